@@ -1,0 +1,2 @@
+//! `frictiond` (skeleton).
+fn main() {}

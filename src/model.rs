@@ -1,0 +1,3 @@
+//! none / CV / SCV / PINN behind one trait.
+//!
+//! (skeleton)

@@ -1,0 +1,16 @@
+//! # frictl (library part)
+//!
+//! The offline machinery behind the `frictl` binary, as a library so benches and tests can use it:
+//! - [`dynamics`]: URDF parsing and rigid-body dynamics (RNEA fixed/floating base, CRBA).
+//! - [`sim`]: the virtual two-inertia harmonic-drive joint with LuGre friction.
+//! - [`acquire`]: the excitation protocol and dataset logs.
+//! - [`interop`]: ONNX and safetensors import/export of `.fwt` models.
+//!
+//! It is **not** the real-time daemon and never depends on it.
+
+#![warn(missing_docs)]
+
+pub mod acquire;
+pub mod dynamics;
+pub mod interop;
+pub mod sim;

@@ -1,0 +1,95 @@
+//! # frictl — the offline half of frictionless
+//!
+//! What it **is**: one command-line tool for everything that is not the 1 kHz loop: the virtual
+//! harmonic-drive joints and their plant process (`sim`), data acquisition with the paper's excitation
+//! protocol (`acquire`), URDF rigid-body dynamics (`dynamics`), the label pipeline (`preprocess`),
+//! CV/SCV fitting (`fit`), PINN training and hyper-parameter search (`train`, `search`), model import,
+//! export and inspection (`import`, `export`, `convert`, `inspect`, `predict`), evaluation (`eval`),
+//! the paper's closed-loop experiments (`experiment`), live views of a running daemon (`monitor`,
+//! `record`), CAN tools (`can`) and the end-to-end `demo`.
+//!
+//! What it is **not**: it never links the daemon; it talks to `frictiond` only through the shared-memory
+//! ABI in `frictionless-shm-types`, through files and by starting it as a process.
+
+use clap::{Parser, Subcommand};
+
+mod cmd;
+
+/// frictl — friction identification, training and tooling for harmonic-drive joints.
+#[derive(Parser, Debug)]
+#[command(name = "frictl", version, about, long_about = None, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Print a weight file's header, shapes, metadata and CRC status.
+    Inspect(cmd::inspect::Args),
+    /// Import a model from ONNX or safetensors into a .fwt weight file.
+    Import(cmd::import::Args),
+    /// Export a .fwt weight file to ONNX or safetensors.
+    Export(cmd::export::Args),
+    /// Re-write a .fwt weight file with another storage precision.
+    Convert(cmd::convert::Args),
+    /// Run a model on raw input vectors from a CSV file, one output per line.
+    Predict(cmd::predict::Args),
+    /// Rigid-body dynamics on a URDF (inverse dynamics, mass matrix).
+    Dynamics(cmd::dynamics::Args),
+    /// The virtual harmonic-drive joints: run offline or serve them as a plant process.
+    Sim(cmd::sim::Args),
+    /// Run the excitation protocol and log a dataset.
+    Acquire(cmd::acquire::Args),
+    /// Resample, filter, smooth and label logs into a training dataset.
+    Preprocess(cmd::preprocess::Args),
+    /// Fit the CV or SCV static friction model.
+    Fit(cmd::fit::Args),
+    /// Train the physics-informed network.
+    Train(cmd::train::Args),
+    /// Random hyper-parameter search over the paper's ranges.
+    Search(cmd::search::Args),
+    /// Evaluate none/CV/SCV/PINN on held-out runs.
+    Eval(cmd::eval::Args),
+    /// Run the paper's closed-loop experiments against the virtual joints.
+    Experiment(cmd::experiment::Args),
+    /// Live view of a running frictiond.
+    Monitor(cmd::monitor::Args),
+    /// Record states, requests, commands and status from shared memory to CSV.
+    Record(cmd::record::Args),
+    /// CAN bus tools: record and replay candump logs.
+    Can(cmd::can::Args),
+    /// The whole method end to end on the virtual joints.
+    Demo(cmd::demo::Args),
+}
+
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Inspect(a) => cmd::inspect::run(a),
+        Command::Import(a) => cmd::import::run(a),
+        Command::Export(a) => cmd::export::run(a),
+        Command::Convert(a) => cmd::convert::run(a),
+        Command::Predict(a) => cmd::predict::run(a),
+        Command::Dynamics(a) => cmd::dynamics::run(a),
+        Command::Sim(a) => cmd::sim::run(a),
+        Command::Acquire(a) => cmd::acquire::run(a),
+        Command::Preprocess(a) => cmd::preprocess::run(a),
+        Command::Fit(a) => cmd::fit::run(a),
+        Command::Train(a) => cmd::train::run(a),
+        Command::Search(a) => cmd::search::run(a),
+        Command::Eval(a) => cmd::eval::run(a),
+        Command::Experiment(a) => cmd::experiment::run(a),
+        Command::Monitor(a) => cmd::monitor::run(a),
+        Command::Record(a) => cmd::record::run(a),
+        Command::Can(a) => cmd::can::run(a),
+        Command::Demo(a) => cmd::demo::run(a),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("frictl: error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
