@@ -1,11 +1,31 @@
 //! The `.fwt` weight file: fixed-size, versioned, self-describing, CRC-32C protected.
 //!
-//! (skeleton — reader and writer are filled in by the weight-format work; the types are the contract)
+//! What this module **is**: the in-memory model description ([`ModelFile`]), the byte codec
+//! ([`to_bytes`], [`from_bytes`]), atomic file helpers ([`read_file`], [`write_file`]) and a
+//! diagnostic header view ([`inspect`]). The byte-level specification is `docs/weights-format.md`;
+//! the offsets and codes live in [`layout`].
+//!
+//! What it is **not**: no inference (see [`crate::kernel`]), no ONNX/safetensors import or export
+//! (that is `frictl`), no memory mapping. The reader checks length, magic, version, sizes, CRC,
+//! shape limits and values before it allocates anything sized by the file, and never panics.
+
+mod codec;
+mod inspect;
+pub mod layout;
+
+use std::io::{self, Write};
+use std::path::{Path, PathBuf};
+
+use thiserror::Error;
 
 use crate::features::FeatureSpec;
 use crate::friction::ScvParams;
-use crate::mlp::{MlpWeights, StorageDtype};
+use crate::mlp::{MlpShapeError, MlpWeights, StorageDtype};
 use crate::units::GearRatio;
+
+pub use codec::{encoded_layout, round_to_dtype};
+pub use inspect::{Inspection, LayerInfo};
+pub use layout::{Layout, Unit};
 
 /// Which velocity/current signals the model was trained on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -62,4 +82,223 @@ pub struct ModelFile {
     pub dtype: StorageDtype,
     /// The network (values already rounded to `dtype` when read from a file).
     pub mlp: MlpWeights,
+}
+
+/// Why a `.fwt` file (or a [`ModelFile`] to be written) is not acceptable.
+#[derive(Debug, Error)]
+pub enum WeightError {
+    /// Fewer bytes than the fixed header or the header's own length needs.
+    #[error("truncated .fwt data: need at least {expected} bytes, got {got}")]
+    Truncated {
+        /// Bytes needed.
+        expected: u64,
+        /// Bytes present.
+        got: u64,
+    },
+    /// The first 8 bytes are not the `.fwt` magic.
+    #[error("bad magic {found:02x?}: not a .fwt weight file")]
+    BadMagic {
+        /// The first (up to) 8 bytes found, zero-filled.
+        found: [u8; 8],
+    },
+    /// The major version is not one this reader understands.
+    #[error(
+        "unsupported .fwt format version {major}.{minor}; this reader understands major version {supported}"
+    )]
+    UnsupportedVersion {
+        /// Major version in the file.
+        major: u16,
+        /// Minor version in the file.
+        minor: u16,
+        /// The major version this reader understands.
+        supported: u16,
+    },
+    /// The CRC-32C over the file does not match the stored one.
+    #[error(
+        "CRC-32C mismatch: header key `crc32c` = {stored:#010x}, computed {computed:#010x} (file corrupted)"
+    )]
+    Crc {
+        /// CRC stored in the header.
+        stored: u32,
+        /// CRC computed over the bytes.
+        computed: u32,
+    },
+    /// The network shape is over the limits or inconsistent.
+    #[error("network shape: {0}")]
+    Shape(#[from] MlpShapeError),
+    /// A value that must be finite is NaN or infinite (or overflows the storage dtype).
+    #[error("{field}[{index}] = {value} is not finite (as stored)")]
+    NonFinite {
+        /// Which field or buffer, e.g. "layer 1 weight" or "kt_nm_per_a".
+        field: String,
+        /// Flat index (0 for scalars).
+        index: usize,
+        /// The offending value.
+        value: f64,
+    },
+    /// The header's `file_len` says more bytes than present.
+    #[error("header key `file_len` = {claimed} bytes, but only {present} bytes are present")]
+    HeaderSaysMore {
+        /// Bytes the header claims.
+        claimed: u64,
+        /// Bytes present.
+        present: u64,
+    },
+    /// More bytes are present than the header's `file_len` declares.
+    #[error(
+        "header key `file_len` = {declared} bytes, but {present} bytes are present (trailing data)"
+    )]
+    TrailingData {
+        /// Bytes the header declares.
+        declared: u64,
+        /// Bytes present.
+        present: u64,
+    },
+    /// A header key disagrees with the value the rest of the header implies.
+    #[error(
+        "header key `{field}` = {stored} disagrees with {expected} implied by the rest of the header"
+    )]
+    Inconsistent {
+        /// The header key.
+        field: &'static str,
+        /// Value stored (or given).
+        stored: u64,
+        /// Value implied.
+        expected: u64,
+    },
+    /// A text field is not valid NUL-padded UTF-8.
+    #[error("header key `{field}` is not valid NUL-padded UTF-8")]
+    BadUtf8 {
+        /// The header key.
+        field: &'static str,
+    },
+    /// A numeric code is not defined by this format version.
+    #[error("header key `{field}` has unknown code {value}")]
+    UnknownCode {
+        /// The header key.
+        field: &'static str,
+        /// The code found.
+        value: u64,
+    },
+    /// A value is well-formed but out of its allowed range (e.g. a name too long, kt ≤ 0).
+    #[error("`{field}` = {value}: {reason}")]
+    Invalid {
+        /// Which key.
+        field: &'static str,
+        /// The value, formatted.
+        value: String,
+        /// What is wrong.
+        reason: &'static str,
+    },
+    /// A reserved or padding byte is not zero in a file of a minor version this reader knows.
+    #[error("byte at offset {offset} (reserved/padding) is {value:#04x}, must be zero")]
+    NonZeroReserved {
+        /// Byte offset in the file.
+        offset: u64,
+        /// The byte found.
+        value: u8,
+    },
+    /// Reading or writing a file failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        #[source]
+        source: io::Error,
+    },
+    /// A format error in a named file (from [`read_file`] / [`write_file`]).
+    #[error("{path}: {source}")]
+    InFile {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it.
+        #[source]
+        source: Box<WeightError>,
+    },
+}
+
+impl WeightError {
+    /// The underlying error, with any [`WeightError::InFile`] wrapper removed.
+    pub fn kind(&self) -> &WeightError {
+        match self {
+            WeightError::InFile { source, .. } => source.kind(),
+            other => other,
+        }
+    }
+}
+
+/// Serialises a model into `.fwt` bytes.
+///
+/// Validates everything [`from_bytes`] would check (shapes, limits, finite values, names, codes,
+/// feature/input consistency) and rounds weights and biases to `file.dtype` (round-to-nearest-even
+/// via `half`); a value that overflows the dtype is an error. Normalisation stays f32.
+pub fn to_bytes(file: &ModelFile) -> Result<Vec<u8>, WeightError> {
+    codec::encode(file)
+}
+
+/// Parses and fully validates `.fwt` bytes; weights are decoded to f32.
+///
+/// Never panics, and allocates only after the header's sizes are checked against
+/// [`crate::mlp::limits`] and against the number of bytes present.
+pub fn from_bytes(bytes: &[u8]) -> Result<ModelFile, WeightError> {
+    codec::decode(bytes)
+}
+
+/// Reads and validates a `.fwt` file. Every error names `path`.
+pub fn read_file(path: &Path) -> Result<ModelFile, WeightError> {
+    let bytes = std::fs::read(path).map_err(|source| WeightError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    from_bytes(&bytes).map_err(|e| WeightError::InFile {
+        path: path.to_owned(),
+        source: Box::new(e),
+    })
+}
+
+/// Writes a `.fwt` file atomically: a temporary file in the same directory is written, synced and
+/// renamed over `path`, so readers see either the old or the new file, never a partial one.
+pub fn write_file(path: &Path, file: &ModelFile) -> Result<(), WeightError> {
+    let bytes = to_bytes(file).map_err(|e| WeightError::InFile {
+        path: path.to_owned(),
+        source: Box::new(e),
+    })?;
+    let io_err = |p: &Path| {
+        let p = p.to_owned();
+        move |source| WeightError::Io { path: p, source }
+    };
+    let name = path.file_name().ok_or_else(|| WeightError::Io {
+        path: path.to_owned(),
+        source: io::Error::new(io::ErrorKind::InvalidInput, "path has no file name"),
+    })?;
+    let mut tmp_name = std::ffi::OsString::from(".");
+    tmp_name.push(name);
+    tmp_name.push(format!(".tmp-{}", std::process::id()));
+    let tmp = path.with_file_name(tmp_name);
+    let result = (|| {
+        let mut f = std::fs::File::create(&tmp).map_err(io_err(&tmp))?;
+        f.write_all(&bytes).map_err(io_err(&tmp))?;
+        f.sync_all().map_err(io_err(&tmp))?;
+        drop(f);
+        std::fs::rename(&tmp, path).map_err(io_err(path))
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+        return result;
+    }
+    // Make the rename durable; failure to sync the directory is not fatal for the data itself.
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
+        && let Ok(d) = std::fs::File::open(dir)
+    {
+        let _ = d.sync_all();
+    }
+    Ok(())
+}
+
+/// A header view for diagnostics (`frictl inspect`): works even when the CRC is wrong, the payload
+/// is truncated or values are not finite (see [`Inspection::error`]). Fails only when the header
+/// itself cannot be decoded (bad magic/version, truncated header, unknown codes, sizes over limits).
+pub fn inspect(bytes: &[u8]) -> Result<Inspection, WeightError> {
+    inspect::inspect(bytes)
 }

@@ -1,0 +1,779 @@
+//! Encoder and validating decoder of the `.fwt` byte format (layout in [`super::layout`]).
+//!
+//! Not public API by itself: [`super::to_bytes`], [`super::from_bytes`] and [`super::inspect`] are
+//! the entry points. Every read goes through bounds-checked helpers; sizes from the file are checked
+//! against [`crate::mlp::limits`] and against the bytes present before anything is allocated.
+
+use half::{bf16, f16};
+
+use crate::features::FeatureSpec;
+use crate::friction::ScvParams;
+use crate::mlp::{
+    Activation, DenseLayer, MlpShapeError, MlpWeights, Normalisation, StorageDtype, limits,
+};
+use crate::units::GearRatio;
+
+use super::inspect::LayerInfo;
+use super::layout::{self, Layout, Unit, off};
+use super::{ModelFile, ModelMeta, SignalFiltering, TrainingMeta, WeightError};
+
+// ---------------------------------------------------------------------------------------------
+// Little-endian readers over a slice whose length the caller has already checked.
+
+fn rd<const N: usize>(b: &[u8], at: usize) -> [u8; N] {
+    let mut a = [0u8; N];
+    // Callers check `b.len() >= FIXED_HEADER_LEN` (or header_len) first; `get` keeps this panic-free
+    // even if that invariant were broken (the value then reads as zeros and fails validation).
+    if let Some(s) = b.get(at..at + N) {
+        a.copy_from_slice(s);
+    }
+    a
+}
+fn rd_u8(b: &[u8], at: usize) -> u8 {
+    rd::<1>(b, at)[0]
+}
+fn rd_u16(b: &[u8], at: usize) -> u16 {
+    u16::from_le_bytes(rd(b, at))
+}
+fn rd_u32(b: &[u8], at: usize) -> u32 {
+    u32::from_le_bytes(rd(b, at))
+}
+fn rd_u64(b: &[u8], at: usize) -> u64 {
+    u64::from_le_bytes(rd(b, at))
+}
+fn rd_f32(b: &[u8], at: usize) -> f32 {
+    f32::from_le_bytes(rd(b, at))
+}
+fn rd_f64(b: &[u8], at: usize) -> f64 {
+    f64::from_le_bytes(rd(b, at))
+}
+
+/// CRC-32C of the whole file with the four CRC bytes taken as zero.
+pub(super) fn file_crc(bytes: &[u8]) -> u32 {
+    let head = bytes.get(..off::CRC).unwrap_or(bytes);
+    let tail = bytes.get(off::CRC + 4..).unwrap_or(&[]);
+    let c = crc32c::crc32c(head);
+    let c = crc32c::crc32c_append(c, &[0u8; 4]);
+    crc32c::crc32c_append(c, tail)
+}
+
+/// Checks magic, major version and that the fixed header is present.
+pub(super) fn check_prefix(bytes: &[u8]) -> Result<(), WeightError> {
+    let n = bytes.len().min(8);
+    if bytes[..n] != layout::MAGIC[..n] {
+        let mut found = [0u8; 8];
+        found[..n].copy_from_slice(&bytes[..n]);
+        return Err(WeightError::BadMagic { found });
+    }
+    if bytes.len() >= off::VERSION_MINOR + 2 {
+        let major = rd_u16(bytes, off::VERSION_MAJOR);
+        if major != layout::VERSION_MAJOR {
+            let minor = rd_u16(bytes, off::VERSION_MINOR);
+            return Err(WeightError::UnsupportedVersion {
+                major,
+                minor,
+                supported: layout::VERSION_MAJOR,
+            });
+        }
+    }
+    if bytes.len() < layout::FIXED_HEADER_LEN {
+        return Err(WeightError::Truncated {
+            expected: layout::FIXED_HEADER_LEN as u64,
+            got: bytes.len() as u64,
+        });
+    }
+    Ok(())
+}
+
+/// The decoded header: everything but the normalisation values and the payload.
+#[derive(Clone, Debug)]
+pub(super) struct Header {
+    pub version_minor: u16,
+    pub crc_stored: u32,
+    pub layout: Layout,
+    pub features: FeatureSpec,
+    pub input_units: Vec<Unit>,
+    pub n_inputs: usize,
+    pub dtype: StorageDtype,
+    pub filtering: SignalFiltering,
+    pub layers: Vec<LayerInfo>,
+    pub gear_ratio: f64,
+    pub kt_nm_per_a: f64,
+    pub scv: Option<ScvParams>,
+    pub dataset_sha256: [u8; 32],
+    pub val_rmse_nm: f32,
+    pub test_rmse_nm: f32,
+    pub created_unix_s: u64,
+    pub joint_name: String,
+    pub tool_version: String,
+}
+
+fn unknown(field: &'static str, value: impl Into<u64>) -> WeightError {
+    WeightError::UnknownCode {
+        field,
+        value: value.into(),
+    }
+}
+
+fn inconsistent(field: &'static str, stored: u64, expected: u64) -> Result<(), WeightError> {
+    if stored == expected {
+        Ok(())
+    } else {
+        Err(WeightError::Inconsistent {
+            field,
+            stored,
+            expected,
+        })
+    }
+}
+
+fn flag(b: &[u8], at: usize, field: &'static str) -> Result<bool, WeightError> {
+    match rd_u8(b, at) {
+        0 => Ok(false),
+        1 => Ok(true),
+        v => Err(unknown(field, v)),
+    }
+}
+
+fn text<const N: usize>(b: &[u8], at: usize, field: &'static str) -> Result<String, WeightError> {
+    let raw: [u8; N] = rd(b, at);
+    let len = raw
+        .iter()
+        .position(|&c| c == 0)
+        .ok_or(WeightError::BadUtf8 { field })?;
+    if raw[len..].iter().any(|&c| c != 0) {
+        return Err(WeightError::BadUtf8 { field });
+    }
+    std::str::from_utf8(&raw[..len])
+        .map(str::to_owned)
+        .map_err(|_| WeightError::BadUtf8 { field })
+}
+
+fn dim(layer: usize, what: &'static str, value: u64, max: usize) -> Result<usize, WeightError> {
+    if value == 0 || value > max as u64 {
+        // Saturate for the error value on (hypothetical) 32-bit targets.
+        let value = usize::try_from(value).unwrap_or(usize::MAX);
+        Err(MlpShapeError::Dimension {
+            layer,
+            what,
+            value,
+            max,
+        }
+        .into())
+    } else {
+        Ok(value as usize)
+    }
+}
+
+/// Decodes and cross-checks the header (fixed part and layer table). Requires only the header bytes,
+/// not the payload; does not check the CRC, reserved bytes or normalisation values.
+pub(super) fn parse_header(b: &[u8]) -> Result<Header, WeightError> {
+    check_prefix(b)?;
+    let version_minor = rd_u16(b, off::VERSION_MINOR);
+    let crc_stored = rd_u32(b, off::CRC);
+
+    // Features and inputs.
+    let set_code = rd_u16(b, off::FEATURE_SET);
+    let set =
+        layout::feature_set_from_code(set_code).ok_or_else(|| unknown("feature_set", set_code))?;
+    let units = layout::block_units(set);
+    inconsistent(
+        "n_blocks",
+        rd_u8(b, off::N_BLOCKS).into(),
+        units.len() as u64,
+    )?;
+    let temperature = flag(b, off::TEMPERATURE, "temperature")?;
+    let history = u64::from(rd_u32(b, off::HISTORY));
+    let n_inputs_stored = u64::from(rd_u32(b, off::N_INPUTS));
+    let n_inputs = dim(0, "n_in", n_inputs_stored, limits::MAX_INPUTS)?;
+    if history == 0 {
+        return Err(WeightError::Invalid {
+            field: "history",
+            value: "0".into(),
+            reason: "must be at least 1",
+        });
+    }
+    inconsistent(
+        "n_inputs",
+        n_inputs_stored,
+        units.len() as u64 * history + u64::from(temperature),
+    )?;
+    let history = history as usize; // ≤ MAX_INPUTS after the check above
+    let mut input_units = Vec::with_capacity(units.len() + 1);
+    for slot in 0..layout::MAX_BLOCKS {
+        let code = rd_u8(b, off::BLOCK_UNITS + slot);
+        let want = units.get(slot).map_or(0, |u| u.code());
+        if code != want {
+            let field = "block_units";
+            return Err(match Unit::from_code(code) {
+                None if code != 0 => unknown(field, code),
+                _ => WeightError::Inconsistent {
+                    field,
+                    stored: code.into(),
+                    expected: want.into(),
+                },
+            });
+        }
+        if let Some(&u) = units.get(slot) {
+            input_units.push(u);
+        }
+    }
+    let t_code = rd_u8(b, off::TEMPERATURE_UNIT);
+    let t_want = if temperature {
+        layout::TEMPERATURE_UNIT.code()
+    } else {
+        0
+    };
+    if t_code != t_want {
+        if t_code != 0 && Unit::from_code(t_code).is_none() {
+            return Err(unknown("temperature_unit", t_code));
+        }
+        inconsistent("temperature_unit", t_code.into(), t_want.into())?;
+    }
+    if temperature {
+        input_units.push(layout::TEMPERATURE_UNIT);
+    }
+    let o_code = rd_u8(b, off::OUTPUT_UNIT);
+    if Unit::from_code(o_code).is_none() {
+        return Err(unknown("output_unit", o_code));
+    }
+    inconsistent(
+        "output_unit",
+        o_code.into(),
+        layout::OUTPUT_UNIT.code().into(),
+    )?;
+
+    let d_code = rd_u8(b, off::DTYPE);
+    let dtype = layout::dtype_from_code(d_code).ok_or_else(|| unknown("dtype", d_code))?;
+    let f_code = rd_u8(b, off::FILTERING);
+    let filtering =
+        layout::filtering_from_code(f_code).ok_or_else(|| unknown("filtering", f_code))?;
+
+    // Layer table: count first, then the bytes, then each entry against the limits.
+    let n_layers = usize::from(rd_u8(b, off::N_LAYERS));
+    if n_layers == 0 {
+        return Err(MlpShapeError::Empty.into());
+    }
+    if n_layers - 1 > limits::MAX_HIDDEN_LAYERS {
+        return Err(MlpShapeError::TooDeep(n_layers - 1).into());
+    }
+    let layout = Layout::new(n_inputs as u64, n_layers as u64, 0, 0);
+    inconsistent(
+        "header_len",
+        rd_u32(b, off::HEADER_LEN).into(),
+        layout.header_len,
+    )?;
+    if (b.len() as u64) < layout.header_len {
+        return Err(WeightError::Truncated {
+            expected: layout.header_len,
+            got: b.len() as u64,
+        });
+    }
+    let mut layers = Vec::with_capacity(n_layers);
+    let mut n_params = 0u64;
+    let mut prev_out = n_inputs;
+    for k in 0..n_layers {
+        let at = layout::FIXED_HEADER_LEN + k * layout::LAYER_ENTRY_LEN;
+        let n_in = u64::from(rd_u32(b, at));
+        let max_out = if k + 1 == n_layers {
+            limits::MAX_OUTPUTS
+        } else {
+            limits::MAX_WIDTH
+        };
+        let n_out = dim(k, "n_out", rd_u32(b, at + 4).into(), max_out)?;
+        if n_in != prev_out as u64 {
+            let expected = usize::try_from(n_in).unwrap_or(usize::MAX);
+            return Err(MlpShapeError::Chain {
+                layer: k,
+                expected,
+                got: prev_out,
+            }
+            .into());
+        }
+        let a_code = rd_u8(b, at + 8);
+        let activation = layout::activation_from_code(a_code)
+            .ok_or_else(|| unknown("layer activation", a_code))?;
+        let want = if k + 1 == n_layers {
+            Activation::Identity
+        } else {
+            Activation::Relu
+        };
+        if activation != want {
+            return Err(MlpShapeError::Activation {
+                layer: k,
+                found: activation,
+            }
+            .into());
+        }
+        n_params += (prev_out as u64 + 1) * n_out as u64;
+        layers.push(LayerInfo {
+            n_in: prev_out,
+            n_out,
+            activation,
+        });
+        prev_out = n_out;
+    }
+    let layout = Layout::new(
+        n_inputs as u64,
+        n_layers as u64,
+        n_params,
+        dtype.size_bytes() as u64,
+    );
+    inconsistent(
+        "payload_offset",
+        rd_u32(b, off::PAYLOAD_OFFSET).into(),
+        layout.payload_offset,
+    )?;
+    inconsistent(
+        "payload_len",
+        rd_u64(b, off::PAYLOAD_LEN),
+        layout.payload_len,
+    )?;
+    inconsistent("file_len", rd_u64(b, off::FILE_LEN), layout.file_len)?;
+
+    let scv = if flag(b, off::SCV_PRESENT, "scv_present")? {
+        let v = |i: usize| rd_f64(b, off::SCV + 8 * i);
+        Some(ScvParams {
+            kc: v(0),
+            ka: v(1),
+            kv: v(2),
+            ks: v(3),
+            vs: v(4),
+            alpha: v(5),
+        })
+    } else {
+        None
+    };
+
+    Ok(Header {
+        version_minor,
+        crc_stored,
+        layout,
+        features: FeatureSpec {
+            set,
+            history,
+            temperature,
+        },
+        input_units,
+        n_inputs,
+        dtype,
+        filtering,
+        layers,
+        gear_ratio: rd_f64(b, off::GEAR_RATIO),
+        kt_nm_per_a: rd_f64(b, off::KT),
+        scv,
+        dataset_sha256: rd(b, off::DATASET_SHA256),
+        val_rmse_nm: rd_f32(b, off::VAL_RMSE),
+        test_rmse_nm: rd_f32(b, off::TEST_RMSE),
+        created_unix_s: rd_u64(b, off::CREATED),
+        joint_name: text::<64>(b, off::JOINT_NAME, "joint_name")?,
+        tool_version: text::<32>(b, off::TOOL_VERSION, "tool_version")?,
+    })
+}
+
+/// Byte ranges that must be zero in a file whose minor version this reader knows.
+fn reserved_ranges(h: &Header) -> Vec<std::ops::Range<usize>> {
+    let mut r = vec![
+        off::RESERVED_A..off::RESERVED_A + 6,
+        off::RESERVED_B..layout::FIXED_HEADER_LEN,
+    ];
+    if h.scv.is_none() {
+        r.push(off::SCV..off::SCV + 48);
+    }
+    for k in 0..h.layers.len() {
+        let at = layout::FIXED_HEADER_LEN + k * layout::LAYER_ENTRY_LEN;
+        r.push(at + 9..at + layout::LAYER_ENTRY_LEN);
+    }
+    r.push(h.layout.header_len as usize..h.layout.payload_offset as usize);
+    r
+}
+
+fn decode_values(b: &[u8], at: usize, n: usize, dtype: StorageDtype) -> Vec<f32> {
+    let s = dtype.size_bytes();
+    let bytes = b.get(at..at + n * s).unwrap_or(&[]);
+    match dtype {
+        StorageDtype::F32 => bytes
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect(),
+        StorageDtype::F16 => bytes
+            .chunks_exact(2)
+            .map(|c| f16::from_le_bytes([c[0], c[1]]).to_f32())
+            .collect(),
+        StorageDtype::Bf16 => bytes
+            .chunks_exact(2)
+            .map(|c| bf16::from_le_bytes([c[0], c[1]]).to_f32())
+            .collect(),
+    }
+}
+
+/// Full validating decode (see [`super::from_bytes`]).
+pub(super) fn decode(b: &[u8]) -> Result<ModelFile, WeightError> {
+    check_prefix(b)?;
+    // Order for the most useful diagnosis: when the length matches the header's `file_len`, a CRC
+    // mismatch (corruption) is reported before any structural complaint it may have caused; when it
+    // does not, the header's structure (limits, codes) is checked first, then the length.
+    let declared = rd_u64(b, off::FILE_LEN);
+    let present = b.len() as u64;
+    if declared == present {
+        let computed = file_crc(b);
+        let stored = rd_u32(b, off::CRC);
+        if computed != stored {
+            return Err(WeightError::Crc { stored, computed });
+        }
+    }
+    let h = parse_header(b)?;
+    if declared > present {
+        return Err(WeightError::HeaderSaysMore {
+            claimed: declared,
+            present,
+        });
+    }
+    if declared < present {
+        return Err(WeightError::TrailingData { declared, present });
+    }
+    // `<=` (not `==`): stays right when VERSION_MINOR is raised.
+    #[allow(clippy::absurd_extreme_comparisons)]
+    let known_minor = h.version_minor <= layout::VERSION_MINOR;
+    if known_minor {
+        for r in reserved_ranges(&h) {
+            if let Some((i, &value)) = b
+                .get(r.clone())
+                .unwrap_or(&[])
+                .iter()
+                .enumerate()
+                .find(|(_, v)| **v != 0)
+            {
+                return Err(WeightError::NonZeroReserved {
+                    offset: (r.start + i) as u64,
+                    value,
+                });
+            }
+        }
+    }
+    let gear_ratio = GearRatio::new(h.gear_ratio).map_err(|e| WeightError::Invalid {
+        field: "gear_ratio",
+        value: e.0.to_string(),
+        reason: "must be finite and non-zero",
+    })?;
+
+    // All sizes below were checked against the limits and the byte count (file_len == len).
+    let n = h.n_inputs;
+    let norm_at = layout::FIXED_HEADER_LEN + h.layers.len() * layout::LAYER_ENTRY_LEN;
+    let norm = Normalisation {
+        mean: decode_values(b, norm_at, n, StorageDtype::F32),
+        scale: decode_values(b, norm_at + 4 * n, n, StorageDtype::F32),
+    };
+    let mut at = h.layout.payload_offset as usize;
+    let s = h.dtype.size_bytes();
+    let mut layers = Vec::with_capacity(h.layers.len());
+    for l in &h.layers {
+        let weight = decode_values(b, at, l.n_in * l.n_out, h.dtype);
+        at += l.n_in * l.n_out * s;
+        let bias = decode_values(b, at, l.n_out, h.dtype);
+        at += l.n_out * s;
+        layers.push(DenseLayer {
+            n_in: l.n_in,
+            n_out: l.n_out,
+            weight,
+            bias,
+            activation: l.activation,
+        });
+    }
+    let file = ModelFile {
+        meta: ModelMeta {
+            joint_name: h.joint_name,
+            gear_ratio,
+            kt_nm_per_a: h.kt_nm_per_a,
+            features: h.features,
+            scv: h.scv,
+            training: TrainingMeta {
+                dataset_sha256: h.dataset_sha256,
+                val_rmse_nm: h.val_rmse_nm,
+                test_rmse_nm: h.test_rmse_nm,
+                created_unix_s: h.created_unix_s,
+                tool_version: h.tool_version,
+                filtering: h.filtering,
+            },
+        },
+        dtype: h.dtype,
+        mlp: MlpWeights { norm, layers },
+    };
+    validate_model(&file)?;
+    Ok(file)
+}
+
+fn finite_all(field: impl Fn() -> String, v: &[f32]) -> Result<(), WeightError> {
+    match v.iter().position(|x| !x.is_finite()) {
+        Some(index) => Err(WeightError::NonFinite {
+            field: field(),
+            index,
+            value: v[index].into(),
+        }),
+        None => Ok(()),
+    }
+}
+
+fn finite(field: &str, value: f64) -> Result<(), WeightError> {
+    if value.is_finite() {
+        Ok(())
+    } else {
+        Err(WeightError::NonFinite {
+            field: field.to_owned(),
+            index: 0,
+            value,
+        })
+    }
+}
+
+fn text_ok(field: &'static str, s: &str, max: usize) -> Result<(), WeightError> {
+    if s.len() > max {
+        return Err(WeightError::Invalid {
+            field,
+            value: format!("{s:?}"),
+            reason: "too long for its header field",
+        });
+    }
+    if s.contains('\0') {
+        return Err(WeightError::Invalid {
+            field,
+            value: format!("{s:?}"),
+            reason: "must not contain NUL",
+        });
+    }
+    Ok(())
+}
+
+/// Rounds one value to the storage dtype (round-to-nearest-even) and back to f32.
+fn round_one(v: f32, dtype: StorageDtype) -> f32 {
+    match dtype {
+        StorageDtype::F32 => v,
+        StorageDtype::F16 => f16::from_f32(v).to_f32(),
+        StorageDtype::Bf16 => bf16::from_f32(v).to_f32(),
+    }
+}
+
+/// A copy of `mlp` with every weight and bias rounded to `dtype` (what [`super::from_bytes`]
+/// returns after a [`super::to_bytes`] round trip). The normalisation is not rounded (it is stored
+/// as f32). Values too large for the dtype become ±∞; [`super::to_bytes`] refuses those.
+pub fn round_to_dtype(mlp: &MlpWeights, dtype: StorageDtype) -> MlpWeights {
+    let mut out = mlp.clone();
+    for l in &mut out.layers {
+        for v in l.weight.iter_mut().chain(l.bias.iter_mut()) {
+            *v = round_one(*v, dtype);
+        }
+    }
+    out
+}
+
+/// The sizes of the file [`super::to_bytes`] writes for `mlp` stored as `dtype`.
+pub fn encoded_layout(mlp: &MlpWeights, dtype: StorageDtype) -> Layout {
+    Layout::new(
+        mlp.n_inputs() as u64,
+        mlp.layers.len() as u64,
+        mlp.n_params() as u64,
+        dtype.size_bytes() as u64,
+    )
+}
+
+/// Everything the writer and the reader both require of a model.
+fn validate_model(f: &ModelFile) -> Result<(), WeightError> {
+    let mlp = &f.mlp;
+    for (k, l) in mlp.layers.iter().enumerate() {
+        finite_all(|| format!("layer {k} weight"), &l.weight)?;
+        finite_all(|| format!("layer {k} bias"), &l.bias)?;
+    }
+    finite_all(|| "normalisation mean".into(), &mlp.norm.mean)?;
+    finite_all(|| "normalisation scale".into(), &mlp.norm.scale)?;
+    mlp.validate()?;
+    if f.dtype != StorageDtype::F32 {
+        for (k, l) in mlp.layers.iter().enumerate() {
+            for (what, v) in [("weight", &l.weight), ("bias", &l.bias)] {
+                if let Some(index) = v.iter().position(|&x| !round_one(x, f.dtype).is_finite()) {
+                    return Err(WeightError::NonFinite {
+                        field: format!("layer {k} {what} (overflows {:?})", f.dtype),
+                        index,
+                        value: v[index].into(),
+                    });
+                }
+            }
+        }
+    }
+    let m = &f.meta;
+    let spec = &m.features;
+    if spec.history == 0 {
+        return Err(WeightError::Invalid {
+            field: "history",
+            value: "0".into(),
+            reason: "must be at least 1",
+        });
+    }
+    let blocks = layout::block_units(spec.set).len() as u64;
+    let spec_inputs = blocks
+        .saturating_mul(spec.history as u64)
+        .saturating_add(u64::from(spec.temperature));
+    inconsistent("n_inputs", spec_inputs, mlp.n_inputs() as u64)?;
+    text_ok("joint_name", &m.joint_name, layout::JOINT_NAME_MAX)?;
+    text_ok(
+        "tool_version",
+        &m.training.tool_version,
+        layout::TOOL_VERSION_MAX,
+    )?;
+    finite("gear_ratio", m.gear_ratio.get())?;
+    finite("kt_nm_per_a", m.kt_nm_per_a)?;
+    if m.kt_nm_per_a <= 0.0 {
+        return Err(WeightError::Invalid {
+            field: "kt_nm_per_a",
+            value: m.kt_nm_per_a.to_string(),
+            reason: "must be positive (the sign lives in the gear ratio)",
+        });
+    }
+    if let Some(s) = &m.scv {
+        for (name, v) in [
+            ("scv.kc", s.kc),
+            ("scv.ka", s.ka),
+            ("scv.kv", s.kv),
+            ("scv.ks", s.ks),
+            ("scv.vs", s.vs),
+            ("scv.alpha", s.alpha),
+        ] {
+            finite(name, v)?;
+        }
+    }
+    for (field, v) in [
+        ("val_rmse_nm", m.training.val_rmse_nm),
+        ("test_rmse_nm", m.training.test_rmse_nm),
+    ] {
+        let ok = v.is_nan() || (v.is_finite() && v >= 0.0);
+        if !ok {
+            return Err(WeightError::Invalid {
+                field,
+                value: v.to_string(),
+                reason: "must be NaN (unknown) or finite and ≥ 0",
+            });
+        }
+    }
+    Ok(())
+}
+
+fn put(b: &mut [u8], at: usize, v: &[u8]) {
+    b[at..at + v.len()].copy_from_slice(v);
+}
+
+/// Validating encoder (see [`super::to_bytes`]).
+pub(super) fn encode(f: &ModelFile) -> Result<Vec<u8>, WeightError> {
+    validate_model(f)?;
+    let mlp = &f.mlp;
+    let m = &f.meta;
+    let lay = encoded_layout(mlp, f.dtype);
+    // Sizes are within limits (validated), so the layout fits the header's fields and memory.
+    let mut b = vec![0u8; lay.file_len as usize];
+    put(&mut b, off::MAGIC, &layout::MAGIC);
+    put(
+        &mut b,
+        off::VERSION_MAJOR,
+        &layout::VERSION_MAJOR.to_le_bytes(),
+    );
+    put(
+        &mut b,
+        off::VERSION_MINOR,
+        &layout::VERSION_MINOR.to_le_bytes(),
+    );
+    put(
+        &mut b,
+        off::HEADER_LEN,
+        &(lay.header_len as u32).to_le_bytes(),
+    );
+    put(
+        &mut b,
+        off::PAYLOAD_OFFSET,
+        &(lay.payload_offset as u32).to_le_bytes(),
+    );
+    put(&mut b, off::PAYLOAD_LEN, &lay.payload_len.to_le_bytes());
+    put(&mut b, off::FILE_LEN, &lay.file_len.to_le_bytes());
+    let units = layout::block_units(m.features.set);
+    put(
+        &mut b,
+        off::FEATURE_SET,
+        &layout::feature_set_code(m.features.set).to_le_bytes(),
+    );
+    b[off::N_BLOCKS] = units.len() as u8;
+    b[off::TEMPERATURE] = u8::from(m.features.temperature);
+    put(
+        &mut b,
+        off::HISTORY,
+        &(m.features.history as u32).to_le_bytes(),
+    );
+    put(
+        &mut b,
+        off::N_INPUTS,
+        &(mlp.n_inputs() as u32).to_le_bytes(),
+    );
+    b[off::N_LAYERS] = mlp.layers.len() as u8;
+    b[off::DTYPE] = layout::dtype_code(f.dtype);
+    b[off::OUTPUT_UNIT] = layout::OUTPUT_UNIT.code();
+    b[off::FILTERING] = layout::filtering_code(m.training.filtering);
+    for (i, u) in units.iter().enumerate() {
+        b[off::BLOCK_UNITS + i] = u.code();
+    }
+    if m.features.temperature {
+        b[off::TEMPERATURE_UNIT] = layout::TEMPERATURE_UNIT.code();
+    }
+    put(&mut b, off::GEAR_RATIO, &m.gear_ratio.get().to_le_bytes());
+    put(&mut b, off::KT, &m.kt_nm_per_a.to_le_bytes());
+    if let Some(s) = &m.scv {
+        b[off::SCV_PRESENT] = 1;
+        for (i, v) in [s.kc, s.ka, s.kv, s.ks, s.vs, s.alpha]
+            .into_iter()
+            .enumerate()
+        {
+            put(&mut b, off::SCV + 8 * i, &v.to_le_bytes());
+        }
+    }
+    put(&mut b, off::DATASET_SHA256, &m.training.dataset_sha256);
+    put(&mut b, off::VAL_RMSE, &m.training.val_rmse_nm.to_le_bytes());
+    put(
+        &mut b,
+        off::TEST_RMSE,
+        &m.training.test_rmse_nm.to_le_bytes(),
+    );
+    put(
+        &mut b,
+        off::CREATED,
+        &m.training.created_unix_s.to_le_bytes(),
+    );
+    put(&mut b, off::JOINT_NAME, m.joint_name.as_bytes());
+    put(
+        &mut b,
+        off::TOOL_VERSION,
+        m.training.tool_version.as_bytes(),
+    );
+
+    let mut at = layout::FIXED_HEADER_LEN;
+    for l in &mlp.layers {
+        put(&mut b, at, &(l.n_in as u32).to_le_bytes());
+        put(&mut b, at + 4, &(l.n_out as u32).to_le_bytes());
+        b[at + 8] = layout::activation_code(l.activation);
+        at += layout::LAYER_ENTRY_LEN;
+    }
+    for v in mlp.norm.mean.iter().chain(&mlp.norm.scale) {
+        put(&mut b, at, &v.to_le_bytes());
+        at += 4;
+    }
+    debug_assert_eq!(at as u64, lay.header_len);
+    at = lay.payload_offset as usize;
+    for l in &mlp.layers {
+        for &v in l.weight.iter().chain(&l.bias) {
+            match f.dtype {
+                StorageDtype::F32 => put(&mut b, at, &v.to_le_bytes()),
+                StorageDtype::F16 => put(&mut b, at, &f16::from_f32(v).to_le_bytes()),
+                StorageDtype::Bf16 => put(&mut b, at, &bf16::from_f32(v).to_le_bytes()),
+            }
+            at += f.dtype.size_bytes();
+        }
+    }
+    debug_assert_eq!(at as u64, lay.file_len);
+    let crc = file_crc(&b);
+    put(&mut b, off::CRC, &crc.to_le_bytes());
+    Ok(b)
+}

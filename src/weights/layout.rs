@@ -1,0 +1,270 @@
+//! Byte layout of the `.fwt` format: constants, field offsets, numeric codes and the size formula.
+//!
+//! This is the single source of truth the codec uses; `docs/weights-format.md` describes the same
+//! table in prose. It holds no I/O and no validation logic beyond code ↔ enum mapping.
+
+use crate::features::FeatureSet;
+use crate::mlp::{Activation, StorageDtype};
+
+use super::SignalFiltering;
+
+/// The 8 magic bytes every `.fwt` file starts with (`"FWT\0"` + `"\r\n\x1a\n"`, which catches
+/// text-mode transfers that rewrite line endings or stop at Ctrl-Z, as PNG's signature does).
+pub const MAGIC: [u8; 8] = *b"FWT\0\r\n\x1a\n";
+/// Format major version written and understood. Readers refuse any other major.
+pub const VERSION_MAJOR: u16 = 1;
+/// Format minor version written. Readers accept any minor of their major.
+pub const VERSION_MINOR: u16 = 0;
+/// Length of the fixed header in bytes (the layer table follows it).
+pub const FIXED_HEADER_LEN: usize = 320;
+/// Length of one layer-table entry in bytes.
+pub const LAYER_ENTRY_LEN: usize = 16;
+/// Alignment of the payload start in bytes.
+pub const PAYLOAD_ALIGN: usize = 64;
+/// Longest joint name in bytes (UTF-8; the field is 64 bytes, NUL-padded).
+pub const JOINT_NAME_MAX: usize = 63;
+/// Longest tool-version string in bytes (UTF-8; the field is 32 bytes, NUL-padded).
+pub const TOOL_VERSION_MAX: usize = 31;
+/// Number of per-block unit slots in the header.
+pub const MAX_BLOCKS: usize = 8;
+
+/// Field offsets inside the fixed header (all little-endian).
+pub mod off {
+    /// `[u8; 8]` magic.
+    pub const MAGIC: usize = 0;
+    /// `u16` major version.
+    pub const VERSION_MAJOR: usize = 8;
+    /// `u16` minor version.
+    pub const VERSION_MINOR: usize = 10;
+    /// `u32` CRC-32C of the whole file with these four bytes taken as zero.
+    pub const CRC: usize = 12;
+    /// `u32` header length (fixed header + layer table + normalisation), unpadded.
+    pub const HEADER_LEN: usize = 16;
+    /// `u32` payload offset (header length rounded up to 64).
+    pub const PAYLOAD_OFFSET: usize = 20;
+    /// `u64` payload length in bytes.
+    pub const PAYLOAD_LEN: usize = 24;
+    /// `u64` total file length in bytes.
+    pub const FILE_LEN: usize = 32;
+    /// `u16` feature-set code.
+    pub const FEATURE_SET: usize = 40;
+    /// `u8` number of feature blocks.
+    pub const N_BLOCKS: usize = 42;
+    /// `u8` temperature flag (0 or 1).
+    pub const TEMPERATURE: usize = 43;
+    /// `u32` history length H.
+    pub const HISTORY: usize = 44;
+    /// `u32` number of network inputs.
+    pub const N_INPUTS: usize = 48;
+    /// `u8` number of dense layers (hidden + output).
+    pub const N_LAYERS: usize = 52;
+    /// `u8` storage dtype code.
+    pub const DTYPE: usize = 53;
+    /// `u8` output unit code.
+    pub const OUTPUT_UNIT: usize = 54;
+    /// `u8` signal-filtering code.
+    pub const FILTERING: usize = 55;
+    /// `[u8; 8]` unit code per feature block (unused slots zero).
+    pub const BLOCK_UNITS: usize = 56;
+    /// `u8` unit code of the temperature input (zero without temperature).
+    pub const TEMPERATURE_UNIT: usize = 64;
+    /// `u8` SCV presence flag (0 or 1).
+    pub const SCV_PRESENT: usize = 65;
+    /// `[u8; 6]` reserved, zero.
+    pub const RESERVED_A: usize = 66;
+    /// `f64` signed gear ratio.
+    pub const GEAR_RATIO: usize = 72;
+    /// `f64` torque constant [Nm/A].
+    pub const KT: usize = 80;
+    /// `[f64; 6]` SCV kc, ka, kv, ks, vs, alpha (zero when absent).
+    pub const SCV: usize = 88;
+    /// `[u8; 32]` dataset SHA-256.
+    pub const DATASET_SHA256: usize = 136;
+    /// `f32` validation RMSE [Nm].
+    pub const VAL_RMSE: usize = 168;
+    /// `f32` test RMSE [Nm].
+    pub const TEST_RMSE: usize = 172;
+    /// `u64` creation time [s since the Unix epoch].
+    pub const CREATED: usize = 176;
+    /// `[u8; 64]` joint name, UTF-8, NUL-padded.
+    pub const JOINT_NAME: usize = 184;
+    /// `[u8; 32]` tool version, UTF-8, NUL-padded.
+    pub const TOOL_VERSION: usize = 248;
+    /// `[u8; 40]` reserved, zero.
+    pub const RESERVED_B: usize = 280;
+}
+
+/// Physical unit codes used for the inputs and the output.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Unit {
+    /// Joint-side angle [rad] (code 1).
+    JointRad,
+    /// Joint-side velocity [rad/s] (code 2).
+    JointRadS,
+    /// Motor-side angle [motor rad] (code 3).
+    MotorRad,
+    /// Motor-side velocity [motor rad/s] (code 4).
+    MotorRadS,
+    /// Temperature [°C] (code 5).
+    Celsius,
+    /// Joint-side torque [Nm] (code 6).
+    JointNm,
+}
+
+impl Unit {
+    /// The stable numeric code.
+    pub fn code(self) -> u8 {
+        match self {
+            Unit::JointRad => 1,
+            Unit::JointRadS => 2,
+            Unit::MotorRad => 3,
+            Unit::MotorRadS => 4,
+            Unit::Celsius => 5,
+            Unit::JointNm => 6,
+        }
+    }
+    /// The unit for a code, if known.
+    pub fn from_code(code: u8) -> Option<Self> {
+        Some(match code {
+            1 => Unit::JointRad,
+            2 => Unit::JointRadS,
+            3 => Unit::MotorRad,
+            4 => Unit::MotorRadS,
+            5 => Unit::Celsius,
+            6 => Unit::JointNm,
+            _ => return None,
+        })
+    }
+    /// Short symbol, e.g. "motor rad/s".
+    pub fn symbol(self) -> &'static str {
+        match self {
+            Unit::JointRad => "rad",
+            Unit::JointRadS => "rad/s",
+            Unit::MotorRad => "motor rad",
+            Unit::MotorRadS => "motor rad/s",
+            Unit::Celsius => "°C",
+            Unit::JointNm => "Nm",
+        }
+    }
+}
+
+/// Stable code of a feature set. Codes 1 and 2 equal the authors' `input_type`; 3–5 are reserved for
+/// their other input types; 6 is the June 2024 `[s, θ]` model.
+pub fn feature_set_code(set: FeatureSet) -> u16 {
+    match set {
+        FeatureSet::DeltaThetaJointVel => 1,
+        FeatureSet::MotorVelJointVel => 2,
+        FeatureSet::JointPosMotorPos => 6,
+    }
+}
+
+/// Feature set for a code, if known.
+pub fn feature_set_from_code(code: u16) -> Option<FeatureSet> {
+    Some(match code {
+        1 => FeatureSet::DeltaThetaJointVel,
+        2 => FeatureSet::MotorVelJointVel,
+        6 => FeatureSet::JointPosMotorPos,
+        _ => return None,
+    })
+}
+
+/// Units of the blocks of a feature set, in block order.
+pub fn block_units(set: FeatureSet) -> &'static [Unit] {
+    match set {
+        FeatureSet::DeltaThetaJointVel => &[Unit::MotorRad, Unit::JointRadS],
+        FeatureSet::MotorVelJointVel => &[Unit::MotorRadS, Unit::JointRadS],
+        FeatureSet::JointPosMotorPos => &[Unit::JointRad, Unit::MotorRad],
+    }
+}
+
+/// The unit of the network output: joint-side friction torque.
+pub const OUTPUT_UNIT: Unit = Unit::JointNm;
+/// The unit of the optional temperature input.
+pub const TEMPERATURE_UNIT: Unit = Unit::Celsius;
+
+/// Stable code of a storage dtype.
+pub fn dtype_code(d: StorageDtype) -> u8 {
+    match d {
+        StorageDtype::F32 => 1,
+        StorageDtype::F16 => 2,
+        StorageDtype::Bf16 => 3,
+    }
+}
+
+/// Storage dtype for a code, if known.
+pub fn dtype_from_code(code: u8) -> Option<StorageDtype> {
+    Some(match code {
+        1 => StorageDtype::F32,
+        2 => StorageDtype::F16,
+        3 => StorageDtype::Bf16,
+        _ => return None,
+    })
+}
+
+/// Stable code of an activation.
+pub fn activation_code(a: Activation) -> u8 {
+    match a {
+        Activation::Relu => 1,
+        Activation::Identity => 2,
+    }
+}
+
+/// Activation for a code, if known.
+pub fn activation_from_code(code: u8) -> Option<Activation> {
+    Some(match code {
+        1 => Activation::Relu,
+        2 => Activation::Identity,
+        _ => return None,
+    })
+}
+
+/// Stable code of a signal-filtering kind.
+pub fn filtering_code(f: SignalFiltering) -> u8 {
+    match f {
+        SignalFiltering::Unknown => 0,
+        SignalFiltering::Causal => 1,
+        SignalFiltering::NonCausal => 2,
+    }
+}
+
+/// Signal filtering for a code, if known.
+pub fn filtering_from_code(code: u8) -> Option<SignalFiltering> {
+    Some(match code {
+        0 => SignalFiltering::Unknown,
+        1 => SignalFiltering::Causal,
+        2 => SignalFiltering::NonCausal,
+        _ => return None,
+    })
+}
+
+/// Sizes of the parts of a file, all in bytes, as the spec's formula gives them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct Layout {
+    /// Fixed header + layer table + normalisation (unpadded).
+    pub header_len: u64,
+    /// `header_len` rounded up to a multiple of 64.
+    pub payload_offset: u64,
+    /// Weights and biases of every layer in the storage dtype.
+    pub payload_len: u64,
+    /// `payload_offset + payload_len`: the whole file.
+    pub file_len: u64,
+}
+
+impl Layout {
+    /// The layout for `n_inputs` raw inputs, `n_layers` layers holding `n_params` weights + biases,
+    /// stored with `dtype_size` bytes per value. Arithmetic is in u64; callers pass sizes already
+    /// checked against [`crate::mlp::limits`], for which it cannot overflow.
+    pub fn new(n_inputs: u64, n_layers: u64, n_params: u64, dtype_size: u64) -> Self {
+        let header_len = FIXED_HEADER_LEN as u64 + LAYER_ENTRY_LEN as u64 * n_layers + 8 * n_inputs;
+        let align = PAYLOAD_ALIGN as u64;
+        let payload_offset = header_len.div_ceil(align) * align;
+        let payload_len = n_params * dtype_size;
+        Self {
+            header_len,
+            payload_offset,
+            payload_len,
+            file_len: payload_offset + payload_len,
+        }
+    }
+}
