@@ -1,1 +1,19 @@
-//! (skeleton)
+//! # Data acquisition with the paper's excitation protocol
+//!
+//! What it is: the protocol of reference `simulator-and-protocol.md` §6.1/§6.2 — five starting poses,
+//! position-controlled re-centring before every block, current sines (amplitude × frequency, 2 cycles
+//! each, high → low f), ramps both ways, steps, a position-limit latch and a current guard, plus
+//! closed-loop sine-tracking sets for sliding data — and its dataset output (CSV + JSON sidecar):
+//! - [`config`]: every number as a serde struct (the `[protocol]` table of a preset);
+//! - [`protocol`]: the schedule, the controllers and the run loop over the [`protocol::JointIo`] seam;
+//! - [`log`]: CSV columns, units and the sidecar.
+//!
+//! What it is not: the plant (see [`crate::sim`]) or a live shared-memory client (the [`protocol::JointIo`]
+//! trait is the seam for it once the shm ABI exists).
+
+pub mod config;
+pub mod log;
+pub mod protocol;
+
+pub use config::ProtocolConfig;
+pub use protocol::{Block, BlockKind, JointIo, LogRow, Mode, RunSummary, SimJoint, run, schedule};

@@ -1,1 +1,22 @@
-//! (skeleton)
+//! # The virtual harmonic-drive joint
+//!
+//! What it is: a two-inertia joint simulator (reference `simulator-and-protocol.md` §2–§5) used to
+//! generate datasets and to test the whole method without a robot:
+//! - [`params`]: every parameter as a serde struct, the `knee` / `ankle_roll` presets and the
+//!   `--params FILE` / `--set key=value` override layering;
+//! - [`link`]: the [`LinkDynamics`](link::LinkDynamics) trait (I_L(s), g(s)) and an analytic pendulum;
+//! - [`plant`]: the equations, 20 kHz semi-implicit Euler with the exact LuGre update, 1 kHz sensor
+//!   emulation and the true friction as diagnostics;
+//! - [`profile`]: open-loop current profiles for `frictl sim run`.
+//!
+//! What it is not: the excitation protocol or any controller ([`crate::acquire`]), and not yet an
+//! iceoryx2 plant process (`frictl sim serve` comes after the shared-memory ABI).
+
+pub mod link;
+pub mod params;
+pub mod plant;
+pub mod profile;
+
+pub use link::{LinkDynamics, Pendulum};
+pub use params::{LinkModel, ParamError, PlantParams, SensorParams};
+pub use plant::{Measurement, Plant, PlantState, Sample, Truth};

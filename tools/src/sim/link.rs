@@ -1,0 +1,77 @@
+//! Link dynamics seen by the simulated joint: inertia and gravity torque as functions of the joint angle.
+//!
+//! What it is: the [`LinkDynamics`] trait (other joints held fixed, so only I_L(s), g(s) and an optional
+//! velocity term), the analytic [`Pendulum`] and the factory [`link_from_model`] for the preset's
+//! `[plant.link]` table.
+//!
+//! What it is not: a rigid-body library. The URDF-backed implementation will wrap
+//! [`crate::dynamics`] once that module offers a single-joint view.
+
+use crate::sim::params::LinkModel;
+
+/// Single-joint link dynamics, joint-side units: I_L(s)·s̈ + c(s, ṡ) + g(s) = τ.
+pub trait LinkDynamics: Send + Sync {
+    /// Link inertia about the joint axis I_L(s) [kg·m²].
+    fn inertia_kgm2(&self, s_rad: f64) -> f64;
+    /// Gravity torque g(s) [Nm]: the joint torque that holds the link still at `s_rad`.
+    fn gravity_nm(&self, s_rad: f64) -> f64;
+    /// Velocity-dependent torque c(s, ṡ) [Nm] (0 for a single joint whose own angle does not change
+    /// its inertia, which is the case with the other joints fixed).
+    fn velocity_torque_nm(&self, _s_rad: f64, _s_dot_rad_s: f64) -> f64 {
+        0.0
+    }
+}
+
+/// Analytic pendulum: constant I_L, g(s) = A·sin(s + phase).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pendulum {
+    /// Inertia about the joint [kg·m²].
+    pub inertia_kgm2: f64,
+    /// Gravity amplitude A = m·g·l [Nm].
+    pub gravity_amplitude_nm: f64,
+    /// Phase [rad] (0: hanging at s = 0).
+    pub gravity_phase_rad: f64,
+}
+
+impl LinkDynamics for Pendulum {
+    #[inline]
+    fn inertia_kgm2(&self, _s_rad: f64) -> f64 {
+        self.inertia_kgm2
+    }
+    #[inline]
+    fn gravity_nm(&self, s_rad: f64) -> f64 {
+        self.gravity_amplitude_nm * (s_rad + self.gravity_phase_rad).sin()
+    }
+}
+
+/// Builds the link dynamics described by a preset's `[plant.link]` table.
+pub fn link_from_model(model: &LinkModel) -> Box<dyn LinkDynamics> {
+    match *model {
+        LinkModel::Pendulum {
+            inertia_kgm2,
+            gravity_amplitude_nm,
+            gravity_phase_rad,
+        } => Box::new(Pendulum {
+            inertia_kgm2,
+            gravity_amplitude_nm,
+            gravity_phase_rad,
+        }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pendulum_gravity_is_zero_hanging_and_peaks_horizontal() {
+        let p = Pendulum {
+            inertia_kgm2: 0.5,
+            gravity_amplitude_nm: 16.6,
+            gravity_phase_rad: 0.0,
+        };
+        assert!(p.gravity_nm(0.0).abs() < 1e-12);
+        assert!((p.gravity_nm(-std::f64::consts::FRAC_PI_2) + 16.6).abs() < 1e-9);
+        assert_eq!(p.inertia_kgm2(1.0), 0.5);
+    }
+}

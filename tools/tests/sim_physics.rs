@@ -1,0 +1,291 @@
+//! Physical sanity tests of the virtual harmonic-drive joint (reference §2–§5).
+
+use frictl::sim::params::{PRESET_NAMES, load_table};
+use frictl::sim::{LinkModel, Plant, PlantParams};
+
+fn params(preset: &str, sets: &[&str]) -> PlantParams {
+    let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+    PlantParams::from_table(&load_table(preset, None, &sets).unwrap()).unwrap()
+}
+
+#[test]
+fn presets_load_and_carry_the_reference_values() {
+    for name in PRESET_NAMES {
+        let p = PlantParams::preset(name).unwrap();
+        assert!(
+            p.gear_ratio_signed < 0.0,
+            "{name}: left-leg ratios are negative"
+        );
+        assert_eq!(p.substeps_per_sample, 20);
+        assert!((p.sample_period_s() - 1e-3).abs() < 1e-15);
+    }
+    let knee = PlantParams::preset("knee").unwrap();
+    assert_eq!(knee.gear_ratio_signed, -100.0);
+    assert_eq!(knee.kt_nm_per_a, 0.157);
+    assert!((knee.j_eq_kgm2() - 0.23).abs() < 1e-12);
+    let ankle = PlantParams::preset("ankle_roll").unwrap();
+    assert_eq!(ankle.gear_ratio_signed, -160.0);
+    assert_eq!(ankle.kt_nm_per_a, 0.0665);
+    assert!((ankle.j_eq_kgm2() - 0.128).abs() < 1e-12);
+    assert!(ankle.sensors.temperature_sensor && !knee.sensors.temperature_sensor);
+}
+
+#[test]
+fn overrides_apply_and_unknown_keys_fail_with_the_key_named() {
+    let p = params(
+        "knee",
+        &["plant.k1_nm_per_rad=20000", "plant.link.inertia_kgm2=0.4"],
+    );
+    assert_eq!(p.k1_nm_per_rad, 2e4);
+    assert_eq!(
+        p.link,
+        LinkModel::Pendulum {
+            inertia_kgm2: 0.4,
+            gravity_amplitude_nm: 16.6,
+            gravity_phase_rad: 0.0
+        }
+    );
+    let table = load_table("knee", None, &["plant.k1_nm_per_radd=1".to_string()]).unwrap();
+    let err = PlantParams::from_table(&table).unwrap_err().to_string();
+    assert!(err.contains("k1_nm_per_radd"), "{err}");
+    let table = load_table("knee", None, &["plant.k1_nm_per_rad=-5".to_string()]).unwrap();
+    let err = PlantParams::from_table(&table).unwrap_err().to_string();
+    assert!(err.contains("k1_nm_per_rad") && err.contains("-5"), "{err}");
+    assert!(load_table("elbow", None, &[]).is_err());
+    assert!(load_table("knee", None, &["no_equals_sign".to_string()]).is_err());
+}
+
+#[test]
+fn params_file_is_deep_merged_over_the_preset() {
+    let dir = std::env::temp_dir().join(format!("frictl-sim-params-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("over.toml");
+    std::fs::write(
+        &file,
+        "[plant]\nmu_load = 0.0\n[plant.sensors]\ncurrent_noise_std_a = 0.5\n",
+    )
+    .unwrap();
+    let t = load_table("ankle_roll", Some(&file), &[]).unwrap();
+    let p = PlantParams::from_table(&t).unwrap();
+    assert_eq!(p.mu_load, 0.0);
+    assert_eq!(p.sensors.current_noise_std_a, 0.5);
+    assert_eq!(p.f_s0_nm, 4.0, "untouched keys keep the preset value");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// No input, no gravity: the stored energy (kinetic + flexspline + bristle) never increases.
+#[test]
+fn energy_never_increases_without_input() {
+    for preset in PRESET_NAMES {
+        let p = params(
+            preset,
+            &[
+                "plant.link.gravity_amplitude_nm=0",
+                "plant.sensors.current_noise_std_a=0",
+            ],
+        );
+        let mut plant = Plant::from_params(p, 3).unwrap();
+        let mut st = plant.state();
+        st.s_dot_rad_s = 1.0;
+        st.phi_dot_rad_s = -0.5;
+        st.phi_rad = st.s_rad + 2e-4;
+        st.i_a = 0.0;
+        plant.set_state(st);
+        let e0 = plant.stored_energy_j();
+        assert!(e0 > 0.0);
+        let mut prev = e0;
+        for k in 0..3000 {
+            plant.step(0.0, 0.0);
+            let e = plant.stored_energy_j();
+            // Semi-implicit Euler conserves a slightly shifted energy: allow 1e-9 of E0 per sample.
+            assert!(
+                e <= prev + 1e-9 * e0,
+                "{preset}: energy rose at sample {k}: {prev} -> {e}"
+            );
+            prev = e;
+        }
+        assert!(
+            prev < 0.05 * e0,
+            "{preset}: energy is dissipated ({prev} of {e0})"
+        );
+    }
+}
+
+/// With ripple, load dependence and temperature effects off, the LuGre friction at constant velocity
+/// settles to the Stribeck curve g_ss(ṡ) + σ2·ṡ and z to g_ss/σ0.
+#[test]
+fn lugre_steady_state_matches_the_stribeck_curve() {
+    for preset in PRESET_NAMES {
+        for &v in &[0.02, 0.1, 0.3, 1.0, -0.05, -0.5] {
+            let p = params(
+                preset,
+                &[
+                    "plant.e1=0",
+                    "plant.e2=0",
+                    "plant.mu_load=0",
+                    "plant.beta_c_per_k=0",
+                    "plant.beta_v_per_k=0",
+                    "plant.link.gravity_amplitude_nm=0",
+                    // huge inertias: the velocity stays put while the friction settles
+                    "plant.link.inertia_kgm2=1e7",
+                    "plant.j_motor_kgm2=1e3",
+                ],
+            );
+            let (fc0, dfc, fs, vs, delta, s0, s2) = (
+                p.f_c0_nm,
+                p.delta_f_c_nm,
+                p.f_s0_nm,
+                p.v_s_rad_s,
+                p.stribeck_exponent,
+                p.sigma0_nm_per_rad,
+                p.sigma2j_nms_per_rad,
+            );
+            let mut plant = Plant::from_params(p, 0).unwrap();
+            let mut st = plant.state();
+            st.s_dot_rad_s = v;
+            st.phi_dot_rad_s = v;
+            st.i_a = 0.0;
+            plant.set_state(st);
+            let mut sample = plant.step(0.0, 0.0);
+            for _ in 0..300 {
+                sample = plant.step(0.0, 0.0);
+            }
+            let t = sample.truth;
+            let v_now = t.state.s_dot_rad_s;
+            assert!(
+                (v_now - v).abs() < 1e-3 * v.abs(),
+                "velocity held: {v_now} vs {v}"
+            );
+            let fc = fc0 + dfc * (v_now / 1e-3).tanh();
+            let g = fc + (fs - fc) * (-(v_now.abs() / vs).powf(delta)).exp();
+            let expected = g * v_now.signum() + s2 * v_now;
+            assert!(
+                (t.tau_fj_nm - expected).abs() < 1e-3 * g,
+                "{preset} v = {v}: tau_Fj {} vs Stribeck {expected}",
+                t.tau_fj_nm
+            );
+            assert!((t.z_rad - g / s0 * v.signum()).abs() < 1e-3 * g / s0);
+        }
+    }
+}
+
+fn hold_torque(preset: &str, tau_joint_nm: f64, seconds: f64) -> (f64, f64, Plant) {
+    let p = params(
+        preset,
+        &[
+            "plant.link.gravity_amplitude_nm=0",
+            "plant.e1=0",
+            "plant.e2=0",
+            "plant.t0_max_c=25",
+            "plant.t0_min_c=25",
+        ],
+    );
+    let i = tau_joint_nm / (p.gear_ratio_signed * p.kt_nm_per_a);
+    let mut plant = Plant::from_params(p, 1).unwrap();
+    let s0 = plant.state().s_rad;
+    for _ in 0..(seconds * 1000.0) as usize {
+        plant.step(i, 0.0);
+    }
+    let st = plant.state();
+    (st.s_rad - s0, st.s_dot_rad_s, plant)
+}
+
+/// A constant joint torque below breakaway leaves the joint stuck (pre-sliding only); above it moves.
+#[test]
+fn stiction_holds_below_breakaway_and_releases_above() {
+    for preset in PRESET_NAMES {
+        let p = PlantParams::preset(preset).unwrap();
+        let presliding = 2.0 * p.f_s0_nm / p.sigma0_nm_per_rad;
+        for sign in [1.0, -1.0] {
+            let (ds, sd, _) = hold_torque(preset, sign * 0.5 * p.f_s0_nm, 2.0);
+            assert!(
+                ds.abs() < presliding,
+                "{preset}: stuck joint moved {ds} rad"
+            );
+            assert!(sd.abs() < 1e-3, "{preset}: stuck joint has velocity {sd}");
+            let (ds, _, _) = hold_torque(preset, sign * (p.f_s0_nm + p.f_cm_nm) * 1.6, 1.0);
+            assert!(
+                ds * sign > 0.05,
+                "{preset}: torque above breakaway must move the joint, moved {ds}"
+            );
+        }
+    }
+}
+
+/// Robot conventions end to end: positive joint torque command → positive ṡ, θ_meas = r_signed·φ,
+/// and the measured current keeps the commanded sign.
+#[test]
+fn signed_gear_ratio_conventions_hold_end_to_end() {
+    for preset in PRESET_NAMES {
+        let p = PlantParams::preset(preset).unwrap();
+        let r = p.gear_ratio_signed;
+        let (ds, sd, plant) = hold_torque(preset, 2.0 * (p.f_s0_nm + p.f_cm_nm), 0.3);
+        assert!(
+            ds > 0.0 && sd > 0.0,
+            "{preset}: positive joint torque moves s up"
+        );
+        let i_cmd = 2.0 * (p.f_s0_nm + p.f_cm_nm) / (r * p.kt_nm_per_a);
+        assert!(
+            i_cmd < 0.0,
+            "negative ratio: positive torque needs negative current"
+        );
+        let m = plant.measurement();
+        assert!(
+            m.i_meas_a * i_cmd > 0.0,
+            "{preset}: measured current has the command's sign"
+        );
+        let st = plant.state();
+        let q = std::f64::consts::TAU / 3600.0;
+        assert!((m.theta_motor_rad - r * st.phi_rad).abs() <= 0.5 * q + 1e-12);
+        assert!(
+            m.omega_motor_rad_s * r * sd > 0.0,
+            "{preset}: motor velocity has the sign of r*s_dot"
+        );
+        let qs = std::f64::consts::TAU / f64::from(1u32 << 18);
+        assert!((m.s_rad - st.s_rad).abs() <= 0.5 * qs + 1e-15);
+        assert!(
+            ((m.s_rad / qs).round() * qs - m.s_rad).abs() < 1e-12,
+            "joint encoder is quantised"
+        );
+    }
+}
+
+#[test]
+fn same_seed_same_run_other_seed_differs() {
+    let run = |seed: u64| {
+        let mut plant =
+            Plant::from_params(PlantParams::preset("ankle_roll").unwrap(), seed).unwrap();
+        (0..2000)
+            .map(|k| plant.step(0.8 * (k as f64 * 0.004).sin(), 0.0))
+            .collect::<Vec<_>>()
+    };
+    let a = run(7);
+    let b = run(7);
+    assert!(a == b, "identical seeds give identical samples");
+    let c = run(8);
+    assert!(
+        a.iter()
+            .zip(&c)
+            .any(|(x, y)| x.meas.i_meas_a != y.meas.i_meas_a)
+    );
+    assert_ne!(
+        a[0].truth.state.temperature_c, c[0].truth.state.temperature_c,
+        "T0 comes from the seed"
+    );
+}
+
+#[test]
+fn starts_pre_wound_to_hold_gravity() {
+    let p = params("knee", &["plant.initial_s_rad=-1.0"]);
+    let mut plant = Plant::from_params(p.clone(), 0).unwrap();
+    let st = plant.state();
+    let g = 16.6 * (-1.0f64).sin();
+    let d = st.phi_rad - st.s_rad;
+    assert!((p.k1_nm_per_rad * d + p.k3_nm_per_rad3 * d.powi(3) - g).abs() < 1e-9);
+    // holding the gravity current keeps it there
+    let i_hold = g / (p.gear_ratio_signed * p.kt_nm_per_a);
+    for _ in 0..1000 {
+        plant.step(i_hold, 0.0);
+    }
+    assert!((plant.state().s_rad + 1.0).abs() < 1e-3);
+}
