@@ -1,51 +1,493 @@
-//! Allocation-free single-sample MLP inference.
+//! Allocation-free single-sample MLP inference with runtime CPU dispatch.
 //!
-//! (skeleton — a straightforward implementation that defines the API; the blocked, dispatched kernel
-//! replaces its internals)
+//! What this module **is**: the real-time inference kernel for the friction networks described by
+//! [`MlpWeights`] (dense + ReLU hidden layers, at most [`limits::MAX_HIDDEN_LAYERS`] of them, widths up to
+//! [`limits::MAX_WIDTH`], one linear output). [`Mlp::new`] re-lays the weights out once (this allocates);
+//! afterwards [`Mlp::forward`] performs no allocation, no locking and no system call.
+//!
+//! What it is **not**: a general tensor library, a batch engine or a trainer. It does not parse files
+//! (see [`crate::weights`]) and it never runs several samples at once.
+//!
+//! ## Layout
+//! Each hidden layer is stored *blocked* as `[ceil(out/16)][in][16]`: output rows are grouped 16 at a time
+//! and, for every input `i`, the 16 weights of a group are contiguous. The kernel broadcasts `x[i]` and
+//! performs one 16-lane FMA per output group, so it vectorises across outputs (no horizontal reductions)
+//! and streams the weights linearly. Outputs are zero-padded to a multiple of 16 (padding weights and
+//! biases are 0, so padded activations are exactly 0 after ReLU). The output layer (one neuron) is stored
+//! as its weight row zero-padded to a multiple of 16 and evaluated as a 16-lane dot product followed by a
+//! horizontal sum. All buffers are 64-byte aligned ([`Block`]-sized chunks).
+//!
+//! The input normalisation `(x − mean) / scale` is applied first, in f32, exactly as written (not folded
+//! into the first layer), so reduced-precision storage rounds the *same* weights the trainer produced.
+//!
+//! ## Precision
+//! Computation is always f32 with f32 biases and normalisation. Weights are stored as f32, IEEE f16 or
+//! bf16 ([`StorageDtype`]), rounded to nearest-even once at load and decoded inside the kernel
+//! (`vcvtph2ps` for f16, a 16-bit left shift for bf16). [`storage_rounded`] gives the exact weights a
+//! reduced-precision kernel computes with, for validation against the f32 model.
+//!
+//! ## Paths
+//! [`KernelPath::Avx512`] (AVX-512F intrinsics), [`KernelPath::Avx2Fma`] (AVX2 + FMA + F16C intrinsics)
+//! and [`KernelPath::Portable`] (plain Rust that the compiler auto-vectorises; correct on any CPU, uses
+//! FMA only when the build enables it). [`Mlp::new`] picks the fastest path the running CPU supports;
+//! [`Mlp::with_path`] forces one (tests compare all of them).
 
-use crate::mlp::{MlpShapeError, MlpWeights, StorageDtype};
+use crate::mlp::{Activation, MlpShapeError, MlpWeights, StorageDtype, limits};
+use thiserror::Error;
+
+mod portable;
+#[cfg(target_arch = "x86_64")]
+mod x86;
+
+/// Lanes per block: outputs are processed 16 at a time (one zmm, or two ymm).
+pub const LANES: usize = 16;
+
+/// 16 f32 values, 64-byte aligned (one cache line, one zmm register).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(64))]
+pub(crate) struct Block(pub(crate) [f32; LANES]);
+
+/// 32 16-bit values (two rows of 16 f16/bf16 weights), 64-byte aligned.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(64))]
+pub(crate) struct HalfBlock(pub(crate) [u16; 2 * LANES]);
+
+const ZERO_BLOCK: Block = Block([0.0; LANES]);
+
+/// Dtype codes used as const generic parameters of the kernels.
+pub(crate) mod dt {
+    /// f32 rows (64 bytes).
+    pub const F32: u8 = 0;
+    /// IEEE binary16 rows (32 bytes).
+    pub const F16: u8 = 1;
+    /// bfloat16 rows (32 bytes).
+    pub const BF16: u8 = 2;
+}
+
+/// Which implementation [`Mlp::forward`] runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum KernelPath {
+    /// AVX-512F intrinsics (x86-64 only, detected at run time).
+    Avx512,
+    /// AVX2 + FMA + F16C intrinsics (x86-64 only, detected at run time).
+    Avx2Fma,
+    /// Plain Rust, auto-vectorised for whatever the build targets; always available.
+    Portable,
+}
+
+impl KernelPath {
+    /// All paths, fastest first.
+    pub const ALL: [KernelPath; 3] = [
+        KernelPath::Avx512,
+        KernelPath::Avx2Fma,
+        KernelPath::Portable,
+    ];
+
+    /// Whether the running CPU can execute this path.
+    pub fn is_available(self) -> bool {
+        match self {
+            KernelPath::Portable => true,
+            #[cfg(target_arch = "x86_64")]
+            KernelPath::Avx512 => std::is_x86_feature_detected!("avx512f"),
+            #[cfg(target_arch = "x86_64")]
+            KernelPath::Avx2Fma => {
+                std::is_x86_feature_detected!("avx2")
+                    && std::is_x86_feature_detected!("fma")
+                    && std::is_x86_feature_detected!("f16c")
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            _ => false,
+        }
+    }
+
+    /// The fastest path available on the running CPU.
+    pub fn detect() -> KernelPath {
+        Self::ALL
+            .into_iter()
+            .find(|p| p.is_available())
+            .unwrap_or(KernelPath::Portable)
+    }
+
+    /// Every path available on the running CPU, fastest first.
+    pub fn available() -> Vec<KernelPath> {
+        Self::ALL.into_iter().filter(|p| p.is_available()).collect()
+    }
+
+    /// Short lowercase name (`avx512`, `avx2fma`, `portable`).
+    pub fn name(self) -> &'static str {
+        match self {
+            KernelPath::Avx512 => "avx512",
+            KernelPath::Avx2Fma => "avx2fma",
+            KernelPath::Portable => "portable",
+        }
+    }
+}
+
+impl std::fmt::Display for KernelPath {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A forced [`KernelPath`] that the running CPU cannot execute.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Error)]
+#[error("kernel path {0} is not supported by this CPU")]
+pub struct PathUnavailable(pub KernelPath);
+
+/// Where one dense layer lives in the weight store.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(crate) struct LayerPlan {
+    /// Inputs of the layer (not padded).
+    pub(crate) n_in: usize,
+    /// Output blocks (`ceil(n_out / 16)`); for the output layer: input blocks (`ceil(n_in / 16)`).
+    pub(crate) n_blk: usize,
+    /// First 16-wide row of this layer in the weight store.
+    pub(crate) row0: usize,
+    /// First bias block of this layer (hidden layers only).
+    pub(crate) bias_blk0: usize,
+}
+
+/// The re-laid-out weights.
+#[derive(Clone, Debug)]
+pub(crate) enum Store {
+    /// f32 rows, one [`Block`] per row.
+    F32(Vec<Block>),
+    /// f16 or bf16 bit patterns, two rows per [`HalfBlock`].
+    Half(Vec<HalfBlock>),
+}
+
+/// Everything the kernels read (immutable after construction).
+#[derive(Clone, Debug)]
+pub(crate) struct Net {
+    pub(crate) n_in: usize,
+    pub(crate) mean: Vec<f32>,
+    pub(crate) scale: Vec<f32>,
+    pub(crate) hidden: [LayerPlan; limits::MAX_HIDDEN_LAYERS],
+    pub(crate) n_hidden: usize,
+    pub(crate) out: LayerPlan,
+    pub(crate) out_bias: f32,
+    pub(crate) store: Store,
+    pub(crate) bias: Vec<Block>,
+}
+
+/// Activation buffers (the only memory [`Mlp::forward`] writes).
+#[derive(Clone, Debug)]
+pub(crate) struct Scratch {
+    /// Normalised input, zero-padded to whole blocks.
+    pub(crate) xin: Vec<Block>,
+    /// Ping-pong activation buffers, each `max hidden blocks` long.
+    pub(crate) a: Vec<Block>,
+    pub(crate) b: Vec<Block>,
+}
 
 /// An MLP laid out for inference. Built once (allocates), then [`Mlp::forward`] never allocates.
 #[derive(Clone, Debug)]
 pub struct Mlp {
-    w: MlpWeights,
+    net: Net,
+    scratch: Scratch,
     dtype: StorageDtype,
-    a: Vec<f32>,
-    b: Vec<f32>,
+    path: KernelPath,
+}
+
+/// Rounds one f32 weight to the storage precision and returns its bit pattern (f16/bf16) — RNE.
+fn encode_half(v: f32, dtype: StorageDtype) -> u16 {
+    match dtype {
+        StorageDtype::Bf16 => half::bf16::from_f32(v).to_bits(),
+        _ => half::f16::from_f32(v).to_bits(),
+    }
+}
+
+/// The weights a kernel with storage `dtype` actually computes with: every layer weight rounded to
+/// `dtype` (round to nearest, ties to even) and back to f32. Biases and normalisation stay f32, as in the
+/// kernel. Use it to validate a reduced-precision model against its f32 original.
+pub fn storage_rounded(w: &MlpWeights, dtype: StorageDtype) -> MlpWeights {
+    let mut r = w.clone();
+    for l in &mut r.layers {
+        for v in &mut l.weight {
+            *v = match dtype {
+                StorageDtype::F32 => *v,
+                StorageDtype::F16 => half::f16::from_f32(*v).to_f32(),
+                StorageDtype::Bf16 => half::bf16::from_f32(*v).to_f32(),
+            };
+        }
+    }
+    r
+}
+
+fn blocks(n: usize) -> usize {
+    n.div_ceil(LANES)
 }
 
 impl Mlp {
-    /// Lays out `w` for inference with the given storage precision.
+    /// Lays out `w` for inference with the given storage precision, on the fastest path the CPU supports
+    /// ([`KernelPath::detect`]). Fails if `w` does not pass [`MlpWeights::validate`].
     pub fn new(w: &MlpWeights, dtype: StorageDtype) -> Result<Self, MlpShapeError> {
         w.validate()?;
-        let m = w.sizes().into_iter().max().unwrap_or(1);
-        Ok(Self { w: w.clone(), dtype, a: vec![0.0; m], b: vec![0.0; m] })
+        let n_layers = w.layers.len();
+        let n_hidden = n_layers - 1;
+        // Plan the rows: hidden layer k has n_blk(out) * n_in rows, the output layer n_blk(in) rows.
+        let mut hidden = [LayerPlan::default(); limits::MAX_HIDDEN_LAYERS];
+        let mut row = 0usize;
+        let mut bias_blk = 0usize;
+        let mut max_blk = 1usize;
+        for (k, l) in w.layers[..n_hidden].iter().enumerate() {
+            let n_blk = blocks(l.n_out);
+            hidden[k] = LayerPlan {
+                n_in: l.n_in,
+                n_blk,
+                row0: row,
+                bias_blk0: bias_blk,
+            };
+            row += n_blk * l.n_in;
+            bias_blk += n_blk;
+            max_blk = max_blk.max(n_blk);
+        }
+        let last = &w.layers[n_hidden];
+        debug_assert_eq!(last.activation, Activation::Identity);
+        let out = LayerPlan {
+            n_in: last.n_in,
+            n_blk: blocks(last.n_in),
+            row0: row,
+            bias_blk0: 0,
+        };
+        let n_rows = row + out.n_blk;
+
+        // Fill f32 rows first (zero padded), then encode if needed.
+        let mut rows = vec![ZERO_BLOCK; n_rows];
+        let mut bias = vec![ZERO_BLOCK; bias_blk.max(1)];
+        for (k, l) in w.layers[..n_hidden].iter().enumerate() {
+            let p = hidden[k];
+            for o in 0..l.n_out {
+                let (blk, lane) = (o / LANES, o % LANES);
+                for i in 0..l.n_in {
+                    rows[p.row0 + blk * l.n_in + i].0[lane] = l.weight[o * l.n_in + i];
+                }
+                bias[p.bias_blk0 + blk].0[lane] = l.bias[o];
+            }
+        }
+        for (i, &v) in last.weight.iter().enumerate() {
+            rows[out.row0 + i / LANES].0[i % LANES] = v;
+        }
+        let store = match dtype {
+            StorageDtype::F32 => Store::F32(rows),
+            StorageDtype::F16 | StorageDtype::Bf16 => {
+                let mut hb = vec![HalfBlock([0; 2 * LANES]); n_rows.div_ceil(2)];
+                for (r, blk) in rows.iter().enumerate() {
+                    for (lane, &v) in blk.0.iter().enumerate() {
+                        hb[r / 2].0[(r % 2) * LANES + lane] = encode_half(v, dtype);
+                    }
+                }
+                Store::Half(hb)
+            }
+        };
+        let n_in = w.n_inputs();
+        let net = Net {
+            n_in,
+            mean: w.norm.mean.clone(),
+            scale: w.norm.scale.clone(),
+            hidden,
+            n_hidden,
+            out,
+            out_bias: last.bias[0],
+            store,
+            bias,
+        };
+        let scratch = Scratch {
+            xin: vec![ZERO_BLOCK; blocks(n_in)],
+            a: vec![ZERO_BLOCK; max_blk],
+            b: vec![ZERO_BLOCK; max_blk],
+        };
+        Ok(Self {
+            net,
+            scratch,
+            dtype,
+            path: KernelPath::detect(),
+        })
     }
+
+    /// Forces the implementation [`Mlp::forward`] uses. Fails if the running CPU cannot execute it.
+    pub fn with_path(mut self, path: KernelPath) -> Result<Self, PathUnavailable> {
+        if !path.is_available() {
+            return Err(PathUnavailable(path));
+        }
+        self.path = path;
+        Ok(self)
+    }
+
+    /// The implementation [`Mlp::forward`] runs.
+    pub fn path(&self) -> KernelPath {
+        self.path
+    }
+
     /// Number of raw inputs.
     pub fn n_inputs(&self) -> usize {
-        self.w.n_inputs()
+        self.net.n_in
     }
+
     /// Storage precision.
     pub fn dtype(&self) -> StorageDtype {
         self.dtype
     }
-    /// One inference on a raw (un-normalised) input; `x.len()` must equal [`Mlp::n_inputs`].
-    /// Returns the single output (joint-side friction, Nm).
+
+    /// Bytes of weight storage the kernel streams per inference (padding included, biases excluded).
+    pub fn weight_bytes(&self) -> usize {
+        match &self.net.store {
+            Store::F32(v) => std::mem::size_of_val(v.as_slice()),
+            Store::Half(v) => std::mem::size_of_val(v.as_slice()),
+        }
+    }
+
+    /// One inference on a raw (un-normalised) input; returns the single output (joint-side friction, Nm).
+    ///
+    /// Never allocates and never panics. Returns `f32::NAN` if `x.len() != self.n_inputs()` or if any
+    /// input is NaN or infinite (a NaN would otherwise be silently clipped to 0 by a ReLU).
     pub fn forward(&mut self, x: &[f32]) -> f32 {
-        let n = self.w.n_inputs();
-        for i in 0..n {
-            self.a[i] = (x[i] - self.w.norm.mean[i]) / self.w.norm.scale[i];
+        if !normalise(&self.net, x, &mut self.scratch.xin) {
+            return f32::NAN;
         }
-        for l in &self.w.layers {
-            for o in 0..l.n_out {
-                let mut acc = l.bias[o];
-                for i in 0..l.n_in {
-                    acc += l.weight[o * l.n_in + i] * self.a[i];
-                }
-                self.b[o] = if l.activation == crate::mlp::Activation::Relu { acc.max(0.0) } else { acc };
+        let net = &self.net;
+        let s = &mut self.scratch;
+        let code = match (self.dtype, &net.store) {
+            (StorageDtype::F32, Store::F32(_)) => dt::F32,
+            (StorageDtype::F16, Store::Half(_)) => dt::F16,
+            (StorageDtype::Bf16, Store::Half(_)) => dt::BF16,
+            _ => return f32::NAN, // unreachable by construction
+        };
+        match self.path {
+            #[cfg(target_arch = "x86_64")]
+            KernelPath::Avx512 => x86::forward_avx512(net, s, code),
+            #[cfg(target_arch = "x86_64")]
+            KernelPath::Avx2Fma => x86::forward_avx2(net, s, code),
+            _ => portable::forward(net, s, code),
+        }
+    }
+}
+
+impl Net {
+    /// Rows in the weight store.
+    fn n_rows(&self) -> usize {
+        match &self.store {
+            Store::F32(v) => v.len(),
+            Store::Half(v) => 2 * v.len(),
+        }
+    }
+
+    /// Checks that every row, bias block and activation block the kernels touch exists. True by
+    /// construction; the SIMD paths check it once per call so their raw-pointer loads stay in bounds
+    /// even if that invariant were ever broken.
+    pub(crate) fn fits(&self, s: &Scratch) -> bool {
+        let mut prev_blk = blocks(self.n_in);
+        if s.xin.len() < prev_blk || self.n_hidden > self.hidden.len() {
+            return false;
+        }
+        for p in &self.hidden[..self.n_hidden] {
+            let ok = blocks(p.n_in) <= prev_blk
+                && p.row0 + p.n_blk * p.n_in <= self.n_rows()
+                && p.bias_blk0 + p.n_blk <= self.bias.len()
+                && p.n_blk <= s.a.len()
+                && p.n_blk <= s.b.len();
+            if !ok {
+                return false;
             }
-            std::mem::swap(&mut self.a, &mut self.b);
+            prev_blk = p.n_blk;
         }
-        self.a[0]
+        self.out.n_blk <= prev_blk && self.out.row0 + self.out.n_blk <= self.n_rows()
+    }
+}
+
+/// Writes `(x − mean) / scale` into `xin` (the zero padding past `n_in` is never touched).
+/// Returns false if `x` has the wrong length or a non-finite value.
+fn normalise(net: &Net, x: &[f32], xin: &mut [Block]) -> bool {
+    if x.len() != net.n_in {
+        return false;
+    }
+    let mut finite = true;
+    let chunks = x
+        .chunks(LANES)
+        .zip(net.mean.chunks(LANES).zip(net.scale.chunks(LANES)));
+    for (blk, (xc, (mc, sc))) in xin.iter_mut().zip(chunks) {
+        for (((d, &xv), &m), &sv) in blk.0.iter_mut().zip(xc).zip(mc).zip(sc) {
+            *d = (xv - m) / sv;
+            finite &= d.is_finite();
+        }
+    }
+    finite
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mlp::{DenseLayer, Normalisation};
+
+    fn net(sizes: &[usize]) -> MlpWeights {
+        let mut seed = 0x1234_5678_u32;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 17;
+            seed ^= seed << 5;
+            (seed as f32 / u32::MAX as f32) - 0.5
+        };
+        let n = sizes.len() - 1;
+        let layers = (0..n)
+            .map(|k| DenseLayer {
+                n_in: sizes[k],
+                n_out: sizes[k + 1],
+                weight: (0..sizes[k] * sizes[k + 1]).map(|_| rnd()).collect(),
+                bias: (0..sizes[k + 1]).map(|_| rnd() * 0.1 + 0.05).collect(),
+                activation: if k + 1 == n {
+                    Activation::Identity
+                } else {
+                    Activation::Relu
+                },
+            })
+            .collect();
+        MlpWeights {
+            norm: Normalisation::identity(sizes[0]),
+            layers,
+        }
+    }
+
+    #[test]
+    fn wrong_length_and_non_finite_give_nan() {
+        let w = net(&[3, 17, 1]);
+        for p in KernelPath::available() {
+            let mut m = Mlp::new(&w, StorageDtype::F32)
+                .unwrap()
+                .with_path(p)
+                .unwrap();
+            assert!(m.forward(&[0.1, 0.2]).is_nan());
+            assert!(m.forward(&[0.1, 0.2, 0.3, 0.4]).is_nan());
+            assert!(m.forward(&[0.1, f32::NAN, 0.3]).is_nan());
+            assert!(m.forward(&[0.1, f32::INFINITY, 0.3]).is_nan());
+            assert!(m.forward(&[0.1, 0.2, 0.3]).is_finite());
+        }
+    }
+
+    #[test]
+    fn layout_padding_and_sizes() {
+        let w = net(&[5, 17, 33, 1]);
+        let m = Mlp::new(&w, StorageDtype::F32).unwrap();
+        // rows: 2 blocks * 5 + 3 blocks * 17 + 3 output rows = 64 rows of 64 bytes
+        assert_eq!(m.weight_bytes(), (2 * 5 + 3 * 17 + 3) * 64);
+        let h = Mlp::new(&w, StorageDtype::F16).unwrap();
+        assert_eq!(h.weight_bytes(), (2 * 5 + 3 * 17 + 3) * 32);
+        assert_eq!(m.n_inputs(), 5);
+        assert_eq!(h.dtype(), StorageDtype::F16);
+    }
+
+    #[test]
+    fn portable_matches_reference_small() {
+        let w = net(&[7, 20, 1]);
+        let mut m = Mlp::new(&w, StorageDtype::F32)
+            .unwrap()
+            .with_path(KernelPath::Portable)
+            .unwrap();
+        let x = [0.3, -0.2, 0.1, 0.5, -0.4, 0.25, 0.05];
+        let want = w.forward_reference(&x)[0];
+        let got = m.forward(&x);
+        assert!(
+            (got - want).abs() <= 1e-5 * want.abs().max(1e-3),
+            "{got} vs {want}"
+        );
     }
 }

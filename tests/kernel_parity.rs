@@ -1,0 +1,378 @@
+//! Parity of the inference kernel ([`frictionless::kernel::Mlp`]) with the f64 reference forward pass
+//! ([`MlpWeights::forward_reference`]) on every kernel path the machine supports × every storage dtype,
+//! on random networks of many shapes, plus the zero-allocation guarantee of `forward`.
+//!
+//! Tolerance: `|kernel − reference| ≤ 1e-5 · max(|reference|, m)` where `m = |b| + Σ|w_i·a_i|` is the
+//! magnitude of the output neuron's terms (computed in f64 here). Using `m` keeps the bound meaningful
+//! when an output happens to cancel to ~0; it is the natural scale of f32 summation error.
+//! For f16/bf16 storage the reference runs on the weights rounded to that dtype (rounded here with the
+//! `half` crate, independently of the kernel), then the same 1e-5 bound applies.
+
+use frictionless::kernel::{KernelPath, Mlp};
+use frictionless::mlp::{Activation, DenseLayer, MlpWeights, Normalisation, StorageDtype};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+// ---------------------------------------------------------------------------------------------------
+// Counting allocator (per thread, so parallel tests do not disturb each other).
+
+struct CountingAlloc;
+
+thread_local! {
+    static ALLOCS: Cell<usize> = const { Cell::new(0) };
+}
+
+// SAFETY: forwards every call to the system allocator unchanged; only counts.
+unsafe impl GlobalAlloc for CountingAlloc {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
+        // SAFETY: same contract as the caller's.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: CountingAlloc = CountingAlloc;
+
+fn allocs_here() -> usize {
+    ALLOCS.with(|c| c.get())
+}
+
+// ---------------------------------------------------------------------------------------------------
+// Random networks.
+
+/// A random MLP with He-uniform weights (activations neither die nor explode with depth), small
+/// positive-leaning biases and a non-trivial normalisation.
+fn random_net(rng: &mut ChaCha8Rng, sizes: &[usize]) -> MlpWeights {
+    let n = sizes.len() - 1;
+    let layers = (0..n)
+        .map(|k| {
+            let (ni, no) = (sizes[k], sizes[k + 1]);
+            let lim = (6.0 / ni as f32).sqrt();
+            DenseLayer {
+                n_in: ni,
+                n_out: no,
+                weight: (0..ni * no).map(|_| rng.random_range(-lim..lim)).collect(),
+                bias: (0..no).map(|_| rng.random_range(-0.1..0.3)).collect(),
+                activation: if k + 1 == n {
+                    Activation::Identity
+                } else {
+                    Activation::Relu
+                },
+            }
+        })
+        .collect();
+    let ni = sizes[0];
+    let norm = Normalisation {
+        mean: (0..ni).map(|_| rng.random_range(-2.0..2.0)).collect(),
+        scale: (0..ni).map(|_| rng.random_range(0.25..4.0)).collect(),
+    };
+    let w = MlpWeights { norm, layers };
+    w.validate().expect("random net is valid");
+    w
+}
+
+/// Raw inputs around the normalisation mean (normalised values roughly in ±2).
+fn random_input(rng: &mut ChaCha8Rng, w: &MlpWeights) -> Vec<f32> {
+    w.norm
+        .mean
+        .iter()
+        .zip(&w.norm.scale)
+        .map(|(&m, &s)| m + s * rng.random_range(-2.0f32..2.0))
+        .collect()
+}
+
+/// Weights rounded to the storage dtype (what a reduced-precision kernel computes with).
+fn rounded(w: &MlpWeights, dtype: StorageDtype) -> MlpWeights {
+    let mut r = w.clone();
+    for l in &mut r.layers {
+        for v in &mut l.weight {
+            *v = match dtype {
+                StorageDtype::F32 => *v,
+                StorageDtype::F16 => half::f16::from_f32(*v).to_f32(),
+                StorageDtype::Bf16 => half::bf16::from_f32(*v).to_f32(),
+            };
+        }
+    }
+    r
+}
+
+/// f64 forward pass returning (output, magnitude of the output neuron's terms).
+fn forward_f64_with_magnitude(w: &MlpWeights, x: &[f32]) -> (f64, f64) {
+    let mut a: Vec<f64> = x
+        .iter()
+        .zip(w.norm.mean.iter().zip(&w.norm.scale))
+        .map(|(&x, (&m, &s))| (x as f64 - m as f64) / s as f64)
+        .collect();
+    let last = w.layers.len() - 1;
+    for (k, l) in w.layers.iter().enumerate() {
+        let mut y = vec![0f64; l.n_out];
+        let mut mag = 0f64;
+        for (o, yo) in y.iter_mut().enumerate() {
+            let mut acc = l.bias[o] as f64;
+            mag = (l.bias[o] as f64).abs();
+            for (wv, xi) in l.weight[o * l.n_in..(o + 1) * l.n_in].iter().zip(&a) {
+                acc += *wv as f64 * xi;
+                mag += (*wv as f64 * xi).abs();
+            }
+            *yo = if l.activation == Activation::Relu {
+                acc.max(0.0)
+            } else {
+                acc
+            };
+        }
+        if k == last {
+            return (y[0], mag);
+        }
+        a = y;
+    }
+    unreachable!("a validated net has at least one layer")
+}
+
+const DTYPES: [StorageDtype; 3] = [StorageDtype::F32, StorageDtype::F16, StorageDtype::Bf16];
+
+/// Checks every available path × dtype on `w` with `n_inputs` random inputs; returns the worst
+/// relative error seen.
+fn check_net(rng: &mut ChaCha8Rng, w: &MlpWeights, n_inputs: usize) -> f64 {
+    let paths = KernelPath::available();
+    let xs: Vec<Vec<f32>> = (0..n_inputs).map(|_| random_input(rng, w)).collect();
+    let mut worst = 0f64;
+    for dtype in DTYPES {
+        let wr = rounded(w, dtype);
+        let refs: Vec<(f32, f64)> = xs
+            .iter()
+            .map(|x| {
+                let (y64, mag) = forward_f64_with_magnitude(&wr, x);
+                let y = wr.forward_reference(x)[0];
+                // Our f64 pass and the crate's reference must agree (guards the magnitude helper).
+                assert!(
+                    (y as f64 - y64).abs() <= 1e-6 * mag.max(1e-30),
+                    "reference helpers disagree"
+                );
+                (y, mag)
+            })
+            .collect();
+        for &path in &paths {
+            let mut m = Mlp::new(w, dtype).unwrap().with_path(path).unwrap();
+            assert_eq!(m.path(), path);
+            assert_eq!(m.dtype(), dtype);
+            assert_eq!(m.n_inputs(), w.n_inputs());
+            for (x, &(y_ref, mag)) in xs.iter().zip(&refs) {
+                let y = m.forward(x);
+                let scale = (y_ref.abs() as f64).max(mag).max(1e-30);
+                let rel = (y as f64 - y_ref as f64).abs() / scale;
+                assert!(
+                    rel <= 1e-5,
+                    "sizes {:?} {dtype:?} {path}: kernel {y} vs reference {y_ref} (rel {rel:.3e}, magnitude {mag:.3e})",
+                    w.sizes()
+                );
+                worst = worst.max(rel);
+            }
+        }
+    }
+    worst
+}
+
+#[test]
+fn portable_path_always_available_and_forcing_works() {
+    assert!(KernelPath::Portable.is_available());
+    assert!(KernelPath::available().contains(&KernelPath::detect()));
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let w = random_net(&mut rng, &[4, 8, 1]);
+    for p in KernelPath::ALL {
+        let r = Mlp::new(&w, StorageDtype::F32).unwrap().with_path(p);
+        assert_eq!(r.is_ok(), p.is_available(), "{p}");
+    }
+    // A freshly built kernel runs on the detected path.
+    assert_eq!(
+        Mlp::new(&w, StorageDtype::F32).unwrap().path(),
+        KernelPath::detect()
+    );
+    eprintln!("kernel paths on this CPU: {:?}", KernelPath::available());
+}
+
+#[test]
+fn fixed_shapes_all_paths_all_dtypes() {
+    let shapes: &[&[usize]] = &[
+        &[1, 1],
+        &[17, 1],
+        &[1, 1, 1],
+        &[1, 16, 1],
+        &[1, 17, 1],
+        &[3, 15, 33, 1],
+        &[40, 268, 215, 1],
+        &[50, 450, 210, 280, 1],
+        &[7, 33, 15, 129, 65, 1],
+        &[1024, 1, 1024, 1],
+        &[1024, 1024, 1],
+        &[5, 1024, 1000, 1024, 999, 1],
+        &[64, 128, 144, 136, 120, 1],
+    ];
+    let mut rng = ChaCha8Rng::seed_from_u64(2);
+    for s in shapes {
+        let w = random_net(&mut rng, s);
+        let worst = check_net(&mut rng, &w, 3);
+        eprintln!("{s:?}: worst relative error {worst:.2e}");
+    }
+}
+
+#[test]
+fn random_shapes_all_paths_all_dtypes() {
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let mut worst = 0f64;
+    for _ in 0..40 {
+        let n_hidden = rng.random_range(0..=4usize);
+        let dim = |rng: &mut ChaCha8Rng| {
+            // Mostly small (odd multiples of nothing in particular), sometimes up to the limit.
+            if rng.random_bool(0.8) {
+                rng.random_range(1..=96usize)
+            } else {
+                rng.random_range(97..=1024usize)
+            }
+        };
+        let mut sizes = vec![dim(&mut rng)];
+        for _ in 0..n_hidden {
+            sizes.push(dim(&mut rng));
+        }
+        sizes.push(1);
+        let w = random_net(&mut rng, &sizes);
+        worst = worst.max(check_net(&mut rng, &w, 2));
+    }
+    eprintln!("random shapes: worst relative error {worst:.2e}");
+}
+
+/// The real ergoCub model's shape (50→450→210→280→1) with its real folded normalisation and its real
+/// raw input vectors from the reference I/O JSON, random weights. (Full parity with the real weights is
+/// the ONNX importer's test.)
+#[test]
+fn ergocub_shape_with_real_normalisation_and_inputs() {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../shared/anchors/blf_jtc_ergoCubSN002_l_ankle_roll_pinn_2024-06.reference_io.json"
+    );
+    let Ok(text) = std::fs::read_to_string(path) else {
+        eprintln!("skipped: {path} not found");
+        return;
+    };
+    let j: serde_json::Value = serde_json::from_str(&text).expect("anchor JSON parses");
+    let norm = &j["normalisation_folded_in_first_Gemm"];
+    let vecf = |v: &serde_json::Value| -> Vec<f32> {
+        v.as_array()
+            .expect("array")
+            .iter()
+            .map(|e| e.as_f64().expect("number") as f32)
+            .collect()
+    };
+    let mean = vecf(&norm["mean"]);
+    let scale = vecf(&norm["scale_iqr"]);
+    assert_eq!(mean.len(), 50);
+    assert_eq!(scale.len(), 50);
+    let inputs: Vec<Vec<f32>> = j["cases"]
+        .as_array()
+        .expect("cases")
+        .iter()
+        .map(|c| vecf(&c["input"]))
+        .collect();
+    assert_eq!(inputs.len(), 9);
+
+    let mut rng = ChaCha8Rng::seed_from_u64(4);
+    let mut w = random_net(&mut rng, &[50, 450, 210, 280, 1]);
+    w.norm = Normalisation { mean, scale };
+    w.validate().unwrap();
+    for dtype in DTYPES {
+        let wr = rounded(&w, dtype);
+        for path in KernelPath::available() {
+            let mut m = Mlp::new(&w, dtype).unwrap().with_path(path).unwrap();
+            for x in &inputs {
+                let (y_ref, mag) = forward_f64_with_magnitude(&wr, x);
+                let y = m.forward(x) as f64;
+                assert!(
+                    (y - y_ref).abs() <= 1e-5 * y_ref.abs().max(mag),
+                    "{dtype:?} {path}: {y} vs {y_ref} (magnitude {mag})"
+                );
+            }
+        }
+    }
+}
+
+/// Reduced precision against the *unrounded* f32 model: the stated accuracy bounds (relative to the output
+/// neuron's magnitude) are 2e-3 for f16 (11-bit significand) and 2e-2 for bf16 (8-bit significand).
+#[test]
+fn reduced_precision_error_vs_f32_is_bounded() {
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let w = random_net(&mut rng, &[40, 268, 215, 1]);
+    for (dtype, bound) in [(StorageDtype::F16, 2e-3), (StorageDtype::Bf16, 2e-2)] {
+        let mut m = Mlp::new(&w, dtype).unwrap();
+        let mut worst = 0f64;
+        for _ in 0..20 {
+            let x = random_input(&mut rng, &w);
+            let (y_ref, mag) = forward_f64_with_magnitude(&w, &x);
+            let rel = (m.forward(&x) as f64 - y_ref).abs() / y_ref.abs().max(mag);
+            worst = worst.max(rel);
+        }
+        eprintln!("{dtype:?} vs f32 model: worst relative error {worst:.2e}");
+        assert!(worst <= bound, "{dtype:?}: {worst:.3e} > {bound}");
+        assert!(
+            worst > 0.0,
+            "{dtype:?}: rounding had no effect at all, the weights were not rounded"
+        );
+    }
+}
+
+#[test]
+fn forward_does_not_allocate() {
+    let mut rng = ChaCha8Rng::seed_from_u64(6);
+    let w = random_net(&mut rng, &[50, 450, 210, 280, 1]);
+    let x = random_input(&mut rng, &w);
+    let bad = vec![0.0f32; 49];
+    for dtype in DTYPES {
+        for path in KernelPath::available() {
+            let mut m = Mlp::new(&w, dtype).unwrap().with_path(path).unwrap();
+            let before = allocs_here();
+            let mut sum = 0f32;
+            for _ in 0..100 {
+                sum += m.forward(&x);
+            }
+            let nan = m.forward(&bad);
+            let after = allocs_here();
+            assert!(sum.is_finite() && nan.is_nan());
+            assert_eq!(after - before, 0, "{dtype:?} {path}: forward allocated");
+        }
+    }
+    // The counter itself works: building a kernel allocates.
+    let before = allocs_here();
+    let m = Mlp::new(&w, StorageDtype::F32).unwrap();
+    assert!(allocs_here() > before);
+    drop(m);
+}
+
+#[test]
+fn wrong_input_length_returns_nan_on_every_path() {
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let w = random_net(&mut rng, &[6, 20, 1]);
+    for dtype in DTYPES {
+        for path in KernelPath::available() {
+            let mut m = Mlp::new(&w, dtype).unwrap().with_path(path).unwrap();
+            assert!(m.forward(&[]).is_nan());
+            assert!(m.forward(&[0.0; 5]).is_nan());
+            assert!(m.forward(&[0.0; 7]).is_nan());
+            assert!(m.forward(&[0.0; 6]).is_finite());
+        }
+    }
+}
