@@ -1,6 +1,31 @@
 //! Feature sets, history buffers, warm-up and the Δθ offset latch.
 //!
-//! (skeleton — filled in by the friction/features work)
+//! What this module **is**: the definition of a network's input vector and the allocation-free machinery
+//! that builds it tick by tick.
+//! - [`FeatureSet`] names the per-tick signals (blocks) and their order; [`Feature`] is one signal with
+//!   its unit; [`FeatureSpec`] adds the history length H and the optional temperature slot.
+//! - Layout (block-major, oldest → newest, f32, as the authors train):
+//!   `x[b·H + j] = feature_b(t − (H−1) + j)`, `j = H−1` is the newest sample; with temperature, one
+//!   motor temperature [°C] (of the newest sample) follows the last block at `x[n_blocks·H]`.
+//! - [`DeltaThetaLatch`]: Δθ = r·s − (θ − θ_off) [motor rad] with the offset θ_off = θ − r·s latched
+//!   explicitly (Δθ = 0 at the latch instant), r the signed gear ratio.
+//! - [`History`]: a fixed-capacity ring buffer per joint (inline arrays, no heap at all), `push` one
+//!   [`JointSample`] per tick, `fill` the input vector into a caller-provided slice.
+//! - [`WarmupPolicy`]: what to do while fewer than H samples have arrived.
+//!
+//! What it is **not**: no filtering of the signals (velocities arrive already estimated), no inference,
+//! no I/O. Values are computed in f64 and stored as f32 (the network's precision), so a large motor
+//! angle loses no precision in the Δθ subtraction.
+
+use std::fmt;
+
+use crate::units::GearRatio;
+
+/// Largest supported history length H (samples per block).
+pub const MAX_HISTORY: usize = 64;
+
+/// Largest number of blocks of any [`FeatureSet`] (the size of [`History`]'s inline storage).
+pub const MAX_BLOCKS: usize = 2;
 
 /// Which per-tick signals a network consumes, in block order. Each block holds `H` samples, oldest
 /// first; the optional motor temperature comes last as one value.
@@ -15,6 +40,117 @@ pub enum FeatureSet {
     JointPosMotorPos,
 }
 
+/// One per-tick signal (one block of the input vector).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Feature {
+    /// Δθ = r·s − (θ − θ_off) [motor rad]: transmission deflection relative to the latch instant.
+    DeltaThetaMotorRad,
+    /// Joint velocity ṡ [rad/s].
+    JointVelRadS,
+    /// Motor velocity ω_m [motor rad/s].
+    MotorVelRadS,
+    /// Joint position s [rad].
+    JointPosRad,
+    /// Motor position θ [motor rad] (raw, no offset).
+    MotorPosRad,
+}
+
+impl Feature {
+    /// Short snake_case name, e.g. `"delta_theta"` (for metadata and `inspect`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Feature::DeltaThetaMotorRad => "delta_theta",
+            Feature::JointVelRadS => "joint_vel",
+            Feature::MotorVelRadS => "motor_vel",
+            Feature::JointPosRad => "joint_pos",
+            Feature::MotorPosRad => "motor_pos",
+        }
+    }
+
+    /// Unit of the values, e.g. `"motor rad"`, `"rad/s"`.
+    pub fn unit(self) -> &'static str {
+        match self {
+            Feature::DeltaThetaMotorRad | Feature::MotorPosRad => "motor rad",
+            Feature::JointVelRadS => "rad/s",
+            Feature::MotorVelRadS => "motor rad/s",
+            Feature::JointPosRad => "rad",
+        }
+    }
+}
+
+impl fmt::Display for Feature {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} [{}]", self.name(), self.unit())
+    }
+}
+
+impl FeatureSet {
+    /// Every feature set.
+    pub const ALL: [FeatureSet; 3] = [
+        FeatureSet::DeltaThetaJointVel,
+        FeatureSet::MotorVelJointVel,
+        FeatureSet::JointPosMotorPos,
+    ];
+
+    /// The blocks, in input-vector order.
+    pub fn blocks(self) -> &'static [Feature] {
+        match self {
+            FeatureSet::DeltaThetaJointVel => &[Feature::DeltaThetaMotorRad, Feature::JointVelRadS],
+            FeatureSet::MotorVelJointVel => &[Feature::MotorVelRadS, Feature::JointVelRadS],
+            FeatureSet::JointPosMotorPos => &[Feature::JointPosRad, Feature::MotorPosRad],
+        }
+    }
+
+    /// Number of blocks (each H long).
+    pub fn n_blocks(self) -> usize {
+        self.blocks().len()
+    }
+
+    /// Whether the set uses Δθ, i.e. depends on the latched offset.
+    pub fn uses_delta_theta(self) -> bool {
+        self.blocks().contains(&Feature::DeltaThetaMotorRad)
+    }
+
+    /// snake_case name as in serde, e.g. `"delta_theta_joint_vel"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            FeatureSet::DeltaThetaJointVel => "delta_theta_joint_vel",
+            FeatureSet::MotorVelJointVel => "motor_vel_joint_vel",
+            FeatureSet::JointPosMotorPos => "joint_pos_motor_pos",
+        }
+    }
+}
+
+impl fmt::Display for FeatureSet {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Why a feature spec or an input buffer is not acceptable.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum FeatureError {
+    /// H outside `1..=MAX_HISTORY`.
+    #[error("feature history length H = {history} is outside 1..={max}")]
+    History {
+        /// The H given.
+        history: usize,
+        /// [`MAX_HISTORY`].
+        max: usize,
+    },
+    /// An input buffer of the wrong length.
+    #[error("input buffer has {got} values, the feature spec {spec} needs {expected}")]
+    Length {
+        /// Its length.
+        got: usize,
+        /// `FeatureSpec::n_inputs()`.
+        expected: usize,
+        /// The spec, rendered.
+        spec: String,
+    },
+}
+
 /// A feature set with its history length and whether motor temperature [°C] is appended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 pub struct FeatureSpec {
@@ -26,10 +162,118 @@ pub struct FeatureSpec {
     pub temperature: bool,
 }
 
+/// What one position of the input vector holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InputSlot {
+    /// A history value.
+    History {
+        /// The signal.
+        feature: Feature,
+        /// Block index b.
+        block: usize,
+        /// How many ticks old: 0 is the newest sample (j = H−1), H−1 the oldest (j = 0).
+        age_ticks: usize,
+    },
+    /// The motor temperature [°C] of the newest sample.
+    TemperatureC,
+}
+
+impl InputSlot {
+    /// Unit of the value.
+    pub fn unit(self) -> &'static str {
+        match self {
+            InputSlot::History { feature, .. } => feature.unit(),
+            InputSlot::TemperatureC => "degC",
+        }
+    }
+}
+
+impl fmt::Display for InputSlot {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            InputSlot::History {
+                feature,
+                age_ticks: 0,
+                ..
+            } => {
+                write!(f, "{}[t] ({})", feature.name(), feature.unit())
+            }
+            InputSlot::History {
+                feature, age_ticks, ..
+            } => {
+                write!(f, "{}[t-{age_ticks}] ({})", feature.name(), feature.unit())
+            }
+            InputSlot::TemperatureC => f.write_str("motor_temperature (degC)"),
+        }
+    }
+}
+
+impl fmt::Display for FeatureSpec {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} H={}", self.set, self.history)?;
+        if self.temperature {
+            f.write_str(" +temperature")?;
+        }
+        Ok(())
+    }
+}
+
 impl FeatureSpec {
-    /// Length of the input vector: 2·H (+1 with temperature).
+    /// Length of the input vector: n_blocks·H (+1 with temperature).
     pub fn n_inputs(&self) -> usize {
-        2 * self.history + usize::from(self.temperature)
+        self.set.n_blocks() * self.history + usize::from(self.temperature)
+    }
+
+    /// Checks `1 ≤ H ≤ MAX_HISTORY`.
+    pub fn validate(&self) -> Result<(), FeatureError> {
+        if (1..=MAX_HISTORY).contains(&self.history) {
+            Ok(())
+        } else {
+            Err(FeatureError::History {
+                history: self.history,
+                max: MAX_HISTORY,
+            })
+        }
+    }
+
+    /// Index of block `block`'s value `age_ticks` old (0 = newest), if both are in range.
+    pub fn index(&self, block: usize, age_ticks: usize) -> Option<usize> {
+        (block < self.set.n_blocks() && age_ticks < self.history)
+            .then(|| block * self.history + (self.history - 1 - age_ticks))
+    }
+
+    /// Index of the temperature slot, if the spec has one.
+    pub fn temperature_index(&self) -> Option<usize> {
+        self.temperature.then(|| self.set.n_blocks() * self.history)
+    }
+
+    /// What input `i` holds, or `None` past the end (or for H = 0).
+    pub fn slot(&self, i: usize) -> Option<InputSlot> {
+        let h = self.history;
+        if h == 0 {
+            return None;
+        }
+        let blocks = self.set.blocks();
+        let b = i / h;
+        if let Some(&feature) = blocks.get(b) {
+            Some(InputSlot::History {
+                feature,
+                block: b,
+                age_ticks: h - 1 - (i % h),
+            })
+        } else if Some(i) == self.temperature_index() {
+            Some(InputSlot::TemperatureC)
+        } else {
+            None
+        }
+    }
+
+    /// One label per input, e.g. `"delta_theta[t-3] (motor rad)"` (allocates; for tools).
+    pub fn input_labels(&self) -> Vec<String> {
+        (0..self.n_inputs())
+            .filter_map(|i| self.slot(i))
+            .map(|s| s.to_string())
+            .collect()
     }
 }
 
@@ -46,4 +290,570 @@ pub struct JointSample {
     pub omega_motor_rad_s: f64,
     /// Motor temperature [°C] (NaN when the joint has no sensor).
     pub temperature_c: f64,
+}
+
+/// The Δθ offset latch: Δθ = r·s − (θ − θ_off) [motor rad], θ_off = θ − r·s taken at [`Self::latch`].
+///
+/// Δθ is therefore 0 at the latch instant and afterwards measures the change of transmission deflection
+/// (flexspline wind-up) since then. The training pipeline latches once at the first sample of each log
+/// file; the daemon latches at enable (bumpless start). Before any latch the offset is 0.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DeltaThetaLatch {
+    gear_ratio: GearRatio,
+    theta_off_motor_rad: f64,
+    latched: bool,
+}
+
+impl DeltaThetaLatch {
+    /// A latch for signed gear ratio `r`, not latched yet (offset 0).
+    pub fn new(gear_ratio: GearRatio) -> Self {
+        Self {
+            gear_ratio,
+            theta_off_motor_rad: 0.0,
+            latched: false,
+        }
+    }
+
+    /// Stores θ_off = θ − r·s so that Δθ is 0 for this (s, θ).
+    pub fn latch(&mut self, s_rad: f64, theta_motor_rad: f64) {
+        self.theta_off_motor_rad =
+            theta_motor_rad - self.gear_ratio.motor_rad_from_joint_rad(s_rad);
+        self.latched = true;
+    }
+
+    /// Δθ = r·s − (θ − θ_off) [motor rad].
+    #[inline]
+    pub fn delta_theta_motor_rad(&self, s_rad: f64, theta_motor_rad: f64) -> f64 {
+        self.gear_ratio.motor_rad_from_joint_rad(s_rad)
+            - (theta_motor_rad - self.theta_off_motor_rad)
+    }
+
+    /// The latched offset θ_off [motor rad] (0 before the first latch).
+    pub fn offset_motor_rad(&self) -> f64 {
+        self.theta_off_motor_rad
+    }
+
+    /// Whether [`Self::latch`] has been called.
+    pub fn is_latched(&self) -> bool {
+        self.latched
+    }
+
+    /// The signed gear ratio.
+    pub fn gear_ratio(&self) -> GearRatio {
+        self.gear_ratio
+    }
+}
+
+/// What a PINN estimator does while fewer than H samples have been pushed since the last reset.
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum WarmupPolicy {
+    /// Infer at once; missing older samples read as 0 (and so does the temperature before the first
+    /// sample). Sensible for deflection/velocity features, which are ≈ 0 at a bumpless enable.
+    ZeroPad,
+    /// Output 0 ("not ready") until H samples have arrived — the BLF device's behaviour after each
+    /// torque-mode entry. The default: no compensation is the safe side.
+    #[default]
+    HoldZero,
+}
+
+impl WarmupPolicy {
+    /// Whether a history holding `len` samples out of `history` may be used for inference.
+    #[inline]
+    pub fn is_ready(self, len: usize, history: usize) -> bool {
+        match self {
+            WarmupPolicy::ZeroPad => len >= 1,
+            WarmupPolicy::HoldZero => len >= history,
+        }
+    }
+}
+
+/// Per-joint fixed-capacity history of the features of a [`FeatureSpec`].
+///
+/// All storage is inline (`MAX_BLOCKS × MAX_HISTORY` f32, ~0.5 KiB): no heap, ever. [`History::push`]
+/// and [`History::fill`] are O(H) copies and never allocate or panic.
+///
+/// Δθ uses the embedded [`DeltaThetaLatch`]; if it was never latched, the first pushed sample latches
+/// it (as the training pipeline does at the first sample of a file). [`History::reset`] clears and
+/// latches explicitly; [`History::clear`] keeps the latch.
+#[derive(Clone, Debug)]
+pub struct History {
+    spec: FeatureSpec,
+    latch: DeltaThetaLatch,
+    buf: [[f32; MAX_HISTORY]; MAX_BLOCKS],
+    /// Ring index of the next write, in `0..H`.
+    head: usize,
+    /// Valid samples, `0..=H`.
+    len: usize,
+    /// Temperature of the newest sample [°C] (0 when empty).
+    temperature_c: f32,
+}
+
+impl History {
+    /// An empty history for `spec` (validated) and signed gear ratio `gear_ratio`.
+    pub fn new(spec: FeatureSpec, gear_ratio: GearRatio) -> Result<Self, FeatureError> {
+        spec.validate()?;
+        Ok(Self {
+            spec,
+            latch: DeltaThetaLatch::new(gear_ratio),
+            buf: [[0.0; MAX_HISTORY]; MAX_BLOCKS],
+            head: 0,
+            len: 0,
+            temperature_c: 0.0,
+        })
+    }
+
+    /// The feature spec.
+    pub fn spec(&self) -> &FeatureSpec {
+        &self.spec
+    }
+
+    /// The Δθ latch.
+    pub fn latch(&self) -> &DeltaThetaLatch {
+        &self.latch
+    }
+
+    /// Number of samples held (≤ H).
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether no sample is held.
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Whether H samples are held.
+    #[inline]
+    pub fn is_full(&self) -> bool {
+        self.len == self.spec.history
+    }
+
+    /// Whether inference may run under `policy`.
+    #[inline]
+    pub fn is_ready(&self, policy: WarmupPolicy) -> bool {
+        policy.is_ready(self.len, self.spec.history)
+    }
+
+    /// Forgets all samples (the latch is kept).
+    pub fn clear(&mut self) {
+        self.head = 0;
+        self.len = 0;
+        self.temperature_c = 0.0;
+        for b in &mut self.buf {
+            b.fill(0.0);
+        }
+    }
+
+    /// Clears and latches the Δθ offset at `sample` (Δθ = 0 there). Does not push the sample.
+    pub fn reset(&mut self, sample: &JointSample) {
+        self.clear();
+        self.latch.latch(sample.s_rad, sample.theta_motor_rad);
+    }
+
+    /// Value of `feature` for `sample` with the current latch [unit of the feature].
+    #[inline]
+    pub fn feature_value(&self, feature: Feature, sample: &JointSample) -> f64 {
+        match feature {
+            Feature::DeltaThetaMotorRad => self
+                .latch
+                .delta_theta_motor_rad(sample.s_rad, sample.theta_motor_rad),
+            Feature::JointVelRadS => sample.sdot_rad_s,
+            Feature::MotorVelRadS => sample.omega_motor_rad_s,
+            Feature::JointPosRad => sample.s_rad,
+            Feature::MotorPosRad => sample.theta_motor_rad,
+        }
+    }
+
+    /// Appends one tick, dropping the oldest sample when full.
+    #[inline]
+    pub fn push(&mut self, sample: &JointSample) {
+        if !self.latch.is_latched() {
+            self.latch.latch(sample.s_rad, sample.theta_motor_rad);
+        }
+        let head = self.head;
+        for (b, &feature) in self.spec.set.blocks().iter().enumerate() {
+            self.buf[b][head] = self.feature_value(feature, sample) as f32;
+        }
+        let h = self.spec.history;
+        self.head = if head + 1 == h { 0 } else { head + 1 };
+        if self.len < h {
+            self.len += 1;
+        }
+        self.temperature_c = sample.temperature_c as f32;
+    }
+
+    /// Writes the input vector (layout in the module doc; zero-padded for missing old samples) into
+    /// `out`, which must have exactly `spec().n_inputs()` values. Never allocates.
+    #[inline]
+    pub fn fill(&self, out: &mut [f32]) -> Result<(), FeatureError> {
+        let h = self.spec.history;
+        let n_blocks = self.spec.set.n_blocks();
+        if out.len() != self.spec.n_inputs() {
+            return Err(FeatureError::Length {
+                got: out.len(),
+                expected: self.spec.n_inputs(),
+                spec: self.spec.to_string(),
+            });
+        }
+        let len = self.len;
+        let missing = h - len;
+        // Oldest valid sample's ring index; the valid samples run from there, wrapping at H.
+        let start = (self.head + h - len) % h;
+        let first = (h - start).min(len);
+        for (ring, block) in self.buf.iter().zip(out.chunks_exact_mut(h)).take(n_blocks) {
+            let (pad, data) = block.split_at_mut(missing);
+            pad.fill(0.0);
+            let (a, b) = data.split_at_mut(first);
+            a.copy_from_slice(&ring[start..start + first]);
+            b.copy_from_slice(&ring[..len - first]);
+        }
+        if let Some(t) = self.spec.temperature_index() {
+            out[t] = self.temperature_c;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn r(v: f64) -> GearRatio {
+        GearRatio::new(v).unwrap()
+    }
+
+    fn sample(k: usize) -> JointSample {
+        let k = k as f64;
+        JointSample {
+            s_rad: 0.1 + 0.01 * k,
+            sdot_rad_s: -0.5 + 0.125 * k,
+            theta_motor_rad: 3.0 - 2.0 * k,
+            omega_motor_rad_s: 10.0 + k,
+            temperature_c: 30.0 + k,
+        }
+    }
+
+    fn spec(set: FeatureSet, history: usize, temperature: bool) -> FeatureSpec {
+        FeatureSpec {
+            set,
+            history,
+            temperature,
+        }
+    }
+
+    fn filled(h: &History) -> Vec<f32> {
+        let mut x = vec![f32::NAN; h.spec().n_inputs()];
+        h.fill(&mut x).unwrap();
+        x
+    }
+
+    #[test]
+    fn layout_by_hand_for_each_set() {
+        // Five samples pushed, H = 3: the window holds samples 2, 3, 4 (oldest first).
+        let gr = r(2.0);
+        // Δθ offset latched at sample 0: θ_off = θ0 − r·s0 = 3.0 − 0.2 = 2.8.
+        // Δθ_k = r·s_k − (θ_k − 2.8) = 0.2 + 0.02k − 3 + 2k + 2.8 = 2.02·k.
+        let dtheta = |k: f32| 2.02 * k;
+        let cases: [(FeatureSet, [f32; 6]); 3] = [
+            (
+                FeatureSet::DeltaThetaJointVel,
+                [dtheta(2.0), dtheta(3.0), dtheta(4.0), -0.25, -0.125, 0.0],
+            ),
+            (
+                FeatureSet::MotorVelJointVel,
+                [12.0, 13.0, 14.0, -0.25, -0.125, 0.0],
+            ),
+            (
+                FeatureSet::JointPosMotorPos,
+                [0.12, 0.13, 0.14, -1.0, -3.0, -5.0],
+            ),
+        ];
+        for (set, want) in cases {
+            for temperature in [false, true] {
+                let mut h = History::new(spec(set, 3, temperature), gr).unwrap();
+                for k in 0..5 {
+                    h.push(&sample(k));
+                }
+                let x = filled(&h);
+                assert_eq!(x.len(), 6 + usize::from(temperature));
+                for (i, (got, want)) in x.iter().zip(want).enumerate() {
+                    assert!(
+                        (got - want).abs() < 1e-5,
+                        "{set} x[{i}] = {got}, want {want}"
+                    );
+                }
+                if temperature {
+                    assert_eq!(x[6], 34.0, "temperature slot holds the newest sample's");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn wrap_around_keeps_oldest_first() {
+        let mut h = History::new(spec(FeatureSet::MotorVelJointVel, 4, false), r(1.0)).unwrap();
+        for k in 0..4 {
+            h.push(&sample(k));
+        }
+        assert!(h.is_full());
+        assert_eq!(&filled(&h)[..4], &[10.0, 11.0, 12.0, 13.0]);
+        for k in 4..11 {
+            h.push(&sample(k));
+            let x = filled(&h);
+            let want: Vec<f32> = (k - 3..=k).map(|j| 10.0 + j as f32).collect();
+            assert_eq!(&x[..4], &want[..], "after pushing sample {k}");
+            assert_eq!(h.len(), 4);
+        }
+    }
+
+    #[test]
+    fn latch_zeroes_delta_theta_then_tracks_deflection() {
+        for ratio in [-160.0, 100.0] {
+            let gr = r(ratio);
+            let mut h = History::new(spec(FeatureSet::DeltaThetaJointVel, 2, false), gr).unwrap();
+            // Arbitrary absolute encoder offset between motor and joint.
+            let s0 = 0.3;
+            let th0 = ratio * s0 + 1234.5;
+            let enable = JointSample {
+                s_rad: s0,
+                theta_motor_rad: th0,
+                ..Default::default()
+            };
+            h.reset(&enable);
+            h.push(&enable);
+            assert_eq!(
+                filled(&h)[1],
+                0.0,
+                "Δθ is 0 at the latch instant (r = {ratio})"
+            );
+            // Rigid motion: θ follows r·s exactly → Δθ stays 0.
+            let rigid = JointSample {
+                s_rad: s0 + 0.1,
+                theta_motor_rad: th0 + ratio * 0.1,
+                ..enable
+            };
+            h.push(&rigid);
+            assert!(filled(&h)[1].abs() < 1e-9, "rigid motion keeps Δθ at 0");
+            // Wind-up: the motor lags by 0.5 motor rad → Δθ = r·s − θ grows by +0.5.
+            let lag = JointSample {
+                theta_motor_rad: rigid.theta_motor_rad - 0.5,
+                ..rigid
+            };
+            h.push(&lag);
+            assert!(
+                (filled(&h)[1] - 0.5).abs() < 1e-9,
+                "Δθ tracks deflection (r = {ratio})"
+            );
+            // Sign of r: a joint motion with the motor stalled gives Δθ = r·Δs.
+            let stalled = JointSample {
+                s_rad: s0 + 0.01,
+                theta_motor_rad: th0,
+                ..enable
+            };
+            h.push(&stalled);
+            let d = filled(&h)[1] as f64;
+            assert!(
+                (d - ratio * 0.01).abs() < 1e-4,
+                "Δθ = {d}, want r·Δs = {}",
+                ratio * 0.01
+            );
+            assert_eq!(d.signum(), ratio.signum());
+        }
+    }
+
+    #[test]
+    fn first_push_latches_when_never_latched_and_clear_keeps_latch() {
+        let mut h =
+            History::new(spec(FeatureSet::DeltaThetaJointVel, 3, false), r(-160.0)).unwrap();
+        assert!(!h.latch().is_latched());
+        h.push(&sample(0));
+        assert!(h.latch().is_latched());
+        let off = h.latch().offset_motor_rad();
+        assert_eq!(off, sample(0).theta_motor_rad - (-160.0) * sample(0).s_rad);
+        h.clear();
+        assert!(h.is_empty());
+        assert_eq!(filled(&h), vec![0.0; 6]);
+        h.push(&sample(3));
+        assert_eq!(h.latch().offset_motor_rad(), off, "clear keeps the latch");
+    }
+
+    #[test]
+    fn warm_up_policies() {
+        let sp = spec(FeatureSet::MotorVelJointVel, 3, true);
+        let mut h = History::new(sp, r(1.0)).unwrap();
+        assert!(!h.is_ready(WarmupPolicy::ZeroPad));
+        assert!(!h.is_ready(WarmupPolicy::HoldZero));
+        h.push(&sample(0));
+        assert!(h.is_ready(WarmupPolicy::ZeroPad));
+        assert!(!h.is_ready(WarmupPolicy::HoldZero));
+        // Zero padding: missing old samples are 0, present ones at the newest end.
+        assert_eq!(filled(&h), vec![0.0, 0.0, 10.0, 0.0, 0.0, -0.5, 30.0]);
+        h.push(&sample(1));
+        assert!(!h.is_ready(WarmupPolicy::HoldZero));
+        assert_eq!(filled(&h), vec![0.0, 10.0, 11.0, 0.0, -0.5, -0.375, 31.0]);
+        h.push(&sample(2));
+        assert!(h.is_ready(WarmupPolicy::HoldZero));
+        assert_eq!(WarmupPolicy::default(), WarmupPolicy::HoldZero);
+        assert_eq!(
+            serde_json::to_string(&WarmupPolicy::ZeroPad).unwrap(),
+            "\"zero_pad\""
+        );
+        assert_eq!(
+            serde_json::from_str::<WarmupPolicy>("\"hold_zero\"").unwrap(),
+            WarmupPolicy::HoldZero
+        );
+    }
+
+    #[test]
+    fn nan_temperature_is_passed_through() {
+        let mut h = History::new(spec(FeatureSet::MotorVelJointVel, 1, true), r(1.0)).unwrap();
+        h.push(&JointSample {
+            temperature_c: f64::NAN,
+            ..sample(0)
+        });
+        assert!(
+            filled(&h)[2].is_nan(),
+            "no sensor → NaN input → NaN output the caller zeroes"
+        );
+    }
+
+    #[test]
+    fn fill_checks_length_and_validate_checks_history() {
+        let h = History::new(spec(FeatureSet::DeltaThetaJointVel, 5, true), r(1.0)).unwrap();
+        let mut short = [0.0f32; 10];
+        let e = h.fill(&mut short).unwrap_err();
+        assert_eq!(
+            e,
+            FeatureError::Length {
+                got: 10,
+                expected: 11,
+                spec: "delta_theta_joint_vel H=5 +temperature".into()
+            }
+        );
+        for bad in [0, MAX_HISTORY + 1] {
+            let s = spec(FeatureSet::DeltaThetaJointVel, bad, false);
+            assert!(
+                matches!(s.validate(), Err(FeatureError::History { history, .. }) if history == bad)
+            );
+            assert!(History::new(s, r(1.0)).is_err());
+        }
+        spec(FeatureSet::DeltaThetaJointVel, MAX_HISTORY, true)
+            .validate()
+            .unwrap();
+    }
+
+    #[test]
+    fn slots_and_labels() {
+        let s = spec(FeatureSet::DeltaThetaJointVel, 3, true);
+        assert_eq!(s.n_inputs(), 7);
+        assert_eq!(
+            s.slot(0),
+            Some(InputSlot::History {
+                feature: Feature::DeltaThetaMotorRad,
+                block: 0,
+                age_ticks: 2
+            })
+        );
+        assert_eq!(
+            s.slot(5),
+            Some(InputSlot::History {
+                feature: Feature::JointVelRadS,
+                block: 1,
+                age_ticks: 0
+            })
+        );
+        assert_eq!(s.slot(6), Some(InputSlot::TemperatureC));
+        assert_eq!(s.slot(7), None);
+        assert_eq!(s.index(1, 0), Some(5));
+        assert_eq!(s.index(0, 2), Some(0));
+        assert_eq!(s.index(2, 0), None);
+        let labels = s.input_labels();
+        assert_eq!(labels.len(), 7);
+        assert_eq!(labels[2], "delta_theta[t] (motor rad)");
+        assert_eq!(labels[3], "joint_vel[t-2] (rad/s)");
+        assert_eq!(s.slot(6).unwrap().unit(), "degC");
+        for set in FeatureSet::ALL {
+            let name = serde_json::to_string(&set).unwrap();
+            assert_eq!(name, format!("\"{set}\""), "Display matches serde");
+        }
+    }
+
+    fn any_set() -> impl Strategy<Value = FeatureSet> {
+        prop::sample::select(FeatureSet::ALL.to_vec())
+    }
+
+    fn any_sample() -> impl Strategy<Value = JointSample> {
+        (
+            -3.0..3.0f64,
+            -5.0..5.0f64,
+            -500.0..500.0f64,
+            -800.0..800.0f64,
+            20.0..80.0f64,
+        )
+            .prop_map(
+                |(s_rad, sdot_rad_s, theta_motor_rad, omega_motor_rad_s, temperature_c)| {
+                    JointSample {
+                        s_rad,
+                        sdot_rad_s,
+                        theta_motor_rad,
+                        omega_motor_rad_s,
+                        temperature_c,
+                    }
+                },
+            )
+    }
+
+    proptest! {
+        /// The ring buffer against a naive model: keep every sample, take the last H, zero-pad.
+        #[test]
+        fn fill_matches_naive_window(
+            set in any_set(),
+            history in 1..=MAX_HISTORY,
+            temperature in any::<bool>(),
+            ratio in prop::sample::select(vec![-160.0, -100.0, 100.0, 160.0, 1.5]),
+            samples in prop::collection::vec(any_sample(), 1..200),
+            clear_at in prop::option::of(0usize..200),
+        ) {
+            let sp = spec(set, history, temperature);
+            let mut h = History::new(sp, r(ratio)).unwrap();
+            let mut kept: Vec<JointSample> = Vec::new();
+            let theta_off = samples[0].theta_motor_rad - ratio * samples[0].s_rad;
+            for (k, smp) in samples.iter().enumerate() {
+                if clear_at == Some(k) {
+                    h.clear();
+                    kept.clear();
+                }
+                h.push(smp);
+                kept.push(*smp);
+                prop_assert_eq!(h.len(), kept.len().min(history));
+            }
+            let mut want = vec![0.0f32; sp.n_inputs()];
+            let window = &kept[kept.len().saturating_sub(history)..];
+            let pad = history - window.len();
+            for (b, f) in set.blocks().iter().enumerate() {
+                for (j, smp) in window.iter().enumerate() {
+                    let v = match f {
+                        Feature::DeltaThetaMotorRad => {
+                            ratio * smp.s_rad - (smp.theta_motor_rad - theta_off)
+                        }
+                        Feature::JointVelRadS => smp.sdot_rad_s,
+                        Feature::MotorVelRadS => smp.omega_motor_rad_s,
+                        Feature::JointPosRad => smp.s_rad,
+                        Feature::MotorPosRad => smp.theta_motor_rad,
+                    };
+                    want[b * history + pad + j] = v as f32;
+                }
+            }
+            if temperature {
+                want[set.n_blocks() * history] = kept.last().unwrap().temperature_c as f32;
+            }
+            prop_assert_eq!(filled(&h), want);
+        }
+    }
 }

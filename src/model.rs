@@ -1,3 +1,641 @@
 //! none / CV / SCV / PINN behind one trait.
 //!
-//! (skeleton)
+//! What this module **is**: the per-joint friction estimator the daemon calls once per tick.
+//! [`FrictionModel`] is the common interface (`reset` at enable, `estimate` per tick); [`JointModel`]
+//! is the enum the real-time path holds, dispatching by `match` (no vtable, no allocation). Static
+//! models ([`CvParams`], [`ScvParams`], [`ScvCodeParams`]) use the joint velocity only;
+//! [`PinnEstimator`] keeps a [`History`] of its features and runs the [`crate::kernel::Mlp`].
+//!
+//! What it is **not**: no clamping, gating, gain (`kfc`) or filtering of the estimate, and no NaN
+//! handling — those belong to the control law in the daemon, which must zero a non-finite estimate.
+//! Construction allocates (a PINN copies its weights and metadata); `estimate` and `reset` never do.
+
+use std::fmt;
+use std::str::FromStr;
+
+use crate::features::{FeatureError, FeatureSpec, History, JointSample, WarmupPolicy};
+use crate::friction::{CvParams, ScvCodeParams, ScvParams, StaticFriction};
+use crate::kernel::Mlp;
+use crate::mlp::MlpShapeError;
+use crate::weights::{ModelFile, ModelMeta};
+
+/// The family of a friction model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ModelKind {
+    /// No compensation (τ̂_F = 0).
+    None,
+    /// Coulomb–viscous.
+    Cv,
+    /// Stribeck–Coulomb–viscous (paper or code form).
+    Scv,
+    /// Physics-informed neural network.
+    Pinn,
+}
+
+impl ModelKind {
+    /// Every kind.
+    pub const ALL: [ModelKind; 4] = [
+        ModelKind::None,
+        ModelKind::Cv,
+        ModelKind::Scv,
+        ModelKind::Pinn,
+    ];
+
+    /// snake_case name as in serde: `"none"`, `"cv"`, `"scv"`, `"pinn"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ModelKind::None => "none",
+            ModelKind::Cv => "cv",
+            ModelKind::Scv => "scv",
+            ModelKind::Pinn => "pinn",
+        }
+    }
+}
+
+impl fmt::Display for ModelKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// An unknown model-kind name.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown friction model kind `{0}` (expected one of: none, cv, scv, pinn)")]
+pub struct UnknownModelKind(pub String);
+
+impl FromStr for ModelKind {
+    type Err = UnknownModelKind;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        ModelKind::ALL
+            .into_iter()
+            .find(|k| k.name() == s)
+            .ok_or_else(|| UnknownModelKind(s.to_string()))
+    }
+}
+
+/// A per-joint friction estimator.
+pub trait FrictionModel {
+    /// The model family.
+    fn kind(&self) -> ModelKind;
+    /// Called on enable (bumpless): clears history, latches Δθ offset at this sample.
+    fn reset(&mut self, sample: &JointSample);
+    /// One tick: push the sample, return τ̂_F [Nm, joint side]. Never allocates, never panics.
+    /// Returns 0.0 while a HoldZero PINN warms up. May return NaN/Inf if inputs are (caller zeroes).
+    fn estimate(&mut self, sample: &JointSample) -> f64;
+    /// Whether the next `estimate` comes from the model rather than a warm-up 0. Static models: always.
+    fn is_ready(&self) -> bool {
+        true
+    }
+}
+
+/// No friction compensation: always 0 Nm.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct NoFriction;
+
+impl FrictionModel for NoFriction {
+    fn kind(&self) -> ModelKind {
+        ModelKind::None
+    }
+    fn reset(&mut self, _sample: &JointSample) {}
+    #[inline]
+    fn estimate(&mut self, _sample: &JointSample) -> f64 {
+        0.0
+    }
+}
+
+impl FrictionModel for CvParams {
+    fn kind(&self) -> ModelKind {
+        ModelKind::Cv
+    }
+    fn reset(&mut self, _sample: &JointSample) {}
+    #[inline]
+    fn estimate(&mut self, sample: &JointSample) -> f64 {
+        self.torque_nm(sample.sdot_rad_s)
+    }
+}
+
+impl FrictionModel for ScvParams {
+    fn kind(&self) -> ModelKind {
+        ModelKind::Scv
+    }
+    fn reset(&mut self, _sample: &JointSample) {}
+    #[inline]
+    fn estimate(&mut self, sample: &JointSample) -> f64 {
+        self.torque_nm(sample.sdot_rad_s)
+    }
+}
+
+impl FrictionModel for ScvCodeParams {
+    fn kind(&self) -> ModelKind {
+        ModelKind::Scv
+    }
+    fn reset(&mut self, _sample: &JointSample) {}
+    #[inline]
+    fn estimate(&mut self, sample: &JointSample) -> f64 {
+        self.torque_nm(sample.sdot_rad_s)
+    }
+}
+
+/// Why a PINN estimator cannot be built from a model file.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ModelError {
+    /// The feature spec is invalid (e.g. H out of range).
+    #[error("model for joint `{joint}`: {source}")]
+    Features {
+        /// Joint name from the metadata.
+        joint: String,
+        /// The feature error.
+        #[source]
+        source: FeatureError,
+    },
+    /// The metadata's feature spec and the network disagree on the input width.
+    #[error(
+        "model for joint `{joint}`: feature spec {spec} needs {expected} inputs but the network takes {got}"
+    )]
+    InputCount {
+        /// Joint name.
+        joint: String,
+        /// The spec, rendered.
+        spec: String,
+        /// `FeatureSpec::n_inputs()`.
+        expected: usize,
+        /// `MlpWeights::n_inputs()`.
+        got: usize,
+    },
+    /// The network is not acceptable to the kernel.
+    #[error("model for joint `{joint}`: network: {source}")]
+    Network {
+        /// Joint name.
+        joint: String,
+        /// The shape error.
+        #[source]
+        source: MlpShapeError,
+    },
+}
+
+/// The PINN friction estimator of one joint: feature history + MLP kernel + warm-up policy.
+///
+/// Built once (allocates); [`FrictionModel::estimate`] pushes the sample into the history, builds the
+/// input vector into a preallocated buffer and runs one inference, without allocating.
+#[derive(Clone, Debug)]
+pub struct PinnEstimator {
+    mlp: Mlp,
+    history: History,
+    warmup: WarmupPolicy,
+    x: Box<[f32]>,
+    meta: ModelMeta,
+}
+
+impl PinnEstimator {
+    /// Builds the estimator from a model file: checks the feature spec, that it matches the network's
+    /// input width, and lays the network out for the kernel (in the file's storage dtype).
+    pub fn from_model_file(f: &ModelFile, warmup: WarmupPolicy) -> Result<Self, ModelError> {
+        let joint = || f.meta.joint_name.clone();
+        let spec: FeatureSpec = f.meta.features;
+        let history =
+            History::new(spec, f.meta.gear_ratio).map_err(|source| ModelError::Features {
+                joint: joint(),
+                source,
+            })?;
+        if spec.n_inputs() != f.mlp.n_inputs() {
+            return Err(ModelError::InputCount {
+                joint: joint(),
+                spec: spec.to_string(),
+                expected: spec.n_inputs(),
+                got: f.mlp.n_inputs(),
+            });
+        }
+        let mlp = Mlp::new(&f.mlp, f.dtype).map_err(|source| ModelError::Network {
+            joint: joint(),
+            source,
+        })?;
+        Ok(Self {
+            mlp,
+            history,
+            warmup,
+            x: vec![0.0; spec.n_inputs()].into_boxed_slice(),
+            meta: f.meta.clone(),
+        })
+    }
+
+    /// The model's metadata (a copy taken at construction).
+    pub fn meta(&self) -> &ModelMeta {
+        &self.meta
+    }
+
+    /// Whether the history allows inference under the warm-up policy.
+    pub fn is_ready(&self) -> bool {
+        self.history.is_ready(self.warmup)
+    }
+
+    /// The warm-up policy.
+    pub fn warmup(&self) -> WarmupPolicy {
+        self.warmup
+    }
+
+    /// The feature history.
+    pub fn history(&self) -> &History {
+        &self.history
+    }
+
+    /// The input vector of the last inference (zeros before the first one).
+    pub fn last_input(&self) -> &[f32] {
+        &self.x
+    }
+}
+
+impl FrictionModel for PinnEstimator {
+    fn kind(&self) -> ModelKind {
+        ModelKind::Pinn
+    }
+
+    fn reset(&mut self, sample: &JointSample) {
+        self.history.reset(sample);
+    }
+
+    #[inline]
+    fn estimate(&mut self, sample: &JointSample) -> f64 {
+        self.history.push(sample);
+        if !self.history.is_ready(self.warmup) {
+            return 0.0;
+        }
+        // `x` was sized from the same spec as the history, so `fill` cannot fail; NaN if it ever did.
+        if self.history.fill(&mut self.x).is_err() {
+            return f64::NAN;
+        }
+        f64::from(self.mlp.forward(&self.x))
+    }
+
+    fn is_ready(&self) -> bool {
+        PinnEstimator::is_ready(self)
+    }
+}
+
+/// The friction model of one joint, enum-dispatched for the real-time path.
+#[derive(Clone, Debug)]
+pub enum JointModel {
+    /// No compensation.
+    None(NoFriction),
+    /// Coulomb–viscous.
+    Cv(CvParams),
+    /// Stribeck–Coulomb–viscous, paper form.
+    Scv(ScvParams),
+    /// Stribeck–Coulomb–viscous, the authors' code form.
+    ScvCode(ScvCodeParams),
+    /// PINN (boxed: it is large and holds the network).
+    Pinn(Box<PinnEstimator>),
+}
+
+impl Default for JointModel {
+    fn default() -> Self {
+        JointModel::None(NoFriction)
+    }
+}
+
+impl From<CvParams> for JointModel {
+    fn from(p: CvParams) -> Self {
+        JointModel::Cv(p)
+    }
+}
+
+impl From<ScvParams> for JointModel {
+    fn from(p: ScvParams) -> Self {
+        JointModel::Scv(p)
+    }
+}
+
+impl From<ScvCodeParams> for JointModel {
+    fn from(p: ScvCodeParams) -> Self {
+        JointModel::ScvCode(p)
+    }
+}
+
+impl From<PinnEstimator> for JointModel {
+    fn from(p: PinnEstimator) -> Self {
+        JointModel::Pinn(Box::new(p))
+    }
+}
+
+impl FrictionModel for JointModel {
+    #[inline]
+    fn kind(&self) -> ModelKind {
+        match self {
+            JointModel::None(m) => m.kind(),
+            JointModel::Cv(m) => m.kind(),
+            JointModel::Scv(m) => m.kind(),
+            JointModel::ScvCode(m) => m.kind(),
+            JointModel::Pinn(m) => m.kind(),
+        }
+    }
+
+    #[inline]
+    fn reset(&mut self, sample: &JointSample) {
+        match self {
+            JointModel::None(m) => m.reset(sample),
+            JointModel::Cv(m) => m.reset(sample),
+            JointModel::Scv(m) => m.reset(sample),
+            JointModel::ScvCode(m) => m.reset(sample),
+            JointModel::Pinn(m) => m.reset(sample),
+        }
+    }
+
+    #[inline]
+    fn estimate(&mut self, sample: &JointSample) -> f64 {
+        match self {
+            JointModel::None(m) => m.estimate(sample),
+            JointModel::Cv(m) => m.estimate(sample),
+            JointModel::Scv(m) => m.estimate(sample),
+            JointModel::ScvCode(m) => m.estimate(sample),
+            JointModel::Pinn(m) => m.estimate(sample),
+        }
+    }
+
+    #[inline]
+    fn is_ready(&self) -> bool {
+        match self {
+            JointModel::Pinn(m) => PinnEstimator::is_ready(m),
+            _ => true,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::features::FeatureSet;
+    use crate::friction::paper;
+    use crate::mlp::{Activation, DenseLayer, MlpWeights, Normalisation, StorageDtype};
+    use crate::units::GearRatio;
+    use crate::weights::{SignalFiltering, TrainingMeta};
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn random_mlp(rng: &mut ChaCha8Rng, sizes: &[usize]) -> MlpWeights {
+        let n_in = sizes[0];
+        let layers = sizes
+            .windows(2)
+            .enumerate()
+            .map(|(k, w)| DenseLayer {
+                n_in: w[0],
+                n_out: w[1],
+                weight: (0..w[0] * w[1])
+                    .map(|_| rng.random_range(-0.5..0.5))
+                    .collect(),
+                bias: (0..w[1]).map(|_| rng.random_range(-0.2..0.2)).collect(),
+                activation: if k + 2 == sizes.len() {
+                    Activation::Identity
+                } else {
+                    Activation::Relu
+                },
+            })
+            .collect();
+        MlpWeights {
+            norm: Normalisation {
+                mean: (0..n_in).map(|_| rng.random_range(-1.0..1.0)).collect(),
+                scale: (0..n_in).map(|_| rng.random_range(0.5..3.0)).collect(),
+            },
+            layers,
+        }
+    }
+
+    fn model_file(spec: FeatureSpec, ratio: f64, seed: u64) -> ModelFile {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        ModelFile {
+            meta: ModelMeta {
+                joint_name: "l_ankle_roll".into(),
+                gear_ratio: GearRatio::new(ratio).unwrap(),
+                kt_nm_per_a: 0.0665,
+                features: spec,
+                scv: None,
+                training: TrainingMeta {
+                    dataset_sha256: [0; 32],
+                    val_rmse_nm: f32::NAN,
+                    test_rmse_nm: f32::NAN,
+                    created_unix_s: 0,
+                    tool_version: "test".into(),
+                    filtering: SignalFiltering::Unknown,
+                },
+            },
+            dtype: StorageDtype::F32,
+            mlp: random_mlp(&mut rng, &[spec.n_inputs(), 16, 8, 1]),
+        }
+    }
+
+    fn sample(k: usize) -> JointSample {
+        let t = k as f64 * 1e-3;
+        JointSample {
+            s_rad: 0.2 * (3.0 * t).sin(),
+            sdot_rad_s: 0.6 * (3.0 * t).cos(),
+            theta_motor_rad: -160.0 * 0.2 * (3.0 * t).sin() + 7.0 + 0.3 * (5.0 * t).sin(),
+            omega_motor_rad_s: -96.0 * (3.0 * t).cos(),
+            temperature_c: 35.0 + t,
+        }
+    }
+
+    /// The input vector built from scratch for `window` (oldest first), zero-padded to H.
+    fn hand_built(
+        spec: FeatureSpec,
+        ratio: f64,
+        theta_off: f64,
+        window: &[JointSample],
+    ) -> Vec<f32> {
+        assert_eq!(spec.set, FeatureSet::DeltaThetaJointVel);
+        let h = spec.history;
+        let mut x = vec![0.0f32; spec.n_inputs()];
+        let pad = h - window.len();
+        for (j, s) in window.iter().enumerate() {
+            x[pad + j] = (ratio * s.s_rad - (s.theta_motor_rad - theta_off)) as f32;
+            x[h + pad + j] = s.sdot_rad_s as f32;
+        }
+        if spec.temperature {
+            x[2 * h] = window.last().map_or(0.0, |s| s.temperature_c as f32);
+        }
+        x
+    }
+
+    fn close(a: f64, b: f64) -> bool {
+        (a - b).abs() <= 1e-4 * (1.0 + b.abs())
+    }
+
+    #[test]
+    fn pinn_equals_reference_forward_on_hand_built_history() {
+        let spec = FeatureSpec {
+            set: FeatureSet::DeltaThetaJointVel,
+            history: 6,
+            temperature: true,
+        };
+        let f = model_file(spec, -160.0, 1);
+        let mut est = PinnEstimator::from_model_file(&f, WarmupPolicy::ZeroPad).unwrap();
+        assert_eq!(est.kind(), ModelKind::Pinn);
+        let enable = sample(0);
+        est.reset(&enable);
+        let theta_off = enable.theta_motor_rad - (-160.0) * enable.s_rad;
+        let mut seen = Vec::new();
+        let mut nonzero = 0;
+        for k in 0..40 {
+            let s = sample(k * 37);
+            seen.push(s);
+            let y = est.estimate(&s);
+            let window = &seen[seen.len().saturating_sub(6)..];
+            let x = hand_built(spec, -160.0, theta_off, window);
+            assert_eq!(est.last_input(), &x[..], "tick {k}: input vector");
+            let want = f64::from(f.mlp.forward_reference(&x)[0]);
+            assert!(close(y, want), "tick {k}: estimate {y}, reference {want}");
+            nonzero += usize::from(y != 0.0);
+        }
+        assert!(nonzero > 30, "a random network gives non-zero outputs");
+        assert_eq!(est.meta().joint_name, f.meta.joint_name);
+        assert_eq!(est.meta().features, spec);
+    }
+
+    #[test]
+    fn hold_zero_outputs_zero_for_h_minus_1_ticks() {
+        let spec = FeatureSpec {
+            set: FeatureSet::MotorVelJointVel,
+            history: 5,
+            temperature: false,
+        };
+        let f = model_file(spec, 100.0, 2);
+        let mut est =
+            JointModel::from(PinnEstimator::from_model_file(&f, WarmupPolicy::HoldZero).unwrap());
+        for round in 0..2 {
+            est.reset(&sample(100 * round));
+            for k in 0..4 {
+                assert!(!est.is_ready());
+                assert_eq!(
+                    est.estimate(&sample(100 * round + k)),
+                    0.0,
+                    "round {round} tick {k}"
+                );
+            }
+            let y = est.estimate(&sample(100 * round + 4));
+            assert!(est.is_ready());
+            let mut x = Vec::new();
+            for blk in 0..2 {
+                for k in 0..5 {
+                    let s = sample(100 * round + k);
+                    x.push(if blk == 0 {
+                        s.omega_motor_rad_s
+                    } else {
+                        s.sdot_rad_s
+                    } as f32);
+                }
+            }
+            let want = f64::from(f.mlp.forward_reference(&x)[0]);
+            assert!(
+                want != 0.0 && close(y, want),
+                "round {round}: {y} vs {want}"
+            );
+        }
+    }
+
+    #[test]
+    fn reset_clears_history_and_latches_delta_theta() {
+        let spec = FeatureSpec {
+            set: FeatureSet::DeltaThetaJointVel,
+            history: 3,
+            temperature: false,
+        };
+        let f = model_file(spec, -160.0, 3);
+        let mut est = PinnEstimator::from_model_file(&f, WarmupPolicy::ZeroPad).unwrap();
+        for k in 0..10 {
+            est.estimate(&sample(k * 50));
+        }
+        assert!(est.history().is_full());
+        let enable = sample(777);
+        est.reset(&enable);
+        assert!(est.history().is_empty());
+        let off = est.history().latch().offset_motor_rad();
+        assert!((off - (enable.theta_motor_rad + 160.0 * enable.s_rad)).abs() < 1e-12);
+        // Holding still at the enable pose: Δθ block is all zero, older samples are zero-padded.
+        let y = est.estimate(&enable);
+        let x = [0.0, 0.0, 0.0, 0.0, 0.0, enable.sdot_rad_s as f32];
+        assert_eq!(est.last_input(), &x);
+        assert!(close(y, f64::from(f.mlp.forward_reference(&x)[0])));
+    }
+
+    #[test]
+    fn static_models_equal_friction_values() {
+        let mut models: Vec<JointModel> = vec![
+            paper::CV_KNEE.into(),
+            paper::SCV_ANKLE_ROLL.into(),
+            ScvCodeParams {
+                fc: 0.24,
+                fs: 0.46,
+                fv: 0.77,
+                vs: 0.0198,
+            }
+            .into(),
+            JointModel::default(),
+        ];
+        let kinds: Vec<ModelKind> = models.iter().map(|m| m.kind()).collect();
+        assert_eq!(
+            kinds,
+            [
+                ModelKind::Cv,
+                ModelKind::Scv,
+                ModelKind::Scv,
+                ModelKind::None
+            ]
+        );
+        for k in 0..200 {
+            let s = JointSample {
+                sdot_rad_s: (k as f64 - 100.0) * 0.013,
+                ..sample(k)
+            };
+            let v = s.sdot_rad_s;
+            assert_eq!(models[0].estimate(&s), paper::CV_KNEE.torque_nm(v));
+            assert_eq!(models[1].estimate(&s), paper::SCV_ANKLE_ROLL.torque_nm(v));
+            if let JointModel::ScvCode(p) = models[2] {
+                assert_eq!(models[2].estimate(&s), p.torque_nm(v));
+            }
+            assert_eq!(models[3].estimate(&s), 0.0);
+            for m in &mut models {
+                m.reset(&s);
+                assert!(m.is_ready());
+            }
+        }
+    }
+
+    #[test]
+    fn from_model_file_rejects_mismatches() {
+        let spec = FeatureSpec {
+            set: FeatureSet::DeltaThetaJointVel,
+            history: 4,
+            temperature: false,
+        };
+        let mut f = model_file(spec, -160.0, 4);
+        f.meta.features.temperature = true;
+        let e = PinnEstimator::from_model_file(&f, WarmupPolicy::ZeroPad).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                ModelError::InputCount {
+                    expected: 9,
+                    got: 8,
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
+        assert!(e.to_string().contains("l_ankle_roll"), "{e}");
+        let mut f = model_file(spec, -160.0, 4);
+        f.meta.features.history = 0;
+        let e = PinnEstimator::from_model_file(&f, WarmupPolicy::ZeroPad).unwrap_err();
+        assert!(matches!(e, ModelError::Features { .. }), "{e:?}");
+        let mut f = model_file(spec, -160.0, 4);
+        f.mlp.layers[1].bias[0] = f32::NAN;
+        let e = PinnEstimator::from_model_file(&f, WarmupPolicy::ZeroPad).unwrap_err();
+        assert!(matches!(e, ModelError::Network { .. }), "{e:?}");
+    }
+
+    #[test]
+    fn model_kind_names() {
+        for k in ModelKind::ALL {
+            assert_eq!(serde_json::to_string(&k).unwrap(), format!("\"{k}\""));
+            assert_eq!(k.to_string().parse::<ModelKind>().unwrap(), k);
+        }
+        assert!("stribeck".parse::<ModelKind>().is_err());
+    }
+}
