@@ -1,10 +1,43 @@
-//! `frictl inspect` — not built yet (issue #2).
+//! `frictl inspect FILE [--json]`: a `.fwt` file's header, shapes, metadata and CRC status.
+//!
+//! Uses [`frictionless::weights::inspect`], which tolerates a bad CRC or a truncated payload so the
+//! header can still be shown; the command then exits non-zero with the problem. Not a converter.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
 
 /// Arguments of `frictl inspect`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// The `.fwt` weight file.
+    pub file: PathBuf,
+    /// Print the view as JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
 
-/// Runs `frictl inspect`.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`frictl inspect` is not built yet (tracked in issue #2)")
+/// Runs `frictl inspect`: prints the view, then fails if the file is not valid.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let path = args.file.display();
+    let bytes = std::fs::read(&args.file).with_context(|| format!("cannot read {path}"))?;
+    let view = frictionless::weights::inspect(&bytes)
+        .with_context(|| format!("{path}: not a readable .fwt weight file"))?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&view)?);
+    } else {
+        println!("file           {path}");
+        println!("{view}");
+    }
+    if let Some(e) = &view.error {
+        anyhow::bail!("{path}: invalid .fwt file: {e}");
+    }
+    if !view.crc_ok {
+        anyhow::bail!(
+            "{path}: CRC-32C mismatch (stored {:#010x}, computed {:#010x})",
+            view.crc_stored,
+            view.crc_computed
+        );
+    }
+    Ok(())
 }
