@@ -30,7 +30,7 @@ fn read_raw(path: &Path) -> ort::Result<MlpWeights> {
         return Err(bad("bad magic"));
     }
     let mut off = 8;
-    let mut u32_at = |off: &mut usize| -> ort::Result<u32> {
+    let u32_at = |off: &mut usize| -> ort::Result<u32> {
         let v = bytes.get(*off..*off + 4).ok_or_else(|| bad("truncated"))?;
         *off += 4;
         Ok(u32::from_le_bytes([v[0], v[1], v[2], v[3]]))
@@ -39,7 +39,7 @@ fn read_raw(path: &Path) -> ort::Result<MlpWeights> {
     let sizes: Vec<usize> = (0..n)
         .map(|_| u32_at(&mut off).map(|v| v as usize))
         .collect::<ort::Result<_>>()?;
-    let mut f32s = |count: usize, off: &mut usize| -> ort::Result<Vec<f32>> {
+    let f32s = |count: usize, off: &mut usize| -> ort::Result<Vec<f32>> {
         let v = bytes
             .get(*off..*off + 4 * count)
             .ok_or_else(|| bad("truncated"))?;
