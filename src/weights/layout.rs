@@ -268,3 +268,92 @@ impl Layout {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_code_maps_back_to_its_value_and_unknown_codes_are_none() {
+        let mut seen = 0;
+        for c in 0..=255u8 {
+            if let Some(u) = Unit::from_code(c) {
+                assert_eq!(u.code(), c);
+                seen += 1;
+            }
+            if let Some(d) = dtype_from_code(c) {
+                assert_eq!(dtype_code(d), c);
+            }
+            if let Some(a) = activation_from_code(c) {
+                assert_eq!(activation_code(a), c);
+            }
+            if let Some(f) = filtering_from_code(c) {
+                assert_eq!(filtering_code(f), c);
+            }
+        }
+        assert_eq!(seen, 6);
+        assert_eq!(Unit::from_code(0), None, "0 means an unused slot");
+        for c in 0..=u16::MAX {
+            if let Some(s) = feature_set_from_code(c) {
+                assert_eq!(feature_set_code(s), c);
+                assert_eq!(block_units(s).len(), 2);
+            }
+        }
+        assert_eq!(feature_set_from_code(3), None, "reserved for input_type 3");
+    }
+
+    #[test]
+    fn field_offsets_tile_the_fixed_header() {
+        // (offset, size) of every fixed-header field in order: no gaps, no overlaps, 320 bytes.
+        let fields = [
+            (off::MAGIC, 8),
+            (off::VERSION_MAJOR, 2),
+            (off::VERSION_MINOR, 2),
+            (off::CRC, 4),
+            (off::HEADER_LEN, 4),
+            (off::PAYLOAD_OFFSET, 4),
+            (off::PAYLOAD_LEN, 8),
+            (off::FILE_LEN, 8),
+            (off::FEATURE_SET, 2),
+            (off::N_BLOCKS, 1),
+            (off::TEMPERATURE, 1),
+            (off::HISTORY, 4),
+            (off::N_INPUTS, 4),
+            (off::N_LAYERS, 1),
+            (off::DTYPE, 1),
+            (off::OUTPUT_UNIT, 1),
+            (off::FILTERING, 1),
+            (off::BLOCK_UNITS, MAX_BLOCKS),
+            (off::TEMPERATURE_UNIT, 1),
+            (off::SCV_PRESENT, 1),
+            (off::RESERVED_A, 6),
+            (off::GEAR_RATIO, 8),
+            (off::KT, 8),
+            (off::SCV, 48),
+            (off::DATASET_SHA256, 32),
+            (off::VAL_RMSE, 4),
+            (off::TEST_RMSE, 4),
+            (off::CREATED, 8),
+            (off::JOINT_NAME, JOINT_NAME_MAX + 1),
+            (off::TOOL_VERSION, TOOL_VERSION_MAX + 1),
+            (off::RESERVED_B, 40),
+        ];
+        let mut at = 0;
+        for (o, size) in fields {
+            assert_eq!(o, at, "field at {o}");
+            // Naturally aligned multi-byte scalars.
+            if matches!(size, 2 | 4 | 8) {
+                assert_eq!(o % size, 0, "field at {o} misaligned");
+            }
+            at += size;
+        }
+        assert_eq!(at, FIXED_HEADER_LEN);
+    }
+
+    #[test]
+    fn layout_of_the_ergocub_network() {
+        let l = Layout::new(40, 3, 69_039, 4);
+        assert_eq!((l.header_len, l.payload_offset), (688, 704));
+        assert_eq!(l.file_len, 704 + 4 * 69_039);
+    }
+}

@@ -1,0 +1,34 @@
+//! Fuzz target: arbitrary bytes into the `.fwt` reader and the header inspector.
+//!
+//! Both must return (never panic, never allocate unboundedly). Beyond that it checks two properties:
+//! whatever `from_bytes` accepts, `inspect` accepts as valid; and a minor-0 file that `from_bytes`
+//! accepts is re-encoded by `to_bytes` to exactly the same bytes (the format is canonical).
+#![no_main]
+
+use frictionless::weights::{from_bytes, inspect, to_bytes};
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    let decoded = from_bytes(data);
+    let view = inspect(data);
+    if let Ok(model) = &decoded {
+        let v = view
+            .as_ref()
+            .expect("inspect must accept what from_bytes accepts");
+        assert!(
+            v.crc_ok && v.error.is_none(),
+            "accepted file must inspect as valid"
+        );
+        if v.version_minor == 0 {
+            let again = to_bytes(model).expect("an accepted model must re-encode");
+            assert!(
+                again == data,
+                "re-encoding an accepted minor-0 file must reproduce it"
+            );
+        }
+    }
+    if let Ok(v) = &view {
+        let _ = v.to_string();
+        let _ = serde_json::to_string(v).expect("Inspection serialises");
+    }
+});
