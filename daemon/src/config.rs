@@ -1,0 +1,734 @@
+//! The daemon's TOML configuration: parsing, validation, resolved per-joint parameters.
+//!
+//! What this module **is**: one TOML file (`serde` + `toml`, unknown keys are errors) describing the loop
+//! (`[loop]`), the I/O backend (`[backend]`), safety behaviour (`[safety]`) and the joints
+//! (`[[joint]]`, key names after the ergoCub `JointTorqueControlDevice`: `kt`, `kfc`, `kp`, `ki`,
+//! `max_curr`, `max_output_friction`, `friction_model`, `kc`, `kv`, `ka`, `ks`, `vs`, `alpha`, `model`).
+//! [`load`] parses and validates everything, including reading every model file, and returns a
+//! [`Config`] or a [`ConfigError`] naming the file, the key and the value.
+//!
+//! What it is **not**: no model construction (see `params.rs`), no I/O besides reading the config and
+//! model files. Units: SI, joint side; the velocity threshold is in **rad/s** (BLF used deg/s).
+
+use std::path::{Path, PathBuf};
+
+use frictionless_shm_types::MAX_JOINTS;
+use serde::Deserialize;
+
+/// Why a configuration is not acceptable. Every variant names the file; most name the key and value.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("{file}: cannot read: {source}")]
+    Read {
+        /// Config file.
+        file: PathBuf,
+        /// OS error.
+        source: std::io::Error,
+    },
+    /// TOML syntax, a wrong type or an unknown key.
+    #[error("{file}: {message}")]
+    Parse {
+        /// Config file.
+        file: PathBuf,
+        /// toml's message (names the key, line and column).
+        message: String,
+    },
+    /// A key holds a value outside its domain.
+    #[error("{file}: key `{key}` = {value}: {requirement}")]
+    Invalid {
+        /// Config file.
+        file: PathBuf,
+        /// Full key path, e.g. `joint[1].max_curr`.
+        key: String,
+        /// The offending value as written.
+        value: String,
+        /// What it must satisfy.
+        requirement: String,
+    },
+    /// A model file is missing or invalid.
+    #[error("{file}: key `{key}` = {path:?}: {message}")]
+    Model {
+        /// Config file.
+        file: PathBuf,
+        /// Key path, e.g. `joint[0].model`.
+        key: String,
+        /// Resolved model path.
+        path: PathBuf,
+        /// What is wrong with it.
+        message: String,
+    },
+}
+
+/// `[loop]`.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct LoopConfig {
+    /// Loop period [µs] (1000 = 1 kHz).
+    #[serde(default = "default_period_us")]
+    pub period_us: u64,
+    /// CPU to pin the RT thread to (none = no pinning).
+    #[serde(default)]
+    pub cpu: Option<usize>,
+    /// SCHED_FIFO priority 1–99 for the RT thread (none = SCHED_OTHER).
+    #[serde(default)]
+    pub priority: Option<i32>,
+    /// mlockall(MCL_CURRENT | MCL_FUTURE) before the loop starts.
+    #[serde(default)]
+    pub lock_memory: bool,
+    /// If true, refuse to start when SCHED_FIFO / mlockall / affinity are refused; else warn.
+    #[serde(default)]
+    pub require_rt: bool,
+    /// Publish DaemonStatus every this many ticks.
+    #[serde(default = "default_status_every")]
+    pub status_every_ticks: u64,
+    /// READY=1 is sent after this many ticks ran (and were not missed).
+    #[serde(default = "default_ready_after")]
+    pub ready_after_ticks: u64,
+}
+
+fn default_period_us() -> u64 {
+    1000
+}
+fn default_status_every() -> u64 {
+    100
+}
+fn default_ready_after() -> u64 {
+    50
+}
+
+impl Default for LoopConfig {
+    fn default() -> Self {
+        Self {
+            period_us: default_period_us(),
+            cpu: None,
+            priority: None,
+            lock_memory: false,
+            require_rt: false,
+            status_every_ticks: default_status_every(),
+            ready_after_ticks: default_ready_after(),
+        }
+    }
+}
+
+/// Which I/O backend the loop uses.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum BackendKind {
+    /// iceoryx2 shared memory (`frictionless-shm-types` services).
+    Shm,
+}
+
+/// `[backend]`.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BackendConfig {
+    /// Backend kind.
+    pub kind: BackendKind,
+    /// Service-name prefix (`<prefix>/joint_states`, …).
+    #[serde(default = "default_prefix")]
+    pub service_prefix: String,
+    /// iceoryx2 root path (relative paths are relative to the config file); none = iceoryx2 default.
+    #[serde(default)]
+    pub root_path: Option<PathBuf>,
+}
+
+fn default_prefix() -> String {
+    "frictionless".to_owned()
+}
+
+/// What to output for enabled joints when joint-state input is stale.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum OnStale {
+    /// 0 A on every joint.
+    Zero,
+    /// Drop the friction estimate and the torque feedback (they need fresh state) and convert the
+    /// last τ_des statically: i = τ_des/(kt·r), clamped. A stale *torque request* always gives 0 A.
+    StaticModel,
+}
+
+/// `[safety]`.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SafetyConfig {
+    /// Inputs older than this many periods (no new sample, or stamp too old) are stale.
+    #[serde(default = "default_stale")]
+    pub stale_after_ticks: u64,
+    /// Output while joint states are stale.
+    #[serde(default = "default_on_stale")]
+    pub on_stale: OnStale,
+}
+
+fn default_stale() -> u64 {
+    5
+}
+fn default_on_stale() -> OnStale {
+    OnStale::Zero
+}
+
+impl Default for SafetyConfig {
+    fn default() -> Self {
+        Self {
+            stale_after_ticks: default_stale(),
+            on_stale: default_on_stale(),
+        }
+    }
+}
+
+/// Butterworth low-pass on τ̂_F.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct LpfConfig {
+    /// Filter order 1–8.
+    pub order: usize,
+    /// Cut-off frequency [Hz], below Nyquist.
+    pub cutoff_hz: f64,
+}
+
+/// Friction model names (the ergoCub names and short forms).
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq)]
+pub enum FrictionModelName {
+    /// No friction compensation.
+    #[serde(rename = "none")]
+    None,
+    /// Coulomb–viscous.
+    #[serde(rename = "coulomb_viscous", alias = "cv")]
+    CoulombViscous,
+    /// Stribeck–Coulomb–viscous.
+    #[serde(rename = "coulomb_viscous_stribeck", alias = "scv")]
+    CoulombViscousStribeck,
+    /// PINN from a `.fwt` file.
+    #[serde(rename = "pinn")]
+    Pinn,
+}
+
+/// PINN warm-up policy while the history is not yet full.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum WarmupName {
+    /// Infer on zero-padded history from the first tick.
+    ZeroPad,
+    /// Output 0 friction until the history is full (the safe default, as the BLF device).
+    #[default]
+    HoldZero,
+}
+
+/// One `[[joint]]` as written.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct JointConfig {
+    /// Joint name (unique).
+    pub name: String,
+    /// Index into the payload arrays (0–63, unique).
+    pub index: usize,
+    /// Signed gear ratio r (motor angle per joint angle), non-zero.
+    pub gear_ratio: f64,
+    /// Torque constant kt [Nm/A], motor side, > 0 (the same calibration as used for training!).
+    pub kt: f64,
+    /// Current clamp ±max_curr [A], > 0.
+    pub max_curr: f64,
+    /// Friction compensation gain kfc (0 disables compensation), 0–2.
+    #[serde(default = "one")]
+    pub kfc: f64,
+    /// Proportional gain on the torque error [-] (0 = pure feed-forward).
+    #[serde(default)]
+    pub kp: f64,
+    /// Integral gain on the torque error [1/s].
+    #[serde(default)]
+    pub ki: f64,
+    /// Friction clip ±max_output_friction [Nm], applied only while |ṡ| > the threshold.
+    #[serde(default = "infinite")]
+    pub max_output_friction: f64,
+    /// The velocity gate of the friction clip [rad/s] (≥ 0).
+    #[serde(default)]
+    pub joint_velocity_threshold_rad_s: f64,
+    /// Butterworth LPF on τ̂_F (none = unfiltered).
+    #[serde(default)]
+    pub lpf: Option<LpfConfig>,
+    /// Friction model.
+    pub friction_model: FrictionModelName,
+    /// Coulomb level [Nm].
+    #[serde(default)]
+    pub kc: Option<f64>,
+    /// Viscous coefficient [Nm·s/rad].
+    #[serde(default)]
+    pub kv: Option<f64>,
+    /// Smooth-sign steepness [s/rad]; `inf` = sign().
+    #[serde(default)]
+    pub ka: Option<f64>,
+    /// Breakaway friction [Nm] (SCV).
+    #[serde(default)]
+    pub ks: Option<f64>,
+    /// Stribeck velocity [rad/s] (SCV).
+    #[serde(default)]
+    pub vs: Option<f64>,
+    /// Stribeck exponent (SCV).
+    #[serde(default)]
+    pub alpha: Option<f64>,
+    /// `.fwt` model file for `pinn`, relative to the config file.
+    #[serde(default)]
+    pub model: Option<PathBuf>,
+    /// PINN warm-up policy.
+    #[serde(default)]
+    pub warmup: WarmupName,
+}
+
+fn one() -> f64 {
+    1.0
+}
+fn infinite() -> f64 {
+    f64::INFINITY
+}
+
+/// The whole file as written.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RawConfig {
+    /// `[loop]`.
+    #[serde(default, rename = "loop")]
+    pub loop_: LoopConfig,
+    /// `[backend]`.
+    pub backend: BackendConfig,
+    /// `[safety]`.
+    #[serde(default)]
+    pub safety: SafetyConfig,
+    /// `[[joint]]`.
+    #[serde(default)]
+    pub joint: Vec<JointConfig>,
+}
+
+/// Validated friction model parameters of one joint.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ModelSpec {
+    /// No compensation.
+    None,
+    /// CV.
+    Cv(frictionless::friction::CvParams),
+    /// SCV (paper form).
+    Scv(frictionless::friction::ScvParams),
+    /// PINN loaded from a file (resolved path); the file was read and validated by [`load`].
+    Pinn {
+        /// Resolved path.
+        path: PathBuf,
+        /// Warm-up policy.
+        warmup: WarmupName,
+    },
+}
+
+/// A validated configuration.
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// The config file it came from.
+    pub file: PathBuf,
+    /// As written (validated).
+    pub raw: RawConfig,
+    /// Resolved model per joint, same order as `raw.joint`.
+    pub models: Vec<ModelSpec>,
+    /// Resolved iceoryx2 root path.
+    pub root_path: Option<PathBuf>,
+}
+
+impl Config {
+    /// Loop period [ns].
+    pub fn period_ns(&self) -> u64 {
+        self.raw.loop_.period_us * 1000
+    }
+}
+
+struct Checker<'a> {
+    file: &'a Path,
+}
+
+impl Checker<'_> {
+    fn fail(&self, key: String, value: impl std::fmt::Display, req: &str) -> ConfigError {
+        ConfigError::Invalid {
+            file: self.file.to_path_buf(),
+            key,
+            value: value.to_string(),
+            requirement: req.to_owned(),
+        }
+    }
+    fn finite_pos(&self, key: String, v: f64) -> Result<(), ConfigError> {
+        if v.is_finite() && v > 0.0 {
+            Ok(())
+        } else {
+            Err(self.fail(key, v, "must be finite and > 0"))
+        }
+    }
+    fn nonneg(&self, key: String, v: f64) -> Result<(), ConfigError> {
+        if v.is_finite() && v >= 0.0 {
+            Ok(())
+        } else {
+            Err(self.fail(key, v, "must be finite and >= 0"))
+        }
+    }
+}
+
+/// Reads, parses and validates `path`, including every model file. Touches no IPC.
+pub fn load(path: &Path) -> Result<Config, ConfigError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        file: path.to_path_buf(),
+        source,
+    })?;
+    parse(path, &text)
+}
+
+/// Parses and validates `text` as if read from `path` (relative model paths resolve against its
+/// directory).
+pub fn parse(path: &Path, text: &str) -> Result<Config, ConfigError> {
+    let raw: RawConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
+        file: path.to_path_buf(),
+        message: e.to_string().trim_end().replace('\n', " | "),
+    })?;
+    let c = Checker { file: path };
+    let base = path.parent().unwrap_or(Path::new("."));
+
+    let l = &raw.loop_;
+    if !(20..=1_000_000).contains(&l.period_us) {
+        return Err(c.fail("loop.period_us".into(), l.period_us, "must be 20..=1000000"));
+    }
+    if let Some(p) = l.priority
+        && !(1..=99).contains(&p)
+    {
+        return Err(c.fail("loop.priority".into(), p, "must be 1..=99 (SCHED_FIFO)"));
+    }
+    if l.status_every_ticks == 0 {
+        return Err(c.fail("loop.status_every_ticks".into(), 0, "must be >= 1"));
+    }
+    if raw.safety.stale_after_ticks == 0 {
+        return Err(c.fail("safety.stale_after_ticks".into(), 0, "must be >= 1"));
+    }
+    if raw.backend.service_prefix.is_empty() || raw.backend.service_prefix.contains('\0') {
+        return Err(c.fail(
+            "backend.service_prefix".into(),
+            format!("{:?}", raw.backend.service_prefix),
+            "must be non-empty without NUL",
+        ));
+    }
+    if raw.joint.is_empty() {
+        return Err(c.fail("joint".into(), "[]", "at least one [[joint]] is required"));
+    }
+    if raw.joint.len() > MAX_JOINTS {
+        return Err(c.fail(
+            "joint".into(),
+            raw.joint.len(),
+            &format!("at most {MAX_JOINTS} joints"),
+        ));
+    }
+    let fs_hz = 1e6 / l.period_us as f64;
+    let mut models = Vec::with_capacity(raw.joint.len());
+    for (k, j) in raw.joint.iter().enumerate() {
+        let key = |name: &str| format!("joint[{k}].{name}");
+        if j.name.is_empty() {
+            return Err(c.fail(key("name"), "\"\"", "must be non-empty"));
+        }
+        if raw.joint[..k].iter().any(|o| o.name == j.name) {
+            return Err(c.fail(key("name"), &j.name, "duplicate joint name"));
+        }
+        if j.index >= MAX_JOINTS {
+            return Err(c.fail(key("index"), j.index, &format!("must be < {MAX_JOINTS}")));
+        }
+        if raw.joint[..k].iter().any(|o| o.index == j.index) {
+            return Err(c.fail(key("index"), j.index, "duplicate joint index"));
+        }
+        if frictionless::units::GearRatio::new(j.gear_ratio).is_err() {
+            return Err(c.fail(
+                key("gear_ratio"),
+                j.gear_ratio,
+                "must be finite and non-zero",
+            ));
+        }
+        c.finite_pos(key("kt"), j.kt)?;
+        c.finite_pos(key("max_curr"), j.max_curr)?;
+        if !(j.kfc.is_finite() && (0.0..=2.0).contains(&j.kfc)) {
+            return Err(c.fail(key("kfc"), j.kfc, "must be in [0, 2]"));
+        }
+        c.nonneg(key("kp"), j.kp)?;
+        c.nonneg(key("ki"), j.ki)?;
+        if !(j.max_output_friction > 0.0) {
+            return Err(c.fail(
+                key("max_output_friction"),
+                j.max_output_friction,
+                "must be > 0",
+            ));
+        }
+        c.nonneg(
+            key("joint_velocity_threshold_rad_s"),
+            j.joint_velocity_threshold_rad_s,
+        )?;
+        if let Some(lpf) = j.lpf {
+            if !(1..=8).contains(&lpf.order) {
+                return Err(c.fail(key("lpf.order"), lpf.order, "must be 1..=8"));
+            }
+            if !(lpf.cutoff_hz.is_finite() && lpf.cutoff_hz > 0.0 && lpf.cutoff_hz < 0.5 * fs_hz) {
+                return Err(c.fail(
+                    key("lpf.cutoff_hz"),
+                    lpf.cutoff_hz,
+                    &format!("must be > 0 and below Nyquist ({} Hz)", 0.5 * fs_hz),
+                ));
+            }
+        }
+        models.push(model_spec(&c, base, k, j)?);
+    }
+    let root_path = raw.backend.root_path.as_ref().map(|p| base.join(p));
+    Ok(Config {
+        file: path.to_path_buf(),
+        raw,
+        models,
+        root_path,
+    })
+}
+
+fn model_spec(
+    c: &Checker,
+    base: &Path,
+    k: usize,
+    j: &JointConfig,
+) -> Result<ModelSpec, ConfigError> {
+    use frictionless::friction::{CvParams, ScvParams, StaticFriction};
+    let key = |name: &str| format!("joint[{k}].{name}");
+    let need = |name: &str, v: Option<f64>| -> Result<f64, ConfigError> {
+        v.ok_or_else(|| {
+            c.fail(
+                key(name),
+                "<missing>",
+                &format!("required by friction_model = {:?}", j.friction_model),
+            )
+        })
+    };
+    let forbid = |names: &[(&str, bool)]| -> Result<(), ConfigError> {
+        for (n, present) in names {
+            if *present {
+                return Err(c.fail(
+                    key(n),
+                    "<set>",
+                    &format!("not used by friction_model = {:?}", j.friction_model),
+                ));
+            }
+        }
+        Ok(())
+    };
+    let param_err = |e: frictionless::friction::FrictionParamError| match e {
+        frictionless::friction::FrictionParamError::Invalid {
+            name,
+            value,
+            requirement,
+            ..
+        } => c.fail(key(name), value, requirement),
+        other => c.fail(key("friction_model"), "?", &other.to_string()),
+    };
+    match j.friction_model {
+        FrictionModelName::None => {
+            forbid(&[
+                ("kc", j.kc.is_some()),
+                ("kv", j.kv.is_some()),
+                ("ka", j.ka.is_some()),
+                ("ks", j.ks.is_some()),
+                ("vs", j.vs.is_some()),
+                ("alpha", j.alpha.is_some()),
+                ("model", j.model.is_some()),
+            ])?;
+            Ok(ModelSpec::None)
+        }
+        FrictionModelName::CoulombViscous => {
+            forbid(&[
+                ("ks", j.ks.is_some()),
+                ("vs", j.vs.is_some()),
+                ("alpha", j.alpha.is_some()),
+                ("model", j.model.is_some()),
+            ])?;
+            let p = CvParams {
+                kc: need("kc", j.kc)?,
+                ka: need("ka", j.ka)?,
+                kv: need("kv", j.kv)?,
+            };
+            p.validate().map_err(param_err)?;
+            Ok(ModelSpec::Cv(p))
+        }
+        FrictionModelName::CoulombViscousStribeck => {
+            forbid(&[("model", j.model.is_some())])?;
+            let p = ScvParams {
+                kc: need("kc", j.kc)?,
+                ka: need("ka", j.ka)?,
+                kv: need("kv", j.kv)?,
+                ks: need("ks", j.ks)?,
+                vs: need("vs", j.vs)?,
+                alpha: need("alpha", j.alpha)?,
+            };
+            p.validate().map_err(param_err)?;
+            Ok(ModelSpec::Scv(p))
+        }
+        FrictionModelName::Pinn => {
+            forbid(&[
+                ("kc", j.kc.is_some()),
+                ("kv", j.kv.is_some()),
+                ("ka", j.ka.is_some()),
+                ("ks", j.ks.is_some()),
+                ("vs", j.vs.is_some()),
+                ("alpha", j.alpha.is_some()),
+            ])?;
+            let rel = j.model.as_ref().ok_or_else(|| {
+                c.fail(
+                    key("model"),
+                    "<missing>",
+                    "required by friction_model = \"pinn\"",
+                )
+            })?;
+            let path = base.join(rel);
+            crate::params::check_model_file(&path, j.gear_ratio).map_err(|message| {
+                ConfigError::Model {
+                    file: c.file.to_path_buf(),
+                    key: key("model"),
+                    path: path.clone(),
+                    message,
+                }
+            })?;
+            Ok(ModelSpec::Pinn {
+                path,
+                warmup: j.warmup,
+            })
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"
+[loop]
+period_us = 1000
+[backend]
+kind = "shm"
+service_prefix = "t"
+[safety]
+stale_after_ticks = 3
+on_stale = "static_model"
+[[joint]]
+name = "knee"
+index = 0
+gear_ratio = -100.0
+kt = 0.157
+max_curr = 5.0
+kfc = 0.85
+max_output_friction = 25.0
+joint_velocity_threshold_rad_s = 0.01
+lpf = { order = 2, cutoff_hz = 10.0 }
+friction_model = "cv"
+kc = 8.1
+ka = 50.84
+kv = 5.55
+[[joint]]
+name = "ankle"
+index = 3
+gear_ratio = 160
+kt = 0.0665
+max_curr = 3.0
+friction_model = "coulomb_viscous_stribeck"
+kc = 1.0005
+ka = 2.78
+kv = 0.29
+ks = 6.0
+vs = 0.13
+alpha = 0.6
+"#;
+
+    fn p(text: &str) -> Result<Config, ConfigError> {
+        parse(Path::new("/etc/x/test.toml"), text)
+    }
+
+    #[test]
+    fn good_config_parses_with_aliases_and_defaults() {
+        let c = p(GOOD).unwrap();
+        assert_eq!(c.raw.joint.len(), 2);
+        assert_eq!(c.period_ns(), 1_000_000);
+        assert_eq!(c.raw.safety.on_stale, OnStale::StaticModel);
+        assert!(matches!(c.models[0], ModelSpec::Cv(p) if p.kc == 8.1));
+        assert!(matches!(c.models[1], ModelSpec::Scv(p) if p.alpha == 0.6));
+        // defaults
+        assert_eq!(c.raw.joint[1].kfc, 1.0);
+        assert_eq!(c.raw.joint[1].kp, 0.0);
+        assert!(c.raw.joint[1].max_output_friction.is_infinite());
+    }
+
+    #[test]
+    fn unknown_key_is_an_error_naming_it() {
+        let e = p(&GOOD.replace("kfc = 0.85", "kfc = 0.85\nbwfilter_enabled = true"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("bwfilter_enabled") && e.contains("test.toml"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn bad_values_name_file_key_and_value() {
+        let cases = [
+            (
+                "max_curr = 5.0",
+                "max_curr = -5.0",
+                "joint[0].max_curr",
+                "-5",
+            ),
+            (
+                "gear_ratio = 160",
+                "gear_ratio = 0",
+                "joint[1].gear_ratio",
+                "0",
+            ),
+            ("index = 3", "index = 0", "joint[1].index", "0"),
+            ("index = 3", "index = 64", "joint[1].index", "64"),
+            (
+                "cutoff_hz = 10.0",
+                "cutoff_hz = 600.0",
+                "joint[0].lpf.cutoff_hz",
+                "600",
+            ),
+            ("vs = 0.13", "vs = 0.0", "joint[1].vs", "0"),
+            ("kfc = 0.85", "kfc = 3.0", "joint[0].kfc", "3"),
+            ("period_us = 1000", "period_us = 5", "loop.period_us", "5"),
+            (
+                "stale_after_ticks = 3",
+                "stale_after_ticks = 0",
+                "safety.stale_after_ticks",
+                "0",
+            ),
+        ];
+        for (from, to, key, val) in cases {
+            let e = p(&GOOD.replace(from, to)).unwrap_err().to_string();
+            assert!(
+                e.contains("test.toml") && e.contains(key) && e.contains(val),
+                "{from} → {to}: {e}"
+            );
+        }
+    }
+
+    #[test]
+    fn missing_and_misplaced_model_parameters_are_errors() {
+        let e = p(&GOOD.replace("kv = 5.55\n", "")).unwrap_err().to_string();
+        assert!(e.contains("joint[0].kv") && e.contains("missing"), "{e}");
+        let e = p(&GOOD.replace("ka = 50.84", "ka = 50.84\nks = 1.0"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("joint[0].ks"), "{e}");
+        let e = p(&GOOD.replace("friction_model = \"cv\"", "friction_model = \"bogus\""))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("bogus"), "{e}");
+    }
+
+    #[test]
+    fn pinn_without_file_reports_resolved_path() {
+        let text = GOOD.replace(
+            "friction_model = \"cv\"\nkc = 8.1\nka = 50.84\nkv = 5.55",
+            "friction_model = \"pinn\"\nmodel = \"models/knee.fwt\"",
+        );
+        let e = p(&text).unwrap_err().to_string();
+        assert!(
+            e.contains("joint[0].model") && e.contains("/etc/x/models/knee.fwt"),
+            "{e}"
+        );
+    }
+}

@@ -1,0 +1,609 @@
+//! THE RT TICK: the time-triggered control thread, top to bottom in one module.
+//!
+//! What this module **is**: the dedicated loop thread. Set-up (allowed to allocate and log): open the
+//! backend (iceoryx2 node and ports are `!Send`, so they are created here), apply RT settings
+//! (timer slack, CPU affinity, SCHED_FIFO, mlockall — each verified, refusals reported), pre-fault
+//! the stack. Then, every period on an absolute CLOCK_MONOTONIC deadline (`clock_nanosleep` with
+//! `TIMER_ABSTIME`):
+//!
+//! 1. [`Inputs::poll`]: newest [`JointStates`] and [`TorqueRequest`] (latest value), freshness by
+//!    `seq` and `stamp_ns`;
+//! 2. parameter hand-over: `try_recv` a new `Box<Params>` (built off-thread), send the old one back
+//!    to be freed off-thread;
+//! 3. [`compute`]: per joint, enable edge → reset (bumpless), model estimate, control law
+//!    ([`crate::control`]), stale/fault/NaN handling → [`MotorCurrentCommand`];
+//! 4. publish (+ notify); record lateness / compute time / input age in fixed histograms;
+//!    publish [`DaemonStatus`] every `status_every_ticks`; advance the heartbeat.
+//!
+//! No allocation, no locks, no logging, no blocking syscall other than the sleep in the loop. The
+//! only heap allocation is inside iceoryx2's `loan` (one 48-byte `Box` per published sample,
+//! measured); it is wrapped in [`crate::alloc_count::exempt`] so the allocation test can tell it apart.
+//!
+//! What it is **not**: no config parsing, no signals, no systemd (the supervisor in `main.rs`).
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, SyncSender, TryRecvError};
+
+use frictionless::features::JointSample;
+use frictionless::model::FrictionModel;
+use frictionless_shm_types::{
+    DaemonStatus, FLAG_DISABLED, FLAG_FAULT, FLAG_STALE, Inbox, IoError, Ipc, IpcConfig,
+    JointStates, MAX_JOINTS, MotorCurrentCommand, Outbox, STATUS_CPU_PINNED, STATUS_INPUT_STALE,
+    STATUS_MEMORY_LOCKED, STATUS_SCHED_FIFO, STATUS_STOPPING, TorqueRequest, monotonic_ns,
+};
+
+use crate::alloc_count;
+use crate::config::{Config, OnStale};
+use crate::control::{LawInput, LawOutput};
+use crate::params::Params;
+
+/// State shared between the RT thread and the supervisor (atomics only).
+#[derive(Debug, Default)]
+pub struct Shared {
+    /// Set by the supervisor to end the loop (zero currents are published on the way out).
+    pub stop: AtomicBool,
+    /// Ticks completed (the heartbeat the watchdog checks).
+    pub heartbeat: AtomicU64,
+    /// Missed deadlines (whole periods skipped).
+    pub missed: AtomicU64,
+    /// p99 wake lateness upper bound [ns] (updated with each status publish).
+    pub lateness_p99_ns: AtomicU64,
+    /// Max wake lateness [ns].
+    pub lateness_max_ns: AtomicU64,
+    /// Generation of the parameters in use.
+    pub generation: AtomicU64,
+    /// RT settings granted (`STATUS_*` bits).
+    pub rt_flags: AtomicU32,
+    /// Ticks during which RT-thread allocations were counted.
+    pub counted_ticks: AtomicU64,
+}
+
+/// The I/O seam: the loop reads newest inputs and publishes outputs through this.
+pub trait Backend {
+    /// Newest joint states since the last call, if any.
+    fn read_states(&mut self) -> Result<Option<JointStates>, IoError>;
+    /// Newest torque request since the last call, if any.
+    fn read_request(&mut self) -> Result<Option<TorqueRequest>, IoError>;
+    /// Sends a current command.
+    fn publish_command(&mut self, cmd: &MotorCurrentCommand) -> Result<(), IoError>;
+    /// Sends a status snapshot.
+    fn publish_status(&mut self, status: &DaemonStatus) -> Result<(), IoError>;
+}
+
+/// iceoryx2 shared-memory backend (the `frictionless-shm-types` services).
+pub struct ShmBackend {
+    _ipc: Ipc,
+    states: Inbox<JointStates>,
+    request: Inbox<TorqueRequest>,
+    command: Outbox<MotorCurrentCommand>,
+    status: Outbox<DaemonStatus>,
+}
+
+impl ShmBackend {
+    /// Opens the node (cleaning up dead nodes first) and all ports. Set-up time only.
+    pub fn open(ipc_cfg: &IpcConfig) -> Result<Self, String> {
+        match Ipc::cleanup_dead_nodes_for(ipc_cfg) {
+            Ok(n) if n > 0 => tracing::info!("removed resources of {n} dead iceoryx2 node(s)"),
+            Ok(_) => {}
+            Err(e) => tracing::warn!("dead-node clean-up failed: {e}"),
+        }
+        let ipc = Ipc::open(ipc_cfg, "frictiond").map_err(|e| e.to_string())?;
+        let states = ipc.joint_states().map_err(|e| e.to_string())?;
+        let request = ipc.torque_request().map_err(|e| e.to_string())?;
+        let command = ipc.motor_current_command().map_err(|e| e.to_string())?;
+        let status = ipc.daemon_status().map_err(|e| e.to_string())?;
+        Ok(Self {
+            states: states.inbox().map_err(|e| e.to_string())?,
+            request: request.inbox().map_err(|e| e.to_string())?,
+            command: command.outbox().map_err(|e| e.to_string())?,
+            status: status.outbox().map_err(|e| e.to_string())?,
+            _ipc: ipc,
+        })
+    }
+}
+
+impl Backend for ShmBackend {
+    fn read_states(&mut self) -> Result<Option<JointStates>, IoError> {
+        self.states.latest()
+    }
+    fn read_request(&mut self) -> Result<Option<TorqueRequest>, IoError> {
+        self.request.latest()
+    }
+    fn publish_command(&mut self, cmd: &MotorCurrentCommand) -> Result<(), IoError> {
+        // iceoryx2 0.10 allocates one 48-byte Box per loaned sample (measured; see module doc).
+        alloc_count::exempt(|| self.command.publish(cmd))
+    }
+    fn publish_status(&mut self, status: &DaemonStatus) -> Result<(), IoError> {
+        alloc_count::exempt(|| self.status.publish(status))
+    }
+}
+
+/// Newest value of one input with its freshness.
+#[derive(Debug, Clone, Copy)]
+pub struct Latest<T> {
+    /// The value (meaningful only when `have`).
+    pub value: T,
+    /// Whether any value arrived yet.
+    pub have: bool,
+    /// Tick at which a new `seq` last arrived.
+    pub new_at_tick: u64,
+}
+
+impl<T: Copy> Latest<T> {
+    fn new(zero: T) -> Self {
+        Self {
+            value: zero,
+            have: false,
+            new_at_tick: 0,
+        }
+    }
+
+    fn update(&mut self, v: Option<T>, tick: u64) {
+        if let Some(v) = v {
+            self.value = v;
+            self.have = true;
+            self.new_at_tick = tick;
+        }
+    }
+
+    /// Stale: none yet, no new sample for more than `after` ticks, or stamp older than `after`
+    /// periods.
+    fn stale(&self, tick: u64, now_ns: u64, stamp_ns: u64, after: u64, period_ns: u64) -> bool {
+        !self.have
+            || tick.saturating_sub(self.new_at_tick) > after
+            || now_ns.saturating_sub(stamp_ns) > after.saturating_mul(period_ns)
+    }
+}
+
+/// Task 1: the inputs.
+#[derive(Debug)]
+pub struct Inputs {
+    /// Joint states.
+    pub states: Latest<JointStates>,
+    /// Torque request.
+    pub request: Latest<TorqueRequest>,
+}
+
+impl Inputs {
+    /// Drains the backend (latest value) for this tick. Receive errors keep the old value.
+    pub fn poll(&mut self, b: &mut impl Backend, tick: u64) {
+        self.states.update(b.read_states().ok().flatten(), tick);
+        self.request.update(b.read_request().ok().flatten(), tick);
+    }
+}
+
+/// Per-tick freshness verdict.
+#[derive(Debug, Clone, Copy)]
+pub struct Freshness {
+    /// Joint states stale.
+    pub state_stale: bool,
+    /// Torque request stale.
+    pub request_stale: bool,
+}
+
+/// Task 3: computes the command for one tick. Pure apart from the models' and laws' own state.
+///
+/// `prev_enabled` holds the enable mask of the last tick (for the bumpless enable edge).
+#[inline]
+pub fn compute(
+    p: &mut Params,
+    inp: &Inputs,
+    fresh: Freshness,
+    prev_enabled: &mut u64,
+    cmd: &mut MotorCurrentCommand,
+    tau_f_out: &mut [f64; MAX_JOINTS],
+) {
+    let st = &inp.states.value;
+    let rq = &inp.request.value;
+    let enabled_now = if inp.request.have {
+        rq.enable_mask & p.configured_mask
+    } else {
+        0
+    };
+    cmd.valid_mask = enabled_now;
+    cmd.n_joints = p.joints.len() as u32;
+    cmd.state_stamp_ns = if inp.states.have { st.stamp_ns } else { 0 };
+    cmd.state_seq = if inp.states.have { st.seq } else { 0 };
+    for j in p.joints.iter_mut() {
+        let k = j.index;
+        let bit = 1u64 << k;
+        let out = if enabled_now & bit == 0 {
+            LawOutput {
+                i_a: 0.0,
+                tau_f_hat_nm: 0.0,
+                flags: FLAG_DISABLED,
+            }
+        } else if fresh.request_stale || (k as u32) >= rq.n_joints {
+            stale_out(0.0)
+        } else if fresh.state_stale || (k as u32) >= st.n_joints {
+            match p.on_stale {
+                OnStale::Zero => stale_out(0.0),
+                OnStale::StaticModel => {
+                    let mut o = j.law.feed_forward_only(rq.tau_des_nm[k]);
+                    o.flags |= FLAG_STALE;
+                    o
+                }
+            }
+        } else if st.fault_flags[k] != 0 {
+            j.law.reset();
+            LawOutput {
+                i_a: 0.0,
+                tau_f_hat_nm: 0.0,
+                flags: FLAG_FAULT,
+            }
+        } else {
+            let sample = JointSample {
+                s_rad: st.s_rad[k],
+                sdot_rad_s: st.sdot_rad_s[k],
+                theta_motor_rad: st.theta_motor_rad[k],
+                omega_motor_rad_s: st.omega_motor_rad_s[k],
+                temperature_c: st.temperature_c[k],
+            };
+            if *prev_enabled & bit == 0 {
+                // Bumpless enable: fresh history and filter state.
+                j.model.reset(&sample);
+                j.law.reset();
+            }
+            let f = j.model.estimate(&sample);
+            j.law.step(&LawInput {
+                tau_des_nm: rq.tau_des_nm[k],
+                friction_nm: f,
+                sdot_rad_s: sample.sdot_rad_s,
+                tau_meas_nm: st.tau_meas_nm[k],
+            })
+        };
+        cmd.i_ref_a[k] = out.i_a;
+        cmd.flags[k] = out.flags;
+        tau_f_out[k] = out.tau_f_hat_nm;
+    }
+    *prev_enabled = enabled_now;
+}
+
+#[inline]
+fn stale_out(i_a: f64) -> LawOutput {
+    LawOutput {
+        i_a,
+        tau_f_hat_nm: 0.0,
+        flags: FLAG_STALE,
+    }
+}
+
+/// Task 4: timing statistics.
+#[derive(Debug)]
+struct Telemetry {
+    status: DaemonStatus,
+    stale_ticks: u64,
+}
+
+/// Everything the RT thread gets from the supervisor.
+pub struct RtSetup {
+    /// The validated config (loop, backend, safety).
+    pub config: Config,
+    /// Initial parameters.
+    pub params: Box<Params>,
+    /// New parameters from reloads.
+    pub rx_params: Receiver<Box<Params>>,
+    /// Old parameters back to the supervisor to be freed.
+    pub tx_old: SyncSender<Box<Params>>,
+    /// Shared atomics.
+    pub shared: Arc<Shared>,
+    /// Start-up result: Ok(granted STATUS_* flags) or why set-up failed.
+    pub started: SyncSender<Result<u32, String>>,
+    /// Count RT-thread allocations after `ready_after_ticks`.
+    pub count_allocs: bool,
+}
+
+/// Applies RT settings to the calling thread; returns granted `STATUS_*` flags. Logs refusals.
+fn apply_rt_settings(cfg: &Config) -> Result<u32, String> {
+    let l = &cfg.raw.loop_;
+    let mut flags = 0;
+    let mut refused = Vec::new();
+    // SAFETY: plain syscalls on the calling thread with valid arguments.
+    unsafe {
+        // Timer slack 1 ns (default 50 µs would dominate SCHED_OTHER lateness).
+        if libc::prctl(libc::PR_SET_TIMERSLACK, 1, 0, 0, 0) != 0 {
+            refused.push(format!(
+                "PR_SET_TIMERSLACK: {}",
+                std::io::Error::last_os_error()
+            ));
+        }
+        if let Some(cpu) = l.cpu {
+            let mut set: libc::cpu_set_t = std::mem::zeroed();
+            libc::CPU_SET(cpu, &mut set);
+            let ok = libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) == 0;
+            let mut got: libc::cpu_set_t = std::mem::zeroed();
+            libc::sched_getaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &mut got);
+            if ok && libc::CPU_ISSET(cpu, &got) && libc::CPU_COUNT(&got) == 1 {
+                flags |= STATUS_CPU_PINNED;
+            } else {
+                refused.push(format!(
+                    "CPU affinity {cpu}: {}",
+                    std::io::Error::last_os_error()
+                ));
+            }
+        }
+        if let Some(prio) = l.priority {
+            let sp = libc::sched_param {
+                sched_priority: prio,
+            };
+            let rc = libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &sp);
+            let mut pol = 0;
+            let mut got = libc::sched_param { sched_priority: 0 };
+            libc::pthread_getschedparam(libc::pthread_self(), &mut pol, &mut got);
+            if rc == 0 && pol == libc::SCHED_FIFO && got.sched_priority == prio {
+                flags |= STATUS_SCHED_FIFO;
+            } else {
+                refused.push(format!(
+                    "SCHED_FIFO {prio}: {} (needs CAP_SYS_NICE or LimitRTPRIO)",
+                    std::io::Error::from_raw_os_error(rc)
+                ));
+            }
+        }
+        if l.lock_memory {
+            // MCL_FUTURE under a finite RLIMIT_MEMLOCK makes later allocations past the limit fail:
+            // only ask for it when the limit is unlimited (or we are root).
+            let mut rl = libc::rlimit {
+                rlim_cur: 0,
+                rlim_max: 0,
+            };
+            libc::getrlimit(libc::RLIMIT_MEMLOCK, &mut rl);
+            let future = rl.rlim_cur == libc::RLIM_INFINITY || libc::geteuid() == 0;
+            let mcl = libc::MCL_CURRENT | if future { libc::MCL_FUTURE } else { 0 };
+            if libc::mlockall(mcl) == 0 {
+                flags |= STATUS_MEMORY_LOCKED;
+                if !future {
+                    tracing::warn!(
+                        "mlockall: MCL_CURRENT only (RLIMIT_MEMLOCK is finite; set LimitMEMLOCK=infinity)"
+                    );
+                }
+            } else {
+                refused.push(format!(
+                    "mlockall: {} (needs CAP_IPC_LOCK or LimitMEMLOCK)",
+                    std::io::Error::last_os_error()
+                ));
+            }
+        }
+    }
+    for r in &refused {
+        tracing::warn!("RT setting refused: {r}");
+    }
+    if l.require_rt && !refused.is_empty() {
+        return Err(format!(
+            "loop.require_rt = true and RT settings were refused: {}",
+            refused.join("; ")
+        ));
+    }
+    Ok(flags)
+}
+
+/// Touches `bytes` of stack so the loop never page-faults on it.
+#[inline(never)]
+fn prefault_stack() {
+    let mut buf = [0u8; 256 * 1024];
+    for k in (0..buf.len()).step_by(4096) {
+        buf[k] = 1;
+    }
+    std::hint::black_box(&mut buf);
+}
+
+/// Sleeps until the absolute CLOCK_MONOTONIC time `deadline_ns` (retries on EINTR).
+#[inline]
+fn sleep_until(deadline_ns: u64) {
+    use nix::sys::time::TimeSpec;
+    use nix::time::{ClockId, ClockNanosleepFlags, clock_nanosleep};
+    let ts = TimeSpec::new(
+        (deadline_ns / 1_000_000_000) as _,
+        (deadline_ns % 1_000_000_000) as _,
+    );
+    while let Err(nix::errno::Errno::EINTR) = clock_nanosleep(
+        ClockId::CLOCK_MONOTONIC,
+        ClockNanosleepFlags::TIMER_ABSTIME,
+        &ts,
+    ) {}
+}
+
+/// The RT thread's body. Returns when `shared.stop` is set (after publishing zero currents) or
+/// set-up fails.
+pub fn run(setup: RtSetup) {
+    let RtSetup {
+        config,
+        mut params,
+        rx_params,
+        tx_old,
+        shared,
+        started,
+        count_allocs,
+    } = setup;
+    let ipc_cfg = IpcConfig {
+        root_path: config.root_path.clone(),
+        service_prefix: config.raw.backend.service_prefix.clone(),
+    };
+    let mut backend = match ShmBackend::open(&ipc_cfg) {
+        Ok(b) => b,
+        Err(e) => {
+            let _ = started.send(Err(format!("opening IPC: {e}")));
+            return;
+        }
+    };
+    let rt_flags = match apply_rt_settings(&config) {
+        Ok(f) => f,
+        Err(e) => {
+            let _ = started.send(Err(e));
+            return;
+        }
+    };
+    shared.rt_flags.store(rt_flags, Ordering::Relaxed);
+    prefault_stack();
+    let _ = started.send(Ok(rt_flags));
+
+    let period_ns = config.period_ns();
+    let l = &config.raw.loop_;
+    let status_every = l.status_every_ticks;
+    let count_from_tick = l.ready_after_ticks;
+
+    let mut inputs = Inputs {
+        states: Latest::new(JointStates::zeroed()),
+        request: Latest::new(TorqueRequest::zeroed()),
+    };
+    let mut cmd = MotorCurrentCommand::zeroed();
+    let mut tele = Telemetry {
+        status: DaemonStatus::zeroed(),
+        stale_ticks: 0,
+    };
+    tele.status.period_ns = period_ns;
+    tele.status.flags = rt_flags;
+    let mut tau_f = [0.0f64; MAX_JOINTS];
+    let mut prev_enabled = 0u64;
+    let mut parked_old: Option<Box<Params>> = None;
+    let mut missed = 0u64;
+    let mut tick = 0u64;
+    let mut deadline = monotonic_ns() + period_ns;
+
+    loop {
+        sleep_until(deadline);
+        let wake = monotonic_ns();
+        if shared.stop.load(Ordering::Relaxed) {
+            break;
+        }
+        if count_allocs && tick == count_from_tick {
+            alloc_count::set_counting(true);
+        }
+
+        // 1. inputs
+        inputs.poll(&mut backend, tick);
+
+        // 2. parameter hand-over (the old set is freed by the supervisor, never here)
+        if let Some(old) = parked_old.take()
+            && let Err(std::sync::mpsc::TrySendError::Full(old)) = tx_old.try_send(old)
+        {
+            parked_old = Some(old);
+        }
+        if parked_old.is_none() {
+            match rx_params.try_recv() {
+                Ok(new) => {
+                    let old = std::mem::replace(&mut params, new);
+                    prev_enabled = 0; // every enabled joint gets a bumpless reset
+                    shared
+                        .generation
+                        .store(params.generation, Ordering::Relaxed);
+                    tele.status.generation = params.generation;
+                    if let Err(std::sync::mpsc::TrySendError::Full(old)) = tx_old.try_send(old) {
+                        parked_old = Some(old);
+                    }
+                }
+                Err(TryRecvError::Empty | TryRecvError::Disconnected) => {}
+            }
+        }
+
+        // 3. compute
+        let stale_after = params.stale_after_ticks;
+        let fresh = Freshness {
+            state_stale: inputs.states.stale(
+                tick,
+                wake,
+                inputs.states.value.stamp_ns,
+                stale_after,
+                period_ns,
+            ),
+            request_stale: inputs.request.stale(
+                tick,
+                wake,
+                inputs.request.value.stamp_ns,
+                stale_after,
+                period_ns,
+            ),
+        };
+        compute(
+            &mut params,
+            &inputs,
+            fresh,
+            &mut prev_enabled,
+            &mut cmd,
+            &mut tau_f,
+        );
+        cmd.seq = cmd.seq.wrapping_add(1);
+        cmd.stamp_ns = monotonic_ns();
+
+        // 4. output
+        let _ = backend.publish_command(&cmd);
+        let done = monotonic_ns();
+
+        // telemetry
+        let s = &mut tele.status;
+        s.lateness.record(wake.saturating_sub(deadline));
+        s.compute.record(done.saturating_sub(wake));
+        if inputs.states.have {
+            let age = wake.saturating_sub(inputs.states.value.stamp_ns);
+            s.input_age.record(age);
+            s.input_age_ns = age;
+        }
+        if fresh.state_stale {
+            tele.stale_ticks += 1;
+        }
+        tick += 1;
+        if tick % status_every == 0 {
+            s.seq += 1;
+            s.stamp_ns = done;
+            s.ticks = tick;
+            s.missed_deadlines = missed;
+            s.stale_ticks = tele.stale_ticks;
+            s.n_joints = params.joints.len() as u32;
+            s.flags = rt_flags
+                | if fresh.state_stale {
+                    STATUS_INPUT_STALE
+                } else {
+                    0
+                };
+            for j in params.joints.iter() {
+                s.model_kind[j.index] = crate::params::kind_code(&j.model);
+            }
+            s.tau_f_hat_nm = tau_f;
+            s.i_ref_a = cmd.i_ref_a;
+            s.joint_flags = cmd.flags;
+            let _ = backend.publish_status(s);
+            shared
+                .lateness_p99_ns
+                .store(s.lateness.quantile_upper_ns(0.99), Ordering::Relaxed);
+            shared
+                .lateness_max_ns
+                .store(s.lateness.max_ns, Ordering::Relaxed);
+        }
+        shared.heartbeat.store(tick, Ordering::Relaxed);
+
+        // next absolute deadline; skip whole missed periods (no catch-up bursts)
+        deadline += period_ns;
+        let now = monotonic_ns();
+        if now >= deadline {
+            let skipped = (now - deadline) / period_ns + 1;
+            missed += skipped;
+            deadline += skipped * period_ns;
+            shared.missed.store(missed, Ordering::Relaxed);
+        }
+    }
+    alloc_count::set_counting(false);
+    if count_allocs {
+        shared
+            .counted_ticks
+            .store(tick.saturating_sub(count_from_tick), Ordering::Relaxed);
+    }
+
+    // Stopping: zero current on every configured joint, a few times so latest-value readers see it.
+    cmd.valid_mask = params.configured_mask;
+    cmd.i_ref_a = [0.0; MAX_JOINTS];
+    cmd.flags = [0; MAX_JOINTS];
+    tele.status.flags |= STATUS_STOPPING;
+    for _ in 0..3 {
+        cmd.seq = cmd.seq.wrapping_add(1);
+        cmd.stamp_ns = monotonic_ns();
+        let _ = backend.publish_command(&cmd);
+        sleep_until(monotonic_ns() + period_ns);
+    }
+    tele.status.seq += 1;
+    tele.status.stamp_ns = monotonic_ns();
+    tele.status.i_ref_a = [0.0; MAX_JOINTS];
+    let _ = backend.publish_status(&tele.status);
+    if let Some(old) = parked_old {
+        drop(old); // stopping: allocation rules no longer apply
+    }
+}
