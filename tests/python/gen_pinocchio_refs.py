@@ -29,6 +29,7 @@ import numpy as np
 import pinocchio as pin
 
 SEED = 20240917
+GRAVITY = np.array([0.0, 0.0, -9.80665])  # Pinocchio's default is -9.81: set it explicitly
 LEG_JOINTS = [f"{s}_{j}" for s in "lr" for j in ("hip_pitch", "hip_roll", "hip_yaw", "knee", "ankle_pitch", "ankle_roll")]
 
 
@@ -76,6 +77,7 @@ def to_vectors(model, q, qd, qdd, base=None):
 
 
 def run_rnea(model, q, qd, qdd, base=None, wrenches=None):
+    model.gravity.linear = GRAVITY
     data = model.createData()
     qv, vv, av = to_vectors(model, q, qd, qdd, base)
     fext = pin.StdVec_Force()

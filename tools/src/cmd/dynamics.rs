@@ -263,8 +263,13 @@ fn info(m: ModelArgs) -> anyhow::Result<()> {
             JointKind::Revolute => "revolute",
             JointKind::Prismatic => "prismatic",
         };
+        let parent = if jt.parent_body == 0 {
+            robot.root_link.as_str()
+        } else {
+            robot.joints[jt.parent_body - 1].name.as_str()
+        };
         println!(
-            "{:<20} {:<9} ({:>6.3}, {:>6.3}, {:>6.3}) [{:>7.4}, {:>7.4}] {:>9.3} {:>12.5}  {} (parent body {})",
+            "{:<20} {:<9} ({:>6.3}, {:>6.3}, {:>6.3}) [{:>7.4}, {:>7.4}] {:>9.3} {:>12.5}  {} (index {j}, after {parent})",
             jt.name,
             kind,
             jt.axis.x,
@@ -275,11 +280,6 @@ fn info(m: ModelArgs) -> anyhow::Result<()> {
             jt.inertia.mass_kg,
             view.inertia_kg_m2(),
             jt.child_link,
-            if jt.parent_body == 0 {
-                robot.root_link.clone()
-            } else {
-                robot.joints[jt.parent_body - 1].name.clone()
-            } + &format!(" / #{j}"),
         );
     }
     Ok(())

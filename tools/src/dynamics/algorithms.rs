@@ -157,6 +157,7 @@ impl Robot {
     }
 
     /// Core RNEA: root velocity/acceleration (gravity folded in) given; returns the root wrench.
+    #[allow(clippy::too_many_arguments)]
     #[inline]
     fn rnea_core(
         &self,
