@@ -340,7 +340,8 @@ impl Mlp {
     /// One inference on a raw (un-normalised) input; returns the single output (joint-side friction, Nm).
     ///
     /// Never allocates and never panics. Returns `f32::NAN` if `x.len() != self.n_inputs()` or if any
-    /// input is NaN or infinite (a NaN would otherwise be silently clipped to 0 by a ReLU).
+    /// input is NaN or infinite or normalises to a non-finite value (a NaN would otherwise be silently
+    /// clipped to 0 by a ReLU).
     pub fn forward(&mut self, x: &[f32]) -> f32 {
         if !normalise(&self.net, x, &mut self.scratch.xin) {
             return f32::NAN;
