@@ -54,17 +54,17 @@ pub struct Inspection {
     pub joint_name: String,
     /// Signed gear ratio as stored (not yet validated).
     pub gear_ratio: f64,
-    /// Torque constant [Nm/A] as stored.
+    /// Torque constant \[Nm/A\] as stored.
     pub kt_nm_per_a: f64,
     /// SCV prior (paper form), if present.
     pub scv: Option<ScvParams>,
     /// Dataset SHA-256, lowercase hex.
     pub dataset_sha256: String,
-    /// Validation RMSE [Nm] (NaN → JSON null: unknown).
+    /// Validation RMSE \[Nm\] (NaN → JSON null: unknown).
     pub val_rmse_nm: f32,
-    /// Test RMSE [Nm] (NaN → JSON null: unknown).
+    /// Test RMSE \[Nm\] (NaN → JSON null: unknown).
     pub test_rmse_nm: f32,
-    /// Creation time [s since the Unix epoch].
+    /// Creation time \[s since the Unix epoch\].
     pub created_unix_s: u64,
     /// Tool that wrote the file.
     pub tool_version: String,

@@ -74,17 +74,17 @@ pub mod off {
     pub const RESERVED_A: usize = 66;
     /// `f64` signed gear ratio.
     pub const GEAR_RATIO: usize = 72;
-    /// `f64` torque constant [Nm/A].
+    /// `f64` torque constant \[Nm/A\].
     pub const KT: usize = 80;
     /// `[f64; 6]` SCV kc, ka, kv, ks, vs, alpha (zero when absent).
     pub const SCV: usize = 88;
     /// `[u8; 32]` dataset SHA-256.
     pub const DATASET_SHA256: usize = 136;
-    /// `f32` validation RMSE [Nm].
+    /// `f32` validation RMSE \[Nm\].
     pub const VAL_RMSE: usize = 168;
-    /// `f32` test RMSE [Nm].
+    /// `f32` test RMSE \[Nm\].
     pub const TEST_RMSE: usize = 172;
-    /// `u64` creation time [s since the Unix epoch].
+    /// `u64` creation time \[s since the Unix epoch\].
     pub const CREATED: usize = 176;
     /// `[u8; 64]` joint name, UTF-8, NUL-padded.
     pub const JOINT_NAME: usize = 184;
@@ -98,17 +98,17 @@ pub mod off {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Unit {
-    /// Joint-side angle [rad] (code 1).
+    /// Joint-side angle \[rad\] (code 1).
     JointRad,
-    /// Joint-side velocity [rad/s] (code 2).
+    /// Joint-side velocity \[rad/s\] (code 2).
     JointRadS,
-    /// Motor-side angle [motor rad] (code 3).
+    /// Motor-side angle \[motor rad\] (code 3).
     MotorRad,
-    /// Motor-side velocity [motor rad/s] (code 4).
+    /// Motor-side velocity \[motor rad/s\] (code 4).
     MotorRadS,
-    /// Temperature [°C] (code 5).
+    /// Temperature \[°C\] (code 5).
     Celsius,
-    /// Joint-side torque [Nm] (code 6).
+    /// Joint-side torque \[Nm\] (code 6).
     JointNm,
 }
 

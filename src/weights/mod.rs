@@ -44,9 +44,9 @@ pub enum SignalFiltering {
 pub struct TrainingMeta {
     /// SHA-256 of the training dataset (all zeros if unknown).
     pub dataset_sha256: [u8; 32],
-    /// Validation RMSE [Nm] (NaN if unknown).
+    /// Validation RMSE \[Nm\] (NaN if unknown).
     pub val_rmse_nm: f32,
-    /// Test RMSE [Nm] (NaN if unknown).
+    /// Test RMSE \[Nm\] (NaN if unknown).
     pub test_rmse_nm: f32,
     /// Creation time, seconds since the Unix epoch.
     pub created_unix_s: u64,
@@ -63,7 +63,7 @@ pub struct ModelMeta {
     pub joint_name: String,
     /// Signed gear ratio used for Δθ and the current.
     pub gear_ratio: GearRatio,
-    /// Torque constant [Nm/A] the labels were computed with.
+    /// Torque constant \[Nm/A\] the labels were computed with.
     pub kt_nm_per_a: f64,
     /// Input features, their order and history.
     pub features: FeatureSpec,
