@@ -14,3 +14,4 @@ pub mod acquire;
 pub mod dynamics;
 pub mod interop;
 pub mod sim;
+pub mod train;
