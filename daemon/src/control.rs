@@ -129,6 +129,7 @@ impl JointLaw {
     }
 
     /// The torque-error integral [Nm·s].
+    #[cfg(test)]
     pub fn integral_nm_s(&self) -> f64 {
         self.e_int_nm_s
     }

@@ -184,13 +184,15 @@ pub struct Freshness {
 
 /// Task 3: computes the command for one tick. Pure apart from the models' and laws' own state.
 ///
-/// `prev_enabled` holds the enable mask of the last tick (for the bumpless enable edge).
+/// `prev_active` holds the joints that ran the normal (model + law) path last tick: a joint entering
+/// it — enable edge, or first fresh state after a stale/fault gap — gets a bumpless reset (model
+/// history and law state), since its history no longer describes the last ticks.
 #[inline]
 pub fn compute(
     p: &mut Params,
     inp: &Inputs,
     fresh: Freshness,
-    prev_enabled: &mut u64,
+    prev_active: &mut u64,
     cmd: &mut MotorCurrentCommand,
     tau_f_out: &mut [f64; MAX_JOINTS],
 ) {
@@ -205,6 +207,7 @@ pub fn compute(
     cmd.n_joints = p.joints.len() as u32;
     cmd.state_stamp_ns = if inp.states.have { st.stamp_ns } else { 0 };
     cmd.state_seq = if inp.states.have { st.seq } else { 0 };
+    let mut active = 0u64;
     for j in p.joints.iter_mut() {
         let k = j.index;
         let bit = 1u64 << k;
@@ -240,11 +243,12 @@ pub fn compute(
                 omega_motor_rad_s: st.omega_motor_rad_s[k],
                 temperature_c: st.temperature_c[k],
             };
-            if *prev_enabled & bit == 0 {
+            if *prev_active & bit == 0 {
                 // Bumpless enable: fresh history and filter state.
                 j.model.reset(&sample);
                 j.law.reset();
             }
+            active |= bit;
             let f = j.model.estimate(&sample);
             j.law.step(&LawInput {
                 tau_des_nm: rq.tau_des_nm[k],
@@ -257,7 +261,7 @@ pub fn compute(
         cmd.flags[k] = out.flags;
         tau_f_out[k] = out.tau_f_hat_nm;
     }
-    *prev_enabled = enabled_now;
+    *prev_active = active;
 }
 
 #[inline]
@@ -454,7 +458,7 @@ pub fn run(setup: RtSetup) {
     tele.status.period_ns = period_ns;
     tele.status.flags = rt_flags;
     let mut tau_f = [0.0f64; MAX_JOINTS];
-    let mut prev_enabled = 0u64;
+    let mut prev_active = 0u64;
     let mut parked_old: Option<Box<Params>> = None;
     let mut missed = 0u64;
     let mut tick = 0u64;
@@ -483,7 +487,7 @@ pub fn run(setup: RtSetup) {
             match rx_params.try_recv() {
                 Ok(new) => {
                     let old = std::mem::replace(&mut params, new);
-                    prev_enabled = 0; // every enabled joint gets a bumpless reset
+                    prev_active = 0; // every enabled joint gets a bumpless reset
                     shared
                         .generation
                         .store(params.generation, Ordering::Relaxed);
@@ -518,7 +522,7 @@ pub fn run(setup: RtSetup) {
             &mut params,
             &inputs,
             fresh,
-            &mut prev_enabled,
+            &mut prev_active,
             &mut cmd,
             &mut tau_f,
         );
@@ -605,5 +609,136 @@ pub fn run(setup: RtSetup) {
     let _ = backend.publish_status(&tele.status);
     if let Some(old) = parked_old {
         drop(old); // stopping: allocation rules no longer apply
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use frictionless_shm_types::{FLAG_NON_FINITE, FLAG_STALE};
+
+    fn params(on_stale: &str) -> Box<Params> {
+        let text = format!(
+            r#"
+[backend]
+kind = "shm"
+[safety]
+on_stale = "{on_stale}"
+[[joint]]
+name = "a"
+index = 2
+gear_ratio = -100.0
+kt = 0.1
+max_curr = 5.0
+kfc = 1.0
+lpf = {{ order = 1, cutoff_hz = 50.0 }}
+friction_model = "cv"
+kc = 1.0
+ka = 1000.0
+kv = 0.0
+"#
+        );
+        let cfg = crate::config::parse(std::path::Path::new("t.toml"), &text).unwrap();
+        crate::params::build(&cfg, 0).unwrap()
+    }
+
+    fn inputs(tau: f64, v: f64) -> Inputs {
+        let mut st = JointStates::zeroed();
+        st.n_joints = 3;
+        st.sdot_rad_s[2] = v;
+        let mut rq = TorqueRequest::zeroed();
+        rq.n_joints = 3;
+        rq.enable_mask = 1 << 2;
+        rq.tau_des_nm[2] = tau;
+        Inputs {
+            states: Latest {
+                value: st,
+                have: true,
+                new_at_tick: 0,
+            },
+            request: Latest {
+                value: rq,
+                have: true,
+                new_at_tick: 0,
+            },
+        }
+    }
+
+    const FRESH: Freshness = Freshness {
+        state_stale: false,
+        request_stale: false,
+    };
+
+    fn run(p: &mut Params, inp: &Inputs, f: Freshness, prev: &mut u64) -> MotorCurrentCommand {
+        let mut cmd = MotorCurrentCommand::zeroed();
+        let mut tau_f = [0.0; MAX_JOINTS];
+        compute(p, inp, f, prev, &mut cmd, &mut tau_f);
+        cmd
+    }
+
+    #[test]
+    fn enable_edge_resets_the_filter_and_masks_follow_the_request() {
+        let mut p = params("zero");
+        let mut prev = 0;
+        let inp = inputs(0.0, 1.0);
+        let first = run(&mut p, &inp, FRESH, &mut prev).i_ref_a[2];
+        assert_eq!(prev, 1 << 2);
+        let second = run(&mut p, &inp, FRESH, &mut prev).i_ref_a[2];
+        assert!(second.abs() > first.abs(), "LPF rising: {first} → {second}");
+        // Disable: 0 A, not valid, flagged.
+        let mut off = inputs(0.0, 1.0);
+        off.request.value.enable_mask = 0;
+        let c = run(&mut p, &off, FRESH, &mut prev);
+        assert_eq!(
+            (c.valid_mask, c.i_ref_a[2], c.flags[2]),
+            (0, 0.0, FLAG_DISABLED)
+        );
+        // Re-enable: the filter starts again from 0 (same first value as at the start).
+        let again = run(&mut p, &inp, FRESH, &mut prev).i_ref_a[2];
+        assert_eq!(again, first);
+    }
+
+    #[test]
+    fn stale_fault_and_nan_paths() {
+        let mut p = params("static_model");
+        let mut prev = 0;
+        let inp = inputs(2.0, 1.0);
+        let stale = Freshness {
+            state_stale: true,
+            request_stale: false,
+        };
+        let c = run(&mut p, &inp, stale, &mut prev);
+        assert_eq!(c.flags[2], FLAG_STALE);
+        assert!((c.i_ref_a[2] - 2.0 / (0.1 * -100.0)).abs() < 1e-12);
+        let both = Freshness {
+            state_stale: true,
+            request_stale: true,
+        };
+        assert_eq!(run(&mut p, &inp, both, &mut prev).i_ref_a[2], 0.0);
+        let mut fault = inputs(2.0, 1.0);
+        fault.states.value.fault_flags[2] = 1;
+        let c = run(&mut p, &fault, FRESH, &mut prev);
+        assert_eq!((c.i_ref_a[2], c.flags[2]), (0.0, FLAG_FAULT));
+        let mut nan = inputs(2.0, 1.0);
+        nan.states.value.sdot_rad_s[2] = f64::NAN;
+        let c = run(&mut p, &nan, FRESH, &mut prev);
+        assert_eq!((c.i_ref_a[2], c.flags[2]), (0.0, FLAG_NON_FINITE));
+        // No request ever received: nothing valid.
+        let mut none = inputs(2.0, 1.0);
+        none.request.have = false;
+        assert_eq!(run(&mut p, &none, FRESH, &mut prev).valid_mask, 0);
+    }
+
+    #[test]
+    fn freshness_by_seq_age_and_stamp_age() {
+        let mut l = Latest::new(0u8);
+        assert!(l.stale(0, 0, 0, 5, 1000), "nothing received yet");
+        l.update(Some(1), 10);
+        assert!(!l.stale(15, 10_000, 9_000, 5, 1000));
+        assert!(
+            l.stale(16, 10_000, 9_000, 5, 1000),
+            "no new sample for 6 ticks"
+        );
+        assert!(l.stale(11, 20_000, 9_000, 5, 1000), "stamp 11 periods old");
     }
 }

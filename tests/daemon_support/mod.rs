@@ -1,0 +1,297 @@
+//! Shared helpers of the `daemon_*` end-to-end tests: a real `frictiond` process, an isolated
+//! iceoryx2 root path and service prefix per test, and the test process acting as the plant.
+//!
+//! Not a test target itself (a directory under `tests/`); included with `mod daemon_support;`.
+
+#![allow(dead_code)]
+
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use frictionless_shm_types::{
+    DaemonStatus, Inbox, Ipc, IpcConfig, JointStates, MotorCurrentCommand, Outbox, TorqueRequest,
+    monotonic_ns,
+};
+
+/// The `frictiond` binary next to the test executable (`target/<profile>/frictiond`).
+pub fn frictiond_bin() -> PathBuf {
+    let exe = std::env::current_exe().expect("current_exe");
+    let dir = exe.parent().and_then(Path::parent).expect("target dir");
+    let bin = dir.join("frictiond");
+    assert!(
+        bin.exists(),
+        "{} not found: build it first (`cargo build -p frictiond`, or run `cargo test --workspace`)",
+        bin.display()
+    );
+    bin
+}
+
+/// A per-test directory, iceoryx2 root path and service prefix; removed on drop.
+pub struct TestEnv {
+    /// Scratch directory (config files, sockets, reports).
+    pub dir: PathBuf,
+    /// iceoryx2 settings shared by the daemon and the plant.
+    pub ipc: IpcConfig,
+}
+
+impl TestEnv {
+    /// A fresh environment tagged `tag`.
+    pub fn new(tag: &str) -> Self {
+        let id = format!(
+            "fld_{tag}_{}_{}",
+            std::process::id(),
+            monotonic_ns() % 1_000_000_000
+        );
+        let dir = std::env::temp_dir().join(&id);
+        std::fs::create_dir_all(dir.join("iox")).unwrap();
+        let ipc = IpcConfig::new(Some(&dir.join("iox")), &id);
+        Self { dir, ipc }
+    }
+
+    /// Writes `frictiond.toml` = `[backend]` for this env + `body`; returns its path.
+    pub fn write_config(&self, body: &str) -> PathBuf {
+        let path = self.dir.join("frictiond.toml");
+        self.write_config_at(&path, body);
+        path
+    }
+
+    /// Writes a config to `path` (same backend section).
+    pub fn write_config_at(&self, path: &Path, body: &str) {
+        let text = format!(
+            "[backend]\nkind = \"shm\"\nservice_prefix = \"{}\"\nroot_path = \"{}\"\n\n{body}",
+            self.ipc.service_prefix,
+            self.ipc.root_path.as_ref().unwrap().display()
+        );
+        std::fs::write(path, text).unwrap();
+    }
+}
+
+impl Drop for TestEnv {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// A running `frictiond`; SIGKILLed on drop if still alive.
+pub struct Daemon {
+    /// The child.
+    pub child: Child,
+}
+
+impl Daemon {
+    /// Starts `frictiond --config cfg` with extra env vars; stderr is captured.
+    pub fn start(cfg: &Path, envs: &[(&str, &str)]) -> Self {
+        let mut cmd = Command::new(frictiond_bin());
+        cmd.arg("--config")
+            .arg(cfg)
+            .env("RUST_LOG", "info")
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped());
+        for (k, v) in envs {
+            cmd.env(k, v);
+        }
+        Self {
+            child: cmd.spawn().expect("spawn frictiond"),
+        }
+    }
+
+    /// The PID.
+    pub fn pid(&self) -> i32 {
+        self.child.id() as i32
+    }
+
+    /// Sends a signal.
+    pub fn signal(&self, sig: i32) {
+        // SAFETY: plain kill(2) on our own child.
+        assert_eq!(unsafe { libc::kill(self.pid(), sig) }, 0);
+    }
+
+    /// Still running?
+    pub fn alive(&mut self) -> bool {
+        self.child.try_wait().unwrap().is_none()
+    }
+
+    /// Waits up to `timeout` for exit; returns (exit status, stderr text).
+    pub fn wait_exit(&mut self, timeout: Duration) -> (std::process::ExitStatus, String) {
+        let t0 = Instant::now();
+        loop {
+            if let Some(st) = self.child.try_wait().unwrap() {
+                let mut s = String::new();
+                if let Some(mut e) = self.child.stderr.take() {
+                    let _ = e.read_to_string(&mut s);
+                }
+                return (st, s);
+            }
+            assert!(
+                t0.elapsed() < timeout,
+                "frictiond did not exit within {timeout:?}"
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        if self.child.try_wait().ok().flatten().is_none() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+/// The test process as the plant: publishes states and requests, reads commands and status.
+pub struct Plant {
+    /// Node (kept alive).
+    pub ipc: Ipc,
+    /// JointStates out.
+    pub states: Outbox<JointStates>,
+    /// TorqueRequest out.
+    pub request: Outbox<TorqueRequest>,
+    /// Commands in.
+    pub cmd: Inbox<MotorCurrentCommand>,
+    /// Status in.
+    pub status: Inbox<DaemonStatus>,
+    /// Next state seq.
+    pub seq: u64,
+}
+
+impl Plant {
+    /// Opens all ports (create in the thread that uses them: ports are !Send).
+    pub fn open(ipc: &IpcConfig, name: &str) -> Self {
+        let node = Ipc::open(ipc, name).unwrap();
+        let states = node.joint_states().unwrap().outbox().unwrap();
+        let request = node.torque_request().unwrap().outbox().unwrap();
+        let cmd = node.motor_current_command().unwrap().inbox().unwrap();
+        let status = node.daemon_status().unwrap().inbox().unwrap();
+        Self {
+            ipc: node,
+            states,
+            request,
+            cmd,
+            status,
+            seq: 0,
+        }
+    }
+
+    /// Publishes `js` and `rq` with fresh stamps and a new seq; returns the state seq.
+    pub fn send(&mut self, js: &JointStates, rq: &TorqueRequest) -> u64 {
+        self.seq += 1;
+        let now = monotonic_ns();
+        let mut js = *js;
+        js.seq = self.seq;
+        js.stamp_ns = now;
+        let mut rq = *rq;
+        rq.seq = self.seq;
+        rq.stamp_ns = now;
+        self.request.publish(&rq).unwrap();
+        self.states.publish(&js).unwrap();
+        self.seq
+    }
+
+    /// Keeps publishing `js`/`rq` every ms until a command answers a state sent in this call and
+    /// satisfies `pred`; panics after `timeout`.
+    pub fn until(
+        &mut self,
+        js: &JointStates,
+        rq: &TorqueRequest,
+        timeout: Duration,
+        mut pred: impl FnMut(&MotorCurrentCommand) -> bool,
+    ) -> MotorCurrentCommand {
+        let t0 = Instant::now();
+        let first = self.seq + 1;
+        let mut last = None;
+        while t0.elapsed() < timeout {
+            self.send(js, rq);
+            std::thread::sleep(Duration::from_millis(1));
+            if let Some(c) = self.cmd.latest().unwrap() {
+                if c.state_seq >= first && pred(&c) {
+                    return c;
+                }
+                last = Some(c);
+            }
+        }
+        panic!("no matching command within {timeout:?}; last: {last:?}");
+    }
+
+    /// Waits (without publishing) for a command satisfying `pred`.
+    pub fn until_silent(
+        &mut self,
+        timeout: Duration,
+        mut pred: impl FnMut(&MotorCurrentCommand) -> bool,
+    ) -> MotorCurrentCommand {
+        let t0 = Instant::now();
+        let mut last = None;
+        while t0.elapsed() < timeout {
+            if let Some(c) = self.cmd.wait_latest(Duration::from_millis(20)).unwrap() {
+                if pred(&c) {
+                    return c;
+                }
+                last = Some(c);
+            }
+        }
+        panic!("no matching command within {timeout:?}; last: {last:?}");
+    }
+
+    /// Waits for a status satisfying `pred` (while optionally keeping inputs fresh).
+    pub fn status_until(
+        &mut self,
+        keep_fresh: Option<(&JointStates, &TorqueRequest)>,
+        timeout: Duration,
+        mut pred: impl FnMut(&DaemonStatus) -> bool,
+    ) -> DaemonStatus {
+        let t0 = Instant::now();
+        let mut last = None;
+        while t0.elapsed() < timeout {
+            if let Some((js, rq)) = keep_fresh {
+                self.send(js, rq);
+            }
+            std::thread::sleep(Duration::from_millis(1));
+            if let Some(s) = self.status.latest().unwrap() {
+                if pred(&s) {
+                    return s;
+                }
+                last = Some(s);
+            }
+        }
+        panic!(
+            "no matching status within {timeout:?}; last ticks/generation: {:?}",
+            last.map(|s| (s.ticks, s.generation))
+        );
+    }
+}
+
+/// Independent reference of the paper's CV model (not the daemon's code).
+pub fn cv_ref(kc: f64, ka: f64, kv: f64, v: f64) -> f64 {
+    kc * (ka * v).tanh() + kv * v
+}
+
+/// Independent reference of the paper's SCV model.
+pub fn scv_ref(kc: f64, ka: f64, kv: f64, ks: f64, vs: f64, alpha: f64, v: f64) -> f64 {
+    kv * v
+        + kc * (ka * v).tanh()
+        + (ks - kc) * (-(v / vs).abs().powf(alpha)).exp() * (ka * v).tanh()
+}
+
+/// Reference control law (pure feed-forward): clip gated by |ṡ| > gate, kfc, /(kt·r), clamp.
+#[allow(clippy::too_many_arguments)]
+pub fn current_ref(
+    tau_des: f64,
+    f: f64,
+    v: f64,
+    gate: f64,
+    max_f: f64,
+    kfc: f64,
+    kt: f64,
+    r: f64,
+    max_i: f64,
+) -> f64 {
+    let f = if v.abs() > gate {
+        f.clamp(-max_f, max_f)
+    } else {
+        f
+    };
+    ((tau_des + kfc * f) / (kt * r)).clamp(-max_i, max_i)
+}
