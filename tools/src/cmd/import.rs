@@ -159,7 +159,7 @@ pub(crate) fn resolve_history(
     let check = |h: usize, source: &str| -> anyhow::Result<usize> {
         if h == 0 || 2 * h + t != n_inputs {
             bail!(
-                "{source} history {h}{} needs {} inputs, but the model has {n_inputs}",
+                "{source} {h}{} needs {} inputs, but the model has {n_inputs}",
                 if temperature { " with temperature" } else { "" },
                 2 * h + t
             );
@@ -170,9 +170,9 @@ pub(crate) fn resolve_history(
         return check(h, "--history");
     }
     if let Some(h) = hint {
-        return check(h, "metadata");
+        return check(h, "metadata `frictionless.history` =");
     }
-    if n_inputs > t && (n_inputs - t) % 2 == 0 {
+    if n_inputs > t && (n_inputs - t).is_multiple_of(2) {
         Ok((n_inputs - t) / 2)
     } else {
         bail!(

@@ -961,12 +961,11 @@ fn diagonal_of(s: &Stage) -> Result<Vec<f64>, OnnxError> {
     }
     let diag: Vec<f64> = (0..n).map(|i| s.weight[i * n + i]).collect();
     let max_diag = diag.iter().fold(0.0f64, |m, d| m.max(d.abs()));
-    for i in 0..n {
-        if diag[i] == 0.0 {
+    for (i, &d) in diag.iter().enumerate() {
+        if d == 0.0 {
             return Err(not_diag(i, i, 0.0));
         }
-        for j in 0..n {
-            let v = s.weight[i * n + j];
+        for (j, &v) in s.weight[i * n..(i + 1) * n].iter().enumerate() {
             if i != j && v != 0.0 && v.abs() >= DIAGONAL_REL_TOL * max_diag {
                 return Err(not_diag(i, j, v));
             }
