@@ -1,0 +1,138 @@
+#!/usr/bin/env bash
+# Real-kernel SocketCAN tests inside a small QEMU VM.
+#
+# This machine's kernel has no CAN. The script boots Debian's stock kernel (`linux-image-amd64`, which
+# carries can.ko, can-raw.ko, vcan.ko, can-gw.ko; NOT the cloud flavour) from a tiny initramfs holding
+# busybox, those modules (loaded in dependency order), the project's statically linked (musl) binaries
+# and test harnesses. Inside, /init creates vcan0 (classic MTU 16) and vcan1, then runs every harness with
+# `--include-ignored --test-threads=1 vcan` (tests named `vcan…` and marked #[ignore = "needs vcan"] on the
+# host). Everything comes from apt, rustup and crates.io.
+#
+# Usage: bash tests/canvm/run.sh
+# Knobs (env): CANVM_WORK (default target/canvm), CANVM_TIMEOUT seconds (default 600), CANVM_SKIP_APT=1,
+#              CANVM_PACKAGES (cargo packages whose test harnesses run in the VM; default "frictionless frictiond frictl"),
+#              CANVM_FILTER (libtest name filter, default "vcan"), CANVM_ACCEL (auto|kvm|tcg, default auto).
+# Last line: "canvm: N passed, N failed"; exit code non-zero on any failure or timeout.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+ROOT=$(pwd)
+WORK=${CANVM_WORK:-$ROOT/target/canvm}
+TIMEOUT=${CANVM_TIMEOUT:-600}
+PACKAGES=${CANVM_PACKAGES:-"frictionless frictiond frictl"}
+FILTER=${CANVM_FILTER:-vcan}
+TARGET=x86_64-unknown-linux-musl
+mkdir -p "$WORK"
+log() { echo "canvm: $*" >&2; }
+
+# 1. Host packages.
+if [ -z "${CANVM_SKIP_APT:-}" ]; then
+  need=""
+  command -v qemu-system-x86_64 >/dev/null || need="$need qemu-system-x86"
+  [ -x /bin/busybox ] && /bin/busybox --list 2>/dev/null | grep -q '^insmod$' || need="$need busybox-static"
+  command -v cpio >/dev/null || need="$need cpio"
+  command -v musl-gcc >/dev/null || need="$need musl-tools"   # C parts of some crates (e.g. alloca) for musl
+  if [ -n "$need" ]; then
+    log "installing$need"
+    apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $need >/dev/null
+  fi
+fi
+
+# 2. The kernel: resolve the ABI package from the meta-package (never pin an ABI), unpack only what we need.
+KDIR="$WORK/kernel"
+if [ ! -f "$KDIR/vmlinuz" ]; then
+  abi=$(apt-cache depends linux-image-amd64 | awk '/Depends: linux-image-[0-9]/{print $2; exit}')
+  [ -n "$abi" ] || { log "cannot resolve linux-image-amd64 (run apt-get update)"; exit 2; }
+  log "kernel package $abi"
+  rm -rf "$KDIR" && mkdir -p "$KDIR/dl" && chmod 777 "$KDIR/dl"
+  (cd "$KDIR/dl" && apt-get download "$abi" >/dev/null 2>&1 || su nobody -s /bin/sh -c "apt-get download $abi" >/dev/null)
+  deb=$(ls "$KDIR"/dl/*.deb | head -n1)
+  dpkg-deb --fsys-tarfile "$deb" | tar -x -C "$KDIR" --wildcards './boot/vmlinuz-*' './boot/config-*' \
+    './lib/modules/*/kernel/net/can/*' './lib/modules/*/kernel/drivers/net/can/*'
+  grep -q '^CONFIG_CAN_VCAN=m' "$KDIR"/boot/config-* || { log "kernel lacks CONFIG_CAN_VCAN=m"; exit 2; }
+  cp "$KDIR"/boot/vmlinuz-* "$KDIR/vmlinuz"
+  rm -rf "$KDIR/dl"
+fi
+MODS=$(ls -d "$KDIR"/lib/modules/*/kernel)
+
+# 3. Static binaries and test harnesses (separate target dir keeps the host build untouched).
+rustup target list --installed 2>/dev/null | grep -q "^$TARGET\$" || rustup target add "$TARGET" >/dev/null
+export CARGO_TARGET_DIR="$WORK/cargo"
+# The VM's TCG CPU has no AVX-512; build for the portable baseline so nothing depends on host features
+# (the kernel's runtime dispatch still picks the best available path).
+export RUSTFLAGS="-C target-cpu=x86-64-v2"
+pkgargs=""; for p in $PACKAGES; do pkgargs="$pkgargs -p $p"; done
+log "building bins and test harnesses for $TARGET ($PACKAGES)"
+cargo build --release --target "$TARGET" $pkgargs --bins 2>&1 | tail -n 3 >&2
+harnesses=$(cargo test --release --target "$TARGET" $pkgargs --no-run --message-format=json 2>"$WORK/build-tests.log" |
+  python3 -c 'import json,sys
+for l in sys.stdin:
+    try: m=json.loads(l)
+    except Exception: continue
+    if m.get("reason")=="compiler-artifact" and m.get("executable") and m.get("profile",{}).get("test"):
+        print(m["executable"])')
+[ -n "$harnesses" ] || { tail -n 30 "$WORK/build-tests.log" >&2; log "building the test harnesses failed"; echo "canvm: 0 passed, 1 failed"; exit 1; }
+
+# 4. initramfs.
+IR="$WORK/initramfs"
+rm -rf "$IR" && mkdir -p "$IR"/{bin,sbin,tests,proc,sys,dev,tmp,mods,dev/shm,run}
+cp /bin/busybox "$IR/bin/busybox"
+for m in drivers/net/can/dev/can-dev.ko drivers/net/can/vcan.ko drivers/net/can/vxcan.ko net/can/can.ko \
+         net/can/can-raw.ko net/can/can-bcm.ko net/can/can-gw.ko; do
+  cp "$MODS/$m" "$IR/mods/"
+done
+for b in "$CARGO_TARGET_DIR/$TARGET/release/"*; do
+  [ -f "$b" ] && [ -x "$b" ] && cp "$b" "$IR/bin/" || true
+done
+n=0
+for h in $harnesses; do
+  base=$(basename "$h"); name=${base%-*}; n=$((n+1))
+  cp "$h" "$IR/tests/$(printf '%02d' $n)-$name"
+done
+cat > "$IR/init" <<INIT
+#!/bin/busybox sh
+/bin/busybox --install -s /bin
+mount -t proc proc /proc; mount -t sysfs sys /sys; mount -t devtmpfs dev /dev
+mkdir -p /dev/shm; mount -t tmpfs shm /dev/shm; mount -t tmpfs tmp /tmp
+for m in can-dev vcan vxcan can can-raw can-bcm can-gw; do insmod /mods/\$m.ko || echo "insmod \$m failed"; done
+ip link set lo up
+for i in vcan0 vcan1; do ip link add dev \$i type vcan && ip link set \$i mtu 16 && ip link set \$i up; done
+export PATH=/bin:/sbin TMPDIR=/tmp HOME=/tmp FRICTIONLESS_IN_CANVM=1
+rc=0
+for t in /tests/*; do
+  echo "CANVM_HARNESS: \$t"
+  (cd /tmp && \$t --include-ignored --test-threads=1 $FILTER) || rc=1
+done
+echo "CANVM_EXIT: \$rc"
+sync; poweroff -f
+INIT
+chmod +x "$IR/init"
+(cd "$IR" && find . | cpio -o -H newc --quiet | gzip -1 > "$WORK/initrd.img")
+
+# 5. Boot. KVM only if it can really work (PVM hosts advertise /dev/kvm but cannot boot a stock kernel).
+accel=${CANVM_ACCEL:-auto}
+if [ "$accel" = auto ]; then
+  accel=tcg
+  if [ -w /dev/kvm ] && grep -qE 'vmx|svm' /proc/cpuinfo && ! grep -q '^kvm_pvm' /proc/modules; then accel=kvm; fi
+fi
+if [ "$accel" = kvm ]; then acc=(-accel kvm -cpu host); else acc=(-accel tcg,thread=multi -cpu max); fi
+log "booting ($accel), timeout ${TIMEOUT}s"
+set +e
+timeout "$TIMEOUT" qemu-system-x86_64 -machine q35 -m 1024 -smp 1 -nographic -no-reboot -nic none \
+  -kernel "$KDIR/vmlinuz" -initrd "$WORK/initrd.img" "${acc[@]}" \
+  -append "console=ttyS0 quiet panic=-1 oops=panic" > "$WORK/console.log" 2>&1
+qrc=$?
+set -e
+tr -d '\r' < "$WORK/console.log" | sed 's/\x1b\[[0-9;?]*[a-zA-Z]//g; s/\x1bc//g' > "$WORK/console.txt"
+grep -E '^(test |CANVM_|running|insmod|thread|---- |  left|  right|failures)' "$WORK/console.txt" || true
+passed=$(grep -cE '^test .* \.\.\. ok$' "$WORK/console.txt" || true)
+failed=$(grep -cE '^test .* \.\.\. FAILED$' "$WORK/console.txt" || true)
+status=0
+if ! grep -q '^CANVM_EXIT: 0' "$WORK/console.txt"; then
+  status=1
+  grep -q '^CANVM_EXIT' "$WORK/console.txt" || { log "VM did not finish (qemu rc $qrc); see $WORK/console.txt"; failed=$((failed+1)); }
+fi
+[ "$passed" -gt 0 ] || { log "no test ran in the VM"; status=1; }
+[ "$failed" -eq 0 ] || status=1
+echo "canvm: $passed passed, $failed failed"
+exit $status
