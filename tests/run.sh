@@ -26,4 +26,4 @@ else
 fi
 
 echo "== cargo test"
-cargo test --workspace --all-targets --no-fail-fast 2>&1 | tee target/cargo-test.log
+cargo test --workspace --no-fail-fast 2>&1 | tee target/cargo-test.log
