@@ -446,7 +446,7 @@ pub fn parse(path: &Path, text: &str) -> Result<Config, ConfigError> {
         }
         c.nonneg(key("kp"), j.kp)?;
         c.nonneg(key("ki"), j.ki)?;
-        if !(j.max_output_friction > 0.0) {
+        if j.max_output_friction.is_nan() || j.max_output_friction <= 0.0 {
             return Err(c.fail(
                 key("max_output_friction"),
                 j.max_output_friction,

@@ -276,7 +276,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         );
         std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
     }
-    tracing::info!("stopped cleanly");
+    tracing::info!(
+        "stopped cleanly: {} ticks, {} missed, wake lateness p99 <= {} us, max {:.1} us",
+        shared.heartbeat.load(Ordering::Relaxed),
+        shared.missed.load(Ordering::Relaxed),
+        shared.lateness_p99_ns.load(Ordering::Relaxed) / 1000,
+        shared.lateness_max_ns.load(Ordering::Relaxed) as f64 / 1e3
+    );
     Ok(())
 }
 

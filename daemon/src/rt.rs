@@ -546,7 +546,7 @@ pub fn run(setup: RtSetup) {
             tele.stale_ticks += 1;
         }
         tick += 1;
-        if tick % status_every == 0 {
+        if tick.is_multiple_of(status_every) {
             s.seq += 1;
             s.stamp_ns = done;
             s.ticks = tick;
