@@ -5,10 +5,10 @@ mod interop_common;
 
 use std::collections::HashMap;
 
+use ::safetensors::tensor::{Dtype, SafeTensors, TensorView};
 use frictionless::mlp::{Activation, DenseLayer, MlpWeights, Normalisation};
 use frictl::interop::safetensors::{self, NormSource, SafetensorsError};
 use interop_common::random;
-use ::safetensors::tensor::{Dtype, SafeTensors, TensorView};
 
 fn mlp(sizes: &[usize]) -> MlpWeights {
     let layers = sizes
