@@ -81,7 +81,10 @@ pub struct Normalisation {
 impl Normalisation {
     /// The identity normalisation for `n` inputs.
     pub fn identity(n: usize) -> Self {
-        Self { mean: vec![0.0; n], scale: vec![1.0; n] }
+        Self {
+            mean: vec![0.0; n],
+            scale: vec![1.0; n],
+        }
     }
 }
 
@@ -150,7 +153,9 @@ pub enum MlpShapeError {
         nonzero: &'static str,
     },
     /// Hidden layers must be ReLU and the output layer linear.
-    #[error("layer {layer}: activation {found:?} not supported here (hidden layers ReLU, output identity)")]
+    #[error(
+        "layer {layer}: activation {found:?} not supported here (hidden layers ReLU, output identity)"
+    )]
     Activation {
         /// Layer index.
         layer: usize,
@@ -195,7 +200,12 @@ impl MlpWeights {
         }
         let dim = |layer, what, value, max| {
             if value == 0 || value > max {
-                Err(MlpShapeError::Dimension { layer, what, value, max })
+                Err(MlpShapeError::Dimension {
+                    layer,
+                    what,
+                    value,
+                    max,
+                })
             } else {
                 Ok(())
             }
@@ -205,17 +215,38 @@ impl MlpWeights {
             let max_out = if k + 1 == n { MAX_OUTPUTS } else { MAX_WIDTH };
             dim(k, "n_out", l.n_out, max_out)?;
             if k > 0 && l.n_in != self.layers[k - 1].n_out {
-                return Err(MlpShapeError::Chain { layer: k, expected: l.n_in, got: self.layers[k - 1].n_out });
+                return Err(MlpShapeError::Chain {
+                    layer: k,
+                    expected: l.n_in,
+                    got: self.layers[k - 1].n_out,
+                });
             }
-            let want_act = if k + 1 == n { Activation::Identity } else { Activation::Relu };
+            let want_act = if k + 1 == n {
+                Activation::Identity
+            } else {
+                Activation::Relu
+            };
             if l.activation != want_act {
-                return Err(MlpShapeError::Activation { layer: k, found: l.activation });
+                return Err(MlpShapeError::Activation {
+                    layer: k,
+                    found: l.activation,
+                });
             }
             if l.weight.len() != l.n_in * l.n_out {
-                return Err(MlpShapeError::Length { layer: k, what: "weight", got: l.weight.len(), expected: l.n_in * l.n_out });
+                return Err(MlpShapeError::Length {
+                    layer: k,
+                    what: "weight",
+                    got: l.weight.len(),
+                    expected: l.n_in * l.n_out,
+                });
             }
             if l.bias.len() != l.n_out {
-                return Err(MlpShapeError::Length { layer: k, what: "bias", got: l.bias.len(), expected: l.n_out });
+                return Err(MlpShapeError::Length {
+                    layer: k,
+                    what: "bias",
+                    got: l.bias.len(),
+                    expected: l.n_out,
+                });
             }
             check_finite(&format!("layer {k} weight"), &l.weight, false)?;
             check_finite(&format!("layer {k} bias"), &l.bias, false)?;
@@ -223,7 +254,12 @@ impl MlpWeights {
         let ni = self.n_inputs();
         for (what, v) in [("mean", &self.norm.mean), ("scale", &self.norm.scale)] {
             if v.len() != ni {
-                return Err(MlpShapeError::Length { layer: usize::MAX, what, got: v.len(), expected: ni });
+                return Err(MlpShapeError::Length {
+                    layer: usize::MAX,
+                    what,
+                    got: v.len(),
+                    expected: ni,
+                });
             }
         }
         check_finite("normalisation mean", &self.norm.mean, false)?;
@@ -277,10 +313,25 @@ mod tests {
 
     fn tiny() -> MlpWeights {
         MlpWeights {
-            norm: Normalisation { mean: vec![1.0, 0.0], scale: vec![2.0, 1.0] },
+            norm: Normalisation {
+                mean: vec![1.0, 0.0],
+                scale: vec![2.0, 1.0],
+            },
             layers: vec![
-                DenseLayer { n_in: 2, n_out: 2, weight: vec![1.0, 0.0, 0.0, -1.0], bias: vec![0.0, 0.5], activation: Activation::Relu },
-                DenseLayer { n_in: 2, n_out: 1, weight: vec![1.0, 2.0], bias: vec![0.25], activation: Activation::Identity },
+                DenseLayer {
+                    n_in: 2,
+                    n_out: 2,
+                    weight: vec![1.0, 0.0, 0.0, -1.0],
+                    bias: vec![0.0, 0.5],
+                    activation: Activation::Relu,
+                },
+                DenseLayer {
+                    n_in: 2,
+                    n_out: 1,
+                    weight: vec![1.0, 2.0],
+                    bias: vec![0.25],
+                    activation: Activation::Identity,
+                },
             ],
         }
     }
@@ -307,6 +358,9 @@ mod tests {
         assert!(matches!(m.validate(), Err(MlpShapeError::NonFinite { .. })));
         let mut m = tiny();
         m.layers[1].activation = Activation::Relu;
-        assert!(matches!(m.validate(), Err(MlpShapeError::Activation { .. })));
+        assert!(matches!(
+            m.validate(),
+            Err(MlpShapeError::Activation { .. })
+        ));
     }
 }

@@ -5,7 +5,9 @@
 //! `recv_own_msgs`, kernel ID filters deliver only the IDs we own, non-blocking reads say WouldBlock,
 //! and error frames can be enabled.
 
-use socketcan::{CanFilter, CanFrame, CanSocket, EmbeddedFrame, Frame, Socket, SocketOptions, StandardId};
+use socketcan::{
+    CanFilter, CanFrame, CanSocket, EmbeddedFrame, Frame, Socket, SocketOptions, StandardId,
+};
 use std::io::ErrorKind;
 
 fn frame(id: u16, data: &[u8]) -> CanFrame {
