@@ -1,7 +1,7 @@
 //! Physical sanity tests of the virtual harmonic-drive joint (reference §2–§5).
 
 use frictl::sim::params::{PRESET_NAMES, load_table};
-use frictl::sim::{LinkModel, Plant, PlantParams};
+use frictl::sim::{LinkDynamics, LinkModel, Plant, PlantParams};
 
 fn params(preset: &str, sets: &[&str]) -> PlantParams {
     let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
@@ -288,4 +288,46 @@ fn starts_pre_wound_to_hold_gravity() {
         plant.step(i_hold, 0.0);
     }
     assert!((plant.state().s_rad + 1.0).abs() < 1e-3);
+}
+
+/// The URDF link model (fixed base, other joints at 0) reproduces the reference's ergoCub numbers, which
+/// are also the pendulum presets' values.
+#[test]
+fn urdf_link_matches_the_ergocub_reference_values() {
+    let urdf = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../shared/robots/ergoCubSN001/model.urdf"
+    );
+    if !std::path::Path::new(urdf).is_file() {
+        eprintln!("skipped: {urdf} not present");
+        return;
+    }
+    for (joint, inertia, amp) in [("l_knee", 0.574, 16.6), ("l_ankle_roll", 0.0054, 0.64)] {
+        let link = frictl::sim::link::link_from_model(&LinkModel::Urdf {
+            urdf: urdf.to_string(),
+            joint: joint.to_string(),
+            other_joints_rad: Default::default(),
+        })
+        .unwrap();
+        let i = link.inertia_kgm2(0.3);
+        assert!(
+            (i - inertia).abs() < 0.03 * inertia,
+            "{joint}: I_L {i} vs {inertia}"
+        );
+        let g = link.gravity_nm(-0.4);
+        let want = amp * (-0.4f64).sin();
+        assert!(
+            (g - want).abs() < 0.05 * want.abs(),
+            "{joint}: g(-0.4) {g} vs {want}"
+        );
+    }
+    let err = frictl::sim::link::link_from_model(&LinkModel::Urdf {
+        urdf: urdf.to_string(),
+        joint: "l_elbow_nope".to_string(),
+        other_joints_rad: Default::default(),
+    })
+    .err()
+    .unwrap()
+    .to_string();
+    assert!(err.contains("l_elbow_nope"), "{err}");
 }

@@ -84,7 +84,8 @@ pub struct StepConfig {
     pub rest_s: f64,
 }
 
-/// A closed-loop sine-tracking set (no friction compensation): s_d = c + A·sin(2πft),
+/// A closed-loop sine-tracking set (no friction compensation): s_d = c + A·sin(2πft) where c is the
+/// position the re-centring to `centre_rad` actually reached (no error step at the start),
 /// s̈_cmd = K_p·(s_d − s) − 2√K_p·ṡ, i_ref = s̈_cmd·(I_L + J_eq)/(r·k_t) + g(s)/(r·k_t).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -97,6 +97,30 @@ pub const SIM_COLUMNS: &[ColumnDoc] = &[
     col("s_dot_true_rad_s", "rad/s", "true joint velocity"),
 ];
 
+/// Significant digits kept in the CSV: below every sensor's resolution (an 18-bit encoder over ±π
+/// needs 6), and it keeps the file about half the size of full round-trip output.
+pub const CSV_SIGNIFICANT_DIGITS: i32 = 9;
+
+/// Rounds to [`CSV_SIGNIFICANT_DIGITS`] significant digits; magnitudes below 1e-30 become 0.
+pub fn round_significant(v: f64) -> f64 {
+    let a = v.abs();
+    if !v.is_finite() || a == 0.0 {
+        return v;
+    }
+    if a < 1e-30 {
+        return 0.0;
+    }
+    let e = a.log10().floor() as i32;
+    let p = CSV_SIGNIFICANT_DIGITS - 1 - e;
+    if p >= 0 {
+        let m = 10f64.powi(p);
+        (v * m).round() / m
+    } else {
+        let m = 10f64.powi(-p);
+        (v / m).round() * m
+    }
+}
+
 /// CSV writer for [`LogRow`]s.
 pub struct CsvLog<W: Write> {
     w: csv::Writer<W>,
@@ -124,8 +148,7 @@ impl<W: Write> CsvLog<W> {
     fn field(&mut self, v: f64) -> Result<(), AcquireError> {
         use std::fmt::Write as _;
         self.buf.clear();
-        // Shortest round-trip representation: exact, and short for quantised values.
-        let _ = write!(self.buf, "{v}");
+        let _ = write!(self.buf, "{}", round_significant(v));
         self.w
             .write_field(self.buf.as_bytes())
             .map_err(|e| AcquireError::Sink(e.to_string()))

@@ -369,6 +369,7 @@ pub fn run(
         let n_rec = (block.recentre_s / ts).round() as u64;
         let n_exc = (block.excitation_s() / ts).round() as u64;
         let mut i0 = 0.0;
+        let mut centre = block.start_rad;
         let mut hold_at: Option<f64> = None;
         for k in 0..n_rec + n_exc {
             let v = vel.update(meas.s_rad);
@@ -377,6 +378,7 @@ pub fn run(
                 (Mode::Recentre, position_current(s, v, block.start_rad))
             } else {
                 if k == n_rec {
+                    centre = s;
                     i0 = match cfg.holding_current {
                         HoldingCurrent::Gravity => {
                             model.current_for_torque(model.link.gravity_nm(s))
@@ -441,7 +443,9 @@ pub fn run(
                             ..
                         },
                     ) => {
-                        let s_d = block.start_rad
+                        // Centred on the position reached by the re-centring (stiction can leave
+                        // it short of the target): no error step, hence no current kick, at t = 0.
+                        let s_d = centre
                             + amplitude_rad * (std::f64::consts::TAU * frequency_hz * t).sin();
                         let acc = kp_per_s2 * (s_d - s) - 2.0 * kp_per_s2.sqrt() * v;
                         (Mode::Tracking, model.current_for_accel(s, acc))

@@ -58,7 +58,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let t0 = plant.state().temperature_c;
     let period_s = plant_params.sample_period_s();
     let total = (schedule_duration_s(&blocks) / period_s).round() as u64;
-    let link = frictl::sim::link::link_from_model(&plant_params.link);
+    let link = frictl::sim::link::link_from_model(&plant_params.link)?;
     let model = ControllerModel {
         gear_ratio_signed: plant_params.gear_ratio_signed,
         kt_nm_per_a: plant_params.kt_nm_per_a,

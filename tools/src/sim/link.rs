@@ -1,13 +1,15 @@
 //! Link dynamics seen by the simulated joint: inertia and gravity torque as functions of the joint angle.
 //!
 //! What it is: the [`LinkDynamics`] trait (other joints held fixed, so only I_L(s), g(s) and an optional
-//! velocity term), the analytic [`Pendulum`] and the factory [`link_from_model`] for the preset's
+//! velocity term), the analytic [`Pendulum`], the URDF single-joint view and the factory [`link_from_model`] for the preset's
 //! `[plant.link]` table.
 //!
-//! What it is not: a rigid-body library. The URDF-backed implementation will wrap
-//! [`crate::dynamics`] once that module offers a single-joint view.
+//! The URDF-backed link is [`crate::dynamics::SingleJoint`] (fixed base, other joints held still:
+//! constant I_L, g(s) = α·cos s + β·sin s), built from `kind = "urdf"`.
+//!
+//! What it is not: a rigid-body library (that is [`crate::dynamics`]).
 
-use crate::sim::params::LinkModel;
+use crate::sim::params::{LinkModel, ParamError};
 
 /// Single-joint link dynamics, joint-side units: I_L(s)·s̈ + c(s, ṡ) + g(s) = τ.
 pub trait LinkDynamics: Send + Sync {
@@ -44,18 +46,53 @@ impl LinkDynamics for Pendulum {
     }
 }
 
+impl LinkDynamics for crate::dynamics::SingleJoint {
+    #[inline]
+    fn inertia_kgm2(&self, _s_rad: f64) -> f64 {
+        self.inertia_kg_m2()
+    }
+    #[inline]
+    fn gravity_nm(&self, s_rad: f64) -> f64 {
+        crate::dynamics::SingleJoint::gravity_nm(self, s_rad)
+    }
+}
+
 /// Builds the link dynamics described by a preset's `[plant.link]` table.
-pub fn link_from_model(model: &LinkModel) -> Box<dyn LinkDynamics> {
-    match *model {
-        LinkModel::Pendulum {
+pub fn link_from_model(model: &LinkModel) -> Result<Box<dyn LinkDynamics>, ParamError> {
+    match model {
+        &LinkModel::Pendulum {
             inertia_kgm2,
             gravity_amplitude_nm,
             gravity_phase_rad,
-        } => Box::new(Pendulum {
+        } => Ok(Box::new(Pendulum {
             inertia_kgm2,
             gravity_amplitude_nm,
             gravity_phase_rad,
-        }),
+        })),
+        LinkModel::Urdf {
+            urdf,
+            joint,
+            other_joints_rad,
+        } => {
+            let err = |e: crate::dynamics::DynamicsError| ParamError::Link(e.to_string());
+            let robot = if urdf == "virtual_leg" {
+                crate::dynamics::virtual_leg().map_err(err)?
+            } else {
+                crate::dynamics::Robot::from_urdf_file(urdf).map_err(err)?
+            };
+            let mut q = vec![0.0; robot.dof()];
+            for (name, &v) in other_joints_rad {
+                q[robot.joint_index(name).map_err(err)?] = v;
+            }
+            let view = robot.single_joint_view(joint, &q).map_err(err)?;
+            if view.inertia.is_nan() || view.inertia <= 0.0 {
+                return Err(ParamError::Link(format!(
+                    "joint {joint} of {urdf} has link inertia {} (must be > 0)",
+                    view.inertia
+                )));
+            }
+            Ok(Box::new(view))
+        }
     }
 }
 

@@ -65,6 +65,9 @@ pub enum ParamError {
         /// The serde error, naming the key.
         source: Box<toml::de::Error>,
     },
+    /// The link dynamics could not be built (URDF missing, joint unknown).
+    #[error("invalid [plant.link]: {0}")]
+    Link(String),
     /// A value is out of its valid range.
     #[error("invalid parameter {key} = {value}: {why}")]
     Invalid {
@@ -89,6 +92,17 @@ pub enum LinkModel {
         gravity_amplitude_nm: f64,
         /// Gravity phase [rad].
         gravity_phase_rad: f64,
+    },
+    /// Link dynamics of one joint of a URDF (fixed base, every other joint held still), through
+    /// [`crate::dynamics::Robot::single_joint_view`].
+    Urdf {
+        /// URDF file, or `virtual_leg` for the project's embedded leg model.
+        urdf: String,
+        /// Joint name in the URDF.
+        joint: String,
+        /// Positions of the other joints [rad] by name (absent ones are 0).
+        #[serde(default)]
+        other_joints_rad: std::collections::BTreeMap<String, f64>,
     },
 }
 
@@ -377,8 +391,15 @@ impl PlantParams {
             enc.motor_velocity_window_samples >= 1,
             "must be >= 1",
         )?;
-        match self.link {
-            LinkModel::Pendulum {
+        match &self.link {
+            LinkModel::Urdf {
+                other_joints_rad, ..
+            } => {
+                for &q in other_joints_rad.values() {
+                    check("link.other_joints_rad", q, true, "must be finite")?;
+                }
+            }
+            &LinkModel::Pendulum {
                 inertia_kgm2,
                 gravity_amplitude_nm,
                 gravity_phase_rad,

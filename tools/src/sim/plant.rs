@@ -131,6 +131,7 @@ pub struct Plant<L: LinkDynamics = Box<dyn LinkDynamics>> {
     // motor-velocity window (quantised θ of the last N samples, ring)
     theta_hist: Vec<f64>,
     theta_pos: usize,
+    samples: u64,
     last_meas: Measurement,
     last_truth: Truth,
 }
@@ -180,6 +181,7 @@ impl<L: LinkDynamics> Plant<L> {
             },
             theta_hist: vec![0.0; window + 1],
             theta_pos: 0,
+            samples: 0,
             last_meas: Measurement {
                 time_s: 0.0,
                 s_rad: 0.0,
@@ -242,9 +244,13 @@ impl<L: LinkDynamics> Plant<L> {
         self.st
     }
 
-    /// Overwrites the continuous state (tests, scenario setup). Sensors are not re-sampled.
+    /// Overwrites the continuous state (tests, scenario setup). Sensors are not re-sampled; the
+    /// sample clock keeps counting from where it was.
     pub fn set_state(&mut self, st: PlantState) {
-        self.st = st;
+        self.st = PlantState {
+            time_s: self.st.time_s,
+            ..st
+        };
     }
 
     /// The most recent measurement (the initial one before the first [`Plant::step`]).
@@ -329,6 +335,9 @@ impl<L: LinkDynamics> Plant<L> {
         for _ in 0..self.p.substeps_per_sample {
             truth = self.substep(&tc, i_ref, tau_ext_nm);
         }
+        // Time as sample count × period: no drift from summing dt.
+        self.samples += 1;
+        self.st.time_s = self.samples as f64 * self.p.sample_period_s();
         truth.state = self.st;
         self.last_truth = truth;
         self.last_meas = self.measure(self.st.time_s);
@@ -453,7 +462,7 @@ impl<L: LinkDynamics> Plant<L> {
 impl Plant<Box<dyn LinkDynamics>> {
     /// A plant whose link comes from the parameters' `[plant.link]` table.
     pub fn from_params(params: PlantParams, seed: u64) -> Result<Self, ParamError> {
-        let link = crate::sim::link::link_from_model(&params.link);
+        let link = crate::sim::link::link_from_model(&params.link)?;
         Self::new(params, link, seed)
     }
 }
