@@ -1,0 +1,108 @@
+//! # CAN motor-drive wire formats
+//!
+//! What this module **is**: pure, allocation-free encoders/decoders of the CAN frames spoken by motor
+//! drives, shared by `frictiond` (sends commands, decodes feedback) and `frictl` (drive emulator,
+//! candump tools):
+//! - [`frame`]: [`WireFrame`], a classic CAN frame independent of any socket library (conversions to and
+//!   from `socketcan::CanFrame` behind the default feature `socketcan`).
+//! - [`mit`]: MIT mini-cheetah / CubeMars AK "MIT mode" (bit-packed fixed point, big-endian).
+//! - [`odrive`]: ODrive "CAN Simple" (id = node << 5 | cmd, little-endian `f32`).
+//! - [`units`]: per-joint mapping between the daemon's motor current [A] and what a drive expects
+//!   (current, motor torque or joint torque), and motor-side feedback back to the joint side.
+//! - [`busload`]: bits per classic frame with worst-case bit stuffing and the bus load of a config.
+//!
+//! What it is **not**: no sockets, no threads, no timing; errors are `Copy` values without heap data
+//! so the RT loop can construct and match them.
+
+pub mod busload;
+pub mod frame;
+pub mod mit;
+pub mod odrive;
+pub mod units;
+
+pub use frame::WireFrame;
+
+/// Error of a CAN codec. `Copy`, no heap data (RT-safe).
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum CanCodecError {
+    /// A frame carried the wrong number of data bytes.
+    #[error("CAN frame id {id:#x}: expected {expected} data bytes, got {got}")]
+    WrongLength {
+        /// Frame id.
+        id: u32,
+        /// Required length.
+        expected: u8,
+        /// Actual length.
+        got: u8,
+    },
+    /// A CAN id does not fit 11 bits (standard) or 29 bits (extended).
+    #[error("CAN id {id:#x} out of range (extended = {extended})")]
+    IdOutOfRange {
+        /// The id.
+        id: u32,
+        /// Whether it was meant as an extended id.
+        extended: bool,
+    },
+    /// More than 8 data bytes for a classic frame.
+    #[error("classic CAN frame data length {len} > 8")]
+    DataTooLong {
+        /// The length asked for.
+        len: usize,
+    },
+    /// An extended-id frame where the protocol uses standard ids (or the reverse).
+    #[error("CAN frame id {id:#x}: extended = {extended} not valid for this protocol")]
+    WrongIdKind {
+        /// Frame id.
+        id: u32,
+        /// Its extended flag.
+        extended: bool,
+    },
+    /// A remote (RTR) frame where a data frame was expected (or the reverse).
+    #[error("CAN frame id {id:#x}: rtr = {rtr} not valid for this message")]
+    WrongRtr {
+        /// Frame id.
+        id: u32,
+        /// Its RTR flag.
+        rtr: bool,
+    },
+    /// A value to encode is NaN or infinite.
+    #[error("non-finite value for field `{field}`")]
+    NonFinite {
+        /// Field name.
+        field: &'static str,
+    },
+    /// A range in a configuration is empty, inverted or not finite.
+    #[error("bad range for `{field}`: [{min}, {max}] (need finite min < max)")]
+    BadRange {
+        /// Field name.
+        field: &'static str,
+        /// Lower end.
+        min: f64,
+        /// Upper end.
+        max: f64,
+    },
+    /// A node / motor id outside the protocol's range.
+    #[error("node id {node} out of range 0..={max}")]
+    NodeOutOfRange {
+        /// The node id.
+        node: u32,
+        /// Largest valid node id.
+        max: u32,
+    },
+    /// A command id this codec does not know.
+    #[error("unknown command id {cmd:#x} (frame id {id:#x})")]
+    UnknownCommand {
+        /// Frame id.
+        id: u32,
+        /// Command id.
+        cmd: u8,
+    },
+    /// A unit conversion parameter (k_t, gear ratio) is zero or not finite.
+    #[error("bad unit parameter `{field}` = {value}")]
+    BadUnitParameter {
+        /// Parameter name.
+        field: &'static str,
+        /// Its value.
+        value: f64,
+    },
+}
