@@ -34,6 +34,8 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe as ps_factory};
 
+pub mod can;
+
 /// Compile-time joint capacity of every payload.
 pub const MAX_JOINTS: usize = 64;
 
