@@ -11,7 +11,9 @@
 #![warn(missing_docs)]
 
 pub mod acquire;
+pub mod canlog;
 pub mod dynamics;
+pub mod ident;
 pub mod interop;
 pub mod sim;
 pub mod train;
