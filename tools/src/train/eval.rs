@@ -50,7 +50,7 @@ impl Predictor {
     /// Predictions (Nm) for raw row-major features `x` (`n_rows × n_inputs`).
     pub fn predict(&mut self, x: &[f32]) -> Result<Vec<f32>, PredictError> {
         let ni = self.layout.sizes[0];
-        if x.len() % ni != 0 {
+        if !x.len().is_multiple_of(ni) {
             return Err(PredictError::Shape {
                 values: x.len(),
                 n_inputs: ni,

@@ -743,7 +743,7 @@ impl Trainer {
     /// batched through the trainer's GEMM path.
     pub fn predict(&mut self, x: &[f32]) -> Result<Vec<f32>, TrainError> {
         let ni = self.layout.sizes[0];
-        if x.len() % ni != 0 {
+        if !x.len().is_multiple_of(ni) {
             return Err(TrainError::Data {
                 set: "prediction",
                 what: "x".into(),

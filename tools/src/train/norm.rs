@@ -28,7 +28,7 @@ fn quantile_in_place(v: &mut [f32], q: f64) -> f64 {
 ///
 /// The mean is accumulated in f64. Returns the identity for zero rows.
 pub fn fit_normalisation(x: &[f32], n_inputs: usize) -> Normalisation {
-    let n_rows = if n_inputs == 0 { 0 } else { x.len() / n_inputs };
+    let n_rows = x.len().checked_div(n_inputs).unwrap_or(0);
     if n_rows == 0 {
         return Normalisation::identity(n_inputs);
     }
