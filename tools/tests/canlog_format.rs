@@ -67,7 +67,7 @@ fn errors_name_the_line_and_text() {
         ("(1.000000) vcan0 1234#11", "hex digits"),
         ("(1.000000) vcan0 800#11", "out of range"),
         ("(1.000000) vcan0 123#112233445566778899", "> 8"),
-        ("(1.000000) vcan0 123##0112233", "FD length"),
+        ("(1.000000) vcan0 123##0112233445566778899", "FD length"),
         ("(1.000000) vcan0 123#RZ", "remote DLC"),
         ("(1.000000) vcan0", "expected"),
         ("(1.000000) vcan0 12G#11", "bad hex id"),
