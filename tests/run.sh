@@ -25,5 +25,8 @@ else
   unset FRICTIONLESS_REFS
 fi
 
+echo "== cargo build --bins (end-to-end tests in tests/ start frictiond and frictl as processes)"
+cargo build --workspace --bins
+
 echo "== cargo test"
 cargo test --workspace --no-fail-fast 2>&1 | tee target/cargo-test.log
