@@ -45,7 +45,7 @@ pub fn load_fraction(
 /// Largest number of joints whose load stays ≤ `limit` (e.g. 0.75).
 pub fn max_joints(bits_per_joint_tick: u32, rate_hz: f64, bitrate_bps: f64, limit: f64) -> u32 {
     let per_joint = load_fraction(1, bits_per_joint_tick, rate_hz, bitrate_bps);
-    if !(per_joint > 0.0) || !(limit > 0.0) {
+    if per_joint.is_nan() || limit.is_nan() || per_joint <= 0.0 || limit <= 0.0 {
         return 0;
     }
     // Small epsilon so an exact fit (e.g. 0.75 / 0.25) is not lost to rounding.
