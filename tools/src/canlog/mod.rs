@@ -103,7 +103,7 @@ fn hex_val(c: u8) -> Option<u8> {
 
 fn parse_hex_bytes(s: &str) -> Result<Vec<u8>, String> {
     let digits: Vec<u8> = s.bytes().filter(|&c| c != b'.').collect();
-    if digits.len() % 2 != 0 {
+    if !digits.len().is_multiple_of(2) {
         return Err(format!("odd number of hex digits in data `{s}`"));
     }
     digits
