@@ -6,5 +6,7 @@
 //!
 //! What it is not: network training (see [`crate::train`]) or anything real-time.
 
+pub mod dataset;
 pub mod filter;
+pub mod fit;
 pub mod kalman;
