@@ -10,3 +10,4 @@ pub mod dataset;
 pub mod filter;
 pub mod fit;
 pub mod kalman;
+pub mod preprocess;
