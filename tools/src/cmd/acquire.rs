@@ -88,7 +88,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut n = 0u64;
     let summary = run_protocol(&mut joint, &model, &protocol, &blocks, &mut |row| {
         n += 1;
-        if n % 10_000 == 0 {
+        if n.is_multiple_of(10_000) {
             bar.set_position(n);
         }
         log.write(row)
