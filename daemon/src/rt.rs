@@ -328,12 +328,12 @@ fn apply_rt_settings(cfg: &Config) -> Result<u32, String> {
             }
         }
         if let Some(prio) = l.priority {
-            let sp = libc::sched_param {
-                sched_priority: prio,
-            };
+            // Zeroed then set: musl's sched_param has extra (sporadic-server) fields glibc lacks.
+            let mut sp: libc::sched_param = std::mem::zeroed();
+            sp.sched_priority = prio;
             let rc = libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &sp);
             let mut pol = 0;
-            let mut got = libc::sched_param { sched_priority: 0 };
+            let mut got: libc::sched_param = std::mem::zeroed();
             libc::pthread_getschedparam(libc::pthread_self(), &mut pol, &mut got);
             if rc == 0 && pol == libc::SCHED_FIFO && got.sched_priority == prio {
                 flags |= STATUS_SCHED_FIFO;
