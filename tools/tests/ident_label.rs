@@ -71,6 +71,7 @@ const KNEE_SETS: &[&str] = &[
 
 /// RMS of label − truth on valid, active, sliding (|ṡ| > 0.03) samples; and the same with J_eq·s̈
 /// removed from the label.
+#[allow(clippy::needless_range_loop)] // five parallel columns indexed by sample
 fn label_error(ds: &Dataset, j_eq: f64) -> (f64, f64, usize) {
     let truth = ds.tau_f_true_nm.as_ref().unwrap();
     let (mut e2, mut e2c, mut n) = (0.0, 0.0, 0usize);

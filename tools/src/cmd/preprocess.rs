@@ -186,9 +186,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     if let Some(t) = &ds.tau_f_true_nm {
         let (mut e2, mut n) = (0.0, 0usize);
-        for k in 0..ds.len() {
+        for (k, truth) in t.iter().enumerate() {
             if ds.valid[k] && ds.sdot_rad_s[k].abs() > 0.03 {
-                e2 += (ds.tau_f_label_nm[k] - t[k]).powi(2);
+                e2 += (ds.tau_f_label_nm[k] - truth).powi(2);
                 n += 1;
             }
         }

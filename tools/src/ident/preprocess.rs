@@ -148,7 +148,7 @@ impl PreprocessConfig {
         if !(self.fs_hz.is_finite() && self.fs_hz > 0.0) {
             return bad("fs_hz", self.fs_hz, "finite and > 0");
         }
-        if !(self.gap_s > 0.0) {
+        if self.gap_s.is_nan() || self.gap_s <= 0.0 {
             return bad("gap_s", self.gap_s, "> 0");
         }
         if !self.subtract_reflected_inertia_kgm2.is_finite() {
@@ -357,7 +357,7 @@ pub fn preprocess(
         return Err(PreprocessError::Empty);
     }
     for k in 1..log.time_s.len() {
-        if !(log.time_s[k] >= log.time_s[k - 1]) {
+        if log.time_s[k].is_nan() || log.time_s[k] < log.time_s[k - 1] {
             return Err(PreprocessError::Time {
                 index: k,
                 prev: log.time_s[k - 1],
@@ -441,11 +441,9 @@ pub fn preprocess(
             ds.tau_f_label_nm.push(tau_f);
             ds.temperature_c.push(temp[k]);
         }
-        if has_truth {
-            if let (Some(tf), Some(pa)) = (&log.tau_f_true_nm, &log.phi_ddot_rad_s2) {
-                truth_f.extend(li(tf));
-                truth_a.extend(li(pa));
-            }
+        if let (true, Some(tf), Some(pa)) = (has_truth, &log.tau_f_true_nm, &log.phi_ddot_rad_s2) {
+            truth_f.extend(li(tf));
+            truth_a.extend(li(pa));
         }
         summary.chunks += 1;
     }
