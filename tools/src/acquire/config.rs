@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::sim::params::ParamError;
+use crate::sim::params::{ParamError, check};
 
 /// Where the offset current i₀ of the open-loop blocks comes from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -174,18 +174,6 @@ impl ProtocolConfig {
 
     /// Checks ranges and signs of every value.
     pub fn validate(&self) -> Result<(), ParamError> {
-        fn check(
-            key: &'static str,
-            value: f64,
-            ok: bool,
-            why: &'static str,
-        ) -> Result<(), ParamError> {
-            if value.is_finite() && ok {
-                Ok(())
-            } else {
-                Err(ParamError::Invalid { key, value, why })
-            }
-        }
         let pos = "must be > 0";
         check(
             "protocol.range_hi_rad",

@@ -265,18 +265,6 @@ impl PlantParams {
 
     /// Checks every value is finite and in its physical range.
     pub fn validate(&self) -> Result<(), ParamError> {
-        fn check(
-            key: &'static str,
-            value: f64,
-            ok: bool,
-            why: &'static str,
-        ) -> Result<(), ParamError> {
-            if value.is_finite() && ok {
-                Ok(())
-            } else {
-                Err(ParamError::Invalid { key, value, why })
-            }
-        }
         let pos = "must be > 0";
         let nonneg = "must be >= 0";
         check(
@@ -513,4 +501,19 @@ pub fn load_table(
         apply_set(&mut table, s)?;
     }
     Ok(table)
+}
+
+/// `Ok` when `value` is finite and `ok` holds, else [`ParamError::Invalid`] naming `key` and `why`.
+/// Shared by the plant and protocol validators.
+pub(crate) fn check(
+    key: &'static str,
+    value: f64,
+    ok: bool,
+    why: &'static str,
+) -> Result<(), ParamError> {
+    if value.is_finite() && ok {
+        Ok(())
+    } else {
+        Err(ParamError::Invalid { key, value, why })
+    }
 }
