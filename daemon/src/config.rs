@@ -85,6 +85,37 @@ pub struct LoopConfig {
     /// READY=1 is sent after this many ticks ran (and were not missed).
     #[serde(default = "default_ready_after")]
     pub ready_after_ticks: u64,
+    /// What starts a tick: the clock (absolute 1 kHz deadlines, the robot mode) or the inputs
+    /// (lockstep with a simulated plant, for fast deterministic closed-loop runs).
+    #[serde(default)]
+    pub trigger: Trigger,
+    /// Lockstep only: also wait for the [`TorqueRequest`](frictionless_shm_types::TorqueRequest)
+    /// whose `state_seq` answers the newest joint state before computing (true when a controller
+    /// takes part in the loop).
+    #[serde(default = "default_true")]
+    pub lockstep_wait_request: bool,
+    /// Lockstep only: how long one tick waits for its inputs before it runs anyway with what it
+    /// has (stale rules apply) [ms].
+    #[serde(default = "default_lockstep_timeout_ms")]
+    pub lockstep_timeout_ms: u64,
+}
+
+/// What starts a tick.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Trigger {
+    /// Absolute CLOCK_MONOTONIC deadlines every `period_us` (the real-time mode).
+    #[default]
+    Clock,
+    /// One tick per new joint state (and request, see `lockstep_wait_request`); no sleeping.
+    Lockstep,
+}
+
+fn default_true() -> bool {
+    true
+}
+fn default_lockstep_timeout_ms() -> u64 {
+    1000
 }
 
 fn default_period_us() -> u64 {
@@ -107,6 +138,9 @@ impl Default for LoopConfig {
             require_rt: false,
             status_every_ticks: default_status_every(),
             ready_after_ticks: default_ready_after(),
+            trigger: Trigger::Clock,
+            lockstep_wait_request: true,
+            lockstep_timeout_ms: default_lockstep_timeout_ms(),
         }
     }
 }
@@ -117,6 +151,8 @@ impl Default for LoopConfig {
 pub enum BackendKind {
     /// iceoryx2 shared memory (`frictionless-shm-types` services).
     Shm,
+    /// SocketCAN drives (`[[bus]]` sections); requests, command mirror and status over shm.
+    Can,
 }
 
 /// `[backend]`.

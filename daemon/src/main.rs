@@ -7,16 +7,10 @@
 //! notifications (READY, WATCHDOG gated on the RT heartbeat, STATUS, RELOADING + MONOTONIC_USEC) and
 //! freeing of replaced parameter sets. `frictiond --config FILE --check` validates without IPC.
 //!
-//! What it is **not**: the control law ([`control`]), the tick ([`rt`]), or the config schema
-//! ([`config`]).
+//! What it is **not**: the control law (`frictiond::control`), the tick (`frictiond::rt`), or the
+//! config schema (`frictiond::config`) — those live in the library.
 
-mod alloc_count;
-mod config;
-mod control;
-mod filter;
-mod params;
-mod rt;
-mod sdnotify;
+use frictiond::{alloc_count, config, params, rt, sdnotify};
 
 use std::path::PathBuf;
 use std::sync::Arc;

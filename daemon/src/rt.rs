@@ -28,12 +28,13 @@ use std::sync::mpsc::{Receiver, SyncSender, TryRecvError};
 use frictionless::features::JointSample;
 use frictionless::model::FrictionModel;
 use frictionless_shm_types::{
-    DaemonStatus, FLAG_DISABLED, FLAG_FAULT, FLAG_STALE, Inbox, IoError, Ipc, IpcConfig,
-    JointStates, MAX_JOINTS, MotorCurrentCommand, Outbox, STATUS_CPU_PINNED, STATUS_INPUT_STALE,
-    STATUS_MEMORY_LOCKED, STATUS_SCHED_FIFO, STATUS_STOPPING, TorqueRequest, monotonic_ns,
+    DaemonStatus, FLAG_DISABLED, FLAG_FAULT, FLAG_STALE, JointStates, MAX_JOINTS,
+    MotorCurrentCommand, STATUS_CPU_PINNED, STATUS_INPUT_STALE, STATUS_MEMORY_LOCKED,
+    STATUS_SCHED_FIFO, STATUS_STOPPING, TorqueRequest, monotonic_ns,
 };
 
 use crate::alloc_count;
+use crate::backend::{AnyBackend, Backend};
 use crate::config::{Config, OnStale};
 use crate::control::{LawInput, LawOutput};
 use crate::params::Params;
@@ -57,66 +58,6 @@ pub struct Shared {
     pub rt_flags: AtomicU32,
     /// Ticks during which RT-thread allocations were counted.
     pub counted_ticks: AtomicU64,
-}
-
-/// The I/O seam: the loop reads newest inputs and publishes outputs through this.
-pub trait Backend {
-    /// Newest joint states since the last call, if any.
-    fn read_states(&mut self) -> Result<Option<JointStates>, IoError>;
-    /// Newest torque request since the last call, if any.
-    fn read_request(&mut self) -> Result<Option<TorqueRequest>, IoError>;
-    /// Sends a current command.
-    fn publish_command(&mut self, cmd: &MotorCurrentCommand) -> Result<(), IoError>;
-    /// Sends a status snapshot.
-    fn publish_status(&mut self, status: &DaemonStatus) -> Result<(), IoError>;
-}
-
-/// iceoryx2 shared-memory backend (the `frictionless-shm-types` services).
-pub struct ShmBackend {
-    _ipc: Ipc,
-    states: Inbox<JointStates>,
-    request: Inbox<TorqueRequest>,
-    command: Outbox<MotorCurrentCommand>,
-    status: Outbox<DaemonStatus>,
-}
-
-impl ShmBackend {
-    /// Opens the node (cleaning up dead nodes first) and all ports. Set-up time only.
-    pub fn open(ipc_cfg: &IpcConfig) -> Result<Self, String> {
-        match Ipc::cleanup_dead_nodes_for(ipc_cfg) {
-            Ok(n) if n > 0 => tracing::info!("removed resources of {n} dead iceoryx2 node(s)"),
-            Ok(_) => {}
-            Err(e) => tracing::warn!("dead-node clean-up failed: {e}"),
-        }
-        let ipc = Ipc::open(ipc_cfg, "frictiond").map_err(|e| e.to_string())?;
-        let states = ipc.joint_states().map_err(|e| e.to_string())?;
-        let request = ipc.torque_request().map_err(|e| e.to_string())?;
-        let command = ipc.motor_current_command().map_err(|e| e.to_string())?;
-        let status = ipc.daemon_status().map_err(|e| e.to_string())?;
-        Ok(Self {
-            states: states.inbox().map_err(|e| e.to_string())?,
-            request: request.inbox().map_err(|e| e.to_string())?,
-            command: command.outbox().map_err(|e| e.to_string())?,
-            status: status.outbox().map_err(|e| e.to_string())?,
-            _ipc: ipc,
-        })
-    }
-}
-
-impl Backend for ShmBackend {
-    fn read_states(&mut self) -> Result<Option<JointStates>, IoError> {
-        self.states.latest()
-    }
-    fn read_request(&mut self) -> Result<Option<TorqueRequest>, IoError> {
-        self.request.latest()
-    }
-    fn publish_command(&mut self, cmd: &MotorCurrentCommand) -> Result<(), IoError> {
-        // iceoryx2 0.10 allocates one 48-byte Box per loaned sample (measured; see module doc).
-        alloc_count::exempt(|| self.command.publish(cmd))
-    }
-    fn publish_status(&mut self, status: &DaemonStatus) -> Result<(), IoError> {
-        alloc_count::exempt(|| self.status.publish(status))
-    }
 }
 
 /// Newest value of one input with its freshness.
@@ -419,14 +360,13 @@ pub fn run(setup: RtSetup) {
         started,
         count_allocs,
     } = setup;
-    let ipc_cfg = IpcConfig {
-        root_path: config.root_path.clone(),
-        service_prefix: config.raw.backend.service_prefix.clone(),
-    };
-    let mut backend = match ShmBackend::open(&ipc_cfg) {
+    let mut backend = match AnyBackend::open(&config) {
         Ok(b) => b,
         Err(e) => {
-            let _ = started.send(Err(format!("opening IPC: {e}")));
+            let _ = started.send(Err(format!(
+                "opening the {:?} backend: {e}",
+                config.raw.backend.kind
+            )));
             return;
         }
     };

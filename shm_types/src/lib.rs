@@ -5,7 +5,7 @@
 //! the *only* functions that open the corresponding services, so every process agrees on names,
 //! payload types and QoS (in iceoryx2 the creator's QoS wins and a mismatch makes `open` fail).
 //!
-//! - [`JointStates`] plant → daemon, [`TorqueRequest`] controller → daemon,
+//! - [`JointStates`] plant → daemon, [`TorqueRequest`] controller → daemon (with the `state_seq` it answers),
 //!   [`MotorCurrentCommand`] daemon → plant, [`DaemonStatus`] daemon → monitors.
 //! - Every pub/sub service `<prefix>/<name>` is paired with an event service of the same name; a
 //!   publisher notifies after each send so blocking consumers can wake up ([`Outbox::publish`]).
@@ -35,6 +35,7 @@ use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe as ps_factory};
 
 pub mod can;
+pub mod sim;
 
 /// Compile-time joint capacity of every payload.
 pub const MAX_JOINTS: usize = 64;
@@ -146,12 +147,16 @@ impl Default for JointStates {
 /// Desired joint torques and which joints the daemon drives (controller → daemon).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
-#[type_name("frictionless::TorqueRequest_v1")]
+#[type_name("frictionless::TorqueRequest_v2")]
 pub struct TorqueRequest {
     /// Sequence number, +1 per message.
     pub seq: u64,
     /// CLOCK_MONOTONIC time [ns] at which the request was made.
     pub stamp_ns: u64,
+    /// `seq` of the [`JointStates`] this request was computed from (0 = not tied to a state).
+    /// A daemon in lockstep (`[loop] trigger = "lockstep"`) waits for the request answering the
+    /// state it is about to process.
+    pub state_seq: u64,
     /// Bit `j` set = joint `j` is in torque mode and driven by the daemon ("hijacked").
     pub enable_mask: u64,
     /// Number of valid joints (≤ [`MAX_JOINTS`]).
@@ -168,6 +173,7 @@ impl TorqueRequest {
         Self {
             seq: 0,
             stamp_ns: 0,
+            state_seq: 0,
             enable_mask: 0,
             n_joints: 0,
             reserved: 0,
@@ -333,7 +339,7 @@ impl Default for Histogram {
 /// Daemon health snapshot (daemon → monitors, ≈ 10–100 Hz).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
-#[type_name("frictionless::DaemonStatus_v1")]
+#[type_name("frictionless::DaemonStatus_v2")]
 pub struct DaemonStatus {
     /// Sequence number, +1 per message.
     pub seq: u64,
@@ -369,6 +375,47 @@ pub struct DaemonStatus {
     pub joint_flags: [u32; MAX_JOINTS],
     /// Model kind per joint ([`model_kind`]).
     pub model_kind: [u8; MAX_JOINTS],
+    /// Field-bus counters summed over every bus (all zero for the shared-memory backend).
+    pub bus: BusCounters,
+}
+
+/// Field-bus (SocketCAN) health counters since start, summed over the daemon's buses.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[type_name("frictionless::BusCounters_v1")]
+pub struct BusCounters {
+    /// Frames received and accepted (ids we own).
+    pub rx_frames: u64,
+    /// Frames sent.
+    pub tx_frames: u64,
+    /// Error frames received (`CAN_ERR_FLAG`).
+    pub error_frames: u64,
+    /// Bus-off events (`CAN_ERR_BUSOFF`).
+    pub bus_off: u64,
+    /// Error-passive / warning events (`CAN_ERR_CRTL` passive bits).
+    pub error_passive: u64,
+    /// Sends refused with ENOBUFS/EAGAIN (queue full; frame dropped, loop not stalled).
+    pub tx_dropped: u64,
+    /// Other socket errors (read or write).
+    pub io_errors: u64,
+    /// Joints whose feedback was stale at the last tick (bit set), per the `[safety]` rule.
+    pub stale_feedback_mask: u64,
+}
+
+impl BusCounters {
+    /// All zeros.
+    pub const fn zeroed() -> Self {
+        Self {
+            rx_frames: 0,
+            tx_frames: 0,
+            error_frames: 0,
+            bus_off: 0,
+            error_passive: 0,
+            tx_dropped: 0,
+            io_errors: 0,
+            stale_feedback_mask: 0,
+        }
+    }
 }
 
 impl DaemonStatus {
@@ -392,6 +439,7 @@ impl DaemonStatus {
             i_ref_a: [0.0; MAX_JOINTS],
             joint_flags: [0; MAX_JOINTS],
             model_kind: [0; MAX_JOINTS],
+            bus: BusCounters::zeroed(),
         }
     }
 }
@@ -468,6 +516,10 @@ pub enum ServiceKind {
     MotorCurrentCommand,
     /// [`DaemonStatus`].
     DaemonStatus,
+    /// [`sim::SimTruth`] (virtual plant diagnostics).
+    SimTruth,
+    /// [`sim::SimDisturbance`] (external torques into the virtual plant).
+    SimDisturbance,
 }
 
 impl ServiceKind {
@@ -478,6 +530,8 @@ impl ServiceKind {
             Self::TorqueRequest => "torque_request",
             Self::MotorCurrentCommand => "motor_current_command",
             Self::DaemonStatus => "daemon_status",
+            Self::SimTruth => "sim_truth",
+            Self::SimDisturbance => "sim_disturbance",
         }
     }
 }
@@ -672,6 +726,16 @@ impl Ipc {
     /// `<prefix>/daemon_status`.
     pub fn daemon_status(&self) -> Result<Channel<DaemonStatus>, ShmError> {
         self.channel(ServiceKind::DaemonStatus)
+    }
+
+    /// `<prefix>/sim_truth` (virtual plant only).
+    pub fn sim_truth(&self) -> Result<Channel<sim::SimTruth>, ShmError> {
+        self.channel(ServiceKind::SimTruth)
+    }
+
+    /// `<prefix>/sim_disturbance` (virtual plant only).
+    pub fn sim_disturbance(&self) -> Result<Channel<sim::SimDisturbance>, ShmError> {
+        self.channel(ServiceKind::SimDisturbance)
     }
 }
 

@@ -1,0 +1,106 @@
+//! The I/O seam of the RT loop: where joint states and torque requests come from and where current
+//! commands and status go.
+//!
+//! What this module **is**: the [`Backend`] trait the tick in [`crate::rt`] is written against, and
+//! [`AnyBackend`], the closed set of backends chosen by `[backend] kind` (static dispatch, no
+//! `dyn` on the RT path). [`shm::ShmBackend`] speaks the iceoryx2 services of
+//! `frictionless-shm-types`; [`can::CanBackend`] reads motor feedback from and sends commands to
+//! SocketCAN drives, and still takes torque requests from (and mirrors commands and status to)
+//! shared memory so controllers, `frictl monitor` and `frictl record` work the same on both.
+//!
+//! What it is **not**: no control law, no timing. Every method is called on the RT thread: no
+//! allocation (beyond what the module docs measure and exempt), no locks, no blocking except
+//! [`Backend::wait_input`], which exists for the lockstep trigger.
+
+pub mod can;
+pub mod shm;
+
+use frictionless_shm_types::{
+    BusCounters, DaemonStatus, IoError, JointStates, MotorCurrentCommand, TorqueRequest,
+};
+
+use crate::config::{BackendKind, Config};
+
+/// The I/O seam: the loop reads newest inputs and publishes outputs through this.
+pub trait Backend {
+    /// Newest joint states since the last call, if any.
+    fn read_states(&mut self) -> Result<Option<JointStates>, IoError>;
+    /// Newest torque request since the last call, if any.
+    fn read_request(&mut self) -> Result<Option<TorqueRequest>, IoError>;
+    /// Sends a current command.
+    fn publish_command(&mut self, cmd: &MotorCurrentCommand) -> Result<(), IoError>;
+    /// Sends a status snapshot.
+    fn publish_status(&mut self, status: &DaemonStatus) -> Result<(), IoError>;
+    /// Blocks until new input may be available or `timeout_ns` passed; `Ok(true)` if woken by
+    /// input. Used only by the lockstep trigger (`[loop] trigger = "lockstep"`).
+    fn wait_input(&mut self, timeout_ns: u64) -> Result<bool, IoError>;
+    /// Field-bus counters since start (zero for shared memory).
+    fn bus_counters(&self) -> BusCounters {
+        BusCounters::zeroed()
+    }
+}
+
+/// The configured backend (static dispatch).
+// Built once at start and owned by the RT thread for its lifetime: variant size does not matter.
+#[allow(clippy::large_enum_variant)]
+pub enum AnyBackend {
+    /// iceoryx2 shared memory.
+    Shm(shm::ShmBackend),
+    /// SocketCAN drives (+ shared memory for requests, command mirror and status).
+    Can(can::CanBackend),
+}
+
+impl AnyBackend {
+    /// Opens the backend named by `[backend] kind`. Set-up time only (allocates, logs).
+    pub fn open(cfg: &Config) -> Result<Self, String> {
+        match cfg.raw.backend.kind {
+            BackendKind::Shm => Ok(Self::Shm(shm::ShmBackend::open(&shm::ipc_config(cfg))?)),
+            BackendKind::Can => Ok(Self::Can(can::CanBackend::open(cfg)?)),
+        }
+    }
+}
+
+impl Backend for AnyBackend {
+    #[inline]
+    fn read_states(&mut self) -> Result<Option<JointStates>, IoError> {
+        match self {
+            Self::Shm(b) => b.read_states(),
+            Self::Can(b) => b.read_states(),
+        }
+    }
+    #[inline]
+    fn read_request(&mut self) -> Result<Option<TorqueRequest>, IoError> {
+        match self {
+            Self::Shm(b) => b.read_request(),
+            Self::Can(b) => b.read_request(),
+        }
+    }
+    #[inline]
+    fn publish_command(&mut self, cmd: &MotorCurrentCommand) -> Result<(), IoError> {
+        match self {
+            Self::Shm(b) => b.publish_command(cmd),
+            Self::Can(b) => b.publish_command(cmd),
+        }
+    }
+    #[inline]
+    fn publish_status(&mut self, status: &DaemonStatus) -> Result<(), IoError> {
+        match self {
+            Self::Shm(b) => b.publish_status(status),
+            Self::Can(b) => b.publish_status(status),
+        }
+    }
+    #[inline]
+    fn wait_input(&mut self, timeout_ns: u64) -> Result<bool, IoError> {
+        match self {
+            Self::Shm(b) => b.wait_input(timeout_ns),
+            Self::Can(b) => b.wait_input(timeout_ns),
+        }
+    }
+    #[inline]
+    fn bus_counters(&self) -> BusCounters {
+        match self {
+            Self::Shm(b) => b.bus_counters(),
+            Self::Can(b) => b.bus_counters(),
+        }
+    }
+}
