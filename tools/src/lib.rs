@@ -4,6 +4,7 @@
 //! - [`dynamics`]: URDF parsing and rigid-body dynamics (RNEA fixed/floating base, CRBA).
 //! - [`sim`]: the virtual two-inertia harmonic-drive joint with LuGre friction.
 //! - [`acquire`]: the excitation protocol and dataset logs.
+//! - [`serve`]: the virtual joints as a plant process (shared memory, SocketCAN).
 //! - [`interop`]: ONNX and safetensors import/export of `.fwt` models.
 //!
 //! It is **not** the real-time daemon and never depends on it.
@@ -15,5 +16,6 @@ pub mod canlog;
 pub mod dynamics;
 pub mod ident;
 pub mod interop;
+pub mod serve;
 pub mod sim;
 pub mod train;
