@@ -1,7 +1,5 @@
 //! candump -L parser/writer tests on a handwritten log, typed errors naming the line, replay pacing.
 
-use std::time::Instant;
-
 use frictl::canlog::{self, CanLogError, LogFrame};
 
 /// Handwritten after `doc/CanDumpLogFormat.md`: standard, extended, empty, RTR with and without
@@ -97,27 +95,38 @@ fn missing_file_error_names_it() {
 
 #[test]
 fn replay_paces_by_timestamps_and_loops() {
-    // 5 frames 20 ms apart at speed 2 → frame k no earlier than k·10 ms after the first.
+    // 5 frames 20 ms apart at speed 2 → frame k due k·10 ms after the first.
     let text: String = (0..5)
         .map(|k| format!("(100.{:06}) vcan0 001#{k:02X}\n", k * 20_000))
         .collect();
     let entries = canlog::parse_log(text.as_bytes(), "<t>").unwrap();
-    let start = Instant::now();
+    // The schedule, with a recording clock (no wall-clock timing in tests).
+    let mut deadlines = Vec::new();
     let mut seen = Vec::new();
-    let n = canlog::replay(&entries, 2.0, 2, |i, _| {
-        seen.push((i, start.elapsed()));
+    let n = canlog::replay_scheduled(
+        &entries,
+        2.0,
+        2,
+        |offset| deadlines.push(offset.as_micros()),
+        |i, _| {
+            seen.push(i);
+            Ok::<(), ()>(())
+        },
+    )
+    .unwrap();
+    assert_eq!(n, 10);
+    assert_eq!(seen, [0, 1, 2, 3, 4, 0, 1, 2, 3, 4]);
+    // Frame k at k·10 ms; the second loop starts one gap (10 ms) after the last frame (40 ms).
+    let want: Vec<u128> = (0..10u128).map(|k| k * 10_000).collect();
+    assert_eq!(deadlines, want);
+    // The real-clock wrapper sends the same frames in the same order.
+    let mut real = Vec::new();
+    canlog::replay(&entries, 1000.0, 1, |i, _| {
+        real.push(i);
         Ok::<(), ()>(())
     })
     .unwrap();
-    assert_eq!(n, 10);
-    let idx: Vec<usize> = seen.iter().map(|s| s.0).collect();
-    assert_eq!(idx, [0, 1, 2, 3, 4, 0, 1, 2, 3, 4]);
-    // Lower bounds only (sleeps never return early); no upper bounds on this noisy machine.
-    for (k, (_, t)) in seen.iter().enumerate().take(5) {
-        assert!(t.as_micros() >= (k as u128) * 10_000, "frame {k} at {t:?}");
-    }
-    // Second loop starts one gap (10 ms scaled) after the last frame (40 ms): ≥ 50 ms.
-    assert!(seen[5].1.as_micros() >= 50_000, "{:?}", seen[5].1);
+    assert_eq!(real, [0, 1, 2, 3, 4]);
     // A failing sender stops the replay with its error.
     let r = canlog::replay(
         &entries,

@@ -321,6 +321,32 @@ pub fn replay<E>(
     entries: &[LogEntry],
     speed: f64,
     loops: u64,
+    send: impl FnMut(usize, &LogEntry) -> Result<(), E>,
+) -> Result<u64, E> {
+    let start = Instant::now();
+    replay_scheduled(
+        entries,
+        speed,
+        loops,
+        |offset| {
+            let deadline = start + offset;
+            let now = Instant::now();
+            if deadline > now {
+                std::thread::sleep(deadline - now);
+            }
+        },
+        send,
+    )
+}
+
+/// The schedule behind [`replay`] with the clock left to the caller: before each frame,
+/// `wait_until(offset)` is called with the frame's deadline as an offset from the replay's start,
+/// then `send` runs. [`replay`] passes a sleeping clock; tests pass a recording one.
+pub fn replay_scheduled<E>(
+    entries: &[LogEntry],
+    speed: f64,
+    loops: u64,
+    mut wait_until: impl FnMut(Duration),
     mut send: impl FnMut(usize, &LogEntry) -> Result<(), E>,
 ) -> Result<u64, E> {
     let speed = if speed.is_finite() && speed > 0.0 {
@@ -333,26 +359,21 @@ pub fn replay<E>(
     };
     let t0 = first.stamp_us;
     let span_us = entries.last().map_or(0, |l| l.stamp_us.saturating_sub(t0));
-    let mut start = Instant::now();
+    let gap_us = if entries.len() > 1 {
+        span_us as f64 / (entries.len() - 1) as f64
+    } else {
+        1000.0
+    };
+    let loop_us = (span_us as f64 + gap_us.max(1.0)) / speed;
     let mut sent = 0;
     let mut k = 0u64;
     while loops == 0 || k < loops {
         for (i, e) in entries.iter().enumerate() {
-            let offset_us = e.stamp_us.saturating_sub(t0) as f64 / speed;
-            let deadline = start + Duration::from_secs_f64(offset_us * 1e-6);
-            let now = Instant::now();
-            if deadline > now {
-                std::thread::sleep(deadline - now);
-            }
+            let offset_us = k as f64 * loop_us + e.stamp_us.saturating_sub(t0) as f64 / speed;
+            wait_until(Duration::from_secs_f64(offset_us * 1e-6));
             send(i, e)?;
             sent += 1;
         }
-        let gap = if entries.len() > 1 {
-            span_us as f64 / (entries.len() - 1) as f64
-        } else {
-            1000.0
-        };
-        start += Duration::from_secs_f64((span_us as f64 + gap.max(1.0)) / speed * 1e-6);
         k += 1;
     }
     Ok(sent)
