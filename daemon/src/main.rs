@@ -7,6 +7,10 @@
 //! notifications (READY, WATCHDOG gated on the RT heartbeat, STATUS, RELOADING + MONOTONIC_USEC) and
 //! freeing of replaced parameter sets. `frictiond --config FILE --check` validates without IPC.
 //!
+//! Environment: `FRICTIOND_ALLOC_REPORT=FILE` counts RT-thread allocations after READY and writes
+//! them at exit; `FRICTIOND_LATENCY_REPORT=FILE` writes the loop statistics at exit (wake lateness
+//! p50/p99/p99.9/max at 1 µs resolution, compute time, input age — `benches/lateness.sh`).
+//!
 //! What it is **not**: the control law (`frictiond::control`), the tick (`frictiond::rt`), or the
 //! config schema (`frictiond::config`) — those live in the library.
 
@@ -145,6 +149,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     let (tx_old, rx_old) = std::sync::mpsc::sync_channel(4);
     let (tx_started, rx_started) = std::sync::mpsc::sync_channel(1);
     let alloc_report = std::env::var_os("FRICTIOND_ALLOC_REPORT").map(PathBuf::from);
+    // Loop statistics at exit (`key=value` lines, see `rt::RtSummary::report`), for benches.
+    let latency_report = std::env::var_os("FRICTIOND_LATENCY_REPORT").map(PathBuf::from);
     let setup = rt::RtSetup {
         config: cfg.clone(),
         params,
@@ -258,9 +264,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         );
     }
     shared.stop.store(true, Ordering::Relaxed);
-    if rt_thread.join().is_err() {
-        bail!("RT thread panicked");
-    }
+    let summary = match rt_thread.join() {
+        Ok(s) => s,
+        Err(_) => bail!("RT thread panicked"),
+    };
     while rx_old.try_recv().is_ok() {}
     if let Some(path) = alloc_report {
         let (counted, exempt) = alloc_count::totals();
@@ -269,6 +276,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             "rt_allocations={counted}\nrt_exempt_allocations={exempt}\nrt_counted_ticks={ticks}\n"
         );
         std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
+    }
+    if let (Some(path), Some(summary)) = (latency_report, &summary) {
+        std::fs::write(&path, summary.report())
+            .with_context(|| format!("writing {}", path.display()))?;
     }
     tracing::info!(
         "stopped cleanly: {} ticks, {} missed, wake lateness p99 <= {} us, max {:.1} us",

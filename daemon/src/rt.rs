@@ -3,11 +3,14 @@
 //! What this module **is**: the dedicated loop thread. Set-up (allowed to allocate and log): open the
 //! backend (iceoryx2 node and ports are `!Send`, so they are created here), apply RT settings
 //! (timer slack, CPU affinity, SCHED_FIFO, mlockall — each verified, refusals reported), pre-fault
-//! the stack. Then, every period on an absolute CLOCK_MONOTONIC deadline (`clock_nanosleep` with
-//! `TIMER_ABSTIME`):
+//! the stack. Then, every tick, one path for both triggers (`[loop] trigger`):
 //!
+//! 0. wait — `clock`: until the next absolute CLOCK_MONOTONIC deadline (`clock_nanosleep` with
+//!    `TIMER_ABSTIME`); `lockstep`: until a joint state newer than the last processed one has
+//!    arrived and, with `lockstep_wait_request`, the [`TorqueRequest`] whose `state_seq` answers
+//!    it (or `lockstep_timeout_ms` passed: the tick runs anyway and the missing input is stale);
 //! 1. [`Inputs::poll`]: newest [`JointStates`] and [`TorqueRequest`] (latest value), freshness by
-//!    `seq` and `stamp_ns`;
+//!    `seq` and `stamp_ns` (lockstep: by `seq` and the timeout, since its time is not wall time);
 //! 2. parameter hand-over: `try_recv` a new `Box<Params>` (built off-thread), send the old one back
 //!    to be freed off-thread;
 //! 3. [`compute`]: per joint, enable edge → reset (bumpless), model estimate, control law
@@ -15,7 +18,11 @@
 //! 4. publish (+ notify); record lateness / compute time / input age in fixed histograms;
 //!    publish [`DaemonStatus`] every `status_every_ticks`; advance the heartbeat.
 //!
-//! No allocation, no locks, no logging, no blocking syscall other than the sleep in the loop. The
+//! Lockstep has no deadline: its lateness histograms stay empty and `missed_deadlines` stays 0;
+//! compute time and input age (plant publish → daemon wake) are recorded as usual. A joint whose
+//! PINN history is not full yet carries `FLAG_WARMING_UP`.
+//!
+//! No allocation, no locks, no logging, no blocking syscall other than the wait in step 0. The
 //! only heap allocation is inside iceoryx2's `loan` (one 48-byte `Box` per published sample,
 //! measured); it is wrapped in [`crate::alloc_count::exempt`] so the allocation test can tell it apart.
 //!
@@ -26,16 +33,16 @@ use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, TryRecvError};
 
 use frictionless::features::JointSample;
-use frictionless::model::FrictionModel;
+use frictionless::model::{FrictionModel, JointModel};
 use frictionless_shm_types::{
-    DaemonStatus, FLAG_DISABLED, FLAG_FAULT, FLAG_STALE, JointStates, MAX_JOINTS,
+    DaemonStatus, FLAG_DISABLED, FLAG_FAULT, FLAG_STALE, FLAG_WARMING_UP, JointStates, MAX_JOINTS,
     MotorCurrentCommand, STATUS_CPU_PINNED, STATUS_INPUT_STALE, STATUS_MEMORY_LOCKED,
     STATUS_SCHED_FIFO, STATUS_STOPPING, TorqueRequest, monotonic_ns,
 };
 
 use crate::alloc_count;
 use crate::backend::{AnyBackend, Backend};
-use crate::config::{Config, OnStale};
+use crate::config::{Config, OnStale, Trigger};
 use crate::control::{LawInput, LawOutput};
 use crate::params::Params;
 
@@ -91,9 +98,18 @@ impl<T: Copy> Latest<T> {
     /// Stale: none yet, no new sample for more than `after` ticks, or stamp older than `after`
     /// periods.
     fn stale(&self, tick: u64, now_ns: u64, stamp_ns: u64, after: u64, period_ns: u64) -> bool {
-        !self.have
-            || tick.saturating_sub(self.new_at_tick) > after
+        self.stale_by_ticks(tick, after)
             || now_ns.saturating_sub(stamp_ns) > after.saturating_mul(period_ns)
+    }
+
+    /// Stale by the sequence rule only: none yet, or no new sample for more than `after` ticks.
+    fn stale_by_ticks(&self, tick: u64, after: u64) -> bool {
+        !self.have || tick.saturating_sub(self.new_at_tick) > after
+    }
+
+    /// Whether a new sample arrived during tick `tick` (since the previous tick's poll).
+    fn new_in(&self, tick: u64) -> bool {
+        self.have && self.new_at_tick == tick
     }
 }
 
@@ -191,18 +207,32 @@ pub fn compute(
             }
             active |= bit;
             let f = j.model.estimate(&sample);
-            j.law.step(&LawInput {
+            let mut o = j.law.step(&LawInput {
                 tau_des_nm: rq.tau_des_nm[k],
                 friction_nm: f,
                 sdot_rad_s: sample.sdot_rad_s,
                 tau_meas_nm: st.tau_meas_nm[k],
-            })
+            });
+            if warming_up(&j.model) {
+                o.flags |= FLAG_WARMING_UP;
+            }
+            o
         };
         cmd.i_ref_a[k] = out.i_a;
         cmd.flags[k] = out.flags;
         tau_f_out[k] = out.tau_f_hat_nm;
     }
     *prev_active = active;
+}
+
+/// Whether a PINN joint's feature history is not full yet (its estimate is a warm-up 0 under
+/// `hold_zero`, or partly zero-padded under `zero_pad`). Static models never warm up.
+#[inline]
+pub fn warming_up(m: &JointModel) -> bool {
+    match m {
+        JointModel::Pinn(p) => !p.history().is_full(),
+        _ => false,
+    }
 }
 
 #[inline]
@@ -348,9 +378,186 @@ fn sleep_until(deadline_ns: u64) {
     ) {}
 }
 
-/// The RT thread's body. Returns when `shared.stop` is set (after publishing zero currents) or
-/// set-up fails.
-pub fn run(setup: RtSetup) {
+/// How a lockstep wait ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum LockstepWake {
+    /// A new state (and, if required, its request) arrived.
+    Inputs,
+    /// `lockstep_timeout_ms` passed first: the tick runs anyway with what it has.
+    TimedOut,
+    /// The supervisor asked to stop.
+    Stop,
+}
+
+/// Longest single block inside a lockstep wait, so a stop request is seen promptly [ns].
+const LOCKSTEP_STOP_POLL_NS: u64 = 20_000_000;
+
+/// The lockstep trigger's wait (the only step that differs from the clock trigger): polls the
+/// inputs into `inputs` (as tick `tick`) until a joint state newer than the last processed one
+/// has arrived and — if `wait_request` — a request whose `state_seq` equals that state's `seq`;
+/// blocks on the backend between polls (on the listener of the input still missing). No
+/// allocation (per-listener `timed_wait`, not a WaitSet, which allocates per wake-up).
+fn wait_lockstep(
+    b: &mut impl Backend,
+    inputs: &mut Inputs,
+    tick: u64,
+    stop: &AtomicBool,
+    wait_request: bool,
+    timeout_ns: u64,
+) -> LockstepWake {
+    let end = monotonic_ns().saturating_add(timeout_ns);
+    loop {
+        inputs.poll(b, tick);
+        let new_state = inputs.states.new_in(tick);
+        let answered = !wait_request
+            || (inputs.request.have && inputs.request.value.state_seq == inputs.states.value.seq);
+        if new_state && answered {
+            return LockstepWake::Inputs;
+        }
+        if stop.load(Ordering::Relaxed) {
+            return LockstepWake::Stop;
+        }
+        let now = monotonic_ns();
+        if now >= end {
+            return LockstepWake::TimedOut;
+        }
+        let slice = (end - now).min(LOCKSTEP_STOP_POLL_NS);
+        let waited = if new_state {
+            b.wait_request(slice)
+        } else {
+            b.wait_input(slice)
+        };
+        if waited.is_err() {
+            // A failing listener must not turn this into a busy loop.
+            sleep_until(monotonic_ns() + 100_000);
+        }
+    }
+}
+
+/// Wake lateness with 1 µs buckets up to [`FineHistogram::BUCKETS`] µs (the shared-memory
+/// [`Histogram`](frictionless_shm_types::Histogram) has power-of-two buckets, too coarse to
+/// compare with `cyclictest`). Allocated and pre-faulted before the loop; `record` is O(1).
+#[derive(Debug)]
+pub struct FineHistogram {
+    counts: Box<[u64]>,
+    /// Values at or above the last bucket.
+    pub overflow: u64,
+    /// Number of recorded values.
+    pub total: u64,
+    /// Largest recorded value [ns].
+    pub max_ns: u64,
+}
+
+impl FineHistogram {
+    /// Number of 1 µs buckets (20 ms).
+    pub const BUCKETS: usize = 20_000;
+
+    /// An empty histogram (allocates and touches every page once).
+    pub fn new() -> Self {
+        let mut counts = vec![1u64; Self::BUCKETS].into_boxed_slice();
+        counts.fill(0);
+        Self {
+            counts,
+            overflow: 0,
+            total: 0,
+            max_ns: 0,
+        }
+    }
+
+    /// Records one value [ns].
+    #[inline]
+    pub fn record(&mut self, ns: u64) {
+        let us = (ns / 1000) as usize;
+        match self.counts.get_mut(us) {
+            Some(c) => *c += 1,
+            None => self.overflow += 1,
+        }
+        self.total += 1;
+        self.max_ns = self.max_ns.max(ns);
+    }
+
+    /// Upper edge [ns] of the 1 µs bucket holding quantile `q` (capped by the max); 0 when empty.
+    pub fn quantile_upper_ns(&self, q: f64) -> u64 {
+        if self.total == 0 {
+            return 0;
+        }
+        let want = ((q.clamp(0.0, 1.0) * self.total as f64).ceil() as u64).max(1);
+        let mut acc = 0;
+        for (k, c) in self.counts.iter().enumerate() {
+            acc += c;
+            if acc >= want {
+                return ((k as u64 + 1) * 1000).min(self.max_ns);
+            }
+        }
+        self.max_ns
+    }
+}
+
+impl Default for FineHistogram {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// What the RT thread hands back when it ends: loop statistics for the exit log and the
+/// `FRICTIOND_LATENCY_REPORT` file.
+#[derive(Debug)]
+pub struct RtSummary {
+    /// Ticks run.
+    pub ticks: u64,
+    /// Missed deadlines (always 0 with the lockstep trigger).
+    pub missed: u64,
+    /// Whether the lockstep trigger ran (then `lateness` is empty: there is no deadline).
+    pub lockstep: bool,
+    /// Wake lateness against the absolute deadline, 1 µs buckets (clock trigger only).
+    pub lateness: FineHistogram,
+    /// The last status snapshot (power-of-two histograms of lateness, compute time, input age).
+    pub status: Box<DaemonStatus>,
+}
+
+impl RtSummary {
+    /// `key=value` lines: ticks, missed, trigger, and p50/p99/p99.9/max of wake lateness (1 µs
+    /// resolution), compute time and input age (power-of-two bucket upper bounds) [ns].
+    pub fn report(&self) -> String {
+        use std::fmt::Write;
+        let mut s = format!(
+            "trigger={}\nticks={}\nmissed={}\n",
+            if self.lockstep { "lockstep" } else { "clock" },
+            self.ticks,
+            self.missed
+        );
+        let h = &self.lateness;
+        let _ = writeln!(
+            s,
+            "lateness_n={}\nlateness_p50_ns={}\nlateness_p99_ns={}\nlateness_p999_ns={}\nlateness_max_ns={}",
+            h.total,
+            h.quantile_upper_ns(0.5),
+            h.quantile_upper_ns(0.99),
+            h.quantile_upper_ns(0.999),
+            h.max_ns
+        );
+        for (name, h) in [
+            ("compute", &self.status.compute),
+            ("input_age", &self.status.input_age),
+        ] {
+            let _ = writeln!(
+                s,
+                "{name}_n={}\n{name}_mean_ns={:.0}\n{name}_p50_ns={}\n{name}_p99_ns={}\n{name}_p999_ns={}\n{name}_max_ns={}",
+                h.total,
+                h.mean_ns(),
+                h.quantile_upper_ns(0.5),
+                h.quantile_upper_ns(0.99),
+                h.quantile_upper_ns(0.999),
+                h.max_ns
+            );
+        }
+        s
+    }
+}
+
+/// The RT thread's body. Returns when `shared.stop` is set (after publishing zero currents), with
+/// the loop statistics; `None` if set-up failed (reported through `started`).
+pub fn run(setup: RtSetup) -> Option<RtSummary> {
     let RtSetup {
         config,
         mut params,
@@ -367,14 +574,14 @@ pub fn run(setup: RtSetup) {
                 "opening the {:?} backend: {e}",
                 config.raw.backend.kind
             )));
-            return;
+            return None;
         }
     };
     let rt_flags = match apply_rt_settings(&config) {
         Ok(f) => f,
         Err(e) => {
             let _ = started.send(Err(e));
-            return;
+            return None;
         }
     };
     shared.rt_flags.store(rt_flags, Ordering::Relaxed);
@@ -385,6 +592,10 @@ pub fn run(setup: RtSetup) {
     let l = &config.raw.loop_;
     let status_every = l.status_every_ticks;
     let count_from_tick = l.ready_after_ticks;
+    let lockstep = l.trigger == Trigger::Lockstep;
+    let wait_request = l.lockstep_wait_request;
+    let lockstep_timeout_ns = l.lockstep_timeout_ms.saturating_mul(1_000_000);
+    let mut lateness_fine = FineHistogram::new();
 
     let mut inputs = Inputs {
         states: Latest::new(JointStates::zeroed()),
@@ -405,17 +616,33 @@ pub fn run(setup: RtSetup) {
     let mut deadline = monotonic_ns() + period_ns;
 
     loop {
-        sleep_until(deadline);
-        let wake = monotonic_ns();
-        if shared.stop.load(Ordering::Relaxed) {
-            break;
-        }
         if count_allocs && tick == count_from_tick {
             alloc_count::set_counting(true);
         }
 
-        // 1. inputs
-        inputs.poll(&mut backend, tick);
+        // 0. wait (the only step that differs between the triggers) and 1. inputs
+        let mut timed_out = false;
+        if lockstep {
+            match wait_lockstep(
+                &mut backend,
+                &mut inputs,
+                tick,
+                &shared.stop,
+                wait_request,
+                lockstep_timeout_ns,
+            ) {
+                LockstepWake::Inputs => {}
+                LockstepWake::TimedOut => timed_out = true,
+                LockstepWake::Stop => break,
+            }
+        } else {
+            sleep_until(deadline);
+            if shared.stop.load(Ordering::Relaxed) {
+                break;
+            }
+            inputs.poll(&mut backend, tick);
+        }
+        let wake = monotonic_ns();
 
         // 2. parameter hand-over (the old set is freed by the supervisor, never here)
         if let Some(old) = parked_old.take()
@@ -442,21 +669,35 @@ pub fn run(setup: RtSetup) {
 
         // 3. compute
         let stale_after = params.stale_after_ticks;
-        let fresh = Freshness {
-            state_stale: inputs.states.stale(
-                tick,
-                wake,
-                inputs.states.value.stamp_ns,
-                stale_after,
-                period_ns,
-            ),
-            request_stale: inputs.request.stale(
-                tick,
-                wake,
-                inputs.request.value.stamp_ns,
-                stale_after,
-                period_ns,
-            ),
+        let fresh = if lockstep {
+            // Lockstep time is not wall time: no stamp-age rule. Its stand-in is the timeout: an
+            // input that did not arrive within `lockstep_timeout_ms` is stale at once.
+            Freshness {
+                state_stale: inputs.states.stale_by_ticks(tick, stale_after)
+                    || (timed_out && !inputs.states.new_in(tick)),
+                request_stale: inputs.request.stale_by_ticks(tick, stale_after)
+                    || (timed_out
+                        && !(inputs.request.new_in(tick)
+                            && (!wait_request
+                                || inputs.request.value.state_seq == inputs.states.value.seq))),
+            }
+        } else {
+            Freshness {
+                state_stale: inputs.states.stale(
+                    tick,
+                    wake,
+                    inputs.states.value.stamp_ns,
+                    stale_after,
+                    period_ns,
+                ),
+                request_stale: inputs.request.stale(
+                    tick,
+                    wake,
+                    inputs.request.value.stamp_ns,
+                    stale_after,
+                    period_ns,
+                ),
+            }
         };
         compute(
             &mut params,
@@ -475,7 +716,12 @@ pub fn run(setup: RtSetup) {
 
         // telemetry
         let s = &mut tele.status;
-        s.lateness.record(wake.saturating_sub(deadline));
+        if !lockstep {
+            // Lockstep has no deadline: its lateness histogram stays empty.
+            let late = wake.saturating_sub(deadline);
+            s.lateness.record(late);
+            lateness_fine.record(late);
+        }
         s.compute.record(done.saturating_sub(wake));
         if inputs.states.have {
             let age = wake.saturating_sub(inputs.states.value.stamp_ns);
@@ -518,7 +764,7 @@ pub fn run(setup: RtSetup) {
         // next absolute deadline; skip whole missed periods (no catch-up bursts)
         deadline += period_ns;
         let now = monotonic_ns();
-        if now >= deadline {
+        if !lockstep && now >= deadline {
             let skipped = (now - deadline) / period_ns + 1;
             missed += skipped;
             deadline += skipped * period_ns;
@@ -550,6 +796,13 @@ pub fn run(setup: RtSetup) {
     if let Some(old) = parked_old {
         drop(old); // stopping: allocation rules no longer apply
     }
+    Some(RtSummary {
+        ticks: tick,
+        missed,
+        lockstep,
+        lateness: lateness_fine,
+        status: Box::new(tele.status),
+    })
 }
 
 #[cfg(test)]

@@ -185,10 +185,58 @@ impl Plant {
         js.stamp_ns = now;
         let mut rq = *rq;
         rq.seq = self.seq;
+        rq.state_seq = self.seq;
         rq.stamp_ns = now;
         self.request.publish(&rq).unwrap();
         self.states.publish(&js).unwrap();
         self.seq
+    }
+
+    /// Lockstep step 1: publishes `js` alone with a fresh stamp and the next seq; returns it.
+    pub fn publish_state(&mut self, js: &JointStates) -> u64 {
+        self.seq += 1;
+        let mut js = *js;
+        js.seq = self.seq;
+        js.stamp_ns = monotonic_ns();
+        self.states.publish(&js).unwrap();
+        self.seq
+    }
+
+    /// Lockstep step 2: publishes `rq` answering the state `state_seq`.
+    pub fn publish_request(&mut self, rq: &TorqueRequest, state_seq: u64) {
+        let mut rq = *rq;
+        rq.seq = state_seq;
+        rq.state_seq = state_seq;
+        rq.stamp_ns = monotonic_ns();
+        self.request.publish(&rq).unwrap();
+    }
+
+    /// Waits until the daemon's ports exist (its status publisher is the last one it opens).
+    pub fn wait_for_daemon(&self, timeout: Duration) {
+        let ch = self.ipc.daemon_status().unwrap();
+        let t0 = Instant::now();
+        while ch.publisher_count() == 0 {
+            assert!(t0.elapsed() < timeout, "frictiond did not open its ports");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    /// Waits for the command answering state `seq` (newer ones also end the wait); `None` after
+    /// `timeout`.
+    pub fn command_for(&mut self, seq: u64, timeout: Duration) -> Option<MotorCurrentCommand> {
+        let t0 = Instant::now();
+        loop {
+            if let Some(c) = self.cmd.latest().unwrap()
+                && c.state_seq >= seq
+            {
+                return Some(c);
+            }
+            let left = timeout.saturating_sub(t0.elapsed());
+            if left.is_zero() {
+                return None;
+            }
+            self.cmd.wait(left.min(Duration::from_millis(5))).unwrap();
+        }
     }
 
     /// Keeps publishing `js`/`rq` every ms until a command answers a state sent in this call and
@@ -294,4 +342,118 @@ pub fn current_ref(
         f
     };
     ((tau_des + kfc * f) / (kt * r)).clamp(-max_i, max_i)
+}
+
+/// Generous bound for anything the tests wait for (no timing asserts).
+pub const T: Duration = Duration::from_secs(20);
+
+/// Three joints: none / CV / SCV with different signs, constants and clamps; no LPF so each tick
+/// is exact.
+pub const THREE_JOINTS: &str = r#"
+[loop]
+period_us = 1000
+status_every_ticks = 10
+ready_after_ticks = 10
+
+[safety]
+stale_after_ticks = 20
+on_stale = "zero"
+
+[[joint]]
+name = "plain"
+index = 0
+gear_ratio = 100.0
+kt = 0.157
+max_curr = 5.0
+friction_model = "none"
+
+[[joint]]
+name = "knee_cv"
+index = 1
+gear_ratio = -100.0
+kt = 0.157
+max_curr = 5.0
+kfc = 0.85
+max_output_friction = 6.0
+joint_velocity_threshold_rad_s = 0.05
+friction_model = "cv"
+kc = 8.1
+ka = 50.84
+kv = 5.55
+
+[[joint]]
+name = "ankle_scv"
+index = 2
+gear_ratio = -160.0
+kt = 0.0665
+max_curr = 3.0
+kfc = 0.7
+max_output_friction = 8.0
+friction_model = "coulomb_viscous_stribeck"
+kc = 1.0005
+ka = 2.78
+kv = 0.29
+ks = 6.0
+vs = 0.13
+alpha = 0.6
+"#;
+
+/// Expected currents of [`THREE_JOINTS`] for torques `tau` and joint velocities `v` (references
+/// above, not the daemon's code).
+pub fn expected(tau: [f64; 3], v: [f64; 3]) -> [f64; 3] {
+    [
+        current_ref(
+            tau[0],
+            0.0,
+            v[0],
+            0.0,
+            f64::INFINITY,
+            1.0,
+            0.157,
+            100.0,
+            5.0,
+        ),
+        current_ref(
+            tau[1],
+            cv_ref(8.1, 50.84, 5.55, v[1]),
+            v[1],
+            0.05,
+            6.0,
+            0.85,
+            0.157,
+            -100.0,
+            5.0,
+        ),
+        current_ref(
+            tau[2],
+            scv_ref(1.0005, 2.78, 0.29, 6.0, 0.13, 0.6, v[2]),
+            v[2],
+            0.0,
+            8.0,
+            0.7,
+            0.0665,
+            -160.0,
+            3.0,
+        ),
+    ]
+}
+
+/// States and a request (all three joints enabled) for [`THREE_JOINTS`].
+pub fn inputs(tau: [f64; 3], v: [f64; 3]) -> (JointStates, TorqueRequest) {
+    let mut js = JointStates::zeroed();
+    js.n_joints = 3;
+    let mut rq = TorqueRequest::zeroed();
+    rq.n_joints = 3;
+    rq.enable_mask = 0b111;
+    for k in 0..3 {
+        js.sdot_rad_s[k] = v[k];
+        js.omega_motor_rad_s[k] = v[k] * 100.0;
+        rq.tau_des_nm[k] = tau[k];
+    }
+    (js, rq)
+}
+
+/// Equal to 1e-9 relative (+1e-9 absolute).
+pub fn close(a: f64, b: f64) -> bool {
+    (a - b).abs() <= 1e-9 * (1.0 + b.abs())
 }

@@ -31,9 +31,15 @@ pub trait Backend {
     fn publish_command(&mut self, cmd: &MotorCurrentCommand) -> Result<(), IoError>;
     /// Sends a status snapshot.
     fn publish_status(&mut self, status: &DaemonStatus) -> Result<(), IoError>;
-    /// Blocks until new input may be available or `timeout_ns` passed; `Ok(true)` if woken by
-    /// input. Used only by the lockstep trigger (`[loop] trigger = "lockstep"`).
+    /// Blocks until new input (a joint state) may be available or `timeout_ns` passed;
+    /// `Ok(true)` if woken by input. Spurious wake-ups are allowed (the caller re-polls). Used
+    /// only by the lockstep trigger (`[loop] trigger = "lockstep"`).
     fn wait_input(&mut self, timeout_ns: u64) -> Result<bool, IoError>;
+    /// Like [`Backend::wait_input`], but for the torque request: the lockstep trigger calls it
+    /// when it has the new state and misses only the request answering it. Default: `wait_input`.
+    fn wait_request(&mut self, timeout_ns: u64) -> Result<bool, IoError> {
+        self.wait_input(timeout_ns)
+    }
     /// Field-bus counters since start (zero for shared memory).
     fn bus_counters(&self) -> BusCounters {
         BusCounters::zeroed()
@@ -94,6 +100,13 @@ impl Backend for AnyBackend {
         match self {
             Self::Shm(b) => b.wait_input(timeout_ns),
             Self::Can(b) => b.wait_input(timeout_ns),
+        }
+    }
+    #[inline]
+    fn wait_request(&mut self, timeout_ns: u64) -> Result<bool, IoError> {
+        match self {
+            Self::Shm(b) => b.wait_request(timeout_ns),
+            Self::Can(b) => b.wait_request(timeout_ns),
         }
     }
     #[inline]

@@ -71,17 +71,14 @@ impl Backend for ShmBackend {
         alloc_count::exempt(|| self.status.publish(status))
     }
     fn wait_input(&mut self, timeout_ns: u64) -> Result<bool, IoError> {
-        // Wait on the states listener in short slices and peek at the request listener between
-        // them: either kind of input wakes the lockstep tick.
-        let slice = Duration::from_nanos(timeout_ns.min(200_000));
-        let deadline = frictionless_shm_types::monotonic_ns().saturating_add(timeout_ns);
-        loop {
-            if self.states.wait(slice)? | self.request.wait(Duration::ZERO)? {
-                return Ok(true);
-            }
-            if frictionless_shm_types::monotonic_ns() >= deadline {
-                return Ok(false);
-            }
-        }
+        // One blocking `Listener::timed_wait` on the states' event service (0 allocations). An
+        // iceoryx2 WaitSet over both listeners would be the textbook choice, but it allocates
+        // twice per wake-up (measured, realtime-ipc-can.md §2.6) and `Inbox` does not expose its
+        // listener; the lockstep trigger instead waits on the listener of the input it misses
+        // (`wait_request` for the request), re-polling both after every wake.
+        self.states.wait(Duration::from_nanos(timeout_ns))
+    }
+    fn wait_request(&mut self, timeout_ns: u64) -> Result<bool, IoError> {
+        self.request.wait(Duration::from_nanos(timeout_ns))
     }
 }

@@ -1,0 +1,210 @@
+//! `frictiond` with `[loop] trigger = "lockstep"` against the test process as the plant (real
+//! processes, real iceoryx2): one tick per joint state, no sleeping (the protocol in the README /
+//! preamble). Each test uses its own iceoryx2 root path and service prefix. No timing asserts; the
+//! throughput test prints ticks/s.
+
+mod daemon_support;
+
+use std::time::{Duration, Instant};
+
+use daemon_support::*;
+use frictionless_shm_types::{FLAG_STALE, JointStates, TorqueRequest};
+
+/// [`THREE_JOINTS`] with the lockstep trigger. The timeout is long so no tick runs on it while the
+/// test drives the loop (a slow CI machine must not turn into spurious timeout ticks).
+fn lockstep_config(wait_request: bool, timeout_ms: u64, ready_after: u64) -> String {
+    THREE_JOINTS.replace(
+        "[loop]\nperiod_us = 1000\nstatus_every_ticks = 10\nready_after_ticks = 10\n",
+        &format!(
+            "[loop]\nperiod_us = 1000\nstatus_every_ticks = 10\nready_after_ticks = {ready_after}\n\
+             trigger = \"lockstep\"\nlockstep_wait_request = {wait_request}\nlockstep_timeout_ms = {timeout_ms}\n"
+        ),
+    )
+}
+
+/// A scripted, changing state/request sequence (covers clip, no clip, clamp, sign changes).
+fn script(k: u64) -> ([f64; 3], [f64; 3]) {
+    let x = k as f64 * 0.37;
+    (
+        [3.0 * x.sin(), 40.0 * (0.5 * x).cos(), 2.0 * (0.3 * x).sin()],
+        [
+            0.5 * x.cos(),
+            0.08 * (1.3 * x).sin(),
+            -0.4 * (0.7 * x).sin(),
+        ],
+    )
+}
+
+#[test]
+fn commands_follow_the_law_one_per_state_with_matching_state_seq() {
+    let env = TestEnv::new("lsdet");
+    let cfg = env.write_config(&lockstep_config(true, 10_000, 10));
+    let mut d = Daemon::start(&cfg, &[]);
+    let mut plant = Plant::open(&env.ipc, "plant");
+    plant.wait_for_daemon(T);
+    let mut last_cmd_seq = None;
+    for _ in 0..300 {
+        let (tau, v) = script(plant.seq + 1);
+        let (js, rq) = inputs(tau, v);
+        let k = plant.publish_state(&js);
+        plant.publish_request(&rq, k);
+        let c = plant
+            .command_for(k, T)
+            .unwrap_or_else(|| panic!("no command for state {k}"));
+        assert_eq!(c.state_seq, k, "the command answers exactly this state");
+        let want = expected(tau, v);
+        for j in 0..3 {
+            assert!(
+                close(c.i_ref_a[j], want[j]),
+                "state {k} joint {j}: {} vs {}",
+                c.i_ref_a[j],
+                want[j]
+            );
+            assert_eq!(c.flags[j] & FLAG_STALE, 0, "state {k} joint {j}");
+        }
+        assert_eq!(c.valid_mask, 0b111);
+        // One tick (one command) per state: the daemon's command seq advances by exactly one.
+        if let Some(prev) = last_cmd_seq {
+            assert_eq!(c.seq, prev + 1, "extra or missing tick before state {k}");
+        }
+        last_cmd_seq = Some(c.seq);
+    }
+    // No deadline in lockstep: no misses, no lateness samples.
+    let (tau, v) = script(0);
+    let (js, rq) = inputs(tau, v);
+    let s = loop {
+        let k = plant.publish_state(&js);
+        plant.publish_request(&rq, k);
+        plant.command_for(k, T).expect("command");
+        if let Some(s) = plant.status.latest().unwrap()
+            && s.ticks >= 300
+        {
+            break s;
+        }
+    };
+    assert_eq!(s.missed_deadlines, 0);
+    assert_eq!(s.lateness.total, 0, "lateness is not recorded in lockstep");
+    assert!(s.compute.total >= 300);
+    assert!(d.alive());
+    d.signal(libc::SIGTERM);
+    let (st, log) = d.wait_exit(T);
+    assert!(st.success(), "{log}");
+}
+
+#[test]
+fn with_wait_request_no_command_until_the_answering_request_arrives() {
+    let env = TestEnv::new("lswait");
+    let cfg = env.write_config(&lockstep_config(true, 10_000, 10));
+    let _d = Daemon::start(&cfg, &[]);
+    let mut plant = Plant::open(&env.ipc, "plant");
+    plant.wait_for_daemon(T);
+    let (js, rq) = inputs([1.0, 1.0, 1.0], [0.2, 0.2, 0.2]);
+    // Prime: one complete step.
+    let k = plant.publish_state(&js);
+    plant.publish_request(&rq, k);
+    assert_eq!(plant.command_for(k, T).expect("first command").state_seq, k);
+    for round in 0..5 {
+        let k = plant.publish_state(&js);
+        // No request yet: nothing answers state k.
+        assert!(
+            plant.command_for(k, Duration::from_millis(200)).is_none(),
+            "round {round}: a command for state {k} came before its request"
+        );
+        // A request answering an older state does not release the tick either.
+        plant.publish_request(&rq, k - 1);
+        let early = plant.command_for(k, Duration::from_millis(200));
+        assert!(
+            early.is_none(),
+            "round {round}: a request for state {} released state {k}: {early:?}",
+            k - 1
+        );
+        // The answering request does, with the request's torques.
+        let (_, rq2) = inputs([2.0, -1.0, 0.5], [0.2, 0.2, 0.2]);
+        plant.publish_request(&rq2, k);
+        let c = plant.command_for(k, T).expect("command after the request");
+        assert_eq!(c.state_seq, k);
+        let want = expected([2.0, -1.0, 0.5], [0.2, 0.2, 0.2]);
+        assert!((0..3).all(|j| close(c.i_ref_a[j], want[j])), "{c:?}");
+    }
+}
+
+#[test]
+fn without_wait_request_every_state_ticks_and_a_timeout_makes_inputs_stale() {
+    let env = TestEnv::new("lsnowait");
+    let cfg = env.write_config(&lockstep_config(false, 300, 10));
+    let _d = Daemon::start(&cfg, &[]);
+    let mut plant = Plant::open(&env.ipc, "plant");
+    plant.wait_for_daemon(T);
+    let (js, rq) = inputs([1.0, 1.0, 1.0], [0.2, 0.2, 0.2]);
+    plant.publish_request(&rq, 0);
+    let want = expected([1.0, 1.0, 1.0], [0.2, 0.2, 0.2]);
+    for _ in 0..20 {
+        let k = plant.publish_state(&js);
+        let c = plant.command_for(k, T).expect("a command per state");
+        assert_eq!(c.state_seq, k);
+        assert!((0..3).all(|j| close(c.i_ref_a[j], want[j])), "{c:?}");
+    }
+    // The plant goes silent: after lockstep_timeout_ms a tick runs anyway, flagged stale, 0 A.
+    let c = plant.until_silent(T, |c| c.flags[0] & FLAG_STALE != 0);
+    assert_eq!(&c.i_ref_a[..3], &[0.0; 3]);
+    // And recovers on the next state.
+    let c = plant.until(&js, &rq, T, |c| c.flags[0] & FLAG_STALE == 0);
+    assert!((0..3).all(|j| close(c.i_ref_a[j], want[j])), "{c:?}");
+}
+
+#[test]
+fn throughput_and_zero_allocations_over_20k_lockstep_ticks() {
+    const READY_AFTER: u64 = 1_000;
+    const TICKS: u64 = 20_000;
+    let env = TestEnv::new("lsthru");
+    let cfg = env.write_config(&lockstep_config(true, 10_000, READY_AFTER));
+    let report = env.dir.join("alloc.txt");
+    let mut d = Daemon::start(
+        &cfg,
+        &[("FRICTIOND_ALLOC_REPORT", report.to_str().unwrap())],
+    );
+    let mut plant = Plant::open(&env.ipc, "plant");
+    plant.wait_for_daemon(T);
+    let (mut js, mut rq): (JointStates, TorqueRequest) = inputs([0.0; 3], [0.0; 3]);
+    let mut step = |plant: &mut Plant, k: u64| {
+        let (tau, v) = script(k);
+        for j in 0..3 {
+            js.sdot_rad_s[j] = v[j];
+            rq.tau_des_nm[j] = tau[j];
+        }
+        let s = plant.publish_state(&js);
+        plant.publish_request(&rq, s);
+        let c = plant.command_for(s, T).expect("command");
+        assert_eq!(c.state_seq, s);
+    };
+    for k in 0..READY_AFTER + 10 {
+        step(&mut plant, k);
+    }
+    let t0 = Instant::now();
+    for k in 0..TICKS {
+        step(&mut plant, k);
+    }
+    let dt = t0.elapsed().as_secs_f64();
+    eprintln!(
+        "lockstep throughput: {TICKS} state→request→command round trips in {dt:.2} s = {:.0} ticks/s ({:.1} µs per tick)",
+        TICKS as f64 / dt,
+        dt / TICKS as f64 * 1e6
+    );
+    d.signal(libc::SIGTERM);
+    let (st, log) = d.wait_exit(T);
+    assert!(st.success(), "{log}");
+    let text = std::fs::read_to_string(&report).expect("allocation report");
+    let get = |key: &str| -> u64 {
+        text.lines()
+            .find_map(|l| l.strip_prefix(&format!("{key}=")))
+            .unwrap_or_else(|| panic!("{key} missing in {text}"))
+            .parse()
+            .unwrap()
+    };
+    assert!(get("rt_counted_ticks") >= TICKS, "{text}");
+    assert_eq!(
+        get("rt_allocations"),
+        0,
+        "lockstep RT-thread allocations: {text}"
+    );
+}
