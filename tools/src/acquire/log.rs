@@ -200,6 +200,32 @@ impl<W: Write> CsvLog<W> {
     }
 }
 
+/// [`Sidecar::source`] of logs made offline against the simulator (truth columns present).
+pub const SOURCE_OFFLINE_SIM: &str = "offline-sim";
+/// [`Sidecar::source`] of logs made live against a plant over shared memory (no truth columns:
+/// the process only sees what a robot would report).
+pub const SOURCE_LIVE_SHM: &str = "live-shm";
+
+/// Connection facts of a live acquisition (sidecar field `live`).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct LiveInfo {
+    /// iceoryx2 service prefix.
+    pub prefix: String,
+    /// iceoryx2 root path (`None` = iceoryx2's default).
+    pub root_path: Option<String>,
+    /// Payload index of the acquired joint.
+    pub joint_index: usize,
+    /// `seq` of the first state used (time 0 of the log).
+    pub first_seq: u64,
+    /// States received.
+    pub states_received: u64,
+    /// States skipped (gaps in `seq`): samples the plant stepped without a fresh command from us.
+    pub states_skipped: u64,
+    /// Whether a `SimTruth` publisher was connected (the plant is a simulator); its truth is not
+    /// logged.
+    pub plant_publishes_sim_truth: bool,
+}
+
 /// The JSON sidecar written next to a log.
 #[derive(Clone, Debug, Serialize)]
 pub struct Sidecar<'a> {
@@ -215,15 +241,20 @@ pub struct Sidecar<'a> {
     pub kt_nm_per_a: f64,
     /// Control/log period [s].
     pub sample_period_s: f64,
-    /// Whether the log comes from the simulator (then the truth columns are present).
+    /// Whether the log comes from the offline simulator (then the truth columns are present).
     pub simulated: bool,
+    /// Where the samples came from: [`SOURCE_OFFLINE_SIM`] or [`SOURCE_LIVE_SHM`].
+    pub source: &'static str,
+    /// Live runs: the connection and what was received.
+    pub live: Option<LiveInfo>,
     /// RNG seed of the simulator.
     pub seed: Option<u64>,
     /// Initial winding temperature drawn from the seed [°C].
     pub initial_temperature_c: Option<f64>,
     /// The preset name or file.
     pub preset: &'a str,
-    /// Full plant parameters (simulated runs).
+    /// Full plant parameters: the simulator's (offline runs) or, for live runs, the preset whose
+    /// nominal values (signed r, k_t, J_eq, link, i_max) the protocol's controllers used.
     pub plant: Option<&'a PlantParams>,
     /// Full protocol configuration.
     pub protocol: &'a ProtocolConfig,

@@ -8,7 +8,8 @@
 //! until the block ends and those samples are marked inactive.
 //!
 //! The seam to the hardware is [`JointIo`]: the offline simulator implements it here
-//! ([`SimJoint`]); a live plant over shared memory implements the same trait later. Controllers only
+//! ([`SimJoint`]); a live plant over shared memory implements it in
+//! [`crate::serve::shm::LiveJoint`]. Controllers only
 //! see [`Measurement`]s (quantised encoders, noisy current), never the simulator's truth.
 //!
 //! What it is not: file output ([`crate::acquire::log`]) or a label pipeline.
@@ -323,8 +324,12 @@ pub struct RunSummary {
     pub duration_s: f64,
 }
 
-/// First-order filtered encoder-difference velocity.
-struct VelocityEstimator {
+/// Causal joint-velocity estimator: the encoder difference (s_k − s_{k−1})/T through a first-order
+/// low-pass filter with cut-off `cutoff_hz` (exact discretisation, α = 1 − e^{−2π·f_c·T}). The
+/// protocol's controllers use it, and `frictl sim serve` uses the same estimator to fill
+/// `JointStates::sdot_rad_s`, as a robot's drive reports a filtered encoder velocity.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VelocityEstimator {
     alpha: f64,
     period_s: f64,
     last_s: f64,
@@ -332,10 +337,26 @@ struct VelocityEstimator {
 }
 
 impl VelocityEstimator {
-    fn update(&mut self, s_rad: f64) -> f64 {
+    /// An estimator at rest (ṡ = 0) at position `s0_rad`, sampled every `period_s`.
+    pub fn new(cutoff_hz: f64, period_s: f64, s0_rad: f64) -> Self {
+        Self {
+            alpha: 1.0 - (-std::f64::consts::TAU * cutoff_hz * period_s).exp(),
+            period_s,
+            last_s: s0_rad,
+            v: 0.0,
+        }
+    }
+
+    /// Feeds the next position sample [rad] and returns the velocity estimate [rad/s].
+    pub fn update(&mut self, s_rad: f64) -> f64 {
         let raw = (s_rad - self.last_s) / self.period_s;
         self.last_s = s_rad;
         self.v += self.alpha * (raw - self.v);
+        self.v
+    }
+
+    /// The latest estimate [rad/s].
+    pub fn velocity_rad_s(&self) -> f64 {
         self.v
     }
 }
@@ -350,12 +371,7 @@ pub fn run(
 ) -> Result<RunSummary, AcquireError> {
     let ts = model.period_s;
     let mut meas = io.measurement();
-    let mut vel = VelocityEstimator {
-        alpha: 1.0 - (-std::f64::consts::TAU * cfg.velocity_filter_hz * ts).exp(),
-        period_s: ts,
-        last_s: meas.s_rad,
-        v: 0.0,
-    };
+    let mut vel = VelocityEstimator::new(cfg.velocity_filter_hz, ts, meas.s_rad);
     let margin = cfg.limit_margin_deg.to_radians();
     let (lim_lo, lim_hi) = (cfg.range_lo_rad + margin, cfg.range_hi_rad - margin);
     let mut summary = RunSummary::default();

@@ -1,15 +1,21 @@
 //! `frictl acquire` — run the excitation protocol and log a dataset (CSV + JSON sidecar).
 //!
-//! Offline against the simulator (the only plant for now); a live plant over shared memory plugs in
-//! through `frictl::acquire::JointIo` once the shm ABI exists.
+//! Offline against the simulator (default: fast, truth columns included), or live against a plant
+//! over shared memory (`--live-shm`: [`frictl::serve::shm::LiveJoint`], e.g. `frictl sim serve`),
+//! through the same `frictl::acquire::JointIo` seam and the same controllers.
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
+use std::time::Duration;
 
 use anyhow::Context;
-use frictl::acquire::log::{CsvLog, Sidecar, columns};
+use frictl::acquire::log::{
+    CsvLog, LiveInfo, SOURCE_LIVE_SHM, SOURCE_OFFLINE_SIM, Sidecar, columns,
+};
 use frictl::acquire::protocol::run as run_protocol;
-use frictl::acquire::protocol::{ControllerModel, SimJoint, schedule_duration_s};
+use frictl::acquire::protocol::{
+    AcquireError, ControllerModel, JointIo, SimJoint, schedule_duration_s,
+};
 use frictl::acquire::{ProtocolConfig, schedule};
 use frictl::sim::params::load_table;
 use frictl::sim::{Plant, PlantParams};
@@ -32,9 +38,34 @@ pub struct Args {
     /// Output directory (created if missing).
     #[arg(long)]
     pub out: PathBuf,
-    /// Base name of the files (default `<joint>_seed<seed>`): NAME.csv and NAME.json.
+    /// Base name of the files (default `<joint>_seed<seed>`, live `<joint>_live`): NAME.csv and
+    /// NAME.json.
     #[arg(long)]
     pub name: Option<String>,
+    /// Acquire live from a plant over iceoryx2 shared memory (e.g. `frictl sim serve`) instead of
+    /// the offline simulator. This process drives the joint's current directly, as on the robot:
+    /// it publishes `<prefix>/motor_current_command` (only --joint-index valid; the plant gives
+    /// other joints 0 A) answering each `<prefix>/joint_states` sample with its seq, so frictiond
+    /// must NOT run on the same prefix. Works against a real-time (1 kHz) or a --lockstep plant.
+    /// --preset still supplies the protocol and the controllers' nominal model (signed r, k_t,
+    /// J_eq, link, i_max). The CSV has no truth columns; the sidecar says `source = "live-shm"`.
+    #[arg(long)]
+    pub live_shm: bool,
+    /// Live: service-name prefix.
+    #[arg(long, default_value = "frictionless")]
+    pub prefix: String,
+    /// Live: iceoryx2 root directory; default: iceoryx2's.
+    #[arg(long)]
+    pub root_path: Option<PathBuf>,
+    /// Live: payload index of the joint to excite (the j-th preset of `frictl sim serve --preset`).
+    #[arg(long, default_value_t = 0)]
+    pub joint_index: usize,
+    /// Live: wait this long for the first joint state [s].
+    #[arg(long, default_value_t = 10.0)]
+    pub connect_timeout_s: f64,
+    /// Live: fail if the next joint state does not arrive within this time [ms].
+    #[arg(long, default_value_t = 1000)]
+    pub state_timeout_ms: u64,
 }
 
 /// Runs `frictl acquire`.
@@ -45,17 +76,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let blocks = schedule(&protocol);
     anyhow::ensure!(!blocks.is_empty(), "the protocol has no enabled blocks");
 
-    let name = args
-        .name
-        .clone()
-        .unwrap_or_else(|| format!("{}_seed{}", plant_params.joint, args.seed));
+    let name = args.name.clone().unwrap_or_else(|| {
+        if args.live_shm {
+            format!("{}_live", plant_params.joint)
+        } else {
+            format!("{}_seed{}", plant_params.joint, args.seed)
+        }
+    });
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output directory {}", args.out.display()))?;
     let csv_path = args.out.join(format!("{name}.csv"));
     let json_path = args.out.join(format!("{name}.json"));
 
-    let plant = Plant::from_params(plant_params.clone(), args.seed)?;
-    let t0 = plant.state().temperature_c;
     let period_s = plant_params.sample_period_s();
     let total = (schedule_duration_s(&blocks) / period_s).round() as u64;
     let link = frictl::sim::link::link_from_model(&plant_params.link)?;
@@ -67,14 +99,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         period_s,
         link: link.as_ref(),
     };
-    let mut joint = SimJoint {
-        plant,
-        tau_ext_nm: 0.0,
-    };
 
+    let with_truth = !args.live_shm;
     let file = std::fs::File::create(&csv_path)
         .with_context(|| format!("cannot create {}", csv_path.display()))?;
-    let mut log = CsvLog::new(std::io::BufWriter::with_capacity(1 << 20, file), true)?;
+    let mut log = CsvLog::new(std::io::BufWriter::with_capacity(1 << 20, file), with_truth)?;
     let bar = if std::io::stderr().is_terminal() {
         indicatif::ProgressBar::new(total)
     } else {
@@ -86,13 +115,57 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     let started = std::time::Instant::now();
     let mut n = 0u64;
-    let summary = run_protocol(&mut joint, &model, &protocol, &blocks, &mut |row| {
+    let mut sink = |row: &frictl::acquire::LogRow| -> Result<(), AcquireError> {
         n += 1;
-        if n.is_multiple_of(10_000) {
+        if n.is_multiple_of(if args.live_shm { 100 } else { 10_000 }) {
             bar.set_position(n);
         }
         log.write(row)
-    })?;
+    };
+
+    let mut t0 = None;
+    let mut live_info = None;
+    let summary = if args.live_shm {
+        let stop = frictl::serve::install_stop_flag()?;
+        anyhow::ensure!(
+            args.connect_timeout_s.is_finite() && args.connect_timeout_s > 0.0,
+            "--connect-timeout-s must be > 0, got {}",
+            args.connect_timeout_s
+        );
+        let cfg = frictionless_shm_types::IpcConfig::new(args.root_path.as_deref(), &args.prefix);
+        let mut joint = frictl::serve::shm::LiveJoint::connect(
+            &cfg,
+            args.joint_index,
+            period_s,
+            Duration::from_secs_f64(args.connect_timeout_s),
+            Duration::from_millis(args.state_timeout_ms),
+            stop,
+        )?;
+        let result = run_protocol(&mut joint, &model, &protocol, &blocks, &mut sink);
+        // Leave the joint at 0 A whatever happened (the plant also zeroes after its timeout).
+        let released = joint.release();
+        live_info = Some(LiveInfo {
+            prefix: args.prefix.clone(),
+            root_path: args.root_path.as_ref().map(|p| p.display().to_string()),
+            joint_index: args.joint_index,
+            first_seq: joint.first_seq(),
+            states_received: joint.states_received,
+            states_skipped: joint.states_skipped,
+            plant_publishes_sim_truth: joint.plant_publishes_sim_truth,
+        });
+        let summary = result?;
+        released?;
+        summary
+    } else {
+        let plant = Plant::from_params(plant_params.clone(), args.seed)?;
+        t0 = Some(plant.state().temperature_c);
+        let mut joint = SimJoint {
+            plant,
+            tau_ext_nm: 0.0,
+        };
+        let io: &mut dyn JointIo = &mut joint;
+        run_protocol(io, &model, &protocol, &blocks, &mut sink)?
+    };
     bar.finish_and_clear();
     log.finish()?
         .into_inner()
@@ -110,14 +183,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         gear_ratio_signed: plant_params.gear_ratio_signed,
         kt_nm_per_a: plant_params.kt_nm_per_a,
         sample_period_s: period_s,
-        simulated: true,
-        seed: Some(args.seed),
-        initial_temperature_c: Some(t0),
+        simulated: !args.live_shm,
+        source: if args.live_shm {
+            SOURCE_LIVE_SHM
+        } else {
+            SOURCE_OFFLINE_SIM
+        },
+        live: live_info,
+        seed: (!args.live_shm).then_some(args.seed),
+        initial_temperature_c: t0,
         preset: &args.preset,
         plant: Some(&plant_params),
         protocol: &protocol,
         csv: &csv_name,
-        columns: columns(true),
+        columns: columns(with_truth),
         chunks: &blocks,
         summary: &summary,
     };

@@ -2,7 +2,9 @@
 //!
 //! `frictl sim run`: an offline open-loop run of a preset with a current profile, logged as CSV (the
 //! same columns as `frictl acquire`, truth included). `frictl sim params`: print the merged parameters.
-//! `frictl sim serve` (an iceoryx2 plant process) is not built yet: it needs the shared-memory ABI.
+//! `frictl sim serve`: the joints as a plant process — over iceoryx2 (`--backend shm`, real time or
+//! lockstep, [`frictl::serve::shm`]) or as motor drives on SocketCAN (`--backend can`,
+//! [`frictl::serve::can`]).
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -67,8 +69,102 @@ pub enum SimCommand {
         #[command(flatten)]
         params: ParamArgs,
     },
-    /// Serve the plant over iceoryx2 (not built yet: needs the shared-memory ABI).
-    Serve,
+    /// Serve the joints as a plant process (iceoryx2 or SocketCAN) for frictiond and experiments.
+    ///
+    /// `--backend shm`: publishes `<prefix>/joint_states` and `<prefix>/sim_truth` (same seq),
+    /// applies the newest `<prefix>/motor_current_command` (joint j gets i_ref_a[j] when bit j of
+    /// valid_mask is set, else 0 A; a command is held for --command-timeout-ms, then 0 A) and the
+    /// newest `<prefix>/sim_disturbance` (external joint torque, held until replaced). Joint j of
+    /// every payload is the j-th name of --preset. JointStates carries the emulated sensors
+    /// (quantised encoders, noisy current, temperature or NaN) and as s_dot the same causal
+    /// filtered encoder-difference velocity frictl acquire uses (cut-off
+    /// protocol.velocity_filter_hz); tau_meas_nm is NaN. seq starts at 1 at simulated time 0.
+    ///
+    /// Real time (default): 1 kHz on absolute CLOCK_MONOTONIC deadlines. --lockstep: no sleeping;
+    /// after publishing state k the plant waits for the command with state_seq = k (up to
+    /// --lockstep-timeout-ms, then a warning and the hold/zero rule in simulated time), steps 1 ms
+    /// and publishes k+1; before state 1 it waits for a command publisher and
+    /// --lockstep-subscribers joint-state subscribers.
+    ///
+    /// Prints "ready" on stderr once the services are open and a one-line summary at exit
+    /// (SIGINT/SIGTERM or --duration-s). Removes dead iceoryx2 nodes under the root at start.
+    ///
+    /// `--backend can`: the joints answer as motor drives on --bus (MIT or ODrive protocol,
+    /// node ids --node-ids).
+    Serve(Box<ServeArgs>),
+}
+
+/// Transport of `frictl sim serve`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Backend {
+    /// iceoryx2 shared memory (`frictionless-shm-types` services).
+    Shm,
+    /// SocketCAN motor drives.
+    Can,
+}
+
+/// CAN motor protocol of `frictl sim serve --backend can`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CanProtocol {
+    /// MIT mini-cheetah style drives.
+    Mit,
+    /// ODrive CAN simple protocol.
+    Odrive,
+}
+
+/// Arguments of `frictl sim serve`.
+#[derive(clap::Args, Debug)]
+pub struct ServeArgs {
+    /// Comma-separated presets or preset files, one joint each: joint j = the j-th name
+    /// (e.g. `knee,ankle_roll`: knee = 0, ankle_roll = 1).
+    #[arg(long, default_value = "knee,ankle_roll")]
+    pub preset: String,
+    /// TOML file deep-merged over every preset (same layout).
+    #[arg(long)]
+    pub params: Option<PathBuf>,
+    /// Override one parameter of every preset, e.g. `--set plant.sigma0_nm_per_rad=3e4`.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub sets: Vec<String>,
+    /// Seed; joint j uses seed + j (initial temperature, current noise).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Transport.
+    #[arg(long, value_enum, default_value_t = Backend::Shm)]
+    pub backend: Backend,
+    /// shm: service-name prefix (`<prefix>/joint_states`, …).
+    #[arg(long, default_value = "frictionless")]
+    pub prefix: String,
+    /// shm: iceoryx2 root directory; default: iceoryx2's.
+    #[arg(long)]
+    pub root_path: Option<PathBuf>,
+    /// shm: advance one 1 ms tick per answering command instead of running in real time.
+    #[arg(long)]
+    pub lockstep: bool,
+    /// shm, lockstep: wait this long for the command answering a state [ms].
+    #[arg(long, default_value_t = 1000)]
+    pub lockstep_timeout_ms: u64,
+    /// shm, lockstep: joint-state subscribers to wait for before publishing state 1.
+    #[arg(long, default_value_t = 1)]
+    pub lockstep_subscribers: usize,
+    /// Hold a command at most this long, then 0 A [ms] (simulated ms in lockstep).
+    #[arg(long, default_value_t = 20)]
+    pub command_timeout_ms: u64,
+    /// Stop after this much simulated time [s] (default: until SIGINT/SIGTERM).
+    #[arg(long)]
+    pub duration_s: Option<f64>,
+    /// Initial joint angles [rad], one per joint, comma-separated (at rest, gravity held by the
+    /// flexspline); default: each preset's plant.initial_s_rad.
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+    pub initial_pose_rad: Vec<f64>,
+    /// can: SocketCAN interface.
+    #[arg(long, default_value = "vcan0")]
+    pub bus: String,
+    /// can: motor protocol.
+    #[arg(long, value_enum, default_value_t = CanProtocol::Mit)]
+    pub protocol: CanProtocol,
+    /// can: node id per joint, comma-separated (default 1, 2, …).
+    #[arg(long, value_delimiter = ',')]
+    pub node_ids: Vec<u8>,
 }
 
 /// Runs `frictl sim`.
@@ -82,9 +178,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             print!("{}", toml::to_string_pretty(&table)?);
             Ok(())
         }
-        SimCommand::Serve => {
-            anyhow::bail!("`frictl sim serve` is not built yet (it needs the shared-memory ABI)")
-        }
+        SimCommand::Serve(a) => serve(*a),
         SimCommand::Run {
             params,
             current_profile,
@@ -136,4 +230,47 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             Ok(())
         }
     }
+}
+
+/// `frictl sim serve`.
+fn serve(a: ServeArgs) -> anyhow::Result<()> {
+    let stop = frictl::serve::install_stop_flag()?;
+    let mut joints = frictl::serve::build_joints(&a.preset, a.params.as_deref(), &a.sets, a.seed)?;
+    match a.backend {
+        Backend::Shm => {
+            // The reported velocity uses each preset's protocol.velocity_filter_hz, like acquire.
+            let mut velocity_filter_hz = Vec::with_capacity(joints.len());
+            for j in &joints {
+                let table = load_table(&j.name, a.params.as_deref(), &a.sets)?;
+                velocity_filter_hz
+                    .push(frictl::acquire::ProtocolConfig::from_table(&table)?.velocity_filter_hz);
+            }
+            let opts = frictl::serve::shm::ShmServeOptions {
+                ipc: frictionless_shm_types::IpcConfig::new(a.root_path.as_deref(), &a.prefix),
+                lockstep: a.lockstep,
+                lockstep_timeout_ms: a.lockstep_timeout_ms,
+                lockstep_min_subscribers: a.lockstep_subscribers,
+                command_timeout_ms: a.command_timeout_ms,
+                duration_s: a.duration_s,
+                initial_pose_rad: a.initial_pose_rad,
+                velocity_filter_hz,
+            };
+            frictl::serve::shm::run(&mut joints, &opts, stop)?;
+            Ok(())
+        }
+        Backend::Can => serve_can(&mut joints, &a, stop),
+    }
+}
+
+/// `frictl sim serve --backend can` (engineer cansim's `serve::can`, not merged yet).
+fn serve_can(
+    _joints: &mut [frictl::serve::ServedJoint],
+    a: &ServeArgs,
+    _stop: &std::sync::atomic::AtomicBool,
+) -> anyhow::Result<()> {
+    anyhow::bail!(
+        "`frictl sim serve --backend can` (bus {}, protocol {:?}) is not built yet",
+        a.bus,
+        a.protocol
+    )
 }

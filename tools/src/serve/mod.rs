@@ -6,6 +6,9 @@
 //! 1 kHz or `--lockstep`) and [`can`] (the joints answer as motor drives on a SocketCAN bus, MIT or
 //! ODrive protocol).
 //!
+//! Also here: [`install_stop_flag`], the SIGINT/SIGTERM flag the serving (and live acquiring)
+//! commands poll for a clean shutdown.
+//!
 //! What it is **not**: no physics (that is [`crate::sim`]), no control (the daemon and the
 //! experiment controller are separate processes).
 
@@ -51,4 +54,33 @@ pub fn build_joints(
         });
     }
     Ok(out)
+}
+
+static STOP: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+extern "C" fn on_stop_signal(_sig: libc::c_int) {
+    // Async-signal-safe: one atomic store.
+    STOP.store(true, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// Installs SIGINT and SIGTERM handlers that set a process-wide flag and returns it. Plain
+/// `sigaction` with an atomic store (async-signal-safe): the tools crate has no signal-hook
+/// dependency. Calling it again is harmless.
+pub fn install_stop_flag() -> anyhow::Result<&'static std::sync::atomic::AtomicBool> {
+    for sig in [libc::SIGINT, libc::SIGTERM] {
+        // SAFETY: a zeroed sigaction with a valid handler address and an empty mask; the handler
+        // only stores to an atomic.
+        let rc = unsafe {
+            let mut sa: libc::sigaction = std::mem::zeroed();
+            sa.sa_sigaction = on_stop_signal as extern "C" fn(libc::c_int) as usize;
+            libc::sigemptyset(&mut sa.sa_mask);
+            libc::sigaction(sig, &sa, std::ptr::null_mut())
+        };
+        anyhow::ensure!(
+            rc == 0,
+            "installing the handler for signal {sig}: {}",
+            std::io::Error::last_os_error()
+        );
+    }
+    Ok(&STOP)
 }
