@@ -14,6 +14,7 @@
 pub mod acquire;
 pub mod canlog;
 pub mod dynamics;
+pub mod experiment;
 pub mod ident;
 pub mod interop;
 pub mod serve;

@@ -1,0 +1,196 @@
+//! Minimum-K_p search: bisection on a log scale for the lowest gain that passes a criterion.
+//!
+//! What this module **is**: [`KpBisection`], a small state machine (`candidate` → run a trial →
+//! `report`) so several independent searches (one per joint) can share each trial run. It assumes
+//! "passes" is monotone in K_p (higher gain, smaller tracking error); it first checks the upper end
+//! (if that fails the minimum is above the range), then the lower end (if that passes the minimum is
+//! at or below it), then halves the log-interval `iterations` times and returns the lowest passing
+//! gain found; the answer lies in (`fail`, `pass`] with `pass/fail = (hi/lo)^(1/2^iterations)`.
+//!
+//! What it is **not**: no trial execution.
+
+/// Result of a search.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[serde(tag = "outcome", rename_all = "snake_case")]
+pub enum MinKp {
+    /// The lowest passing gain found, and the highest failing one below it.
+    Found {
+        /// Lowest passing K_p [1/s²].
+        kp: f64,
+        /// Highest failing K_p [1/s²] (the minimum lies in (fail, kp]).
+        fail_kp: f64,
+    },
+    /// Even the upper end failed: the minimum is above `hi`.
+    AboveRange {
+        /// Upper end [1/s²].
+        hi: f64,
+    },
+    /// The lower end passed: the minimum is at or below `lo`.
+    BelowRange {
+        /// Lower end [1/s²].
+        lo: f64,
+    },
+}
+
+impl MinKp {
+    /// A gain to use for follow-up runs: the passing gain, `hi` (above range) or `lo` (below).
+    pub fn kp_for_runs(&self) -> f64 {
+        match *self {
+            MinKp::Found { kp, .. } => kp,
+            MinKp::AboveRange { hi } => hi,
+            MinKp::BelowRange { lo } => lo,
+        }
+    }
+
+    /// Human-readable, e.g. `550`, `> 30000`, `≤ 10`.
+    pub fn display(&self) -> String {
+        match *self {
+            MinKp::Found { kp, .. } => format!("{}", sig3(kp)),
+            MinKp::AboveRange { hi } => format!("> {}", sig3(hi)),
+            MinKp::BelowRange { lo } => format!("≤ {}", sig3(lo)),
+        }
+    }
+}
+
+/// Rounds to 3 significant digits for display.
+pub fn sig3(x: f64) -> f64 {
+    if x == 0.0 || !x.is_finite() {
+        return x;
+    }
+    let p = 10f64.powi(2 - x.abs().log10().floor() as i32);
+    (x * p).round() / p
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Phase {
+    CheckHi,
+    CheckLo,
+    Bisect { fail: f64, pass: f64, left: u32 },
+    Done(MinKp),
+}
+
+/// Log-scale bisection state (see the module doc).
+#[derive(Clone, Debug)]
+pub struct KpBisection {
+    lo: f64,
+    hi: f64,
+    iterations: u32,
+    phase: Phase,
+    /// Every (K_p, passed) evaluated, in order.
+    pub history: Vec<(f64, bool)>,
+}
+
+impl KpBisection {
+    /// A search over `[lo, hi]` (0 < lo < hi) with `iterations` halvings.
+    pub fn new(lo: f64, hi: f64, iterations: u32) -> anyhow::Result<Self> {
+        anyhow::ensure!(
+            lo.is_finite() && hi.is_finite() && lo > 0.0 && hi > lo,
+            "K_p range [{lo}, {hi}]: need 0 < lo < hi"
+        );
+        Ok(Self {
+            lo,
+            hi,
+            iterations,
+            phase: Phase::CheckHi,
+            history: vec![],
+        })
+    }
+
+    /// The next gain to try, or `None` when done.
+    pub fn candidate(&self) -> Option<f64> {
+        match self.phase {
+            Phase::CheckHi => Some(self.hi),
+            Phase::CheckLo => Some(self.lo),
+            Phase::Bisect { fail, pass, .. } => Some((fail * pass).sqrt()),
+            Phase::Done(_) => None,
+        }
+    }
+
+    /// Reports whether the current candidate passed.
+    pub fn report(&mut self, passed: bool) {
+        let Some(kp) = self.candidate() else { return };
+        self.history.push((kp, passed));
+        self.phase = match self.phase {
+            Phase::CheckHi if !passed => Phase::Done(MinKp::AboveRange { hi: self.hi }),
+            Phase::CheckHi => Phase::CheckLo,
+            Phase::CheckLo if passed => Phase::Done(MinKp::BelowRange { lo: self.lo }),
+            Phase::CheckLo | Phase::Bisect { .. } => {
+                let (fail, pass, left) = match self.phase {
+                    Phase::Bisect { fail, left, .. } if passed => (fail, kp, left - 1),
+                    Phase::Bisect { pass, left, .. } => (kp, pass, left - 1),
+                    _ => (self.lo, self.hi, self.iterations),
+                };
+                if left == 0 {
+                    Phase::Done(MinKp::Found {
+                        kp: pass,
+                        fail_kp: fail,
+                    })
+                } else {
+                    Phase::Bisect { fail, pass, left }
+                }
+            }
+            Phase::Done(d) => Phase::Done(d),
+        };
+    }
+
+    /// The result once done.
+    pub fn result(&self) -> Option<MinKp> {
+        match self.phase {
+            Phase::Done(d) => Some(d),
+            _ => None,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn search(threshold: f64, lo: f64, hi: f64, it: u32) -> (MinKp, usize) {
+        let mut b = KpBisection::new(lo, hi, it).unwrap();
+        let mut n = 0;
+        while let Some(kp) = b.candidate() {
+            b.report(kp >= threshold);
+            n += 1;
+            assert!(n < 100);
+        }
+        (b.result().unwrap(), n)
+    }
+
+    #[test]
+    fn finds_a_known_threshold_within_the_log_resolution() {
+        for &thr in &[13.7, 550.0, 999.0, 4321.0] {
+            let (r, n) = search(thr, 10.0, 30000.0, 10);
+            let MinKp::Found { kp, fail_kp } = r else {
+                panic!("{thr}: {r:?}")
+            };
+            assert_eq!(n, 12, "2 end checks + 10 halvings");
+            assert!(kp >= thr && fail_kp < thr, "{fail_kp} < {thr} ≤ {kp}");
+            let resolution = (30000.0f64 / 10.0).powf(1.0 / 1024.0);
+            assert!(kp / fail_kp <= resolution * (1.0 + 1e-9), "{kp}/{fail_kp}");
+        }
+    }
+
+    #[test]
+    fn out_of_range_thresholds_are_reported_as_such() {
+        assert_eq!(search(1e6, 10.0, 1e4, 5).0, MinKp::AboveRange { hi: 1e4 });
+        assert_eq!(search(1.0, 10.0, 1e4, 5).0, MinKp::BelowRange { lo: 10.0 });
+        assert_eq!(search(1e6, 10.0, 1e4, 5).1, 1, "one trial suffices");
+        assert!(KpBisection::new(10.0, 5.0, 3).is_err());
+        assert!(KpBisection::new(0.0, 5.0, 3).is_err());
+    }
+
+    #[test]
+    fn display_rounds_to_three_digits() {
+        assert_eq!(
+            MinKp::Found {
+                kp: 553.21,
+                fail_kp: 500.0
+            }
+            .display(),
+            "553"
+        );
+        assert_eq!(MinKp::AboveRange { hi: 30000.0 }.display(), "> 30000");
+        assert_eq!(sig3(0.012345), 0.0123);
+    }
+}
