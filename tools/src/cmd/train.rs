@@ -1,10 +1,283 @@
-//! `frictl train` — not built yet (issue #5).
+//! `frictl train` — train the paper's physics-informed friction network on preprocessed datasets and
+//! write a `.fwt` model plus a JSON training report.
+//!
+//! Inputs are built through the daemon's own `History` (see `frictl::train::data`), the split is by
+//! whole chunks (`--val-frac`/`--test-frac` by seeded shuffle, or `--test-chunks`), the loss is
+//! `(1 − λ)·MSE(label) + λ·MSE(SCV prior from --scv)`, and the stored weights are the best on the
+//! validation set. Defaults are the paper's ankle-roll values (Table II). The report schema is in
+//! `frictl::train::pipeline`. This command does not preprocess or fit (see `frictl preprocess`,
+//! `frictl fit`).
+
+use std::ops::ControlFlow;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use frictionless::features::{FeatureSet, FeatureSpec, WarmupPolicy};
+use frictionless::mlp::StorageDtype;
+use frictl::train::TrainConfig;
+use frictl::train::data::{ChunkKey, SplitSpec};
+use frictl::train::pipeline::{self, Job};
+use indicatif::{ProgressBar, ProgressStyle};
+
+/// Feature set (block order of the input vector).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Features {
+    /// `[Δθ ×H, ṡ ×H]` — the paper's (Δθ latched at each chunk start, as the daemon at enable).
+    DeltaThetaJointVel,
+    /// `[ω_m ×H, ṡ ×H]` — ergoCub since Oct 2024.
+    MotorVelJointVel,
+    /// `[s ×H, θ ×H]` — the June 2024 ergoCub model.
+    JointPosMotorPos,
+}
+
+impl From<Features> for FeatureSet {
+    fn from(f: Features) -> Self {
+        match f {
+            Features::DeltaThetaJointVel => FeatureSet::DeltaThetaJointVel,
+            Features::MotorVelJointVel => FeatureSet::MotorVelJointVel,
+            Features::JointPosMotorPos => FeatureSet::JointPosMotorPos,
+        }
+    }
+}
+
+/// Warm-up policy (which samples are training samples, and what the daemon does after enable).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Warmup {
+    /// Only samples with H predecessors in their chunk (the daemon outputs 0 until then).
+    HoldZero,
+    /// Samples from the first of each chunk on, missing history zero-padded.
+    ZeroPad,
+}
+
+impl From<Warmup> for WarmupPolicy {
+    fn from(w: Warmup) -> Self {
+        match w {
+            Warmup::HoldZero => WarmupPolicy::HoldZero,
+            Warmup::ZeroPad => WarmupPolicy::ZeroPad,
+        }
+    }
+}
+
+/// Storage precision of the weights in the `.fwt`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Dtype {
+    /// IEEE binary32.
+    F32,
+    /// IEEE binary16.
+    F16,
+    /// bfloat16.
+    Bf16,
+}
+
+impl From<Dtype> for StorageDtype {
+    fn from(d: Dtype) -> Self {
+        match d {
+            Dtype::F32 => StorageDtype::F32,
+            Dtype::F16 => StorageDtype::F16,
+            Dtype::Bf16 => StorageDtype::Bf16,
+        }
+    }
+}
 
 /// Arguments of `frictl train`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// Preprocessed dataset CSV from `frictl preprocess` (repeatable; its `.json` sidecar must exist).
+    #[arg(long = "dataset", required = true)]
+    pub datasets: Vec<PathBuf>,
+    /// Fitted static model, the JSON of `frictl fit scv|scv-code|cv --json` (the physics prior).
+    #[arg(long)]
+    pub scv: PathBuf,
+    /// Output model file (.fwt).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Input feature set.
+    #[arg(long, value_enum, default_value_t = Features::DeltaThetaJointVel)]
+    pub features: Features,
+    /// History length H (samples per feature block).
+    #[arg(long, default_value_t = 20)]
+    pub history: usize,
+    /// Append the motor temperature [°C] as one more input.
+    #[arg(long)]
+    pub temperature: bool,
+    /// Hidden layer widths, comma separated.
+    #[arg(long, value_delimiter = ',', default_values_t = [268usize, 215])]
+    pub hidden: Vec<usize>,
+    /// Dropout probability after each hidden layer.
+    #[arg(long, default_value_t = 0.07)]
+    pub dropout: f32,
+    /// Epochs.
+    #[arg(long, default_value_t = 350)]
+    pub epochs: usize,
+    /// Batch size.
+    #[arg(long, default_value_t = 4316)]
+    pub batch: usize,
+    /// Adam learning rate.
+    #[arg(long, default_value_t = 7.6e-4)]
+    pub lr: f32,
+    /// Weight λ of the SCV term of the loss.
+    #[arg(long, default_value_t = 0.164)]
+    pub lambda: f32,
+    /// Seed of the split, the initialisation, the shuffles and dropout.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Fraction of chunks for validation.
+    #[arg(long, default_value_t = 0.15)]
+    pub val_frac: f64,
+    /// Fraction of chunks for the held-out test set (ignored with --test-chunks).
+    #[arg(long, default_value_t = 0.15)]
+    pub test_frac: f64,
+    /// Explicit test chunks, comma separated: CHUNK (first dataset) or DATASET:CHUNK.
+    #[arg(long, value_delimiter = ',')]
+    pub test_chunks: Option<Vec<String>>,
+    /// Warm-up policy.
+    #[arg(long, value_enum, default_value_t = Warmup::HoldZero)]
+    pub warmup: Warmup,
+    /// Storage dtype of the weights.
+    #[arg(long, value_enum, default_value_t = Dtype::F32)]
+    pub dtype: Dtype,
+    /// Checkpoint file (complete run state), written every --checkpoint-every epochs and at the end.
+    #[arg(long)]
+    pub checkpoint: Option<PathBuf>,
+    /// Epochs between checkpoints.
+    #[arg(long, default_value_t = 10)]
+    pub checkpoint_every: usize,
+    /// Continue the run saved in --checkpoint (same data and hyper-parameters; --epochs may grow).
+    #[arg(long)]
+    pub resume: bool,
+    /// Training report JSON (default: the model path with extension `.train.json`).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Stop after N epochs without a better validation RMSE.
+    #[arg(long)]
+    pub max_epochs_without_improvement: Option<usize>,
+    /// Trainer threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// No progress bar or summary.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Number of cores available to this process (≥ 1).
+pub fn cores() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// Parses `--test-chunks` values.
+pub fn parse_chunks(v: &Option<Vec<String>>) -> anyhow::Result<Option<Vec<ChunkKey>>> {
+    v.as_ref()
+        .map(|list| {
+            list.iter()
+                .map(|s| {
+                    s.parse::<ChunkKey>()
+                        .map_err(|e| anyhow::anyhow!("--test-chunks: {e}"))
+                })
+                .collect()
+        })
+        .transpose()
+}
 
 /// Runs `frictl train`.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`frictl train` is not built yet (tracked in issue #5)")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let sources = pipeline::load_sources(&args.datasets)?;
+    let scv = pipeline::load_scv(&args.scv)?;
+    let split_spec = SplitSpec {
+        val_frac: args.val_frac,
+        test_frac: args.test_frac,
+        seed: args.seed,
+        test_chunks: parse_chunks(&args.test_chunks)?,
+    };
+    let split = pipeline::split_for(&sources, &split_spec)?;
+    let spec = FeatureSpec {
+        set: args.features.into(),
+        history: args.history,
+        temperature: args.temperature,
+    };
+    spec.validate().context("--history")?;
+    let warmup: WarmupPolicy = args.warmup.into();
+    let prepared = pipeline::prepare(&sources, &scv, &split, &spec, warmup)?;
+    let config = TrainConfig {
+        hidden: args.hidden.clone(),
+        dropout: args.dropout,
+        lambda: args.lambda,
+        lr: args.lr,
+        batch_size: args.batch,
+        epochs: args.epochs,
+        seed: args.seed,
+        threads: args.threads.unwrap_or_else(cores).max(1),
+        patience: args.max_epochs_without_improvement,
+        abort_loss: Some(1000.0),
+    };
+    let job = Job {
+        spec,
+        warmup,
+        config,
+        dtype: args.dtype.into(),
+        checkpoint: args.checkpoint.clone(),
+        checkpoint_every: args.checkpoint_every,
+        resume: args.resume,
+    };
+    if !args.quiet {
+        eprintln!(
+            "frictl train: {} [{}], {} inputs; samples train {} / val {} / test {} (chunks {} / {} / {})",
+            sources.joint,
+            spec,
+            spec.n_inputs(),
+            prepared.train.len(),
+            prepared.val.len(),
+            prepared.test.len(),
+            split.train.len(),
+            split.val.len(),
+            split.test.len()
+        );
+    }
+    let bar = if args.quiet {
+        ProgressBar::hidden()
+    } else {
+        let b = ProgressBar::new(args.epochs as u64);
+        b.set_style(
+            ProgressStyle::with_template("{bar:30} epoch {pos}/{len} {msg} [{elapsed} < {eta}]")
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        b
+    };
+    let mut trained =
+        pipeline::train_model(&sources, &scv, &split, &split_spec, &prepared, &job, |r| {
+            bar.set_position(r.epoch as u64);
+            let val = match (r.val_loss, r.val_rmse_nm) {
+                (Some(l), Some(e)) => format!(" val loss {l:.5} rmse {e:.4} Nm"),
+                _ => String::new(),
+            };
+            bar.set_message(format!(
+                "train loss {:.5}{val}{}",
+                r.train_loss,
+                if r.is_best { " *" } else { "" }
+            ));
+            ControlFlow::Continue(())
+        })?;
+    bar.finish_and_clear();
+    let report_path = args
+        .report
+        .clone()
+        .unwrap_or_else(|| pipeline::default_report_path(&args.out));
+    pipeline::write_outputs(&mut trained, &args.out, &report_path)?;
+    if !args.quiet {
+        let r = &trained.report;
+        let f = |v: Option<f64>| v.map_or("-".into(), |x| format!("{x:.4}"));
+        println!(
+            "frictl train: best epoch {} of {} ({:.1} s); RMSE [Nm] train {} val {} test {} (SCV prior: val {} test {}) -> {} (+ {})",
+            r.best_epoch,
+            r.epochs.len(),
+            r.train_seconds,
+            f(r.rmse_nm.train),
+            f(r.rmse_nm.val),
+            f(r.rmse_nm.test),
+            f(r.scv_rmse_nm.val),
+            f(r.scv_rmse_nm.test),
+            args.out.display(),
+            report_path.display()
+        );
+    }
+    Ok(())
 }

@@ -186,15 +186,19 @@ impl Trainer {
         if let Some(v) = val {
             v.validate("validation")?;
         }
-        if fingerprint(train, val) != state.fingerprint {
-            return Err(err(
-                path,
-                "the given training/validation data differ from the checkpointed run's (SHA-256 fingerprint mismatch)",
-            ));
-        }
         let mut want_sizes = vec![train.n_inputs];
         want_sizes.extend(&cfg.hidden);
         want_sizes.push(1);
+        if state.sizes.first() != want_sizes.first() {
+            return Err(err(
+                path,
+                format!(
+                    "n_inputs = {:?} in the checkpoint, the given data have n_inputs = {}",
+                    state.sizes.first(),
+                    train.n_inputs
+                ),
+            ));
+        }
         if state.sizes != want_sizes {
             return Err(err(
                 path,
@@ -202,6 +206,12 @@ impl Trainer {
                     "layer sizes {:?} do not match config/data {:?}",
                     state.sizes, want_sizes
                 ),
+            ));
+        }
+        if fingerprint(train, val) != state.fingerprint {
+            return Err(err(
+                path,
+                "the given training/validation data differ from the checkpointed run's (SHA-256 fingerprint mismatch)",
             ));
         }
         let layout = Layout::new(&state.sizes);

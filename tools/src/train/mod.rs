@@ -25,9 +25,11 @@
 //! [`Trainer::train`], [`Trainer::save_checkpoint`], [`Predictor`] and [`rmse`].
 
 mod checkpoint;
+pub mod data;
 mod eval;
 mod net;
 mod norm;
+pub mod pipeline;
 mod rng;
 pub mod synthetic;
 

@@ -17,6 +17,10 @@ pub(crate) mod tag {
     pub const SHUFFLE: u64 = 0x5EF0_0000_0000_0002;
     /// Dropout masks.
     pub const DROPOUT: u64 = 0xD50F_0000_0000_0003;
+    /// Chunk split into train/validation/test sets.
+    pub const SPLIT: u64 = 0x5B17_0000_0000_0004;
+    /// Hyper-parameter draws of a random search trial.
+    pub const SEARCH: u64 = 0x5EA2_0000_0000_0005;
 }
 
 /// The SplitMix64 finaliser: a bijective 64-bit mixer.
