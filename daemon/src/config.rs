@@ -13,6 +13,10 @@
 use std::path::{Path, PathBuf};
 
 use frictionless_shm_types::MAX_JOINTS;
+use frictionless_shm_types::can::busload;
+use frictionless_shm_types::can::mit::MitRanges;
+pub use frictionless_shm_types::can::units::CommandUnit;
+use frictionless_shm_types::can::units::{AngleUnit, JointUnits};
 use serde::Deserialize;
 
 /// Why a configuration is not acceptable. Every variant names the file; most name the key and value.
@@ -332,6 +336,91 @@ pub struct RawConfig {
     /// `[[joint]]`.
     #[serde(default)]
     pub joint: Vec<JointConfig>,
+    /// `[[bus]]`: CAN buses (required, ≥ 1, with `[backend] kind = "can"`; forbidden otherwise).
+    #[serde(default)]
+    pub bus: Vec<BusConfig>,
+}
+
+/// Largest number of `[[bus]]` sections (sockets polled per tick).
+pub const MAX_BUSES: usize = 8;
+
+/// Motor-drive protocol of one bus.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum CanProtocol {
+    /// MIT mini-cheetah / CubeMars AK "MIT mode": one 8-byte command, one 6-byte reply per tick.
+    Mit,
+    /// ODrive CAN Simple: Set_Input_Torque per tick; cyclic Get_Encoder_Estimates, Get_Iq, Heartbeat.
+    Odrive,
+}
+
+/// One `[[bus]]`: a SocketCAN interface with the drives on it.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BusConfig {
+    /// SocketCAN interface name (`can0`, `vcan0`), or `fd:N`: an already open CAN socket inherited
+    /// as file descriptor N (kernel filters are then best effort; used by tests over a socketpair).
+    pub interface: String,
+    /// Nominal bitrate [bit/s], for the bus-load budget (the daemon does not configure the link).
+    pub bitrate: u64,
+    /// Protocol of every drive on this bus.
+    pub protocol: CanProtocol,
+    /// Largest allowed worst-case bus load (fraction, 0 < max_load ≤ 1).
+    #[serde(default = "default_max_load")]
+    pub max_load: f64,
+    /// A joint whose drive sent no feedback for more than this many ticks is stale (0 A, flagged).
+    #[serde(default = "default_feedback_timeout")]
+    pub feedback_timeout_ticks: u64,
+    /// MIT only: the standard id the drives reply on (the firmware's CAN master id; byte 0 of the
+    /// reply names the motor).
+    #[serde(default)]
+    pub host_id: u32,
+    /// The drives on this bus (`[[bus.joint]]`, or `joints = [...]`).
+    #[serde(alias = "joints")]
+    pub joint: Vec<BusJointConfig>,
+}
+
+fn default_max_load() -> f64 {
+    0.7
+}
+fn default_feedback_timeout() -> u64 {
+    5
+}
+
+/// One `[[bus.joint]]`: which `[[joint]]` a drive moves, its node id and units.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BusJointConfig {
+    /// Name of a `[[joint]]`.
+    pub joint: String,
+    /// Drive id: MIT motor id (standard id of its commands, 1–255, also byte 0 of its replies);
+    /// ODrive node id (0–63).
+    pub node_id: u32,
+    /// What the drive's command field carries: motor current, motor torque k_t·i or joint torque
+    /// r·k_t·i (signed r).
+    pub command_unit: CommandUnit,
+    /// MIT: position range ±p_max [motor rad].
+    #[serde(default)]
+    pub p_max: Option<f64>,
+    /// MIT: velocity range ±v_max [motor rad/s].
+    #[serde(default)]
+    pub v_max: Option<f64>,
+    /// MIT: feed-forward range ±t_max, in `command_unit` (A, or Nm motor/joint side).
+    #[serde(default)]
+    pub t_max: Option<f64>,
+    /// MIT: reply current-field range ±i_max, in `reply_unit`.
+    #[serde(default)]
+    pub i_max: Option<f64>,
+    /// MIT: position-gain range 0..kp_max [Nm/rad] (we always send kp = 0; default 500).
+    #[serde(default)]
+    pub kp_max: Option<f64>,
+    /// MIT: damping-gain range 0..kd_max [Nm·s/rad] (we always send kd = 0; default 5).
+    #[serde(default)]
+    pub kd_max: Option<f64>,
+    /// MIT: what the reply's third field carries (bgkatz: current; CubeMars AK: torque). Default
+    /// `current`.
+    #[serde(default)]
+    pub reply_unit: Option<CommandUnit>,
 }
 
 /// Validated friction model parameters of one joint.
@@ -363,6 +452,100 @@ pub struct Config {
     pub models: Vec<ModelSpec>,
     /// Resolved iceoryx2 root path.
     pub root_path: Option<PathBuf>,
+    /// Resolved `[[bus]]` sections (empty unless `[backend] kind = "can"`).
+    pub buses: Vec<ResolvedBus>,
+}
+
+/// A validated `[[bus]]` with its drives resolved against the `[[joint]]` table.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ResolvedBus {
+    /// Interface name or `fd:N`.
+    pub interface: String,
+    /// Protocol.
+    pub protocol: CanProtocol,
+    /// MIT reply id.
+    pub host_id: u32,
+    /// Per-joint feedback timeout [ticks].
+    pub feedback_timeout_ticks: u64,
+    /// Drives, in config order.
+    pub joints: Vec<ResolvedDrive>,
+    /// The bus-load budget computed at load time.
+    pub load: BusLoad,
+}
+
+/// One drive on a bus.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ResolvedDrive {
+    /// Position of the joint in `raw.joint` (and `models`).
+    pub joint_pos: usize,
+    /// Payload index of the joint (`[[joint]] index`).
+    pub index: usize,
+    /// Motor id (MIT) or node id (ODrive).
+    pub node_id: u32,
+    /// Command mapping (current → what the drive wants) and feedback angle unit.
+    pub units: JointUnits,
+    /// MIT: how to read the reply's third field back as a current (ODrive: Iq is a current).
+    pub reply_units: JointUnits,
+    /// MIT fixed-point ranges (ODrive: `None`).
+    pub mit: Option<MitRanges>,
+    /// Current clamp of the joint [A] (`[[joint]] max_curr`).
+    pub max_curr_a: f64,
+}
+
+/// Worst-case bus load of one bus from the config.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BusLoad {
+    /// Drives on the bus.
+    pub n_joints: u32,
+    /// Frames per second on the bus (commands and feedback).
+    pub frames_per_s: f64,
+    /// Worst-case bits (with stuffing) of the frames one joint puts on the bus per tick.
+    pub bits_per_joint_tick: u32,
+    /// Frames per joint per tick.
+    pub frames_per_joint_tick: u32,
+    /// Bitrate [bit/s].
+    pub bitrate_bps: u64,
+    /// Load fraction (1 = saturated).
+    pub load: f64,
+    /// Configured limit fraction.
+    pub limit: f64,
+}
+
+impl std::fmt::Display for BusLoad {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} joint(s): {:.0} frames/s, {} bits per joint and tick in {} frame(s) (worst-case stuffing), load {:.1} % of {} bit/s (limit {:.1} %)",
+            self.n_joints,
+            self.frames_per_s,
+            self.bits_per_joint_tick,
+            self.frames_per_joint_tick,
+            100.0 * self.load,
+            self.bitrate_bps,
+            100.0 * self.limit
+        )
+    }
+}
+
+/// One line per bus for `frictiond --check` (empty without buses).
+pub fn bus_summary(cfg: &Config) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    for (b, bus) in cfg.buses.iter().enumerate() {
+        let _ = writeln!(
+            s,
+            "  bus[{b}] {} ({:?}): {}",
+            bus.interface, bus.protocol, bus.load
+        );
+        for d in &bus.joints {
+            let _ = writeln!(
+                s,
+                "    joint[{}] {} node {} command {:?}",
+                d.index, cfg.raw.joint[d.joint_pos].name, d.node_id, d.units.command
+            );
+        }
+    }
+    s
 }
 
 impl Config {
@@ -507,13 +690,296 @@ pub fn parse(path: &Path, text: &str) -> Result<Config, ConfigError> {
         }
         models.push(model_spec(&c, base, k, j)?);
     }
+    let buses = resolve_buses(&c, &raw, fs_hz)?;
     let root_path = raw.backend.root_path.as_ref().map(|p| base.join(p));
     Ok(Config {
         file: path.to_path_buf(),
         raw,
         models,
         root_path,
+        buses,
     })
+}
+
+/// Validates `[[bus]]` against `[backend] kind` and the joints; computes every bus's load.
+fn resolve_buses(
+    c: &Checker,
+    raw: &RawConfig,
+    rate_hz: f64,
+) -> Result<Vec<ResolvedBus>, ConfigError> {
+    if raw.backend.kind != BackendKind::Can {
+        if !raw.bus.is_empty() {
+            return Err(c.fail(
+                "bus".into(),
+                format!("{} section(s)", raw.bus.len()),
+                "[[bus]] is only valid with [backend] kind = \"can\"",
+            ));
+        }
+        return Ok(Vec::new());
+    }
+    if raw.bus.is_empty() {
+        return Err(c.fail(
+            "bus".into(),
+            "[]",
+            "[backend] kind = \"can\" needs at least one [[bus]]",
+        ));
+    }
+    if raw.bus.len() > MAX_BUSES {
+        return Err(c.fail(
+            "bus".into(),
+            raw.bus.len(),
+            &format!("at most {MAX_BUSES} buses"),
+        ));
+    }
+    let mut on_bus: Vec<Option<(usize, usize)>> = vec![None; raw.joint.len()];
+    let mut out = Vec::with_capacity(raw.bus.len());
+    for (b, bus) in raw.bus.iter().enumerate() {
+        let key = |name: &str| format!("bus[{b}].{name}");
+        check_interface(c, &key("interface"), &bus.interface)?;
+        if bus.bitrate == 0 {
+            return Err(c.fail(key("bitrate"), 0, "must be > 0 [bit/s]"));
+        }
+        if !(bus.max_load.is_finite() && bus.max_load > 0.0 && bus.max_load <= 1.0) {
+            return Err(c.fail(key("max_load"), bus.max_load, "must be in (0, 1]"));
+        }
+        if bus.feedback_timeout_ticks == 0 {
+            return Err(c.fail(key("feedback_timeout_ticks"), 0, "must be >= 1"));
+        }
+        if bus.joint.is_empty() {
+            return Err(c.fail(key("joint"), "[]", "a bus needs at least one [[bus.joint]]"));
+        }
+        match bus.protocol {
+            CanProtocol::Mit => {
+                if bus.host_id > frictionless_shm_types::can::frame::SFF_MAX {
+                    return Err(c.fail(
+                        key("host_id"),
+                        bus.host_id,
+                        "must be a standard id 0..=2047",
+                    ));
+                }
+            }
+            CanProtocol::Odrive => {
+                if bus.host_id != 0 {
+                    return Err(c.fail(
+                        key("host_id"),
+                        bus.host_id,
+                        "only used by protocol = \"mit\"",
+                    ));
+                }
+            }
+        }
+        let mut drives = Vec::with_capacity(bus.joint.len());
+        for (k, bj) in bus.joint.iter().enumerate() {
+            let key = |name: &str| format!("bus[{b}].joint[{k}].{name}");
+            let Some(pos) = raw.joint.iter().position(|j| j.name == bj.joint) else {
+                return Err(c.fail(
+                    key("joint"),
+                    format!("{:?}", bj.joint),
+                    "no [[joint]] has this name",
+                ));
+            };
+            if let Some((ob, ok)) = on_bus[pos] {
+                return Err(c.fail(
+                    key("joint"),
+                    format!("{:?}", bj.joint),
+                    &format!(
+                        "joint is already on bus[{ob}].joint[{ok}] (each joint on exactly one bus)"
+                    ),
+                ));
+            }
+            on_bus[pos] = Some((b, k));
+            if bus.joint[..k].iter().any(|o| o.node_id == bj.node_id) {
+                return Err(c.fail(key("node_id"), bj.node_id, "duplicate node id on this bus"));
+            }
+            let j = &raw.joint[pos];
+            if j.kp != 0.0 || j.ki != 0.0 {
+                return Err(c.fail(
+                    format!("joint[{pos}].kp"),
+                    format!("kp = {}, ki = {}", j.kp, j.ki),
+                    "joints on a CAN bus have no joint-torque measurement: kp and ki must be 0",
+                ));
+            }
+            let angle = match bus.protocol {
+                CanProtocol::Mit => AngleUnit::Rad,
+                CanProtocol::Odrive => AngleUnit::Rev,
+            };
+            let units = JointUnits::new(bj.command_unit, j.kt, j.gear_ratio, angle)
+                .map_err(|e| c.fail(format!("joint[{pos}]"), &j.name, &e.to_string()))?;
+            let mit_keys = [
+                ("p_max", bj.p_max),
+                ("v_max", bj.v_max),
+                ("t_max", bj.t_max),
+                ("i_max", bj.i_max),
+                ("kp_max", bj.kp_max),
+                ("kd_max", bj.kd_max),
+            ];
+            let (mit, reply_units) = match bus.protocol {
+                CanProtocol::Odrive => {
+                    if bj.node_id > u32::from(frictionless_shm_types::can::odrive::NODE_MAX) {
+                        return Err(c.fail(
+                            key("node_id"),
+                            bj.node_id,
+                            "ODrive node ids are 0..=63",
+                        ));
+                    }
+                    for (n, v) in mit_keys {
+                        if v.is_some() {
+                            return Err(c.fail(key(n), "<set>", "only used by protocol = \"mit\""));
+                        }
+                    }
+                    if bj.reply_unit.is_some() {
+                        return Err(c.fail(
+                            key("reply_unit"),
+                            "<set>",
+                            "only used by protocol = \"mit\"",
+                        ));
+                    }
+                    let iq = JointUnits {
+                        command: CommandUnit::Current,
+                        ..units
+                    };
+                    (None, iq)
+                }
+                CanProtocol::Mit => {
+                    if !(1..=255).contains(&bj.node_id) {
+                        return Err(c.fail(
+                            key("node_id"),
+                            bj.node_id,
+                            "MIT motor ids are 1..=255 (byte 0 of the reply)",
+                        ));
+                    }
+                    if bj.node_id == bus.host_id {
+                        return Err(c.fail(
+                            key("node_id"),
+                            bj.node_id,
+                            &format!("equals bus[{b}].host_id"),
+                        ));
+                    }
+                    let need = |n: &str, v: Option<f64>| -> Result<f64, ConfigError> {
+                        let v = v.ok_or_else(|| {
+                            c.fail(key(n), "<missing>", "required by protocol = \"mit\"")
+                        })?;
+                        c.finite_pos(key(n), v)?;
+                        Ok(v)
+                    };
+                    let p = need("p_max", bj.p_max)?;
+                    let v = need("v_max", bj.v_max)?;
+                    let t = need("t_max", bj.t_max)?;
+                    let i = need("i_max", bj.i_max)?;
+                    let kp = need("kp_max", bj.kp_max.or(Some(500.0)))?;
+                    let kd = need("kd_max", bj.kd_max.or(Some(5.0)))?;
+                    let ranges = MitRanges {
+                        p_min_rad: -p,
+                        p_max_rad: p,
+                        v_min_rad_s: -v,
+                        v_max_rad_s: v,
+                        kp_min_nm_rad: 0.0,
+                        kp_max_nm_rad: kp,
+                        kd_min_nm_s_rad: 0.0,
+                        kd_max_nm_s_rad: kd,
+                        t_min_nm: -t,
+                        t_max_nm: t,
+                        i_min_a: -i,
+                        i_max_a: i,
+                    };
+                    // The largest command the law can produce must be representable on the wire.
+                    let max_cmd = units.command_from_current(j.max_curr).abs();
+                    if max_cmd > t * (1.0 + 1e-12) {
+                        return Err(c.fail(
+                            key("t_max"),
+                            t,
+                            &format!(
+                                "joint {:?} max_curr = {} A is {max_cmd} in command_unit {:?}: t_max must cover it (the drive would clamp silently)",
+                                j.name, j.max_curr, bj.command_unit
+                            ),
+                        ));
+                    }
+                    let reply = JointUnits {
+                        command: bj.reply_unit.unwrap_or(CommandUnit::Current),
+                        ..units
+                    };
+                    (Some(ranges), reply)
+                }
+            };
+            drives.push(ResolvedDrive {
+                joint_pos: pos,
+                index: j.index,
+                node_id: bj.node_id,
+                units,
+                reply_units,
+                mit,
+                max_curr_a: j.max_curr,
+            });
+        }
+        let (bits, frames) = match bus.protocol {
+            CanProtocol::Mit => (busload::mit_bits_per_joint_tick(), 2),
+            CanProtocol::Odrive => (busload::odrive_bits_per_joint_tick(), 3),
+        };
+        let n = drives.len() as u32;
+        let load = BusLoad {
+            n_joints: n,
+            frames_per_s: f64::from(n * frames) * rate_hz,
+            bits_per_joint_tick: bits,
+            frames_per_joint_tick: frames,
+            bitrate_bps: bus.bitrate,
+            load: busload::load_fraction(n, bits, rate_hz, bus.bitrate as f64),
+            limit: bus.max_load,
+        };
+        if busload::check_load(n, bits, rate_hz, bus.bitrate as f64, bus.max_load).is_err() {
+            return Err(c.fail(
+                key("max_load"),
+                bus.max_load,
+                &format!(
+                    "bus {} over its load limit at {rate_hz} Hz: {load}",
+                    bus.interface
+                ),
+            ));
+        }
+        out.push(ResolvedBus {
+            interface: bus.interface.clone(),
+            protocol: bus.protocol,
+            host_id: bus.host_id,
+            feedback_timeout_ticks: bus.feedback_timeout_ticks,
+            joints: drives,
+            load,
+        });
+    }
+    if let Some(pos) = on_bus.iter().position(Option::is_none) {
+        return Err(c.fail(
+            format!("joint[{pos}].name"),
+            format!("{:?}", raw.joint[pos].name),
+            "with [backend] kind = \"can\" every [[joint]] must be on exactly one [[bus]]",
+        ));
+    }
+    Ok(out)
+}
+
+/// An interface name the kernel accepts (1–15 bytes, no '/', NUL or whitespace) or `fd:N`.
+fn check_interface(c: &Checker, key: &str, name: &str) -> Result<(), ConfigError> {
+    if let Some(n) = name.strip_prefix("fd:") {
+        return match n.parse::<i32>() {
+            Ok(fd) if fd >= 3 => Ok(()),
+            _ => Err(c.fail(
+                key.into(),
+                format!("{name:?}"),
+                "fd:N needs an inherited descriptor N >= 3",
+            )),
+        };
+    }
+    let ok = !name.is_empty()
+        && name.len() < libc::IFNAMSIZ
+        && !name
+            .bytes()
+            .any(|b| b == b'/' || b == 0 || b.is_ascii_whitespace());
+    if ok {
+        Ok(())
+    } else {
+        Err(c.fail(
+            key.into(),
+            format!("{name:?}"),
+            "must be a network interface name (1-15 bytes) or fd:N",
+        ))
+    }
 }
 
 fn model_spec(
