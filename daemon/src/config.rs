@@ -1233,4 +1233,203 @@ alpha = 0.6
             "{e}"
         );
     }
+
+    const CAN: &str = r#"
+[backend]
+kind = "can"
+[[joint]]
+name = "knee"
+index = 0
+gear_ratio = -100.0
+kt = 0.157
+max_curr = 5.0
+friction_model = "none"
+[[joint]]
+name = "ankle"
+index = 1
+gear_ratio = 160.0
+kt = 0.0665
+max_curr = 3.0
+friction_model = "none"
+[[bus]]
+interface = "vcan0"
+bitrate = 1000000
+protocol = "mit"
+[[bus.joint]]
+joint = "knee"
+node_id = 1
+command_unit = "motor_torque"
+p_max = 12.5
+v_max = 65.0
+t_max = 18.0
+i_max = 40.0
+[[bus]]
+interface = "can1"
+bitrate = 1000000
+protocol = "odrive"
+max_load = 0.5
+joints = [{ joint = "ankle", node_id = 3, command_unit = "joint_torque" }]
+"#;
+
+    #[test]
+    fn can_config_resolves_buses_units_and_load() {
+        let c = p(CAN).unwrap();
+        assert_eq!(c.buses.len(), 2);
+        let mit = &c.buses[0];
+        assert_eq!(
+            (mit.protocol, mit.host_id, mit.feedback_timeout_ticks),
+            (CanProtocol::Mit, 0, 5)
+        );
+        let d = mit.joints[0];
+        assert_eq!(
+            (d.index, d.node_id, d.units.command),
+            (0, 1, CommandUnit::MotorTorque)
+        );
+        assert_eq!(d.mit.unwrap().t_min_nm, -18.0);
+        assert_eq!(d.units.gear_ratio, -100.0);
+        // 1 joint × 1 kHz × (135 + 115 worst-case bits: 8- and 6-byte frames) on 1 Mbit/s.
+        assert!((mit.load.load - 0.25).abs() < 1e-12, "{}", mit.load.load);
+        assert_eq!(mit.load.frames_per_s, 2000.0);
+        let od = &c.buses[1];
+        assert_eq!(od.joints[0].units.feedback_angle, AngleUnit::Rev);
+        assert_eq!(od.joints[0].units.command, CommandUnit::JointTorque);
+        assert_eq!(od.load.limit, 0.5);
+        let s = bus_summary(&c);
+        assert!(
+            s.contains("bus[0] vcan0") && s.contains("25.0 %") && s.contains("bus[1] can1"),
+            "{s}"
+        );
+    }
+
+    #[test]
+    fn can_config_errors_name_key_and_value() {
+        let cases = [
+            ("node_id = 1", "node_id = 0", "bus[0].joint[0].node_id", "0"),
+            (
+                "node_id = 3",
+                "node_id = 64",
+                "bus[1].joint[0].node_id",
+                "64",
+            ),
+            (
+                "t_max = 18.0",
+                "t_max = 0.5",
+                "bus[0].joint[0].t_max",
+                "0.5",
+            ),
+            ("i_max = 40.0\n", "", "bus[0].joint[0].i_max", "<missing>"),
+            (
+                "joint = \"ankle\"",
+                "joint = \"knee\"",
+                "bus[1].joint[0].joint",
+                "knee",
+            ),
+            (
+                "joint = \"ankle\"",
+                "joint = \"elbow\"",
+                "bus[1].joint[0].joint",
+                "elbow",
+            ),
+            (
+                "interface = \"can1\"",
+                "interface = \"a/b\"",
+                "bus[1].interface",
+                "a/b",
+            ),
+            (
+                "interface = \"can1\"",
+                "interface = \"fd:x\"",
+                "bus[1].interface",
+                "fd:x",
+            ),
+            ("max_load = 0.5", "max_load = 1.5", "bus[1].max_load", "1.5"),
+            (
+                "bitrate = 1000000\nprotocol = \"odrive\"",
+                "bitrate = 0\nprotocol = \"odrive\"",
+                "bus[1].bitrate",
+                "0",
+            ),
+            (
+                "node_id = 3, command_unit",
+                "node_id = 3, p_max = 1.0, command_unit",
+                "bus[1].joint[0].p_max",
+                "<set>",
+            ),
+            ("kind = \"can\"", "kind = \"shm\"", "bus", "2 section(s)"),
+            (
+                "max_curr = 5.0",
+                "max_curr = 5.0\nkp = 0.5",
+                "joint[0].kp",
+                "kp = 0.5",
+            ),
+        ];
+        for (from, to, key, val) in cases {
+            assert!(CAN.contains(from), "{from}");
+            let e = p(&CAN.replacen(from, to, 1)).unwrap_err().to_string();
+            assert!(
+                e.contains("test.toml") && e.contains(&format!("`{key}`")) && e.contains(val),
+                "{from} → {to}: {e}"
+            );
+        }
+        // Every joint on exactly one bus.
+        let e = p(&CAN.replace(
+            "joints = [{ joint = \"ankle\", node_id = 3, command_unit = \"joint_torque\" }]",
+            "joints = []",
+        ))
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("bus[1].joint"), "{e}");
+        let cut = CAN.find("[[bus]]\ninterface = \"can1\"").unwrap();
+        let e = p(&CAN[..cut]).unwrap_err().to_string();
+        assert!(
+            e.contains("joint[1].name") && e.contains("exactly one"),
+            "{e}"
+        );
+        let cut = CAN.find("[[bus]]").unwrap();
+        let e = p(&CAN[..cut]).unwrap_err().to_string();
+        assert!(
+            e.contains("`bus`") && e.contains("at least one [[bus]]"),
+            "{e}"
+        );
+    }
+
+    fn mit_joints(n: usize, max_load: f64) -> String {
+        let mut text = String::from("[backend]\nkind = \"can\"\n");
+        for k in 0..n {
+            text += &format!(
+                "[[joint]]\nname = \"j{k}\"\nindex = {k}\ngear_ratio = 100.0\nkt = 0.1\nmax_curr = 5.0\nfriction_model = \"none\"\n"
+            );
+        }
+        text += &format!(
+            "[[bus]]\ninterface = \"can0\"\nbitrate = 1000000\nprotocol = \"mit\"\nmax_load = {max_load}\n"
+        );
+        for k in 0..n {
+            text += &format!(
+                "[[bus.joint]]\njoint = \"j{k}\"\nnode_id = {}\ncommand_unit = \"current\"\np_max = 12.5\nv_max = 65.0\nt_max = 5.0\ni_max = 40.0\n",
+                k + 1
+            );
+        }
+        text
+    }
+
+    #[test]
+    fn bus_over_its_load_limit_is_refused_with_the_numbers() {
+        // Four MIT joints at 1 kHz on 1 Mbit/s: 4 × (135 + 115) bits = 100 % > 70 %.
+        let e = p(&mit_joints(4, 0.7)).unwrap_err().to_string();
+        for needle in [
+            "bus[0].max_load",
+            "8000 frames/s",
+            "250 bits",
+            "100.0 %",
+            "limit 70.0 %",
+            "1000000 bit/s",
+        ] {
+            assert!(e.contains(needle), "{needle}: {e}");
+        }
+        // Three fit a 75 % limit exactly; not a 74 % one.
+        let c = p(&mit_joints(3, 0.75)).unwrap();
+        assert!((c.buses[0].load.load - 0.75).abs() < 1e-12);
+        let e = p(&mit_joints(3, 0.74)).unwrap_err().to_string();
+        assert!(e.contains("75.0 %"), "{e}");
+    }
 }

@@ -747,3 +747,439 @@ fn log_counters(c: &SharedCounters, stop: &AtomicBool, buses: &[String]) {
         last = now;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    //! The backend's I/O over `socketpair(AF_UNIX, SOCK_SEQPACKET)` sockets wrapped as real
+    //! `socketcan::CanSocket`s (one write = one 16-byte datagram, as on AF_CAN): the test holds the
+    //! drive end and speaks the protocol with the `frictionless_shm_types::can` codecs.
+
+    use super::*;
+    use frictionless_shm_types::can::mit::{MitRanges, MitReply, MitRx};
+    use frictionless_shm_types::{DaemonStatus, IpcConfig};
+    use socketcan::CanErrorFrame;
+
+    fn pair() -> (CanSocket, CanSocket) {
+        let mut fds = [0; 2];
+        // SAFETY: fds is a valid 2-element array; on success both fds are new and owned by us.
+        let rc = unsafe {
+            libc::socketpair(
+                libc::AF_UNIX,
+                libc::SOCK_SEQPACKET | libc::SOCK_CLOEXEC,
+                0,
+                fds.as_mut_ptr(),
+            )
+        };
+        assert_eq!(rc, 0, "socketpair: {}", std::io::Error::last_os_error());
+        // SAFETY: the fds were just created and are not owned elsewhere.
+        unsafe {
+            (
+                CanSocket::from(OwnedFd::from_raw_fd(fds[0])),
+                CanSocket::from(OwnedFd::from_raw_fd(fds[1])),
+            )
+        }
+    }
+
+    struct Env {
+        dir: std::path::PathBuf,
+        cfg: Config,
+    }
+
+    impl Drop for Env {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
+    }
+
+    fn env(tag: &str, body: &str) -> Env {
+        let id = format!("fldcan_{tag}_{}_{}", std::process::id(), monotonic_ns());
+        let dir = std::env::temp_dir().join(&id);
+        std::fs::create_dir_all(&dir).unwrap();
+        let text = format!(
+            "[backend]\nkind = \"can\"\nservice_prefix = \"{id}\"\nroot_path = \"{}\"\n{body}",
+            dir.display()
+        );
+        let cfg = crate::config::parse(&dir.join("t.toml"), &text).unwrap();
+        Env { dir, cfg }
+    }
+
+    const MIT2: &str = r#"
+[[joint]]
+name = "knee"
+index = 0
+gear_ratio = -100.0
+kt = 0.157
+max_curr = 5.0
+friction_model = "none"
+[[joint]]
+name = "hip"
+index = 2
+gear_ratio = 50.0
+kt = 0.1
+max_curr = 4.0
+friction_model = "none"
+[[bus]]
+interface = "vcan0"
+bitrate = 1000000
+protocol = "mit"
+host_id = 0
+feedback_timeout_ticks = 3
+[[bus.joint]]
+joint = "knee"
+node_id = 1
+command_unit = "motor_torque"
+p_max = 12.5
+v_max = 65.0
+t_max = 1.0
+i_max = 40.0
+[[bus.joint]]
+joint = "hip"
+node_id = 2
+command_unit = "current"
+p_max = 12.5
+v_max = 65.0
+t_max = 10.0
+i_max = 40.0
+"#;
+
+    fn recv(s: &CanSocket) -> WireFrame {
+        let f = s.read_frame_timeout(Duration::from_secs(5)).unwrap();
+        WireFrame::try_from(&f).unwrap()
+    }
+
+    fn send(s: &CanSocket, f: WireFrame) {
+        s.write_frame(&CanFrame::try_from(f).unwrap()).unwrap();
+    }
+
+    fn ranges(t_max: f64) -> MitRanges {
+        MitRanges {
+            t_min_nm: -t_max,
+            t_max_nm: t_max,
+            ..MitRanges::MINI_CHEETAH
+        }
+    }
+
+    fn mit_reply(drive: &CanSocket, id: u8, p: f64, v: f64, i: f64, t_max: f64) {
+        let rep = MitReply {
+            motor_id: id,
+            p_rad: p,
+            v_rad_s: v,
+            i_a: i,
+        };
+        send(drive, mit::encode_reply(0, &rep, &ranges(t_max)).unwrap().0);
+    }
+
+    /// (motor id, t_ff) of the next command frame.
+    fn mit_cmd(drive: &CanSocket) -> (u32, MitRx) {
+        let f = recv(drive);
+        let t_max = if f.id == 1 { 1.0 } else { 10.0 };
+        (f.id, mit::decode_command(&f, &ranges(t_max)).unwrap())
+    }
+
+    fn torque(rx: MitRx) -> f64 {
+        match rx {
+            MitRx::Command(c) => {
+                assert_eq!((c.kp_nm_rad, c.kd_nm_s_rad), (0.0, 0.0), "pure torque");
+                c.t_ff_nm
+            }
+            MitRx::Special(s) => panic!("special frame {s:?}"),
+        }
+    }
+
+    #[test]
+    fn mit_feedback_maps_to_joint_side_and_commands_to_the_drive_unit() {
+        let e = env("mit", MIT2);
+        let (host, drive) = pair();
+        let mut b = CanBackend::with_sockets(&e.cfg, vec![host]).unwrap();
+        // Open enters motor mode on both drives.
+        for id in [1, 2] {
+            assert_eq!(
+                mit_cmd(&drive),
+                (id, MitRx::Special(MitSpecial::EnterMotorMode))
+            );
+        }
+        // No feedback yet: nothing new, both joints stale from the start.
+        assert!(b.read_states().unwrap().is_none());
+        assert_eq!(b.bus_counters().stale_feedback_mask, 0b101);
+
+        mit_reply(&drive, 1, 2.0, -10.0, 3.0, 1.0);
+        mit_reply(&drive, 2, -1.0, 5.0, -7.5, 10.0);
+        // A frame for a motor we do not drive is ignored.
+        mit_reply(&drive, 9, 1.0, 1.0, 1.0, 1.0);
+        let st = b.read_states().unwrap().expect("feedback decoded");
+        let q = MitRanges::MINI_CHEETAH.steps();
+        let near = |a: f64, b: f64, tol: f64| assert!((a - b).abs() <= tol, "{a} vs {b}");
+        near(st.theta_motor_rad[0], 2.0, q[0]);
+        near(st.s_rad[0], 2.0 / -100.0, q[0] / 100.0);
+        near(st.sdot_rad_s[0], -10.0 / -100.0, q[1] / 100.0);
+        near(st.omega_motor_rad_s[0], -10.0, q[1]);
+        near(st.current_a[0], 3.0, q[5]);
+        near(st.s_rad[2], -1.0 / 50.0, q[0] / 50.0);
+        near(st.sdot_rad_s[2], 5.0 / 50.0, q[1] / 50.0);
+        near(st.current_a[2], -7.5, q[5]);
+        assert_eq!((st.fault_flags[0], st.fault_flags[2]), (0, 0));
+        assert_eq!(st.n_joints, 3);
+        assert!(st.tau_meas_nm[0].is_nan(), "no torque sensor on the bus");
+        assert_eq!(b.bus_counters().stale_feedback_mask, 0);
+        assert_eq!(b.bus_counters().rx_frames, 2);
+
+        // Commands: knee in motor torque kt·i, hip in amperes; invalid, NaN and over-limit cases.
+        let mut cmd = MotorCurrentCommand::zeroed();
+        cmd.valid_mask = 0b101;
+        cmd.i_ref_a[0] = 2.5;
+        cmd.i_ref_a[2] = -3.25;
+        b.publish_command(&cmd).unwrap();
+        let (id, rx) = mit_cmd(&drive);
+        assert_eq!(id, 1);
+        near(
+            torque(rx),
+            0.157 * 2.5,
+            ranges(1.0).steps()[4] / 2.0 + 1e-12,
+        );
+        let (id, rx) = mit_cmd(&drive);
+        assert_eq!(id, 2);
+        near(torque(rx), -3.25, ranges(10.0).steps()[4] / 2.0 + 1e-12);
+        cmd.valid_mask = 0b001;
+        cmd.i_ref_a[0] = 99.0; // clamped to max_curr = 5 A → 0.785 Nm
+        b.publish_command(&cmd).unwrap();
+        near(
+            torque(mit_cmd(&drive).1),
+            0.157 * 5.0,
+            ranges(1.0).steps()[4] / 2.0 + 1e-12,
+        );
+        near(
+            torque(mit_cmd(&drive).1),
+            0.0,
+            ranges(10.0).steps()[4] / 2.0 + 1e-12,
+        );
+        cmd.i_ref_a[0] = f64::NAN;
+        b.publish_command(&cmd).unwrap();
+        near(
+            torque(mit_cmd(&drive).1),
+            0.0,
+            ranges(1.0).steps()[4] / 2.0 + 1e-12,
+        );
+        let _ = mit_cmd(&drive);
+        assert_eq!(b.bus_counters().tx_frames, 2 + 6);
+        drop(b);
+        // Drop: zero torque, then exit motor mode, per drive.
+        near(torque(mit_cmd(&drive).1), 0.0, 1e-3);
+        assert_eq!(
+            mit_cmd(&drive),
+            (1, MitRx::Special(MitSpecial::ExitMotorMode))
+        );
+        near(torque(mit_cmd(&drive).1), 0.0, 1e-2);
+        assert_eq!(
+            mit_cmd(&drive),
+            (2, MitRx::Special(MitSpecial::ExitMotorMode))
+        );
+    }
+
+    #[test]
+    fn silent_drive_goes_stale_alone_and_recovers() {
+        let e = env("stale", MIT2);
+        let (host, drive) = pair();
+        drive.set_nonblocking(true).unwrap();
+        let mut b = CanBackend::with_sockets(&e.cfg, vec![host]).unwrap();
+        let mut last = None;
+        for tick in 1..=20u32 {
+            mit_reply(&drive, 1, 0.1, 0.0, 0.0, 1.0);
+            // The hip drive answers only for the first 5 ticks and after tick 15.
+            if !(6..=15).contains(&tick) {
+                mit_reply(&drive, 2, 0.2, 0.0, 0.0, 10.0);
+            }
+            let st = b.read_states().unwrap().expect("knee feedback every tick");
+            let mask = b.bus_counters().stale_feedback_mask;
+            // Timeout 3 ticks: silent since tick 6 → stale from tick 9 (9 − 5 > 3) to tick 15.
+            let want_stale = (9..=15).contains(&tick);
+            assert_eq!(mask, if want_stale { 0b100 } else { 0 }, "tick {tick}");
+            assert_eq!(
+                st.fault_flags[2],
+                if want_stale { FAULT_FEEDBACK_STALE } else { 0 },
+                "tick {tick}"
+            );
+            assert_eq!(st.fault_flags[0], 0);
+            assert!(last.is_none_or(|s| st.seq > s));
+            last = Some(st.seq);
+        }
+    }
+
+    #[test]
+    fn error_frames_are_counted_by_class_and_reach_the_status() {
+        let e = env("err", MIT2);
+        let (host, drive) = pair();
+        let mut b = CanBackend::with_sockets(&e.cfg, vec![host]).unwrap();
+        let bus_off = CanErrorFrame::new_error(CAN_ERR_BUSOFF, &[]).unwrap();
+        let passive =
+            CanErrorFrame::new_error(CAN_ERR_CRTL, &[0, CAN_ERR_CRTL_TX_PASSIVE]).unwrap();
+        let warning = CanErrorFrame::new_error(CAN_ERR_CRTL, &[0, 0x08]).unwrap();
+        for f in [bus_off, passive, warning, passive] {
+            drive.write_frame(&CanFrame::Error(f)).unwrap();
+        }
+        assert!(
+            b.read_states().unwrap().is_none(),
+            "error frames are not feedback"
+        );
+        let c = b.bus_counters();
+        assert_eq!((c.error_frames, c.bus_off, c.error_passive), (4, 1, 2));
+        // The status carries the counters (the RT loop does not need to know about them).
+        let ipc_cfg = IpcConfig {
+            root_path: e.cfg.root_path.clone(),
+            service_prefix: e.cfg.raw.backend.service_prefix.clone(),
+        };
+        let ipc = Ipc::open(&ipc_cfg, "test").unwrap();
+        let inbox = ipc.daemon_status().unwrap().inbox().unwrap();
+        let mut s = DaemonStatus::zeroed();
+        s.ticks = 77;
+        b.publish_status(&s).unwrap();
+        let got = inbox
+            .wait_latest(Duration::from_secs(5))
+            .unwrap()
+            .expect("status");
+        assert_eq!(got.ticks, 77);
+        assert_eq!((got.bus.error_frames, got.bus.bus_off), (4, 1));
+        assert_eq!(got.bus.stale_feedback_mask, 0b101);
+    }
+
+    #[test]
+    fn full_tx_queue_counts_drops_and_never_blocks() {
+        let e = env("full", MIT2);
+        let (host, drive) = pair();
+        let mut b = CanBackend::with_sockets(&e.cfg, vec![host]).unwrap();
+        let mut cmd = MotorCurrentCommand::zeroed();
+        cmd.valid_mask = 0b101;
+        // Nobody reads the drive end: the socket buffer fills, then sends fail with EAGAIN.
+        for _ in 0..20_000 {
+            b.publish_command(&cmd).unwrap();
+            if b.bus_counters().tx_dropped > 100 {
+                break;
+            }
+        }
+        let c = b.bus_counters();
+        assert!(c.tx_dropped > 100, "{c:?}");
+        assert!(c.tx_frames > 0);
+        assert_eq!(c.io_errors, 0);
+        drop(drive);
+    }
+
+    const ODRIVE: &str = r#"
+[[joint]]
+name = "ankle"
+index = 1
+gear_ratio = -160.0
+kt = 0.0665
+max_curr = 3.0
+friction_model = "none"
+[[bus]]
+interface = "vcan1"
+bitrate = 1000000
+protocol = "odrive"
+[[bus.joint]]
+joint = "ankle"
+node_id = 5
+command_unit = "joint_torque"
+"#;
+
+    #[test]
+    fn odrive_feedback_heartbeat_faults_and_joint_torque_commands() {
+        let e = env("odrive", ODRIVE);
+        let (host, drive) = pair();
+        let mut b = CanBackend::with_sockets(&e.cfg, vec![host]).unwrap();
+        let dec = |d: &CanSocket| odrive::decode(&recv(d)).unwrap();
+        assert_eq!(
+            dec(&drive),
+            (5, OdriveMsg::SetInputTorque { torque_nm: 0.0 })
+        );
+        assert!(matches!(
+            dec(&drive),
+            (
+                5,
+                OdriveMsg::SetControllerMode {
+                    control_mode: 1,
+                    input_mode: 1
+                }
+            )
+        ));
+        assert_eq!(
+            dec(&drive),
+            (5, OdriveMsg::SetAxisState { requested_state: 8 })
+        );
+        let tx = |m: OdriveMsg| send(&drive, odrive::encode(5, &m).unwrap());
+        tx(OdriveMsg::EncoderEstimates {
+            pos_rev: -8.0,
+            vel_rev_s: 1.5,
+        });
+        tx(OdriveMsg::Iq {
+            iq_setpoint_a: 1.0,
+            iq_measured_a: 0.75,
+        });
+        // Another node's frames are not ours.
+        send(
+            &drive,
+            odrive::encode(
+                6,
+                &OdriveMsg::EncoderEstimates {
+                    pos_rev: 1.0,
+                    vel_rev_s: 1.0,
+                },
+            )
+            .unwrap(),
+        );
+        let st = b.read_states().unwrap().unwrap();
+        let tau = std::f64::consts::TAU;
+        assert!((st.s_rad[1] - (-8.0 * tau / -160.0)).abs() < 1e-9);
+        assert!((st.sdot_rad_s[1] - (1.5 * tau / -160.0)).abs() < 1e-9);
+        assert!((st.theta_motor_rad[1] - (-8.0 * tau)).abs() < 1e-9);
+        assert_eq!(st.current_a[1], 0.75);
+        assert_eq!(st.fault_flags[1], 0);
+        // Heartbeat with an axis error → drive fault; healthy closed loop → clear.
+        tx(OdriveMsg::Heartbeat {
+            axis_error: 0x40,
+            axis_state: 8,
+            status: [0; 3],
+        });
+        assert_eq!(
+            b.read_states().unwrap().unwrap().fault_flags[1],
+            FAULT_DRIVE
+        );
+        tx(OdriveMsg::Heartbeat {
+            axis_error: 0,
+            axis_state: 8,
+            status: [0; 3],
+        });
+        assert_eq!(b.read_states().unwrap().unwrap().fault_flags[1], 0);
+        // Joint torque command: r·kt·i.
+        let mut cmd = MotorCurrentCommand::zeroed();
+        cmd.valid_mask = 0b10;
+        cmd.i_ref_a[1] = 1.25;
+        b.publish_command(&cmd).unwrap();
+        let (n, m) = dec(&drive);
+        assert_eq!(n, 5);
+        let OdriveMsg::SetInputTorque { torque_nm } = m else {
+            panic!("{m:?}")
+        };
+        assert!((f64::from(torque_nm) - (-160.0 * 0.0665 * 1.25)).abs() < 1e-4);
+        // An idle axis (no error) is re-armed after REENTER_EVERY_TICKS ticks.
+        tx(OdriveMsg::Heartbeat {
+            axis_error: 0,
+            axis_state: 1,
+            status: [0; 3],
+        });
+        drive.set_nonblocking(true).unwrap();
+        let mut rearmed = false;
+        for _ in 0..=REENTER_EVERY_TICKS {
+            let st = b.read_states().unwrap();
+            if let Some(st) = st {
+                assert_eq!(st.fault_flags[1] & FAULT_DRIVE, FAULT_DRIVE);
+            }
+            while let Ok(f) = drive.read_frame() {
+                let w = WireFrame::try_from(&f).unwrap();
+                if odrive::decode(&w).unwrap().1 == (OdriveMsg::SetAxisState { requested_state: 8 })
+                {
+                    rearmed = true;
+                }
+            }
+        }
+        assert!(rearmed, "idle axis was not re-armed");
+    }
+}
