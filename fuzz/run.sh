@@ -1,20 +1,68 @@
 #!/usr/bin/env bash
-# Fuzz the .fwt weight reader for SECONDS (default 60):
-#   fuzz/run.sh 60
-# Installs cargo-fuzz if missing, seeds the corpus with valid files written by the test
-# `fuzz_seed_files_are_valid` (tests/weights_bad_input.rs), then runs libFuzzer with ASan on the stable
-# toolchain (RUSTC_BOOTSTRAP=1 unlocks the -Z flags cargo-fuzz needs). Exits non-zero on a crash; the
-# reproducer is left in fuzz/artifacts/weights_reader/.
+# Fuzz every target for SECONDS each (default 60):
+#   fuzz/run.sh 60                     # all targets, 60 s each (CI: 4 targets = 4 min)
+#   fuzz/run.sh 30 candump_parse       # only the named targets
+# Targets: weights_reader (.fwt reader), can_mit_decode (MIT command/reply/special decoders),
+# can_odrive_decode (ODrive CAN Simple decoder), candump_parse (candump -L line parser).
+# Installs cargo-fuzz if missing, seeds each corpus (the .fwt corpus with valid files written by the test
+# `fuzz_seed_files_are_valid` in tests/weights_bad_input.rs; the CAN corpora with a few valid frames and
+# log lines written here), builds all targets once, then runs libFuzzer with ASan on the stable toolchain
+# (RUSTC_BOOTSTRAP=1 unlocks the -Z flags cargo-fuzz needs) and prints each target's execution count.
+# Exits non-zero on the first crash; the reproducer is left in fuzz/artifacts/<target>/.
 set -euo pipefail
 SECS="${1:-60}"
+shift || true
+ALL=(weights_reader can_mit_decode can_odrive_decode candump_parse)
+if [ $# -gt 0 ]; then TARGETS=("$@"); else TARGETS=("${ALL[@]}"); fi
 cd "$(dirname "$0")/.."
 ROOT="$(pwd)"
 if ! command -v cargo-fuzz >/dev/null 2>&1; then
   cargo install cargo-fuzz --locked
 fi
-CORPUS="$ROOT/fuzz/corpus/weights_reader"
-mkdir -p "$CORPUS"
-echo "== seeding $CORPUS"
-FWT_FUZZ_SEED_DIR="$CORPUS" cargo test -q -p frictionless --test weights_bad_input fuzz_seed_files_are_valid
-echo "== fuzzing weights_reader for ${SECS}s"
-RUSTC_BOOTSTRAP=1 cargo fuzz run weights_reader "$CORPUS" -- -max_total_time="$SECS"
+
+seed() { # seed <target> <name> <printf-format>
+  mkdir -p "$ROOT/fuzz/corpus/$1"
+  # shellcheck disable=SC2059
+  printf "$3" > "$ROOT/fuzz/corpus/$1/seed-$2"
+}
+for t in "${TARGETS[@]}"; do
+  mkdir -p "$ROOT/fuzz/corpus/$t"
+  case "$t" in
+    weights_reader)
+      echo "== seeding fuzz/corpus/weights_reader"
+      FWT_FUZZ_SEED_DIR="$ROOT/fuzz/corpus/weights_reader" \
+        cargo test -q -p frictionless --test weights_bad_input fuzz_seed_files_are_valid ;;
+    can_mit_decode)
+      # byte 0: flags (bit 0 extended, bit 1 RTR) | length << 4; bytes 1..4 id (LE); 4..12 data; then
+      # f64 fields for commands and ranges.
+      seed "$t" command '\x80\x01\x00\x00\x7f\xff\x7f\xf0\x00\x00\x07\xff'
+      seed "$t" enter '\x80\x01\x00\x00\xff\xff\xff\xff\xff\xff\xff\xfc'
+      seed "$t" allff '\x80\x01\x00\x00\xff\xff\xff\xff\xff\xff\xff\xff'
+      seed "$t" reply '\x60\x00\x00\x00\x01\x80\x00\x80\x08\x00\x00\x00' ;;
+    can_odrive_decode)
+      seed "$t" torque '\x40\x2e\x00\x00\x00\x00\x80\x3f\x00\x00\x00\x00'
+      seed "$t" state '\x40\x27\x00\x00\x08\x00\x00\x00\x00\x00\x00\x00'
+      seed "$t" encoder '\x80\x29\x00\x00\x00\x00\x80\x3f\x00\x00\x00\xbf'
+      seed "$t" heartbeat '\x80\x21\x00\x00\x00\x08\x00\x00\x08\x00\x00\x00'
+      seed "$t" rtr '\x02\x29\x00\x00' ;;
+    candump_parse)
+      seed "$t" classic '(1700000000.123456) vcan0 001#7FFF7FF0000007FF\n(1700000000.124456) vcan0 000#018000800800\n'
+      seed "$t" ext_rtr '(0.000001) can0 12345678#R\n(0.000002) can0 02C#R8\n'
+      seed "$t" fd '(1.000000) vcan1 123##1DEADBEEF\n(1.000001) vcan1 123#0011223344556677_C\n' ;;
+    *) echo "unknown fuzz target $t (known: ${ALL[*]})" >&2; exit 2 ;;
+  esac
+done
+
+echo "== building ${TARGETS[*]}"
+for t in "${TARGETS[@]}"; do
+  RUSTC_BOOTSTRAP=1 cargo fuzz build "$t"
+done
+for t in "${TARGETS[@]}"; do
+  echo "== fuzzing $t for ${SECS}s"
+  log="$ROOT/fuzz/artifacts/$t.log"
+  mkdir -p "$ROOT/fuzz/artifacts"
+  RUSTC_BOOTSTRAP=1 cargo fuzz run "$t" "$ROOT/fuzz/corpus/$t" -- -max_total_time="$SECS" \
+    -print_final_stats=1 2> "$log" || { tail -n 60 "$log" >&2; echo "fuzz: $t FAILED (see $log)"; exit 1; }
+  runs=$(grep -oE 'stat::number_of_executed_units: *[0-9]+' "$log" | grep -oE '[0-9]+$' | tail -n1)
+  echo "fuzz: $t ok, ${runs:-?} executions in ${SECS}s, corpus $(ls "$ROOT/fuzz/corpus/$t" | wc -l) inputs"
+done

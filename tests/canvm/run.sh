@@ -5,8 +5,11 @@
 # carries can.ko, can-raw.ko, vcan.ko, can-gw.ko; NOT the cloud flavour) from a tiny initramfs holding
 # busybox, those modules (loaded in dependency order), the project's statically linked (musl) binaries
 # and test harnesses. Inside, /init creates vcan0 (classic MTU 16) and vcan1, then runs every harness with
-# `--include-ignored --test-threads=1 vcan` (tests named `vcan…` and marked #[ignore = "needs vcan"] on the
-# host). Everything comes from apt, rustup and crates.io.
+# `--include-ignored --test-threads=1 --show-output vcan` (tests named `vcan…` and marked
+# #[ignore = "needs vcan"] on the host). The release binaries of the built packages (frictiond, frictl) are
+# in the VM's /bin (on PATH; FRICTIONLESS_IN_CANVM=1 tells tests to look there). Lines a test prints that
+# start with `bench:` (the in-VM benchmarks) are echoed here and saved to $CANVM_WORK/bench.txt.
+# Everything comes from apt, rustup and crates.io.
 #
 # Usage: bash tests/canvm/run.sh
 # Knobs (env): CANVM_WORK (default target/canvm), CANVM_TIMEOUT seconds (default 600), CANVM_SKIP_APT=1,
@@ -84,6 +87,12 @@ done
 for b in "$CARGO_TARGET_DIR/$TARGET/release/"*; do
   [ -f "$b" ] && [ -x "$b" ] && cp "$b" "$IR/bin/" || true
 done
+# The closed-loop tests start these from PATH: make sure they are there when their package is built.
+for b in frictiond frictl; do
+  case " $PACKAGES " in
+    *" $b "*) [ -x "$IR/bin/$b" ] || { log "binary $b missing from the initramfs"; echo "canvm: 0 passed, 1 failed"; exit 1; } ;;
+  esac
+done
 n=0
 for h in $harnesses; do
   base=$(basename "$h"); name=${base%-*}; n=$((n+1))
@@ -101,7 +110,7 @@ export PATH=/bin:/sbin TMPDIR=/tmp HOME=/tmp FRICTIONLESS_IN_CANVM=1
 rc=0
 for t in /tests/*; do
   echo "CANVM_HARNESS: \$t"
-  (cd /tmp && \$t --include-ignored --test-threads=1 $FILTER) || rc=1
+  (cd /tmp && \$t --include-ignored --test-threads=1 --show-output $FILTER) || rc=1
 done
 echo "CANVM_EXIT: \$rc"
 sync; poweroff -f
@@ -125,6 +134,8 @@ qrc=$?
 set -e
 tr -d '\r' < "$WORK/console.log" | sed 's/\x1b\[[0-9;?]*[a-zA-Z]//g; s/\x1bc//g' > "$WORK/console.txt"
 grep -E '^(test |CANVM_|running|insmod|thread|---- |  left|  right|failures)' "$WORK/console.txt" || true
+# Benchmarks inside the VM print lines starting with `bench:` (shown by --show-output): echo them.
+grep -E '^bench:' "$WORK/console.txt" | tee "$WORK/bench.txt" || true
 passed=$(grep -cE '^test .* \.\.\. ok$' "$WORK/console.txt" || true)
 failed=$(grep -cE '^test .* \.\.\. FAILED$' "$WORK/console.txt" || true)
 status=0
