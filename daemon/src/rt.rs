@@ -622,7 +622,7 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
 
         // 0. wait (the only step that differs between the triggers) and 1. inputs
         let mut timed_out = false;
-        if lockstep {
+        let wake = if lockstep {
             match wait_lockstep(
                 &mut backend,
                 &mut inputs,
@@ -635,14 +635,16 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
                 LockstepWake::TimedOut => timed_out = true,
                 LockstepWake::Stop => break,
             }
+            monotonic_ns()
         } else {
             sleep_until(deadline);
+            let wake = monotonic_ns();
             if shared.stop.load(Ordering::Relaxed) {
                 break;
             }
             inputs.poll(&mut backend, tick);
-        }
-        let wake = monotonic_ns();
+            wake
+        };
 
         // 2. parameter hand-over (the old set is freed by the supervisor, never here)
         if let Some(old) = parked_old.take()

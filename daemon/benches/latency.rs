@@ -1,0 +1,182 @@
+//! State → command latency across processes: this process publishes a `JointStates` (and the
+//! `TorqueRequest` answering it), a real `frictiond` (the binary of this package) computes and
+//! publishes the `MotorCurrentCommand`, this process wakes on it (iceoryx2 listener, blocking).
+//! Measured from just before the state is published to the wake-up with the answering command.
+//!
+//! - `lockstep` trigger: the daemon wakes on the inputs — pure IPC + compute latency (one round
+//!   trip of two event wake-ups);
+//! - `clock` trigger: the daemon ticks at 1 kHz on its own phase and this process publishes at
+//!   1 kHz on an unrelated phase — the realistic latency (uniform 0–1 period + IPC + compute).
+//!
+//! Prints p50/p99/p99.9/max [µs]; no asserts. `FRICTIOND_LATENCY_N` samples per trigger (default
+//! 20 000 lockstep, a quarter of that with the clock). Run: `cargo bench -p frictiond --bench latency`.
+
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use frictionless_shm_types::{Ipc, IpcConfig, JointStates, TorqueRequest, monotonic_ns};
+
+const CONFIG: &str = r#"
+[loop]
+period_us = 1000
+status_every_ticks = 100
+ready_after_ticks = 10
+trigger = "TRIGGER"
+lockstep_wait_request = true
+lockstep_timeout_ms = 5000
+
+[safety]
+stale_after_ticks = 20
+on_stale = "zero"
+
+[[joint]]
+name = "knee"
+index = 0
+gear_ratio = -100.0
+kt = 0.157
+max_curr = 5.0
+kfc = 0.85
+max_output_friction = 25.0
+lpf = { order = 2, cutoff_hz = 30.0 }
+friction_model = "cv"
+kc = 8.1
+ka = 50.84
+kv = 5.55
+
+[[joint]]
+name = "ankle_roll"
+index = 1
+gear_ratio = -160.0
+kt = 0.0665
+max_curr = 3.0
+kfc = 0.7
+friction_model = "scv"
+kc = 1.0005
+ka = 2.78
+kv = 0.29
+ks = 6.0
+vs = 0.13
+alpha = 0.6
+"#;
+
+fn quantile(sorted: &[u64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let i = ((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len()) - 1;
+    sorted[i] as f64 / 1e3
+}
+
+fn run(trigger: &str, n: usize, dir: &Path) {
+    let prefix = format!("fld_lat_{trigger}_{}", std::process::id());
+    let iox = dir.join(format!("iox_{trigger}"));
+    std::fs::create_dir_all(&iox).unwrap();
+    let cfg_path = dir.join(format!("{trigger}.toml"));
+    std::fs::write(
+        &cfg_path,
+        format!(
+            "[backend]\nkind = \"shm\"\nservice_prefix = \"{prefix}\"\nroot_path = \"{}\"\n{}",
+            iox.display(),
+            CONFIG.replace("TRIGGER", trigger)
+        ),
+    )
+    .unwrap();
+    let mut daemon = Command::new(env!("CARGO_BIN_EXE_frictiond"))
+        .arg("--config")
+        .arg(&cfg_path)
+        .env("RUST_LOG", "warn")
+        .stdout(Stdio::null())
+        .spawn()
+        .expect("spawn frictiond");
+    let ipc = Ipc::open(&IpcConfig::new(Some(&iox), &prefix), "latency_bench").unwrap();
+    let states = ipc.joint_states().unwrap().outbox().unwrap();
+    let request = ipc.torque_request().unwrap().outbox().unwrap();
+    let cmd = ipc.motor_current_command().unwrap().inbox().unwrap();
+    let status_ch = ipc.daemon_status().unwrap();
+    let t0 = Instant::now();
+    while status_ch.publisher_count() == 0 {
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "frictiond did not start"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let mut js = JointStates::zeroed();
+    js.n_joints = 2;
+    let mut rq = TorqueRequest::zeroed();
+    rq.n_joints = 2;
+    rq.enable_mask = 0b11;
+    let warmup = 1000;
+    let mut lat = Vec::with_capacity(n);
+    let mut lost = 0u64;
+    let period = 1_000_000u64;
+    let mut next = monotonic_ns() + period;
+    for k in 1..=(n + warmup) as u64 {
+        if trigger == "clock" {
+            while monotonic_ns() < next {
+                std::thread::sleep(Duration::from_micros(50));
+            }
+            next += period;
+        }
+        let x = k as f64 * 1e-3;
+        js.sdot_rad_s[0] = x.sin();
+        js.sdot_rad_s[1] = x.cos();
+        rq.tau_des_nm[0] = x.cos();
+        let t_pub = monotonic_ns();
+        js.seq = k;
+        js.stamp_ns = t_pub;
+        rq.seq = k;
+        rq.state_seq = k;
+        rq.stamp_ns = t_pub;
+        states.publish(&js).unwrap();
+        request.publish(&rq).unwrap();
+        // Wait for the command answering state k (give up after 50 ms: counted as lost).
+        let give_up = t_pub + 50_000_000;
+        let got = loop {
+            if let Some(c) = cmd.latest().unwrap()
+                && c.state_seq >= k
+            {
+                break Some(monotonic_ns());
+            }
+            let now = monotonic_ns();
+            if now >= give_up {
+                break None;
+            }
+            cmd.wait(Duration::from_nanos((give_up - now).min(5_000_000)))
+                .unwrap();
+        };
+        match got {
+            Some(t) if k > warmup as u64 => lat.push(t - t_pub),
+            Some(_) => {}
+            None => lost += 1,
+        }
+    }
+    // SAFETY: kill(2) on our own child.
+    unsafe { libc::kill(daemon.id() as i32, libc::SIGTERM) };
+    let _ = daemon.wait();
+    lat.sort_unstable();
+    println!(
+        "state→command latency, {trigger:<8} trigger: n={:<6} p50 {:>7.1} µs  p99 {:>7.1} µs  p99.9 {:>7.1} µs  max {:>8.1} µs  (lost {lost})",
+        lat.len(),
+        quantile(&lat, 0.5),
+        quantile(&lat, 0.99),
+        quantile(&lat, 0.999),
+        lat.last().map_or(f64::NAN, |&m| m as f64 / 1e3),
+    );
+}
+
+fn main() {
+    // `cargo test` runs benches once with `--test`... harness = false gets the raw args: keep the
+    // smoke run short.
+    let smoke = std::env::args().all(|a| a != "--bench");
+    let n: usize = std::env::var("FRICTIOND_LATENCY_N")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(if smoke { 200 } else { 20_000 });
+    let dir = std::env::temp_dir().join(format!("fld_latency_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    run("lockstep", n, &dir);
+    run("clock", (n / 4).max(100), &dir);
+    let _ = std::fs::remove_dir_all(&dir);
+}
