@@ -1,0 +1,499 @@
+//! Shared pieces of the `frictiond` CAN-backend tests (`can_backend.rs` on the host over a
+//! socketpair, `vcan_daemon.rs` on a real vcan in the CAN VM): the test process emulates MIT drives
+//! on a raw `socketcan::CanSocket` (decoding commands and replying with the codecs of
+//! `frictionless_shm_types::can`) and acts as the controller over shared memory, against a spawned
+//! `frictiond` with `[backend] kind = "can"`. The scenarios are written once and run over either
+//! socket kind.
+//!
+//! Not a test target itself (a directory under `tests/`); included with `mod can_support;` after
+//! `mod daemon_support;`.
+
+#![allow(dead_code)]
+
+use std::collections::HashMap;
+use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use frictionless_shm_types::can::WireFrame;
+use frictionless_shm_types::can::mit::{self, MitRanges, MitReply, MitRx, MitSpecial};
+use frictionless_shm_types::{FLAG_FAULT, MotorCurrentCommand, TorqueRequest};
+use socketcan::{CanFrame, CanSocket, Socket};
+
+use crate::daemon_support::{Daemon, Plant, TestEnv, current_ref, cv_ref};
+
+/// The `frictiond` binary: `/bin/frictiond` in the CAN VM, else next to the test executable.
+pub fn frictiond_bin() -> PathBuf {
+    if std::env::var_os("FRICTIONLESS_IN_CANVM").is_some() {
+        return PathBuf::from("/bin/frictiond");
+    }
+    crate::daemon_support::frictiond_bin()
+}
+
+/// Descriptor number the daemon inherits the socketpair end as (`interface = "fd:10"`).
+pub const CHILD_FD: i32 = 10;
+
+/// Starts `frictiond --config cfg`; with `inherit = Some(fd)` the child gets `fd` as [`CHILD_FD`].
+pub fn start_daemon(cfg: &Path, inherit: Option<&OwnedFd>, envs: &[(&str, &str)]) -> Daemon {
+    use std::os::unix::process::CommandExt;
+    let mut cmd = Command::new(frictiond_bin());
+    cmd.arg("--config")
+        .arg(cfg)
+        .env("RUST_LOG", "info")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped());
+    for (k, v) in envs {
+        cmd.env(k, v);
+    }
+    if let Some(fd) = inherit {
+        let raw = fd.as_raw_fd();
+        // SAFETY: dup2 is async-signal-safe; it runs in the child between fork and exec and only
+        // duplicates a descriptor we own (the copy has FD_CLOEXEC cleared).
+        unsafe {
+            cmd.pre_exec(move || {
+                if libc::dup2(raw, CHILD_FD) < 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                Ok(())
+            });
+        }
+    }
+    Daemon {
+        child: cmd.spawn().expect("spawn frictiond"),
+    }
+}
+
+/// A socketpair of classic CAN sockets (close-on-exec): (test end, daemon end).
+pub fn socketpair() -> (CanSocket, OwnedFd) {
+    let mut fds = [0; 2];
+    // SAFETY: fds is a valid 2-element array; on success both fds are new and owned by us.
+    let rc = unsafe {
+        libc::socketpair(
+            libc::AF_UNIX,
+            libc::SOCK_SEQPACKET | libc::SOCK_CLOEXEC,
+            0,
+            fds.as_mut_ptr(),
+        )
+    };
+    assert_eq!(rc, 0, "socketpair: {}", std::io::Error::last_os_error());
+    // SAFETY: the fds were just created and are not owned elsewhere.
+    unsafe {
+        (
+            CanSocket::from(OwnedFd::from_raw_fd(fds[0])),
+            OwnedFd::from_raw_fd(fds[1]),
+        )
+    }
+}
+
+/// Knee (CV friction, r = −100, command in motor torque) and hip (no friction, r = 50, command
+/// in amperes) as MIT drives 1 and 2 on one bus; replies on id 0.
+pub const KNEE_R: f64 = -100.0;
+/// Knee k_t [Nm/A].
+pub const KNEE_KT: f64 = 0.157;
+/// Hip gear ratio.
+pub const HIP_R: f64 = 50.0;
+/// Hip k_t [Nm/A].
+pub const HIP_KT: f64 = 0.1;
+/// Knee CV parameters (kc, ka, kv) and kfc.
+pub const KNEE_CV: (f64, f64, f64, f64) = (8.1, 50.84, 5.55, 0.85);
+/// Knee t range ±[Nm motor side]; hip ±[A].
+pub const T_MAX: [f64; 2] = [1.0, 10.0];
+
+/// The daemon config (without `[backend]`, which [`write_can_config`] adds).
+pub fn mit_body(interface: &str, period_us: u64) -> String {
+    format!(
+        r#"
+[loop]
+period_us = {period_us}
+status_every_ticks = 10
+ready_after_ticks = 10
+
+[safety]
+stale_after_ticks = 20
+on_stale = "zero"
+
+[[joint]]
+name = "knee"
+index = 0
+gear_ratio = {KNEE_R}
+kt = {KNEE_KT}
+max_curr = 5.0
+kfc = {kfc}
+friction_model = "cv"
+kc = {kc}
+ka = {ka}
+kv = {kv}
+
+[[joint]]
+name = "hip"
+index = 1
+gear_ratio = {HIP_R}
+kt = {HIP_KT}
+max_curr = 4.0
+friction_model = "none"
+
+[[bus]]
+interface = "{interface}"
+bitrate = 1000000
+protocol = "mit"
+host_id = 0
+feedback_timeout_ticks = 10
+
+[[bus.joint]]
+joint = "knee"
+node_id = 1
+command_unit = "motor_torque"
+p_max = 12.5
+v_max = 65.0
+t_max = {t0}
+i_max = 40.0
+
+[[bus.joint]]
+joint = "hip"
+node_id = 2
+command_unit = "current"
+p_max = 12.5
+v_max = 65.0
+t_max = {t1}
+i_max = 40.0
+"#,
+        kc = KNEE_CV.0,
+        ka = KNEE_CV.1,
+        kv = KNEE_CV.2,
+        kfc = KNEE_CV.3,
+        t0 = T_MAX[0],
+        t1 = T_MAX[1],
+    )
+}
+
+/// Writes `frictiond.toml` = a CAN `[backend]` for `env` + `body`; returns its path.
+pub fn write_can_config(env: &TestEnv, body: &str) -> PathBuf {
+    let path = env.dir.join("frictiond.toml");
+    let text = format!(
+        "[backend]\nkind = \"can\"\nservice_prefix = \"{}\"\nroot_path = \"{}\"\n{body}",
+        env.ipc.service_prefix,
+        env.ipc.root_path.as_ref().unwrap().display()
+    );
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// MIT ranges of drive `id` (1 = knee, 2 = hip).
+pub fn ranges(id: u32) -> MitRanges {
+    let t = T_MAX[(id as usize) - 1];
+    MitRanges {
+        p_min_rad: -12.5,
+        p_max_rad: 12.5,
+        v_min_rad_s: -65.0,
+        v_max_rad_s: 65.0,
+        kp_min_nm_rad: 0.0,
+        kp_max_nm_rad: 500.0,
+        kd_min_nm_s_rad: 0.0,
+        kd_max_nm_s_rad: 5.0,
+        t_min_nm: -t,
+        t_max_nm: t,
+        i_min_a: -40.0,
+        i_max_a: 40.0,
+    }
+}
+
+/// What a drive sees and how it answers.
+#[derive(Debug, Default, Clone)]
+pub struct DriveLog {
+    /// Commands received (t_ff in the drive's unit).
+    pub commands: u64,
+    /// Last t_ff.
+    pub last_t: f64,
+    /// Whether any command had kp or kd ≠ 0.
+    pub gains_seen: bool,
+    /// Special frames received, in order.
+    pub specials: Vec<MitSpecial>,
+}
+
+/// State shared between the emulator thread and the test.
+#[derive(Debug, Default)]
+pub struct EmuState {
+    /// Per motor id.
+    pub drives: HashMap<u32, DriveLog>,
+    /// Motor ids that do not answer.
+    pub silent: Vec<u32>,
+    /// Reported motor velocity per id [motor rad/s].
+    pub v_motor: HashMap<u32, f64>,
+}
+
+/// MIT drives 1 and 2 emulated on `sock` in a thread: every command is decoded and logged and —
+/// unless the motor is silenced — answered (reply id 0) with p = 0.5 rad, the configured v and
+/// i = the commanded value.
+pub struct MitEmulator {
+    /// Shared state.
+    pub state: Arc<Mutex<EmuState>>,
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<CanSocket>>,
+}
+
+impl MitEmulator {
+    /// Starts the emulator on `sock`.
+    pub fn start(sock: CanSocket, v_motor: [f64; 2]) -> Self {
+        let state = Arc::new(Mutex::new(EmuState::default()));
+        {
+            let mut s = state.lock().unwrap();
+            s.v_motor.insert(1, v_motor[0]);
+            s.v_motor.insert(2, v_motor[1]);
+        }
+        let stop = Arc::new(AtomicBool::new(false));
+        let (st, sp) = (state.clone(), stop.clone());
+        let thread = std::thread::spawn(move || {
+            while !sp.load(Ordering::Relaxed) {
+                let f = match sock.read_frame_timeout(Duration::from_millis(50)) {
+                    Ok(f) => f,
+                    Err(_) => continue,
+                };
+                let Ok(w) = WireFrame::try_from(&f) else {
+                    continue;
+                };
+                if !(w.id == 1 || w.id == 2) || w.extended || w.rtr {
+                    continue;
+                }
+                let r = ranges(w.id);
+                let Ok(rx) = mit::decode_command(&w, &r) else {
+                    continue;
+                };
+                let mut s = st.lock().unwrap();
+                let v = s.v_motor[&w.id];
+                let silent = s.silent.contains(&w.id);
+                let log = s.drives.entry(w.id).or_default();
+                let t = match rx {
+                    MitRx::Special(x) => {
+                        log.specials.push(x);
+                        0.0
+                    }
+                    MitRx::Command(c) => {
+                        log.commands += 1;
+                        log.last_t = c.t_ff_nm;
+                        log.gains_seen |= c.kp_nm_rad != 0.0 || c.kd_nm_s_rad != 0.0;
+                        c.t_ff_nm
+                    }
+                };
+                drop(s);
+                if !silent {
+                    let rep = MitReply {
+                        motor_id: w.id as u8,
+                        p_rad: 0.5,
+                        v_rad_s: v,
+                        i_a: t.clamp(-40.0, 40.0),
+                    };
+                    let (fr, _) = mit::encode_reply(0, &rep, &r).unwrap();
+                    // Best effort, as a drive: a full queue drops the reply.
+                    let _ = sock.write_frame(&CanFrame::try_from(fr).unwrap());
+                }
+            }
+            sock
+        });
+        Self {
+            state,
+            stop,
+            thread: Some(thread),
+        }
+    }
+
+    /// A copy of drive `id`'s log.
+    pub fn log(&self, id: u32) -> DriveLog {
+        self.state
+            .lock()
+            .unwrap()
+            .drives
+            .get(&id)
+            .cloned()
+            .unwrap_or_default()
+    }
+
+    /// Silences (or un-silences) motor `id`.
+    pub fn set_silent(&self, id: u32, silent: bool) {
+        let mut s = self.state.lock().unwrap();
+        s.silent.retain(|&x| x != id);
+        if silent {
+            s.silent.push(id);
+        }
+    }
+
+    /// Stops the thread and returns the socket.
+    pub fn stop(mut self) -> CanSocket {
+        self.stop.store(true, Ordering::Relaxed);
+        self.thread.take().unwrap().join().unwrap()
+    }
+}
+
+impl Drop for MitEmulator {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// The velocity the daemon decodes from a reply carrying `v` (12-bit MIT quantisation), joint side.
+pub fn decoded_sdot(v_motor: f64, r: f64) -> f64 {
+    let (u, _) = mit::float_to_uint(v_motor, -65.0, 65.0, 12);
+    mit::uint_to_float(u, -65.0, 65.0, 12) / r
+}
+
+/// The control law's expected currents (knee, hip) for `tau_des` at the motor velocities `v_motor`.
+pub fn expected_currents(tau_des: [f64; 2], v_motor: [f64; 2]) -> [f64; 2] {
+    let (kc, ka, kv, kfc) = KNEE_CV;
+    let sd_knee = decoded_sdot(v_motor[0], KNEE_R);
+    let sd_hip = decoded_sdot(v_motor[1], HIP_R);
+    [
+        current_ref(
+            tau_des[0],
+            cv_ref(kc, ka, kv, sd_knee),
+            sd_knee,
+            0.0,
+            f64::INFINITY,
+            kfc,
+            KNEE_KT,
+            KNEE_R,
+            5.0,
+        ),
+        current_ref(
+            tau_des[1],
+            0.0,
+            sd_hip,
+            0.0,
+            f64::INFINITY,
+            1.0,
+            HIP_KT,
+            HIP_R,
+            4.0,
+        ),
+    ]
+}
+
+/// Half a quantisation step of the t field of drive `id`, plus float slack.
+pub fn t_tol(id: u32) -> f64 {
+    ranges(id).steps()[4] / 2.0 + 1e-9
+}
+
+/// A torque request enabling both joints.
+pub fn request(tau_des: [f64; 2]) -> TorqueRequest {
+    let mut rq = TorqueRequest::zeroed();
+    rq.n_joints = 2;
+    rq.enable_mask = 0b11;
+    rq.tau_des_nm[0] = tau_des[0];
+    rq.tau_des_nm[1] = tau_des[1];
+    rq
+}
+
+/// Publishes `rq` every ms (fresh stamps) until `pred` holds for the mirrored command; panics
+/// after `timeout` with the last command.
+pub fn drive_until(
+    plant: &mut Plant,
+    rq: &TorqueRequest,
+    timeout: Duration,
+    mut pred: impl FnMut(&MotorCurrentCommand) -> bool,
+) -> MotorCurrentCommand {
+    let t0 = Instant::now();
+    let mut last = None;
+    while t0.elapsed() < timeout {
+        plant.seq += 1;
+        let mut r = *rq;
+        r.seq = plant.seq;
+        r.stamp_ns = frictionless_shm_types::monotonic_ns();
+        plant.request.publish(&r).unwrap();
+        std::thread::sleep(Duration::from_millis(1));
+        if let Some(c) = plant.cmd.latest().unwrap() {
+            if pred(&c) {
+                return c;
+            }
+            last = Some(c);
+        }
+    }
+    panic!("no matching command within {timeout:?}; last: {last:?}");
+}
+
+/// The closed-loop scenario on an already running daemon whose bus peer is `emu`:
+/// 1. commands decode to the control-law currents (mirror exact, CAN frames within quantisation);
+/// 2. knee feedback stops → knee 0 A (FLAG_FAULT, stale bit in the status) while the hip runs on;
+///    feedback resumes → knee back to the law;
+/// 3. all feedback stops → every joint 0 A on the wire.
+pub fn closed_loop_scenario(plant: &mut Plant, emu: &MitEmulator, v_motor: [f64; 2]) {
+    let t = Duration::from_secs(20);
+    let tau = [3.0, 1.5];
+    let want = expected_currents(tau, v_motor);
+    assert!(want[0].abs() > 0.1 && want[1].abs() > 0.1, "{want:?}");
+    let rq = request(tau);
+    let c = drive_until(plant, &rq, t, |c| {
+        c.valid_mask == 0b11
+            && (c.i_ref_a[0] - want[0]).abs() < 1e-9
+            && (c.i_ref_a[1] - want[1]).abs() < 1e-9
+    });
+    assert_eq!((c.flags[0] & FLAG_FAULT, c.flags[1] & FLAG_FAULT), (0, 0));
+    // What reached the drives: knee motor torque kt·i, hip current i (within quantisation).
+    let t0 = Instant::now();
+    loop {
+        let (k, h) = (emu.log(1), emu.log(2));
+        let ok = (k.last_t - KNEE_KT * want[0]).abs() <= t_tol(1)
+            && (h.last_t - want[1]).abs() <= t_tol(2);
+        if ok {
+            assert!(!k.gains_seen && !h.gains_seen, "kp = kd = 0 always");
+            assert_eq!(k.specials.first(), Some(&MitSpecial::EnterMotorMode));
+            break;
+        }
+        assert!(t0.elapsed() < t, "drives saw {k:?} / {h:?}, want {want:?}");
+        plant.seq += 1;
+        let mut r = rq;
+        r.seq = plant.seq;
+        r.stamp_ns = frictionless_shm_types::monotonic_ns();
+        plant.request.publish(&r).unwrap();
+        std::thread::sleep(Duration::from_millis(2));
+    }
+
+    // 2. the knee drive goes silent.
+    emu.set_silent(1, true);
+    let c = drive_until(plant, &rq, t, |c| c.flags[0] & FLAG_FAULT != 0);
+    assert_eq!(c.i_ref_a[0], 0.0);
+    assert!((c.i_ref_a[1] - want[1]).abs() < 1e-9, "hip keeps running");
+    let st = plant
+        .status
+        .wait_latest(t)
+        .unwrap()
+        .expect("status while knee stale");
+    let st = if st.bus.stale_feedback_mask & 1 == 0 {
+        // The snapshot may predate the silence: wait for one that has it.
+        let t0 = Instant::now();
+        loop {
+            if let Some(s) = plant.status.wait_latest(Duration::from_millis(50)).unwrap()
+                && s.bus.stale_feedback_mask & 1 != 0
+            {
+                break s;
+            }
+            assert!(t0.elapsed() < t, "stale bit never reported");
+        }
+    } else {
+        st
+    };
+    assert_eq!(st.bus.stale_feedback_mask & 0b10, 0);
+    // The knee drive still receives commands (it is silent, not deaf): they are 0.
+    std::thread::sleep(Duration::from_millis(50));
+    assert!(emu.log(1).last_t.abs() <= t_tol(1), "{:?}", emu.log(1));
+    emu.set_silent(1, false);
+    drive_until(plant, &rq, t, |c| {
+        c.flags[0] & FLAG_FAULT == 0 && (c.i_ref_a[0] - want[0]).abs() < 1e-9
+    });
+
+    // 3. every drive silent: nothing new arrives → the whole-state stale rule (on_stale = zero).
+    emu.set_silent(1, true);
+    emu.set_silent(2, true);
+    let c = drive_until(plant, &rq, t, |c| {
+        c.i_ref_a[0] == 0.0 && c.i_ref_a[1] == 0.0
+    });
+    assert!(c.flags[0] != 0 && c.flags[1] != 0, "{:?}", &c.flags[..2]);
+    std::thread::sleep(Duration::from_millis(50));
+    assert!(emu.log(1).last_t.abs() <= t_tol(1));
+    assert!(emu.log(2).last_t.abs() <= t_tol(2));
+    emu.set_silent(1, false);
+    emu.set_silent(2, false);
+}
