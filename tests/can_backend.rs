@@ -186,3 +186,23 @@ fn can_check_refuses_an_overloaded_bus_and_names_bad_keys() {
         "{text}"
     );
 }
+
+#[test]
+fn can_example_configs_validate() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    for name in ["config/can_mit.toml", "config/can_odrive.toml"] {
+        let out = Command::new(frictiond_bin())
+            .arg("--config")
+            .arg(root.join(name))
+            .arg("--check")
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stdout).to_string()
+            + &String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{name}: {text}");
+        assert!(
+            text.contains("l_knee") && text.contains("l_ankle_roll"),
+            "{text}"
+        );
+    }
+}
