@@ -1,0 +1,289 @@
+//! `frictiond` with `[backend] kind = "can"` on a real kernel CAN stack (vcan0 in the CAN VM,
+//! `tests/canvm/run.sh`; `#[ignore]`d on the host, whose kernel has no CAN):
+//! - the test process emulates two MIT drives on a raw socket and is the controller over shared
+//!   memory: commands decode to the control-law currents, a silent drive gets 0 A alone, all silent →
+//!   0 A everywhere, injected error frames show up in `DaemonStatus.bus`, SIGTERM leaves motor mode;
+//! - closed loop with `frictl sim serve --backend can --protocol mit` as the drives: the knee moves,
+//!   every published current equals the law for the published friction estimate, and the frames on
+//!   the wire carry k_t·i within the MIT quantisation.
+
+mod can_support;
+mod daemon_support;
+
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use can_support::*;
+use daemon_support::{Plant, TestEnv};
+use frictionless_shm_types::can::WireFrame;
+use frictionless_shm_types::can::mit::{self, MitRanges, MitRx, MitSpecial};
+use frictionless_shm_types::{FLAG_FAULT, TorqueRequest};
+use socketcan::{
+    CanErrorFrame, CanFrame, CanSocket, EmbeddedFrame, ExtendedId, Socket, SocketOptions,
+    StandardId,
+};
+
+const T: Duration = Duration::from_secs(30);
+
+#[test]
+#[ignore = "needs vcan (run tests/canvm/run.sh)"]
+fn vcan_daemon_mit_law_stale_errors_and_exit() {
+    let env = TestEnv::new("vcand");
+    let cfg = write_can_config(&env, &mit_body("vcan0", 1000));
+    let drive_sock = CanSocket::open("vcan0").expect("vcan0");
+    let injector = CanSocket::open("vcan0").expect("vcan0");
+    let v_motor = [-30.0, 12.0];
+    let emu = MitEmulator::start(drive_sock, v_motor);
+    let mut d = start_daemon(&cfg, None, &[]);
+    let mut plant = Plant::open(&env.ipc, "controller");
+    plant.wait_for_daemon(T);
+
+    closed_loop_scenario(&mut plant, &emu, v_motor);
+
+    // Error frames written to vcan reach the daemon's socket (CAN_RAW_ERR_FILTER) and the status.
+    let bus_off = CanErrorFrame::new_error(0x40, &[]).unwrap();
+    let passive = CanErrorFrame::new_error(0x04, &[0, 0x10]).unwrap();
+    for f in [bus_off, passive] {
+        injector.write_frame(&CanFrame::Error(f)).unwrap();
+    }
+    let s = plant.status_until(None, T, |s| s.bus.error_frames >= 2);
+    assert_eq!((s.bus.bus_off, s.bus.error_passive), (1, 1), "{:?}", s.bus);
+    assert_eq!(s.bus.io_errors, 0, "{:?}", s.bus);
+    // Foreign traffic (other ids, an extended id 0, a remote frame on id 0) does not disturb the loop.
+    let foreign = [
+        CanFrame::new(StandardId::new(0x100).unwrap(), &[0u8; 6]).unwrap(),
+        CanFrame::new(StandardId::new(0x7FF).unwrap(), &[1u8; 8]).unwrap(),
+        CanFrame::new(ExtendedId::new(0).unwrap(), &[1u8; 6]).unwrap(),
+        CanFrame::new_remote(StandardId::new(0).unwrap(), 6).unwrap(),
+    ];
+    for f in foreign {
+        injector.write_frame(&f).unwrap();
+    }
+    let rq = request([3.0, 1.5]);
+    let want = expected_currents([3.0, 1.5], v_motor);
+    drive_until(&mut plant, &rq, T, |c| {
+        c.valid_mask == 0b11 && (c.i_ref_a[0] - want[0]).abs() < 1e-9
+    });
+    let s = plant.status_until(None, T, |s| s.bus.error_frames >= 2);
+    assert_eq!(s.bus.io_errors, 0, "{:?}", s.bus);
+
+    d.signal(libc::SIGTERM);
+    let (st, log) = d.wait_exit(T);
+    assert!(st.success(), "{log}");
+    std::thread::sleep(Duration::from_millis(200));
+    for id in [1, 2] {
+        let l = emu.log(id);
+        assert_eq!(l.specials.last(), Some(&MitSpecial::ExitMotorMode), "{l:?}");
+    }
+}
+
+/// The `frictl` binary: `/bin/frictl` in the CAN VM, else next to the test executable.
+fn frictl_bin() -> PathBuf {
+    if std::env::var_os("FRICTIONLESS_IN_CANVM").is_some() {
+        return PathBuf::from("/bin/frictl");
+    }
+    frictiond_bin().with_file_name("frictl")
+}
+
+/// The daemon config matching `frictl sim serve --preset knee,ankle_roll` (kt, r, MIT ranges of
+/// `frictl::serve::can::mit_ranges`), SCV friction without LPF so each tick's law is exact.
+const SIM_BODY: &str = r#"
+[loop]
+period_us = 1000
+status_every_ticks = 20
+ready_after_ticks = 10
+
+[safety]
+stale_after_ticks = 20
+on_stale = "zero"
+
+[[joint]]
+name = "knee"
+index = 0
+gear_ratio = -100.0
+kt = 0.157
+max_curr = 5.0
+kfc = 0.85
+friction_model = "coulomb_viscous_stribeck"
+kc = 5.0
+ka = 16.95
+kv = 5.34
+ks = 9.7
+vs = 5.4
+alpha = 0.5
+
+[[joint]]
+name = "ankle_roll"
+index = 1
+gear_ratio = -160.0
+kt = 0.0665
+max_curr = 3.0
+kfc = 0.7
+friction_model = "coulomb_viscous_stribeck"
+kc = 1.0005
+ka = 2.78
+kv = 0.29
+ks = 6.0
+vs = 0.13
+alpha = 0.6
+
+[[bus]]
+interface = "vcan0"
+bitrate = 1000000
+protocol = "mit"
+feedback_timeout_ticks = 10
+
+[[bus.joint]]
+joint = "knee"
+node_id = 1
+command_unit = "motor_torque"
+p_max = 220.0
+v_max = 500.0
+t_max = 0.942
+i_max = 6.0
+
+[[bus.joint]]
+joint = "ankle_roll"
+node_id = 2
+command_unit = "motor_torque"
+p_max = 84.0
+v_max = 800.0
+t_max = 0.1995
+i_max = 3.0
+"#;
+
+fn knee_ranges() -> MitRanges {
+    MitRanges {
+        p_min_rad: -220.0,
+        p_max_rad: 220.0,
+        v_min_rad_s: -500.0,
+        v_max_rad_s: 500.0,
+        kp_min_nm_rad: 0.0,
+        kp_max_nm_rad: 500.0,
+        kd_min_nm_s_rad: 0.0,
+        kd_max_nm_s_rad: 5.0,
+        t_min_nm: -0.942,
+        t_max_nm: 0.942,
+        i_min_a: -6.0,
+        i_max_a: 6.0,
+    }
+}
+
+struct Child(std::process::Child);
+impl Drop for Child {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+#[test]
+#[ignore = "needs vcan (run tests/canvm/run.sh)"]
+fn vcan_daemon_closed_loop_with_frictl_sim_serve_mit() {
+    let env = TestEnv::new("vcansim");
+    let cfg = write_can_config(&env, SIM_BODY);
+    // A listener on the bus: knee replies (id 0, byte 0 = 1) and knee commands (id 1).
+    let sniff = CanSocket::open("vcan0").expect("vcan0");
+    sniff.set_nonblocking(true).unwrap();
+    let _ = sniff.set_socket_option_int(libc::SOL_SOCKET, libc::SO_RCVBUFFORCE, 8 << 20);
+    let _sim = Child(
+        Command::new(frictl_bin())
+            .args([
+                "sim",
+                "serve",
+                "--backend",
+                "can",
+                "--bus",
+                "vcan0",
+                "--protocol",
+                "mit",
+                "--preset",
+                "knee,ankle_roll",
+                "--initial-pose-rad",
+                "-0.8,0.0",
+            ])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("spawn frictl sim serve"),
+    );
+    let mut d = start_daemon(&cfg, None, &[]);
+    let mut plant = Plant::open(&env.ipc, "controller");
+    plant.wait_for_daemon(T);
+
+    // The knee pushed with −15 Nm (beyond its ≈ 8 Nm breakaway), the ankle held with 0 Nm.
+    let tau = [-15.0, 0.0];
+    let mut rq = TorqueRequest::zeroed();
+    rq.n_joints = 2;
+    rq.enable_mask = 0b11;
+    rq.tau_des_nm[0] = tau[0];
+    rq.tau_des_nm[1] = tau[1];
+    let (kt, r, imax) = ([0.157, 0.0665], [-100.0, -160.0], [5.0, 3.0]);
+    let r_knee = knee_ranges();
+    let mut p_first: Option<f64> = None;
+    let mut p_last = 0.0f64;
+    let mut t_wire = Vec::new();
+    let mut statuses = 0;
+    let mut friction_seen = false;
+    let t0 = Instant::now();
+    let mut last_status_seq = 0;
+    while t0.elapsed() < Duration::from_secs(4) || statuses < 20 {
+        assert!(t0.elapsed() < T, "only {statuses} statuses");
+        plant.seq += 1;
+        rq.seq = plant.seq;
+        rq.stamp_ns = frictionless_shm_types::monotonic_ns();
+        plant.request.publish(&rq).unwrap();
+        std::thread::sleep(Duration::from_millis(1));
+        while let Ok(f) = sniff.read_frame() {
+            let Ok(w) = WireFrame::try_from(&f) else {
+                continue;
+            };
+            if w.id == 0 && w.len >= 6 && w.data[0] == 1 {
+                let rep = mit::decode_reply(&w, &r_knee).unwrap();
+                let s = rep.p_rad / r[0];
+                p_first.get_or_insert(s);
+                p_last = s;
+            } else if w.id == 1
+                && let Ok(MitRx::Command(c)) = mit::decode_command(&w, &r_knee)
+            {
+                t_wire.push(c.t_ff_nm);
+            }
+        }
+        if let Some(s) = plant.status.latest().unwrap()
+            && s.seq != last_status_seq
+            && s.joint_flags[0] & FLAG_FAULT == 0
+            && s.i_ref_a[0] != 0.0
+        {
+            last_status_seq = s.seq;
+            statuses += 1;
+            for j in 0..2 {
+                // The law: i = (τ_des + τ̂_F)/(kt·r), clamped (kp = ki = 0, no LPF, no clip).
+                let want = ((tau[j] + s.tau_f_hat_nm[j]) / (kt[j] * r[j])).clamp(-imax[j], imax[j]);
+                assert!(
+                    (s.i_ref_a[j] - want).abs() <= 1e-9 * want.abs().max(1.0),
+                    "joint {j}: i_ref {} vs law {want} (τ̂_F {})",
+                    s.i_ref_a[j],
+                    s.tau_f_hat_nm[j]
+                );
+            }
+            friction_seen |= s.tau_f_hat_nm[0].abs() > 0.5;
+        }
+    }
+    let (p0, p1) = (p_first.expect("knee replies on the bus"), p_last);
+    assert!((p1 - p0).abs() > 0.05, "knee did not move: {p0} → {p1}");
+    assert!(friction_seen, "no friction compensation while moving");
+    // Knee frames on the wire carry k_t·i within ±k_t·max_curr, and not all the same.
+    assert!(t_wire.len() > 1000, "{} knee commands seen", t_wire.len());
+    let lim = kt[0] * imax[0] + r_knee.steps()[4];
+    assert!(t_wire.iter().all(|t| t.abs() <= lim));
+    let nonzero = t_wire.iter().filter(|t| t.abs() > 0.05).count();
+    assert!(nonzero > t_wire.len() / 2, "{nonzero} of {}", t_wire.len());
+    let s = plant.status.latest().unwrap();
+    if let Some(s) = s {
+        assert_eq!(s.bus.stale_feedback_mask, 0, "{:?}", s.bus);
+    }
+    d.signal(libc::SIGTERM);
+    let (st, log) = d.wait_exit(T);
+    assert!(st.success(), "{log}");
+}
