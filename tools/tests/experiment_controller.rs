@@ -61,8 +61,8 @@ fn exact_compensation_tracks_the_ankle_sine_where_none_does_not() {
         skip_periods: 1.0,
     };
     let kp = 2000.0;
-    let none = metrics::track(&track("ankle_roll", reference, kp, 12.0, false), 4.0);
-    let exact = metrics::track(&track("ankle_roll", reference, kp, 12.0, true), 4.0);
+    let none = metrics::track(&track("ankle_roll", reference, kp, 12.0, false), 4.0, 12.0);
+    let exact = metrics::track(&track("ankle_roll", reference, kp, 12.0, true), 4.0, 12.0);
     eprintln!("ankle Kp {kp}: none {none:?}\nexact {exact:?}");
     assert!(
         exact.rmse_rad <= crit.threshold_rad(0.15),
@@ -89,8 +89,9 @@ fn high_gain_tracks_the_knee_sine_without_compensation() {
     let hi = metrics::track(
         &track("knee", reference, reference_kp_hi(), 10.0, false),
         5.0,
+        10.0,
     );
-    let lo = metrics::track(&track("knee", reference, 3.0, 10.0, false), 5.0);
+    let lo = metrics::track(&track("knee", reference, 3.0, 10.0, false), 5.0, 10.0);
     eprintln!("knee: hi {hi:?}\nlo {lo:?}");
     assert!(hi.rmse_rad < 0.1 * 0.4, "{}", hi.rmse_rad);
     assert!(

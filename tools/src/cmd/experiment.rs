@@ -1,10 +1,551 @@
-//! `frictl experiment` — not built yet (issue #7).
+//! `frictl experiment track|min-kp|disturbance|all` — the paper's closed-loop experiments on the
+//! virtual joints, through real processes: the plant (`frictl sim serve`) and `frictiond` as child
+//! processes, the computed-torque controller in this process (see `frictl::experiment`).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use frictionless::friction::{CvParams, ScvParams, StaticFriction};
+use frictl::experiment::controller::PAPER_KD_PER_S;
+use frictl::experiment::metrics::TrackCriterion;
+use frictl::experiment::report::{SuiteReport, slug, write_trace_csv};
+use frictl::experiment::run::{JointSetup, JointTrace, Pulse};
+use frictl::experiment::session::{Binaries, FrictionModel, Mode, install_signal_flag};
+use frictl::experiment::suite::{self, SuiteConfig, Task};
+
+/// Which experiment.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Kind {
+    /// Sine tracking at `--kp` for every model.
+    Track,
+    /// Lowest K_p per model that tracks the sine within the criterion (bisection on a log scale).
+    MinKp,
+    /// Hold, external torque pulse, release: with `--kp` at that gain for all models; without,
+    /// at each model's own minimum K_p and at the PINN's for all (runs the K_p search first).
+    Disturbance,
+    /// min-kp, then disturbance at the own and at the PINN's K_p, and tracking at the PINN's K_p.
+    All,
+}
+
+/// Which joints.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum JointSel {
+    /// The knee (index 0).
+    Knee,
+    /// The ankle roll (index 1).
+    AnkleRoll,
+    /// Both, in the same trials.
+    Both,
+}
+
+/// Friction model names on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ModelSel {
+    /// No compensation.
+    None,
+    /// Coulomb–viscous (`--cv`).
+    Cv,
+    /// Stribeck–Coulomb–viscous (`--scv`).
+    Scv,
+    /// PINN (`--pinn`).
+    Pinn,
+}
 
 /// Arguments of `frictl experiment`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// Experiment.
+    #[arg(value_enum)]
+    pub kind: Kind,
+    /// Joints.
+    #[arg(long, value_enum, default_value_t = JointSel::Both)]
+    pub joint: JointSel,
+    /// Models, comma-separated (default: none plus every model whose file is given).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub model: Option<Vec<ModelSel>>,
+    /// CV fit JSON from `frictl fit cv --json`: `knee=F.json,ankle_roll=G.json` (or one file with
+    /// one joint).
+    #[arg(long)]
+    pub cv: Option<String>,
+    /// SCV fit JSON from `frictl fit scv --json`, per joint like `--cv`.
+    #[arg(long)]
+    pub scv: Option<String>,
+    /// PINN weight files: `knee=F.fwt,ankle_roll=G.fwt`.
+    #[arg(long)]
+    pub pinn: Option<String>,
+    /// K_p [1/s²] for `track` and for `disturbance --kp`: one value or `knee=30,ankle_roll=550`
+    /// (default for `track`: the paper's PINN gains, knee 30, ankle roll 550).
+    #[arg(long)]
+    pub kp: Option<String>,
+    /// Lockstep (default): one tick per message, fast and deterministic.
+    #[arg(long, conflicts_with = "realtime")]
+    pub lockstep: bool,
+    /// Real time: the plant at 1 kHz wall clock, frictiond on its clock.
+    #[arg(long)]
+    pub realtime: bool,
+    /// Output directory (tables.md, report.json, traces/*.csv, plots).
+    #[arg(long, default_value = "experiment-out")]
+    pub out: PathBuf,
+    /// Also write the JSON report here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Plant seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Plant parameter override (`--set plant.f_s0_nm=5`), applied to both presets.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub sets: Vec<String>,
+    /// Tracking criterion: RMSE ≤ this fraction of the sine amplitude.
+    #[arg(long, default_value_t = 0.1)]
+    pub criterion_frac: f64,
+    /// Sine periods per tracking trial.
+    #[arg(long, default_value_t = 3.0)]
+    pub periods: f64,
+    /// Periods excluded from the evaluation (start-up).
+    #[arg(long, default_value_t = 1.0)]
+    pub skip_periods: f64,
+    /// Bisection halvings of the K_p search.
+    #[arg(long, default_value_t = 7)]
+    pub iterations: u32,
+    /// K_p search range per joint, `knee=3:3000,ankle_roll=30:100000` (the default).
+    #[arg(long)]
+    pub kp_range: Option<String>,
+    /// Disturbance pulse torque [Nm] per joint, `knee=15,ankle_roll=5` (the default).
+    #[arg(long)]
+    pub pulse_nm: Option<String>,
+    /// Disturbance pulse duration [s].
+    #[arg(long, default_value_t = 1.0)]
+    pub pulse_s: f64,
+    /// Hold time before the pulse [s].
+    #[arg(long, default_value_t = 1.0)]
+    pub hold_s: f64,
+    /// Observation time after the release [s].
+    #[arg(long, default_value_t = 3.0)]
+    pub after_release_s: f64,
+    /// No per-trial progress lines.
+    #[arg(long)]
+    pub quiet: bool,
+    /// Do not write PNG plots.
+    #[arg(long)]
+    pub no_plots: bool,
+}
+
+const JOINT_KEYS: [[&str; 2]; 2] = [["knee", "l_knee"], ["ankle_roll", "l_ankle_roll"]];
+
+/// Parses `v` or `knee=v,ankle_roll=w` into per-joint strings for the selected `joints`.
+fn per_joint(
+    what: &str,
+    spec: &str,
+    joints: &[usize],
+    allow_shared: bool,
+) -> anyhow::Result<[Option<String>; 2]> {
+    let mut out: [Option<String>; 2] = [None, None];
+    if !spec.contains('=') {
+        if joints.len() > 1 && !allow_shared {
+            bail!("--{what} `{spec}`: give one per joint, e.g. knee=A,ankle_roll=B");
+        }
+        for &j in joints {
+            out[j] = Some(spec.to_owned());
+        }
+        return Ok(out);
+    }
+    for part in spec.split(',') {
+        let (k, v) = part
+            .split_once('=')
+            .with_context(|| format!("--{what} `{spec}`: `{part}` is not JOINT=VALUE"))?;
+        let j = JOINT_KEYS
+            .iter()
+            .position(|names| names.contains(&k.trim()))
+            .with_context(|| {
+                format!("--{what} `{spec}`: unknown joint `{k}` (knee, ankle_roll)")
+            })?;
+        out[j] = Some(v.trim().to_owned());
+    }
+    Ok(out)
+}
+
+fn per_joint_f64(what: &str, spec: &str, joints: &[usize]) -> anyhow::Result<[Option<f64>; 2]> {
+    let s = per_joint(what, spec, joints, true)?;
+    let mut out = [None, None];
+    for j in 0..2 {
+        if let Some(v) = &s[j] {
+            out[j] = Some(
+                v.parse::<f64>()
+                    .ok()
+                    .filter(|x| x.is_finite() && *x > 0.0)
+                    .with_context(|| format!("--{what}: `{v}` is not a positive number"))?,
+            );
+        }
+    }
+    Ok(out)
+}
+
+/// Parameters of a `frictl fit --json` file (`params` object; `null` = ∞, how JSON stores `ka = inf`).
+fn fit_params(path: &Path, names: &[&str]) -> anyhow::Result<Vec<f64>> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read fit file {}", path.display()))?;
+    let v: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
+    let p = v
+        .get("params")
+        .and_then(|p| p.as_object())
+        .with_context(|| {
+            format!(
+                "{}: no `params` object (from `frictl fit --json`?)",
+                path.display()
+            )
+        })?;
+    names
+        .iter()
+        .map(|n| match p.get(*n) {
+            Some(serde_json::Value::Null) => Ok(f64::INFINITY),
+            Some(x) => x
+                .as_f64()
+                .with_context(|| format!("{}: params.{n} = {x} is not a number", path.display())),
+            None => bail!("{}: params.{n} missing", path.display()),
+        })
+        .collect()
+}
+
+/// Loads the CV parameters written by `frictl fit cv --json`.
+pub fn load_cv(path: &Path) -> anyhow::Result<CvParams> {
+    let p = fit_params(path, CvParams::PARAM_NAMES)?;
+    CvParams::from_params(&p).with_context(|| format!("{}", path.display()))
+}
+
+/// Loads the SCV parameters written by `frictl fit scv --json`.
+pub fn load_scv(path: &Path) -> anyhow::Result<ScvParams> {
+    let p = fit_params(path, ScvParams::PARAM_NAMES)?;
+    ScvParams::from_params(&p).with_context(|| format!("{}", path.display()))
+}
 
 /// Runs `frictl experiment`.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`frictl experiment` is not built yet (tracked in issue #7)")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    install_signal_flag()?;
+    let started = std::time::Instant::now();
+    let joints: Vec<usize> = match args.joint {
+        JointSel::Knee => vec![0],
+        JointSel::AnkleRoll => vec![1],
+        JointSel::Both => vec![0, 1],
+    };
+    let mode = if args.realtime {
+        Mode::Realtime
+    } else {
+        Mode::Lockstep
+    };
+    anyhow::ensure!(
+        args.criterion_frac > 0.0 && args.periods > args.skip_periods && args.skip_periods >= 0.0,
+        "need --criterion-frac > 0 and --periods > --skip-periods ≥ 0"
+    );
+    // models per joint
+    let cv = args
+        .cv
+        .as_deref()
+        .map(|s| per_joint("cv", s, &joints, false))
+        .transpose()?;
+    let scv = args
+        .scv
+        .as_deref()
+        .map(|s| per_joint("scv", s, &joints, false))
+        .transpose()?;
+    let pinn = args
+        .pinn
+        .as_deref()
+        .map(|s| per_joint("pinn", s, &joints, false))
+        .transpose()?;
+    let wanted: Vec<ModelSel> = match &args.model {
+        Some(m) => m.clone(),
+        None => {
+            let mut m = vec![ModelSel::None];
+            if cv.is_some() {
+                m.push(ModelSel::Cv);
+            }
+            if scv.is_some() {
+                m.push(ModelSel::Scv);
+            }
+            if pinn.is_some() {
+                m.push(ModelSel::Pinn);
+            }
+            m
+        }
+    };
+    let mut models: Vec<(usize, FrictionModel)> = vec![];
+    for &j in &joints {
+        let name = JOINT_KEYS[j][0];
+        for m in &wanted {
+            let missing = |flag: &str| {
+                anyhow::anyhow!("--model {m:?} for {name} needs --{flag} with a file for {name}")
+            };
+            let fm = match m {
+                ModelSel::None => FrictionModel::None,
+                ModelSel::Cv => FrictionModel::Cv(load_cv(Path::new(
+                    cv.as_ref()
+                        .and_then(|c| c[j].as_ref())
+                        .ok_or_else(|| missing("cv"))?,
+                ))?),
+                ModelSel::Scv => FrictionModel::Scv(load_scv(Path::new(
+                    scv.as_ref()
+                        .and_then(|c| c[j].as_ref())
+                        .ok_or_else(|| missing("scv"))?,
+                ))?),
+                ModelSel::Pinn => {
+                    let p = PathBuf::from(
+                        pinn.as_ref()
+                            .and_then(|c| c[j].as_ref())
+                            .ok_or_else(|| missing("pinn"))?,
+                    );
+                    anyhow::ensure!(p.is_file(), "--pinn: {} is not a file", p.display());
+                    FrictionModel::Pinn(p)
+                }
+            };
+            models.push((j, fm));
+        }
+    }
+    let mut kp_range = [(3.0, 3000.0), (30.0, 100000.0)];
+    if let Some(s) = &args.kp_range {
+        let r = per_joint("kp-range", s, &joints, true)?;
+        for j in 0..2 {
+            if let Some(v) = &r[j] {
+                let (a, b) = v
+                    .split_once(':')
+                    .with_context(|| format!("--kp-range: `{v}` is not LO:HI"))?;
+                kp_range[j] = (
+                    a.parse().with_context(|| format!("--kp-range: `{a}`"))?,
+                    b.parse().with_context(|| format!("--kp-range: `{b}`"))?,
+                );
+            }
+        }
+    }
+    let mut pulse_nm = [15.0, 5.0];
+    if let Some(s) = &args.pulse_nm {
+        let p = per_joint_f64("pulse-nm", s, &joints)?;
+        for j in 0..2 {
+            if let Some(v) = p[j] {
+                pulse_nm[j] = v;
+            }
+        }
+    }
+    let pulse = |j: usize| Pulse {
+        start_s: args.hold_s,
+        duration_s: args.pulse_s,
+        torque_nm: pulse_nm[j],
+    };
+    let cfg = SuiteConfig {
+        mode,
+        seed: args.seed,
+        sets: args.sets.clone(),
+        criterion: TrackCriterion {
+            frac_of_amplitude: args.criterion_frac,
+            skip_periods: args.skip_periods,
+        },
+        periods: args.periods,
+        kp_range,
+        iterations: args.iterations,
+        pulse: [pulse(0), pulse(1)],
+        after_release_s: args.after_release_s,
+        progress: !args.quiet,
+    };
+    let kp_given = args
+        .kp
+        .as_deref()
+        .map(|s| per_joint_f64("kp", s, &joints))
+        .transpose()?;
+
+    let bins = Binaries::locate()?;
+    let setups = JointSetup::both(&args.sets)?;
+    let names = [
+        setups[0].params.joint.clone(),
+        setups[1].params.joint.clone(),
+    ];
+    let mut report = SuiteReport {
+        mode: if mode == Mode::Lockstep {
+            "lockstep"
+        } else {
+            "realtime"
+        }
+        .into(),
+        seed: args.seed,
+        kd_per_s: PAPER_KD_PER_S,
+        ..SuiteReport::default()
+    };
+    for &j in &joints {
+        let desc = match suite::sine(j) {
+            frictl::experiment::controller::Reference::Sine {
+                centre_rad,
+                amplitude_rad,
+                freq_hz,
+            } => format!("s_d = {centre_rad} − {amplitude_rad}·cos(2π·{freq_hz}·t) rad"),
+            r => format!("{r:?}"),
+        };
+        report.references.insert(names[j].clone(), desc);
+    }
+    std::fs::create_dir_all(args.out.join("traces"))
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let mut traces: Vec<(String, JointTrace)> = vec![];
+    let tasks_at = |kp: &dyn Fn(usize, &str) -> f64| -> Vec<Task> {
+        models
+            .iter()
+            .map(|(j, m)| Task {
+                index: *j,
+                model: m.clone(),
+                kp_per_s2: kp(*j, m.label()),
+            })
+            .collect()
+    };
+    let mut trials = 0usize;
+    match (args.kind, kp_given) {
+        (Kind::Track, kp) => {
+            let kp = kp.unwrap_or([None, None]);
+            let kp = [kp[0].unwrap_or(30.0), kp[1].unwrap_or(550.0)];
+            let tasks = tasks_at(&|j, _| kp[j]);
+            let rs = suite::track(&bins, &setups, &cfg, &tasks, "track")?;
+            trials += rs.len();
+            report.add_track(&names, &rs, false);
+            for r in rs {
+                traces.push((format!("track_{}_{}", names[r.index], r.model), r.trace));
+            }
+        }
+        (Kind::Disturbance, Some(kp)) => {
+            let kp = [kp[0].unwrap_or(30.0), kp[1].unwrap_or(550.0)];
+            let tasks = tasks_at(&|j, _| kp[j]);
+            let rs = suite::disturbance(&bins, &setups, &cfg, &tasks, "disturbance")?;
+            trials += rs.len();
+            for &j in &joints {
+                report.pulses.insert(names[j].clone(), cfg.pulse[j]);
+                report.low_kp_source.insert(names[j].clone(), "--kp".into());
+            }
+            report.add_disturbance(&names, &rs, true);
+            for r in rs {
+                traces.push((
+                    format!("disturbance_{}_{}", names[r.index], r.model),
+                    r.trace,
+                ));
+            }
+        }
+        (kind, _) => {
+            if !args.quiet {
+                eprintln!(
+                    "min-kp: criterion RMSE ≤ {} × amplitude",
+                    args.criterion_frac
+                );
+            }
+            report.criterion = Some(cfg.criterion);
+            let rs = suite::min_kp(&bins, &setups, &cfg, &tasks_at(&|_, _| 0.0))?;
+            trials += rs.iter().map(|r| r.steps.len()).sum::<usize>();
+            report.add_min_kp(&names, &rs);
+            let own: Vec<(usize, String, f64)> = rs
+                .iter()
+                .map(|r| (r.index, r.model.clone(), r.min_kp.kp_for_runs()))
+                .collect();
+            for r in &rs {
+                if let Some(t) = &r.at_min {
+                    traces.push((
+                        format!("track_min_kp_{}_{}", names[r.index], r.model),
+                        t.trace.clone(),
+                    ));
+                }
+            }
+            if kind != Kind::MinKp {
+                for &j in &joints {
+                    report.pulses.insert(names[j].clone(), cfg.pulse[j]);
+                }
+                let own_kp = |j: usize, m: &str| {
+                    own.iter()
+                        .find(|(i, l, _)| *i == j && l == m)
+                        .map_or(f64::NAN, |x| x.2)
+                };
+                let rs = suite::disturbance(
+                    &bins,
+                    &setups,
+                    &cfg,
+                    &tasks_at(&|j, m| own_kp(j, m)),
+                    "disturbance @ own K_p",
+                )?;
+                trials += rs.len();
+                report.add_disturbance(&names, &rs, false);
+                for r in rs {
+                    traces.push((
+                        format!("disturbance_own_{}_{}", names[r.index], r.model),
+                        r.trace,
+                    ));
+                }
+                // the common low gain: the PINN's min K_p, else the lowest of the models run
+                let mut low = [f64::NAN; 2];
+                for &j in &joints {
+                    let pinn = own.iter().find(|(i, l, _)| *i == j && l == "PINN");
+                    let (src, kp) = match pinn {
+                        Some(p) => ("PINN".to_owned(), p.2),
+                        None => {
+                            let m = own
+                                .iter()
+                                .filter(|(i, _, _)| *i == j)
+                                .min_by(|a, b| a.2.total_cmp(&b.2))
+                                .context("no model ran")?;
+                            (format!("{} (no PINN run)", m.1), m.2)
+                        }
+                    };
+                    low[j] = kp;
+                    report.low_kp_source.insert(
+                        names[j].clone(),
+                        format!("{src}, K_p {}", frictl::experiment::search::sig3(kp)),
+                    );
+                }
+                let rs = suite::disturbance(
+                    &bins,
+                    &setups,
+                    &cfg,
+                    &tasks_at(&|j, _| low[j]),
+                    "disturbance @ low K_p",
+                )?;
+                trials += rs.len();
+                report.add_disturbance(&names, &rs, true);
+                for r in rs {
+                    traces.push((
+                        format!("disturbance_low_{}_{}", names[r.index], r.model),
+                        r.trace,
+                    ));
+                }
+                if kind == Kind::All {
+                    let rs = suite::track(
+                        &bins,
+                        &setups,
+                        &cfg,
+                        &tasks_at(&|j, _| low[j]),
+                        "track @ low K_p",
+                    )?;
+                    trials += rs.len();
+                    report.add_track(&names, &rs, true);
+                    for r in rs {
+                        traces.push((format!("track_low_{}_{}", names[r.index], r.model), r.trace));
+                    }
+                }
+            }
+        }
+    }
+    report.trials = trials;
+    report.wall_s = started.elapsed().as_secs_f64();
+    for (name, tr) in &traces {
+        write_trace_csv(
+            &args.out.join("traces").join(format!("{}.csv", slug(name))),
+            tr,
+        )?;
+    }
+    if !args.no_plots {
+        frictl::experiment::report::write_plots(&args.out, &traces)?;
+    }
+    let md = report.markdown();
+    println!("{md}");
+    std::fs::write(args.out.join("tables.md"), &md)?;
+    let json = serde_json::to_string_pretty(&report)?;
+    std::fs::write(args.out.join("report.json"), &json)?;
+    if let Some(p) = &args.json {
+        std::fs::write(p, &json).with_context(|| format!("cannot write {}", p.display()))?;
+    }
+    eprintln!(
+        "frictl experiment: {} trials in {:.1} s; tables, report.json and traces in {}",
+        trials,
+        report.wall_s,
+        args.out.display()
+    );
+    Ok(())
 }

@@ -50,9 +50,9 @@ fn window(tr: &JointTrace, from_s: f64, to_s: f64) -> Vec<usize> {
         .collect()
 }
 
-/// Tracking metrics over `t ≥ skip_s`.
-pub fn track(tr: &JointTrace, skip_s: f64) -> TrackMetrics {
-    let w = window(tr, skip_s, f64::INFINITY);
+/// Tracking metrics over `from_s ≤ t < to_s`.
+pub fn track(tr: &JointTrace, from_s: f64, to_s: f64) -> TrackMetrics {
+    let w = window(tr, from_s, to_s);
     let err = |i: usize| tr.s_des_rad[i] - tr.s_rad[i];
     let max_abs_err_rad = w.iter().map(|&i| err(i).abs()).fold(0.0, f64::max);
     let friction_est_rmse_nm = if tr.kfc > 0.0 {
@@ -146,7 +146,7 @@ mod tests {
     fn track_metrics_of_a_constant_offset_after_the_skip() {
         // error 0.5 before t = 1 s, 0.1 after
         let tr = trace(3000, |t| (1.0, if t < 1.0 { 0.5 } else { 0.9 }));
-        let m = track(&tr, 1.0);
+        let m = track(&tr, 1.0, f64::INFINITY);
         assert_eq!(m.n, 2000);
         assert!((m.rmse_rad - 0.1).abs() < 1e-12);
         assert!((m.max_abs_err_rad - 0.1).abs() < 1e-12);

@@ -12,6 +12,8 @@
 
 pub mod controller;
 pub mod metrics;
+pub mod report;
 pub mod run;
 pub mod search;
 pub mod session;
+pub mod suite;

@@ -161,9 +161,8 @@ fn shipped_joint_keys(name: &str) -> anyhow::Result<String> {
         "lpf",
     ] {
         if let Some(v) = j.get(key) {
-            let mut one = toml::Table::new();
-            one.insert(key.to_owned(), v.clone());
-            out += &toml::to_string(&one)?;
+            // `Value`'s Display writes inline tables (`lpf = { … }`), valid inside `[[joint]]`.
+            out += &format!("{key} = {v}\n");
         }
     }
     Ok(out)
@@ -390,6 +389,8 @@ impl Session {
         for i in 0..self.procs.len() {
             if let Some(status) = self.procs[i].child.try_wait()? {
                 let name = self.procs[i].name;
+                // let the stderr reader thread drain the pipe into the log first
+                std::thread::sleep(Duration::from_millis(100));
                 bail!(
                     "{name} exited ({status}); its log:\n{}",
                     self.log_tail(name)
@@ -440,16 +441,17 @@ impl Session {
         .arg(&self.dir)
         .arg("--seed")
         .arg(spec.seed.to_string())
-        .arg("--initial-pose-rad")
+        // `=` form: the value starts with '-' for negative angles
         .arg(format!(
-            "{},{}",
+            "--initial-pose-rad={},{}",
             spec.initial_pose_rad[0], spec.initial_pose_rad[1]
-        ));
+        ))
+        .arg("--lockstep-subscribers=2");
         if mode == Mode::Lockstep {
             cmd.arg("--lockstep");
         }
         for s in &spec.sets {
-            cmd.arg("--set").arg(s);
+            cmd.arg(format!("--set={s}"));
         }
         let flag = self.spawn("plant", &mut cmd)?;
         self.wait_until("plant", Duration::from_secs(20), || {

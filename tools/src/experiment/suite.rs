@@ -1,0 +1,351 @@
+//! The paper's three closed-loop experiments as functions over real trials.
+//!
+//! What this module **is**: [`track`] (sine tracking at given gains), [`min_kp`] (the lowest K_p per
+//! joint and model that tracks within a [`TrackCriterion`], by [`KpBisection`]) and [`disturbance`]
+//! (hold, external torque pulse, release, position RMSE after release). Tasks on *different* joints
+//! share a trial (the knee and the ankle roll are independent plants in one plant process), so a
+//! `both` run costs no more trials than one joint.
+//!
+//! The references (paper-like, reference doc §9): ankle roll `0 − 0.15·cos(2π·0.25·t)` rad, knee
+//! `−0.8 − 0.4·cos(2π·0.2·t)` rad (centred in the knee's range, gravity-loaded); disturbance holds
+//! at the sine centre.
+//!
+//! What it is **not**: no tables or files (see [`super::report`]).
+
+use super::controller::Reference;
+use super::metrics::{self, DisturbanceMetrics, TrackCriterion, TrackMetrics};
+use super::run::{JointPlan, JointSetup, JointTrace, Pulse, TrialSpec, run_trial};
+use super::search::{KpBisection, MinKp};
+use super::session::{Binaries, FrictionModel, Mode};
+
+/// Settings shared by every trial of a suite.
+#[derive(Clone, Debug)]
+pub struct SuiteConfig {
+    /// Lockstep or real time.
+    pub mode: Mode,
+    /// Plant seed.
+    pub seed: u64,
+    /// Plant `--set` overrides.
+    pub sets: Vec<String>,
+    /// Pass criterion of the tracking trials.
+    pub criterion: TrackCriterion,
+    /// Sine periods per tracking trial (the first `criterion.skip_periods` are not evaluated).
+    pub periods: f64,
+    /// K_p search range [1/s²] per joint index.
+    pub kp_range: [(f64, f64); 2],
+    /// Bisection halvings.
+    pub iterations: u32,
+    /// Disturbance pulse per joint index.
+    pub pulse: [Pulse; 2],
+    /// Observation time after the release [s].
+    pub after_release_s: f64,
+    /// Print one progress line per trial.
+    pub progress: bool,
+}
+
+/// The sine reference of joint `index` (0 = knee, 1 = ankle_roll).
+pub fn sine(index: usize) -> Reference {
+    if index == 0 {
+        Reference::Sine {
+            centre_rad: -0.8,
+            amplitude_rad: 0.4,
+            freq_hz: 0.2,
+        }
+    } else {
+        Reference::Sine {
+            centre_rad: 0.0,
+            amplitude_rad: 0.15,
+            freq_hz: 0.25,
+        }
+    }
+}
+
+/// Amplitude and frequency of a sine reference.
+fn amp_freq(r: &Reference) -> (f64, f64) {
+    match *r {
+        Reference::Sine {
+            amplitude_rad,
+            freq_hz,
+            ..
+        } => (amplitude_rad, freq_hz),
+        Reference::Hold { .. } => (0.0, 0.0),
+    }
+}
+
+/// The held position of the disturbance test for joint `index` (the sine centre).
+pub fn hold_rad(index: usize) -> f64 {
+    match sine(index) {
+        Reference::Sine { centre_rad, .. } => centre_rad,
+        Reference::Hold { s_rad } => s_rad,
+    }
+}
+
+/// One (joint, model, gain) to run.
+#[derive(Clone, Debug)]
+pub struct Task {
+    /// Joint index (0 = knee, 1 = ankle_roll).
+    pub index: usize,
+    /// Friction model in frictiond.
+    pub model: FrictionModel,
+    /// K_p [1/s²].
+    pub kp_per_s2: f64,
+}
+
+/// Runs `plans` grouped so each trial has distinct joints; returns traces in plan order.
+fn run_grouped(
+    bins: &Binaries,
+    setups: &[JointSetup; 2],
+    cfg: &SuiteConfig,
+    plans: Vec<(JointPlan, f64)>,
+    label: &str,
+) -> anyhow::Result<Vec<JointTrace>> {
+    let mut out: Vec<Option<JointTrace>> = vec![None; plans.len()];
+    let mut pending: Vec<usize> = (0..plans.len()).collect();
+    while !pending.is_empty() {
+        let mut group: Vec<usize> = vec![];
+        for &p in &pending {
+            if !group.iter().any(|&g| plans[g].0.index == plans[p].0.index) {
+                group.push(p);
+            }
+        }
+        pending.retain(|p| !group.contains(p));
+        let spec = TrialSpec {
+            mode: cfg.mode,
+            duration_s: group.iter().map(|&g| plans[g].1).fold(0.0, f64::max),
+            joints: group.iter().map(|&g| plans[g].0.clone()).collect(),
+            seed: cfg.seed,
+            sets: cfg.sets.clone(),
+        };
+        let trace = run_trial(bins, setups, &spec)?;
+        if cfg.progress {
+            let who: Vec<String> = trace
+                .joints
+                .iter()
+                .map(|j| format!("{}/{} K_p {:.4}", j.name, j.model, j.kp_per_s2))
+                .collect();
+            eprintln!(
+                "  {label}: {} — {} ticks in {:.2} s ({:.1}× real time)",
+                who.join(", "),
+                trace.ticks,
+                trace.total_wall_s,
+                trace.ticks as f64 * 1e-3 / trace.total_wall_s.max(1e-9)
+            );
+        }
+        for (g, jt) in group.into_iter().zip(trace.joints) {
+            out[g] = Some(jt);
+        }
+    }
+    Ok(out
+        .into_iter()
+        .map(|t| t.expect("every plan ran"))
+        .collect())
+}
+
+/// A tracking run's result.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct TrackResult {
+    /// Task.
+    pub index: usize,
+    /// Model label.
+    pub model: String,
+    /// K_p [1/s²].
+    pub kp_per_s2: f64,
+    /// Metrics over the evaluation window.
+    pub metrics: TrackMetrics,
+    /// Whether RMSE ≤ the criterion's threshold.
+    pub passed: bool,
+    /// The recorded signals.
+    #[serde(skip)]
+    pub trace: JointTrace,
+}
+
+/// Sine tracking for every task (see the module doc).
+pub fn track(
+    bins: &Binaries,
+    setups: &[JointSetup; 2],
+    cfg: &SuiteConfig,
+    tasks: &[Task],
+    label: &str,
+) -> anyhow::Result<Vec<TrackResult>> {
+    let plans = tasks
+        .iter()
+        .map(|t| {
+            let r = sine(t.index);
+            let (_, f) = amp_freq(&r);
+            (
+                JointPlan {
+                    index: t.index,
+                    kp_per_s2: t.kp_per_s2,
+                    reference: r,
+                    pulse: None,
+                    model: t.model.clone(),
+                },
+                cfg.periods / f,
+            )
+        })
+        .collect();
+    let traces = run_grouped(bins, setups, cfg, plans, label)?;
+    Ok(tasks
+        .iter()
+        .zip(traces)
+        .map(|(t, trace)| {
+            let (a, f) = amp_freq(&sine(t.index));
+            let m = metrics::track(&trace, cfg.criterion.skip_periods / f, cfg.periods / f);
+            TrackResult {
+                index: t.index,
+                model: t.model.label().to_owned(),
+                kp_per_s2: t.kp_per_s2,
+                passed: m.rmse_rad <= cfg.criterion.threshold_rad(a),
+                metrics: m,
+                trace,
+            }
+        })
+        .collect())
+}
+
+/// One evaluated gain of a search.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct SearchStep {
+    /// K_p [1/s²].
+    pub kp_per_s2: f64,
+    /// Tracking RMSE [rad].
+    pub rmse_rad: f64,
+    /// Passed the criterion.
+    pub passed: bool,
+}
+
+/// A minimum-K_p search's result.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct MinKpResult {
+    /// Joint index.
+    pub index: usize,
+    /// Model label.
+    pub model: String,
+    /// The answer.
+    pub min_kp: MinKp,
+    /// Every trial of the search.
+    pub steps: Vec<SearchStep>,
+    /// The tracking run at the lowest passing gain (None if nothing passed).
+    pub at_min: Option<TrackResult>,
+}
+
+/// Minimum-K_p search for every (joint, model) task (`kp_per_s2` of the tasks is ignored).
+pub fn min_kp(
+    bins: &Binaries,
+    setups: &[JointSetup; 2],
+    cfg: &SuiteConfig,
+    tasks: &[Task],
+) -> anyhow::Result<Vec<MinKpResult>> {
+    let mut searches: Vec<KpBisection> = tasks
+        .iter()
+        .map(|t| {
+            let (lo, hi) = cfg.kp_range[t.index];
+            KpBisection::new(lo, hi, cfg.iterations)
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let mut steps: Vec<Vec<SearchStep>> = vec![vec![]; tasks.len()];
+    let mut best: Vec<Option<TrackResult>> = vec![None; tasks.len()];
+    let mut round = 0;
+    loop {
+        let live: Vec<usize> = (0..tasks.len())
+            .filter(|&i| searches[i].candidate().is_some())
+            .collect();
+        if live.is_empty() {
+            break;
+        }
+        round += 1;
+        let batch: Vec<Task> = live
+            .iter()
+            .map(|&i| Task {
+                kp_per_s2: searches[i].candidate().expect("live"),
+                ..tasks[i].clone()
+            })
+            .collect();
+        let results = track(bins, setups, cfg, &batch, &format!("min-kp round {round}"))?;
+        for (&i, r) in live.iter().zip(results) {
+            searches[i].report(r.passed);
+            steps[i].push(SearchStep {
+                kp_per_s2: r.kp_per_s2,
+                rmse_rad: r.metrics.rmse_rad,
+                passed: r.passed,
+            });
+            if r.passed && best[i].as_ref().is_none_or(|b| r.kp_per_s2 < b.kp_per_s2) {
+                best[i] = Some(r);
+            }
+        }
+    }
+    Ok(tasks
+        .iter()
+        .enumerate()
+        .map(|(i, t)| MinKpResult {
+            index: t.index,
+            model: t.model.label().to_owned(),
+            min_kp: searches[i].result().expect("done"),
+            steps: std::mem::take(&mut steps[i]),
+            at_min: best[i].take(),
+        })
+        .collect())
+}
+
+/// A disturbance run's result.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct DisturbanceResult {
+    /// Joint index.
+    pub index: usize,
+    /// Model label.
+    pub model: String,
+    /// K_p [1/s²].
+    pub kp_per_s2: f64,
+    /// The pulse.
+    pub pulse: Pulse,
+    /// Metrics.
+    pub metrics: DisturbanceMetrics,
+    /// The recorded signals.
+    #[serde(skip)]
+    pub trace: JointTrace,
+}
+
+/// Disturbance rejection for every task: hold at [`hold_rad`], the joint's pulse, then
+/// `after_release_s` of observation.
+pub fn disturbance(
+    bins: &Binaries,
+    setups: &[JointSetup; 2],
+    cfg: &SuiteConfig,
+    tasks: &[Task],
+    label: &str,
+) -> anyhow::Result<Vec<DisturbanceResult>> {
+    let plans = tasks
+        .iter()
+        .map(|t| {
+            let pulse = cfg.pulse[t.index];
+            (
+                JointPlan {
+                    index: t.index,
+                    kp_per_s2: t.kp_per_s2,
+                    reference: Reference::Hold {
+                        s_rad: hold_rad(t.index),
+                    },
+                    pulse: Some(pulse),
+                    model: t.model.clone(),
+                },
+                pulse.end_s() + cfg.after_release_s,
+            )
+        })
+        .collect();
+    let traces = run_grouped(bins, setups, cfg, plans, label)?;
+    Ok(tasks
+        .iter()
+        .zip(traces)
+        .map(|(t, trace)| {
+            let pulse = cfg.pulse[t.index];
+            DisturbanceResult {
+                index: t.index,
+                model: t.model.label().to_owned(),
+                kp_per_s2: t.kp_per_s2,
+                pulse,
+                metrics: metrics::disturbance(&trace, hold_rad(t.index), &pulse),
+                trace,
+            }
+        })
+        .collect())
+}
