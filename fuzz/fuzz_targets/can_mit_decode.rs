@@ -8,7 +8,8 @@
 //! - a decoded special frame re-encodes to the same frame;
 //! - a decoded reply re-encodes to the same 6 bytes (extra bytes are ignored by the decoder);
 //! - encoding any finite command and decoding it lands within half a quantisation step of the value
-//!   clamped to its range.
+//!   clamped to its range (t up to 4 steps lower when the encoder nudged the frame off the special
+//!   pattern).
 #![no_main]
 
 use frictionless_shm_types::can::WireFrame;
@@ -124,8 +125,10 @@ fn check_encode(data: &[u8], r: &MitRanges) {
                 ];
                 for k in 0..5 {
                     let want = vals[k].clamp(lims[k].0, lims[k].1);
-                    // t may be nudged one step off the special pattern.
-                    let tol = if k == 4 { 1.5 } else { 0.5 } * steps[k] * (1.0 + 1e-9);
+                    // t may be nudged from 0xFFC..=0xFFF down to 0xFFB (up to 4 steps) when every
+                    // other field is at its maximum, so the frame never reads as a special frame.
+                    let nudged = f.data[..7].iter().all(|&x| x == 0xFF) && f.data[7] == 0xFB;
+                    let tol = if k == 4 && nudged { 4.5 } else { 0.5 } * steps[k] * (1.0 + 1e-9);
                     assert!(
                         (got[k] - want).abs() <= tol,
                         "field {k}: {} decoded as {}",
