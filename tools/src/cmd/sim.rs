@@ -103,15 +103,6 @@ pub enum Backend {
     Can,
 }
 
-/// CAN motor protocol of `frictl sim serve --backend can`.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum CanProtocol {
-    /// MIT mini-cheetah style drives.
-    Mit,
-    /// ODrive CAN simple protocol.
-    Odrive,
-}
-
 /// Arguments of `frictl sim serve`.
 #[derive(clap::Args, Debug)]
 pub struct ServeArgs {
@@ -160,8 +151,8 @@ pub struct ServeArgs {
     #[arg(long, default_value = "vcan0")]
     pub bus: String,
     /// can: motor protocol.
-    #[arg(long, value_enum, default_value_t = CanProtocol::Mit)]
-    pub protocol: CanProtocol,
+    #[arg(long, value_enum, default_value_t = frictl::serve::can::Protocol::Mit)]
+    pub protocol: frictl::serve::can::Protocol,
     /// can: node id per joint, comma-separated (default 1, 2, …).
     #[arg(long, value_delimiter = ',')]
     pub node_ids: Vec<u8>,
@@ -258,19 +249,38 @@ fn serve(a: ServeArgs) -> anyhow::Result<()> {
             frictl::serve::shm::run(&mut joints, &opts, stop)?;
             Ok(())
         }
-        Backend::Can => serve_can(&mut joints, &a, stop),
+        Backend::Can => {
+            anyhow::ensure!(
+                !a.lockstep,
+                "--lockstep is a shared-memory mode; --backend can runs in real time"
+            );
+            anyhow::ensure!(
+                a.initial_pose_rad.is_empty() || a.initial_pose_rad.len() == joints.len(),
+                "--initial-pose-rad has {} values for {} joints",
+                a.initial_pose_rad.len(),
+                joints.len()
+            );
+            for (j, &s0) in joints.iter_mut().zip(&a.initial_pose_rad) {
+                anyhow::ensure!(s0.is_finite(), "--initial-pose-rad: {s0} is not finite");
+                j.plant.reset_at_rest(s0);
+            }
+            serve_can(&mut joints, &a, stop)
+        }
     }
 }
 
-/// `frictl sim serve --backend can` (engineer cansim's `serve::can`, not merged yet).
+/// `frictl sim serve --backend can`: [`frictl::serve::can::run`].
 fn serve_can(
-    _joints: &mut [frictl::serve::ServedJoint],
+    joints: &mut [frictl::serve::ServedJoint],
     a: &ServeArgs,
-    _stop: &std::sync::atomic::AtomicBool,
+    stop: &std::sync::atomic::AtomicBool,
 ) -> anyhow::Result<()> {
-    anyhow::bail!(
-        "`frictl sim serve --backend can` (bus {}, protocol {:?}) is not built yet",
-        a.bus,
-        a.protocol
-    )
+    let opts = frictl::serve::can::CanServeOptions {
+        bus: a.bus.clone(),
+        protocol: a.protocol,
+        node_ids: a.node_ids.clone(),
+        command_timeout_ms: a.command_timeout_ms,
+        duration_s: a.duration_s,
+    };
+    frictl::serve::can::run(joints, &opts, stop)
 }
