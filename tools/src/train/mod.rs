@@ -31,6 +31,7 @@ mod net;
 mod norm;
 pub mod pipeline;
 mod rng;
+pub mod search;
 pub mod synthetic;
 
 pub use eval::{PredictError, Predictor, rmse};

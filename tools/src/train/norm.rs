@@ -2,13 +2,26 @@
 //! misnamed `StandardScaler`), on the training split only.
 //!
 //! Percentiles use linear interpolation between order statistics (NumPy's default `np.percentile`).
-//! Columns whose IQR is ≤ [`MIN_IQR`] get scale 1, as the authors' exporter does. This module does not
-//! apply the normalisation to data; the trainer and [`frictionless::mlp::MlpWeights`] do.
+//! Columns whose IQR is ≤ [`MIN_IQR`] get scale 1, as the authors' exporter does.
+//!
+//! One deliberate deviation: when a column's IQR is below [`MIN_IQR_OVER_STD`] × its standard deviation
+//! σ, the scale is σ instead. That happens when most samples sit at one value — e.g. a joint velocity
+//! that is ≈ 0 for the stuck majority of an excitation log, IQR 4e-6 rad/s against peaks of 3.6 rad/s —
+//! where the IQR would blow the moving samples up by 10⁴–10⁶ and training diverges (measured on a
+//! simulated ankle-roll log). For bell-shaped data IQR ≈ 1.35 σ, so the authors' rule is unchanged
+//! there. The scale is stored in the model, so the daemon applies whatever was fitted.
+//!
+//! This module does not apply the normalisation to data; the trainer and
+//! [`frictionless::mlp::MlpWeights`] do.
 
 use frictionless::mlp::Normalisation;
 
 /// Columns with an inter-quartile range at or below this get scale 1.
 pub const MIN_IQR: f32 = 1e-4;
+
+/// A column whose IQR is below this fraction of its standard deviation is scaled by the standard
+/// deviation instead (see the module doc).
+pub const MIN_IQR_OVER_STD: f64 = 0.1;
 
 /// The `q`-th quantile (0..=1) of `v` with linear interpolation; reorders `v`. `v` must be non-empty.
 fn quantile_in_place(v: &mut [f32], q: f64) -> f64 {
@@ -42,11 +55,19 @@ pub fn fit_normalisation(x: &[f32], n_inputs: usize) -> Normalisation {
             sum += v as f64;
             *dst = v;
         }
-        mean.push((sum / n_rows as f64) as f32);
+        let m = sum / n_rows as f64;
+        mean.push(m as f32);
+        let var = col.iter().map(|&v| (v as f64 - m).powi(2)).sum::<f64>() / n_rows as f64;
+        let std = var.sqrt();
         let q75 = quantile_in_place(&mut col, 0.75);
         let q25 = quantile_in_place(&mut col, 0.25);
-        let iqr = (q75 - q25) as f32;
-        scale.push(if iqr > MIN_IQR { iqr } else { 1.0 });
+        let iqr = q75 - q25;
+        let s = if iqr >= MIN_IQR_OVER_STD * std {
+            iqr
+        } else {
+            std
+        } as f32;
+        scale.push(if s > MIN_IQR { s } else { 1.0 });
     }
     Normalisation { mean, scale }
 }
@@ -74,5 +95,19 @@ mod tests {
         assert!((n.scale[0] - 50.0).abs() < 1e-4);
         assert_eq!(n.mean[1], 3.0);
         assert_eq!(n.scale[1], 1.0);
+    }
+
+    #[test]
+    fn spiky_columns_are_scaled_by_their_standard_deviation() {
+        // 90 % of the samples at 0, 10 % at ±2: IQR 0, σ = √(0.1·4) ≈ 0.632.
+        let x: Vec<f32> = (0..1000)
+            .map(|i| match i % 20 {
+                0 => 2.0,
+                1 => -2.0,
+                _ => 0.0,
+            })
+            .collect();
+        let n = fit_normalisation(&x, 1);
+        assert!((n.scale[0] - 0.4f32.sqrt()).abs() < 1e-4, "{}", n.scale[0]);
     }
 }

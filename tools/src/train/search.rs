@@ -1,0 +1,578 @@
+//! Random hyper-parameter search over the paper's ranges (`frictl search`), parallel and resumable.
+//!
+//! What it **is**: [`SearchSpace`] (the authors' W&B sweep ranges, `paper-facts.md` §7.1: batch
+//! 3000–5000, hidden 150–300 each, lr 1e-5–1e-3 log-uniform, H 3–30, λ 0.1–0.5, dropout 0.01–0.1),
+//! [`draw`] (trial `k`'s hyper-parameters, a pure function of the search seed and `k`, so a resumed
+//! search draws what an uninterrupted one would, in any order), and [`run_search`]: the datasets are
+//! loaded and split once (one chunk split for all trials, independent of H, so validation RMSEs are
+//! comparable), `parallel` worker threads take trials from a queue, each trial trains with
+//! `threads_total / parallel` threads and writes `DIR/trials/trial_NNNN.fwt` (+ `.train.json`), and
+//! appends one JSON line to `DIR/results.jsonl` when it finishes. A restart with `resume` skips the
+//! trials already in that file. At the end `DIR/results.json` and `DIR/results.csv` list every trial
+//! sorted by validation RMSE (failed trials last) and the best model is copied to `DIR/best.fwt`
+//! (+ `DIR/best.train.json`). `DIR/search.json` records the search settings; a resume with different
+//! settings is refused.
+//!
+//! Models are selected on validation RMSE only; the test RMSE is reported, never used to choose.
+//!
+//! What it is **not**: no Bayesian or early-pruning search strategy, no distributed workers.
+
+use std::io::Write;
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+use frictionless::features::{FeatureSet, FeatureSpec, WarmupPolicy};
+use frictionless::mlp::StorageDtype;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use super::TrainConfig;
+use super::data::{Split, SplitSpec};
+use super::pipeline::{self, Job, PipelineError, ScvPrior, Sources};
+use super::rng;
+
+/// Inclusive ranges of the random search.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SearchSpace {
+    /// Batch size, uniform integer.
+    pub batch: (usize, usize),
+    /// Width of each of the two hidden layers, uniform integer.
+    pub hidden: (usize, usize),
+    /// Learning rate, log-uniform.
+    pub lr: (f32, f32),
+    /// History length H, uniform integer.
+    pub history: (usize, usize),
+    /// λ, uniform.
+    pub lambda: (f32, f32),
+    /// Dropout, uniform.
+    pub dropout: (f32, f32),
+}
+
+impl Default for SearchSpace {
+    /// The authors' sweep (`config_training_wandb.yaml`).
+    fn default() -> Self {
+        Self {
+            batch: (3000, 5000),
+            hidden: (150, 300),
+            lr: (1e-5, 1e-3),
+            history: (3, 30),
+            lambda: (0.1, 0.5),
+            dropout: (0.01, 0.1),
+        }
+    }
+}
+
+/// The hyper-parameters of one trial.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrialParams {
+    /// Trial index (0-based).
+    pub trial: usize,
+    /// Training seed of the trial (init, shuffles, dropout).
+    pub seed: u64,
+    /// Batch size.
+    pub batch_size: usize,
+    /// Hidden widths.
+    pub hidden: Vec<usize>,
+    /// Learning rate.
+    pub lr: f32,
+    /// History length H.
+    pub history: usize,
+    /// λ.
+    pub lambda: f32,
+    /// Dropout.
+    pub dropout: f32,
+}
+
+/// Trial `trial`'s hyper-parameters: a pure function of `(space, seed, trial)`.
+pub fn draw(space: &SearchSpace, seed: u64, trial: usize) -> TrialParams {
+    let mut g = ChaCha8Rng::seed_from_u64(rng::derive(seed, &[rng::tag::SEARCH, trial as u64]));
+    let (l0, l1) = ((space.lr.0 as f64).ln(), (space.lr.1 as f64).ln());
+    TrialParams {
+        trial,
+        seed: rng::derive(seed, &[rng::tag::SEARCH, trial as u64, 1]) >> 11,
+        batch_size: g.random_range(space.batch.0..=space.batch.1),
+        hidden: vec![
+            g.random_range(space.hidden.0..=space.hidden.1),
+            g.random_range(space.hidden.0..=space.hidden.1),
+        ],
+        lr: g.random_range(l0..=l1).exp() as f32,
+        history: g.random_range(space.history.0..=space.history.1),
+        lambda: g.random_range(space.lambda.0..=space.lambda.1),
+        dropout: g.random_range(space.dropout.0..=space.dropout.1),
+    }
+}
+
+/// The outcome of one trial (one line of `results.jsonl`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrialResult {
+    /// Its hyper-parameters.
+    pub params: TrialParams,
+    /// `"ok"` or `"failed"`.
+    pub status: String,
+    /// Why it failed.
+    pub error: Option<String>,
+    /// Validation RMSE of the stored model [Nm] (the selection criterion).
+    pub val_rmse_nm: Option<f64>,
+    /// Test RMSE [Nm] (reported only).
+    pub test_rmse_nm: Option<f64>,
+    /// Training RMSE [Nm].
+    pub train_rmse_nm: Option<f64>,
+    /// Epoch of the stored weights.
+    pub best_epoch: Option<usize>,
+    /// Epochs run.
+    pub epochs_run: usize,
+    /// Wall time [s].
+    pub seconds: f64,
+    /// Model file, relative to the search directory.
+    pub model: Option<String>,
+}
+
+/// Everything a search needs besides the data.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SearchSettings {
+    /// Ranges.
+    pub space: SearchSpace,
+    /// Search seed (split and trial draws).
+    pub seed: u64,
+    /// Epochs per trial.
+    pub epochs: usize,
+    /// Feature set.
+    pub features: FeatureSet,
+    /// Motor temperature appended.
+    pub temperature: bool,
+    /// Warm-up policy.
+    pub warmup: WarmupPolicy,
+    /// Storage dtype.
+    pub dtype: StorageDtype,
+    /// Early stopping patience.
+    pub patience: Option<usize>,
+    /// Split.
+    pub split: SplitSpec,
+    /// Dataset paths.
+    pub datasets: Vec<String>,
+    /// SHA-256 of the datasets (hex, as in the `.fwt`).
+    pub dataset_sha256: String,
+    /// SCV JSON path.
+    pub scv: String,
+}
+
+/// How to run a search.
+#[derive(Clone, Debug)]
+pub struct SearchRun {
+    /// Output directory.
+    pub dir: PathBuf,
+    /// Total number of trials (trials `0..trials`).
+    pub trials: usize,
+    /// Trials trained at the same time.
+    pub parallel: usize,
+    /// Threads over all trials (each trial gets `threads_total / parallel`, ≥ 1).
+    pub threads_total: usize,
+    /// Continue the search in `dir`.
+    pub resume: bool,
+}
+
+/// Why a search failed (a failing trial is recorded, not an error).
+#[derive(Debug, thiserror::Error)]
+pub enum SearchError {
+    /// Loading or splitting the data failed.
+    #[error(transparent)]
+    Pipeline(#[from] PipelineError),
+    /// A file in the search directory could not be read or written.
+    #[error("{path}: {detail}")]
+    File {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        detail: String,
+    },
+    /// A resume with settings that differ from the ones recorded.
+    #[error(
+        "--resume: {path} was made with {key} = {recorded}, this run has {given}; use another --out directory"
+    )]
+    Settings {
+        /// `search.json`.
+        path: PathBuf,
+        /// The differing setting.
+        key: String,
+        /// Recorded value.
+        recorded: String,
+        /// This run's value.
+        given: String,
+    },
+    /// Invalid options.
+    #[error("{0}")]
+    Usage(String),
+}
+
+fn ferr(path: &Path, detail: impl std::fmt::Display) -> SearchError {
+    SearchError::File {
+        path: path.to_path_buf(),
+        detail: detail.to_string(),
+    }
+}
+
+/// Reads `results.jsonl` (missing file: empty). A torn last line (crash mid-write) is ignored.
+pub fn read_results(path: &Path) -> Result<Vec<TrialResult>, SearchError> {
+    let text = match std::fs::read_to_string(path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(ferr(path, format!("cannot read: {e}"))),
+    };
+    let lines: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
+    let mut out = Vec::with_capacity(lines.len());
+    for (i, l) in lines.iter().enumerate() {
+        match serde_json::from_str::<TrialResult>(l) {
+            Ok(r) => out.push(r),
+            Err(_) if i + 1 == lines.len() && !text.ends_with('\n') => {}
+            Err(e) => return Err(ferr(path, format!("line {}: {e}", i + 1))),
+        }
+    }
+    Ok(out)
+}
+
+fn compare_settings(
+    path: &Path,
+    rec: &SearchSettings,
+    now: &SearchSettings,
+) -> Result<(), SearchError> {
+    let a = serde_json::to_value(rec).map_err(|e| ferr(path, e))?;
+    let b = serde_json::to_value(now).map_err(|e| ferr(path, e))?;
+    if let (Some(a), Some(b)) = (a.as_object(), b.as_object()) {
+        for (k, va) in a {
+            let vb = b.get(k).cloned().unwrap_or(serde_json::Value::Null);
+            if *va != vb {
+                return Err(SearchError::Settings {
+                    path: path.to_path_buf(),
+                    key: k.clone(),
+                    recorded: va.to_string(),
+                    given: vb.to_string(),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Sorts by validation RMSE (ok trials first, ascending; then failed ones by trial index).
+pub fn rank(results: &mut [TrialResult]) {
+    results.sort_by(|a, b| {
+        let key = |r: &TrialResult| match (r.status.as_str(), r.val_rmse_nm) {
+            ("ok", Some(v)) if v.is_finite() => (0, v),
+            _ => (1, 0.0),
+        };
+        let (ka, kb) = (key(a), key(b));
+        ka.0.cmp(&kb.0)
+            .then(ka.1.total_cmp(&kb.1))
+            .then(a.params.trial.cmp(&b.params.trial))
+    });
+}
+
+fn opt(v: Option<f64>) -> String {
+    v.map_or(String::new(), |x| format!("{x}"))
+}
+
+fn write_tables(dir: &Path, ranked: &[TrialResult]) -> Result<(), SearchError> {
+    let jp = dir.join("results.json");
+    let json = serde_json::to_string_pretty(ranked).map_err(|e| ferr(&jp, e))?;
+    std::fs::write(&jp, json).map_err(|e| ferr(&jp, format!("cannot write: {e}")))?;
+    let cp = dir.join("results.csv");
+    let mut w = csv::Writer::from_path(&cp).map_err(|e| ferr(&cp, e))?;
+    let io = |e: csv::Error| ferr(&cp, e);
+    w.write_record([
+        "rank",
+        "trial",
+        "status",
+        "val_rmse_nm",
+        "test_rmse_nm",
+        "train_rmse_nm",
+        "best_epoch",
+        "epochs_run",
+        "batch_size",
+        "hidden0",
+        "hidden1",
+        "lr",
+        "history",
+        "lambda",
+        "dropout",
+        "seed",
+        "seconds",
+        "model",
+        "error",
+    ])
+    .map_err(io)?;
+    for (i, r) in ranked.iter().enumerate() {
+        let p = &r.params;
+        w.write_record([
+            (i + 1).to_string(),
+            p.trial.to_string(),
+            r.status.clone(),
+            opt(r.val_rmse_nm),
+            opt(r.test_rmse_nm),
+            opt(r.train_rmse_nm),
+            r.best_epoch.map_or(String::new(), |e| e.to_string()),
+            r.epochs_run.to_string(),
+            p.batch_size.to_string(),
+            p.hidden.first().map_or(String::new(), |h| h.to_string()),
+            p.hidden.get(1).map_or(String::new(), |h| h.to_string()),
+            p.lr.to_string(),
+            p.history.to_string(),
+            p.lambda.to_string(),
+            p.dropout.to_string(),
+            p.seed.to_string(),
+            format!("{:.3}", r.seconds),
+            r.model.clone().unwrap_or_default(),
+            r.error.clone().unwrap_or_default(),
+        ])
+        .map_err(io)?;
+    }
+    w.flush().map_err(|e| ferr(&cp, e))?;
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run_trial(
+    dir: &Path,
+    sources: &Sources,
+    scv: &ScvPrior,
+    split: &Split,
+    settings: &SearchSettings,
+    params: &TrialParams,
+    threads: usize,
+) -> TrialResult {
+    let started = Instant::now();
+    let rel = format!("trials/trial_{:04}.fwt", params.trial);
+    let model_path = dir.join(&rel);
+    let spec = FeatureSpec {
+        set: settings.features,
+        history: params.history,
+        temperature: settings.temperature,
+    };
+    let job = Job {
+        spec,
+        warmup: settings.warmup,
+        config: TrainConfig {
+            hidden: params.hidden.clone(),
+            dropout: params.dropout,
+            lambda: params.lambda,
+            lr: params.lr,
+            batch_size: params.batch_size,
+            epochs: settings.epochs,
+            seed: params.seed,
+            threads,
+            patience: settings.patience,
+            abort_loss: Some(1000.0),
+        },
+        dtype: settings.dtype,
+        checkpoint: None,
+        checkpoint_every: 1,
+        resume: false,
+    };
+    let result = (|| -> Result<pipeline::Trained, PipelineError> {
+        let prepared = pipeline::prepare(sources, scv, split, &spec, settings.warmup)?;
+        let mut trained = pipeline::train_model(
+            sources,
+            scv,
+            split,
+            &settings.split,
+            &prepared,
+            &job,
+            |_| ControlFlow::Continue(()),
+        )?;
+        pipeline::write_outputs(
+            &mut trained,
+            &model_path,
+            &pipeline::default_report_path(&model_path),
+        )?;
+        Ok(trained)
+    })();
+    match result {
+        Ok(t) => TrialResult {
+            params: params.clone(),
+            status: "ok".into(),
+            error: None,
+            val_rmse_nm: t.report.rmse_nm.val,
+            test_rmse_nm: t.report.rmse_nm.test,
+            train_rmse_nm: t.report.rmse_nm.train,
+            best_epoch: Some(t.report.best_epoch),
+            epochs_run: t.report.epochs.len(),
+            seconds: started.elapsed().as_secs_f64(),
+            model: Some(rel),
+        },
+        Err(e) => TrialResult {
+            params: params.clone(),
+            status: "failed".into(),
+            error: Some(e.to_string()),
+            val_rmse_nm: None,
+            test_rmse_nm: None,
+            train_rmse_nm: None,
+            best_epoch: None,
+            epochs_run: 0,
+            seconds: started.elapsed().as_secs_f64(),
+            model: None,
+        },
+    }
+}
+
+/// Runs (or resumes) a search; `on_trial` is called after each finished trial (from worker threads).
+/// Returns every trial of `0..run.trials` found or run, ranked.
+pub fn run_search(
+    sources: &Sources,
+    scv: &ScvPrior,
+    settings: &SearchSettings,
+    run: &SearchRun,
+    on_trial: impl Fn(&TrialResult) + Sync,
+) -> Result<Vec<TrialResult>, SearchError> {
+    if run.parallel == 0 || run.trials == 0 {
+        return Err(SearchError::Usage(format!(
+            "--trials = {} and --parallel = {} must be ≥ 1",
+            run.trials, run.parallel
+        )));
+    }
+    if settings.split.val_frac <= 0.0 {
+        return Err(SearchError::Usage(format!(
+            "--val-frac = {}: the search selects on validation RMSE and needs a validation set",
+            settings.split.val_frac
+        )));
+    }
+    let dir = &run.dir;
+    std::fs::create_dir_all(dir.join("trials"))
+        .map_err(|e| ferr(&dir.join("trials"), format!("cannot create: {e}")))?;
+    let settings_path = dir.join("search.json");
+    let results_path = dir.join("results.jsonl");
+    let done = if run.resume {
+        match std::fs::read_to_string(&settings_path) {
+            Ok(t) => {
+                let rec: SearchSettings =
+                    serde_json::from_str(&t).map_err(|e| ferr(&settings_path, e))?;
+                compare_settings(&settings_path, &rec, settings)?;
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(ferr(&settings_path, format!("cannot read: {e}"))),
+        }
+        read_results(&results_path)?
+    } else {
+        if read_results(&results_path)?.iter().any(|_| true) {
+            return Err(ferr(
+                &results_path,
+                "holds finished trials: pass --resume to continue this search, or use another --out",
+            ));
+        }
+        Vec::new()
+    };
+    let json = serde_json::to_string_pretty(settings).map_err(|e| ferr(&settings_path, e))?;
+    std::fs::write(&settings_path, json)
+        .map_err(|e| ferr(&settings_path, format!("cannot write: {e}")))?;
+    let split = pipeline::split_for(sources, &settings.split)?;
+    let pending: Vec<TrialParams> = (0..run.trials)
+        .filter(|k| !done.iter().any(|r| r.params.trial == *k))
+        .map(|k| draw(&settings.space, settings.seed, k))
+        .collect();
+    let file = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&results_path)
+        .map_err(|e| ferr(&results_path, format!("cannot open: {e}")))?;
+    let sink = Mutex::new((file, None::<SearchError>));
+    let next = AtomicUsize::new(0);
+    let threads = (run.threads_total / run.parallel).max(1);
+    let finished = Mutex::new(Vec::new());
+    std::thread::scope(|sc| {
+        for _ in 0..run.parallel.min(pending.len()) {
+            sc.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(p) = pending.get(i) else { break };
+                    let r = run_trial(dir, sources, scv, &split, settings, p, threads);
+                    {
+                        let mut g = sink.lock().unwrap_or_else(|e| e.into_inner());
+                        let line = serde_json::to_string(&r).unwrap_or_default() + "\n";
+                        if let Err(e) = g.0.write_all(line.as_bytes()).and_then(|_| g.0.flush()) {
+                            g.1 = Some(ferr(&results_path, format!("cannot append: {e}")));
+                        }
+                    }
+                    on_trial(&r);
+                    finished.lock().unwrap_or_else(|e| e.into_inner()).push(r);
+                }
+            });
+        }
+    });
+    let (_, write_err) = sink.into_inner().unwrap_or_else(|e| e.into_inner());
+    if let Some(e) = write_err {
+        return Err(e);
+    }
+    let mut all: Vec<TrialResult> = done
+        .into_iter()
+        .chain(finished.into_inner().unwrap_or_else(|e| e.into_inner()))
+        .filter(|r| r.params.trial < run.trials)
+        .collect();
+    rank(&mut all);
+    write_tables(dir, &all)?;
+    if let Some(best) = all.first().filter(|r| r.status == "ok")
+        && let Some(m) = &best.model
+    {
+        let src = dir.join(m);
+        let dst = dir.join("best.fwt");
+        std::fs::copy(&src, &dst)
+            .map_err(|e| ferr(&dst, format!("cannot copy {}: {e}", src.display())))?;
+        let rsrc = pipeline::default_report_path(&src);
+        let rdst = dir.join("best.train.json");
+        std::fs::copy(&rsrc, &rdst)
+            .map_err(|e| ferr(&rdst, format!("cannot copy {}: {e}", rsrc.display())))?;
+    }
+    Ok(all)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn draws_stay_in_the_paper_ranges_and_depend_only_on_seed_and_index() {
+        let sp = SearchSpace::default();
+        let mut lrs = Vec::new();
+        for k in 0..500 {
+            let p = draw(&sp, 11, k);
+            assert!((3000..=5000).contains(&p.batch_size));
+            assert!(p.hidden.iter().all(|h| (150..=300).contains(h)));
+            assert!((1e-5..=1e-3).contains(&p.lr), "lr {}", p.lr);
+            assert!((3..=30).contains(&p.history));
+            assert!((0.1..=0.5).contains(&p.lambda));
+            assert!((0.01..=0.1).contains(&p.dropout));
+            assert_eq!(p, draw(&sp, 11, k), "pure function of (seed, index)");
+            lrs.push(p.lr.log10());
+        }
+        // Log-uniform: about half the draws below 1e-4 (the log-midpoint).
+        let below = lrs.iter().filter(|&&l| l < -4.0).count();
+        assert!((200..300).contains(&below), "{below} of 500 below 1e-4");
+        assert_ne!(draw(&sp, 11, 0), draw(&sp, 12, 0));
+    }
+
+    #[test]
+    fn rank_puts_best_validation_first_and_failures_last() {
+        let mk = |trial, status: &str, v: Option<f64>| TrialResult {
+            params: draw(&SearchSpace::default(), 0, trial),
+            status: status.into(),
+            error: None,
+            val_rmse_nm: v,
+            test_rmse_nm: None,
+            train_rmse_nm: None,
+            best_epoch: None,
+            epochs_run: 0,
+            seconds: 0.0,
+            model: None,
+        };
+        let mut r = vec![
+            mk(0, "failed", None),
+            mk(1, "ok", Some(0.5)),
+            mk(2, "ok", Some(0.2)),
+            mk(3, "ok", Some(f64::NAN)),
+        ];
+        rank(&mut r);
+        let order: Vec<usize> = r.iter().map(|t| t.params.trial).collect();
+        assert_eq!(order, vec![2, 1, 0, 3]);
+    }
+}
