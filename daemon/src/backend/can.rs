@@ -25,8 +25,9 @@
 //! - Error frames count `error_frames`, `bus_off` (`CAN_ERR_BUSOFF`) and `error_passive`
 //!   (`CAN_ERR_CRTL` with RX/TX passive). The RT thread only bumps atomics; a logger thread started
 //!   at open logs changes at most once per second (off the RT thread).
-//! - Open enters MIT motor mode (`FF…FC`) / ODrive torque control + closed loop; a stale MIT drive is
-//!   sent enter-motor-mode again every [`REENTER_EVERY_TICKS`], an ODrive reporting a state other than
+//! - Open enters MIT motor mode (`FF…FC`) / ODrive torque control + closed loop; an MIT drive (which
+//!   reports no mode) is sent enter-motor-mode again on every enable edge of its joint and, while its
+//!   feedback is stale, every [`REENTER_EVERY_TICKS`]; an ODrive reporting a state other than
 //!   closed loop (without axis error) is re-armed at the same rate; drop sends 0 and exits motor
 //!   mode / sets the axis idle.
 //!
@@ -125,6 +126,8 @@ struct Drive {
     last_enter_tick: u64,
     /// ODrive: last heartbeat (axis error, axis state), if any.
     heartbeat: Option<(u32, u8)>,
+    /// Whether the last command had this joint valid (enable edges re-enter MIT motor mode).
+    was_valid: bool,
 }
 
 /// One bus: its socket and drives.
@@ -289,6 +292,7 @@ impl CanBackend {
                         last_fb_tick: None,
                         last_enter_tick: 0,
                         heartbeat: None,
+                        was_valid: false,
                     }
                 })
                 .collect();
@@ -588,11 +592,20 @@ impl Backend for CanBackend {
     }
 
     fn publish_command(&mut self, cmd: &MotorCurrentCommand) -> Result<(), IoError> {
-        for bus in &self.buses {
-            for d in &bus.drives {
+        for bus in &mut self.buses {
+            for d in &mut bus.drives {
                 let k = d.cfg.index;
+                let valid = cmd.is_valid(k);
+                // An MIT drive reports no mode: on every enable edge send enter-motor-mode first, so
+                // a drive that started after us or idled on a timeout applies the command.
+                if valid && !d.was_valid && bus.protocol == CanProtocol::Mit {
+                    d.last_enter_tick = self.tick;
+                    let enter = mit::encode_special(d.cfg.node_id, MitSpecial::EnterMotorMode);
+                    Self::send(&bus.sock, &mut self.counters, enter);
+                }
+                d.was_valid = valid;
                 let i = cmd.i_ref_a[k];
-                let i_a = if cmd.is_valid(k) && i.is_finite() {
+                let i_a = if valid && i.is_finite() {
                     i.clamp(-d.cfg.max_curr_a, d.cfg.max_curr_a)
                 } else {
                     0.0
@@ -929,12 +942,21 @@ i_max = 40.0
         cmd.i_ref_a[0] = 2.5;
         cmd.i_ref_a[2] = -3.25;
         b.publish_command(&cmd).unwrap();
+        // Enable edge: enter motor mode again, then the command, per drive.
+        assert_eq!(
+            mit_cmd(&drive),
+            (1, MitRx::Special(MitSpecial::EnterMotorMode))
+        );
         let (id, rx) = mit_cmd(&drive);
         assert_eq!(id, 1);
         near(
             torque(rx),
             0.157 * 2.5,
             ranges(1.0).steps()[4] / 2.0 + 1e-12,
+        );
+        assert_eq!(
+            mit_cmd(&drive),
+            (2, MitRx::Special(MitSpecial::EnterMotorMode))
         );
         let (id, rx) = mit_cmd(&drive);
         assert_eq!(id, 2);
@@ -960,7 +982,17 @@ i_max = 40.0
             ranges(1.0).steps()[4] / 2.0 + 1e-12,
         );
         let _ = mit_cmd(&drive);
-        assert_eq!(b.bus_counters().tx_frames, 2 + 6);
+        // Re-enabling the hip is an edge again.
+        cmd.valid_mask = 0b101;
+        cmd.i_ref_a[0] = 0.0;
+        b.publish_command(&cmd).unwrap();
+        let _ = mit_cmd(&drive);
+        assert_eq!(
+            mit_cmd(&drive),
+            (2, MitRx::Special(MitSpecial::EnterMotorMode))
+        );
+        let _ = mit_cmd(&drive);
+        assert_eq!(b.bus_counters().tx_frames, 2 + 2 + 6 + 3);
         drop(b);
         // Drop: zero torque, then exit motor mode, per drive.
         near(torque(mit_cmd(&drive).1), 0.0, 1e-3);
