@@ -279,10 +279,21 @@ fn vcan_daemon_closed_loop_with_frictl_sim_serve_mit() {
     assert!(t_wire.iter().all(|t| t.abs() <= lim));
     let nonzero = t_wire.iter().filter(|t| t.abs() > 0.05).count();
     assert!(nonzero > t_wire.len() / 2, "{nonzero} of {}", t_wire.len());
-    let s = plant.status.latest().unwrap();
-    if let Some(s) = s {
-        assert_eq!(s.bus.stale_feedback_mask, 0, "{:?}", s.bus);
-    }
+    let s = plant.status.wait_latest(T).unwrap().expect("status");
+    assert_eq!(s.bus.stale_feedback_mask, 0, "{:?}", s.bus);
+    // Numbers, not asserts: the tick from wake-up to published command (drain the socket, decode,
+    // law, encode + send 2 frames, command mirror) as the daemon measures it, and the bus counters.
+    println!(
+        "bench: frictiond CAN tick in VM (2 MIT joints, vcan0, closed loop): mean {:.1} us, p50 <= {:.1} us, p99 <= {:.1} us, max {:.1} us over {} ticks; rx {} tx {} dropped {}",
+        s.compute.mean_ns() / 1e3,
+        s.compute.quantile_upper_ns(0.5) as f64 / 1e3,
+        s.compute.quantile_upper_ns(0.99) as f64 / 1e3,
+        s.compute.max_ns as f64 / 1e3,
+        s.compute.total,
+        s.bus.rx_frames,
+        s.bus.tx_frames,
+        s.bus.tx_dropped
+    );
     d.signal(libc::SIGTERM);
     let (st, log) = d.wait_exit(T);
     assert!(st.success(), "{log}");
