@@ -18,6 +18,7 @@ use can_support::*;
 use daemon_support::{Plant, TestEnv};
 use frictionless_shm_types::can::WireFrame;
 use frictionless_shm_types::can::mit::{self, MitRanges, MitRx, MitSpecial};
+use frictionless_shm_types::can::odrive::{self, OdriveMsg};
 use frictionless_shm_types::{FLAG_FAULT, TorqueRequest};
 use socketcan::{
     CanErrorFrame, CanFrame, CanSocket, EmbeddedFrame, ExtendedId, Socket, SocketOptions,
@@ -86,9 +87,9 @@ fn frictl_bin() -> PathBuf {
     frictiond_bin().with_file_name("frictl")
 }
 
-/// The daemon config matching `frictl sim serve --preset knee,ankle_roll` (kt, r, MIT ranges of
-/// `frictl::serve::can::mit_ranges`), SCV friction without LPF so each tick's law is exact.
-const SIM_BODY: &str = r#"
+/// The daemon joints matching `frictl sim serve --preset knee,ankle_roll` (kt, r), SCV friction
+/// without LPF so each tick's law is exact.
+const SIM_JOINTS: &str = r#"
 [loop]
 period_us = 1000
 status_every_ticks = 20
@@ -128,6 +129,10 @@ ks = 6.0
 vs = 0.13
 alpha = 0.6
 
+"#;
+
+/// The MIT bus of [`SIM_JOINTS`] (ranges of `frictl::serve::can::mit_ranges` for the presets).
+const SIM_MIT_BUS: &str = r#"
 [[bus]]
 interface = "vcan0"
 bitrate = 1000000
@@ -151,6 +156,26 @@ p_max = 84.0
 v_max = 800.0
 t_max = 0.1995
 i_max = 3.0
+"#;
+
+/// The ODrive bus of [`SIM_JOINTS`] (2 axes at 1 kHz: 73 % of 1 Mbit/s worst case).
+const SIM_ODRIVE_BUS: &str = r#"
+[[bus]]
+interface = "vcan0"
+bitrate = 1000000
+protocol = "odrive"
+max_load = 0.75
+feedback_timeout_ticks = 10
+
+[[bus.joint]]
+joint = "knee"
+node_id = 1
+command_unit = "motor_torque"
+
+[[bus.joint]]
+joint = "ankle_roll"
+node_id = 2
+command_unit = "motor_torque"
 "#;
 
 fn knee_ranges() -> MitRanges {
@@ -181,9 +206,63 @@ impl Drop for Child {
 #[test]
 #[ignore = "needs vcan (run tests/canvm/run.sh)"]
 fn vcan_daemon_closed_loop_with_frictl_sim_serve_mit() {
-    let env = TestEnv::new("vcansim");
-    let cfg = write_can_config(&env, SIM_BODY);
-    // A listener on the bus: knee replies (id 0, byte 0 = 1) and knee commands (id 1).
+    closed_loop_with_sim(false);
+}
+
+#[test]
+#[ignore = "needs vcan (run tests/canvm/run.sh)"]
+fn vcan_daemon_closed_loop_with_frictl_sim_serve_odrive() {
+    closed_loop_with_sim(true);
+}
+
+/// Knee joint position [rad] in a knee feedback frame, or the knee command value [motor Nm] in a
+/// knee command frame.
+enum Seen {
+    KneePos(f64),
+    KneeCmd(f64),
+}
+
+fn classify(w: &WireFrame, odrive_bus: bool) -> Option<Seen> {
+    let r_knee = knee_ranges();
+    if odrive_bus {
+        match odrive::decode(w).ok()? {
+            (1, OdriveMsg::EncoderEstimates { pos_rev, .. }) => Some(Seen::KneePos(
+                f64::from(pos_rev) * std::f64::consts::TAU / -100.0,
+            )),
+            (1, OdriveMsg::SetInputTorque { torque_nm }) => {
+                Some(Seen::KneeCmd(f64::from(torque_nm)))
+            }
+            _ => None,
+        }
+    } else if w.id == 0 && w.len >= 6 && w.data[0] == 1 {
+        Some(Seen::KneePos(
+            mit::decode_reply(w, &r_knee).ok()?.p_rad / -100.0,
+        ))
+    } else if w.id == 1 {
+        match mit::decode_command(w, &r_knee).ok()? {
+            MitRx::Command(c) => Some(Seen::KneeCmd(c.t_ff_nm)),
+            MitRx::Special(_) => None,
+        }
+    } else {
+        None
+    }
+}
+
+/// frictiond + `frictl sim serve --backend can` on vcan0: the knee moves, every published current is
+/// the law for the published friction estimate, the knee frames carry k_t·i.
+fn closed_loop_with_sim(odrive_bus: bool) {
+    let env = TestEnv::new(if odrive_bus {
+        "vcansimod"
+    } else {
+        "vcansimmit"
+    });
+    let bus = if odrive_bus {
+        SIM_ODRIVE_BUS
+    } else {
+        SIM_MIT_BUS
+    };
+    let cfg = write_can_config(&env, &format!("{SIM_JOINTS}{bus}"));
+    // A listener on the bus: knee feedback and knee commands.
     let sniff = CanSocket::open("vcan0").expect("vcan0");
     sniff.set_nonblocking(true).unwrap();
     let _ = sniff.set_socket_option_int(libc::SOL_SOCKET, libc::SO_RCVBUFFORCE, 8 << 20);
@@ -197,7 +276,7 @@ fn vcan_daemon_closed_loop_with_frictl_sim_serve_mit() {
                 "--bus",
                 "vcan0",
                 "--protocol",
-                "mit",
+                if odrive_bus { "odrive" } else { "mit" },
                 "--preset",
                 "knee,ankle_roll",
                 "--initial-pose-rad",
@@ -239,15 +318,13 @@ fn vcan_daemon_closed_loop_with_frictl_sim_serve_mit() {
             let Ok(w) = WireFrame::try_from(&f) else {
                 continue;
             };
-            if w.id == 0 && w.len >= 6 && w.data[0] == 1 {
-                let rep = mit::decode_reply(&w, &r_knee).unwrap();
-                let s = rep.p_rad / r[0];
-                p_first.get_or_insert(s);
-                p_last = s;
-            } else if w.id == 1
-                && let Ok(MitRx::Command(c)) = mit::decode_command(&w, &r_knee)
-            {
-                t_wire.push(c.t_ff_nm);
+            match classify(&w, odrive_bus) {
+                Some(Seen::KneePos(s)) => {
+                    p_first.get_or_insert(s);
+                    p_last = s;
+                }
+                Some(Seen::KneeCmd(t)) => t_wire.push(t),
+                None => {}
             }
         }
         if let Some(s) = plant.status.latest().unwrap()
