@@ -16,7 +16,8 @@
 //! validation/test RMSE, time, tool and filtering. The split, seed and hyper-parameters go into the
 //! [`TrainReport`] JSON written next to the model. With several datasets the `.fwt`'s `dataset_sha256`
 //! is SHA-256 over the concatenated 32-byte SHA-256 digests of the dataset CSV files, in `--dataset`
-//! order (one dataset: the digest of its CSV file itself). `created_unix_s` is `SOURCE_DATE_EPOCH`
+//! order (one dataset: the digest of its CSV file itself). A code-form SCV prior (ka = ∞) is stored
+//! with ka = `f64::MAX` ([`storable_scv`]), since the `.fwt` requires finite values. `created_unix_s` is `SOURCE_DATE_EPOCH`
 //! when that environment variable is set (reproducible builds convention), else the current time.
 //!
 //! ## The report JSON (`--report`, schema `frictionless-train-report-v1`)
@@ -620,6 +621,16 @@ pub struct Trained {
     pub report: TrainReport,
 }
 
+/// The prior as the `.fwt` can store it: the file requires finite values, so the code form's
+/// ka = ∞ (sign(v)) is stored as `f64::MAX`, for which tanh(ka·v) = sign(v) for every normal v
+/// (ka·v overflows to ±∞, and tanh(0) = 0 = sign(0)).
+pub fn storable_scv(p: ScvParams) -> ScvParams {
+    ScvParams {
+        ka: if p.ka.is_infinite() { f64::MAX } else { p.ka },
+        ..p
+    }
+}
+
 /// `SOURCE_DATE_EPOCH` if set and valid, else now (seconds since the Unix epoch).
 pub fn created_unix_s() -> u64 {
     std::env::var("SOURCE_DATE_EPOCH")
@@ -746,7 +757,7 @@ pub fn train_model(
             gear_ratio: sources.gear_ratio,
             kt_nm_per_a: sources.kt_nm_per_a,
             features: job.spec,
-            scv: Some(scv.params),
+            scv: Some(storable_scv(scv.params)),
             training: TrainingMeta {
                 dataset_sha256: sources.dataset_sha256,
                 val_rmse_nm: nan(va),
@@ -842,4 +853,28 @@ pub fn write_outputs(
 /// The default report path next to a model: `MODEL.fwt` → `MODEL.train.json`.
 pub fn default_report_path(model_path: &Path) -> PathBuf {
     model_path.with_extension("train.json")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn storable_scv_evaluates_like_the_code_form() {
+        let code = ScvParams::from(ScvCodeParams {
+            fc: 1.2,
+            fs: 2.5,
+            fv: 0.4,
+            vs: 0.2,
+        });
+        assert!(code.ka.is_infinite());
+        let stored = storable_scv(code);
+        assert!(stored.ka.is_finite());
+        stored.validate().unwrap();
+        for v in [-3.0, -0.2, -1e-9, -1e-300, 0.0, 1e-300, 1e-6, 0.05, 2.0] {
+            assert_eq!(stored.torque_nm(v), code.torque_nm(v), "v = {v}");
+        }
+        let finite = ScvParams { ka: 20.0, ..code };
+        assert_eq!(storable_scv(finite), finite);
+    }
 }
