@@ -14,6 +14,7 @@
 pub mod acquire;
 pub mod canlog;
 pub mod dynamics;
+pub mod eval;
 pub mod experiment;
 pub mod ident;
 pub mod interop;

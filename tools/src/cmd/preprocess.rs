@@ -12,6 +12,17 @@ use frictl::ident::preprocess::{LogMeta, PreprocessConfig, RawLog, preprocess};
 use frictl::sim::params::LinkModel;
 use sha2::Digest;
 
+/// Source of the link dynamics for τ_ID.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum LinkSource {
+    /// The sidecar's simulator link model if present and no `--urdf` given, else the URDF.
+    Auto,
+    /// The URDF (`--urdf`, default `virtual_leg`).
+    Urdf,
+    /// The simulator's link model from the sidecar (`plant.link`); an error if absent.
+    Sidecar,
+}
+
 /// Arguments of `frictl preprocess`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -20,20 +31,25 @@ pub struct Args {
     /// Output dataset CSV (its sidecar is written next to it with `.json`).
     #[arg(short = 'o', long = "out")]
     pub out: PathBuf,
-    /// Causal processing: forward Butterworth and forward Kalman filter (default: zero-phase
-    /// Butterworth and RTS smoother, like the authors).
+    /// Causal ṡ/s̈ columns (forward Kalman filter, what the daemon sees) for training on causal
+    /// signals; the label itself always uses the zero-phase current and the RTS smoother.
     #[arg(long)]
     pub causal: bool,
-    /// URDF for inverse dynamics; `virtual_leg` = the project's `config/urdf/virtual_leg.urdf`.
-    #[arg(long, default_value = "virtual_leg")]
-    pub urdf: String,
+    /// Which link dynamics give τ_ID. `auto` (default): the simulator's own link model when the
+    /// sidecar has one (`plant.link`, i.e. a simulated log) and no `--urdf` is given — the label is
+    /// then computed with exactly the dynamics that produced the data — else the URDF.
+    #[arg(long, value_enum, default_value_t = LinkSource::Auto)]
+    pub link: LinkSource,
+    /// URDF for inverse dynamics (default `virtual_leg` = the project's `config/urdf/virtual_leg.urdf`).
+    #[arg(long)]
+    pub urdf: Option<String>,
     /// Joint name in the URDF (default: the sidecar's `joint`).
     #[arg(long)]
     pub joint: Option<String>,
     /// Position of another URDF joint, held fixed [rad] (repeatable; absent joints are 0).
     #[arg(long = "fixed-joint", value_name = "NAME=RAD")]
     pub fixed_joints: Vec<String>,
-    /// Use the simulator's own link model from the sidecar (`plant.link`) instead of the URDF.
+    /// Same as `--link sidecar` (kept for existing scripts).
     #[arg(long)]
     pub link_from_sidecar: bool,
     /// Butterworth order for the current.
@@ -69,7 +85,8 @@ pub struct Args {
     /// |τ_F| limit [Nm] (default: 15 for ankle roll joints, else 100).
     #[arg(long)]
     pub tauf_limit: Option<f64>,
-    /// Ablation: subtract J·s̈ from the label with this J [kg·m²]; `sidecar` = the simulator's r²·J_m.
+    /// Ablation: subtract J·φ̈ (φ̈ from the motor encoder θ/r) from the label with this J [kg·m²];
+    /// `sidecar` = the simulator's r²·J_m.
     #[arg(long)]
     pub subtract_reflected_inertia: Option<String>,
 }
@@ -85,10 +102,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let sha = format!("{:x}", sha2::Sha256::digest(&bytes));
     drop(bytes);
 
-    let (link_model, dynamics) = if args.link_from_sidecar {
+    let use_sidecar = match (args.link_from_sidecar, args.link) {
+        (true, _) | (_, LinkSource::Sidecar) => true,
+        (false, LinkSource::Urdf) => false,
+        (false, LinkSource::Auto) => args.urdf.is_none() && meta.plant_link.is_some(),
+    };
+    let (link_model, dynamics) = if use_sidecar {
         let l = meta.plant_link.clone().with_context(|| {
             format!(
-                "--link-from-sidecar: {} has no plant.link",
+                "--link sidecar: {} has no plant.link (not a simulated log); use --link urdf",
                 sidecar_path.display()
             )
         })?;
@@ -108,13 +130,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .with_context(|| format!("--fixed-joint {s:?}: {v:?} is not a number"))?;
             other.insert(n.trim().to_owned(), v);
         }
-        let d = format!(
-            "URDF {} joint {joint}, other joints {other:?}, fixed base, g = 9.80665",
-            args.urdf
-        );
+        let urdf = args.urdf.clone().unwrap_or_else(|| "virtual_leg".into());
+        let d =
+            format!("URDF {urdf} joint {joint}, other joints {other:?}, fixed base, g = 9.80665");
         (
             LinkModel::Urdf {
-                urdf: args.urdf.clone(),
+                urdf,
                 joint,
                 other_joints_rad: other,
             },

@@ -81,7 +81,7 @@ pub const DATASET_COLUMNS: &[ColumnDoc] = &[
     col(
         "sdot_rad_s",
         "rad/s",
-        "joint velocity, Kalman smoother (or causal KF with --causal)",
+        "joint velocity, Kalman smoother (or causal KF with --causal; the label always uses the smoother)",
     ),
     col(
         "sddot_rad_s2",
@@ -107,7 +107,7 @@ pub const DATASET_COLUMNS: &[ColumnDoc] = &[
     col(
         "i_filt_a",
         "A",
-        "current after the Butterworth low-pass (zero-phase unless --causal)",
+        "current after the zero-phase Butterworth low-pass (the label's current)",
     ),
     col(
         "tau_id_nm",
