@@ -486,3 +486,32 @@ pub fn run(
     summary.duration_s = summary.samples as f64 * ts;
     Ok(summary)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::VelocityEstimator;
+
+    #[test]
+    fn velocity_estimator_is_causal_and_converges_to_the_slope() {
+        let ts = 1e-3;
+        let mut v = VelocityEstimator::new(100.0, ts, 0.5);
+        // At rest: zero.
+        for _ in 0..10 {
+            assert_eq!(v.update(0.5), 0.0);
+        }
+        // A ramp of 2 rad/s starting now: the estimate rises monotonically towards 2 rad/s.
+        let mut last = 0.0;
+        for k in 1..=200 {
+            let e = v.update(0.5 + 2.0 * ts * k as f64);
+            assert!(e >= last - 1e-12 && e <= 2.0 + 1e-9, "k {k}: {e}");
+            last = e;
+        }
+        assert!((last - 2.0).abs() < 1e-6, "{last}");
+        assert_eq!(v.velocity_rad_s(), last);
+        // First-order response: one sample after a step of the raw difference it moved by α.
+        let mut w = VelocityEstimator::new(100.0, ts, 0.0);
+        let alpha = 1.0 - (-std::f64::consts::TAU * 100.0 * ts).exp();
+        let e = w.update(1e-3);
+        assert!((e - alpha * 1.0).abs() < 1e-12, "{e} vs {alpha}");
+    }
+}
