@@ -37,6 +37,10 @@ pub struct Args {
     /// Skip the closed-loop experiments.
     #[arg(long)]
     pub no_experiments: bool,
+    /// Label with causal filters (`frictl preprocess --causal`: forward Butterworth and Kalman
+    /// filter), so the PINN trains on signals like the ones frictiond sees at run time.
+    #[arg(long)]
+    pub causal: bool,
 }
 
 /// Sizes of one demo flavour.
@@ -249,10 +253,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             (&train_csv, &train_ds, "train"),
             (&test_csv, &test_ds, "test"),
         ] {
-            r.frictl(
-                &format!("preprocess {preset} ({what})"),
-                &["preprocess".into(), s(src), "--out".into(), s(dst)],
-            )?;
+            r.frictl(&format!("preprocess {preset} ({what})"), &{
+                let mut a = vec!["preprocess".into(), s(src), "--out".into(), s(dst)];
+                if args.causal {
+                    a.push("--causal".to_string());
+                }
+                a
+            })?;
             std::fs::remove_file(src).ok(); // the raw log is large; the dataset keeps every column used later
         }
         // 3. fit
@@ -468,6 +475,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "producer": format!("frictl {}", env!("CARGO_PKG_VERSION")),
         "settings": if args.full { "full" } else if args.quick { "quick" } else { "default" },
         "seed": seed,
+        "causal_labels": args.causal,
         "network": {"hidden": sizes.hidden, "history": sizes.history, "epochs": sizes.epochs, "batch": sizes.batch},
         "protocol_starts": sizes.n_starts,
         "joints": per_joint,
