@@ -331,3 +331,130 @@ fn urdf_link_matches_the_ergocub_reference_values() {
     .to_string();
     assert!(err.contains("l_elbow_nope"), "{err}");
 }
+
+/// A current that sweeps through breakaway both ways: stick, pre-sliding, stick-slip and fast sliding.
+fn sweep_current_a(p: &PlantParams, k: usize) -> f64 {
+    let t = k as f64 * 1e-3;
+    let breakaway_a = (p.f_s0_nm + p.f_cm_nm) / (p.gear_ratio_signed.abs() * p.kt_nm_per_a);
+    // amplitude slowly between 0.3× and 1.5× breakaway; frequency between 0.3 and 3 Hz
+    let amp = breakaway_a * (0.9 + 0.6 * (0.05 * t).sin());
+    let phase = std::f64::consts::TAU
+        * (1.65 * t
+            - 1.35 / (0.2 * std::f64::consts::TAU) * (0.2 * std::f64::consts::TAU * t).cos());
+    amp * phase.sin()
+}
+
+/// Runs `n` samples of the sweep on the fast path and on the reference path (same seed) and returns
+/// the largest differences (joint angle [rad], true friction [Nm], motor angle [rad]) and whether the
+/// run slid (max |ṡ| in rad/s).
+fn fast_vs_reference(preset: &str, sets: &[&str], seed: u64, n: usize) -> (f64, f64, f64, f64) {
+    let p = params(preset, sets);
+    let mut fast = Plant::from_params(p.clone(), seed).unwrap();
+    let mut refp = Plant::from_params(p.clone(), seed).unwrap();
+    refp.set_reference_math(true);
+    assert!(!fast.reference_math() && refp.reference_math());
+    let (mut ds, mut df, mut dphi, mut vmax) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    for k in 0..n {
+        let i = sweep_current_a(&p, k);
+        let a = fast.step(i, 0.0);
+        let b = refp.step(i, 0.0);
+        ds = ds.max((a.truth.state.s_rad - b.truth.state.s_rad).abs());
+        dphi = dphi.max((a.truth.state.phi_rad - b.truth.state.phi_rad).abs());
+        df = df.max((a.truth.tau_f_nm - b.truth.tau_f_nm).abs());
+        vmax = vmax.max(b.truth.state.s_dot_rad_s.abs());
+    }
+    (ds, df, dphi, vmax)
+}
+
+/// The fast integration path follows the reference (libm every physics step) over a long stick-slip
+/// run: the differences are rounding, far below the encoder resolution (2π/2¹⁸ ≈ 2.4e-5 rad).
+#[test]
+fn fast_path_tracks_the_reference_on_a_long_run() {
+    for preset in PRESET_NAMES {
+        // 120 simulated seconds, gravity and ripple on (the URDF-free pendulum presets)
+        let (ds, df, dphi, vmax) = fast_vs_reference(preset, &[], 4, 120_000);
+        eprintln!(
+            "{preset}: max |Δs| {ds:.3e} rad, |Δφ| {dphi:.3e} rad, |Δτ_F| {df:.3e} Nm, max |ṡ| {vmax:.2} rad/s"
+        );
+        assert!(
+            vmax > 0.5,
+            "{preset}: the sweep must slide (max |ṡ| {vmax})"
+        );
+        assert!(ds < 1e-6, "{preset}: joint angle deviates {ds} rad");
+        assert!(dphi < 1e-6, "{preset}: motor angle deviates {dphi} rad");
+        assert!(df < 1e-3, "{preset}: friction deviates {df} Nm");
+    }
+}
+
+/// The same on a link without a closed form (the fast path then calls the link every step).
+#[test]
+fn fast_path_matches_the_reference_with_a_generic_link() {
+    struct Opaque(frictl::sim::Pendulum);
+    impl LinkDynamics for Opaque {
+        fn inertia_kgm2(&self, s: f64) -> f64 {
+            self.0.inertia_kgm2(s)
+        }
+        fn gravity_nm(&self, s: f64) -> f64 {
+            self.0.gravity_nm(s)
+        }
+    }
+    let p = params("knee", &[]);
+    let pend = frictl::sim::Pendulum {
+        inertia_kgm2: 0.574,
+        gravity_amplitude_nm: 16.6,
+        gravity_phase_rad: 0.3,
+    };
+    let mut a = Plant::new(p.clone(), Opaque(pend), 9).unwrap();
+    let mut b = Plant::new(p.clone(), pend, 9).unwrap();
+    b.set_reference_math(true);
+    for k in 0..20_000 {
+        let i = sweep_current_a(&p, k);
+        let x = a.step(i, 0.0);
+        let y = b.step(i, 0.0);
+        assert!(
+            (x.truth.state.s_rad - y.truth.state.s_rad).abs() < 1e-6,
+            "sample {k}"
+        );
+    }
+}
+
+mod determinism {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(12))]
+        /// For any seed and excitation: the fast path is deterministic for a seed (bit for bit), the
+        /// reference path too, and the two stay within rounding of each other.
+        #[test]
+        fn plant_is_deterministic_for_a_seed_on_both_paths(
+            seed in any::<u64>(),
+            preset_ix in 0usize..2,
+            amp in 0.2f64..2.0,
+            freq_hz in 0.2f64..4.0,
+        ) {
+            let preset = PRESET_NAMES[preset_ix];
+            let p = params(preset, &[]);
+            let breakaway_a = (p.f_s0_nm + p.f_cm_nm) / (p.gear_ratio_signed.abs() * p.kt_nm_per_a);
+            let run = |reference: bool| {
+                let mut plant = Plant::from_params(p.clone(), seed).unwrap();
+                plant.set_reference_math(reference);
+                (0..1500)
+                    .map(|k| plant.step(amp * breakaway_a * (std::f64::consts::TAU * freq_hz * k as f64 * 1e-3).sin(), 0.0))
+                    .collect::<Vec<_>>()
+            };
+            let (f1, f2, r1, r2) = (run(false), run(false), run(true), run(true));
+            // Debug text prints every f64 exactly (and NaN temperature of sensor-less joints as NaN,
+            // which `==` would call unequal)
+            let text = |v: &Vec<frictl::sim::Sample>| format!("{v:?}");
+            prop_assert!(text(&f1) == text(&f2), "fast path not deterministic");
+            prop_assert!(text(&r1) == text(&r2), "reference path not deterministic");
+            for (k, (f, r)) in f1.iter().zip(&r1).enumerate() {
+                prop_assert!((f.truth.state.s_rad - r.truth.state.s_rad).abs() < 1e-8, "sample {}: s", k);
+                prop_assert!((f.truth.tau_f_nm - r.truth.tau_f_nm).abs() < 1e-4, "sample {}: tau_F", k);
+                // same noise draws: the measured current differs only through the state
+                prop_assert!((f.meas.i_meas_a - r.meas.i_meas_a).abs() <= 1.5e-3, "sample {}: i_meas", k);
+            }
+        }
+    }
+}

@@ -22,6 +22,43 @@ pub trait LinkDynamics: Send + Sync {
     fn velocity_torque_nm(&self, _s_rad: f64, _s_dot_rad_s: f64) -> f64 {
         0.0
     }
+    /// The link in closed form, if it has one: constant I_L, no velocity torque and
+    /// g(s) = a·sin s + b·cos s. The simulator's fast path reads it once per 1 kHz sample and then
+    /// needs no call into the link (and no `sin`) per physics step; `None` (the default) makes it call
+    /// [`LinkDynamics::inertia_kgm2`] / [`LinkDynamics::gravity_nm`] every step.
+    fn closed_form(&self) -> Option<LinkClosedForm> {
+        None
+    }
+}
+
+/// A link whose dynamics are I_L·s̈ + a·sin s + b·cos s = τ (see [`LinkDynamics::closed_form`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LinkClosedForm {
+    /// Constant link inertia I_L [kg·m²].
+    pub inertia_kgm2: f64,
+    /// Gravity coefficient a of sin s [Nm].
+    pub gravity_sin_nm: f64,
+    /// Gravity coefficient b of cos s [Nm].
+    pub gravity_cos_nm: f64,
+}
+
+impl<T: LinkDynamics + ?Sized> LinkDynamics for Box<T> {
+    #[inline]
+    fn inertia_kgm2(&self, s_rad: f64) -> f64 {
+        (**self).inertia_kgm2(s_rad)
+    }
+    #[inline]
+    fn gravity_nm(&self, s_rad: f64) -> f64 {
+        (**self).gravity_nm(s_rad)
+    }
+    #[inline]
+    fn velocity_torque_nm(&self, s_rad: f64, s_dot_rad_s: f64) -> f64 {
+        (**self).velocity_torque_nm(s_rad, s_dot_rad_s)
+    }
+    #[inline]
+    fn closed_form(&self) -> Option<LinkClosedForm> {
+        (**self).closed_form()
+    }
 }
 
 /// Analytic pendulum: constant I_L, g(s) = A·sin(s + phase).
@@ -44,6 +81,15 @@ impl LinkDynamics for Pendulum {
     fn gravity_nm(&self, s_rad: f64) -> f64 {
         self.gravity_amplitude_nm * (s_rad + self.gravity_phase_rad).sin()
     }
+    fn closed_form(&self) -> Option<LinkClosedForm> {
+        // A·sin(s + φ) = A·cos φ·sin s + A·sin φ·cos s
+        let (sp, cp) = self.gravity_phase_rad.sin_cos();
+        Some(LinkClosedForm {
+            inertia_kgm2: self.inertia_kgm2,
+            gravity_sin_nm: self.gravity_amplitude_nm * cp,
+            gravity_cos_nm: self.gravity_amplitude_nm * sp,
+        })
+    }
 }
 
 impl LinkDynamics for crate::dynamics::SingleJoint {
@@ -54,6 +100,17 @@ impl LinkDynamics for crate::dynamics::SingleJoint {
     #[inline]
     fn gravity_nm(&self, s_rad: f64) -> f64 {
         crate::dynamics::SingleJoint::gravity_nm(self, s_rad)
+    }
+    fn closed_form(&self) -> Option<LinkClosedForm> {
+        // revolute: g(s) = α·cos s + β·sin s; a prismatic joint is not an angle, no closed form
+        match self.kind {
+            crate::dynamics::JointKind::Revolute => Some(LinkClosedForm {
+                inertia_kgm2: self.inertia,
+                gravity_sin_nm: self.beta,
+                gravity_cos_nm: self.alpha,
+            }),
+            crate::dynamics::JointKind::Prismatic => None,
+        }
     }
 }
 
