@@ -9,8 +9,9 @@
 //!
 //! The seam to the hardware is [`JointIo`]: the offline simulator implements it here
 //! ([`SimJoint`]); a live plant over shared memory implements it in
-//! [`crate::serve::shm::LiveJoint`]. Controllers only
-//! see [`Measurement`]s (quantised encoders, noisy current), never the simulator's truth.
+//! [`crate::serve::shm::LiveJoint`]. Controllers only see [`Measurement`]s (quantised encoders,
+//! noisy current), never the simulator's truth. [`VelocityEstimator`] is the causal joint velocity
+//! both the controllers and the served plant's `JointStates::sdot_rad_s` use.
 //!
 //! What it is not: file output ([`crate::acquire::log`]) or a label pipeline.
 

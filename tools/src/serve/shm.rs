@@ -100,7 +100,7 @@ impl ShmServeOptions {
 pub struct ServeSummary {
     /// Physics ticks (1 ms each) stepped.
     pub ticks: u64,
-    /// Commands received (any `state_seq`).
+    /// Commands taken in (the newest of each poll; any `state_seq`).
     pub commands_received: u64,
     /// Ticks without a fresh command: lockstep — the answer to the state timed out; real time — no
     /// new command arrived since the previous tick.
