@@ -7,8 +7,8 @@
 #    permitted) runs SECONDS while a 1 kHz plant (daemon/benches/lateness_plant.rs) feeds it; at exit
 #    it writes its loop statistics to $FRICTIOND_LATENCY_REPORT (wake lateness against the absolute
 #    deadline in 1 µs buckets, compute time, input age).
-# 2. cyclictest -m -n -i1000 -l SECONDS*1000 -q -h 20000 [-p 80] (Debian rt-tests, installed with
-#    apt-get if missing).
+# 2. cyclictest -m -i1000 -l SECONDS*1000 -q -h 20000 [-p 80] (Debian rt-tests, installed with
+#    apt-get if missing; it uses clock_nanosleep by default: rt-tests 2.x dropped the -n flag).
 # Prints p50 / p99 / p99.9 / max [µs] of both side by side. No pass/fail: numbers for the README.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -106,7 +106,7 @@ D_ROW=$(printf "%-12s %8s %8s %8s %9s   n=%s, missed deadlines %s; compute p50/p
 
 echo "cyclictest: ${SECS} s, -i1000, $SCHED, load average $(cut -d' ' -f1-3 /proc/loadavg)" >&2
 # shellcheck disable=SC2086
-cyclictest -m -n -i1000 -l "$((SECS * 1000))" -q -h 20000 $PRIO_CT >"$WORK/cyclictest.txt"
+cyclictest -m -i1000 -l "$((SECS * 1000))" -q -h 20000 $PRIO_CT >"$WORK/cyclictest.txt"
 # Histogram lines: "<µs> <count>"; overflows counted separately. Quantiles = bucket upper edge.
 C_ROW=$(awk '
     /^[0-9]+[ \t]+[0-9]+/ { c[$1 + 0] = $2 + 0; n += $2 }

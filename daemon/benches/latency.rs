@@ -5,8 +5,8 @@
 //!
 //! - `lockstep` trigger: the daemon wakes on the inputs — pure IPC + compute latency (one round
 //!   trip of two event wake-ups);
-//! - `clock` trigger: the daemon ticks at 1 kHz on its own phase and this process publishes at
-//!   1 kHz on an unrelated phase — the realistic latency (uniform 0–1 period + IPC + compute).
+//! - `clock` trigger: the daemon ticks at 1 kHz on its own phase and this process publishes every
+//!   997 µs, sweeping every phase — the realistic latency (uniform 0–1 period + IPC + compute).
 //!
 //! Prints p50/p99/p99.9/max [µs]; no asserts. `FRICTIOND_LATENCY_N` samples per trigger (default
 //! 20 000 lockstep, a quarter of that with the clock). Run: `cargo bench -p frictiond --bench latency`.
@@ -110,7 +110,10 @@ fn run(trigger: &str, n: usize, dir: &Path) {
     let warmup = 1000;
     let mut lat = Vec::with_capacity(n);
     let mut lost = 0u64;
-    let period = 1_000_000u64;
+    // Clock trigger: publish every 997 µs, so the phase against the daemon's 1 ms grid sweeps the
+    // whole period every ~333 samples (with exactly 1 ms the phase — and the latency — would be
+    // one arbitrary constant).
+    let period = 997_000u64;
     let mut next = monotonic_ns() + period;
     for k in 1..=(n + warmup) as u64 {
         if trigger == "clock" {
