@@ -151,8 +151,7 @@ impl SuiteReport {
             }
             s += "\n";
         }
-        let any =
-            |f: &dyn Fn(&Cell) -> bool| self.joints.values().any(|m| m.values().any(|c| f(c)));
+        let any = |f: &dyn Fn(&Cell) -> bool| self.joints.values().any(|m| m.values().any(f));
         if any(&|c| c.min_kp.is_some()) {
             s += &format!(
                 "\n**Minimum K_p that tracks the sine** ({crit}; paper: ankle roll 13000 / 1000 / 900 / 550, knee 1000 / 100 / 70 / 30)\n\n"
@@ -206,7 +205,7 @@ impl SuiteReport {
         }
         if any(&|c| c.disturbance_own_kp.is_some()) {
             s += "\n**Disturbance at each model's own K_p** (paper Tables III/IV): position RMSE after release [rad]\n\n| joint | none | CV | SCV | PINN |\n|---|---|---|---|---|\n";
-            s += &self.row_table(|c| c.disturbance_own_kp.map(|(kp, d)| (kp, d)));
+            s += &self.row_table(|c| c.disturbance_own_kp);
         }
         if any(&|c| c.disturbance_low_kp.is_some()) {
             let src: Vec<String> = self
@@ -291,41 +290,6 @@ pub fn write_trace_csv(path: &Path, tr: &JointTrace) -> anyhow::Result<()> {
     }
     w.flush()?;
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn markdown_has_one_row_per_joint_and_the_values() {
-        let mut r = SuiteReport {
-            mode: "lockstep".into(),
-            kd_per_s: 4.0,
-            criterion: Some(TrackCriterion {
-                frac_of_amplitude: 0.1,
-                skip_periods: 1.0,
-            }),
-            ..SuiteReport::default()
-        };
-        r.cell("l_knee", "none").min_kp = Some(MinKp::Found {
-            kp: 1234.5,
-            fail_kp: 1000.0,
-        });
-        r.cell("l_knee", "PINN").min_kp = Some(MinKp::BelowRange { lo: 3.0 });
-        r.cell("l_ankle_roll", "SCV").min_kp = Some(MinKp::AboveRange { hi: 30000.0 });
-        let md = r.markdown();
-        assert!(md.contains("| l_knee | 1230 | – | – | ≤ 3 |"), "{md}");
-        assert!(
-            md.contains("| l_ankle_roll | – | – | > 30000 | – |"),
-            "{md}"
-        );
-        assert!(md.contains("10 % of the sine amplitude"), "{md}");
-        assert!(
-            !md.contains("Disturbance"),
-            "no disturbance results, no table"
-        );
-    }
 }
 
 /// Writes one PNG per trace to `out/plots/<name>.png`: three stacked panels over time — position
@@ -449,4 +413,39 @@ pub fn slug(s: &str) -> String {
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn markdown_has_one_row_per_joint_and_the_values() {
+        let mut r = SuiteReport {
+            mode: "lockstep".into(),
+            kd_per_s: 4.0,
+            criterion: Some(TrackCriterion {
+                frac_of_amplitude: 0.1,
+                skip_periods: 1.0,
+            }),
+            ..SuiteReport::default()
+        };
+        r.cell("l_knee", "none").min_kp = Some(MinKp::Found {
+            kp: 1234.5,
+            fail_kp: 1000.0,
+        });
+        r.cell("l_knee", "PINN").min_kp = Some(MinKp::BelowRange { lo: 3.0 });
+        r.cell("l_ankle_roll", "SCV").min_kp = Some(MinKp::AboveRange { hi: 30000.0 });
+        let md = r.markdown();
+        assert!(md.contains("| l_knee | 1230 | – | – | ≤ 3 |"), "{md}");
+        assert!(
+            md.contains("| l_ankle_roll | – | – | > 30000 | – |"),
+            "{md}"
+        );
+        assert!(md.contains("10 % of the sine amplitude"), "{md}");
+        assert!(
+            !md.contains("Disturbance"),
+            "no disturbance results, no table"
+        );
+    }
 }
