@@ -33,6 +33,7 @@ pub enum JointSel {
     /// The knee (index 0).
     Knee,
     /// The ankle roll (index 1).
+    #[value(name = "ankle_roll", alias = "ankle-roll")]
     AnkleRoll,
     /// Both, in the same trials.
     Both,
