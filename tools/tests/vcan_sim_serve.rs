@@ -742,11 +742,8 @@ fn vcan_bench_can_io() {
                     Err(_) => full += 1,
                 }
             }
-            loop {
-                match host.read_frame() {
-                    Ok(_) => received += 1,
-                    Err(_) => break,
-                }
+            while host.read_frame().is_ok() {
+                received += 1;
             }
             cost_us.push(a.elapsed().as_secs_f64() * 1e6);
             sleep_until(t0 + Duration::from_millis(k + 1));
@@ -779,4 +776,59 @@ fn vcan_bench_can_io() {
         );
         assert!(received > 0, "no frames from the emulator");
     }
+}
+
+#[test]
+fn bad_options_are_refused_with_the_offending_value() {
+    let mut joints = build_joints("knee,ankle_roll", None, &[], 1).unwrap();
+    let stop = AtomicBool::new(false);
+    let mut opts = CanServeOptions {
+        bus: "nosuchcan7".into(),
+        protocol: Protocol::Mit,
+        node_ids: vec![],
+        command_timeout_ms: 20,
+        duration_s: Some(0.1),
+    };
+    let e = run_with_stats(&mut joints, &opts, &stop).unwrap_err();
+    assert!(format!("{e:#}").contains("nosuchcan7"), "{e:#}");
+    opts.node_ids = vec![3, 3];
+    let e = run_with_stats(&mut joints, &opts, &stop).unwrap_err();
+    assert!(
+        format!("{e:#}").contains("node id 3 appears twice"),
+        "{e:#}"
+    );
+    opts.node_ids = vec![3];
+    let e = run_with_stats(&mut joints, &opts, &stop).unwrap_err();
+    assert!(format!("{e:#}").contains("1 ids for 2 joints"), "{e:#}");
+    opts.node_ids = vec![1, 64];
+    opts.protocol = Protocol::Odrive;
+    let e = run_with_stats(&mut joints, &opts, &stop).unwrap_err();
+    assert!(format!("{e:#}").contains("64"), "{e:#}");
+}
+
+#[test]
+fn socketpair_serve_stops_after_the_duration_and_ignores_foreign_ids() {
+    let mut joints = build_joints("knee", None, &[], 1).unwrap();
+    let opts = CanServeOptions {
+        bus: "socketpair".into(),
+        protocol: Protocol::Mit,
+        node_ids: vec![9],
+        command_timeout_ms: 20,
+        duration_s: Some(0.2),
+    };
+    let (host, drive) = pair();
+    // A frame for another node and one for ours with a bad length: counted, never answered.
+    send(
+        &host,
+        mit::encode_special(8, MitSpecial::EnterMotorMode).unwrap(),
+    );
+    send(&host, WireFrame::standard(9, &[1, 2]).unwrap());
+    let stop = AtomicBool::new(false);
+    let st = serve_socket(&mut joints, &opts, &drive, &stop).unwrap();
+    assert_eq!(st.ticks, 200);
+    assert_eq!(st.rx_ignored, 1);
+    assert_eq!(st.rx_decode_errors, 1);
+    assert_eq!(st.tx_frames, 0);
+    // The plant advanced 200 ms.
+    assert!((joints[0].plant.measurement().time_s - 0.2).abs() < 1e-9);
 }
