@@ -14,7 +14,8 @@
 # Usage: bash tests/canvm/run.sh
 # Knobs (env): CANVM_WORK (default target/canvm), CANVM_TIMEOUT seconds (default 600), CANVM_SKIP_APT=1,
 #              CANVM_PACKAGES (cargo packages whose test harnesses run in the VM; default "frictionless frictionless-shm-types frictiond frictl"),
-#              CANVM_FILTER (libtest name filter, default "vcan"), CANVM_ACCEL (auto|kvm|tcg, default auto).
+#              CANVM_FILTER (libtest name filter, default "vcan"), CANVM_ACCEL (auto|kvm|tcg, default auto),
+#              CANVM_TESTS (only these integration-test targets, e.g. "vcan_sim_serve vcan_daemon"; default all).
 # Last line: "canvm: N passed, N failed"; exit code non-zero on any failure or timeout.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -67,7 +68,8 @@ export RUSTFLAGS="-C target-cpu=x86-64-v2"
 pkgargs=""; for p in $PACKAGES; do pkgargs="$pkgargs -p $p"; done
 log "building bins and test harnesses for $TARGET ($PACKAGES)"
 cargo build --release --target "$TARGET" $pkgargs --bins 2>&1 | tail -n 3 >&2
-harnesses=$(cargo test --release --target "$TARGET" $pkgargs --no-run --message-format=json 2>"$WORK/build-tests.log" |
+testargs=""; for t in ${CANVM_TESTS:-}; do testargs="$testargs --test $t"; done
+harnesses=$(cargo test --release --target "$TARGET" $pkgargs $testargs --no-run --message-format=json 2>"$WORK/build-tests.log" |
   python3 -c 'import json,sys
 for l in sys.stdin:
     try: m=json.loads(l)
