@@ -295,6 +295,9 @@ pub fn run_trial(
         }
         let truth: Option<SimTruth> = if truth_ok {
             let got = wait_for(&truth_in, Duration::from_millis(500), |tr| tr.seq >= js.seq)?;
+            if got.is_none() && interrupted() {
+                bail!("interrupted");
+            }
             if got.is_none() {
                 truth_ok = false;
                 eprintln!(
