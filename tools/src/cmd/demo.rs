@@ -166,7 +166,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             n_starts: 2,
             hidden: "64,64",
             history: 10,
-            epochs: 12,
+            epochs: 10,
             batch: 4096,
             iterations: 6,
             periods: 3.0,
