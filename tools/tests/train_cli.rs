@@ -197,14 +197,15 @@ fn model_loads_in_the_daemon_loader_and_reproduces_the_trainer_on_the_test_split
 
     // The daemon's path: one estimator, reset at each chunk start, one estimate per row.
     let mut est = PinnEstimator::from_model_file(&file, WarmupPolicy::HoldZero).unwrap();
-    let mut online = vec![f64::NAN; ds.len()];
-    for k in 0..ds.len() {
-        let smp = joint_sample(&ds, k);
-        if k == 0 || ds.chunk[k] != ds.chunk[k - 1] {
-            est.reset(&smp);
-        }
-        online[k] = est.estimate(&smp);
-    }
+    let online: Vec<f64> = (0..ds.len())
+        .map(|k| {
+            let smp = joint_sample(&ds, k);
+            if k == 0 || ds.chunk[k] != ds.chunk[k - 1] {
+                est.reset(&smp);
+            }
+            est.estimate(&smp)
+        })
+        .collect();
     let mut worst = 0f64;
     let (mut sq, mut n) = (0f64, 0usize);
     for (j, &i) in idx.iter().enumerate() {

@@ -20,9 +20,12 @@
 //! elementwise passes use fixed row chunks, reductions run in a fixed order and `gemm` splits work only
 //! over output tiles, so the same seed and data give bit-identical weights.
 //!
-//! This module does **not** read files of data, fit the SCV model, split datasets or write `.fwt` files:
-//! the `frictl train` command does that around it. Entry points: [`Trainer::new`] / [`Trainer::resume`],
-//! [`Trainer::train`], [`Trainer::save_checkpoint`], [`Predictor`] and [`rmse`].
+//! Around the engine: [`data`] builds input windows through the daemon's own `History` and splits
+//! whole chunks into train/validation/test; [`pipeline`] reads datasets and the SCV fit, runs the
+//! trainer and builds the `.fwt` and the JSON report (`frictl train`); [`search`] is the parallel,
+//! resumable random search (`frictl search`). The engine itself does **not** read files or fit the SCV
+//! model. Entry points: [`Trainer::new`] / [`Trainer::resume`], [`Trainer::train`],
+//! [`Trainer::save_checkpoint`], [`Predictor`] and [`rmse`].
 
 mod checkpoint;
 pub mod data;
