@@ -13,6 +13,8 @@
 
 use std::path::Path;
 use std::process::{Command, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use frictionless_shm_types::{Ipc, IpcConfig, JointStates, TorqueRequest, monotonic_ns};
@@ -59,6 +61,18 @@ ks = 6.0
 vs = 0.13
 alpha = 0.6
 "#;
+
+/// Sleeps until the absolute CLOCK_MONOTONIC time `t_ns` (the daemon's own way of sleeping).
+fn sleep_until(t_ns: u64) {
+    use nix::sys::time::TimeSpec;
+    use nix::time::{ClockId, ClockNanosleepFlags, clock_nanosleep};
+    let ts = TimeSpec::new((t_ns / 1_000_000_000) as _, (t_ns % 1_000_000_000) as _);
+    while let Err(nix::errno::Errno::EINTR) = clock_nanosleep(
+        ClockId::CLOCK_MONOTONIC,
+        ClockNanosleepFlags::TIMER_ABSTIME,
+        &ts,
+    ) {}
+}
 
 fn quantile(sorted: &[u64], q: f64) -> f64 {
     if sorted.is_empty() {
@@ -107,21 +121,10 @@ fn run(trigger: &str, n: usize, dir: &Path) {
     let mut rq = TorqueRequest::zeroed();
     rq.n_joints = 2;
     rq.enable_mask = 0b11;
-    let warmup = 1000;
+    let warmup = 1000usize;
+    let total = n + warmup;
     let mut lat = Vec::with_capacity(n);
-    let mut lost = 0u64;
-    // Clock trigger: publish every 997 µs, so the phase against the daemon's 1 ms grid sweeps the
-    // whole period every ~333 samples (with exactly 1 ms the phase — and the latency — would be
-    // one arbitrary constant).
-    let period = 997_000u64;
-    let mut next = monotonic_ns() + period;
-    for k in 1..=(n + warmup) as u64 {
-        if trigger == "clock" {
-            while monotonic_ns() < next {
-                std::thread::sleep(Duration::from_micros(50));
-            }
-            next += period;
-        }
+    let mut publish = |k: u64| -> u64 {
         let x = k as f64 * 1e-3;
         js.sdot_rad_s[0] = x.sin();
         js.sdot_rad_s[1] = x.cos();
@@ -134,27 +137,96 @@ fn run(trigger: &str, n: usize, dir: &Path) {
         rq.stamp_ns = t_pub;
         states.publish(&js).unwrap();
         request.publish(&rq).unwrap();
-        // Wait for the command answering state k (give up after 50 ms: counted as lost).
-        let give_up = t_pub + 50_000_000;
-        let got = loop {
-            if let Some(c) = cmd.latest().unwrap()
-                && c.state_seq >= k
-            {
-                break Some(monotonic_ns());
+        t_pub
+    };
+    let lost = if trigger == "lockstep" {
+        // Ping-pong: publish state k, wait for the command answering it (50 ms: counted as lost).
+        let mut lost = 0u64;
+        for k in 1..=total as u64 {
+            let t_pub = publish(k);
+            let give_up = t_pub + 50_000_000;
+            let got = loop {
+                if let Some(c) = cmd.latest().unwrap()
+                    && c.state_seq >= k
+                {
+                    break Some(monotonic_ns());
+                }
+                let now = monotonic_ns();
+                if now >= give_up {
+                    break None;
+                }
+                cmd.wait(Duration::from_nanos((give_up - now).min(5_000_000)))
+                    .unwrap();
+            };
+            match got {
+                Some(t) if k > warmup as u64 => lat.push(t - t_pub),
+                Some(_) => {}
+                None => lost += 1,
             }
-            let now = monotonic_ns();
-            if now >= give_up {
-                break None;
-            }
-            cmd.wait(Duration::from_nanos((give_up - now).min(5_000_000)))
-                .unwrap();
-        };
-        match got {
-            Some(t) if k > warmup as u64 => lat.push(t - t_pub),
-            Some(_) => {}
-            None => lost += 1,
         }
-    }
+        lost
+    } else {
+        // A publisher thread with its own node publishes on absolute 997 µs deadlines (never
+        // waiting for answers — that would lock the phase to just after the daemon's tick — and
+        // sweeping every phase of the daemon's 1 ms grid); this thread times each state's first
+        // answering command. States superseded before the daemon's next tick are never answered
+        // (counted as lost).
+        let t_pub: Arc<Vec<AtomicU64>> = Arc::new((0..=total).map(|_| AtomicU64::new(0)).collect());
+        let published = Arc::new(AtomicUsize::new(0));
+        let publisher = {
+            let (t_pub, published) = (t_pub.clone(), published.clone());
+            let (iox, prefix) = (iox.clone(), prefix.clone());
+            std::thread::spawn(move || {
+                let ipc = Ipc::open(&IpcConfig::new(Some(&iox), &prefix), "latency_pub").unwrap();
+                let states = ipc.joint_states().unwrap().outbox().unwrap();
+                let request = ipc.torque_request().unwrap().outbox().unwrap();
+                let mut js = JointStates::zeroed();
+                js.n_joints = 2;
+                let mut rq = TorqueRequest::zeroed();
+                rq.n_joints = 2;
+                rq.enable_mask = 0b11;
+                let period = 997_000u64;
+                let mut next = monotonic_ns() + period;
+                for k in 1..=total {
+                    sleep_until(next);
+                    next += period;
+                    let now = monotonic_ns();
+                    js.seq = k as u64;
+                    js.stamp_ns = now;
+                    js.sdot_rad_s[0] = (k as f64 * 1e-3).sin();
+                    rq.seq = k as u64;
+                    rq.state_seq = k as u64;
+                    rq.stamp_ns = now;
+                    t_pub[k].store(now, Ordering::Release);
+                    published.store(k, Ordering::Release);
+                    states.publish(&js).unwrap();
+                    request.publish(&rq).unwrap();
+                }
+            })
+        };
+        let mut answered = vec![false; total + 1];
+        let mut last_seen = monotonic_ns();
+        loop {
+            if let Some(c) = cmd.latest().unwrap() {
+                let t = monotonic_ns();
+                let s = c.state_seq as usize;
+                if (1..=total).contains(&s) && !answered[s] {
+                    answered[s] = true;
+                    last_seen = t;
+                    if s > warmup {
+                        lat.push(t - t_pub[s].load(Ordering::Acquire));
+                    }
+                }
+            }
+            let done = published.load(Ordering::Acquire) == total;
+            if done && (answered[total] || monotonic_ns() > last_seen + 50_000_000) {
+                break;
+            }
+            cmd.wait(Duration::from_millis(5)).unwrap();
+        }
+        publisher.join().unwrap();
+        answered[warmup + 1..].iter().filter(|a| !**a).count() as u64
+    };
     // SAFETY: kill(2) on our own child.
     unsafe { libc::kill(daemon.id() as i32, libc::SIGTERM) };
     let _ = daemon.wait();

@@ -925,6 +925,33 @@ kv = 0.0
     }
 
     #[test]
+    fn fine_histogram_quantiles_have_1us_resolution() {
+        let mut h = FineHistogram::new();
+        assert_eq!(h.quantile_upper_ns(0.5), 0, "empty");
+        // 1.5 µs, 2.5 µs, …, 100.5 µs: value i lands in bucket [i, i+1) µs.
+        for us in 1..=100u64 {
+            h.record(us * 1000 + 500);
+        }
+        assert_eq!(h.quantile_upper_ns(0.5), 51_000);
+        assert_eq!(h.quantile_upper_ns(0.99), 100_000);
+        assert_eq!(h.quantile_upper_ns(1.0), 100_500, "capped by the max");
+        h.record(1_000_000_000);
+        assert_eq!((h.overflow, h.total, h.max_ns), (1, 101, 1_000_000_000));
+        assert_eq!(h.quantile_upper_ns(1.0), 1_000_000_000);
+        let s = RtSummary {
+            ticks: 101,
+            missed: 0,
+            lockstep: false,
+            lateness: h,
+            status: Box::new(DaemonStatus::zeroed()),
+        }
+        .report();
+        assert!(s.contains("trigger=clock\n"), "{s}");
+        assert!(s.contains("lateness_p50_ns=52000\n"), "{s}");
+        assert!(s.contains("lateness_max_ns=1000000000\n"), "{s}");
+    }
+
+    #[test]
     fn freshness_by_seq_age_and_stamp_age() {
         let mut l = Latest::new(0u8);
         assert!(l.stale(0, 0, 0, 5, 1000), "nothing received yet");
