@@ -363,9 +363,9 @@ pub fn split_chunks(all: &[ChunkKey], spec: &SplitSpec) -> Result<Split, DataErr
 pub struct SetData {
     /// Raw inputs, row-major.
     pub x: Vec<f32>,
-    /// Label τ_F per sample [Nm].
+    /// Label τ_F per sample \[Nm\].
     pub y_label_nm: Vec<f32>,
-    /// SCV prior τ_F,SCV(ṡ of the target row) per sample [Nm].
+    /// SCV prior τ_F,SCV(ṡ of the target row) per sample \[Nm\].
     pub y_scv_nm: Vec<f32>,
     /// Inputs per sample.
     pub n_inputs: usize,

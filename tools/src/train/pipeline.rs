@@ -503,7 +503,7 @@ pub struct Job {
     pub resume: bool,
 }
 
-/// RMSE per set [Nm] (`None` for an empty set).
+/// RMSE per set \[Nm\] (`None` for an empty set).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SetMetrics {
     /// Training set.
@@ -604,11 +604,11 @@ pub struct TrainReport {
     pub resumed: bool,
     /// Network parameters.
     pub n_params: usize,
-    /// The stored model's RMSE per set [Nm].
+    /// The stored model's RMSE per set \[Nm\].
     pub rmse_nm: SetMetrics,
-    /// The SCV prior's RMSE per set [Nm].
+    /// The SCV prior's RMSE per set \[Nm\].
     pub scv_rmse_nm: SetMetrics,
-    /// Training wall time [s].
+    /// Training wall time \[s\].
     pub train_seconds: f64,
 }
 

@@ -115,17 +115,17 @@ pub struct TrialResult {
     pub status: String,
     /// Why it failed.
     pub error: Option<String>,
-    /// Validation RMSE of the stored model [Nm] (the selection criterion).
+    /// Validation RMSE of the stored model \[Nm\] (the selection criterion).
     pub val_rmse_nm: Option<f64>,
-    /// Test RMSE [Nm] (reported only).
+    /// Test RMSE \[Nm\] (reported only).
     pub test_rmse_nm: Option<f64>,
-    /// Training RMSE [Nm].
+    /// Training RMSE \[Nm\].
     pub train_rmse_nm: Option<f64>,
     /// Epoch of the stored weights.
     pub best_epoch: Option<usize>,
     /// Epochs run.
     pub epochs_run: usize,
-    /// Wall time [s].
+    /// Wall time \[s\].
     pub seconds: f64,
     /// Model file, relative to the search directory.
     pub model: Option<String>,
