@@ -9,8 +9,12 @@
 //!   (48 MB and O(N·P²) with pivoting for 10⁶ samples × 6 parameters); with P ≤ 6 the normal
 //!   equations `JᵀJ` (P×P) and `Jᵀr` can be accumulated in one streaming, rayon-parallel pass, which
 //!   is what keeps a 10⁶-sample fit well under a second. Conditioning is handled by the Marquardt
-//!   scaling and by solving in log-space; a few coarse starts on a subsample pick the basin, then the
-//!   best start is refined on all samples.
+//!   scaling and by solving in log-space; a few coarse starts on a 5 000-sample subsample pick the
+//!   basin (in parallel), the best converges on a ≤ 100 000-sample subsample, then 1–2 steps polish it
+//!   on all samples. Each pass evaluates τ and ∂τ/∂p together ([`Fittable::value_jacobian`]), and LM
+//!   stops as soon as the decrease its own linear model predicts is below `rel_tol` (no wasted data
+//!   passes on rejected steps near the optimum). 10⁶ SCV samples: 3.10 s → 2.15 s (same run, 2 cores
+//!   shared with ~8 compilers) with the fused pass and the predicted-decrease stop alone.
 //! - [`Method::Adam`]: the paper/authors' procedure for parity — full-batch Adam on softplus
 //!   parameters (lr 0.01, 3000 epochs, L1 or MSE loss).
 //! - [`sliding_quadrant_mask`]: the authors' sample selection (|ṡ| > 0.03 rad/s and ṡ·τ_F > 0).
@@ -337,21 +341,26 @@ pub fn fit<M: Fittable>(
             let vs: Vec<f64> = v_rad_s.iter().step_by(stride).copied().collect();
             let ts: Vec<f64> = tau_nm.iter().step_by(stride).copied().collect();
             let best = starts
-                .iter()
+                .par_iter()
                 .map(|s| lm(s, &vs, &ts, 20, 1e-9))
                 .min_by(|a, b| a.1.total_cmp(&b.1))
                 .map(|(m, _, _)| m)
                 .unwrap_or(starts[0]);
-            // Medium: ≤ 200 000 samples, so the full-data pass only polishes (1–3 steps).
-            let stride = (v_rad_s.len() / 200_000).max(1);
-            let best = if stride > 1 {
+            // Medium: ≤ 100 000 samples converge fully; the full-data pass then only polishes
+            // (relative tolerance ≥ 1e-7: the subsample optimum is within the statistical error of
+            // the full one, so 1–2 Gauss–Newton steps suffice and each costs a full data pass).
+            let stride = (v_rad_s.len() / 100_000).max(1);
+            let (best, polish_tol) = if stride > 1 {
                 let vm: Vec<f64> = v_rad_s.iter().step_by(stride).copied().collect();
                 let tm: Vec<f64> = tau_nm.iter().step_by(stride).copied().collect();
-                lm(&best, &vm, &tm, opts.max_iter, opts.rel_tol).0
+                (
+                    lm(&best, &vm, &tm, opts.max_iter, opts.rel_tol).0,
+                    opts.rel_tol.max(1e-7),
+                )
             } else {
-                best
+                (best, opts.rel_tol)
             };
-            let (m, _, it) = lm(&best, v_rad_s, tau_nm, opts.max_iter, opts.rel_tol);
+            let (m, _, it) = lm(&best, v_rad_s, tau_nm, opts.max_iter, polish_tol);
             (m, it)
         }
         Method::Adam => {
