@@ -53,12 +53,12 @@ fn commands_follow_the_law_one_per_state_with_matching_state_seq() {
             .unwrap_or_else(|| panic!("no command for state {k}"));
         assert_eq!(c.state_seq, k, "the command answers exactly this state");
         let want = expected(tau, v);
-        for j in 0..3 {
+        for (j, &w) in want.iter().enumerate().take(3) {
             assert!(
-                close(c.i_ref_a[j], want[j]),
+                close(c.i_ref_a[j], w),
                 "state {k} joint {j}: {} vs {}",
                 c.i_ref_a[j],
-                want[j]
+                w
             );
             assert_eq!(c.flags[j] & FLAG_STALE, 0, "state {k} joint {j}");
         }
@@ -168,10 +168,8 @@ fn throughput_and_zero_allocations_over_20k_lockstep_ticks() {
     let (mut js, mut rq): (JointStates, TorqueRequest) = inputs([0.0; 3], [0.0; 3]);
     let mut step = |plant: &mut Plant, k: u64| {
         let (tau, v) = script(k);
-        for j in 0..3 {
-            js.sdot_rad_s[j] = v[j];
-            rq.tau_des_nm[j] = tau[j];
-        }
+        js.sdot_rad_s[..3].copy_from_slice(&v);
+        rq.tau_des_nm[..3].copy_from_slice(&tau);
         let s = plant.publish_state(&js);
         plant.publish_request(&rq, s);
         let c = plant.command_for(s, T).expect("command");

@@ -29,6 +29,8 @@ const TINY: &[&str] = &[
     "--set",
     "protocol.sines.frequencies_hz=[2.0]",
     "--set",
+    "protocol.sines.cycles=2",
+    "--set",
     "protocol.ramps.enabled=false",
     "--set",
     "protocol.steps.enabled=false",
