@@ -266,7 +266,7 @@ fn closed_loop_with_sim(odrive_bus: bool) {
     let sniff = CanSocket::open("vcan0").expect("vcan0");
     sniff.set_nonblocking(true).unwrap();
     let _ = sniff.set_socket_option_int(libc::SOL_SOCKET, libc::SO_RCVBUFFORCE, 8 << 20);
-    let _sim = Child(
+    let mut sim = Child(
         Command::new(frictl_bin())
             .args([
                 "sim",
@@ -279,11 +279,11 @@ fn closed_loop_with_sim(odrive_bus: bool) {
                 if odrive_bus { "odrive" } else { "mit" },
                 "--preset",
                 "knee,ankle_roll",
-                "--initial-pose-rad",
-                "-0.8,0.0",
+                // `=`: a value starting with '-' would otherwise read as a flag.
+                "--initial-pose-rad=-0.8,0.0",
             ])
             .stdout(Stdio::null())
-            .stderr(Stdio::null())
+            .stderr(Stdio::piped())
             .spawn()
             .expect("spawn frictl sim serve"),
     );
@@ -291,6 +291,11 @@ fn closed_loop_with_sim(odrive_bus: bool) {
     let mut plant = Plant::open(&env.ipc, "controller");
     plant.wait_for_daemon(T);
 
+    if let Some(st) = sim.0.try_wait().unwrap() {
+        let mut err = String::new();
+        let _ = std::io::Read::read_to_string(sim.0.stderr.as_mut().unwrap(), &mut err);
+        panic!("frictl sim serve exited ({st}): {err}");
+    }
     // The knee pushed with −15 Nm (beyond its ≈ 8 Nm breakaway), the ankle held with 0 Nm.
     let tau = [-15.0, 0.0];
     let mut rq = TorqueRequest::zeroed();
