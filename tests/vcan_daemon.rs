@@ -366,7 +366,8 @@ fn closed_loop_with_sim(odrive_bus: bool) {
     // Numbers, not asserts: the tick from wake-up to published command (drain the socket, decode,
     // law, encode + send 2 frames, command mirror) as the daemon measures it, and the bus counters.
     println!(
-        "bench: frictiond CAN tick in VM (2 MIT joints, vcan0, closed loop): mean {:.1} us, p50 <= {:.1} us, p99 <= {:.1} us, max {:.1} us over {} ticks; rx {} tx {} dropped {}",
+        "bench: frictiond CAN tick in VM (2 {} joints, vcan0, closed loop): mean {:.1} us, p50 <= {:.1} us, p99 <= {:.1} us, max {:.1} us over {} ticks; rx {} tx {} dropped {}",
+        if odrive_bus { "ODrive" } else { "MIT" },
         s.compute.mean_ns() / 1e3,
         s.compute.quantile_upper_ns(0.5) as f64 / 1e3,
         s.compute.quantile_upper_ns(0.99) as f64 / 1e3,
