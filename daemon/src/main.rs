@@ -109,6 +109,7 @@ fn summary(cfg: &config::Config) -> String {
             model
         );
     }
+    s.push_str(&config::bus_summary(cfg));
     s
 }
 

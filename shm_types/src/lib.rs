@@ -46,6 +46,10 @@ pub const HIST_BUCKETS: usize = 32;
 /// Per-joint fault flag in [`JointStates::fault_flags`]: the drive reports a hardware fault.
 pub const FAULT_DRIVE: u32 = 1 << 0;
 
+/// Per-joint fault flag in [`JointStates::fault_flags`]: the joint's drive sent no feedback within its
+/// timeout (set by field-bus backends; the daemon outputs 0 A for that joint only).
+pub const FAULT_FEEDBACK_STALE: u32 = 1 << 1;
+
 /// Per-joint flag in [`MotorCurrentCommand::flags`] / [`DaemonStatus::joint_flags`]: the current was
 /// clamped to ±max_curr.
 pub const FLAG_CURRENT_SATURATED: u32 = 1 << 0;

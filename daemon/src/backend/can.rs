@@ -49,18 +49,14 @@ use frictionless_shm_types::can::mit::{self, MitCommand, MitSpecial};
 use frictionless_shm_types::can::odrive::{self, OdriveMsg};
 use frictionless_shm_types::can::{CanCodecError, WireFrame};
 use frictionless_shm_types::{
-    BusCounters, DaemonStatus, FAULT_DRIVE, Inbox, IoError, Ipc, JointStates, MotorCurrentCommand,
-    Outbox, TorqueRequest, monotonic_ns,
+    BusCounters, DaemonStatus, FAULT_DRIVE, FAULT_FEEDBACK_STALE, Inbox, IoError, Ipc, JointStates,
+    MotorCurrentCommand, Outbox, TorqueRequest, monotonic_ns,
 };
 use socketcan::{CanFilter, CanFrame, CanSocket, EmbeddedFrame, Socket, SocketOptions};
 
 use super::Backend;
 use crate::alloc_count;
 use crate::config::{CanProtocol, Config, ResolvedBus, ResolvedDrive};
-
-/// Per-joint fault bit in [`JointStates::fault_flags`]: the drive's feedback is stale (no frame for
-/// more than `feedback_timeout_ticks`). Any non-zero fault flag makes the RT loop output 0 A.
-pub const FAULT_FEEDBACK_STALE: u32 = 1 << 31;
 
 /// At most this many frames are read from one bus per tick (a flooded bus cannot stall the tick).
 pub const MAX_FRAMES_PER_TICK: usize = 256;
