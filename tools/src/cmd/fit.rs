@@ -7,7 +7,7 @@ use anyhow::Context;
 use frictionless::friction::{CvParams, ScvCodeParams, ScvParams, StaticFriction};
 use frictl::ident::dataset::Dataset;
 use frictl::ident::fit::{
-    FitOptions, FitResult, Fittable, Loss, Method, fit, select, sliding_quadrant_mask,
+    FitBounds, FitOptions, FitResult, Fittable, Loss, Method, fit, select, sliding_quadrant_mask,
 };
 
 /// Static model to fit.
@@ -50,6 +50,29 @@ pub struct Args {
     /// Use the simulator truth column instead of the label (diagnostics).
     #[arg(long)]
     pub truth: bool,
+    /// Upper bound of ka [s/rad]: tanh(ka·v) must saturate over a velocity band ≥ 1/ka, comparable to
+    /// the velocity noise/resolution (200 s/rad ↔ 5 mrad/s); a steeper smooth sign only fits label
+    /// noise and makes the compensation chatter ±kc around v = 0.
+    #[arg(long, default_value_t = FitBounds::default().ka_max)]
+    pub ka_max: f64,
+    /// Lower bound of ka [s/rad].
+    #[arg(long, default_value_t = FitBounds::default().ka_min)]
+    pub ka_min: f64,
+    /// Lower bound of the Stribeck velocity vs [rad/s] (SCV, SCV code form).
+    #[arg(long, default_value_t = FitBounds::default().vs_min)]
+    pub vs_min: f64,
+    /// Upper bound of the Stribeck velocity vs [rad/s].
+    #[arg(long, default_value_t = FitBounds::default().vs_max)]
+    pub vs_max: f64,
+    /// Lower bound of the Stribeck exponent α (SCV).
+    #[arg(long, default_value_t = FitBounds::default().alpha_min)]
+    pub alpha_min: f64,
+    /// Upper bound of the Stribeck exponent α.
+    #[arg(long, default_value_t = FitBounds::default().alpha_max)]
+    pub alpha_max: f64,
+    /// Upper bound of ks/kc (fs/fc for the code form).
+    #[arg(long, default_value_t = FitBounds::default().ks_max_ratio)]
+    pub ks_max_ratio: f64,
     /// Write the TOML snippet here.
     #[arg(long)]
     pub toml: Option<PathBuf>,
@@ -84,6 +107,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         adam_loss: args.loss,
         adam_epochs: args.epochs,
         adam_lr: args.lr,
+        bounds: FitBounds {
+            ka_min: args.ka_min,
+            ka_max: args.ka_max,
+            vs_min: args.vs_min,
+            vs_max: args.vs_max,
+            alpha_min: args.alpha_min,
+            alpha_max: args.alpha_max,
+            ks_max_ratio: args.ks_max_ratio,
+        },
         ..FitOptions::default()
     };
     let started = std::time::Instant::now();
@@ -147,6 +179,12 @@ fn report<M: Fittable + 'static>(
     target: &[f64],
     args: &Args,
 ) -> anyhow::Result<(String, serde_json::Value)> {
+    if !r.at_bounds.is_empty() {
+        eprintln!(
+            "frictl fit: parameters on a bound: {} (the unbounded optimum lies outside; see --help for the bound flags)",
+            r.at_bounds.join(", ")
+        );
+    }
     let (rmse_valid, _) = frictl::ident::fit::errors(
         &r.model,
         &select(&ds.sdot_rad_s, &ds.valid),
@@ -180,6 +218,16 @@ fn report<M: Fittable + 'static>(
         "rmse_valid_nm": rmse_valid,
         "n_samples": r.n_samples,
         "iterations": r.iterations,
+        "bounds": {
+            "ka_min": args.ka_min,
+            "ka_max": args.ka_max,
+            "vs_min": args.vs_min,
+            "vs_max": args.vs_max,
+            "alpha_min": args.alpha_min,
+            "alpha_max": args.alpha_max,
+            "ks_max_ratio": args.ks_max_ratio,
+        },
+        "at_bounds": r.at_bounds,
         "sliding_quadrants": args.sliding_quadrants,
         "v_min_rad_s": args.v_min,
         "dataset": args.dataset.display().to_string(),

@@ -15,6 +15,17 @@
 //!   stops as soon as the decrease its own linear model predicts is below `rel_tol` (no wasted data
 //!   passes on rejected steps near the optimum). 10⁶ SCV samples: 3.10 s → 2.15 s (same run, 2 cores
 //!   shared with ~8 compilers) with the fused pass and the predicted-decrease stop alone.
+//!
+//!   Bounds ([`FitBounds`], defaults physically motivated, overridable by `frictl fit` flags): the
+//!   unbounded least-squares optimum runs away on real/simulated data (ka → 1e8 turns tanh into a
+//!   sign function, so velocity noise near 0 switches the compensation by ±2·kc; vs → 1e-10 with a
+//!   tiny α and ks = 400·kc is a spike no controller should follow). LM therefore works on
+//!   `z = ln p` with box bounds, except that ks (fs) is parametrised as `ln(ks/kc)` so
+//!   `ks ≤ ks_max_ratio·kc` is a box bound too; every constraint is then a box in z, enforced by a
+//!   projected LM with an active set (a parameter at a bound whose gradient pushes outward is held
+//!   fixed for that iteration; the trial step is projected onto the box). Cost per iteration is
+//!   unchanged (same single data pass). kc, kv, ks ≥ 0 stay enforced by the log parametrisation
+//!   (floor 1e-12).
 //! - [`Method::Adam`]: the paper/authors' procedure for parity — full-batch Adam on softplus
 //!   parameters (lr 0.01, 3000 epochs, L1 or MSE loss).
 //! - [`sliding_quadrant_mask`]: the authors' sample selection (|ṡ| > 0.03 rad/s and ṡ·τ_F > 0).
@@ -60,6 +71,9 @@ pub enum FitError {
         /// Torque.
         tau: f64,
     },
+    /// The bounds are not a valid box (`0 < lo ≤ hi`, not NaN).
+    #[error("invalid fit bounds: {0}")]
+    Bounds(String),
     /// The result is outside the model's domain.
     #[error("fit of {model} ended outside the parameter domain: {msg}")]
     Domain {
@@ -74,7 +88,7 @@ pub enum FitError {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum Method {
-    /// Levenberg–Marquardt on log-parameters (least squares).
+    /// Projected Levenberg–Marquardt on log-parameters within the bounds (least squares).
     Lm,
     /// Full-batch Adam on softplus parameters (the paper's procedure).
     Adam,
@@ -88,6 +102,79 @@ pub enum Loss {
     Mse,
     /// Mean absolute error (authors' code).
     L1,
+}
+
+/// Floor/ceiling of the parameters that have no physical bound other than positivity (kc, kv, ks/kc).
+const P_MIN: f64 = 1e-12;
+const P_MAX: f64 = 1e12;
+
+/// Physical bounds on the fitted parameters, enforced by both solvers.
+///
+/// Defaults: `ka ≤ 200 s/rad` — tanh(ka·v) reaches 0.76 at v = 1/ka, so 200 s/rad means the smooth
+/// sign still spans ≥ 5 mrad/s, the order of the velocity noise/resolution; a steeper one only
+/// follows label noise and makes the closed-loop compensation chatter. `vs ∈ [1e-3, 10] rad/s` and
+/// `α ∈ [0.2, 5]` keep the Stribeck term a hump over a velocity band the data can resolve;
+/// `ks ≤ 10·kc` rejects the spikes that a few stick samples produce.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct FitBounds {
+    /// Smallest ka [s/rad].
+    pub ka_min: f64,
+    /// Largest ka [s/rad].
+    pub ka_max: f64,
+    /// Smallest Stribeck velocity vs [rad/s].
+    pub vs_min: f64,
+    /// Largest Stribeck velocity vs [rad/s].
+    pub vs_max: f64,
+    /// Smallest Stribeck exponent α.
+    pub alpha_min: f64,
+    /// Largest Stribeck exponent α.
+    pub alpha_max: f64,
+    /// Largest ks/kc (fs/fc for the code form).
+    pub ks_max_ratio: f64,
+}
+
+impl Default for FitBounds {
+    fn default() -> Self {
+        Self {
+            ka_min: 1e-3,
+            ka_max: 200.0,
+            vs_min: 1e-3,
+            vs_max: 10.0,
+            alpha_min: 0.2,
+            alpha_max: 5.0,
+            ks_max_ratio: 10.0,
+        }
+    }
+}
+
+impl FitBounds {
+    /// Bounds that only keep the parameters in the models' domain (the pre-bounds behaviour).
+    pub const UNBOUNDED: FitBounds = FitBounds {
+        ka_min: P_MIN,
+        ka_max: P_MAX,
+        vs_min: P_MIN,
+        vs_max: P_MAX,
+        alpha_min: P_MIN,
+        alpha_max: P_MAX,
+        ks_max_ratio: P_MAX,
+    };
+
+    /// Checks `0 < lo ≤ hi` for each pair and `ks_max_ratio > 0` (∞ allowed as an upper bound).
+    pub fn validate(&self) -> Result<(), FitError> {
+        for (name, lo, hi) in [
+            ("ka", self.ka_min, self.ka_max),
+            ("vs", self.vs_min, self.vs_max),
+            ("alpha", self.alpha_min, self.alpha_max),
+            ("ks/kc", P_MIN, self.ks_max_ratio),
+        ] {
+            if !(lo > 0.0 && lo.is_finite() && hi >= lo) {
+                return Err(FitError::Bounds(format!(
+                    "{name} range [{lo}, {hi}] (need 0 < min ≤ max, min finite)"
+                )));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Fitting options.
@@ -105,6 +192,8 @@ pub struct FitOptions {
     pub adam_epochs: usize,
     /// Adam: loss.
     pub adam_loss: Loss,
+    /// Parameter bounds (both solvers).
+    pub bounds: FitBounds,
 }
 
 impl Default for FitOptions {
@@ -116,6 +205,7 @@ impl Default for FitOptions {
             adam_lr: 0.01,
             adam_epochs: 3000,
             adam_loss: Loss::L1,
+            bounds: FitBounds::default(),
         }
     }
 }
@@ -133,6 +223,8 @@ pub struct FitResult<M> {
     pub n_samples: usize,
     /// Iterations (LM refinement) or epochs (Adam).
     pub iterations: usize,
+    /// Parameters that ended on a bound, e.g. `"ka=max"`, `"ks/kc=max"` (empty: interior optimum).
+    pub at_bounds: Vec<String>,
 }
 
 /// The authors' sliding-data selection: `|ṡ| > v_min_rad_s` and `ṡ·τ_F > 0` (1st/3rd quadrant).
@@ -183,6 +275,14 @@ pub trait Fittable: StaticFriction + Serialize + Send + Sync {
     /// A few starting points derived from the data (the fitter tries all and keeps the best).
     fn starts(v: &[f64], tau: &[f64]) -> Vec<Self>;
 
+    /// `(lo, hi)` of each parameter in [`StaticFriction::PARAM_NAMES`] order; for the child of
+    /// [`Fittable::RATIO`] the bounds are on `p[child] / p[parent]`.
+    fn bounds(b: &FitBounds) -> Vec<(f64, f64)>;
+
+    /// `(child, parent)`: the child is fitted as the ratio child/parent (ks/kc), so that an upper
+    /// bound on the ratio is a box bound.
+    const RATIO: Option<(usize, usize)> = None;
+
     /// τ(v) and ∂τ/∂p in one call. The default calls [`StaticFriction::torque_nm`] and
     /// [`StaticFriction::jacobian`]; the models override it to share the transcendental functions
     /// (tanh/sech² from one `expm1`, |v/vs|^α from one `ln` and one `exp`), which is most of the cost
@@ -218,6 +318,10 @@ impl Fittable for CvParams {
             .collect()
     }
 
+    fn bounds(b: &FitBounds) -> Vec<(f64, f64)> {
+        vec![(P_MIN, P_MAX), (b.ka_min, b.ka_max), (P_MIN, P_MAX)]
+    }
+
     #[inline]
     fn value_jacobian(&self, v: f64) -> (f64, [f64; 3]) {
         let (t, dt_dka) = tanh_dka(self.ka, v);
@@ -245,6 +349,19 @@ impl Fittable for ScvParams {
         }
         out
     }
+
+    fn bounds(b: &FitBounds) -> Vec<(f64, f64)> {
+        vec![
+            (P_MIN, P_MAX),
+            (b.ka_min, b.ka_max),
+            (P_MIN, P_MAX),
+            (P_MIN, b.ks_max_ratio),
+            (b.vs_min, b.vs_max),
+            (b.alpha_min, b.alpha_max),
+        ]
+    }
+
+    const RATIO: Option<(usize, usize)> = Some((3, 0));
 
     #[inline]
     fn value_jacobian(&self, v: f64) -> (f64, [f64; 6]) {
@@ -294,6 +411,78 @@ impl Fittable for ScvCodeParams {
             })
             .collect()
     }
+
+    fn bounds(b: &FitBounds) -> Vec<(f64, f64)> {
+        vec![
+            (P_MIN, P_MAX),
+            (P_MIN, b.ks_max_ratio),
+            (P_MIN, P_MAX),
+            (b.vs_min, b.vs_max),
+        ]
+    }
+
+    const RATIO: Option<(usize, usize)> = Some((1, 0));
+}
+
+/// Fit coordinates z of a model: `ln p`, except `ln(p[child]/p[parent])` for [`Fittable::RATIO`].
+fn to_z<M: Fittable>(m: &M) -> Vec<f64> {
+    let p = m.params();
+    let p = p.as_ref();
+    let mut z: Vec<f64> = p.iter().map(|x| x.max(1e-300).ln()).collect();
+    if let Some((c, q)) = M::RATIO {
+        z[c] -= z[q];
+    }
+    z
+}
+
+/// The model at fit coordinates z (inverse of [`to_z`]; exponents clamped to ±40 for safety, wider
+/// than any finite default bound).
+fn from_z<M: Fittable>(z: &[f64]) -> M {
+    let mut w = z.to_vec();
+    if let Some((c, q)) = M::RATIO {
+        w[c] += w[q];
+    }
+    let p: Vec<f64> = w.iter().map(|x| x.clamp(-40.0, 40.0).exp()).collect();
+    with_params::<M>(&p)
+}
+
+/// The bounds as a box in z: (ln lo, ln hi).
+fn z_box<M: Fittable>(b: &FitBounds) -> (Vec<f64>, Vec<f64>) {
+    M::bounds(b).iter().map(|&(l, h)| (l.ln(), h.ln())).unzip()
+}
+
+fn project(z: &mut [f64], lo: &[f64], hi: &[f64]) {
+    for ((x, &l), &h) in z.iter_mut().zip(lo).zip(hi) {
+        *x = x.max(l).min(h);
+    }
+}
+
+/// The model moved into the bounds (parent first, then the ratio child relative to it).
+pub fn project_into_bounds<M: Fittable>(m: &M, b: &FitBounds) -> M {
+    let (lo, hi) = z_box::<M>(b);
+    let mut z = to_z(m);
+    project(&mut z, &lo, &hi);
+    from_z(&z)
+}
+
+/// Parameters of `m` on (within 1e-9 relative of) a bound, as `"name=min"`/`"name=max"`
+/// (`"ks/kc=max"` for the ratio). The positivity floor/ceiling of kc, kv, ks are not listed.
+pub fn active_bounds<M: Fittable>(m: &M, b: &FitBounds) -> Vec<String> {
+    let z = to_z(m);
+    let mut out = Vec::new();
+    for (k, (&(l, h), &zk)) in M::bounds(b).iter().zip(&z).enumerate() {
+        let name = match M::RATIO {
+            Some((c, q)) if c == k => format!("{}/{}", M::PARAM_NAMES[c], M::PARAM_NAMES[q]),
+            _ => M::PARAM_NAMES[k].to_string(),
+        };
+        if l > P_MIN && zk <= l.ln() + 1e-9 {
+            out.push(format!("{name}=min"));
+        }
+        if h < P_MAX && zk >= h.ln() - 1e-9 {
+            out.push(format!("{name}=max"));
+        }
+    }
+    out
 }
 
 fn check_data(v: &[f64], tau: &[f64], name: &'static str, n_params: usize) -> Result<(), FitError> {
@@ -333,7 +522,12 @@ pub fn fit<M: Fittable>(
     opts: &FitOptions,
 ) -> Result<FitResult<M>, FitError> {
     check_data(v_rad_s, tau_nm, M::NAME, M::N_PARAMS)?;
-    let starts = M::starts(v_rad_s, tau_nm);
+    opts.bounds.validate()?;
+    let (lo, hi) = z_box::<M>(&opts.bounds);
+    let starts: Vec<M> = M::starts(v_rad_s, tau_nm)
+        .iter()
+        .map(|s| project_into_bounds(s, &opts.bounds))
+        .collect();
     let (model, iterations) = match opts.method {
         Method::Lm => {
             // Coarse: each start on a strided subsample of ≤ 5 000 samples, 20 iterations.
@@ -342,7 +536,7 @@ pub fn fit<M: Fittable>(
             let ts: Vec<f64> = tau_nm.iter().step_by(stride).copied().collect();
             let best = starts
                 .par_iter()
-                .map(|s| lm(s, &vs, &ts, 20, 1e-9))
+                .map(|s| lm(s, &vs, &ts, 20, 1e-9, &lo, &hi))
                 .min_by(|a, b| a.1.total_cmp(&b.1))
                 .map(|(m, _, _)| m)
                 .unwrap_or(starts[0]);
@@ -354,13 +548,13 @@ pub fn fit<M: Fittable>(
                 let vm: Vec<f64> = v_rad_s.iter().step_by(stride).copied().collect();
                 let tm: Vec<f64> = tau_nm.iter().step_by(stride).copied().collect();
                 (
-                    lm(&best, &vm, &tm, opts.max_iter, opts.rel_tol).0,
+                    lm(&best, &vm, &tm, opts.max_iter, opts.rel_tol, &lo, &hi).0,
                     opts.rel_tol.max(1e-7),
                 )
             } else {
                 (best, opts.rel_tol)
             };
-            let (m, _, it) = lm(&best, v_rad_s, tau_nm, opts.max_iter, polish_tol);
+            let (m, _, it) = lm(&best, v_rad_s, tau_nm, opts.max_iter, polish_tol, &lo, &hi);
             (m, it)
         }
         Method::Adam => {
@@ -382,12 +576,14 @@ pub fn fit<M: Fittable>(
         msg: e.to_string(),
     })?;
     let (rmse_nm, mae_nm) = errors(&model, v_rad_s, tau_nm);
+    let at_bounds = active_bounds(&model, &opts.bounds);
     Ok(FitResult {
         model,
         rmse_nm,
         mae_nm,
         n_samples: v_rad_s.len(),
         iterations,
+        at_bounds,
     })
 }
 
@@ -413,7 +609,8 @@ fn cost<M: StaticFriction + Sync>(m: &M, v: &[f64], tau: &[f64]) -> f64 {
     r * r * v.len() as f64 * 0.5
 }
 
-/// Cost ½Σr², and in log-parameters u: JᵀJ (row-major P×P) and Jᵀr, in one parallel pass.
+/// Cost ½Σr², and in fit coordinates z ([`to_z`]): JᵀJ (row-major P×P) and Jᵀr, in one parallel
+/// pass.
 fn normal_equations<M: Fittable>(
     m: &M,
     v: &[f64],
@@ -435,6 +632,10 @@ fn normal_equations<M: Fittable>(
                 for k in 0..np {
                     // Chain rule for p = exp(u): ∂τ/∂u = ∂τ/∂p · p.
                     j[k] = jp.as_ref()[k] * p[k];
+                }
+                if let Some((c, q)) = M::RATIO {
+                    // p_c = exp(z_q + z_c): z_q moves both the parent and the child.
+                    j[q] += j[c];
                 }
                 acc.0 += 0.5 * r * r;
                 for a in 0..np {
@@ -464,27 +665,21 @@ fn with_params<M: StaticFriction>(p: &[f64]) -> M {
     M::from_params_unchecked(&pv)
 }
 
-/// Levenberg–Marquardt in log-parameters; returns (model, cost, accepted iterations).
+/// Projected Levenberg–Marquardt in fit coordinates z within the box `[lo, hi]`; returns (model,
+/// cost, accepted iterations).
 fn lm<M: Fittable>(
     start: &M,
     v: &[f64],
     tau: &[f64],
     max_iter: usize,
     rel_tol: f64,
+    lo: &[f64],
+    hi: &[f64],
 ) -> (M, f64, usize) {
     let np = M::N_PARAMS;
-    // u = ln p, with p clamped into [1e-8, 1e8] so the log is finite.
-    let mut u: Vec<f64> = start
-        .params()
-        .as_ref()
-        .iter()
-        .map(|p| p.clamp(1e-8, 1e8).ln())
-        .collect();
-    let model_of = |u: &[f64]| -> M {
-        let p: Vec<f64> = u.iter().map(|x| x.clamp(-40.0, 40.0).exp()).collect();
-        with_params::<M>(&p)
-    };
-    let mut m = model_of(&u);
+    let mut z = to_z(start);
+    project(&mut z, lo, hi);
+    let mut m: M = from_z(&z);
     let (mut c, mut jtj, mut jtr) = normal_equations(&m, v, tau);
     let mut lambda = 1e-3;
     let mut iters = 0;
@@ -494,32 +689,56 @@ fn lm<M: Fittable>(
             jtj[lo * MAX_P + hi]
         });
         let g = DVector::from_fn(np, |i, _| -jtr[i]);
+        // Active set: a coordinate on a bound whose descent direction points out of the box is held.
+        let free: Vec<bool> = (0..np)
+            .map(|i| !((z[i] <= lo[i] && g[i] < 0.0) || (z[i] >= hi[i] && g[i] > 0.0)))
+            .collect();
+        if !free.iter().any(|&f| f) {
+            break;
+        }
+        let gf = DVector::from_fn(np, |i, _| if free[i] { g[i] } else { 0.0 });
         let mut improved = false;
         while lambda < 1e12 {
             let mut aa = a.clone();
             for i in 0..np {
-                // Marquardt scaling, with a floor so a parameter with no influence stays put.
-                aa[(i, i)] += lambda * a[(i, i)].max(1e-12);
+                if free[i] {
+                    // Marquardt scaling, with a floor so a parameter with no influence stays put.
+                    aa[(i, i)] += lambda * a[(i, i)].max(1e-12);
+                } else {
+                    for k in 0..np {
+                        aa[(i, k)] = 0.0;
+                        aa[(k, i)] = 0.0;
+                    }
+                    aa[(i, i)] = 1.0;
+                }
             }
             let Some(chol) = aa.cholesky() else {
                 lambda *= 10.0;
                 continue;
             };
-            let du = chol.solve(&g);
-            // Decrease predicted by the Gauss–Newton model, −(Jᵀr)ᵀ·du − ½·duᵀ·JᵀJ·du: when even
-            // that is below rel_tol·c the step cannot matter — stop without another data pass
-            // (near the optimum, rejected steps would otherwise cost a full pass each while λ grows).
-            let ad = &a * &du;
-            let predicted = g.dot(&du) - 0.5 * du.dot(&ad);
+            let du = chol.solve(&gf);
+            let mut zn: Vec<f64> = z.iter().zip(du.iter()).map(|(a, b)| a + b).collect();
+            project(&mut zn, lo, hi);
+            let d = DVector::from_fn(np, |i, _| zn[i] - z[i]);
+            // Decrease predicted by the Gauss–Newton model for the projected step,
+            // −(Jᵀr)ᵀ·d − ½·dᵀ·JᵀJ·d: when even that is below rel_tol·c the step cannot matter — stop
+            // without another data pass (near the optimum, rejected steps would otherwise cost a full
+            // pass each while λ grows). A projected step the model says cannot decrease the cost is
+            // shortened (λ up) without a data pass.
+            let ad = &a * &d;
+            let predicted = g.dot(&d) - 0.5 * d.dot(&ad);
             if predicted.is_finite() && predicted >= 0.0 && predicted < rel_tol * c {
                 return (m, c, iters);
             }
-            let un: Vec<f64> = u.iter().zip(du.iter()).map(|(a, b)| a + b).collect();
-            let mn = model_of(&un);
+            if d.iter().all(|x| *x == 0.0) || (predicted.is_finite() && predicted < 0.0) {
+                lambda *= 4.0;
+                continue;
+            }
+            let mn: M = from_z(&zn);
             let (cn, jtjn, jtrn) = normal_equations(&mn, v, tau);
             if cn.is_finite() && cn < c {
                 let rel = (c - cn) / c.max(1e-300);
-                u = un;
+                z = zn;
                 m = mn;
                 c = cn;
                 jtj = jtjn;
@@ -550,7 +769,8 @@ fn softplus_inv(y: f64) -> f64 {
     if y > 30.0 { y } else { y.exp_m1().ln() }
 }
 
-/// Full-batch Adam on softplus parameters (β = 0.9, 0.999, ε = 1e-8).
+/// Full-batch Adam on softplus parameters (β = 0.9, 0.999, ε = 1e-8), projected onto the bounds
+/// after each step.
 fn adam<M: Fittable>(start: &M, v: &[f64], tau: &[f64], opts: &FitOptions) -> M {
     let np = M::N_PARAMS;
     let mut u: Vec<f64> = start
@@ -598,6 +818,14 @@ fn adam<M: Fittable>(start: &M, v: &[f64], tau: &[f64], opts: &FitOptions) -> M 
             let mh = m1[k] / (1.0 - b1.powi(t as i32));
             let vh = m2[k] / (1.0 - b2.powi(t as i32));
             u[k] -= opts.adam_lr * mh / (vh.sqrt() + eps);
+        }
+        // Keep the iterate inside the bounds (write back only what the projection moved).
+        let p: Vec<f64> = u.iter().map(|&x| softplus(x)).collect();
+        let pb = project_into_bounds(&with_params::<M>(&p), &opts.bounds).params();
+        for k in 0..np {
+            if (pb.as_ref()[k] - p[k]).abs() > 1e-12 * p[k].abs() {
+                u[k] = softplus_inv(pb.as_ref()[k]);
+            }
         }
     }
     let p: Vec<f64> = u.iter().map(|&x| softplus(x)).collect();
