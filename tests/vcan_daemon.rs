@@ -19,7 +19,7 @@ use daemon_support::{Plant, TestEnv};
 use frictionless_shm_types::can::WireFrame;
 use frictionless_shm_types::can::mit::{self, MitRanges, MitRx, MitSpecial};
 use frictionless_shm_types::can::odrive::{self, OdriveMsg};
-use frictionless_shm_types::{FLAG_FAULT, TorqueRequest};
+use frictionless_shm_types::{FLAG_FAULT, FLAG_STALE, TorqueRequest};
 use socketcan::{
     CanErrorFrame, CanFrame, CanSocket, EmbeddedFrame, ExtendedId, Socket, SocketOptions,
     StandardId,
@@ -334,7 +334,7 @@ fn closed_loop_with_sim(odrive_bus: bool) {
         }
         if let Some(s) = plant.status.latest().unwrap()
             && s.seq != last_status_seq
-            && s.joint_flags[0] & FLAG_FAULT == 0
+            && s.joint_flags[0] & (FLAG_FAULT | FLAG_STALE) == 0
             && s.i_ref_a[0] != 0.0
         {
             last_status_seq = s.seq;

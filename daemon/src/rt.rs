@@ -35,9 +35,9 @@ use std::sync::mpsc::{Receiver, SyncSender, TryRecvError};
 use frictionless::features::JointSample;
 use frictionless::model::{FrictionModel, JointModel};
 use frictionless_shm_types::{
-    DaemonStatus, FLAG_DISABLED, FLAG_FAULT, FLAG_STALE, FLAG_WARMING_UP, JointStates, MAX_JOINTS,
-    MotorCurrentCommand, STATUS_CPU_PINNED, STATUS_INPUT_STALE, STATUS_MEMORY_LOCKED,
-    STATUS_SCHED_FIFO, STATUS_STOPPING, TorqueRequest, monotonic_ns,
+    DaemonStatus, FAULT_FEEDBACK_STALE, FLAG_DISABLED, FLAG_FAULT, FLAG_STALE, FLAG_WARMING_UP,
+    JointStates, MAX_JOINTS, MotorCurrentCommand, STATUS_CPU_PINNED, STATUS_INPUT_STALE,
+    STATUS_MEMORY_LOCKED, STATUS_SCHED_FIFO, STATUS_STOPPING, TorqueRequest, monotonic_ns,
 };
 
 use crate::alloc_count;
@@ -176,7 +176,13 @@ pub fn compute(
             }
         } else if fresh.request_stale || (k as u32) >= rq.n_joints {
             stale_out(0.0)
-        } else if fresh.state_stale || (k as u32) >= st.n_joints {
+        } else if fresh.state_stale
+            || (k as u32) >= st.n_joints
+            || st.fault_flags[k] == FAULT_FEEDBACK_STALE
+        {
+            // Whole-state staleness, or this joint's drive fell silent on a field bus (the CAN
+            // backend marks it with FAULT_FEEDBACK_STALE alone): the configured safe output. A
+            // drive fault reported alongside wins (the fault branch below).
             match p.on_stale {
                 OnStale::Zero => stale_out(0.0),
                 OnStale::StaticModel => {
@@ -185,7 +191,7 @@ pub fn compute(
                     o
                 }
             }
-        } else if st.fault_flags[k] != 0 {
+        } else if st.fault_flags[k] & !FAULT_FEEDBACK_STALE != 0 {
             j.law.reset();
             LawOutput {
                 i_a: 0.0,
@@ -949,6 +955,24 @@ kv = 0.0
         assert!(s.contains("trigger=clock\n"), "{s}");
         assert!(s.contains("lateness_p50_ns=52000\n"), "{s}");
         assert!(s.contains("lateness_max_ns=1000000000\n"), "{s}");
+    }
+
+    #[test]
+    fn a_silent_field_bus_drive_gets_the_on_stale_output_not_a_fault() {
+        let mut prev = 0;
+        let mut inp = inputs(2.0, 1.0);
+        inp.states.value.fault_flags[2] = FAULT_FEEDBACK_STALE;
+        let mut p = params("static_model");
+        let c = run(&mut p, &inp, FRESH, &mut prev);
+        assert_eq!(c.flags[2], FLAG_STALE);
+        assert!((c.i_ref_a[2] - 2.0 / (0.1 * -100.0)).abs() < 1e-12);
+        let mut p = params("zero");
+        let c = run(&mut p, &inp, FRESH, &mut prev);
+        assert_eq!((c.i_ref_a[2], c.flags[2]), (0.0, FLAG_STALE));
+        // Any other fault bit still wins over staleness.
+        inp.states.value.fault_flags[2] |= frictionless_shm_types::FAULT_DRIVE;
+        let c = run(&mut p, &inp, FRESH, &mut prev);
+        assert_eq!((c.i_ref_a[2], c.flags[2]), (0.0, FLAG_FAULT));
     }
 
     #[test]

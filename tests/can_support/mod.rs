@@ -20,7 +20,7 @@ use std::time::{Duration, Instant};
 
 use frictionless_shm_types::can::WireFrame;
 use frictionless_shm_types::can::mit::{self, MitRanges, MitReply, MitRx, MitSpecial};
-use frictionless_shm_types::{FLAG_FAULT, MotorCurrentCommand, TorqueRequest};
+use frictionless_shm_types::{FLAG_FAULT, FLAG_STALE, MotorCurrentCommand, TorqueRequest};
 use socketcan::{CanFrame, CanSocket, Socket};
 
 use crate::daemon_support::{Daemon, Plant, TestEnv, current_ref, cv_ref};
@@ -416,7 +416,8 @@ pub fn drive_until(
 
 /// The closed-loop scenario on an already running daemon whose bus peer is `emu`:
 /// 1. commands decode to the control-law currents (mirror exact, CAN frames within quantisation);
-/// 2. knee feedback stops → knee 0 A (FLAG_FAULT, stale bit in the status) while the hip runs on;
+/// 2. knee feedback stops → knee gets the `on_stale` output, here 0 A (FLAG_STALE, stale bit in the
+///    status) while the hip runs on;
 ///    feedback resumes → knee back to the law;
 /// 3. all feedback stops → every joint 0 A on the wire.
 pub fn closed_loop_scenario(plant: &mut Plant, emu: &MitEmulator, v_motor: [f64; 2]) {
@@ -453,7 +454,12 @@ pub fn closed_loop_scenario(plant: &mut Plant, emu: &MitEmulator, v_motor: [f64;
 
     // 2. the knee drive goes silent.
     emu.set_silent(1, true);
-    let c = drive_until(plant, &rq, t, |c| c.flags[0] & FLAG_FAULT != 0);
+    let c = drive_until(plant, &rq, t, |c| c.flags[0] & FLAG_STALE != 0);
+    assert_eq!(
+        c.flags[0] & FLAG_FAULT,
+        0,
+        "a silent drive is stale, not faulted"
+    );
     assert_eq!(c.i_ref_a[0], 0.0);
     assert!((c.i_ref_a[1] - want[1]).abs() < 1e-9, "hip keeps running");
     let st = plant
@@ -481,7 +487,7 @@ pub fn closed_loop_scenario(plant: &mut Plant, emu: &MitEmulator, v_motor: [f64;
     assert!(emu.log(1).last_t.abs() <= t_tol(1), "{:?}", emu.log(1));
     emu.set_silent(1, false);
     drive_until(plant, &rq, t, |c| {
-        c.flags[0] & FLAG_FAULT == 0 && (c.i_ref_a[0] - want[0]).abs() < 1e-9
+        c.flags[0] & (FLAG_FAULT | FLAG_STALE) == 0 && (c.i_ref_a[0] - want[0]).abs() < 1e-9
     });
 
     // 3. every drive silent: nothing new arrives → the whole-state stale rule (on_stale = zero).

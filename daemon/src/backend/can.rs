@@ -11,7 +11,8 @@
 //!   signed gear ratio; the current), and applies the **per-joint** freshness rule: a drive silent
 //!   for more than `feedback_timeout_ticks` ticks gets its bit in
 //!   [`BusCounters::stale_feedback_mask`] and [`FAULT_FEEDBACK_STALE`] in `fault_flags`, so the RT
-//!   loop's fault rule gives it 0 A (flag `FLAG_FAULT`) while the other joints keep running. An
+//!   loop gives that joint the `[safety] on_stale` output (flag `FLAG_STALE`), exactly as a stale
+//!   shared-memory state would, while the other joints keep running. An
 //!   ODrive heartbeat with an axis error or an axis state other than closed loop sets `FAULT_DRIVE`.
 //!   States are returned whenever a feedback frame was decoded or the stale mask changed; when every
 //!   drive is silent, nothing new is returned and the loop's whole-state stale rule applies.
