@@ -281,6 +281,9 @@ fn closed_loop_with_sim(odrive_bus: bool) {
                 "knee,ankle_roll",
                 // `=`: a value starting with '-' would otherwise read as a flag.
                 "--initial-pose-rad=-0.8,0.0",
+                // A TCG VM can stall the daemon for tens of ms; a tripped ODrive watchdog latches an
+                // axis error that (as on a real ODrive) needs clearing, which this test is not about.
+                "--command-timeout-ms=1000",
             ])
             .stdout(Stdio::null())
             .stderr(Stdio::piped())
