@@ -17,7 +17,7 @@ use frictionless::model::{FrictionModel, PinnEstimator};
 use frictionless::weights::read_file;
 use frictl::ident::dataset::Dataset;
 use frictl::train::Predictor;
-use frictl::train::data::{build_inputs, joint_sample};
+use frictl::train::data::build_inputs;
 use sha2::{Digest, Sha256};
 
 const EPOCH: &str = "1700000000";
@@ -199,7 +199,7 @@ fn model_loads_in_the_daemon_loader_and_reproduces_the_trainer_on_the_test_split
     let mut est = PinnEstimator::from_model_file(&file, WarmupPolicy::HoldZero).unwrap();
     let online: Vec<f64> = (0..ds.len())
         .map(|k| {
-            let smp = joint_sample(&ds, k);
+            let smp = ds.joint_sample(k);
             if k == 0 || ds.chunk[k] != ds.chunk[k - 1] {
                 est.reset(&smp);
             }

@@ -45,7 +45,7 @@ pub mod plot;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-use frictionless::features::{JointSample, WarmupPolicy};
+use frictionless::features::WarmupPolicy;
 use frictionless::friction::{CvParams, ScvCodeParams, ScvParams};
 use frictionless::model::{FrictionModel, JointModel, PinnEstimator};
 use frictionless::weights::ModelFile;
@@ -212,50 +212,16 @@ pub fn load_static_model(path: &Path) -> Result<JointModel, EvalError> {
     Ok(m)
 }
 
-/// The per-row inputs of a model, as the daemon receives them.
-pub fn joint_sample(ds: &Dataset, k: usize) -> JointSample {
-    JointSample {
-        s_rad: ds.s_rad[k],
-        sdot_rad_s: ds.sdot_rad_s[k],
-        theta_motor_rad: ds.theta_motor_rad[k],
-        omega_motor_rad_s: ds.omega_motor_rad_s[k],
-        temperature_c: ds.temperature_c[k],
-    }
-}
-
-/// Checks that every column a model reads has `time_s`'s length.
+/// Checks that every column has `time_s`'s length.
 pub fn check_lengths(ds: &Dataset) -> Result<(), EvalError> {
-    let n = ds.time_s.len();
-    let cols: [(&'static str, usize); 9] = [
-        ("chunk", ds.chunk.len()),
-        ("valid", ds.valid.len()),
-        ("s_rad", ds.s_rad.len()),
-        ("sdot_rad_s", ds.sdot_rad_s.len()),
-        ("theta_motor_rad", ds.theta_motor_rad.len()),
-        ("omega_motor_rad_s", ds.omega_motor_rad_s.len()),
-        ("temperature_c", ds.temperature_c.len()),
-        ("tau_f_label_nm", ds.tau_f_label_nm.len()),
-        ("delta_theta_motor_rad", ds.delta_theta_motor_rad.len()),
-    ];
-    for (column, got) in cols {
-        if got != n {
-            return Err(EvalError::ColumnLength {
-                column,
-                got,
-                expected: n,
-            });
-        }
+    match ds.mismatched_column() {
+        Some((column, got)) => Err(EvalError::ColumnLength {
+            column,
+            got,
+            expected: ds.len(),
+        }),
+        None => Ok(()),
     }
-    if let Some(t) = &ds.tau_f_true_nm
-        && t.len() != n
-    {
-        return Err(EvalError::ColumnLength {
-            column: "tau_f_true_nm",
-            got: t.len(),
-            expected: n,
-        });
-    }
-    Ok(())
 }
 
 /// `[start, end)` row ranges of the dataset's chunks (a new range wherever `chunk` changes).
@@ -283,8 +249,8 @@ pub fn predict(ds: &Dataset, model: &JointModel) -> Vec<f64> {
         .par_iter()
         .map(|&(a, b)| {
             let mut m = model.clone();
-            m.reset(&joint_sample(ds, a));
-            (a..b).map(|k| m.estimate(&joint_sample(ds, k))).collect()
+            m.reset(&ds.joint_sample(a));
+            (a..b).map(|k| m.estimate(&ds.joint_sample(k))).collect()
         })
         .collect();
     parts.concat()

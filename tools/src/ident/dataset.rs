@@ -240,6 +240,41 @@ impl From<&ColumnDoc> for ColumnDocOwned {
 }
 
 impl Dataset {
+    /// The model input sample of row `k` (what `frictiond` would read from `JointStates` at that
+    /// instant). Shared by training and evaluation so both feed `History` identically.
+    pub fn joint_sample(&self, k: usize) -> frictionless::features::JointSample {
+        frictionless::features::JointSample {
+            s_rad: self.s_rad[k],
+            sdot_rad_s: self.sdot_rad_s[k],
+            theta_motor_rad: self.theta_motor_rad[k],
+            omega_motor_rad_s: self.omega_motor_rad_s[k],
+            temperature_c: self.temperature_c[k],
+        }
+    }
+
+    /// The first column whose length differs from `time_s`'s, as `(name, length)`; `None` when all
+    /// columns (including the optional true friction) have one value per sample.
+    pub fn mismatched_column(&self) -> Option<(&'static str, usize)> {
+        let n = self.time_s.len();
+        let cols: [(&'static str, usize); 11] = [
+            ("chunk", self.chunk.len()),
+            ("source_chunk", self.source_chunk.len()),
+            ("valid", self.valid.len()),
+            ("s_rad", self.s_rad.len()),
+            ("sdot_rad_s", self.sdot_rad_s.len()),
+            ("theta_motor_rad", self.theta_motor_rad.len()),
+            ("omega_motor_rad_s", self.omega_motor_rad_s.len()),
+            ("temperature_c", self.temperature_c.len()),
+            ("tau_f_label_nm", self.tau_f_label_nm.len()),
+            ("delta_theta_motor_rad", self.delta_theta_motor_rad.len()),
+            (
+                "tau_f_true_nm",
+                self.tau_f_true_nm.as_ref().map_or(n, Vec::len),
+            ),
+        ];
+        cols.into_iter().find(|&(_, len)| len != n)
+    }
+
     /// Number of samples.
     pub fn len(&self) -> usize {
         self.time_s.len()

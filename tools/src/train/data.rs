@@ -25,7 +25,7 @@ use std::collections::BTreeSet;
 use std::fmt;
 use std::str::FromStr;
 
-use frictionless::features::{FeatureError, FeatureSpec, History, JointSample, WarmupPolicy};
+use frictionless::features::{FeatureError, FeatureSpec, History, WarmupPolicy};
 use frictionless::friction::{ScvParams, StaticFriction};
 use frictionless::units::GearRatio;
 use rand::SeedableRng;
@@ -98,41 +98,15 @@ impl Windows {
         &self.x[i * self.n_inputs..(i + 1) * self.n_inputs]
     }
 }
-
-/// The dataset row `k` as the daemon's per-tick sample.
-pub fn joint_sample(ds: &Dataset, k: usize) -> JointSample {
-    JointSample {
-        s_rad: ds.s_rad[k],
-        sdot_rad_s: ds.sdot_rad_s[k],
-        theta_motor_rad: ds.theta_motor_rad[k],
-        omega_motor_rad_s: ds.omega_motor_rad_s[k],
-        temperature_c: ds.temperature_c[k],
-    }
-}
-
 fn check_lengths(ds: &Dataset) -> Result<(), DataError> {
-    let n = ds.time_s.len();
-    let cols: [(&'static str, usize); 9] = [
-        ("chunk", ds.chunk.len()),
-        ("valid", ds.valid.len()),
-        ("s_rad", ds.s_rad.len()),
-        ("sdot_rad_s", ds.sdot_rad_s.len()),
-        ("theta_motor_rad", ds.theta_motor_rad.len()),
-        ("omega_motor_rad_s", ds.omega_motor_rad_s.len()),
-        ("temperature_c", ds.temperature_c.len()),
-        ("tau_f_label_nm", ds.tau_f_label_nm.len()),
-        ("source_chunk", ds.source_chunk.len()),
-    ];
-    for (column, got) in cols {
-        if got != n {
-            return Err(DataError::ColumnLength {
-                column,
-                got,
-                expected: n,
-            });
-        }
+    match ds.mismatched_column() {
+        Some((column, got)) => Err(DataError::ColumnLength {
+            column,
+            got,
+            expected: ds.len(),
+        }),
+        None => Ok(()),
     }
-    Ok(())
 }
 
 /// Builds every sample's input vector through [`History`], resetting (and latching Δθ) at the first row
@@ -156,7 +130,7 @@ pub fn build_inputs(
     w.rows.reserve(valid_rows);
     w.chunk.reserve(valid_rows);
     for k in 0..ds.len() {
-        let sample = joint_sample(ds, k);
+        let sample = ds.joint_sample(k);
         if k == 0 || ds.chunk[k] != ds.chunk[k - 1] {
             hist.reset(&sample);
         }
