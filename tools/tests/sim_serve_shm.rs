@@ -407,7 +407,10 @@ fn real_time_plant_publishes_on_its_own_and_commands_time_out_to_zero() {
     let published = last - first.expect("states arrive");
     // The rate is a measurement, not an assertion (this machine is noisy): printed for the log.
     println!("real-time plant: {published} new states in 1 s of wall time (nominal 1000)");
-    assert!(published > 0, "the real-time plant keeps publishing on its own");
+    assert!(
+        published > 0,
+        "the real-time plant keeps publishing on its own"
+    );
 
     // Command 1.5 A on the ankle roll for 300 ms; the truth shows it applied.
     let t1 = Instant::now();
