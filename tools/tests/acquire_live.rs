@@ -7,13 +7,11 @@
 //!
 //! Every test uses its own iceoryx2 root directory, prefix and output directory, removed at the end.
 
-use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
-use std::sync::mpsc;
-use std::time::{Duration, Instant};
+use std::path::Path;
+use std::process::{Command, Output};
 
-use frictionless_shm_types::monotonic_ns;
+mod plant_common;
+use plant_common::{Plant, Scratch};
 
 /// A tiny protocol on one start: two sine chunks (0.28 A and 0.71 A at 2 Hz, 2 cycles), the second
 /// of which drives the ankle roll into the position guard. 2.6 s simulated.
@@ -39,94 +37,6 @@ const TINY: &[&str] = &[
     "--set",
     "protocol.recentre_s=0.3",
 ];
-
-/// Scratch directory (iceoryx2 root + outputs) and a unique prefix, removed on drop.
-struct Scratch {
-    dir: PathBuf,
-    prefix: String,
-}
-
-impl Scratch {
-    fn new(tag: &str) -> Self {
-        let prefix = format!(
-            "fl_acqlive_{tag}_{}_{}",
-            std::process::id(),
-            monotonic_ns() % 1_000_000_000
-        );
-        let dir = std::env::temp_dir().join(&prefix);
-        std::fs::create_dir_all(dir.join("iox")).unwrap();
-        Self { dir, prefix }
-    }
-    fn root(&self) -> PathBuf {
-        self.dir.join("iox")
-    }
-    fn out(&self) -> PathBuf {
-        self.dir.join("out")
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.dir);
-    }
-}
-
-/// A running `frictl sim serve` (waited for "ready"); killed on drop if still running.
-struct Plant {
-    child: Child,
-    lines: mpsc::Receiver<String>,
-}
-
-impl Plant {
-    fn spawn(s: &Scratch, extra: &[&str]) -> Self {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_frictl"))
-            .args(["sim", "serve", "--backend", "shm", "--prefix", &s.prefix])
-            .arg("--root-path")
-            .arg(s.root())
-            .args(extra)
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("spawn frictl sim serve");
-        let stderr = child.stderr.take().unwrap();
-        let (tx, lines) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-                if tx.send(line).is_err() {
-                    break;
-                }
-            }
-        });
-        let end = Instant::now() + Duration::from_secs(60);
-        loop {
-            let line = lines
-                .recv_timeout(end.saturating_duration_since(Instant::now()))
-                .expect("plant prints ready");
-            if line.contains("ready") {
-                break;
-            }
-        }
-        Self { child, lines }
-    }
-
-    /// Sends SIGTERM and returns (success, stderr lines after ready).
-    fn terminate(mut self) -> (bool, Vec<String>) {
-        // SAFETY: signalling our own child by pid.
-        unsafe { libc::kill(self.child.id() as libc::pid_t, libc::SIGTERM) };
-        let st = self.child.wait().unwrap();
-        let lines: Vec<String> = self.lines.try_iter().collect();
-        (st.success(), lines)
-    }
-}
-
-impl Drop for Plant {
-    fn drop(&mut self) {
-        if self.child.try_wait().ok().flatten().is_none() {
-            let _ = self.child.kill();
-            let _ = self.child.wait();
-        }
-    }
-}
 
 fn acquire(s: &Scratch, seed: u64, name: &str, live: bool) -> Output {
     let mut c = Command::new(env!("CARGO_BIN_EXE_frictl"));

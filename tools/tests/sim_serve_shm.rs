@@ -4,132 +4,15 @@
 //!
 //! Every test uses its own iceoryx2 root directory and prefix and removes the directory at the end.
 
-use std::io::{BufRead, BufReader};
-use std::path::PathBuf;
-use std::process::{Child, Command, ExitStatus, Stdio};
-use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use frictionless_shm_types::sim::{SimDisturbance, SimTruth};
-use frictionless_shm_types::{
-    Inbox, Ipc, IpcConfig, JointStates, MotorCurrentCommand, Outbox, monotonic_ns,
-};
+use frictionless_shm_types::{Inbox, Ipc, JointStates, MotorCurrentCommand, Outbox, monotonic_ns};
 use frictl::sim::PlantParams;
 use frictl::sim::params::load_table;
 
-/// A unique iceoryx2 root directory + prefix, removed on drop.
-struct Scratch {
-    root: PathBuf,
-    prefix: String,
-}
-
-impl Scratch {
-    fn new(tag: &str) -> Self {
-        let prefix = format!(
-            "fl_serve_{tag}_{}_{}",
-            std::process::id(),
-            monotonic_ns() % 1_000_000_000
-        );
-        let root = std::env::temp_dir().join(&prefix);
-        std::fs::create_dir_all(&root).unwrap();
-        Self { root, prefix }
-    }
-
-    fn config(&self) -> IpcConfig {
-        IpcConfig::new(Some(&self.root), &self.prefix)
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.root);
-    }
-}
-
-/// A running `frictl sim serve`; killed on drop if still running.
-struct Plant {
-    child: Child,
-    lines: mpsc::Receiver<String>,
-    seen: Vec<String>,
-}
-
-impl Plant {
-    fn spawn(s: &Scratch, extra: &[&str]) -> Self {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_frictl"))
-            .args(["sim", "serve", "--backend", "shm", "--prefix", &s.prefix])
-            .arg("--root-path")
-            .arg(&s.root)
-            .args(extra)
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("spawn frictl");
-        let stderr = child.stderr.take().unwrap();
-        let (tx, lines) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-                if tx.send(line).is_err() {
-                    break;
-                }
-            }
-        });
-        let mut p = Self {
-            child,
-            lines,
-            seen: Vec::new(),
-        };
-        p.wait_line("ready", Duration::from_secs(60));
-        p
-    }
-
-    /// Returns a stderr line containing `needle`, seen before or arriving within `timeout`.
-    fn wait_line(&mut self, needle: &str, timeout: Duration) -> String {
-        if let Some(l) = self.seen.iter().find(|l| l.contains(needle)) {
-            return l.clone();
-        }
-        let end = Instant::now() + timeout;
-        loop {
-            let left = end.saturating_duration_since(Instant::now());
-            match self.lines.recv_timeout(left) {
-                Ok(l) => {
-                    self.seen.push(l.clone());
-                    if l.contains(needle) {
-                        return l;
-                    }
-                }
-                Err(_) => panic!("no `{needle}` on stderr; got {:?}", self.seen),
-            }
-        }
-    }
-
-    fn signal(&self, sig: libc::c_int) {
-        // SAFETY: sending a signal to our own child by pid.
-        assert_eq!(
-            unsafe { libc::kill(self.child.id() as libc::pid_t, sig) },
-            0
-        );
-    }
-
-    fn wait_exit(&mut self, timeout: Duration) -> ExitStatus {
-        let end = Instant::now() + timeout;
-        loop {
-            if let Some(st) = self.child.try_wait().unwrap() {
-                return st;
-            }
-            assert!(Instant::now() < end, "plant did not exit; {:?}", self.seen);
-            std::thread::sleep(Duration::from_millis(10));
-        }
-    }
-}
-
-impl Drop for Plant {
-    fn drop(&mut self) {
-        if self.child.try_wait().ok().flatten().is_none() {
-            let _ = self.child.kill();
-            let _ = self.child.wait();
-        }
-    }
-}
+mod plant_common;
+use plant_common::{Plant, Scratch};
 
 /// The test's side: a controller that answers states with commands (inbox before outbox, as the
 /// lockstep plant requires).
@@ -499,7 +382,7 @@ fn lockstep_timeout_without_answers_holds_then_zeroes_and_keeps_going() {
         {
             applied.push((tr.seq, tr.i_applied_a[0]));
         }
-        if let Some(st) = plant.child.try_wait().unwrap() {
+        if let Some(st) = plant.try_exit() {
             break st;
         }
         assert!(Instant::now() < end, "plant advances without answers");
