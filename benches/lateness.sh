@@ -1,19 +1,37 @@
 #!/usr/bin/env bash
-# Wake lateness of frictiond's RT loop next to cyclictest, on the same machine, one after the other.
+# Wake lateness of frictiond's RT loop next to cyclictest, like for like, on the same machine.
 #
-#   benches/lateness.sh [SECONDS]        (or env LATENESS_SECONDS; default 60)
+#   bash benches/lateness.sh [SECONDS]        (or env LATENESS_SECONDS; default 60)
 #
-# 1. frictiond (release, clock trigger, 1 kHz, two joints CV/SCV, SCHED_FIFO 80 + mlockall when
-#    permitted) runs SECONDS while a 1 kHz plant (daemon/benches/lateness_plant.rs) feeds it; at exit
-#    it writes its loop statistics to $FRICTIOND_LATENCY_REPORT (wake lateness against the absolute
-#    deadline in 1 µs buckets, compute time, input age).
-# 2. cyclictest -m -i1000 -l SECONDS*1000 -q -h 20000 [-p 80] (Debian rt-tests, installed with
-#    apt-get if missing; it uses clock_nanosleep by default: rt-tests 2.x dropped the -n flag).
+# Both measurements run under the SAME conditions, one after the other, each for SECONDS:
+#   - the same load: a 1 kHz plant process (daemon/benches/lateness_plant.rs) publishing joint states
+#     and torque requests, pinned to the "plant CPU" (default 0), SCHED_OTHER;
+#   - the measuring thread pinned to the "RT CPU" (default 1) with SCHED_FIFO 80 and mlockall when
+#     permitted; every other thread of the measured process on the plant CPU (frictiond's supervisor
+#     via taskset, cyclictest's main thread via --mainaffinity);
+#   - the same PM QoS: /dev/cpu_dma_latency held at 0 µs when writable (cyclictest does this by
+#     default; frictiond via `[loop] cpu_dma_latency_us = 0`), so neither wakes from a deep idle state
+#     (in a VM: an HLT exit) that the other avoids.
+# 1. frictiond (release, clock trigger, 1 kHz, the two-joint fixture config/bench_two_joint.toml) runs
+#    while the plant feeds it (its full compute + publish path every tick); at exit it writes its loop
+#    statistics to $FRICTIOND_LATENCY_REPORT (wake lateness against the absolute deadline in 1 µs
+#    buckets, compute time, the RT thread's page faults and context switches, policy, CPU, PM QoS).
+# 2. cyclictest -m -i1000 -q -h 20000 -p 80 -a RT_CPU --mainaffinity PLANT_CPU, with the plant running
+#    again (it then has no subscriber; its CPU load on the plant CPU is the same).
+# While each runs, the script prints every thread of the measured process with its policy, priority,
+# affinity and the CPU it is on (from ps/taskset, i.e. /proc), and whether the PM QoS was held.
 # Prints p50 / p99 / p99.9 / max [µs] of both side by side. No pass/fail: numbers for the README.
+#
+# Environment: LATENESS_RT_CPU (1), LATENESS_PLANT_CPU (0), LATENESS_PRIO (80),
+# LATENESS_ORDER=cyclictest-first to swap the order (load drift shows up as an order effect).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SECS="${1:-${LATENESS_SECONDS:-60}}"
 TARGET="${CARGO_TARGET_DIR:-$PWD/target}"
+RT_CPU="${LATENESS_RT_CPU:-1}"
+PLANT_CPU="${LATENESS_PLANT_CPU:-0}"
+PRIO="${LATENESS_PRIO:-80}"
+ORDER="${LATENESS_ORDER:-frictiond-first}"
 
 if ! command -v cyclictest >/dev/null; then
     echo "installing rt-tests (cyclictest) with apt-get" >&2
@@ -21,12 +39,24 @@ if ! command -v cyclictest >/dev/null; then
     $SUDO apt-get install -y rt-tests >/dev/null || { $SUDO apt-get update >/dev/null && $SUDO apt-get install -y rt-tests >/dev/null; }
 fi
 
-# Real-time priority only when permitted (root, or an RLIMIT_RTPRIO >= 80).
+NCPU=$(nproc)
+if [ "$NCPU" -lt 2 ] || [ "$RT_CPU" -ge "$NCPU" ] || [ "$PLANT_CPU" -ge "$NCPU" ]; then
+    echo "need 2 CPUs for the pinned layout (have $NCPU): RT and plant share CPU 0" >&2
+    RT_CPU=0; PLANT_CPU=0
+fi
+
+# Real-time priority only when permitted (root, or an RLIMIT_RTPRIO >= PRIO).
 RTPRIO=$(ulimit -r)
-if [ "$(id -u)" = 0 ] || [ "$RTPRIO" = unlimited ] || [ "$RTPRIO" -ge 80 ]; then
-    PRIO_TOML="priority = 80"; PRIO_CT="-p 80"; SCHED="SCHED_FIFO 80"
+if [ "$(id -u)" = 0 ] || [ "$RTPRIO" = unlimited ] || [ "$RTPRIO" -ge "$PRIO" ]; then
+    PRIO_TOML="priority = $PRIO"; PRIO_CT="-p $PRIO"; SCHED="SCHED_FIFO $PRIO"
 else
     PRIO_TOML=""; PRIO_CT=""; SCHED="SCHED_OTHER (no RT priority permitted)"
+fi
+# PM QoS: both hold cpu_dma_latency = 0 when the device is writable; otherwise neither does.
+if [ -w /dev/cpu_dma_latency ]; then
+    QOS_TOML="cpu_dma_latency_us = 0"; QOS_CT=""; QOS="cpu_dma_latency=0 held"
+else
+    QOS_TOML=""; QOS_CT="--laptop"; QOS="cpu_dma_latency not writable: not held by either"
 fi
 
 cargo build --release -q -p frictiond --bin frictiond
@@ -35,10 +65,20 @@ cargo bench -q -p frictiond --bench lateness_plant --no-run 2>"$PLANT_LOG" || { 
 PLANT=$(ls -t "$TARGET"/release/deps/lateness_plant-* | grep -v '\.d$' | head -1)
 
 WORK=$(mktemp -d /tmp/fld_lateness.XXXXXX)
-trap 'rm -rf "$WORK" "$PLANT_LOG"' EXIT
+PLANT_PID=""
+MEASURED_PID=""
+cleanup() {
+    # Only the processes this script started, by PID.
+    [ -n "$MEASURED_PID" ] && kill -TERM "$MEASURED_PID" 2>/dev/null || true
+    [ -n "$PLANT_PID" ] && kill -TERM "$PLANT_PID" 2>/dev/null || true
+    rm -rf "$WORK" "$PLANT_LOG"
+}
+trap cleanup EXIT
 PREFIX="fld_lateness_$$"
 mkdir -p "$WORK/iox"
-cat >"$WORK/frictiond.toml" <<TOML
+# The shared two-joint fixture up to its per-run marker, then this run's [backend] and [loop].
+sed '/^# ---- per-run sections/,$d' config/bench_two_joint.toml >"$WORK/frictiond.toml"
+cat >>"$WORK/frictiond.toml" <<TOML
 [backend]
 kind = "shm"
 service_prefix = "$PREFIX"
@@ -46,82 +86,106 @@ root_path = "$WORK/iox"
 
 [loop]
 period_us = 1000
+cpu = $RT_CPU
 $PRIO_TOML
 lock_memory = true
+$QOS_TOML
 status_every_ticks = 100
 ready_after_ticks = 100
-
-[safety]
-stale_after_ticks = 20
-on_stale = "zero"
-
-[[joint]]
-name = "knee"
-index = 0
-gear_ratio = -100.0
-kt = 0.157
-max_curr = 5.0
-kfc = 0.85
-max_output_friction = 25.0
-lpf = { order = 2, cutoff_hz = 30.0 }
-friction_model = "cv"
-kc = 8.1
-ka = 50.84
-kv = 5.55
-
-[[joint]]
-name = "ankle_roll"
-index = 1
-gear_ratio = -160.0
-kt = 0.0665
-max_curr = 3.0
-kfc = 0.7
-friction_model = "scv"
-kc = 1.0005
-ka = 2.78
-kv = 0.29
-ks = 6.0
-vs = 0.13
-alpha = 0.6
 TOML
 
-echo "frictiond: ${SECS} s, clock trigger, 1 kHz, $SCHED, load average $(cut -d' ' -f1-3 /proc/loadavg)" >&2
-FRICTIOND_LATENCY_REPORT="$WORK/report.txt" RUST_LOG=warn \
-    "$TARGET/release/frictiond" --config "$WORK/frictiond.toml" &
-DPID=$!
-sleep 0.5
-FLD_PLANT_PREFIX="$PREFIX" FLD_PLANT_ROOT="$WORK/iox" FLD_PLANT_SECONDS="$((SECS + 2))" "$PLANT" 2>/dev/null &
-PPID_=$!
-sleep "$SECS"
-kill -TERM "$DPID"
-wait "$DPID"
-wait "$PPID_" || true
+start_plant() {
+    FLD_PLANT_PREFIX="$PREFIX" FLD_PLANT_ROOT="$WORK/iox" FLD_PLANT_SECONDS="$((SECS + 5))" \
+        taskset -c "$PLANT_CPU" "$PLANT" 2>/dev/null &
+    PLANT_PID=$!
+}
+stop_plant() {
+    kill -TERM "$PLANT_PID" 2>/dev/null || true
+    wait "$PLANT_PID" 2>/dev/null || true
+    PLANT_PID=""
+}
+
+# Every thread of process $1: tid, name, policy, RT priority, affinity, CPU it last ran on.
+threads() {
+    local pid=$1 tid line aff
+    ps -L -o tid=,comm=,cls=,rtprio=,psr= -p "$pid" | while read -r tid line; do
+        aff=$(taskset -pc "$tid" 2>/dev/null | sed 's/.*: //')
+        printf "    tid %-7s %-16s cls/rtprio/cpu-now: %-14s affinity: %s\n" "$tid" \
+            "$(echo "$line" | awk '{print $1}')" "$(echo "$line" | awk '{print $2"/"$3"/"$4}')" "$aff"
+    done
+}
+# Whether process $1 holds /dev/cpu_dma_latency open.
+qos_held() {
+    if ls -l "/proc/$1/fd" 2>/dev/null | grep -q cpu_dma_latency; then echo yes; else echo no; fi
+}
+
+D_ROW="" C_ROW="" D_THREADS="" C_THREADS="" D_EXTRA=""
 get() { sed -n "s/^$1=//p" "$WORK/report.txt"; }
 us() { awk -v x="$1" 'BEGIN { printf "%.1f", x / 1000 }'; }
-D_N=$(get lateness_n)
-D_ROW=$(printf "%-12s %8s %8s %8s %9s   n=%s, missed deadlines %s; compute p50/p99 <= %s/%s µs (power-of-two buckets)" \
-    frictiond "$(us "$(get lateness_p50_ns)")" "$(us "$(get lateness_p99_ns)")" \
-    "$(us "$(get lateness_p999_ns)")" "$(us "$(get lateness_max_ns)")" "$D_N" "$(get missed)" \
-    "$(us "$(get compute_p50_ns)")" "$(us "$(get compute_p99_ns)")")
 
-echo "cyclictest: ${SECS} s, -i1000, $SCHED, load average $(cut -d' ' -f1-3 /proc/loadavg)" >&2
-# shellcheck disable=SC2086
-cyclictest -m -i1000 -l "$((SECS * 1000))" -q -h 20000 $PRIO_CT >"$WORK/cyclictest.txt"
-# Histogram lines: "<µs> <count>"; overflows counted separately. Quantiles = bucket upper edge.
-C_ROW=$(awk '
-    /^[0-9]+[ \t]+[0-9]+/ { c[$1 + 0] = $2 + 0; n += $2 }
-    /^# Max Latencies:/ { mx = $4 + 0 }
-    /^# Histogram Overflows:/ { ov = $4 + 0 }
-    END {
-        n += ov; split("0.5 0.99 0.999", q, " ");
-        for (i = 1; i <= 3; i++) {
-            want = q[i] * n; acc = 0; r[i] = mx;
-            for (k = 0; k < 20000; k++) { acc += c[k]; if (acc >= want) { r[i] = k + 1; break } }
-            if (r[i] > mx) r[i] = mx;
-        }
-        printf "%-12s %8.1f %8.1f %8.1f %9.1f   n=%d", "cyclictest", r[1], r[2], r[3], mx, n
-    }' "$WORK/cyclictest.txt")
+run_frictiond() {
+    echo "frictiond: ${SECS} s, clock trigger, 1 kHz, $SCHED on CPU $RT_CPU, plant on CPU $PLANT_CPU, $QOS, load average $(cut -d' ' -f1-3 /proc/loadavg)" >&2
+    start_plant
+    FRICTIOND_LATENCY_REPORT="$WORK/report.txt" RUST_LOG=warn \
+        taskset -c "$PLANT_CPU" "$TARGET/release/frictiond" --config "$WORK/frictiond.toml" &
+    MEASURED_PID=$!
+    sleep 1
+    D_THREADS="$(threads "$MEASURED_PID")
+    PM QoS fd held: $(qos_held "$MEASURED_PID")"
+    sleep "$((SECS > 1 ? SECS - 1 : 0))"
+    kill -TERM "$MEASURED_PID"
+    wait "$MEASURED_PID"
+    MEASURED_PID=""
+    stop_plant
+    D_ROW=$(printf "%-12s %8s %8s %8s %9s   n=%s, missed deadlines %s" \
+        frictiond "$(us "$(get lateness_p50_ns)")" "$(us "$(get lateness_p99_ns)")" \
+        "$(us "$(get lateness_p999_ns)")" "$(us "$(get lateness_max_ns)")" "$(get lateness_n)" "$(get missed)")
+    D_EXTRA=$(printf "frictiond RT thread: %s %s, CPU %s→%s, pinned %s, mlocked %s, PM QoS %s µs; during the loop: %s minor / %s major page faults, %s voluntary / %s involuntary context switches; compute p50/p99 <= %s/%s µs (power-of-two buckets)" \
+        "$(get rt_policy)" "$(get rt_priority)" "$(get rt_cpu_start)" "$(get rt_cpu_end)" \
+        "$(get rt_cpu_pinned)" "$(get rt_memory_locked)" "$(get rt_pm_qos_us)" \
+        "$(get rt_minflt)" "$(get rt_majflt)" "$(get rt_nvcsw)" "$(get rt_nivcsw)" \
+        "$(us "$(get compute_p50_ns)")" "$(us "$(get compute_p99_ns)")")
+}
 
-printf "\nwake lateness [µs]   %8s %8s %8s %9s\n" p50 p99 p99.9 max
+run_cyclictest() {
+    echo "cyclictest: ${SECS} s, -i1000, $SCHED on CPU $RT_CPU (main thread on CPU $PLANT_CPU), plant on CPU $PLANT_CPU, $QOS, load average $(cut -d' ' -f1-3 /proc/loadavg)" >&2
+    start_plant
+    # shellcheck disable=SC2086
+    cyclictest -m -i1000 -l "$((SECS * 1000))" -q -h 20000 $PRIO_CT $QOS_CT \
+        -a "$RT_CPU" --mainaffinity="$PLANT_CPU" >"$WORK/cyclictest.txt" 2>"$WORK/cyclictest.err" &
+    MEASURED_PID=$!
+    sleep 1
+    C_THREADS="$(threads "$MEASURED_PID")
+    PM QoS fd held: $(qos_held "$MEASURED_PID")"
+    wait "$MEASURED_PID"
+    MEASURED_PID=""
+    stop_plant
+    # Histogram lines: "<µs> <count>"; overflows counted separately. Quantiles = bucket upper edge.
+    C_ROW=$(awk '
+        /^[0-9]+[ \t]+[0-9]+/ { c[$1 + 0] = $2 + 0; n += $2 }
+        /^# Max Latencies:/ { mx = $4 + 0 }
+        /^# Histogram Overflows:/ { ov = $4 + 0 }
+        END {
+            n += ov; split("0.5 0.99 0.999", q, " ");
+            for (i = 1; i <= 3; i++) {
+                want = q[i] * n; acc = 0; r[i] = mx;
+                for (k = 0; k < 20000; k++) { acc += c[k]; if (acc >= want) { r[i] = k + 1; break } }
+                if (r[i] > mx) r[i] = mx;
+            }
+            printf "%-12s %8.1f %8.1f %8.1f %9.1f   n=%d", "cyclictest", r[1], r[2], r[3], mx, n
+        }' "$WORK/cyclictest.txt")
+}
+
+if [ "$ORDER" = cyclictest-first ]; then run_cyclictest; run_frictiond; else run_frictiond; run_cyclictest; fi
+
+echo
+echo "threads while measuring (cls: FF = SCHED_FIFO, TS = SCHED_OTHER):"
+echo "  frictiond:"; echo "$D_THREADS"
+echo "  cyclictest:"; echo "$C_THREADS"
+echo "$D_EXTRA"
+printf "\nwake lateness [µs], %s s each, %s on CPU %s, plant on CPU %s, %s (order: %s)\n" \
+    "$SECS" "$SCHED" "$RT_CPU" "$PLANT_CPU" "$QOS" "$ORDER"
+printf "%-12s %8s %8s %8s %9s\n" "" p50 p99 p99.9 max
 echo "$D_ROW"
 echo "$C_ROW"
+echo "load average at the end: $(cut -d' ' -f1-3 /proc/loadavg)"

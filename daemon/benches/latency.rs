@@ -10,6 +10,8 @@
 //!
 //! Prints p50/p99/p99.9/max [µs]; no asserts. `FRICTIOND_LATENCY_N` samples per trigger (default
 //! 20 000 lockstep, a quarter of that with the clock). Run: `cargo bench -p frictiond --bench latency`.
+//! The daemon config is the shared fixture `config/bench_two_joint.toml` (joints, `[safety]`) plus this
+//! run's `[backend]` and `[loop]`.
 
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -19,7 +21,13 @@ use std::time::{Duration, Instant};
 
 use frictionless_shm_types::{Ipc, IpcConfig, JointStates, TorqueRequest, monotonic_ns};
 
-const CONFIG: &str = r#"
+/// The shared two-joint fixture (`config/bench_two_joint.toml`), up to its per-run marker.
+const FIXTURE: &str = include_str!("../../config/bench_two_joint.toml");
+/// The marker line after which the fixture's own `[backend]`/`[loop]` start.
+const PER_RUN_MARKER: &str = "# ---- per-run sections";
+
+/// The bench's `[loop]` (`TRIGGER` replaced per run).
+const LOOP: &str = r#"
 [loop]
 period_us = 1000
 status_every_ticks = 100
@@ -27,40 +35,19 @@ ready_after_ticks = 10
 trigger = "TRIGGER"
 lockstep_wait_request = true
 lockstep_timeout_ms = 5000
-
-[safety]
-stale_after_ticks = 20
-on_stale = "zero"
-
-[[joint]]
-name = "knee"
-index = 0
-gear_ratio = -100.0
-kt = 0.157
-max_curr = 5.0
-kfc = 0.85
-max_output_friction = 25.0
-lpf = { order = 2, cutoff_hz = 30.0 }
-friction_model = "cv"
-kc = 8.1
-ka = 50.84
-kv = 5.55
-
-[[joint]]
-name = "ankle_roll"
-index = 1
-gear_ratio = -160.0
-kt = 0.0665
-max_curr = 3.0
-kfc = 0.7
-friction_model = "scv"
-kc = 1.0005
-ka = 2.78
-kv = 0.29
-ks = 6.0
-vs = 0.13
-alpha = 0.6
 "#;
+
+/// The fixture's joints and `[safety]`, this run's `[backend]` and `[loop]`.
+fn config_text(prefix: &str, iox: &Path, trigger: &str) -> String {
+    let (joints, _) = FIXTURE
+        .split_once(PER_RUN_MARKER)
+        .expect("config/bench_two_joint.toml lost its per-run marker line");
+    format!(
+        "{joints}\n[backend]\nkind = \"shm\"\nservice_prefix = \"{prefix}\"\nroot_path = \"{}\"\n{}",
+        iox.display(),
+        LOOP.replace("TRIGGER", trigger)
+    )
+}
 
 /// Sleeps until the absolute CLOCK_MONOTONIC time `t_ns` (the daemon's own way of sleeping).
 fn sleep_until(t_ns: u64) {
@@ -87,15 +74,7 @@ fn run(trigger: &str, n: usize, dir: &Path) {
     let iox = dir.join(format!("iox_{trigger}"));
     std::fs::create_dir_all(&iox).unwrap();
     let cfg_path = dir.join(format!("{trigger}.toml"));
-    std::fs::write(
-        &cfg_path,
-        format!(
-            "[backend]\nkind = \"shm\"\nservice_prefix = \"{prefix}\"\nroot_path = \"{}\"\n{}",
-            iox.display(),
-            CONFIG.replace("TRIGGER", trigger)
-        ),
-    )
-    .unwrap();
+    std::fs::write(&cfg_path, config_text(&prefix, &iox, trigger)).unwrap();
     let mut daemon = Command::new(env!("CARGO_BIN_EXE_frictiond"))
         .arg("--config")
         .arg(&cfg_path)

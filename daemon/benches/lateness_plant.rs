@@ -4,9 +4,12 @@
 //!
 //! Environment: `FLD_PLANT_PREFIX`, `FLD_PLANT_ROOT` (iceoryx2 service prefix and root path, as in
 //! the daemon's `[backend]`), `FLD_PLANT_SECONDS` (default 10). Without `FLD_PLANT_PREFIX` (e.g.
-//! `cargo bench` over every bench) it does nothing.
+//! `cargo bench` over every bench) it does nothing. SIGTERM ends it cleanly (ports dropped, no stale
+//! shared-memory files).
 
 use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use frictionless_shm_types::{Ipc, IpcConfig, JointStates, TorqueRequest, monotonic_ns};
 use nix::sys::time::TimeSpec;
@@ -24,6 +27,10 @@ fn main() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(10.0);
+    let stop = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGTERM, signal_hook::consts::SIGINT] {
+        signal_hook::flag::register(sig, stop.clone()).expect("signal handler");
+    }
     let cfg = IpcConfig::new(root.as_deref().map(Path::new), &prefix);
     let ipc = Ipc::open(&cfg, "lateness_plant").expect("iceoryx2 node");
     let states = ipc.joint_states().unwrap().outbox().unwrap();
@@ -38,7 +45,7 @@ fn main() {
     let end = start + (seconds * 1e9) as u64;
     let mut deadline = start + period;
     let mut k = 0u64;
-    while deadline < end {
+    while deadline < end && !stop.load(Ordering::Relaxed) {
         let ts = TimeSpec::new(
             (deadline / 1_000_000_000) as _,
             (deadline % 1_000_000_000) as _,

@@ -3,7 +3,8 @@
 //! What this module **is**: one TOML file (`serde` + `toml`, unknown keys are errors) describing the loop
 //! (`[loop]`), the I/O backend (`[backend]`), safety behaviour (`[safety]`) and the joints
 //! (`[[joint]]`, key names after the ergoCub `JointTorqueControlDevice`: `kt`, `kfc`, `kp`, `ki`,
-//! `max_curr`, `max_output_friction`, `friction_model`, `kc`, `kv`, `ka`, `ks`, `vs`, `alpha`, `model`).
+//! `max_curr`, `max_output_friction`, `friction_model`, `kc`, `kv`, `ka`, `ks`, `vs`, `alpha`, `model`;
+//! ours: `warmup`, `delta_theta_offset_motor_rad`).
 //! [`load`] parses and validates everything, including reading every model file, and returns a
 //! [`Config`] or a [`ConfigError`] naming the file, the key and the value.
 //!
@@ -80,6 +81,12 @@ pub struct LoopConfig {
     /// mlockall(MCL_CURRENT | MCL_FUTURE) before the loop starts.
     #[serde(default)]
     pub lock_memory: bool,
+    /// PM QoS CPU wake-up latency bound [µs] written to `/dev/cpu_dma_latency` and held while the
+    /// daemon runs (none = leave the idle states alone). `0` keeps idle CPUs out of deep C-states
+    /// (in a VM: polling instead of HLT exits), as `cyclictest` does by default. Root only; a
+    /// refusal is warned (or fatal with `require_rt`).
+    #[serde(default)]
+    pub cpu_dma_latency_us: Option<u32>,
     /// If true, refuse to start when SCHED_FIFO / mlockall / affinity are refused; else warn.
     #[serde(default)]
     pub require_rt: bool,
@@ -139,6 +146,7 @@ impl Default for LoopConfig {
             cpu: None,
             priority: None,
             lock_memory: false,
+            cpu_dma_latency_us: None,
             require_rt: false,
             status_every_ticks: default_status_every(),
             ready_after_ticks: default_ready_after(),
@@ -312,6 +320,11 @@ pub struct JointConfig {
     /// PINN warm-up policy.
     #[serde(default)]
     pub warmup: WarmupName,
+    /// PINN Δθ offset θ_off [motor rad] (Δθ = r·s − (θ − θ_off)): a fixed encoder calibration, kept
+    /// across enables. Absent: latched at every enable (Δθ = 0 there). Set it to the offset the
+    /// training logs were latched with (0 for the virtual joints).
+    #[serde(default)]
+    pub delta_theta_offset_motor_rad: Option<f64>,
 }
 
 fn one() -> f64 {
@@ -612,6 +625,15 @@ pub fn parse(path: &Path, text: &str) -> Result<Config, ConfigError> {
     {
         return Err(c.fail("loop.priority".into(), p, "must be 1..=99 (SCHED_FIFO)"));
     }
+    if let Some(us) = l.cpu_dma_latency_us
+        && us > i32::MAX as u32
+    {
+        return Err(c.fail(
+            "loop.cpu_dma_latency_us".into(),
+            us,
+            "must fit the kernel's s32 PM QoS value (0..=2147483647)",
+        ));
+    }
     if l.status_every_ticks == 0 {
         return Err(c.fail("loop.status_every_ticks".into(), 0, "must be >= 1"));
     }
@@ -676,6 +698,11 @@ pub fn parse(path: &Path, text: &str) -> Result<Config, ConfigError> {
             key("joint_velocity_threshold_rad_s"),
             j.joint_velocity_threshold_rad_s,
         )?;
+        if let Some(off) = j.delta_theta_offset_motor_rad
+            && !off.is_finite()
+        {
+            return Err(c.fail(key("delta_theta_offset_motor_rad"), off, "must be finite"));
+        }
         if let Some(lpf) = j.lpf {
             if !(1..=8).contains(&lpf.order) {
                 return Err(c.fail(key("lpf.order"), lpf.order, "must be 1..=8"));
@@ -1152,6 +1179,13 @@ alpha = 0.6
         assert_eq!(c.raw.joint[1].kfc, 1.0);
         assert_eq!(c.raw.joint[1].kp, 0.0);
         assert!(c.raw.joint[1].max_output_friction.is_infinite());
+        assert_eq!(c.raw.loop_.cpu_dma_latency_us, None, "PM QoS is opt-in");
+        let c = p(&GOOD.replace(
+            "period_us = 1000",
+            "period_us = 1000\ncpu_dma_latency_us = 0",
+        ))
+        .unwrap();
+        assert_eq!(c.raw.loop_.cpu_dma_latency_us, Some(0));
     }
 
     #[test]
@@ -1191,6 +1225,12 @@ alpha = 0.6
             ("vs = 0.13", "vs = 0.0", "joint[1].vs", "0"),
             ("kfc = 0.85", "kfc = 3.0", "joint[0].kfc", "3"),
             ("period_us = 1000", "period_us = 5", "loop.period_us", "5"),
+            (
+                "period_us = 1000",
+                "period_us = 1000\ncpu_dma_latency_us = 3000000000",
+                "loop.cpu_dma_latency_us",
+                "3000000000",
+            ),
             (
                 "stale_after_ticks = 3",
                 "stale_after_ticks = 0",

@@ -275,11 +275,51 @@ pub struct RtSetup {
     pub count_allocs: bool,
 }
 
-/// Applies RT settings to the calling thread; returns granted `STATUS_*` flags. Logs refusals.
-fn apply_rt_settings(cfg: &Config) -> Result<u32, String> {
+/// What [`apply_rt_settings`] obtained.
+struct RtGrant {
+    /// Granted `STATUS_*` flags.
+    flags: u32,
+    /// The open `/dev/cpu_dma_latency` holding the PM QoS request (dropped = released).
+    _pm_qos: Option<std::fs::File>,
+    /// The PM QoS value read back from `/dev/cpu_dma_latency` [µs], when held.
+    pm_qos_us: Option<i32>,
+}
+
+/// `[loop] cpu_dma_latency_us`: writes the bound to `/dev/cpu_dma_latency` and keeps the file open
+/// (the kernel drops the request on close), then reads the effective value back.
+fn hold_cpu_dma_latency(us: u32) -> std::io::Result<(std::fs::File, i32)> {
+    use std::io::{Read, Write};
+    let mut f = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open("/dev/cpu_dma_latency")?;
+    f.write_all(&(us as i32).to_ne_bytes())?;
+    let mut b = [0u8; 4];
+    f.read_exact(&mut b)?;
+    Ok((f, i32::from_ne_bytes(b)))
+}
+
+/// Applies RT settings to the calling thread; returns what was granted. Logs refusals.
+fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, String> {
     let l = &cfg.raw.loop_;
     let mut flags = 0;
     let mut refused = Vec::new();
+    let (mut pm_qos, mut pm_qos_us) = (None, None);
+    if let Some(us) = l.cpu_dma_latency_us {
+        match hold_cpu_dma_latency(us) {
+            Ok((f, got)) => {
+                if got as i64 > us as i64 {
+                    tracing::warn!(
+                        "cpu_dma_latency: asked for {us} µs, the effective bound is {got} µs"
+                    );
+                }
+                (pm_qos, pm_qos_us) = (Some(f), Some(got));
+            }
+            Err(e) => refused.push(format!(
+                "cpu_dma_latency {us} µs: /dev/cpu_dma_latency: {e} (root only)"
+            )),
+        }
+    }
     // SAFETY: plain syscalls on the calling thread with valid arguments.
     unsafe {
         // Timer slack 1 ns (default 50 µs would dominate SCHED_OTHER lateness).
@@ -355,7 +395,11 @@ fn apply_rt_settings(cfg: &Config) -> Result<u32, String> {
             refused.join("; ")
         ));
     }
-    Ok(flags)
+    Ok(RtGrant {
+        flags,
+        _pm_qos: pm_qos,
+        pm_qos_us,
+    })
 }
 
 /// Touches `bytes` of stack so the loop never page-faults on it.
@@ -440,6 +484,47 @@ fn wait_lockstep(
     }
 }
 
+/// Resource usage of the calling thread (`getrusage(RUSAGE_THREAD)`): read before and after the
+/// loop only (a syscall), to tell page faults and preemptions apart from timer wake-up latency.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ThreadUsage {
+    /// Minor page faults.
+    pub minflt: u64,
+    /// Major page faults.
+    pub majflt: u64,
+    /// Voluntary context switches (one per sleep of the clock trigger).
+    pub nvcsw: u64,
+    /// Involuntary context switches (preemptions).
+    pub nivcsw: u64,
+}
+
+impl ThreadUsage {
+    /// The calling thread's counters now (zero if the call fails).
+    pub fn now() -> Self {
+        // SAFETY: getrusage writes into a valid, zeroed rusage.
+        let mut ru: libc::rusage = unsafe { std::mem::zeroed() };
+        if unsafe { libc::getrusage(libc::RUSAGE_THREAD, &mut ru) } != 0 {
+            return Self::default();
+        }
+        Self {
+            minflt: ru.ru_minflt as u64,
+            majflt: ru.ru_majflt as u64,
+            nvcsw: ru.ru_nvcsw as u64,
+            nivcsw: ru.ru_nivcsw as u64,
+        }
+    }
+
+    /// Counts since `earlier`.
+    pub fn since(self, earlier: Self) -> Self {
+        Self {
+            minflt: self.minflt.saturating_sub(earlier.minflt),
+            majflt: self.majflt.saturating_sub(earlier.majflt),
+            nvcsw: self.nvcsw.saturating_sub(earlier.nvcsw),
+            nivcsw: self.nivcsw.saturating_sub(earlier.nivcsw),
+        }
+    }
+}
+
 /// Wake lateness with 1 µs buckets up to [`FineHistogram::BUCKETS`] µs (the shared-memory
 /// [`Histogram`](frictionless_shm_types::Histogram) has power-of-two buckets, too coarse to
 /// compare with `cyclictest`). Allocated and pre-faulted before the loop; `record` is O(1).
@@ -519,6 +604,51 @@ pub struct RtSummary {
     pub lateness: FineHistogram,
     /// The last status snapshot (power-of-two histograms of lateness, compute time, input age).
     pub status: Box<DaemonStatus>,
+    /// How the RT thread ran: what it was granted and what happened to it during the loop.
+    pub thread: RtThreadReport,
+}
+
+/// How the RT thread ran (for the latency report).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct RtThreadReport {
+    /// Kernel thread id.
+    pub tid: i32,
+    /// Granted `STATUS_*` flags.
+    pub rt_flags: u32,
+    /// Scheduling policy (`SCHED_*`) and priority at the end of the loop.
+    pub policy: i32,
+    /// Priority at the end of the loop (0 under SCHED_OTHER).
+    pub priority: i32,
+    /// CPU the thread ran on when the loop started and when it ended.
+    pub cpu_start: i32,
+    /// See `cpu_start`.
+    pub cpu_end: i32,
+    /// PM QoS bound held on `/dev/cpu_dma_latency` [µs] (read back), if any.
+    pub pm_qos_us: Option<i32>,
+    /// Page faults and context switches during the loop.
+    pub usage: ThreadUsage,
+}
+
+impl RtThreadReport {
+    fn policy_name(&self) -> &'static str {
+        match self.policy {
+            libc::SCHED_FIFO => "SCHED_FIFO",
+            libc::SCHED_RR => "SCHED_RR",
+            libc::SCHED_OTHER => "SCHED_OTHER",
+            libc::SCHED_BATCH => "SCHED_BATCH",
+            libc::SCHED_IDLE => "SCHED_IDLE",
+            _ => "unknown",
+        }
+    }
+}
+
+/// The calling thread's scheduling policy and priority.
+fn sched_of_self() -> (i32, i32) {
+    let mut pol = 0;
+    // SAFETY: valid out-pointers for the calling thread.
+    let mut sp: libc::sched_param = unsafe { std::mem::zeroed() };
+    unsafe { libc::pthread_getschedparam(libc::pthread_self(), &mut pol, &mut sp) };
+    (pol, sp.sched_priority)
 }
 
 impl RtSummary {
@@ -541,6 +671,24 @@ impl RtSummary {
             h.quantile_upper_ns(0.99),
             h.quantile_upper_ns(0.999),
             h.max_ns
+        );
+        let t = &self.thread;
+        let _ = writeln!(
+            s,
+            "rt_tid={}\nrt_policy={}\nrt_priority={}\nrt_cpu_pinned={}\nrt_memory_locked={}\nrt_cpu_start={}\nrt_cpu_end={}\nrt_pm_qos_us={}\nrt_minflt={}\nrt_majflt={}\nrt_nvcsw={}\nrt_nivcsw={}",
+            t.tid,
+            t.policy_name(),
+            t.priority,
+            t.rt_flags & STATUS_CPU_PINNED != 0,
+            t.rt_flags & STATUS_MEMORY_LOCKED != 0,
+            t.cpu_start,
+            t.cpu_end,
+            t.pm_qos_us
+                .map_or_else(|| "none".to_owned(), |v| v.to_string()),
+            t.usage.minflt,
+            t.usage.majflt,
+            t.usage.nvcsw,
+            t.usage.nivcsw
         );
         for (name, h) in [
             ("compute", &self.status.compute),
@@ -583,13 +731,15 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
             return None;
         }
     };
-    let rt_flags = match apply_rt_settings(&config) {
-        Ok(f) => f,
+    // Held until this function returns (the PM QoS request lives as long as the file is open).
+    let grant = match apply_rt_settings(&config) {
+        Ok(g) => g,
         Err(e) => {
             let _ = started.send(Err(e));
             return None;
         }
     };
+    let rt_flags = grant.flags;
     shared.rt_flags.store(rt_flags, Ordering::Relaxed);
     prefault_stack();
     let _ = started.send(Ok(rt_flags));
@@ -619,6 +769,10 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
     let mut parked_old: Option<Box<Params>> = None;
     let mut missed = 0u64;
     let mut tick = 0u64;
+    // SAFETY: gettid/sched_getcpu have no preconditions.
+    let tid = unsafe { libc::gettid() };
+    let cpu_start = unsafe { libc::sched_getcpu() };
+    let usage_start = ThreadUsage::now();
     let mut deadline = monotonic_ns() + period_ns;
 
     loop {
@@ -780,6 +934,19 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
         }
     }
     alloc_count::set_counting(false);
+    let usage = ThreadUsage::now().since(usage_start);
+    let (policy, priority) = sched_of_self();
+    let thread = RtThreadReport {
+        tid,
+        rt_flags,
+        policy,
+        priority,
+        cpu_start,
+        // SAFETY: no preconditions.
+        cpu_end: unsafe { libc::sched_getcpu() },
+        pm_qos_us: grant.pm_qos_us,
+        usage,
+    };
     if count_allocs {
         shared
             .counted_ticks
@@ -810,6 +977,7 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
         lockstep,
         lateness: lateness_fine,
         status: Box::new(tele.status),
+        thread,
     })
 }
 
@@ -950,11 +1118,38 @@ kv = 0.0
             lockstep: false,
             lateness: h,
             status: Box::new(DaemonStatus::zeroed()),
+            thread: RtThreadReport {
+                policy: libc::SCHED_FIFO,
+                priority: 80,
+                usage: ThreadUsage {
+                    minflt: 3,
+                    ..ThreadUsage::default()
+                },
+                ..RtThreadReport::default()
+            },
         }
         .report();
         assert!(s.contains("trigger=clock\n"), "{s}");
         assert!(s.contains("lateness_p50_ns=52000\n"), "{s}");
         assert!(s.contains("lateness_max_ns=1000000000\n"), "{s}");
+        assert!(s.contains("rt_policy=SCHED_FIFO\nrt_priority=80\n"), "{s}");
+        assert!(s.contains("rt_minflt=3\nrt_majflt=0\n"), "{s}");
+        assert!(s.contains("rt_pm_qos_us=none\n"), "{s}");
+    }
+
+    #[test]
+    fn thread_usage_sees_this_threads_page_faults_and_sleeps() {
+        let before = ThreadUsage::now();
+        // A fresh mapping (mmap at this size): every first touch of a page faults.
+        let mut v = vec![0u8; (1 << 20) + 64 * 4096];
+        for k in (0..v.len()).step_by(4096) {
+            v[k] = 1;
+        }
+        std::hint::black_box(&mut v);
+        std::thread::sleep(std::time::Duration::from_millis(1));
+        let d = ThreadUsage::now().since(before);
+        assert!(d.minflt >= 64, "{d:?}");
+        assert!(d.nvcsw >= 1, "a sleep is a voluntary switch: {d:?}");
     }
 
     #[test]
