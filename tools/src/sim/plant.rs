@@ -19,6 +19,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
+use crate::sim::fastmath;
 use crate::sim::link::LinkDynamics;
 use crate::sim::params::{ParamError, PlantParams};
 
@@ -100,40 +101,52 @@ fn quantise(x: f64, q: f64) -> f64 {
     if q > 0.0 { (x / q).round() * q } else { x }
 }
 
-/// tanh(x) without the libm call where it is exactly ±1 in f64: 1 − 2/(e^{2|x|} + 1) rounds to 1 once
-/// e^{2|x|} > 2^55, i.e. |x| > 19.06, so the result is bit-identical to `x.tanh()`.
+/// (sin d, cos d) for |d| ≤ 0.1 from the Taylor series to d⁹ and d¹⁰ (truncation below 3e-19).
 #[inline(always)]
-fn tanh_sat(x: f64) -> f64 {
-    if x.abs() >= 20.0 {
-        1.0_f64.copysign(x)
-    } else {
-        x.tanh()
-    }
+fn sin_cos_small(d: f64) -> (f64, f64) {
+    let d2 = d * d;
+    // Horner forms of d − d³/3! + … + d⁹/9! and 1 − d²/2! + … − d¹⁰/10!
+    let sd = d
+        * (1.0
+            + d2 * (-1.0 / 6.0
+                + d2 * (1.0 / 120.0 + d2 * (-1.0 / 5040.0 + d2 * (1.0 / 362_880.0)))));
+    let cd = 1.0
+        + d2 * (-0.5
+            + d2 * (1.0 / 24.0
+                + d2 * (-1.0 / 720.0 + d2 * (1.0 / 40_320.0 + d2 * (-1.0 / 3_628_800.0)))));
+    (sd, cd)
 }
 
 /// Rotates (sin a, cos a) to (sin(a + d), cos(a + d)). For |d| < 0.1 with Taylor series of sin d and
-/// cos d (truncation below 3e-19 — far under one ulp), else by evaluating `new_angle` directly.
-/// Replaces two libm calls per physics step by a dozen multiply-adds; the rounding drift over the
-/// ≤ 20 steps of a sample (re-synchronised every sample) is a few ulp.
+/// cos d (truncation below 3e-19 — far under one ulp; three terms fewer for |d| < 1e-3); for |d| < 0.8 from d/8 and three angle
+/// doublings (sin 2h = 2·sin h·cos h, cos 2h = 1 − 2·sin²h, ≈ 1 ulp each); else by evaluating
+/// `new_angle` directly. Replaces two libm calls per physics step by a dozen multiply-adds (the
+/// motor ripple angle 2|r|φ advances by up to 0.8 rad per step at |φ̇| ≈ 50 rad/s on the ankle); the
+/// rounding drift over the ≤ 20 steps of a sample (re-synchronised every sample) is a few ulp.
 #[inline(always)]
 fn rotate(sin_a: &mut f64, cos_a: &mut f64, d: f64, new_angle: f64) {
-    if d.abs() < 0.1 {
+    let a = d.abs();
+    let (sd, cd) = if a < 1e-3 {
+        // the joint angle's step (|ṡ|·dt < 1e-3 below 20 rad/s): to d⁵ and d⁶ (truncation < 2e-25)
         let d2 = d * d;
-        // Horner forms of d − d³/3! + … + d⁹/9! and 1 − d²/2! + … − d¹⁰/10!
-        let sd = d
-            * (1.0
-                + d2 * (-1.0 / 6.0
-                    + d2 * (1.0 / 120.0 + d2 * (-1.0 / 5040.0 + d2 * (1.0 / 362_880.0)))));
-        let cd = 1.0
-            + d2 * (-0.5
-                + d2 * (1.0 / 24.0
-                    + d2 * (-1.0 / 720.0 + d2 * (1.0 / 40_320.0 + d2 * (-1.0 / 3_628_800.0)))));
-        let (s, c) = (*sin_a, *cos_a);
-        *sin_a = s * cd + c * sd;
-        *cos_a = c * cd - s * sd;
+        let sd = d * d2.mul_add(d2.mul_add(1.0 / 120.0, -1.0 / 6.0), 1.0);
+        let cd = d2.mul_add(d2.mul_add(d2.mul_add(-1.0 / 720.0, 1.0 / 24.0), -0.5), 1.0);
+        (sd, cd)
+    } else if a < 0.1 {
+        sin_cos_small(d)
+    } else if a < 0.8 {
+        let (mut sh, mut ch) = sin_cos_small(d * 0.125);
+        for _ in 0..3 {
+            (sh, ch) = (2.0 * sh * ch, (-2.0 * sh).mul_add(sh, 1.0));
+        }
+        (sh, ch)
     } else {
         (*sin_a, *cos_a) = new_angle.sin_cos();
-    }
+        return;
+    };
+    let (s, c) = (*sin_a, *cos_a);
+    *sin_a = s * cd + c * sd;
+    *cos_a = c * cd - s * sd;
 }
 
 /// The virtual harmonic-drive joint.
@@ -261,12 +274,16 @@ impl<L: LinkDynamics> Plant<L> {
     /// Selects the integration path. `false` (the default) is the fast path: per 1 kHz sample the
     /// link's [`closed_form`](LinkDynamics::closed_form) is read once and sin/cos of the joint angle and
     /// of the motor ripple angle are evaluated once, then advanced through the physics steps by exact
-    /// rotation (Taylor sin/cos of the per-step angle increment, recomputed directly when an increment
-    /// exceeds 0.1 rad); `tanh` returns ±1 without a call where it is ±1 in f64 (|x| ≥ 20); the
-    /// σ1·exp(−(ṡ/v_s)²) factor is 0 where it is below 4e-18·σ1. `true` runs the reference: libm and
-    /// the link every physics step, exactly the equations as written. The two agree to rounding
-    /// (≈ 1e-15 relative per sample); see `tools/tests/sim_physics.rs` for the measured deviation on
-    /// long runs. Both are deterministic for a seed.
+    /// rotation (Taylor sin/cos of the per-step angle increment, with angle doubling up to 0.8 rad,
+    /// recomputed directly beyond); `exp`, `ln` (for the Stribeck power) and `tanh` are the inlined
+    /// [`fastmath`] kernels (≤ 1–2 ulp from libm, bounds in that module); the Stribeck term
+    /// exp(−|ṡ/v_s|^δ) is 0 once |ṡ/v_s|^δ ≥ 40 (below 4.3e-18·(F_s − F_c)) and the
+    /// σ1·exp(−(ṡ/v_s)²) factor is 0 where it is below 4e-18·σ1; sums on the step's dependency
+    /// chain are regrouped into FMAs. `true` runs the reference: libm and the link every physics
+    /// step, exactly the equations as written. The two agree to rounding (≈ 1e-15 relative per
+    /// sample; over 120 s of stick-slip the joint angles differ by ≤ 1e-9 rad, far below the
+    /// encoder's 2.4e-5 rad, see `tools/tests/sim_physics.rs`, which asserts ≤ 1e-6 rad). Both are
+    /// deterministic for a seed.
     pub fn set_reference_math(&mut self, reference: bool) {
         self.reference_math = reference;
     }
@@ -465,13 +482,50 @@ impl<L: LinkDynamics> Plant<L> {
     }
 
     /// The fast path of [`Plant::step`]: `substeps_per_sample` physics steps with the state in
-    /// registers, no link call and no `sin` per step when the link has a closed form (see
-    /// [`Plant::set_reference_math`] for what differs from [`Plant::substep`]: rounding only).
+    /// registers, no link call and no `sin` per step when the link has a closed form, and the
+    /// inlined [`fastmath`] kernels instead of libm (see [`Plant::set_reference_math`] for what
+    /// differs from [`Plant::substep`]).
     #[inline(never)]
     fn substeps_fast(&mut self, tc: &ThermalCoeffs, i_ref: f64, tau_ext: f64) -> Truth {
+        // One monomorphised loop per link kind: the closed-form link needs no call and no branch.
+        let (st, truth) = match self.link.closed_form() {
+            Some(cf) => {
+                let inv_il = 1.0 / cf.inertia_kgm2;
+                self.substeps_fast_with(tc, i_ref, tau_ext, |_s, _sd, sin_s, cos_s| {
+                    (
+                        cf.gravity_sin_nm * sin_s + cf.gravity_cos_nm * cos_s,
+                        inv_il,
+                        0.0,
+                    )
+                })
+            }
+            None => {
+                let link = &self.link;
+                self.substeps_fast_with(tc, i_ref, tau_ext, |s, sd, _sin_s, _cos_s| {
+                    (
+                        link.gravity_nm(s),
+                        1.0 / link.inertia_kgm2(s),
+                        link.velocity_torque_nm(s, sd),
+                    )
+                })
+            }
+        };
+        self.st = st;
+        truth
+    }
+
+    /// The loop of [`Plant::substeps_fast`]; `link(s, ṡ, sin s, cos s)` returns
+    /// (g(s) [Nm], 1/I_L(s) [1/(kg·m²)], c(s, ṡ) [Nm]).
+    #[inline(always)]
+    fn substeps_fast_with(
+        &self,
+        tc: &ThermalCoeffs,
+        i_ref: f64,
+        tau_ext: f64,
+        link: impl Fn(f64, f64, f64, f64) -> (f64, f64, f64),
+    ) -> (PlantState, Truth) {
         let p = &self.p;
         let dt = self.dt;
-        let cf = self.link.closed_form();
         let mut st = self.st;
         let two_r = 2.0 * self.r_abs;
         let ripple_m = p.e1 != 0.0;
@@ -487,15 +541,18 @@ impl<L: LinkDynamics> Plant<L> {
         // so every division on it costs its full latency; a multiply costs a quarter of that.
         let inv_eps_m = 1.0 / p.eps_m_rad_s;
         let inv_v_s = 1.0 / p.v_s_rad_s;
-        let inv_dt = 1.0 / dt;
+        let sigma1_per_dt0 = p.sigma1_nms_per_rad / dt;
         let inv_j_eq = 1.0 / self.j_eq;
         let inv_sigma0 = 1.0 / p.sigma0_nm_per_rad;
         let sigma0_dt = p.sigma0_nm_per_rad * dt;
         let dt_per_c_th = dt / self.c_th;
         let inv_r_th = 1.0 / p.r_th_k_per_w;
-        let inv_il_cf = cf.map(|cf| 1.0 / cf.inertia_kgm2);
+        let delta = p.stribeck_exponent;
+        let linear_stribeck = delta == 1.0;
+        let f_s_minus_c0 = tc.f_s - tc.f_c0;
+        let n = p.substeps_per_sample;
         let mut truth = Truth::default();
-        for _ in 0..p.substeps_per_sample {
+        for k in 0..n {
             let PlantState {
                 s_rad: s,
                 s_dot_rad_s: sd,
@@ -508,14 +565,25 @@ impl<L: LinkDynamics> Plant<L> {
             // flexspline
             let tau_t = self.spring_nm(phi - s) + p.d_t_nms_per_rad * (phid - sd);
             // motor-side friction (joint side)
-            let tau_fm = p.f_cm_nm * tanh_sat(phid * inv_eps_m) + tc.sigma2m * phid;
+            let tau_fm = p.f_cm_nm * fastmath::tanh(phid * inv_eps_m) + tc.sigma2m * phid;
             // output-side LuGre level g_ss (same expression as `g_ss_with`)
-            let fc = tc.f_c0 + tc.delta_f_c * tanh_sat(sd * 1e3);
+            let dfc = tc.delta_f_c * fastmath::tanh(sd * 1e3);
             let x = sd.abs() * inv_v_s;
-            let strib = if p.stribeck_exponent == 1.0 {
-                (-x).exp()
+            // exp(−x^δ) < 4.3e-18 once x^δ > 40: the Stribeck term is then dropped (error below
+            // 4.3e-18·(F_s − F_c) Nm, far under one ulp of g_ss), which skips ln and exp at speed
+            let strib = if linear_stribeck {
+                if x < 40.0 {
+                    fastmath::exp_in_range(-x)
+                } else {
+                    0.0
+                }
             } else {
-                (-x.powf(p.stribeck_exponent)).exp()
+                let xd = fastmath::powf(x, delta);
+                if xd < 40.0 {
+                    fastmath::exp_in_range(-xd)
+                } else {
+                    0.0
+                }
             };
             let mut ripple = 1.0;
             if ripple_m {
@@ -525,43 +593,37 @@ impl<L: LinkDynamics> Plant<L> {
                 // sin(s + p2)
                 ripple += p.e2 * (sin_s * self.cos_p2 + cos_s * self.sin_p2);
             }
-            let g_ss = (fc + (tc.f_s - fc) * strib) * ripple + p.mu_load * tau_t.abs();
+            // fc + (f_s − fc)·strib with fc = f_c0 + dfc
+            let level = (f_s_minus_c0 - dfc).mul_add(strib, tc.f_c0 + dfc);
+            let g_ss = level.mul_add(ripple, p.mu_load * tau_t.abs());
             // exact exponential LuGre update for frozen ṡ
             let a_dt = sigma0_dt * sd.abs() / g_ss;
             let z_new = if a_dt < 1e-12 {
                 z + sd * dt
             } else {
                 let z_ss = (g_ss * inv_sigma0).copysign(sd);
-                z_ss + (z - z_ss) * (-a_dt).exp()
+                (z - z_ss).mul_add(fastmath::exp(-a_dt), z_ss)
             };
-            let z_dot = (z_new - z) * inv_dt;
-            let sv = sd * inv_v_s;
-            let sv2 = sv * sv;
+            let sv2 = x * x;
             // exp(−40) = 4e-18: below that the damping term is far under one ulp of τ_Fj
-            let sigma1 = if sv2 < 40.0 {
-                p.sigma1_nms_per_rad * (-sv2).exp()
+            let sigma1_per_dt = if sv2 < 40.0 {
+                sigma1_per_dt0 * fastmath::exp_in_range(-sv2)
             } else {
                 0.0
             };
-            let tau_fj = p.sigma0_nm_per_rad * z_new + sigma1 * z_dot + tc.sigma2j * sd;
+            // σ0·z + σ1·ż + σ2j·ṡ with ż = (z_new − z)/dt, grouped so that z_new → τ_Fj is two FMAs
+            let tau_fj = sigma1_per_dt.mul_add(
+                z_new - z,
+                p.sigma0_nm_per_rad.mul_add(z_new, tc.sigma2j * sd),
+            );
             // link
-            let (g, inv_il, c) = match (cf, inv_il_cf) {
-                (Some(cf), Some(inv_il)) => (
-                    cf.gravity_sin_nm * sin_s + cf.gravity_cos_nm * cos_s,
-                    inv_il,
-                    0.0,
-                ),
-                _ => (
-                    self.link.gravity_nm(s),
-                    1.0 / self.link.inertia_kgm2(s),
-                    self.link.velocity_torque_nm(s, sd),
-                ),
-            };
-            let s_dd = (tau_t - tau_fj - g - c + tau_ext) * inv_il;
+            let (g, inv_il, c) = link(s, sd, sin_s, cos_s);
+            // everything but τ_Fj first: it is ready long before τ_Fj (the end of the chain)
+            let tau_rest = tau_t - g - c + tau_ext;
             let phi_dd = (drive_nm_per_a * i - tau_t - tau_fm) * inv_j_eq;
             // semi-implicit Euler: velocities first, then positions with the new velocities
             let phid_new = phid + phi_dd * dt;
-            let sd_new = sd + s_dd * dt;
+            let sd_new = (tau_rest - tau_fj).mul_add(inv_il * dt, sd);
             let heat_w = p.r_w_ohm * i * i + (tau_fm * phid).abs() + (tau_fj * sd).abs()
                 - (st.temperature_c - p.t_amb_c) * inv_r_th;
             st.phi_dot_rad_s = phid_new;
@@ -573,6 +635,22 @@ impl<L: LinkDynamics> Plant<L> {
             // current loop: exact first-order lag with the held reference
             st.i_a = i + (i_ref - i) * self.current_gain;
             st.time_s += dt;
+            if k + 1 == n {
+                // the truth of the sample is that of its last physics step
+                truth = Truth {
+                    tau_f_nm: tau_fm + tau_fj,
+                    tau_fm_nm: tau_fm,
+                    tau_fj_nm: tau_fj,
+                    tau_t_nm: tau_t,
+                    z_rad: z_new,
+                    phi_ddot_rad_s2: phi_dd,
+                    s_ddot_rad_s2: (tau_rest - tau_fj) * inv_il,
+                    gravity_nm: g,
+                    g_ss_nm: g_ss,
+                    state: st,
+                };
+                break;
+            }
             // advance sin/cos of the angles to the new positions
             rotate(&mut sin_s, &mut cos_s, st.s_rad - s, st.s_rad);
             if ripple_m {
@@ -583,21 +661,8 @@ impl<L: LinkDynamics> Plant<L> {
                     two_r * st.phi_rad + p.p1_rad,
                 );
             }
-            truth = Truth {
-                tau_f_nm: tau_fm + tau_fj,
-                tau_fm_nm: tau_fm,
-                tau_fj_nm: tau_fj,
-                tau_t_nm: tau_t,
-                z_rad: z_new,
-                phi_ddot_rad_s2: phi_dd,
-                s_ddot_rad_s2: s_dd,
-                gravity_nm: g,
-                g_ss_nm: g_ss,
-                state: st,
-            };
         }
-        self.st = st;
-        truth
+        (st, truth)
     }
 
     fn theta_quantised(&self) -> f64 {
