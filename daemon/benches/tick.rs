@@ -1,8 +1,10 @@
 //! Compute cost of one RT tick ([`frictiond::rt::compute`]: per joint model estimate + control law)
 //! for 1, 15 (ergoCub legs + torso) and 32 joints of paper-size PINNs — the ankle-roll network of
-//! the paper, `[Δθ ×20, ṡ ×20]` → 268 → 215 → 1 (paper-facts.md), random weights, f32 storage —
-//! and, for reference, the same joint counts with the SCV model. Numbers for the README; no
-//! asserts. Run: `cargo bench -p frictiond --bench tick`.
+//! the paper, `[Δθ ×20, ṡ ×20]` → 268 → 215 → 1 (paper-facts.md), random weights, stored as f32,
+//! f16 and bf16 (the `.fwt` storage dtypes: 32 distinct f32 networks are 8.9 MB of weights, more
+//! than this machine's caches; half precision halves the bytes streamed per tick) — and, for
+//! reference, the same joint counts with the SCV model. Numbers for the README; no asserts.
+//! Run: `cargo bench -p frictiond --bench tick` (filter e.g. `-- 'tick/pinn.*/32'`).
 
 use std::hint::black_box;
 
@@ -25,7 +27,7 @@ use rand_chacha::ChaCha8Rng;
 const R: f64 = -160.0;
 const H: usize = 20;
 
-fn paper_pinn(seed: u64) -> JointModel {
+fn paper_pinn(seed: u64, dtype: StorageDtype) -> JointModel {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let features = FeatureSpec {
         set: FeatureSet::DeltaThetaJointVel,
@@ -67,7 +69,7 @@ fn paper_pinn(seed: u64) -> JointModel {
                 filtering: SignalFiltering::Unknown,
             },
         },
-        dtype: StorageDtype::F32,
+        dtype,
         mlp: MlpWeights {
             norm: Normalisation::identity(sizes[0]),
             layers,
@@ -89,8 +91,9 @@ fn scv() -> JointModel {
     })
 }
 
-/// `n` joints with distinct models, the ergoCub law (clip, kfc, 2nd-order LPF, clamp).
-fn params(n: usize, pinn: bool) -> Box<Params> {
+/// `n` joints with distinct models (PINNs stored as `dtype`, or SCV when `None`), the ergoCub law
+/// (clip, kfc, 2nd-order LPF, clamp).
+fn params(n: usize, pinn: Option<StorageDtype>) -> Box<Params> {
     let gains = Gains {
         kt_nm_per_a: 0.0665,
         gear_ratio: R,
@@ -105,7 +108,10 @@ fn params(n: usize, pinn: bool) -> Box<Params> {
     let joints = (0..n)
         .map(|k| JointRt {
             index: k,
-            model: if pinn { paper_pinn(k as u64) } else { scv() },
+            model: match pinn {
+                Some(dtype) => paper_pinn(k as u64, dtype),
+                None => scv(),
+            },
             law: JointLaw::new(gains, Some(Butterworth::design(2, 30.0, 1000.0).unwrap())),
         })
         .collect();
@@ -152,7 +158,12 @@ fn tick(c: &mut Criterion) {
         request_stale: false,
     };
     let mut g = c.benchmark_group("tick");
-    for (label, pinn) in [("pinn_40x268x215", true), ("scv", false)] {
+    for (label, pinn) in [
+        ("pinn_40x268x215_f32", Some(StorageDtype::F32)),
+        ("pinn_40x268x215_f16", Some(StorageDtype::F16)),
+        ("pinn_40x268x215_bf16", Some(StorageDtype::Bf16)),
+        ("scv", None),
+    ] {
         for n in [1usize, 15, 32] {
             let mut p = params(n, pinn);
             let mut inp = inputs(n);
