@@ -2,10 +2,12 @@
 //!
 //! - label = SCV(ṡ) + N(0, σ): the true SCV scores RMSE ≈ σ against the label and 0 against the truth
 //!   column, "none" is far worse, and the sliding/stick split counts add up;
-//! - label = c·ṡ + d·Δθ (Δθ latched at the chunk start) + noise, and a PINN file whose network computes
-//!   exactly c·ṡ_newest + d·Δθ_newest: the PINN, run through the daemon's `PinnEstimator`, scores ≈ σ,
-//!   which it can only do if the history, the newest-sample index and the per-chunk Δθ latch are the
-//!   daemon's; with `hold_zero` the first H−1 rows of each chunk are skipped for every model;
+//! - label = c·ṡ + d·Δθ (Δθ latched once at the first row of the dataset, or at each chunk start) +
+//!   noise, and a PINN file whose network computes exactly c·ṡ_newest + d·Δθ_newest: the PINN, run
+//!   through the daemon's `PinnEstimator`, scores ≈ σ under the matching `delta_theta_offset` option,
+//!   which it can only do if the history, the newest-sample index and the Δθ latch are the daemon's
+//!   (and it is far off under the other latch); with `hold_zero` the first H−1 rows of each chunk are
+//!   skipped for every model;
 //! - the `frictl eval` binary writes the JSON report (the keys `frictl demo` reads) and valid PNG
 //!   figures, and `--test-only` keeps only the train report's test chunks.
 
@@ -21,6 +23,7 @@ use frictionless::units::GearRatio;
 use frictionless::weights::{ModelFile, ModelMeta, SignalFiltering, TrainingMeta};
 use frictl::eval::{EvalOptions, ModelSpec, evaluate};
 use frictl::ident::dataset::Dataset;
+use frictl::train::data::DeltaThetaOffset;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -31,8 +34,10 @@ const CHUNK_ROWS: usize = 4000;
 
 /// Chunks of sine motion (different amplitude/frequency per chunk) with a deflection Δ(t), so
 /// θ = r·s − Δθ with Δθ = 3·sin(…) + per-chunk offset [motor rad]. `label(ṡ, Δθ_rel)` gives the
-/// noiseless friction; the label column adds N(0, σ) noise, the truth column is noiseless.
-fn dataset(label: &dyn Fn(f64, f64) -> f64, seed: u64) -> Dataset {
+/// noiseless friction, Δθ_rel relative to the latch instant of `latch` (`Run`: the first row,
+/// `Chunk`: each chunk's first row); the label column adds N(0, σ) noise, the truth column is
+/// noiseless.
+fn dataset(label: &dyn Fn(f64, f64) -> f64, seed: u64, latch: DeltaThetaOffset) -> Dataset {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let noise = Normal::new(0.0, SIGMA).unwrap();
     let mut ds = Dataset::default();
@@ -45,7 +50,11 @@ fn dataset(label: &dyn Fn(f64, f64) -> f64, seed: u64) -> Dataset {
             let s = amp * (w * t).sin();
             let sdot = amp * w * (w * t).cos();
             let dth = dth0 + 3.0 * (2.0 * w * t + 0.3).sin();
-            let dth_rel = dth - (dth0 + 3.0 * 0.3f64.sin());
+            let dth_rel = match latch {
+                DeltaThetaOffset::Chunk => dth - (dth0 + 3.0 * 0.3f64.sin()),
+                DeltaThetaOffset::Run => dth - (-2.0 + 3.0 * 0.3f64.sin()),
+                DeltaThetaOffset::Fixed(_) => unreachable!("not used here"),
+            };
             let truth = label(sdot, dth_rel);
             ds.time_s.push(10.0 * f64::from(c) + t);
             ds.chunk.push(c);
@@ -133,7 +142,7 @@ fn scv() -> ScvParams {
 #[test]
 fn scv_label_scores_the_noise_and_none_is_far() {
     let m = scv();
-    let ds = dataset(&|v, _| m.torque_nm(v), 1);
+    let ds = dataset(&|v, _| m.torque_nm(v), 1, DeltaThetaOffset::Run);
     let models = [
         ModelSpec::none(),
         ModelSpec::static_model("scv", JointModel::Scv(m)),
@@ -160,33 +169,53 @@ fn scv_label_scores_the_noise_and_none_is_far() {
 }
 
 #[test]
-fn pinn_runs_like_the_daemon_with_a_per_chunk_latch() {
+fn pinn_runs_like_the_daemon_with_the_run_or_the_chunk_latch() {
     let lin = |v: f64, d: f64| f64::from(C_NM_S) * v + f64::from(D_NM) * d;
-    let ds = dataset(&lin, 2);
     let file = linear_pinn();
     let models = [
         ModelSpec::none(),
         ModelSpec::static_model("scv", JointModel::Scv(scv())),
         ModelSpec::pinn("pinn", &file, WarmupPolicy::HoldZero).unwrap(),
     ];
-    let ev = evaluate("synthetic", &ds, &models, None, &EvalOptions::default()).unwrap();
-    let p = ev.sums[2].metrics();
-    let scv_m = ev.sums[1].metrics();
-    println!("pinn {p:?}\nscv {scv_m:?}");
-    // hold_zero: the first H−1 rows of each of the 3 chunks are skipped, for every model.
-    assert_eq!(p.n_samples, ds.len() - 3 * (H - 1));
-    assert_eq!(scv_m.n_samples, p.n_samples);
-    let r = p.rmse_all.unwrap();
-    assert!((r - SIGMA).abs() < 0.15 * SIGMA, "PINN RMSE {r}");
-    assert!(p.rmse_true_all.unwrap() < 1e-3, "{p:?}");
-    assert!(scv_m.rmse_all.unwrap() > 3.0 * r);
-    // Warm-up rows predict 0 (the daemon's hold_zero), then the network's value.
-    let pred = &ev.predictions[2];
-    assert_eq!(pred[0], 0.0);
-    assert_eq!(pred[CHUNK_ROWS + H - 2], 0.0);
-    let k = CHUNK_ROWS + 100;
-    let want = ds.tau_f_true_nm.as_ref().unwrap()[k];
-    assert!((pred[k] - want).abs() < 1e-3 * (1.0 + want.abs()));
+    let opts = |latch| EvalOptions {
+        delta_theta_offset: latch,
+        ..EvalOptions::default()
+    };
+    assert_eq!(
+        EvalOptions::default().delta_theta_offset,
+        DeltaThetaOffset::Run
+    );
+    for (latch, other) in [
+        (DeltaThetaOffset::Run, DeltaThetaOffset::Chunk),
+        (DeltaThetaOffset::Chunk, DeltaThetaOffset::Run),
+    ] {
+        let ds = dataset(&lin, 2, latch);
+        let ev = evaluate("synthetic", &ds, &models, None, &opts(latch)).unwrap();
+        let p = ev.sums[2].metrics();
+        let scv_m = ev.sums[1].metrics();
+        println!("{latch}: pinn {p:?}\nscv {scv_m:?}");
+        // hold_zero: the first H−1 rows of each of the 3 chunks are skipped, for every model.
+        assert_eq!(p.n_samples, ds.len() - 3 * (H - 1));
+        assert_eq!(scv_m.n_samples, p.n_samples);
+        let r = p.rmse_all.unwrap();
+        assert!((r - SIGMA).abs() < 0.15 * SIGMA, "{latch}: PINN RMSE {r}");
+        assert!(p.rmse_true_all.unwrap() < 1e-3, "{latch}: {p:?}");
+        assert!(scv_m.rmse_all.unwrap() > 3.0 * r);
+        // Warm-up rows predict 0 (the daemon's hold_zero), then the network's value.
+        let pred = &ev.predictions[2];
+        assert_eq!(pred[0], 0.0);
+        assert_eq!(pred[CHUNK_ROWS + H - 2], 0.0);
+        let k = CHUNK_ROWS + 100;
+        let want = ds.tau_f_true_nm.as_ref().unwrap()[k];
+        assert!((pred[k] - want).abs() < 1e-3 * (1.0 + want.abs()));
+        // The other latch shifts chunks 1 and 2 by d·(5 motor rad per chunk): far off.
+        let wrong = evaluate("synthetic", &ds, &models, None, &opts(other)).unwrap();
+        let rw = wrong.sums[2].metrics().rmse_all.unwrap();
+        assert!(
+            rw > 5.0 * r,
+            "{latch} data under the {other} latch: {rw} vs {r}"
+        );
+    }
 }
 
 fn png_size(path: &Path) -> (u32, u32) {
@@ -207,7 +236,7 @@ fn cli_writes_report_and_figures_and_filters_test_chunks() {
     let dir = std::env::temp_dir().join(format!("eval_cli_{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let lin = |v: f64, d: f64| f64::from(C_NM_S) * v + f64::from(D_NM) * d;
-    let ds = dataset(&lin, 3);
+    let ds = dataset(&lin, 3, DeltaThetaOffset::Run);
     let csv = dir.join("heldout.csv");
     ds.write_csv(&csv).unwrap();
     let pinn = dir.join("m.fwt");

@@ -12,12 +12,12 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
 
-use frictionless::features::{FeatureSet, FeatureSpec, WarmupPolicy};
+use frictionless::features::{FeatureSet, FeatureSpec, JointSample, WarmupPolicy};
 use frictionless::model::{FrictionModel, PinnEstimator};
 use frictionless::weights::read_file;
 use frictl::ident::dataset::Dataset;
 use frictl::train::Predictor;
-use frictl::train::data::build_inputs;
+use frictl::train::data::{DeltaThetaOffset, build_inputs};
 use sha2::{Digest, Sha256};
 
 const EPOCH: &str = "1700000000";
@@ -184,7 +184,14 @@ fn model_loads_in_the_daemon_loader_and_reproduces_the_trainer_on_the_test_split
         .map(|k| k["chunk"].as_u64().unwrap() as u32)
         .collect();
     assert!(!test_chunks.is_empty(), "a test split exists");
-    let w = build_inputs(&ds, &spec, m.gear_ratio, WarmupPolicy::HoldZero).unwrap();
+    let w = build_inputs(
+        &ds,
+        &spec,
+        m.gear_ratio,
+        WarmupPolicy::HoldZero,
+        DeltaThetaOffset::Run,
+    )
+    .unwrap();
     let idx: Vec<usize> = (0..w.len())
         .filter(|&i| test_chunks.contains(&w.chunk[i]))
         .collect();
@@ -195,13 +202,27 @@ fn model_loads_in_the_daemon_loader_and_reproduces_the_trainer_on_the_test_split
     let x: Vec<f32> = idx.iter().flat_map(|&i| w.input(i).to_vec()).collect();
     let batched = Predictor::new(&file.mlp, 2).unwrap().predict(&x).unwrap();
 
-    // The daemon's path: one estimator, reset at each chunk start, one estimate per row.
+    // The daemon's path: one estimator, enabled (reset) at each chunk start with the Δθ offset the
+    // report lists for the dataset (a daemon configured with `delta_theta_offset_motor_rad`), one
+    // estimate per row. `reset` latches θ_off = θ − r·s of the sample it is given.
+    assert_eq!(report["delta_theta_offset"], "run");
+    let off = report["datasets"][0]["delta_theta_offset_motor_rad"]
+        .as_f64()
+        .expect("the run offset is reported");
+    assert!(
+        (off - (ds.theta_motor_rad[0] - m.gear_ratio.get() * ds.s_rad[0])).abs() < 1e-12,
+        "reported offset {off} is θ₀ − r·s₀ of the first row"
+    );
     let mut est = PinnEstimator::from_model_file(&file, WarmupPolicy::HoldZero).unwrap();
     let online: Vec<f64> = (0..ds.len())
         .map(|k| {
             let smp = ds.joint_sample(k);
             if k == 0 || ds.chunk[k] != ds.chunk[k - 1] {
-                est.reset(&smp);
+                est.reset(&JointSample {
+                    s_rad: 0.0,
+                    theta_motor_rad: off,
+                    ..smp
+                });
             }
             est.estimate(&smp)
         })

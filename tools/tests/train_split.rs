@@ -8,7 +8,7 @@ use std::process::{Command, Output};
 use std::sync::OnceLock;
 
 use frictionless::features::{FeatureSet, FeatureSpec, WarmupPolicy};
-use frictl::train::data::{ChunkKey, SplitSpec};
+use frictl::train::data::{ChunkKey, DeltaThetaOffset, SplitSpec};
 use frictl::train::pipeline::{self, Sources};
 
 fn frictl(args: &[&str]) -> Output {
@@ -124,7 +124,8 @@ fn no_chunk_in_two_sets_and_no_window_straddles_chunks() {
                 history: h,
                 temperature: false,
             };
-            let p = pipeline::prepare(&src, &scv, &split, &fs, warmup).unwrap();
+            let p =
+                pipeline::prepare(&src, &scv, &split, &fs, warmup, DeltaThetaOffset::Run).unwrap();
             for (set, chunks) in [
                 (&p.train, &split.train),
                 (&p.val, &split.val),

@@ -8,6 +8,7 @@ use anyhow::Context;
 use frictionless::features::WarmupPolicy;
 use frictl::eval::{self, EvalOptions, ModelSpec, plot};
 use frictl::ident::dataset::{Dataset, DatasetSidecar};
+use frictl::train::data::DeltaThetaOffset;
 
 /// PINN warm-up policy (as the daemon is configured).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -51,6 +52,10 @@ pub struct Args {
     /// PINN warm-up policy.
     #[arg(long, value_enum, default_value_t = Warmup::HoldZero)]
     pub warmup: Warmup,
+    /// Where a PINN's Δθ offset is latched: `run` (once per dataset), `chunk` (every chunk start) or a
+    /// fixed θ_off in motor rad — use the setting the PINN was trained with (its train report).
+    #[arg(long, default_value = "run", allow_hyphen_values = true)]
+    pub delta_theta_offset: DeltaThetaOffset,
     /// Chunk shown in the time-series and hysteresis figures (default: most sliding rows).
     #[arg(long)]
     pub plot_chunk: Option<u32>,
@@ -84,6 +89,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             Warmup::HoldZero => WarmupPolicy::HoldZero,
             Warmup::ZeroPad => WarmupPolicy::ZeroPad,
         },
+        delta_theta_offset: args.delta_theta_offset,
     };
     let mut models = vec![ModelSpec::none()];
     if let Some(p) = &args.cv {

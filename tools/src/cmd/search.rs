@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use frictionless::features::WarmupPolicy;
-use frictl::train::data::SplitSpec;
+use frictl::train::data::{DeltaThetaOffset, SplitSpec};
 use frictl::train::pipeline;
 use frictl::train::search::{SearchRun, SearchSettings, SearchSpace, run_search};
 
@@ -61,6 +61,10 @@ pub struct Args {
     /// Warm-up policy.
     #[arg(long, value_enum, default_value_t = Warmup::HoldZero)]
     pub warmup: Warmup,
+    /// Where the Δθ offset is latched: `run` (once per dataset), `chunk` (every chunk start) or a
+    /// fixed θ_off in motor rad (see `frictl train --help`).
+    #[arg(long, default_value = "run", allow_hyphen_values = true)]
+    pub delta_theta_offset: DeltaThetaOffset,
     /// Storage dtype of the models.
     #[arg(long, value_enum, default_value_t = Dtype::F32)]
     pub dtype: Dtype,
@@ -83,6 +87,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         features: args.features.into(),
         temperature: args.temperature,
         warmup: WarmupPolicy::from(args.warmup),
+        delta_theta_offset: args.delta_theta_offset,
         dtype: args.dtype.into(),
         patience: args.max_epochs_without_improvement,
         split: SplitSpec {

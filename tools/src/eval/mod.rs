@@ -5,7 +5,8 @@
 //!   `frictl fit … --json`, and PINNs from `.fwt` files;
 //! - [`predict`]: every model's τ̂_F for every row of a [`Dataset`], produced **the way the daemon
 //!   produces it**: one [`JointModel`] per chunk, `reset` at the chunk's first row (which latches the
-//!   Δθ offset, as the daemon does at enable and as `train::data::build_inputs` does), then
+//!   Δθ offset as [`EvalOptions::delta_theta_offset`] says — by default once per dataset, as
+//!   `train::data::build_inputs` does by default and as a daemon configured with that offset does), then
 //!   `estimate` row by row (a PINN goes through `frictionless::features::History` and the kernel
 //!   `Mlp`). Chunks run in parallel (rayon), each on its own copy of the model;
 //! - [`Metrics`] / [`evaluate`]: RMSE [Nm] against the label τ_F (and against the simulator's true
@@ -53,6 +54,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::ident::dataset::Dataset;
+use crate::train::data::DeltaThetaOffset;
 
 /// Report format tag.
 pub const REPORT_FORMAT: &str = "frictionless-eval-v1";
@@ -240,16 +242,17 @@ pub fn chunk_ranges(ds: &Dataset) -> Vec<(usize, usize)> {
     out
 }
 
-/// τ̂_F [Nm] of `model` for every row: chunk by chunk, reset at each chunk's first row, then one
-/// `estimate` per row in time order (warm-up rows of a `hold_zero` PINN give 0, as in the daemon).
-/// Chunks run in parallel, each on a clone of the model.
-pub fn predict(ds: &Dataset, model: &JointModel) -> Vec<f64> {
+/// τ̂_F [Nm] of `model` for every row: chunk by chunk, reset at each chunk's first row (a PINN's
+/// Δθ latched as `offset` says, like `train::data::build_inputs`), then one `estimate` per row in
+/// time order (warm-up rows of a `hold_zero` PINN give 0, as in the daemon). Chunks run in
+/// parallel, each on a clone of the model.
+pub fn predict(ds: &Dataset, model: &JointModel, offset: DeltaThetaOffset) -> Vec<f64> {
     let ranges = chunk_ranges(ds);
     let parts: Vec<Vec<f64>> = ranges
         .par_iter()
         .map(|&(a, b)| {
             let mut m = model.clone();
-            m.reset(&ds.joint_sample(a));
+            m.reset(&offset.latch_sample(ds, a));
             (a..b).map(|k| m.estimate(&ds.joint_sample(k))).collect()
         })
         .collect();
@@ -387,6 +390,8 @@ pub struct EvalOptions {
     pub v_sliding_rad_s: f64,
     /// PINN warm-up policy (as configured in the daemon).
     pub warmup: WarmupPolicy,
+    /// Where a PINN's Δθ offset is latched (as in training; default once per dataset).
+    pub delta_theta_offset: DeltaThetaOffset,
 }
 
 impl Default for EvalOptions {
@@ -394,6 +399,7 @@ impl Default for EvalOptions {
         Self {
             v_sliding_rad_s: 0.03,
             warmup: WarmupPolicy::HoldZero,
+            delta_theta_offset: DeltaThetaOffset::Run,
         }
     }
 }
@@ -430,7 +436,10 @@ pub fn evaluate(
             reason: "must be finite and >= 0",
         });
     }
-    let predictions: Vec<Vec<f64>> = models.iter().map(|m| predict(ds, &m.model)).collect();
+    let predictions: Vec<Vec<f64>> = models
+        .iter()
+        .map(|m| predict(ds, &m.model, opts.delta_theta_offset))
+        .collect();
     let mut mask: Vec<bool> = (0..ds.len())
         .map(|k| {
             ds.valid[k]

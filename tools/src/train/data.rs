@@ -4,12 +4,12 @@
 //! What it **is**:
 //! - [`build_inputs`]: every sample's input vector, produced by feeding the dataset's rows one by one
 //!   into a [`frictionless::features::History`] — the same code `frictiond` runs each tick through
-//!   `PinnEstimator::estimate` — so the offline and online inputs cannot differ. The Δθ offset is
-//!   latched as the daemon latches it: the daemon calls `History::reset(sample)` on the first sample of
-//!   a contiguous run of fresh states (enable edge, or after a stale gap), so here the history is reset
-//!   at the first row of every chunk (a chunk is one contiguous stream; chunks are separated by gaps or
-//!   protocol blocks). Δθ is therefore 0 at each chunk start, whereas the dataset column
-//!   `delta_theta_motor_rad` (latched once per run, the authors' convention) is **not** used.
+//!   `PinnEstimator::estimate` — so the offline and online inputs cannot differ. The history is
+//!   cleared at the first row of every chunk (a chunk is one contiguous stream; chunks are separated
+//!   by gaps or protocol blocks); the Δθ offset is latched there as [`DeltaThetaOffset`] says: by
+//!   default once per dataset at its first row (`Run`, the authors' once-per-file convention, equal to
+//!   the dataset column `delta_theta_motor_rad`), or at each chunk start (`Chunk`, what the daemon does
+//!   when it re-latches at every enable), or a fixed calibrated offset.
 //!   A row becomes a sample when it is `valid`, the history is ready under the [`WarmupPolicy`]
 //!   (`hold_zero`: H samples of the same chunk; `zero_pad`: ≥ 1, older slots 0) and every input value
 //!   and the label are finite. So no window ever straddles two chunks.
@@ -25,7 +25,7 @@ use std::collections::BTreeSet;
 use std::fmt;
 use std::str::FromStr;
 
-use frictionless::features::{FeatureError, FeatureSpec, History, WarmupPolicy};
+use frictionless::features::{FeatureError, FeatureSpec, History, JointSample, WarmupPolicy};
 use frictionless::friction::{ScvParams, StaticFriction};
 use frictionless::units::GearRatio;
 use rand::SeedableRng;
@@ -109,13 +109,95 @@ fn check_lengths(ds: &Dataset) -> Result<(), DataError> {
     }
 }
 
-/// Builds every sample's input vector through [`History`], resetting (and latching Δθ) at the first row
-/// of each chunk, as the daemon does at enable. See the module doc for which rows become samples.
+/// Where the Δθ offset θ_off (Δθ = r·s − (θ − θ_off), motor rad) is taken when windows are built.
+///
+/// Δθ is a deflection relative to the latch instant. Latched at a chunk start, Δθ = 0 there whatever
+/// torque the transmission holds (stiction wind-up left by the previous block, gravity), so the same
+/// Δθ means different friction torques in different chunks; latched once per recording it is the
+/// deflection relative to the (torque-free, for the virtual joints) start of the run in every chunk.
+/// The network can only read stiction from Δθ in the second case, which is why `Run` is the default
+/// (measured: see `frictl train --help`, `--delta-theta-offset`). The daemon must then be configured
+/// with the same offset (`[[joint]] delta_theta_offset_motor_rad`, the value in the train report),
+/// not re-latch at enable.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DeltaThetaOffset {
+    /// Latched once at the first row of each dataset (one recording), kept across its chunks: the
+    /// authors' convention (`theta -= theta[0] − s_motor[0]` once per file).
+    #[default]
+    Run,
+    /// Latched at the first row of every chunk (what the daemon does when it re-latches at each
+    /// enable).
+    Chunk,
+    /// A fixed, calibrated θ_off \[motor rad\] for every chunk (0: the absolute deflection of
+    /// encoders that read θ = r·φ).
+    Fixed(f64),
+}
+
+impl fmt::Display for DeltaThetaOffset {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Run => f.write_str("run"),
+            Self::Chunk => f.write_str("chunk"),
+            Self::Fixed(v) => write!(f, "{v}"),
+        }
+    }
+}
+
+impl FromStr for DeltaThetaOffset {
+    type Err = String;
+    /// `run`, `chunk` or a finite number (a fixed θ_off in motor rad).
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.trim() {
+            "run" => Ok(Self::Run),
+            "chunk" => Ok(Self::Chunk),
+            t => match t.parse::<f64>() {
+                Ok(v) if v.is_finite() => Ok(Self::Fixed(v)),
+                _ => Err(format!(
+                    "`{s}`: expected `run`, `chunk` or a finite θ_off in motor rad"
+                )),
+            },
+        }
+    }
+}
+
+impl DeltaThetaOffset {
+    /// The sample to pass to `History::reset` / `FrictionModel::reset` at the first row `k` of a
+    /// chunk of `ds` so that the latched offset follows this policy (`reset` latches
+    /// θ_off = θ − r·s of the sample it is given).
+    pub fn latch_sample(self, ds: &Dataset, k: usize) -> JointSample {
+        match self {
+            Self::Run => ds.joint_sample(0),
+            Self::Chunk => ds.joint_sample(k),
+            Self::Fixed(off) => JointSample {
+                s_rad: 0.0,
+                theta_motor_rad: off,
+                ..ds.joint_sample(k)
+            },
+        }
+    }
+
+    /// The θ_off \[motor rad\] this policy latches for a whole dataset, if it is one value
+    /// (`Run`: θ₀ − r·s₀ of the first row; `Fixed`: the value; `Chunk`: `None`).
+    pub fn offset_for(self, ds: &Dataset, gear_ratio: GearRatio) -> Option<f64> {
+        match self {
+            Self::Run if !ds.is_empty() => {
+                Some(ds.theta_motor_rad[0] - gear_ratio.get() * ds.s_rad[0])
+            }
+            Self::Fixed(v) => Some(v),
+            _ => None,
+        }
+    }
+}
+
+/// Builds every sample's input vector through [`History`], resetting the history at the first row of
+/// each chunk and latching Δθ there as `offset` says. See the module doc for which rows become samples.
 pub fn build_inputs(
     ds: &Dataset,
     spec: &FeatureSpec,
     gear_ratio: GearRatio,
     warmup: WarmupPolicy,
+    offset: DeltaThetaOffset,
 ) -> Result<Windows, DataError> {
     check_lengths(ds)?;
     let mut hist = History::new(*spec, gear_ratio)?;
@@ -132,7 +214,7 @@ pub fn build_inputs(
     for k in 0..ds.len() {
         let sample = ds.joint_sample(k);
         if k == 0 || ds.chunk[k] != ds.chunk[k - 1] {
-            hist.reset(&sample);
+            hist.reset(&offset.latch_sample(ds, k));
         }
         hist.push(&sample);
         if !ds.valid[k] || !hist.is_ready(warmup) {
@@ -557,7 +639,7 @@ mod tests {
     }
 
     #[test]
-    fn windows_by_hand_with_per_chunk_latch() {
+    fn windows_by_hand_for_each_delta_theta_latch() {
         let ds = toy_dataset();
         let r = -2.0;
         let spec = FeatureSpec {
@@ -566,30 +648,61 @@ mod tests {
             temperature: false,
         };
         let gr = GearRatio::new(r).unwrap();
-        let w = build_inputs(&ds, &spec, gr, WarmupPolicy::HoldZero).unwrap();
-        // Rows 2..6 and 8..12 have 3 predecessors-in-chunk (incl. themselves); row 2 is invalid.
-        assert_eq!(w.rows, vec![3, 4, 5, 8, 9, 10, 11]);
-        assert_eq!(w.chunk, vec![0, 0, 0, 1, 1, 1, 1]);
-        for (i, &row) in w.rows.iter().enumerate() {
-            let start = if row < 6 { 0 } else { 6 };
-            let off = ds.theta_motor_rad[start] - r * ds.s_rad[start];
-            let x = w.input(i);
-            for j in 0..3 {
-                let k = row + j - 2;
-                assert!(
-                    k >= start,
-                    "window of row {row} reaches into the previous chunk"
-                );
-                let dtheta = r * ds.s_rad[k] - (ds.theta_motor_rad[k] - off);
-                assert!(
-                    (x[j] as f64 - dtheta).abs() < 1e-5,
-                    "Δθ of row {row}, slot {j}"
-                );
-                assert!((x[3 + j] as f64 - ds.sdot_rad_s[k]).abs() < 1e-6);
+        let run_off = ds.theta_motor_rad[0] - r * ds.s_rad[0];
+        for latch in [
+            DeltaThetaOffset::Chunk,
+            DeltaThetaOffset::Run,
+            DeltaThetaOffset::Fixed(1.25),
+        ] {
+            let w = build_inputs(&ds, &spec, gr, WarmupPolicy::HoldZero, latch).unwrap();
+            // Rows 2..6 and 8..12 have 3 predecessors-in-chunk (incl. themselves); row 2 is invalid.
+            assert_eq!(w.rows, vec![3, 4, 5, 8, 9, 10, 11]);
+            assert_eq!(w.chunk, vec![0, 0, 0, 1, 1, 1, 1]);
+            for (i, &row) in w.rows.iter().enumerate() {
+                let start = if row < 6 { 0 } else { 6 };
+                let off = match latch {
+                    DeltaThetaOffset::Chunk => ds.theta_motor_rad[start] - r * ds.s_rad[start],
+                    DeltaThetaOffset::Run => run_off,
+                    DeltaThetaOffset::Fixed(v) => v,
+                };
+                let x = w.input(i);
+                for j in 0..3 {
+                    let k = row + j - 2;
+                    assert!(
+                        k >= start,
+                        "window of row {row} reaches into the previous chunk"
+                    );
+                    let dtheta = r * ds.s_rad[k] - (ds.theta_motor_rad[k] - off);
+                    assert!(
+                        (x[j] as f64 - dtheta).abs() < 1e-5,
+                        "{latch}: Δθ of row {row}, slot {j}"
+                    );
+                    assert!((x[3 + j] as f64 - ds.sdot_rad_s[k]).abs() < 1e-6);
+                }
             }
         }
+        assert_eq!(DeltaThetaOffset::Run.offset_for(&ds, gr), Some(run_off));
+        assert_eq!(DeltaThetaOffset::Chunk.offset_for(&ds, gr), None);
+        assert_eq!("run".parse::<DeltaThetaOffset>(), Ok(DeltaThetaOffset::Run));
+        assert_eq!(
+            "chunk".parse::<DeltaThetaOffset>(),
+            Ok(DeltaThetaOffset::Chunk)
+        );
+        assert_eq!(
+            "-0.5".parse::<DeltaThetaOffset>(),
+            Ok(DeltaThetaOffset::Fixed(-0.5))
+        );
+        assert!("inf".parse::<DeltaThetaOffset>().is_err());
+        assert!("runs".parse::<DeltaThetaOffset>().is_err());
         // Zero padding: samples from the first row of each chunk on, missing slots 0.
-        let z = build_inputs(&ds, &spec, gr, WarmupPolicy::ZeroPad).unwrap();
+        let z = build_inputs(
+            &ds,
+            &spec,
+            gr,
+            WarmupPolicy::ZeroPad,
+            DeltaThetaOffset::Chunk,
+        )
+        .unwrap();
         assert_eq!(z.rows, vec![0, 1, 3, 4, 5, 6, 7, 8, 9, 10, 11]);
         let first_of_chunk1 = z.rows.iter().position(|&r| r == 6).unwrap();
         let want = [0.0, 0.0, 0.0, 0.0, 0.0, ds.sdot_rad_s[6] as f32];
@@ -605,6 +718,7 @@ mod tests {
             },
             gr,
             WarmupPolicy::HoldZero,
+            DeltaThetaOffset::Chunk,
         )
         .unwrap();
         assert!(t.is_empty());
@@ -624,6 +738,7 @@ mod tests {
             &spec,
             GearRatio::new(1.0).unwrap(),
             WarmupPolicy::HoldZero,
+            DeltaThetaOffset::Run,
         )
         .unwrap();
         let scv = ScvParams {

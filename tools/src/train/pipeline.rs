@@ -26,10 +26,13 @@
 //! producer          "frictl <version>"
 //! model             path of the .fwt written ("" if none)
 //! joint, gear_ratio_signed, kt_nm_per_a, filtering ("causal" | "non_causal" | "unknown")
-//! datasets[]        {path, sha256 (hex), samples, chunks}
+//! datasets[]        {path, sha256 (hex), samples, chunks, delta_theta_offset_motor_rad}
 //! dataset_sha256    hex, as stored in the .fwt
 //! scv               {path, model ("Cv" | "Scv" | "ScvCode"), params {kc, ka, kv, ks, vs, alpha} (paper form)}
 //! features          {set, history, temperature};  n_inputs;  warmup ("hold_zero" | "zero_pad")
+//! delta_theta_offset "run" | "chunk" | {"fixed": θ_off}: where Δθ was latched (see
+//!                   `data::DeltaThetaOffset`); datasets[].delta_theta_offset_motor_rad is the value
+//!                   (null per chunk) to configure in the daemon
 //! config            {hidden[], dropout, lambda, lr, batch_size, epochs, seed, threads, patience, abort_loss}
 //! dtype             "f32" | "f16" | "bf16"
 //! split             {spec {val_frac, test_frac, seed, test_chunks}, train[], val[], test[] (each {dataset, chunk}),
@@ -58,7 +61,9 @@ use frictionless::weights::{
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use super::data::{self, ChunkKey, DataError, SetData, Split, SplitSpec, Windows};
+use super::data::{
+    self, ChunkKey, DataError, DeltaThetaOffset, SetData, Split, SplitSpec, Windows,
+};
 use super::{EpochReport, PredictError, Predictor, TrainConfig, TrainError, Trainer, rmse};
 use crate::ident::dataset::{Dataset, DatasetError, DatasetSidecar};
 
@@ -431,17 +436,18 @@ pub fn prepare(
     split: &Split,
     spec: &FeatureSpec,
     warmup: WarmupPolicy,
+    offset: DeltaThetaOffset,
 ) -> Result<Prepared, PipelineError> {
     let windows: Vec<Windows> = sources
         .list
         .iter()
         .map(|s| {
-            data::build_inputs(&s.data, spec, sources.gear_ratio, warmup).map_err(|source| {
-                PipelineError::Inputs {
+            data::build_inputs(&s.data, spec, sources.gear_ratio, warmup, offset).map_err(
+                |source| PipelineError::Inputs {
                     path: s.path.clone(),
                     source,
-                }
-            })
+                },
+            )
         })
         .collect::<Result<_, _>>()?;
     let pairs: Vec<(&Dataset, &Windows)> =
@@ -491,6 +497,8 @@ pub struct Job {
     pub spec: FeatureSpec,
     /// Warm-up policy (training samples and the daemon's behaviour at enable).
     pub warmup: WarmupPolicy,
+    /// Where the Δθ offset was latched when the inputs were built (recorded in the report).
+    pub delta_theta_offset: DeltaThetaOffset,
     /// Hyper-parameters.
     pub config: TrainConfig,
     /// Storage precision of the `.fwt`.
@@ -525,6 +533,10 @@ pub struct DatasetInfo {
     pub samples: usize,
     /// Sidecar `chunks`.
     pub chunks: usize,
+    /// The Δθ offset θ_off \[motor rad\] the inputs of this dataset were built with (`None` when
+    /// latched per chunk): the value for the daemon's `delta_theta_offset_motor_rad`.
+    #[serde(default)]
+    pub delta_theta_offset_motor_rad: Option<f64>,
 }
 
 /// The split in the report.
@@ -588,6 +600,9 @@ pub struct TrainReport {
     pub n_inputs: usize,
     /// Warm-up policy.
     pub warmup: WarmupPolicy,
+    /// Where the Δθ offset was latched (`run`, `chunk` or `{"fixed": θ_off}`).
+    #[serde(default = "chunk_latch")]
+    pub delta_theta_offset: DeltaThetaOffset,
     /// Hyper-parameters.
     pub config: TrainConfig,
     /// Storage dtype.
@@ -619,6 +634,11 @@ pub struct Trained {
     pub model: ModelFile,
     /// The report (`model` field empty until [`write_outputs`]).
     pub report: TrainReport,
+}
+
+/// Reports written before the option existed latched Δθ at every chunk start.
+fn chunk_latch() -> DeltaThetaOffset {
+    DeltaThetaOffset::Chunk
 }
 
 /// The prior as the `.fwt` can store it: the file requires finite values, so the code form's
@@ -792,6 +812,9 @@ pub fn train_model(
                 sha256: hex(&s.sha256),
                 samples: s.data.len(),
                 chunks: s.sidecar.chunks,
+                delta_theta_offset_motor_rad: job
+                    .delta_theta_offset
+                    .offset_for(&s.data, sources.gear_ratio),
             })
             .collect(),
         dataset_sha256: hex(&sources.dataset_sha256),
@@ -803,6 +826,7 @@ pub fn train_model(
         features: job.spec,
         n_inputs: job.spec.n_inputs(),
         warmup: job.warmup,
+        delta_theta_offset: job.delta_theta_offset,
         config: trainer.config().clone(),
         dtype: job.dtype,
         split: SplitReport {

@@ -31,7 +31,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::TrainConfig;
-use super::data::{Split, SplitSpec};
+use super::data::{DeltaThetaOffset, Split, SplitSpec};
 use super::pipeline::{self, Job, PipelineError, ScvPrior, Sources};
 use super::rng;
 
@@ -131,6 +131,11 @@ pub struct TrialResult {
     pub model: Option<String>,
 }
 
+/// Searches saved before the Δθ-offset option latched at every chunk start.
+fn chunk_latch() -> DeltaThetaOffset {
+    DeltaThetaOffset::Chunk
+}
+
 /// Everything a search needs besides the data.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SearchSettings {
@@ -146,6 +151,9 @@ pub struct SearchSettings {
     pub temperature: bool,
     /// Warm-up policy.
     pub warmup: WarmupPolicy,
+    /// Where Δθ is latched (searches saved before this option latched per chunk).
+    #[serde(default = "chunk_latch")]
+    pub delta_theta_offset: DeltaThetaOffset,
     /// Storage dtype.
     pub dtype: StorageDtype,
     /// Early stopping patience.
@@ -354,6 +362,7 @@ fn run_trial(
     let job = Job {
         spec,
         warmup: settings.warmup,
+        delta_theta_offset: settings.delta_theta_offset,
         config: TrainConfig {
             hidden: params.hidden.clone(),
             dropout: params.dropout,
@@ -372,7 +381,14 @@ fn run_trial(
         resume: false,
     };
     let result = (|| -> Result<pipeline::Trained, PipelineError> {
-        let prepared = pipeline::prepare(sources, scv, split, &spec, settings.warmup)?;
+        let prepared = pipeline::prepare(
+            sources,
+            scv,
+            split,
+            &spec,
+            settings.warmup,
+            settings.delta_theta_offset,
+        )?;
         let mut trained = pipeline::train_model(
             sources,
             scv,
