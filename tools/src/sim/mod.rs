@@ -10,8 +10,8 @@
 //!   emulation and the true friction as diagnostics;
 //! - [`profile`]: open-loop current profiles for `frictl sim run`.
 //!
-//! What it is not: the excitation protocol or any controller ([`crate::acquire`]), and not yet an
-//! iceoryx2 plant process (`frictl sim serve` comes after the shared-memory ABI).
+//! What it is not: the excitation protocol or any controller ([`crate::acquire`]), and not the
+//! plant process over shared memory or CAN (`frictl sim serve`, [`crate::serve`]).
 
 pub mod fastmath;
 pub mod link;
