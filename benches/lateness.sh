@@ -23,7 +23,10 @@
 # Prints p50 / p99 / p99.9 / max [µs] of both side by side. No pass/fail: numbers for the README.
 #
 # Environment: LATENESS_RT_CPU (1), LATENESS_PLANT_CPU (0), LATENESS_PRIO (80),
-# LATENESS_ORDER=cyclictest-first to swap the order (load drift shows up as an order effect).
+# LATENESS_ORDER=cyclictest-first to swap the order (load drift shows up as an order effect),
+# LATENESS_CONFIG (config/bench_two_joint.toml; its [backend] and [loop] are replaced) with
+# LATENESS_JOINTS (2) joints published by the plant: e.g. LATENESS_CONFIG=config/stress32.toml
+# LATENESS_JOINTS=32 for the 32-PINN tick.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SECS="${1:-${LATENESS_SECONDS:-60}}"
@@ -32,6 +35,8 @@ RT_CPU="${LATENESS_RT_CPU:-1}"
 PLANT_CPU="${LATENESS_PLANT_CPU:-0}"
 PRIO="${LATENESS_PRIO:-80}"
 ORDER="${LATENESS_ORDER:-frictiond-first}"
+CONFIG="${LATENESS_CONFIG:-config/bench_two_joint.toml}"
+JOINTS="${LATENESS_JOINTS:-2}"
 
 if ! command -v cyclictest >/dev/null; then
     echo "installing rt-tests (cyclictest) with apt-get" >&2
@@ -76,8 +81,14 @@ cleanup() {
 trap cleanup EXIT
 PREFIX="fld_lateness_$$"
 mkdir -p "$WORK/iox"
-# The shared two-joint fixture up to its per-run marker, then this run's [backend] and [loop].
-sed '/^# ---- per-run sections/,$d' config/bench_two_joint.toml >"$WORK/frictiond.toml"
+# The config's [safety] and joints (its own [backend] and [loop] dropped, relative model paths made
+# absolute), then this run's [backend] and [loop].
+CFG_DIR=$(cd "$(dirname "$CONFIG")" && pwd)
+awk -v dir="$CFG_DIR" '
+    /^[ \t]*\[/ { skip = ($0 ~ /^[ \t]*\[(loop|backend)\][ \t]*(#.*)?$/) }
+    skip { next }
+    /^[ \t]*model[ \t]*=[ \t]*"[^\/]/ { sub(/"/, "\"" dir "/") }
+    { print }' "$CONFIG" >"$WORK/frictiond.toml"
 cat >>"$WORK/frictiond.toml" <<TOML
 [backend]
 kind = "shm"
@@ -95,7 +106,7 @@ ready_after_ticks = 100
 TOML
 
 start_plant() {
-    FLD_PLANT_PREFIX="$PREFIX" FLD_PLANT_ROOT="$WORK/iox" FLD_PLANT_SECONDS="$((SECS + 5))" \
+    FLD_PLANT_PREFIX="$PREFIX" FLD_PLANT_ROOT="$WORK/iox" FLD_PLANT_SECONDS="$((SECS + 5))" FLD_PLANT_JOINTS="$JOINTS" \
         taskset -c "$PLANT_CPU" "$PLANT" 2>/dev/null &
     PLANT_PID=$!
 }
@@ -124,7 +135,7 @@ get() { sed -n "s/^$1=//p" "$WORK/report.txt"; }
 us() { awk -v x="$1" 'BEGIN { printf "%.1f", x / 1000 }'; }
 
 run_frictiond() {
-    echo "frictiond: ${SECS} s, clock trigger, 1 kHz, $SCHED on CPU $RT_CPU, plant on CPU $PLANT_CPU, $QOS, load average $(cut -d' ' -f1-3 /proc/loadavg)" >&2
+    echo "frictiond: ${SECS} s, $CONFIG ($JOINTS joints fed), clock trigger, 1 kHz, $SCHED on CPU $RT_CPU, plant on CPU $PLANT_CPU, $QOS, load average $(cut -d' ' -f1-3 /proc/loadavg)" >&2
     start_plant
     FRICTIOND_LATENCY_REPORT="$WORK/report.txt" RUST_LOG=warn \
         taskset -c "$PLANT_CPU" "$TARGET/release/frictiond" --config "$WORK/frictiond.toml" &

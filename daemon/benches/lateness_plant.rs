@@ -3,7 +3,8 @@
 //! daemon under measurement runs its full compute path. Not a simulator (that is `frictl sim`).
 //!
 //! Environment: `FLD_PLANT_PREFIX`, `FLD_PLANT_ROOT` (iceoryx2 service prefix and root path, as in
-//! the daemon's `[backend]`), `FLD_PLANT_SECONDS` (default 10). Without `FLD_PLANT_PREFIX` (e.g.
+//! the daemon's `[backend]`), `FLD_PLANT_SECONDS` (default 10), `FLD_PLANT_JOINTS` (default 2; 32 for
+//! `config/stress32.toml`). Without `FLD_PLANT_PREFIX` (e.g.
 //! `cargo bench` over every bench) it does nothing. SIGTERM ends it cleanly (ports dropped, no stale
 //! shared-memory files).
 
@@ -31,15 +32,24 @@ fn main() {
     for sig in [signal_hook::consts::SIGTERM, signal_hook::consts::SIGINT] {
         signal_hook::flag::register(sig, stop.clone()).expect("signal handler");
     }
+    let n_joints: usize = std::env::var("FLD_PLANT_JOINTS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(2)
+        .clamp(1, 64);
     let cfg = IpcConfig::new(root.as_deref().map(Path::new), &prefix);
     let ipc = Ipc::open(&cfg, "lateness_plant").expect("iceoryx2 node");
     let states = ipc.joint_states().unwrap().outbox().unwrap();
     let request = ipc.torque_request().unwrap().outbox().unwrap();
     let mut js = JointStates::zeroed();
-    js.n_joints = 2;
+    js.n_joints = n_joints as u32;
     let mut rq = TorqueRequest::zeroed();
-    rq.n_joints = 2;
-    rq.enable_mask = 0b11;
+    rq.n_joints = n_joints as u32;
+    rq.enable_mask = if n_joints == 64 {
+        u64::MAX
+    } else {
+        (1u64 << n_joints) - 1
+    };
     let period = 1_000_000u64;
     let start = monotonic_ns();
     let end = start + (seconds * 1e9) as u64;
@@ -57,7 +67,7 @@ fn main() {
         ) {}
         k += 1;
         let t = k as f64 * 1e-3;
-        for j in 0..2 {
+        for j in 0..n_joints {
             js.s_rad[j] = 0.3 * (2.0 * t).sin();
             js.sdot_rad_s[j] = 0.6 * (2.0 * t).cos();
             js.theta_motor_rad[j] = -100.0 * js.s_rad[j];
