@@ -38,7 +38,7 @@ fn script(k: u64) -> ([f64; 3], [f64; 3]) {
 #[test]
 fn commands_follow_the_law_one_per_state_with_matching_state_seq() {
     let env = TestEnv::new("lsdet");
-    let cfg = env.write_config(&lockstep_config(true, 10_000, 10));
+    let cfg = env.write_config(&lockstep_config(true, NEVER_MS, 10));
     let mut d = Daemon::start(&cfg, &[]);
     let mut plant = Plant::open(&env.ipc, "plant");
     plant.wait_for_daemon(T);
@@ -91,41 +91,72 @@ fn commands_follow_the_law_one_per_state_with_matching_state_seq() {
     assert!(st.success(), "{log}");
 }
 
+/// Long enough that no tick can run on the lockstep timeout while a test drives the loop, whatever
+/// the load (a timeout tick answers the newest state, flagged stale, and would look like a tick
+/// released without its request). The timeout path has its own test with a short timeout.
+const NEVER_MS: u64 = 3_600_000;
+
 #[test]
 fn with_wait_request_no_command_until_the_answering_request_arrives() {
     let env = TestEnv::new("lswait");
-    let cfg = env.write_config(&lockstep_config(true, 10_000, 10));
-    let _d = Daemon::start(&cfg, &[]);
+    let cfg = env.write_config(&lockstep_config(true, NEVER_MS, 10));
+    let mut d = Daemon::start(&cfg, &[]);
     let mut plant = Plant::open(&env.ipc, "plant");
     plant.wait_for_daemon(T);
+    // On failure: stop the daemon and show its log next to the message.
+    let outcome = wait_request_rounds(&mut plant);
+    d.signal(libc::SIGTERM);
+    let (st, log) = d.wait_exit(T);
+    if let Err(e) = outcome {
+        panic!("{e}\n--- frictiond log ---\n{log}");
+    }
+    assert!(st.success(), "{log}");
+}
+
+/// The body of [`with_wait_request_no_command_until_the_answering_request_arrives`]: `Err` names the
+/// round, the state and the offending command (with its flags: `FLAG_STALE` would mean a timeout
+/// tick).
+fn wait_request_rounds(plant: &mut Plant) -> Result<(), String> {
     let (js, rq) = inputs([1.0, 1.0, 1.0], [0.2, 0.2, 0.2]);
     // Prime: one complete step.
     let k = plant.publish_state(&js);
     plant.publish_request(&rq, k);
-    assert_eq!(plant.command_for(k, T).expect("first command").state_seq, k);
+    let c = plant.command_for(k, T).ok_or("no first command")?;
+    if c.state_seq != k {
+        return Err(format!("first command answers {} not {k}", c.state_seq));
+    }
     for round in 0..5 {
         let k = plant.publish_state(&js);
         // No request yet: nothing answers state k.
-        assert!(
-            plant.command_for(k, Duration::from_millis(200)).is_none(),
-            "round {round}: a command for state {k} came before its request"
-        );
+        if let Some(c) = plant.command_for(k, Duration::from_millis(200)) {
+            return Err(format!(
+                "round {round}: a command for state {k} came before its request: {c:?}"
+            ));
+        }
         // A request answering an older state does not release the tick either.
         plant.publish_request(&rq, k - 1);
-        let early = plant.command_for(k, Duration::from_millis(200));
-        assert!(
-            early.is_none(),
-            "round {round}: a request for state {} released state {k}: {early:?}",
-            k - 1
-        );
-        // The answering request does, with the request's torques.
+        if let Some(c) = plant.command_for(k, Duration::from_millis(200)) {
+            return Err(format!(
+                "round {round}: a request for state {} released state {k}: {c:?}",
+                k - 1
+            ));
+        }
+        // The answering request does, with the request's torques, fresh (not a timeout tick).
         let (_, rq2) = inputs([2.0, -1.0, 0.5], [0.2, 0.2, 0.2]);
         plant.publish_request(&rq2, k);
-        let c = plant.command_for(k, T).expect("command after the request");
-        assert_eq!(c.state_seq, k);
+        let c = plant
+            .command_for(k, T)
+            .ok_or_else(|| format!("round {round}: no command after the request for {k}"))?;
         let want = expected([2.0, -1.0, 0.5], [0.2, 0.2, 0.2]);
-        assert!((0..3).all(|j| close(c.i_ref_a[j], want[j])), "{c:?}");
+        if c.state_seq != k
+            || (0..3).any(|j| !close(c.i_ref_a[j], want[j]) || c.flags[j] & FLAG_STALE != 0)
+        {
+            return Err(format!(
+                "round {round}: command for {k} (want i_ref {want:?}, not stale): {c:?}"
+            ));
+        }
     }
+    Ok(())
 }
 
 #[test]
@@ -157,7 +188,7 @@ fn throughput_and_zero_allocations_over_20k_lockstep_ticks() {
     const READY_AFTER: u64 = 1_000;
     const TICKS: u64 = 20_000;
     let env = TestEnv::new("lsthru");
-    let cfg = env.write_config(&lockstep_config(true, 10_000, READY_AFTER));
+    let cfg = env.write_config(&lockstep_config(true, NEVER_MS, READY_AFTER));
     let report = env.dir.join("alloc.txt");
     let mut d = Daemon::start(
         &cfg,
