@@ -26,7 +26,7 @@
 # LATENESS_ORDER=cyclictest-first to swap the order (load drift shows up as an order effect),
 # LATENESS_CONFIG (config/bench_two_joint.toml; its [backend] and [loop] are replaced) with
 # LATENESS_JOINTS (2) joints published by the plant: e.g. LATENESS_CONFIG=config/stress32.toml
-# LATENESS_JOINTS=32 for the 32-PINN tick.
+# LATENESS_JOINTS=32 for the 32-PINN tick, LATENESS_PM_QOS=off (neither holds cpu_dma_latency).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SECS="${1:-${LATENESS_SECONDS:-60}}"
@@ -57,14 +57,17 @@ if [ "$(id -u)" = 0 ] || [ "$RTPRIO" = unlimited ] || [ "$RTPRIO" -ge "$PRIO" ];
 else
     PRIO_TOML=""; PRIO_CT=""; SCHED="SCHED_OTHER (no RT priority permitted)"
 fi
-# PM QoS: both hold cpu_dma_latency = 0 when the device is writable; otherwise neither does.
-if [ -w /dev/cpu_dma_latency ]; then
+# PM QoS: both hold cpu_dma_latency = 0 when the device is writable (LATENESS_PM_QOS=off: neither
+# does, for the A/B of deep idle states); otherwise neither does.
+if [ "${LATENESS_PM_QOS:-on}" != off ] && [ -w /dev/cpu_dma_latency ]; then
     QOS_TOML="cpu_dma_latency_us = 0"; QOS_CT=""; QOS="cpu_dma_latency=0 held"
 else
-    QOS_TOML=""; QOS_CT="--laptop"; QOS="cpu_dma_latency not writable: not held by either"
+    QOS_TOML=""; QOS_CT="--laptop"; QOS="cpu_dma_latency not held by either (LATENESS_PM_QOS=${LATENESS_PM_QOS:-on}, writable: $([ -w /dev/cpu_dma_latency ] && echo yes || echo no))"
 fi
 
 cargo build --release -q -p frictiond --bin frictiond
+# From here on this script (and the sleeps, ps, awk it runs) stays on the plant CPU.
+taskset -pc "$PLANT_CPU" $$ >/dev/null
 PLANT_LOG=$(mktemp)
 cargo bench -q -p frictiond --bench lateness_plant --no-run 2>"$PLANT_LOG" || { cat "$PLANT_LOG" >&2; exit 1; }
 PLANT=$(ls -t "$TARGET"/release/deps/lateness_plant-* | grep -v '\.d$' | head -1)
@@ -119,8 +122,9 @@ stop_plant() {
 # Every thread of process $1: tid, name, policy, RT priority, affinity, CPU it last ran on.
 threads() {
     local pid=$1 tid line aff
-    ps -L -o tid=,comm=,cls=,rtprio=,psr= -p "$pid" | while read -r tid line; do
-        aff=$(taskset -pc "$tid" 2>/dev/null | sed 's/.*: //')
+    # Pinned to the plant CPU like everything else, so the listing does not disturb the RT CPU.
+    taskset -c "$PLANT_CPU" ps -L -o tid=,comm=,cls=,rtprio=,psr= -p "$pid" | while read -r tid line; do
+        aff=$(taskset -c "$PLANT_CPU" taskset -pc "$tid" 2>/dev/null | sed 's/.*: //')
         printf "    tid %-7s %-16s cls/rtprio/cpu-now: %-14s affinity: %s\n" "$tid" \
             "$(echo "$line" | awk '{print $1}')" "$(echo "$line" | awk '{print $2"/"$3"/"$4}')" "$aff"
     done
