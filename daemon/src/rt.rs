@@ -1138,6 +1138,21 @@ kv = 0.0
     }
 
     #[test]
+    fn cpu_dma_latency_is_held_and_read_back_or_the_refusal_is_an_error() {
+        match hold_cpu_dma_latency(0) {
+            // While our request is open the effective bound is the minimum of all: 0.
+            Ok((_file, got_us)) => assert_eq!(got_us, 0),
+            Err(e) => assert!(
+                matches!(
+                    e.kind(),
+                    std::io::ErrorKind::PermissionDenied | std::io::ErrorKind::NotFound
+                ),
+                "{e}"
+            ),
+        }
+    }
+
+    #[test]
     fn thread_usage_sees_this_threads_page_faults_and_sleeps() {
         let before = ThreadUsage::now();
         // A fresh mapping (mmap at this size): every first touch of a page faults.
