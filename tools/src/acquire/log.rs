@@ -156,8 +156,10 @@ pub fn round_significant(v: f64) -> f64 {
     }
 }
 
-/// Bytes buffered inside [`CsvLog`] before they are handed to the writer.
-const CSV_CHUNK_BYTES: usize = 1 << 16;
+/// Bytes buffered inside [`CsvLog`] before they are handed to the writer: 1 MiB, at least the
+/// `BufWriter` capacity `frictl acquire` and `frictl sim run` use, so that a `BufWriter` passes the
+/// chunk straight to the file instead of copying it (the copy was ≈ 5 % of `frictl acquire`).
+const CSV_CHUNK_BYTES: usize = 1 << 20;
 
 /// CSV writer for [`LogRow`]s.
 ///
