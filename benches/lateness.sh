@@ -3,7 +3,9 @@
 #
 #   bash benches/lateness.sh [SECONDS]        (or env LATENESS_SECONDS; default 60)
 #
-# Both measurements run under the SAME conditions, one after the other, each for SECONDS:
+# Both measurements run under the SAME conditions, interleaved in LATENESS_CHUNKS (3) chunks each
+# (frictiond, cyclictest, frictiond, …; SECONDS in total each, so load drift hits both alike), and
+# both quantile sets come from the merged 1 µs histograms computed by one awk function:
 #   - the same load: a 1 kHz plant process (daemon/benches/lateness_plant.rs) publishing joint states
 #     and torque requests, pinned to the "plant CPU" (default 0), SCHED_OTHER;
 #   - the measuring thread pinned to the "RT CPU" (default 1) with SCHED_FIFO 80 and mlockall when
@@ -21,9 +23,11 @@
 # While each runs, the script prints every thread of the measured process with its policy, priority,
 # affinity and the CPU it is on (from ps/taskset, i.e. /proc), and whether the PM QoS was held.
 # Prints p50 / p99 / p99.9 / max [µs] of both side by side. No pass/fail: numbers for the README.
+# Each frictiond chunk is a fresh process (its first ticks after start-up included), like each
+# cyclictest chunk.
 #
 # Environment: LATENESS_RT_CPU (1), LATENESS_PLANT_CPU (0), LATENESS_PRIO (80),
-# LATENESS_ORDER=cyclictest-first to swap the order (load drift shows up as an order effect),
+# LATENESS_ORDER=cyclictest-first to swap the order within each chunk pair, LATENESS_CHUNKS (3),
 # LATENESS_CONFIG (config/bench_two_joint.toml; its [backend] and [loop] are replaced) with
 # LATENESS_JOINTS (2) joints published by the plant: e.g. LATENESS_CONFIG=config/stress32.toml
 # LATENESS_JOINTS=32 for the 32-PINN tick, LATENESS_PM_QOS=off (neither holds cpu_dma_latency).
@@ -35,6 +39,7 @@ RT_CPU="${LATENESS_RT_CPU:-1}"
 PLANT_CPU="${LATENESS_PLANT_CPU:-0}"
 PRIO="${LATENESS_PRIO:-80}"
 ORDER="${LATENESS_ORDER:-frictiond-first}"
+CHUNKS="${LATENESS_CHUNKS:-3}"
 CONFIG="${LATENESS_CONFIG:-config/bench_two_joint.toml}"
 JOINTS="${LATENESS_JOINTS:-2}"
 
@@ -134,12 +139,15 @@ qos_held() {
     if ls -l "/proc/$1/fd" 2>/dev/null | grep -q cpu_dma_latency; then echo yes; else echo no; fi
 }
 
-D_ROW="" C_ROW="" D_THREADS="" C_THREADS="" D_EXTRA=""
+D_THREADS="" C_THREADS="" D_EXTRA="" D_MISSED=0
+: >"$WORK/d_hist"; : >"$WORK/c_hist"   # merged histograms: "<µs bucket> <count>" lines
+D_OV=0; D_MAX_US=0; C_OV=0; C_MAX_US=0
 get() { sed -n "s/^$1=//p" "$WORK/report.txt"; }
 us() { awk -v x="$1" 'BEGIN { printf "%.1f", x / 1000 }'; }
+fmax() { awk -v a="$1" -v b="$2" 'BEGIN { print (a > b ? a : b) }'; }
 
-run_frictiond() {
-    echo "frictiond: ${SECS} s, $CONFIG ($JOINTS joints fed), clock trigger, 1 kHz, $SCHED on CPU $RT_CPU, plant on CPU $PLANT_CPU, $QOS, load average $(cut -d' ' -f1-3 /proc/loadavg)" >&2
+run_frictiond() {  # $1 = seconds
+    echo "frictiond: ${1} s, $CONFIG ($JOINTS joints fed), clock trigger, 1 kHz, $SCHED on CPU $RT_CPU, plant on CPU $PLANT_CPU, $QOS, load average $(cut -d' ' -f1-3 /proc/loadavg)" >&2
     start_plant
     FRICTIOND_LATENCY_REPORT="$WORK/report.txt" RUST_LOG=warn \
         taskset -c "$PLANT_CPU" "$TARGET/release/frictiond" --config "$WORK/frictiond.toml" &
@@ -147,26 +155,27 @@ run_frictiond() {
     sleep 1
     D_THREADS="$(threads "$MEASURED_PID")
     PM QoS fd held: $(qos_held "$MEASURED_PID")"
-    sleep "$((SECS > 1 ? SECS - 1 : 0))"
+    sleep "$(($1 > 1 ? $1 - 1 : 0))"
     kill -TERM "$MEASURED_PID"
     wait "$MEASURED_PID"
     MEASURED_PID=""
     stop_plant
-    D_ROW=$(printf "%-12s %8s %8s %8s %9s   n=%s, missed deadlines %s" \
-        frictiond "$(us "$(get lateness_p50_ns)")" "$(us "$(get lateness_p99_ns)")" \
-        "$(us "$(get lateness_p999_ns)")" "$(us "$(get lateness_max_ns)")" "$(get lateness_n)" "$(get missed)")
-    D_EXTRA=$(printf "frictiond RT thread: %s %s, CPU %s→%s, pinned %s, mlocked %s, PM QoS %s µs; during the loop: %s minor / %s major page faults, %s voluntary / %s involuntary context switches; compute p50/p99 <= %s/%s µs (power-of-two buckets)" \
+    get lateness_hist_us | tr ',' '\n' | tr ':' ' ' | grep . >>"$WORK/d_hist" || true
+    D_OV=$((D_OV + $(get lateness_overflow)))
+    D_MAX_US=$(fmax "$D_MAX_US" "$(us "$(get lateness_max_ns)")")
+    D_MISSED=$((D_MISSED + $(get missed)))
+    D_EXTRA=$(printf "frictiond RT thread (last chunk): %s %s, CPU %s→%s, pinned %s, mlocked %s, PM QoS %s µs; during the loop: %s minor / %s major page faults, %s voluntary / %s involuntary context switches; compute p50/p99 <= %s/%s µs (power-of-two buckets)" \
         "$(get rt_policy)" "$(get rt_priority)" "$(get rt_cpu_start)" "$(get rt_cpu_end)" \
         "$(get rt_cpu_pinned)" "$(get rt_memory_locked)" "$(get rt_pm_qos_us)" \
         "$(get rt_minflt)" "$(get rt_majflt)" "$(get rt_nvcsw)" "$(get rt_nivcsw)" \
         "$(us "$(get compute_p50_ns)")" "$(us "$(get compute_p99_ns)")")
 }
 
-run_cyclictest() {
-    echo "cyclictest: ${SECS} s, -i1000, $SCHED on CPU $RT_CPU (main thread on CPU $PLANT_CPU), plant on CPU $PLANT_CPU, $QOS, load average $(cut -d' ' -f1-3 /proc/loadavg)" >&2
+run_cyclictest() {  # $1 = seconds
+    echo "cyclictest: ${1} s, -i1000, $SCHED on CPU $RT_CPU (main thread on CPU $PLANT_CPU), plant on CPU $PLANT_CPU, $QOS, load average $(cut -d' ' -f1-3 /proc/loadavg)" >&2
     start_plant
     # shellcheck disable=SC2086
-    cyclictest -m -i1000 -l "$((SECS * 1000))" -q -h 20000 $PRIO_CT $QOS_CT \
+    cyclictest -m -i1000 -l "$(($1 * 1000))" -q -h 20000 $PRIO_CT $QOS_CT \
         -a "$RT_CPU" --mainaffinity="$PLANT_CPU" >"$WORK/cyclictest.txt" 2>"$WORK/cyclictest.err" &
     MEASURED_PID=$!
     sleep 1
@@ -175,11 +184,17 @@ run_cyclictest() {
     wait "$MEASURED_PID"
     MEASURED_PID=""
     stop_plant
-    # Histogram lines: "<µs> <count>"; overflows counted separately. Quantiles = bucket upper edge.
-    C_ROW=$(awk '
-        /^[0-9]+[ \t]+[0-9]+/ { c[$1 + 0] = $2 + 0; n += $2 }
-        /^# Max Latencies:/ { mx = $4 + 0 }
-        /^# Histogram Overflows:/ { ov = $4 + 0 }
+    # Histogram lines "<µs> <count>" (bucket k = [k, k+1) µs, like frictiond's); overflows apart.
+    awk '/^[0-9]+[ \t]+[0-9]+/ && $2 + 0 > 0 { print $1 + 0, $2 + 0 }' "$WORK/cyclictest.txt" >>"$WORK/c_hist"
+    C_OV=$((C_OV + $(awk '/^# Histogram Overflows:/ { print $4 + 0 }' "$WORK/cyclictest.txt")))
+    C_MAX_US=$(fmax "$C_MAX_US" "$(awk '/^# Max Latencies:/ { print $4 + 0 }' "$WORK/cyclictest.txt")")
+}
+
+# Quantiles of a merged histogram, the same way for both: the upper edge of the 1 µs bucket holding
+# the quantile, capped by the max. $1 name, $2 file, $3 overflow count, $4 max [µs], $5 extra text.
+row() {
+    awk -v name="$1" -v ov="$3" -v mx="$4" -v extra="$5" '
+        { c[$1 + 0] += $2; n += $2 }
         END {
             n += ov; split("0.5 0.99 0.999", q, " ");
             for (i = 1; i <= 3; i++) {
@@ -187,20 +202,25 @@ run_cyclictest() {
                 for (k = 0; k < 20000; k++) { acc += c[k]; if (acc >= want) { r[i] = k + 1; break } }
                 if (r[i] > mx) r[i] = mx;
             }
-            printf "%-12s %8.1f %8.1f %8.1f %9.1f   n=%d", "cyclictest", r[1], r[2], r[3], mx, n
-        }' "$WORK/cyclictest.txt")
+            printf "%-12s %8.1f %8.1f %8.1f %9.1f   n=%d%s\n", name, r[1], r[2], r[3], mx, n, extra
+        }' "$2"
 }
 
-if [ "$ORDER" = cyclictest-first ]; then run_cyclictest; run_frictiond; else run_frictiond; run_cyclictest; fi
+# Interleaved chunks (F C F C … or C F C F …) so load drift hits both alike.
+CHUNK=$(( (SECS + CHUNKS - 1) / CHUNKS ))
+for _ in $(seq "$CHUNKS"); do
+    if [ "$ORDER" = cyclictest-first ]; then run_cyclictest "$CHUNK"; run_frictiond "$CHUNK"
+    else run_frictiond "$CHUNK"; run_cyclictest "$CHUNK"; fi
+done
 
 echo
 echo "threads while measuring (cls: FF = SCHED_FIFO, TS = SCHED_OTHER):"
 echo "  frictiond:"; echo "$D_THREADS"
 echo "  cyclictest:"; echo "$C_THREADS"
 echo "$D_EXTRA"
-printf "\nwake lateness [µs], %s s each, %s on CPU %s, plant on CPU %s, %s (order: %s)\n" \
-    "$SECS" "$SCHED" "$RT_CPU" "$PLANT_CPU" "$QOS" "$ORDER"
+printf "\nwake lateness [µs], %s chunks x %s s each, interleaved (%s), %s on CPU %s, plant on CPU %s, %s\n" \
+    "$CHUNKS" "$CHUNK" "$ORDER" "$SCHED" "$RT_CPU" "$PLANT_CPU" "$QOS"
 printf "%-12s %8s %8s %8s %9s\n" "" p50 p99 p99.9 max
-echo "$D_ROW"
-echo "$C_ROW"
+row frictiond "$WORK/d_hist" "$D_OV" "$D_MAX_US" ", missed deadlines $D_MISSED"
+row cyclictest "$WORK/c_hist" "$C_OV" "$C_MAX_US" ""
 echo "load average at the end: $(cut -d' ' -f1-3 /proc/loadavg)"

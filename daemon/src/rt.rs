@@ -672,6 +672,15 @@ impl RtSummary {
             h.quantile_upper_ns(0.999),
             h.max_ns
         );
+        // The whole 1 µs histogram (non-empty buckets), so runs can be merged (benches/lateness.sh
+        // interleaves frictiond and cyclictest in chunks and computes both quantiles one way).
+        let _ = write!(s, "lateness_overflow={}\nlateness_hist_us=", h.overflow);
+        let mut first = true;
+        for (us, &c) in h.counts.iter().enumerate().filter(|(_, c)| **c > 0) {
+            let _ = write!(s, "{}{us}:{c}", if first { "" } else { "," });
+            first = false;
+        }
+        s.push('\n');
         let t = &self.thread;
         let _ = writeln!(
             s,
@@ -1135,6 +1144,15 @@ kv = 0.0
         assert!(s.contains("rt_policy=SCHED_FIFO\nrt_priority=80\n"), "{s}");
         assert!(s.contains("rt_minflt=3\nrt_majflt=0\n"), "{s}");
         assert!(s.contains("rt_pm_qos_us=none\n"), "{s}");
+        // 1.5 … 100.5 µs once each, then 1 s in the overflow.
+        let hist: String = (1..=100).map(|us| format!("{us}:1,")).collect();
+        assert!(
+            s.contains(&format!(
+                "lateness_overflow=1\nlateness_hist_us={}\n",
+                hist.trim_end_matches(',')
+            )),
+            "{s}"
+        );
     }
 
     #[test]
