@@ -321,6 +321,13 @@ impl DeltaThetaLatch {
         self.latched = true;
     }
 
+    /// Sets θ_off [motor rad] explicitly (a calibrated encoder offset: with θ_off = θ − r·s taken
+    /// where the transmission carries no torque, Δθ is the absolute deflection), and marks it latched.
+    pub fn set_offset(&mut self, theta_off_motor_rad: f64) {
+        self.theta_off_motor_rad = theta_off_motor_rad;
+        self.latched = true;
+    }
+
     /// Δθ = r·s − (θ − θ_off) [motor rad].
     #[inline]
     pub fn delta_theta_motor_rad(&self, s_rad: f64, theta_motor_rad: f64) -> f64 {
@@ -378,10 +385,19 @@ impl WarmupPolicy {
 /// Δθ uses the embedded [`DeltaThetaLatch`]; if it was never latched, the first pushed sample latches
 /// it (as the training pipeline does at the first sample of a file). [`History::reset`] clears and
 /// latches explicitly; [`History::clear`] keeps the latch.
+///
+/// With a fixed offset ([`History::fix_delta_theta_offset`], a calibrated θ_off) `reset` clears the
+/// samples but does **not** re-latch: Δθ then measures the absolute transmission deflection at every
+/// enable, which is what a network trained with one offset per recording has learnt. Re-latching at
+/// each enable (the default) makes Δθ = 0 whatever torque the transmission holds at that instant
+/// (stiction wind-up, gravity), so a network that reads friction from the absolute deflection is
+/// shifted by that torque for the whole run.
 #[derive(Clone, Debug)]
 pub struct History {
     spec: FeatureSpec,
     latch: DeltaThetaLatch,
+    /// Whether the latch offset is a fixed calibration (never re-latched by `reset`).
+    fixed_offset: bool,
     buf: [[f32; MAX_HISTORY]; MAX_BLOCKS],
     /// Ring index of the next write, in `0..H`.
     head: usize,
@@ -398,6 +414,7 @@ impl History {
         Ok(Self {
             spec,
             latch: DeltaThetaLatch::new(gear_ratio),
+            fixed_offset: false,
             buf: [[0.0; MAX_HISTORY]; MAX_BLOCKS],
             head: 0,
             len: 0,
@@ -449,10 +466,31 @@ impl History {
         }
     }
 
-    /// Clears and latches the Δθ offset at `sample` (Δθ = 0 there). Does not push the sample.
+    /// Clears and latches the Δθ offset at `sample` (Δθ = 0 there) — unless the offset is fixed
+    /// ([`Self::fix_delta_theta_offset`]), then it only clears. Does not push the sample.
     pub fn reset(&mut self, sample: &JointSample) {
         self.clear();
-        self.latch.latch(sample.s_rad, sample.theta_motor_rad);
+        if !self.fixed_offset {
+            self.latch.latch(sample.s_rad, sample.theta_motor_rad);
+        }
+    }
+
+    /// Fixes the Δθ offset θ_off [motor rad] (Δθ = r·s − (θ − θ_off)) for the life of this history:
+    /// later [`Self::reset`]s keep it. `None` returns to latching at every reset (and at the first
+    /// push if never latched); the current offset stays until the next reset.
+    pub fn fix_delta_theta_offset(&mut self, theta_off_motor_rad: Option<f64>) {
+        match theta_off_motor_rad {
+            Some(off) => {
+                self.latch.set_offset(off);
+                self.fixed_offset = true;
+            }
+            None => self.fixed_offset = false,
+        }
+    }
+
+    /// The fixed Δθ offset [motor rad], if one was set with [`Self::fix_delta_theta_offset`].
+    pub fn fixed_delta_theta_offset(&self) -> Option<f64> {
+        self.fixed_offset.then(|| self.latch.offset_motor_rad())
     }
 
     /// Value of `feature` for `sample` with the current latch [unit of the feature].
@@ -681,6 +719,34 @@ mod tests {
         assert_eq!(filled(&h), vec![0.0; 6]);
         h.push(&sample(3));
         assert_eq!(h.latch().offset_motor_rad(), off, "clear keeps the latch");
+    }
+
+    #[test]
+    fn fixed_offset_survives_reset_and_gives_absolute_deflection() {
+        let ratio = -160.0;
+        let mut h = History::new(spec(FeatureSet::DeltaThetaJointVel, 2, false), r(ratio)).unwrap();
+        h.fix_delta_theta_offset(Some(0.0));
+        assert_eq!(h.fixed_delta_theta_offset(), Some(0.0));
+        // Enable while the transmission is wound up: the motor leads the joint by 0.05 motor rad.
+        let wound = JointSample {
+            s_rad: 0.2,
+            theta_motor_rad: ratio * 0.2 + 0.05,
+            ..Default::default()
+        };
+        h.reset(&wound);
+        h.push(&wound);
+        let d = filled(&h)[1] as f64;
+        assert!(
+            (d - (-0.05)).abs() < 1e-5,
+            "fixed offset: Δθ = r·s − θ = −0.05 at enable, got {d}"
+        );
+        assert_eq!(h.latch().offset_motor_rad(), 0.0, "reset kept the offset");
+        // Back to latching at reset: Δθ = 0 at the next enable.
+        h.fix_delta_theta_offset(None);
+        assert_eq!(h.fixed_delta_theta_offset(), None);
+        h.reset(&wound);
+        h.push(&wound);
+        assert_eq!(filled(&h)[1], 0.0);
     }
 
     #[test]

@@ -4,7 +4,9 @@
 //! [`FrictionModel`] is the common interface (`reset` at enable, `estimate` per tick); [`JointModel`]
 //! is the enum the real-time path holds, dispatching by `match` (no vtable, no allocation). Static
 //! models ([`CvParams`], [`ScvParams`], [`ScvCodeParams`]) use the joint velocity only;
-//! [`PinnEstimator`] keeps a [`History`] of its features and runs the [`crate::kernel::Mlp`].
+//! [`PinnEstimator`] keeps a [`History`] of its features and runs the [`crate::kernel::Mlp`]. Its Δθ
+//! offset is latched at every `reset` (enable) unless fixed with
+//! [`PinnEstimator::fix_delta_theta_offset`] (a calibrated offset, kept across enables).
 //!
 //! What it is **not**: no clamping, gating, gain (`kfc`) or filtering of the estimate, and no NaN
 //! handling — those belong to the control law in the daemon, which must zero a non-finite estimate.
@@ -242,6 +244,15 @@ impl PinnEstimator {
     /// The input vector of the last inference (zeros before the first one).
     pub fn last_input(&self) -> &[f32] {
         &self.x
+    }
+
+    /// Fixes the Δθ offset θ_off [motor rad] so [`FrictionModel::reset`] (enable) no longer
+    /// re-latches it (see [`History::fix_delta_theta_offset`]); `None` restores latching at enable.
+    /// Use the offset the training data were recorded with (e.g. 0 for the virtual joints, whose
+    /// encoders read θ = r·φ: Δθ is then the absolute deflection, as in a log latched once at a
+    /// torque-free start).
+    pub fn fix_delta_theta_offset(&mut self, theta_off_motor_rad: Option<f64>) {
+        self.history.fix_delta_theta_offset(theta_off_motor_rad);
     }
 }
 
@@ -555,6 +566,36 @@ mod tests {
         assert!(close(y, f64::from(f.mlp.forward_reference(&x)[0])));
     }
 
+    #[test]
+    fn fixed_offset_is_kept_across_enables() {
+        let spec = FeatureSpec {
+            set: FeatureSet::DeltaThetaJointVel,
+            history: 3,
+            temperature: false,
+        };
+        let f = model_file(spec, -160.0, 4);
+        let mut est = PinnEstimator::from_model_file(&f, WarmupPolicy::ZeroPad).unwrap();
+        // θ_off = 7 motor rad, the constant part of `sample`'s motor angle.
+        est.fix_delta_theta_offset(Some(7.0));
+        for enable_at in [100, 333] {
+            let enable = sample(enable_at);
+            est.reset(&enable);
+            let y = est.estimate(&enable);
+            let x = hand_built(spec, -160.0, 7.0, &[enable]);
+            assert_eq!(est.last_input(), &x[..], "enable at sample {enable_at}");
+            assert!(
+                x[2] != 0.0,
+                "the wound-up sample has Δθ ≠ 0 with a fixed offset"
+            );
+            assert!(close(y, f64::from(f.mlp.forward_reference(&x)[0])));
+        }
+        // Back to latching at enable: Δθ = 0 at the enable sample.
+        est.fix_delta_theta_offset(None);
+        let enable = sample(500);
+        est.reset(&enable);
+        est.estimate(&enable);
+        assert_eq!(est.last_input()[2], 0.0);
+    }
     #[test]
     fn static_models_equal_friction_values() {
         let mut models: Vec<JointModel> = vec![

@@ -85,8 +85,11 @@ pub fn build(cfg: &Config, generation: u64) -> Result<Box<Params>, String> {
                     WarmupName::ZeroPad => WarmupPolicy::ZeroPad,
                     WarmupName::HoldZero => WarmupPolicy::HoldZero,
                 };
-                let est = PinnEstimator::from_model_file(&file, policy)
+                let mut est = PinnEstimator::from_model_file(&file, policy)
                     .map_err(|e| format!("joint {}: model {}: {e}", j.name, path.display()))?;
+                // A calibrated Δθ offset is kept across enables; without one, Δθ is latched at
+                // every enable (see `frictionless::features::History`).
+                est.fix_delta_theta_offset(j.delta_theta_offset_motor_rad);
                 JointModel::Pinn(Box::new(est))
             }
         };
