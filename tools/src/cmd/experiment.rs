@@ -129,6 +129,41 @@ pub struct Args {
     /// Do not write PNG plots.
     #[arg(long)]
     pub no_plots: bool,
+    /// The PINN's Δθ offset θ_off in frictiond (`delta_theta_offset_motor_rad`), one value or
+    /// `knee=V,ankle_roll=W`: a number [motor rad] is fixed across enables — use the value of the
+    /// train report (`datasets[].delta_theta_offset_motor_rad`; 0 for logs of the virtual joints,
+    /// whose encoders read θ = r·φ, so Δθ = r·s − θ is the absolute deflection); `enable` latches
+    /// Δθ = 0 at every enable, whatever torque the transmission holds then (only right for a
+    /// network trained with `--delta-theta-offset chunk`).
+    #[arg(long, default_value = "0")]
+    pub pinn_delta_theta_offset: String,
+}
+
+/// Parses `--pinn-delta-theta-offset` into per-joint offsets (`None` = latch at enable).
+fn pinn_offsets(spec: &str) -> anyhow::Result<[Option<f64>; 2]> {
+    let one = |v: &str| -> anyhow::Result<Option<f64>> {
+        match v.trim() {
+            "enable" => Ok(None),
+            t => t
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .map(Some)
+                .with_context(|| {
+                    format!(
+                        "--pinn-delta-theta-offset: `{t}` is neither `enable` nor a finite number"
+                    )
+                }),
+        }
+    };
+    let parts = per_joint("pinn-delta-theta-offset", spec, &[0, 1], true)?;
+    let mut out = [Some(0.0); 2];
+    for j in 0..2 {
+        if let Some(v) = &parts[j] {
+            out[j] = one(v)?;
+        }
+    }
+    Ok(out)
 }
 
 const JOINT_KEYS: [[&str; 2]; 2] = [["knee", "l_knee"], ["ankle_roll", "l_ankle_roll"]];
@@ -345,6 +380,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         pulse: [pulse(0), pulse(1)],
         after_release_s: args.after_release_s,
         progress: !args.quiet,
+        pinn_delta_theta_offset_motor_rad: pinn_offsets(&args.pinn_delta_theta_offset)?,
     };
     let kp_given = args
         .kp

@@ -263,19 +263,21 @@ impl SuiteReport {
     }
 }
 
-/// Writes a trace as CSV (`t_s,s_des_rad,s_rad,s_true_rad,tau_des_nm,tau_f_hat_nm,tau_f_true_nm,i_applied_a,tau_ext_nm,flags`).
+/// Writes a trace as CSV (`t_s,s_des_rad,s_rad,s_true_rad,tau_des_nm,tau_f_hat_nm,tau_f_true_nm,i_applied_a,tau_ext_nm,flags,sdot_rad_s,sdot_true_rad_s,theta_motor_rad,omega_motor_rad_s`).
 pub fn write_trace_csv(path: &Path, tr: &JointTrace) -> anyhow::Result<()> {
     let f =
         std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
     let mut w = std::io::BufWriter::new(f);
     writeln!(
         w,
-        "t_s,s_des_rad,s_rad,s_true_rad,tau_des_nm,tau_f_hat_nm,tau_f_true_nm,i_applied_a,tau_ext_nm,flags"
+        "t_s,s_des_rad,s_rad,s_true_rad,tau_des_nm,tau_f_hat_nm,tau_f_true_nm,i_applied_a,tau_ext_nm,flags,\
+         sdot_rad_s,sdot_true_rad_s,theta_motor_rad,omega_motor_rad_s"
     )?;
+    let at = |v: &[f64], i: usize| v.get(i).copied().unwrap_or(f64::NAN);
     for i in 0..tr.t_s.len() {
         writeln!(
             w,
-            "{:.3},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{}",
+            "{:.3},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{},{:.9e},{:.9e},{:.12e},{:.9e}",
             tr.t_s[i],
             tr.s_des_rad[i],
             tr.s_rad[i],
@@ -285,7 +287,11 @@ pub fn write_trace_csv(path: &Path, tr: &JointTrace) -> anyhow::Result<()> {
             tr.tau_f_true_nm[i],
             tr.i_applied_a[i],
             tr.tau_ext_nm[i],
-            tr.flags[i]
+            tr.flags[i],
+            at(&tr.sdot_rad_s, i),
+            at(&tr.sdot_true_rad_s, i),
+            at(&tr.theta_motor_rad, i),
+            at(&tr.omega_motor_rad_s, i),
         )?;
     }
     w.flush()?;

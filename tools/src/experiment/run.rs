@@ -108,6 +108,13 @@ pub struct TrialSpec {
     pub seed: u64,
     /// Plant `--set` overrides (also applied to the controller's link model).
     pub sets: Vec<String>,
+    /// PINN Δθ offset θ_off [motor rad] for frictiond per joint index (fixed across enables),
+    /// `None` = latch at enable. The virtual plant's encoders read θ = r·φ, so 0 makes Δθ the
+    /// absolute deflection — the offset of a training log latched once at its torque-free start.
+    pub pinn_delta_theta_offset_motor_rad: [Option<f64>; 2],
+    /// frictiond with `kfc = 1`, no friction clip and no LPF, so the recorded τ̂_F is the model's
+    /// raw output (for checking online against offline inference); `false` = the shipped law.
+    pub raw_friction: bool,
 }
 
 /// Recorded signals of one joint, one entry per tick.
@@ -131,9 +138,18 @@ pub struct JointTrace {
     pub s_rad: Vec<f64>,
     /// True s [rad] (SimTruth; NaN when the plant sent none).
     pub s_true_rad: Vec<f64>,
+    /// Measured ṡ [rad/s] as the plant published it (the drive's causal estimate; what frictiond used).
+    pub sdot_rad_s: Vec<f64>,
+    /// True ṡ [rad/s] (SimTruth; NaN when the plant sent none).
+    pub sdot_true_rad_s: Vec<f64>,
+    /// Measured motor position θ [motor rad] as published (what frictiond used for Δθ).
+    pub theta_motor_rad: Vec<f64>,
+    /// Measured motor velocity ω_m [motor rad/s] as published.
+    pub omega_motor_rad_s: Vec<f64>,
     /// τ_des [Nm].
     pub tau_des_nm: Vec<f64>,
-    /// τ̂_F after clip, kfc and LPF [Nm] (DaemonStatus of the newest daemon tick).
+    /// τ̂_F after clip, kfc and LPF [Nm] (DaemonStatus of the newest daemon tick; in lockstep exactly
+    /// the daemon's output for the previous row's state, i.e. row k holds τ̂_F(state k − 1)).
     pub tau_f_hat_nm: Vec<f64>,
     /// True friction τ_F [Nm] (SimTruth).
     pub tau_f_true_nm: Vec<f64>,
@@ -220,9 +236,10 @@ pub fn run_trial(
             gear_ratio: s.params.gear_ratio_signed,
             kt_nm_per_a: s.params.kt_nm_per_a,
             model: plan.map_or(FrictionModel::None, |p| p.model.clone()),
+            delta_theta_offset_motor_rad: spec.pinn_delta_theta_offset_motor_rad[i],
         });
     }
-    session.start_daemon(bins, spec.mode, &daemon_joints, || {
+    session.start_daemon(bins, spec.mode, &daemon_joints, spec.raw_friction, || {
         req_ch.subscriber_count()
     })?;
     session.start_plant(
@@ -250,6 +267,8 @@ pub fn run_trial(
             model: p.model.label().to_owned(),
             kfc: if p.model == FrictionModel::None {
                 0.0
+            } else if spec.raw_friction {
+                1.0
             } else {
                 shipped_kfc(&setups[p.index].params.joint)
             },
@@ -308,7 +327,17 @@ pub fn run_trial(
         } else {
             None
         };
-        if let Some(st) = status_in.latest()? {
+        // In lockstep the daemon publishes one DaemonStatus per tick, right after the command that
+        // answered the previous state; the plant can publish the next state before that status is
+        // out. Wait (briefly) for a status newer than the one recorded last tick, so row k always
+        // holds the daemon's output for state k − 1 (a fixed one-tick lag, no race).
+        let fresh_status = |st: &DaemonStatus| status.is_none_or(|old| st.seq > old.seq);
+        let st_new = if spec.mode == Mode::Lockstep && ticks > 0 {
+            wait_for(&status_in, Duration::from_millis(200), fresh_status)?
+        } else {
+            status_in.latest()?
+        };
+        if let Some(st) = st_new {
             status = Some(st);
         }
         let mut req = TorqueRequest::zeroed();
@@ -323,6 +352,11 @@ pub fn run_trial(
             tr.t_s.push(t);
             tr.s_des_rad.push(sp.s_rad);
             tr.s_rad.push(js.s_rad[j]);
+            tr.sdot_rad_s.push(js.sdot_rad_s[j]);
+            tr.theta_motor_rad.push(js.theta_motor_rad[j]);
+            tr.omega_motor_rad_s.push(js.omega_motor_rad_s[j]);
+            tr.sdot_true_rad_s
+                .push(truth.map_or(f64::NAN, |x| x.sdot_true_rad_s[j]));
             tr.tau_des_nm.push(tau);
             tr.tau_ext_nm.push(ext[j]);
             tr.s_true_rad

@@ -1,11 +1,15 @@
 //! Minimum-K_p search: bisection on a log scale for the lowest gain that passes a criterion.
 //!
 //! What this module **is**: [`KpBisection`], a small state machine (`candidate` → run a trial →
-//! `report`) so several independent searches (one per joint) can share each trial run. It assumes
-//! "passes" is monotone in K_p (higher gain, smaller tracking error); it first checks the upper end
-//! (if that fails the minimum is above the range), then the lower end (if that passes the minimum is
-//! at or below it), then halves the log-interval `iterations` times and returns the lowest passing
-//! gain found; the answer lies in (`fail`, `pass`] with `pass/fail = (hi/lo)^(1/2^iterations)`.
+//! `report`) so several independent searches (one per joint) can share each trial run. It first
+//! checks the upper end. "Passes" is not always monotone in K_p: with K_d fixed at 4/s the damping
+//! ratio falls as 1/√K_p, and a compensation that removes friction (the plant's main damping) can
+//! make a high gain oscillate while a lower one tracks. So when the upper end fails, the search
+//! scans down a log grid of [`SCAN_POINTS`] gains for one that passes (none passing:
+//! [`MinKp::NonePassed`]). From the highest passing gain it checks the lower end (if that passes the
+//! minimum is at or below it), then halves the log-interval `iterations` times and returns the
+//! lowest passing gain found; the answer lies in (`fail`, `pass`] with `pass/fail = (p/lo)^(1/2^it)`,
+//! `p` the passing gain the bisection started from. Below `p` the search assumes monotonicity.
 //!
 //! What it is **not**: no trial execution.
 
@@ -20,7 +24,8 @@ pub enum MinKp {
         /// Highest failing K_p [1/s²] (the minimum lies in (fail, kp]).
         fail_kp: f64,
     },
-    /// Even the upper end failed: the minimum is above `hi`.
+    /// Even the upper end failed: the minimum is above `hi` (not produced by [`KpBisection`], which
+    /// scans down from a failing upper end and reports [`MinKp::NonePassed`]; kept for reports).
     AboveRange {
         /// Upper end [1/s²].
         hi: f64,
@@ -29,6 +34,13 @@ pub enum MinKp {
     BelowRange {
         /// Lower end [1/s²].
         lo: f64,
+    },
+    /// The upper end failed and so did every gain of the downward scan: nothing in range tracks.
+    NonePassed {
+        /// Lower end [1/s²].
+        lo: f64,
+        /// Upper end [1/s²].
+        hi: f64,
     },
 }
 
@@ -39,6 +51,7 @@ impl MinKp {
             MinKp::Found { kp, .. } => kp,
             MinKp::AboveRange { hi } => hi,
             MinKp::BelowRange { lo } => lo,
+            MinKp::NonePassed { hi, .. } => hi,
         }
     }
 
@@ -48,6 +61,7 @@ impl MinKp {
             MinKp::Found { kp, .. } => format!("{}", sig3(kp)),
             MinKp::AboveRange { hi } => format!("> {}", sig3(hi)),
             MinKp::BelowRange { lo } => format!("≤ {}", sig3(lo)),
+            MinKp::NonePassed { lo, hi } => format!("none in {}–{}", sig3(lo), sig3(hi)),
         }
     }
 }
@@ -61,11 +75,22 @@ pub fn sig3(x: f64) -> f64 {
     (x * p).round() / p
 }
 
+/// Gains tried below a failing upper end before giving up (log-spaced, exclusive of both ends).
+pub const SCAN_POINTS: u32 = 4;
+
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Phase {
     CheckHi,
+    /// Scanning down after a failing upper end: candidate `k` of [`SCAN_POINTS`].
+    ScanDown {
+        k: u32,
+    },
     CheckLo,
-    Bisect { fail: f64, pass: f64, left: u32 },
+    Bisect {
+        fail: f64,
+        pass: f64,
+        left: u32,
+    },
     Done(MinKp),
 }
 
@@ -76,6 +101,8 @@ pub struct KpBisection {
     hi: f64,
     iterations: u32,
     phase: Phase,
+    /// The passing gain the bisection starts from (`hi`, or the scan's passing gain).
+    pass_start: f64,
     /// Every (K_p, passed) evaluated, in order.
     pub history: Vec<(f64, bool)>,
 }
@@ -92,6 +119,7 @@ impl KpBisection {
             hi,
             iterations,
             phase: Phase::CheckHi,
+            pass_start: hi,
             history: vec![],
         })
     }
@@ -100,6 +128,9 @@ impl KpBisection {
     pub fn candidate(&self) -> Option<f64> {
         match self.phase {
             Phase::CheckHi => Some(self.hi),
+            Phase::ScanDown { k } => {
+                Some(self.hi * (self.lo / self.hi).powf(f64::from(k) / f64::from(SCAN_POINTS + 1)))
+            }
             Phase::CheckLo => Some(self.lo),
             Phase::Bisect { fail, pass, .. } => Some((fail * pass).sqrt()),
             Phase::Done(_) => None,
@@ -111,14 +142,27 @@ impl KpBisection {
         let Some(kp) = self.candidate() else { return };
         self.history.push((kp, passed));
         self.phase = match self.phase {
-            Phase::CheckHi if !passed => Phase::Done(MinKp::AboveRange { hi: self.hi }),
+            Phase::CheckHi if !passed => Phase::ScanDown { k: 1 },
             Phase::CheckHi => Phase::CheckLo,
+            Phase::ScanDown { .. } if passed => {
+                self.pass_start = kp;
+                Phase::CheckLo
+            }
+            Phase::ScanDown { k } if k < SCAN_POINTS => Phase::ScanDown { k: k + 1 },
+            Phase::ScanDown { .. } => {
+                // The upper end failed and nothing below it passed: whether a gain above the
+                // range would track cannot be told from failures alone.
+                Phase::Done(MinKp::NonePassed {
+                    lo: self.lo,
+                    hi: self.hi,
+                })
+            }
             Phase::CheckLo if passed => Phase::Done(MinKp::BelowRange { lo: self.lo }),
             Phase::CheckLo | Phase::Bisect { .. } => {
                 let (fail, pass, left) = match self.phase {
                     Phase::Bisect { fail, left, .. } if passed => (fail, kp, left - 1),
                     Phase::Bisect { pass, left, .. } => (kp, pass, left - 1),
-                    _ => (self.lo, self.hi, self.iterations),
+                    _ => (self.lo, self.pass_start, self.iterations),
                 };
                 if left == 0 {
                     Phase::Done(MinKp::Found {
@@ -173,11 +217,39 @@ mod tests {
 
     #[test]
     fn out_of_range_thresholds_are_reported_as_such() {
-        assert_eq!(search(1e6, 10.0, 1e4, 5).0, MinKp::AboveRange { hi: 1e4 });
+        assert_eq!(
+            search(1e6, 10.0, 1e4, 5).0,
+            MinKp::NonePassed { lo: 10.0, hi: 1e4 }
+        );
         assert_eq!(search(1.0, 10.0, 1e4, 5).0, MinKp::BelowRange { lo: 10.0 });
-        assert_eq!(search(1e6, 10.0, 1e4, 5).1, 1, "one trial suffices");
+        assert_eq!(
+            search(1e6, 10.0, 1e4, 5).1,
+            1 + SCAN_POINTS as usize,
+            "upper end + the downward scan"
+        );
         assert!(KpBisection::new(10.0, 5.0, 3).is_err());
         assert!(KpBisection::new(0.0, 5.0, 3).is_err());
+    }
+
+    #[test]
+    fn a_failing_upper_end_scans_down_then_bisects_below_the_passing_gain() {
+        // Passes only in [550, 20000): a high gain oscillates, a low one cannot track.
+        let passes = |kp: f64| (550.0..20000.0).contains(&kp);
+        let mut b = KpBisection::new(30.0, 1e5, 8).unwrap();
+        let mut n = 0;
+        while let Some(kp) = b.candidate() {
+            b.report(passes(kp));
+            n += 1;
+            assert!(n < 100);
+        }
+        let MinKp::Found { kp, fail_kp } = b.result().unwrap() else {
+            panic!("{:?}", b.result())
+        };
+        assert!(kp >= 550.0 && fail_kp < 550.0, "{fail_kp} < 550 ≤ {kp}");
+        assert!(kp / fail_kp < 1.05, "resolution {kp}/{fail_kp}");
+        // history: the failing upper end, then the scan down to the first passing gain
+        assert_eq!(b.history[0], (1e5, false));
+        assert!(b.history[1].0 < 1e5 && b.history.iter().any(|&(k, p)| p && k < 20000.0));
     }
 
     #[test]

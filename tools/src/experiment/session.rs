@@ -118,6 +118,9 @@ pub struct DaemonJoint {
     pub kt_nm_per_a: f64,
     /// Friction model.
     pub model: FrictionModel,
+    /// For a PINN: the fixed Δθ offset θ_off [motor rad] frictiond keeps across enables
+    /// (`delta_theta_offset_motor_rad`); `None` = latch at enable.
+    pub delta_theta_offset_motor_rad: Option<f64>,
 }
 
 /// Loop trigger of a run.
@@ -139,7 +142,9 @@ fn toml_num(v: f64) -> String {
 
 /// The `[[joint]]` keys of `config/ankle_knee.toml` for `name` that the experiments reuse, as TOML
 /// lines (`kfc`, `max_curr`, `max_output_friction`, `joint_velocity_threshold_rad_s`, `lpf`).
-fn shipped_joint_keys(name: &str) -> anyhow::Result<String> {
+/// With `raw_friction`, only `max_curr` is taken and `kfc = 1` (no clip, no LPF): the daemon's τ̂_F
+/// is then the model's output itself (used to check online against offline inference).
+fn shipped_joint_keys(name: &str, raw_friction: bool) -> anyhow::Result<String> {
     let t: toml::Table = ANKLE_KNEE_TOML
         .parse()
         .context("config/ankle_knee.toml does not parse")?;
@@ -153,13 +158,19 @@ fn shipped_joint_keys(name: &str) -> anyhow::Result<String> {
         .find(|j| j.get("name").and_then(|n| n.as_str()) == Some(name))
         .with_context(|| format!("config/ankle_knee.toml: no [[joint]] named `{name}`"))?;
     let mut out = String::new();
-    for key in [
-        "kfc",
-        "max_curr",
-        "max_output_friction",
-        "joint_velocity_threshold_rad_s",
-        "lpf",
-    ] {
+    let keys: &[&str] = if raw_friction {
+        out += "kfc = 1.0\n";
+        &["max_curr"]
+    } else {
+        &[
+            "kfc",
+            "max_curr",
+            "max_output_friction",
+            "joint_velocity_threshold_rad_s",
+            "lpf",
+        ]
+    };
+    for &key in keys {
         if let Some(v) = j.get(key) {
             // `Value`'s Display writes inline tables (`lpf = { … }`), valid inside `[[joint]]`.
             out += &format!("{key} = {v}\n");
@@ -170,19 +181,21 @@ fn shipped_joint_keys(name: &str) -> anyhow::Result<String> {
 
 /// `kfc` of `name` in `config/ankle_knee.toml` (1.0 if absent, the daemon's default).
 pub fn shipped_kfc(name: &str) -> f64 {
-    shipped_joint_keys(name)
+    shipped_joint_keys(name, false)
         .ok()
         .and_then(|s| s.parse::<toml::Table>().ok())
         .and_then(|t| t.get("kfc").and_then(|v| v.as_float()))
         .unwrap_or(1.0)
 }
 
-/// Writes a `frictiond` config for one run to `path` and returns its text.
+/// Writes a `frictiond` config for one run to `path` and returns its text. `raw_friction`: see
+/// [`shipped_joint_keys`].
 pub fn write_daemon_config(
     path: &Path,
     ipc: &IpcConfig,
     mode: Mode,
     joints: &[DaemonJoint],
+    raw_friction: bool,
 ) -> anyhow::Result<String> {
     let root = ipc
         .root_path
@@ -210,7 +223,7 @@ pub fn write_daemon_config(
             toml_num(j.gear_ratio),
             toml_num(j.kt_nm_per_a)
         );
-        s += &shipped_joint_keys(&j.name)?;
+        s += &shipped_joint_keys(&j.name, raw_friction)?;
         match &j.model {
             FrictionModel::None => s += "friction_model = \"none\"\n",
             FrictionModel::Cv(p) => {
@@ -239,6 +252,9 @@ pub fn write_daemon_config(
                     "friction_model = \"pinn\"\nmodel = {:?}\nwarmup = \"zero_pad\"\n",
                     abs.display().to_string()
                 );
+                if let Some(off) = j.delta_theta_offset_motor_rad {
+                    s += &format!("delta_theta_offset_motor_rad = {}\n", toml_num(off));
+                }
             }
         }
     }
@@ -400,17 +416,18 @@ impl Session {
         Ok(())
     }
 
-    /// Starts `frictiond` on a config written for this run and waits until it subscribed to the
-    /// torque requests (`probe` returns the subscriber count).
+    /// Starts `frictiond` on a config written for this run (see [`write_daemon_config`]) and waits
+    /// until it subscribed to the torque requests (`probe` returns the subscriber count).
     pub fn start_daemon(
         &mut self,
         bins: &Binaries,
         mode: Mode,
         joints: &[DaemonJoint],
+        raw_friction: bool,
         probe: impl Fn() -> usize,
     ) -> anyhow::Result<()> {
         let cfg = self.dir.join("frictiond.toml");
-        write_daemon_config(&cfg, &self.ipc, mode, joints)?;
+        write_daemon_config(&cfg, &self.ipc, mode, joints, raw_friction)?;
         self.spawn(
             "frictiond",
             Command::new(&bins.frictiond).arg("--config").arg(&cfg),

@@ -41,6 +41,8 @@ pub struct SuiteConfig {
     pub after_release_s: f64,
     /// Print one progress line per trial.
     pub progress: bool,
+    /// PINN Δθ offset for frictiond (see [`TrialSpec::pinn_delta_theta_offset_motor_rad`]).
+    pub pinn_delta_theta_offset_motor_rad: [Option<f64>; 2],
 }
 
 /// The sine reference of joint `index` (0 = knee, 1 = ankle_roll).
@@ -115,6 +117,8 @@ fn run_grouped(
             joints: group.iter().map(|&g| plans[g].0.clone()).collect(),
             seed: cfg.seed,
             sets: cfg.sets.clone(),
+            pinn_delta_theta_offset_motor_rad: cfg.pinn_delta_theta_offset_motor_rad,
+            raw_friction: false,
         };
         let trace = run_trial(bins, setups, &spec)?;
         if cfg.progress {
