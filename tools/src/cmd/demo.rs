@@ -9,6 +9,14 @@
 //! PINN's K_p; per-stage seconds), the stage outputs (`data/`, `models/`, `eval/`, `experiments/`
 //! with PNG plots) and every stage's log (`logs/`). Children are stopped on Ctrl-C; the experiment
 //! runs clean up their shared-memory directories themselves.
+//!
+//! Two choices that decide whether the PINN helps in the closed loop (measured, see the README):
+//! - the label is the friction without the reflected rotor inertia (`preprocess
+//!   --subtract-reflected-inertia sidecar`; `--with-rotor-inertia` keeps the paper's label). A
+//!   network trained on τ_F + J_eq·φ̈ feeds kfc·J_eq·φ̈ back with its history and filter lag, which
+//!   drove the ankle roll into a growing 4 Hz stick–slip oscillation at the K_p the SCV tracks with;
+//! - frictiond keeps the Δθ offset the network was trained with (`--pinn-delta-theta-offset`, from
+//!   the train report) instead of re-latching at enable.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -41,6 +49,10 @@ pub struct Args {
     /// filter), so the PINN trains on signals like the ones frictiond sees at run time.
     #[arg(long)]
     pub causal: bool,
+    /// Keep the reflected rotor inertia J_eq·φ̈ in the label (the paper's label; by default it is
+    /// subtracted with the simulator's r²·J_m, see the module doc).
+    #[arg(long)]
+    pub with_rotor_inertia: bool,
 }
 
 /// Sizes of one demo flavour.
@@ -137,6 +149,33 @@ fn read_json(p: &Path) -> anyhow::Result<serde_json::Value> {
     serde_json::from_str(&t).with_context(|| format!("{}: not JSON", p.display()))
 }
 
+/// The Δθ offset frictiond must use for a PINN, from its train report: the
+/// `datasets[0].delta_theta_offset_motor_rad` the windows were latched with (as text for
+/// `--pinn-delta-theta-offset`), or `enable` when training latched per chunk (no single value).
+fn pinn_offset_arg(train_report: &Path) -> anyhow::Result<String> {
+    let j = read_json(train_report)?;
+    let offsets: Vec<Option<f64>> = j
+        .get("datasets")
+        .and_then(|d| d.as_array())
+        .map(|a| {
+            a.iter()
+                .map(|d| {
+                    d.get("delta_theta_offset_motor_rad")
+                        .and_then(|v| v.as_f64())
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    match offsets.first() {
+        Some(Some(v)) if offsets.iter().all(|o| *o == Some(*v)) => Ok(format!("{v:e}")),
+        Some(Some(_)) => anyhow::bail!(
+            "{}: the datasets were latched with different Δθ offsets ({offsets:?}); frictiond takes one",
+            train_report.display()
+        ),
+        _ => Ok("enable".into()),
+    }
+}
+
 /// Runs `frictl demo`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     install_signal_flag()?;
@@ -162,12 +201,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             periods: 2.0,
         }
     } else {
+        // `frictl train`'s defaults (128×128, H 20, batch 512, 10 epochs): ≈ 1 min per joint.
         Sizes {
             n_starts: 2,
-            hidden: "64,64",
-            history: 10,
+            hidden: "128,128",
+            history: 20,
             epochs: 10,
-            batch: 4096,
+            batch: 512,
             iterations: 6,
             periods: 3.0,
         }
@@ -257,6 +297,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 let mut a = vec!["preprocess".into(), s(src), "--out".into(), s(dst)];
                 if args.causal {
                     a.push("--causal".to_string());
+                }
+                if !args.with_rotor_inertia {
+                    a.push("--subtract-reflected-inertia".into());
+                    a.push("sidecar".into());
                 }
                 a
             })?;
@@ -405,6 +449,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             )
         };
         let exp_json = exp_dir.join("report.json");
+        // frictiond keeps the Δθ offset the PINN was trained with (not re-latched at enable).
+        let mut offsets = vec![];
+        for (key, joint) in JOINTS {
+            let v = pinn_offset_arg(&models.join(format!("{joint}_train.json")))?;
+            offsets.push(format!("{key}={v}"));
+        }
         r.frictl(
             "experiment all (both joints; none, CV, SCV, PINN)",
             &[
@@ -418,6 +468,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 f("_scv.json"),
                 "--pinn".into(),
                 f(".fwt"),
+                "--pinn-delta-theta-offset".into(),
+                offsets.join(","),
                 "--seed".into(),
                 seed.to_string(),
                 "--iterations".into(),
@@ -487,12 +539,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         serde_json::to_string_pretty(&report)?,
     )?;
     let mut md = format!(
-        "# frictionless demo\n\nSettings: {} (protocol starts {}, PINN hidden {}, H {}, {} epochs), seed {seed}. Total {:.0} s.\n",
+        "# frictionless demo\n\nSettings: {} (protocol starts {}, PINN hidden {}, H {}, {} epochs; label {}), seed {seed}. Total {:.0} s.\n",
         report["settings"].as_str().unwrap_or(""),
         sizes.n_starts,
         sizes.hidden,
         sizes.history,
         sizes.epochs,
+        if args.with_rotor_inertia {
+            "r·k_t·i − τ_ID (the paper's, with J_eq·φ̈)"
+        } else {
+            "r·k_t·i − τ_ID − J_eq·φ̈ (reflected rotor inertia subtracted)"
+        },
         total
     );
     md += "\n## Friction estimation (held-out closed-loop tracking run)\n";
