@@ -352,7 +352,11 @@ fn check_mode_validates_without_ipc() {
 #[test]
 fn shipped_configs_pass_check() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    for name in ["config/ankle_knee.toml", "config/stress32.toml"] {
+    for name in [
+        "config/ankle_knee.toml",
+        "config/stress32.toml",
+        "config/bench_two_joint.toml",
+    ] {
         let out = std::process::Command::new(frictiond_bin())
             .args(["--check", "--config"])
             .arg(root.join(name))
