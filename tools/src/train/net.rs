@@ -565,6 +565,7 @@ mod tests {
     /// Forward and backward (no dropout) against a naive f64 evaluation of the same net and of
     /// the gradient of ½Σŷ² (dLoss/dŷ = ŷ): checks the fused single-output paths.
     #[test]
+    #[allow(clippy::needless_range_loop)]
     fn fused_output_layer_matches_a_naive_network() {
         let sizes = [5usize, 37, 19, 1];
         let layout = Layout::new(&sizes);
