@@ -152,6 +152,7 @@ fn daemon_pinn_output_equals_offline_inference_on_the_recorded_states() {
             sets: vec![],
             pinn_delta_theta_offset_motor_rad: [offset; 2],
             raw_friction: true,
+            kfc: [None; 2],
         };
         let trace = run_trial(&bins, &setups, &spec).expect("closed-loop trial");
         for tr in &trace.joints {

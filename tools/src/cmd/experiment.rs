@@ -137,6 +137,11 @@ pub struct Args {
     /// network trained with `--delta-theta-offset chunk`).
     #[arg(long, default_value = "0")]
     pub pinn_delta_theta_offset: String,
+    /// Friction compensation gain kfc of every model, one value or `knee=A,ankle_roll=B`
+    /// (default: the shipped `config/ankle_knee.toml`, knee 0.85, ankle roll 0.7; the paper-era
+    /// ergoCub SN002 config used 1).
+    #[arg(long)]
+    pub kfc: Option<String>,
 }
 
 /// Parses `--pinn-delta-theta-offset` into per-joint offsets (`None` = latch at enable).
@@ -381,6 +386,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         after_release_s: args.after_release_s,
         progress: !args.quiet,
         pinn_delta_theta_offset_motor_rad: pinn_offsets(&args.pinn_delta_theta_offset)?,
+        kfc: match &args.kfc {
+            Some(s) => per_joint_f64("kfc", s, &[0, 1])?,
+            None => [None; 2],
+        },
     };
     let kp_given = args
         .kp

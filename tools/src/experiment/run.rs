@@ -115,6 +115,8 @@ pub struct TrialSpec {
     /// frictiond with `kfc = 1`, no friction clip and no LPF, so the recorded τ̂_F is the model's
     /// raw output (for checking online against offline inference); `false` = the shipped law.
     pub raw_friction: bool,
+    /// `kfc` per joint index instead of the shipped config's (`None` = shipped).
+    pub kfc: [Option<f64>; 2],
 }
 
 /// Recorded signals of one joint, one entry per tick.
@@ -237,6 +239,7 @@ pub fn run_trial(
             kt_nm_per_a: s.params.kt_nm_per_a,
             model: plan.map_or(FrictionModel::None, |p| p.model.clone()),
             delta_theta_offset_motor_rad: spec.pinn_delta_theta_offset_motor_rad[i],
+            kfc: spec.kfc[i],
         });
     }
     session.start_daemon(bins, spec.mode, &daemon_joints, spec.raw_friction, || {
@@ -270,7 +273,7 @@ pub fn run_trial(
             } else if spec.raw_friction {
                 1.0
             } else {
-                shipped_kfc(&setups[p.index].params.joint)
+                spec.kfc[p.index].unwrap_or_else(|| shipped_kfc(&setups[p.index].params.joint))
             },
             ..JointTrace::default()
         })

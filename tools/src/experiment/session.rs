@@ -121,6 +121,8 @@ pub struct DaemonJoint {
     /// For a PINN: the fixed Δθ offset θ_off [motor rad] frictiond keeps across enables
     /// (`delta_theta_offset_motor_rad`); `None` = latch at enable.
     pub delta_theta_offset_motor_rad: Option<f64>,
+    /// `kfc` instead of the shipped config's (`None` = shipped).
+    pub kfc: Option<f64>,
 }
 
 /// Loop trigger of a run.
@@ -223,7 +225,18 @@ pub fn write_daemon_config(
             toml_num(j.gear_ratio),
             toml_num(j.kt_nm_per_a)
         );
-        s += &shipped_joint_keys(&j.name, raw_friction)?;
+        let shipped = shipped_joint_keys(&j.name, raw_friction)?;
+        match j.kfc {
+            Some(kfc) => {
+                s += &shipped
+                    .lines()
+                    .filter(|l| !l.starts_with("kfc "))
+                    .map(|l| format!("{l}\n"))
+                    .collect::<String>();
+                s += &format!("kfc = {}\n", toml_num(kfc));
+            }
+            None => s += &shipped,
+        }
         match &j.model {
             FrictionModel::None => s += "friction_model = \"none\"\n",
             FrictionModel::Cv(p) => {

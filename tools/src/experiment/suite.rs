@@ -43,6 +43,8 @@ pub struct SuiteConfig {
     pub progress: bool,
     /// PINN Δθ offset for frictiond (see [`TrialSpec::pinn_delta_theta_offset_motor_rad`]).
     pub pinn_delta_theta_offset_motor_rad: [Option<f64>; 2],
+    /// `kfc` per joint index instead of the shipped config's (`None` = shipped).
+    pub kfc: [Option<f64>; 2],
 }
 
 /// The sine reference of joint `index` (0 = knee, 1 = ankle_roll).
@@ -119,6 +121,7 @@ fn run_grouped(
             sets: cfg.sets.clone(),
             pinn_delta_theta_offset_motor_rad: cfg.pinn_delta_theta_offset_motor_rad,
             raw_friction: false,
+            kfc: cfg.kfc,
         };
         let trace = run_trial(bins, setups, &spec)?;
         if cfg.progress {
