@@ -218,8 +218,7 @@ pub(crate) fn forward(
         let (n_in, n_out) = (layout.n_in(l), layout.n_out(l));
         let (before, after) = ws.act.split_at_mut(l);
         let input: &[f32] = if l == 0 { &ws.x } else { &before[l - 1] };
-        let (cur, next) = after.split_at_mut(1);
-        let out = &mut cur[0][..rows * n_out];
+        let out = &mut after[0][..rows * n_out];
         matmul(
             out,
             View::rm(&input[..rows * n_in], rows, n_in),
@@ -237,48 +236,11 @@ pub(crate) fn forward(
             }
             continue;
         }
-        if l + 2 == n_layers && layout.n_out(l + 1) == 1 {
-            // Last hidden layer before a single output: the output's dot product runs in the same
-            // chunk pass, on rows still in cache, instead of a separate matrix–vector GEMM and bias
-            // pass over the whole batch.
-            let (w_out, b_out) = (layout.weight(p, l + 1), layout.bias(p, l + 1)[0]);
-            let y = &mut next[0][..rows];
-            out.par_chunks_mut(CHUNK_ROWS * n_out)
-                .zip(y.par_chunks_mut(CHUNK_ROWS))
-                .enumerate()
-                .for_each(|(ci, (chunk, yc))| {
-                    hidden_activation(chunk, bias, dropout, l, ci);
-                    for (row, yv) in chunk.chunks_exact(n_out).zip(yc) {
-                        *yv = dot(row, w_out) + b_out;
-                    }
-                });
-            break;
-        }
         // Fused bias + ReLU (+ dropout) pass, parallel over fixed row chunks.
         out.par_chunks_mut(CHUNK_ROWS * n_out)
             .enumerate()
             .for_each(|(ci, chunk)| hidden_activation(chunk, bias, dropout, l, ci));
     }
-}
-
-/// `Σ a[j]·w[j]` with 16 independent partial sums (vectorised; a fixed order, so deterministic).
-#[inline]
-fn dot(a: &[f32], w: &[f32]) -> f32 {
-    const W: usize = 16;
-    let (ac, wc) = (a.chunks_exact(W), w.chunks_exact(W));
-    let tail: f32 = ac
-        .remainder()
-        .iter()
-        .zip(wc.remainder())
-        .map(|(x, y)| x * y)
-        .sum();
-    let mut acc = [0f32; W];
-    for (x, y) in ac.zip(wc) {
-        for k in 0..W {
-            acc[k] = x[k].mul_add(y[k], acc[k]);
-        }
-    }
-    acc.iter().sum::<f32>() + tail
 }
 
 /// Units per block of the dropout pass: the 16-bit lanes of one block are drawn first (the serial
@@ -359,33 +321,8 @@ pub(crate) fn backward(
         };
         let (lower, upper) = ws.delta.split_at_mut(l);
         let dz = &upper[0][..rows * n_out];
-        let gw = &mut g[layout.w_off[l]..layout.w_off[l] + n_out * n_in];
-        if n_out == 1 && l > 0 {
-            // Single output: dW = Σ_i dz_i·a_i (column blocks, rows in order), db = Σ dz, and
-            // dA_prev[i][j] = dz_i·w_j masked by ReLU'·dropout — one pass instead of two rank-1
-            // GEMMs plus the mask pass.
-            let cols = bias_block_cols(n_in, threads);
-            gw.par_chunks_mut(cols)
-                .enumerate()
-                .for_each(|(bi, acc)| weighted_column_sums(acc, input, n_in, bi * cols, dz));
-            g[layout.b_off[l]] = dz.iter().fold(0.0, |s, d| s + d);
-            let w = layout.weight(p, l);
-            lower[l - 1][..rows * n_in]
-                .par_chunks_mut(CHUNK_ROWS * n_in)
-                .zip(input.par_chunks(CHUNK_ROWS * n_in))
-                .zip(dz.par_chunks(CHUNK_ROWS))
-                .for_each(|((d, a), dzc)| {
-                    for ((dr, ar), &dzi) in
-                        d.chunks_exact_mut(n_in).zip(a.chunks_exact(n_in)).zip(dzc)
-                    {
-                        for ((dv, &av), &wj) in dr.iter_mut().zip(ar).zip(w) {
-                            *dv = if av > 0.0 { dzi * wj * keep_scale } else { 0.0 };
-                        }
-                    }
-                });
-            continue;
-        }
         // dW[n_out × n_in] = dZᵀ · A_prev
+        let gw = &mut g[layout.w_off[l]..layout.w_off[l] + n_out * n_in];
         matmul(
             gw,
             View::rm_t(dz, rows, n_out),
@@ -436,18 +373,6 @@ fn column_sums(acc: &mut [f32], m: &[f32], n_cols: usize, c0: usize) {
     for row in m.chunks_exact(n_cols) {
         for (a, &v) in acc.iter_mut().zip(&row[c0..c0 + w]) {
             *a += v;
-        }
-    }
-}
-
-/// `acc[j] = Σ_rows wts[row]·m[row][c0 + j]` over the row-major `m` (`n_cols` wide), rows in order.
-#[inline]
-fn weighted_column_sums(acc: &mut [f32], m: &[f32], n_cols: usize, c0: usize, wts: &[f32]) {
-    acc.fill(0.0);
-    let w = acc.len();
-    for (row, &wr) in m.chunks_exact(n_cols).zip(wts) {
-        for (a, &v) in acc.iter_mut().zip(&row[c0..c0 + w]) {
-            *a = v.mul_add(wr, *a);
         }
     }
 }
@@ -560,96 +485,6 @@ mod tests {
         let mut d = [1.0, 2.0, 3.0, -4.0, 5.0];
         relu_dropout_grad(&mut d, &a, 1.25);
         assert_eq!(d, [0.0, 2.5, 0.0, -5.0, 0.0]);
-    }
-
-    /// Forward and backward (no dropout) against a naive f64 evaluation of the same net and of
-    /// the gradient of ½Σŷ² (dLoss/dŷ = ŷ): checks the fused single-output paths.
-    #[test]
-    #[allow(clippy::needless_range_loop)]
-    fn fused_output_layer_matches_a_naive_network() {
-        let sizes = [5usize, 37, 19, 1];
-        let layout = Layout::new(&sizes);
-        let mut g = XorShift64Star::new(7);
-        let mut u = || (g.next_u64() >> 40) as f32 / (1u64 << 24) as f32 - 0.5;
-        let p: Vec<f32> = (0..layout.n_params).map(|_| u()).collect();
-        let rows = 150; // more than two row chunks, the last one partial
-        let mut ws = Workspace::new(&layout, rows);
-        for v in &mut ws.x {
-            *v = 2.0 * u();
-        }
-        let x = ws.x.clone();
-        forward(&layout, &p, &mut ws, rows, None, 2);
-        // Naive f64 forward, keeping the activations.
-        let mut acts: Vec<Vec<f64>> = vec![x.iter().map(|&v| v as f64).collect()];
-        for l in 0..layout.n_layers() {
-            let (ni, no) = (layout.n_in(l), layout.n_out(l));
-            let (w, b) = (layout.weight(&p, l), layout.bias(&p, l));
-            let prev = acts.last().unwrap();
-            let mut out = vec![0f64; rows * no];
-            for r in 0..rows {
-                for o in 0..no {
-                    let z = b[o] as f64
-                        + (0..ni)
-                            .map(|i| w[o * ni + i] as f64 * prev[r * ni + i])
-                            .sum::<f64>();
-                    out[r * no + o] = if l + 1 == layout.n_layers() {
-                        z
-                    } else {
-                        z.max(0.0)
-                    };
-                }
-            }
-            acts.push(out);
-        }
-        let y = acts.last().unwrap().clone();
-        for r in 0..rows {
-            let got = ws.act[2][r] as f64;
-            assert!(
-                (got - y[r]).abs() <= 1e-5 * (1.0 + y[r].abs()),
-                "row {r}: {got} vs {}",
-                y[r]
-            );
-        }
-        // Backward of ½Σŷ²: dŷ = ŷ.
-        for r in 0..rows {
-            ws.delta[2][r] = ws.act[2][r];
-        }
-        let mut grad = vec![0f32; layout.n_params];
-        backward(&layout, &p, &mut grad, &mut ws, rows, None, 2);
-        let mut dz: Vec<f64> = y.clone();
-        let mut want = vec![0f64; layout.n_params];
-        for l in (0..layout.n_layers()).rev() {
-            let (ni, no) = (layout.n_in(l), layout.n_out(l));
-            let a = &acts[l];
-            for o in 0..no {
-                for i in 0..ni {
-                    want[layout.w_off[l] + o * ni + i] =
-                        (0..rows).map(|r| dz[r * no + o] * a[r * ni + i]).sum();
-                }
-                want[layout.b_off[l] + o] = (0..rows).map(|r| dz[r * no + o]).sum();
-            }
-            if l == 0 {
-                break;
-            }
-            let w = layout.weight(&p, l);
-            let mut d = vec![0f64; rows * ni];
-            for r in 0..rows {
-                for i in 0..ni {
-                    if a[r * ni + i] > 0.0 {
-                        d[r * ni + i] =
-                            (0..no).map(|o| dz[r * no + o] * w[o * ni + i] as f64).sum();
-                    }
-                }
-            }
-            dz = d;
-        }
-        let scale = want.iter().fold(0f64, |m, v| m.max(v.abs()));
-        for (k, (&gk, &wk)) in grad.iter().zip(&want).enumerate() {
-            assert!(
-                (gk as f64 - wk).abs() <= 1e-4 * scale,
-                "parameter {k}: {gk} vs {wk}"
-            );
-        }
     }
 
     #[test]
