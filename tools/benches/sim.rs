@@ -2,12 +2,23 @@
 //! path (the default) and on the reference path (libm and the link every physics step).
 //! Real-time factor = 1 s / reported time (target ≥ 1000×, i.e. ≤ 1 ms per iteration).
 //!
+//! `sim_protocol_ankle_roll`: the real acquisition excitation ([`frictl::acquire::protocol::run`] with
+//! the preset's `[protocol]`: re-centring, current sines, ramps, steps, closed-loop tracking) on the
+//! simulator for a fixed simulated span (every k-th block of the schedule, printed at start), i.e.
+//! the speeds `frictl acquire` really produces, controller and velocity filter included. Plant
+//! construction is outside the timing. Real-time factor = span / reported time.
+//!
 //! Also the dataset writer: 1000 simulated samples through [`frictl::acquire::log::CsvLog`] into
 //! memory (the CSV formatting cost of one simulated second of `frictl acquire`).
 
+use criterion::BatchSize;
 use criterion::{Criterion, criterion_group, criterion_main};
+use frictl::acquire::config::ProtocolConfig;
 use frictl::acquire::log::CsvLog;
-use frictl::acquire::protocol::{LogRow, Mode};
+use frictl::acquire::protocol::{
+    self, ControllerModel, LogRow, Mode, SimJoint, schedule, schedule_duration_s,
+};
+use frictl::sim::params::load_table;
 use frictl::sim::{Plant, PlantParams};
 use std::hint::black_box;
 
@@ -70,5 +81,67 @@ fn csv_one_simulated_second(c: &mut Criterion) {
     });
 }
 
-criterion_group!(benches, one_simulated_second, csv_one_simulated_second);
+/// Simulated span of `sim_protocol_ankle_roll` (at least; whole blocks) [s].
+const PROTOCOL_SPAN_S: f64 = 30.0;
+
+fn protocol_ankle_roll(c: &mut Criterion) {
+    let table = load_table("ankle_roll", None, &[]).expect("built-in preset");
+    let params = PlantParams::from_table(&table).expect("valid preset");
+    let cfg = ProtocolConfig::from_table(&table).expect("valid protocol");
+    let all = schedule(&cfg);
+    // every k-th block so the span samples sines, ramps, steps and tracking alike
+    let total_s = schedule_duration_s(&all);
+    let stride = ((total_s / PROTOCOL_SPAN_S).floor() as usize).max(1);
+    let mut blocks = Vec::new();
+    for b in all.iter().step_by(stride) {
+        blocks.push(b.clone());
+        if schedule_duration_s(&blocks) >= PROTOCOL_SPAN_S {
+            break;
+        }
+    }
+    let span_s = schedule_duration_s(&blocks);
+    eprintln!(
+        "sim_protocol_ankle_roll: {} of {} blocks (every {stride}th), {span_s:.3} simulated s \
+         (whole schedule {total_s:.1} s)",
+        blocks.len(),
+        all.len()
+    );
+    let link = frictl::sim::link::link_from_model(&params.link).expect("valid link");
+    let model = ControllerModel {
+        gear_ratio_signed: params.gear_ratio_signed,
+        kt_nm_per_a: params.kt_nm_per_a,
+        j_eq_kgm2: params.j_eq_kgm2(),
+        i_max_a: params.i_max_a,
+        period_s: params.sample_period_s(),
+        link: link.as_ref(),
+    };
+    let mut group = c.benchmark_group("protocol");
+    group.sample_size(10);
+    group.bench_function("sim_protocol_ankle_roll", |b| {
+        b.iter_batched(
+            || SimJoint {
+                plant: Plant::from_params(params.clone(), 1).expect("valid preset"),
+                tau_ext_nm: 0.0,
+            },
+            |mut joint| {
+                let mut acc = 0.0;
+                let summary = protocol::run(&mut joint, &model, &cfg, &blocks, &mut |row| {
+                    acc += row.i_ref_a;
+                    Ok(())
+                })
+                .expect("simulated run");
+                black_box((acc, summary.chunks))
+            },
+            BatchSize::PerIteration,
+        )
+    });
+    group.finish();
+}
+
+criterion_group!(
+    benches,
+    one_simulated_second,
+    protocol_ankle_roll,
+    csv_one_simulated_second
+);
 criterion_main!(benches);

@@ -8,7 +8,8 @@
 //! - [`link`]: the [`LinkDynamics`](link::LinkDynamics) trait (I_L(s), g(s)) and an analytic pendulum;
 //! - [`plant`]: the equations, 20 kHz semi-implicit Euler with the exact LuGre update, 1 kHz sensor
 //!   emulation and the true friction as diagnostics;
-//! - [`profile`]: open-loop current profiles for `frictl sim run`.
+//! - [`profile`]: open-loop current profiles for `frictl sim run`;
+//! - [`stribeck`]: the tabulated Stribeck shape exp(−u^δ) of the fast path.
 //!
 //! What it is not: the excitation protocol or any controller ([`crate::acquire`]), and not the
 //! plant process over shared memory or CAN (`frictl sim serve`, [`crate::serve`]).
@@ -18,6 +19,7 @@ pub mod link;
 pub mod params;
 pub mod plant;
 pub mod profile;
+pub mod stribeck;
 
 pub use link::{LinkDynamics, Pendulum};
 pub use params::{LinkModel, ParamError, PlantParams, SensorParams};

@@ -22,6 +22,7 @@ use rand_distr::StandardNormal;
 use crate::sim::fastmath;
 use crate::sim::link::LinkDynamics;
 use crate::sim::params::{ParamError, PlantParams};
+use crate::sim::stribeck::StribeckTable;
 
 /// Continuous state of the joint (joint side, |r|).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -173,6 +174,8 @@ pub struct Plant<L: LinkDynamics = Box<dyn LinkDynamics>> {
     sin_p2: f64,
     /// true: every physics step calls libm and the link (the reference); false: the fast path.
     reference_math: bool,
+    /// exp(−u^δ) by table for the fast path when δ ≠ 1 (`None`: δ = 1 or δ too small to tabulate).
+    stribeck: Option<StribeckTable>,
 }
 
 /// Temperature-dependent coefficients, evaluated once per 1 kHz sample: T changes by well under
@@ -233,6 +236,11 @@ impl<L: LinkDynamics> Plant<L> {
             cos_p2: params.p2_rad.cos(),
             sin_p2: params.p2_rad.sin(),
             reference_math: false,
+            stribeck: if params.stribeck_exponent == 1.0 {
+                None
+            } else {
+                StribeckTable::new(params.stribeck_exponent)
+            },
             p: params,
         };
         plant.reset_at_rest(plant.p.initial_s_rad);
@@ -549,6 +557,7 @@ impl<L: LinkDynamics> Plant<L> {
         let inv_r_th = 1.0 / p.r_th_k_per_w;
         let delta = p.stribeck_exponent;
         let linear_stribeck = delta == 1.0;
+        let stribeck_table = self.stribeck.as_ref();
         let f_s_minus_c0 = tc.f_s - tc.f_c0;
         let n = p.substeps_per_sample;
         let mut truth = Truth::default();
@@ -577,6 +586,9 @@ impl<L: LinkDynamics> Plant<L> {
                 } else {
                     0.0
                 }
+            } else if let Some(table) = stribeck_table {
+                // one load + a cubic instead of ln → exp → exp (≤ 1e-12 absolute, see `stribeck`)
+                table.shape(x)
             } else {
                 let xd = fastmath::powf(x, delta);
                 if xd < 40.0 {
