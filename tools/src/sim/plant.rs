@@ -283,14 +283,16 @@ impl<L: LinkDynamics> Plant<L> {
     /// link's [`closed_form`](LinkDynamics::closed_form) is read once and sin/cos of the joint angle and
     /// of the motor ripple angle are evaluated once, then advanced through the physics steps by exact
     /// rotation (Taylor sin/cos of the per-step angle increment, with angle doubling up to 0.8 rad,
-    /// recomputed directly beyond); `exp`, `ln` (for the Stribeck power) and `tanh` are the inlined
-    /// [`fastmath`] kernels (≤ 1–2 ulp from libm, bounds in that module); the Stribeck term
-    /// exp(−|ṡ/v_s|^δ) is 0 once |ṡ/v_s|^δ ≥ 40 (below 4.3e-18·(F_s − F_c)) and the
-    /// σ1·exp(−(ṡ/v_s)²) factor is 0 where it is below 4e-18·σ1; sums on the step's dependency
+    /// recomputed directly beyond); `exp` and `tanh` are the inlined [`fastmath`] kernels (≤ 1–2 ulp
+    /// from libm, bounds in that module); for δ ≠ 1 the Stribeck shape exp(−|ṡ/v_s|^δ) comes from
+    /// the plant's [`StribeckTable`] (≤ 1e-12 absolute from libm; `powf` + `exp` only in the stick
+    /// phase |ṡ| < v_s·2⁻²⁰); the Stribeck term is 0 once |ṡ/v_s|^δ ≥ 40 (below
+    /// 4.3e-18·(F_s − F_c)) and the σ1·exp(−(ṡ/v_s)²) factor is 0 where it is below 4e-18·σ1;
+    /// sums on the step's dependency
     /// chain are regrouped into FMAs. `true` runs the reference: libm and the link every physics
-    /// step, exactly the equations as written. The two agree to rounding (≈ 1e-15 relative per
-    /// sample; over 120 s of stick-slip the joint angles differ by ≤ 1e-9 rad, far below the
-    /// encoder's 2.4e-5 rad, see `tools/tests/sim_physics.rs`, which asserts ≤ 1e-6 rad). Both are
+    /// step, exactly the equations as written. The two agree to rounding and the table's 1e-12
+    /// (over 120 s of stick-slip the joint angles differ by ≤ 2e-10 rad on the ankle, ≈ 1e-15 rad on
+    /// the knee, far below the encoder's 2.4e-5 rad, see `tools/tests/sim_physics.rs`, which asserts ≤ 1e-6 rad). Both are
     /// deterministic for a seed.
     pub fn set_reference_math(&mut self, reference: bool) {
         self.reference_math = reference;

@@ -108,7 +108,7 @@ impl StribeckTable {
         if u >= self.u_top {
             return 0.0;
         }
-        if !(u >= self.u_lo) {
+        if u.is_nan() || u < self.u_lo {
             // stick phase (and NaN): the inlined kernels, as before the table
             return fastmath::exp_in_range(-fastmath::powf(u.max(0.0), self.delta));
         }
