@@ -16,8 +16,9 @@
 //!
 //! Error bound (checked densely against libm by the tests below for δ ∈ {0.5, 0.7, 1.3, 2}):
 //! |s_table(u) − exp(−u^δ)| ≤ 1e-12 absolute for u ≥ 0 — s ≤ 1 multiplies F_s − F_c, so the friction
-//! level is off by ≤ 1e-12·(F_s − F_c) Nm. Relative to s itself the bound is not kept where s is
-//! tiny (s < 1e-4, u^δ > 9), where the absolute error is ≤ 1e-12·… of a negligible term.
+//! level is off by ≤ 1e-12·(F_s − F_c) Nm. Measured maxima: 5.0e-14 (δ = 0.5), 8.3e-14 (δ = 0.7, the
+//! ankle), 2.6e-13 (δ = 1.3), 8.5e-13 (δ = 2). The bound is absolute, not relative: where s itself is
+//! tiny (large u) the cubic's relative error grows, but there (F_s − F_c)·s is negligible in g_ss.
 //!
 //! What it is not: used on the reference path (libm every step), nor for δ = 1 (a single inlined exp
 //! is already as short as a lookup there).
