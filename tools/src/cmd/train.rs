@@ -44,7 +44,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 /// Feature set (block order of the input vector).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Features {
-    /// `[Δθ ×H, ṡ ×H]` — the paper's (Δθ latched at each chunk start, as the daemon at enable).
+    /// `[Δθ ×H, ṡ ×H]` — the paper's (Δθ zeroed once per recording; see `--delta-theta-offset`).
     DeltaThetaJointVel,
     /// `[ω_m ×H, ṡ ×H]` — ergoCub since Oct 2024.
     MotorVelJointVel,
