@@ -580,7 +580,7 @@ fn wait_readable(fd: i32, timeout: Duration) -> io::Result<()> {
         revents: 0,
     };
     let ts = libc::timespec {
-        tv_sec: timeout.as_secs() as libc::time_t,
+        tv_sec: timeout.as_secs() as _, // time_t: 64-bit on glibc x86_64 and musl ≥ 1.2
         tv_nsec: timeout.subsec_nanos() as libc::c_long,
     };
     // ppoll instead of the socketcan timeout helpers: those round sub-millisecond timeouts to 0 or up
