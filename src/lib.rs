@@ -12,6 +12,8 @@
 //!   (AVX-512 / AVX2+FMA / portable) and f16/bf16 weight storage.
 //! - [`model`]: none / CV / SCV / PINN behind one trait, so the daemon treats them alike.
 //! - [`units`]: the signed gear ratio and unit conventions.
+//! - `random` (cargo feature `random`, off by default): seeded random ReLU networks for tests, benches
+//!   and tools.
 //!
 //! What it is **not**: no threads, no IPC, no logging, no file-system access beyond the explicit
 //! `read`/`write` helpers of [`weights`]. The daemon (`frictiond`) and the tools (`frictl`) build on it.
@@ -29,5 +31,7 @@ pub mod friction;
 pub mod kernel;
 pub mod mlp;
 pub mod model;
+#[cfg(feature = "random")]
+pub mod random;
 pub mod units;
 pub mod weights;

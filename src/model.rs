@@ -376,42 +376,21 @@ mod tests {
     use super::*;
     use crate::features::FeatureSet;
     use crate::friction::paper;
-    use crate::mlp::{Activation, DenseLayer, MlpWeights, Normalisation, StorageDtype};
+    use crate::mlp::StorageDtype;
+    use crate::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
     use crate::units::GearRatio;
     use crate::weights::{SignalFiltering, TrainingMeta};
-    use rand::{Rng, SeedableRng};
-    use rand_chacha::ChaCha8Rng;
-
-    fn random_mlp(rng: &mut ChaCha8Rng, sizes: &[usize]) -> MlpWeights {
-        let n_in = sizes[0];
-        let layers = sizes
-            .windows(2)
-            .enumerate()
-            .map(|(k, w)| DenseLayer {
-                n_in: w[0],
-                n_out: w[1],
-                weight: (0..w[0] * w[1])
-                    .map(|_| rng.random_range(-0.5..0.5))
-                    .collect(),
-                bias: (0..w[1]).map(|_| rng.random_range(-0.2..0.2)).collect(),
-                activation: if k + 2 == sizes.len() {
-                    Activation::Identity
-                } else {
-                    Activation::Relu
-                },
-            })
-            .collect();
-        MlpWeights {
-            norm: Normalisation {
-                mean: (0..n_in).map(|_| rng.random_range(-1.0..1.0)).collect(),
-                scale: (0..n_in).map(|_| rng.random_range(0.5..3.0)).collect(),
-            },
-            layers,
-        }
-    }
 
     fn model_file(spec: FeatureSpec, ratio: f64, seed: u64) -> ModelFile {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mlp = RandomMlpSpec {
+            sizes: vec![spec.n_inputs(), 16, 8, 1],
+            weights: WeightInit::Uniform { amp: 0.5 },
+            bias: -0.2..0.2,
+            norm: NormInit::Uniform {
+                mean: -1.0..1.0,
+                scale: 0.5..3.0,
+            },
+        };
         ModelFile {
             meta: ModelMeta {
                 joint_name: "l_ankle_roll".into(),
@@ -429,7 +408,7 @@ mod tests {
                 },
             },
             dtype: StorageDtype::F32,
-            mlp: random_mlp(&mut rng, &[spec.n_inputs(), 16, 8, 1]),
+            mlp: seeded_mlp(&mlp, seed).unwrap(),
         }
     }
 

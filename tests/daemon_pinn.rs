@@ -12,14 +12,14 @@ use std::time::Duration;
 
 use daemon_support::*;
 use frictionless::features::{FeatureSet, FeatureSpec, JointSample, WarmupPolicy};
-use frictionless::mlp::{Activation, DenseLayer, MlpWeights, Normalisation, StorageDtype};
+use frictionless::mlp::StorageDtype;
 use frictionless::model::{FrictionModel, PinnEstimator};
+use frictionless::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
 use frictionless::units::GearRatio;
 use frictionless::weights::{ModelFile, ModelMeta, SignalFiltering, TrainingMeta};
 use frictionless_shm_types::{
     FLAG_STALE, FLAG_WARMING_UP, JointStates, MotorCurrentCommand, TorqueRequest, model_kind,
 };
-use rand::{Rng, SeedableRng};
 
 const R: f64 = -100.0;
 const KT: f64 = 0.157;
@@ -29,30 +29,17 @@ const H: usize = 10;
 
 /// A random 2H → 16 → 12 → 1 network with the paper's feature set `[Δθ ×H, ṡ ×H]`.
 fn model_file(seed: u64) -> ModelFile {
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let features = FeatureSpec {
         set: FeatureSet::DeltaThetaJointVel,
         history: H,
         temperature: false,
     };
-    let sizes = [features.n_inputs(), 16, 12, 1];
-    let layers = sizes
-        .windows(2)
-        .enumerate()
-        .map(|(k, w)| DenseLayer {
-            n_in: w[0],
-            n_out: w[1],
-            weight: (0..w[0] * w[1])
-                .map(|_| rng.random_range(-0.6f32..0.6))
-                .collect(),
-            bias: (0..w[1]).map(|_| rng.random_range(-0.2f32..0.2)).collect(),
-            activation: if k + 2 == sizes.len() {
-                Activation::Identity
-            } else {
-                Activation::Relu
-            },
-        })
-        .collect();
+    let mlp = RandomMlpSpec {
+        sizes: vec![features.n_inputs(), 16, 12, 1],
+        weights: WeightInit::Uniform { amp: 0.6 },
+        bias: -0.2..0.2,
+        norm: NormInit::Identity,
+    };
     ModelFile {
         meta: ModelMeta {
             joint_name: "knee".into(),
@@ -70,10 +57,7 @@ fn model_file(seed: u64) -> ModelFile {
             },
         },
         dtype: StorageDtype::F32,
-        mlp: MlpWeights {
-            norm: Normalisation::identity(sizes[0]),
-            layers,
-        },
+        mlp: seeded_mlp(&mlp, seed).unwrap(),
     }
 }
 

@@ -9,7 +9,8 @@
 //! `half` crate, independently of the kernel), then the same 1e-5 bound applies.
 
 use frictionless::kernel::{KernelPath, Mlp};
-use frictionless::mlp::{Activation, DenseLayer, MlpWeights, Normalisation, StorageDtype};
+use frictionless::mlp::{Activation, MlpWeights, Normalisation, StorageDtype};
+use frictionless::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -58,34 +59,18 @@ fn allocs_here() -> usize {
 // Random networks.
 
 /// A random MLP with He-uniform weights (activations neither die nor explode with depth), small
-/// positive-leaning biases and a non-trivial normalisation.
+/// positive-leaning biases and a non-trivial normalisation; its seed is the next draw of `rng`.
 fn random_net(rng: &mut ChaCha8Rng, sizes: &[usize]) -> MlpWeights {
-    let n = sizes.len() - 1;
-    let layers = (0..n)
-        .map(|k| {
-            let (ni, no) = (sizes[k], sizes[k + 1]);
-            let lim = (6.0 / ni as f32).sqrt();
-            DenseLayer {
-                n_in: ni,
-                n_out: no,
-                weight: (0..ni * no).map(|_| rng.random_range(-lim..lim)).collect(),
-                bias: (0..no).map(|_| rng.random_range(-0.1..0.3)).collect(),
-                activation: if k + 1 == n {
-                    Activation::Identity
-                } else {
-                    Activation::Relu
-                },
-            }
-        })
-        .collect();
-    let ni = sizes[0];
-    let norm = Normalisation {
-        mean: (0..ni).map(|_| rng.random_range(-2.0..2.0)).collect(),
-        scale: (0..ni).map(|_| rng.random_range(0.25..4.0)).collect(),
+    let spec = RandomMlpSpec {
+        sizes: sizes.to_vec(),
+        weights: WeightInit::HeUniform,
+        bias: -0.1..0.3,
+        norm: NormInit::Uniform {
+            mean: -2.0..2.0,
+            scale: 0.25..4.0,
+        },
     };
-    let w = MlpWeights { norm, layers };
-    w.validate().expect("random net is valid");
-    w
+    seeded_mlp(&spec, rng.random()).expect("random net is valid")
 }
 
 /// Raw inputs around the normalisation mean (normalised values roughly in ±2).

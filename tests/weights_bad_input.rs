@@ -8,16 +8,13 @@ use std::path::PathBuf;
 
 use frictionless::features::{FeatureSet, FeatureSpec};
 use frictionless::friction::ScvParams;
-use frictionless::mlp::{
-    Activation, DenseLayer, MlpShapeError, MlpWeights, Normalisation, StorageDtype,
-};
+use frictionless::mlp::{MlpShapeError, MlpWeights, StorageDtype};
+use frictionless::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
 use frictionless::units::GearRatio;
 use frictionless::weights::{
     self, ModelFile, ModelMeta, SignalFiltering, TrainingMeta, WeightError, from_bytes, inspect,
     to_bytes,
 };
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
 
 // Offsets from docs/weights-format.md.
 const CRC_AT: usize = 12;
@@ -51,30 +48,16 @@ fn spec_file_len(sizes: &[usize], dtype_size: usize) -> usize {
 }
 
 fn random_mlp(sizes: &[usize], seed: u64) -> MlpWeights {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let n = sizes[0];
-    let norm = Normalisation {
-        mean: (0..n).map(|_| rng.random_range(-2.0..2.0)).collect(),
-        scale: (0..n).map(|_| rng.random_range(0.1..3.0)).collect(),
+    let spec = RandomMlpSpec {
+        sizes: sizes.to_vec(),
+        weights: WeightInit::Uniform { amp: 0.5 },
+        bias: -0.1..0.1,
+        norm: NormInit::Uniform {
+            mean: -2.0..2.0,
+            scale: 0.1..3.0,
+        },
     };
-    let layers = sizes
-        .windows(2)
-        .enumerate()
-        .map(|(k, w)| DenseLayer {
-            n_in: w[0],
-            n_out: w[1],
-            weight: (0..w[0] * w[1])
-                .map(|_| rng.random_range(-0.5..0.5))
-                .collect(),
-            bias: (0..w[1]).map(|_| rng.random_range(-0.1..0.1)).collect(),
-            activation: if k + 2 == sizes.len() {
-                Activation::Identity
-            } else {
-                Activation::Relu
-            },
-        })
-        .collect();
-    MlpWeights { norm, layers }
+    seeded_mlp(&spec, seed).expect("valid sizes")
 }
 
 /// A model for `sizes`; an odd input count means H = (n−1)/2 plus temperature.
