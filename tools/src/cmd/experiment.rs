@@ -10,7 +10,9 @@ use frictl::experiment::controller::PAPER_KD_PER_S;
 use frictl::experiment::metrics::TrackCriterion;
 use frictl::experiment::report::{SuiteReport, slug, write_trace_csv};
 use frictl::experiment::run::{JointSetup, JointTrace, Pulse};
-use frictl::experiment::session::{Binaries, FrictionModel, Mode, install_signal_flag};
+use frictl::experiment::session::{
+    Binaries, FrictionModel, LawSettings, Lpf, Mode, install_signal_flag,
+};
 use frictl::experiment::suite::{self, SuiteConfig, Task};
 
 /// Which experiment.
@@ -50,6 +52,10 @@ pub enum ModelSel {
     Scv,
     /// PINN (`--pinn`).
     Pinn,
+    /// Diagnostic bound "oracle (true friction)": frictiond runs no model and the controller adds
+    /// frictiond's law applied to the plant's true friction (kfc, clip, LPF) to τ_des. Lockstep only;
+    /// not a model a robot can run.
+    Oracle,
 }
 
 /// Arguments of `frictl experiment`.
@@ -142,6 +148,42 @@ pub struct Args {
     /// ergoCub SN002 config used 1).
     #[arg(long)]
     pub kfc: Option<String>,
+    /// Low-pass on τ̂_F in frictiond (and on the oracle's term): `off` (no `lpf`), a cut-off [Hz]
+    /// (Butterworth of the shipped order, 2), or per joint `knee=off,ankle_roll=10` (default: the
+    /// shipped `config/ankle_knee.toml`, 30 Hz order 2 on both joints).
+    #[arg(long)]
+    pub lpf: Option<String>,
+}
+
+/// Parses `--lpf` into per-joint overrides (`None` = shipped); a cut-off keeps the shipped order
+/// (2 if the shipped config has no LPF).
+fn lpf_overrides(spec: &str, names: &[String; 2]) -> anyhow::Result<[Option<Lpf>; 2]> {
+    let parts = per_joint("lpf", spec, &[0, 1], true)?;
+    let mut out = [None; 2];
+    for j in 0..2 {
+        let Some(v) = &parts[j] else { continue };
+        out[j] = Some(match v.as_str() {
+            "off" | "none" => Lpf::Off,
+            t => {
+                let cutoff_hz = t
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|x| x.is_finite() && *x > 0.0 && *x < 500.0)
+                    .with_context(|| {
+                        format!(
+                            "--lpf `{spec}`: `{t}` for {} is neither `off` nor a cut-off in (0, 500) Hz",
+                            names[j]
+                        )
+                    })?;
+                let order = match LawSettings::shipped(&names[j], None, None)?.lpf {
+                    Lpf::Butterworth { order, .. } => order,
+                    Lpf::Off => 2,
+                };
+                Lpf::Butterworth { order, cutoff_hz }
+            }
+        });
+    }
+    Ok(out)
 }
 
 /// Parses `--pinn-delta-theta-offset` into per-joint offsets (`None` = latch at enable).
@@ -310,6 +352,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             m
         }
     };
+    anyhow::ensure!(
+        !(args.realtime && wanted.contains(&ModelSel::Oracle)),
+        "--model oracle runs in lockstep only (it adds the true friction of the state each request \
+         answers); drop --realtime or the oracle"
+    );
     let mut models: Vec<(usize, FrictionModel)> = vec![];
     for &j in &joints {
         let name = JOINT_KEYS[j][0];
@@ -338,6 +385,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     anyhow::ensure!(p.is_file(), "--pinn: {} is not a file", p.display());
                     FrictionModel::Pinn(p)
                 }
+                ModelSel::Oracle => FrictionModel::Oracle,
             };
             models.push((j, fm));
         }
@@ -371,6 +419,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         duration_s: args.pulse_s,
         torque_nm: pulse_nm[j],
     };
+    let setups = JointSetup::both(&args.sets)?;
+    let names = [
+        setups[0].params.joint.clone(),
+        setups[1].params.joint.clone(),
+    ];
+    let lpf = match &args.lpf {
+        Some(s) => lpf_overrides(s, &names)?,
+        None => [None; 2],
+    };
     let cfg = SuiteConfig {
         mode,
         seed: args.seed,
@@ -390,6 +447,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             Some(s) => per_joint_f64("kfc", s, &[0, 1])?,
             None => [None; 2],
         },
+        lpf,
     };
     let kp_given = args
         .kp
@@ -398,11 +456,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .transpose()?;
 
     let bins = Binaries::locate()?;
-    let setups = JointSetup::both(&args.sets)?;
-    let names = [
-        setups[0].params.joint.clone(),
-        setups[1].params.joint.clone(),
-    ];
     let mut report = SuiteReport {
         mode: if mode == Mode::Lockstep {
             "lockstep"
@@ -424,6 +477,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             r => format!("{r:?}"),
         };
         report.references.insert(names[j].clone(), desc);
+        let law = LawSettings::shipped(&names[j], cfg.kfc[j], cfg.lpf[j])?;
+        report
+            .configuration
+            .insert(names[j].clone(), law.describe());
     }
     std::fs::create_dir_all(args.out.join("traces"))
         .with_context(|| format!("cannot create {}", args.out.display()))?;

@@ -16,10 +16,11 @@ use anyhow::Context;
 use super::metrics::{DisturbanceMetrics, TrackCriterion, TrackMetrics};
 use super::run::{JointTrace, Pulse};
 use super::search::{MinKp, sig3};
+use super::session::ORACLE_LABEL;
 use super::suite::{DisturbanceResult, MinKpResult, SearchStep, TrackResult};
 
-/// Model column order of every table.
-pub const MODEL_ORDER: [&str; 4] = ["none", "CV", "SCV", "PINN"];
+/// Model column order of every table (the oracle column only appears when it ran).
+pub const MODEL_ORDER: [&str; 5] = ["none", "CV", "SCV", "PINN", ORACLE_LABEL];
 
 /// Everything measured for one (joint, model).
 #[derive(Clone, Debug, Default, serde::Serialize)]
@@ -53,6 +54,8 @@ pub struct SuiteReport {
     pub kd_per_s: f64,
     /// Reference description per joint.
     pub references: BTreeMap<String, String>,
+    /// frictiond's friction-compensation law per joint (kfc, clip, τ̂_F LPF).
+    pub configuration: BTreeMap<String, String>,
     /// Disturbance pulse per joint.
     pub pulses: BTreeMap<String, Pulse>,
     /// Where the common low K_p came from per joint (normally "PINN").
@@ -127,6 +130,26 @@ impl SuiteReport {
             .collect()
     }
 
+    /// Table columns: none, CV, SCV, PINN, and the oracle if any joint ran it.
+    fn columns(&self) -> Vec<&'static str> {
+        let oracle = self.joints.values().any(|m| m.contains_key(ORACLE_LABEL));
+        MODEL_ORDER
+            .iter()
+            .copied()
+            .filter(|k| *k != ORACLE_LABEL || oracle)
+            .collect()
+    }
+
+    /// `| joint | none | CV | SCV | PINN |` (plus the oracle) and its separator row.
+    fn header(&self) -> String {
+        let cols = self.columns();
+        format!(
+            "| joint | {} |\n|---|{}\n",
+            cols.join(" | "),
+            "---|".repeat(cols.len())
+        )
+    }
+
     /// The tables as markdown.
     pub fn markdown(&self) -> String {
         let mut s = String::new();
@@ -151,15 +174,18 @@ impl SuiteReport {
             }
             s += "\n";
         }
+        for (j, c) in &self.configuration {
+            s += &format!("- {j} frictiond law: {c}\n");
+        }
         let any = |f: &dyn Fn(&Cell) -> bool| self.joints.values().any(|m| m.values().any(f));
         if any(&|c| c.min_kp.is_some()) {
             s += &format!(
                 "\n**Minimum K_p that tracks the sine** ({crit}; paper: ankle roll 13000 / 1000 / 900 / 550, knee 1000 / 100 / 70 / 30)\n\n"
             );
-            s += "| joint | none | CV | SCV | PINN |\n|---|---|---|---|---|\n";
+            s += &self.header();
             for (j, m) in &self.joints {
                 s += &format!("| {j} |");
-                for k in MODEL_ORDER {
+                for k in self.columns() {
                     let v = m
                         .get(k)
                         .and_then(|c| c.min_kp)
@@ -204,7 +230,8 @@ impl SuiteReport {
             }
         }
         if any(&|c| c.disturbance_own_kp.is_some()) {
-            s += "\n**Disturbance at each model's own K_p** (paper Tables III/IV): position RMSE after release [rad]\n\n| joint | none | CV | SCV | PINN |\n|---|---|---|---|---|\n";
+            s += "\n**Disturbance at each model's own K_p** (paper Tables III/IV): position RMSE after release [rad]\n\n";
+            s += &self.header();
             s += &self.row_table(|c| c.disturbance_own_kp);
         }
         if any(&|c| c.disturbance_low_kp.is_some()) {
@@ -214,16 +241,18 @@ impl SuiteReport {
                 .map(|(j, w)| format!("{j}: {w}"))
                 .collect();
             s += &format!(
-                "\n**Disturbance at the same low K_p for all** (paper Table V; K_p from {}): position RMSE after release [rad] (paper: ankle roll 0.19 / 0.2 / 0.21 / 0.046, knee 0.21 / 0.11 / 0.097 / 0.017)\n\n| joint | none | CV | SCV | PINN |\n|---|---|---|---|---|\n",
+                "\n**Disturbance at the same low K_p for all** (paper Table V; K_p from {}): position RMSE after release [rad] (paper: ankle roll 0.19 / 0.2 / 0.21 / 0.046, knee 0.21 / 0.11 / 0.097 / 0.017)\n\n",
                 src.join(", ")
             );
+            s += &self.header();
             s += &self.row_table(|c| c.disturbance_low_kp);
         }
         if any(&|c| c.track_at_low_kp.is_some()) {
-            s += "\n**Sine tracking at the same low K_p**: tracking RMSE [rad]\n\n| joint | none | CV | SCV | PINN |\n|---|---|---|---|---|\n";
+            s += "\n**Sine tracking at the same low K_p**: tracking RMSE [rad]\n\n";
+            s += &self.header();
             for (j, m) in &self.joints {
                 s += &format!("| {j} |");
-                for k in MODEL_ORDER {
+                for k in self.columns() {
                     let v = m
                         .get(k)
                         .and_then(|c| c.track_at_low_kp)
@@ -246,7 +275,7 @@ impl SuiteReport {
         let mut s = String::new();
         for (j, m) in &self.joints {
             s += &format!("| {j} |");
-            for k in MODEL_ORDER {
+            for k in self.columns() {
                 let v = m.get(k).and_then(&f).map_or("–".into(), |(kp, d)| {
                     format!(
                         "{:.4} (K_p {}, max {:.3})",
@@ -324,7 +353,11 @@ pub fn write_plots(out: &Path, traces: &[(String, JointTrace)]) -> anyhow::Resul
         // stride so at most ~4000 points per series
         let stride = (tr.t_s.len() / 4000).max(1);
         type Series<'a> = (&'a str, &'a [f64], RGBColor);
-        let f_hat_label = format!("τ̂_F (frictiond, {}, kfc {})", tr.model, tr.kfc);
+        let f_hat_label = if tr.model == ORACLE_LABEL {
+            format!("kfc·τ_F,true added to τ_des (oracle, kfc {})", tr.kfc)
+        } else {
+            format!("τ̂_F (frictiond, {}, kfc {})", tr.model, tr.kfc)
+        };
         let title0 = format!("{} — {} — K_p {} 1/s²", name, tr.name, sig3(tr.kp_per_s2));
         let specs: [(String, &str, Vec<Series>); 3] = [
             (

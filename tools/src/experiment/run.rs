@@ -18,9 +18,10 @@ use frictionless_shm_types::sim::{SimDisturbance, SimTruth};
 use frictionless_shm_types::{DaemonStatus, Inbox, Ipc, JointStates, TorqueRequest, monotonic_ns};
 
 use super::controller::{ComputedTorque, Reference};
+use super::oracle::OracleCompensation;
 use super::session::{
-    Binaries, DaemonJoint, FrictionModel, Mode, PRESETS, PlantSpec, Session, interrupted,
-    shipped_kfc,
+    Binaries, DaemonJoint, FrictionModel, LawSettings, Lpf, Mode, PRESETS, PlantSpec, Session,
+    interrupted,
 };
 use crate::sim::PlantParams;
 use crate::sim::link::{LinkDynamics, link_from_model};
@@ -119,6 +120,13 @@ pub struct TrialSpec {
     pub kfc: [Option<f64>; 2],
 }
 
+/// Further per-trial settings (kept out of [`TrialSpec`] so existing struct literals stay valid).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TrialOptions {
+    /// τ̂_F low-pass per joint index instead of the shipped config's (`None` = shipped).
+    pub lpf: [Option<Lpf>; 2],
+}
+
 /// Recorded signals of one joint, one entry per tick.
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct JointTrace {
@@ -151,7 +159,9 @@ pub struct JointTrace {
     /// τ_des [Nm].
     pub tau_des_nm: Vec<f64>,
     /// τ̂_F after clip, kfc and LPF [Nm] (DaemonStatus of the newest daemon tick; in lockstep exactly
-    /// the daemon's output for the previous row's state, i.e. row k holds τ̂_F(state k − 1)).
+    /// the daemon's output for the previous row's state, i.e. row k holds τ̂_F(state k − 1)). For the
+    /// oracle: its compensation with the same one-row lag (row k holds the term added for state
+    /// k − 1; the term for state k is inside row k's τ_des).
     pub tau_f_hat_nm: Vec<f64>,
     /// True friction τ_F [Nm] (SimTruth).
     pub tau_f_true_nm: Vec<f64>,
@@ -197,11 +207,21 @@ fn wait_for<T: std::fmt::Debug + Copy + iceoryx2::prelude::ZeroCopySend + 'stati
     }
 }
 
-/// Runs one trial through real processes (see the module doc).
+/// Runs one trial through real processes (see the module doc) with default [`TrialOptions`].
 pub fn run_trial(
     bins: &Binaries,
     setups: &[JointSetup; 2],
     spec: &TrialSpec,
+) -> anyhow::Result<TrialTrace> {
+    run_trial_with(bins, setups, spec, &TrialOptions::default())
+}
+
+/// Runs one trial through real processes (see the module doc).
+pub fn run_trial_with(
+    bins: &Binaries,
+    setups: &[JointSetup; 2],
+    spec: &TrialSpec,
+    opts: &TrialOptions,
 ) -> anyhow::Result<TrialTrace> {
     let started = Instant::now();
     for p in &spec.joints {
@@ -209,6 +229,12 @@ pub fn run_trial(
             p.index < 2,
             "joint index {} (0 = knee, 1 = ankle_roll)",
             p.index
+        );
+        anyhow::ensure!(
+            !(p.model == FrictionModel::Oracle
+                && (spec.mode != Mode::Lockstep || spec.raw_friction)),
+            "the oracle runs in lockstep only, with the shipped law (it pairs each request with the \
+             SimTruth of the state it answers)"
         );
     }
     let mut session = Session::new()?;
@@ -240,6 +266,7 @@ pub fn run_trial(
             model: plan.map_or(FrictionModel::None, |p| p.model.clone()),
             delta_theta_offset_motor_rad: spec.pinn_delta_theta_offset_motor_rad[i],
             kfc: spec.kfc[i],
+            lpf: opts.lpf[i],
         });
     }
     session.start_daemon(bins, spec.mode, &daemon_joints, spec.raw_friction, || {
@@ -260,10 +287,22 @@ pub fn run_trial(
         .iter()
         .map(|p| ComputedTorque::paper(setups[p.index].link.as_ref(), p.kp_per_s2))
         .collect();
+    let laws: Vec<LawSettings> = spec
+        .joints
+        .iter()
+        .map(|p| {
+            LawSettings::shipped(
+                &setups[p.index].params.joint,
+                spec.kfc[p.index],
+                opts.lpf[p.index],
+            )
+        })
+        .collect::<anyhow::Result<_>>()?;
     let mut traces: Vec<JointTrace> = spec
         .joints
         .iter()
-        .map(|p| JointTrace {
+        .enumerate()
+        .map(|(k, p)| JointTrace {
             index: p.index,
             name: setups[p.index].params.joint.clone(),
             kp_per_s2: p.kp_per_s2,
@@ -273,11 +312,22 @@ pub fn run_trial(
             } else if spec.raw_friction {
                 1.0
             } else {
-                spec.kfc[p.index].unwrap_or_else(|| shipped_kfc(&setups[p.index].params.joint))
+                laws[k].kfc
             },
             ..JointTrace::default()
         })
         .collect();
+    let mut oracles: Vec<Option<OracleCompensation>> = spec
+        .joints
+        .iter()
+        .zip(&laws)
+        .map(|(p, law)| {
+            (p.model == FrictionModel::Oracle)
+                .then(|| OracleCompensation::new(*law))
+                .transpose()
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let mut oracle_prev = vec![0.0f64; spec.joints.len()];
     let enable_mask = spec.joints.iter().fold(0u64, |m, p| m | (1u64 << p.index));
 
     let loop_start = Instant::now();
@@ -348,7 +398,23 @@ pub fn run_trial(
         for (k, p) in spec.joints.iter().enumerate() {
             let j = p.index;
             let sp = p.reference.at(t);
-            let tau = ctrls[k].tau_des_nm(js.s_rad[j], js.sdot_rad_s[j], &sp);
+            let mut tau = ctrls[k].tau_des_nm(js.s_rad[j], js.sdot_rad_s[j], &sp);
+            let mut f_hat = status.map_or(f64::NAN, |x| x.tau_f_hat_nm[j]);
+            if let Some(o) = &mut oracles[k] {
+                let tr = truth.with_context(
+                    || "the oracle needs the plant's SimTruth, and the plant published none",
+                )?;
+                anyhow::ensure!(
+                    tr.seq == js.seq,
+                    "oracle: SimTruth seq {} does not match JointStates seq {}",
+                    tr.seq,
+                    js.seq
+                );
+                let comp = o.step(tr.tau_f_true_nm[j], js.sdot_rad_s[j]);
+                tau += comp;
+                f_hat = oracle_prev[k];
+                oracle_prev[k] = comp;
+            }
             req.tau_des_nm[j] = tau;
             ext[j] = p.pulse.map_or(0.0, |pl| pl.at(t));
             let tr = &mut traces[k];
@@ -368,8 +434,7 @@ pub fn run_trial(
                 .push(truth.map_or(f64::NAN, |x| x.tau_f_true_nm[j]));
             tr.i_applied_a
                 .push(truth.map_or(f64::NAN, |x| x.i_applied_a[j]));
-            tr.tau_f_hat_nm
-                .push(status.map_or(f64::NAN, |x| x.tau_f_hat_nm[j]));
+            tr.tau_f_hat_nm.push(f_hat);
             tr.flags.push(status.map_or(0, |x| x.joint_flags[j]));
         }
         if ext != last_ext {

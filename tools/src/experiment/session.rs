@@ -91,6 +91,10 @@ pub enum FrictionModel {
     Scv(ScvParams),
     /// PINN weight file (`.fwt`).
     Pinn(PathBuf),
+    /// Diagnostic bound, not a model a robot can run: frictiond runs `none` for the joint and the
+    /// experiment controller adds the law's kfc·τ_F,true (the plant's true friction from `SimTruth`,
+    /// with frictiond's clip and LPF) to τ_des — see [`super::oracle`]. Lockstep only.
+    Oracle,
 }
 
 impl FrictionModel {
@@ -101,7 +105,104 @@ impl FrictionModel {
             Self::Cv(_) => "CV",
             Self::Scv(_) => "SCV",
             Self::Pinn(_) => "PINN",
+            Self::Oracle => ORACLE_LABEL,
         }
+    }
+}
+
+/// Table/JSON label of [`FrictionModel::Oracle`].
+pub const ORACLE_LABEL: &str = "oracle (true friction)";
+
+/// The τ̂_F low-pass of a joint's law.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Lpf {
+    /// No `lpf` key: τ̂_F unfiltered.
+    Off,
+    /// Butterworth low-pass (`lpf = { order, cutoff_hz }`) at the daemon's 1 kHz.
+    Butterworth {
+        /// Order 1–8.
+        order: usize,
+        /// −3 dB cut-off [Hz].
+        cutoff_hz: f64,
+    },
+}
+
+impl std::fmt::Display for Lpf {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Lpf::Off => write!(f, "off"),
+            Lpf::Butterworth { order, cutoff_hz } => {
+                write!(f, "Butterworth order {order} at {cutoff_hz} Hz")
+            }
+        }
+    }
+}
+
+/// The friction-compensation part of one joint's law as frictiond runs it (the shipped
+/// `config/ankle_knee.toml` values with the experiment's overrides): what the oracle must mimic and
+/// what the report's configuration line shows.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LawSettings {
+    /// kfc.
+    pub kfc: f64,
+    /// Friction clip ±max_output_friction [Nm] (∞ if absent).
+    pub max_output_friction_nm: f64,
+    /// Velocity gate of the clip [rad/s].
+    pub joint_velocity_threshold_rad_s: f64,
+    /// τ̂_F low-pass.
+    pub lpf: Lpf,
+}
+
+impl LawSettings {
+    /// The shipped law of joint `name` with `kfc` / `lpf` overrides (`None` = shipped); the daemon's
+    /// defaults for absent keys (kfc 1, no clip, gate 0, no LPF).
+    pub fn shipped(name: &str, kfc: Option<f64>, lpf: Option<Lpf>) -> anyhow::Result<Self> {
+        let t: toml::Table = shipped_joint_keys(name, false)?
+            .parse()
+            .context("config/ankle_knee.toml: joint keys do not parse")?;
+        let num = |k: &str, default: f64| -> anyhow::Result<f64> {
+            match t.get(k) {
+                None => Ok(default),
+                Some(v) => v
+                    .as_float()
+                    .or_else(|| v.as_integer().map(|i| i as f64))
+                    .with_context(|| {
+                        format!("config/ankle_knee.toml: {name}.{k} = {v} is not a number")
+                    }),
+            }
+        };
+        let shipped_lpf = match t.get("lpf") {
+            None => Lpf::Off,
+            Some(v) => {
+                let order = v
+                    .get("order")
+                    .and_then(|o| o.as_integer())
+                    .and_then(|o| usize::try_from(o).ok())
+                    .with_context(|| format!("config/ankle_knee.toml: {name}.lpf.order"))?;
+                let cutoff_hz = v
+                    .get("cutoff_hz")
+                    .and_then(|c| c.as_float())
+                    .with_context(|| format!("config/ankle_knee.toml: {name}.lpf.cutoff_hz"))?;
+                Lpf::Butterworth { order, cutoff_hz }
+            }
+        };
+        Ok(Self {
+            kfc: match kfc {
+                Some(k) => k,
+                None => num("kfc", 1.0)?,
+            },
+            max_output_friction_nm: num("max_output_friction", f64::INFINITY)?,
+            joint_velocity_threshold_rad_s: num("joint_velocity_threshold_rad_s", 0.0)?,
+            lpf: lpf.unwrap_or(shipped_lpf),
+        })
+    }
+
+    /// One line for reports: `kfc 0.7, clip ±8 Nm, τ̂_F LPF Butterworth order 2 at 30 Hz`.
+    pub fn describe(&self) -> String {
+        format!(
+            "kfc {}, clip ±{} Nm, τ̂_F LPF {}",
+            self.kfc, self.max_output_friction_nm, self.lpf
+        )
     }
 }
 
@@ -123,6 +224,8 @@ pub struct DaemonJoint {
     pub delta_theta_offset_motor_rad: Option<f64>,
     /// `kfc` instead of the shipped config's (`None` = shipped).
     pub kfc: Option<f64>,
+    /// τ̂_F low-pass instead of the shipped config's (`None` = shipped).
+    pub lpf: Option<Lpf>,
 }
 
 /// Loop trigger of a run.
@@ -226,19 +329,30 @@ pub fn write_daemon_config(
             toml_num(j.kt_nm_per_a)
         );
         let shipped = shipped_joint_keys(&j.name, raw_friction)?;
-        match j.kfc {
-            Some(kfc) => {
-                s += &shipped
-                    .lines()
-                    .filter(|l| !l.starts_with("kfc "))
-                    .map(|l| format!("{l}\n"))
-                    .collect::<String>();
-                s += &format!("kfc = {}\n", toml_num(kfc));
-            }
-            None => s += &shipped,
+        // overridden keys are dropped from the shipped lines and written after them
+        let drop_kfc = j.kfc.is_some();
+        let drop_lpf = j.lpf.is_some() && !raw_friction;
+        s += &shipped
+            .lines()
+            .filter(|l| {
+                let overridden =
+                    (drop_kfc && l.starts_with("kfc ")) || (drop_lpf && l.starts_with("lpf "));
+                !overridden
+            })
+            .map(|l| format!("{l}\n"))
+            .collect::<String>();
+        if let Some(kfc) = j.kfc {
+            s += &format!("kfc = {}\n", toml_num(kfc));
+        }
+        if let (Some(Lpf::Butterworth { order, cutoff_hz }), false) = (j.lpf, raw_friction) {
+            s += &format!(
+                "lpf = {{ order = {order}, cutoff_hz = {} }}\n",
+                toml_num(cutoff_hz)
+            );
         }
         match &j.model {
-            FrictionModel::None => s += "friction_model = \"none\"\n",
+            // the oracle's compensation is added by the controller to τ_des
+            FrictionModel::None | FrictionModel::Oracle => s += "friction_model = \"none\"\n",
             FrictionModel::Cv(p) => {
                 s += &format!(
                     "friction_model = \"coulomb_viscous\"\nkc = {}\nka = {}\nkv = {}\n",
@@ -544,5 +658,66 @@ impl Drop for Session {
         if !self.keep_dir {
             let _ = std::fs::remove_dir_all(&self.dir);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn joint_table(text: &str) -> toml::Table {
+        let t: toml::Table = text.parse().expect("the written config parses");
+        t["joint"].as_array().unwrap()[0]
+            .as_table()
+            .unwrap()
+            .clone()
+    }
+
+    fn written(kfc: Option<f64>, lpf: Option<Lpf>, model: FrictionModel) -> toml::Table {
+        let dir = std::env::temp_dir().join(format!("loop4_cfg_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let ipc = IpcConfig::new(Some(&dir), "t");
+        let j = DaemonJoint {
+            name: "l_ankle_roll".into(),
+            index: 1,
+            gear_ratio: -160.0,
+            kt_nm_per_a: 0.07,
+            model,
+            delta_theta_offset_motor_rad: None,
+            kfc,
+            lpf,
+        };
+        let text =
+            write_daemon_config(&dir.join("f.toml"), &ipc, Mode::Lockstep, &[j], false).unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
+        joint_table(&text)
+    }
+
+    #[test]
+    fn lpf_and_kfc_overrides_replace_the_shipped_keys() {
+        let shipped = written(None, None, FrictionModel::None);
+        let law = LawSettings::shipped("l_ankle_roll", None, None).unwrap();
+        assert_eq!(shipped.get("lpf").is_some(), law.lpf != Lpf::Off);
+        let off = written(Some(0.95), Some(Lpf::Off), FrictionModel::None);
+        assert!(off.get("lpf").is_none(), "{off:?}");
+        assert_eq!(off["kfc"].as_float(), Some(0.95));
+        let ten = written(
+            None,
+            Some(Lpf::Butterworth {
+                order: 3,
+                cutoff_hz: 10.0,
+            }),
+            FrictionModel::None,
+        );
+        assert_eq!(ten["lpf"]["cutoff_hz"].as_float(), Some(10.0));
+        assert_eq!(ten["lpf"]["order"].as_integer(), Some(3));
+        assert_eq!(ten["kfc"].as_float(), Some(law.kfc));
+        // the oracle's joint runs no model in frictiond
+        let oracle = written(None, None, FrictionModel::Oracle);
+        assert_eq!(oracle["friction_model"].as_str(), Some("none"));
+        // LawSettings follows the same overrides
+        let l = LawSettings::shipped("l_ankle_roll", Some(0.5), Some(Lpf::Off)).unwrap();
+        assert_eq!((l.kfc, l.lpf), (0.5, Lpf::Off));
+        assert_eq!(l.max_output_friction_nm, law.max_output_friction_nm);
     }
 }

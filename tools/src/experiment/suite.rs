@@ -14,9 +14,11 @@
 
 use super::controller::Reference;
 use super::metrics::{self, DisturbanceMetrics, TrackCriterion, TrackMetrics};
-use super::run::{JointPlan, JointSetup, JointTrace, Pulse, TrialSpec, run_trial};
+use super::run::{
+    JointPlan, JointSetup, JointTrace, Pulse, TrialOptions, TrialSpec, run_trial_with,
+};
 use super::search::{KpBisection, MinKp};
-use super::session::{Binaries, FrictionModel, Mode};
+use super::session::{Binaries, FrictionModel, Lpf, Mode};
 
 /// Settings shared by every trial of a suite.
 #[derive(Clone, Debug)]
@@ -45,6 +47,8 @@ pub struct SuiteConfig {
     pub pinn_delta_theta_offset_motor_rad: [Option<f64>; 2],
     /// `kfc` per joint index instead of the shipped config's (`None` = shipped).
     pub kfc: [Option<f64>; 2],
+    /// τ̂_F low-pass per joint index instead of the shipped config's (`None` = shipped).
+    pub lpf: [Option<Lpf>; 2],
 }
 
 /// The sine reference of joint `index` (0 = knee, 1 = ankle_roll).
@@ -123,7 +127,7 @@ fn run_grouped(
             raw_friction: false,
             kfc: cfg.kfc,
         };
-        let trace = run_trial(bins, setups, &spec)?;
+        let trace = run_trial_with(bins, setups, &spec, &TrialOptions { lpf: cfg.lpf })?;
         if cfg.progress {
             let who: Vec<String> = trace
                 .joints
