@@ -13,15 +13,14 @@
 //! Needs `frictiond` built next to `frictl` (`cargo build --workspace --bins`, as `tests/run.sh`).
 
 use frictionless::features::{FeatureSet, FeatureSpec, JointSample, WarmupPolicy};
-use frictionless::mlp::{Activation, DenseLayer, MlpWeights, Normalisation, StorageDtype};
+use frictionless::mlp::StorageDtype;
 use frictionless::model::{FrictionModel, PinnEstimator};
+use frictionless::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
 use frictionless::units::GearRatio;
 use frictionless::weights::{ModelFile, ModelMeta, SignalFiltering, TrainingMeta};
 use frictl::experiment::controller::Reference;
 use frictl::experiment::run::{JointPlan, JointSetup, JointTrace, TrialSpec, run_trial};
 use frictl::experiment::session::{Binaries, FrictionModel as Fm, Mode};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
 
 /// A small ReLU network whose normalisation is sized to the joint's signals (so the output moves
 /// with Δθ and ṡ instead of sitting in one ReLU region).
@@ -32,27 +31,18 @@ fn model_file(joint: &str, ratio: f64, kt: f64, seed: u64) -> ModelFile {
         temperature: false,
     };
     let n_in = spec.n_inputs();
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let sizes = [n_in, 24, 16, 1];
-    let layers = sizes
-        .windows(2)
-        .enumerate()
-        .map(|(k, w)| DenseLayer {
-            n_in: w[0],
-            n_out: w[1],
-            weight: (0..w[0] * w[1])
-                .map(|_| rng.random_range(-0.4..0.4))
-                .collect(),
-            bias: (0..w[1]).map(|_| rng.random_range(-0.1..0.1)).collect(),
-            activation: if k + 2 == sizes.len() {
-                Activation::Identity
-            } else {
-                Activation::Relu
-            },
-        })
-        .collect();
+    let mut mlp = seeded_mlp(
+        &RandomMlpSpec {
+            sizes: vec![n_in, 24, 16, 1],
+            weights: WeightInit::Uniform { amp: 0.4 },
+            bias: -0.1..0.1,
+            norm: NormInit::Identity,
+        },
+        seed,
+    )
+    .unwrap();
     // Δθ block scaled by ~0.05 motor rad (≈ 2–3 Nm of wind-up), ṡ block by 0.3 rad/s.
-    let scale = (0..n_in)
+    mlp.norm.scale = (0..n_in)
         .map(|i| if i < spec.history { 0.05 } else { 0.3 })
         .collect();
     ModelFile {
@@ -72,13 +62,7 @@ fn model_file(joint: &str, ratio: f64, kt: f64, seed: u64) -> ModelFile {
             },
         },
         dtype: StorageDtype::F32,
-        mlp: MlpWeights {
-            norm: Normalisation {
-                mean: vec![0.0; n_in],
-                scale,
-            },
-            layers,
-        },
+        mlp,
     }
 }
 

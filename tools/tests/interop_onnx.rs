@@ -4,7 +4,8 @@
 mod interop_common;
 
 use frictionless::kernel::{KernelPath, Mlp};
-use frictionless::mlp::{Activation, DenseLayer, MlpWeights, Normalisation, StorageDtype};
+use frictionless::mlp::{Activation, MlpWeights, Normalisation, StorageDtype};
+use frictionless::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
 use frictl::interop::onnx::{self, ExportOptions, NormExport, OnnxError};
 use interop_common::*;
 use onnx_protobuf::Message;
@@ -457,32 +458,17 @@ fn constant_nodes_and_identity_are_accepted() {
 }
 
 fn random_mlp(seed: u64, sizes: &[usize]) -> MlpWeights {
-    let n = sizes[0];
-    let layers = sizes
-        .windows(2)
-        .enumerate()
-        .map(|(k, w)| DenseLayer {
-            n_in: w[0],
-            n_out: w[1],
-            weight: random(seed * 10 + k as u64, w[0] * w[1], 0.5),
-            bias: random(seed * 10 + 5 + k as u64, w[1], 0.2),
-            activation: if k + 2 == sizes.len() {
-                Activation::Identity
-            } else {
-                Activation::Relu
-            },
-        })
-        .collect();
-    MlpWeights {
-        norm: Normalisation {
-            mean: random(seed + 1000, n, 3.0),
-            scale: random(seed + 2000, n, 1.0)
-                .iter()
-                .map(|v| v.abs() + 0.05)
-                .collect(),
+    let spec = RandomMlpSpec {
+        sizes: sizes.to_vec(),
+        weights: WeightInit::Uniform { amp: 0.5 },
+        bias: -0.2..0.2,
+        // Means in ±3, scales in [0.05, 1.05): away from zero, small enough to matter.
+        norm: NormInit::Uniform {
+            mean: -3.0..3.0,
+            scale: 0.05..1.05,
         },
-        layers,
-    }
+    };
+    seeded_mlp(&spec, seed).expect("valid sizes")
 }
 
 #[test]
