@@ -3,10 +3,10 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use frictl::acquire::protocol::{ControllerModel, LatchReason, RunSummary, run};
-use frictl::acquire::{BlockKind, LogRow, Mode, ProtocolConfig, SimJoint, schedule};
+use frictl::acquire::protocol::{LatchReason, RunSummary};
+use frictl::acquire::{BlockKind, LogRow, Mode, ProtocolConfig, run_offline, schedule};
+use frictl::sim::PlantParams;
 use frictl::sim::params::load_table;
-use frictl::sim::{Plant, PlantParams};
 
 fn load(preset: &str, sets: &[&str]) -> (PlantParams, ProtocolConfig) {
     let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
@@ -18,27 +18,13 @@ fn load(preset: &str, sets: &[&str]) -> (PlantParams, ProtocolConfig) {
 }
 
 fn simulate(plant_p: &PlantParams, cfg: &ProtocolConfig, seed: u64) -> (Vec<LogRow>, RunSummary) {
-    let blocks = schedule(cfg);
-    let link = frictl::sim::link::link_from_model(&plant_p.link).unwrap();
-    let model = ControllerModel {
-        gear_ratio_signed: plant_p.gear_ratio_signed,
-        kt_nm_per_a: plant_p.kt_nm_per_a,
-        j_eq_kgm2: plant_p.j_eq_kgm2(),
-        i_max_a: plant_p.i_max_a,
-        period_s: plant_p.sample_period_s(),
-        link: link.as_ref(),
-    };
-    let mut joint = SimJoint {
-        plant: Plant::from_params(plant_p.clone(), seed).unwrap(),
-        tau_ext_nm: 0.0,
-    };
     let mut rows = Vec::new();
-    let summary = run(&mut joint, &model, cfg, &blocks, &mut |r| {
+    let run = run_offline(plant_p, cfg, &schedule(cfg), seed, &mut |r| {
         rows.push(*r);
         Ok(())
     })
     .unwrap();
-    (rows, summary)
+    (rows, run.summary)
 }
 
 #[test]
@@ -419,26 +405,12 @@ fn default_protocols_fit_the_joints() {
                 v_max = v_max.max(v);
             }
         };
-        let summary = {
-            let link = frictl::sim::link::link_from_model(&p.link).unwrap();
-            let model = ControllerModel {
-                gear_ratio_signed: p.gear_ratio_signed,
-                kt_nm_per_a: p.kt_nm_per_a,
-                j_eq_kgm2: p.j_eq_kgm2(),
-                i_max_a: p.i_max_a,
-                period_s: p.sample_period_s(),
-                link: link.as_ref(),
-            };
-            let mut joint = SimJoint {
-                plant: Plant::from_params(p.clone(), 1).unwrap(),
-                tau_ext_nm: 0.0,
-            };
-            run(&mut joint, &model, &cfg, &blocks, &mut |r| {
-                sink_rows(r);
-                Ok(())
-            })
-            .unwrap()
-        };
+        let summary = run_offline(&p, &cfg, &blocks, 1, &mut |r| {
+            sink_rows(r);
+            Ok(())
+        })
+        .unwrap()
+        .summary;
         let guarded = |pred: &dyn Fn(&BlockKind) -> bool| {
             let chunks: Vec<u32> = blocks
                 .iter()

@@ -14,34 +14,19 @@
 //!   the reference targets (0.5 Nm knee, 0.2 Nm ankle roll): measured 0.29 / 0.07 Nm;
 //! - `causal` changes the ṡ/s̈ columns only, never the label.
 
-use frictl::acquire::protocol::{ControllerModel, run};
-use frictl::acquire::{LogRow, ProtocolConfig, SimJoint, schedule};
+use frictl::acquire::{LogRow, ProtocolConfig, run_offline, schedule};
 use frictl::ident::dataset::Dataset;
 use frictl::ident::preprocess::{LogMeta, PreprocessConfig, RawLog, preprocess};
+use frictl::sim::PlantParams;
 use frictl::sim::params::load_table;
-use frictl::sim::{Plant, PlantParams};
 
 fn simulate(preset: &str, sets: &[&str]) -> (PlantParams, Vec<LogRow>) {
     let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
     let t = load_table(preset, None, &sets).unwrap();
     let p = PlantParams::from_table(&t).unwrap();
     let cfg = ProtocolConfig::from_table(&t).unwrap();
-    let blocks = schedule(&cfg);
-    let link = frictl::sim::link::link_from_model(&p.link).unwrap();
-    let model = ControllerModel {
-        gear_ratio_signed: p.gear_ratio_signed,
-        kt_nm_per_a: p.kt_nm_per_a,
-        j_eq_kgm2: p.j_eq_kgm2(),
-        i_max_a: p.i_max_a,
-        period_s: p.sample_period_s(),
-        link: link.as_ref(),
-    };
-    let mut joint = SimJoint {
-        plant: Plant::from_params(p.clone(), 7).unwrap(),
-        tau_ext_nm: 0.0,
-    };
     let mut rows = Vec::new();
-    run(&mut joint, &model, &cfg, &blocks, &mut |r| {
+    run_offline(&p, &cfg, &schedule(&cfg), 7, &mut |r| {
         rows.push(*r);
         Ok(())
     })

@@ -2,7 +2,7 @@
 //! recording beats the fitted SCV model on an unseen closed-loop tracking run by a clear margin, and
 //! the Δθ offset latched once per recording (the default) beats one latched at every chunk start.
 //!
-//! Everything runs through the library, in-process: `acquire::protocol::run` on the simulator (a short
+//! Everything runs through the library, in-process: `acquire::run_offline` (the protocol on the simulator) (a short
 //! protocol: one start, a few sine, ramp and step blocks and closed-loop tracking at K_p 13000), the
 //! label pipeline (`ident::preprocess`), the SCV fit on sliding 1st/3rd-quadrant samples
 //! (`ident::fit`), the inputs through the daemon's `History` (`train::data::build_inputs`) and the
@@ -12,13 +12,12 @@
 use frictionless::features::{FeatureSet, FeatureSpec, WarmupPolicy};
 use frictionless::friction::{ScvParams, StaticFriction};
 use frictionless::units::GearRatio;
-use frictl::acquire::protocol::{ControllerModel, run};
-use frictl::acquire::{LogRow, ProtocolConfig, SimJoint, schedule};
+use frictl::acquire::{LogRow, ProtocolConfig, run_offline, schedule};
 use frictl::ident::dataset::Dataset;
 use frictl::ident::fit::{FitOptions, fit, select, sliding_quadrant_mask};
 use frictl::ident::preprocess::{LogMeta, PreprocessConfig, RawLog, preprocess};
+use frictl::sim::PlantParams;
 use frictl::sim::params::load_table;
-use frictl::sim::{Plant, PlantParams};
 use frictl::train::data::{DeltaThetaOffset, build_inputs};
 use frictl::train::{Dataset as TrainSet, Predictor, TrainConfig, Trainer, rmse};
 
@@ -50,26 +49,13 @@ fn recording(seed: u64, sets: &[&str]) -> (PlantParams, Dataset) {
     let t = load_table("ankle_roll", None, &sets).unwrap();
     let p = PlantParams::from_table(&t).unwrap();
     let cfg = ProtocolConfig::from_table(&t).unwrap();
-    let blocks = schedule(&cfg);
-    let link = frictl::sim::link::link_from_model(&p.link).unwrap();
-    let model = ControllerModel {
-        gear_ratio_signed: p.gear_ratio_signed,
-        kt_nm_per_a: p.kt_nm_per_a,
-        j_eq_kgm2: p.j_eq_kgm2(),
-        i_max_a: p.i_max_a,
-        period_s: p.sample_period_s(),
-        link: link.as_ref(),
-    };
-    let mut joint = SimJoint {
-        plant: Plant::from_params(p.clone(), seed).unwrap(),
-        tau_ext_nm: 0.0,
-    };
     let mut rows: Vec<LogRow> = Vec::new();
-    run(&mut joint, &model, &cfg, &blocks, &mut |r| {
+    run_offline(&p, &cfg, &schedule(&cfg), seed, &mut |r| {
         rows.push(*r);
         Ok(())
     })
     .unwrap();
+    let link = frictl::sim::link::link_from_model(&p.link).unwrap();
     let f = |g: &dyn Fn(&LogRow) -> f64| rows.iter().map(g).collect::<Vec<f64>>();
     let raw = RawLog {
         time_s: f(&|r| r.meas.time_s),

@@ -18,6 +18,7 @@
 use serde::Serialize;
 
 use crate::acquire::config::{HoldingCurrent, ProtocolConfig};
+use crate::sim::PlantParams;
 use crate::sim::link::LinkDynamics;
 use crate::sim::plant::{Measurement, Plant, Truth};
 
@@ -83,7 +84,21 @@ pub struct ControllerModel<'a> {
     pub link: &'a dyn LinkDynamics,
 }
 
-impl ControllerModel<'_> {
+impl<'a> ControllerModel<'a> {
+    /// The nominal model of a simulated joint: its signed gear ratio, k_t, reflected motor inertia,
+    /// current saturation and sample period from `params`, with `link` (built from `params.link`,
+    /// e.g. by [`crate::sim::link::link_from_model`]).
+    pub fn nominal(params: &PlantParams, link: &'a dyn LinkDynamics) -> Self {
+        Self {
+            gear_ratio_signed: params.gear_ratio_signed,
+            kt_nm_per_a: params.kt_nm_per_a,
+            j_eq_kgm2: params.j_eq_kgm2(),
+            i_max_a: params.i_max_a,
+            period_s: params.sample_period_s(),
+            link,
+        }
+    }
+
     fn current_for_torque(&self, tau_nm: f64) -> f64 {
         tau_nm / (self.gear_ratio_signed * self.kt_nm_per_a)
     }

@@ -13,12 +13,10 @@ use frictl::acquire::log::{
     CsvLog, LiveInfo, SOURCE_LIVE_SHM, SOURCE_OFFLINE_SIM, Sidecar, columns,
 };
 use frictl::acquire::protocol::run as run_protocol;
-use frictl::acquire::protocol::{
-    AcquireError, ControllerModel, JointIo, SimJoint, schedule_duration_s,
-};
-use frictl::acquire::{ProtocolConfig, schedule};
+use frictl::acquire::protocol::{AcquireError, ControllerModel, schedule_duration_s};
+use frictl::acquire::{ProtocolConfig, run_offline, schedule};
+use frictl::sim::PlantParams;
 use frictl::sim::params::load_table;
-use frictl::sim::{Plant, PlantParams};
 
 /// Arguments of `frictl acquire`.
 #[derive(clap::Args, Debug)]
@@ -90,15 +88,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let period_s = plant_params.sample_period_s();
     let total = (schedule_duration_s(&blocks) / period_s).round() as u64;
+    // The controllers' link model (live runs; offline runs build their own): fail before any I/O.
     let link = frictl::sim::link::link_from_model(&plant_params.link)?;
-    let model = ControllerModel {
-        gear_ratio_signed: plant_params.gear_ratio_signed,
-        kt_nm_per_a: plant_params.kt_nm_per_a,
-        j_eq_kgm2: plant_params.j_eq_kgm2(),
-        i_max_a: plant_params.i_max_a,
-        period_s,
-        link: link.as_ref(),
-    };
 
     let with_truth = !args.live_shm;
     let file = std::fs::File::create(&csv_path)
@@ -141,6 +132,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             Duration::from_millis(args.state_timeout_ms),
             stop,
         )?;
+        let model = ControllerModel::nominal(&plant_params, link.as_ref());
         let result = run_protocol(&mut joint, &model, &protocol, &blocks, &mut sink);
         // Leave the joint at 0 A whatever happened (the plant also zeroes after its timeout).
         let released = joint.release();
@@ -157,14 +149,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         released?;
         summary
     } else {
-        let plant = Plant::from_params(plant_params.clone(), args.seed)?;
-        t0 = Some(plant.state().temperature_c);
-        let mut joint = SimJoint {
-            plant,
-            tau_ext_nm: 0.0,
-        };
-        let io: &mut dyn JointIo = &mut joint;
-        run_protocol(io, &model, &protocol, &blocks, &mut sink)?
+        let run = run_offline(&plant_params, &protocol, &blocks, args.seed, &mut sink)?;
+        t0 = Some(run.initial_temperature_c);
+        run.summary
     };
     bar.finish_and_clear();
     log.finish()?
