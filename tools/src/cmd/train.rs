@@ -30,6 +30,7 @@
 //! recording, `--val-frac 0 --test-frac 0` trains on every chunk and keeps the last epoch.
 //! The paper's values are given in each option's help; pass them explicitly for a paper-size run.
 
+use std::io::IsTerminal;
 use std::ops::ControlFlow;
 use std::path::PathBuf;
 
@@ -270,7 +271,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             split.test.len()
         );
     }
-    let bar = if args.quiet {
+    // indicatif draws nothing when stderr is not a terminal (a log file, `frictl demo`'s stage logs): then
+    // a plain line every 5 % of the epochs, so a long run shows its progress in the log.
+    let plain_every =
+        (!args.quiet && !std::io::stderr().is_terminal()).then(|| (args.epochs / 20).max(1));
+    let started = std::time::Instant::now();
+    let bar = if args.quiet || plain_every.is_some() {
         ProgressBar::hidden()
     } else {
         let b = ProgressBar::new(args.epochs as u64);
@@ -287,11 +293,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 (Some(l), Some(e)) => format!(" val loss {l:.5} rmse {e:.4} Nm"),
                 _ => String::new(),
             };
-            bar.set_message(format!(
+            let msg = format!(
                 "train loss {:.5}{val}{}",
                 r.train_loss,
                 if r.is_best { " *" } else { "" }
-            ));
+            );
+            if let Some(every) = plain_every {
+                if r.epoch == 1 || r.epoch % every == 0 || r.epoch == args.epochs {
+                    eprintln!(
+                        "epoch {}/{} {msg} [{:.0} s]",
+                        r.epoch,
+                        args.epochs,
+                        started.elapsed().as_secs_f64()
+                    );
+                }
+            }
+            bar.set_message(msg);
             ControlFlow::Continue(())
         })?;
     bar.finish_and_clear();
