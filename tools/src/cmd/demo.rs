@@ -17,6 +17,13 @@
 //!   drove the ankle roll into a growing 4 Hz stick–slip oscillation at the K_p the SCV tracks with;
 //! - frictiond keeps the Δθ offset the network was trained with (`--pinn-delta-theta-offset`, from
 //!   the train report) instead of re-latching at enable.
+//!
+//! The closed-loop tables carry a fifth, diagnostic column, `oracle (true friction)`
+//! (`frictl experiment --model oracle`): frictiond's compensation law (same kfc, clip and LPF) fed
+//! with the simulator's true friction — a bound no robot can run, the minimum K_p a *perfect*
+//! estimator reaches under the shipped law. A model at the oracle's K_p is limited by the control
+//! structure (kfc < 1 leaves (1 − kfc)·F_s of stiction to the position loop), not by its estimate;
+//! a model below it gets there by something other than estimating friction (the SCV's dither).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -24,7 +31,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use frictl::experiment::session::{install_signal_flag, interrupted};
+use frictl::experiment::session::{ORACLE_LABEL, install_signal_flag, interrupted};
 
 /// Arguments of `frictl demo`.
 #[derive(clap::Args, Debug)]
@@ -469,12 +476,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             offsets.push(format!("{key}={v}"));
         }
         r.frictl(
-            "experiment all (both joints; none, CV, SCV, PINN)",
+            "experiment all (both joints; none, CV, SCV, PINN, oracle)",
             &[
                 "experiment".into(),
                 "all".into(),
                 "--joint".into(),
                 "both".into(),
+                "--model".into(),
+                "none,cv,scv,pinn,oracle".into(),
                 "--cv".into(),
                 f("_cv.json"),
                 "--scv".into(),
@@ -499,7 +508,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let Some(cells) = ex.get("joints").and_then(|j| j.get(joint)) else {
                 continue;
             };
-            for label in ["none", "CV", "SCV", "PINN"] {
+            for label in ["none", "CV", "SCV", "PINN", ORACLE_LABEL] {
                 let Some(c) = cells.get(label) else { continue };
                 let m = &mut entry["models"][label];
                 m["min_kp"] = c.get("min_kp").cloned().unwrap_or_default();
@@ -569,6 +578,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     md += &eval_md;
     if !exp_md.is_empty() {
         md += "\n## Closed-loop experiments\n\n";
+        md += "The column `oracle (true friction)` is a diagnostic bound, not a model: frictiond runs no \
+               model and the controller adds frictiond's law (the same kfc, clip and LPF) applied to the \
+               simulator's true friction of the state each request answers. Its minimum K_p is what a \
+               perfect estimator reaches under this law. A model near it is limited by the control \
+               structure (kfc < 1 leaves (1 − kfc) of the stiction to the position loop), not by its \
+               estimate; a model below it gets there by something other than estimating friction (a \
+               breakaway term above the true one dithers the joint through reversals).\n\n";
         md += &exp_md;
         md += "\nPlots: `experiments/plots/*.png`; traces: `experiments/traces/*.csv`.\n";
     }
