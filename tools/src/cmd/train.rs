@@ -298,15 +298,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 r.train_loss,
                 if r.is_best { " *" } else { "" }
             );
-            if let Some(every) = plain_every {
-                if r.epoch == 1 || r.epoch % every == 0 || r.epoch == args.epochs {
-                    eprintln!(
-                        "epoch {}/{} {msg} [{:.0} s]",
-                        r.epoch,
-                        args.epochs,
-                        started.elapsed().as_secs_f64()
-                    );
-                }
+            if let Some(every) = plain_every
+                && (r.epoch == 1 || r.epoch % every == 0 || r.epoch == args.epochs)
+            {
+                eprintln!(
+                    "epoch {}/{} {msg} [{:.0} s]",
+                    r.epoch,
+                    args.epochs,
+                    started.elapsed().as_secs_f64()
+                );
             }
             bar.set_message(msg);
             ControlFlow::Continue(())
