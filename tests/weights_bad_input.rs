@@ -8,8 +8,8 @@ use std::path::PathBuf;
 
 use frictionless::features::{FeatureSet, FeatureSpec};
 use frictionless::friction::ScvParams;
-use frictionless::mlp::{MlpShapeError, MlpWeights, StorageDtype};
-use frictionless::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
+use frictionless::mlp::{MlpShapeError, StorageDtype};
+use frictionless::random::{RandomMlpSpec, seeded_mlp};
 use frictionless::units::GearRatio;
 use frictionless::weights::{
     self, ModelFile, ModelMeta, SignalFiltering, TrainingMeta, WeightError, from_bytes, inspect,
@@ -47,19 +47,6 @@ fn spec_file_len(sizes: &[usize], dtype_size: usize) -> usize {
     align64(FIXED + ENTRY * (sizes.len() - 1) + 8 * sizes[0]) + n_params * dtype_size
 }
 
-fn random_mlp(sizes: &[usize], seed: u64) -> MlpWeights {
-    let spec = RandomMlpSpec {
-        sizes: sizes.to_vec(),
-        weights: WeightInit::Uniform { amp: 0.5 },
-        bias: -0.1..0.1,
-        norm: NormInit::Uniform {
-            mean: -2.0..2.0,
-            scale: 0.1..3.0,
-        },
-    };
-    seeded_mlp(&spec, seed).expect("valid sizes")
-}
-
 /// A model for `sizes`; an odd input count means H = (n−1)/2 plus temperature.
 fn model(sizes: &[usize], dtype: StorageDtype, seed: u64) -> ModelFile {
     ModelFile {
@@ -90,7 +77,7 @@ fn model(sizes: &[usize], dtype: StorageDtype, seed: u64) -> ModelFile {
             },
         },
         dtype,
-        mlp: random_mlp(sizes, seed),
+        mlp: seeded_mlp(&RandomMlpSpec::new(sizes), seed).unwrap(),
     }
 }
 

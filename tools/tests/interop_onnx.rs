@@ -5,7 +5,7 @@ mod interop_common;
 
 use frictionless::kernel::{KernelPath, Mlp};
 use frictionless::mlp::{Activation, MlpWeights, Normalisation, StorageDtype};
-use frictionless::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
+use frictionless::random::{RandomMlpSpec, seeded_mlp};
 use frictl::interop::onnx::{self, ExportOptions, NormExport, OnnxError};
 use interop_common::*;
 use onnx_protobuf::Message;
@@ -458,17 +458,7 @@ fn constant_nodes_and_identity_are_accepted() {
 }
 
 fn random_mlp(seed: u64, sizes: &[usize]) -> MlpWeights {
-    let spec = RandomMlpSpec {
-        sizes: sizes.to_vec(),
-        weights: WeightInit::Uniform { amp: 0.5 },
-        bias: -0.2..0.2,
-        // Means in ±3, scales in [0.05, 1.05): away from zero, small enough to matter.
-        norm: NormInit::Uniform {
-            mean: -3.0..3.0,
-            scale: 0.05..1.05,
-        },
-    };
-    seeded_mlp(&spec, seed).expect("valid sizes")
+    seeded_mlp(&RandomMlpSpec::new(sizes), seed).unwrap()
 }
 
 #[test]
