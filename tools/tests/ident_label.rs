@@ -14,9 +14,9 @@
 //!   the reference targets (0.5 Nm knee, 0.2 Nm ankle roll): measured 0.29 / 0.07 Nm;
 //! - `causal` changes the ṡ/s̈ columns only, never the label.
 
-use frictl::acquire::{LogRow, ProtocolConfig, run_offline, schedule};
+use frictl::acquire::{LogRow, ProtocolConfig, log_meta, raw_log, run_offline, schedule};
 use frictl::ident::dataset::Dataset;
-use frictl::ident::preprocess::{LogMeta, PreprocessConfig, RawLog, preprocess};
+use frictl::ident::preprocess::{PreprocessConfig, preprocess};
 use frictl::sim::PlantParams;
 use frictl::sim::params::load_table;
 
@@ -32,23 +32,6 @@ fn simulate(preset: &str, sets: &[&str]) -> (PlantParams, Vec<LogRow>) {
     })
     .unwrap();
     (p, rows)
-}
-
-fn raw(rows: &[LogRow], stride: usize) -> RawLog {
-    let rows: Vec<&LogRow> = rows.iter().step_by(stride).collect();
-    let f = |g: &dyn Fn(&LogRow) -> f64| rows.iter().map(|r| g(r)).collect::<Vec<f64>>();
-    RawLog {
-        time_s: f(&|r| r.meas.time_s),
-        chunk: rows.iter().map(|r| r.chunk).collect(),
-        active: rows.iter().map(|r| r.active).collect(),
-        s_rad: f(&|r| r.meas.s_rad),
-        theta_motor_rad: f(&|r| r.meas.theta_motor_rad),
-        omega_motor_rad_s: f(&|r| r.meas.omega_motor_rad_s),
-        i_meas_a: f(&|r| r.meas.i_meas_a),
-        temperature_c: f(&|r| r.meas.temperature_c),
-        tau_f_true_nm: Some(f(&|r| r.truth.unwrap().tau_f_nm)),
-        phi_ddot_rad_s2: Some(f(&|r| r.truth.unwrap().phi_ddot_rad_s2)),
-    }
 }
 
 const KNEE_SETS: &[&str] = &[
@@ -90,16 +73,6 @@ fn label_error(ds: &Dataset, j_eq: f64) -> (f64, f64, usize) {
     ((e2 / n as f64).sqrt(), (e2f / n as f64).sqrt(), n)
 }
 
-fn meta(p: &PlantParams) -> LogMeta {
-    LogMeta {
-        joint: p.joint.clone(),
-        gear_ratio_signed: p.gear_ratio_signed,
-        kt_nm_per_a: p.kt_nm_per_a,
-        plant_link: Some(p.link.clone()),
-        j_eq_kgm2: Some(p.j_eq_kgm2()),
-    }
-}
-
 /// Runs the pipeline (paper label and the J_eq·φ̂̈ ablation) and checks the documented bounds.
 fn check_floor(
     name: &str,
@@ -109,15 +82,15 @@ fn check_floor(
     target_nm: f64,
 ) -> Dataset {
     let link = frictl::sim::link::link_from_model(&p.link).unwrap();
-    let m = meta(p);
+    let m = log_meta(p);
     let cfg = PreprocessConfig::for_joint(&p.joint);
-    let (ds, summary) = preprocess(&raw(rows, 1), &m, link.as_ref(), &cfg).unwrap();
+    let (ds, summary) = preprocess(&raw_log(rows, 1), &m, link.as_ref(), &cfg).unwrap();
     let (rms, floor, n) = label_error(&ds, p.j_eq_kgm2());
     let abl = PreprocessConfig {
         subtract_reflected_inertia_kgm2: p.j_eq_kgm2(),
         ..cfg.clone()
     };
-    let (dsa, _) = preprocess(&raw(rows, 1), &m, link.as_ref(), &abl).unwrap();
+    let (dsa, _) = preprocess(&raw_log(rows, 1), &m, link.as_ref(), &abl).unwrap();
     let (rms_abl, _, _) = label_error(&dsa, p.j_eq_kgm2());
     println!(
         "{name}: paper label RMS error {rms:.3} Nm, pipeline floor (minus true J_eq*phi_ddot) {floor:.3} Nm, \
@@ -166,9 +139,9 @@ fn knee_label_recovers_true_friction_at_1khz_and_500hz() {
 
     // The same run logged at 500 Hz and resampled to 1 kHz.
     let link = frictl::sim::link::link_from_model(&p.link).unwrap();
-    let m = meta(&p);
+    let m = log_meta(&p);
     let cfg = PreprocessConfig::for_joint(&p.joint);
-    let (ds5, _) = preprocess(&raw(&rows, 2), &m, link.as_ref(), &cfg).unwrap();
+    let (ds5, _) = preprocess(&raw_log(&rows, 2), &m, link.as_ref(), &cfg).unwrap();
     let (rms5, floor5, n5) = label_error(&ds5, p.j_eq_kgm2());
     println!("knee 500 Hz log: label RMS error {rms5:.3} Nm, floor {floor5:.3}, {n5} sliding rows");
     assert!((ds5.time_s[1] - ds5.time_s[0] - 1e-3).abs() < 1e-9);
@@ -180,7 +153,7 @@ fn knee_label_recovers_true_friction_at_1khz_and_500hz() {
         causal: true,
         ..cfg.clone()
     };
-    let (dsc, _) = preprocess(&raw(&rows, 1), &m, link.as_ref(), &causal).unwrap();
+    let (dsc, _) = preprocess(&raw_log(&rows, 1), &m, link.as_ref(), &causal).unwrap();
     assert_eq!(dsc.tau_f_label_nm, ds.tau_f_label_nm);
     assert_eq!(dsc.valid, ds.valid);
     assert_ne!(dsc.sdot_rad_s, ds.sdot_rad_s);
@@ -209,7 +182,7 @@ fn dataset_csv_round_trips() {
     let (p, rows) = simulate("ankle_roll", ANKLE_SETS);
     let link = frictl::sim::link::link_from_model(&p.link).unwrap();
     let cfg = PreprocessConfig::for_joint(&p.joint);
-    let (ds, _) = preprocess(&raw(&rows, 1), &meta(&p), link.as_ref(), &cfg).unwrap();
+    let (ds, _) = preprocess(&raw_log(&rows, 1), &log_meta(&p), link.as_ref(), &cfg).unwrap();
     let (rms, _, n) = label_error(&ds, p.j_eq_kgm2());
     println!("ankle roll: label RMS error {rms:.3} Nm on {n} sliding samples");
     let dir = std::env::temp_dir().join(format!("ident_label_{}", std::process::id()));

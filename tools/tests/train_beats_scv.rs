@@ -12,10 +12,10 @@
 use frictionless::features::{FeatureSet, FeatureSpec, WarmupPolicy};
 use frictionless::friction::{ScvParams, StaticFriction};
 use frictionless::units::GearRatio;
-use frictl::acquire::{LogRow, ProtocolConfig, run_offline, schedule};
+use frictl::acquire::{LogRow, ProtocolConfig, log_meta, raw_log, run_offline, schedule};
 use frictl::ident::dataset::Dataset;
 use frictl::ident::fit::{FitOptions, fit, select, sliding_quadrant_mask};
-use frictl::ident::preprocess::{LogMeta, PreprocessConfig, RawLog, preprocess};
+use frictl::ident::preprocess::{PreprocessConfig, preprocess};
 use frictl::sim::PlantParams;
 use frictl::sim::params::load_table;
 use frictl::train::data::{DeltaThetaOffset, build_inputs};
@@ -56,29 +56,9 @@ fn recording(seed: u64, sets: &[&str]) -> (PlantParams, Dataset) {
     })
     .unwrap();
     let link = frictl::sim::link::link_from_model(&p.link).unwrap();
-    let f = |g: &dyn Fn(&LogRow) -> f64| rows.iter().map(g).collect::<Vec<f64>>();
-    let raw = RawLog {
-        time_s: f(&|r| r.meas.time_s),
-        chunk: rows.iter().map(|r| r.chunk).collect(),
-        active: rows.iter().map(|r| r.active).collect(),
-        s_rad: f(&|r| r.meas.s_rad),
-        theta_motor_rad: f(&|r| r.meas.theta_motor_rad),
-        omega_motor_rad_s: f(&|r| r.meas.omega_motor_rad_s),
-        i_meas_a: f(&|r| r.meas.i_meas_a),
-        temperature_c: f(&|r| r.meas.temperature_c),
-        tau_f_true_nm: Some(f(&|r| r.truth.unwrap().tau_f_nm)),
-        phi_ddot_rad_s2: Some(f(&|r| r.truth.unwrap().phi_ddot_rad_s2)),
-    };
-    let meta = LogMeta {
-        joint: p.joint.clone(),
-        gear_ratio_signed: p.gear_ratio_signed,
-        kt_nm_per_a: p.kt_nm_per_a,
-        plant_link: Some(p.link.clone()),
-        j_eq_kgm2: Some(p.j_eq_kgm2()),
-    };
     let (ds, _) = preprocess(
-        &raw,
-        &meta,
+        &raw_log(&rows, 1),
+        &log_meta(&p),
         link.as_ref(),
         &PreprocessConfig::for_joint(&p.joint),
     )

@@ -7,7 +7,8 @@
 //! - [`config`]: every number as a serde struct (the `[protocol]` table of a preset);
 //! - [`protocol`]: the schedule, the controllers and the run loop over the [`protocol::JointIo`] seam;
 //! - [`log`]: CSV columns, units and the sidecar;
-//! - [`offline`]: the protocol on a fresh simulated plant ([`offline::run_offline`]).
+//! - [`offline`]: the protocol on a fresh simulated plant ([`offline::run_offline`]) and its rows as
+//!   the label pipeline's input.
 //!
 //! What it is not: the plant (see [`crate::sim`]) or a live shared-memory client (the [`protocol::JointIo`]
 //! trait is the seam for it once the shm ABI exists).
@@ -18,5 +19,5 @@ pub mod offline;
 pub mod protocol;
 
 pub use config::ProtocolConfig;
-pub use offline::{OfflineError, OfflineRun, run_offline};
+pub use offline::{OfflineError, OfflineRun, log_meta, raw_log, run_offline};
 pub use protocol::{Block, BlockKind, JointIo, LogRow, Mode, RunSummary, SimJoint, run, schedule};
