@@ -26,12 +26,14 @@
 //! a model below it gets there by something other than estimating friction (the SCV's dither).
 
 use std::collections::BTreeMap;
+use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use frictl::experiment::session::{ORACLE_LABEL, install_signal_flag, interrupted};
+use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `frictl demo`.
 #[derive(clap::Args, Debug)]
@@ -112,9 +114,35 @@ impl Runner {
             .stderr(f)
             .spawn()
             .with_context(|| format!("cannot start {} {}", self.exe.display(), args.join(" ")))?;
+        // The child's newest log line (e.g. `frictl train`'s `epoch 35/350 …`) as the stage's progress: a
+        // spinner line on a terminal, a plain line every minute otherwise.
+        let on_tty = std::io::stderr().is_terminal();
+        let spinner = if on_tty {
+            let b = ProgressBar::new_spinner();
+            b.set_style(
+                ProgressStyle::with_template("     {spinner} [{elapsed}] {wide_msg}")
+                    .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+            );
+            b
+        } else {
+            ProgressBar::hidden()
+        };
+        let mut last_shown = Instant::now();
+        let mut polls = 0u64;
         let status = loop {
             if let Some(s) = child.try_wait()? {
                 break s;
+            }
+            polls += 1;
+            if polls.is_multiple_of(25)
+                && let Some(line) = last_log_line(&log)
+            {
+                spinner.set_message(line.clone());
+                spinner.tick();
+                if !on_tty && last_shown.elapsed() >= Duration::from_secs(60) {
+                    eprintln!("     … {line}");
+                    last_shown = Instant::now();
+                }
             }
             if interrupted() {
                 // SAFETY: kill(2) on our own child.
@@ -130,6 +158,7 @@ impl Runner {
             }
             std::thread::sleep(Duration::from_millis(20));
         };
+        spinner.finish_and_clear();
         let secs = t0.elapsed().as_secs_f64();
         if !status.success() {
             let text = std::fs::read_to_string(&log).unwrap_or_default();
@@ -148,6 +177,23 @@ impl Runner {
         });
         Ok(secs)
     }
+}
+
+/// The last non-empty line of a stage log (its last 4 KiB), trimmed to 100 characters; `None` if the log
+/// is empty or unreadable (progress display only, never an error).
+fn last_log_line(log: &Path) -> Option<String> {
+    use std::io::{Read, Seek, SeekFrom};
+    let mut f = std::fs::File::open(log).ok()?;
+    let len = f.metadata().ok()?.len();
+    f.seek(SeekFrom::Start(len.saturating_sub(4096))).ok()?;
+    let mut buf = Vec::new();
+    f.read_to_end(&mut buf).ok()?;
+    let text = String::from_utf8_lossy(&buf);
+    let line = text
+        .split(['\n', '\r'])
+        .map(str::trim)
+        .rfind(|l| !l.is_empty())?;
+    Some(line.chars().take(100).collect())
 }
 
 fn s(p: &Path) -> String {
@@ -365,7 +411,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 seed.to_string(),
                 "--report".into(),
                 s(&train_report),
-                "--quiet".into(),
             ]
             .into_iter()
             .chain(sizes.train_extra.iter().map(|a| a.to_string()))
