@@ -10,8 +10,8 @@
 //! - [`offline`]: the protocol on a fresh simulated plant ([`offline::run_offline`]) and its rows as
 //!   the label pipeline's input.
 //!
-//! What it is not: the plant (see [`crate::sim`]) or a live shared-memory client (the [`protocol::JointIo`]
-//! trait is the seam for it once the shm ABI exists).
+//! What it is not: the plant (see [`crate::sim`]) or a live shared-memory client (that is
+//! [`crate::serve::shm::LiveJoint`], behind the same [`protocol::JointIo`] seam).
 
 pub mod config;
 pub mod log;
