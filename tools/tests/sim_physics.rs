@@ -56,6 +56,38 @@ fn overrides_apply_and_unknown_keys_fail_with_the_key_named() {
 }
 
 #[test]
+fn joint_prefixed_set_applies_to_that_preset_only() {
+    use frictl::sim::params::check_set_joints;
+    let sets = vec![
+        "ankle_roll:plant.t0_min_c=31.5".to_string(),
+        "plant.t0_max_c=33.0".to_string(),
+    ];
+    let t0_min = |preset: &str| {
+        PlantParams::from_table(&load_table(preset, None, &sets).unwrap())
+            .unwrap()
+            .t0_min_c
+    };
+    let knee_default = PlantParams::preset("knee").unwrap().t0_min_c;
+    assert_eq!(t0_min("ankle_roll"), 31.5);
+    assert_eq!(t0_min("knee"), knee_default);
+    for preset in ["knee", "ankle_roll"] {
+        let p = PlantParams::from_table(&load_table(preset, None, &sets).unwrap()).unwrap();
+        assert_eq!(
+            p.t0_max_c, 33.0,
+            "{preset}: an unprefixed --set applies to every preset"
+        );
+    }
+    check_set_joints(&sets, &["knee", "ankle_roll"]).unwrap();
+    let err = check_set_joints(&sets, &["knee"]).unwrap_err().to_string();
+    assert!(
+        err.contains("ankle_roll:plant.t0_min_c=31.5") && err.contains("knee"),
+        "{err}"
+    );
+    // A colon inside the value is not a joint prefix.
+    check_set_joints(&["plant.note=a:b".to_string()], &["knee"]).unwrap();
+}
+
+#[test]
 fn params_file_is_deep_merged_over_the_preset() {
     let dir = std::env::temp_dir().join(format!("frictl-sim-params-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();

@@ -68,6 +68,7 @@ pub struct Args {
 
 /// Runs `frictl acquire`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    frictl::sim::params::check_set_joints(&args.sets, &[args.preset.as_str()])?;
     let table = load_table(&args.preset, args.params.as_deref(), &args.sets)?;
     let plant_params = PlantParams::from_table(&table)?;
     let protocol = ProtocolConfig::from_table(&table)?;

@@ -99,7 +99,8 @@ pub struct Args {
     /// Plant seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Plant parameter override (`--set plant.f_s0_nm=5`), applied to both presets.
+    /// Plant parameter override (`--set plant.f_s0_nm=5`), applied to both presets; `JOINT:` in front
+    /// applies it to one (`--set ankle_roll:plant.t0_min_c=31`).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub sets: Vec<String>,
     /// Tracking criterion: RMSE ≤ this fraction of the sine amplitude.

@@ -12,7 +12,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use frictl::acquire::log::CsvLog;
 use frictl::acquire::protocol::{LogRow, Mode};
-use frictl::sim::params::load_table;
+use frictl::sim::params::{check_set_joints, load_table};
 use frictl::sim::profile::CurrentProfile;
 use frictl::sim::{Plant, PlantParams};
 
@@ -113,7 +113,8 @@ pub struct ServeArgs {
     /// TOML file deep-merged over every preset (same layout).
     #[arg(long)]
     pub params: Option<PathBuf>,
-    /// Override one parameter of every preset, e.g. `--set plant.sigma0_nm_per_rad=3e4`.
+    /// Override one parameter of every preset, e.g. `--set plant.sigma0_nm_per_rad=3e4`, or of one
+    /// joint: `--set ankle_roll:plant.t0_min_c=30`.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub sets: Vec<String>,
     /// Seed; joint j uses seed + j (initial temperature, current noise).
@@ -162,6 +163,7 @@ pub struct ServeArgs {
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args.command {
         SimCommand::Params { params } => {
+            check_set_joints(&params.sets, &[params.preset.as_str()])?;
             let table = load_table(&params.preset, params.params.as_deref(), &params.sets)?;
             // Validate before printing, so a bad override fails here too.
             PlantParams::from_table(&table)?;
@@ -183,6 +185,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 "--duration-s must be a positive number, got {duration_s}"
             );
             anyhow::ensure!(tau_ext_nm.is_finite(), "--tau-ext-nm must be finite");
+            check_set_joints(&params.sets, &[params.preset.as_str()])?;
             let table = load_table(&params.preset, params.params.as_deref(), &params.sets)?;
             let p = PlantParams::from_table(&table)?;
             let period_s = p.sample_period_s();

@@ -52,6 +52,7 @@ impl JointSetup {
 
     /// Both presets in payload order ([`PRESETS`]).
     pub fn both(sets: &[String]) -> anyhow::Result<[JointSetup; 2]> {
+        crate::sim::params::check_set_joints(sets, &PRESETS)?;
         Ok([Self::load(PRESETS[0], sets)?, Self::load(PRESETS[1], sets)?])
     }
 }

@@ -36,8 +36,10 @@ pub fn build_joints(
     sets: &[String],
     seed: u64,
 ) -> anyhow::Result<Vec<ServedJoint>> {
+    let names: Vec<&str> = presets.split(',').map(str::trim).collect();
+    crate::sim::params::check_set_joints(sets, &names)?;
     let mut out = Vec::new();
-    for (index, name) in presets.split(',').map(str::trim).enumerate() {
+    for (index, name) in names.iter().copied().enumerate() {
         anyhow::ensure!(!name.is_empty(), "--preset `{presets}`: empty preset name");
         anyhow::ensure!(
             index < frictionless_shm_types::MAX_JOINTS,

@@ -46,6 +46,16 @@ pub enum ParamError {
     /// A `--set` argument is not `key=value`.
     #[error("--set {0:?}: expected key=value with a dotted key, e.g. plant.k1_nm_per_rad=2e4")]
     BadSet(String),
+    /// A `--set JOINT:key=value` names a joint that is not one of the presets.
+    #[error("--set {set:?}: no preset {joint:?} among {presets:?}")]
+    UnknownSetJoint {
+        /// The whole argument.
+        set: String,
+        /// The joint prefix.
+        joint: String,
+        /// The presets of this run.
+        presets: Vec<String>,
+    },
     /// A `--set` key walks through a value that is not a table.
     #[error("--set {key:?}: {prefix:?} is not a table")]
     NotATable {
@@ -447,6 +457,32 @@ pub fn merge_tables(base: &mut toml::Table, over: toml::Table) {
     }
 }
 
+/// Splits a `--set` argument into its joint prefix (`ankle_roll:plant.t0_min_c=30` → `Some("ankle_roll")`)
+/// and the `key=value` part; an argument without a prefix applies to every preset.
+pub fn split_set_joint(set: &str) -> (Option<&str>, &str) {
+    match set.split_once(':') {
+        Some((joint, rest)) if !joint.contains('=') => (Some(joint.trim()), rest),
+        _ => (None, set),
+    }
+}
+
+/// Checks that every joint prefix in `sets` names one of `presets` (before anything is loaded, so a
+/// misspelt joint is an error rather than an override silently applied to nothing).
+pub fn check_set_joints(sets: &[String], presets: &[&str]) -> Result<(), ParamError> {
+    for set in sets {
+        if let (Some(joint), _) = split_set_joint(set)
+            && !presets.contains(&joint)
+        {
+            return Err(ParamError::UnknownSetJoint {
+                set: set.clone(),
+                joint: joint.to_owned(),
+                presets: presets.iter().map(|p| (*p).to_owned()).collect(),
+            });
+        }
+    }
+    Ok(())
+}
+
 /// Applies one `key=value` override with a dotted key. The value is parsed as a TOML value
 /// (numbers, booleans, arrays, quoted strings); anything else is taken as a bare string.
 pub fn apply_set(table: &mut toml::Table, set: &str) -> Result<(), ParamError> {
@@ -477,7 +513,8 @@ pub fn apply_set(table: &mut toml::Table, set: &str) -> Result<(), ParamError> {
 }
 
 /// Loads a preset (built-in name or TOML path), deep-merges the optional `params_file` over it, then
-/// applies each `key=value` of `sets` in order. Returns the merged table (with `plant` and `protocol`).
+/// applies each `key=value` of `sets` in order (a `JOINT:key=value` only when `JOINT` is `preset`, see
+/// [`check_set_joints`]). Returns the merged table (with `plant` and `protocol`).
 pub fn load_table(
     preset: &str,
     params_file: Option<&Path>,
@@ -498,7 +535,11 @@ pub fn load_table(
         merge_tables(&mut table, read_table(file)?);
     }
     for s in sets {
-        apply_set(&mut table, s)?;
+        match split_set_joint(s) {
+            (Some(joint), kv) if joint == preset => apply_set(&mut table, kv)?,
+            (Some(_), _) => {}
+            (None, kv) => apply_set(&mut table, kv)?,
+        }
     }
     Ok(table)
 }
