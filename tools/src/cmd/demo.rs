@@ -16,7 +16,10 @@
 //!   network trained on τ_F + J_eq·φ̈ feeds kfc·J_eq·φ̈ back with its history and filter lag, which
 //!   drove the ankle roll into a growing 4 Hz stick–slip oscillation at the K_p the SCV tracks with;
 //! - frictiond keeps the Δθ offset the network was trained with (`--pinn-delta-theta-offset`, from
-//!   the train report) instead of re-latching at enable.
+//!   the train report) instead of re-latching at enable;
+//! - each joint's plant in the experiments starts at the winding temperature of its training
+//!   recording (`--set JOINT:plant.t0_min_c=…`), not at a seed-drawn one: no model reads temperature,
+//!   and a plant hotter than its training data has less sliding friction than any model learnt.
 //!
 //! The closed-loop tables carry a fifth, diagnostic column, `oracle (true friction)`
 //! (`frictl experiment --model oracle`): frictiond's compensation law (same kfc, clip and LPF) fed
@@ -505,6 +508,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // 7. closed loop
     let exp_dir = out.join("experiments");
     let mut exp_md = String::new();
+    let mut exp_temps: Vec<String> = vec![];
     if !args.no_experiments {
         let f = |suffix: &str| {
             format!(
@@ -519,6 +523,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         for (key, joint) in JOINTS {
             let v = pinn_offset_arg(&models.join(format!("{joint}_train.json")))?;
             offsets.push(format!("{key}={v}"));
+        }
+        // Each joint's plant starts at the winding temperature of its training recording: the models
+        // are compared in the conditions they were identified in (none of them reads temperature; a
+        // plant several °C hotter than its training data has less sliding friction than any model
+        // learnt, which matters as kfc approaches 1).
+        let mut plant_t0 = vec![];
+        for (key, joint) in JOINTS {
+            let sidecar = data.join(format!("{joint}_train.json"));
+            let t0 = read_json(&sidecar)?
+                .get("initial_temperature_c")
+                .and_then(|v| v.as_f64())
+                .with_context(|| format!("{}: no initial_temperature_c", sidecar.display()))?;
+            exp_temps.push(format!("{key} {t0:.1} °C"));
+            for bound in ["t0_min_c", "t0_max_c"] {
+                plant_t0.push(format!("--set={key}:plant.{bound}={t0}"));
+            }
         }
         r.frictl(
             "experiment all (both joints; none, CV, SCV, PINN, oracle)",
@@ -545,7 +565,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 sizes.periods.to_string(),
                 "--out".into(),
                 s(&exp_dir),
-            ],
+            ]
+            .into_iter()
+            .chain(plant_t0)
+            .collect::<Vec<String>>(),
         )?;
         exp_md = std::fs::read_to_string(exp_dir.join("tables.md")).unwrap_or_default();
         let ex = read_json(&exp_json)?;
@@ -630,6 +653,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                structure (kfc < 1 leaves (1 − kfc) of the stiction to the position loop), not by its \
                estimate; a model below it gets there by something other than estimating friction (a \
                breakaway term above the true one dithers the joint through reversals).\n\n";
+        md += &format!(
+            "Each joint's plant starts at the winding temperature of its training recording ({}).\n\n",
+            exp_temps.join(", ")
+        );
         md += &exp_md;
         md += "\nPlots: `experiments/plots/*.png`; traces: `experiments/traces/*.csv`.\n";
     }
