@@ -15,7 +15,8 @@
 
 use criterion::Criterion;
 use frictionless::kernel::{KernelPath, Mlp};
-use frictionless::mlp::{Activation, DenseLayer, MlpWeights, Normalisation, StorageDtype};
+use frictionless::mlp::{MlpWeights, StorageDtype};
+use frictionless::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::hint::black_box;
@@ -36,32 +37,19 @@ fn dtype_name(d: StorageDtype) -> &'static str {
     }
 }
 
-/// A random MLP (He-uniform weights, small biases, non-trivial normalisation).
+/// A random MLP (He-uniform weights, small biases, non-trivial normalisation) from the library's seeded
+/// builder; the seed is drawn from the bench's own stream so each call gives a different net.
 fn random_net(rng: &mut ChaCha8Rng, sizes: &[usize]) -> MlpWeights {
-    let n = sizes.len() - 1;
-    let layers = (0..n)
-        .map(|k| {
-            let (ni, no) = (sizes[k], sizes[k + 1]);
-            let lim = (6.0 / ni as f32).sqrt();
-            DenseLayer {
-                n_in: ni,
-                n_out: no,
-                weight: (0..ni * no).map(|_| rng.random_range(-lim..lim)).collect(),
-                bias: (0..no).map(|_| rng.random_range(-0.1..0.3)).collect(),
-                activation: if k + 1 == n {
-                    Activation::Identity
-                } else {
-                    Activation::Relu
-                },
-            }
-        })
-        .collect();
-    let ni = sizes[0];
-    let norm = Normalisation {
-        mean: (0..ni).map(|_| rng.random_range(-0.5..0.5)).collect(),
-        scale: (0..ni).map(|_| rng.random_range(0.5..2.0)).collect(),
+    let spec = RandomMlpSpec {
+        weights: WeightInit::HeUniform,
+        bias: -0.1..0.3,
+        norm: NormInit::Uniform {
+            mean: -0.5..0.5,
+            scale: 0.5..2.0,
+        },
+        ..RandomMlpSpec::new(sizes)
     };
-    MlpWeights { norm, layers }
+    seeded_mlp(&spec, rng.random()).expect("valid bench net")
 }
 
 fn random_inputs(rng: &mut ChaCha8Rng, w: &MlpWeights, n: usize) -> Vec<Vec<f32>> {

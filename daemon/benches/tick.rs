@@ -16,43 +16,28 @@ use frictiond::params::{JointRt, Params};
 use frictiond::rt::{Freshness, Inputs, Latest, compute};
 use frictionless::features::{FeatureSet, FeatureSpec, WarmupPolicy};
 use frictionless::friction::ScvParams;
-use frictionless::mlp::{Activation, DenseLayer, MlpWeights, Normalisation, StorageDtype};
+use frictionless::mlp::StorageDtype;
 use frictionless::model::{JointModel, PinnEstimator};
+use frictionless::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
 use frictionless::units::GearRatio;
 use frictionless::weights::{ModelFile, ModelMeta, SignalFiltering, TrainingMeta};
 use frictionless_shm_types::{JointStates, MAX_JOINTS, MotorCurrentCommand, TorqueRequest};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
 
 const R: f64 = -160.0;
 const H: usize = 20;
 
 fn paper_pinn(seed: u64, dtype: StorageDtype) -> JointModel {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let features = FeatureSpec {
         set: FeatureSet::DeltaThetaJointVel,
         history: H,
         temperature: false,
     };
-    let sizes = [features.n_inputs(), 268, 215, 1];
-    let layers = sizes
-        .windows(2)
-        .enumerate()
-        .map(|(k, w)| {
-            let a = (6.0 / w[0] as f32).sqrt();
-            DenseLayer {
-                n_in: w[0],
-                n_out: w[1],
-                weight: (0..w[0] * w[1]).map(|_| rng.random_range(-a..a)).collect(),
-                bias: (0..w[1]).map(|_| rng.random_range(-0.1f32..0.1)).collect(),
-                activation: if k + 2 == sizes.len() {
-                    Activation::Identity
-                } else {
-                    Activation::Relu
-                },
-            }
-        })
-        .collect();
+    let spec = RandomMlpSpec {
+        weights: WeightInit::HeUniform,
+        norm: NormInit::Identity,
+        ..RandomMlpSpec::new(&[features.n_inputs(), 268, 215, 1])
+    };
+    let mlp = seeded_mlp(&spec, seed).expect("valid bench net");
     let file = ModelFile {
         meta: ModelMeta {
             joint_name: format!("j{seed}"),
@@ -70,10 +55,7 @@ fn paper_pinn(seed: u64, dtype: StorageDtype) -> JointModel {
             },
         },
         dtype,
-        mlp: MlpWeights {
-            norm: Normalisation::identity(sizes[0]),
-            layers,
-        },
+        mlp,
     };
     JointModel::Pinn(Box::new(
         PinnEstimator::from_model_file(&file, WarmupPolicy::HoldZero).unwrap(),
