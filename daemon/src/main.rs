@@ -65,13 +65,14 @@ fn summary(cfg: &config::Config) -> String {
     use std::fmt::Write;
     let l = &cfg.raw.loop_;
     let mut s = format!(
-        "{}: OK\n  loop: period {} µs ({:.0} Hz), cpu {:?}, priority {:?}, lock_memory {}\n  backend: {:?} prefix {:?} root {:?}\n  safety: stale after {} ticks → {:?}\n",
+        "{}: OK\n  loop: period {} µs ({:.0} Hz), cpu {:?}, priority {:?}, lock_memory {}, cpu_dma_latency_us {:?}\n  backend: {:?} prefix {:?} root {:?}\n  safety: stale after {} ticks → {:?}\n",
         cfg.file.display(),
         l.period_us,
         1e6 / l.period_us as f64,
         l.cpu,
         l.priority,
         l.lock_memory,
+        l.cpu_dma_latency_us,
         cfg.raw.backend.kind,
         cfg.raw.backend.service_prefix,
         cfg.root_path,

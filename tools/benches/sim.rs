@@ -107,14 +107,7 @@ fn protocol_ankle_roll(c: &mut Criterion) {
         all.len()
     );
     let link = frictl::sim::link::link_from_model(&params.link).expect("valid link");
-    let model = ControllerModel {
-        gear_ratio_signed: params.gear_ratio_signed,
-        kt_nm_per_a: params.kt_nm_per_a,
-        j_eq_kgm2: params.j_eq_kgm2(),
-        i_max_a: params.i_max_a,
-        period_s: params.sample_period_s(),
-        link: link.as_ref(),
-    };
+    let model = ControllerModel::nominal(&params, link.as_ref());
     let mut group = c.benchmark_group("protocol");
     group.sample_size(10);
     group.bench_function("sim_protocol_ankle_roll", |b| {
