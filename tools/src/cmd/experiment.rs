@@ -154,6 +154,20 @@ pub struct Args {
     /// shipped `config/ankle_knee.toml`, 30 Hz order 2 on both joints).
     #[arg(long)]
     pub lpf: Option<String>,
+    /// The controller's M: `link` (the paper's, URDF link inertia only) or `link-rotor` (plus the
+    /// reflected rotor inertia r²·J_m of the preset — a diagnostic: the loop then gets the K_p asked
+    /// for and 25× more damping on the ankle roll).
+    #[arg(long, value_enum, default_value_t = ControllerInertia::Link)]
+    pub controller_inertia: ControllerInertia,
+}
+
+/// What the computed-torque controller's M contains.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ControllerInertia {
+    /// URDF link inertia I_L (the paper's).
+    Link,
+    /// I_L + r²·J_m.
+    LinkRotor,
 }
 
 /// Parses `--lpf` into per-joint overrides (`None` = shipped); a cut-off keeps the shipped order
@@ -449,6 +463,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             None => [None; 2],
         },
         lpf,
+        rotor_inertia_in_m: args.controller_inertia == ControllerInertia::LinkRotor,
     };
     let kp_given = args
         .kp
@@ -479,9 +494,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         };
         report.references.insert(names[j].clone(), desc);
         let law = LawSettings::shipped(&names[j], cfg.kfc[j], cfg.lpf[j])?;
+        let m = if cfg.rotor_inertia_in_m {
+            format!(
+                "; controller M = I_L + r²J_m ({:.4} kg·m² added)",
+                setups[j].params.j_eq_kgm2()
+            )
+        } else {
+            String::new()
+        };
         report
             .configuration
-            .insert(names[j].clone(), law.describe());
+            .insert(names[j].clone(), format!("{}{m}", law.describe()));
     }
     std::fs::create_dir_all(args.out.join("traces"))
         .with_context(|| format!("cannot create {}", args.out.display()))?;

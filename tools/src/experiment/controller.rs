@@ -17,6 +17,11 @@
 //! `K_p·I_L/(I_L + r²J_m)` — which is why the required K_p are large (ankle roll I_L = 0.0054 kg·m²
 //! against r²J_m = 0.128 kg·m²).
 //!
+//! [`ComputedTorque::extra_inertia_kgm2`] adds a constant to M: with the reflected rotor inertia
+//! (`frictl experiment --controller-inertia link-rotor`) the controller models the whole inertia the
+//! motor accelerates, the loop gain is the K_p asked for, and K_d·(I_L + r²J_m) is 25× more damping on
+//! the ankle roll — a diagnostic of how much the paper's numbers owe to M = I_L, not the paper's setup.
+//!
 //! What it is **not**: no I/O, no low-level torque-to-current law (that is `frictiond`).
 
 use crate::sim::link::LinkDynamics;
@@ -110,6 +115,8 @@ pub struct ComputedTorque<L: LinkDynamics> {
     pub kp_per_s2: f64,
     /// K_d [1/s].
     pub kd_per_s: f64,
+    /// Constant inertia added to M [kg·m²] (0 = the paper's M = I_L; r²·J_m models the rotor).
+    pub extra_inertia_kgm2: f64,
 }
 
 impl<L: LinkDynamics> ComputedTorque<L> {
@@ -119,6 +126,7 @@ impl<L: LinkDynamics> ComputedTorque<L> {
             link,
             kp_per_s2,
             kd_per_s: PAPER_KD_PER_S,
+            extra_inertia_kgm2: 0.0,
         }
     }
 
@@ -128,7 +136,7 @@ impl<L: LinkDynamics> ComputedTorque<L> {
         let acc = sp.sddot_rad_s2
             + self.kd_per_s * (sp.sdot_rad_s - sdot_rad_s)
             + self.kp_per_s2 * (sp.s_rad - s_rad);
-        self.link.inertia_kgm2(s_rad) * acc
+        (self.link.inertia_kgm2(s_rad) + self.extra_inertia_kgm2) * acc
             + self.link.velocity_torque_nm(s_rad, sdot_rad_s)
             + self.link.gravity_nm(s_rad)
     }
@@ -184,5 +192,14 @@ mod tests {
         assert!((off - on - (0.5 * 100.0 * 0.01 + grav_diff)).abs() < 1e-12);
         let slow = c.tau_des_nm(0.1, 0.0, &sp);
         assert!((slow - on - 0.5 * 4.0 * 0.2).abs() < 1e-12);
+        // extra inertia scales the PD and feed-forward part only, not gravity
+        let with_rotor = ComputedTorque {
+            extra_inertia_kgm2: 0.25,
+            ..c
+        };
+        let off2 = with_rotor.tau_des_nm(0.09, 0.2, &sp);
+        let on2 = with_rotor.tau_des_nm(0.1, 0.2, &sp);
+        assert!((on2 - (0.75 * 0.3 + 10.0 * 0.1f64.sin())).abs() < 1e-12);
+        assert!((off2 - on2 - (0.75 * 100.0 * 0.01 + grav_diff)).abs() < 1e-12);
     }
 }

@@ -126,6 +126,9 @@ pub struct TrialSpec {
 pub struct TrialOptions {
     /// τ̂_F low-pass per joint index instead of the shipped config's (`None` = shipped).
     pub lpf: [Option<Lpf>; 2],
+    /// Add the reflected rotor inertia r²·J_m (from the preset) to the controller's M (diagnostic;
+    /// the paper's M is the link inertia only).
+    pub rotor_inertia_in_m: bool,
 }
 
 /// Recorded signals of one joint, one entry per tick.
@@ -286,7 +289,14 @@ pub fn run_trial_with(
     let ctrls: Vec<ComputedTorque<&dyn LinkDynamics>> = spec
         .joints
         .iter()
-        .map(|p| ComputedTorque::paper(setups[p.index].link.as_ref(), p.kp_per_s2))
+        .map(|p| ComputedTorque {
+            extra_inertia_kgm2: if opts.rotor_inertia_in_m {
+                setups[p.index].params.j_eq_kgm2()
+            } else {
+                0.0
+            },
+            ..ComputedTorque::paper(setups[p.index].link.as_ref(), p.kp_per_s2)
+        })
         .collect();
     let laws: Vec<LawSettings> = spec
         .joints

@@ -49,6 +49,8 @@ pub struct SuiteConfig {
     pub kfc: [Option<f64>; 2],
     /// τ̂_F low-pass per joint index instead of the shipped config's (`None` = shipped).
     pub lpf: [Option<Lpf>; 2],
+    /// Reflected rotor inertia in the controller's M (see [`TrialOptions::rotor_inertia_in_m`]).
+    pub rotor_inertia_in_m: bool,
 }
 
 /// The sine reference of joint `index` (0 = knee, 1 = ankle_roll).
@@ -127,7 +129,15 @@ fn run_grouped(
             raw_friction: false,
             kfc: cfg.kfc,
         };
-        let trace = run_trial_with(bins, setups, &spec, &TrialOptions { lpf: cfg.lpf })?;
+        let trace = run_trial_with(
+            bins,
+            setups,
+            &spec,
+            &TrialOptions {
+                lpf: cfg.lpf,
+                rotor_inertia_in_m: cfg.rotor_inertia_in_m,
+            },
+        )?;
         if cfg.progress {
             let who: Vec<String> = trace
                 .joints
