@@ -379,7 +379,7 @@ mod tests {
     use crate::mlp::StorageDtype;
     use crate::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
     use crate::units::GearRatio;
-    use crate::weights::{SignalFiltering, TrainingMeta};
+    use crate::weights::TrainingMeta;
 
     fn model_file(spec: FeatureSpec, ratio: f64, seed: u64) -> ModelFile {
         let mlp = RandomMlpSpec {
@@ -398,14 +398,7 @@ mod tests {
                 kt_nm_per_a: 0.0665,
                 features: spec,
                 scv: None,
-                training: TrainingMeta {
-                    dataset_sha256: [0; 32],
-                    val_rmse_nm: f32::NAN,
-                    test_rmse_nm: f32::NAN,
-                    created_unix_s: 0,
-                    tool_version: "test".into(),
-                    filtering: SignalFiltering::Unknown,
-                },
+                training: TrainingMeta::unknown("test", 0),
             },
             dtype: StorageDtype::F32,
             mlp: seeded_mlp(&mlp, seed).unwrap(),

@@ -12,7 +12,7 @@ use frictionless::friction::{ScvCodeParams, paper};
 use frictionless::mlp::{Activation, DenseLayer, MlpWeights, Normalisation, StorageDtype};
 use frictionless::model::{FrictionModel, JointModel, NoFriction, PinnEstimator};
 use frictionless::units::GearRatio;
-use frictionless::weights::{ModelFile, ModelMeta, SignalFiltering, TrainingMeta};
+use frictionless::weights::{ModelFile, ModelMeta, TrainingMeta};
 
 struct Counting;
 
@@ -84,14 +84,7 @@ fn pinn(set: FeatureSet, history: usize, temperature: bool, warmup: WarmupPolicy
             kt_nm_per_a: 0.0665,
             features,
             scv: Some(paper::SCV_ANKLE_ROLL),
-            training: TrainingMeta {
-                dataset_sha256: [0; 32],
-                val_rmse_nm: f32::NAN,
-                test_rmse_nm: f32::NAN,
-                created_unix_s: 0,
-                tool_version: "alloc test".into(),
-                filtering: SignalFiltering::Unknown,
-            },
+            training: TrainingMeta::unknown("alloc test", 0),
         },
         dtype: StorageDtype::F32,
         mlp: mlp(&[features.n_inputs(), 268, 215, 1]),

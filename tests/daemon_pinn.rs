@@ -16,7 +16,7 @@ use frictionless::mlp::StorageDtype;
 use frictionless::model::{FrictionModel, PinnEstimator};
 use frictionless::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
 use frictionless::units::GearRatio;
-use frictionless::weights::{ModelFile, ModelMeta, SignalFiltering, TrainingMeta};
+use frictionless::weights::{ModelFile, ModelMeta, TrainingMeta};
 use frictionless_shm_types::{
     FLAG_STALE, FLAG_WARMING_UP, JointStates, MotorCurrentCommand, TorqueRequest, model_kind,
 };
@@ -47,14 +47,7 @@ fn model_file(seed: u64) -> ModelFile {
             kt_nm_per_a: KT,
             features,
             scv: None,
-            training: TrainingMeta {
-                dataset_sha256: [0; 32],
-                val_rmse_nm: f32::NAN,
-                test_rmse_nm: f32::NAN,
-                created_unix_s: 0,
-                tool_version: "daemon_pinn test".into(),
-                filtering: SignalFiltering::Unknown,
-            },
+            training: TrainingMeta::unknown("daemon_pinn test", 0),
         },
         dtype: StorageDtype::F32,
         mlp: seeded_mlp(&mlp, seed).unwrap(),

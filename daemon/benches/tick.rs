@@ -20,7 +20,7 @@ use frictionless::mlp::StorageDtype;
 use frictionless::model::{JointModel, PinnEstimator};
 use frictionless::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
 use frictionless::units::GearRatio;
-use frictionless::weights::{ModelFile, ModelMeta, SignalFiltering, TrainingMeta};
+use frictionless::weights::{ModelFile, ModelMeta, TrainingMeta};
 use frictionless_shm_types::{JointStates, MAX_JOINTS, MotorCurrentCommand, TorqueRequest};
 
 const R: f64 = -160.0;
@@ -45,14 +45,7 @@ fn paper_pinn(seed: u64, dtype: StorageDtype) -> JointModel {
             kt_nm_per_a: 0.0665,
             features,
             scv: None,
-            training: TrainingMeta {
-                dataset_sha256: [0; 32],
-                val_rmse_nm: f32::NAN,
-                test_rmse_nm: f32::NAN,
-                created_unix_s: 0,
-                tool_version: "tick bench".into(),
-                filtering: SignalFiltering::Unknown,
-            },
+            training: TrainingMeta::unknown("tick bench", 0),
         },
         dtype,
         mlp,

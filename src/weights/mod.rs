@@ -56,6 +56,21 @@ pub struct TrainingMeta {
     pub filtering: SignalFiltering,
 }
 
+impl TrainingMeta {
+    /// Provenance unknown (an imported network, a test or bench net): no dataset hash, no RMSEs,
+    /// unknown filtering; `tool_version` and `created_unix_s` say who wrote the file and when.
+    pub fn unknown(tool_version: impl Into<String>, created_unix_s: u64) -> Self {
+        Self {
+            dataset_sha256: [0; 32],
+            val_rmse_nm: f32::NAN,
+            test_rmse_nm: f32::NAN,
+            created_unix_s,
+            tool_version: tool_version.into(),
+            filtering: SignalFiltering::Unknown,
+        }
+    }
+}
+
 /// Everything about a model besides its weights.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ModelMeta {

@@ -20,7 +20,7 @@ use frictionless::friction::{ScvParams, StaticFriction, paper};
 use frictionless::mlp::{Activation, DenseLayer, MlpWeights, Normalisation, StorageDtype};
 use frictionless::model::JointModel;
 use frictionless::units::GearRatio;
-use frictionless::weights::{ModelFile, ModelMeta, SignalFiltering, TrainingMeta};
+use frictionless::weights::{ModelFile, ModelMeta, TrainingMeta};
 use frictl::eval::{EvalOptions, ModelSpec, evaluate};
 use frictl::ident::dataset::Dataset;
 use frictl::train::data::DeltaThetaOffset;
@@ -103,14 +103,7 @@ fn linear_pinn() -> ModelFile {
                 temperature: false,
             },
             scv: None,
-            training: TrainingMeta {
-                dataset_sha256: [0; 32],
-                val_rmse_nm: f32::NAN,
-                test_rmse_nm: f32::NAN,
-                created_unix_s: 0,
-                tool_version: "eval test".into(),
-                filtering: SignalFiltering::Unknown,
-            },
+            training: TrainingMeta::unknown("eval test", 0),
         },
         dtype: StorageDtype::F32,
         mlp: MlpWeights {

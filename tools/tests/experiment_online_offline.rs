@@ -17,7 +17,7 @@ use frictionless::mlp::StorageDtype;
 use frictionless::model::{FrictionModel, PinnEstimator};
 use frictionless::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
 use frictionless::units::GearRatio;
-use frictionless::weights::{ModelFile, ModelMeta, SignalFiltering, TrainingMeta};
+use frictionless::weights::{ModelFile, ModelMeta, TrainingMeta};
 use frictl::experiment::controller::Reference;
 use frictl::experiment::run::{JointPlan, JointSetup, JointTrace, TrialSpec, run_trial};
 use frictl::experiment::session::{Binaries, FrictionModel as Fm, Mode};
@@ -52,14 +52,7 @@ fn model_file(joint: &str, ratio: f64, kt: f64, seed: u64) -> ModelFile {
             kt_nm_per_a: kt,
             features: spec,
             scv: None,
-            training: TrainingMeta {
-                dataset_sha256: [0; 32],
-                val_rmse_nm: f32::NAN,
-                test_rmse_nm: f32::NAN,
-                created_unix_s: 0,
-                tool_version: "test".into(),
-                filtering: SignalFiltering::Unknown,
-            },
+            training: TrainingMeta::unknown("test", 0),
         },
         dtype: StorageDtype::F32,
         mlp,

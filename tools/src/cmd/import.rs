@@ -14,7 +14,7 @@ use frictionless::features::{FeatureSet, FeatureSpec};
 use frictionless::kernel::Mlp;
 use frictionless::mlp::{MlpWeights, StorageDtype};
 use frictionless::units::GearRatio;
-use frictionless::weights::{self, ModelFile, ModelMeta, SignalFiltering, TrainingMeta};
+use frictionless::weights::{self, ModelFile, ModelMeta, TrainingMeta};
 use frictl::interop::{self, ModelHints, onnx, safetensors};
 
 /// Source format.
@@ -221,16 +221,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 temperature,
             },
             scv: None,
-            training: TrainingMeta {
-                dataset_sha256: [0; 32],
-                val_rmse_nm: f32::NAN,
-                test_rmse_nm: f32::NAN,
-                created_unix_s: SystemTime::now()
+            training: TrainingMeta::unknown(
+                format!("frictl {}", env!("CARGO_PKG_VERSION")),
+                SystemTime::now()
                     .duration_since(UNIX_EPOCH)
                     .map_or(0, |d| d.as_secs()),
-                tool_version: format!("frictl {}", env!("CARGO_PKG_VERSION")),
-                filtering: SignalFiltering::Unknown,
-            },
+            ),
         },
         dtype: args.dtype.into(),
         mlp,
