@@ -21,7 +21,7 @@
 //! pair a request with the truth of the state it answers).
 
 use super::session::{LawSettings, Lpf};
-use crate::ident::filter::{Butterworth, Sos};
+use crate::ident::filter::{Butterworth, Sos, sosfilt_step};
 
 /// Daemon tick rate [Hz] (the experiments' `period_us = 1000`).
 const FS_HZ: f64 = 1000.0;
@@ -68,15 +68,8 @@ impl OracleCompensation {
         } else {
             tau_f_true_nm
         };
-        let mut y = if g.kfc > 0.0 { g.kfc * f } else { 0.0 };
-        for (s, z) in self.sos.iter().zip(self.state.iter_mut()) {
-            let [b0, b1, b2, _, a1, a2] = *s;
-            let x = y;
-            y = b0 * x + z[0];
-            z[0] = b1 * x - a1 * y + z[1];
-            z[1] = b2 * x - a2 * y;
-        }
-        y
+        let y = if g.kfc > 0.0 { g.kfc * f } else { 0.0 };
+        sosfilt_step(&self.sos, y, &mut self.state)
     }
 }
 

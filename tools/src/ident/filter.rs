@@ -155,23 +155,36 @@ impl Butterworth {
     }
 }
 
+/// One sample through one section in direct form II transposed, updating its state `z`.
+#[inline]
+fn df2t(s: &Sos, z: &mut [f64; 2], x: f64) -> f64 {
+    let [b0, b1, b2, _, a1, a2] = *s;
+    let y = b0 * x + z[0];
+    z[0] = b1 * x - a1 * y + z[1];
+    z[1] = b2 * x - a2 * y;
+    y
+}
+
 /// Applies the sections in direct form II transposed to `x`, starting from and updating the per-section
 /// state `zi` (`zi.len()` must equal `sos.len()`; extra/missing sections are treated as zero state).
 pub fn sosfilt(sos: &[Sos], x: &[f64], zi: &mut [[f64; 2]]) -> Vec<f64> {
     let mut y = x.to_vec();
     for (s, z) in sos.iter().zip(zi.iter_mut()) {
-        let [b0, b1, b2, _, a1, a2] = *s;
-        let (mut z0, mut z1) = (z[0], z[1]);
+        // The state in a local for the inner loop (kept in registers), written back once.
+        let mut zl = *z;
         for v in y.iter_mut() {
-            let xi = *v;
-            let yi = b0 * xi + z0;
-            z0 = b1 * xi - a1 * yi + z1;
-            z1 = b2 * xi - a2 * yi;
-            *v = yi;
+            *v = df2t(s, &mut zl, *v);
         }
-        *z = [z0, z1];
+        *z = zl;
     }
     y
+}
+
+/// One sample through all sections (the streaming form of [`sosfilt`]), updating `zi`.
+pub fn sosfilt_step(sos: &[Sos], x: f64, zi: &mut [[f64; 2]]) -> f64 {
+    sos.iter()
+        .zip(zi.iter_mut())
+        .fold(x, |v, (s, z)| df2t(s, z, v))
 }
 
 /// Steady-state initial conditions of each section for a unit step (`scipy.signal.sosfilt_zi`).
