@@ -17,26 +17,26 @@ use std::time::Instant;
 
 use frictl::train::{TrainConfig, Trainer, synthetic};
 
-/// CPU time of the whole process (all threads) in seconds.
-fn process_cpu_s() -> f64 {
+/// CPU time of `clock` in seconds: `CLOCK_PROCESS_CPUTIME_ID` (all threads of the process) or
+/// `CLOCK_THREAD_CPUTIME_ID` (this thread; unaffected by time spent descheduled on a loaded machine).
+fn cpu_s(clock: libc::clockid_t) -> f64 {
     let mut ts = libc::timespec {
         tv_sec: 0,
         tv_nsec: 0,
     };
     // SAFETY: `ts` is a valid, exclusively borrowed timespec.
-    unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut ts) };
+    unsafe { libc::clock_gettime(clock, &mut ts) };
     ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
 }
 
-/// Thread CPU time in seconds (unaffected by time spent descheduled on a loaded machine).
+/// CPU time of the whole process (all threads) in seconds.
+fn process_cpu_s() -> f64 {
+    cpu_s(libc::CLOCK_PROCESS_CPUTIME_ID)
+}
+
+/// Thread CPU time in seconds.
 fn thread_cpu_s() -> f64 {
-    let mut ts = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: `ts` is a valid, exclusively borrowed timespec.
-    unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
-    ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
+    cpu_s(libc::CLOCK_THREAD_CPUTIME_ID)
 }
 
 /// `dst[m×n] row-major = lhs[m×k] · rhs[k×n]`, operands given as (data, row stride, column stride);
