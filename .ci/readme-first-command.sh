@@ -1,0 +1,63 @@
+#!/usr/bin/env bash
+# Runs the README's first set-up command exactly as a newcomer would: in a fresh clone of this checkout,
+# with an empty cargo target directory, and checks the `demo-out/report.json` it leaves.
+#
+# The command is read from README.md (the line after `# 1.` in the "Set-up: the two commands" block), so
+# the README and CI cannot drift apart. Usage: bash .ci/readme-first-command.sh
+# Knobs (env): README_CMD_WORK (default: a new temporary directory, removed at the end unless
+#              README_CMD_KEEP=1).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$(pwd)
+
+# The block starts at the "Set-up: the two commands" heading; the command is the first non-comment line
+# after the `# 1.` comment inside the following ```sh fence.
+cmd=$(awk '
+  /^## Set-up: the two commands/ { in_section = 1; next }
+  in_section && /^```sh/ { in_block = 1; next }
+  in_block && /^```/ { exit }
+  in_block && /^# 1\./ { want = 1; next }
+  in_block && want && NF && $0 !~ /^#/ { print; exit }
+' README.md)
+[ -n "$cmd" ] || { echo "readme-first-command: no command after '# 1.' in README.md's set-up block" >&2; exit 2; }
+echo "readme-first-command: \`$cmd\`"
+
+work=${README_CMD_WORK:-$(mktemp -d)}
+cleanup() { [ -n "${README_CMD_KEEP:-}" ] || rm -rf "$work"; }
+trap cleanup EXIT
+rm -rf "$work/clone" "$work/target"
+git clone -q "$ROOT" "$work/clone"
+# A newcomer's clone has no build products: an empty, private target directory.
+mkdir -p "$work/target"
+cd "$work/clone"
+start=$(date +%s)
+env CARGO_TARGET_DIR="$work/target" bash -c "$cmd" </dev/null
+echo "readme-first-command: finished in $(( $(date +%s) - start )) s (build from an empty target dir included)"
+
+python3 - "$work/clone/demo-out/report.json" <<'EOF'
+import json, math, sys
+path = sys.argv[1]
+with open(path) as f:
+    report = json.load(f)
+joints = report.get("joints")
+if not isinstance(joints, dict) or not joints:
+    sys.exit(f"{path}: no `joints` object")
+bad = []
+for name, joint in joints.items():
+    models = joint.get("models", {})
+    for label in ("none", "CV", "SCV", "PINN"):
+        m = models.get(label)
+        if m is None:
+            bad.append(f"{name}: no model `{label}`")
+            continue
+        kp = m.get("min_kp")
+        if not isinstance(kp, (int, float)) or not math.isfinite(kp) or kp <= 0:
+            bad.append(f"{name}/{label}: min_kp = {kp!r}")
+    for label in ("CV", "SCV", "PINN"):
+        rmse = models.get(label, {}).get("eval", {}).get("rmse_all")
+        if not isinstance(rmse, (int, float)) or not math.isfinite(rmse) or rmse < 0:
+            bad.append(f"{name}/{label}: eval.rmse_all = {rmse!r}")
+if bad:
+    sys.exit(f"{path}: " + "; ".join(bad))
+print(f"readme-first-command: {path}: {len(joints)} joints, every model has a finite min_kp and an unseen-run friction RMSE")
+EOF
