@@ -20,6 +20,6 @@ echo "== ONNX Runtime $("$VENV/bin/python" -c "import onnxruntime;print(onnxrunt
 export ORT_DYLIB_PATH="$LIB"
 export FRICTIONLESS_ORT_DIR="$ROOT/target/ort-bench"
 "$VENV/bin/python" benches/make_paper_onnx.py --out "$FRICTIONLESS_ORT_DIR" \
-  --ergocub "$ROOT/../shared/anchors/blf_jtc_ergoCubSN002_l_ankle_roll_pinn_2024-06.onnx"
+  --ergocub "$ROOT/tests/fixtures/ergocub/blf_jtc_ergoCubSN002_l_ankle_roll_pinn_2024-06.onnx"
 FILTER=("${@:-^ort}")
 cargo bench -p frictionless --features ort-bench --bench inference -- "${FILTER[@]}"

@@ -100,7 +100,7 @@ fn compare(lib: &Path, dir: &Path, full: bool) -> ort::Result<()> {
         .map_err(|e| err(format!("loading {}: {e}", lib.display())))?
         .build()?;
     let anchor = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/anchors/blf_jtc_ergoCubSN002_l_ankle_roll_pinn_2024-06.onnx");
+        .join("tests/fixtures/ergocub/blf_jtc_ergoCubSN002_l_ankle_roll_pinn_2024-06.onnx");
     let models = [
         (
             "paper",

@@ -6,7 +6,7 @@ Writes, under OUT/onnx/:
                               leading diagonal normalisation Gemm or Sub/Div, Gemm with transB 0/1,
                               alpha/beta, MatMul+Add, raw_data and float_data initializers,
                               1-3 hidden layers, dynamic batch
-  ergocub_extra.json          the real ergoCub model (shared/anchors) on extra random inputs
+  ergocub_extra.json          the real ergoCub model (tests/fixtures/ergocub) on extra random inputs
 
 Each JSON: {"name", "model", "n_inputs", "hidden", "form", "inputs": [[...]], "outputs": [...]}.
 Inputs are float32 values (exact in JSON), outputs come from ONNX Runtime (CPU, 1 thread, batched).
@@ -25,7 +25,7 @@ import onnxruntime as ort
 from onnx import TensorProto, helper, numpy_helper
 
 REPO = pathlib.Path(__file__).resolve().parents[2]
-ANCHOR = REPO.parent / "shared" / "anchors" / "blf_jtc_ergoCubSN002_l_ankle_roll_pinn_2024-06"
+ANCHOR = REPO / "tests" / "fixtures" / "ergocub" / "blf_jtc_ergoCubSN002_l_ankle_roll_pinn_2024-06"
 
 
 def tensor(name, arr, float_data=False):

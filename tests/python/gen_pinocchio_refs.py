@@ -17,7 +17,7 @@ root-link frame. Each external wrench acts ON the robot at the frame origin, exp
 Joints are named, never indexed: Pinocchio's order is depth-first and differs from ours.
 
 Models: iCub 3 (`iCubGenova09` from icub-models==2.8.1) and the real ergoCub URDF
-(`--ergocub PATH`, default ../shared/robots/ergoCubSN001/model.urdf relative to the repository).
+(`--ergocub PATH`, default tests/fixtures/ergocub/ergoCubSN001.urdf in the repository).
 """
 
 import argparse
@@ -164,13 +164,13 @@ def cases_for(label, urdf, rng, n_fixed, n_legs, n_float):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", required=True, help="output directory")
-    ap.add_argument("--ergocub", help="ergoCub URDF (default: ../shared/robots/ergoCubSN001/model.urdf from the repo)")
+    ap.add_argument("--ergocub", help="ergoCub URDF (default: tests/fixtures/ergocub/ergoCubSN001.urdf)")
     args = ap.parse_args()
 
     import icub_models
 
     repo = Path(__file__).resolve().parents[2]
-    ergocub = Path(args.ergocub) if args.ergocub else repo / ".." / "shared" / "robots" / "ergoCubSN001" / "model.urdf"
+    ergocub = Path(args.ergocub) if args.ergocub else repo / "tests" / "fixtures" / "ergocub" / "ergoCubSN001.urdf"
     if not ergocub.is_file():
         sys.exit(f"gen_pinocchio_refs: ergoCub URDF not found at {ergocub} (pass --ergocub PATH)")
     icub3 = Path(str(icub_models.get_model_file("iCubGenova09")))
