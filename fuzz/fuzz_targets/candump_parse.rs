@@ -8,7 +8,7 @@
 #![no_main]
 
 #[allow(dead_code)]
-#[path = "../../tools/src/canlog/mod.rs"]
+#[path = "../../tools/frictl/src/canlog/mod.rs"]
 mod canlog;
 
 use libfuzzer_sys::fuzz_target;

@@ -24,7 +24,7 @@ pub use single_joint::{SingleJoint, SingleJointTable};
 pub use spatial::{Force, Motion, SpatialInertia, Transform};
 
 /// The project's own humanoid leg + torso URDF (15 DoF), embedded so nothing needs files or pip.
-pub const DEFAULT_URDF: &str = include_str!("../../../config/urdf/virtual_leg.urdf");
+pub const DEFAULT_URDF: &str = include_str!("../../../../config/urdf/virtual_leg.urdf");
 
 /// Path of the project's own URDF relative to the repository root (what `--urdf` defaults to).
 pub const DEFAULT_URDF_PATH: &str = "config/urdf/virtual_leg.urdf";

@@ -328,7 +328,7 @@ fn starts_pre_wound_to_hold_gravity() {
 fn urdf_link_matches_the_ergocub_reference_values() {
     let urdf = concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../../shared/robots/ergoCubSN001/model.urdf"
+        "/../../../shared/robots/ergoCubSN001/model.urdf"
     );
     if !std::path::Path::new(urdf).is_file() {
         eprintln!("skipped: {urdf} not present");

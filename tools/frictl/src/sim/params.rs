@@ -14,9 +14,9 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 /// The built-in knee preset (`config/presets/knee.toml`).
-pub const KNEE_PRESET_TOML: &str = include_str!("../../../config/presets/knee.toml");
+pub const KNEE_PRESET_TOML: &str = include_str!("../../../../config/presets/knee.toml");
 /// The built-in ankle-roll preset (`config/presets/ankle_roll.toml`).
-pub const ANKLE_ROLL_PRESET_TOML: &str = include_str!("../../../config/presets/ankle_roll.toml");
+pub const ANKLE_ROLL_PRESET_TOML: &str = include_str!("../../../../config/presets/ankle_roll.toml");
 
 /// Names of the built-in presets.
 pub const PRESET_NAMES: &[&str] = &["knee", "ankle_roll"];
