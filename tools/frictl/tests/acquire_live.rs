@@ -10,7 +10,7 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
-mod plant_common;
+use crate::plant_common;
 use plant_common::{Plant, Scratch};
 
 /// A tiny protocol on one start: two sine chunks (0.28 A and 0.71 A at 2 Hz, 2 cycles), the second

@@ -3,10 +3,10 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use frictl::acquire::protocol::{LatchReason, RunSummary};
-use frictl::acquire::{BlockKind, LogRow, Mode, ProtocolConfig, run_offline, schedule};
-use frictl::sim::PlantParams;
-use frictl::sim::params::load_table;
+use frictionless_acquire::protocol::{LatchReason, RunSummary};
+use frictionless_acquire::{BlockKind, LogRow, Mode, ProtocolConfig, run_offline, schedule};
+use frictionless_sim::PlantParams;
+use frictionless_sim::params::load_table;
 
 fn load(preset: &str, sets: &[&str]) -> (PlantParams, ProtocolConfig) {
     let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
@@ -83,13 +83,13 @@ fn schedule_plays_the_configured_amplitudes_frequencies_and_starts() {
         ramps.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-12),
         "{ramps:?}"
     );
-    let total_min = frictl::acquire::protocol::schedule_duration_s(&blocks) / 60.0;
+    let total_min = frictionless_acquire::protocol::schedule_duration_s(&blocks) / 60.0;
     assert!(
         (15.0..28.0).contains(&total_min),
         "ankle protocol ≥ 15 min (issue #3), got {total_min}"
     );
     let (_, knee) = load("knee", &["protocol.tracking.train.enabled=false"]);
-    let knee_min = frictl::acquire::protocol::schedule_duration_s(&schedule(&knee)) / 60.0;
+    let knee_min = frictionless_acquire::protocol::schedule_duration_s(&schedule(&knee)) / 60.0;
     assert!(
         (20.0..29.0).contains(&knee_min),
         "knee protocol without tracking ≈ 20–28 min, got {knee_min}"

@@ -1,7 +1,7 @@
 //! End-to-end tests of the model subcommands of the real `frictl` binary: import, inspect,
 //! predict, export, convert, and their error messages.
 
-mod interop_common;
+use crate::interop_common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

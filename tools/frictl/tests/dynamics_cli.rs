@@ -3,7 +3,7 @@
 use std::io::Write;
 use std::process::Command;
 
-use frictl::dynamics::{BaseState, ExternalWrench, Force, Workspace, virtual_leg};
+use frictionless_dynamics::{BaseState, ExternalWrench, Force, Workspace, virtual_leg};
 use nalgebra::Vector3;
 
 fn frictl() -> Command {

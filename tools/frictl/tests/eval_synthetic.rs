@@ -21,9 +21,9 @@ use frictionless::mlp::{Activation, DenseLayer, MlpWeights, Normalisation, Stora
 use frictionless::model::JointModel;
 use frictionless::units::GearRatio;
 use frictionless::weights::{ModelFile, ModelMeta, TrainingMeta};
+use frictionless_dataset::Dataset;
+use frictionless_train::data::DeltaThetaOffset;
 use frictl::eval::{EvalOptions, ModelSpec, evaluate};
-use frictl::ident::dataset::Dataset;
-use frictl::train::data::DeltaThetaOffset;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};

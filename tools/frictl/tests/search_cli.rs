@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use frictl::train::search::{SearchSpace, TrialResult, draw, read_results};
+use frictionless_train::search::{SearchSpace, TrialResult, draw, read_results};
 
 fn frictl(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_frictl"))

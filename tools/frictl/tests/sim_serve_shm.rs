@@ -8,10 +8,10 @@ use std::time::{Duration, Instant};
 
 use frictionless_shm_types::sim::{SimDisturbance, SimTruth};
 use frictionless_shm_types::{Inbox, Ipc, JointStates, MotorCurrentCommand, Outbox, monotonic_ns};
-use frictl::sim::PlantParams;
-use frictl::sim::params::load_table;
+use frictionless_sim::PlantParams;
+use frictionless_sim::params::load_table;
 
-mod plant_common;
+use crate::plant_common;
 use plant_common::{Plant, Scratch};
 
 /// The test's side: a controller that answers states with commands (inbox before outbox, as the

@@ -15,9 +15,9 @@ use std::sync::OnceLock;
 use frictionless::features::{FeatureSet, FeatureSpec, JointSample, WarmupPolicy};
 use frictionless::model::{FrictionModel, PinnEstimator};
 use frictionless::weights::read_file;
-use frictl::ident::dataset::Dataset;
-use frictl::train::Predictor;
-use frictl::train::data::{DeltaThetaOffset, build_inputs};
+use frictionless_dataset::Dataset;
+use frictionless_train::Predictor;
+use frictionless_train::data::{DeltaThetaOffset, build_inputs};
 use sha2::{Digest, Sha256};
 
 const EPOCH: &str = "1700000000";

@@ -8,8 +8,8 @@ use std::process::{Command, Output};
 use std::sync::OnceLock;
 
 use frictionless::features::{FeatureSet, FeatureSpec, WarmupPolicy};
-use frictl::train::data::{ChunkKey, DeltaThetaOffset, SplitSpec};
-use frictl::train::pipeline::{self, Sources};
+use frictionless_train::data::{ChunkKey, DeltaThetaOffset, SplitSpec};
+use frictionless_train::pipeline::{self, Sources};
 
 fn frictl(args: &[&str]) -> Output {
     let out = Command::new(env!("CARGO_BIN_EXE_frictl"))

@@ -21,12 +21,12 @@ use std::time::{Duration, Instant};
 use frictionless_shm_types::can::WireFrame;
 use frictionless_shm_types::can::mit::{self, MitCommand, MitRanges, MitSpecial};
 use frictionless_shm_types::can::odrive::{self, OdriveMsg};
+use frictionless_sim::PlantParams;
 use frictl::serve::build_joints;
 use frictl::serve::can::{
     AXIS_ERROR_WATCHDOG_TIMER_EXPIRED, CanServeOptions, CanServeStats, MIT_HOST_ID, Protocol,
     mit_ranges, run_with_stats, serve_socket,
 };
-use frictl::sim::PlantParams;
 use socketcan::{CanFilter, CanFrame, CanSocket, Socket, SocketOptions};
 
 /// Where the emulator runs.
@@ -575,13 +575,13 @@ fn vcan_odrive_watchdog_idles_the_drive() {
     assert_eq!(stats.command_timeouts, 1, "{stats:?}");
 }
 
-/// Records a MIT session on vcan0 with `frictl::canlog::record`, then replays the log onto vcan1
+/// Records a MIT session on vcan0 with `frictionless_canlog::record`, then replays the log onto vcan1
 /// and checks the frames arrive identical and in order; finally replays only the commands into a
 /// fresh emulator on vcan0, which answers every one.
 #[test]
 #[ignore = "needs vcan (run tests/canvm/run.sh)"]
 fn vcan_candump_record_replay_reproduces_the_session() {
-    use frictl::canlog::{self, LogFrame};
+    use frictionless_canlog::{self as canlog, LogFrame};
     let nodes = [1u8];
     let knee = params("knee");
     let ranges = [mit_ranges(&knee)];

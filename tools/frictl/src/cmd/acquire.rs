@@ -2,21 +2,21 @@
 //!
 //! Offline against the simulator (default: fast, truth columns included), or live against a plant
 //! over shared memory (`--live-shm`: [`frictl::serve::shm::LiveJoint`], e.g. `frictl sim serve`),
-//! through the same `frictl::acquire::JointIo` seam and the same controllers.
+//! through the same `frictionless_acquire::JointIo` seam and the same controllers.
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::Context;
-use frictl::acquire::log::{
+use frictionless_acquire::log::{
     CsvLog, LiveInfo, SOURCE_LIVE_SHM, SOURCE_OFFLINE_SIM, Sidecar, columns,
 };
-use frictl::acquire::protocol::run as run_protocol;
-use frictl::acquire::protocol::{AcquireError, ControllerModel, schedule_duration_s};
-use frictl::acquire::{ProtocolConfig, run_offline, schedule};
-use frictl::sim::PlantParams;
-use frictl::sim::params::load_table;
+use frictionless_acquire::protocol::run as run_protocol;
+use frictionless_acquire::protocol::{AcquireError, ControllerModel, schedule_duration_s};
+use frictionless_acquire::{ProtocolConfig, run_offline, schedule};
+use frictionless_sim::PlantParams;
+use frictionless_sim::params::load_table;
 
 /// Arguments of `frictl acquire`.
 #[derive(clap::Args, Debug)]
@@ -68,7 +68,7 @@ pub struct Args {
 
 /// Runs `frictl acquire`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    frictl::sim::params::check_set_joints(&args.sets, &[args.preset.as_str()])?;
+    frictionless_sim::params::check_set_joints(&args.sets, &[args.preset.as_str()])?;
     let table = load_table(&args.preset, args.params.as_deref(), &args.sets)?;
     let plant_params = PlantParams::from_table(&table)?;
     let protocol = ProtocolConfig::from_table(&table)?;
@@ -90,7 +90,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let period_s = plant_params.sample_period_s();
     let total = (schedule_duration_s(&blocks) / period_s).round() as u64;
     // The controllers' link model (live runs; offline runs build their own): fail before any I/O.
-    let link = frictl::sim::link::link_from_model(&plant_params.link)?;
+    let link = frictionless_sim::link::link_from_model(&plant_params.link)?;
 
     let with_truth = !args.live_shm;
     let file = std::fs::File::create(&csv_path)
@@ -107,7 +107,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     let started = std::time::Instant::now();
     let mut n = 0u64;
-    let mut sink = |row: &frictl::acquire::LogRow| -> Result<(), AcquireError> {
+    let mut sink = |row: &frictionless_acquire::LogRow| -> Result<(), AcquireError> {
         n += 1;
         if n.is_multiple_of(if args.live_shm { 100 } else { 10_000 }) {
             bar.set_position(n);

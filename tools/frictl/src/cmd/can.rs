@@ -2,7 +2,7 @@
 //!
 //! `frictl can record IFACE FILE [--count N] [--seconds S]` (stops on SIGINT/SIGTERM too, flushing the
 //! file) and `frictl can replay FILE [--iface IFACE] [--loop] [--speed X]`. The format and pacing
-//! live in [`frictl::canlog`]. Not a bus analyser: no decoding, no filters.
+//! live in [`frictionless_canlog`]. Not a bus analyser: no decoding, no filters.
 
 use std::io::BufWriter;
 use std::path::PathBuf;
@@ -10,7 +10,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use anyhow::Context;
-use frictl::canlog;
+use frictionless_canlog as canlog;
 
 /// Arguments of `frictl can`.
 #[derive(clap::Args, Debug)]

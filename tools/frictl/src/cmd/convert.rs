@@ -9,7 +9,7 @@ use std::path::PathBuf;
 
 use frictionless::kernel::Mlp;
 use frictionless::weights;
-use frictl::interop;
+use frictionless_interop as interop;
 
 use super::import::Dtype;
 

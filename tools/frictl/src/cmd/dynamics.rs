@@ -1,13 +1,13 @@
 //! `frictl dynamics` — inverse dynamics and model info on a URDF, from the command line.
 //!
-//! It is a thin JSON-lines front end over `frictl::dynamics`; it does no dynamics itself.
+//! It is a thin JSON-lines front end over `frictionless_dynamics`; it does no dynamics itself.
 
 use std::collections::{BTreeMap, HashMap};
 use std::io::{BufRead, BufWriter, Write};
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use frictl::dynamics::{
+use frictionless_dynamics::{
     BaseState, DEFAULT_URDF, DEFAULT_URDF_PATH, ExternalWrench, Force, JointKind, Reduction, Robot,
     Workspace,
 };

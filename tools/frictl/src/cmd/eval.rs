@@ -6,9 +6,9 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use frictionless::features::WarmupPolicy;
+use frictionless_dataset::{Dataset, DatasetSidecar};
+use frictionless_train::data::DeltaThetaOffset;
 use frictl::eval::{self, EvalOptions, ModelSpec, plot};
-use frictl::ident::dataset::{Dataset, DatasetSidecar};
-use frictl::train::data::DeltaThetaOffset;
 
 /// PINN warm-up policy (as the daemon is configured).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]

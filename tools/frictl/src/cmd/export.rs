@@ -9,7 +9,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use frictl::interop::{META_PREFIX, ModelHints, onnx, safetensors};
+use frictionless_interop::{META_PREFIX, ModelHints, onnx, safetensors};
 
 /// Target format.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]

@@ -5,8 +5,8 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use frictionless::friction::{CvParams, ScvCodeParams, ScvParams, StaticFriction};
-use frictl::ident::dataset::Dataset;
-use frictl::ident::fit::{
+use frictionless_dataset::Dataset;
+use frictionless_ident::fit::{
     FitBounds, FitOptions, FitResult, Fittable, Loss, Method, fit, select, sliding_quadrant_mask,
 };
 
@@ -185,7 +185,7 @@ fn report<M: Fittable + 'static>(
             r.at_bounds.join(", ")
         );
     }
-    let (rmse_valid, _) = frictl::ident::fit::errors(
+    let (rmse_valid, _) = frictionless_ident::fit::errors(
         &r.model,
         &select(&ds.sdot_rad_s, &ds.valid),
         &select(target, &ds.valid),

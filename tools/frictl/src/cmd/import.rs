@@ -1,6 +1,6 @@
 //! `frictl import onnx|safetensors IN -o OUT.fwt …`: a foreign model into a `.fwt` weight file.
 //!
-//! The network comes from [`frictl::interop`]; the metadata a foreign file lacks (joint, signed gear
+//! The network comes from [`frictionless_interop`]; the metadata a foreign file lacks (joint, signed gear
 //! ratio, k_t, feature set, history) comes from the command line, falling back to `frictionless.*`
 //! metadata written by `frictl export`. The history is inferred from the input width when omitted and
 //! unambiguous. After writing, the file is read back and its kernel compared with the imported f32
@@ -15,7 +15,7 @@ use frictionless::kernel::Mlp;
 use frictionless::mlp::{MlpWeights, StorageDtype};
 use frictionless::units::GearRatio;
 use frictionless::weights::{self, ModelFile, ModelMeta, TrainingMeta};
-use frictl::interop::{self, ModelHints, onnx, safetensors};
+use frictionless_interop::{self as interop, ModelHints, onnx, safetensors};
 
 /// Source format.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]

@@ -1,15 +1,15 @@
 //! `frictl preprocess` — acquisition log (CSV + JSON sidecar) → labelled dataset (CSV + JSON sidecar).
 //!
-//! See `frictl::ident::preprocess` for the pipeline and `frictl::ident::dataset` for the columns.
+//! See `frictionless_ident::preprocess` for the pipeline and `frictionless_dataset` for the columns.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use anyhow::Context;
-use frictl::ident::dataset::{ColumnDocOwned, DatasetSidecar};
-use frictl::ident::kalman::KalmanConfig;
-use frictl::ident::preprocess::{LogMeta, PreprocessConfig, RawLog, preprocess};
-use frictl::sim::params::LinkModel;
+use frictionless_dataset::{ColumnDocOwned, DatasetSidecar};
+use frictionless_ident::kalman::KalmanConfig;
+use frictionless_ident::preprocess::{LogMeta, PreprocessConfig, RawLog, preprocess};
+use frictionless_sim::params::LinkModel;
 use sha2::Digest;
 
 /// Source of the link dynamics for τ_ID.
@@ -142,7 +142,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             d,
         )
     };
-    let link = frictl::sim::link::link_from_model(&link_model)?;
+    let link = frictionless_sim::link::link_from_model(&link_model)?;
 
     let mut cfg = PreprocessConfig::for_joint(&meta.joint);
     cfg.fs_hz = args.fs_hz;

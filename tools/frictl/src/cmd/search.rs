@@ -1,15 +1,15 @@
 //! `frictl search` — random hyper-parameter search over the paper's ranges, trials in parallel on the
 //! cores, resumable; writes a results table (CSV + JSON, sorted by validation RMSE) and `best.fwt`.
-//! The machinery and the directory layout are documented in `frictl::train::search`; this module only
+//! The machinery and the directory layout are documented in `frictionless_train::search`; this module only
 //! parses arguments and reports progress.
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use frictionless::features::WarmupPolicy;
-use frictl::train::data::{DeltaThetaOffset, SplitSpec};
-use frictl::train::pipeline;
-use frictl::train::search::{SearchRun, SearchSettings, SearchSpace, run_search};
+use frictionless_train::data::{DeltaThetaOffset, SplitSpec};
+use frictionless_train::pipeline;
+use frictionless_train::search::{SearchRun, SearchSettings, SearchSpace, run_search};
 
 use super::train::{Dtype, Features, Warmup, cores, parse_chunks};
 

@@ -10,11 +10,11 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 
 use anyhow::Context;
-use frictl::acquire::log::CsvLog;
-use frictl::acquire::protocol::{LogRow, Mode};
-use frictl::sim::params::{check_set_joints, load_table};
-use frictl::sim::profile::CurrentProfile;
-use frictl::sim::{Plant, PlantParams};
+use frictionless_acquire::log::CsvLog;
+use frictionless_acquire::protocol::{LogRow, Mode};
+use frictionless_sim::params::{check_set_joints, load_table};
+use frictionless_sim::profile::CurrentProfile;
+use frictionless_sim::{Plant, PlantParams};
 
 /// Arguments of `frictl sim`.
 #[derive(clap::Args, Debug)]
@@ -167,7 +167,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let table = load_table(&params.preset, params.params.as_deref(), &params.sets)?;
             // Validate before printing, so a bad override fails here too.
             PlantParams::from_table(&table)?;
-            frictl::acquire::ProtocolConfig::from_table(&table)?;
+            frictionless_acquire::ProtocolConfig::from_table(&table)?;
             print!("{}", toml::to_string_pretty(&table)?);
             Ok(())
         }
@@ -236,8 +236,9 @@ fn serve(a: ServeArgs) -> anyhow::Result<()> {
             let mut velocity_filter_hz = Vec::with_capacity(joints.len());
             for j in &joints {
                 let table = load_table(&j.name, a.params.as_deref(), &a.sets)?;
-                velocity_filter_hz
-                    .push(frictl::acquire::ProtocolConfig::from_table(&table)?.velocity_filter_hz);
+                velocity_filter_hz.push(
+                    frictionless_acquire::ProtocolConfig::from_table(&table)?.velocity_filter_hz,
+                );
             }
             let opts = frictl::serve::shm::ShmServeOptions {
                 ipc: frictionless_shm_types::IpcConfig::new(a.root_path.as_deref(), &a.prefix),

@@ -1,10 +1,10 @@
 //! `frictl train` — train the paper's physics-informed friction network on preprocessed datasets and
 //! write a `.fwt` model plus a JSON training report.
 //!
-//! Inputs are built through the daemon's own `History` (see `frictl::train::data`), the split is by
+//! Inputs are built through the daemon's own `History` (see `frictionless_train::data`), the split is by
 //! whole chunks (`--val-frac`/`--test-frac` by seeded shuffle, or `--test-chunks`), the loss is
 //! `(1 − λ)·MSE(label) + λ·MSE(SCV prior from --scv)`, and the stored weights are the best on the
-//! validation set. The report schema is in `frictl::train::pipeline`. This command does not
+//! validation set. The report schema is in `frictionless_train::pipeline`. This command does not
 //! preprocess or fit (see `frictl preprocess`, `frictl fit`).
 //!
 //! ## Defaults (measured, not the paper's Table II)
@@ -37,9 +37,9 @@ use std::path::PathBuf;
 use anyhow::Context;
 use frictionless::features::{FeatureSet, FeatureSpec, WarmupPolicy};
 use frictionless::mlp::StorageDtype;
-use frictl::train::TrainConfig;
-use frictl::train::data::{ChunkKey, DeltaThetaOffset, SplitSpec};
-use frictl::train::pipeline::{self, Job};
+use frictionless_train::TrainConfig;
+use frictionless_train::data::{ChunkKey, DeltaThetaOffset, SplitSpec};
+use frictionless_train::pipeline::{self, Job};
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Feature set (block order of the input vector).

@@ -53,8 +53,8 @@ use frictionless::weights::ModelFile;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::ident::dataset::Dataset;
-use crate::train::data::DeltaThetaOffset;
+use frictionless_dataset::Dataset;
+use frictionless_train::data::DeltaThetaOffset;
 
 /// Report format tag.
 pub const REPORT_FORMAT: &str = "frictionless-eval-v1";

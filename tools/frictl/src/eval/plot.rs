@@ -23,7 +23,7 @@ use std::sync::OnceLock;
 use plotters::prelude::*;
 
 use super::{DatasetEval, ModelSpec, chunk_ranges};
-use crate::ident::dataset::Dataset;
+use frictionless_dataset::Dataset;
 
 /// Plotting errors (the message names the figure file).
 #[derive(Debug, thiserror::Error)]

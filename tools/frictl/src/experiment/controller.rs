@@ -3,8 +3,8 @@
 //! What it **is**: [`ComputedTorque`] evaluates
 //! `τ_des = M(s)·(s̈_d + K_d·(ṡ_d − ṡ) + K_p·(s_d − s)) + h(s, ṡ)` with `M = I_L(s)` and
 //! `h = c(s, ṡ) + g(s)` from the same link model the virtual plant uses (the preset's `[plant.link]`
-//! table through [`crate::sim::link::link_from_model`]: the analytic pendulum or the URDF
-//! single-joint view of [`crate::dynamics::SingleJoint`]), and [`Reference`] gives the desired
+//! table through [`frictionless_sim::link::link_from_model`]: the analytic pendulum or the URDF
+//! single-joint view of [`frictionless_dynamics::SingleJoint`]), and [`Reference`] gives the desired
 //! trajectory (sinusoid or hold).
 //!
 //! Units of the gains (paper §9, "s̈* = s̈_des + K_d(ṡ_des − ṡ) + K_p(s_des − s)", then τ = M·s̈* + h):
@@ -24,7 +24,7 @@
 //!
 //! What it is **not**: no I/O, no low-level torque-to-current law (that is `frictiond`).
 
-use crate::sim::link::LinkDynamics;
+use frictionless_sim::link::LinkDynamics;
 
 /// The paper's derivative gain K_d [1/s] (all experiments).
 pub const PAPER_KD_PER_S: f64 = 4.0;
@@ -91,22 +91,6 @@ impl Reference {
     }
 }
 
-/// A borrowed link model is a link model (so several controllers can share one preset's link).
-impl<T: LinkDynamics + ?Sized> LinkDynamics for &T {
-    #[inline]
-    fn inertia_kgm2(&self, s_rad: f64) -> f64 {
-        (**self).inertia_kgm2(s_rad)
-    }
-    #[inline]
-    fn gravity_nm(&self, s_rad: f64) -> f64 {
-        (**self).gravity_nm(s_rad)
-    }
-    #[inline]
-    fn velocity_torque_nm(&self, s_rad: f64, s_dot_rad_s: f64) -> f64 {
-        (**self).velocity_torque_nm(s_rad, s_dot_rad_s)
-    }
-}
-
 /// Computed-torque control of one joint (see the module doc).
 pub struct ComputedTorque<L: LinkDynamics> {
     /// Link model: M = I_L(s), h = c(s, ṡ) + g(s).
@@ -145,7 +129,7 @@ impl<L: LinkDynamics> ComputedTorque<L> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::Pendulum;
+    use frictionless_sim::Pendulum;
 
     #[test]
     fn sine_reference_derivatives_match_finite_differences() {

@@ -8,7 +8,7 @@
 //! `disturbance`, in [`suite`]) and their tables, JSON and plots ([`report`]); the `oracle`
 //! diagnostic ([`oracle`]: compensation with the plant's true friction — a bound, not a model).
 //!
-//! What it is **not**: no physics (that is [`crate::sim`] in the plant process), no friction model
+//! What it is **not**: no physics (that is [`frictionless_sim`] in the plant process), no friction model
 //! evaluation (that is `frictiond`); this process only controls, disturbs and measures.
 
 pub mod controller;

@@ -13,7 +13,7 @@
 //! the control structure (kfc, K_d, the controller's M) allows with a perfect friction estimate. If a
 //! model's minimum K_p is close to the oracle's, the estimator is not what limits it.
 //!
-//! The low-pass is designed by [`crate::ident::filter::Butterworth::lowpass`] (scipy's design; the
+//! The low-pass is designed by [`frictionless_ident::filter::Butterworth::lowpass`] (scipy's design; the
 //! same bilinear-transform Butterworth with pre-warping as frictiond's, equal up to rounding) and
 //! run here one sample at a time in transposed direct form II (tools must not depend on the daemon).
 //!
@@ -21,7 +21,7 @@
 //! pair a request with the truth of the state it answers).
 
 use super::session::{LawSettings, Lpf};
-use crate::ident::filter::{Butterworth, Sos, sosfilt_step};
+use frictionless_ident::filter::{Butterworth, Sos, sosfilt_step};
 
 /// Daemon tick rate [Hz] (the experiments' `period_us = 1000`).
 const FS_HZ: f64 = 1000.0;

@@ -23,9 +23,9 @@ use super::session::{
     Binaries, DaemonJoint, FrictionModel, LawSettings, Lpf, Mode, PRESETS, PlantSpec, Session,
     interrupted,
 };
-use crate::sim::PlantParams;
-use crate::sim::link::{LinkDynamics, link_from_model};
-use crate::sim::params::load_table;
+use frictionless_sim::PlantParams;
+use frictionless_sim::link::{LinkDynamics, link_from_model};
+use frictionless_sim::params::load_table;
 
 /// A plant preset as the controller and the daemon config need it.
 pub struct JointSetup {
@@ -52,7 +52,7 @@ impl JointSetup {
 
     /// Both presets in payload order ([`PRESETS`]).
     pub fn both(sets: &[String]) -> anyhow::Result<[JointSetup; 2]> {
-        crate::sim::params::check_set_joints(sets, &PRESETS)?;
+        frictionless_sim::params::check_set_joints(sets, &PRESETS)?;
         Ok([Self::load(PRESETS[0], sets)?, Self::load(PRESETS[1], sets)?])
     }
 }

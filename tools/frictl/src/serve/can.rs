@@ -47,7 +47,7 @@ use frictionless_shm_types::can::odrive::{self, OdriveMsg};
 use socketcan::{CanFilter, CanFrame, CanSocket, Socket, SocketOptions};
 
 use super::ServedJoint;
-use crate::sim::{Measurement, PlantParams};
+use frictionless_sim::{Measurement, PlantParams};
 
 /// Tick period [ns] (1 kHz).
 pub const TICK_NS: u64 = 1_000_000;

@@ -9,14 +9,14 @@
 //! Also here: [`install_stop_flag`], the SIGINT/SIGTERM flag the serving (and live acquiring)
 //! commands poll for a clean shutdown.
 //!
-//! What it is **not**: no physics (that is [`crate::sim`]), no control (the daemon and the
+//! What it is **not**: no physics (that is [`frictionless_sim`]), no control (the daemon and the
 //! experiment controller are separate processes).
 
 pub mod can;
 pub mod shm;
 
-use crate::sim::params::load_table;
-use crate::sim::{Plant, PlantParams};
+use frictionless_sim::params::load_table;
+use frictionless_sim::{Plant, PlantParams};
 
 /// One virtual joint on a payload index / bus node.
 pub struct ServedJoint {
@@ -37,7 +37,7 @@ pub fn build_joints(
     seed: u64,
 ) -> anyhow::Result<Vec<ServedJoint>> {
     let names: Vec<&str> = presets.split(',').map(str::trim).collect();
-    crate::sim::params::check_set_joints(sets, &names)?;
+    frictionless_sim::params::check_set_joints(sets, &names)?;
     let mut out = Vec::new();
     for (index, name) in names.iter().copied().enumerate() {
         anyhow::ensure!(!name.is_empty(), "--preset `{presets}`: empty preset name");

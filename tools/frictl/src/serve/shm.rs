@@ -17,19 +17,19 @@
 //!     Before the first state it waits until a command publisher and `lockstep_min_subscribers`
 //!     joint-state subscribers are connected, so nobody misses state 1 (clients must open their
 //!     `JointStates` inbox *before* their `MotorCurrentCommand` outbox, as `frictiond` does).
-//! - [`LiveJoint`]: the controller side of one joint as an [`crate::acquire::JointIo`]: it answers
+//! - [`LiveJoint`]: the controller side of one joint as an [`frictionless_acquire::JointIo`]: it answers
 //!   each received state with a command carrying `state_seq`, then waits for the next state. The
 //!   same code works against a real-time or a lockstep plant.
 //!
 //! Published fields: `s_rad`, `theta_motor_rad`, `omega_motor_rad_s`, `current_a`,
-//! `temperature_c` are the plant's emulated sensors ([`crate::sim::Measurement`]: quantised
+//! `temperature_c` are the plant's emulated sensors ([`frictionless_sim::Measurement`]: quantised
 //! encoders, noisy current, NaN temperature without a sensor). `sdot_rad_s` is what a drive reports:
 //! the causal [`VelocityEstimator`] of `frictl acquire` (filtered joint-encoder difference, cut-off
 //! `protocol.velocity_filter_hz` of the preset) — never the true velocity. `tau_meas_nm` is NaN (no
 //! joint torque sensor). `seq` starts at 1 (the initial state, simulated time 0) and grows by one per
 //! simulated millisecond.
 //!
-//! What it is **not**: no physics ([`crate::sim`]), no control law, no signal handling (the caller
+//! What it is **not**: no physics ([`frictionless_sim`]), no control law, no signal handling (the caller
 //! passes a stop flag; see [`super::install_stop_flag`]).
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -43,8 +43,8 @@ use frictionless_shm_types::{
 };
 
 use super::ServedJoint;
-use crate::acquire::protocol::{AcquireError, JointIo, VelocityEstimator};
-use crate::sim::{Measurement, Truth};
+use frictionless_acquire::protocol::{AcquireError, JointIo, VelocityEstimator};
+use frictionless_sim::{Measurement, Truth};
 
 /// Cut-off of the reported joint velocity when no per-joint value is given [Hz] (the presets' value).
 pub const DEFAULT_VELOCITY_FILTER_HZ: f64 = 100.0;
