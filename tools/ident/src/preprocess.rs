@@ -14,7 +14,7 @@
 //! mismatch of two different causal filters (current vs. s̈) to it (measured on the knee test run:
 //! label error 0.95 Nm causal vs 0.77 Nm non-causal).
 //!
-//! ## Label accuracy (simulator, `tests/ident_label.rs`)
+//! ## Label accuracy (simulator, `tools/acquire/tests/ident_label.rs`)
 //! label − τ_F,true = J_eq·φ̈ + r·k_t·(i_f − i) − I_L·(ŝ̈ − s̈), i.e. the reflected motor inertia the
 //! paper neglects, current noise after the filter, and the smoother's acceleration error. On the
 //! knee test run (sine, ramp and 0.5/1 Hz tracking blocks, sliding rows) these are 0.78, 0.20 and

@@ -292,7 +292,7 @@ impl<L: LinkDynamics> Plant<L> {
     /// chain are regrouped into FMAs. `true` runs the reference: libm and the link every physics
     /// step, exactly the equations as written. The two agree to rounding and the table's 1e-12
     /// (over 120 s of stick-slip the joint angles differ by ≤ 2e-10 rad on the ankle, ≈ 1e-15 rad on
-    /// the knee, far below the encoder's 2.4e-5 rad, see `tools/tests/sim_physics.rs`, which asserts ≤ 1e-6 rad). Both are
+    /// the knee, far below the encoder's 2.4e-5 rad, see `tools/sim/tests/sim_physics.rs`, which asserts ≤ 1e-6 rad). Both are
     /// deterministic for a seed.
     pub fn set_reference_math(&mut self, reference: bool) {
         self.reference_math = reference;

@@ -6,7 +6,7 @@
 //! know about losses, optimisers or epochs (see the parent module).
 //!
 //! Speed (bench workload 200k × 40, 268/215, batch 4096): the GEMMs cost ~0.63 s CPU per epoch at
-//! 60–70 GFMA/s per core (`FRICTL_BENCH_GEMM=1 cargo bench -p frictl --bench train`); the elementwise
+//! 60–70 GFMA/s per core (`FRICTL_BENCH_GEMM=1 cargo bench -p frictionless-train --bench train`); the elementwise
 //! passes were a third of the profile until they were made vectorisable (dropout drawn per block,
 //! then applied branch-free; ReLU gradient branch-free; bias sums one column block per thread).
 //! Same run, load 1.5: 0.89–0.95 → 0.59–0.61 s per epoch on 2 threads, 1.33 → 0.77 s CPU on 1.
