@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Training throughput: the hand-written trainer (tools/benches/train.rs) against PyTorch CPU
+# Training throughput: the hand-written trainer (tools/train/benches/train.rs) against PyTorch CPU
 # (benches/train_vs_pytorch.py) on the same workload in the same run: 200k x 40 synthetic friction
 # samples, 268/215 hidden, batch 4096, dropout 0.1, Adam lr 1e-3, lambda 0.1, 2 threads each.
 #
@@ -37,7 +37,7 @@ if ! "$VENV/bin/python" -c 'import torch, numpy' 2>/dev/null; then
 fi
 
 echo "== building the frictl bench (release)"
-cargo bench -q -p frictl --bench train --no-run
+cargo bench -q -p frictionless-train --bench train --no-run
 
 export RAYON_NUM_THREADS=$THREADS OMP_NUM_THREADS=$THREADS MKL_NUM_THREADS=$THREADS
 echo "== machine: $(nproc) CPUs, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ *//')"
@@ -46,7 +46,7 @@ echo "== load average before: $(cut -d' ' -f1-3 /proc/loadavg)"
 rust_wall=() rust_cpu=() py_wall=() py_cpu=()
 for round in $(seq 1 "$ROUNDS"); do
   echo "== round $round/$ROUNDS: frictl (hand-written trainer on gemm), $THREADS threads"
-  out=$(FRICTL_BENCH_EPOCHS=$EPOCHS FRICTL_BENCH_THREADS=$THREADS cargo bench -q -p frictl --bench train)
+  out=$(FRICTL_BENCH_EPOCHS=$EPOCHS FRICTL_BENCH_THREADS=$THREADS cargo bench -q -p frictionless-train --bench train)
   echo "$out"
   rust_wall+=("$(sed -n 's/^FRICTL_EPOCH_S=//p' <<<"$out")")
   rust_cpu+=("$(sed -n 's/^FRICTL_EPOCH_CPU_S=//p' <<<"$out")")

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""PyTorch CPU counterpart of `tools/benches/train.rs`: the same training workload timed per epoch.
+"""PyTorch CPU counterpart of `tools/train/benches/train.rs`: the same training workload timed per epoch.
 
 200k x 40 synthetic friction samples (2 signals x history 20, block-major, same generator formula as
 `frictl::train::synthetic`), Linear(40,268)-ReLU-Dropout(0.1)-Linear(268,215)-ReLU-Dropout(0.1)-Linear(215,1),

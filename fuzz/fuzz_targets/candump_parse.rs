@@ -1,5 +1,5 @@
-//! Fuzz target: arbitrary text into the `candump -L` log parser (`frictl::canlog`, compiled here from
-//! its source file so the fuzz build does not pull all of frictl's dependencies).
+//! Fuzz target: arbitrary text into the `candump -L` log parser (`frictionless-canlog`, a small crate,
+//! so the fuzz build does not pull frictl's dependencies).
 //!
 //! Never panics. Round trip: a line the parser accepts is formatted canonically by `format_entry`,
 //! and that canonical line parses back to the same entry (so `frictl can record` output replays
@@ -7,9 +7,7 @@
 //! exactly when every non-blank line parses.
 #![no_main]
 
-#[allow(dead_code)]
-#[path = "../../tools/src/canlog/mod.rs"]
-mod canlog;
+use frictionless_canlog as canlog;
 
 use libfuzzer_sys::fuzz_target;
 

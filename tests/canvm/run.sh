@@ -13,7 +13,7 @@
 #
 # Usage: bash tests/canvm/run.sh
 # Knobs (env): CANVM_WORK (default target/canvm), CANVM_TIMEOUT seconds (default 600), CANVM_SKIP_APT=1,
-#              CANVM_PACKAGES (cargo packages whose test harnesses run in the VM; default "frictionless frictionless-shm-types frictiond frictl"),
+#              CANVM_PACKAGES (cargo packages whose test harnesses run in the VM; default "frictionless frictionless-shm-types frictiond frictionless-canlog frictl"),
 #              CANVM_FILTER (libtest name filter, default "vcan"), CANVM_ACCEL (auto|kvm|tcg, default auto),
 #              CANVM_TESTS (only these integration-test targets, e.g. "vcan_sim_serve vcan_daemon"; default all).
 # Last line: "canvm: N passed, N failed"; exit code non-zero on any failure or timeout.
@@ -22,7 +22,7 @@ cd "$(dirname "$0")/../.."
 ROOT=$(pwd)
 WORK=${CANVM_WORK:-$ROOT/target/canvm}
 TIMEOUT=${CANVM_TIMEOUT:-600}
-PACKAGES=${CANVM_PACKAGES:-"frictionless frictionless-shm-types frictiond frictl"}
+PACKAGES=${CANVM_PACKAGES:-"frictionless frictionless-shm-types frictiond frictionless-canlog frictl"}
 FILTER=${CANVM_FILTER:-vcan}
 TARGET=x86_64-unknown-linux-musl
 mkdir -p "$WORK"

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Reference inverse-dynamics cases from Pinocchio for frictl's Rust RNEA (tools/tests/dynamics_pinocchio.rs).
+"""Reference inverse-dynamics cases from Pinocchio for frictl's Rust RNEA (tools/dynamics/tests/dynamics_pinocchio.rs).
 
 Writes OUT/pinocchio_rnea.jsonl, one JSON object per line:
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Reference vectors for frictl's Butterworth / sosfilt / sosfiltfilt (tools/src/ident/filter.rs).
+"""Reference vectors for frictl's Butterworth / sosfilt / sosfiltfilt (tools/ident/src/filter.rs).
 
 Writes DIR/scipy_filters.json: a list of cases, each with the design (order, cutoff_hz, fs_hz), scipy's
 sos matrix, a seeded random input signal and scipy.signal.sosfilt / sosfiltfilt outputs.

@@ -1,0 +1,455 @@
+//! # `frictionless-dataset`: the offline file formats shared by acquisition, labelling and training
+//!
+//! Crate table: `tools/dataset`, a leaf (serde, csv); used by `frictionless-acquire` (raw log column
+//! docs), `frictionless-ident` (writes datasets), `frictionless-train` and `frictl` (read them).
+//!
+//! What this crate **is**: [`ColumnDoc`] (name, unit and meaning of one CSV column, for the raw
+//! acquisition log and the dataset alike), [`Dataset`] (column vectors, one entry per 1 kHz sample),
+//! [`DATASET_COLUMNS`] (names, units, meaning), the CSV writer/reader and [`DatasetSidecar`] (what was
+//! done to produce it), written by `frictl preprocess` and read by `frictl fit`, the trainer and `eval`.
+//!
+//! What it is **not**: the raw acquisition log writer (`frictionless-acquire`, `acquire::log`) or the
+//! label pipeline (`frictionless-ident`, `preprocess`).
+
+#![warn(missing_docs)]
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+/// Documentation of one CSV column.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ColumnDoc {
+    /// Header name.
+    pub name: &'static str,
+    /// Unit.
+    pub unit: &'static str,
+    /// Meaning.
+    pub doc: &'static str,
+}
+
+/// Dataset I/O errors (each names the file, and the line/column where relevant).
+#[derive(Debug, thiserror::Error)]
+pub enum DatasetError {
+    /// File could not be opened/read/written.
+    #[error("{path}: {msg}")]
+    Io {
+        /// File.
+        path: String,
+        /// Reason.
+        msg: String,
+    },
+    /// A required column is missing.
+    #[error("{path}: required column `{column}` is missing")]
+    MissingColumn {
+        /// File.
+        path: String,
+        /// Column.
+        column: &'static str,
+    },
+    /// A field is not a number.
+    #[error("{path}: line {line}, column `{column}`: cannot parse {value:?} as a number")]
+    Parse {
+        /// File.
+        path: String,
+        /// 1-based line number.
+        line: u64,
+        /// Column.
+        column: String,
+        /// Raw text.
+        value: String,
+    },
+}
+
+const fn col(name: &'static str, unit: &'static str, doc: &'static str) -> ColumnDoc {
+    ColumnDoc { name, unit, doc }
+}
+
+/// Columns of a dataset CSV, in file order (`tau_f_true_nm` and `phi_ddot_rad_s2` only when the
+/// log had simulator truth).
+pub const DATASET_COLUMNS: &[ColumnDoc] = &[
+    col(
+        "time_s",
+        "s",
+        "time on the resampled uniform grid (log clock)",
+    ),
+    col(
+        "chunk",
+        "-",
+        "chunk id after splitting (0, 1, ...); windows must not cross chunks",
+    ),
+    col("source_chunk", "-", "chunk id in the acquisition log"),
+    col(
+        "active",
+        "0/1",
+        "log `active` flag (nearest-previous sample)",
+    ),
+    col(
+        "valid",
+        "0/1",
+        "1 if the sample passes every sample filter (|sddot|, |sdot|, |i_filt|, |tau_f|) and its chunk could be filtered",
+    ),
+    col(
+        "s_rad",
+        "rad",
+        "joint position (linear interpolation of the encoder)",
+    ),
+    col(
+        "sdot_rad_s",
+        "rad/s",
+        "joint velocity, Kalman smoother (or causal KF with --causal; the label always uses the smoother)",
+    ),
+    col(
+        "sddot_rad_s2",
+        "rad/s^2",
+        "joint acceleration, same estimator",
+    ),
+    col(
+        "theta_motor_rad",
+        "motor rad",
+        "motor encoder (linear interpolation)",
+    ),
+    col(
+        "delta_theta_motor_rad",
+        "motor rad",
+        "r_signed*s - theta - (r_signed*s0 - theta0): offset removed once per run",
+    ),
+    col(
+        "omega_motor_rad_s",
+        "motor rad/s",
+        "motor velocity from the log (linear interpolation)",
+    ),
+    col("i_meas_a", "A", "measured current (linear interpolation)"),
+    col(
+        "i_filt_a",
+        "A",
+        "current after the zero-phase Butterworth low-pass (the label's current)",
+    ),
+    col(
+        "tau_id_nm",
+        "Nm",
+        "inverse dynamics I(s)*sddot + c(s, sdot) + g(s), other joints fixed",
+    ),
+    col(
+        "tau_f_label_nm",
+        "Nm",
+        "friction label r_signed*kt*i_filt - tau_id (joint side)",
+    ),
+    col(
+        "temperature_c",
+        "degC",
+        "temperature (NaN without a sensor)",
+    ),
+];
+
+/// Truth columns of datasets made from simulated logs (diagnostics only, never model inputs).
+pub const DATASET_TRUTH_COLUMNS: &[ColumnDoc] = &[
+    col(
+        "tau_f_true_nm",
+        "Nm",
+        "true joint-side friction from the simulator",
+    ),
+    col(
+        "phi_ddot_rad_s2",
+        "rad/s^2",
+        "true motor acceleration reflected to the joint",
+    ),
+];
+
+/// A preprocessed dataset as column vectors (all the same length).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Dataset {
+    /// Time [s].
+    pub time_s: Vec<f64>,
+    /// Chunk id after splitting.
+    pub chunk: Vec<u32>,
+    /// Chunk id of the acquisition log.
+    pub source_chunk: Vec<u32>,
+    /// Log `active` flag.
+    pub active: Vec<bool>,
+    /// Sample passes every filter.
+    pub valid: Vec<bool>,
+    /// Joint position [rad].
+    pub s_rad: Vec<f64>,
+    /// Joint velocity [rad/s].
+    pub sdot_rad_s: Vec<f64>,
+    /// Joint acceleration [rad/s²].
+    pub sddot_rad_s2: Vec<f64>,
+    /// Motor position [motor rad].
+    pub theta_motor_rad: Vec<f64>,
+    /// Δθ = r·s − θ − offset [motor rad].
+    pub delta_theta_motor_rad: Vec<f64>,
+    /// Motor velocity [motor rad/s].
+    pub omega_motor_rad_s: Vec<f64>,
+    /// Measured current [A].
+    pub i_meas_a: Vec<f64>,
+    /// Filtered current [A].
+    pub i_filt_a: Vec<f64>,
+    /// Inverse-dynamics torque [Nm].
+    pub tau_id_nm: Vec<f64>,
+    /// Friction label [Nm].
+    pub tau_f_label_nm: Vec<f64>,
+    /// Temperature [°C] (NaN without a sensor).
+    pub temperature_c: Vec<f64>,
+    /// True friction (simulated logs) [Nm].
+    pub tau_f_true_nm: Option<Vec<f64>>,
+    /// True motor acceleration reflected to the joint (simulated logs) [rad/s²].
+    pub phi_ddot_rad_s2: Option<Vec<f64>>,
+}
+
+/// The JSON sidecar of a dataset: provenance and every setting used.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DatasetSidecar {
+    /// Format tag `frictionless-dataset-v1`.
+    pub format: String,
+    /// Producer (`frictl <version>`).
+    pub producer: String,
+    /// Input log CSV path as given.
+    pub input_log: String,
+    /// SHA-256 of the input log CSV (hex).
+    pub input_sha256: String,
+    /// Joint name.
+    pub joint: String,
+    /// Signed gear ratio used for the label and Δθ.
+    pub gear_ratio_signed: f64,
+    /// Torque constant used for the label [Nm/A].
+    pub kt_nm_per_a: f64,
+    /// Output sample rate [Hz].
+    pub fs_hz: f64,
+    /// Processing settings.
+    pub settings: serde_json::Value,
+    /// Link dynamics used for τ_ID (description).
+    pub dynamics: String,
+    /// Δθ offset removed, r·s₀ − θ₀ [motor rad].
+    pub delta_theta_offset_motor_rad: f64,
+    /// Number of samples.
+    pub samples: usize,
+    /// Number of valid samples.
+    pub valid_samples: usize,
+    /// Number of chunks.
+    pub chunks: usize,
+    /// Chunks dropped as too short to filter (samples marked invalid).
+    pub short_chunks: usize,
+    /// Column documentation, in file order.
+    pub columns: Vec<ColumnDocOwned>,
+}
+
+/// Owned copy of a [`ColumnDoc`] (for deserialising sidecars).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ColumnDocOwned {
+    /// Header name.
+    pub name: String,
+    /// Unit.
+    pub unit: String,
+    /// Meaning.
+    pub doc: String,
+}
+
+impl From<&ColumnDoc> for ColumnDocOwned {
+    fn from(c: &ColumnDoc) -> Self {
+        Self {
+            name: c.name.into(),
+            unit: c.unit.into(),
+            doc: c.doc.into(),
+        }
+    }
+}
+
+impl Dataset {
+    /// The model input sample of row `k` (what `frictiond` would read from `JointStates` at that
+    /// instant). Shared by training and evaluation so both feed `History` identically.
+    pub fn joint_sample(&self, k: usize) -> frictionless::features::JointSample {
+        frictionless::features::JointSample {
+            s_rad: self.s_rad[k],
+            sdot_rad_s: self.sdot_rad_s[k],
+            theta_motor_rad: self.theta_motor_rad[k],
+            omega_motor_rad_s: self.omega_motor_rad_s[k],
+            temperature_c: self.temperature_c[k],
+        }
+    }
+
+    /// The first column whose length differs from `time_s`'s, as `(name, length)`; `None` when all
+    /// columns (including the optional true friction) have one value per sample.
+    pub fn mismatched_column(&self) -> Option<(&'static str, usize)> {
+        let n = self.time_s.len();
+        let cols: [(&'static str, usize); 11] = [
+            ("chunk", self.chunk.len()),
+            ("source_chunk", self.source_chunk.len()),
+            ("valid", self.valid.len()),
+            ("s_rad", self.s_rad.len()),
+            ("sdot_rad_s", self.sdot_rad_s.len()),
+            ("theta_motor_rad", self.theta_motor_rad.len()),
+            ("omega_motor_rad_s", self.omega_motor_rad_s.len()),
+            ("temperature_c", self.temperature_c.len()),
+            ("tau_f_label_nm", self.tau_f_label_nm.len()),
+            ("delta_theta_motor_rad", self.delta_theta_motor_rad.len()),
+            (
+                "tau_f_true_nm",
+                self.tau_f_true_nm.as_ref().map_or(n, Vec::len),
+            ),
+        ];
+        cols.into_iter().find(|&(_, len)| len != n)
+    }
+
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.time_s.len()
+    }
+
+    /// True if there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.time_s.is_empty()
+    }
+
+    /// The columns of this dataset, in file order.
+    pub fn columns(&self) -> Vec<ColumnDoc> {
+        let truth = if self.tau_f_true_nm.is_some() {
+            DATASET_TRUTH_COLUMNS
+        } else {
+            &[]
+        };
+        DATASET_COLUMNS.iter().chain(truth).copied().collect()
+    }
+
+    /// Writes the CSV (header + one line per sample, shortest round-trip float text).
+    pub fn write_csv(&self, path: &Path) -> Result<(), DatasetError> {
+        let p = path.display().to_string();
+        let io = |e: &dyn std::fmt::Display| DatasetError::Io {
+            path: p.clone(),
+            msg: e.to_string(),
+        };
+        let file = std::fs::File::create(path).map_err(|e| io(&e))?;
+        let mut w = csv::Writer::from_writer(std::io::BufWriter::with_capacity(1 << 20, file));
+        w.write_record(self.columns().iter().map(|c| c.name))
+            .map_err(|e| io(&e))?;
+        let mut buf = ryu_like::Buf::default();
+        for k in 0..self.len() {
+            let b = |x: bool| if x { 1.0 } else { 0.0 };
+            let mut row = [
+                self.time_s[k],
+                f64::from(self.chunk[k]),
+                f64::from(self.source_chunk[k]),
+                b(self.active[k]),
+                b(self.valid[k]),
+                self.s_rad[k],
+                self.sdot_rad_s[k],
+                self.sddot_rad_s2[k],
+                self.theta_motor_rad[k],
+                self.delta_theta_motor_rad[k],
+                self.omega_motor_rad_s[k],
+                self.i_meas_a[k],
+                self.i_filt_a[k],
+                self.tau_id_nm[k],
+                self.tau_f_label_nm[k],
+                self.temperature_c[k],
+                0.0,
+                0.0,
+            ];
+            let mut n = 16;
+            if let (Some(t), Some(a)) = (&self.tau_f_true_nm, &self.phi_ddot_rad_s2) {
+                row[16] = t[k];
+                row[17] = a[k];
+                n = 18;
+            }
+            for v in &row[..n] {
+                w.write_field(buf.format(*v)).map_err(|e| io(&e))?;
+            }
+            w.write_record(None::<&[u8]>).map_err(|e| io(&e))?;
+        }
+        w.flush().map_err(|e| io(&e))?;
+        Ok(())
+    }
+
+    /// Reads a dataset CSV by column name (column order is free; the truth columns are optional).
+    pub fn read_csv(path: &Path) -> Result<Self, DatasetError> {
+        let p = path.display().to_string();
+        let mut cols = read_columns(path)?;
+        let mut take = |name: &'static str| -> Result<Vec<f64>, DatasetError> {
+            cols.remove(name).ok_or(DatasetError::MissingColumn {
+                path: p.clone(),
+                column: name,
+            })
+        };
+        let to_u32 = |v: Vec<f64>| v.into_iter().map(|x| x as u32).collect();
+        let to_bool = |v: Vec<f64>| v.into_iter().map(|x| x != 0.0).collect();
+        Ok(Self {
+            time_s: take("time_s")?,
+            chunk: to_u32(take("chunk")?),
+            source_chunk: to_u32(take("source_chunk")?),
+            active: to_bool(take("active")?),
+            valid: to_bool(take("valid")?),
+            s_rad: take("s_rad")?,
+            sdot_rad_s: take("sdot_rad_s")?,
+            sddot_rad_s2: take("sddot_rad_s2")?,
+            theta_motor_rad: take("theta_motor_rad")?,
+            delta_theta_motor_rad: take("delta_theta_motor_rad")?,
+            omega_motor_rad_s: take("omega_motor_rad_s")?,
+            i_meas_a: take("i_meas_a")?,
+            i_filt_a: take("i_filt_a")?,
+            tau_id_nm: take("tau_id_nm")?,
+            tau_f_label_nm: take("tau_f_label_nm")?,
+            temperature_c: take("temperature_c")?,
+            tau_f_true_nm: take("tau_f_true_nm").ok(),
+            phi_ddot_rad_s2: take("phi_ddot_rad_s2").ok(),
+        })
+    }
+}
+
+/// Reads every column of a numeric CSV with a header into a map name → values
+/// (empty fields and `NaN` become NaN).
+pub fn read_columns(
+    path: &Path,
+) -> Result<std::collections::HashMap<String, Vec<f64>>, DatasetError> {
+    let p = path.display().to_string();
+    let io = |e: &dyn std::fmt::Display| DatasetError::Io {
+        path: p.clone(),
+        msg: e.to_string(),
+    };
+    let mut r = csv::Reader::from_path(path).map_err(|e| io(&e))?;
+    let names: Vec<String> = r
+        .headers()
+        .map_err(|e| io(&e))?
+        .iter()
+        .map(str::to_owned)
+        .collect();
+    let mut data: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
+    let mut rec = csv::StringRecord::new();
+    let mut line = 1u64;
+    while r.read_record(&mut rec).map_err(|e| io(&e))? {
+        line += 1;
+        for (j, f) in rec.iter().enumerate().take(names.len()) {
+            let t = f.trim();
+            let v = if t.is_empty() {
+                f64::NAN
+            } else {
+                t.parse::<f64>().map_err(|_| DatasetError::Parse {
+                    path: p.clone(),
+                    line,
+                    column: names[j].clone(),
+                    value: f.to_owned(),
+                })?
+            };
+            data[j].push(v);
+        }
+        for d in data.iter_mut().skip(rec.len()) {
+            d.push(f64::NAN);
+        }
+    }
+    Ok(names.into_iter().zip(data).collect())
+}
+
+/// Minimal float formatting into a reusable buffer (std `Display`: shortest round-trip text).
+mod ryu_like {
+    use std::fmt::Write;
+
+    #[derive(Default)]
+    pub struct Buf(String);
+
+    impl Buf {
+        pub fn format(&mut self, v: f64) -> &[u8] {
+            self.0.clear();
+            let _ = write!(self.0, "{v}");
+            self.0.as_bytes()
+        }
+    }
+}

@@ -1,0 +1,38 @@
+//! # `frictionless-dynamics`: URDF rigid-body dynamics
+//!
+//! Crate table: `tools/dynamics`, a leaf (nalgebra, urdf-rs); used by `frictionless-sim` (the link
+//! model of the virtual joint) and `frictl` (`frictl dynamics`, `frictl experiment`).
+//!
+//! What this crate **is**: a URDF loader that builds a kinematic tree with fixed joints lumped and optional
+//! joint locking ([`Robot`], [`Reduction`]), and allocation-free algorithms on it: fixed- and
+//! floating-base RNEA with external wrenches, CRBA mass matrix, gravity and bias torques
+//! ([`Workspace`]), plus the single-joint link-side view used by the virtual joint simulator
+//! ([`SingleJoint`]). Conventions follow Pinocchio (see [`algorithms`]); results are cross-checked
+//! against Pinocchio on iCub 3 and ergoCub in `tools/dynamics/tests/dynamics_pinocchio.rs`.
+//!
+//! What it is **not**: forward dynamics, contact solving, geometry or visualisation.
+//!
+//! The project's own model is `config/urdf/virtual_leg.urdf` ([`DEFAULT_URDF`]).
+
+pub mod algorithms;
+pub mod error;
+pub mod robot;
+pub mod single_joint;
+pub mod spatial;
+
+pub use algorithms::{BaseState, ExternalWrench, GRAVITY_M_S2, Workspace, gravity_world};
+pub use error::DynamicsError;
+pub use robot::{Frame, FrameId, Joint, JointKind, Reduction, Robot};
+pub use single_joint::{SingleJoint, SingleJointTable};
+pub use spatial::{Force, Motion, SpatialInertia, Transform};
+
+/// The project's own humanoid leg + torso URDF (15 DoF), embedded so nothing needs files or pip.
+pub const DEFAULT_URDF: &str = include_str!("../../../config/urdf/virtual_leg.urdf");
+
+/// Path of the project's own URDF relative to the repository root (what `--urdf` defaults to).
+pub const DEFAULT_URDF_PATH: &str = "config/urdf/virtual_leg.urdf";
+
+/// Loads the project's own leg model ([`DEFAULT_URDF`]).
+pub fn virtual_leg() -> Result<Robot, DynamicsError> {
+    Robot::from_urdf_str(DEFAULT_URDF, DEFAULT_URDF_PATH)
+}

@@ -1,0 +1,155 @@
+//! Cross-check of the Rust RNEA against Pinocchio on iCub 3 (`iCubGenova09`, icub-models 2.8.1) and the
+//! real ergoCub URDF: fixed base over all joints, legs-only reduced models, floating base with sole
+//! wrenches. References come from `tests/python/gen_pinocchio_refs.py` via `tests/run.sh`; joints are
+//! compared **by name**, tolerance 1e-6 N·m.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+
+use frictionless_dynamics::{BaseState, ExternalWrench, Force, Reduction, Robot, Workspace};
+use nalgebra::Vector3;
+use serde::Deserialize;
+
+const TOL_NM: f64 = 1e-6;
+
+#[derive(Deserialize)]
+struct Base {
+    pos: [f64; 3],
+    quat: [f64; 4],
+    vel: [f64; 6],
+    acc: [f64; 6],
+}
+
+#[derive(Deserialize)]
+struct Case {
+    model: String,
+    urdf: String,
+    kind: String,
+    keep: Option<Vec<String>>,
+    locked_q: HashMap<String, f64>,
+    q: HashMap<String, f64>,
+    qd: HashMap<String, f64>,
+    qdd: HashMap<String, f64>,
+    base: Option<Base>,
+    wrenches: HashMap<String, [f64; 6]>,
+    tau: HashMap<String, f64>,
+    base_wrench: Option<[f64; 6]>,
+}
+
+fn refs_file() -> Option<PathBuf> {
+    match std::env::var_os("FRICTIONLESS_REFS") {
+        None => {
+            println!("skipped: run tests/run.sh (FRICTIONLESS_REFS is unset)");
+            None
+        }
+        Some(dir) => Some(PathBuf::from(dir).join("pinocchio_rnea.jsonl")),
+    }
+}
+
+#[test]
+fn rnea_matches_pinocchio_by_joint_name() {
+    let Some(path) = refs_file() else { return };
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| {
+        panic!(
+            "FRICTIONLESS_REFS is set but {} is missing: {e}",
+            path.display()
+        )
+    });
+    let mut models: HashMap<String, Robot> = HashMap::new();
+    let mut counts: HashMap<(String, String), usize> = HashMap::new();
+    let mut worst = 0.0f64;
+    for (line_no, line) in text.lines().enumerate() {
+        let c: Case =
+            serde_json::from_str(line).unwrap_or_else(|e| panic!("line {}: {e}", line_no + 1));
+        let key = format!("{}|{:?}|{:?}", c.urdf, c.keep, {
+            let mut l: Vec<_> = c.locked_q.iter().map(|(k, v)| format!("{k}={v}")).collect();
+            l.sort();
+            l
+        });
+        let robot = models.entry(key).or_insert_with(|| {
+            let red = c.keep.as_ref().map(|keep| Reduction {
+                keep: keep.clone(),
+                locked_q: c.locked_q.clone(),
+            });
+            Robot::from_urdf_file_reduced(&c.urdf, red.as_ref())
+                .unwrap_or_else(|e| panic!("line {}: {e}", line_no + 1))
+        });
+        let n = robot.dof();
+        // Every movable joint of ours is in Pinocchio's output and vice versa.
+        assert_eq!(n, c.tau.len(), "line {}: joint count", line_no + 1);
+        let vec_of = |m: &HashMap<String, f64>| {
+            robot
+                .vector_from_names(m.iter().map(|(k, v)| (k.as_str(), *v)))
+                .unwrap_or_else(|e| panic!("line {}: {e}", line_no + 1))
+        };
+        let (q, qd, qdd) = (vec_of(&c.q), vec_of(&c.qd), vec_of(&c.qdd));
+        let ext: Vec<ExternalWrench> = c
+            .wrenches
+            .iter()
+            .map(|(f, w)| ExternalWrench {
+                frame: robot.frame_id(f).unwrap(),
+                wrench: Force::new(
+                    Vector3::new(w[3], w[4], w[5]),
+                    Vector3::new(w[0], w[1], w[2]),
+                ),
+            })
+            .collect();
+        let mut ws = Workspace::new(robot);
+        let mut tau = vec![0.0; n];
+        match (&c.base, c.kind.as_str()) {
+            (Some(b), "floating") => {
+                let base = BaseState::from_arrays(b.pos, b.quat, b.vel, b.acc).unwrap();
+                let bw = robot
+                    .rnea_floating(&mut ws, &base, &q, &qd, &qdd, &ext, &mut tau)
+                    .unwrap();
+                let expect = c.base_wrench.expect("floating case has base_wrench");
+                let got = [bw.lin.x, bw.lin.y, bw.lin.z, bw.ang.x, bw.ang.y, bw.ang.z];
+                for k in 0..6 {
+                    let err = (got[k] - expect[k]).abs();
+                    worst = worst.max(err);
+                    assert!(
+                        err <= TOL_NM,
+                        "line {} ({}): base wrench[{k}] {} vs pinocchio {}",
+                        line_no + 1,
+                        c.model,
+                        got[k],
+                        expect[k]
+                    );
+                }
+            }
+            (None, "fixed" | "legs") => {
+                assert!(ext.is_empty());
+                robot.rnea(&mut ws, &q, &qd, &qdd, &mut tau).unwrap();
+            }
+            (_, k) => panic!("line {}: unexpected case kind {k}", line_no + 1),
+        }
+        for (name, &expect) in &c.tau {
+            let got = tau[robot.joint_index(name).unwrap()];
+            let err = (got - expect).abs();
+            worst = worst.max(err);
+            assert!(
+                err <= TOL_NM,
+                "line {} ({} {}): joint {name}: {got} Nm vs pinocchio {expect} Nm",
+                line_no + 1,
+                c.model,
+                c.kind
+            );
+        }
+        *counts.entry((c.model.clone(), c.kind.clone())).or_default() += 1;
+    }
+    // Every model × kind combination must be present (a silently empty file would prove nothing).
+    for model in ["iCubGenova09", "ergoCubSN001"] {
+        for kind in ["fixed", "legs", "floating"] {
+            assert!(
+                counts
+                    .get(&(model.to_string(), kind.to_string()))
+                    .copied()
+                    .unwrap_or(0)
+                    > 0,
+                "no {model} {kind} cases in {}",
+                path.display()
+            );
+        }
+    }
+    println!("pinocchio cross-check: {counts:?}, worst abs error {worst:.3e}");
+}

@@ -1,0 +1,205 @@
+//! `frictl acquire` — run the excitation protocol and log a dataset (CSV + JSON sidecar).
+//!
+//! Offline against the simulator (default: fast, truth columns included), or live against a plant
+//! over shared memory (`--live-shm`: [`frictl::serve::shm::LiveJoint`], e.g. `frictl sim serve`),
+//! through the same `frictionless_acquire::JointIo` seam and the same controllers.
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::Context;
+use frictionless_acquire::log::{
+    CsvLog, LiveInfo, SOURCE_LIVE_SHM, SOURCE_OFFLINE_SIM, Sidecar, columns,
+};
+use frictionless_acquire::protocol::run as run_protocol;
+use frictionless_acquire::protocol::{AcquireError, ControllerModel, schedule_duration_s};
+use frictionless_acquire::{ProtocolConfig, run_offline, schedule};
+use frictionless_sim::PlantParams;
+use frictionless_sim::params::load_table;
+
+/// Arguments of `frictl acquire`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Built-in preset (`knee`, `ankle_roll`) or a preset TOML file (tables `plant` and `protocol`).
+    #[arg(long)]
+    pub preset: String,
+    /// TOML file deep-merged over the preset (same layout).
+    #[arg(long)]
+    pub params: Option<PathBuf>,
+    /// Override one parameter, e.g. `--set plant.k1_nm_per_rad=2e4 --set protocol.steps.enabled=false`.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub sets: Vec<String>,
+    /// Simulator seed (initial temperature, current noise).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Output directory (created if missing).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Base name of the files (default `<joint>_seed<seed>`, live `<joint>_live`): NAME.csv and
+    /// NAME.json.
+    #[arg(long)]
+    pub name: Option<String>,
+    /// Acquire live from a plant over iceoryx2 shared memory (e.g. `frictl sim serve`) instead of
+    /// the offline simulator. This process drives the joint's current directly, as on the robot:
+    /// it publishes `<prefix>/motor_current_command` (only --joint-index valid; the plant gives
+    /// other joints 0 A) answering each `<prefix>/joint_states` sample with its seq, so frictiond
+    /// must NOT run on the same prefix. Works against a real-time (1 kHz) or a --lockstep plant.
+    /// --preset still supplies the protocol and the controllers' nominal model (signed r, k_t,
+    /// J_eq, link, i_max). The CSV has no truth columns; the sidecar says `source = "live-shm"`.
+    #[arg(long)]
+    pub live_shm: bool,
+    /// Live: service-name prefix.
+    #[arg(long, default_value = "frictionless")]
+    pub prefix: String,
+    /// Live: iceoryx2 root directory; default: iceoryx2's.
+    #[arg(long)]
+    pub root_path: Option<PathBuf>,
+    /// Live: payload index of the joint to excite (the j-th preset of `frictl sim serve --preset`).
+    #[arg(long, default_value_t = 0)]
+    pub joint_index: usize,
+    /// Live: wait this long for the first joint state [s].
+    #[arg(long, default_value_t = 10.0)]
+    pub connect_timeout_s: f64,
+    /// Live: fail if the next joint state does not arrive within this time [ms].
+    #[arg(long, default_value_t = 1000)]
+    pub state_timeout_ms: u64,
+}
+
+/// Runs `frictl acquire`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    frictionless_sim::params::check_set_joints(&args.sets, &[args.preset.as_str()])?;
+    let table = load_table(&args.preset, args.params.as_deref(), &args.sets)?;
+    let plant_params = PlantParams::from_table(&table)?;
+    let protocol = ProtocolConfig::from_table(&table)?;
+    let blocks = schedule(&protocol);
+    anyhow::ensure!(!blocks.is_empty(), "the protocol has no enabled blocks");
+
+    let name = args.name.clone().unwrap_or_else(|| {
+        if args.live_shm {
+            format!("{}_live", plant_params.joint)
+        } else {
+            format!("{}_seed{}", plant_params.joint, args.seed)
+        }
+    });
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create output directory {}", args.out.display()))?;
+    let csv_path = args.out.join(format!("{name}.csv"));
+    let json_path = args.out.join(format!("{name}.json"));
+
+    let period_s = plant_params.sample_period_s();
+    let total = (schedule_duration_s(&blocks) / period_s).round() as u64;
+    // The controllers' link model (live runs; offline runs build their own): fail before any I/O.
+    let link = frictionless_sim::link::link_from_model(&plant_params.link)?;
+
+    let with_truth = !args.live_shm;
+    let file = std::fs::File::create(&csv_path)
+        .with_context(|| format!("cannot create {}", csv_path.display()))?;
+    let mut log = CsvLog::new(std::io::BufWriter::with_capacity(1 << 20, file), with_truth)?;
+    let bar = if std::io::stderr().is_terminal() {
+        indicatif::ProgressBar::new(total)
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} samples ({eta} left)")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let started = std::time::Instant::now();
+    let mut n = 0u64;
+    let mut sink = |row: &frictionless_acquire::LogRow| -> Result<(), AcquireError> {
+        n += 1;
+        if n.is_multiple_of(if args.live_shm { 100 } else { 10_000 }) {
+            bar.set_position(n);
+        }
+        log.write(row)
+    };
+
+    let mut t0 = None;
+    let mut live_info = None;
+    let summary = if args.live_shm {
+        let stop = frictl::serve::install_stop_flag()?;
+        anyhow::ensure!(
+            args.connect_timeout_s.is_finite() && args.connect_timeout_s > 0.0,
+            "--connect-timeout-s must be > 0, got {}",
+            args.connect_timeout_s
+        );
+        let cfg = frictionless_shm_types::IpcConfig::new(args.root_path.as_deref(), &args.prefix);
+        let mut joint = frictl::serve::shm::LiveJoint::connect(
+            &cfg,
+            args.joint_index,
+            period_s,
+            Duration::from_secs_f64(args.connect_timeout_s),
+            Duration::from_millis(args.state_timeout_ms),
+            stop,
+        )?;
+        let model = ControllerModel::nominal(&plant_params, link.as_ref());
+        let result = run_protocol(&mut joint, &model, &protocol, &blocks, &mut sink);
+        // Leave the joint at 0 A whatever happened (the plant also zeroes after its timeout).
+        let released = joint.release();
+        live_info = Some(LiveInfo {
+            prefix: args.prefix.clone(),
+            root_path: args.root_path.as_ref().map(|p| p.display().to_string()),
+            joint_index: args.joint_index,
+            first_seq: joint.first_seq(),
+            states_received: joint.states_received,
+            states_skipped: joint.states_skipped,
+            plant_publishes_sim_truth: joint.plant_publishes_sim_truth,
+        });
+        let summary = result?;
+        released?;
+        summary
+    } else {
+        let run = run_offline(&plant_params, &protocol, &blocks, args.seed, &mut sink)?;
+        t0 = Some(run.initial_temperature_c);
+        run.summary
+    };
+    bar.finish_and_clear();
+    log.finish()?
+        .into_inner()
+        .map_err(|e| anyhow::anyhow!("cannot flush {}: {}", csv_path.display(), e.error()))?;
+    let elapsed = started.elapsed().as_secs_f64();
+
+    let csv_name = csv_path
+        .file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let sidecar = Sidecar {
+        format: "frictionless-acquire-v1",
+        producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
+        joint: &plant_params.joint,
+        gear_ratio_signed: plant_params.gear_ratio_signed,
+        kt_nm_per_a: plant_params.kt_nm_per_a,
+        sample_period_s: period_s,
+        simulated: !args.live_shm,
+        source: if args.live_shm {
+            SOURCE_LIVE_SHM
+        } else {
+            SOURCE_OFFLINE_SIM
+        },
+        live: live_info,
+        seed: (!args.live_shm).then_some(args.seed),
+        initial_temperature_c: t0,
+        preset: &args.preset,
+        plant: Some(&plant_params),
+        protocol: &protocol,
+        csv: &csv_name,
+        columns: columns(with_truth),
+        chunks: &blocks,
+        summary: &summary,
+    };
+    let json = serde_json::to_string_pretty(&sidecar)?;
+    std::fs::write(&json_path, json)
+        .with_context(|| format!("cannot write {}", json_path.display()))?;
+    eprintln!(
+        "frictl acquire: {} samples ({:.1} simulated min, {} chunks, {} active, {} guard holds) in {:.2} s -> {}",
+        summary.samples,
+        summary.duration_s / 60.0,
+        summary.chunks,
+        summary.active_samples,
+        summary.latches.len(),
+        elapsed,
+        csv_path.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,111 @@
+//! `frictl can`: record and replay `candump -L` logs on SocketCAN interfaces.
+//!
+//! `frictl can record IFACE FILE [--count N] [--seconds S]` (stops on SIGINT/SIGTERM too, flushing the
+//! file) and `frictl can replay FILE [--iface IFACE] [--loop] [--speed X]`. The format and pacing
+//! live in [`frictionless_canlog`]. Not a bus analyser: no decoding, no filters.
+
+use std::io::BufWriter;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use anyhow::Context;
+use frictionless_canlog as canlog;
+
+/// Arguments of `frictl can`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// What to do.
+    #[command(subcommand)]
+    pub action: Action,
+}
+
+/// `frictl can` subcommands.
+#[derive(clap::Subcommand, Debug)]
+pub enum Action {
+    /// Record frames from IFACE into FILE (candump -L format).
+    Record {
+        /// CAN interface, e.g. can0 or vcan0.
+        iface: String,
+        /// Output log file.
+        file: PathBuf,
+        /// Stop after this many frames (0 = no limit).
+        #[arg(long, default_value_t = 0)]
+        count: u64,
+        /// Stop after this many seconds.
+        #[arg(long)]
+        seconds: Option<f64>,
+    },
+    /// Replay FILE, paced by its timestamps.
+    Replay {
+        /// Log file (candump -L format).
+        file: PathBuf,
+        /// Send everything on this interface instead of the one named in each line.
+        #[arg(long)]
+        iface: Option<String>,
+        /// Repeat forever.
+        #[arg(long = "loop")]
+        repeat: bool,
+        /// Time scale: 2 = twice as fast.
+        #[arg(long, default_value_t = 1.0)]
+        speed: f64,
+    },
+}
+
+static STOP: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_signal(_: libc::c_int) {
+    STOP.store(true, Ordering::Relaxed);
+}
+
+/// Runs `frictl can`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    match args.action {
+        Action::Record {
+            iface,
+            file,
+            count,
+            seconds,
+        } => {
+            let duration = match seconds {
+                Some(s) if s.is_finite() && s > 0.0 => Some(Duration::from_secs_f64(s)),
+                Some(s) => anyhow::bail!("--seconds {s}: must be finite and > 0"),
+                None => None,
+            };
+            // SAFETY: the handler only stores to an atomic (async-signal-safe).
+            unsafe {
+                let h = on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t;
+                libc::signal(libc::SIGINT, h);
+                libc::signal(libc::SIGTERM, h);
+            }
+            let f = std::fs::File::create(&file)
+                .with_context(|| format!("creating {}", file.display()))?;
+            let mut w = BufWriter::new(f);
+            let n = canlog::record(&iface, &mut w, count, duration, &|| {
+                STOP.load(Ordering::Relaxed)
+            })?;
+            eprintln!("recorded {n} frames from {iface} to {}", file.display());
+            Ok(())
+        }
+        Action::Replay {
+            file,
+            iface,
+            repeat,
+            speed,
+        } => {
+            anyhow::ensure!(
+                speed.is_finite() && speed > 0.0,
+                "--speed {speed}: must be finite and > 0"
+            );
+            let entries = canlog::read_log(&file)?;
+            let n = canlog::replay_to_iface(
+                &entries,
+                iface.as_deref(),
+                speed,
+                if repeat { 0 } else { 1 },
+            )?;
+            eprintln!("replayed {n} frames from {}", file.display());
+            Ok(())
+        }
+    }
+}

@@ -1,0 +1,214 @@
+//! `frictl eval` — RMSE of none / CV / SCV / PINN models on held-out datasets, a printed table, a JSON
+//! report and PNG figures. See `frictl::eval` for the method, the rows evaluated and the JSON schema.
+
+use std::collections::BTreeSet;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use frictionless::features::WarmupPolicy;
+use frictionless_dataset::{Dataset, DatasetSidecar};
+use frictionless_train::data::DeltaThetaOffset;
+use frictl::eval::{self, EvalOptions, ModelSpec, plot};
+
+/// PINN warm-up policy (as the daemon is configured).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Warmup {
+    /// 0 until H samples have arrived; those rows are skipped for every model.
+    HoldZero,
+    /// Infer at once with zero-padded history.
+    ZeroPad,
+}
+
+/// Arguments of `frictl eval`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Held-out dataset CSV from `frictl preprocess` (repeatable).
+    #[arg(long = "dataset", required = true)]
+    pub datasets: Vec<PathBuf>,
+    /// CV model: the JSON of `frictl fit cv --json`.
+    #[arg(long)]
+    pub cv: Option<PathBuf>,
+    /// SCV model: the JSON of `frictl fit scv|scv-code --json`.
+    #[arg(long)]
+    pub scv: Option<PathBuf>,
+    /// PINN model file `.fwt` (repeatable).
+    #[arg(long = "pinn")]
+    pub pinns: Vec<PathBuf>,
+    /// Training report of `frictl train --report` (training-curve figure; test split for --test-only).
+    #[arg(long)]
+    pub train_report: Option<PathBuf>,
+    /// Use only the chunks the training report marks as its test split.
+    #[arg(long, requires = "train_report")]
+    pub test_only: bool,
+    /// Directory for the PNG figures (created if missing).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Write the JSON report here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Sliding threshold on |ṡ| [rad/s].
+    #[arg(long, default_value_t = 0.03)]
+    pub v_sliding: f64,
+    /// PINN warm-up policy.
+    #[arg(long, value_enum, default_value_t = Warmup::HoldZero)]
+    pub warmup: Warmup,
+    /// Where a PINN's Δθ offset is latched: `run` (once per dataset), `chunk` (every chunk start) or a
+    /// fixed θ_off in motor rad — use the setting the PINN was trained with (its train report).
+    #[arg(long, default_value = "run", allow_hyphen_values = true)]
+    pub delta_theta_offset: DeltaThetaOffset,
+    /// Chunk shown in the time-series and hysteresis figures (default: most sliding rows).
+    #[arg(long)]
+    pub plot_chunk: Option<u32>,
+}
+
+fn pinn_names(paths: &[PathBuf]) -> Vec<String> {
+    if paths.len() == 1 {
+        return vec!["pinn".into()];
+    }
+    let mut out: Vec<String> = Vec::new();
+    for (i, p) in paths.iter().enumerate() {
+        let stem = p
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| i.to_string());
+        let mut name = format!("pinn:{stem}");
+        if out.contains(&name) {
+            name = format!("pinn:{stem}#{i}");
+        }
+        out.push(name);
+    }
+    out
+}
+
+/// Runs `frictl eval`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let started = std::time::Instant::now();
+    let opts = EvalOptions {
+        v_sliding_rad_s: args.v_sliding,
+        warmup: match args.warmup {
+            Warmup::HoldZero => WarmupPolicy::HoldZero,
+            Warmup::ZeroPad => WarmupPolicy::ZeroPad,
+        },
+        delta_theta_offset: args.delta_theta_offset,
+    };
+    let mut models = vec![ModelSpec::none()];
+    if let Some(p) = &args.cv {
+        models.push(ModelSpec::static_model("cv", eval::load_static_model(p)?));
+    }
+    if let Some(p) = &args.scv {
+        models.push(ModelSpec::static_model("scv", eval::load_static_model(p)?));
+    }
+    let mut pinn_files = Vec::new();
+    for (p, name) in args.pinns.iter().zip(pinn_names(&args.pinns)) {
+        let f = frictionless::weights::read_file(p)?;
+        models.push(
+            ModelSpec::pinn(&name, &f, opts.warmup)
+                .with_context(|| format!("PINN {}", p.display()))?,
+        );
+        pinn_files.push((p.clone(), f));
+    }
+    let test_chunks: Option<Vec<BTreeSet<u32>>> = if args.test_only {
+        let r = args
+            .train_report
+            .as_ref()
+            .context("--test-only needs --train-report")?;
+        Some(eval::test_chunks_from_report(r, &args.datasets)?)
+    } else {
+        None
+    };
+
+    let mut loaded = Vec::new();
+    for p in &args.datasets {
+        let ds = Dataset::read_csv(p)?;
+        let side: Option<DatasetSidecar> = std::fs::read_to_string(p.with_extension("json"))
+            .ok()
+            .and_then(|t| serde_json::from_str(&t).ok());
+        let joint = side.as_ref().map(|s| s.joint.clone()).unwrap_or_default();
+        if let Some(s) = &side {
+            for (fp, f) in &pinn_files {
+                let r = f.meta.gear_ratio.get();
+                anyhow::ensure!(
+                    (r - s.gear_ratio_signed).abs() <= 1e-9 * r.abs(),
+                    "PINN {} was trained with gear ratio {r} but dataset {} has gear_ratio_signed = {} (Δθ would be wrong)",
+                    fp.display(),
+                    p.display(),
+                    s.gear_ratio_signed
+                );
+                if !f.meta.joint_name.is_empty()
+                    && !s.joint.is_empty()
+                    && f.meta.joint_name != s.joint
+                {
+                    eprintln!(
+                        "frictl eval: warning: PINN {} is for joint {:?}, dataset {} is {:?}",
+                        fp.display(),
+                        f.meta.joint_name,
+                        p.display(),
+                        s.joint
+                    );
+                }
+            }
+        }
+        loaded.push((p.clone(), ds, joint));
+    }
+
+    let mut evals = Vec::new();
+    for (i, (p, ds, joint)) in loaded.iter().enumerate() {
+        let filter = test_chunks.as_ref().map(|t| &t[i]);
+        let ev = eval::evaluate(&p.display().to_string(), ds, &models, filter, &opts)?;
+        evals.push((ev, ds, joint.clone()));
+    }
+    let report = eval::build_report(&models, &evals, &opts, args.test_only);
+    print!("{}", eval::format_table(&report));
+    if let Some(p) = &args.json {
+        std::fs::write(p, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("cannot write {}", p.display()))?;
+    }
+
+    if let Some(dir) = &args.out {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        if plot::init_font().is_none() {
+            eprintln!(
+                "frictl eval: no TrueType font found (set FRICTL_FONT=path/to/font.ttf); figures are drawn without text"
+            );
+        }
+        let mut written = Vec::new();
+        for ((ev, ds, _), (p, _, _)) in evals.iter().zip(&loaded) {
+            let stem = p
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "dataset".into());
+            let f = dir.join(format!("{stem}_friction_vs_velocity.png"));
+            plot::friction_vs_velocity(&f, ds, ev, &models)?;
+            written.push(f);
+            if let Some(range) = plot::pick_chunk(ds, ev, opts.v_sliding_rad_s, args.plot_chunk) {
+                let f = dir.join(format!("{stem}_timeseries.png"));
+                plot::timeseries(&f, ds, ev, &models, range)?;
+                written.push(f);
+                let f = dir.join(format!("{stem}_hysteresis.png"));
+                plot::hysteresis(&f, ds, range)?;
+                written.push(f);
+            }
+        }
+        if let Some(r) = &args.train_report {
+            let text = std::fs::read_to_string(r)
+                .with_context(|| format!("cannot read {}", r.display()))?;
+            let v: serde_json::Value = serde_json::from_str(&text)
+                .with_context(|| format!("{} is not JSON", r.display()))?;
+            let f = dir.join("training_curves.png");
+            match plot::training_curves(&f, &v) {
+                Ok(()) => written.push(f),
+                Err(e) => eprintln!("frictl eval: warning: {e}"),
+            }
+        }
+        for f in &written {
+            eprintln!("frictl eval: wrote {}", f.display());
+        }
+    }
+    eprintln!(
+        "frictl eval: {} model(s) on {} dataset(s) in {:.2} s",
+        models.len(),
+        evals.len(),
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
+}

@@ -1,0 +1,81 @@
+//! `frictl export onnx|safetensors IN.fwt -o OUT`: a `.fwt` model for other tools.
+//!
+//! ONNX: a `Gemm`/`Relu` graph (input `input` `[batch, n]`, output `output` `[batch, 1]`, opset 13,
+//! dynamic batch) with the normalisation as `Sub`+`Div` (default) or a diagonal `Gemm`, so the model
+//! can be checked with ONNX Runtime. safetensors: a PyTorch `nn.Sequential` state dict (`0.weight`,
+//! `0.bias`, `2.weight`, …, plus `norm.mean`/`norm.scale`). Both carry the joint metadata. Reduced
+//! precision weights are exported as the f32 values they decode to. Not an importer.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use frictionless_interop::{META_PREFIX, ModelHints, onnx, safetensors};
+
+/// Target format.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    /// ONNX (Gemm/Relu chain, opset 13).
+    Onnx,
+    /// safetensors (PyTorch nn.Sequential state dict).
+    Safetensors,
+}
+
+/// How the ONNX export writes the input normalisation.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Norm {
+    /// Sub(mean) then Div(scale): the exact f32 statistics.
+    SubDiv,
+    /// One diagonal Gemm (w = 1/scale, b = −mean/scale), as the authors' exporter.
+    DiagonalGemm,
+}
+
+/// Arguments of `frictl export`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Target format.
+    pub format: Format,
+    /// The `.fwt` weight file.
+    pub input: PathBuf,
+    /// The file to write.
+    #[arg(short = 'o', long)]
+    pub output: PathBuf,
+    /// ONNX only: how to write the normalisation.
+    #[arg(long, value_enum, default_value = "sub-div")]
+    pub norm: Norm,
+}
+
+/// Runs `frictl export`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let file = frictionless::weights::read_file(&args.input)?;
+    let mut meta = ModelHints::from_meta(&file.meta).to_pairs();
+    meta.push((
+        format!("{META_PREFIX}storage_dtype"),
+        format!("{:?}", file.dtype).to_lowercase(),
+    ));
+    let bytes = match args.format {
+        Format::Onnx => {
+            let opts = onnx::ExportOptions {
+                norm: match args.norm {
+                    Norm::SubDiv => onnx::NormExport::SubDiv,
+                    Norm::DiagonalGemm => onnx::NormExport::DiagonalGemm,
+                },
+                metadata: meta,
+            };
+            onnx::export_bytes(&file.mlp, &opts)
+                .with_context(|| format!("exporting {}", args.input.display()))?
+        }
+        Format::Safetensors => safetensors::export_bytes(&file.mlp, &meta)
+            .with_context(|| format!("exporting {}", args.input.display()))?,
+    };
+    std::fs::write(&args.output, &bytes)
+        .with_context(|| format!("cannot write {}", args.output.display()))?;
+    let sizes: Vec<String> = file.mlp.sizes().iter().map(|s| s.to_string()).collect();
+    println!(
+        "wrote {} ({:?}, {} bytes): {}",
+        args.output.display(),
+        args.format,
+        bytes.len(),
+        sizes.join(" → ")
+    );
+    Ok(())
+}

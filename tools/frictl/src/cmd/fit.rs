@@ -1,0 +1,236 @@
+//! `frictl fit cv|scv|scv-code DATASET.csv` — fit a static friction model to a preprocessed dataset and
+//! print/write it as a `[[joint]]` TOML snippet in the daemon's config format, and as JSON.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use frictionless::friction::{CvParams, ScvCodeParams, ScvParams, StaticFriction};
+use frictionless_dataset::Dataset;
+use frictionless_ident::fit::{
+    FitBounds, FitOptions, FitResult, Fittable, Loss, Method, fit, select, sliding_quadrant_mask,
+};
+
+/// Static model to fit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ModelKind {
+    /// Coulomb–viscous τ = kc·tanh(ka·v) + kv·v.
+    Cv,
+    /// Stribeck–Coulomb–viscous (paper form, kc, ka, kv, ks, vs, alpha).
+    Scv,
+    /// The authors' code form (sign(), α = 2): fc, fs, fv, vs.
+    ScvCode,
+}
+
+/// Arguments of `frictl fit`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Model.
+    #[arg(value_enum)]
+    pub model: ModelKind,
+    /// Dataset CSV from `frictl preprocess`.
+    pub dataset: PathBuf,
+    /// Solver.
+    #[arg(long, value_enum, default_value_t = Method::Lm)]
+    pub method: Method,
+    /// Adam loss (`--method adam`).
+    #[arg(long, value_enum, default_value_t = Loss::L1)]
+    pub loss: Loss,
+    /// Adam epochs.
+    #[arg(long, default_value_t = 3000)]
+    pub epochs: usize,
+    /// Adam learning rate.
+    #[arg(long, default_value_t = 0.01)]
+    pub lr: f64,
+    /// Fit only sliding 1st/3rd-quadrant samples (|ṡ| > --v-min and ṡ·τ_F > 0), the authors' choice.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub sliding_quadrants: bool,
+    /// Velocity threshold of the sliding selection [rad/s].
+    #[arg(long, default_value_t = 0.03)]
+    pub v_min: f64,
+    /// Use the simulator truth column instead of the label (diagnostics).
+    #[arg(long)]
+    pub truth: bool,
+    /// Upper bound of ka [s/rad]: tanh(ka·v) must saturate over a velocity band ≥ 1/ka, comparable to
+    /// the velocity noise/resolution (200 s/rad ↔ 5 mrad/s); a steeper smooth sign only fits label
+    /// noise and makes the compensation chatter ±kc around v = 0.
+    #[arg(long, default_value_t = FitBounds::default().ka_max)]
+    pub ka_max: f64,
+    /// Lower bound of ka [s/rad].
+    #[arg(long, default_value_t = FitBounds::default().ka_min)]
+    pub ka_min: f64,
+    /// Lower bound of the Stribeck velocity vs [rad/s] (SCV, SCV code form).
+    #[arg(long, default_value_t = FitBounds::default().vs_min)]
+    pub vs_min: f64,
+    /// Upper bound of the Stribeck velocity vs [rad/s].
+    #[arg(long, default_value_t = FitBounds::default().vs_max)]
+    pub vs_max: f64,
+    /// Lower bound of the Stribeck exponent α (SCV).
+    #[arg(long, default_value_t = FitBounds::default().alpha_min)]
+    pub alpha_min: f64,
+    /// Upper bound of the Stribeck exponent α.
+    #[arg(long, default_value_t = FitBounds::default().alpha_max)]
+    pub alpha_max: f64,
+    /// Upper bound of ks/kc (fs/fc for the code form).
+    #[arg(long, default_value_t = FitBounds::default().ks_max_ratio)]
+    pub ks_max_ratio: f64,
+    /// Write the TOML snippet here.
+    #[arg(long)]
+    pub toml: Option<PathBuf>,
+    /// Write the JSON result here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// Runs `frictl fit`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let ds = Dataset::read_csv(&args.dataset)?;
+    let target = if args.truth {
+        ds.tau_f_true_nm
+            .clone()
+            .context("--truth: the dataset has no tau_f_true_nm column")?
+    } else {
+        ds.tau_f_label_nm.clone()
+    };
+    let mut mask = ds.valid.clone();
+    if args.sliding_quadrants {
+        for (m, s) in
+            mask.iter_mut()
+                .zip(sliding_quadrant_mask(&ds.sdot_rad_s, &target, args.v_min))
+        {
+            *m &= s;
+        }
+    }
+    let v = select(&ds.sdot_rad_s, &mask);
+    let t = select(&target, &mask);
+    let opts = FitOptions {
+        method: args.method,
+        adam_loss: args.loss,
+        adam_epochs: args.epochs,
+        adam_lr: args.lr,
+        bounds: FitBounds {
+            ka_min: args.ka_min,
+            ka_max: args.ka_max,
+            vs_min: args.vs_min,
+            vs_max: args.vs_max,
+            alpha_min: args.alpha_min,
+            alpha_max: args.alpha_max,
+            ks_max_ratio: args.ks_max_ratio,
+        },
+        ..FitOptions::default()
+    };
+    let started = std::time::Instant::now();
+    let (toml, json) = match args.model {
+        ModelKind::Cv => report(fit::<CvParams>(&v, &t, &opts)?, &ds, &target, &args),
+        ModelKind::Scv => report(fit::<ScvParams>(&v, &t, &opts)?, &ds, &target, &args),
+        ModelKind::ScvCode => report(fit::<ScvCodeParams>(&v, &t, &opts)?, &ds, &target, &args),
+    }?;
+    eprintln!(
+        "frictl fit: {} of {} samples selected, fitted in {:.3} s",
+        v.len(),
+        ds.len(),
+        started.elapsed().as_secs_f64()
+    );
+    println!("{toml}");
+    if let Some(p) = &args.toml {
+        std::fs::write(p, &toml).with_context(|| format!("cannot write {}", p.display()))?;
+    }
+    if let Some(p) = &args.json {
+        std::fs::write(p, serde_json::to_string_pretty(&json)?)
+            .with_context(|| format!("cannot write {}", p.display()))?;
+    }
+    Ok(())
+}
+
+/// Daemon `[[joint]]` keys for a fitted model (SCV code form = SCV with ka = inf, alpha = 2).
+fn daemon_keys<M: StaticFriction + 'static>(m: &M) -> Vec<(&'static str, f64)> {
+    let any = m as &dyn std::any::Any;
+    if let Some(c) = any.downcast_ref::<CvParams>() {
+        vec![("kc", c.kc), ("kv", c.kv), ("ka", c.ka)]
+    } else {
+        let s: ScvParams = if let Some(s) = any.downcast_ref::<ScvParams>() {
+            *s
+        } else if let Some(c) = any.downcast_ref::<ScvCodeParams>() {
+            ScvParams::from(*c)
+        } else {
+            return vec![];
+        };
+        vec![
+            ("kc", s.kc),
+            ("kv", s.kv),
+            ("ka", s.ka),
+            ("ks", s.ks),
+            ("vs", s.vs),
+            ("alpha", s.alpha),
+        ]
+    }
+}
+
+fn toml_f64(v: f64) -> String {
+    if v == f64::INFINITY {
+        "inf".into()
+    } else {
+        format!("{v:e}")
+    }
+}
+
+fn report<M: Fittable + 'static>(
+    r: FitResult<M>,
+    ds: &Dataset,
+    target: &[f64],
+    args: &Args,
+) -> anyhow::Result<(String, serde_json::Value)> {
+    if !r.at_bounds.is_empty() {
+        eprintln!(
+            "frictl fit: parameters on a bound: {} (the unbounded optimum lies outside; see --help for the bound flags)",
+            r.at_bounds.join(", ")
+        );
+    }
+    let (rmse_valid, _) = frictionless_ident::fit::errors(
+        &r.model,
+        &select(&ds.sdot_rad_s, &ds.valid),
+        &select(target, &ds.valid),
+    );
+    let model_name = if M::N_PARAMS == 3 {
+        "coulomb_viscous"
+    } else {
+        "coulomb_viscous_stribeck"
+    };
+    let mut s = format!(
+        "# frictl fit {:?} ({:?}) on {}: {} samples, RMSE {:.4} Nm on the fitted samples, {:.4} Nm on all valid samples\n[[joint]]\nfriction_model = \"{model_name}\"\n",
+        args.model,
+        args.method,
+        args.dataset.display(),
+        r.n_samples,
+        r.rmse_nm,
+        rmse_valid
+    );
+    for (k, v) in daemon_keys(&r.model) {
+        s += &format!("{k} = {}\n", toml_f64(v));
+    }
+    let json = serde_json::json!({
+        "model": format!("{:?}", args.model),
+        "method": args.method,
+        "params": r.model,
+        "param_names": M::PARAM_NAMES,
+        "daemon_friction_model": model_name,
+        "rmse_fitted_nm": r.rmse_nm,
+        "mae_fitted_nm": r.mae_nm,
+        "rmse_valid_nm": rmse_valid,
+        "n_samples": r.n_samples,
+        "iterations": r.iterations,
+        "bounds": {
+            "ka_min": args.ka_min,
+            "ka_max": args.ka_max,
+            "vs_min": args.vs_min,
+            "vs_max": args.vs_max,
+            "alpha_min": args.alpha_min,
+            "alpha_max": args.alpha_max,
+            "ks_max_ratio": args.ks_max_ratio,
+        },
+        "at_bounds": r.at_bounds,
+        "sliding_quadrants": args.sliding_quadrants,
+        "v_min_rad_s": args.v_min,
+        "dataset": args.dataset.display().to_string(),
+    });
+    Ok((s, json))
+}

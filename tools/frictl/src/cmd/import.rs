@@ -1,0 +1,263 @@
+//! `frictl import onnx|safetensors IN -o OUT.fwt …`: a foreign model into a `.fwt` weight file.
+//!
+//! The network comes from [`frictionless_interop`]; the metadata a foreign file lacks (joint, signed gear
+//! ratio, k_t, feature set, history) comes from the command line, falling back to `frictionless.*`
+//! metadata written by `frictl export`. The history is inferred from the input width when omitted and
+//! unambiguous. After writing, the file is read back and its kernel compared with the imported f32
+//! network on random inputs. Not a trainer; no ONNX Runtime involved.
+
+use std::path::{Path, PathBuf};
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use anyhow::{Context, bail};
+use frictionless::features::{FeatureSet, FeatureSpec};
+use frictionless::kernel::Mlp;
+use frictionless::mlp::{MlpWeights, StorageDtype};
+use frictionless::units::GearRatio;
+use frictionless::weights::{self, ModelFile, ModelMeta, TrainingMeta};
+use frictionless_interop::{self as interop, ModelHints, onnx, safetensors};
+
+/// Source format.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    /// ONNX (PyTorch export: Gemm/MatMul+Add/Relu chain).
+    Onnx,
+    /// safetensors (PyTorch nn.Sequential state dict).
+    Safetensors,
+}
+
+/// Input feature set (block order of the input vector).
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Features {
+    /// [Δθ ×H, ṡ ×H]: motor-side deflection [motor rad], joint velocity [rad/s] (the paper's).
+    #[value(name = "delta_theta_joint_vel")]
+    DeltaThetaJointVel,
+    /// [ω_m ×H, ṡ ×H]: motor velocity [motor rad/s], joint velocity [rad/s].
+    #[value(name = "motor_vel_joint_vel")]
+    MotorVelJointVel,
+    /// [s ×H, θ ×H]: joint position [rad], motor position [motor rad] (the June 2024 ergoCub model).
+    #[value(name = "joint_pos_motor_pos")]
+    JointPosMotorPos,
+}
+
+impl From<Features> for FeatureSet {
+    fn from(f: Features) -> Self {
+        match f {
+            Features::DeltaThetaJointVel => FeatureSet::DeltaThetaJointVel,
+            Features::MotorVelJointVel => FeatureSet::MotorVelJointVel,
+            Features::JointPosMotorPos => FeatureSet::JointPosMotorPos,
+        }
+    }
+}
+
+/// Weight storage precision.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Dtype {
+    /// IEEE binary32.
+    F32,
+    /// IEEE binary16.
+    F16,
+    /// bfloat16.
+    Bf16,
+}
+
+impl From<Dtype> for StorageDtype {
+    fn from(d: Dtype) -> Self {
+        match d {
+            Dtype::F32 => StorageDtype::F32,
+            Dtype::F16 => StorageDtype::F16,
+            Dtype::Bf16 => StorageDtype::Bf16,
+        }
+    }
+}
+
+/// Arguments of `frictl import`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Source format.
+    pub format: Format,
+    /// The ONNX or safetensors file.
+    pub input: PathBuf,
+    /// The `.fwt` file to write.
+    #[arg(short = 'o', long)]
+    pub output: PathBuf,
+    /// Input feature set (required unless the file carries `frictionless.features` metadata).
+    #[arg(long)]
+    pub features: Option<Features>,
+    /// The last input is the motor temperature [°C].
+    #[arg(long)]
+    pub temperature: bool,
+    /// History length H (samples per block); inferred from the input width when omitted.
+    #[arg(long)]
+    pub history: Option<usize>,
+    /// Joint name, e.g. l_ankle_roll.
+    #[arg(long)]
+    pub joint: Option<String>,
+    /// Signed gear ratio r (motor angle per joint angle), e.g. -160.
+    #[arg(long, allow_hyphen_values = true)]
+    pub gear_ratio: Option<f64>,
+    /// Torque constant k_t [Nm/A] the training labels used.
+    #[arg(long)]
+    pub kt: Option<f64>,
+    /// Weight storage precision of the written file.
+    #[arg(long, value_enum, default_value = "f32")]
+    pub dtype: Dtype,
+}
+
+/// The network and metadata hints read from a foreign file, plus a one-line summary.
+pub(crate) fn load_foreign(
+    format: Format,
+    path: &Path,
+) -> anyhow::Result<(MlpWeights, ModelHints, String)> {
+    let p = path.display();
+    match format {
+        Format::Onnx => {
+            let imp = onnx::import_file(path)?;
+            let hints = ModelHints::from_pairs(&imp.metadata)
+                .map_err(|(k, v)| anyhow::anyhow!("{p}: metadata `{k}` = `{v}` does not parse"))?;
+            let summary = format!(
+                "ONNX opset {} (IR {}, producer `{}`), input `{}`, output `{}`, batch {}, normalisation {}",
+                imp.opset,
+                imp.ir_version,
+                imp.producer,
+                imp.input_name,
+                imp.output_name,
+                imp.batch_dim
+                    .map_or("dynamic".to_string(), |b| b.to_string()),
+                if imp.normalisation_found {
+                    "folded out of the graph"
+                } else {
+                    "none (identity)"
+                }
+            );
+            Ok((imp.mlp, hints, summary))
+        }
+        Format::Safetensors => {
+            let imp = safetensors::import_file(path)?;
+            let hints = ModelHints::from_pairs(&imp.metadata)
+                .map_err(|(k, v)| anyhow::anyhow!("{p}: metadata `{k}` = `{v}` does not parse"))?;
+            let mut summary = format!(
+                "safetensors state dict, prefix `{}`, Linear index spacing {}, normalisation from {:?}",
+                imp.prefix, imp.spacing, imp.norm_source
+            );
+            if !imp.ignored.is_empty() {
+                summary.push_str(&format!(", ignored tensors: {}", imp.ignored.join(", ")));
+            }
+            Ok((imp.mlp, hints, summary))
+        }
+    }
+}
+
+/// Picks H for `n` inputs: the given one (checked), else the hint (checked), else n/2 or (n−1)/2.
+pub(crate) fn resolve_history(
+    n_inputs: usize,
+    temperature: bool,
+    history: Option<usize>,
+    hint: Option<usize>,
+) -> anyhow::Result<usize> {
+    let t = usize::from(temperature);
+    let check = |h: usize, source: &str| -> anyhow::Result<usize> {
+        if h == 0 || 2 * h + t != n_inputs {
+            bail!(
+                "{source} {h}{} needs {} inputs, but the model has {n_inputs}",
+                if temperature { " with temperature" } else { "" },
+                2 * h + t
+            );
+        }
+        Ok(h)
+    };
+    if let Some(h) = history {
+        return check(h, "--history");
+    }
+    if let Some(h) = hint {
+        return check(h, "metadata `frictionless.history` =");
+    }
+    if n_inputs > t && (n_inputs - t).is_multiple_of(2) {
+        Ok((n_inputs - t) / 2)
+    } else {
+        bail!(
+            "cannot infer the history from {n_inputs} inputs{}: an odd width means one extra input (pass --temperature) — or give --history",
+            if temperature { " with temperature" } else { "" }
+        )
+    }
+}
+
+/// Runs `frictl import`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let (mlp, hints, summary) = load_foreign(args.format, &args.input)?;
+    let inp = args.input.display();
+    let n = mlp.n_inputs();
+    let temperature = args.temperature || hints.temperature.unwrap_or(false);
+    let history = resolve_history(n, temperature, args.history, hints.history)
+        .with_context(|| format!("{inp}"))?;
+    let set: FeatureSet = match (args.features, hints.features) {
+        (Some(f), _) => f.into(),
+        (None, Some(f)) => f,
+        (None, None) => bail!("{inp}: the file does not say its feature set; pass --features"),
+    };
+    let joint_name = args
+        .joint
+        .or(hints.joint_name)
+        .with_context(|| format!("{inp}: the file does not name its joint; pass --joint"))?;
+    let r = args.gear_ratio.or(hints.gear_ratio).with_context(|| {
+        format!("{inp}: the file does not give the gear ratio; pass --gear-ratio")
+    })?;
+    let gear_ratio = GearRatio::new(r).map_err(|e| anyhow::anyhow!("--gear-ratio: {e}"))?;
+    let kt = args
+        .kt
+        .or(hints.kt_nm_per_a)
+        .with_context(|| format!("{inp}: the file does not give k_t; pass --kt"))?;
+    if !(kt.is_finite() && kt > 0.0) {
+        bail!("--kt {kt}: the torque constant must be finite and positive");
+    }
+    let file = ModelFile {
+        meta: ModelMeta {
+            joint_name,
+            gear_ratio,
+            kt_nm_per_a: kt,
+            features: FeatureSpec {
+                set,
+                history,
+                temperature,
+            },
+            scv: None,
+            training: TrainingMeta::unknown(
+                format!("frictl {}", env!("CARGO_PKG_VERSION")),
+                SystemTime::now()
+                    .duration_since(UNIX_EPOCH)
+                    .map_or(0, |d| d.as_secs()),
+            ),
+        },
+        dtype: args.dtype.into(),
+        mlp,
+    };
+    weights::write_file(&args.output, &file)?;
+    // Read back and compare the stored model with the imported f32 network.
+    let back = weights::read_file(&args.output)?;
+    let mut imported = Mlp::new(&file.mlp, StorageDtype::F32)?;
+    let mut stored = Mlp::new(&back.mlp, back.dtype)?;
+    let inputs = interop::random_inputs(&file.mlp.norm, 256, 1);
+    let (diff, max_ref) = interop::max_output_change(&mut imported, &mut stored, &inputs);
+    let sizes: Vec<String> = back.mlp.sizes().iter().map(|s| s.to_string()).collect();
+    println!("read   {inp}: {summary}");
+    println!(
+        "wrote  {}: {} ({:?}), {} params, features {:?} H={} temperature={}",
+        args.output.display(),
+        sizes.join(" → "),
+        back.dtype,
+        back.mlp.n_params(),
+        set,
+        history,
+        temperature
+    );
+    println!(
+        "check  max |Δoutput| vs imported f32 on 256 random inputs: {diff:.3e} Nm (max |output| {max_ref:.3} Nm)"
+    );
+    if !diff.is_finite() {
+        bail!(
+            "{}: the stored model gives non-finite outputs",
+            args.output.display()
+        );
+    }
+    Ok(())
+}

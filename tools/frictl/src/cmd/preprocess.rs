@@ -1,0 +1,225 @@
+//! `frictl preprocess` — acquisition log (CSV + JSON sidecar) → labelled dataset (CSV + JSON sidecar).
+//!
+//! See `frictionless_ident::preprocess` for the pipeline and `frictionless_dataset` for the columns.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use frictionless_dataset::{ColumnDocOwned, DatasetSidecar};
+use frictionless_ident::kalman::KalmanConfig;
+use frictionless_ident::preprocess::{LogMeta, PreprocessConfig, RawLog, preprocess};
+use frictionless_sim::params::LinkModel;
+use sha2::Digest;
+
+/// Source of the link dynamics for τ_ID.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum LinkSource {
+    /// The sidecar's simulator link model if present and no `--urdf` given, else the URDF.
+    Auto,
+    /// The URDF (`--urdf`, default `virtual_leg`).
+    Urdf,
+    /// The simulator's link model from the sidecar (`plant.link`); an error if absent.
+    Sidecar,
+}
+
+/// Arguments of `frictl preprocess`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Acquisition log CSV (its sidecar is the same path with `.json`).
+    pub log: PathBuf,
+    /// Output dataset CSV (its sidecar is written next to it with `.json`).
+    #[arg(short = 'o', long = "out")]
+    pub out: PathBuf,
+    /// Causal ṡ/s̈ columns (forward Kalman filter, what the daemon sees) for training on causal
+    /// signals; the label itself always uses the zero-phase current and the RTS smoother.
+    #[arg(long)]
+    pub causal: bool,
+    /// Which link dynamics give τ_ID. `auto` (default): the simulator's own link model when the
+    /// sidecar has one (`plant.link`, i.e. a simulated log) and no `--urdf` is given — the label is
+    /// then computed with exactly the dynamics that produced the data — else the URDF.
+    #[arg(long, value_enum, default_value_t = LinkSource::Auto)]
+    pub link: LinkSource,
+    /// URDF for inverse dynamics (default `virtual_leg` = the project's `config/urdf/virtual_leg.urdf`).
+    #[arg(long)]
+    pub urdf: Option<String>,
+    /// Joint name in the URDF (default: the sidecar's `joint`).
+    #[arg(long)]
+    pub joint: Option<String>,
+    /// Position of another URDF joint, held fixed [rad] (repeatable; absent joints are 0).
+    #[arg(long = "fixed-joint", value_name = "NAME=RAD")]
+    pub fixed_joints: Vec<String>,
+    /// Same as `--link sidecar` (kept for existing scripts).
+    #[arg(long)]
+    pub link_from_sidecar: bool,
+    /// Butterworth order for the current.
+    #[arg(long, default_value_t = 5)]
+    pub butter_order: usize,
+    /// Butterworth cut-off [Hz].
+    #[arg(long, default_value_t = 100.0)]
+    pub butter_cutoff_hz: f64,
+    /// Output sample rate [Hz].
+    #[arg(long, default_value_t = 1000.0)]
+    pub fs_hz: f64,
+    /// Time gap that starts a new chunk [s].
+    #[arg(long, default_value_t = 1.0)]
+    pub gap_s: f64,
+    /// Kalman P₀ diagonal (pos, vel, acc).
+    #[arg(long, num_args = 3, value_delimiter = ',', default_values_t = [1e-5, 1e-4, 1e4])]
+    pub kalman_p0: Vec<f64>,
+    /// Kalman Q diagonal per step (pos, vel, acc).
+    #[arg(long, num_args = 3, value_delimiter = ',', default_values_t = [1e-5, 1e-4, 1e4])]
+    pub kalman_q: Vec<f64>,
+    /// Kalman measurement variance R [rad²].
+    #[arg(long, default_value_t = 1e-4)]
+    pub kalman_r: f64,
+    /// |s̈| limit [rad/s²].
+    #[arg(long, default_value_t = 10.0)]
+    pub joint_acc_limit: f64,
+    /// |ṡ| limit [rad/s].
+    #[arg(long, default_value_t = 10.0)]
+    pub joint_vel_limit: f64,
+    /// |i_f| limit [A] (default 10).
+    #[arg(long)]
+    pub im_limit: Option<f64>,
+    /// |τ_F| limit [Nm] (default: 15 for ankle roll joints, else 100).
+    #[arg(long)]
+    pub tauf_limit: Option<f64>,
+    /// Ablation: subtract J·φ̈ (φ̈ from the motor encoder θ/r) from the label with this J [kg·m²];
+    /// `sidecar` = the simulator's r²·J_m.
+    #[arg(long)]
+    pub subtract_reflected_inertia: Option<String>,
+}
+
+/// Runs `frictl preprocess`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let started = std::time::Instant::now();
+    let sidecar_path = args.log.with_extension("json");
+    let meta = LogMeta::read_json(&sidecar_path)?;
+    let log = RawLog::read_csv(&args.log)?;
+    let bytes =
+        std::fs::read(&args.log).with_context(|| format!("cannot read {}", args.log.display()))?;
+    let sha = format!("{:x}", sha2::Sha256::digest(&bytes));
+    drop(bytes);
+
+    let use_sidecar = match (args.link_from_sidecar, args.link) {
+        (true, _) | (_, LinkSource::Sidecar) => true,
+        (false, LinkSource::Urdf) => false,
+        (false, LinkSource::Auto) => args.urdf.is_none() && meta.plant_link.is_some(),
+    };
+    let (link_model, dynamics) = if use_sidecar {
+        let l = meta.plant_link.clone().with_context(|| {
+            format!(
+                "--link sidecar: {} has no plant.link (not a simulated log); use --link urdf",
+                sidecar_path.display()
+            )
+        })?;
+        let d = format!("simulator link model from the sidecar: {l:?}");
+        (l, d)
+    } else {
+        let joint = args.joint.clone().unwrap_or_else(|| meta.joint.clone());
+        anyhow::ensure!(!joint.is_empty(), "no joint name: pass --joint");
+        let mut other = BTreeMap::new();
+        for s in &args.fixed_joints {
+            let (n, v) = s
+                .split_once('=')
+                .with_context(|| format!("--fixed-joint {s:?}: expected NAME=RAD"))?;
+            let v: f64 = v
+                .trim()
+                .parse()
+                .with_context(|| format!("--fixed-joint {s:?}: {v:?} is not a number"))?;
+            other.insert(n.trim().to_owned(), v);
+        }
+        let urdf = args.urdf.clone().unwrap_or_else(|| "virtual_leg".into());
+        let d =
+            format!("URDF {urdf} joint {joint}, other joints {other:?}, fixed base, g = 9.80665");
+        (
+            LinkModel::Urdf {
+                urdf,
+                joint,
+                other_joints_rad: other,
+            },
+            d,
+        )
+    };
+    let link = frictionless_sim::link::link_from_model(&link_model)?;
+
+    let mut cfg = PreprocessConfig::for_joint(&meta.joint);
+    cfg.fs_hz = args.fs_hz;
+    cfg.gap_s = args.gap_s;
+    cfg.butter_order = args.butter_order;
+    cfg.butter_cutoff_hz = args.butter_cutoff_hz;
+    cfg.causal = args.causal;
+    cfg.kalman = KalmanConfig {
+        p0: [args.kalman_p0[0], args.kalman_p0[1], args.kalman_p0[2]],
+        q: [args.kalman_q[0], args.kalman_q[1], args.kalman_q[2]],
+        r: args.kalman_r,
+    };
+    cfg.limits.joint_acc_limit_rad_s2 = args.joint_acc_limit;
+    cfg.limits.joint_vel_limit_rad_s = args.joint_vel_limit;
+    if let Some(v) = args.im_limit {
+        cfg.limits.im_limit_a = v;
+    }
+    if let Some(v) = args.tauf_limit {
+        cfg.limits.tauf_limit_nm = v;
+    }
+    if let Some(j) = &args.subtract_reflected_inertia {
+        cfg.subtract_reflected_inertia_kgm2 = if j == "sidecar" {
+            meta.j_eq_kgm2.context(
+                "--subtract-reflected-inertia sidecar: the sidecar has no plant.j_motor_kgm2",
+            )?
+        } else {
+            j.parse()
+                .with_context(|| format!("--subtract-reflected-inertia {j:?} is not a number"))?
+        };
+    }
+    let (ds, summary) = preprocess(&log, &meta, link.as_ref(), &cfg)?;
+    ds.write_csv(&args.out)?;
+    let valid = ds.valid.iter().filter(|v| **v).count();
+    let side = DatasetSidecar {
+        format: "frictionless-dataset-v1".into(),
+        producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
+        input_log: args.log.display().to_string(),
+        input_sha256: sha,
+        joint: meta.joint.clone(),
+        gear_ratio_signed: meta.gear_ratio_signed,
+        kt_nm_per_a: meta.kt_nm_per_a,
+        fs_hz: cfg.fs_hz,
+        settings: serde_json::to_value(&cfg)?,
+        dynamics,
+        delta_theta_offset_motor_rad: summary.delta_theta_offset_motor_rad,
+        samples: ds.len(),
+        valid_samples: valid,
+        chunks: summary.chunks,
+        short_chunks: summary.short_chunks,
+        columns: ds.columns().iter().map(ColumnDocOwned::from).collect(),
+    };
+    let side_path = args.out.with_extension("json");
+    std::fs::write(&side_path, serde_json::to_string_pretty(&side)?)
+        .with_context(|| format!("cannot write {}", side_path.display()))?;
+    let mut msg = format!(
+        "frictl preprocess: {} samples ({valid} valid, {} chunks, {} too short) in {:.2} s -> {}",
+        ds.len(),
+        summary.chunks,
+        summary.short_chunks,
+        started.elapsed().as_secs_f64(),
+        args.out.display()
+    );
+    if let Some(t) = &ds.tau_f_true_nm {
+        let (mut e2, mut n) = (0.0, 0usize);
+        for (k, truth) in t.iter().enumerate() {
+            if ds.valid[k] && ds.sdot_rad_s[k].abs() > 0.03 {
+                e2 += (ds.tau_f_label_nm[k] - truth).powi(2);
+                n += 1;
+            }
+        }
+        if n > 0 {
+            msg += &format!(
+                "\n  label vs simulator truth: RMS {:.3} Nm on {n} valid sliding samples",
+                (e2 / n as f64).sqrt()
+            );
+        }
+    }
+    eprintln!("{msg}");
+    Ok(())
+}

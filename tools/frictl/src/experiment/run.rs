@@ -1,0 +1,483 @@
+//! One closed-loop trial over shared memory: the experiment controller's loop.
+//!
+//! What this module **is**: [`JointSetup`] (a plant preset's link model, gear ratio and k_t — the
+//! controller's M and h come from exactly the link model the plant simulates), [`TrialSpec`] (which
+//! joints, gains, references, disturbance pulses and friction models) and [`run_trial`], which starts a
+//! [`Session`] (frictiond + plant), then per received `JointStates` (seq k) computes τ_des for every
+//! planned joint, publishes the `SimDisturbance` when it changes and the `TorqueRequest` with
+//! `state_seq = k` (the lockstep protocol of the preamble), and records a [`TrialTrace`]: set-point,
+//! measured and true position, τ_des, τ̂_F (from `DaemonStatus`, published every tick), true friction
+//! and applied current (from `SimTruth`).
+//!
+//! What it is **not**: no metrics or tables (see [`super::metrics`], [`super::report`]).
+
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use frictionless_shm_types::sim::{SimDisturbance, SimTruth};
+use frictionless_shm_types::{DaemonStatus, Inbox, Ipc, JointStates, TorqueRequest, monotonic_ns};
+
+use super::controller::{ComputedTorque, Reference};
+use super::oracle::OracleCompensation;
+use super::session::{
+    Binaries, DaemonJoint, FrictionModel, LawSettings, Lpf, Mode, PRESETS, PlantSpec, Session,
+    interrupted,
+};
+use frictionless_sim::PlantParams;
+use frictionless_sim::link::{LinkDynamics, link_from_model};
+use frictionless_sim::params::load_table;
+
+/// A plant preset as the controller and the daemon config need it.
+pub struct JointSetup {
+    /// Preset name (`knee`, `ankle_roll`).
+    pub preset: String,
+    /// The plant parameters (joint name, signed r, k_t, range, initial pose, link model).
+    pub params: PlantParams,
+    /// The link model the plant simulates (M = I_L, h = g).
+    pub link: Box<dyn LinkDynamics>,
+}
+
+impl JointSetup {
+    /// Loads `preset` with `--set` overrides `sets` (the same ones the plant gets).
+    pub fn load(preset: &str, sets: &[String]) -> anyhow::Result<Self> {
+        let table = load_table(preset, None, sets)?;
+        let params = PlantParams::from_table(&table)?;
+        let link = link_from_model(&params.link)?;
+        Ok(Self {
+            preset: preset.to_owned(),
+            params,
+            link,
+        })
+    }
+
+    /// Both presets in payload order ([`PRESETS`]).
+    pub fn both(sets: &[String]) -> anyhow::Result<[JointSetup; 2]> {
+        frictionless_sim::params::check_set_joints(sets, &PRESETS)?;
+        Ok([Self::load(PRESETS[0], sets)?, Self::load(PRESETS[1], sets)?])
+    }
+}
+
+/// An external torque pulse on the joint output (through `SimDisturbance`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct Pulse {
+    /// Start time [s] after the trial start.
+    pub start_s: f64,
+    /// Duration [s].
+    pub duration_s: f64,
+    /// Torque [Nm] (positive increases s).
+    pub torque_nm: f64,
+}
+
+impl Pulse {
+    /// End time [s].
+    pub fn end_s(&self) -> f64 {
+        self.start_s + self.duration_s
+    }
+    fn at(&self, t_s: f64) -> f64 {
+        if t_s >= self.start_s && t_s < self.end_s() {
+            self.torque_nm
+        } else {
+            0.0
+        }
+    }
+}
+
+/// What one joint does in a trial.
+#[derive(Clone, Debug)]
+pub struct JointPlan {
+    /// Payload index (0 = knee, 1 = ankle_roll).
+    pub index: usize,
+    /// K_p [1/s²] (K_d is the paper's 4/s).
+    pub kp_per_s2: f64,
+    /// Desired trajectory; the plant starts at its first point.
+    pub reference: Reference,
+    /// Optional disturbance.
+    pub pulse: Option<Pulse>,
+    /// Friction model frictiond runs for this joint.
+    pub model: FrictionModel,
+}
+
+/// One trial.
+#[derive(Clone, Debug)]
+pub struct TrialSpec {
+    /// Lockstep or real time.
+    pub mode: Mode,
+    /// Duration [s] of simulated time.
+    pub duration_s: f64,
+    /// The controlled joints (others are disabled and hang at their preset pose).
+    pub joints: Vec<JointPlan>,
+    /// Plant seed.
+    pub seed: u64,
+    /// Plant `--set` overrides (also applied to the controller's link model).
+    pub sets: Vec<String>,
+    /// PINN Δθ offset θ_off [motor rad] for frictiond per joint index (fixed across enables),
+    /// `None` = latch at enable. The virtual plant's encoders read θ = r·φ, so 0 makes Δθ the
+    /// absolute deflection — the offset of a training log latched once at its torque-free start.
+    pub pinn_delta_theta_offset_motor_rad: [Option<f64>; 2],
+    /// frictiond with `kfc = 1`, no friction clip and no LPF, so the recorded τ̂_F is the model's
+    /// raw output (for checking online against offline inference); `false` = the shipped law.
+    pub raw_friction: bool,
+    /// `kfc` per joint index instead of the shipped config's (`None` = shipped).
+    pub kfc: [Option<f64>; 2],
+}
+
+/// Further per-trial settings (kept out of [`TrialSpec`] so existing struct literals stay valid).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TrialOptions {
+    /// τ̂_F low-pass per joint index instead of the shipped config's (`None` = shipped).
+    pub lpf: [Option<Lpf>; 2],
+    /// Add the reflected rotor inertia r²·J_m (from the preset) to the controller's M (diagnostic;
+    /// the paper's M is the link inertia only).
+    pub rotor_inertia_in_m: bool,
+}
+
+/// Recorded signals of one joint, one entry per tick.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct JointTrace {
+    /// Payload index.
+    pub index: usize,
+    /// Joint name.
+    pub name: String,
+    /// K_p used [1/s²].
+    pub kp_per_s2: f64,
+    /// Friction model label.
+    pub model: String,
+    /// kfc of the daemon config (τ̂_F includes it).
+    pub kfc: f64,
+    /// Time [s] (from the state seq).
+    pub t_s: Vec<f64>,
+    /// Set-point s_d [rad].
+    pub s_des_rad: Vec<f64>,
+    /// Measured s [rad] (what the controller used).
+    pub s_rad: Vec<f64>,
+    /// True s [rad] (SimTruth; NaN when the plant sent none).
+    pub s_true_rad: Vec<f64>,
+    /// Measured ṡ [rad/s] as the plant published it (the drive's causal estimate; what frictiond used).
+    pub sdot_rad_s: Vec<f64>,
+    /// True ṡ [rad/s] (SimTruth; NaN when the plant sent none).
+    pub sdot_true_rad_s: Vec<f64>,
+    /// Measured motor position θ [motor rad] as published (what frictiond used for Δθ).
+    pub theta_motor_rad: Vec<f64>,
+    /// Measured motor velocity ω_m [motor rad/s] as published.
+    pub omega_motor_rad_s: Vec<f64>,
+    /// τ_des [Nm].
+    pub tau_des_nm: Vec<f64>,
+    /// τ̂_F after clip, kfc and LPF [Nm] (DaemonStatus of the newest daemon tick; in lockstep exactly
+    /// the daemon's output for the previous row's state, i.e. row k holds τ̂_F(state k − 1)). For the
+    /// oracle: its compensation with the same one-row lag (row k holds the term added for state
+    /// k − 1; the term for state k is inside row k's τ_des).
+    pub tau_f_hat_nm: Vec<f64>,
+    /// True friction τ_F [Nm] (SimTruth).
+    pub tau_f_true_nm: Vec<f64>,
+    /// Current the plant applied [A] (SimTruth).
+    pub i_applied_a: Vec<f64>,
+    /// External torque requested [Nm].
+    pub tau_ext_nm: Vec<f64>,
+    /// Daemon flags per tick (DaemonStatus::joint_flags).
+    pub flags: Vec<u32>,
+}
+
+/// Everything recorded in a trial.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct TrialTrace {
+    /// One trace per planned joint, in plan order.
+    pub joints: Vec<JointTrace>,
+    /// Ticks run.
+    pub ticks: u64,
+    /// Wall-clock seconds of the control loop (without process start-up).
+    pub loop_wall_s: f64,
+    /// Wall-clock seconds including start-up and tear-down.
+    pub total_wall_s: f64,
+}
+
+/// Waits for a value with `accept` true, up to `timeout`.
+fn wait_for<T: std::fmt::Debug + Copy + iceoryx2::prelude::ZeroCopySend + 'static>(
+    inbox: &Inbox<T>,
+    timeout: Duration,
+    accept: impl Fn(&T) -> bool,
+) -> anyhow::Result<Option<T>> {
+    let deadline = Instant::now() + timeout;
+    loop {
+        if let Some(v) = inbox.latest()?
+            && accept(&v)
+        {
+            return Ok(Some(v));
+        }
+        let now = Instant::now();
+        if now >= deadline || interrupted() {
+            return Ok(None);
+        }
+        inbox.wait((deadline - now).min(Duration::from_millis(20)))?;
+    }
+}
+
+/// Runs one trial through real processes (see the module doc) with default [`TrialOptions`].
+pub fn run_trial(
+    bins: &Binaries,
+    setups: &[JointSetup; 2],
+    spec: &TrialSpec,
+) -> anyhow::Result<TrialTrace> {
+    run_trial_with(bins, setups, spec, &TrialOptions::default())
+}
+
+/// Runs one trial through real processes (see the module doc).
+pub fn run_trial_with(
+    bins: &Binaries,
+    setups: &[JointSetup; 2],
+    spec: &TrialSpec,
+    opts: &TrialOptions,
+) -> anyhow::Result<TrialTrace> {
+    let started = Instant::now();
+    for p in &spec.joints {
+        anyhow::ensure!(
+            p.index < 2,
+            "joint index {} (0 = knee, 1 = ankle_roll)",
+            p.index
+        );
+        anyhow::ensure!(
+            !(p.model == FrictionModel::Oracle
+                && (spec.mode != Mode::Lockstep || spec.raw_friction)),
+            "the oracle runs in lockstep only, with the shipped law (it pairs each request with the \
+             SimTruth of the state it answers)"
+        );
+    }
+    let mut session = Session::new()?;
+    if std::env::var_os("FRICTL_KEEP_RUN_DIR").is_some() {
+        session.keep_dir(true);
+        eprintln!("run directory kept: {}", session.dir.display());
+    }
+    let node = Ipc::open(&session.ipc, "experiment")?;
+    let js_ch = node.joint_states()?;
+    let js_in = js_ch.inbox()?;
+    let truth_in = node.sim_truth()?.inbox()?;
+    let status_in = node.daemon_status()?.inbox()?;
+    let req_ch = node.torque_request()?;
+    let req_out = req_ch.outbox()?;
+    let dist_out = node.sim_disturbance()?.outbox()?;
+    // also create the command service so the daemon and plant agree on it from the start
+    let _cmd_ch = node.motor_current_command()?;
+
+    let mut daemon_joints = vec![];
+    let mut initial = [0.0; 2];
+    for (i, s) in setups.iter().enumerate() {
+        let plan = spec.joints.iter().find(|p| p.index == i);
+        initial[i] = plan.map_or(s.params.initial_s_rad, |p| p.reference.start_rad());
+        daemon_joints.push(DaemonJoint {
+            name: s.params.joint.clone(),
+            index: i,
+            gear_ratio: s.params.gear_ratio_signed,
+            kt_nm_per_a: s.params.kt_nm_per_a,
+            model: plan.map_or(FrictionModel::None, |p| p.model.clone()),
+            delta_theta_offset_motor_rad: spec.pinn_delta_theta_offset_motor_rad[i],
+            kfc: spec.kfc[i],
+            lpf: opts.lpf[i],
+        });
+    }
+    session.start_daemon(bins, spec.mode, &daemon_joints, spec.raw_friction, || {
+        req_ch.subscriber_count()
+    })?;
+    session.start_plant(
+        bins,
+        spec.mode,
+        &PlantSpec {
+            seed: spec.seed,
+            initial_pose_rad: initial,
+            sets: spec.sets.clone(),
+        },
+    )?;
+
+    let ctrls: Vec<ComputedTorque<&dyn LinkDynamics>> = spec
+        .joints
+        .iter()
+        .map(|p| ComputedTorque {
+            extra_inertia_kgm2: if opts.rotor_inertia_in_m {
+                setups[p.index].params.j_eq_kgm2()
+            } else {
+                0.0
+            },
+            ..ComputedTorque::paper(setups[p.index].link.as_ref(), p.kp_per_s2)
+        })
+        .collect();
+    let laws: Vec<LawSettings> = spec
+        .joints
+        .iter()
+        .map(|p| {
+            LawSettings::shipped(
+                &setups[p.index].params.joint,
+                spec.kfc[p.index],
+                opts.lpf[p.index],
+            )
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let mut traces: Vec<JointTrace> = spec
+        .joints
+        .iter()
+        .enumerate()
+        .map(|(k, p)| JointTrace {
+            index: p.index,
+            name: setups[p.index].params.joint.clone(),
+            kp_per_s2: p.kp_per_s2,
+            model: p.model.label().to_owned(),
+            kfc: if p.model == FrictionModel::None {
+                0.0
+            } else if spec.raw_friction {
+                1.0
+            } else {
+                laws[k].kfc
+            },
+            ..JointTrace::default()
+        })
+        .collect();
+    let mut oracles: Vec<Option<OracleCompensation>> = spec
+        .joints
+        .iter()
+        .zip(&laws)
+        .map(|(p, law)| {
+            (p.model == FrictionModel::Oracle)
+                .then(|| OracleCompensation::new(*law))
+                .transpose()
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let mut oracle_prev = vec![0.0f64; spec.joints.len()];
+    let enable_mask = spec.joints.iter().fold(0u64, |m, p| m | (1u64 << p.index));
+
+    let loop_start = Instant::now();
+    let mut seq0: Option<u64> = None;
+    let mut last_seq = 0u64;
+    let mut truth_ok = true;
+    let mut status: Option<DaemonStatus> = None;
+    let mut last_ext = [0.0f64; 2];
+    let mut req_seq = 0u64;
+    let mut dist_seq = 0u64;
+    let mut ticks = 0u64;
+    loop {
+        if interrupted() {
+            bail!("interrupted");
+        }
+        let js: JointStates = match wait_for(&js_in, Duration::from_secs(10), |s| {
+            s.seq > last_seq || seq0.is_none()
+        })? {
+            Some(js) => js,
+            None => {
+                if interrupted() {
+                    bail!("interrupted");
+                }
+                session.check_alive()?;
+                bail!(
+                    "no new JointStates for 10 s after seq {last_seq}; plant log:\n{}\nfrictiond log:\n{}",
+                    session.log_tail("plant"),
+                    session.log_tail("frictiond")
+                );
+            }
+        };
+        let s0 = *seq0.get_or_insert(js.seq);
+        last_seq = js.seq;
+        let t = (js.seq - s0) as f64 * 1e-3;
+        if t >= spec.duration_s {
+            break;
+        }
+        let truth: Option<SimTruth> = if truth_ok {
+            let got = wait_for(&truth_in, Duration::from_millis(500), |tr| tr.seq >= js.seq)?;
+            if got.is_none() && interrupted() {
+                bail!("interrupted");
+            }
+            if got.is_none() {
+                truth_ok = false;
+                eprintln!(
+                    "warning: the plant publishes no SimTruth; true friction is not recorded"
+                );
+            }
+            got
+        } else {
+            None
+        };
+        // In lockstep the daemon publishes one DaemonStatus per tick, right after the command that
+        // answered the previous state; the plant can publish the next state before that status is
+        // out. Wait (briefly) for a status newer than the one recorded last tick, so row k always
+        // holds the daemon's output for state k − 1 (a fixed one-tick lag, no race).
+        let fresh_status = |st: &DaemonStatus| status.is_none_or(|old| st.seq > old.seq);
+        let st_new = if spec.mode == Mode::Lockstep && ticks > 0 {
+            wait_for(&status_in, Duration::from_millis(200), fresh_status)?
+        } else {
+            status_in.latest()?
+        };
+        if let Some(st) = st_new {
+            status = Some(st);
+        }
+        let mut req = TorqueRequest::zeroed();
+        let mut ext = [0.0f64; 2];
+        for (k, p) in spec.joints.iter().enumerate() {
+            let j = p.index;
+            let sp = p.reference.at(t);
+            let mut tau = ctrls[k].tau_des_nm(js.s_rad[j], js.sdot_rad_s[j], &sp);
+            let mut f_hat = status.map_or(f64::NAN, |x| x.tau_f_hat_nm[j]);
+            if let Some(o) = &mut oracles[k] {
+                let tr = truth.with_context(
+                    || "the oracle needs the plant's SimTruth, and the plant published none",
+                )?;
+                anyhow::ensure!(
+                    tr.seq == js.seq,
+                    "oracle: SimTruth seq {} does not match JointStates seq {}",
+                    tr.seq,
+                    js.seq
+                );
+                let comp = o.step(tr.tau_f_true_nm[j], js.sdot_rad_s[j]);
+                tau += comp;
+                f_hat = oracle_prev[k];
+                oracle_prev[k] = comp;
+            }
+            req.tau_des_nm[j] = tau;
+            ext[j] = p.pulse.map_or(0.0, |pl| pl.at(t));
+            let tr = &mut traces[k];
+            tr.t_s.push(t);
+            tr.s_des_rad.push(sp.s_rad);
+            tr.s_rad.push(js.s_rad[j]);
+            tr.sdot_rad_s.push(js.sdot_rad_s[j]);
+            tr.theta_motor_rad.push(js.theta_motor_rad[j]);
+            tr.omega_motor_rad_s.push(js.omega_motor_rad_s[j]);
+            tr.sdot_true_rad_s
+                .push(truth.map_or(f64::NAN, |x| x.sdot_true_rad_s[j]));
+            tr.tau_des_nm.push(tau);
+            tr.tau_ext_nm.push(ext[j]);
+            tr.s_true_rad
+                .push(truth.map_or(f64::NAN, |x| x.s_true_rad[j]));
+            tr.tau_f_true_nm
+                .push(truth.map_or(f64::NAN, |x| x.tau_f_true_nm[j]));
+            tr.i_applied_a
+                .push(truth.map_or(f64::NAN, |x| x.i_applied_a[j]));
+            tr.tau_f_hat_nm.push(f_hat);
+            tr.flags.push(status.map_or(0, |x| x.joint_flags[j]));
+        }
+        if ext != last_ext {
+            dist_seq += 1;
+            let mut d = SimDisturbance::zeroed();
+            d.seq = dist_seq;
+            d.stamp_ns = monotonic_ns();
+            d.n_joints = 2;
+            d.tau_ext_nm[..2].copy_from_slice(&ext);
+            dist_out
+                .publish(&d)
+                .map_err(|e| anyhow::anyhow!("publish SimDisturbance: {e}"))?;
+            last_ext = ext;
+        }
+        req_seq += 1;
+        req.seq = req_seq;
+        req.stamp_ns = monotonic_ns();
+        req.state_seq = js.seq;
+        req.enable_mask = enable_mask;
+        req.n_joints = 2;
+        req_out
+            .publish(&req)
+            .map_err(|e| anyhow::anyhow!("publish TorqueRequest: {e}"))?;
+        ticks += 1;
+    }
+    let loop_wall_s = loop_start.elapsed().as_secs_f64();
+    session.check_alive().context("after the run")?;
+    // Locals drop in reverse order: ports and node first, then the session (children, run dir).
+    Ok(TrialTrace {
+        joints: traces,
+        ticks,
+        loop_wall_s,
+        total_wall_s: started.elapsed().as_secs_f64(),
+    })
+}

@@ -1,0 +1,723 @@
+//! One closed-loop run's processes: the virtual plant and `frictiond` as child processes on a private
+//! iceoryx2 root path and service prefix, torn down (and the shared-memory files removed) on drop.
+//!
+//! What this module **is**: [`Binaries`] (where `frictl` and `frictiond` are), [`DaemonJoint`] /
+//! [`write_daemon_config`] (the per-run `frictiond` TOML, with `kfc`, `max_curr`, the friction clip
+//! and the LPF taken from the shipped `config/ankle_knee.toml`), [`Session`] (spawn plant + daemon,
+//! wait until both are connected, kill + wait + remove the temp dir on drop) and [`interrupted`]
+//! (Ctrl-C / SIGTERM flag registered with signal-hook, polled by the run loop).
+//!
+//! What it is **not**: no control loop (see [`super::run`]), no physics, no daemon logic. Children
+//! get `PR_SET_PDEATHSIG = SIGTERM`, so they also stop if this process is killed outright.
+
+use std::io::{BufRead, BufReader};
+use std::os::unix::process::CommandExt;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, OnceLock};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use frictionless::friction::{CvParams, ScvParams};
+use frictionless_shm_types::IpcConfig;
+
+/// Shipped daemon config whose per-joint `kfc`, `max_curr`, `max_output_friction` and `lpf` the
+/// experiments use.
+pub const ANKLE_KNEE_TOML: &str = include_str!("../../../../config/ankle_knee.toml");
+
+/// The plant presets of every experiment, in payload-index order (knee = 0, ankle_roll = 1).
+pub const PRESETS: [&str; 2] = ["knee", "ankle_roll"];
+
+/// The two executables a run starts.
+#[derive(Clone, Debug)]
+pub struct Binaries {
+    /// `frictl` (serves the plant: `frictl sim serve`).
+    pub frictl: PathBuf,
+    /// `frictiond`.
+    pub frictiond: PathBuf,
+}
+
+impl Binaries {
+    /// `frictl` = this executable; `frictiond` = `$FRICTIOND`, else next to `frictl` (or one
+    /// directory up, for test binaries in `target/*/deps`), else on `PATH`.
+    pub fn locate() -> anyhow::Result<Self> {
+        let me = std::env::current_exe().context("cannot find the running executable")?;
+        Self::with_frictl(me)
+    }
+
+    /// As [`Binaries::locate`] with an explicit `frictl` path (tests pass `CARGO_BIN_EXE_frictl`).
+    pub fn with_frictl(frictl: PathBuf) -> anyhow::Result<Self> {
+        if let Some(p) = std::env::var_os("FRICTIOND") {
+            let p = PathBuf::from(p);
+            anyhow::ensure!(p.is_file(), "$FRICTIOND = {} is not a file", p.display());
+            return Ok(Self {
+                frictl,
+                frictiond: p,
+            });
+        }
+        let mut candidates = vec![];
+        if let Some(dir) = frictl.parent() {
+            candidates.push(dir.join("frictiond"));
+            if let Some(up) = dir.parent() {
+                candidates.push(up.join("frictiond"));
+            }
+        }
+        if let Some(path) = std::env::var_os("PATH") {
+            candidates.extend(std::env::split_paths(&path).map(|d| d.join("frictiond")));
+        }
+        match candidates.iter().find(|p| p.is_file()) {
+            Some(p) => Ok(Self {
+                frictl,
+                frictiond: p.clone(),
+            }),
+            None => bail!(
+                "cannot find the `frictiond` executable (looked next to {} and on PATH; build it with \
+                 `cargo build -p frictiond` or set FRICTIOND=/path/to/frictiond)",
+                frictl.display()
+            ),
+        }
+    }
+}
+
+/// The friction model `frictiond` runs for one joint.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FrictionModel {
+    /// No compensation.
+    None,
+    /// Coulomb–viscous.
+    Cv(CvParams),
+    /// Stribeck–Coulomb–viscous (paper form).
+    Scv(ScvParams),
+    /// PINN weight file (`.fwt`).
+    Pinn(PathBuf),
+    /// Diagnostic bound, not a model a robot can run: frictiond runs `none` for the joint and the
+    /// experiment controller adds the law's kfc·τ_F,true (the plant's true friction from `SimTruth`,
+    /// with frictiond's clip and LPF) to τ_des — see [`super::oracle`]. Lockstep only.
+    Oracle,
+}
+
+impl FrictionModel {
+    /// Short name for tables: `none`, `CV`, `SCV`, `PINN`.
+    pub fn label(&self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::Cv(_) => "CV",
+            Self::Scv(_) => "SCV",
+            Self::Pinn(_) => "PINN",
+            Self::Oracle => ORACLE_LABEL,
+        }
+    }
+}
+
+/// Table/JSON label of [`FrictionModel::Oracle`].
+pub const ORACLE_LABEL: &str = "oracle (true friction)";
+
+/// The τ̂_F low-pass of a joint's law.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Lpf {
+    /// No `lpf` key: τ̂_F unfiltered.
+    Off,
+    /// Butterworth low-pass (`lpf = { order, cutoff_hz }`) at the daemon's 1 kHz.
+    Butterworth {
+        /// Order 1–8.
+        order: usize,
+        /// −3 dB cut-off [Hz].
+        cutoff_hz: f64,
+    },
+}
+
+impl std::fmt::Display for Lpf {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Lpf::Off => write!(f, "off"),
+            Lpf::Butterworth { order, cutoff_hz } => {
+                write!(f, "Butterworth order {order} at {cutoff_hz} Hz")
+            }
+        }
+    }
+}
+
+/// The friction-compensation part of one joint's law as frictiond runs it (the shipped
+/// `config/ankle_knee.toml` values with the experiment's overrides): what the oracle must mimic and
+/// what the report's configuration line shows.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LawSettings {
+    /// kfc.
+    pub kfc: f64,
+    /// Friction clip ±max_output_friction [Nm] (∞ if absent).
+    pub max_output_friction_nm: f64,
+    /// Velocity gate of the clip [rad/s].
+    pub joint_velocity_threshold_rad_s: f64,
+    /// τ̂_F low-pass.
+    pub lpf: Lpf,
+}
+
+impl LawSettings {
+    /// The shipped law of joint `name` with `kfc` / `lpf` overrides (`None` = shipped); the daemon's
+    /// defaults for absent keys (kfc 1, no clip, gate 0, no LPF).
+    pub fn shipped(name: &str, kfc: Option<f64>, lpf: Option<Lpf>) -> anyhow::Result<Self> {
+        let t: toml::Table = shipped_joint_keys(name, false)?
+            .parse()
+            .context("config/ankle_knee.toml: joint keys do not parse")?;
+        let num = |k: &str, default: f64| -> anyhow::Result<f64> {
+            match t.get(k) {
+                None => Ok(default),
+                Some(v) => v
+                    .as_float()
+                    .or_else(|| v.as_integer().map(|i| i as f64))
+                    .with_context(|| {
+                        format!("config/ankle_knee.toml: {name}.{k} = {v} is not a number")
+                    }),
+            }
+        };
+        let shipped_lpf = match t.get("lpf") {
+            None => Lpf::Off,
+            Some(v) => {
+                let order = v
+                    .get("order")
+                    .and_then(|o| o.as_integer())
+                    .and_then(|o| usize::try_from(o).ok())
+                    .with_context(|| format!("config/ankle_knee.toml: {name}.lpf.order"))?;
+                let cutoff_hz = v
+                    .get("cutoff_hz")
+                    .and_then(|c| c.as_float())
+                    .with_context(|| format!("config/ankle_knee.toml: {name}.lpf.cutoff_hz"))?;
+                Lpf::Butterworth { order, cutoff_hz }
+            }
+        };
+        Ok(Self {
+            kfc: match kfc {
+                Some(k) => k,
+                None => num("kfc", 1.0)?,
+            },
+            max_output_friction_nm: num("max_output_friction", f64::INFINITY)?,
+            joint_velocity_threshold_rad_s: num("joint_velocity_threshold_rad_s", 0.0)?,
+            lpf: lpf.unwrap_or(shipped_lpf),
+        })
+    }
+
+    /// One line for reports: `kfc 0.7, clip ±8 Nm, τ̂_F LPF Butterworth order 2 at 30 Hz`.
+    pub fn describe(&self) -> String {
+        format!(
+            "kfc {}, clip ±{} Nm, τ̂_F LPF {}",
+            self.kfc, self.max_output_friction_nm, self.lpf
+        )
+    }
+}
+
+/// One `[[joint]]` of a per-run daemon config.
+#[derive(Clone, Debug)]
+pub struct DaemonJoint {
+    /// Joint name (the preset's `plant.joint`, e.g. `l_knee`).
+    pub name: String,
+    /// Payload index.
+    pub index: usize,
+    /// Signed gear ratio (from the plant preset).
+    pub gear_ratio: f64,
+    /// Torque constant [Nm/A] (from the plant preset).
+    pub kt_nm_per_a: f64,
+    /// Friction model.
+    pub model: FrictionModel,
+    /// For a PINN: the fixed Δθ offset θ_off [motor rad] frictiond keeps across enables
+    /// (`delta_theta_offset_motor_rad`); `None` = latch at enable.
+    pub delta_theta_offset_motor_rad: Option<f64>,
+    /// `kfc` instead of the shipped config's (`None` = shipped).
+    pub kfc: Option<f64>,
+    /// τ̂_F low-pass instead of the shipped config's (`None` = shipped).
+    pub lpf: Option<Lpf>,
+}
+
+/// Loop trigger of a run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mode {
+    /// One tick per message through plant → controller → daemon → plant (fast, deterministic).
+    Lockstep,
+    /// 1 kHz wall clock: the plant on absolute deadlines, the daemon on its clock.
+    Realtime,
+}
+
+fn toml_num(v: f64) -> String {
+    if v == f64::INFINITY {
+        "inf".into()
+    } else {
+        format!("{v:e}")
+    }
+}
+
+/// The `[[joint]]` keys of `config/ankle_knee.toml` for `name` that the experiments reuse, as TOML
+/// lines (`kfc`, `max_curr`, `max_output_friction`, `joint_velocity_threshold_rad_s`, `lpf`).
+/// With `raw_friction`, only `max_curr` is taken and `kfc = 1` (no clip, no LPF): the daemon's τ̂_F
+/// is then the model's output itself (used to check online against offline inference).
+fn shipped_joint_keys(name: &str, raw_friction: bool) -> anyhow::Result<String> {
+    let t: toml::Table = ANKLE_KNEE_TOML
+        .parse()
+        .context("config/ankle_knee.toml does not parse")?;
+    let joints = t
+        .get("joint")
+        .and_then(|v| v.as_array())
+        .context("config/ankle_knee.toml: no [[joint]]")?;
+    let j = joints
+        .iter()
+        .filter_map(|v| v.as_table())
+        .find(|j| j.get("name").and_then(|n| n.as_str()) == Some(name))
+        .with_context(|| format!("config/ankle_knee.toml: no [[joint]] named `{name}`"))?;
+    let mut out = String::new();
+    let keys: &[&str] = if raw_friction {
+        out += "kfc = 1.0\n";
+        &["max_curr"]
+    } else {
+        &[
+            "kfc",
+            "max_curr",
+            "max_output_friction",
+            "joint_velocity_threshold_rad_s",
+            "lpf",
+        ]
+    };
+    for &key in keys {
+        if let Some(v) = j.get(key) {
+            // `Value`'s Display writes inline tables (`lpf = { … }`), valid inside `[[joint]]`.
+            out += &format!("{key} = {v}\n");
+        }
+    }
+    Ok(out)
+}
+
+/// `kfc` of `name` in `config/ankle_knee.toml` (1.0 if absent, the daemon's default).
+pub fn shipped_kfc(name: &str) -> f64 {
+    shipped_joint_keys(name, false)
+        .ok()
+        .and_then(|s| s.parse::<toml::Table>().ok())
+        .and_then(|t| t.get("kfc").and_then(|v| v.as_float()))
+        .unwrap_or(1.0)
+}
+
+/// Writes a `frictiond` config for one run to `path` and returns its text. `raw_friction`: see
+/// [`shipped_joint_keys`].
+pub fn write_daemon_config(
+    path: &Path,
+    ipc: &IpcConfig,
+    mode: Mode,
+    joints: &[DaemonJoint],
+    raw_friction: bool,
+) -> anyhow::Result<String> {
+    let root = ipc
+        .root_path
+        .as_ref()
+        .context("a run needs its own iceoryx2 root path")?;
+    let (trigger, stale) = match mode {
+        // Lockstep runs faster than real time but may pause on a busy machine: a stamp-age staleness
+        // of 5 ms would inject random zero-current ticks, so allow 1 s.
+        Mode::Lockstep => ("lockstep", 1000),
+        Mode::Realtime => ("clock", 5),
+    };
+    let mut s = format!(
+        "# Written by `frictl experiment` for one run.\n[loop]\nperiod_us = 1000\nstatus_every_ticks = 1\n\
+         ready_after_ticks = 1\ntrigger = \"{trigger}\"\nlockstep_wait_request = true\nlockstep_timeout_ms = 1000\n\n\
+         [backend]\nkind = \"shm\"\nservice_prefix = {:?}\nroot_path = {:?}\n\n\
+         [safety]\nstale_after_ticks = {stale}\non_stale = \"zero\"\n",
+        ipc.service_prefix,
+        root.display().to_string(),
+    );
+    for j in joints {
+        s += &format!(
+            "\n[[joint]]\nname = {:?}\nindex = {}\ngear_ratio = {}\nkt = {}\n",
+            j.name,
+            j.index,
+            toml_num(j.gear_ratio),
+            toml_num(j.kt_nm_per_a)
+        );
+        let shipped = shipped_joint_keys(&j.name, raw_friction)?;
+        // overridden keys are dropped from the shipped lines and written after them
+        let drop_kfc = j.kfc.is_some();
+        let drop_lpf = j.lpf.is_some() && !raw_friction;
+        s += &shipped
+            .lines()
+            .filter(|l| {
+                let overridden =
+                    (drop_kfc && l.starts_with("kfc ")) || (drop_lpf && l.starts_with("lpf "));
+                !overridden
+            })
+            .map(|l| format!("{l}\n"))
+            .collect::<String>();
+        if let Some(kfc) = j.kfc {
+            s += &format!("kfc = {}\n", toml_num(kfc));
+        }
+        if let (Some(Lpf::Butterworth { order, cutoff_hz }), false) = (j.lpf, raw_friction) {
+            s += &format!(
+                "lpf = {{ order = {order}, cutoff_hz = {} }}\n",
+                toml_num(cutoff_hz)
+            );
+        }
+        match &j.model {
+            // the oracle's compensation is added by the controller to τ_des
+            FrictionModel::None | FrictionModel::Oracle => s += "friction_model = \"none\"\n",
+            FrictionModel::Cv(p) => {
+                s += &format!(
+                    "friction_model = \"coulomb_viscous\"\nkc = {}\nka = {}\nkv = {}\n",
+                    toml_num(p.kc),
+                    toml_num(p.ka),
+                    toml_num(p.kv)
+                )
+            }
+            FrictionModel::Scv(p) => {
+                s += &format!(
+                    "friction_model = \"coulomb_viscous_stribeck\"\nkc = {}\nka = {}\nkv = {}\nks = {}\nvs = {}\nalpha = {}\n",
+                    toml_num(p.kc),
+                    toml_num(p.ka),
+                    toml_num(p.kv),
+                    toml_num(p.ks),
+                    toml_num(p.vs),
+                    toml_num(p.alpha)
+                )
+            }
+            FrictionModel::Pinn(file) => {
+                let abs = std::path::absolute(file)
+                    .with_context(|| format!("PINN file {}", file.display()))?;
+                s += &format!(
+                    "friction_model = \"pinn\"\nmodel = {:?}\nwarmup = \"zero_pad\"\n",
+                    abs.display().to_string()
+                );
+                if let Some(off) = j.delta_theta_offset_motor_rad {
+                    s += &format!("delta_theta_offset_motor_rad = {}\n", toml_num(off));
+                }
+            }
+        }
+    }
+    std::fs::write(path, &s).with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(s)
+}
+
+/// Set by SIGINT / SIGTERM once [`install_signal_flag`] ran.
+static INTERRUPT: OnceLock<Arc<AtomicBool>> = OnceLock::new();
+
+/// Registers SIGINT and SIGTERM to set the interrupt flag (idempotent). The run loop polls
+/// [`interrupted`] and returns an error; dropping the [`Session`] then stops the children.
+pub fn install_signal_flag() -> anyhow::Result<()> {
+    if INTERRUPT.get().is_some() {
+        return Ok(());
+    }
+    let flag = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(sig, flag.clone())
+            .with_context(|| format!("cannot register signal {sig}"))?;
+    }
+    let _ = INTERRUPT.set(flag);
+    Ok(())
+}
+
+/// Whether SIGINT / SIGTERM arrived.
+pub fn interrupted() -> bool {
+    INTERRUPT.get().is_some_and(|f| f.load(Ordering::Relaxed))
+}
+
+/// A unique private directory + service prefix for one run.
+fn unique_ipc() -> anyhow::Result<IpcConfig> {
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+    let id = format!(
+        "flx_{}_{}_{}",
+        std::process::id(),
+        n,
+        frictionless_shm_types::monotonic_ns() % 1_000_000_000
+    );
+    let root = std::env::temp_dir().join(&id);
+    std::fs::create_dir_all(&root)
+        .with_context(|| format!("cannot create run directory {}", root.display()))?;
+    Ok(IpcConfig::new(Some(&root), &id))
+}
+
+/// A started child with its log file.
+struct Proc {
+    name: &'static str,
+    child: Child,
+    log: PathBuf,
+}
+
+/// What the plant is started with.
+#[derive(Clone, Debug)]
+pub struct PlantSpec {
+    /// Seed.
+    pub seed: u64,
+    /// Initial joint angle per preset index [rad].
+    pub initial_pose_rad: [f64; 2],
+    /// `--set KEY=VALUE` overrides passed to every preset.
+    pub sets: Vec<String>,
+}
+
+/// The processes of one run (see the module doc). Dropping it stops them and removes the run
+/// directory (iceoryx2 root path, config, logs).
+pub struct Session {
+    /// The run's iceoryx2 configuration (unique root path and prefix).
+    pub ipc: IpcConfig,
+    /// The run directory (= the iceoryx2 root path).
+    pub dir: PathBuf,
+    procs: Vec<Proc>,
+    keep_dir: bool,
+}
+
+impl Session {
+    /// Creates the run directory and IPC names; starts nothing yet.
+    pub fn new() -> anyhow::Result<Self> {
+        let ipc = unique_ipc()?;
+        let dir = ipc.root_path.clone().expect("unique_ipc sets a root");
+        Ok(Self {
+            ipc,
+            dir,
+            procs: vec![],
+            keep_dir: false,
+        })
+    }
+
+    /// Keeps the run directory (logs, config) after drop, for debugging.
+    pub fn keep_dir(&mut self, keep: bool) {
+        self.keep_dir = keep;
+    }
+
+    fn spawn(&mut self, name: &'static str, cmd: &mut Command) -> anyhow::Result<Arc<AtomicBool>> {
+        let log = self.dir.join(format!("{name}.log"));
+        // SAFETY: prctl is async-signal-safe; the closure touches no allocator or lock.
+        unsafe {
+            cmd.pre_exec(|| {
+                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+                Ok(())
+            });
+        }
+        let mut child = cmd
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .env(
+                "RUST_LOG",
+                std::env::var("RUST_LOG").unwrap_or_else(|_| "warn".into()),
+            )
+            .spawn()
+            .with_context(|| format!("cannot start {name} ({:?})", cmd.get_program()))?;
+        let stderr = child.stderr.take().expect("piped");
+        let log_file = std::fs::File::create(&log)
+            .with_context(|| format!("cannot create {}", log.display()))?;
+        let ready = Arc::new(AtomicBool::new(false));
+        let ready2 = ready.clone();
+        self.procs.push(Proc { name, child, log });
+        std::thread::spawn(move || {
+            use std::io::Write;
+            let mut w = std::io::BufWriter::new(log_file);
+            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+                if line.contains("ready") {
+                    ready2.store(true, Ordering::Release);
+                }
+                let _ = writeln!(w, "{line}");
+                let _ = w.flush();
+            }
+        });
+        Ok(ready)
+    }
+
+    /// Last lines of a child's log, for error messages.
+    pub fn log_tail(&self, name: &str) -> String {
+        self.procs
+            .iter()
+            .find(|p| p.name == name)
+            .and_then(|p| std::fs::read_to_string(&p.log).ok())
+            .map(|s| {
+                let lines: Vec<&str> = s.lines().collect();
+                lines[lines.len().saturating_sub(15)..].join("\n")
+            })
+            .unwrap_or_default()
+    }
+
+    /// Error if a child has exited.
+    pub fn check_alive(&mut self) -> anyhow::Result<()> {
+        for i in 0..self.procs.len() {
+            if let Some(status) = self.procs[i].child.try_wait()? {
+                let name = self.procs[i].name;
+                // let the stderr reader thread drain the pipe into the log first
+                std::thread::sleep(Duration::from_millis(100));
+                bail!(
+                    "{name} exited ({status}); its log:\n{}",
+                    self.log_tail(name)
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// Starts `frictiond` on a config written for this run (see [`write_daemon_config`]) and waits
+    /// until it subscribed to the torque requests (`probe` returns the subscriber count).
+    pub fn start_daemon(
+        &mut self,
+        bins: &Binaries,
+        mode: Mode,
+        joints: &[DaemonJoint],
+        raw_friction: bool,
+        probe: impl Fn() -> usize,
+    ) -> anyhow::Result<()> {
+        let cfg = self.dir.join("frictiond.toml");
+        write_daemon_config(&cfg, &self.ipc, mode, joints, raw_friction)?;
+        self.spawn(
+            "frictiond",
+            Command::new(&bins.frictiond).arg("--config").arg(&cfg),
+        )?;
+        self.wait_until("frictiond", Duration::from_secs(20), || probe() >= 1)
+    }
+
+    /// Starts the plant (`frictl sim serve --preset knee,ankle_roll --backend shm …`) and waits for
+    /// its "ready" line.
+    pub fn start_plant(
+        &mut self,
+        bins: &Binaries,
+        mode: Mode,
+        spec: &PlantSpec,
+    ) -> anyhow::Result<()> {
+        let mut cmd = Command::new(&bins.frictl);
+        cmd.args([
+            "sim",
+            "serve",
+            "--preset",
+            &PRESETS.join(","),
+            "--backend",
+            "shm",
+        ])
+        .arg("--prefix")
+        .arg(&self.ipc.service_prefix)
+        .arg("--root-path")
+        .arg(&self.dir)
+        .arg("--seed")
+        .arg(spec.seed.to_string())
+        // `=` form: the value starts with '-' for negative angles
+        .arg(format!(
+            "--initial-pose-rad={},{}",
+            spec.initial_pose_rad[0], spec.initial_pose_rad[1]
+        ))
+        .arg("--lockstep-subscribers=2");
+        if mode == Mode::Lockstep {
+            cmd.arg("--lockstep");
+        }
+        for s in &spec.sets {
+            cmd.arg(format!("--set={s}"));
+        }
+        let flag = self.spawn("plant", &mut cmd)?;
+        self.wait_until("plant", Duration::from_secs(20), || {
+            flag.load(Ordering::Acquire)
+        })
+    }
+
+    fn wait_until(
+        &mut self,
+        name: &str,
+        timeout: Duration,
+        cond: impl Fn() -> bool,
+    ) -> anyhow::Result<()> {
+        let t0 = Instant::now();
+        while !cond() {
+            if interrupted() {
+                bail!("interrupted");
+            }
+            self.check_alive()?;
+            if t0.elapsed() > timeout {
+                bail!(
+                    "{name} did not become ready within {timeout:?}; its log:\n{}",
+                    self.log_tail(name)
+                );
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        Ok(())
+    }
+
+    /// Stops every child: SIGTERM, up to 2 s grace, then SIGKILL; always waits (no zombies).
+    pub fn stop(&mut self) {
+        for p in self.procs.iter_mut().rev() {
+            if let Ok(None) = p.child.try_wait() {
+                // SAFETY: plain kill(2) on our own child's pid.
+                unsafe { libc::kill(p.child.id() as libc::pid_t, libc::SIGTERM) };
+            }
+        }
+        let t0 = Instant::now();
+        for p in self.procs.iter_mut().rev() {
+            loop {
+                match p.child.try_wait() {
+                    Ok(Some(_)) | Err(_) => break,
+                    Ok(None) if t0.elapsed() > Duration::from_secs(2) => {
+                        let _ = p.child.kill();
+                        let _ = p.child.wait();
+                        break;
+                    }
+                    Ok(None) => std::thread::sleep(Duration::from_millis(2)),
+                }
+            }
+        }
+        self.procs.clear();
+    }
+}
+
+impl Drop for Session {
+    fn drop(&mut self) {
+        self.stop();
+        if !self.keep_dir {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn joint_table(text: &str) -> toml::Table {
+        let t: toml::Table = text.parse().expect("the written config parses");
+        t["joint"].as_array().unwrap()[0]
+            .as_table()
+            .unwrap()
+            .clone()
+    }
+
+    fn written(kfc: Option<f64>, lpf: Option<Lpf>, model: FrictionModel) -> toml::Table {
+        let dir = std::env::temp_dir().join(format!("loop4_cfg_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let ipc = IpcConfig::new(Some(&dir), "t");
+        let j = DaemonJoint {
+            name: "l_ankle_roll".into(),
+            index: 1,
+            gear_ratio: -160.0,
+            kt_nm_per_a: 0.07,
+            model,
+            delta_theta_offset_motor_rad: None,
+            kfc,
+            lpf,
+        };
+        let text =
+            write_daemon_config(&dir.join("f.toml"), &ipc, Mode::Lockstep, &[j], false).unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
+        joint_table(&text)
+    }
+
+    #[test]
+    fn lpf_and_kfc_overrides_replace_the_shipped_keys() {
+        let shipped = written(None, None, FrictionModel::None);
+        let law = LawSettings::shipped("l_ankle_roll", None, None).unwrap();
+        assert_eq!(shipped.get("lpf").is_some(), law.lpf != Lpf::Off);
+        let off = written(Some(0.95), Some(Lpf::Off), FrictionModel::None);
+        assert!(off.get("lpf").is_none(), "{off:?}");
+        assert_eq!(off["kfc"].as_float(), Some(0.95));
+        let ten = written(
+            None,
+            Some(Lpf::Butterworth {
+                order: 3,
+                cutoff_hz: 10.0,
+            }),
+            FrictionModel::None,
+        );
+        assert_eq!(ten["lpf"]["cutoff_hz"].as_float(), Some(10.0));
+        assert_eq!(ten["lpf"]["order"].as_integer(), Some(3));
+        assert_eq!(ten["kfc"].as_float(), Some(law.kfc));
+        // the oracle's joint runs no model in frictiond
+        let oracle = written(None, None, FrictionModel::Oracle);
+        assert_eq!(oracle["friction_model"].as_str(), Some("none"));
+        // LawSettings follows the same overrides
+        let l = LawSettings::shipped("l_ankle_roll", Some(0.5), Some(Lpf::Off)).unwrap();
+        assert_eq!((l.kfc, l.lpf), (0.5, Lpf::Off));
+        assert_eq!(l.max_output_friction_nm, law.max_output_friction_nm);
+    }
+}

@@ -1,0 +1,363 @@
+//! End-to-end tests of the model subcommands of the real `frictl` binary: import, inspect,
+//! predict, export, convert, and their error messages.
+
+use crate::interop_common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use interop_common::*;
+use onnx_protobuf::Message;
+
+fn frictl(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_frictl"))
+        .args(args)
+        .output()
+        .expect("run frictl")
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A fresh scratch directory under the target dir, unique per test.
+fn scratch(test: &str) -> PathBuf {
+    let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("cli_models_{test}"));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn import_anchor(dir: &Path) -> PathBuf {
+    let out = dir.join("l_ankle_roll.fwt");
+    let o = frictl(&[
+        "import",
+        "onnx",
+        s(&anchor_onnx()),
+        "-o",
+        s(&out),
+        "--features",
+        "joint_pos_motor_pos",
+        "--joint",
+        "l_ankle_roll",
+        "--gear-ratio",
+        "-160",
+        "--kt",
+        "0.066468037",
+    ]);
+    assert!(o.status.success(), "import failed: {}", stderr(&o));
+    out
+}
+
+/// The anchor JSON's inputs as CSV, and the expected outputs.
+fn anchor_cases_csv(dir: &Path) -> (PathBuf, Vec<f32>) {
+    let json = anchor_json();
+    let mut csv = String::new();
+    let mut want = Vec::new();
+    for c in json["cases"].as_array().unwrap() {
+        let row: Vec<String> = f32s(&c["input"]).iter().map(|v| format!("{v:?}")).collect();
+        csv.push_str(&row.join(","));
+        csv.push('\n');
+        want.push(c["output"].as_f64().unwrap() as f32);
+    }
+    let p = dir.join("cases.csv");
+    std::fs::write(&p, csv).unwrap();
+    (p, want)
+}
+
+fn parse_outputs(o: &Output) -> Vec<f32> {
+    stdout(o)
+        .lines()
+        .map(|l| l.trim().parse().expect("float line"))
+        .collect()
+}
+
+#[test]
+fn import_then_inspect_shows_the_ergocub_model() {
+    let dir = scratch("inspect");
+    let fwt = import_anchor(&dir);
+    let o = frictl(&["inspect", s(&fwt)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    assert!(text.contains("50 → 450 → 210 → 280 → 1"), "{text}");
+    assert!(text.contains("l_ankle_roll"), "{text}");
+    assert!(text.contains("-160"), "{text}");
+    assert!(text.contains(": ok"), "{text}");
+
+    let o = frictl(&["inspect", s(&fwt), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["n_inputs"], 50);
+    assert_eq!(v["sizes"], serde_json::json!([50, 450, 210, 280, 1]));
+    assert_eq!(v["joint_name"], "l_ankle_roll");
+    assert_eq!(v["gear_ratio"], -160.0);
+    assert_eq!(v["crc_ok"], true);
+    assert_eq!(v["features"]["history"], 25);
+}
+
+#[test]
+fn predict_reproduces_the_reference_outputs_from_fwt_and_onnx() {
+    let dir = scratch("predict");
+    let fwt = import_anchor(&dir);
+    let (csv, want) = anchor_cases_csv(&dir);
+    for model in [fwt, anchor_onnx()] {
+        let o = frictl(&["predict", s(&model), "--input", s(&csv)]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let got = parse_outputs(&o);
+        assert_eq!(got.len(), want.len());
+        for (j, (g, w)) in got.iter().zip(&want).enumerate() {
+            assert_close(*g, *w, 1e-5, 1e-6, &format!("{} case {j}", model.display()));
+        }
+    }
+}
+
+#[test]
+fn corrupt_file_fails_naming_the_file() {
+    let dir = scratch("corrupt");
+    let fwt = import_anchor(&dir);
+    let mut bytes = std::fs::read(&fwt).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0x40;
+    let bad = dir.join("flipped.fwt");
+    std::fs::write(&bad, &bytes).unwrap();
+    for args in [
+        vec!["inspect", s(&bad)],
+        vec!["export", "onnx", s(&bad), "-o", "/dev/null"],
+    ] {
+        let o = frictl(&args);
+        assert!(!o.status.success(), "{args:?} should fail");
+        let err = stderr(&o);
+        assert!(err.contains("flipped.fwt"), "{args:?}: {err}");
+        assert!(err.to_lowercase().contains("crc"), "{args:?}: {err}");
+    }
+    let (csv, _) = anchor_cases_csv(&dir);
+    let o = frictl(&["predict", s(&bad), "--input", s(&csv)]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("flipped.fwt"), "{}", stderr(&o));
+
+    let junk = dir.join("junk.fwt");
+    std::fs::write(&junk, b"hello").unwrap();
+    let o = frictl(&["inspect", s(&junk)]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("junk.fwt"), "{}", stderr(&o));
+}
+
+#[test]
+fn unsupported_op_error_names_op_and_node() {
+    let dir = scratch("unsupported");
+    let nodes = vec![
+        node(
+            "Gemm",
+            "/l0/Gemm",
+            &["input", "w0", "b0"],
+            &["h0"],
+            vec![attr_i("transB", 1)],
+        ),
+        node("Sigmoid", "/act/Sigmoid_3", &["h0"], &["a0"], vec![]),
+        node(
+            "Gemm",
+            "/l1/Gemm",
+            &["a0", "w1", "b1"],
+            &["output"],
+            vec![attr_i("transB", 1)],
+        ),
+    ];
+    let inits = vec![
+        tensor("w0", &[4, 6], &random(1, 24, 1.0), false),
+        tensor("b0", &[4], &random(2, 4, 1.0), false),
+        tensor("w1", &[1, 4], &random(3, 4, 1.0), false),
+        tensor("b1", &[1], &random(4, 1, 1.0), false),
+    ];
+    let p = dir.join("sigmoid.onnx");
+    std::fs::write(
+        &p,
+        model(nodes, inits, 6, &["output"], 13)
+            .write_to_bytes()
+            .unwrap(),
+    )
+    .unwrap();
+    let o = frictl(&[
+        "import",
+        "onnx",
+        s(&p),
+        "-o",
+        s(&dir.join("x.fwt")),
+        "--features",
+        "motor_vel_joint_vel",
+        "--joint",
+        "j",
+        "--gear-ratio",
+        "100",
+        "--kt",
+        "0.1",
+    ]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(
+        err.contains("Sigmoid") && err.contains("/act/Sigmoid_3") && err.contains("sigmoid.onnx"),
+        "{err}"
+    );
+    assert!(!dir.join("x.fwt").exists());
+}
+
+#[test]
+fn history_is_inferred_or_checked() {
+    let dir = scratch("history");
+    let anchor = anchor_onnx();
+    let base = [
+        "import",
+        "onnx",
+        s(&anchor),
+        "--features",
+        "delta_theta_joint_vel",
+        "--joint",
+        "j",
+        "--gear-ratio",
+        "-160",
+        "--kt",
+        "0.07",
+    ];
+    let out = dir.join("h.fwt");
+    // Explicit matching history.
+    let mut a = base.to_vec();
+    a.extend(["-o", s(&out), "--history", "25"]);
+    let o = frictl(&a);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // Mismatch: 2·20 ≠ 50.
+    let mut a = base.to_vec();
+    a.extend(["-o", s(&out), "--history", "20"]);
+    let o = frictl(&a);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--history 20"), "{}", stderr(&o));
+    // 50 inputs cannot be 2H + 1 (temperature).
+    let mut a = base.to_vec();
+    a.extend(["-o", s(&out), "--temperature"]);
+    let o = frictl(&a);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("cannot infer the history"),
+        "{}",
+        stderr(&o)
+    );
+    // Missing required metadata is named.
+    let o = frictl(&[
+        "import",
+        "onnx",
+        s(&anchor_onnx()),
+        "-o",
+        s(&out),
+        "--joint",
+        "j",
+        "--gear-ratio",
+        "1",
+        "--kt",
+        "1",
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--features"), "{}", stderr(&o));
+}
+
+#[test]
+fn export_and_reimport_keep_outputs_and_metadata() {
+    let dir = scratch("export");
+    let fwt = import_anchor(&dir);
+    let (csv, want) = anchor_cases_csv(&dir);
+    for (fmt, file, extra) in [
+        ("onnx", "m.onnx", vec![]),
+        ("onnx", "m_diag.onnx", vec!["--norm", "diagonal-gemm"]),
+        ("safetensors", "m.safetensors", vec![]),
+    ] {
+        let out = dir.join(file);
+        let mut a = vec!["export", fmt, s(&fwt), "-o", s(&out)];
+        a.extend(extra);
+        let o = frictl(&a);
+        assert!(o.status.success(), "{}", stderr(&o));
+        // predict straight from the exported file.
+        let o = frictl(&["predict", s(&out), "--input", s(&csv)]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        for (g, w) in parse_outputs(&o).iter().zip(&want) {
+            assert_close(*g, *w, 1e-5, 1e-6, file);
+        }
+        // Re-import without flags: the metadata travels with the file.
+        let back = dir.join(format!("{file}.fwt"));
+        let o = frictl(&["import", fmt, s(&out), "-o", s(&back)]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let o = frictl(&["inspect", s(&back), "--json"]);
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(v["joint_name"], "l_ankle_roll");
+        assert_eq!(v["gear_ratio"], -160.0);
+        assert_eq!(v["kt_nm_per_a"], 0.066468037);
+        assert_eq!(v["features"]["set"], "joint_pos_motor_pos");
+    }
+}
+
+#[test]
+fn convert_to_f16_reports_a_small_change() {
+    let dir = scratch("convert");
+    let fwt = import_anchor(&dir);
+    let out = dir.join("f16.fwt");
+    let o = frictl(&[
+        "convert",
+        s(&fwt),
+        "-o",
+        s(&out),
+        "--dtype",
+        "f16",
+        "--samples",
+        "200",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    // "max |Δoutput| on 200 random inputs: 1.234e-3 Nm (…)"
+    let diff: f32 = text
+        .split("random inputs: ")
+        .nth(1)
+        .and_then(|t| t.split_whitespace().next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("no change figure in: {text}"));
+    assert!(diff > 0.0, "f16 rounding must change something: {text}");
+    assert!(diff < 0.05, "f16 change too large: {text}");
+    let o = frictl(&["inspect", s(&out), "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["dtype"], "f16");
+    assert!(std::fs::metadata(&out).unwrap().len() < std::fs::metadata(&fwt).unwrap().len());
+}
+
+#[test]
+fn predict_rejects_bad_rows_naming_the_file_and_row() {
+    let dir = scratch("badcsv");
+    let fwt = import_anchor(&dir);
+    let csv = dir.join("short.csv");
+    std::fs::write(&csv, "1,2,3\n").unwrap();
+    let o = frictl(&["predict", s(&fwt), "--input", s(&csv)]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("short.csv: row 1 has 3 values"),
+        "{}",
+        stderr(&o)
+    );
+    let csv = dir.join("word.csv");
+    let mut row = vec!["0.0"; 50];
+    row[7] = "abc";
+    std::fs::write(&csv, row.join(",")).unwrap();
+    let o = frictl(&["predict", s(&fwt), "--input", s(&csv)]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("column 8"), "{}", stderr(&o));
+}
+
+#[test]
+fn every_model_subcommand_has_help() {
+    for sub in ["inspect", "import", "export", "convert", "predict"] {
+        let o = frictl(&[sub, "--help"]);
+        assert!(o.status.success(), "{sub} --help");
+        assert!(stdout(&o).contains("Usage"), "{sub}: {}", stdout(&o));
+    }
+}

@@ -1,0 +1,336 @@
+//! `frictl eval` on synthetic datasets whose label is known by construction.
+//!
+//! - label = SCV(ṡ) + N(0, σ): the true SCV scores RMSE ≈ σ against the label and 0 against the truth
+//!   column, "none" is far worse, and the sliding/stick split counts add up;
+//! - label = c·ṡ + d·Δθ (Δθ latched once at the first row of the dataset, or at each chunk start) +
+//!   noise, and a PINN file whose network computes exactly c·ṡ_newest + d·Δθ_newest: the PINN, run
+//!   through the daemon's `PinnEstimator`, scores ≈ σ under the matching `delta_theta_offset` option,
+//!   which it can only do if the history, the newest-sample index and the Δθ latch are the daemon's
+//!   (and it is far off under the other latch); with `hold_zero` the first H−1 rows of each chunk are
+//!   skipped for every model;
+//! - the `frictl eval` binary writes the JSON report (the keys `frictl demo` reads) and valid PNG
+//!   figures, and `--test-only` keeps only the train report's test chunks.
+
+use std::collections::BTreeSet;
+use std::path::Path;
+use std::process::Command;
+
+use frictionless::features::{FeatureSet, FeatureSpec, WarmupPolicy};
+use frictionless::friction::{ScvParams, StaticFriction, paper};
+use frictionless::mlp::{Activation, DenseLayer, MlpWeights, Normalisation, StorageDtype};
+use frictionless::model::JointModel;
+use frictionless::units::GearRatio;
+use frictionless::weights::{ModelFile, ModelMeta, TrainingMeta};
+use frictionless_dataset::Dataset;
+use frictionless_train::data::DeltaThetaOffset;
+use frictl::eval::{EvalOptions, ModelSpec, evaluate};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+
+const R: f64 = -160.0;
+const SIGMA: f64 = 0.1;
+const CHUNK_ROWS: usize = 4000;
+
+/// Chunks of sine motion (different amplitude/frequency per chunk) with a deflection Δ(t), so
+/// θ = r·s − Δθ with Δθ = 3·sin(…) + per-chunk offset [motor rad]. `label(ṡ, Δθ_rel)` gives the
+/// noiseless friction, Δθ_rel relative to the latch instant of `latch` (`Run`: the first row,
+/// `Chunk`: each chunk's first row); the label column adds N(0, σ) noise, the truth column is
+/// noiseless.
+fn dataset(label: &dyn Fn(f64, f64) -> f64, seed: u64, latch: DeltaThetaOffset) -> Dataset {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let noise = Normal::new(0.0, SIGMA).unwrap();
+    let mut ds = Dataset::default();
+    for c in 0..3u32 {
+        let (amp, f) = (0.1 + 0.05 * f64::from(c), 0.5 + 0.25 * f64::from(c));
+        let w = 2.0 * std::f64::consts::PI * f;
+        let dth0 = 5.0 * f64::from(c) - 2.0;
+        for k in 0..CHUNK_ROWS {
+            let t = k as f64 * 1e-3;
+            let s = amp * (w * t).sin();
+            let sdot = amp * w * (w * t).cos();
+            let dth = dth0 + 3.0 * (2.0 * w * t + 0.3).sin();
+            let dth_rel = match latch {
+                DeltaThetaOffset::Chunk => dth - (dth0 + 3.0 * 0.3f64.sin()),
+                DeltaThetaOffset::Run => dth - (-2.0 + 3.0 * 0.3f64.sin()),
+                DeltaThetaOffset::Fixed(_) => unreachable!("not used here"),
+            };
+            let truth = label(sdot, dth_rel);
+            ds.time_s.push(10.0 * f64::from(c) + t);
+            ds.chunk.push(c);
+            ds.source_chunk.push(c);
+            ds.active.push(true);
+            ds.valid.push(true);
+            ds.s_rad.push(s);
+            ds.sdot_rad_s.push(sdot);
+            ds.sddot_rad_s2.push(-amp * w * w * (w * t).sin());
+            ds.theta_motor_rad.push(R * s - dth);
+            ds.delta_theta_motor_rad.push(dth);
+            ds.omega_motor_rad_s.push(R * sdot);
+            ds.i_meas_a.push(0.0);
+            ds.i_filt_a.push(0.0);
+            ds.tau_id_nm.push(0.0);
+            ds.tau_f_label_nm.push(truth + noise.sample(&mut rng));
+            ds.temperature_c.push(f64::NAN);
+            ds.tau_f_true_nm.get_or_insert_with(Vec::new).push(truth);
+            ds.phi_ddot_rad_s2.get_or_insert_with(Vec::new).push(0.0);
+        }
+    }
+    ds
+}
+
+const C_NM_S: f32 = 2.0;
+const D_NM: f32 = 0.25;
+const H: usize = 5;
+
+/// A `.fwt` model computing c·ṡ_newest + d·Δθ_newest with ReLU pairs (relu(x) − relu(−x) = x).
+fn linear_pinn() -> ModelFile {
+    let n = 2 * H;
+    let mut w1 = vec![0f32; 4 * n];
+    let (dth, sdot) = (H - 1, 2 * H - 1); // newest sample of each block
+    w1[dth] = D_NM;
+    w1[n + dth] = -D_NM;
+    w1[2 * n + sdot] = C_NM_S;
+    w1[3 * n + sdot] = -C_NM_S;
+    ModelFile {
+        meta: ModelMeta {
+            joint_name: "l_ankle_roll".into(),
+            gear_ratio: GearRatio::new(R).unwrap(),
+            kt_nm_per_a: 0.0665,
+            features: FeatureSpec {
+                set: FeatureSet::DeltaThetaJointVel,
+                history: H,
+                temperature: false,
+            },
+            scv: None,
+            training: TrainingMeta::unknown("eval test", 0),
+        },
+        dtype: StorageDtype::F32,
+        mlp: MlpWeights {
+            norm: Normalisation::identity(n),
+            layers: vec![
+                DenseLayer {
+                    n_in: n,
+                    n_out: 4,
+                    weight: w1,
+                    bias: vec![0.0; 4],
+                    activation: Activation::Relu,
+                },
+                DenseLayer {
+                    n_in: 4,
+                    n_out: 1,
+                    weight: vec![1.0, -1.0, 1.0, -1.0],
+                    bias: vec![0.0],
+                    activation: Activation::Identity,
+                },
+            ],
+        },
+    }
+}
+
+fn scv() -> ScvParams {
+    paper::SCV_ANKLE_ROLL
+}
+
+#[test]
+fn scv_label_scores_the_noise_and_none_is_far() {
+    let m = scv();
+    let ds = dataset(&|v, _| m.torque_nm(v), 1, DeltaThetaOffset::Run);
+    let models = [
+        ModelSpec::none(),
+        ModelSpec::static_model("scv", JointModel::Scv(m)),
+    ];
+    let ev = evaluate("synthetic", &ds, &models, None, &EvalOptions::default()).unwrap();
+    let none = ev.sums[0].metrics();
+    let s = ev.sums[1].metrics();
+    println!("none {none:?}\nscv {s:?}");
+    assert_eq!(s.n_samples, ds.len());
+    assert_eq!(s.n_sliding + s.n_stick, s.n_samples);
+    assert!(s.n_stick > 0 && s.n_sliding > s.n_stick);
+    for r in [s.rmse_all, s.rmse_sliding, s.rmse_stick] {
+        let r = r.unwrap();
+        assert!(
+            (r - SIGMA).abs() < 0.15 * SIGMA,
+            "SCV RMSE {r} vs noise σ {SIGMA}"
+        );
+    }
+    assert!(s.rmse_true_all.unwrap() < 1e-9);
+    assert!(none.rmse_all.unwrap() > 5.0 * SIGMA, "none {none:?}");
+    assert!(none.rmse_true_all.unwrap() > 5.0 * SIGMA);
+    // Sliding rows are where the friction is large; stick rows hold the breakaway transition.
+    assert!(none.rmse_sliding.unwrap() > none.rmse_stick.unwrap());
+}
+
+#[test]
+fn pinn_runs_like_the_daemon_with_the_run_or_the_chunk_latch() {
+    let lin = |v: f64, d: f64| f64::from(C_NM_S) * v + f64::from(D_NM) * d;
+    let file = linear_pinn();
+    let models = [
+        ModelSpec::none(),
+        ModelSpec::static_model("scv", JointModel::Scv(scv())),
+        ModelSpec::pinn("pinn", &file, WarmupPolicy::HoldZero).unwrap(),
+    ];
+    let opts = |latch| EvalOptions {
+        delta_theta_offset: latch,
+        ..EvalOptions::default()
+    };
+    assert_eq!(
+        EvalOptions::default().delta_theta_offset,
+        DeltaThetaOffset::Run
+    );
+    for (latch, other) in [
+        (DeltaThetaOffset::Run, DeltaThetaOffset::Chunk),
+        (DeltaThetaOffset::Chunk, DeltaThetaOffset::Run),
+    ] {
+        let ds = dataset(&lin, 2, latch);
+        let ev = evaluate("synthetic", &ds, &models, None, &opts(latch)).unwrap();
+        let p = ev.sums[2].metrics();
+        let scv_m = ev.sums[1].metrics();
+        println!("{latch}: pinn {p:?}\nscv {scv_m:?}");
+        // hold_zero: the first H−1 rows of each of the 3 chunks are skipped, for every model.
+        assert_eq!(p.n_samples, ds.len() - 3 * (H - 1));
+        assert_eq!(scv_m.n_samples, p.n_samples);
+        let r = p.rmse_all.unwrap();
+        assert!((r - SIGMA).abs() < 0.15 * SIGMA, "{latch}: PINN RMSE {r}");
+        assert!(p.rmse_true_all.unwrap() < 1e-3, "{latch}: {p:?}");
+        assert!(scv_m.rmse_all.unwrap() > 3.0 * r);
+        // Warm-up rows predict 0 (the daemon's hold_zero), then the network's value.
+        let pred = &ev.predictions[2];
+        assert_eq!(pred[0], 0.0);
+        assert_eq!(pred[CHUNK_ROWS + H - 2], 0.0);
+        let k = CHUNK_ROWS + 100;
+        let want = ds.tau_f_true_nm.as_ref().unwrap()[k];
+        assert!((pred[k] - want).abs() < 1e-3 * (1.0 + want.abs()));
+        // The other latch shifts chunks 1 and 2 by d·(5 motor rad per chunk): far off.
+        let wrong = evaluate("synthetic", &ds, &models, None, &opts(other)).unwrap();
+        let rw = wrong.sums[2].metrics().rmse_all.unwrap();
+        assert!(
+            rw > 5.0 * r,
+            "{latch} data under the {other} latch: {rw} vs {r}"
+        );
+    }
+}
+
+fn png_size(path: &Path) -> (u32, u32) {
+    let f = std::fs::File::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut dec = png::Decoder::new(std::io::BufReader::new(f))
+        .read_info()
+        .unwrap_or_else(|e| panic!("{} is not a PNG: {e}", path.display()));
+    let mut buf = vec![0; dec.output_buffer_size()];
+    let info = dec.next_frame(&mut buf).unwrap();
+    // Not a blank image: more than one distinct byte value.
+    let distinct: BTreeSet<u8> = buf[..info.buffer_size()].iter().copied().collect();
+    assert!(distinct.len() > 2, "{} looks blank", path.display());
+    (info.width, info.height)
+}
+
+#[test]
+fn cli_writes_report_and_figures_and_filters_test_chunks() {
+    let dir = std::env::temp_dir().join(format!("eval_cli_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let lin = |v: f64, d: f64| f64::from(C_NM_S) * v + f64::from(D_NM) * d;
+    let ds = dataset(&lin, 3, DeltaThetaOffset::Run);
+    let csv = dir.join("heldout.csv");
+    ds.write_csv(&csv).unwrap();
+    let pinn = dir.join("m.fwt");
+    frictionless::weights::write_file(&pinn, &linear_pinn()).unwrap();
+    let scv_json = dir.join("scv.json");
+    std::fs::write(
+        &scv_json,
+        serde_json::json!({"model": "Scv", "params": scv()}).to_string(),
+    )
+    .unwrap();
+    let cv_json = dir.join("cv.json");
+    std::fs::write(
+        &cv_json,
+        serde_json::json!({"model": "Cv", "params": paper::CV_ANKLE_ROLL}).to_string(),
+    )
+    .unwrap();
+    let report = dir.join("train.json");
+    std::fs::write(
+        &report,
+        serde_json::json!({
+            "datasets": [{"path": "elsewhere/train.csv", "sha256": "00"}, {"path": csv.display().to_string()}],
+            "split": {"test": [{"dataset": 1, "chunk": 2}, {"dataset": 0, "chunk": 0}]},
+            "epochs": [
+                {"epoch": 1, "train_loss": 3.0, "val_loss": 2.5, "val_rmse_nm": 1.6, "is_best": true},
+                {"epoch": 2, "train_loss": 1.0, "val_loss": 1.2, "val_rmse_nm": 1.1, "is_best": true},
+                {"epoch": 3, "train_loss": 0.5, "val_loss": null, "val_rmse_nm": null, "is_best": false}
+            ]
+        })
+        .to_string(),
+    )
+    .unwrap();
+    let figs = dir.join("figs");
+    let json = dir.join("eval.json");
+    let run = |extra: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_frictl"))
+            .arg("eval")
+            .arg("--dataset")
+            .arg(&csv)
+            .arg("--cv")
+            .arg(&cv_json)
+            .arg("--scv")
+            .arg(&scv_json)
+            .arg("--pinn")
+            .arg(&pinn)
+            .arg("--train-report")
+            .arg(&report)
+            .arg("--out")
+            .arg(&figs)
+            .arg("--json")
+            .arg(&json)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "frictl eval failed: {}\n{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        println!("{}", String::from_utf8_lossy(&out.stdout));
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        v
+    };
+    let v = run(&[]);
+    assert_eq!(v["format"], "frictionless-eval-v1");
+    for name in ["none", "cv", "scv", "pinn"] {
+        for key in [
+            "rmse_all",
+            "rmse_sliding",
+            "rmse_stick",
+            "rmse_true_all",
+            "rmse_true_sliding",
+            "rmse_true_stick",
+            "n_samples",
+        ] {
+            assert!(
+                v["models"][name][key].is_number(),
+                "models.{name}.{key} = {}",
+                v["models"][name][key]
+            );
+        }
+    }
+    let n_all = v["models"]["pinn"]["n_samples"].as_u64().unwrap();
+    assert_eq!(n_all as usize, ds.len() - 3 * (H - 1));
+    let pinn_rmse = v["models"]["pinn"]["rmse_all"].as_f64().unwrap();
+    assert!((pinn_rmse - SIGMA).abs() < 0.15 * SIGMA);
+    for f in [
+        "heldout_friction_vs_velocity.png",
+        "heldout_timeseries.png",
+        "heldout_hysteresis.png",
+        "training_curves.png",
+    ] {
+        assert_eq!(png_size(&figs.join(f)), (1200, 800), "{f}");
+    }
+
+    // --test-only: the report's test split holds chunk 2 of this dataset (dataset 1 of the report,
+    // matched by path; its dataset 0 is another file).
+    let v = run(&["--test-only"]);
+    assert_eq!(v["test_only"], true);
+    let n_test = v["models"]["scv"]["n_samples"].as_u64().unwrap();
+    assert_eq!(n_test as usize, CHUNK_ROWS - (H - 1));
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -1,0 +1,23 @@
+//! Integration tests of `frictl`: the binary as a process (`CARGO_BIN_EXE_frictl`), the plant server, experiments with `frictiond`.
+//!
+//! One test binary for the crate: each module is one former integration-test file.
+
+mod acquire_live;
+mod acquire_protocol;
+mod cli_models;
+mod demo_chain;
+mod dynamics_cli;
+mod eval_synthetic;
+mod experiment_controller;
+mod experiment_online_offline;
+mod experiment_oracle;
+// The ONNX graph builder and ergoCub anchor helpers of the interop tests (one copy, owned by
+// `frictionless-interop`).
+#[path = "../../interop/tests/interop_common/mod.rs"]
+mod interop_common;
+mod plant_common;
+mod search_cli;
+mod sim_serve_shm;
+mod train_cli;
+mod train_split;
+mod vcan_sim_serve;

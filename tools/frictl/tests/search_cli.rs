@@ -1,0 +1,165 @@
+//! `frictl search` with 3 tiny trials (2 epochs each, 2 in parallel) on a small simulated dataset:
+//! the results table is complete and sorted by validation RMSE, `best.fwt` is the best trial's model,
+//! the hyper-parameters are in the paper's ranges, and a resumed search runs only the missing trials.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use frictionless_train::search::{SearchSpace, TrialResult, draw, read_results};
+
+fn frictl(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_frictl"))
+        .args(args)
+        .env("SOURCE_DATE_EPOCH", "1700000000")
+        .output()
+        .expect("frictl runs")
+}
+
+fn ok(args: &[&str]) -> Output {
+    let out = frictl(args);
+    assert!(
+        out.status.success(),
+        "frictl {args:?} failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 temp path")
+}
+
+fn dataset(dir: &Path) -> (PathBuf, PathBuf) {
+    ok(&[
+        "acquire",
+        "--preset",
+        "ankle_roll",
+        "--seed",
+        "2",
+        "--name",
+        "run",
+        "--out",
+        s(dir),
+        "--set",
+        "protocol.n_starts=1",
+        "--set",
+        "protocol.sines.frequencies_hz=[0.8]",
+        "--set",
+        "protocol.ramps.slopes_a_per_s=[0.39]",
+        "--set",
+        "protocol.steps.levels_a=[0.3]",
+        "--set",
+        "protocol.tracking.train.amplitudes_rad=[0.1]",
+        "--set",
+        "protocol.tracking.train.frequencies_hz=[1.0]",
+    ]);
+    let ds = dir.join("ds.csv");
+    ok(&[
+        "preprocess",
+        s(&dir.join("run.csv")),
+        "--out",
+        s(&ds),
+        "--link-from-sidecar",
+    ]);
+    let scv = dir.join("scv.json");
+    ok(&["fit", "scv-code", s(&ds), "--json", s(&scv)]);
+    (ds, scv)
+}
+
+#[test]
+fn three_tiny_trials_then_resume() {
+    let dir = std::env::temp_dir().join(format!("frictl-search-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (ds, scv) = dataset(&dir);
+    let out = dir.join("search");
+    let search = |trials: &str, resume: bool| {
+        let mut a = vec![
+            "search",
+            "--dataset",
+            s(&ds),
+            "--scv",
+            s(&scv),
+            "--trials",
+            trials,
+            "--out",
+            s(&out),
+            "--parallel",
+            "2",
+            "--threads",
+            "2",
+            "--epochs",
+            "2",
+            "--seed",
+            "5",
+            "--quiet",
+        ];
+        if resume {
+            a.push("--resume");
+        }
+        frictl(&a)
+    };
+    let r = search("3", false);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+
+    let lines = read_results(&out.join("results.jsonl")).unwrap();
+    assert_eq!(lines.len(), 3);
+    let mut idx: Vec<usize> = lines.iter().map(|t| t.params.trial).collect();
+    idx.sort();
+    assert_eq!(idx, vec![0, 1, 2]);
+    let space = SearchSpace::default();
+    for t in &lines {
+        assert_eq!(t.status, "ok", "{:?}", t.error);
+        assert_eq!(
+            t.params,
+            draw(&space, 5, t.params.trial),
+            "drawn from (seed, index)"
+        );
+        let p = &t.params;
+        assert!((3000..=5000).contains(&p.batch_size));
+        assert!(p.hidden.iter().all(|h| (150..=300).contains(h)));
+        assert!((1e-5..=1e-3).contains(&p.lr));
+        assert!((3..=30).contains(&p.history));
+        assert!((0.1..=0.5).contains(&p.lambda) && (0.01..=0.1).contains(&p.dropout));
+        assert!(t.val_rmse_nm.unwrap() > 0.0 && t.test_rmse_nm.unwrap() > 0.0);
+        assert_eq!(t.epochs_run, 2);
+    }
+
+    // results.json is sorted by validation RMSE; results.csv has the same order.
+    let ranked: Vec<TrialResult> =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    let vals: Vec<f64> = ranked.iter().map(|t| t.val_rmse_nm.unwrap()).collect();
+    assert!(vals.windows(2).all(|w| w[0] <= w[1]), "sorted: {vals:?}");
+    let mut csv = csv::Reader::from_path(out.join("results.csv")).unwrap();
+    let csv_trials: Vec<usize> = csv
+        .records()
+        .map(|r| r.unwrap()[1].parse().unwrap())
+        .collect();
+    let json_trials: Vec<usize> = ranked.iter().map(|t| t.params.trial).collect();
+    assert_eq!(csv_trials, json_trials);
+
+    // best.fwt is the best trial's model, and it is valid.
+    let best = &ranked[0];
+    let best_bytes = std::fs::read(out.join("best.fwt")).unwrap();
+    assert!(best_bytes == std::fs::read(out.join(best.model.as_ref().unwrap())).unwrap());
+    let m = frictionless::weights::read_file(&out.join("best.fwt")).unwrap();
+    assert_eq!(m.meta.features.history, best.params.history);
+    assert!((m.meta.training.val_rmse_nm as f64 - vals[0]).abs() < 1e-4 * vals[0].max(1.0));
+
+    // Without --resume the directory is refused; with it only trial 3 runs.
+    let again = search("3", false);
+    assert!(!again.status.success());
+    assert!(String::from_utf8_lossy(&again.stderr).contains("--resume"));
+    let r = search("4", true);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let lines2 = read_results(&out.join("results.jsonl")).unwrap();
+    assert_eq!(lines2.len(), 4, "one new trial appended");
+    assert_eq!(&lines2[..3], &lines[..], "finished trials untouched");
+    assert_eq!(lines2[3].params.trial, 3);
+    let r = search("4", true);
+    assert!(r.status.success());
+    assert_eq!(
+        read_results(&out.join("results.jsonl")).unwrap().len(),
+        4,
+        "nothing left to run"
+    );
+}

@@ -1,0 +1,480 @@
+//! `frictl train` end to end on a small simulated dataset: `frictl acquire` (tiny protocol) →
+//! `frictl preprocess` → `frictl fit scv --json` → `frictl train` (tiny network, few epochs).
+//!
+//! Checks that the written `.fwt` loads in the daemon's loader (`PinnEstimator::from_model_file`) and,
+//! fed sample by sample through its `History` (reset at each chunk start, as the daemon at enable),
+//! reproduces the trainer's batched predictions (`Predictor`) on the test split to 1e-5; that its
+//! metadata match the dataset sidecar, the fit and the report; that the same seed gives the same
+//! bytes; that `--resume` equals an uninterrupted run; and that bad inputs give errors naming the
+//! file, key or value.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+
+use frictionless::features::{FeatureSet, FeatureSpec, JointSample, WarmupPolicy};
+use frictionless::model::{FrictionModel, PinnEstimator};
+use frictionless::weights::read_file;
+use frictionless_dataset::Dataset;
+use frictionless_train::Predictor;
+use frictionless_train::data::{DeltaThetaOffset, build_inputs};
+use sha2::{Digest, Sha256};
+
+const EPOCH: &str = "1700000000";
+
+fn frictl(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_frictl"))
+        .args(args)
+        .env("SOURCE_DATE_EPOCH", EPOCH)
+        .output()
+        .expect("frictl runs")
+}
+
+fn ok(out: Output, what: &str) -> Output {
+    assert!(
+        out.status.success(),
+        "{what} failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+fn err_text(out: Output, what: &str) -> String {
+    assert!(!out.status.success(), "{what} should fail");
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 temp path")
+}
+
+/// The shared fixture: a preprocessed ankle-roll dataset (6 chunks) and its SCV fit.
+struct Fixture {
+    dir: PathBuf,
+    ds: PathBuf,
+    scv: PathBuf,
+}
+
+fn fixture() -> &'static Fixture {
+    static F: OnceLock<Fixture> = OnceLock::new();
+    F.get_or_init(|| {
+        let dir = std::env::temp_dir().join(format!("frictl-train-cli-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        ok(
+            frictl(&[
+                "acquire",
+                "--preset",
+                "ankle_roll",
+                "--seed",
+                "1",
+                "--name",
+                "run",
+                "--out",
+                s(&dir),
+                "--set",
+                "protocol.n_starts=1",
+                "--set",
+                "protocol.sines.amplitude_to_a=0.4",
+                "--set",
+                "protocol.sines.frequencies_hz=[0.8]",
+                "--set",
+                "protocol.ramps.slopes_a_per_s=[0.39]",
+                "--set",
+                "protocol.steps.levels_a=[0.3]",
+                "--set",
+                "protocol.tracking.train.amplitudes_rad=[0.1]",
+                "--set",
+                "protocol.tracking.train.frequencies_hz=[1.0]",
+            ]),
+            "acquire",
+        );
+        let ds = dir.join("ds.csv");
+        ok(
+            frictl(&[
+                "preprocess",
+                s(&dir.join("run.csv")),
+                "--out",
+                s(&ds),
+                "--link-from-sidecar",
+            ]),
+            "preprocess",
+        );
+        let scv = dir.join("scv.json");
+        ok(
+            frictl(&["fit", "scv", s(&ds), "--json", s(&scv)]),
+            "fit scv",
+        );
+        Fixture { dir, ds, scv }
+    })
+}
+
+/// `frictl train` with a tiny network; an option in `extra` replaces the default of this helper.
+fn train(out: &Path, extra: &[&str]) -> Output {
+    let f = fixture();
+    let defaults: [(&str, &str); 9] = [
+        ("--dataset", s(&f.ds)),
+        ("--scv", s(&f.scv)),
+        ("--out", s(out)),
+        ("--history", "5"),
+        ("--hidden", "16,12"),
+        ("--batch", "1024"),
+        ("--lr", "3e-3"),
+        ("--threads", "2"),
+        ("--epochs", "3"),
+    ];
+    let mut args = vec!["train", "--quiet"];
+    for (k, v) in defaults {
+        if !extra.contains(&k) {
+            args.extend_from_slice(&[k, v]);
+        }
+    }
+    args.extend_from_slice(extra);
+    frictl(&args)
+}
+
+#[test]
+fn model_loads_in_the_daemon_loader_and_reproduces_the_trainer_on_the_test_split() {
+    let f = fixture();
+    let out = f.dir.join("main.fwt");
+    ok(train(&out, &["--seed", "2"]), "train");
+    let file = read_file(&out).expect("the .fwt reads back");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.with_extension("train.json")).unwrap())
+            .unwrap();
+
+    // Metadata against the inputs it came from.
+    let side: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(f.ds.with_extension("json")).unwrap())
+            .unwrap();
+    let fit: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&f.scv).unwrap()).unwrap();
+    let m = &file.meta;
+    assert_eq!(m.joint_name, side["joint"].as_str().unwrap());
+    assert_eq!(
+        m.gear_ratio.get(),
+        side["gear_ratio_signed"].as_f64().unwrap()
+    );
+    assert_eq!(m.kt_nm_per_a, side["kt_nm_per_a"].as_f64().unwrap());
+    let spec = FeatureSpec {
+        set: FeatureSet::DeltaThetaJointVel,
+        history: 5,
+        temperature: false,
+    };
+    assert_eq!(m.features, spec);
+    let scv = m.scv.expect("SCV prior stored");
+    for (name, v) in [
+        ("kc", scv.kc),
+        ("ka", scv.ka),
+        ("kv", scv.kv),
+        ("ks", scv.ks),
+    ] {
+        assert_eq!(v, fit["params"][name].as_f64().unwrap(), "scv.{name}");
+    }
+    let sha: [u8; 32] = Sha256::digest(std::fs::read(&f.ds).unwrap()).into();
+    assert_eq!(m.training.dataset_sha256, sha);
+    assert_eq!(m.training.created_unix_s, EPOCH.parse::<u64>().unwrap());
+    assert_eq!(file.mlp.sizes(), vec![10, 16, 12, 1]);
+
+    // The test split: chunks from the report, samples from build_inputs.
+    let ds = Dataset::read_csv(&f.ds).unwrap();
+    let test_chunks: Vec<u32> = report["split"]["test"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|k| k["chunk"].as_u64().unwrap() as u32)
+        .collect();
+    assert!(!test_chunks.is_empty(), "a test split exists");
+    let w = build_inputs(
+        &ds,
+        &spec,
+        m.gear_ratio,
+        WarmupPolicy::HoldZero,
+        DeltaThetaOffset::Run,
+    )
+    .unwrap();
+    let idx: Vec<usize> = (0..w.len())
+        .filter(|&i| test_chunks.contains(&w.chunk[i]))
+        .collect();
+    assert_eq!(
+        idx.len() as u64,
+        report["split"]["test_samples"].as_u64().unwrap()
+    );
+    let x: Vec<f32> = idx.iter().flat_map(|&i| w.input(i).to_vec()).collect();
+    let batched = Predictor::new(&file.mlp, 2).unwrap().predict(&x).unwrap();
+
+    // The daemon's path: one estimator, enabled (reset) at each chunk start with the Δθ offset the
+    // report lists for the dataset (a daemon configured with `delta_theta_offset_motor_rad`), one
+    // estimate per row. `reset` latches θ_off = θ − r·s of the sample it is given.
+    assert_eq!(report["delta_theta_offset"], "run");
+    let off = report["datasets"][0]["delta_theta_offset_motor_rad"]
+        .as_f64()
+        .expect("the run offset is reported");
+    assert!(
+        (off - (ds.theta_motor_rad[0] - m.gear_ratio.get() * ds.s_rad[0])).abs() < 1e-12,
+        "reported offset {off} is θ₀ − r·s₀ of the first row"
+    );
+    let mut est = PinnEstimator::from_model_file(&file, WarmupPolicy::HoldZero).unwrap();
+    let online: Vec<f64> = (0..ds.len())
+        .map(|k| {
+            let smp = ds.joint_sample(k);
+            if k == 0 || ds.chunk[k] != ds.chunk[k - 1] {
+                est.reset(&JointSample {
+                    s_rad: 0.0,
+                    theta_motor_rad: off,
+                    ..smp
+                });
+            }
+            est.estimate(&smp)
+        })
+        .collect();
+    let mut worst = 0f64;
+    let (mut sq, mut n) = (0f64, 0usize);
+    for (j, &i) in idx.iter().enumerate() {
+        let row = w.rows[i];
+        let d = (online[row] - batched[j] as f64).abs();
+        worst = worst.max(d);
+        sq += (batched[j] as f64 - ds.tau_f_label_nm[row]).powi(2);
+        n += 1;
+    }
+    assert!(
+        worst <= 1e-5,
+        "daemon path vs trainer differ by {worst} Nm on the test split"
+    );
+    // The stored test RMSE is the one of these predictions.
+    let test_rmse = (sq / n as f64).sqrt();
+    let stored = m.training.test_rmse_nm as f64;
+    assert!(
+        (stored - test_rmse).abs() <= 1e-4 * test_rmse.max(1.0),
+        "stored test RMSE {stored}, recomputed {test_rmse}"
+    );
+    assert!(m.training.val_rmse_nm.is_finite());
+    let epochs = report["epochs"].as_array().unwrap();
+    assert_eq!(epochs.len(), 3);
+    assert!(
+        epochs
+            .iter()
+            .all(|e| e["train_loss"].as_f64().unwrap() > 0.0)
+    );
+}
+
+#[test]
+fn same_seed_gives_identical_bytes_and_another_seed_does_not() {
+    let f = fixture();
+    let (a, b, c) = (
+        f.dir.join("seed_a.fwt"),
+        f.dir.join("seed_b.fwt"),
+        f.dir.join("seed_c.fwt"),
+    );
+    ok(train(&a, &["--seed", "7"]), "train a");
+    ok(train(&b, &["--seed", "7"]), "train b");
+    ok(train(&c, &["--seed", "8"]), "train c");
+    let (ba, bb, bc) = (
+        std::fs::read(&a).unwrap(),
+        std::fs::read(&b).unwrap(),
+        std::fs::read(&c).unwrap(),
+    );
+    assert!(ba == bb, "same seed, same bytes");
+    assert!(ba != bc, "another seed, another model");
+}
+
+#[test]
+fn resume_equals_an_uninterrupted_run() {
+    let f = fixture();
+    let full = f.dir.join("full.fwt");
+    ok(
+        train(&full, &["--seed", "3", "--epochs", "4", "--dtype", "f16"]),
+        "uninterrupted",
+    );
+    let ckpt = f.dir.join("half.ckpt");
+    let resumed = f.dir.join("resumed.fwt");
+    let c = s(&ckpt);
+    ok(
+        train(
+            &resumed,
+            &[
+                "--seed",
+                "3",
+                "--epochs",
+                "2",
+                "--dtype",
+                "f16",
+                "--checkpoint",
+                c,
+            ],
+        ),
+        "first half",
+    );
+    ok(
+        train(
+            &resumed,
+            &[
+                "--seed",
+                "3",
+                "--epochs",
+                "4",
+                "--dtype",
+                "f16",
+                "--checkpoint",
+                c,
+                "--resume",
+            ],
+        ),
+        "resume",
+    );
+    let (a, b) = (
+        std::fs::read(&full).unwrap(),
+        std::fs::read(&resumed).unwrap(),
+    );
+    assert!(a == b, "resumed run = uninterrupted run, byte for byte");
+    let read = |p: &Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(p.with_extension("train.json")).unwrap())
+            .unwrap()
+    };
+    let (rf, rr) = (read(&full), read(&resumed));
+    let losses = |r: &serde_json::Value| -> Vec<(f64, f64)> {
+        r["epochs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|e| {
+                (
+                    e["train_loss"].as_f64().unwrap(),
+                    e["val_loss"].as_f64().unwrap(),
+                )
+            })
+            .collect()
+    };
+    assert_eq!(losses(&rr).len(), 4, "the resumed run has all 4 epochs");
+    assert_eq!(losses(&rf), losses(&rr), "identical per-epoch losses");
+    assert_eq!(rr["resumed"], true);
+    assert_eq!(rf["resumed"], false);
+    // Resuming with other hyper-parameters is refused, naming the key and both values.
+    let e = err_text(
+        train(
+            &f.dir.join("x.fwt"),
+            &[
+                "--seed",
+                "3",
+                "--epochs",
+                "6",
+                "--lr",
+                "1e-3",
+                "--checkpoint",
+                c,
+                "--resume",
+            ],
+        ),
+        "resume with another lr",
+    );
+    assert!(
+        e.contains("--lr") && e.contains("0.003") && e.contains("0.001"),
+        "{e}"
+    );
+}
+
+#[test]
+fn bad_inputs_give_errors_naming_file_key_and_value() {
+    let f = fixture();
+    let out = f.dir.join("bad.fwt");
+
+    // A dataset without the sdot_rad_s column.
+    let text = std::fs::read_to_string(&f.ds).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let drop = header.iter().position(|h| *h == "sdot_rad_s").unwrap();
+    let stripped: String = text
+        .lines()
+        .map(|l| {
+            let mut v: Vec<&str> = l.split(',').collect();
+            v.remove(drop);
+            v.join(",") + "\n"
+        })
+        .collect();
+    let bad_ds = f.dir.join("nosdot.csv");
+    std::fs::write(&bad_ds, stripped).unwrap();
+    std::fs::copy(f.ds.with_extension("json"), bad_ds.with_extension("json")).unwrap();
+    let e = err_text(
+        frictl(&[
+            "train",
+            "--dataset",
+            s(&bad_ds),
+            "--scv",
+            s(&f.scv),
+            "--out",
+            s(&out),
+            "--quiet",
+        ]),
+        "missing column",
+    );
+    assert!(e.contains("nosdot.csv") && e.contains("sdot_rad_s"), "{e}");
+
+    // A missing sidecar.
+    let lone = f.dir.join("lone.csv");
+    std::fs::copy(&f.ds, &lone).unwrap();
+    let e = err_text(train(&out, &["--dataset", s(&lone)]), "missing sidecar");
+    assert!(e.contains("lone.json"), "{e}");
+
+    // An SCV JSON of an unknown model.
+    let bad_scv = f.dir.join("bad_scv.json");
+    std::fs::write(&bad_scv, r#"{"model": "Lugre", "params": {}}"#).unwrap();
+    let e = err_text(
+        frictl(&[
+            "train",
+            "--dataset",
+            s(&f.ds),
+            "--scv",
+            s(&bad_scv),
+            "--out",
+            s(&out),
+            "--quiet",
+        ]),
+        "bad scv",
+    );
+    assert!(
+        e.contains("bad_scv.json") && e.contains("`model`") && e.contains("Lugre"),
+        "{e}"
+    );
+
+    // Fractions that leave no training chunk (6 chunks: 3 test + 3 validation).
+    let e = err_text(
+        train(&out, &["--val-frac", "0.5", "--test-frac", "0.5"]),
+        "empty split",
+    );
+    assert!(
+        e.contains("--val-frac = 0.5") && e.contains("no training chunk"),
+        "{e}"
+    );
+
+    // A test chunk that does not exist.
+    let e = err_text(train(&out, &["--test-chunks", "2,99"]), "unknown chunk");
+    assert!(e.contains("--test-chunks = 0:99"), "{e}");
+
+    // Resuming a checkpoint with another input width (H = 5 → 10 inputs, H = 6 → 12).
+    let ckpt = f.dir.join("h5.ckpt");
+    ok(
+        train(&out, &["--epochs", "1", "--checkpoint", s(&ckpt)]),
+        "checkpointed run",
+    );
+    let e = err_text(
+        train(
+            &out,
+            &[
+                "--history",
+                "6",
+                "--epochs",
+                "2",
+                "--checkpoint",
+                s(&ckpt),
+                "--resume",
+            ],
+        ),
+        "n_inputs mismatch",
+    );
+    assert!(
+        e.contains("h5.ckpt") && e.contains("n_inputs") && e.contains("12"),
+        "{e}"
+    );
+
+    // An H the feature code refuses.
+    let e = err_text(train(&out, &["--history", "0"]), "H = 0");
+    assert!(e.contains("--history") && e.contains("H = 0"), "{e}");
+}

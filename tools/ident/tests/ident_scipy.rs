@@ -1,0 +1,92 @@
+//! Parity of `frictionless_ident::filter` with scipy (`butter`, `sosfilt`, `sosfilt_zi`, `sosfiltfilt`).
+//!
+//! Needs `FRICTIONLESS_REFS` (set by `tests/run.sh`, written by `tests/python/gen_scipy_refs.py`):
+//! unset → skipped with a message; set but the file is missing → FAIL.
+
+use frictionless_ident::filter::{Butterworth, sosfilt_zi};
+use serde::Deserialize;
+
+#[derive(Deserialize)]
+struct Case {
+    order: usize,
+    cutoff_hz: f64,
+    fs_hz: f64,
+    sos: Vec<[f64; 6]>,
+    x: Vec<f64>,
+    sosfilt: Vec<f64>,
+    sosfiltfilt: Vec<f64>,
+    sosfilt_zi: Vec<[f64; 2]>,
+}
+
+#[derive(Deserialize)]
+struct Refs {
+    cases: Vec<Case>,
+}
+
+fn load() -> Option<Refs> {
+    let Some(dir) = std::env::var_os("FRICTIONLESS_REFS") else {
+        println!("skipped: run tests/run.sh (FRICTIONLESS_REFS is unset)");
+        return None;
+    };
+    let path = std::path::Path::new(&dir).join("scipy_filters.json");
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| {
+        panic!(
+            "FRICTIONLESS_REFS is set but {} is missing: {e}",
+            path.display()
+        )
+    });
+    Some(serde_json::from_str(&text).expect("scipy_filters.json parses"))
+}
+
+fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn butter_sos_equals_scipy() {
+    let Some(refs) = load() else { return };
+    assert!(!refs.cases.is_empty());
+    for c in &refs.cases {
+        let f = Butterworth::lowpass(c.order, c.cutoff_hz, c.fs_hz).unwrap();
+        assert_eq!(f.sos.len(), c.sos.len(), "order {}", c.order);
+        let d = max_abs_diff(f.sos.as_flattened(), c.sos.as_flattened());
+        assert!(
+            d < 1e-12,
+            "order {} fc {}: sos differs by {d}",
+            c.order,
+            c.cutoff_hz
+        );
+        let zi = sosfilt_zi(&f.sos);
+        let d = max_abs_diff(zi.as_flattened(), c.sosfilt_zi.as_flattened());
+        assert!(d < 1e-10, "order {}: zi differs by {d}", c.order);
+    }
+}
+
+#[test]
+fn sosfilt_and_sosfiltfilt_equal_scipy() {
+    let Some(refs) = load() else { return };
+    let mut worst = 0.0f64;
+    for c in &refs.cases {
+        let f = Butterworth::lowpass(c.order, c.cutoff_hz, c.fs_hz).unwrap();
+        let d1 = max_abs_diff(&f.filter(&c.x), &c.sosfilt);
+        let d2 = max_abs_diff(&f.filtfilt(&c.x).unwrap(), &c.sosfiltfilt);
+        assert!(
+            d1 < 1e-9,
+            "order {} fc {}: sosfilt differs by {d1}",
+            c.order,
+            c.cutoff_hz
+        );
+        assert!(
+            d2 < 1e-9,
+            "order {} fc {}: sosfiltfilt differs by {d2}",
+            c.order,
+            c.cutoff_hz
+        );
+        worst = worst.max(d1).max(d2);
+    }
+    println!("worst |rust − scipy| over all cases: {worst:e}");
+}

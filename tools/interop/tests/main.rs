@@ -1,0 +1,8 @@
+//! Integration tests of `frictionless-interop` (ONNX and safetensors import/export, reference vectors).
+//!
+//! One test binary for the crate: each module is one former integration-test file.
+
+mod interop_common;
+mod interop_onnx;
+mod interop_refs;
+mod interop_safetensors;
