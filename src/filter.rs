@@ -520,7 +520,14 @@ mod tests {
         let x: Vec<f64> = (0..3000)
             .map(|k| 3.0 * (k as f64 * 0.031).sin() + if k % 500 < 250 { 2.0 } else { -1.5 })
             .collect();
-        for (order, fc) in [(1, 50.0), (2, 30.0), (2, 5.0), (3, 10.0), (4, 100.0), (8, 40.0)] {
+        for (order, fc) in [
+            (1, 50.0),
+            (2, 30.0),
+            (2, 5.0),
+            (3, 10.0),
+            (4, 100.0),
+            (8, 40.0),
+        ] {
             let old = previous_daemon_lpf(order, fc, 1000.0);
             let mut zi = vec![[0.0; 2]; old.len()];
             let want = sosfilt(&old, &x, &mut zi);

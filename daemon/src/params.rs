@@ -13,9 +13,10 @@ use frictionless::features::WarmupPolicy;
 use frictionless::model::{JointModel, NoFriction, PinnEstimator};
 use frictionless_shm_types::model_kind;
 
+use frictionless::filter::CausalButterworth;
+use frictionless::law::{Gains, JointLaw};
+
 use crate::config::{Config, ModelSpec, OnStale, WarmupName};
-use crate::control::{Gains, JointLaw};
-use crate::filter::Butterworth;
 
 /// Reads and checks a `.fwt` model against the joint's configured gear ratio. Error text names the
 /// problem; the caller adds file and key.
@@ -95,7 +96,7 @@ pub fn build(cfg: &Config, generation: u64) -> Result<Box<Params>, String> {
         };
         let lpf = match j.lpf {
             Some(l) => Some(
-                Butterworth::design(l.order, l.cutoff_hz, fs_hz)
+                CausalButterworth::design(l.order, l.cutoff_hz, fs_hz)
                     .map_err(|e| format!("joint {}: lpf: {e}", j.name))?,
             ),
             None => None,

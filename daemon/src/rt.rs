@@ -14,7 +14,8 @@
 //! 2. parameter hand-over: `try_recv` a new `Box<Params>` (built off-thread), send the old one back
 //!    to be freed off-thread;
 //! 3. [`compute`]: per joint, enable edge → reset (bumpless), model estimate, control law
-//!    ([`crate::control`]), stale/fault/NaN handling → [`MotorCurrentCommand`];
+//!    ([`frictionless::law`], its [`LawFlags`] mapped to the ABI's `FLAG_*` by [`abi_flags`]),
+//!    stale/fault/NaN handling → [`MotorCurrentCommand`];
 //! 4. publish (+ notify); record lateness / compute time / input age in fixed histograms;
 //!    publish [`DaemonStatus`] every `status_every_ticks`; advance the heartbeat.
 //!
@@ -33,17 +34,18 @@ use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, TryRecvError};
 
 use frictionless::features::JointSample;
+use frictionless::law::{LawFlags, LawInput, LawOutput};
 use frictionless::model::{FrictionModel, JointModel};
 use frictionless_shm_types::{
-    DaemonStatus, FAULT_FEEDBACK_STALE, FLAG_DISABLED, FLAG_FAULT, FLAG_STALE, FLAG_WARMING_UP,
-    JointStates, MAX_JOINTS, MotorCurrentCommand, STATUS_CPU_PINNED, STATUS_INPUT_STALE,
-    STATUS_MEMORY_LOCKED, STATUS_SCHED_FIFO, STATUS_STOPPING, TorqueRequest, monotonic_ns,
+    DaemonStatus, FAULT_FEEDBACK_STALE, FLAG_CURRENT_SATURATED, FLAG_DISABLED, FLAG_FAULT,
+    FLAG_FRICTION_CLIPPED, FLAG_NON_FINITE, FLAG_STALE, FLAG_WARMING_UP, JointStates, MAX_JOINTS,
+    MotorCurrentCommand, STATUS_CPU_PINNED, STATUS_INPUT_STALE, STATUS_MEMORY_LOCKED,
+    STATUS_SCHED_FIFO, STATUS_STOPPING, TorqueRequest, monotonic_ns,
 };
 
 use crate::alloc_count;
 use crate::backend::{AnyBackend, Backend};
 use crate::config::{Config, OnStale, Trigger};
-use crate::control::{LawInput, LawOutput};
 use crate::params::Params;
 
 /// State shared between the RT thread and the supervisor (atomics only).
@@ -169,13 +171,9 @@ pub fn compute(
         let k = j.index;
         let bit = 1u64 << k;
         let out = if enabled_now & bit == 0 {
-            LawOutput {
-                i_a: 0.0,
-                tau_f_hat_nm: 0.0,
-                flags: FLAG_DISABLED,
-            }
+            JointOut::zero(FLAG_DISABLED)
         } else if fresh.request_stale || (k as u32) >= rq.n_joints {
-            stale_out(0.0)
+            JointOut::zero(FLAG_STALE)
         } else if fresh.state_stale
             || (k as u32) >= st.n_joints
             || st.fault_flags[k] == FAULT_FEEDBACK_STALE
@@ -184,20 +182,14 @@ pub fn compute(
             // backend marks it with FAULT_FEEDBACK_STALE alone): the configured safe output. A
             // drive fault reported alongside wins (the fault branch below).
             match p.on_stale {
-                OnStale::Zero => stale_out(0.0),
+                OnStale::Zero => JointOut::zero(FLAG_STALE),
                 OnStale::StaticModel => {
-                    let mut o = j.law.feed_forward_only(rq.tau_des_nm[k]);
-                    o.flags |= FLAG_STALE;
-                    o
+                    JointOut::from_law(j.law.feed_forward_only(rq.tau_des_nm[k]), FLAG_STALE)
                 }
             }
         } else if st.fault_flags[k] & !FAULT_FEEDBACK_STALE != 0 {
             j.law.reset();
-            LawOutput {
-                i_a: 0.0,
-                tau_f_hat_nm: 0.0,
-                flags: FLAG_FAULT,
-            }
+            JointOut::zero(FLAG_FAULT)
         } else {
             let sample = JointSample {
                 s_rad: st.s_rad[k],
@@ -213,16 +205,18 @@ pub fn compute(
             }
             active |= bit;
             let f = j.model.estimate(&sample);
-            let mut o = j.law.step(&LawInput {
+            let o = j.law.step(&LawInput {
                 tau_des_nm: rq.tau_des_nm[k],
                 friction_nm: f,
                 sdot_rad_s: sample.sdot_rad_s,
                 tau_meas_nm: st.tau_meas_nm[k],
             });
-            if warming_up(&j.model) {
-                o.flags |= FLAG_WARMING_UP;
-            }
-            o
+            let warming = if warming_up(&j.model) {
+                FLAG_WARMING_UP
+            } else {
+                0
+            };
+            JointOut::from_law(o, warming)
         };
         cmd.i_ref_a[k] = out.i_a;
         cmd.flags[k] = out.flags;
@@ -241,12 +235,49 @@ pub fn warming_up(m: &JointModel) -> bool {
     }
 }
 
+/// The ABI's `FLAG_*` bits of one tick of the law (the bit values are the ABI's, unchanged).
 #[inline]
-fn stale_out(i_a: f64) -> LawOutput {
-    LawOutput {
-        i_a,
-        tau_f_hat_nm: 0.0,
-        flags: FLAG_STALE,
+pub fn abi_flags(f: LawFlags) -> u32 {
+    let mut bits = 0;
+    if f.friction_clipped {
+        bits |= FLAG_FRICTION_CLIPPED;
+    }
+    if f.current_saturated {
+        bits |= FLAG_CURRENT_SATURATED;
+    }
+    if f.non_finite {
+        bits |= FLAG_NON_FINITE;
+    }
+    bits
+}
+
+/// One joint's slot of the command for this tick.
+#[derive(Debug, Clone, Copy)]
+struct JointOut {
+    i_a: f64,
+    tau_f_hat_nm: f64,
+    flags: u32,
+}
+
+impl JointOut {
+    /// Zero current, no compensation, `flags`.
+    #[inline]
+    fn zero(flags: u32) -> Self {
+        Self {
+            i_a: 0.0,
+            tau_f_hat_nm: 0.0,
+            flags,
+        }
+    }
+
+    /// The law's output with its flags mapped to the ABI, plus `extra` `FLAG_*` bits.
+    #[inline]
+    fn from_law(o: LawOutput, extra: u32) -> Self {
+        Self {
+            i_a: o.i_a,
+            tau_f_hat_nm: o.tau_f_hat_nm,
+            flags: abi_flags(o.flags) | extra,
+        }
     }
 }
 
@@ -1201,6 +1232,25 @@ kv = 0.0
         inp.states.value.fault_flags[2] |= frictionless_shm_types::FAULT_DRIVE;
         let c = run(&mut p, &inp, FRESH, &mut prev);
         assert_eq!((c.i_ref_a[2], c.flags[2]), (0.0, FLAG_FAULT));
+    }
+
+    #[test]
+    fn law_flags_map_to_the_abi_bits() {
+        assert_eq!(abi_flags(LawFlags::NONE), 0);
+        let all = LawFlags {
+            friction_clipped: true,
+            current_saturated: true,
+            non_finite: true,
+        };
+        assert_eq!(
+            abi_flags(all),
+            FLAG_FRICTION_CLIPPED | FLAG_CURRENT_SATURATED | FLAG_NON_FINITE
+        );
+        let clipped = LawFlags {
+            friction_clipped: true,
+            ..LawFlags::NONE
+        };
+        assert_eq!(abi_flags(clipped), FLAG_FRICTION_CLIPPED);
     }
 
     #[test]
