@@ -12,12 +12,12 @@
 
 use std::path::PathBuf;
 
+use frictionless::filter::Butterworth;
 use frictl::experiment::controller::ComputedTorque;
 use frictl::experiment::metrics;
 use frictl::experiment::run::{JointPlan, JointSetup, JointTrace, TrialOptions, run_trial_with};
 use frictl::experiment::session::{Binaries, FrictionModel, LawSettings, Lpf, Mode};
 use frictl::experiment::suite::sine;
-use frictl::ident::filter::Butterworth;
 
 const ANKLE: usize = 1;
 const KP: f64 = 3000.0;

@@ -41,9 +41,9 @@
 use serde::{Deserialize, Serialize};
 
 use super::dataset::Dataset;
-use super::filter::{Butterworth, FilterError};
 use super::kalman::{self, KalmanConfig, KalmanError};
 use crate::sim::link::LinkDynamics;
+use frictionless::filter::{Butterworth, FilterError};
 
 /// Pipeline errors.
 #[derive(Debug, thiserror::Error)]

@@ -19,10 +19,10 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
-use crate::sim::fastmath;
 use crate::sim::link::LinkDynamics;
 use crate::sim::params::{ParamError, PlantParams};
 use crate::sim::stribeck::StribeckTable;
+use frictionless::fastmath;
 
 /// Continuous state of the joint (joint side, |r|).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
