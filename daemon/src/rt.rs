@@ -44,8 +44,8 @@ use frictionless_shm_types::{
 };
 
 use crate::alloc_count;
-use crate::backend::{AnyBackend, Backend};
-use crate::config::{Config, OnStale, Trigger};
+use crate::backend::{AnyBackend, Backend, BackendError};
+use crate::config::{BackendKind, Config, OnStale, Trigger};
 use crate::params::Params;
 
 /// State shared between the RT thread and the supervisor (atomics only).
@@ -301,9 +301,67 @@ pub struct RtSetup {
     /// Shared atomics.
     pub shared: Arc<Shared>,
     /// Start-up result: Ok(granted STATUS_* flags) or why set-up failed.
-    pub started: SyncSender<Result<u32, String>>,
+    pub started: SyncSender<Result<u32, RtSetupError>>,
     /// Count RT-thread allocations after `ready_after_ticks`.
     pub count_allocs: bool,
+}
+
+/// Why the RT thread could not start (reported through [`RtSetup::started`]).
+#[derive(Debug, thiserror::Error)]
+pub enum RtSetupError {
+    /// The backend could not be opened.
+    #[error("opening the {kind:?} backend: {source}")]
+    Backend {
+        /// `[backend] kind`.
+        kind: BackendKind,
+        /// Why.
+        source: BackendError,
+    },
+    /// `[loop] require_rt = true` and at least one RT setting was refused.
+    #[error("loop.require_rt = true and RT settings were refused: {}", join_refusals(.0))]
+    RtRefused(Vec<RtRefusal>),
+}
+
+/// One RT setting the kernel refused (logged; fatal under `[loop] require_rt = true`).
+#[derive(Debug, thiserror::Error)]
+pub enum RtRefusal {
+    /// `/dev/cpu_dma_latency` could not be held.
+    #[error("cpu_dma_latency {us} µs: /dev/cpu_dma_latency: {source} (root only)")]
+    CpuDmaLatency {
+        /// Requested bound [µs].
+        us: u32,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// `prctl(PR_SET_TIMERSLACK)` failed.
+    #[error("PR_SET_TIMERSLACK: {0}")]
+    TimerSlack(#[source] std::io::Error),
+    /// The thread could not be pinned to `[loop] cpu`.
+    #[error("CPU affinity {cpu}: {source}")]
+    Affinity {
+        /// Requested CPU.
+        cpu: usize,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// SCHED_FIFO at `[loop] priority` was not granted.
+    #[error("SCHED_FIFO {priority}: {source} (needs CAP_SYS_NICE or LimitRTPRIO)")]
+    SchedFifo {
+        /// Requested priority.
+        priority: i32,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// `mlockall` failed.
+    #[error("mlockall: {0} (needs CAP_IPC_LOCK or LimitMEMLOCK)")]
+    Mlockall(#[source] std::io::Error),
+}
+
+fn join_refusals(r: &[RtRefusal]) -> String {
+    r.iter()
+        .map(ToString::to_string)
+        .collect::<Vec<_>>()
+        .join("; ")
 }
 
 /// What [`apply_rt_settings`] obtained.
@@ -331,7 +389,7 @@ fn hold_cpu_dma_latency(us: u32) -> std::io::Result<(std::fs::File, i32)> {
 }
 
 /// Applies RT settings to the calling thread; returns what was granted. Logs refusals.
-fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, String> {
+fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, RtSetupError> {
     let l = &cfg.raw.loop_;
     let mut flags = 0;
     let mut refused = Vec::new();
@@ -346,19 +404,14 @@ fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, String> {
                 }
                 (pm_qos, pm_qos_us) = (Some(f), Some(got));
             }
-            Err(e) => refused.push(format!(
-                "cpu_dma_latency {us} µs: /dev/cpu_dma_latency: {e} (root only)"
-            )),
+            Err(source) => refused.push(RtRefusal::CpuDmaLatency { us, source }),
         }
     }
     // SAFETY: plain syscalls on the calling thread with valid arguments.
     unsafe {
         // Timer slack 1 ns (default 50 µs would dominate SCHED_OTHER lateness).
         if libc::prctl(libc::PR_SET_TIMERSLACK, 1, 0, 0, 0) != 0 {
-            refused.push(format!(
-                "PR_SET_TIMERSLACK: {}",
-                std::io::Error::last_os_error()
-            ));
+            refused.push(RtRefusal::TimerSlack(std::io::Error::last_os_error()));
         }
         if let Some(cpu) = l.cpu {
             let mut set: libc::cpu_set_t = std::mem::zeroed();
@@ -369,10 +422,10 @@ fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, String> {
             if ok && libc::CPU_ISSET(cpu, &got) && libc::CPU_COUNT(&got) == 1 {
                 flags |= STATUS_CPU_PINNED;
             } else {
-                refused.push(format!(
-                    "CPU affinity {cpu}: {}",
-                    std::io::Error::last_os_error()
-                ));
+                refused.push(RtRefusal::Affinity {
+                    cpu,
+                    source: std::io::Error::last_os_error(),
+                });
             }
         }
         if let Some(prio) = l.priority {
@@ -386,10 +439,10 @@ fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, String> {
             if rc == 0 && pol == libc::SCHED_FIFO && got.sched_priority == prio {
                 flags |= STATUS_SCHED_FIFO;
             } else {
-                refused.push(format!(
-                    "SCHED_FIFO {prio}: {} (needs CAP_SYS_NICE or LimitRTPRIO)",
-                    std::io::Error::from_raw_os_error(rc)
-                ));
+                refused.push(RtRefusal::SchedFifo {
+                    priority: prio,
+                    source: std::io::Error::from_raw_os_error(rc),
+                });
             }
         }
         if l.lock_memory {
@@ -410,10 +463,7 @@ fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, String> {
                     );
                 }
             } else {
-                refused.push(format!(
-                    "mlockall: {} (needs CAP_IPC_LOCK or LimitMEMLOCK)",
-                    std::io::Error::last_os_error()
-                ));
+                refused.push(RtRefusal::Mlockall(std::io::Error::last_os_error()));
             }
         }
     }
@@ -421,10 +471,7 @@ fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, String> {
         tracing::warn!("RT setting refused: {r}");
     }
     if l.require_rt && !refused.is_empty() {
-        return Err(format!(
-            "loop.require_rt = true and RT settings were refused: {}",
-            refused.join("; ")
-        ));
+        return Err(RtSetupError::RtRefused(refused));
     }
     Ok(RtGrant {
         flags,
@@ -764,10 +811,10 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
     let mut backend = match AnyBackend::open(&config) {
         Ok(b) => b,
         Err(e) => {
-            let _ = started.send(Err(format!(
-                "opening the {:?} backend: {e}",
-                config.raw.backend.kind
-            )));
+            let _ = started.send(Err(RtSetupError::Backend {
+                kind: config.raw.backend.kind,
+                source: e,
+            }));
             return None;
         }
     };
