@@ -19,6 +19,10 @@
 //! 4. publish (+ notify); record lateness / compute time / input age in fixed histograms;
 //!    publish [`DaemonStatus`] every `status_every_ticks`; advance the heartbeat.
 //!
+//! [`run`] reads top to bottom as these steps, each a named function or method in this module
+//! (`wait_for_tick`, `ParamSlot::hand_over`, `Freshness::judge`, [`compute`], `Telemetry::record`
+//! / `Telemetry::publish`, `next_deadline`), then `publish_stop` on the way out.
+//!
 //! Lockstep has no deadline: its lateness histograms stay empty and `missed_deadlines` stays 0;
 //! compute time and input age (plant publish → daemon wake) are recorded as usual. A joint whose
 //! PINN history is not full yet carries `FLAG_WARMING_UP`.
@@ -279,13 +283,6 @@ impl JointOut {
             flags: abi_flags(o.flags) | extra,
         }
     }
-}
-
-/// Task 4: timing statistics.
-#[derive(Debug)]
-struct Telemetry {
-    status: DaemonStatus,
-    stale_ticks: u64,
 }
 
 /// Everything the RT thread gets from the supervisor.
@@ -796,50 +793,330 @@ impl RtSummary {
     }
 }
 
-/// The RT thread's body. Returns when `shared.stop` is set (after publishing zero currents), with
-/// the loop statistics; `None` if set-up failed (reported through `started`).
-pub fn run(setup: RtSetup) -> Option<RtSummary> {
-    let RtSetup {
-        config,
-        mut params,
-        rx_params,
-        tx_old,
-        shared,
-        started,
-        count_allocs,
-    } = setup;
-    let mut backend = match AnyBackend::open(&config) {
+/// Loop constants, read from `[loop]` once before the first tick.
+#[derive(Debug, Clone, Copy)]
+struct LoopPlan {
+    period_ns: u64,
+    status_every: u64,
+    /// First tick whose allocations are counted (`ready_after_ticks`).
+    count_from_tick: u64,
+    lockstep: bool,
+    wait_request: bool,
+    lockstep_timeout_ns: u64,
+}
+
+impl LoopPlan {
+    fn of(config: &Config) -> Self {
+        let l = &config.raw.loop_;
+        Self {
+            period_ns: config.period_ns(),
+            status_every: l.status_every_ticks,
+            count_from_tick: l.ready_after_ticks,
+            lockstep: l.trigger == Trigger::Lockstep,
+            wait_request: l.lockstep_wait_request,
+            lockstep_timeout_ns: l.lockstep_timeout_ms.saturating_mul(1_000_000),
+        }
+    }
+}
+
+/// Set-up on the RT thread: opens the backend (its iceoryx2 ports are `!Send`), applies the RT
+/// settings, pre-faults the stack and reports the outcome through `started`. `None` if set-up
+/// failed (the error went to `started`).
+fn start(
+    config: &Config,
+    shared: &Shared,
+    started: &SyncSender<Result<u32, RtSetupError>>,
+) -> Option<(AnyBackend, RtGrant)> {
+    let backend = match AnyBackend::open(config) {
         Ok(b) => b,
-        Err(e) => {
+        Err(source) => {
             let _ = started.send(Err(RtSetupError::Backend {
                 kind: config.raw.backend.kind,
-                source: e,
+                source,
             }));
             return None;
         }
     };
-    // Held until this function returns (the PM QoS request lives as long as the file is open).
-    let grant = match apply_rt_settings(&config) {
+    let grant = match apply_rt_settings(config) {
         Ok(g) => g,
         Err(e) => {
             let _ = started.send(Err(e));
             return None;
         }
     };
-    let rt_flags = grant.flags;
-    shared.rt_flags.store(rt_flags, Ordering::Relaxed);
+    shared.rt_flags.store(grant.flags, Ordering::Relaxed);
     prefault_stack();
-    let _ = started.send(Ok(rt_flags));
+    let _ = started.send(Ok(grant.flags));
+    Some((backend, grant))
+}
 
-    let period_ns = config.period_ns();
-    let l = &config.raw.loop_;
-    let status_every = l.status_every_ticks;
-    let count_from_tick = l.ready_after_ticks;
-    let lockstep = l.trigger == Trigger::Lockstep;
-    let wait_request = l.lockstep_wait_request;
-    let lockstep_timeout_ns = l.lockstep_timeout_ms.saturating_mul(1_000_000);
-    let mut lateness_fine = FineHistogram::new();
+/// How steps 0–1 of a tick ended.
+#[derive(Debug, Clone, Copy)]
+enum Wake {
+    /// Run the tick: woken at `wake_ns`; `timed_out` if the lockstep wait gave up on an input.
+    Tick { wake_ns: u64, timed_out: bool },
+    /// The supervisor asked to stop.
+    Stop,
+}
 
+/// Steps 0 and 1: waits for the trigger (clock deadline or lockstep inputs), then the inputs are
+/// polled for tick `tick`.
+#[inline]
+fn wait_for_tick(
+    plan: &LoopPlan,
+    backend: &mut AnyBackend,
+    inputs: &mut Inputs,
+    tick: u64,
+    deadline_ns: u64,
+    stop: &AtomicBool,
+) -> Wake {
+    if plan.lockstep {
+        let timed_out = match wait_lockstep(
+            backend,
+            inputs,
+            tick,
+            stop,
+            plan.wait_request,
+            plan.lockstep_timeout_ns,
+        ) {
+            LockstepWake::Inputs => false,
+            LockstepWake::TimedOut => true,
+            LockstepWake::Stop => return Wake::Stop,
+        };
+        Wake::Tick {
+            wake_ns: monotonic_ns(),
+            timed_out,
+        }
+    } else {
+        sleep_until(deadline_ns);
+        let wake_ns = monotonic_ns();
+        if stop.load(Ordering::Relaxed) {
+            return Wake::Stop;
+        }
+        inputs.poll(backend, tick);
+        Wake::Tick {
+            wake_ns,
+            timed_out: false,
+        }
+    }
+}
+
+/// Step 2: the parameters in use and the hand-over with the supervisor. Old sets go back to be
+/// freed off-thread, never here; while one cannot be sent back (queue full) no new set is taken.
+struct ParamSlot {
+    params: Box<Params>,
+    parked_old: Option<Box<Params>>,
+    rx_params: Receiver<Box<Params>>,
+    tx_old: SyncSender<Box<Params>>,
+}
+
+impl ParamSlot {
+    /// Takes a new parameter set if one is waiting; `true` if it did.
+    #[inline]
+    fn hand_over(&mut self) -> bool {
+        if let Some(old) = self.parked_old.take()
+            && let Err(std::sync::mpsc::TrySendError::Full(old)) = self.tx_old.try_send(old)
+        {
+            self.parked_old = Some(old);
+        }
+        if self.parked_old.is_some() {
+            return false;
+        }
+        match self.rx_params.try_recv() {
+            Ok(new) => {
+                let old = std::mem::replace(&mut self.params, new);
+                if let Err(std::sync::mpsc::TrySendError::Full(old)) = self.tx_old.try_send(old) {
+                    self.parked_old = Some(old);
+                }
+                true
+            }
+            Err(TryRecvError::Empty | TryRecvError::Disconnected) => false,
+        }
+    }
+}
+
+impl Freshness {
+    /// Step 3a: whether this tick's state and request are stale. Clock trigger: by `seq` and by
+    /// stamp age against the wake time. Lockstep: its time is not wall time, so there is no
+    /// stamp-age rule; its stand-in is the timeout — an input that did not arrive within
+    /// `lockstep_timeout_ms` (`timed_out`) is stale at once.
+    #[inline]
+    fn judge(
+        plan: &LoopPlan,
+        inputs: &Inputs,
+        tick: u64,
+        wake_ns: u64,
+        timed_out: bool,
+        stale_after: u64,
+    ) -> Self {
+        let (st, rq) = (&inputs.states, &inputs.request);
+        if plan.lockstep {
+            let answered = !plan.wait_request || rq.value.state_seq == st.value.seq;
+            Self {
+                state_stale: st.stale_by_ticks(tick, stale_after)
+                    || (timed_out && !st.new_in(tick)),
+                request_stale: rq.stale_by_ticks(tick, stale_after)
+                    || (timed_out && !(rq.new_in(tick) && answered)),
+            }
+        } else {
+            Self {
+                state_stale: st.stale(
+                    tick,
+                    wake_ns,
+                    st.value.stamp_ns,
+                    stale_after,
+                    plan.period_ns,
+                ),
+                request_stale: rq.stale(
+                    tick,
+                    wake_ns,
+                    rq.value.stamp_ns,
+                    stale_after,
+                    plan.period_ns,
+                ),
+            }
+        }
+    }
+}
+
+/// Step 4's statistics: the status snapshot being filled and the fine lateness histogram.
+#[derive(Debug)]
+struct Telemetry {
+    status: DaemonStatus,
+    stale_ticks: u64,
+    lateness_fine: FineHistogram,
+}
+
+impl Telemetry {
+    /// Records one tick: wake lateness (clock trigger only: lockstep has no deadline), compute
+    /// time, input age, staleness.
+    #[inline]
+    fn record(
+        &mut self,
+        plan: &LoopPlan,
+        inputs: &Inputs,
+        fresh: Freshness,
+        wake_ns: u64,
+        deadline_ns: u64,
+        done_ns: u64,
+    ) {
+        let s = &mut self.status;
+        if !plan.lockstep {
+            let late = wake_ns.saturating_sub(deadline_ns);
+            s.lateness.record(late);
+            self.lateness_fine.record(late);
+        }
+        s.compute.record(done_ns.saturating_sub(wake_ns));
+        if inputs.states.have {
+            let age = wake_ns.saturating_sub(inputs.states.value.stamp_ns);
+            s.input_age.record(age);
+            s.input_age_ns = age;
+        }
+        if fresh.state_stale {
+            self.stale_ticks += 1;
+        }
+    }
+
+    /// Publishes the [`DaemonStatus`] snapshot after `ticks` ticks and mirrors the lateness
+    /// quantiles into `shared`.
+    #[allow(clippy::too_many_arguments)] // one snapshot from the tick's pieces, called once
+    #[inline]
+    fn publish(
+        &mut self,
+        backend: &mut AnyBackend,
+        shared: &Shared,
+        params: &Params,
+        cmd: &MotorCurrentCommand,
+        tau_f: &[f64; MAX_JOINTS],
+        state_stale: bool,
+        (ticks, missed, rt_flags): (u64, u64, u32),
+        now_ns: u64,
+    ) {
+        let s = &mut self.status;
+        s.seq += 1;
+        s.stamp_ns = now_ns;
+        s.ticks = ticks;
+        s.missed_deadlines = missed;
+        s.stale_ticks = self.stale_ticks;
+        s.n_joints = params.joints.len() as u32;
+        s.flags = rt_flags | if state_stale { STATUS_INPUT_STALE } else { 0 };
+        for j in params.joints.iter() {
+            s.model_kind[j.index] = crate::params::kind_code(&j.model);
+        }
+        s.tau_f_hat_nm = *tau_f;
+        s.i_ref_a = cmd.i_ref_a;
+        s.joint_flags = cmd.flags;
+        let _ = backend.publish_status(s);
+        shared
+            .lateness_p99_ns
+            .store(s.lateness.quantile_upper_ns(0.99), Ordering::Relaxed);
+        shared
+            .lateness_max_ns
+            .store(s.lateness.max_ns, Ordering::Relaxed);
+    }
+}
+
+/// The next absolute deadline after `deadline_ns` and the number of whole periods skipped to
+/// reach it: missed periods are skipped, not caught up in a burst (clock trigger; lockstep has no
+/// deadline and skips nothing).
+#[inline]
+fn next_deadline(plan: &LoopPlan, deadline_ns: u64, now_ns: u64) -> (u64, u64) {
+    let next = deadline_ns + plan.period_ns;
+    if plan.lockstep || now_ns < next {
+        return (next, 0);
+    }
+    let skipped = (now_ns - next) / plan.period_ns + 1;
+    (next + skipped * plan.period_ns, skipped)
+}
+
+/// Stopping: zero current on every configured joint, published a few times so latest-value readers
+/// see it, then a last status with `STATUS_STOPPING`.
+fn publish_stop(
+    backend: &mut AnyBackend,
+    cmd: &mut MotorCurrentCommand,
+    status: &mut DaemonStatus,
+    configured_mask: u64,
+    period_ns: u64,
+) {
+    cmd.valid_mask = configured_mask;
+    cmd.i_ref_a = [0.0; MAX_JOINTS];
+    cmd.flags = [0; MAX_JOINTS];
+    status.flags |= STATUS_STOPPING;
+    for _ in 0..3 {
+        cmd.seq = cmd.seq.wrapping_add(1);
+        cmd.stamp_ns = monotonic_ns();
+        let _ = backend.publish_command(cmd);
+        sleep_until(monotonic_ns() + period_ns);
+    }
+    status.seq += 1;
+    status.stamp_ns = monotonic_ns();
+    status.i_ref_a = [0.0; MAX_JOINTS];
+    let _ = backend.publish_status(status);
+}
+
+/// The RT thread's body. Returns when `shared.stop` is set (after publishing zero currents), with
+/// the loop statistics; `None` if set-up failed (reported through `started`).
+pub fn run(setup: RtSetup) -> Option<RtSummary> {
+    let RtSetup {
+        config,
+        params,
+        rx_params,
+        tx_old,
+        shared,
+        started,
+        count_allocs,
+    } = setup;
+    // `grant` is held until this function returns (the PM QoS request lives while its file is open).
+    let (mut backend, grant) = start(&config, &shared, &started)?;
+    let rt_flags = grant.flags;
+    let plan = LoopPlan::of(&config);
+
+    let mut slot = ParamSlot {
+        params,
+        parked_old: None,
+        rx_params,
+        tx_old,
+    };
     let mut inputs = Inputs {
         states: Latest::new(JointStates::zeroed()),
         request: Latest::new(TorqueRequest::zeroed()),
@@ -848,108 +1125,50 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
     let mut tele = Telemetry {
         status: DaemonStatus::zeroed(),
         stale_ticks: 0,
+        lateness_fine: FineHistogram::new(),
     };
-    tele.status.period_ns = period_ns;
+    tele.status.period_ns = plan.period_ns;
     tele.status.flags = rt_flags;
     let mut tau_f = [0.0f64; MAX_JOINTS];
     let mut prev_active = 0u64;
-    let mut parked_old: Option<Box<Params>> = None;
     let mut missed = 0u64;
     let mut tick = 0u64;
     // SAFETY: gettid/sched_getcpu have no preconditions.
     let tid = unsafe { libc::gettid() };
     let cpu_start = unsafe { libc::sched_getcpu() };
     let usage_start = ThreadUsage::now();
-    let mut deadline = monotonic_ns() + period_ns;
+    let mut deadline = monotonic_ns() + plan.period_ns;
 
     loop {
-        if count_allocs && tick == count_from_tick {
+        if count_allocs && tick == plan.count_from_tick {
             alloc_count::set_counting(true);
         }
 
         // 0. wait (the only step that differs between the triggers) and 1. inputs
-        let mut timed_out = false;
-        let wake = if lockstep {
-            match wait_lockstep(
-                &mut backend,
-                &mut inputs,
-                tick,
-                &shared.stop,
-                wait_request,
-                lockstep_timeout_ns,
-            ) {
-                LockstepWake::Inputs => {}
-                LockstepWake::TimedOut => timed_out = true,
-                LockstepWake::Stop => break,
-            }
-            monotonic_ns()
-        } else {
-            sleep_until(deadline);
-            let wake = monotonic_ns();
-            if shared.stop.load(Ordering::Relaxed) {
-                break;
-            }
-            inputs.poll(&mut backend, tick);
-            wake
+        let Wake::Tick { wake_ns, timed_out } = wait_for_tick(
+            &plan,
+            &mut backend,
+            &mut inputs,
+            tick,
+            deadline,
+            &shared.stop,
+        ) else {
+            break;
         };
 
-        // 2. parameter hand-over (the old set is freed by the supervisor, never here)
-        if let Some(old) = parked_old.take()
-            && let Err(std::sync::mpsc::TrySendError::Full(old)) = tx_old.try_send(old)
-        {
-            parked_old = Some(old);
-        }
-        if parked_old.is_none() {
-            match rx_params.try_recv() {
-                Ok(new) => {
-                    let old = std::mem::replace(&mut params, new);
-                    prev_active = 0; // every enabled joint gets a bumpless reset
-                    shared
-                        .generation
-                        .store(params.generation, Ordering::Relaxed);
-                    tele.status.generation = params.generation;
-                    if let Err(std::sync::mpsc::TrySendError::Full(old)) = tx_old.try_send(old) {
-                        parked_old = Some(old);
-                    }
-                }
-                Err(TryRecvError::Empty | TryRecvError::Disconnected) => {}
-            }
+        // 2. parameter hand-over
+        if slot.hand_over() {
+            prev_active = 0; // every enabled joint gets a bumpless reset
+            let generation = slot.params.generation;
+            shared.generation.store(generation, Ordering::Relaxed);
+            tele.status.generation = generation;
         }
 
         // 3. compute
-        let stale_after = params.stale_after_ticks;
-        let fresh = if lockstep {
-            // Lockstep time is not wall time: no stamp-age rule. Its stand-in is the timeout: an
-            // input that did not arrive within `lockstep_timeout_ms` is stale at once.
-            Freshness {
-                state_stale: inputs.states.stale_by_ticks(tick, stale_after)
-                    || (timed_out && !inputs.states.new_in(tick)),
-                request_stale: inputs.request.stale_by_ticks(tick, stale_after)
-                    || (timed_out
-                        && !(inputs.request.new_in(tick)
-                            && (!wait_request
-                                || inputs.request.value.state_seq == inputs.states.value.seq))),
-            }
-        } else {
-            Freshness {
-                state_stale: inputs.states.stale(
-                    tick,
-                    wake,
-                    inputs.states.value.stamp_ns,
-                    stale_after,
-                    period_ns,
-                ),
-                request_stale: inputs.request.stale(
-                    tick,
-                    wake,
-                    inputs.request.value.stamp_ns,
-                    stale_after,
-                    period_ns,
-                ),
-            }
-        };
+        let stale_after = slot.params.stale_after_ticks;
+        let fresh = Freshness::judge(&plan, &inputs, tick, wake_ns, timed_out, stale_after);
         compute(
-            &mut params,
+            &mut slot.params,
             &inputs,
             fresh,
             &mut prev_active,
@@ -959,64 +1178,29 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
         cmd.seq = cmd.seq.wrapping_add(1);
         cmd.stamp_ns = monotonic_ns();
 
-        // 4. output
+        // 4. output, telemetry, heartbeat
         let _ = backend.publish_command(&cmd);
         let done = monotonic_ns();
-
-        // telemetry
-        let s = &mut tele.status;
-        if !lockstep {
-            // Lockstep has no deadline: its lateness histogram stays empty.
-            let late = wake.saturating_sub(deadline);
-            s.lateness.record(late);
-            lateness_fine.record(late);
-        }
-        s.compute.record(done.saturating_sub(wake));
-        if inputs.states.have {
-            let age = wake.saturating_sub(inputs.states.value.stamp_ns);
-            s.input_age.record(age);
-            s.input_age_ns = age;
-        }
-        if fresh.state_stale {
-            tele.stale_ticks += 1;
-        }
+        tele.record(&plan, &inputs, fresh, wake_ns, deadline, done);
         tick += 1;
-        if tick.is_multiple_of(status_every) {
-            s.seq += 1;
-            s.stamp_ns = done;
-            s.ticks = tick;
-            s.missed_deadlines = missed;
-            s.stale_ticks = tele.stale_ticks;
-            s.n_joints = params.joints.len() as u32;
-            s.flags = rt_flags
-                | if fresh.state_stale {
-                    STATUS_INPUT_STALE
-                } else {
-                    0
-                };
-            for j in params.joints.iter() {
-                s.model_kind[j.index] = crate::params::kind_code(&j.model);
-            }
-            s.tau_f_hat_nm = tau_f;
-            s.i_ref_a = cmd.i_ref_a;
-            s.joint_flags = cmd.flags;
-            let _ = backend.publish_status(s);
-            shared
-                .lateness_p99_ns
-                .store(s.lateness.quantile_upper_ns(0.99), Ordering::Relaxed);
-            shared
-                .lateness_max_ns
-                .store(s.lateness.max_ns, Ordering::Relaxed);
+        if tick.is_multiple_of(plan.status_every) {
+            tele.publish(
+                &mut backend,
+                &shared,
+                &slot.params,
+                &cmd,
+                &tau_f,
+                fresh.state_stale,
+                (tick, missed, rt_flags),
+                done,
+            );
         }
         shared.heartbeat.store(tick, Ordering::Relaxed);
 
-        // next absolute deadline; skip whole missed periods (no catch-up bursts)
-        deadline += period_ns;
-        let now = monotonic_ns();
-        if !lockstep && now >= deadline {
-            let skipped = (now - deadline) / period_ns + 1;
+        let skipped;
+        (deadline, skipped) = next_deadline(&plan, deadline, monotonic_ns());
+        if skipped > 0 {
             missed += skipped;
-            deadline += skipped * period_ns;
             shared.missed.store(missed, Ordering::Relaxed);
         }
     }
@@ -1037,32 +1221,22 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
     if count_allocs {
         shared
             .counted_ticks
-            .store(tick.saturating_sub(count_from_tick), Ordering::Relaxed);
+            .store(tick.saturating_sub(plan.count_from_tick), Ordering::Relaxed);
     }
 
-    // Stopping: zero current on every configured joint, a few times so latest-value readers see it.
-    cmd.valid_mask = params.configured_mask;
-    cmd.i_ref_a = [0.0; MAX_JOINTS];
-    cmd.flags = [0; MAX_JOINTS];
-    tele.status.flags |= STATUS_STOPPING;
-    for _ in 0..3 {
-        cmd.seq = cmd.seq.wrapping_add(1);
-        cmd.stamp_ns = monotonic_ns();
-        let _ = backend.publish_command(&cmd);
-        sleep_until(monotonic_ns() + period_ns);
-    }
-    tele.status.seq += 1;
-    tele.status.stamp_ns = monotonic_ns();
-    tele.status.i_ref_a = [0.0; MAX_JOINTS];
-    let _ = backend.publish_status(&tele.status);
-    if let Some(old) = parked_old {
-        drop(old); // stopping: allocation rules no longer apply
-    }
+    publish_stop(
+        &mut backend,
+        &mut cmd,
+        &mut tele.status,
+        slot.params.configured_mask,
+        plan.period_ns,
+    );
+    drop(slot); // stopping: allocation rules no longer apply (a parked old set is freed here)
     Some(RtSummary {
         ticks: tick,
         missed,
-        lockstep,
-        lateness: lateness_fine,
+        lockstep: plan.lockstep,
+        lateness: tele.lateness_fine,
         status: Box::new(tele.status),
         thread,
     })
