@@ -29,8 +29,8 @@ pub enum ParamsError {
         joint: String,
         /// The model file.
         path: PathBuf,
-        /// Why reading failed.
-        source: WeightError,
+        /// Why reading failed (boxed: keeps `Result<_, ParamsError>` small).
+        source: Box<WeightError>,
     },
     /// A model file was read but does not make an estimator.
     #[error("joint {joint}: model {}: {source}", path.display())]
@@ -39,8 +39,8 @@ pub enum ParamsError {
         joint: String,
         /// The model file.
         path: PathBuf,
-        /// Why the estimator could not be built.
-        source: ModelError,
+        /// Why the estimator could not be built (boxed: keeps `Result<_, ParamsError>` small).
+        source: Box<ModelError>,
     },
     /// The τ̂_F low-pass cannot be designed.
     #[error("joint {joint}: lpf: {source}")]
@@ -119,7 +119,7 @@ pub fn build(cfg: &Config, generation: u64) -> Result<Box<Params>, ParamsError> 
                     ParamsError::ReadModel {
                         joint: j.name.clone(),
                         path: path.clone(),
-                        source,
+                        source: Box::new(source),
                     }
                 })?;
                 let policy = match warmup {
@@ -130,7 +130,7 @@ pub fn build(cfg: &Config, generation: u64) -> Result<Box<Params>, ParamsError> 
                     ParamsError::Model {
                         joint: j.name.clone(),
                         path: path.clone(),
-                        source,
+                        source: Box::new(source),
                     }
                 })?;
                 // A calibrated Δθ offset is kept across enables; without one, Δθ is latched at
