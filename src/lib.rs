@@ -12,6 +12,12 @@
 //!   (AVX-512 / AVX2+FMA / portable) and f16/bf16 weight storage.
 //! - [`model`]: none / CV / SCV / PINN behind one trait, so the daemon treats them alike.
 //! - [`units`]: the signed gear ratio and unit conventions.
+//! - [`law`]: the per-joint torque-to-current control law (friction compensation gain, velocity-gated
+//!   clip, τ̂_F low-pass, PI on the torque error, current clamp, NaN handling, bumpless reset) that
+//!   frictiond runs every tick and the tools' experiment oracle runs on the true friction.
+//! - [`filter`]: the one Butterworth low-pass (scipy-equal design, allocation-free per-sample step,
+//!   offline `sosfilt`/`sosfiltfilt`).
+//! - [`fastmath`]: inlinable exp/ln/powf/tanh kernels with stated error bounds (scalar and lane-wise).
 //! - `random` (cargo feature `random`, off by default): seeded random ReLU networks for tests, benches
 //!   and tools.
 //!
@@ -26,9 +32,12 @@
 
 #![warn(missing_docs)]
 
+pub mod fastmath;
 pub mod features;
+pub mod filter;
 pub mod friction;
 pub mod kernel;
+pub mod law;
 pub mod mlp;
 pub mod model;
 #[cfg(feature = "random")]

@@ -1,6 +1,6 @@
 //! Compute cost of one RT tick ([`frictiond::rt::compute`]: per joint model estimate + control law)
 //! for 1, 15 (ergoCub legs + torso) and 32 joints of paper-size PINNs — the ankle-roll network of
-//! the paper, `[Δθ ×20, ṡ ×20]` → 268 → 215 → 1 (paper-facts.md), random weights, stored as f32,
+//! the paper, `[Δθ ×20, ṡ ×20]` → 268 → 215 → 1 (the paper), random weights, stored as f32,
 //! f16 and bf16 (the `.fwt` storage dtypes: 32 distinct f32 networks are 8.9 MB of weights, more
 //! than this machine's caches; half precision halves the bytes streamed per tick) — and, for
 //! reference, the same joint counts with the SCV model. Numbers for the README; no asserts.
@@ -10,12 +10,12 @@ use std::hint::black_box;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use frictiond::config::OnStale;
-use frictiond::control::{Gains, JointLaw};
-use frictiond::filter::Butterworth;
 use frictiond::params::{JointRt, Params};
 use frictiond::rt::{Freshness, Inputs, Latest, compute};
 use frictionless::features::{FeatureSet, FeatureSpec, WarmupPolicy};
+use frictionless::filter::CausalButterworth;
 use frictionless::friction::ScvParams;
+use frictionless::law::{Gains, JointLaw};
 use frictionless::mlp::StorageDtype;
 use frictionless::model::{JointModel, PinnEstimator};
 use frictionless::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
@@ -87,7 +87,10 @@ fn params(n: usize, pinn: Option<StorageDtype>) -> Box<Params> {
                 Some(dtype) => paper_pinn(k as u64, dtype),
                 None => scv(),
             },
-            law: JointLaw::new(gains, Some(Butterworth::design(2, 30.0, 1000.0).unwrap())),
+            law: JointLaw::new(
+                gains,
+                Some(CausalButterworth::design(2, 30.0, 1000.0).unwrap()),
+            ),
         })
         .collect();
     Box::new(Params {

@@ -131,11 +131,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     let cfg = config::load(&cli.config)?;
     if cli.check {
         // Also build the runtime parameters (filters, models) so --check catches everything.
-        params::build(&cfg, 0).map_err(anyhow::Error::msg)?;
+        params::build(&cfg, 0)?;
         print!("{}", summary(&cfg));
         return Ok(());
     }
-    let params = params::build(&cfg, 0).map_err(anyhow::Error::msg)?;
+    let params = params::build(&cfg, 0)?;
     tracing::info!(
         "config {} validated: {} joint(s), period {} µs",
         cfg.file.display(),
@@ -316,7 +316,7 @@ fn reload(
                     "[loop] and [backend] changes need a restart; applying joints and safety only"
                 );
             }
-            let p = params::build(&new, *generation + 1)?;
+            let p = params::build(&new, *generation + 1).map_err(|e| e.to_string())?;
             Ok((new, p))
         });
     match result {

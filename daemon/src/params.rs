@@ -7,18 +7,54 @@
 //! What it is **not**: no I/O besides reading model files; nothing here runs on the RT thread except
 //! the `#[inline]` estimator calls.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use frictionless::features::WarmupPolicy;
-use frictionless::model::{JointModel, NoFriction, PinnEstimator};
+use frictionless::model::{JointModel, ModelError, NoFriction, PinnEstimator};
+use frictionless::weights::WeightError;
 use frictionless_shm_types::model_kind;
 
+use frictionless::filter::{CausalButterworth, FilterError};
+use frictionless::law::{Gains, JointLaw};
+
 use crate::config::{Config, ModelSpec, OnStale, WarmupName};
-use crate::control::{Gains, JointLaw};
-use crate::filter::Butterworth;
+
+/// Why the runtime parameters could not be built. Messages name the joint, the file and the cause.
+#[derive(Debug, thiserror::Error)]
+pub enum ParamsError {
+    /// A `.fwt` model file could not be read.
+    #[error("joint {joint}: model {}: {source}", path.display())]
+    ReadModel {
+        /// Joint name.
+        joint: String,
+        /// The model file.
+        path: PathBuf,
+        /// Why reading failed (boxed: keeps `Result<_, ParamsError>` small).
+        source: Box<WeightError>,
+    },
+    /// A model file was read but does not make an estimator.
+    #[error("joint {joint}: model {}: {source}", path.display())]
+    Model {
+        /// Joint name.
+        joint: String,
+        /// The model file.
+        path: PathBuf,
+        /// Why the estimator could not be built (boxed: keeps `Result<_, ParamsError>` small).
+        source: Box<ModelError>,
+    },
+    /// The τ̂_F low-pass cannot be designed.
+    #[error("joint {joint}: lpf: {source}")]
+    Lpf {
+        /// Joint name.
+        joint: String,
+        /// The design error.
+        source: FilterError,
+    },
+}
 
 /// Reads and checks a `.fwt` model against the joint's configured gear ratio. Error text names the
-/// problem; the caller adds file and key.
+/// problem; the caller (the config validation, which wraps it in its own typed error) adds file and
+/// key.
 pub fn check_model_file(path: &Path, gear_ratio: f64) -> Result<(), String> {
     let m = frictionless::weights::read_file(path).map_err(|e| e.to_string())?;
     let r = m.meta.gear_ratio.get();
@@ -68,7 +104,7 @@ pub struct Params {
 }
 
 /// Builds the runtime parameters (loads model files, designs filters). Off the RT thread.
-pub fn build(cfg: &Config, generation: u64) -> Result<Box<Params>, String> {
+pub fn build(cfg: &Config, generation: u64) -> Result<Box<Params>, ParamsError> {
     let dt_s = cfg.raw.loop_.period_us as f64 * 1e-6;
     let fs_hz = 1.0 / dt_s;
     let mut joints = Vec::with_capacity(cfg.raw.joint.len());
@@ -79,14 +115,24 @@ pub fn build(cfg: &Config, generation: u64) -> Result<Box<Params>, String> {
             ModelSpec::Cv(p) => JointModel::Cv(*p),
             ModelSpec::Scv(p) => JointModel::Scv(*p),
             ModelSpec::Pinn { path, warmup } => {
-                let file = frictionless::weights::read_file(path)
-                    .map_err(|e| format!("joint {}: model {}: {e}", j.name, path.display()))?;
+                let file = frictionless::weights::read_file(path).map_err(|source| {
+                    ParamsError::ReadModel {
+                        joint: j.name.clone(),
+                        path: path.clone(),
+                        source: Box::new(source),
+                    }
+                })?;
                 let policy = match warmup {
                     WarmupName::ZeroPad => WarmupPolicy::ZeroPad,
                     WarmupName::HoldZero => WarmupPolicy::HoldZero,
                 };
-                let mut est = PinnEstimator::from_model_file(&file, policy)
-                    .map_err(|e| format!("joint {}: model {}: {e}", j.name, path.display()))?;
+                let mut est = PinnEstimator::from_model_file(&file, policy).map_err(|source| {
+                    ParamsError::Model {
+                        joint: j.name.clone(),
+                        path: path.clone(),
+                        source: Box::new(source),
+                    }
+                })?;
                 // A calibrated Δθ offset is kept across enables; without one, Δθ is latched at
                 // every enable (see `frictionless::features::History`).
                 est.fix_delta_theta_offset(j.delta_theta_offset_motor_rad);
@@ -95,8 +141,12 @@ pub fn build(cfg: &Config, generation: u64) -> Result<Box<Params>, String> {
         };
         let lpf = match j.lpf {
             Some(l) => Some(
-                Butterworth::design(l.order, l.cutoff_hz, fs_hz)
-                    .map_err(|e| format!("joint {}: lpf: {e}", j.name))?,
+                CausalButterworth::design(l.order, l.cutoff_hz, fs_hz).map_err(|source| {
+                    ParamsError::Lpf {
+                        joint: j.name.clone(),
+                        source,
+                    }
+                })?,
             ),
             None => None,
         };

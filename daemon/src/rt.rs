@@ -14,9 +14,14 @@
 //! 2. parameter hand-over: `try_recv` a new `Box<Params>` (built off-thread), send the old one back
 //!    to be freed off-thread;
 //! 3. [`compute`]: per joint, enable edge → reset (bumpless), model estimate, control law
-//!    ([`crate::control`]), stale/fault/NaN handling → [`MotorCurrentCommand`];
+//!    ([`frictionless::law`], its [`LawFlags`] mapped to the ABI's `FLAG_*` by [`abi_flags`]),
+//!    stale/fault/NaN handling → [`MotorCurrentCommand`];
 //! 4. publish (+ notify); record lateness / compute time / input age in fixed histograms;
 //!    publish [`DaemonStatus`] every `status_every_ticks`; advance the heartbeat.
+//!
+//! [`run`] reads top to bottom as these steps, each a named function or method in this module
+//! (`wait_for_tick`, `ParamSlot::hand_over`, `Freshness::judge`, [`compute`], `Telemetry::record`
+//! / `Telemetry::publish`, `next_deadline`), then `publish_stop` on the way out.
 //!
 //! Lockstep has no deadline: its lateness histograms stay empty and `missed_deadlines` stays 0;
 //! compute time and input age (plant publish → daemon wake) are recorded as usual. A joint whose
@@ -33,17 +38,18 @@ use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, TryRecvError};
 
 use frictionless::features::JointSample;
+use frictionless::law::{LawFlags, LawInput, LawOutput};
 use frictionless::model::{FrictionModel, JointModel};
 use frictionless_shm_types::{
-    DaemonStatus, FAULT_FEEDBACK_STALE, FLAG_DISABLED, FLAG_FAULT, FLAG_STALE, FLAG_WARMING_UP,
-    JointStates, MAX_JOINTS, MotorCurrentCommand, STATUS_CPU_PINNED, STATUS_INPUT_STALE,
-    STATUS_MEMORY_LOCKED, STATUS_SCHED_FIFO, STATUS_STOPPING, TorqueRequest, monotonic_ns,
+    DaemonStatus, FAULT_FEEDBACK_STALE, FLAG_CURRENT_SATURATED, FLAG_DISABLED, FLAG_FAULT,
+    FLAG_FRICTION_CLIPPED, FLAG_NON_FINITE, FLAG_STALE, FLAG_WARMING_UP, JointStates, MAX_JOINTS,
+    MotorCurrentCommand, STATUS_CPU_PINNED, STATUS_INPUT_STALE, STATUS_MEMORY_LOCKED,
+    STATUS_SCHED_FIFO, STATUS_STOPPING, TorqueRequest, monotonic_ns,
 };
 
 use crate::alloc_count;
-use crate::backend::{AnyBackend, Backend};
-use crate::config::{Config, OnStale, Trigger};
-use crate::control::{LawInput, LawOutput};
+use crate::backend::{AnyBackend, Backend, BackendError};
+use crate::config::{BackendKind, Config, OnStale, Trigger};
 use crate::params::Params;
 
 /// State shared between the RT thread and the supervisor (atomics only).
@@ -169,13 +175,9 @@ pub fn compute(
         let k = j.index;
         let bit = 1u64 << k;
         let out = if enabled_now & bit == 0 {
-            LawOutput {
-                i_a: 0.0,
-                tau_f_hat_nm: 0.0,
-                flags: FLAG_DISABLED,
-            }
+            JointOut::zero(FLAG_DISABLED)
         } else if fresh.request_stale || (k as u32) >= rq.n_joints {
-            stale_out(0.0)
+            JointOut::zero(FLAG_STALE)
         } else if fresh.state_stale
             || (k as u32) >= st.n_joints
             || st.fault_flags[k] == FAULT_FEEDBACK_STALE
@@ -184,20 +186,14 @@ pub fn compute(
             // backend marks it with FAULT_FEEDBACK_STALE alone): the configured safe output. A
             // drive fault reported alongside wins (the fault branch below).
             match p.on_stale {
-                OnStale::Zero => stale_out(0.0),
+                OnStale::Zero => JointOut::zero(FLAG_STALE),
                 OnStale::StaticModel => {
-                    let mut o = j.law.feed_forward_only(rq.tau_des_nm[k]);
-                    o.flags |= FLAG_STALE;
-                    o
+                    JointOut::from_law(j.law.feed_forward_only(rq.tau_des_nm[k]), FLAG_STALE)
                 }
             }
         } else if st.fault_flags[k] & !FAULT_FEEDBACK_STALE != 0 {
             j.law.reset();
-            LawOutput {
-                i_a: 0.0,
-                tau_f_hat_nm: 0.0,
-                flags: FLAG_FAULT,
-            }
+            JointOut::zero(FLAG_FAULT)
         } else {
             let sample = JointSample {
                 s_rad: st.s_rad[k],
@@ -213,16 +209,18 @@ pub fn compute(
             }
             active |= bit;
             let f = j.model.estimate(&sample);
-            let mut o = j.law.step(&LawInput {
+            let o = j.law.step(&LawInput {
                 tau_des_nm: rq.tau_des_nm[k],
                 friction_nm: f,
                 sdot_rad_s: sample.sdot_rad_s,
                 tau_meas_nm: st.tau_meas_nm[k],
             });
-            if warming_up(&j.model) {
-                o.flags |= FLAG_WARMING_UP;
-            }
-            o
+            let warming = if warming_up(&j.model) {
+                FLAG_WARMING_UP
+            } else {
+                0
+            };
+            JointOut::from_law(o, warming)
         };
         cmd.i_ref_a[k] = out.i_a;
         cmd.flags[k] = out.flags;
@@ -241,20 +239,50 @@ pub fn warming_up(m: &JointModel) -> bool {
     }
 }
 
+/// The ABI's `FLAG_*` bits of one tick of the law (the bit values are the ABI's, unchanged).
 #[inline]
-fn stale_out(i_a: f64) -> LawOutput {
-    LawOutput {
-        i_a,
-        tau_f_hat_nm: 0.0,
-        flags: FLAG_STALE,
+pub fn abi_flags(f: LawFlags) -> u32 {
+    let mut bits = 0;
+    if f.friction_clipped {
+        bits |= FLAG_FRICTION_CLIPPED;
     }
+    if f.current_saturated {
+        bits |= FLAG_CURRENT_SATURATED;
+    }
+    if f.non_finite {
+        bits |= FLAG_NON_FINITE;
+    }
+    bits
 }
 
-/// Task 4: timing statistics.
-#[derive(Debug)]
-struct Telemetry {
-    status: DaemonStatus,
-    stale_ticks: u64,
+/// One joint's slot of the command for this tick.
+#[derive(Debug, Clone, Copy)]
+struct JointOut {
+    i_a: f64,
+    tau_f_hat_nm: f64,
+    flags: u32,
+}
+
+impl JointOut {
+    /// Zero current, no compensation, `flags`.
+    #[inline]
+    fn zero(flags: u32) -> Self {
+        Self {
+            i_a: 0.0,
+            tau_f_hat_nm: 0.0,
+            flags,
+        }
+    }
+
+    /// The law's output with its flags mapped to the ABI, plus `extra` `FLAG_*` bits.
+    #[inline]
+    fn from_law(o: LawOutput, extra: u32) -> Self {
+        Self {
+            i_a: o.i_a,
+            tau_f_hat_nm: o.tau_f_hat_nm,
+            flags: abi_flags(o.flags) | extra,
+        }
+    }
 }
 
 /// Everything the RT thread gets from the supervisor.
@@ -270,9 +298,67 @@ pub struct RtSetup {
     /// Shared atomics.
     pub shared: Arc<Shared>,
     /// Start-up result: Ok(granted STATUS_* flags) or why set-up failed.
-    pub started: SyncSender<Result<u32, String>>,
+    pub started: SyncSender<Result<u32, RtSetupError>>,
     /// Count RT-thread allocations after `ready_after_ticks`.
     pub count_allocs: bool,
+}
+
+/// Why the RT thread could not start (reported through [`RtSetup::started`]).
+#[derive(Debug, thiserror::Error)]
+pub enum RtSetupError {
+    /// The backend could not be opened.
+    #[error("opening the {kind:?} backend: {source}")]
+    Backend {
+        /// `[backend] kind`.
+        kind: BackendKind,
+        /// Why.
+        source: BackendError,
+    },
+    /// `[loop] require_rt = true` and at least one RT setting was refused.
+    #[error("loop.require_rt = true and RT settings were refused: {}", join_refusals(.0))]
+    RtRefused(Vec<RtRefusal>),
+}
+
+/// One RT setting the kernel refused (logged; fatal under `[loop] require_rt = true`).
+#[derive(Debug, thiserror::Error)]
+pub enum RtRefusal {
+    /// `/dev/cpu_dma_latency` could not be held.
+    #[error("cpu_dma_latency {us} µs: /dev/cpu_dma_latency: {source} (root only)")]
+    CpuDmaLatency {
+        /// Requested bound [µs].
+        us: u32,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// `prctl(PR_SET_TIMERSLACK)` failed.
+    #[error("PR_SET_TIMERSLACK: {0}")]
+    TimerSlack(#[source] std::io::Error),
+    /// The thread could not be pinned to `[loop] cpu`.
+    #[error("CPU affinity {cpu}: {source}")]
+    Affinity {
+        /// Requested CPU.
+        cpu: usize,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// SCHED_FIFO at `[loop] priority` was not granted.
+    #[error("SCHED_FIFO {priority}: {source} (needs CAP_SYS_NICE or LimitRTPRIO)")]
+    SchedFifo {
+        /// Requested priority.
+        priority: i32,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// `mlockall` failed.
+    #[error("mlockall: {0} (needs CAP_IPC_LOCK or LimitMEMLOCK)")]
+    Mlockall(#[source] std::io::Error),
+}
+
+fn join_refusals(r: &[RtRefusal]) -> String {
+    r.iter()
+        .map(ToString::to_string)
+        .collect::<Vec<_>>()
+        .join("; ")
 }
 
 /// What [`apply_rt_settings`] obtained.
@@ -300,7 +386,7 @@ fn hold_cpu_dma_latency(us: u32) -> std::io::Result<(std::fs::File, i32)> {
 }
 
 /// Applies RT settings to the calling thread; returns what was granted. Logs refusals.
-fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, String> {
+fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, RtSetupError> {
     let l = &cfg.raw.loop_;
     let mut flags = 0;
     let mut refused = Vec::new();
@@ -315,19 +401,14 @@ fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, String> {
                 }
                 (pm_qos, pm_qos_us) = (Some(f), Some(got));
             }
-            Err(e) => refused.push(format!(
-                "cpu_dma_latency {us} µs: /dev/cpu_dma_latency: {e} (root only)"
-            )),
+            Err(source) => refused.push(RtRefusal::CpuDmaLatency { us, source }),
         }
     }
     // SAFETY: plain syscalls on the calling thread with valid arguments.
     unsafe {
         // Timer slack 1 ns (default 50 µs would dominate SCHED_OTHER lateness).
         if libc::prctl(libc::PR_SET_TIMERSLACK, 1, 0, 0, 0) != 0 {
-            refused.push(format!(
-                "PR_SET_TIMERSLACK: {}",
-                std::io::Error::last_os_error()
-            ));
+            refused.push(RtRefusal::TimerSlack(std::io::Error::last_os_error()));
         }
         if let Some(cpu) = l.cpu {
             let mut set: libc::cpu_set_t = std::mem::zeroed();
@@ -338,10 +419,10 @@ fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, String> {
             if ok && libc::CPU_ISSET(cpu, &got) && libc::CPU_COUNT(&got) == 1 {
                 flags |= STATUS_CPU_PINNED;
             } else {
-                refused.push(format!(
-                    "CPU affinity {cpu}: {}",
-                    std::io::Error::last_os_error()
-                ));
+                refused.push(RtRefusal::Affinity {
+                    cpu,
+                    source: std::io::Error::last_os_error(),
+                });
             }
         }
         if let Some(prio) = l.priority {
@@ -355,10 +436,10 @@ fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, String> {
             if rc == 0 && pol == libc::SCHED_FIFO && got.sched_priority == prio {
                 flags |= STATUS_SCHED_FIFO;
             } else {
-                refused.push(format!(
-                    "SCHED_FIFO {prio}: {} (needs CAP_SYS_NICE or LimitRTPRIO)",
-                    std::io::Error::from_raw_os_error(rc)
-                ));
+                refused.push(RtRefusal::SchedFifo {
+                    priority: prio,
+                    source: std::io::Error::from_raw_os_error(rc),
+                });
             }
         }
         if l.lock_memory {
@@ -379,10 +460,7 @@ fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, String> {
                     );
                 }
             } else {
-                refused.push(format!(
-                    "mlockall: {} (needs CAP_IPC_LOCK or LimitMEMLOCK)",
-                    std::io::Error::last_os_error()
-                ));
+                refused.push(RtRefusal::Mlockall(std::io::Error::last_os_error()));
             }
         }
     }
@@ -390,10 +468,7 @@ fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, String> {
         tracing::warn!("RT setting refused: {r}");
     }
     if l.require_rt && !refused.is_empty() {
-        return Err(format!(
-            "loop.require_rt = true and RT settings were refused: {}",
-            refused.join("; ")
-        ));
+        return Err(RtSetupError::RtRefused(refused));
     }
     Ok(RtGrant {
         flags,
@@ -718,50 +793,330 @@ impl RtSummary {
     }
 }
 
-/// The RT thread's body. Returns when `shared.stop` is set (after publishing zero currents), with
-/// the loop statistics; `None` if set-up failed (reported through `started`).
-pub fn run(setup: RtSetup) -> Option<RtSummary> {
-    let RtSetup {
-        config,
-        mut params,
-        rx_params,
-        tx_old,
-        shared,
-        started,
-        count_allocs,
-    } = setup;
-    let mut backend = match AnyBackend::open(&config) {
+/// Loop constants, read from `[loop]` once before the first tick.
+#[derive(Debug, Clone, Copy)]
+struct LoopPlan {
+    period_ns: u64,
+    status_every: u64,
+    /// First tick whose allocations are counted (`ready_after_ticks`).
+    count_from_tick: u64,
+    lockstep: bool,
+    wait_request: bool,
+    lockstep_timeout_ns: u64,
+}
+
+impl LoopPlan {
+    fn of(config: &Config) -> Self {
+        let l = &config.raw.loop_;
+        Self {
+            period_ns: config.period_ns(),
+            status_every: l.status_every_ticks,
+            count_from_tick: l.ready_after_ticks,
+            lockstep: l.trigger == Trigger::Lockstep,
+            wait_request: l.lockstep_wait_request,
+            lockstep_timeout_ns: l.lockstep_timeout_ms.saturating_mul(1_000_000),
+        }
+    }
+}
+
+/// Set-up on the RT thread: opens the backend (its iceoryx2 ports are `!Send`), applies the RT
+/// settings, pre-faults the stack and reports the outcome through `started`. `None` if set-up
+/// failed (the error went to `started`).
+fn start(
+    config: &Config,
+    shared: &Shared,
+    started: &SyncSender<Result<u32, RtSetupError>>,
+) -> Option<(AnyBackend, RtGrant)> {
+    let backend = match AnyBackend::open(config) {
         Ok(b) => b,
-        Err(e) => {
-            let _ = started.send(Err(format!(
-                "opening the {:?} backend: {e}",
-                config.raw.backend.kind
-            )));
+        Err(source) => {
+            let _ = started.send(Err(RtSetupError::Backend {
+                kind: config.raw.backend.kind,
+                source,
+            }));
             return None;
         }
     };
-    // Held until this function returns (the PM QoS request lives as long as the file is open).
-    let grant = match apply_rt_settings(&config) {
+    let grant = match apply_rt_settings(config) {
         Ok(g) => g,
         Err(e) => {
             let _ = started.send(Err(e));
             return None;
         }
     };
-    let rt_flags = grant.flags;
-    shared.rt_flags.store(rt_flags, Ordering::Relaxed);
+    shared.rt_flags.store(grant.flags, Ordering::Relaxed);
     prefault_stack();
-    let _ = started.send(Ok(rt_flags));
+    let _ = started.send(Ok(grant.flags));
+    Some((backend, grant))
+}
 
-    let period_ns = config.period_ns();
-    let l = &config.raw.loop_;
-    let status_every = l.status_every_ticks;
-    let count_from_tick = l.ready_after_ticks;
-    let lockstep = l.trigger == Trigger::Lockstep;
-    let wait_request = l.lockstep_wait_request;
-    let lockstep_timeout_ns = l.lockstep_timeout_ms.saturating_mul(1_000_000);
-    let mut lateness_fine = FineHistogram::new();
+/// How steps 0–1 of a tick ended.
+#[derive(Debug, Clone, Copy)]
+enum Wake {
+    /// Run the tick: woken at `wake_ns`; `timed_out` if the lockstep wait gave up on an input.
+    Tick { wake_ns: u64, timed_out: bool },
+    /// The supervisor asked to stop.
+    Stop,
+}
 
+/// Steps 0 and 1: waits for the trigger (clock deadline or lockstep inputs), then the inputs are
+/// polled for tick `tick`.
+#[inline]
+fn wait_for_tick(
+    plan: &LoopPlan,
+    backend: &mut AnyBackend,
+    inputs: &mut Inputs,
+    tick: u64,
+    deadline_ns: u64,
+    stop: &AtomicBool,
+) -> Wake {
+    if plan.lockstep {
+        let timed_out = match wait_lockstep(
+            backend,
+            inputs,
+            tick,
+            stop,
+            plan.wait_request,
+            plan.lockstep_timeout_ns,
+        ) {
+            LockstepWake::Inputs => false,
+            LockstepWake::TimedOut => true,
+            LockstepWake::Stop => return Wake::Stop,
+        };
+        Wake::Tick {
+            wake_ns: monotonic_ns(),
+            timed_out,
+        }
+    } else {
+        sleep_until(deadline_ns);
+        let wake_ns = monotonic_ns();
+        if stop.load(Ordering::Relaxed) {
+            return Wake::Stop;
+        }
+        inputs.poll(backend, tick);
+        Wake::Tick {
+            wake_ns,
+            timed_out: false,
+        }
+    }
+}
+
+/// Step 2: the parameters in use and the hand-over with the supervisor. Old sets go back to be
+/// freed off-thread, never here; while one cannot be sent back (queue full) no new set is taken.
+struct ParamSlot {
+    params: Box<Params>,
+    parked_old: Option<Box<Params>>,
+    rx_params: Receiver<Box<Params>>,
+    tx_old: SyncSender<Box<Params>>,
+}
+
+impl ParamSlot {
+    /// Takes a new parameter set if one is waiting; `true` if it did.
+    #[inline]
+    fn hand_over(&mut self) -> bool {
+        if let Some(old) = self.parked_old.take()
+            && let Err(std::sync::mpsc::TrySendError::Full(old)) = self.tx_old.try_send(old)
+        {
+            self.parked_old = Some(old);
+        }
+        if self.parked_old.is_some() {
+            return false;
+        }
+        match self.rx_params.try_recv() {
+            Ok(new) => {
+                let old = std::mem::replace(&mut self.params, new);
+                if let Err(std::sync::mpsc::TrySendError::Full(old)) = self.tx_old.try_send(old) {
+                    self.parked_old = Some(old);
+                }
+                true
+            }
+            Err(TryRecvError::Empty | TryRecvError::Disconnected) => false,
+        }
+    }
+}
+
+impl Freshness {
+    /// Step 3a: whether this tick's state and request are stale. Clock trigger: by `seq` and by
+    /// stamp age against the wake time. Lockstep: its time is not wall time, so there is no
+    /// stamp-age rule; its stand-in is the timeout — an input that did not arrive within
+    /// `lockstep_timeout_ms` (`timed_out`) is stale at once.
+    #[inline]
+    fn judge(
+        plan: &LoopPlan,
+        inputs: &Inputs,
+        tick: u64,
+        wake_ns: u64,
+        timed_out: bool,
+        stale_after: u64,
+    ) -> Self {
+        let (st, rq) = (&inputs.states, &inputs.request);
+        if plan.lockstep {
+            let answered = !plan.wait_request || rq.value.state_seq == st.value.seq;
+            Self {
+                state_stale: st.stale_by_ticks(tick, stale_after)
+                    || (timed_out && !st.new_in(tick)),
+                request_stale: rq.stale_by_ticks(tick, stale_after)
+                    || (timed_out && !(rq.new_in(tick) && answered)),
+            }
+        } else {
+            Self {
+                state_stale: st.stale(
+                    tick,
+                    wake_ns,
+                    st.value.stamp_ns,
+                    stale_after,
+                    plan.period_ns,
+                ),
+                request_stale: rq.stale(
+                    tick,
+                    wake_ns,
+                    rq.value.stamp_ns,
+                    stale_after,
+                    plan.period_ns,
+                ),
+            }
+        }
+    }
+}
+
+/// Step 4's statistics: the status snapshot being filled and the fine lateness histogram.
+#[derive(Debug)]
+struct Telemetry {
+    status: DaemonStatus,
+    stale_ticks: u64,
+    lateness_fine: FineHistogram,
+}
+
+impl Telemetry {
+    /// Records one tick: wake lateness (clock trigger only: lockstep has no deadline), compute
+    /// time, input age, staleness.
+    #[inline]
+    fn record(
+        &mut self,
+        plan: &LoopPlan,
+        inputs: &Inputs,
+        fresh: Freshness,
+        wake_ns: u64,
+        deadline_ns: u64,
+        done_ns: u64,
+    ) {
+        let s = &mut self.status;
+        if !plan.lockstep {
+            let late = wake_ns.saturating_sub(deadline_ns);
+            s.lateness.record(late);
+            self.lateness_fine.record(late);
+        }
+        s.compute.record(done_ns.saturating_sub(wake_ns));
+        if inputs.states.have {
+            let age = wake_ns.saturating_sub(inputs.states.value.stamp_ns);
+            s.input_age.record(age);
+            s.input_age_ns = age;
+        }
+        if fresh.state_stale {
+            self.stale_ticks += 1;
+        }
+    }
+
+    /// Publishes the [`DaemonStatus`] snapshot after `ticks` ticks and mirrors the lateness
+    /// quantiles into `shared`.
+    #[allow(clippy::too_many_arguments)] // one snapshot from the tick's pieces, called once
+    #[inline]
+    fn publish(
+        &mut self,
+        backend: &mut AnyBackend,
+        shared: &Shared,
+        params: &Params,
+        cmd: &MotorCurrentCommand,
+        tau_f: &[f64; MAX_JOINTS],
+        state_stale: bool,
+        (ticks, missed, rt_flags): (u64, u64, u32),
+        now_ns: u64,
+    ) {
+        let s = &mut self.status;
+        s.seq += 1;
+        s.stamp_ns = now_ns;
+        s.ticks = ticks;
+        s.missed_deadlines = missed;
+        s.stale_ticks = self.stale_ticks;
+        s.n_joints = params.joints.len() as u32;
+        s.flags = rt_flags | if state_stale { STATUS_INPUT_STALE } else { 0 };
+        for j in params.joints.iter() {
+            s.model_kind[j.index] = crate::params::kind_code(&j.model);
+        }
+        s.tau_f_hat_nm = *tau_f;
+        s.i_ref_a = cmd.i_ref_a;
+        s.joint_flags = cmd.flags;
+        let _ = backend.publish_status(s);
+        shared
+            .lateness_p99_ns
+            .store(s.lateness.quantile_upper_ns(0.99), Ordering::Relaxed);
+        shared
+            .lateness_max_ns
+            .store(s.lateness.max_ns, Ordering::Relaxed);
+    }
+}
+
+/// The next absolute deadline after `deadline_ns` and the number of whole periods skipped to
+/// reach it: missed periods are skipped, not caught up in a burst (clock trigger; lockstep has no
+/// deadline and skips nothing).
+#[inline]
+fn next_deadline(plan: &LoopPlan, deadline_ns: u64, now_ns: u64) -> (u64, u64) {
+    let next = deadline_ns + plan.period_ns;
+    if plan.lockstep || now_ns < next {
+        return (next, 0);
+    }
+    let skipped = (now_ns - next) / plan.period_ns + 1;
+    (next + skipped * plan.period_ns, skipped)
+}
+
+/// Stopping: zero current on every configured joint, published a few times so latest-value readers
+/// see it, then a last status with `STATUS_STOPPING`.
+fn publish_stop(
+    backend: &mut AnyBackend,
+    cmd: &mut MotorCurrentCommand,
+    status: &mut DaemonStatus,
+    configured_mask: u64,
+    period_ns: u64,
+) {
+    cmd.valid_mask = configured_mask;
+    cmd.i_ref_a = [0.0; MAX_JOINTS];
+    cmd.flags = [0; MAX_JOINTS];
+    status.flags |= STATUS_STOPPING;
+    for _ in 0..3 {
+        cmd.seq = cmd.seq.wrapping_add(1);
+        cmd.stamp_ns = monotonic_ns();
+        let _ = backend.publish_command(cmd);
+        sleep_until(monotonic_ns() + period_ns);
+    }
+    status.seq += 1;
+    status.stamp_ns = monotonic_ns();
+    status.i_ref_a = [0.0; MAX_JOINTS];
+    let _ = backend.publish_status(status);
+}
+
+/// The RT thread's body. Returns when `shared.stop` is set (after publishing zero currents), with
+/// the loop statistics; `None` if set-up failed (reported through `started`).
+pub fn run(setup: RtSetup) -> Option<RtSummary> {
+    let RtSetup {
+        config,
+        params,
+        rx_params,
+        tx_old,
+        shared,
+        started,
+        count_allocs,
+    } = setup;
+    // `grant` is held until this function returns (the PM QoS request lives while its file is open).
+    let (mut backend, grant) = start(&config, &shared, &started)?;
+    let rt_flags = grant.flags;
+    let plan = LoopPlan::of(&config);
+
+    let mut slot = ParamSlot {
+        params,
+        parked_old: None,
+        rx_params,
+        tx_old,
+    };
     let mut inputs = Inputs {
         states: Latest::new(JointStates::zeroed()),
         request: Latest::new(TorqueRequest::zeroed()),
@@ -770,108 +1125,50 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
     let mut tele = Telemetry {
         status: DaemonStatus::zeroed(),
         stale_ticks: 0,
+        lateness_fine: FineHistogram::new(),
     };
-    tele.status.period_ns = period_ns;
+    tele.status.period_ns = plan.period_ns;
     tele.status.flags = rt_flags;
     let mut tau_f = [0.0f64; MAX_JOINTS];
     let mut prev_active = 0u64;
-    let mut parked_old: Option<Box<Params>> = None;
     let mut missed = 0u64;
     let mut tick = 0u64;
     // SAFETY: gettid/sched_getcpu have no preconditions.
     let tid = unsafe { libc::gettid() };
     let cpu_start = unsafe { libc::sched_getcpu() };
     let usage_start = ThreadUsage::now();
-    let mut deadline = monotonic_ns() + period_ns;
+    let mut deadline = monotonic_ns() + plan.period_ns;
 
     loop {
-        if count_allocs && tick == count_from_tick {
+        if count_allocs && tick == plan.count_from_tick {
             alloc_count::set_counting(true);
         }
 
         // 0. wait (the only step that differs between the triggers) and 1. inputs
-        let mut timed_out = false;
-        let wake = if lockstep {
-            match wait_lockstep(
-                &mut backend,
-                &mut inputs,
-                tick,
-                &shared.stop,
-                wait_request,
-                lockstep_timeout_ns,
-            ) {
-                LockstepWake::Inputs => {}
-                LockstepWake::TimedOut => timed_out = true,
-                LockstepWake::Stop => break,
-            }
-            monotonic_ns()
-        } else {
-            sleep_until(deadline);
-            let wake = monotonic_ns();
-            if shared.stop.load(Ordering::Relaxed) {
-                break;
-            }
-            inputs.poll(&mut backend, tick);
-            wake
+        let Wake::Tick { wake_ns, timed_out } = wait_for_tick(
+            &plan,
+            &mut backend,
+            &mut inputs,
+            tick,
+            deadline,
+            &shared.stop,
+        ) else {
+            break;
         };
 
-        // 2. parameter hand-over (the old set is freed by the supervisor, never here)
-        if let Some(old) = parked_old.take()
-            && let Err(std::sync::mpsc::TrySendError::Full(old)) = tx_old.try_send(old)
-        {
-            parked_old = Some(old);
-        }
-        if parked_old.is_none() {
-            match rx_params.try_recv() {
-                Ok(new) => {
-                    let old = std::mem::replace(&mut params, new);
-                    prev_active = 0; // every enabled joint gets a bumpless reset
-                    shared
-                        .generation
-                        .store(params.generation, Ordering::Relaxed);
-                    tele.status.generation = params.generation;
-                    if let Err(std::sync::mpsc::TrySendError::Full(old)) = tx_old.try_send(old) {
-                        parked_old = Some(old);
-                    }
-                }
-                Err(TryRecvError::Empty | TryRecvError::Disconnected) => {}
-            }
+        // 2. parameter hand-over
+        if slot.hand_over() {
+            prev_active = 0; // every enabled joint gets a bumpless reset
+            let generation = slot.params.generation;
+            shared.generation.store(generation, Ordering::Relaxed);
+            tele.status.generation = generation;
         }
 
         // 3. compute
-        let stale_after = params.stale_after_ticks;
-        let fresh = if lockstep {
-            // Lockstep time is not wall time: no stamp-age rule. Its stand-in is the timeout: an
-            // input that did not arrive within `lockstep_timeout_ms` is stale at once.
-            Freshness {
-                state_stale: inputs.states.stale_by_ticks(tick, stale_after)
-                    || (timed_out && !inputs.states.new_in(tick)),
-                request_stale: inputs.request.stale_by_ticks(tick, stale_after)
-                    || (timed_out
-                        && !(inputs.request.new_in(tick)
-                            && (!wait_request
-                                || inputs.request.value.state_seq == inputs.states.value.seq))),
-            }
-        } else {
-            Freshness {
-                state_stale: inputs.states.stale(
-                    tick,
-                    wake,
-                    inputs.states.value.stamp_ns,
-                    stale_after,
-                    period_ns,
-                ),
-                request_stale: inputs.request.stale(
-                    tick,
-                    wake,
-                    inputs.request.value.stamp_ns,
-                    stale_after,
-                    period_ns,
-                ),
-            }
-        };
+        let stale_after = slot.params.stale_after_ticks;
+        let fresh = Freshness::judge(&plan, &inputs, tick, wake_ns, timed_out, stale_after);
         compute(
-            &mut params,
+            &mut slot.params,
             &inputs,
             fresh,
             &mut prev_active,
@@ -881,64 +1178,29 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
         cmd.seq = cmd.seq.wrapping_add(1);
         cmd.stamp_ns = monotonic_ns();
 
-        // 4. output
+        // 4. output, telemetry, heartbeat
         let _ = backend.publish_command(&cmd);
         let done = monotonic_ns();
-
-        // telemetry
-        let s = &mut tele.status;
-        if !lockstep {
-            // Lockstep has no deadline: its lateness histogram stays empty.
-            let late = wake.saturating_sub(deadline);
-            s.lateness.record(late);
-            lateness_fine.record(late);
-        }
-        s.compute.record(done.saturating_sub(wake));
-        if inputs.states.have {
-            let age = wake.saturating_sub(inputs.states.value.stamp_ns);
-            s.input_age.record(age);
-            s.input_age_ns = age;
-        }
-        if fresh.state_stale {
-            tele.stale_ticks += 1;
-        }
+        tele.record(&plan, &inputs, fresh, wake_ns, deadline, done);
         tick += 1;
-        if tick.is_multiple_of(status_every) {
-            s.seq += 1;
-            s.stamp_ns = done;
-            s.ticks = tick;
-            s.missed_deadlines = missed;
-            s.stale_ticks = tele.stale_ticks;
-            s.n_joints = params.joints.len() as u32;
-            s.flags = rt_flags
-                | if fresh.state_stale {
-                    STATUS_INPUT_STALE
-                } else {
-                    0
-                };
-            for j in params.joints.iter() {
-                s.model_kind[j.index] = crate::params::kind_code(&j.model);
-            }
-            s.tau_f_hat_nm = tau_f;
-            s.i_ref_a = cmd.i_ref_a;
-            s.joint_flags = cmd.flags;
-            let _ = backend.publish_status(s);
-            shared
-                .lateness_p99_ns
-                .store(s.lateness.quantile_upper_ns(0.99), Ordering::Relaxed);
-            shared
-                .lateness_max_ns
-                .store(s.lateness.max_ns, Ordering::Relaxed);
+        if tick.is_multiple_of(plan.status_every) {
+            tele.publish(
+                &mut backend,
+                &shared,
+                &slot.params,
+                &cmd,
+                &tau_f,
+                fresh.state_stale,
+                (tick, missed, rt_flags),
+                done,
+            );
         }
         shared.heartbeat.store(tick, Ordering::Relaxed);
 
-        // next absolute deadline; skip whole missed periods (no catch-up bursts)
-        deadline += period_ns;
-        let now = monotonic_ns();
-        if !lockstep && now >= deadline {
-            let skipped = (now - deadline) / period_ns + 1;
+        let skipped;
+        (deadline, skipped) = next_deadline(&plan, deadline, monotonic_ns());
+        if skipped > 0 {
             missed += skipped;
-            deadline += skipped * period_ns;
             shared.missed.store(missed, Ordering::Relaxed);
         }
     }
@@ -959,32 +1221,22 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
     if count_allocs {
         shared
             .counted_ticks
-            .store(tick.saturating_sub(count_from_tick), Ordering::Relaxed);
+            .store(tick.saturating_sub(plan.count_from_tick), Ordering::Relaxed);
     }
 
-    // Stopping: zero current on every configured joint, a few times so latest-value readers see it.
-    cmd.valid_mask = params.configured_mask;
-    cmd.i_ref_a = [0.0; MAX_JOINTS];
-    cmd.flags = [0; MAX_JOINTS];
-    tele.status.flags |= STATUS_STOPPING;
-    for _ in 0..3 {
-        cmd.seq = cmd.seq.wrapping_add(1);
-        cmd.stamp_ns = monotonic_ns();
-        let _ = backend.publish_command(&cmd);
-        sleep_until(monotonic_ns() + period_ns);
-    }
-    tele.status.seq += 1;
-    tele.status.stamp_ns = monotonic_ns();
-    tele.status.i_ref_a = [0.0; MAX_JOINTS];
-    let _ = backend.publish_status(&tele.status);
-    if let Some(old) = parked_old {
-        drop(old); // stopping: allocation rules no longer apply
-    }
+    publish_stop(
+        &mut backend,
+        &mut cmd,
+        &mut tele.status,
+        slot.params.configured_mask,
+        plan.period_ns,
+    );
+    drop(slot); // stopping: allocation rules no longer apply (a parked old set is freed here)
     Some(RtSummary {
         ticks: tick,
         missed,
-        lockstep,
-        lateness: lateness_fine,
+        lockstep: plan.lockstep,
+        lateness: tele.lateness_fine,
         status: Box::new(tele.status),
         thread,
     })
@@ -1201,6 +1453,25 @@ kv = 0.0
         inp.states.value.fault_flags[2] |= frictionless_shm_types::FAULT_DRIVE;
         let c = run(&mut p, &inp, FRESH, &mut prev);
         assert_eq!((c.i_ref_a[2], c.flags[2]), (0.0, FLAG_FAULT));
+    }
+
+    #[test]
+    fn law_flags_map_to_the_abi_bits() {
+        assert_eq!(abi_flags(LawFlags::NONE), 0);
+        let all = LawFlags {
+            friction_clipped: true,
+            current_saturated: true,
+            non_finite: true,
+        };
+        assert_eq!(
+            abi_flags(all),
+            FLAG_FRICTION_CLIPPED | FLAG_CURRENT_SATURATED | FLAG_NON_FINITE
+        );
+        let clipped = LawFlags {
+            friction_clipped: true,
+            ..LawFlags::NONE
+        };
+        assert_eq!(abi_flags(clipped), FLAG_FRICTION_CLIPPED);
     }
 
     #[test]

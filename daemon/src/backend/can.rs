@@ -55,7 +55,7 @@ use frictionless_shm_types::{
 };
 use socketcan::{CanFilter, CanFrame, CanSocket, EmbeddedFrame, Socket, SocketOptions};
 
-use super::Backend;
+use super::{Backend, BackendError};
 use crate::alloc_count;
 use crate::config::{CanProtocol, Config, ResolvedBus, ResolvedDrive};
 
@@ -159,17 +159,18 @@ fn is_full_or_empty(e: &std::io::Error) -> bool {
 }
 
 /// Opens the socket of `bus.interface` (a kernel interface, or `fd:N`). Set-up only.
-fn open_socket(interface: &str) -> Result<(CanSocket, bool), String> {
+fn open_socket(interface: &str) -> Result<(CanSocket, bool), BackendError> {
     if let Some(n) = interface.strip_prefix("fd:") {
-        let fd: i32 = n
-            .parse()
-            .map_err(|_| format!("interface {interface:?}: not fd:N"))?;
+        let fd: i32 = n.parse().map_err(|_| BackendError::FdSpec {
+            interface: interface.to_owned(),
+        })?;
         // SAFETY: fcntl on an integer fd has no memory effects; it only tells us if it is open.
         if unsafe { libc::fcntl(fd, libc::F_GETFD) } < 0 {
-            return Err(format!(
-                "interface {interface:?}: descriptor {fd} is not open: {}",
-                std::io::Error::last_os_error()
-            ));
+            return Err(BackendError::FdNotOpen {
+                interface: interface.to_owned(),
+                fd,
+                source: std::io::Error::last_os_error(),
+            });
         }
         // SAFETY: the descriptor is open and, by the `fd:N` contract, handed to us to own.
         let owned = unsafe { OwnedFd::from_raw_fd(fd) };
@@ -177,16 +178,22 @@ fn open_socket(interface: &str) -> Result<(CanSocket, bool), String> {
         unsafe { libc::fcntl(fd, libc::F_SETFD, libc::FD_CLOEXEC) };
         return Ok((CanSocket::from(owned), false));
     }
-    let s = CanSocket::open(interface)
-        .map_err(|e| format!("opening CAN interface {interface:?}: {e}"))?;
+    let s = CanSocket::open(interface).map_err(|source| BackendError::Open {
+        interface: interface.to_owned(),
+        source,
+    })?;
     Ok((s, true))
 }
 
 /// Kernel filters, error frames, non-blocking. `strict`: filter failures are errors (real
 /// interfaces); otherwise logged (inherited sockets, e.g. socketpairs, cannot filter).
-fn configure_socket(s: &CanSocket, bus: &ResolvedBus, strict: bool) -> Result<(), String> {
+fn configure_socket(s: &CanSocket, bus: &ResolvedBus, strict: bool) -> Result<(), BackendError> {
     s.set_nonblocking(true)
-        .map_err(|e| format!("{}: set_nonblocking: {e}", bus.interface))?;
+        .map_err(|source| BackendError::SocketOption {
+            interface: bus.interface.clone(),
+            what: "set_nonblocking",
+            source,
+        })?;
     let filters: Vec<CanFilter> = owned_ids(bus)
         .into_iter()
         .map(|id| CanFilter::new(id, STD_DATA_ONLY))
@@ -196,11 +203,12 @@ fn configure_socket(s: &CanSocket, bus: &ResolvedBus, strict: bool) -> Result<()
         .and_then(|()| s.set_error_filter(CAN_ERR_MASK));
     match res {
         Ok(()) => {}
-        Err(e) if strict => {
-            return Err(format!(
-                "{}: setting kernel filters / error mask: {e}",
-                bus.interface
-            ));
+        Err(source) if strict => {
+            return Err(BackendError::SocketOption {
+                interface: bus.interface.clone(),
+                what: "setting kernel filters / error mask",
+                source,
+            });
         }
         Err(e) => tracing::warn!(
             "{}: kernel filters not available ({e}); filtering in user space only",
@@ -233,7 +241,7 @@ pub fn owned_ids(bus: &ResolvedBus) -> Vec<u32> {
 
 impl CanBackend {
     /// Opens every configured bus (and the shared-memory ports). Set-up time only.
-    pub fn open(cfg: &Config) -> Result<Self, String> {
+    pub fn open(cfg: &Config) -> Result<Self, BackendError> {
         let mut socks = Vec::with_capacity(cfg.buses.len());
         for bus in &cfg.buses {
             let (s, strict) = open_socket(&bus.interface)?;
@@ -245,13 +253,12 @@ impl CanBackend {
 
     /// Like [`Self::open`] with already open sockets, one per `cfg.buses` entry in order (tests
     /// pass socketpair ends). Filters are applied best effort. Sends the enter-mode frames.
-    pub fn with_sockets(cfg: &Config, socks: Vec<CanSocket>) -> Result<Self, String> {
+    pub fn with_sockets(cfg: &Config, socks: Vec<CanSocket>) -> Result<Self, BackendError> {
         if socks.len() != cfg.buses.len() {
-            return Err(format!(
-                "{} sockets for {} buses",
-                socks.len(),
-                cfg.buses.len()
-            ));
+            return Err(BackendError::SocketCount {
+                sockets: socks.len(),
+                buses: cfg.buses.len(),
+            });
         }
         let ipc_cfg = super::shm::ipc_config(cfg);
         match Ipc::cleanup_dead_nodes_for(&ipc_cfg) {
@@ -259,19 +266,10 @@ impl CanBackend {
             Ok(_) => {}
             Err(e) => tracing::warn!("dead-node clean-up failed: {e}"),
         }
-        let ipc = Ipc::open(&ipc_cfg, "frictiond").map_err(|e| e.to_string())?;
-        let request = ipc
-            .torque_request()
-            .and_then(|c| c.inbox())
-            .map_err(|e| e.to_string())?;
-        let command = ipc
-            .motor_current_command()
-            .and_then(|c| c.outbox())
-            .map_err(|e| e.to_string())?;
-        let status_out = ipc
-            .daemon_status()
-            .and_then(|c| c.outbox())
-            .map_err(|e| e.to_string())?;
+        let ipc = Ipc::open(&ipc_cfg, "frictiond")?;
+        let request = ipc.torque_request().and_then(|c| c.inbox())?;
+        let command = ipc.motor_current_command().and_then(|c| c.outbox())?;
+        let status_out = ipc.daemon_status().and_then(|c| c.outbox())?;
         let mut states = JointStates::zeroed();
         let mut buses = Vec::with_capacity(socks.len());
         for (bus, sock) in cfg.buses.iter().zip(socks) {
@@ -316,7 +314,7 @@ impl CanBackend {
             std::thread::Builder::new()
                 .name("frictiond-canlog".into())
                 .spawn(move || log_counters(&shared, &stop, &names))
-                .map_err(|e| format!("spawning the CAN logger thread: {e}"))?
+                .map_err(BackendError::LoggerThread)?
         };
         let mut me = Self {
             buses,

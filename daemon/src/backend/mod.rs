@@ -16,10 +16,64 @@ pub mod can;
 pub mod shm;
 
 use frictionless_shm_types::{
-    BusCounters, DaemonStatus, IoError, JointStates, MotorCurrentCommand, TorqueRequest,
+    BusCounters, DaemonStatus, IoError, JointStates, MotorCurrentCommand, ShmError, TorqueRequest,
 };
 
 use crate::config::{BackendKind, Config};
+
+/// Why a backend could not be opened (set-up time). Messages name the interface or service and the
+/// OS or iceoryx2 error.
+#[derive(Debug, thiserror::Error)]
+pub enum BackendError {
+    /// An iceoryx2 node or port could not be opened.
+    #[error("shared memory: {0}")]
+    Shm(#[from] ShmError),
+    /// `fd:` not followed by a descriptor number.
+    #[error("CAN interface {interface:?}: `fd:` must be followed by a descriptor number")]
+    FdSpec {
+        /// The configured interface.
+        interface: String,
+    },
+    /// An inherited descriptor (`fd:N`) is not open.
+    #[error("CAN interface {interface:?}: descriptor {fd} is not open: {source}")]
+    FdNotOpen {
+        /// The configured interface.
+        interface: String,
+        /// The descriptor number.
+        fd: i32,
+        /// `fcntl(F_GETFD)`'s error.
+        source: std::io::Error,
+    },
+    /// A kernel CAN interface could not be opened.
+    #[error("opening CAN interface {interface:?}: {source}")]
+    Open {
+        /// The interface name.
+        interface: String,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// A socket option could not be set.
+    #[error("CAN interface {interface:?}: {what}: {source}")]
+    SocketOption {
+        /// The interface name.
+        interface: String,
+        /// Which option (e.g. "set_nonblocking").
+        what: &'static str,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// `CanBackend::with_sockets` got a socket count that differs from the configured buses.
+    #[error("{sockets} sockets for {buses} configured CAN buses")]
+    SocketCount {
+        /// Sockets passed.
+        sockets: usize,
+        /// Buses configured.
+        buses: usize,
+    },
+    /// The bus-counter logger thread could not be spawned.
+    #[error("spawning the CAN logger thread: {0}")]
+    LoggerThread(#[source] std::io::Error),
+}
 
 /// The I/O seam: the loop reads newest inputs and publishes outputs through this.
 pub trait Backend {
@@ -58,7 +112,7 @@ pub enum AnyBackend {
 
 impl AnyBackend {
     /// Opens the backend named by `[backend] kind`. Set-up time only (allocates, logs).
-    pub fn open(cfg: &Config) -> Result<Self, String> {
+    pub fn open(cfg: &Config) -> Result<Self, BackendError> {
         match cfg.raw.backend.kind {
             BackendKind::Shm => Ok(Self::Shm(shm::ShmBackend::open(&shm::ipc_config(cfg))?)),
             BackendKind::Can => Ok(Self::Can(can::CanBackend::open(cfg)?)),

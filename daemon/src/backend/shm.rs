@@ -12,7 +12,7 @@ use frictionless_shm_types::{
     TorqueRequest,
 };
 
-use super::Backend;
+use super::{Backend, BackendError};
 use crate::alloc_count;
 use crate::config::Config;
 
@@ -35,22 +35,22 @@ pub struct ShmBackend {
 
 impl ShmBackend {
     /// Opens the node (cleaning up dead nodes first) and all ports. Set-up time only.
-    pub fn open(ipc_cfg: &IpcConfig) -> Result<Self, String> {
+    pub fn open(ipc_cfg: &IpcConfig) -> Result<Self, BackendError> {
         match Ipc::cleanup_dead_nodes_for(ipc_cfg) {
             Ok(n) if n > 0 => tracing::info!("removed resources of {n} dead iceoryx2 node(s)"),
             Ok(_) => {}
             Err(e) => tracing::warn!("dead-node clean-up failed: {e}"),
         }
-        let ipc = Ipc::open(ipc_cfg, "frictiond").map_err(|e| e.to_string())?;
-        let states = ipc.joint_states().map_err(|e| e.to_string())?;
-        let request = ipc.torque_request().map_err(|e| e.to_string())?;
-        let command = ipc.motor_current_command().map_err(|e| e.to_string())?;
-        let status = ipc.daemon_status().map_err(|e| e.to_string())?;
+        let ipc = Ipc::open(ipc_cfg, "frictiond")?;
+        let states = ipc.joint_states()?;
+        let request = ipc.torque_request()?;
+        let command = ipc.motor_current_command()?;
+        let status = ipc.daemon_status()?;
         Ok(Self {
-            states: states.inbox().map_err(|e| e.to_string())?,
-            request: request.inbox().map_err(|e| e.to_string())?,
-            command: command.outbox().map_err(|e| e.to_string())?,
-            status: status.outbox().map_err(|e| e.to_string())?,
+            states: states.inbox()?,
+            request: request.inbox()?,
+            command: command.outbox()?,
+            status: status.outbox()?,
             _ipc: ipc,
         })
     }

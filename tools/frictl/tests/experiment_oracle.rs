@@ -12,7 +12,7 @@
 
 use std::path::PathBuf;
 
-use frictionless_ident::filter::Butterworth;
+use frictionless::filter::Butterworth;
 use frictl::experiment::controller::ComputedTorque;
 use frictl::experiment::metrics;
 use frictl::experiment::run::{JointPlan, JointSetup, JointTrace, TrialOptions, run_trial_with};

@@ -3,7 +3,7 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use frictionless::friction::{CvParams, ScvParams, StaticFriction, paper};
-use frictionless_ident::filter::Butterworth;
+use frictionless::filter::Butterworth;
 use frictionless_ident::fit::{FitOptions, fit};
 use frictionless_ident::kalman::{KalmanConfig, smooth};
 

@@ -18,7 +18,7 @@
 //!
 //!   The pass itself is vectorised by hand-shaped code, not a crate: samples go through
 //!   [`Fittable::value_jacobian_lanes`] in groups of [`LANES`], with branch-free [`exp_lanes`] /
-//!   [`ln_lanes`] (≤ 4 ulp from libm, tested) written one loop per operation so LLVM emits AVX2, and
+//!   [`ln_lanes`] (`frictionless::fastmath`, ≈ 1 ulp from libm, tested there) written one loop per operation so LLVM emits AVX2, and
 //!   JᵀJ/Jᵀr accumulated lane-wise; chunk sums are added in chunk order (bit-identical for any
 //!   thread count). Measured (`cargo bench -p frictl --bench fit`, same run, load 3.7): SCV 10⁶
 //!   632 ms → 91 ms, CV 84 ms → 39 ms; callgrind instructions per fit: SCV 5.48 G → 1.29 G,
@@ -42,6 +42,7 @@
 //!
 //! What it is not: a fitter for history (PINN) models, or a robust/weighted regression.
 
+use frictionless::fastmath::{exp_lanes, ln_lanes};
 use frictionless::friction::{CvParams, ScvCodeParams, ScvParams, StaticFriction};
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
@@ -336,86 +337,6 @@ macro_rules! lanes {
         }
         o
     }};
-}
-
-/// 1.5·2⁵²: adding it rounds an f64 of magnitude < 2⁵¹ to an integer held in the low mantissa bits
-/// (a float→int conversion without `cvtpd2qq`, which AVX2 lacks).
-const ROUND_SHIFTER: f64 = 6_755_399_441_055_744.0;
-
-/// `exp(x)` per lane, branch-free (vectorisable): x = n·ln2 + r with |r| ≤ ln2/2, e^r by its degree-13
-/// Taylor polynomial (truncation < 1e-17 relative), 2ⁿ through the exponent bits. Within a few ulp of
-/// libm for x ∈ [−708, 709]; exactly 0 below (libm gives subnormals down to −745) and +∞ above.
-#[inline(always)]
-// fdlibm's constants, kept digit for digit; max/min instead of clamp keeps the vectorised form measured.
-#[allow(clippy::excessive_precision, clippy::manual_clamp)]
-pub fn exp_lanes(x: &Lanes) -> Lanes {
-    const LN2_HI: f64 = 6.931_471_803_691_238_164_90e-1;
-    const LN2_LO: f64 = 1.908_214_929_270_587_700_02e-10;
-    // 1/k! for k = 13 down to 0.
-    const C: [f64; 14] = [
-        1.0 / 6_227_020_800.0,
-        1.0 / 479_001_600.0,
-        1.0 / 39_916_800.0,
-        1.0 / 3_628_800.0,
-        1.0 / 362_880.0,
-        1.0 / 40_320.0,
-        1.0 / 5_040.0,
-        1.0 / 720.0,
-        1.0 / 120.0,
-        1.0 / 24.0,
-        1.0 / 6.0,
-        0.5,
-        1.0,
-        1.0,
-    ];
-    let xc = lanes!(|l| x[l].max(-708.0).min(709.0));
-    let shifted = lanes!(|l| xc[l].mul_add(std::f64::consts::LOG2_E, ROUND_SHIFTER));
-    let n = lanes!(|l| shifted[l] - ROUND_SHIFTER);
-    let r = lanes!(|l| n[l].mul_add(-LN2_HI, xc[l]));
-    let r = lanes!(|l| n[l].mul_add(-LN2_LO, r[l]));
-    let mut p = [C[0]; LANES];
-    for &c in &C[1..] {
-        for l in 0..LANES {
-            p[l] = p[l].mul_add(r[l], c);
-        }
-    }
-    let y = lanes!(|l| p[l] * f64::from_bits(shifted[l].to_bits().wrapping_add(1023) << 52));
-    let y = lanes!(|l| if x[l] < -708.0 { 0.0 } else { y[l] });
-    lanes!(|l| if x[l] > 709.0 { f64::INFINITY } else { y[l] })
-}
-
-/// `ln(x)` per lane for positive, normal, finite x, branch-free (vectorisable): the fdlibm/musl
-/// algorithm (x = 2ᵏ·(1 + f), √½ ≤ 1 + f < √2, log1p(f) through s = f/(2 + f) and a degree-14
-/// polynomial in s), < 1 ulp.
-#[inline(always)]
-#[allow(clippy::excessive_precision)] // fdlibm's constants, kept digit for digit
-pub fn ln_lanes(x: &Lanes) -> Lanes {
-    const LN2_HI: f64 = 6.931_471_803_691_238_164_90e-1;
-    const LN2_LO: f64 = 1.908_214_929_270_587_700_02e-10;
-    const LG1: f64 = 6.666_666_666_666_735_130e-1;
-    const LG2: f64 = 3.999_999_999_940_941_908e-1;
-    const LG3: f64 = 2.857_142_874_366_239_149e-1;
-    const LG4: f64 = 2.222_219_843_214_978_396e-1;
-    const LG5: f64 = 1.818_357_216_161_805_012e-1;
-    const LG6: f64 = 1.531_383_769_920_937_332e-1;
-    const LG7: f64 = 1.479_819_860_511_658_591e-1;
-    let mut ix = [0u64; LANES];
-    for l in 0..LANES {
-        ix[l] = x[l]
-            .to_bits()
-            .wrapping_add((0x3ff0_0000u64 - 0x3fe6_a09e) << 32);
-    }
-    let dk = lanes!(|l| f64::from_bits((ix[l] >> 52) | 0x4330_0000_0000_0000)
-        - (4_503_599_627_370_496.0 + 1023.0));
-    let f =
-        lanes!(|l| f64::from_bits((ix[l] & 0x000f_ffff_ffff_ffff) + (0x3fe6_a09eu64 << 32)) - 1.0);
-    let hfsq = lanes!(|l| 0.5 * f[l] * f[l]);
-    let s = lanes!(|l| f[l] / (2.0 + f[l]));
-    let z = lanes!(|l| s[l] * s[l]);
-    let w = lanes!(|l| z[l] * z[l]);
-    let t1 = lanes!(|l| w[l] * w[l].mul_add(w[l].mul_add(LG6, LG4), LG2));
-    let t2 = lanes!(|l| z[l] * w[l].mul_add(w[l].mul_add(w[l].mul_add(LG7, LG5), LG3), LG1));
-    lanes!(|l| s[l] * (hfsq[l] + t2[l] + t1[l]) + dk[l] * LN2_LO - hfsq[l] + f[l] + dk[l] * LN2_HI)
 }
 
 /// tanh(ka·v) and ∂/∂ka = v·sech²(ka·v) per lane (finite ka), as [`tanh_dka`] but from
@@ -1211,59 +1132,6 @@ mod tests {
             fv: 0.5,
             vs: 0.1,
         });
-    }
-
-    #[test]
-    fn lane_exp_and_ln_match_libm_to_a_few_ulp() {
-        let mut xs = vec![
-            0.0, -0.0, 1e-300, -1e-12, 0.5, -0.5, 0.3465, -0.3466, 1.0, -1.0, 700.0, -700.0,
-        ];
-        let mut s = 0x9e37_79b9_7f4a_7c15u64;
-        for _ in 0..20_000 {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            xs.push(((s >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 1400.0);
-            xs.push(((s >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 6.0);
-        }
-        xs.truncate(xs.len() / LANES * LANES);
-        let mut worst = 0f64;
-        for g in xs.chunks_exact(LANES) {
-            let g: &Lanes = g.try_into().unwrap();
-            let e = exp_lanes(g);
-            for l in 0..LANES {
-                let want = g[l].exp();
-                let rel = ((e[l] - want) / want).abs();
-                worst = worst.max(rel);
-                assert!(
-                    rel <= 4.0 * f64::EPSILON,
-                    "exp({}) = {} vs {want}",
-                    g[l],
-                    e[l]
-                );
-            }
-            // ln on positive normal values spanning the whole exponent range.
-            let mut pos = [0.0; LANES];
-            for l in 0..LANES {
-                pos[l] = (g[l] * 0.5).exp().max(f64::MIN_POSITIVE);
-            }
-            let lnv = ln_lanes(&pos);
-            for l in 0..LANES {
-                let want = pos[l].ln();
-                assert!(
-                    (lnv[l] - want).abs() <= 2.0 * f64::EPSILON * want.abs().max(1.0),
-                    "ln({}) = {} vs {want}",
-                    pos[l],
-                    lnv[l]
-                );
-            }
-        }
-        assert!(worst > 0.0 || xs.is_empty());
-        // Outside the range: 0 and +inf, never NaN.
-        let mut ext = [0.0; LANES];
-        ext[..4].copy_from_slice(&[-710.0, -1e300, 710.0, f64::NEG_INFINITY]);
-        let e = exp_lanes(&ext);
-        assert_eq!(&e[..4], &[0.0, 0.0, f64::INFINITY, 0.0]);
     }
 
     fn lanes_agree<M: Fittable>(m: &M) {

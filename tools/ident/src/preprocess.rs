@@ -40,7 +40,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::filter::{Butterworth, FilterError};
+use frictionless::filter::{Butterworth, FilterError};
 use super::kalman::{self, KalmanConfig, KalmanError};
 use frictionless_dataset::Dataset;
 use frictionless_sim::link::LinkDynamics;

@@ -1,9 +1,9 @@
-//! Parity of `frictionless_ident::filter` with scipy (`butter`, `sosfilt`, `sosfilt_zi`, `sosfiltfilt`).
+//! Parity of `frictionless::filter` with scipy (`butter`, `sosfilt`, `sosfilt_zi`, `sosfiltfilt`).
 //!
 //! Needs `FRICTIONLESS_REFS` (set by `tests/run.sh`, written by `tests/python/gen_scipy_refs.py`):
 //! unset → skipped with a message; set but the file is missing → FAIL.
 
-use frictionless_ident::filter::{Butterworth, sosfilt_zi};
+use frictionless::filter::{Butterworth, sosfilt_zi};
 use serde::Deserialize;
 
 #[derive(Deserialize)]

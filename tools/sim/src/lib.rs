@@ -8,7 +8,6 @@
 //! generate datasets and to test the whole method without a robot:
 //! - [`params`]: every parameter as a serde struct, the `knee` / `ankle_roll` presets and the
 //!   `--params FILE` / `--set key=value` override layering;
-//! - [`fastmath`]: inlinable exp/ln/powf/tanh with stated error bounds for the fast path;
 //! - [`link`]: the [`LinkDynamics`](link::LinkDynamics) trait (I_L(s), g(s)) and an analytic pendulum;
 //! - [`plant`]: the equations, 20 kHz semi-implicit Euler with the exact LuGre update, 1 kHz sensor
 //!   emulation and the true friction as diagnostics;
@@ -20,7 +19,6 @@
 
 #![warn(missing_docs)]
 
-pub mod fastmath;
 pub mod link;
 pub mod params;
 pub mod plant;

@@ -19,7 +19,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
-use crate::fastmath;
+use frictionless::fastmath;
 use crate::link::LinkDynamics;
 use crate::params::{ParamError, PlantParams};
 use crate::stribeck::StribeckTable;

@@ -23,7 +23,7 @@
 //! What it is not: used on the reference path (libm every step), nor for δ = 1 (a single inlined exp
 //! is already as short as a lookup there).
 
-use crate::fastmath;
+use frictionless::fastmath;
 
 /// Mantissa bits of u that select the cell inside a binade (2^9 = 512 cells per binade).
 pub const MANTISSA_BITS: u32 = 9;

@@ -1,9 +1,10 @@
 //! The oracle: friction compensation with the plant's *true* friction — a diagnostic **bound**, not a
 //! model a robot can run (no robot measures its own friction torque).
 //!
-//! What this module **is**: [`OracleCompensation`], the friction-compensation part of frictiond's law
-//! (`daemon/src/control.rs`: velocity-gated clip to ±max_output_friction, ×kfc, optional Butterworth
-//! low-pass, state cleared at enable) applied to τ_F,true instead of a model output. In an
+//! What this module **is**: [`OracleCompensation`], frictiond's per-joint law
+//! ([`frictionless::law::JointLaw`], the same code frictiond runs: velocity-gated clip to
+//! ±max_output_friction, ×kfc, optional Butterworth low-pass, state cleared at enable) fed with
+//! τ_F,true instead of a model output, reading back the compensation τ̂_F it applies. In an
 //! `oracle` trial frictiond runs `friction_model = "none"` for the joint, and the experiment
 //! controller adds this term to τ_des for the request that answers `JointStates` seq k, using
 //! `SimTruth` seq k (the true friction of the plant's last physics step, the one that produced state
@@ -13,15 +14,13 @@
 //! the control structure (kfc, K_d, the controller's M) allows with a perfect friction estimate. If a
 //! model's minimum K_p is close to the oracle's, the estimator is not what limits it.
 //!
-//! The low-pass is designed by [`frictionless_ident::filter::Butterworth::lowpass`] (scipy's design; the
-//! same bilinear-transform Butterworth with pre-warping as frictiond's, equal up to rounding) and
-//! run here one sample at a time in transposed direct form II (tools must not depend on the daemon).
-//!
 //! What it is **not**: no estimator, no I/O; lockstep only (in real time the controller could not
 //! pair a request with the truth of the state it answers).
 
+use frictionless::filter::CausalButterworth;
+use frictionless::law::{Gains, JointLaw, LawInput};
+
 use super::session::{LawSettings, Lpf};
-use frictionless_ident::filter::{Butterworth, Sos, sosfilt_step};
 
 /// Daemon tick rate [Hz] (the experiments' `period_us = 1000`).
 const FS_HZ: f64 = 1000.0;
@@ -29,47 +28,56 @@ const FS_HZ: f64 = 1000.0;
 /// frictiond's compensation law applied to the true friction (see the module doc).
 #[derive(Clone, Debug)]
 pub struct OracleCompensation {
-    law: LawSettings,
-    sos: Vec<Sos>,
-    state: Vec<[f64; 2]>,
+    settings: LawSettings,
+    law: JointLaw,
 }
 
 impl OracleCompensation {
-    /// The compensation of a joint whose law is `law` (filter state zero, as after an enable).
-    pub fn new(law: LawSettings) -> anyhow::Result<Self> {
-        let sos = match law.lpf {
-            Lpf::Off => vec![],
-            Lpf::Butterworth { order, cutoff_hz } => {
-                Butterworth::lowpass(order, cutoff_hz, FS_HZ)
-                    .map_err(|e| anyhow::anyhow!("oracle τ̂_F low-pass: {e}"))?
-                    .sos
-            }
+    /// The compensation of a joint whose law is `settings` (filter state zero, as after an enable).
+    pub fn new(settings: LawSettings) -> anyhow::Result<Self> {
+        let lpf = match settings.lpf {
+            Lpf::Off => None,
+            Lpf::Butterworth { order, cutoff_hz } => Some(
+                CausalButterworth::design(order, cutoff_hz, FS_HZ)
+                    .map_err(|e| anyhow::anyhow!("oracle τ̂_F low-pass: {e}"))?,
+            ),
         };
-        let state = vec![[0.0; 2]; sos.len()];
-        Ok(Self { law, sos, state })
+        // Only τ̂_F is read back: unit kt·r, no torque feedback and no current clamp, so the current
+        // path neither saturates nor flags anything.
+        let gains = Gains {
+            kt_nm_per_a: 1.0,
+            gear_ratio: 1.0,
+            kfc: settings.kfc,
+            kp: 0.0,
+            ki: 0.0,
+            max_curr_a: f64::INFINITY,
+            max_output_friction_nm: settings.max_output_friction_nm,
+            joint_velocity_threshold_rad_s: settings.joint_velocity_threshold_rad_s,
+            dt_s: 1.0 / FS_HZ,
+        };
+        Ok(Self {
+            settings,
+            law: JointLaw::new(gains, lpf),
+        })
     }
 
     /// The law it mimics.
     pub fn law(&self) -> &LawSettings {
-        &self.law
+        &self.settings
     }
 
     /// One tick: the term [Nm] to add to τ_des for true friction `tau_f_true_nm` and measured joint
     /// velocity `sdot_rad_s` (the clip gate). Non-finite input gives 0 and clears the filter, as
     /// frictiond does.
     pub fn step(&mut self, tau_f_true_nm: f64, sdot_rad_s: f64) -> f64 {
-        if !(tau_f_true_nm.is_finite() && sdot_rad_s.is_finite()) {
-            self.state.iter_mut().for_each(|z| *z = [0.0; 2]);
-            return 0.0;
-        }
-        let g = &self.law;
-        let f = if sdot_rad_s.abs() > g.joint_velocity_threshold_rad_s {
-            tau_f_true_nm.clamp(-g.max_output_friction_nm, g.max_output_friction_nm)
-        } else {
-            tau_f_true_nm
-        };
-        let y = if g.kfc > 0.0 { g.kfc * f } else { 0.0 };
-        sosfilt_step(&self.sos, y, &mut self.state)
+        self.law
+            .step(&LawInput {
+                tau_des_nm: 0.0,
+                friction_nm: tau_f_true_nm,
+                sdot_rad_s,
+                tau_meas_nm: 0.0,
+            })
+            .tau_f_hat_nm
     }
 }
 
@@ -113,7 +121,7 @@ mod tests {
             .collect();
         let ours: Vec<f64> = x.iter().map(|&v| o.step(v, 1.0)).collect();
         let scaled: Vec<f64> = x.iter().map(|v| 0.85 * v).collect();
-        let reference = Butterworth::lowpass(2, 30.0, 1000.0)
+        let reference = frictionless::filter::Butterworth::lowpass(2, 30.0, 1000.0)
             .unwrap()
             .filter(&scaled);
         for (a, b) in ours.iter().zip(&reference) {

@@ -1,25 +1,49 @@
 //! The per-joint torque-to-current control law with friction compensation (pure, allocation-free).
 //!
-//! What this module **is**: the BLF `JointTorqueControlDevice` law (paper-facts §9), with its known
-//! defects fixed, as a small state machine per joint ([`JointLaw`]) that any backend (shared memory,
-//! CAN) calls once per tick:
+//! What this module **is**: the law of the BLF `JointTorqueControlDevice` (see `docs/`), with its
+//! known defects fixed, as a small state machine per joint ([`JointLaw`]) that frictiond's RT tick
+//! calls once per tick and per joint, and that the tools' experiment oracle runs on the true
+//! friction:
 //!
 //! ```text
 //! f     = friction model output (caller)                        [Nm]
 //! f     = clamp(f, ±max_output_friction)   only if |ṡ| > joint_velocity_threshold_rad_s
-//! τ̂_F   = kfc·f  (0 if kfc = 0);  τ̂_F ← Butterworth LPF(τ̂_F)  (if configured)
+//! τ̂_F   = kfc·f  (0 if kfc ≤ 0);  τ̂_F ← Butterworth LPF(τ̂_F)  (if configured)
 //! e_int += (τ_des − τ_meas)·dt     (only when ki > 0; anti-windup: ki·|e_int| ≤ max_curr·|kt·r|)
 //! i     = (τ_des + kp·(τ_des − τ_meas) + ki·e_int + τ̂_F) / (kt·r)       (signed r)
 //! i     = clamp(i, ±max_curr);   any NaN/±∞ on the way → i = 0 and the joint's state is reset
 //! ```
 //! [`JointLaw::reset`] is the bumpless-enable hook (filter and integral cleared; the caller also
-//! resets the friction model). Flags use the `FLAG_*` constants of `frictionless-shm-types`.
+//! resets the friction model). What happened on a tick (clip, saturation, non-finite) comes back as
+//! [`LawFlags`]; frictiond maps them to its ABI's `FLAG_*` bits.
 //!
-//! What it is **not**: no friction model (the caller passes `f`), no I/O, no time keeping.
+//! [`JointLaw::step`], [`JointLaw::feed_forward_only`] and [`JointLaw::reset`] allocate nothing,
+//! take no lock and cannot panic. The low-pass is designed off the RT thread
+//! ([`CausalButterworth::design`]).
+//!
+//! What it is **not**: no friction model (the caller passes `f`), no I/O, no time keeping, no ABI.
 
-use frictionless_shm_types::{FLAG_CURRENT_SATURATED, FLAG_FRICTION_CLIPPED, FLAG_NON_FINITE};
+use crate::filter::CausalButterworth;
 
-use crate::filter::Butterworth;
+/// What happened during one tick of the law.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LawFlags {
+    /// The friction estimate was clipped to ±max_output_friction (velocity gate open).
+    pub friction_clipped: bool,
+    /// The current was clamped to ±max_curr.
+    pub current_saturated: bool,
+    /// A non-finite input or intermediate: the output is 0 and the state was reset.
+    pub non_finite: bool,
+}
+
+impl LawFlags {
+    /// No event.
+    pub const NONE: Self = Self {
+        friction_clipped: false,
+        current_saturated: false,
+        non_finite: false,
+    };
+}
 
 /// Constant per-joint gains and limits of the law.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -71,8 +95,8 @@ pub struct LawOutput {
     pub i_a: f64,
     /// Friction compensation actually applied, τ̂_F [Nm] (after clip, kfc, filter).
     pub tau_f_hat_nm: f64,
-    /// `FLAG_*` bits.
-    pub flags: u32,
+    /// What happened on this tick.
+    pub flags: LawFlags,
 }
 
 /// The law with its per-joint state (LPF, torque-error integral).
@@ -80,7 +104,7 @@ pub struct LawOutput {
 pub struct JointLaw {
     /// Gains and limits.
     pub gains: Gains,
-    lpf: Option<Butterworth>,
+    lpf: Option<CausalButterworth>,
     e_int_nm_s: f64,
 }
 
@@ -111,8 +135,8 @@ pub fn clamp_current(i_a: f64, max_curr_a: f64) -> (f64, bool) {
 }
 
 impl JointLaw {
-    /// A law with optional pre-designed LPF (design it off the RT thread).
-    pub fn new(gains: Gains, lpf: Option<Butterworth>) -> Self {
+    /// A law with an optional pre-designed LPF (design it off the RT thread).
+    pub fn new(gains: Gains, lpf: Option<CausalButterworth>) -> Self {
         Self {
             gains,
             lpf,
@@ -129,7 +153,6 @@ impl JointLaw {
     }
 
     /// The torque-error integral [Nm·s].
-    #[cfg(test)]
     pub fn integral_nm_s(&self) -> f64 {
         self.e_int_nm_s
     }
@@ -146,11 +169,9 @@ impl JointLaw {
         if !inputs_finite {
             return self.non_finite();
         }
-        let mut flags = 0;
+        let mut flags = LawFlags::NONE;
         let (f, clipped) = gated_clip(x.friction_nm, x.sdot_rad_s, &g);
-        if clipped {
-            flags |= FLAG_FRICTION_CLIPPED;
-        }
+        flags.friction_clipped = clipped;
         let mut tau_f = if g.kfc > 0.0 { g.kfc * f } else { 0.0 };
         if let Some(lpf) = &mut self.lpf {
             tau_f = lpf.step(tau_f);
@@ -170,9 +191,7 @@ impl JointLaw {
             return self.non_finite();
         }
         let (i, sat) = clamp_current(i, g.max_curr_a);
-        if sat {
-            flags |= FLAG_CURRENT_SATURATED;
-        }
+        flags.current_saturated = sat;
         LawOutput {
             i_a: i,
             tau_f_hat_nm: tau_f,
@@ -192,7 +211,10 @@ impl JointLaw {
         LawOutput {
             i_a: i,
             tau_f_hat_nm: 0.0,
-            flags: if sat { FLAG_CURRENT_SATURATED } else { 0 },
+            flags: LawFlags {
+                current_saturated: sat,
+                ..LawFlags::NONE
+            },
         }
     }
 
@@ -202,7 +224,10 @@ impl JointLaw {
         LawOutput {
             i_a: 0.0,
             tau_f_hat_nm: 0.0,
-            flags: FLAG_NON_FINITE,
+            flags: LawFlags {
+                non_finite: true,
+                ..LawFlags::NONE
+            },
         }
     }
 }
@@ -242,7 +267,7 @@ mod tests {
         assert!((out.i_a - want).abs() < 1e-12, "{} vs {want}", out.i_a);
         assert!(out.i_a < 0.0, "negative ratio flips the current");
         assert!((out.tau_f_hat_nm - 1.05).abs() < 1e-12);
-        assert_eq!(out.flags, 0);
+        assert_eq!(out.flags, LawFlags::NONE);
         // The torque produced, r·kt·i, equals τ_des + τ̂_F.
         assert!((-160.0 * 0.0665 * out.i_a - 3.05).abs() < 1e-12);
     }
@@ -253,11 +278,11 @@ mod tests {
         // Above the gate: clipped to 8 Nm before kfc.
         let out = law.step(&input(0.0, 20.0, 0.5));
         assert!((out.tau_f_hat_nm - 0.7 * 8.0).abs() < 1e-12);
-        assert_ne!(out.flags & FLAG_FRICTION_CLIPPED, 0);
+        assert!(out.flags.friction_clipped);
         // Below the gate: not clipped (BLF behaviour), the current clamp still bounds the output.
         let out = law.step(&input(0.0, 20.0, 0.01));
         assert!((out.tau_f_hat_nm - 14.0).abs() < 1e-12);
-        assert_eq!(out.flags & FLAG_FRICTION_CLIPPED, 0);
+        assert!(!out.flags.friction_clipped);
         // Negative side.
         let out = law.step(&input(0.0, -20.0, -0.5));
         assert!((out.tau_f_hat_nm + 5.6).abs() < 1e-12);
@@ -282,14 +307,14 @@ mod tests {
         let mut law = JointLaw::new(gains(), None);
         let out = law.step(&input(100.0, 0.0, 0.0));
         assert_eq!(out.i_a, -3.0);
-        assert_ne!(out.flags & FLAG_CURRENT_SATURATED, 0);
+        assert!(out.flags.current_saturated);
         let out = law.step(&input(-100.0, 0.0, 0.0));
         assert_eq!(out.i_a, 3.0);
     }
 
     #[test]
     fn non_finite_inputs_give_zero_and_do_not_poison_the_filter() {
-        let lpf = Butterworth::design(2, 10.0, 1000.0).unwrap();
+        let lpf = CausalButterworth::design(2, 10.0, 1000.0).unwrap();
         let mut law = JointLaw::new(gains(), Some(lpf));
         for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
             for x in [
@@ -299,14 +324,14 @@ mod tests {
             ] {
                 let out = law.step(&x);
                 assert_eq!(out.i_a, 0.0);
-                assert_eq!(out.flags, FLAG_NON_FINITE);
+                assert!(out.flags.non_finite);
             }
         }
         let out = law.step(&input(1.0, 1.0, 0.1));
-        assert!(out.i_a.is_finite() && out.i_a != 0.0 && out.flags == 0);
+        assert!(out.i_a.is_finite() && out.i_a != 0.0 && out.flags == LawFlags::NONE);
         // NaN τ_meas is fine without feedback, fatal with it.
         let mut fb = JointLaw::new(Gains { kp: 1.0, ..gains() }, None);
-        assert_eq!(fb.step(&input(1.0, 0.0, 0.0)).flags, FLAG_NON_FINITE);
+        assert!(fb.step(&input(1.0, 0.0, 0.0)).flags.non_finite);
         // A huge (finite) value still clamps, not NaN.
         let out = law.step(&input(1e308, 1e308, 1.0));
         assert!(out.i_a.abs() <= 3.0);
@@ -314,7 +339,7 @@ mod tests {
 
     #[test]
     fn lpf_smooths_and_reset_is_bumpless() {
-        let lpf = Butterworth::design(2, 5.0, 1000.0).unwrap();
+        let lpf = CausalButterworth::design(2, 5.0, 1000.0).unwrap();
         let mut law = JointLaw::new(gains(), Some(lpf));
         let first = law.step(&input(0.0, 2.0, 1.0));
         assert!(

@@ -1,22 +1,24 @@
-//! Inlinable `exp`, `ln`, `powf` and `tanh` for the simulator's 20 kHz inner loop.
+//! Inlinable `exp`, `ln`, `powf` and `tanh`: the project's one set of fast transcendental kernels.
 //!
-//! What it is: branch-light f64 kernels that the compiler inlines into
-//! [`Plant`](crate::Plant)'s fast path, so the independent transcendental calls of one physics
-//! step overlap instead of serialising through libm calls (measured with callgrind: libm's
-//! `exp`/`pow`/`tanh`/`expm1` were ≈ 45–55 % of the simulator's instructions, most of it call overhead
-//! and special-case handling the plant never needs). Hand-written because no well-kept crate offers
-//! inlinable, FMA-based kernels with a stated error bound (the `libm` crate is a port of the same
-//! out-of-line algorithms).
+//! What it is: branch-light f64 kernels that the compiler inlines into hot loops — the simulator's
+//! 20 kHz plant step (latency-bound: the independent transcendental calls of one physics step
+//! overlap instead of serialising through libm calls, which were ≈ 45–55 % of its instructions)
+//! and the friction-fit's vectorised least-squares pass ([`exp_lanes`], [`ln_lanes`]: the same
+//! kernels written one loop per operation over a lane array, so LLVM emits SIMD code with table
+//! gathers). Hand-written because no well-kept crate offers inlinable, FMA-based kernels with a
+//! stated error bound (the `libm` crate is a port of the out-of-line algorithms).
 //!
 //! Error bounds (checked against libm by the unit tests below over dense sweeps):
 //! - [`exp`]: relative error ≤ 3e-16 (≈ 1 ulp) on [−708, 709]; 0 below −708 (libm returns a
 //!   subnormal < 3e-308 there); libm above 709;
 //! - [`ln`]: absolute error ≤ 4e-16 + 4e-16·|ln x| for finite normal x > 0;
 //! - [`powf`]: x^y for x ≥ 0, relative error ≤ 4e-16·(1 + |y·ln x|) + 4e-16;
-//! - [`tanh`]: absolute error ≤ 1e-15 (relative ≤ 1e-15 for |x| < 1/16), exactly ±1 for |x| ≥ 20.
+//! - [`tanh`]: absolute error ≤ 1e-15 (relative ≤ 1e-15 for |x| < 1/16), exactly ±1 for |x| ≥ 20;
+//! - [`exp_lanes`], [`ln_lanes`]: the same values as [`exp`] and [`ln`] per lane, except that
+//!   [`exp_lanes`] gives +∞ above 709 (branch-free).
 //!
 //! What it is not: general-purpose libm replacements (no NaN/∞ propagation guarantees beyond what is
-//! stated, no subnormal inputs for [`ln`]); the reference path of the plant keeps calling libm.
+//! stated, no subnormal inputs for [`ln`]); reference computations keep calling libm.
 
 /// log₂ e.
 const LOG2_E: f64 = std::f64::consts::LOG2_E;
@@ -119,7 +121,6 @@ pub fn exp_in_range(x: f64) -> f64 {
     const STEP_HI: f64 = LN2_HI / 64.0;
     const STEP_LO: f64 = LN2_LO / 64.0;
     // k = round(x·64/ln2) by the 1.5·2^52 shifter: one FMA, and k is in the low mantissa bits
-    const SHIFTER: f64 = 6_755_399_441_055_744.0;
     let shifted = x.mul_add(INV_STEP, SHIFTER);
     let k = shifted.to_bits() as i64; // low bits: k modulo 2^51 (two's complement for k < 0)
     let kf = shifted - SHIFTER;
@@ -342,6 +343,39 @@ pub fn tanh(x: f64) -> f64 {
     ((1.0 - e) / (1.0 + e)).copysign(x)
 }
 
+/// 1.5·2⁵²: adding it rounds an f64 of magnitude < 2⁵¹ to an integer held in the low mantissa bits
+/// (a float→int conversion without `cvtpd2qq`, which AVX2 lacks).
+const SHIFTER: f64 = 6_755_399_441_055_744.0;
+
+/// [`exp`] on each lane, branch-free (vectorisable): 0 below −708, +∞ above 709. Written as one
+/// loop per operation, the shape LLVM reliably turns into SIMD code.
+#[inline(always)]
+// max/min instead of clamp: clamp's NaN/ordering checks keep LLVM from vectorising the loop.
+#[allow(clippy::manual_clamp)]
+pub fn exp_lanes<const N: usize>(x: &[f64; N]) -> [f64; N] {
+    let mut y = [0.0; N];
+    for l in 0..N {
+        y[l] = exp_in_range(x[l].max(-708.0).min(709.0));
+    }
+    for l in 0..N {
+        y[l] = if x[l] < -708.0 { 0.0 } else { y[l] };
+    }
+    for l in 0..N {
+        y[l] = if x[l] > 709.0 { f64::INFINITY } else { y[l] };
+    }
+    y
+}
+
+/// [`ln`] on each lane (finite normal x > 0), branch-free (vectorisable).
+#[inline(always)]
+pub fn ln_lanes<const N: usize>(x: &[f64; N]) -> [f64; N] {
+    let mut y = [0.0; N];
+    for l in 0..N {
+        y[l] = ln(x[l]);
+    }
+    y
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -430,5 +464,51 @@ mod tests {
         assert_eq!(tanh(0.0), 0.0);
         assert_eq!(tanh(30.0), 1.0);
         assert_eq!(tanh(-30.0), -1.0);
+    }
+
+    #[test]
+    fn lane_exp_and_ln_equal_the_scalar_kernels_and_stay_within_libm_bounds() {
+        const LANES: usize = 8;
+        let mut xs = vec![
+            0.0, -0.0, 1e-300, -1e-12, 0.5, -0.5, 0.3465, -0.3466, 1.0, -1.0, 700.0, -700.0,
+        ];
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        for _ in 0..20_000 {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            xs.push(((s >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 1400.0);
+            xs.push(((s >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 6.0);
+        }
+        xs.truncate(xs.len() / LANES * LANES);
+        for g in xs.chunks_exact(LANES) {
+            let g: &[f64; LANES] = g.try_into().unwrap();
+            let e = exp_lanes(g);
+            for l in 0..LANES {
+                assert_eq!(e[l].to_bits(), exp(g[l]).to_bits(), "exp({})", g[l]);
+                let want = g[l].exp();
+                let rel = ((e[l] - want) / want).abs();
+                assert!(rel <= 3e-16, "exp({}) = {} vs {want}", g[l], e[l]);
+            }
+            // ln on positive normal values spanning the whole exponent range.
+            let mut pos = [0.0; LANES];
+            for l in 0..LANES {
+                pos[l] = (g[l] * 0.5).exp().max(f64::MIN_POSITIVE);
+            }
+            let lnv = ln_lanes(&pos);
+            for l in 0..LANES {
+                let want = pos[l].ln();
+                assert_eq!(lnv[l].to_bits(), ln(pos[l]).to_bits());
+                assert!(
+                    (lnv[l] - want).abs() <= 4e-16 + 4e-16 * want.abs(),
+                    "ln({}) = {} vs {want}",
+                    pos[l],
+                    lnv[l]
+                );
+            }
+        }
+        // Outside the range: 0 and +∞, never NaN.
+        let e = exp_lanes(&[-710.0, -1e300, 710.0, f64::NEG_INFINITY]);
+        assert_eq!(e, [0.0, 0.0, f64::INFINITY, 0.0]);
     }
 }
