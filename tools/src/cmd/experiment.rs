@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use frictionless::friction::{CvParams, ScvParams, StaticFriction};
+use frictionless::friction::{CvParams, ScvParams};
 use frictl::experiment::controller::PAPER_KD_PER_S;
 use frictl::experiment::metrics::TrackCriterion;
 use frictl::experiment::report::{SuiteReport, slug, write_trace_csv};
@@ -14,6 +14,7 @@ use frictl::experiment::session::{
     Binaries, FrictionModel, LawSettings, Lpf, Mode, install_signal_flag,
 };
 use frictl::experiment::suite::{self, SuiteConfig, Task};
+use frictl::ident::fit_file::FittedModel;
 
 /// Which experiment.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -278,43 +279,27 @@ fn per_joint_f64(what: &str, spec: &str, joints: &[usize]) -> anyhow::Result<[Op
     Ok(out)
 }
 
-/// Parameters of a `frictl fit --json` file (`params` object; `null` = ∞, how JSON stores `ka = inf`).
-fn fit_params(path: &Path, names: &[&str]) -> anyhow::Result<Vec<f64>> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read fit file {}", path.display()))?;
-    let v: serde_json::Value =
-        serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
-    let p = v
-        .get("params")
-        .and_then(|p| p.as_object())
-        .with_context(|| {
-            format!(
-                "{}: no `params` object (from `frictl fit --json`?)",
-                path.display()
-            )
-        })?;
-    names
-        .iter()
-        .map(|n| match p.get(*n) {
-            Some(serde_json::Value::Null) => Ok(f64::INFINITY),
-            Some(x) => x
-                .as_f64()
-                .with_context(|| format!("{}: params.{n} = {x} is not a number", path.display())),
-            None => bail!("{}: params.{n} missing", path.display()),
-        })
-        .collect()
-}
-
 /// Loads the CV parameters written by `frictl fit cv --json`.
 pub fn load_cv(path: &Path) -> anyhow::Result<CvParams> {
-    let p = fit_params(path, CvParams::PARAM_NAMES)?;
-    CvParams::from_params(&p).with_context(|| format!("{}", path.display()))
+    match FittedModel::read(path)? {
+        FittedModel::Cv { params } => Ok(params),
+        other => bail!(
+            "{}: a fit of model {:?}, --cv needs a CV fit (`frictl fit cv`)",
+            path.display(),
+            other.tag()
+        ),
+    }
 }
 
-/// Loads the SCV parameters written by `frictl fit scv --json`.
+/// Loads the SCV parameters written by `frictl fit scv --json` (or `scv-code`, in paper form).
 pub fn load_scv(path: &Path) -> anyhow::Result<ScvParams> {
-    let p = fit_params(path, ScvParams::PARAM_NAMES)?;
-    ScvParams::from_params(&p).with_context(|| format!("{}", path.display()))
+    match FittedModel::read(path)? {
+        FittedModel::Cv { .. } => bail!(
+            "{}: a fit of model \"Cv\", --scv needs an SCV fit (`frictl fit scv`)",
+            path.display()
+        ),
+        scv => Ok(scv.to_scv()),
+    }
 }
 
 /// Runs `frictl experiment`.

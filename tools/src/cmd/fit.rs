@@ -1,14 +1,16 @@
 //! `frictl fit cv|scv|scv-code DATASET.csv` — fit a static friction model to a preprocessed dataset and
-//! print/write it as a `[[joint]]` TOML snippet in the daemon's config format, and as JSON.
+//! print/write it as a `[[joint]]` TOML snippet in the daemon's config format, and as JSON
+//! ([`frictl::ident::fit_file::FitFile`]).
 
 use std::path::PathBuf;
 
 use anyhow::Context;
-use frictionless::friction::{CvParams, ScvCodeParams, ScvParams, StaticFriction};
+use frictionless::friction::{CvParams, ScvCodeParams, ScvParams};
 use frictl::ident::dataset::Dataset;
 use frictl::ident::fit::{
     FitBounds, FitOptions, FitResult, Fittable, Loss, Method, fit, select, sliding_quadrant_mask,
 };
+use frictl::ident::fit_file::{FitFile, FittedModel};
 
 /// Static model to fit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -120,9 +122,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let started = std::time::Instant::now();
     let (toml, json) = match args.model {
-        ModelKind::Cv => report(fit::<CvParams>(&v, &t, &opts)?, &ds, &target, &args),
-        ModelKind::Scv => report(fit::<ScvParams>(&v, &t, &opts)?, &ds, &target, &args),
-        ModelKind::ScvCode => report(fit::<ScvCodeParams>(&v, &t, &opts)?, &ds, &target, &args),
+        ModelKind::Cv => report(
+            fit::<CvParams>(&v, &t, &opts)?,
+            |params| FittedModel::Cv { params },
+            &ds,
+            &target,
+            &args,
+        ),
+        ModelKind::Scv => report(
+            fit::<ScvParams>(&v, &t, &opts)?,
+            |params| FittedModel::Scv { params },
+            &ds,
+            &target,
+            &args,
+        ),
+        ModelKind::ScvCode => report(
+            fit::<ScvCodeParams>(&v, &t, &opts)?,
+            |params| FittedModel::ScvCode { params },
+            &ds,
+            &target,
+            &args,
+        ),
     }?;
     eprintln!(
         "frictl fit: {} of {} samples selected, fitted in {:.3} s",
@@ -142,18 +162,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 /// Daemon `[[joint]]` keys for a fitted model (SCV code form = SCV with ka = inf, alpha = 2).
-fn daemon_keys<M: StaticFriction + 'static>(m: &M) -> Vec<(&'static str, f64)> {
-    let any = m as &dyn std::any::Any;
-    if let Some(c) = any.downcast_ref::<CvParams>() {
+fn daemon_keys(m: &FittedModel) -> Vec<(&'static str, f64)> {
+    if let FittedModel::Cv { params: c } = m {
         vec![("kc", c.kc), ("kv", c.kv), ("ka", c.ka)]
     } else {
-        let s: ScvParams = if let Some(s) = any.downcast_ref::<ScvParams>() {
-            *s
-        } else if let Some(c) = any.downcast_ref::<ScvCodeParams>() {
-            ScvParams::from(*c)
-        } else {
-            return vec![];
-        };
+        let s = m.to_scv();
         vec![
             ("kc", s.kc),
             ("kv", s.kv),
@@ -173,12 +186,13 @@ fn toml_f64(v: f64) -> String {
     }
 }
 
-fn report<M: Fittable + 'static>(
+fn report<M: Fittable>(
     r: FitResult<M>,
+    tagged: fn(M) -> FittedModel,
     ds: &Dataset,
     target: &[f64],
     args: &Args,
-) -> anyhow::Result<(String, serde_json::Value)> {
+) -> anyhow::Result<(String, FitFile)> {
     if !r.at_bounds.is_empty() {
         eprintln!(
             "frictl fit: parameters on a bound: {} (the unbounded optimum lies outside; see --help for the bound flags)",
@@ -190,13 +204,11 @@ fn report<M: Fittable + 'static>(
         &select(&ds.sdot_rad_s, &ds.valid),
         &select(target, &ds.valid),
     );
-    let model_name = if M::N_PARAMS == 3 {
-        "coulomb_viscous"
-    } else {
-        "coulomb_viscous_stribeck"
-    };
+    let fitted = tagged(r.model);
+    // The serialised name is a quoted string, valid TOML.
+    let model_name = serde_json::to_value(fitted.daemon_friction_model())?;
     let mut s = format!(
-        "# frictl fit {:?} ({:?}) on {}: {} samples, RMSE {:.4} Nm on the fitted samples, {:.4} Nm on all valid samples\n[[joint]]\nfriction_model = \"{model_name}\"\n",
+        "# frictl fit {:?} ({:?}) on {}: {} samples, RMSE {:.4} Nm on the fitted samples, {:.4} Nm on all valid samples\n[[joint]]\nfriction_model = {model_name}\n",
         args.model,
         args.method,
         args.dataset.display(),
@@ -204,33 +216,32 @@ fn report<M: Fittable + 'static>(
         r.rmse_nm,
         rmse_valid
     );
-    for (k, v) in daemon_keys(&r.model) {
+    for (k, v) in daemon_keys(&fitted) {
         s += &format!("{k} = {}\n", toml_f64(v));
     }
-    let json = serde_json::json!({
-        "model": format!("{:?}", args.model),
-        "method": args.method,
-        "params": r.model,
-        "param_names": M::PARAM_NAMES,
-        "daemon_friction_model": model_name,
-        "rmse_fitted_nm": r.rmse_nm,
-        "mae_fitted_nm": r.mae_nm,
-        "rmse_valid_nm": rmse_valid,
-        "n_samples": r.n_samples,
-        "iterations": r.iterations,
-        "bounds": {
-            "ka_min": args.ka_min,
-            "ka_max": args.ka_max,
-            "vs_min": args.vs_min,
-            "vs_max": args.vs_max,
-            "alpha_min": args.alpha_min,
-            "alpha_max": args.alpha_max,
-            "ks_max_ratio": args.ks_max_ratio,
+    let json = FitFile {
+        fitted,
+        method: args.method,
+        param_names: M::PARAM_NAMES.iter().map(|n| (*n).to_owned()).collect(),
+        daemon_friction_model: fitted.daemon_friction_model(),
+        rmse_fitted_nm: r.rmse_nm,
+        mae_fitted_nm: r.mae_nm,
+        rmse_valid_nm: rmse_valid,
+        n_samples: r.n_samples,
+        iterations: r.iterations,
+        bounds: FitBounds {
+            ka_min: args.ka_min,
+            ka_max: args.ka_max,
+            vs_min: args.vs_min,
+            vs_max: args.vs_max,
+            alpha_min: args.alpha_min,
+            alpha_max: args.alpha_max,
+            ks_max_ratio: args.ks_max_ratio,
         },
-        "at_bounds": r.at_bounds,
-        "sliding_quadrants": args.sliding_quadrants,
-        "v_min_rad_s": args.v_min,
-        "dataset": args.dataset.display().to_string(),
-    });
+        at_bounds: r.at_bounds.clone(),
+        sliding_quadrants: args.sliding_quadrants,
+        v_min_rad_s: args.v_min,
+        dataset: args.dataset.display().to_string(),
+    };
     Ok((s, json))
 }
