@@ -58,7 +58,7 @@ impl JointSetup {
 }
 
 /// An external torque pulse on the joint output (through `SimDisturbance`).
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Pulse {
     /// Start time [s] after the trial start.
     pub start_s: f64,
