@@ -7,7 +7,7 @@
 //! What it is **not**: no I/O besides reading model files; nothing here runs on the RT thread except
 //! the `#[inline]` estimator calls.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use frictionless::features::WarmupPolicy;
 use frictionless::model::{JointModel, ModelError, NoFriction, PinnEstimator};
@@ -52,19 +52,8 @@ pub enum ParamsError {
     },
 }
 
-/// Reads and checks a `.fwt` model against the joint's configured gear ratio. Error text names the
-/// problem; the caller (the config validation, which wraps it in its own typed error) adds file and
-/// key.
-pub fn check_model_file(path: &Path, gear_ratio: f64) -> Result<(), String> {
-    let m = frictionless::weights::read_file(path).map_err(|e| e.to_string())?;
-    let r = m.meta.gear_ratio.get();
-    if (r - gear_ratio).abs() > 1e-9 * gear_ratio.abs() {
-        return Err(format!(
-            "model was trained with gear_ratio {r}, config says {gear_ratio} (sign and value must match)"
-        ));
-    }
-    Ok(())
-}
+/// The model-file check `--check` runs, defined with the config schema.
+pub use crate::config::check_model_file;
 
 /// Status code of a model kind (`frictionless_shm_types::model_kind`).
 pub fn kind_code(m: &JointModel) -> u8 {

@@ -6,12 +6,16 @@
 //! What this crate **is**: [`ColumnDoc`] (name, unit and meaning of one CSV column, for the raw
 //! acquisition log and the dataset alike), [`Dataset`] (column vectors, one entry per 1 kHz sample),
 //! [`DATASET_COLUMNS`] (names, units, meaning), the CSV writer/reader and [`DatasetSidecar`] (what was
-//! done to produce it), written by `frictl preprocess` and read by `frictl fit`, the trainer and `eval`.
+//! done to produce it), written by `frictl preprocess` and read by `frictl fit`, the trainer and `eval`;
+//! [`fit_file::FittedModel`], the fitted CV/SCV model in the JSON `frictl fit --json` writes and eval,
+//! the trainer's SCV prior and the experiments read.
 //!
 //! What it is **not**: the raw acquisition log writer (`frictionless-acquire`, `acquire::log`) or the
 //! label pipeline (`frictionless-ident`, `preprocess`).
 
 #![warn(missing_docs)]
+
+pub mod fit_file;
 
 use std::path::Path;
 

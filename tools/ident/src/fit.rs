@@ -46,7 +46,7 @@ use frictionless::fastmath::{exp_lanes, ln_lanes};
 use frictionless::friction::{CvParams, ScvCodeParams, ScvParams, StaticFriction};
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Largest number of parameters of a static model (SCV).
 const MAX_P: usize = 6;
@@ -96,7 +96,7 @@ pub enum FitError {
 }
 
 /// Solver.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum Method {
     /// Projected Levenberg–Marquardt on log-parameters within the bounds (least squares).
@@ -126,7 +126,7 @@ const P_MAX: f64 = 1e12;
 /// follows label noise and makes the closed-loop compensation chatter. `vs ∈ [1e-3, 10] rad/s` and
 /// `α ∈ [0.2, 5]` keep the Stribeck term a hump over a velocity band the data can resolve;
 /// `ks ≤ 10·kc` rejects the spikes that a few stick samples produce.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FitBounds {
     /// Smallest ka [s/rad].
     pub ka_min: f64,

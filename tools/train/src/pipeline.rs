@@ -52,7 +52,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use frictionless::features::{FeatureSpec, WarmupPolicy};
-use frictionless::friction::{CvParams, ScvCodeParams, ScvParams, StaticFriction};
+use frictionless::friction::{ScvParams, StaticFriction};
 use frictionless::mlp::StorageDtype;
 use frictionless::units::GearRatio;
 use frictionless::weights::{
@@ -310,59 +310,31 @@ pub struct ScvPrior {
     pub params: ScvParams,
 }
 
-/// Reads the JSON written by `frictl fit cv|scv|scv-code --json` (keys `model` and `params`).
+/// Reads the JSON written by `frictl fit cv|scv|scv-code --json`
+/// ([`frictionless_dataset::fit_file::FittedModel`]) as an SCV prior ([`FittedModel::to_scv`]).
+///
+/// [`FittedModel::to_scv`]: frictionless_dataset::fit_file::FittedModel::to_scv
 pub fn load_scv(path: &Path) -> Result<ScvPrior, PipelineError> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| file_err(path, format!("cannot read: {e}")))?;
-    let v: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| file_err(path, format!("not JSON: {e}")))?;
-    let model = v
-        .get("model")
-        .and_then(|m| m.as_str())
-        .ok_or_else(|| {
-            file_err(
-                path,
-                "key `model` missing or not a string (expected the JSON of `frictl fit --json`)",
-            )
-        })?
-        .to_owned();
-    let params = v
-        .get("params")
-        .cloned()
-        .ok_or_else(|| file_err(path, "key `params` missing"))?;
-    let bad = |e: &dyn std::fmt::Display| {
-        file_err(path, format!("key `params` for model {model:?}: {e}"))
-    };
-    let scv = match model.as_str() {
-        "Cv" => {
-            let c: CvParams = serde_json::from_value(params).map_err(|e| bad(&e))?;
-            c.validate().map_err(|e| bad(&e))?;
-            ScvParams {
-                kc: c.kc,
-                ka: c.ka,
-                kv: c.kv,
-                ks: c.kc,
-                vs: 1.0,
-                alpha: 1.0,
-            }
-        }
-        "Scv" => serde_json::from_value(params).map_err(|e| bad(&e))?,
-        "ScvCode" => {
-            let c: ScvCodeParams = serde_json::from_value(params).map_err(|e| bad(&e))?;
-            c.validate().map_err(|e| bad(&e))?;
-            ScvParams::from(c)
-        }
-        other => {
-            return Err(file_err(
-                path,
-                format!("key `model` = {other:?}: expected \"Cv\", \"Scv\" or \"ScvCode\""),
-            ));
-        }
-    };
-    scv.validate().map_err(|e| bad(&e))?;
+    use frictionless_dataset::fit_file::{FitFileError, FittedModel};
+    let fitted = FittedModel::read(path).map_err(|e| match e {
+        FitFileError::Read { source, .. } => file_err(path, format!("cannot read: {source}")),
+        FitFileError::Parse { message, .. } => file_err(
+            path,
+            format!(
+                "not a fit of `frictl fit --json` (keys `model` = \"Cv\" | \"Scv\" | \"ScvCode\" and `params`): {message}"
+            ),
+        ),
+    })?;
+    let scv = fitted.to_scv();
+    scv.validate().map_err(|e| {
+        file_err(
+            path,
+            format!("key `params` for model {:?}: {e}", fitted.tag()),
+        )
+    })?;
     Ok(ScvPrior {
         path: path.to_path_buf(),
-        model,
+        model: fitted.tag().to_owned(),
         params: scv,
     })
 }
@@ -882,6 +854,7 @@ pub fn default_report_path(model_path: &Path) -> PathBuf {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use frictionless::friction::ScvCodeParams;
 
     #[test]
     fn storable_scv_evaluates_like_the_code_form() {

@@ -35,7 +35,11 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
+use frictl::eval::{Metrics, Report as EvalReport};
+use frictl::experiment::report::{Cell, SuiteReport};
+use frictl::experiment::search::MinKp;
 use frictl::experiment::session::{ORACLE_LABEL, install_signal_flag, interrupted};
+use frictionless_train::pipeline::TrainReport;
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `frictl demo`.
@@ -204,27 +208,26 @@ fn s(p: &Path) -> String {
 }
 
 fn read_json(p: &Path) -> anyhow::Result<serde_json::Value> {
+    read_typed(p)
+}
+
+/// Reads a JSON report into its typed struct.
+fn read_typed<T: serde::de::DeserializeOwned>(p: &Path) -> anyhow::Result<T> {
     let t = std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
-    serde_json::from_str(&t).with_context(|| format!("{}: not JSON", p.display()))
+    serde_json::from_str(&t)
+        .with_context(|| format!("{}: not the expected JSON report", p.display()))
 }
 
 /// The Δθ offset frictiond must use for a PINN, from its train report: the
 /// `datasets[0].delta_theta_offset_motor_rad` the windows were latched with (as text for
 /// `--pinn-delta-theta-offset`), or `enable` when training latched per chunk (no single value).
 fn pinn_offset_arg(train_report: &Path) -> anyhow::Result<String> {
-    let j = read_json(train_report)?;
-    let offsets: Vec<Option<f64>> = j
-        .get("datasets")
-        .and_then(|d| d.as_array())
-        .map(|a| {
-            a.iter()
-                .map(|d| {
-                    d.get("delta_theta_offset_motor_rad")
-                        .and_then(|v| v.as_f64())
-                })
-                .collect()
-        })
-        .unwrap_or_default();
+    let report: TrainReport = read_typed(train_report)?;
+    let offsets: Vec<Option<f64>> = report
+        .datasets
+        .iter()
+        .map(|d| d.delta_theta_offset_motor_rad)
+        .collect();
     match offsets.first() {
         Some(Some(v)) if offsets.iter().all(|o| *o == Some(*v)) => Ok(format!("{v:e}")),
         Some(Some(_)) => anyhow::bail!(
@@ -235,57 +238,196 @@ fn pinn_offset_arg(train_report: &Path) -> anyhow::Result<String> {
     }
 }
 
+impl Sizes {
+    /// The sizes of `--full`, `--quick` or the default flavour.
+    fn for_args(args: &Args) -> Self {
+        if args.full {
+            Sizes {
+                n_starts: 5,
+                hidden: "268,215",
+                history: 20,
+                epochs: 350,
+                batch: 4316,
+                iterations: 8,
+                periods: 3.0,
+                // `frictl train`'s defaults are the demo's measured ones; the paper's values explicitly.
+                train_extra: &["--lr", "7.6e-4", "--lambda", "0.164", "--dropout", "0.07"],
+            }
+        } else if args.quick {
+            Sizes {
+                n_starts: 1,
+                hidden: "32,32",
+                history: 10,
+                epochs: 3,
+                batch: 4096,
+                iterations: 4,
+                periods: 2.0,
+                train_extra: &["--val-frac", "0", "--test-frac", "0"],
+            }
+        } else {
+            // `frictl train`'s defaults (128×128, H 30, batch 512, 10 epochs): ≈ 1 min per joint. The
+            // demo has its own unseen test run, so every training chunk is used and the last epoch kept
+            // (`--val-frac 0 --test-frac 0`: on the knee, epoch selection on protocol chunks measured worse
+            // on tracking, 0.36–0.38 vs 0.32–0.33 × SCV).
+            Sizes {
+                n_starts: 2,
+                hidden: "128,128",
+                history: 30,
+                epochs: 10,
+                batch: 512,
+                iterations: 6,
+                periods: 3.0,
+                train_extra: &["--val-frac", "0", "--test-frac", "0"],
+            }
+        }
+    }
+}
+
+/// `full`, `quick` or `default`.
+fn settings_name(args: &Args) -> &'static str {
+    if args.full {
+        "full"
+    } else if args.quick {
+        "quick"
+    } else {
+        "default"
+    }
+}
+
+/// The output directories under `--out`.
+struct Dirs {
+    data: PathBuf,
+    models: PathBuf,
+    eval: PathBuf,
+    experiments: PathBuf,
+}
+
+/// The files one joint's stages produce.
+struct JointFiles {
+    train_ds: PathBuf,
+    test_ds: PathBuf,
+    cv: PathBuf,
+    scv: PathBuf,
+    fwt: PathBuf,
+    train_report: PathBuf,
+    eval_json: PathBuf,
+}
+
+impl JointFiles {
+    fn new(d: &Dirs, joint: &str) -> Self {
+        Self {
+            train_ds: d.data.join(format!("{joint}_train_ds.csv")),
+            test_ds: d.data.join(format!("{joint}_test_ds.csv")),
+            cv: d.models.join(format!("{joint}_cv.json")),
+            scv: d.models.join(format!("{joint}_scv.json")),
+            fwt: d.models.join(format!("{joint}.fwt")),
+            train_report: d.models.join(format!("{joint}_train.json")),
+            eval_json: d.eval.join(format!("{joint}.json")),
+        }
+    }
+}
+
+/// `report.json` (format `frictionless-demo-v1`).
+#[derive(serde::Serialize)]
+struct DemoReport<'a> {
+    format: &'static str,
+    producer: String,
+    settings: &'static str,
+    seed: u64,
+    causal_labels: bool,
+    network: Network,
+    protocol_starts: u32,
+    joints: &'a BTreeMap<String, JointEntry>,
+    stages: &'a [Stage],
+    total_seconds: f64,
+}
+
+/// `report.json` `network`.
+#[derive(serde::Serialize)]
+struct Network {
+    hidden: &'static str,
+    history: u32,
+    epochs: u32,
+    batch: u32,
+}
+
+/// `report.json` `joints.JOINT`.
+#[derive(serde::Serialize)]
+struct JointEntry {
+    /// Model label (`none`, `CV`, `SCV`, `PINN`, the oracle's) → results.
+    models: BTreeMap<String, ModelEntry>,
+    files: JointFilesEntry,
+}
+
+/// `report.json` `joints.JOINT.files`.
+#[derive(serde::Serialize)]
+struct JointFilesEntry {
+    cv: String,
+    scv: String,
+    pinn: String,
+    eval: String,
+}
+
+/// `report.json` `joints.JOINT.models.LABEL`: the offline evaluation (absent for the oracle, `null`
+/// when the evaluation failed) and the closed-loop results (absent without experiments).
+#[derive(serde::Serialize, Default)]
+struct ModelEntry {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    eval: Option<Option<Metrics>>,
+    #[serde(flatten)]
+    closed_loop: Option<ClosedLoopEntry>,
+}
+
+/// The closed-loop part of a [`ModelEntry`], from the experiment suite's [`Cell`].
+#[derive(serde::Serialize)]
+struct ClosedLoopEntry {
+    min_kp: Option<MinKp>,
+    tracking_rmse_at_min_kp_rad: Option<f64>,
+    tracking_rmse_at_low_kp_rad: Option<f64>,
+    disturbance_rmse_own_kp_rad: Option<f64>,
+    disturbance_rmse_low_kp_rad: Option<f64>,
+    low_kp: Option<f64>,
+}
+
+impl From<&Cell> for ClosedLoopEntry {
+    fn from(c: &Cell) -> Self {
+        Self {
+            min_kp: c.min_kp,
+            tracking_rmse_at_min_kp_rad: c.track_at_min_kp.map(|t| t.rmse_rad),
+            tracking_rmse_at_low_kp_rad: c.track_at_low_kp.map(|(_, t)| t.rmse_rad),
+            disturbance_rmse_own_kp_rad: c
+                .disturbance_own_kp
+                .map(|(_, d)| d.rmse_after_release_rad),
+            disturbance_rmse_low_kp_rad: c
+                .disturbance_low_kp
+                .map(|(_, d)| d.rmse_after_release_rad),
+            low_kp: c.disturbance_low_kp.map(|(kp, _)| kp),
+        }
+    }
+}
+
+/// The evaluation's model keys and the demo's labels for them.
+const EVAL_MODELS: [(&str, &str); 4] = [
+    ("none", "none"),
+    ("cv", "CV"),
+    ("scv", "SCV"),
+    ("pinn", "PINN"),
+];
+
 /// Runs `frictl demo`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     install_signal_flag()?;
     let started = Instant::now();
-    let sizes = if args.full {
-        Sizes {
-            n_starts: 5,
-            hidden: "268,215",
-            history: 20,
-            epochs: 350,
-            batch: 4316,
-            iterations: 8,
-            periods: 3.0,
-            // `frictl train`'s defaults are the demo's measured ones; the paper's values explicitly.
-            train_extra: &["--lr", "7.6e-4", "--lambda", "0.164", "--dropout", "0.07"],
-        }
-    } else if args.quick {
-        Sizes {
-            n_starts: 1,
-            hidden: "32,32",
-            history: 10,
-            epochs: 3,
-            batch: 4096,
-            iterations: 4,
-            periods: 2.0,
-            train_extra: &["--val-frac", "0", "--test-frac", "0"],
-        }
-    } else {
-        // `frictl train`'s defaults (128×128, H 30, batch 512, 10 epochs): ≈ 1 min per joint. The
-        // demo has its own unseen test run, so every training chunk is used and the last epoch kept
-        // (`--val-frac 0 --test-frac 0`: on the knee, epoch selection on protocol chunks measured worse
-        // on tracking, 0.36–0.38 vs 0.32–0.33 × SCV).
-        Sizes {
-            n_starts: 2,
-            hidden: "128,128",
-            history: 30,
-            epochs: 10,
-            batch: 512,
-            iterations: 6,
-            periods: 3.0,
-            train_extra: &["--val-frac", "0", "--test-frac", "0"],
-        }
-    };
+    let sizes = Sizes::for_args(&args);
     let out = &args.out;
-    let (data, models, evald, logs) = (
-        out.join("data"),
-        out.join("models"),
-        out.join("eval"),
-        out.join("logs"),
-    );
-    for d in [&data, &models, &evald, &logs] {
+    let dirs = Dirs {
+        data: out.join("data"),
+        models: out.join("models"),
+        eval: out.join("eval"),
+        experiments: out.join("experiments"),
+    };
+    let logs = out.join("logs");
+    for d in [&dirs.data, &dirs.models, &dirs.eval, &logs] {
         std::fs::create_dir_all(d).with_context(|| format!("cannot create {}", d.display()))?;
     }
     let mut r = Runner {
@@ -294,153 +436,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         stages: vec![],
         n: 0,
     };
-    let seed = args.seed;
     eprintln!(
         "frictl demo → {} ({} settings; logs in {}/logs)",
         out.display(),
-        if args.full {
-            "full (paper sizes)"
-        } else if args.quick {
-            "quick"
-        } else {
-            "default"
+        match settings_name(&args) {
+            "full" => "full (paper sizes)",
+            other => other,
         },
         out.display()
     );
-    let mut per_joint: BTreeMap<String, serde_json::Value> = BTreeMap::new();
+    let mut per_joint: BTreeMap<String, JointEntry> = BTreeMap::new();
     let mut eval_md = String::new();
     for (preset, joint) in JOINTS {
-        // 1. acquisition: the protocol (training) and an unseen closed-loop tracking set (test)
-        let train_csv = data.join(format!("{joint}_train.csv"));
-        let test_csv = data.join(format!("{joint}_test.csv"));
-        r.frictl(
-            &format!("acquire {preset} (train, seed {seed})"),
-            &[
-                "acquire".into(),
-                "--preset".into(),
-                preset.into(),
-                "--seed".into(),
-                seed.to_string(),
-                "--out".into(),
-                s(&data),
-                "--name".into(),
-                format!("{joint}_train"),
-                format!("--set=protocol.n_starts={}", sizes.n_starts),
-            ],
-        )?;
-        let mut test_args: Vec<String> = vec![
-            "acquire".into(),
-            "--preset".into(),
-            preset.into(),
-            "--seed".into(),
-            (seed + 100).to_string(),
-            "--out".into(),
-            s(&data),
-            "--name".into(),
-            format!("{joint}_test"),
-        ];
-        for k in [
-            "protocol.sines.enabled=false",
-            "protocol.ramps.enabled=false",
-            "protocol.steps.enabled=false",
-            "protocol.tracking.train.enabled=false",
-            "protocol.tracking.test.enabled=true",
-        ] {
-            test_args.push(format!("--set={k}"));
-        }
-        r.frictl(
-            &format!("acquire {preset} (test, seed {})", seed + 100),
-            &test_args,
-        )?;
-        // 2. label
-        let train_ds = data.join(format!("{joint}_train_ds.csv"));
-        let test_ds = data.join(format!("{joint}_test_ds.csv"));
-        for (src, dst, what) in [
-            (&train_csv, &train_ds, "train"),
-            (&test_csv, &test_ds, "test"),
-        ] {
-            r.frictl(&format!("preprocess {preset} ({what})"), &{
-                let mut a = vec!["preprocess".into(), s(src), "--out".into(), s(dst)];
-                if args.causal {
-                    a.push("--causal".to_string());
-                }
-                if !args.with_rotor_inertia {
-                    a.push("--subtract-reflected-inertia".into());
-                    a.push("sidecar".into());
-                }
-                a
-            })?;
-            std::fs::remove_file(src).ok(); // the raw log is large; the dataset keeps every column used later
-        }
-        // 3. fit
-        let cv = models.join(format!("{joint}_cv.json"));
-        let scv = models.join(format!("{joint}_scv.json"));
-        for (m, f) in [("cv", &cv), ("scv", &scv)] {
-            r.frictl(
-                &format!("fit {m} {preset}"),
-                &[
-                    "fit".into(),
-                    m.into(),
-                    s(&train_ds),
-                    "--json".into(),
-                    s(f),
-                    "--toml".into(),
-                    s(&f.with_extension("toml")),
-                ],
-            )?;
-        }
-        // 4. train
-        let fwt = models.join(format!("{joint}.fwt"));
-        let train_report = models.join(format!("{joint}_train.json"));
-        r.frictl(
-            &format!("train {preset}"),
-            &[
-                "train".into(),
-                "--dataset".into(),
-                s(&train_ds),
-                "--scv".into(),
-                s(&scv),
-                "--out".into(),
-                s(&fwt),
-                "--hidden".into(),
-                sizes.hidden.into(),
-                "--history".into(),
-                sizes.history.to_string(),
-                "--epochs".into(),
-                sizes.epochs.to_string(),
-                "--batch".into(),
-                sizes.batch.to_string(),
-                "--seed".into(),
-                seed.to_string(),
-                "--report".into(),
-                s(&train_report),
-            ]
-            .into_iter()
-            .chain(sizes.train_extra.iter().map(|a| a.to_string()))
-            .collect::<Vec<String>>(),
-        )?;
-        // 5. evaluate on the unseen tracking run
-        let eval_json = evald.join(format!("{joint}.json"));
-        let eval_result = r.frictl(
-            &format!("eval {preset}"),
-            &[
-                "eval".into(),
-                "--dataset".into(),
-                s(&test_ds),
-                "--cv".into(),
-                s(&cv),
-                "--scv".into(),
-                s(&scv),
-                "--pinn".into(),
-                s(&fwt),
-                "--train-report".into(),
-                s(&train_report),
-                "--out".into(),
-                s(&evald.join(joint)),
-                "--json".into(),
-                s(&eval_json),
-            ],
-        );
+        let files = JointFiles::new(&dirs, joint);
+        acquire(&mut r, &args, &sizes, &dirs, preset, joint)?;
+        label(&mut r, &args, &dirs, preset, joint, &files)?;
+        fit(&mut r, preset, &files)?;
+        train(&mut r, &sizes, args.seed, preset, &files)?;
+        let eval_result = evaluate(&mut r, &dirs, preset, joint, &files);
         if let Err(e) = &eval_result {
             // The closed-loop experiments do not need the offline evaluation: report and go on.
             eprintln!("warning: {e:#}");
@@ -448,189 +461,388 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 "\n**{joint}**: the evaluation stage failed (see logs/); no offline RMSEs.\n"
             );
         }
-        // 6. export
-        r.frictl(
-            &format!("export {preset} → ONNX"),
-            &[
-                "export".into(),
-                "onnx".into(),
-                s(&fwt),
-                "-o".into(),
-                s(&fwt.with_extension("onnx")),
-            ],
-        )?;
-        let ev = if eval_result.is_ok() {
-            read_json(&eval_json)?
-        } else {
-            serde_json::Value::Null
+        export(&mut r, preset, &files)?;
+        let ev: Option<EvalReport> = match eval_result {
+            Ok(()) => Some(read_typed(&files.eval_json)?),
+            Err(_) => None,
         };
-        let mut entry = serde_json::Map::new();
-        let mut models_json = serde_json::Map::new();
-        if eval_result.is_ok() {
-            eval_md += &format!(
-                "\n**{joint}: friction RMSE on the unseen tracking run [Nm]** (label; truth in parentheses)\n\n| model | all | sliding | stick |\n|---|---|---|---|\n"
-            );
+        if let Some(ev) = &ev {
+            eval_md += &eval_table(joint, ev);
         }
-        for (key, label) in [
-            ("none", "none"),
-            ("cv", "CV"),
-            ("scv", "SCV"),
-            ("pinn", "PINN"),
-        ] {
-            let m = ev
-                .get("models")
-                .and_then(|m| m.get(key))
-                .cloned()
-                .unwrap_or_default();
-            let f = |k: &str| m.get(k).and_then(|v| v.as_f64());
-            let cell = |a: &str, b: &str| match (f(a), f(b)) {
-                (Some(x), Some(t)) => format!("{x:.3} ({t:.3})"),
-                (Some(x), None) => format!("{x:.3}"),
-                _ => "–".into(),
-            };
-            if eval_result.is_ok() {
-                eval_md += &format!(
-                    "| {label} | {} | {} | {} |\n",
-                    cell("rmse_all", "rmse_true_all"),
-                    cell("rmse_sliding", "rmse_true_sliding"),
-                    cell("rmse_stick", "rmse_true_stick")
-                );
-            }
-            models_json.insert(label.into(), serde_json::json!({ "eval": m }));
-        }
-        entry.insert("models".into(), serde_json::Value::Object(models_json));
-        entry.insert(
-            "files".into(),
-            serde_json::json!({"cv": s(&cv), "scv": s(&scv), "pinn": s(&fwt), "eval": s(&eval_json)}),
-        );
-        per_joint.insert(joint.into(), serde_json::Value::Object(entry));
+        per_joint.insert(joint.into(), joint_entry(ev.as_ref(), &files));
     }
-    // 7. closed loop
-    let exp_dir = out.join("experiments");
-    let mut exp_md = String::new();
-    let mut exp_temps: Vec<String> = vec![];
-    if !args.no_experiments {
-        let f = |suffix: &str| {
-            format!(
-                "knee={},ankle_roll={}",
-                s(&models.join(format!("l_knee{suffix}"))),
-                s(&models.join(format!("l_ankle_roll{suffix}")))
-            )
-        };
-        let exp_json = exp_dir.join("report.json");
-        // frictiond keeps the Δθ offset the PINN was trained with (not re-latched at enable).
-        let mut offsets = vec![];
-        for (key, joint) in JOINTS {
-            let v = pinn_offset_arg(&models.join(format!("{joint}_train.json")))?;
-            offsets.push(format!("{key}={v}"));
-        }
-        // Each joint's plant starts at the winding temperature of its training recording: the models
-        // are compared in the conditions they were identified in (none of them reads temperature; a
-        // plant several °C hotter than its training data has less sliding friction than any model
-        // learnt, which matters as kfc approaches 1).
-        let mut plant_t0 = vec![];
-        for (key, joint) in JOINTS {
-            let sidecar = data.join(format!("{joint}_train.json"));
-            let t0 = read_json(&sidecar)?
-                .get("initial_temperature_c")
-                .and_then(|v| v.as_f64())
-                .with_context(|| format!("{}: no initial_temperature_c", sidecar.display()))?;
-            exp_temps.push(format!("{key} {t0:.1} °C"));
-            for bound in ["t0_min_c", "t0_max_c"] {
-                plant_t0.push(format!("--set={key}:plant.{bound}={t0}"));
-            }
-        }
-        r.frictl(
-            "experiment all (both joints; none, CV, SCV, PINN, oracle)",
-            &[
-                "experiment".into(),
-                "all".into(),
-                "--joint".into(),
-                "both".into(),
-                "--model".into(),
-                "none,cv,scv,pinn,oracle".into(),
-                "--cv".into(),
-                f("_cv.json"),
-                "--scv".into(),
-                f("_scv.json"),
-                "--pinn".into(),
-                f(".fwt"),
-                "--pinn-delta-theta-offset".into(),
-                offsets.join(","),
-                "--seed".into(),
-                seed.to_string(),
-                "--iterations".into(),
-                sizes.iterations.to_string(),
-                "--periods".into(),
-                sizes.periods.to_string(),
-                "--out".into(),
-                s(&exp_dir),
-            ]
-            .into_iter()
-            .chain(plant_t0)
-            .collect::<Vec<String>>(),
-        )?;
-        exp_md = std::fs::read_to_string(exp_dir.join("tables.md")).unwrap_or_default();
-        let ex = read_json(&exp_json)?;
-        for (joint, entry) in per_joint.iter_mut() {
-            let Some(cells) = ex.get("joints").and_then(|j| j.get(joint)) else {
-                continue;
-            };
-            for label in ["none", "CV", "SCV", "PINN", ORACLE_LABEL] {
-                let Some(c) = cells.get(label) else { continue };
-                let m = &mut entry["models"][label];
-                m["min_kp"] = c.get("min_kp").cloned().unwrap_or_default();
-                m["tracking_rmse_at_min_kp_rad"] = c
-                    .get("track_at_min_kp")
-                    .and_then(|t| t.get("rmse_rad"))
-                    .cloned()
-                    .unwrap_or_default();
-                m["tracking_rmse_at_low_kp_rad"] = c
-                    .get("track_at_low_kp")
-                    .and_then(|t| t.get(1))
-                    .and_then(|t| t.get("rmse_rad"))
-                    .cloned()
-                    .unwrap_or_default();
-                m["disturbance_rmse_own_kp_rad"] = c
-                    .get("disturbance_own_kp")
-                    .and_then(|t| t.get(1))
-                    .and_then(|t| t.get("rmse_after_release_rad"))
-                    .cloned()
-                    .unwrap_or_default();
-                m["disturbance_rmse_low_kp_rad"] = c
-                    .get("disturbance_low_kp")
-                    .and_then(|t| t.get(1))
-                    .and_then(|t| t.get("rmse_after_release_rad"))
-                    .cloned()
-                    .unwrap_or_default();
-                m["low_kp"] = c
-                    .get("disturbance_low_kp")
-                    .and_then(|t| t.get(0))
-                    .cloned()
-                    .unwrap_or_default();
-            }
-        }
-    }
+    let (exp_md, exp_temps) = if args.no_experiments {
+        (String::new(), vec![])
+    } else {
+        experiments(&mut r, &sizes, args.seed, &dirs, &mut per_joint)?
+    };
     let total = started.elapsed().as_secs_f64();
-    let report = serde_json::json!({
-        "format": "frictionless-demo-v1",
-        "producer": format!("frictl {}", env!("CARGO_PKG_VERSION")),
-        "settings": if args.full { "full" } else if args.quick { "quick" } else { "default" },
-        "seed": seed,
-        "causal_labels": args.causal,
-        "network": {"hidden": sizes.hidden, "history": sizes.history, "epochs": sizes.epochs, "batch": sizes.batch},
-        "protocol_starts": sizes.n_starts,
-        "joints": per_joint,
-        "stages": r.stages,
-        "total_seconds": total,
-    });
+    let report = DemoReport {
+        format: "frictionless-demo-v1",
+        producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
+        settings: settings_name(&args),
+        seed: args.seed,
+        causal_labels: args.causal,
+        network: Network {
+            hidden: sizes.hidden,
+            history: sizes.history,
+            epochs: sizes.epochs,
+            batch: sizes.batch,
+        },
+        protocol_starts: sizes.n_starts,
+        joints: &per_joint,
+        stages: &r.stages,
+        total_seconds: total,
+    };
     std::fs::write(
         out.join("report.json"),
         serde_json::to_string_pretty(&report)?,
     )?;
+    let md = report_md(&args, &sizes, &report, &eval_md, &exp_md, &exp_temps);
+    std::fs::write(out.join("report.md"), &md)?;
+    println!("{md}");
+    eprintln!(
+        "frictl demo: done in {total:.0} s → {}/report.md",
+        out.display()
+    );
+    Ok(())
+}
+
+/// Stage 1, acquisition: the protocol (training) and an unseen closed-loop tracking set (test).
+fn acquire(
+    r: &mut Runner,
+    args: &Args,
+    sizes: &Sizes,
+    dirs: &Dirs,
+    preset: &str,
+    joint: &str,
+) -> anyhow::Result<()> {
+    let seed = args.seed;
+    r.frictl(
+        &format!("acquire {preset} (train, seed {seed})"),
+        &[
+            "acquire".into(),
+            "--preset".into(),
+            preset.into(),
+            "--seed".into(),
+            seed.to_string(),
+            "--out".into(),
+            s(&dirs.data),
+            "--name".into(),
+            format!("{joint}_train"),
+            format!("--set=protocol.n_starts={}", sizes.n_starts),
+        ],
+    )?;
+    let mut test_args: Vec<String> = vec![
+        "acquire".into(),
+        "--preset".into(),
+        preset.into(),
+        "--seed".into(),
+        (seed + 100).to_string(),
+        "--out".into(),
+        s(&dirs.data),
+        "--name".into(),
+        format!("{joint}_test"),
+    ];
+    for k in [
+        "protocol.sines.enabled=false",
+        "protocol.ramps.enabled=false",
+        "protocol.steps.enabled=false",
+        "protocol.tracking.train.enabled=false",
+        "protocol.tracking.test.enabled=true",
+    ] {
+        test_args.push(format!("--set={k}"));
+    }
+    r.frictl(
+        &format!("acquire {preset} (test, seed {})", seed + 100),
+        &test_args,
+    )?;
+    Ok(())
+}
+
+/// Stage 2, label: preprocess both recordings into datasets (the raw logs are removed afterwards).
+fn label(
+    r: &mut Runner,
+    args: &Args,
+    dirs: &Dirs,
+    preset: &str,
+    joint: &str,
+    files: &JointFiles,
+) -> anyhow::Result<()> {
+    let train_csv = dirs.data.join(format!("{joint}_train.csv"));
+    let test_csv = dirs.data.join(format!("{joint}_test.csv"));
+    for (src, dst, what) in [
+        (&train_csv, &files.train_ds, "train"),
+        (&test_csv, &files.test_ds, "test"),
+    ] {
+        r.frictl(&format!("preprocess {preset} ({what})"), &{
+            let mut a = vec!["preprocess".into(), s(src), "--out".into(), s(dst)];
+            if args.causal {
+                a.push("--causal".to_string());
+            }
+            if !args.with_rotor_inertia {
+                a.push("--subtract-reflected-inertia".into());
+                a.push("sidecar".into());
+            }
+            a
+        })?;
+        std::fs::remove_file(src).ok(); // the raw log is large; the dataset keeps every column used later
+    }
+    Ok(())
+}
+
+/// Stage 3, fit: CV and SCV on the training dataset.
+fn fit(r: &mut Runner, preset: &str, files: &JointFiles) -> anyhow::Result<()> {
+    for (m, f) in [("cv", &files.cv), ("scv", &files.scv)] {
+        r.frictl(
+            &format!("fit {m} {preset}"),
+            &[
+                "fit".into(),
+                m.into(),
+                s(&files.train_ds),
+                "--json".into(),
+                s(f),
+                "--toml".into(),
+                s(&f.with_extension("toml")),
+            ],
+        )?;
+    }
+    Ok(())
+}
+
+/// Stage 4, train: the PINN with the SCV fit as its physics prior.
+fn train(
+    r: &mut Runner,
+    sizes: &Sizes,
+    seed: u64,
+    preset: &str,
+    files: &JointFiles,
+) -> anyhow::Result<()> {
+    r.frictl(
+        &format!("train {preset}"),
+        &[
+            "train".into(),
+            "--dataset".into(),
+            s(&files.train_ds),
+            "--scv".into(),
+            s(&files.scv),
+            "--out".into(),
+            s(&files.fwt),
+            "--hidden".into(),
+            sizes.hidden.into(),
+            "--history".into(),
+            sizes.history.to_string(),
+            "--epochs".into(),
+            sizes.epochs.to_string(),
+            "--batch".into(),
+            sizes.batch.to_string(),
+            "--seed".into(),
+            seed.to_string(),
+            "--report".into(),
+            s(&files.train_report),
+        ]
+        .into_iter()
+        .chain(sizes.train_extra.iter().map(|a| a.to_string()))
+        .collect::<Vec<String>>(),
+    )?;
+    Ok(())
+}
+
+/// Stage 5, evaluate: every model on the unseen tracking run.
+fn evaluate(
+    r: &mut Runner,
+    dirs: &Dirs,
+    preset: &str,
+    joint: &str,
+    files: &JointFiles,
+) -> anyhow::Result<()> {
+    r.frictl(
+        &format!("eval {preset}"),
+        &[
+            "eval".into(),
+            "--dataset".into(),
+            s(&files.test_ds),
+            "--cv".into(),
+            s(&files.cv),
+            "--scv".into(),
+            s(&files.scv),
+            "--pinn".into(),
+            s(&files.fwt),
+            "--train-report".into(),
+            s(&files.train_report),
+            "--out".into(),
+            s(&dirs.eval.join(joint)),
+            "--json".into(),
+            s(&files.eval_json),
+        ],
+    )?;
+    Ok(())
+}
+
+/// Stage 6, export: the PINN to ONNX.
+fn export(r: &mut Runner, preset: &str, files: &JointFiles) -> anyhow::Result<()> {
+    r.frictl(
+        &format!("export {preset} → ONNX"),
+        &[
+            "export".into(),
+            "onnx".into(),
+            s(&files.fwt),
+            "-o".into(),
+            s(&files.fwt.with_extension("onnx")),
+        ],
+    )?;
+    Ok(())
+}
+
+/// The markdown table of one joint's evaluation.
+fn eval_table(joint: &str, ev: &EvalReport) -> String {
     let mut md = format!(
-        "# frictionless demo\n\nSettings: {} (protocol starts {}, PINN hidden {}, H {}, {} epochs; label {}), seed {seed}. Total {:.0} s.\n",
-        report["settings"].as_str().unwrap_or(""),
+        "\n**{joint}: friction RMSE on the unseen tracking run [Nm]** (label; truth in parentheses)\n\n| model | all | sliding | stick |\n|---|---|---|---|\n"
+    );
+    for (key, label) in EVAL_MODELS {
+        let m = ev.models.get(key);
+        let cell = |f: fn(&Metrics) -> (Option<f64>, Option<f64>)| match m.map(f) {
+            Some((Some(x), Some(t))) => format!("{x:.3} ({t:.3})"),
+            Some((Some(x), None)) => format!("{x:.3}"),
+            _ => "–".into(),
+        };
+        md += &format!(
+            "| {label} | {} | {} | {} |\n",
+            cell(|m| (m.rmse_all, m.rmse_true_all)),
+            cell(|m| (m.rmse_sliding, m.rmse_true_sliding)),
+            cell(|m| (m.rmse_stick, m.rmse_true_stick))
+        );
+    }
+    md
+}
+
+/// One joint's `report.json` entry before the experiments: every model's evaluation (`null` where
+/// there is none) and the files.
+fn joint_entry(ev: Option<&EvalReport>, files: &JointFiles) -> JointEntry {
+    let models = EVAL_MODELS
+        .iter()
+        .map(|(key, label)| {
+            let metrics = ev.and_then(|e| e.models.get(*key)).copied();
+            (
+                (*label).to_owned(),
+                ModelEntry {
+                    eval: Some(metrics),
+                    closed_loop: None,
+                },
+            )
+        })
+        .collect();
+    JointEntry {
+        models,
+        files: JointFilesEntry {
+            cv: s(&files.cv),
+            scv: s(&files.scv),
+            pinn: s(&files.fwt),
+            eval: s(&files.eval_json),
+        },
+    }
+}
+
+/// Stage 7, closed loop: `frictl experiment all` for both joints and every model (plants at their
+/// training temperature, frictiond with the PINN's trained Δθ offset); adds the results to
+/// `per_joint`. Returns the experiment's tables and the plant temperatures.
+fn experiments(
+    r: &mut Runner,
+    sizes: &Sizes,
+    seed: u64,
+    dirs: &Dirs,
+    per_joint: &mut BTreeMap<String, JointEntry>,
+) -> anyhow::Result<(String, Vec<String>)> {
+    let models = &dirs.models;
+    let f = |suffix: &str| {
+        format!(
+            "knee={},ankle_roll={}",
+            s(&models.join(format!("l_knee{suffix}"))),
+            s(&models.join(format!("l_ankle_roll{suffix}")))
+        )
+    };
+    let exp_dir = &dirs.experiments;
+    let exp_json = exp_dir.join("report.json");
+    // frictiond keeps the Δθ offset the PINN was trained with (not re-latched at enable).
+    let mut offsets = vec![];
+    for (key, joint) in JOINTS {
+        let v = pinn_offset_arg(&models.join(format!("{joint}_train.json")))?;
+        offsets.push(format!("{key}={v}"));
+    }
+    // Each joint's plant starts at the winding temperature of its training recording: the models
+    // are compared in the conditions they were identified in (none of them reads temperature; a
+    // plant several °C hotter than its training data has less sliding friction than any model
+    // learnt, which matters as kfc approaches 1).
+    let mut plant_t0 = vec![];
+    let mut exp_temps = vec![];
+    for (key, joint) in JOINTS {
+        // The acquisition sidecar (written by `frictl acquire`; its struct borrows, so read one key).
+        let sidecar = dirs.data.join(format!("{joint}_train.json"));
+        let t0 = read_json(&sidecar)?
+            .get("initial_temperature_c")
+            .and_then(|v| v.as_f64())
+            .with_context(|| format!("{}: no initial_temperature_c", sidecar.display()))?;
+        exp_temps.push(format!("{key} {t0:.1} °C"));
+        for bound in ["t0_min_c", "t0_max_c"] {
+            plant_t0.push(format!("--set={key}:plant.{bound}={t0}"));
+        }
+    }
+    r.frictl(
+        "experiment all (both joints; none, CV, SCV, PINN, oracle)",
+        &[
+            "experiment".into(),
+            "all".into(),
+            "--joint".into(),
+            "both".into(),
+            "--model".into(),
+            "none,cv,scv,pinn,oracle".into(),
+            "--cv".into(),
+            f("_cv.json"),
+            "--scv".into(),
+            f("_scv.json"),
+            "--pinn".into(),
+            f(".fwt"),
+            "--pinn-delta-theta-offset".into(),
+            offsets.join(","),
+            "--seed".into(),
+            seed.to_string(),
+            "--iterations".into(),
+            sizes.iterations.to_string(),
+            "--periods".into(),
+            sizes.periods.to_string(),
+            "--out".into(),
+            s(exp_dir),
+        ]
+        .into_iter()
+        .chain(plant_t0)
+        .collect::<Vec<String>>(),
+    )?;
+    let exp_md = std::fs::read_to_string(exp_dir.join("tables.md")).unwrap_or_default();
+    let ex: SuiteReport = read_typed(&exp_json)?;
+    for (joint, entry) in per_joint.iter_mut() {
+        let Some(cells) = ex.joints.get(joint) else {
+            continue;
+        };
+        for label in ["none", "CV", "SCV", "PINN", ORACLE_LABEL] {
+            let Some(c) = cells.get(label) else { continue };
+            entry.models.entry(label.into()).or_default().closed_loop = Some(c.into());
+        }
+    }
+    Ok((exp_md, exp_temps))
+}
+
+/// Stage 8, report: `report.md` (`report.json` is written by [`run`]).
+fn report_md(
+    args: &Args,
+    sizes: &Sizes,
+    report: &DemoReport,
+    eval_md: &str,
+    exp_md: &str,
+    exp_temps: &[String],
+) -> String {
+    let mut md = format!(
+        "# frictionless demo\n\nSettings: {} (protocol starts {}, PINN hidden {}, H {}, {} epochs; label {}), seed {}. Total {:.0} s.\n",
+        report.settings,
         sizes.n_starts,
         sizes.hidden,
         sizes.history,
@@ -640,10 +852,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         } else {
             "r·k_t·i − τ_ID − J_eq·φ̈ (reflected rotor inertia subtracted)"
         },
-        total
+        report.seed,
+        report.total_seconds
     );
     md += "\n## Friction estimation (held-out closed-loop tracking run)\n";
-    md += &eval_md;
+    md += eval_md;
     if !exp_md.is_empty() {
         md += "\n## Closed-loop experiments\n\n";
         md += "The column `oracle (true friction)` is a diagnostic bound, not a model: frictiond runs no \
@@ -657,18 +870,124 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "Each joint's plant starts at the winding temperature of its training recording ({}).\n\n",
             exp_temps.join(", ")
         );
-        md += &exp_md;
+        md += exp_md;
         md += "\nPlots: `experiments/plots/*.png`; traces: `experiments/traces/*.csv`.\n";
     }
     md += "\n## Stages\n\n| stage | seconds |\n|---|---|\n";
-    for st in &r.stages {
+    for st in report.stages {
         md += &format!("| {} | {:.1} |\n", st.name, st.seconds);
     }
-    std::fs::write(out.join("report.md"), &md)?;
-    println!("{md}");
-    eprintln!(
-        "frictl demo: done in {total:.0} s → {}/report.md",
-        out.display()
-    );
-    Ok(())
+    md
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn key_set(v: &serde_json::Value) -> Vec<String> {
+        v.as_object().unwrap().keys().cloned().collect()
+    }
+
+    /// The `report.json` keys of a joint entry: eval per model (`null` when missing), the closed-loop
+    /// keys read from an experiment report as `frictl experiment` writes it (NaN metrics as `null`),
+    /// the oracle without `eval`.
+    #[test]
+    fn joint_entry_keys_and_values() {
+        let files = JointFiles::new(
+            &Dirs {
+                data: "d".into(),
+                models: "m".into(),
+                eval: "e".into(),
+                experiments: "x".into(),
+            },
+            "l_knee",
+        );
+        let metrics = Metrics {
+            rmse_all: Some(1.5),
+            n_samples: 10,
+            ..Metrics::default()
+        };
+        let ev = EvalReport {
+            format: "frictionless-eval-v1".into(),
+            producer: "t".into(),
+            v_sliding_rad_s: 0.01,
+            test_only: false,
+            warmup: frictionless::features::WarmupPolicy::HoldZero,
+            datasets: vec![],
+            models: [("none".to_owned(), metrics), ("cv".to_owned(), metrics)].into(),
+            order: vec![],
+        };
+        let mut per_joint = BTreeMap::from([("l_knee".to_owned(), joint_entry(Some(&ev), &files))]);
+        let track = r#"{"rmse_rad": 0.03, "max_abs_err_rad": 0.1, "tau_des_rms_nm": 2.0,
+            "friction_est_rmse_nm": null, "residual_friction_rms_nm": 1.0, "friction_true_rms_nm": 1.0,
+            "n": 100}"#;
+        let dist = r#"{"rmse_after_release_rad": 0.02, "max_deflection_rad": 0.1, "final_offset_rad": 0.0}"#;
+        let cell = format!(
+            r#"{{"min_kp": {{"outcome": "found", "kp": 61.5, "fail_kp": 40.0}}, "search": [{{"kp_per_s2": 1.0, "rmse_rad": null, "passed": false}}],
+            "track_at_min_kp": {track}, "track": null, "track_at_low_kp": [146.0, {track}],
+            "disturbance_own_kp": [61.5, {dist}], "disturbance_low_kp": [146.0, {dist}]}}"#
+        );
+        let suite = format!(
+            r#"{{"mode": "lockstep", "seed": 1, "criterion": null, "kd_per_s": 10.0, "references": {{}},
+            "configuration": {{}}, "pulses": {{}}, "low_kp_source": {{}}, "wall_s": 1.0, "trials": 3,
+            "joints": {{"l_knee": {{"none": {cell}, "{ORACLE_LABEL}": {cell}}}}}}}"#
+        );
+        let ex: SuiteReport = serde_json::from_str(&suite).unwrap();
+        let cells = &ex.joints["l_knee"];
+        assert!(
+            cells["none"]
+                .track_at_min_kp
+                .unwrap()
+                .friction_est_rmse_nm
+                .is_nan()
+        );
+        for (label, c) in cells {
+            per_joint
+                .get_mut("l_knee")
+                .unwrap()
+                .models
+                .entry(label.clone())
+                .or_default()
+                .closed_loop = Some(c.into());
+        }
+        let v = serde_json::to_value(&per_joint).unwrap();
+        let entry = &v["l_knee"];
+        assert_eq!(key_set(entry), ["files", "models"]);
+        assert_eq!(key_set(&entry["files"]), ["cv", "eval", "pinn", "scv"]);
+        assert_eq!(entry["files"]["cv"], s(&files.cv));
+        let models = &entry["models"];
+        assert_eq!(key_set(models), ["CV", "PINN", "SCV", "none", ORACLE_LABEL]);
+        let closed = [
+            "disturbance_rmse_low_kp_rad",
+            "disturbance_rmse_own_kp_rad",
+            "low_kp",
+            "min_kp",
+            "tracking_rmse_at_low_kp_rad",
+            "tracking_rmse_at_min_kp_rad",
+        ];
+        let mut with_eval = closed.map(String::from).to_vec();
+        with_eval.insert(2, "eval".into());
+        assert_eq!(key_set(&models["none"]), with_eval);
+        assert_eq!(key_set(&models[ORACLE_LABEL]), closed);
+        assert_eq!(key_set(&models["CV"]), ["eval"]);
+        assert_eq!(
+            models["none"]["eval"],
+            serde_json::to_value(metrics).unwrap()
+        );
+        assert!(
+            models["PINN"]["eval"].is_null(),
+            "no pinn in the evaluation"
+        );
+        assert_eq!(models["none"]["low_kp"], 146.0);
+        assert_eq!(models["none"]["tracking_rmse_at_min_kp_rad"], 0.03);
+        assert_eq!(models["none"]["disturbance_rmse_own_kp_rad"], 0.02);
+        assert_eq!(
+            models["none"]["min_kp"],
+            serde_json::json!({"outcome": "found", "kp": 61.5, "fail_kp": 40.0})
+        );
+        // A failed evaluation: every model's `eval` is null.
+        let failed = serde_json::to_value(joint_entry(None, &files)).unwrap();
+        assert!(failed["models"]["SCV"]["eval"].is_null());
+        assert_eq!(key_set(&failed["models"]["SCV"]), ["eval"]);
+    }
 }

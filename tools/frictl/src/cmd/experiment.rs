@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use frictionless::friction::{CvParams, ScvParams, StaticFriction};
+use frictionless::friction::{CvParams, ScvParams};
 use frictl::experiment::controller::PAPER_KD_PER_S;
 use frictl::experiment::metrics::TrackCriterion;
 use frictl::experiment::report::{SuiteReport, slug, write_trace_csv};
@@ -14,6 +14,7 @@ use frictl::experiment::session::{
     Binaries, FrictionModel, LawSettings, Lpf, Mode, install_signal_flag,
 };
 use frictl::experiment::suite::{self, SuiteConfig, Task};
+use frictionless_dataset::fit_file::FittedModel;
 
 /// Which experiment.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -278,43 +279,27 @@ fn per_joint_f64(what: &str, spec: &str, joints: &[usize]) -> anyhow::Result<[Op
     Ok(out)
 }
 
-/// Parameters of a `frictl fit --json` file (`params` object; `null` = ∞, how JSON stores `ka = inf`).
-fn fit_params(path: &Path, names: &[&str]) -> anyhow::Result<Vec<f64>> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read fit file {}", path.display()))?;
-    let v: serde_json::Value =
-        serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))?;
-    let p = v
-        .get("params")
-        .and_then(|p| p.as_object())
-        .with_context(|| {
-            format!(
-                "{}: no `params` object (from `frictl fit --json`?)",
-                path.display()
-            )
-        })?;
-    names
-        .iter()
-        .map(|n| match p.get(*n) {
-            Some(serde_json::Value::Null) => Ok(f64::INFINITY),
-            Some(x) => x
-                .as_f64()
-                .with_context(|| format!("{}: params.{n} = {x} is not a number", path.display())),
-            None => bail!("{}: params.{n} missing", path.display()),
-        })
-        .collect()
-}
-
 /// Loads the CV parameters written by `frictl fit cv --json`.
 pub fn load_cv(path: &Path) -> anyhow::Result<CvParams> {
-    let p = fit_params(path, CvParams::PARAM_NAMES)?;
-    CvParams::from_params(&p).with_context(|| format!("{}", path.display()))
+    match FittedModel::read(path)? {
+        FittedModel::Cv { params } => Ok(params),
+        other => bail!(
+            "{}: a fit of model {:?}, --cv needs a CV fit (`frictl fit cv`)",
+            path.display(),
+            other.tag()
+        ),
+    }
 }
 
-/// Loads the SCV parameters written by `frictl fit scv --json`.
+/// Loads the SCV parameters written by `frictl fit scv --json` (or `scv-code`, in paper form).
 pub fn load_scv(path: &Path) -> anyhow::Result<ScvParams> {
-    let p = fit_params(path, ScvParams::PARAM_NAMES)?;
-    ScvParams::from_params(&p).with_context(|| format!("{}", path.display()))
+    match FittedModel::read(path)? {
+        FittedModel::Cv { .. } => bail!(
+            "{}: a fit of model \"Cv\", --scv needs an SCV fit (`frictl fit scv`)",
+            path.display()
+        ),
+        scv => Ok(scv.to_scv()),
+    }
 }
 
 /// Runs `frictl experiment`.
@@ -335,21 +320,92 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.criterion_frac > 0.0 && args.periods > args.skip_periods && args.skip_periods >= 0.0,
         "need --criterion-frac > 0 and --periods > --skip-periods ≥ 0"
     );
-    // models per joint
+    let models = load_models(&args, &joints)?;
+    let setups = JointSetup::both(&args.sets)?;
+    let names = [
+        setups[0].params.joint.clone(),
+        setups[1].params.joint.clone(),
+    ];
+    let cfg = suite_config(&args, &joints, mode, &names)?;
+    let kp_given = args
+        .kp
+        .as_deref()
+        .map(|s| per_joint_f64("kp", s, &joints))
+        .transpose()?;
+    let mut suite = Suite {
+        bins: Binaries::locate()?,
+        report: SuiteReport {
+            mode: if mode == Mode::Lockstep {
+                "lockstep"
+            } else {
+                "realtime"
+            }
+            .into(),
+            seed: args.seed,
+            kd_per_s: PAPER_KD_PER_S,
+            ..SuiteReport::default()
+        },
+        setups,
+        cfg,
+        models,
+        joints,
+        names,
+        traces: vec![],
+        trials: 0,
+    };
+    suite.describe_setup()?;
+    std::fs::create_dir_all(args.out.join("traces"))
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    match (args.kind, kp_given) {
+        (Kind::Track, kp) => {
+            let kp = kp.unwrap_or([None, None]);
+            let kp = [kp[0].unwrap_or(30.0), kp[1].unwrap_or(550.0)];
+            suite.track(&|j, _| kp[j], "track", false, "track")?;
+        }
+        (Kind::Disturbance, Some(kp)) => {
+            let kp = [kp[0].unwrap_or(30.0), kp[1].unwrap_or(550.0)];
+            for &j in &suite.joints {
+                let name = suite.names[j].clone();
+                suite.report.pulses.insert(name.clone(), suite.cfg.pulse[j]);
+                suite.report.low_kp_source.insert(name, "--kp".into());
+            }
+            suite.disturbance(&|j, _| kp[j], "disturbance", true, "disturbance")?;
+        }
+        (kind, _) => {
+            if !args.quiet {
+                eprintln!(
+                    "min-kp: criterion RMSE ≤ {} × amplitude",
+                    args.criterion_frac
+                );
+            }
+            let own = suite.min_kp()?;
+            if kind != Kind::MinKp {
+                suite.at_own_and_low_kp(&own, kind == Kind::All)?;
+            }
+        }
+    }
+    suite.report.trials = suite.trials;
+    suite.report.wall_s = started.elapsed().as_secs_f64();
+    write_outputs(&args, &suite.report, &suite.traces)
+}
+
+/// The friction model of every (joint, `--model`) pair, loaded from the `--cv` / `--scv` / `--pinn`
+/// files (default models: none plus every one a file was given for).
+fn load_models(args: &Args, joints: &[usize]) -> anyhow::Result<Vec<(usize, FrictionModel)>> {
     let cv = args
         .cv
         .as_deref()
-        .map(|s| per_joint("cv", s, &joints, false))
+        .map(|s| per_joint("cv", s, joints, false))
         .transpose()?;
     let scv = args
         .scv
         .as_deref()
-        .map(|s| per_joint("scv", s, &joints, false))
+        .map(|s| per_joint("scv", s, joints, false))
         .transpose()?;
     let pinn = args
         .pinn
         .as_deref()
-        .map(|s| per_joint("pinn", s, &joints, false))
+        .map(|s| per_joint("pinn", s, joints, false))
         .transpose()?;
     let wanted: Vec<ModelSel> = match &args.model {
         Some(m) => m.clone(),
@@ -373,7 +429,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
          answers); drop --realtime or the oracle"
     );
     let mut models: Vec<(usize, FrictionModel)> = vec![];
-    for &j in &joints {
+    for &j in joints {
         let name = JOINT_KEYS[j][0];
         for m in &wanted {
             let missing = |flag: &str| {
@@ -405,9 +461,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             models.push((j, fm));
         }
     }
+    Ok(models)
+}
+
+/// The suite's settings from the flags: K_p search ranges, disturbance pulses, criterion, kfc / LPF
+/// overrides, the PINN's Δθ offsets.
+fn suite_config(
+    args: &Args,
+    joints: &[usize],
+    mode: Mode,
+    names: &[String; 2],
+) -> anyhow::Result<SuiteConfig> {
     let mut kp_range = [(3.0, 3000.0), (30.0, 100000.0)];
     if let Some(s) = &args.kp_range {
-        let r = per_joint("kp-range", s, &joints, true)?;
+        let r = per_joint("kp-range", s, joints, true)?;
         for j in 0..2 {
             if let Some(v) = &r[j] {
                 let (a, b) = v
@@ -422,7 +489,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let mut pulse_nm = [15.0, 5.0];
     if let Some(s) = &args.pulse_nm {
-        let p = per_joint_f64("pulse-nm", s, &joints)?;
+        let p = per_joint_f64("pulse-nm", s, joints)?;
         for j in 0..2 {
             if let Some(v) = p[j] {
                 pulse_nm[j] = v;
@@ -434,16 +501,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         duration_s: args.pulse_s,
         torque_nm: pulse_nm[j],
     };
-    let setups = JointSetup::both(&args.sets)?;
-    let names = [
-        setups[0].params.joint.clone(),
-        setups[1].params.joint.clone(),
-    ];
     let lpf = match &args.lpf {
-        Some(s) => lpf_overrides(s, &names)?,
+        Some(s) => lpf_overrides(s, names)?,
         None => [None; 2],
     };
-    let cfg = SuiteConfig {
+    Ok(SuiteConfig {
         mode,
         seed: args.seed,
         sets: args.sets.clone(),
@@ -464,53 +526,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
         lpf,
         rotor_inertia_in_m: args.controller_inertia == ControllerInertia::LinkRotor,
-    };
-    let kp_given = args
-        .kp
-        .as_deref()
-        .map(|s| per_joint_f64("kp", s, &joints))
-        .transpose()?;
+    })
+}
 
-    let bins = Binaries::locate()?;
-    let mut report = SuiteReport {
-        mode: if mode == Mode::Lockstep {
-            "lockstep"
-        } else {
-            "realtime"
-        }
-        .into(),
-        seed: args.seed,
-        kd_per_s: PAPER_KD_PER_S,
-        ..SuiteReport::default()
-    };
-    for &j in &joints {
-        let desc = match suite::sine(j) {
-            frictl::experiment::controller::Reference::Sine {
-                centre_rad,
-                amplitude_rad,
-                freq_hz,
-            } => format!("s_d = {centre_rad} − {amplitude_rad}·cos(2π·{freq_hz}·t) rad"),
-            r => format!("{r:?}"),
-        };
-        report.references.insert(names[j].clone(), desc);
-        let law = LawSettings::shipped(&names[j], cfg.kfc[j], cfg.lpf[j])?;
-        let m = if cfg.rotor_inertia_in_m {
-            format!(
-                "; controller M = I_L + r²J_m ({:.4} kg·m² added)",
-                setups[j].params.j_eq_kgm2()
-            )
-        } else {
-            String::new()
-        };
-        report
-            .configuration
-            .insert(names[j].clone(), format!("{}{m}", law.describe()));
-    }
-    std::fs::create_dir_all(args.out.join("traces"))
-        .with_context(|| format!("cannot create {}", args.out.display()))?;
-    let mut traces: Vec<(String, JointTrace)> = vec![];
-    let tasks_at = |kp: &dyn Fn(usize, &str) -> f64| -> Vec<Task> {
-        models
+/// One `frictl experiment` run: what its trial batches share and what they accumulate.
+struct Suite {
+    bins: Binaries,
+    setups: [JointSetup; 2],
+    cfg: SuiteConfig,
+    /// (joint index, model) of every task.
+    models: Vec<(usize, FrictionModel)>,
+    joints: Vec<usize>,
+    /// Joint names by index.
+    names: [String; 2],
+    report: SuiteReport,
+    /// (name, trace) of every trial kept for the CSVs and plots.
+    traces: Vec<(String, JointTrace)>,
+    trials: usize,
+}
+
+impl Suite {
+    /// Every task at the gain `kp(joint, model label)`.
+    fn tasks_at(&self, kp: &dyn Fn(usize, &str) -> f64) -> Vec<Task> {
+        self.models
             .iter()
             .map(|(j, m)| Task {
                 index: *j,
@@ -518,159 +556,197 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 kp_per_s2: kp(*j, m.label()),
             })
             .collect()
-    };
-    let mut trials = 0usize;
-    match (args.kind, kp_given) {
-        (Kind::Track, kp) => {
-            let kp = kp.unwrap_or([None, None]);
-            let kp = [kp[0].unwrap_or(30.0), kp[1].unwrap_or(550.0)];
-            let tasks = tasks_at(&|j, _| kp[j]);
-            let rs = suite::track(&bins, &setups, &cfg, &tasks, "track")?;
-            trials += rs.len();
-            report.add_track(&names, &rs, false);
-            for r in rs {
-                traces.push((format!("track_{}_{}", names[r.index], r.model), r.trace));
-            }
+    }
+
+    /// The report's reference and frictiond-law description per joint.
+    fn describe_setup(&mut self) -> anyhow::Result<()> {
+        for &j in &self.joints {
+            let desc = match suite::sine(j) {
+                frictl::experiment::controller::Reference::Sine {
+                    centre_rad,
+                    amplitude_rad,
+                    freq_hz,
+                } => format!("s_d = {centre_rad} − {amplitude_rad}·cos(2π·{freq_hz}·t) rad"),
+                r => format!("{r:?}"),
+            };
+            self.report.references.insert(self.names[j].clone(), desc);
+            let law = LawSettings::shipped(&self.names[j], self.cfg.kfc[j], self.cfg.lpf[j])?;
+            let m = if self.cfg.rotor_inertia_in_m {
+                format!(
+                    "; controller M = I_L + r²J_m ({:.4} kg·m² added)",
+                    self.setups[j].params.j_eq_kgm2()
+                )
+            } else {
+                String::new()
+            };
+            self.report
+                .configuration
+                .insert(self.names[j].clone(), format!("{}{m}", law.describe()));
         }
-        (Kind::Disturbance, Some(kp)) => {
-            let kp = [kp[0].unwrap_or(30.0), kp[1].unwrap_or(550.0)];
-            let tasks = tasks_at(&|j, _| kp[j]);
-            let rs = suite::disturbance(&bins, &setups, &cfg, &tasks, "disturbance")?;
-            trials += rs.len();
-            for &j in &joints {
-                report.pulses.insert(names[j].clone(), cfg.pulse[j]);
-                report.low_kp_source.insert(names[j].clone(), "--kp".into());
-            }
-            report.add_disturbance(&names, &rs, true);
-            for r in rs {
-                traces.push((
-                    format!("disturbance_{}_{}", names[r.index], r.model),
-                    r.trace,
+        Ok(())
+    }
+
+    /// Tracking trials of every task at `kp`; traces named `{prefix}_{joint}_{model}`.
+    fn track(
+        &mut self,
+        kp: &dyn Fn(usize, &str) -> f64,
+        label: &str,
+        at_low_kp: bool,
+        prefix: &str,
+    ) -> anyhow::Result<()> {
+        let rs = suite::track(
+            &self.bins,
+            &self.setups,
+            &self.cfg,
+            &self.tasks_at(kp),
+            label,
+        )?;
+        self.trials += rs.len();
+        self.report.add_track(&self.names, &rs, at_low_kp);
+        for r in rs {
+            self.traces.push((
+                format!("{prefix}_{}_{}", self.names[r.index], r.model),
+                r.trace,
+            ));
+        }
+        Ok(())
+    }
+
+    /// Disturbance trials of every task at `kp`; traces named `{prefix}_{joint}_{model}`.
+    fn disturbance(
+        &mut self,
+        kp: &dyn Fn(usize, &str) -> f64,
+        label: &str,
+        at_low_kp: bool,
+        prefix: &str,
+    ) -> anyhow::Result<()> {
+        let rs = suite::disturbance(
+            &self.bins,
+            &self.setups,
+            &self.cfg,
+            &self.tasks_at(kp),
+            label,
+        )?;
+        self.trials += rs.len();
+        self.report.add_disturbance(&self.names, &rs, at_low_kp);
+        for r in rs {
+            self.traces.push((
+                format!("{prefix}_{}_{}", self.names[r.index], r.model),
+                r.trace,
+            ));
+        }
+        Ok(())
+    }
+
+    /// The minimum-K_p search of every task; returns (joint, model label, K_p to run at).
+    fn min_kp(&mut self) -> anyhow::Result<Vec<(usize, String, f64)>> {
+        self.report.criterion = Some(self.cfg.criterion);
+        let rs = suite::min_kp(
+            &self.bins,
+            &self.setups,
+            &self.cfg,
+            &self.tasks_at(&|_, _| 0.0),
+        )?;
+        self.trials += rs.iter().map(|r| r.steps.len()).sum::<usize>();
+        self.report.add_min_kp(&self.names, &rs);
+        for r in &rs {
+            if let Some(t) = &r.at_min {
+                self.traces.push((
+                    format!("track_min_kp_{}_{}", self.names[r.index], r.model),
+                    t.trace.clone(),
                 ));
             }
         }
-        (kind, _) => {
-            if !args.quiet {
-                eprintln!(
-                    "min-kp: criterion RMSE ≤ {} × amplitude",
-                    args.criterion_frac
-                );
-            }
-            report.criterion = Some(cfg.criterion);
-            let rs = suite::min_kp(&bins, &setups, &cfg, &tasks_at(&|_, _| 0.0))?;
-            trials += rs.iter().map(|r| r.steps.len()).sum::<usize>();
-            report.add_min_kp(&names, &rs);
-            let own: Vec<(usize, String, f64)> = rs
-                .iter()
-                .map(|r| (r.index, r.model.clone(), r.min_kp.kp_for_runs()))
-                .collect();
-            for r in &rs {
-                if let Some(t) = &r.at_min {
-                    traces.push((
-                        format!("track_min_kp_{}_{}", names[r.index], r.model),
-                        t.trace.clone(),
-                    ));
-                }
-            }
-            if kind != Kind::MinKp {
-                for &j in &joints {
-                    report.pulses.insert(names[j].clone(), cfg.pulse[j]);
-                }
-                let own_kp = |j: usize, m: &str| {
-                    own.iter()
-                        .find(|(i, l, _)| *i == j && l == m)
-                        .map_or(f64::NAN, |x| x.2)
-                };
-                let rs = suite::disturbance(
-                    &bins,
-                    &setups,
-                    &cfg,
-                    &tasks_at(&|j, m| own_kp(j, m)),
-                    "disturbance @ own K_p",
-                )?;
-                trials += rs.len();
-                report.add_disturbance(&names, &rs, false);
-                for r in rs {
-                    traces.push((
-                        format!("disturbance_own_{}_{}", names[r.index], r.model),
-                        r.trace,
-                    ));
-                }
-                // the common low gain: the PINN's min K_p, else the lowest of the models run
-                let mut low = [f64::NAN; 2];
-                for &j in &joints {
-                    let pinn = own.iter().find(|(i, l, _)| *i == j && l == "PINN");
-                    let (src, kp) = match pinn {
-                        Some(p) => ("PINN".to_owned(), p.2),
-                        None => {
-                            let m = own
-                                .iter()
-                                .filter(|(i, _, _)| *i == j)
-                                .min_by(|a, b| a.2.total_cmp(&b.2))
-                                .context("no model ran")?;
-                            (format!("{} (no PINN run)", m.1), m.2)
-                        }
-                    };
-                    low[j] = kp;
-                    report.low_kp_source.insert(
-                        names[j].clone(),
-                        format!("{src}, K_p {}", frictl::experiment::search::sig3(kp)),
-                    );
-                }
-                let rs = suite::disturbance(
-                    &bins,
-                    &setups,
-                    &cfg,
-                    &tasks_at(&|j, _| low[j]),
-                    "disturbance @ low K_p",
-                )?;
-                trials += rs.len();
-                report.add_disturbance(&names, &rs, true);
-                for r in rs {
-                    traces.push((
-                        format!("disturbance_low_{}_{}", names[r.index], r.model),
-                        r.trace,
-                    ));
-                }
-                if kind == Kind::All {
-                    let rs = suite::track(
-                        &bins,
-                        &setups,
-                        &cfg,
-                        &tasks_at(&|j, _| low[j]),
-                        "track @ low K_p",
-                    )?;
-                    trials += rs.len();
-                    report.add_track(&names, &rs, true);
-                    for r in rs {
-                        traces.push((format!("track_low_{}_{}", names[r.index], r.model), r.trace));
-                    }
-                }
-            }
-        }
+        Ok(rs
+            .iter()
+            .map(|r| (r.index, r.model.clone(), r.min_kp.kp_for_runs()))
+            .collect())
     }
-    report.trials = trials;
-    report.wall_s = started.elapsed().as_secs_f64();
-    for (name, tr) in &traces {
+
+    /// After the search: disturbance at each model's own minimum K_p, then disturbance (and with
+    /// `track`, tracking) at the common low gain ([`Suite::low_kp`]).
+    fn at_own_and_low_kp(
+        &mut self,
+        own: &[(usize, String, f64)],
+        track: bool,
+    ) -> anyhow::Result<()> {
+        for &j in &self.joints {
+            self.report
+                .pulses
+                .insert(self.names[j].clone(), self.cfg.pulse[j]);
+        }
+        let own_kp = |j: usize, m: &str| {
+            own.iter()
+                .find(|(i, l, _)| *i == j && l == m)
+                .map_or(f64::NAN, |x| x.2)
+        };
+        self.disturbance(&own_kp, "disturbance @ own K_p", false, "disturbance_own")?;
+        let low = self.low_kp(own)?;
+        self.disturbance(
+            &|j, _| low[j],
+            "disturbance @ low K_p",
+            true,
+            "disturbance_low",
+        )?;
+        if track {
+            self.track(&|j, _| low[j], "track @ low K_p", true, "track_low")?;
+        }
+        Ok(())
+    }
+
+    /// The common low gain per joint: the PINN's minimum K_p, else the lowest of the models run
+    /// (recorded in the report's `low_kp_source`).
+    fn low_kp(&mut self, own: &[(usize, String, f64)]) -> anyhow::Result<[f64; 2]> {
+        let mut low = [f64::NAN; 2];
+        for &j in &self.joints {
+            let pinn = own.iter().find(|(i, l, _)| *i == j && l == "PINN");
+            let (src, kp) = match pinn {
+                Some(p) => ("PINN".to_owned(), p.2),
+                None => {
+                    let m = own
+                        .iter()
+                        .filter(|(i, _, _)| *i == j)
+                        .min_by(|a, b| a.2.total_cmp(&b.2))
+                        .context("no model ran")?;
+                    (format!("{} (no PINN run)", m.1), m.2)
+                }
+            };
+            low[j] = kp;
+            self.report.low_kp_source.insert(
+                self.names[j].clone(),
+                format!("{src}, K_p {}", frictl::experiment::search::sig3(kp)),
+            );
+        }
+        Ok(low)
+    }
+}
+
+/// Traces (CSV), plots, `tables.md` and `report.json` (and `--json`).
+fn write_outputs(
+    args: &Args,
+    report: &SuiteReport,
+    traces: &[(String, JointTrace)],
+) -> anyhow::Result<()> {
+    for (name, tr) in traces {
         write_trace_csv(
             &args.out.join("traces").join(format!("{}.csv", slug(name))),
             tr,
         )?;
     }
     if !args.no_plots {
-        frictl::experiment::report::write_plots(&args.out, &traces)?;
+        frictl::experiment::report::write_plots(&args.out, traces)?;
     }
     let md = report.markdown();
     println!("{md}");
     std::fs::write(args.out.join("tables.md"), &md)?;
-    let json = serde_json::to_string_pretty(&report)?;
+    let json = serde_json::to_string_pretty(report)?;
     std::fs::write(args.out.join("report.json"), &json)?;
     if let Some(p) = &args.json {
         std::fs::write(p, &json).with_context(|| format!("cannot write {}", p.display()))?;
     }
     eprintln!(
         "frictl experiment: {} trials in {:.1} s; tables, report.json and traces in {}",
-        trials,
+        report.trials,
         report.wall_s,
         args.out.display()
     );

@@ -1,14 +1,18 @@
 //! `frictl fit cv|scv|scv-code DATASET.csv` — fit a static friction model to a preprocessed dataset and
-//! print/write it as a `[[joint]]` TOML snippet in the daemon's config format, and as JSON.
+//! print/write it as a `[[joint]]` TOML snippet in the daemon's config format, and as JSON
+//! ([`FitFile`]).
 
 use std::path::PathBuf;
 
 use anyhow::Context;
-use frictionless::friction::{CvParams, ScvCodeParams, ScvParams, StaticFriction};
+use frictionless::friction::{CvParams, ScvCodeParams, ScvParams};
 use frictionless_dataset::Dataset;
 use frictionless_ident::fit::{
     FitBounds, FitOptions, FitResult, Fittable, Loss, Method, fit, select, sliding_quadrant_mask,
 };
+use frictiond_config::FrictionModelName;
+use frictionless_dataset::fit_file::FittedModel;
+use serde::{Deserialize, Serialize};
 
 /// Static model to fit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -120,9 +124,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let started = std::time::Instant::now();
     let (toml, json) = match args.model {
-        ModelKind::Cv => report(fit::<CvParams>(&v, &t, &opts)?, &ds, &target, &args),
-        ModelKind::Scv => report(fit::<ScvParams>(&v, &t, &opts)?, &ds, &target, &args),
-        ModelKind::ScvCode => report(fit::<ScvCodeParams>(&v, &t, &opts)?, &ds, &target, &args),
+        ModelKind::Cv => report(
+            fit::<CvParams>(&v, &t, &opts)?,
+            |params| FittedModel::Cv { params },
+            &ds,
+            &target,
+            &args,
+        ),
+        ModelKind::Scv => report(
+            fit::<ScvParams>(&v, &t, &opts)?,
+            |params| FittedModel::Scv { params },
+            &ds,
+            &target,
+            &args,
+        ),
+        ModelKind::ScvCode => report(
+            fit::<ScvCodeParams>(&v, &t, &opts)?,
+            |params| FittedModel::ScvCode { params },
+            &ds,
+            &target,
+            &args,
+        ),
     }?;
     eprintln!(
         "frictl fit: {} of {} samples selected, fitted in {:.3} s",
@@ -142,18 +164,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 /// Daemon `[[joint]]` keys for a fitted model (SCV code form = SCV with ka = inf, alpha = 2).
-fn daemon_keys<M: StaticFriction + 'static>(m: &M) -> Vec<(&'static str, f64)> {
-    let any = m as &dyn std::any::Any;
-    if let Some(c) = any.downcast_ref::<CvParams>() {
+fn daemon_keys(m: &FittedModel) -> Vec<(&'static str, f64)> {
+    if let FittedModel::Cv { params: c } = m {
         vec![("kc", c.kc), ("kv", c.kv), ("ka", c.ka)]
     } else {
-        let s: ScvParams = if let Some(s) = any.downcast_ref::<ScvParams>() {
-            *s
-        } else if let Some(c) = any.downcast_ref::<ScvCodeParams>() {
-            ScvParams::from(*c)
-        } else {
-            return vec![];
-        };
+        let s = m.to_scv();
         vec![
             ("kc", s.kc),
             ("kv", s.kv),
@@ -173,12 +188,13 @@ fn toml_f64(v: f64) -> String {
     }
 }
 
-fn report<M: Fittable + 'static>(
+fn report<M: Fittable>(
     r: FitResult<M>,
+    tagged: fn(M) -> FittedModel,
     ds: &Dataset,
     target: &[f64],
     args: &Args,
-) -> anyhow::Result<(String, serde_json::Value)> {
+) -> anyhow::Result<(String, FitFile)> {
     if !r.at_bounds.is_empty() {
         eprintln!(
             "frictl fit: parameters on a bound: {} (the unbounded optimum lies outside; see --help for the bound flags)",
@@ -190,13 +206,11 @@ fn report<M: Fittable + 'static>(
         &select(&ds.sdot_rad_s, &ds.valid),
         &select(target, &ds.valid),
     );
-    let model_name = if M::N_PARAMS == 3 {
-        "coulomb_viscous"
-    } else {
-        "coulomb_viscous_stribeck"
-    };
+    let fitted = tagged(r.model);
+    // The serialised name is a quoted string, valid TOML.
+    let model_name = serde_json::to_value(daemon_friction_model(&fitted))?;
     let mut s = format!(
-        "# frictl fit {:?} ({:?}) on {}: {} samples, RMSE {:.4} Nm on the fitted samples, {:.4} Nm on all valid samples\n[[joint]]\nfriction_model = \"{model_name}\"\n",
+        "# frictl fit {:?} ({:?}) on {}: {} samples, RMSE {:.4} Nm on the fitted samples, {:.4} Nm on all valid samples\n[[joint]]\nfriction_model = {model_name}\n",
         args.model,
         args.method,
         args.dataset.display(),
@@ -204,33 +218,120 @@ fn report<M: Fittable + 'static>(
         r.rmse_nm,
         rmse_valid
     );
-    for (k, v) in daemon_keys(&r.model) {
+    for (k, v) in daemon_keys(&fitted) {
         s += &format!("{k} = {}\n", toml_f64(v));
     }
-    let json = serde_json::json!({
-        "model": format!("{:?}", args.model),
-        "method": args.method,
-        "params": r.model,
-        "param_names": M::PARAM_NAMES,
-        "daemon_friction_model": model_name,
-        "rmse_fitted_nm": r.rmse_nm,
-        "mae_fitted_nm": r.mae_nm,
-        "rmse_valid_nm": rmse_valid,
-        "n_samples": r.n_samples,
-        "iterations": r.iterations,
-        "bounds": {
-            "ka_min": args.ka_min,
-            "ka_max": args.ka_max,
-            "vs_min": args.vs_min,
-            "vs_max": args.vs_max,
-            "alpha_min": args.alpha_min,
-            "alpha_max": args.alpha_max,
-            "ks_max_ratio": args.ks_max_ratio,
+    let json = FitFile {
+        fitted,
+        method: args.method,
+        param_names: M::PARAM_NAMES.iter().map(|n| (*n).to_owned()).collect(),
+        daemon_friction_model: daemon_friction_model(&fitted),
+        rmse_fitted_nm: r.rmse_nm,
+        mae_fitted_nm: r.mae_nm,
+        rmse_valid_nm: rmse_valid,
+        n_samples: r.n_samples,
+        iterations: r.iterations,
+        bounds: FitBounds {
+            ka_min: args.ka_min,
+            ka_max: args.ka_max,
+            vs_min: args.vs_min,
+            vs_max: args.vs_max,
+            alpha_min: args.alpha_min,
+            alpha_max: args.alpha_max,
+            ks_max_ratio: args.ks_max_ratio,
         },
-        "at_bounds": r.at_bounds,
-        "sliding_quadrants": args.sliding_quadrants,
-        "v_min_rad_s": args.v_min,
-        "dataset": args.dataset.display().to_string(),
-    });
+        at_bounds: r.at_bounds.clone(),
+        sliding_quadrants: args.sliding_quadrants,
+        v_min_rad_s: args.v_min,
+        dataset: args.dataset.display().to_string(),
+    };
     Ok((s, json))
+}
+
+/// The whole JSON `frictl fit --json` writes.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FitFile {
+    /// `model` and `params`.
+    #[serde(flatten)]
+    pub fitted: FittedModel,
+    /// Solver.
+    pub method: Method,
+    /// Parameter names in the fitter's order.
+    pub param_names: Vec<String>,
+    /// The daemon's `friction_model` for the snippet.
+    pub daemon_friction_model: FrictionModelName,
+    /// RMSE on the fitted (selected) samples [Nm].
+    pub rmse_fitted_nm: f64,
+    /// MAE on the fitted samples [Nm].
+    pub mae_fitted_nm: f64,
+    /// RMSE on all valid samples [Nm].
+    pub rmse_valid_nm: f64,
+    /// Fitted samples.
+    pub n_samples: usize,
+    /// Solver iterations.
+    pub iterations: usize,
+    /// Parameter bounds the solver enforced.
+    pub bounds: FitBounds,
+    /// Parameters that ended on a bound.
+    pub at_bounds: Vec<String>,
+    /// Whether only sliding 1st/3rd-quadrant samples were fitted.
+    pub sliding_quadrants: bool,
+    /// Velocity threshold of that selection [rad/s].
+    pub v_min_rad_s: f64,
+    /// The dataset CSV.
+    pub dataset: String,
+}
+
+    /// The daemon's `friction_model` for this model (the code form runs as SCV with ka = ∞, α = 2).
+fn daemon_friction_model(fitted: &FittedModel) -> FrictionModelName {
+        match fitted {
+            FittedModel::Cv { .. } => FrictionModelName::CoulombViscous,
+            FittedModel::Scv { .. } | FittedModel::ScvCode { .. } => FrictionModelName::CoulombViscousStribeck,
+        }
+    }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A file as `frictl fit scv --json` wrote it with `"model": format!("{:?}", ModelKind::Scv)`.
+    const WRITTEN_BEFORE: &str = r#"{
+  "model": "Scv",
+  "method": "lm",
+  "params": {"kc": 1.0005, "ka": 2.78, "kv": 0.29, "ks": 6.0, "vs": 0.13, "alpha": 0.6},
+  "param_names": ["kc", "ka", "kv", "ks", "vs", "alpha"],
+  "daemon_friction_model": "coulomb_viscous_stribeck",
+  "rmse_fitted_nm": 0.5, "mae_fitted_nm": 0.4, "rmse_valid_nm": 0.6,
+  "n_samples": 1000, "iterations": 12,
+  "bounds": {"ka_min": 0.1, "ka_max": 200.0, "vs_min": 0.001, "vs_max": 10.0, "alpha_min": 0.2,
+             "alpha_max": 5.0, "ks_max_ratio": 10.0},
+  "at_bounds": [],
+  "sliding_quadrants": true,
+  "v_min_rad_s": 0.03,
+  "dataset": "d.csv"
+}"#;
+
+    #[test]
+    fn files_written_before_read_and_round_trip() {
+        let f: FitFile = serde_json::from_str(WRITTEN_BEFORE).unwrap();
+        assert_eq!(f.fitted.tag(), "Scv");
+        assert_eq!(f.method, Method::Lm);
+        assert_eq!(
+            f.daemon_friction_model,
+            FrictionModelName::CoulombViscousStribeck
+        );
+        assert_eq!(f.fitted.to_scv().alpha, 0.6);
+        let again: FitFile = serde_json::from_str(&serde_json::to_string(&f).unwrap()).unwrap();
+        assert_eq!(again, f);
+        // The written JSON keeps the keys (and tag) it had.
+        let v: serde_json::Value = serde_json::to_value(&f).unwrap();
+        let old: serde_json::Value = serde_json::from_str(WRITTEN_BEFORE).unwrap();
+        let keys =
+            |v: &serde_json::Value| v.as_object().unwrap().keys().cloned().collect::<Vec<_>>();
+        let (mut a, mut b) = (keys(&v), keys(&old));
+        a.sort();
+        b.sort();
+        assert_eq!(a, b);
+        assert_eq!(v["model"], "Scv");
+    }
 }

@@ -47,7 +47,6 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use frictionless::features::WarmupPolicy;
-use frictionless::friction::{CvParams, ScvCodeParams, ScvParams};
 use frictionless::model::{FrictionModel, JointModel, PinnEstimator};
 use frictionless::weights::ModelFile;
 use rayon::prelude::*;
@@ -166,52 +165,23 @@ impl ModelSpec {
 }
 
 /// Reads a static model from the JSON of `frictl fit cv|scv|scv-code --json`
-/// (keys `model` = `Cv` | `Scv` | `ScvCode` and `params`).
+/// ([`frictionless_dataset::fit_file::FittedModel`]: `model` = `Cv` | `Scv` | `ScvCode` and `params`).
 pub fn load_static_model(path: &Path) -> Result<JointModel, EvalError> {
+    use frictionless_dataset::fit_file::{FitFileError, FittedModel};
     let p = path.display().to_string();
-    let err = |msg: String| EvalError::StaticModel {
-        path: p.clone(),
-        msg,
-    };
-    let text = std::fs::read_to_string(path).map_err(|e| EvalError::Io {
-        path: p.clone(),
-        msg: e.to_string(),
-    })?;
-    let v: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| err(format!("not JSON: {e}")))?;
-    let kind = v
-        .get("model")
-        .and_then(serde_json::Value::as_str)
-        .ok_or_else(|| err("key `model` missing or not a string".into()))?;
-    let params = v
-        .get("params")
-        .cloned()
-        .ok_or_else(|| err("key `params` missing".into()))?;
-    let bad = |e: serde_json::Error| err(format!("key `params` for model {kind:?}: {e}"));
-    use frictionless::friction::StaticFriction;
-    let m = match kind {
-        "Cv" => {
-            let m: CvParams = serde_json::from_value(params).map_err(bad)?;
-            m.validate().map_err(|e| err(e.to_string()))?;
-            JointModel::Cv(m)
-        }
-        "Scv" => {
-            let m: ScvParams = serde_json::from_value(params).map_err(bad)?;
-            m.validate().map_err(|e| err(e.to_string()))?;
-            JointModel::Scv(m)
-        }
-        "ScvCode" => {
-            let m: ScvCodeParams = serde_json::from_value(params).map_err(bad)?;
-            m.validate().map_err(|e| err(e.to_string()))?;
-            JointModel::ScvCode(m)
-        }
-        other => {
-            return Err(err(format!(
-                "key `model` = {other:?}: expected \"Cv\", \"Scv\" or \"ScvCode\""
-            )));
-        }
-    };
-    Ok(m)
+    match FittedModel::read(path) {
+        Ok(m) => Ok(m.joint_model()),
+        Err(FitFileError::Read { source, .. }) => Err(EvalError::Io {
+            path: p,
+            msg: source.to_string(),
+        }),
+        Err(FitFileError::Parse { message, .. }) => Err(EvalError::StaticModel {
+            path: p,
+            msg: format!(
+                "not a fit of `frictl fit --json` (keys `model` = \"Cv\" | \"Scv\" | \"ScvCode\" and `params`): {message}"
+            ),
+        }),
+    }
 }
 
 /// Checks that every column has `time_s`'s length.

@@ -24,20 +24,31 @@ fn rms_over(idx: impl Iterator<Item = usize>, f: impl Fn(usize) -> f64) -> f64 {
     }
 }
 
+/// Reads a metric written by serde_json, which stores NaN and ±∞ as `null`: `null` reads as NaN.
+pub(crate) fn null_as_nan<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(<Option<f64> as serde::Deserialize>::deserialize(d)?.unwrap_or(f64::NAN))
+}
+
 /// Tracking and friction-estimate metrics of one joint's trace.
-#[derive(Clone, Copy, Debug, serde::Serialize)]
+#[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize)]
 pub struct TrackMetrics {
     /// RMSE of s_d − s over the evaluation window [rad].
+    #[serde(deserialize_with = "null_as_nan")]
     pub rmse_rad: f64,
     /// Max |s_d − s| over the window [rad].
+    #[serde(deserialize_with = "null_as_nan")]
     pub max_abs_err_rad: f64,
     /// RMS of τ_des over the window [Nm].
+    #[serde(deserialize_with = "null_as_nan")]
     pub tau_des_rms_nm: f64,
     /// RMSE of the model's own estimate τ̂_F/kfc against the true friction [Nm] (NaN for `none`).
+    #[serde(deserialize_with = "null_as_nan")]
     pub friction_est_rmse_nm: f64,
     /// RMS of the friction left uncompensated, τ_F − τ̂_F [Nm] (for `none`: RMS of τ_F).
+    #[serde(deserialize_with = "null_as_nan")]
     pub residual_friction_rms_nm: f64,
     /// RMS of the true friction [Nm].
+    #[serde(deserialize_with = "null_as_nan")]
     pub friction_true_rms_nm: f64,
     /// Samples in the window.
     pub n: usize,
@@ -82,7 +93,7 @@ pub fn track(tr: &JointTrace, from_s: f64, to_s: f64) -> TrackMetrics {
 
 /// The pass criterion of the minimum-K_p search: tracking RMSE ≤ `frac_of_amplitude` × amplitude,
 /// evaluated after the first `skip_periods` periods.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TrackCriterion {
     /// Allowed RMSE as a fraction of the sine amplitude.
     pub frac_of_amplitude: f64,
@@ -98,13 +109,16 @@ impl TrackCriterion {
 }
 
 /// Disturbance-rejection metrics of one joint.
-#[derive(Clone, Copy, Debug, serde::Serialize)]
+#[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize)]
 pub struct DisturbanceMetrics {
     /// RMSE of s − s_hold from the release to the end of the trial [rad] (the paper's metric).
+    #[serde(deserialize_with = "null_as_nan")]
     pub rmse_after_release_rad: f64,
     /// Largest |s − s_hold| while the pulse acted or after [rad].
+    #[serde(deserialize_with = "null_as_nan")]
     pub max_deflection_rad: f64,
     /// |s − s_hold| at the end of the trial [rad].
+    #[serde(deserialize_with = "null_as_nan")]
     pub final_offset_rad: f64,
 }
 

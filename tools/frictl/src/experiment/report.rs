@@ -23,7 +23,7 @@ use super::suite::{DisturbanceResult, MinKpResult, SearchStep, TrackResult};
 pub const MODEL_ORDER: [&str; 5] = ["none", "CV", "SCV", "PINN", ORACLE_LABEL];
 
 /// Everything measured for one (joint, model).
-#[derive(Clone, Debug, Default, serde::Serialize)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
 pub struct Cell {
     /// Minimum K_p search result.
     pub min_kp: Option<MinKp>,
@@ -42,7 +42,7 @@ pub struct Cell {
 }
 
 /// Results of a suite, keyed by joint name then model label.
-#[derive(Clone, Debug, Default, serde::Serialize)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
 pub struct SuiteReport {
     /// `lockstep` or `realtime`.
     pub mode: String,

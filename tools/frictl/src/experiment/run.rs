@@ -15,7 +15,9 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use frictionless_shm_types::sim::{SimDisturbance, SimTruth};
-use frictionless_shm_types::{DaemonStatus, Inbox, Ipc, JointStates, TorqueRequest, monotonic_ns};
+use frictionless_shm_types::{
+    DaemonStatus, Inbox, Ipc, JointStates, Outbox, TorqueRequest, monotonic_ns,
+};
 
 use super::controller::{ComputedTorque, Reference};
 use super::oracle::OracleCompensation;
@@ -58,7 +60,7 @@ impl JointSetup {
 }
 
 /// An external torque pulse on the joint output (through `SimDisturbance`).
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Pulse {
     /// Start time [s] after the trial start.
     pub start_s: f64,
@@ -228,19 +230,7 @@ pub fn run_trial_with(
     opts: &TrialOptions,
 ) -> anyhow::Result<TrialTrace> {
     let started = Instant::now();
-    for p in &spec.joints {
-        anyhow::ensure!(
-            p.index < 2,
-            "joint index {} (0 = knee, 1 = ankle_roll)",
-            p.index
-        );
-        anyhow::ensure!(
-            !(p.model == FrictionModel::Oracle
-                && (spec.mode != Mode::Lockstep || spec.raw_friction)),
-            "the oracle runs in lockstep only, with the shipped law (it pairs each request with the \
-             SimTruth of the state it answers)"
-        );
-    }
+    check_spec(spec)?;
     let mut session = Session::new()?;
     if std::env::var_os("FRICTL_KEEP_RUN_DIR").is_some() {
         session.keep_dir(true);
@@ -257,22 +247,7 @@ pub fn run_trial_with(
     // also create the command service so the daemon and plant agree on it from the start
     let _cmd_ch = node.motor_current_command()?;
 
-    let mut daemon_joints = vec![];
-    let mut initial = [0.0; 2];
-    for (i, s) in setups.iter().enumerate() {
-        let plan = spec.joints.iter().find(|p| p.index == i);
-        initial[i] = plan.map_or(s.params.initial_s_rad, |p| p.reference.start_rad());
-        daemon_joints.push(DaemonJoint {
-            name: s.params.joint.clone(),
-            index: i,
-            gear_ratio: s.params.gear_ratio_signed,
-            kt_nm_per_a: s.params.kt_nm_per_a,
-            model: plan.map_or(FrictionModel::None, |p| p.model.clone()),
-            delta_theta_offset_motor_rad: spec.pinn_delta_theta_offset_motor_rad[i],
-            kfc: spec.kfc[i],
-            lpf: opts.lpf[i],
-        });
-    }
+    let (daemon_joints, initial) = daemon_joints(setups, spec, opts);
     session.start_daemon(bins, spec.mode, &daemon_joints, spec.raw_friction, || {
         req_ch.subscriber_count()
     })?;
@@ -286,18 +261,7 @@ pub fn run_trial_with(
         },
     )?;
 
-    let ctrls: Vec<ComputedTorque<&dyn LinkDynamics>> = spec
-        .joints
-        .iter()
-        .map(|p| ComputedTorque {
-            extra_inertia_kgm2: if opts.rotor_inertia_in_m {
-                setups[p.index].params.j_eq_kgm2()
-            } else {
-                0.0
-            },
-            ..ComputedTorque::paper(setups[p.index].link.as_ref(), p.kp_per_s2)
-        })
-        .collect();
+    let ctrls = controllers(setups, spec, opts);
     let laws: Vec<LawSettings> = spec
         .joints
         .iter()
@@ -309,25 +273,7 @@ pub fn run_trial_with(
             )
         })
         .collect::<anyhow::Result<_>>()?;
-    let mut traces: Vec<JointTrace> = spec
-        .joints
-        .iter()
-        .enumerate()
-        .map(|(k, p)| JointTrace {
-            index: p.index,
-            name: setups[p.index].params.joint.clone(),
-            kp_per_s2: p.kp_per_s2,
-            model: p.model.label().to_owned(),
-            kfc: if p.model == FrictionModel::None {
-                0.0
-            } else if spec.raw_friction {
-                1.0
-            } else {
-                laws[k].kfc
-            },
-            ..JointTrace::default()
-        })
-        .collect();
+    let mut traces = empty_traces(setups, spec, &laws);
     let mut oracles: Vec<Option<OracleCompensation>> = spec
         .joints
         .iter()
@@ -354,22 +300,7 @@ pub fn run_trial_with(
         if interrupted() {
             bail!("interrupted");
         }
-        let js: JointStates = match wait_for(&js_in, Duration::from_secs(10), |s| {
-            s.seq > last_seq || seq0.is_none()
-        })? {
-            Some(js) => js,
-            None => {
-                if interrupted() {
-                    bail!("interrupted");
-                }
-                session.check_alive()?;
-                bail!(
-                    "no new JointStates for 10 s after seq {last_seq}; plant log:\n{}\nfrictiond log:\n{}",
-                    session.log_tail("plant"),
-                    session.log_tail("frictiond")
-                );
-            }
-        };
+        let js = next_state(&js_in, &mut session, last_seq, seq0.is_none())?;
         let s0 = *seq0.get_or_insert(js.seq);
         last_seq = js.seq;
         let t = (js.seq - s0) as f64 * 1e-3;
@@ -428,36 +359,20 @@ pub fn run_trial_with(
             }
             req.tau_des_nm[j] = tau;
             ext[j] = p.pulse.map_or(0.0, |pl| pl.at(t));
-            let tr = &mut traces[k];
-            tr.t_s.push(t);
-            tr.s_des_rad.push(sp.s_rad);
-            tr.s_rad.push(js.s_rad[j]);
-            tr.sdot_rad_s.push(js.sdot_rad_s[j]);
-            tr.theta_motor_rad.push(js.theta_motor_rad[j]);
-            tr.omega_motor_rad_s.push(js.omega_motor_rad_s[j]);
-            tr.sdot_true_rad_s
-                .push(truth.map_or(f64::NAN, |x| x.sdot_true_rad_s[j]));
-            tr.tau_des_nm.push(tau);
-            tr.tau_ext_nm.push(ext[j]);
-            tr.s_true_rad
-                .push(truth.map_or(f64::NAN, |x| x.s_true_rad[j]));
-            tr.tau_f_true_nm
-                .push(truth.map_or(f64::NAN, |x| x.tau_f_true_nm[j]));
-            tr.i_applied_a
-                .push(truth.map_or(f64::NAN, |x| x.i_applied_a[j]));
-            tr.tau_f_hat_nm.push(f_hat);
-            tr.flags.push(status.map_or(0, |x| x.joint_flags[j]));
+            traces[k].push_row(&Row {
+                t_s: t,
+                s_des_rad: sp.s_rad,
+                state: &js,
+                truth: truth.as_ref(),
+                status: status.as_ref(),
+                tau_des_nm: tau,
+                tau_f_hat_nm: f_hat,
+                tau_ext_nm: ext[j],
+            });
         }
         if ext != last_ext {
             dist_seq += 1;
-            let mut d = SimDisturbance::zeroed();
-            d.seq = dist_seq;
-            d.stamp_ns = monotonic_ns();
-            d.n_joints = 2;
-            d.tau_ext_nm[..2].copy_from_slice(&ext);
-            dist_out
-                .publish(&d)
-                .map_err(|e| anyhow::anyhow!("publish SimDisturbance: {e}"))?;
+            publish_disturbance(&dist_out, dist_seq, ext)?;
             last_ext = ext;
         }
         req_seq += 1;
@@ -480,4 +395,172 @@ pub fn run_trial_with(
         loop_wall_s,
         total_wall_s: started.elapsed().as_secs_f64(),
     })
+}
+
+/// Joint indices are 0 or 1; the oracle only in lockstep with the shipped law.
+fn check_spec(spec: &TrialSpec) -> anyhow::Result<()> {
+    for p in &spec.joints {
+        anyhow::ensure!(
+            p.index < 2,
+            "joint index {} (0 = knee, 1 = ankle_roll)",
+            p.index
+        );
+        anyhow::ensure!(
+            !(p.model == FrictionModel::Oracle
+                && (spec.mode != Mode::Lockstep || spec.raw_friction)),
+            "the oracle runs in lockstep only, with the shipped law (it pairs each request with the \
+             SimTruth of the state it answers)"
+        );
+    }
+    Ok(())
+}
+
+/// frictiond's joints (both presets; unplanned joints run no model) and the plant's initial pose
+/// (a planned joint starts at its reference, the others at their preset pose).
+fn daemon_joints(
+    setups: &[JointSetup; 2],
+    spec: &TrialSpec,
+    opts: &TrialOptions,
+) -> (Vec<DaemonJoint>, [f64; 2]) {
+    let mut joints = vec![];
+    let mut initial = [0.0; 2];
+    for (i, s) in setups.iter().enumerate() {
+        let plan = spec.joints.iter().find(|p| p.index == i);
+        initial[i] = plan.map_or(s.params.initial_s_rad, |p| p.reference.start_rad());
+        joints.push(DaemonJoint {
+            name: s.params.joint.clone(),
+            index: i,
+            gear_ratio: s.params.gear_ratio_signed,
+            kt_nm_per_a: s.params.kt_nm_per_a,
+            model: plan.map_or(FrictionModel::None, |p| p.model.clone()),
+            delta_theta_offset_motor_rad: spec.pinn_delta_theta_offset_motor_rad[i],
+            kfc: spec.kfc[i],
+            lpf: opts.lpf[i],
+        });
+    }
+    (joints, initial)
+}
+
+/// The paper's computed-torque controller per planned joint (with r²·J_m in M if asked).
+fn controllers<'a>(
+    setups: &'a [JointSetup; 2],
+    spec: &TrialSpec,
+    opts: &TrialOptions,
+) -> Vec<ComputedTorque<&'a dyn LinkDynamics>> {
+    spec.joints
+        .iter()
+        .map(|p| ComputedTorque {
+            extra_inertia_kgm2: if opts.rotor_inertia_in_m {
+                setups[p.index].params.j_eq_kgm2()
+            } else {
+                0.0
+            },
+            ..ComputedTorque::paper(setups[p.index].link.as_ref(), p.kp_per_s2)
+        })
+        .collect()
+}
+
+/// One empty trace per planned joint, with the kfc its τ̂_F includes (0 without a model).
+fn empty_traces(
+    setups: &[JointSetup; 2],
+    spec: &TrialSpec,
+    laws: &[LawSettings],
+) -> Vec<JointTrace> {
+    spec.joints
+        .iter()
+        .enumerate()
+        .map(|(k, p)| JointTrace {
+            index: p.index,
+            name: setups[p.index].params.joint.clone(),
+            kp_per_s2: p.kp_per_s2,
+            model: p.model.label().to_owned(),
+            kfc: if p.model == FrictionModel::None {
+                0.0
+            } else if spec.raw_friction {
+                1.0
+            } else {
+                laws[k].kfc
+            },
+            ..JointTrace::default()
+        })
+        .collect()
+}
+
+/// The next `JointStates` (the first one, or one newer than `last_seq`); an error naming the plant's
+/// and frictiond's last log lines after 10 s without one.
+fn next_state(
+    js_in: &Inbox<JointStates>,
+    session: &mut Session,
+    last_seq: u64,
+    first: bool,
+) -> anyhow::Result<JointStates> {
+    match wait_for(js_in, Duration::from_secs(10), |s| {
+        s.seq > last_seq || first
+    })? {
+        Some(js) => Ok(js),
+        None => {
+            if interrupted() {
+                bail!("interrupted");
+            }
+            session.check_alive()?;
+            bail!(
+                "no new JointStates for 10 s after seq {last_seq}; plant log:\n{}\nfrictiond log:\n{}",
+                session.log_tail("plant"),
+                session.log_tail("frictiond")
+            );
+        }
+    }
+}
+
+/// Publishes the external torques `ext_nm` (both joints) as `SimDisturbance` number `seq`.
+fn publish_disturbance(
+    out: &Outbox<SimDisturbance>,
+    seq: u64,
+    ext_nm: [f64; 2],
+) -> anyhow::Result<()> {
+    let mut d = SimDisturbance::zeroed();
+    d.seq = seq;
+    d.stamp_ns = monotonic_ns();
+    d.n_joints = 2;
+    d.tau_ext_nm[..2].copy_from_slice(&ext_nm);
+    out.publish(&d)
+        .map_err(|e| anyhow::anyhow!("publish SimDisturbance: {e}"))
+}
+
+/// What one tick records for one joint.
+struct Row<'a> {
+    t_s: f64,
+    s_des_rad: f64,
+    state: &'a JointStates,
+    truth: Option<&'a SimTruth>,
+    status: Option<&'a DaemonStatus>,
+    tau_des_nm: f64,
+    tau_f_hat_nm: f64,
+    tau_ext_nm: f64,
+}
+
+impl JointTrace {
+    /// Appends one tick (NaN where the plant sent no truth, flags 0 before the first status).
+    fn push_row(&mut self, r: &Row) {
+        let j = self.index;
+        let (js, truth) = (r.state, r.truth);
+        self.t_s.push(r.t_s);
+        self.s_des_rad.push(r.s_des_rad);
+        self.s_rad.push(js.s_rad[j]);
+        self.sdot_rad_s.push(js.sdot_rad_s[j]);
+        self.theta_motor_rad.push(js.theta_motor_rad[j]);
+        self.omega_motor_rad_s.push(js.omega_motor_rad_s[j]);
+        self.sdot_true_rad_s
+            .push(truth.map_or(f64::NAN, |x| x.sdot_true_rad_s[j]));
+        self.tau_des_nm.push(r.tau_des_nm);
+        self.tau_ext_nm.push(r.tau_ext_nm);
+        self.s_true_rad
+            .push(truth.map_or(f64::NAN, |x| x.s_true_rad[j]));
+        self.tau_f_true_nm
+            .push(truth.map_or(f64::NAN, |x| x.tau_f_true_nm[j]));
+        self.i_applied_a
+            .push(truth.map_or(f64::NAN, |x| x.i_applied_a[j]));
+        self.tau_f_hat_nm.push(r.tau_f_hat_nm);
+        self.flags.push(r.status.map_or(0, |x| x.joint_flags[j]));
+    }
 }

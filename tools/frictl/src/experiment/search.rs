@@ -14,7 +14,7 @@
 //! What it is **not**: no trial execution.
 
 /// Result of a search.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(tag = "outcome", rename_all = "snake_case")]
 pub enum MinKp {
     /// The lowest passing gain found, and the highest failing one below it.

@@ -2,8 +2,9 @@
 //! iceoryx2 root path and service prefix, torn down (and the shared-memory files removed) on drop.
 //!
 //! What this module **is**: [`Binaries`] (where `frictl` and `frictiond` are), [`DaemonJoint`] /
-//! [`write_daemon_config`] (the per-run `frictiond` TOML, with `kfc`, `max_curr`, the friction clip
-//! and the LPF taken from the shipped `config/ankle_knee.toml`), [`Session`] (spawn plant + daemon,
+//! [`daemon_config`] / [`write_daemon_config`] (the per-run `frictiond` config as the daemon's typed
+//! schema, `frictiond_config::RawConfig`, with `kfc`, `max_curr`, the friction clip and the LPF taken
+//! from the shipped `config/ankle_knee.toml`, written with `toml::to_string`), [`Session`] (spawn plant + daemon,
 //! wait until both are connected, kill + wait + remove the temp dir on drop) and [`interrupted`]
 //! (Ctrl-C / SIGTERM flag registered with signal-hook, polled by the run loop).
 //!
@@ -19,6 +20,10 @@ use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
+use frictiond_config::{
+    BackendConfig, BackendKind, FrictionModelName, JointConfig, LoopConfig, LpfConfig, OnStale,
+    RawConfig, SafetyConfig, Trigger, WarmupName,
+};
 use frictionless::friction::{CvParams, ScvParams};
 use frictionless_shm_types::IpcConfig;
 
@@ -157,43 +162,12 @@ impl LawSettings {
     /// The shipped law of joint `name` with `kfc` / `lpf` overrides (`None` = shipped); the daemon's
     /// defaults for absent keys (kfc 1, no clip, gate 0, no LPF).
     pub fn shipped(name: &str, kfc: Option<f64>, lpf: Option<Lpf>) -> anyhow::Result<Self> {
-        let t: toml::Table = shipped_joint_keys(name, false)?
-            .parse()
-            .context("config/ankle_knee.toml: joint keys do not parse")?;
-        let num = |k: &str, default: f64| -> anyhow::Result<f64> {
-            match t.get(k) {
-                None => Ok(default),
-                Some(v) => v
-                    .as_float()
-                    .or_else(|| v.as_integer().map(|i| i as f64))
-                    .with_context(|| {
-                        format!("config/ankle_knee.toml: {name}.{k} = {v} is not a number")
-                    }),
-            }
-        };
-        let shipped_lpf = match t.get("lpf") {
-            None => Lpf::Off,
-            Some(v) => {
-                let order = v
-                    .get("order")
-                    .and_then(|o| o.as_integer())
-                    .and_then(|o| usize::try_from(o).ok())
-                    .with_context(|| format!("config/ankle_knee.toml: {name}.lpf.order"))?;
-                let cutoff_hz = v
-                    .get("cutoff_hz")
-                    .and_then(|c| c.as_float())
-                    .with_context(|| format!("config/ankle_knee.toml: {name}.lpf.cutoff_hz"))?;
-                Lpf::Butterworth { order, cutoff_hz }
-            }
-        };
+        let j = shipped_joint(name)?;
         Ok(Self {
-            kfc: match kfc {
-                Some(k) => k,
-                None => num("kfc", 1.0)?,
-            },
-            max_output_friction_nm: num("max_output_friction", f64::INFINITY)?,
-            joint_velocity_threshold_rad_s: num("joint_velocity_threshold_rad_s", 0.0)?,
-            lpf: lpf.unwrap_or(shipped_lpf),
+            kfc: kfc.unwrap_or(j.kfc),
+            max_output_friction_nm: j.max_output_friction,
+            joint_velocity_threshold_rad_s: j.joint_velocity_threshold_rad_s,
+            lpf: lpf.unwrap_or_else(|| j.lpf.into()),
         })
     }
 
@@ -237,64 +211,150 @@ pub enum Mode {
     Realtime,
 }
 
-fn toml_num(v: f64) -> String {
-    if v == f64::INFINITY {
-        "inf".into()
-    } else {
-        format!("{v:e}")
+/// The `[[joint]]` of `config/ankle_knee.toml` named `name`, typed by the daemon's schema (not
+/// validated: its model paths are relative to `config/`).
+fn shipped_joint(name: &str) -> anyhow::Result<JointConfig> {
+    let shipped: RawConfig =
+        toml::from_str(ANKLE_KNEE_TOML).context("config/ankle_knee.toml does not parse")?;
+    shipped
+        .joint
+        .into_iter()
+        .find(|j| j.name == name)
+        .with_context(|| format!("config/ankle_knee.toml: no [[joint]] named `{name}`"))
+}
+
+/// `kfc` of `name` in `config/ankle_knee.toml` (1.0 if absent, the daemon's default).
+pub fn shipped_kfc(name: &str) -> f64 {
+    shipped_joint(name).map_or(1.0, |j| j.kfc)
+}
+
+impl From<Option<LpfConfig>> for Lpf {
+    fn from(l: Option<LpfConfig>) -> Self {
+        match l {
+            None => Lpf::Off,
+            Some(LpfConfig { order, cutoff_hz }) => Lpf::Butterworth { order, cutoff_hz },
+        }
     }
 }
 
-/// The `[[joint]]` keys of `config/ankle_knee.toml` for `name` that the experiments reuse, as TOML
-/// lines (`kfc`, `max_curr`, `max_output_friction`, `joint_velocity_threshold_rad_s`, `lpf`).
-/// With `raw_friction`, only `max_curr` is taken and `kfc = 1` (no clip, no LPF): the daemon's τ̂_F
-/// is then the model's output itself (used to check online against offline inference).
-fn shipped_joint_keys(name: &str, raw_friction: bool) -> anyhow::Result<String> {
-    let t: toml::Table = ANKLE_KNEE_TOML
-        .parse()
-        .context("config/ankle_knee.toml does not parse")?;
-    let joints = t
-        .get("joint")
-        .and_then(|v| v.as_array())
-        .context("config/ankle_knee.toml: no [[joint]]")?;
-    let j = joints
-        .iter()
-        .filter_map(|v| v.as_table())
-        .find(|j| j.get("name").and_then(|n| n.as_str()) == Some(name))
-        .with_context(|| format!("config/ankle_knee.toml: no [[joint]] named `{name}`"))?;
-    let mut out = String::new();
-    let keys: &[&str] = if raw_friction {
-        out += "kfc = 1.0\n";
-        &["max_curr"]
-    } else {
-        &[
-            "kfc",
-            "max_curr",
-            "max_output_friction",
-            "joint_velocity_threshold_rad_s",
-            "lpf",
-        ]
+impl From<Lpf> for Option<LpfConfig> {
+    fn from(l: Lpf) -> Self {
+        match l {
+            Lpf::Off => None,
+            Lpf::Butterworth { order, cutoff_hz } => Some(LpfConfig { order, cutoff_hz }),
+        }
+    }
+}
+
+/// The `[[joint]]` frictiond runs for `j`: name, index, gear ratio and kt from the plant; `max_curr`,
+/// `kfc`, the friction clip, its gate and the LPF from `config/ankle_knee.toml` (with `j`'s `kfc` /
+/// `lpf` overrides); the model's keys. With `raw_friction`, only `max_curr` is taken from the shipped
+/// joint and `kfc` defaults to 1 (no clip, no LPF, `lpf` override ignored): the daemon's τ̂_F is then
+/// the model's output itself (used to check online against offline inference).
+pub fn daemon_joint(j: &DaemonJoint, raw_friction: bool) -> anyhow::Result<JointConfig> {
+    let shipped = shipped_joint(&j.name)?;
+    let mut out = JointConfig {
+        name: j.name.clone(),
+        index: j.index,
+        gear_ratio: j.gear_ratio,
+        kt: j.kt_nm_per_a,
+        max_curr: shipped.max_curr,
+        kfc: 1.0,
+        kp: 0.0,
+        ki: 0.0,
+        max_output_friction: f64::INFINITY,
+        joint_velocity_threshold_rad_s: 0.0,
+        lpf: None,
+        friction_model: FrictionModelName::None,
+        kc: None,
+        kv: None,
+        ka: None,
+        ks: None,
+        vs: None,
+        alpha: None,
+        model: None,
+        warmup: WarmupName::default(),
+        delta_theta_offset_motor_rad: None,
     };
-    for &key in keys {
-        if let Some(v) = j.get(key) {
-            // `Value`'s Display writes inline tables (`lpf = { … }`), valid inside `[[joint]]`.
-            out += &format!("{key} = {v}\n");
+    if !raw_friction {
+        out.kfc = shipped.kfc;
+        out.max_output_friction = shipped.max_output_friction;
+        out.joint_velocity_threshold_rad_s = shipped.joint_velocity_threshold_rad_s;
+        out.lpf = j.lpf.map_or(shipped.lpf, Into::into);
+    }
+    if let Some(kfc) = j.kfc {
+        out.kfc = kfc;
+    }
+    match &j.model {
+        // the oracle's compensation is added by the controller to τ_des
+        FrictionModel::None | FrictionModel::Oracle => {}
+        FrictionModel::Cv(p) => {
+            out.friction_model = FrictionModelName::CoulombViscous;
+            (out.kc, out.ka, out.kv) = (Some(p.kc), Some(p.ka), Some(p.kv));
+        }
+        FrictionModel::Scv(p) => {
+            out.friction_model = FrictionModelName::CoulombViscousStribeck;
+            (out.kc, out.ka, out.kv) = (Some(p.kc), Some(p.ka), Some(p.kv));
+            (out.ks, out.vs, out.alpha) = (Some(p.ks), Some(p.vs), Some(p.alpha));
+        }
+        FrictionModel::Pinn(file) => {
+            let abs = std::path::absolute(file)
+                .with_context(|| format!("PINN file {}", file.display()))?;
+            out.friction_model = FrictionModelName::Pinn;
+            out.model = Some(abs);
+            out.warmup = WarmupName::ZeroPad;
+            out.delta_theta_offset_motor_rad = j.delta_theta_offset_motor_rad;
         }
     }
     Ok(out)
 }
 
-/// `kfc` of `name` in `config/ankle_knee.toml` (1.0 if absent, the daemon's default).
-pub fn shipped_kfc(name: &str) -> f64 {
-    shipped_joint_keys(name, false)
-        .ok()
-        .and_then(|s| s.parse::<toml::Table>().ok())
-        .and_then(|t| t.get("kfc").and_then(|v| v.as_float()))
-        .unwrap_or(1.0)
+/// The `frictiond` config of one run: 1 kHz, status every tick, the `mode`'s trigger, shared memory on
+/// `ipc`, zero output on stale input, and [`daemon_joint`] per joint.
+pub fn daemon_config(
+    ipc: &IpcConfig,
+    mode: Mode,
+    joints: &[DaemonJoint],
+    raw_friction: bool,
+) -> anyhow::Result<RawConfig> {
+    let root = ipc
+        .root_path
+        .as_ref()
+        .context("a run needs its own iceoryx2 root path")?;
+    let (trigger, stale_after_ticks) = match mode {
+        // Lockstep runs faster than real time but may pause on a busy machine: a stamp-age staleness
+        // of 5 ms would inject random zero-current ticks, so allow 1 s.
+        Mode::Lockstep => (Trigger::Lockstep, 1000),
+        Mode::Realtime => (Trigger::Clock, 5),
+    };
+    Ok(RawConfig {
+        loop_: LoopConfig {
+            period_us: 1000,
+            status_every_ticks: 1,
+            ready_after_ticks: 1,
+            trigger,
+            lockstep_wait_request: true,
+            lockstep_timeout_ms: 1000,
+            ..LoopConfig::default()
+        },
+        backend: BackendConfig {
+            kind: BackendKind::Shm,
+            service_prefix: ipc.service_prefix.clone(),
+            root_path: Some(root.clone()),
+        },
+        safety: SafetyConfig {
+            stale_after_ticks,
+            on_stale: OnStale::Zero,
+        },
+        joint: joints
+            .iter()
+            .map(|j| daemon_joint(j, raw_friction))
+            .collect::<anyhow::Result<_>>()?,
+        bus: Vec::new(),
+    })
 }
 
-/// Writes a `frictiond` config for one run to `path` and returns its text. `raw_friction`: see
-/// [`shipped_joint_keys`].
+/// Writes the `frictiond` config of one run ([`daemon_config`]) to `path` and returns its text.
 pub fn write_daemon_config(
     path: &Path,
     ipc: &IpcConfig,
@@ -302,89 +362,11 @@ pub fn write_daemon_config(
     joints: &[DaemonJoint],
     raw_friction: bool,
 ) -> anyhow::Result<String> {
-    let root = ipc
-        .root_path
-        .as_ref()
-        .context("a run needs its own iceoryx2 root path")?;
-    let (trigger, stale) = match mode {
-        // Lockstep runs faster than real time but may pause on a busy machine: a stamp-age staleness
-        // of 5 ms would inject random zero-current ticks, so allow 1 s.
-        Mode::Lockstep => ("lockstep", 1000),
-        Mode::Realtime => ("clock", 5),
-    };
-    let mut s = format!(
-        "# Written by `frictl experiment` for one run.\n[loop]\nperiod_us = 1000\nstatus_every_ticks = 1\n\
-         ready_after_ticks = 1\ntrigger = \"{trigger}\"\nlockstep_wait_request = true\nlockstep_timeout_ms = 1000\n\n\
-         [backend]\nkind = \"shm\"\nservice_prefix = {:?}\nroot_path = {:?}\n\n\
-         [safety]\nstale_after_ticks = {stale}\non_stale = \"zero\"\n",
-        ipc.service_prefix,
-        root.display().to_string(),
+    let cfg = daemon_config(ipc, mode, joints, raw_friction)?;
+    let s = format!(
+        "# Written by `frictl experiment` for one run.\n{}",
+        toml::to_string(&cfg).context("cannot serialise the frictiond config")?
     );
-    for j in joints {
-        s += &format!(
-            "\n[[joint]]\nname = {:?}\nindex = {}\ngear_ratio = {}\nkt = {}\n",
-            j.name,
-            j.index,
-            toml_num(j.gear_ratio),
-            toml_num(j.kt_nm_per_a)
-        );
-        let shipped = shipped_joint_keys(&j.name, raw_friction)?;
-        // overridden keys are dropped from the shipped lines and written after them
-        let drop_kfc = j.kfc.is_some();
-        let drop_lpf = j.lpf.is_some() && !raw_friction;
-        s += &shipped
-            .lines()
-            .filter(|l| {
-                let overridden =
-                    (drop_kfc && l.starts_with("kfc ")) || (drop_lpf && l.starts_with("lpf "));
-                !overridden
-            })
-            .map(|l| format!("{l}\n"))
-            .collect::<String>();
-        if let Some(kfc) = j.kfc {
-            s += &format!("kfc = {}\n", toml_num(kfc));
-        }
-        if let (Some(Lpf::Butterworth { order, cutoff_hz }), false) = (j.lpf, raw_friction) {
-            s += &format!(
-                "lpf = {{ order = {order}, cutoff_hz = {} }}\n",
-                toml_num(cutoff_hz)
-            );
-        }
-        match &j.model {
-            // the oracle's compensation is added by the controller to τ_des
-            FrictionModel::None | FrictionModel::Oracle => s += "friction_model = \"none\"\n",
-            FrictionModel::Cv(p) => {
-                s += &format!(
-                    "friction_model = \"coulomb_viscous\"\nkc = {}\nka = {}\nkv = {}\n",
-                    toml_num(p.kc),
-                    toml_num(p.ka),
-                    toml_num(p.kv)
-                )
-            }
-            FrictionModel::Scv(p) => {
-                s += &format!(
-                    "friction_model = \"coulomb_viscous_stribeck\"\nkc = {}\nka = {}\nkv = {}\nks = {}\nvs = {}\nalpha = {}\n",
-                    toml_num(p.kc),
-                    toml_num(p.ka),
-                    toml_num(p.kv),
-                    toml_num(p.ks),
-                    toml_num(p.vs),
-                    toml_num(p.alpha)
-                )
-            }
-            FrictionModel::Pinn(file) => {
-                let abs = std::path::absolute(file)
-                    .with_context(|| format!("PINN file {}", file.display()))?;
-                s += &format!(
-                    "friction_model = \"pinn\"\nmodel = {:?}\nwarmup = \"zero_pad\"\n",
-                    abs.display().to_string()
-                );
-                if let Some(off) = j.delta_theta_offset_motor_rad {
-                    s += &format!("delta_theta_offset_motor_rad = {}\n", toml_num(off));
-                }
-            }
-        }
-    }
     std::fs::write(path, &s).with_context(|| format!("cannot write {}", path.display()))?;
     Ok(s)
 }
@@ -665,19 +647,8 @@ impl Drop for Session {
 mod tests {
     use super::*;
 
-    fn joint_table(text: &str) -> toml::Table {
-        let t: toml::Table = text.parse().expect("the written config parses");
-        t["joint"].as_array().unwrap()[0]
-            .as_table()
-            .unwrap()
-            .clone()
-    }
-
-    fn written(kfc: Option<f64>, lpf: Option<Lpf>, model: FrictionModel) -> toml::Table {
-        let dir = std::env::temp_dir().join(format!("loop4_cfg_{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let ipc = IpcConfig::new(Some(&dir), "t");
-        let j = DaemonJoint {
+    fn joint(kfc: Option<f64>, lpf: Option<Lpf>, model: FrictionModel) -> DaemonJoint {
+        DaemonJoint {
             name: "l_ankle_roll".into(),
             index: 1,
             gear_ratio: -160.0,
@@ -686,21 +657,42 @@ mod tests {
             delta_theta_offset_motor_rad: None,
             kfc,
             lpf,
-        };
+        }
+    }
+
+    /// Writes the config of one joint, parses it back with frictiond's validation and checks it is
+    /// what [`daemon_config`] intended; returns the joint.
+    fn written(kfc: Option<f64>, lpf: Option<Lpf>, model: FrictionModel) -> JointConfig {
+        let dir = std::env::temp_dir().join(format!("loop4_cfg_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let ipc = IpcConfig::new(Some(&dir), "t");
+        let j = joint(kfc, lpf, model);
+        let path = dir.join("f.toml");
         let text =
-            write_daemon_config(&dir.join("f.toml"), &ipc, Mode::Lockstep, &[j], false).unwrap();
+            write_daemon_config(&path, &ipc, Mode::Lockstep, std::slice::from_ref(&j), false)
+                .unwrap();
+        let parsed =
+            frictiond_config::parse(&path, &text).unwrap_or_else(|e| panic!("{e}\n{text}"));
         let _ = std::fs::remove_dir_all(&dir);
-        joint_table(&text)
+        let intended = daemon_config(&ipc, Mode::Lockstep, &[j], false).unwrap();
+        assert_eq!(parsed.raw, intended, "{text}");
+        assert_eq!(parsed.raw.backend.service_prefix, ipc.service_prefix);
+        assert_eq!(parsed.raw.backend.root_path, ipc.root_path);
+        assert_eq!(parsed.raw.loop_.trigger, Trigger::Lockstep);
+        parsed.raw.joint.into_iter().next().unwrap()
     }
 
     #[test]
     fn lpf_and_kfc_overrides_replace_the_shipped_keys() {
         let shipped = written(None, None, FrictionModel::None);
         let law = LawSettings::shipped("l_ankle_roll", None, None).unwrap();
-        assert_eq!(shipped.get("lpf").is_some(), law.lpf != Lpf::Off);
+        assert_eq!(shipped.lpf.is_some(), law.lpf != Lpf::Off);
+        assert_eq!(shipped.kfc, law.kfc);
+        assert_eq!(shipped.kfc, shipped_kfc("l_ankle_roll"));
+        assert_eq!(shipped.max_output_friction, law.max_output_friction_nm);
         let off = written(Some(0.95), Some(Lpf::Off), FrictionModel::None);
-        assert!(off.get("lpf").is_none(), "{off:?}");
-        assert_eq!(off["kfc"].as_float(), Some(0.95));
+        assert_eq!(off.lpf, None);
+        assert_eq!(off.kfc, 0.95);
         let ten = written(
             None,
             Some(Lpf::Butterworth {
@@ -709,15 +701,79 @@ mod tests {
             }),
             FrictionModel::None,
         );
-        assert_eq!(ten["lpf"]["cutoff_hz"].as_float(), Some(10.0));
-        assert_eq!(ten["lpf"]["order"].as_integer(), Some(3));
-        assert_eq!(ten["kfc"].as_float(), Some(law.kfc));
+        assert_eq!(
+            ten.lpf,
+            Some(LpfConfig {
+                order: 3,
+                cutoff_hz: 10.0
+            })
+        );
+        assert_eq!(ten.kfc, law.kfc);
         // the oracle's joint runs no model in frictiond
         let oracle = written(None, None, FrictionModel::Oracle);
-        assert_eq!(oracle["friction_model"].as_str(), Some("none"));
+        assert_eq!(oracle.friction_model, FrictionModelName::None);
         // LawSettings follows the same overrides
         let l = LawSettings::shipped("l_ankle_roll", Some(0.5), Some(Lpf::Off)).unwrap();
         assert_eq!((l.kfc, l.lpf), (0.5, Lpf::Off));
         assert_eq!(l.max_output_friction_nm, law.max_output_friction_nm);
+    }
+
+    #[test]
+    fn written_models_carry_their_parameters() {
+        let cv = CvParams {
+            kc: 1.25,
+            ka: 40.0,
+            kv: 0.3,
+        };
+        let j = written(Some(1.0), None, FrictionModel::Cv(cv));
+        assert_eq!(j.friction_model, FrictionModelName::CoulombViscous);
+        assert_eq!((j.kc, j.ka, j.kv), (Some(1.25), Some(40.0), Some(0.3)));
+        assert_eq!(
+            (j.ks, j.vs, j.alpha, j.model.as_ref()),
+            (None, None, None, None)
+        );
+        let scv = ScvParams {
+            kc: 1.0,
+            ka: 3.0,
+            kv: 0.29,
+            ks: 6.0,
+            vs: 0.13,
+            alpha: 0.6,
+        };
+        let j = written(None, None, FrictionModel::Scv(scv));
+        assert_eq!(j.friction_model, FrictionModelName::CoulombViscousStribeck);
+        assert_eq!(
+            (j.kc, j.ka, j.kv, j.ks, j.vs, j.alpha),
+            (
+                Some(1.0),
+                Some(3.0),
+                Some(0.29),
+                Some(6.0),
+                Some(0.13),
+                Some(0.6)
+            )
+        );
+        // A PINN joint: absolute model path, zero-pad warm-up, the Δθ offset (not validated here:
+        // the file does not exist).
+        let mut p = joint(None, None, FrictionModel::Pinn("rel/a.fwt".into()));
+        p.delta_theta_offset_motor_rad = Some(0.0);
+        let ipc = IpcConfig::new(Some(Path::new("/tmp/x")), "t");
+        let cfg = daemon_config(&ipc, Mode::Realtime, &[p], true).unwrap();
+        let text = toml::to_string(&cfg).unwrap();
+        let back: RawConfig = toml::from_str(&text).unwrap();
+        assert_eq!(back, cfg);
+        let j = &back.joint[0];
+        assert_eq!(j.friction_model, FrictionModelName::Pinn);
+        assert!(j.model.as_ref().unwrap().is_absolute());
+        assert!(j.model.as_ref().unwrap().ends_with("rel/a.fwt"));
+        assert_eq!(j.warmup, WarmupName::ZeroPad);
+        assert_eq!(j.delta_theta_offset_motor_rad, Some(0.0));
+        // raw friction: kfc 1, no clip, no LPF; max_curr still shipped
+        assert_eq!(j.kfc, 1.0);
+        assert!(j.max_output_friction.is_infinite());
+        assert_eq!(j.lpf, None);
+        assert_eq!(j.max_curr, shipped_joint("l_ankle_roll").unwrap().max_curr);
+        assert_eq!(back.loop_.trigger, Trigger::Clock);
+        assert_eq!(back.safety.stale_after_ticks, 5);
     }
 }

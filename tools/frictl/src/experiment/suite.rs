@@ -225,11 +225,12 @@ pub fn track(
 }
 
 /// One evaluated gain of a search.
-#[derive(Clone, Copy, Debug, serde::Serialize)]
+#[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize)]
 pub struct SearchStep {
     /// K_p [1/s²].
     pub kp_per_s2: f64,
     /// Tracking RMSE [rad].
+    #[serde(deserialize_with = "super::metrics::null_as_nan")]
     pub rmse_rad: f64,
     /// Passed the criterion.
     pub passed: bool,
