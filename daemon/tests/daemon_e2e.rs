@@ -2,11 +2,9 @@
 //! JointStates/TorqueRequest, reads MotorCurrentCommand/DaemonStatus) against a spawned daemon. Each
 //! test uses its own iceoryx2 root path and service prefix. No timing asserts beyond generous bounds.
 
-mod daemon_support;
-
 use std::time::Duration;
 
-use daemon_support::*;
+use crate::daemon_support::*;
 use frictionless_shm_types::{FLAG_CURRENT_SATURATED, FLAG_NON_FINITE, FLAG_STALE};
 
 #[test]
