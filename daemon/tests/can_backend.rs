@@ -9,7 +9,7 @@ use std::process::Command;
 use std::time::Duration;
 
 use crate::can_support::*;
-use crate::daemon_support::{Plant, TestEnv, frictiond_bin};
+use crate::daemon_support::{Plant, TestEnv, frictiond_bin, repo_root};
 use frictionless_shm_types::can::mit::MitSpecial;
 use socketcan::{CanErrorFrame, CanFrame, CanSocket, Socket};
 
@@ -196,7 +196,7 @@ fn can_check_refuses_an_overloaded_bus_and_names_bad_keys() {
 
 #[test]
 fn can_example_configs_validate() {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let root = repo_root();
     for name in ["config/can_mit.toml", "config/can_odrive.toml"] {
         let out = Command::new(frictiond_bin())
             .arg("--config")

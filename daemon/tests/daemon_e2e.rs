@@ -349,7 +349,7 @@ fn check_mode_validates_without_ipc() {
 
 #[test]
 fn shipped_configs_pass_check() {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let root = repo_root();
     for name in [
         "config/ankle_knee.toml",
         "config/stress32.toml",
@@ -405,7 +405,8 @@ fn plant_killed_with_sigkill_and_restarted_daemon_keeps_running() {
         std::process::Command::new(std::env::current_exe().unwrap())
             .args([
                 "--exact",
-                "child_plant_process",
+                // The libtest name of `child_plant_process` in this binary (module path, no crate).
+                "daemon_e2e::child_plant_process",
                 "--ignored",
                 "--test-threads=1",
             ])

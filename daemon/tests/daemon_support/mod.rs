@@ -24,6 +24,13 @@ pub fn frictiond_bin() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_frictiond"))
 }
 
+/// The repository root (the workspace; `config/` holds the shipped configs).
+pub fn repo_root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("daemon/ is inside the workspace")
+}
+
 /// Where `frictl` is expected: `/bin/frictl` in the CAN VM, else `target/<profile>/frictl`, next to
 /// the test executable's `deps/` directory (another package's binary, so Cargo does not build it for
 /// this test target: `tests/run.sh` runs `cargo build --workspace --bins` first). May not exist.
