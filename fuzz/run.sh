@@ -31,7 +31,7 @@ for t in "${TARGETS[@]}"; do
     weights_reader)
       echo "== seeding fuzz/corpus/weights_reader"
       FWT_FUZZ_SEED_DIR="$ROOT/fuzz/corpus/weights_reader" \
-        cargo test -q -p frictionless --test weights_bad_input fuzz_seed_files_are_valid ;;
+        cargo test -q -p frictionless --test frictionless_tests weights_bad_input::fuzz_seed_files_are_valid ;;
     can_mit_decode)
       # byte 0: flags (bit 0 extended, bit 1 RTR) | length << 4; bytes 1..4 id (LE); 4..12 data; then
       # f64 fields for commands and ranges.

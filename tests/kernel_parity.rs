@@ -1,6 +1,7 @@
 //! Parity of the inference kernel ([`frictionless::kernel::Mlp`]) with the f64 reference forward pass
 //! ([`MlpWeights::forward_reference`]) on every kernel path the machine supports × every storage dtype,
-//! on random networks of many shapes, plus the zero-allocation guarantee of `forward`.
+//! on random networks of many shapes. (That `forward` never allocates is proven in `alloc_free.rs`,
+//! the binary with the counting allocator.)
 //!
 //! Tolerance: `|kernel − reference| ≤ 1e-5 · max(|reference|, m)` where `m = |b| + Σ|w_i·a_i|` is the
 //! magnitude of the output neuron's terms (computed in f64 here). Using `m` keeps the bound meaningful
@@ -13,47 +14,6 @@ use frictionless::mlp::{Activation, MlpWeights, Normalisation, StorageDtype};
 use frictionless::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
-// ---------------------------------------------------------------------------------------------------
-// Counting allocator (per thread, so parallel tests do not disturb each other).
-
-struct CountingAlloc;
-
-thread_local! {
-    static ALLOCS: Cell<usize> = const { Cell::new(0) };
-}
-
-// SAFETY: forwards every call to the system allocator unchanged; only counts.
-unsafe impl GlobalAlloc for CountingAlloc {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc_zeroed(layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
-#[global_allocator]
-static GLOBAL: CountingAlloc = CountingAlloc;
-
-fn allocs_here() -> usize {
-    ALLOCS.with(|c| c.get())
-}
 
 // ---------------------------------------------------------------------------------------------------
 // Random networks.
@@ -318,33 +278,6 @@ fn reduced_precision_error_vs_f32_is_bounded() {
             "{dtype:?}: rounding had no effect at all, the weights were not rounded"
         );
     }
-}
-
-#[test]
-fn forward_does_not_allocate() {
-    let mut rng = ChaCha8Rng::seed_from_u64(6);
-    let w = random_net(&mut rng, &[50, 450, 210, 280, 1]);
-    let x = random_input(&mut rng, &w);
-    let bad = vec![0.0f32; 49];
-    for dtype in DTYPES {
-        for path in KernelPath::available() {
-            let mut m = Mlp::new(&w, dtype).unwrap().with_path(path).unwrap();
-            let before = allocs_here();
-            let mut sum = 0f32;
-            for _ in 0..100 {
-                sum += m.forward(&x);
-            }
-            let nan = m.forward(&bad);
-            let after = allocs_here();
-            assert!(sum.is_finite() && nan.is_nan());
-            assert_eq!(after - before, 0, "{dtype:?} {path}: forward allocated");
-        }
-    }
-    // The counter itself works: building a kernel allocates.
-    let before = allocs_here();
-    let m = Mlp::new(&w, StorageDtype::F32).unwrap();
-    assert!(allocs_here() > before);
-    drop(m);
 }
 
 #[test]

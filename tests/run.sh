@@ -25,7 +25,9 @@ else
   unset FRICTIONLESS_REFS
 fi
 
-echo "== cargo build --bins (end-to-end tests in tests/ start frictiond and frictl as processes)"
+# Cargo builds a package's own binaries for its integration tests (frictiond for daemon/tests), not
+# another package's: the frictiond tests that run `frictl` find it in target/<profile>/, built here.
+echo "== cargo build --bins (end-to-end tests start frictiond and frictl as processes)"
 cargo build --workspace --bins
 
 echo "== cargo test"

@@ -15,7 +15,7 @@
 # Knobs (env): CANVM_WORK (default target/canvm), CANVM_TIMEOUT seconds (default 600), CANVM_SKIP_APT=1,
 #              CANVM_PACKAGES (cargo packages whose test harnesses run in the VM; default "frictionless frictionless-shm-types frictiond frictionless-canlog frictl"),
 #              CANVM_FILTER (libtest name filter, default "vcan"), CANVM_ACCEL (auto|kvm|tcg, default auto),
-#              CANVM_TESTS (only these integration-test targets, e.g. "vcan_sim_serve vcan_daemon"; default all).
+#              CANVM_TESTS (only these integration-test targets, e.g. "shm_types_tests frictiond_e2e"; default all).
 # Last line: "canvm: N passed, N failed"; exit code non-zero on any failure or timeout.
 set -euo pipefail
 cd "$(dirname "$0")/../.."

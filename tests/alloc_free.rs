@@ -1,6 +1,9 @@
-//! Proves that `FrictionModel::estimate` (and `reset`) on every `JointModel` variant performs no heap
-//! allocation after construction, with a counting global allocator.
+//! Proves, with a counting global allocator, that the core's per-tick calls perform no heap
+//! allocation after construction: `FrictionModel::estimate` (and `reset`) on every `JointModel`
+//! variant, and `kernel::Mlp::forward` on every kernel path × storage dtype (also on a wrong input
+//! length).
 //!
+//! Its own test binary (see `Cargo.toml`): the `#[global_allocator]` applies to the whole binary.
 //! The counter is thread-local (const-initialised, no destructor, so reading it never allocates), so
 //! allocations made by the test harness on other threads cannot disturb the count.
 
@@ -9,6 +12,7 @@ use std::cell::Cell;
 
 use frictionless::features::{FeatureSet, FeatureSpec, JointSample, WarmupPolicy};
 use frictionless::friction::{ScvCodeParams, paper};
+use frictionless::kernel::{KernelPath, Mlp};
 use frictionless::mlp::{Activation, DenseLayer, MlpWeights, Normalisation, StorageDtype};
 use frictionless::model::{FrictionModel, JointModel, NoFriction, PinnEstimator};
 use frictionless::units::GearRatio;
@@ -23,15 +27,15 @@ thread_local! {
 // SAFETY: forwards to the system allocator; only adds a thread-local counter increment.
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCS.with(|c| c.set(c.get() + 1));
+        let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
         unsafe { System.alloc(layout) }
     }
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        ALLOCS.with(|c| c.set(c.get() + 1));
+        let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
         unsafe { System.alloc_zeroed(layout) }
     }
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCS.with(|c| c.set(c.get() + 1));
+        let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
         unsafe { System.realloc(ptr, layout, new_size) }
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
@@ -185,4 +189,30 @@ fn estimate_never_allocates_on_any_variant() {
     let v = std::hint::black_box(vec![1u8; 16]);
     assert!(allocs() > before, "counting allocator is active");
     drop(v);
+}
+
+#[test]
+fn kernel_forward_never_allocates_on_any_path_or_dtype() {
+    let w = mlp(&[50, 450, 210, 280, 1]);
+    let x: Vec<f32> = (0..50).map(|i| (i % 7) as f32 * 0.1 - 0.3).collect();
+    let bad = vec![0.0f32; 49];
+    for dtype in [StorageDtype::F32, StorageDtype::F16, StorageDtype::Bf16] {
+        for path in KernelPath::available() {
+            let mut m = Mlp::new(&w, dtype).unwrap().with_path(path).unwrap();
+            let before = allocs();
+            let mut sum = 0f32;
+            for _ in 0..100 {
+                sum += m.forward(&x);
+            }
+            let nan = m.forward(&bad);
+            let after = allocs();
+            assert!(sum.is_finite() && nan.is_nan());
+            assert_eq!(after - before, 0, "{dtype:?} {path}: forward allocated");
+        }
+    }
+    // The counter itself works: building a kernel allocates.
+    let before = allocs();
+    let m = Mlp::new(&w, StorageDtype::F32).unwrap();
+    assert!(allocs() > before);
+    drop(m);
 }

@@ -4,15 +4,12 @@
 //! controller over shared memory. The same scenarios run on a real vcan in `vcan_daemon.rs`.
 //! Also: `frictiond --check` refusing an overloaded bus and bad `[[bus]]` keys with the numbers.
 
-mod can_support;
-mod daemon_support;
-
 use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 use std::process::Command;
 use std::time::Duration;
 
-use can_support::*;
-use daemon_support::{Plant, TestEnv};
+use crate::can_support::*;
+use crate::daemon_support::{Plant, TestEnv, frictiond_bin, repo_root};
 use frictionless_shm_types::can::mit::MitSpecial;
 use socketcan::{CanErrorFrame, CanFrame, CanSocket, Socket};
 
@@ -199,7 +196,7 @@ fn can_check_refuses_an_overloaded_bus_and_names_bad_keys() {
 
 #[test]
 fn can_example_configs_validate() {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let root = repo_root();
     for name in ["config/can_mit.toml", "config/can_odrive.toml"] {
         let out = Command::new(frictiond_bin())
             .arg("--config")

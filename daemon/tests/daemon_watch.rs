@@ -5,23 +5,21 @@
 //! `frictiond` (`target/<profile>/frictl`): if it is missing the test is skipped with a message
 //! when `FRICTIONLESS_REFS` is unset, and fails when it is set (the full test run).
 
-mod daemon_support;
-
 use std::path::PathBuf;
 use std::process::Command;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use daemon_support::*;
+use crate::daemon_support::*;
 use frictionless_shm_types::{FLAG_STALE, STATUS_INPUT_STALE};
 
 const TAU: [f64; 3] = [2.0, 1.0, 0.5];
 const V: [f64; 3] = [0.3, 0.4, -0.2];
 
-/// `target/<profile>/frictl`, or `None` (after the skip/fail rule) if it was not built.
+/// [`frictl_path`], or `None` (after the skip/fail rule) if it was not built.
 fn frictl_bin() -> Option<PathBuf> {
-    let bin = frictiond_bin().with_file_name("frictl");
+    let bin = frictl_path();
     if bin.exists() {
         return Some(bin);
     }

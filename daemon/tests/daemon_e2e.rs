@@ -2,11 +2,9 @@
 //! JointStates/TorqueRequest, reads MotorCurrentCommand/DaemonStatus) against a spawned daemon. Each
 //! test uses its own iceoryx2 root path and service prefix. No timing asserts beyond generous bounds.
 
-mod daemon_support;
-
 use std::time::Duration;
 
-use daemon_support::*;
+use crate::daemon_support::*;
 use frictionless_shm_types::{FLAG_CURRENT_SATURATED, FLAG_NON_FINITE, FLAG_STALE};
 
 #[test]
@@ -351,7 +349,7 @@ fn check_mode_validates_without_ipc() {
 
 #[test]
 fn shipped_configs_pass_check() {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let root = repo_root();
     for name in [
         "config/ankle_knee.toml",
         "config/stress32.toml",
@@ -407,7 +405,8 @@ fn plant_killed_with_sigkill_and_restarted_daemon_keeps_running() {
         std::process::Command::new(std::env::current_exe().unwrap())
             .args([
                 "--exact",
-                "child_plant_process",
+                // The libtest name of `child_plant_process` in this binary (module path, no crate).
+                "daemon_e2e::child_plant_process",
                 "--ignored",
                 "--test-threads=1",
             ])

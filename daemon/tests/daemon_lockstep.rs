@@ -3,11 +3,9 @@
 //! preamble). Each test uses its own iceoryx2 root path and service prefix. No timing asserts; the
 //! throughput test prints ticks/s.
 
-mod daemon_support;
-
 use std::time::{Duration, Instant};
 
-use daemon_support::*;
+use crate::daemon_support::*;
 use frictionless_shm_types::{FLAG_STALE, JointStates, TorqueRequest};
 
 /// [`THREE_JOINTS`] with the lockstep trigger. The timeout is long so no tick runs on it while the

@@ -5,8 +5,8 @@
 //! `frictiond` with `[backend] kind = "can"`. The scenarios are written once and run over either
 //! socket kind.
 //!
-//! Not a test target itself (a directory under `tests/`); included with `mod can_support;` after
-//! `mod daemon_support;`.
+//! Not a test target itself; `main.rs` includes it with `mod can_support;` (it uses
+//! `crate::daemon_support`).
 
 #![allow(dead_code)]
 
@@ -23,15 +23,7 @@ use frictionless_shm_types::can::mit::{self, MitRanges, MitReply, MitRx, MitSpec
 use frictionless_shm_types::{FLAG_FAULT, FLAG_STALE, MotorCurrentCommand, TorqueRequest};
 use socketcan::{CanFrame, CanSocket, Socket};
 
-use crate::daemon_support::{Daemon, Plant, TestEnv, current_ref, cv_ref};
-
-/// The `frictiond` binary: `/bin/frictiond` in the CAN VM, else next to the test executable.
-pub fn frictiond_bin() -> PathBuf {
-    if std::env::var_os("FRICTIONLESS_IN_CANVM").is_some() {
-        return PathBuf::from("/bin/frictiond");
-    }
-    crate::daemon_support::frictiond_bin()
-}
+use crate::daemon_support::{Daemon, Plant, TestEnv, current_ref, cv_ref, frictiond_bin};
 
 /// Descriptor number the daemon inherits the socketpair end as (`interface = "fd:10"`).
 pub const CHILD_FD: i32 = 10;

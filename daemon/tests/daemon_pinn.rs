@@ -5,12 +5,10 @@
 //! Also: the warm-up flag (both policies), SIGHUP to a new `.fwt` (switch without a lost tick) and
 //! to a corrupt one (the running model stays).
 
-mod daemon_support;
-
 use std::path::Path;
 use std::time::Duration;
 
-use daemon_support::*;
+use crate::daemon_support::*;
 use frictionless::features::{FeatureSet, FeatureSpec, JointSample, WarmupPolicy};
 use frictionless::mlp::StorageDtype;
 use frictionless::model::{FrictionModel, PinnEstimator};

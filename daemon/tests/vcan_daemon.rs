@@ -7,15 +7,11 @@
 //!   every published current equals the law for the published friction estimate, and the frames on
 //!   the wire carry k_t·i within the MIT quantisation.
 
-mod can_support;
-mod daemon_support;
-
-use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use can_support::*;
-use daemon_support::{Plant, TestEnv};
+use crate::can_support::*;
+use crate::daemon_support::{Plant, TestEnv, frictl_path};
 use frictionless_shm_types::can::WireFrame;
 use frictionless_shm_types::can::mit::{self, MitRanges, MitRx, MitSpecial};
 use frictionless_shm_types::can::odrive::{self, OdriveMsg};
@@ -77,14 +73,6 @@ fn vcan_daemon_mit_law_stale_errors_and_exit() {
         let l = emu.log(id);
         assert_eq!(l.specials.last(), Some(&MitSpecial::ExitMotorMode), "{l:?}");
     }
-}
-
-/// The `frictl` binary: `/bin/frictl` in the CAN VM, else next to the test executable.
-fn frictl_bin() -> PathBuf {
-    if std::env::var_os("FRICTIONLESS_IN_CANVM").is_some() {
-        return PathBuf::from("/bin/frictl");
-    }
-    frictiond_bin().with_file_name("frictl")
 }
 
 /// The daemon joints matching `frictl sim serve --preset knee,ankle_roll` (kt, r), SCV friction
@@ -267,7 +255,7 @@ fn closed_loop_with_sim(odrive_bus: bool) {
     sniff.set_nonblocking(true).unwrap();
     let _ = sniff.set_socket_option_int(libc::SOL_SOCKET, libc::SO_RCVBUFFORCE, 8 << 20);
     let mut sim = Child(
-        Command::new(frictl_bin())
+        Command::new(frictl_path())
             .args([
                 "sim",
                 "serve",

@@ -1,7 +1,7 @@
 //! Shared helpers of the `daemon_*` end-to-end tests: a real `frictiond` process, an isolated
 //! iceoryx2 root path and service prefix per test, and the test process acting as the plant.
 //!
-//! Not a test target itself (a directory under `tests/`); included with `mod daemon_support;`.
+//! Not a test target itself; `main.rs` includes it with `mod daemon_support;`.
 
 #![allow(dead_code)]
 
@@ -15,17 +15,32 @@ use frictionless_shm_types::{
     monotonic_ns,
 };
 
-/// The `frictiond` binary next to the test executable (`target/<profile>/frictiond`).
+/// The `frictiond` binary: `/bin/frictiond` in the CAN VM (`FRICTIONLESS_IN_CANVM`, see
+/// `tests/canvm/run.sh`), else the one Cargo built for this test target (`CARGO_BIN_EXE_frictiond`).
 pub fn frictiond_bin() -> PathBuf {
+    if std::env::var_os("FRICTIONLESS_IN_CANVM").is_some() {
+        return PathBuf::from("/bin/frictiond");
+    }
+    PathBuf::from(env!("CARGO_BIN_EXE_frictiond"))
+}
+
+/// The repository root (the workspace; `config/` holds the shipped configs).
+pub fn repo_root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("daemon/ is inside the workspace")
+}
+
+/// Where `frictl` is expected: `/bin/frictl` in the CAN VM, else `target/<profile>/frictl`, next to
+/// the test executable's `deps/` directory (another package's binary, so Cargo does not build it for
+/// this test target: `tests/run.sh` runs `cargo build --workspace --bins` first). May not exist.
+pub fn frictl_path() -> PathBuf {
+    if std::env::var_os("FRICTIONLESS_IN_CANVM").is_some() {
+        return PathBuf::from("/bin/frictl");
+    }
     let exe = std::env::current_exe().expect("current_exe");
     let dir = exe.parent().and_then(Path::parent).expect("target dir");
-    let bin = dir.join("frictiond");
-    assert!(
-        bin.exists(),
-        "{} not found: build it first (`cargo build -p frictiond`, or run `cargo test --workspace`)",
-        bin.display()
-    );
-    bin
+    dir.join("frictl")
 }
 
 /// A per-test directory, iceoryx2 root path and service prefix; removed on drop.

@@ -6,11 +6,9 @@
 //! Scope: steady state. A new peer connecting (e.g. `frictl monitor` attaching) makes iceoryx2 set up
 //! connection state on the RT thread; that is not covered by this claim.
 
-mod daemon_support;
-
 use std::time::Duration;
 
-use daemon_support::*;
+use crate::daemon_support::*;
 use frictionless_shm_types::{JointStates, TorqueRequest};
 
 #[test]
