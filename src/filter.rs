@@ -480,10 +480,10 @@ mod tests {
         }
     }
 
-    /// frictiond's previous τ̂_F low-pass (cookbook biquads per pole pair, Q = 1/(2·sin θ_k), DC
-    /// gain 1 per section, the first-order section last), kept here only to show that the scipy
-    /// design run by [`CausalButterworth`] gives the daemon the same outputs up to rounding.
-    fn previous_daemon_lpf(order: usize, cutoff_hz: f64, fs_hz: f64) -> Vec<Sos> {
+    /// An independent Butterworth design: cookbook biquads per pole pair (Q = 1/(2·sin θ_k)), DC
+    /// gain 1 per section, the first-order section last. Different sections and gain split, the
+    /// same transfer function: [`CausalButterworth`] must give the same outputs up to rounding.
+    fn cookbook_lpf(order: usize, cutoff_hz: f64, fs_hz: f64) -> Vec<Sos> {
         let w0 = 2.0 * std::f64::consts::PI * cutoff_hz / fs_hz;
         let (sw, cw) = w0.sin_cos();
         let mut sos = Vec::new();
@@ -516,7 +516,7 @@ mod tests {
     }
 
     #[test]
-    fn same_outputs_as_the_previous_daemon_lpf() {
+    fn same_outputs_as_an_independent_cookbook_design() {
         let x: Vec<f64> = (0..3000)
             .map(|k| 3.0 * (k as f64 * 0.031).sin() + if k % 500 < 250 { 2.0 } else { -1.5 })
             .collect();
@@ -528,7 +528,7 @@ mod tests {
             (4, 100.0),
             (8, 40.0),
         ] {
-            let old = previous_daemon_lpf(order, fc, 1000.0);
+            let old = cookbook_lpf(order, fc, 1000.0);
             let mut zi = vec![[0.0; 2]; old.len()];
             let want = sosfilt(&old, &x, &mut zi);
             let mut new = CausalButterworth::design(order, fc, 1000.0).unwrap();

@@ -11,7 +11,7 @@
 //! them at exit; `FRICTIOND_LATENCY_REPORT=FILE` writes the loop statistics at exit (wake lateness
 //! p50/p99/p99.9/max at 1 µs resolution, compute time, input age — `benches/lateness.sh`).
 //!
-//! What it is **not**: the control law (`frictiond::control`), the tick (`frictiond::rt`), or the
+//! What it is **not**: the control law (`frictionless::law`), the tick (`frictiond::rt`), or the
 //! config schema (`frictiond::config`) — those live in the library.
 
 use frictiond::{alloc_count, config, params, rt, sdnotify};
