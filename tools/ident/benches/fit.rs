@@ -2,8 +2,8 @@
 //! and the label pipeline's zero-phase Butterworth + RTS smoother on 10⁶ samples.
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use frictionless::friction::{CvParams, ScvParams, StaticFriction, paper};
 use frictionless::filter::Butterworth;
+use frictionless::friction::{CvParams, ScvParams, StaticFriction, paper};
 use frictionless_ident::fit::{FitOptions, fit};
 use frictionless_ident::kalman::{KalmanConfig, smooth};
 

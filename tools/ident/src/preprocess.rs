@@ -40,8 +40,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use frictionless::filter::{Butterworth, FilterError};
 use super::kalman::{self, KalmanConfig, KalmanError};
+use frictionless::filter::{Butterworth, FilterError};
 use frictionless_dataset::Dataset;
 use frictionless_sim::link::LinkDynamics;
 

@@ -19,10 +19,10 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
-use frictionless::fastmath;
 use crate::link::LinkDynamics;
 use crate::params::{ParamError, PlantParams};
 use crate::stribeck::StribeckTable;
+use frictionless::fastmath;
 
 /// Continuous state of the joint (joint side, |r|).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

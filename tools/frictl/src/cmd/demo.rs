@@ -35,11 +35,11 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
+use frictionless_train::pipeline::TrainReport;
 use frictl::eval::{Metrics, Report as EvalReport};
 use frictl::experiment::report::{Cell, SuiteReport};
 use frictl::experiment::search::MinKp;
-use frictl::experiment::session::{ORACLE_LABEL, install_signal_flag, interrupted};
-use frictionless_train::pipeline::TrainReport;
+use frictl::experiment::session::{Binaries, ORACLE_LABEL, install_signal_flag, interrupted};
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `frictl demo`.
@@ -96,6 +96,9 @@ struct Stage {
 
 struct Runner {
     exe: PathBuf,
+    /// `frictiond`, located (or built) once before the first stage and passed to every child as
+    /// `$FRICTIOND` (`None` with `--no-experiments`).
+    frictiond: Option<PathBuf>,
     logs: PathBuf,
     stages: Vec<Stage>,
     n: usize,
@@ -114,7 +117,11 @@ impl Runner {
         let f = std::fs::File::create(&log)
             .with_context(|| format!("cannot create {}", log.display()))?;
         let t0 = Instant::now();
-        let mut child = Command::new(&self.exe)
+        let mut cmd = Command::new(&self.exe);
+        if let Some(frictiond) = &self.frictiond {
+            cmd.env("FRICTIOND", frictiond);
+        }
+        let mut child = cmd
             .args(args)
             .stdin(Stdio::null())
             .stdout(f.try_clone()?)
@@ -430,8 +437,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for d in [&dirs.data, &dirs.models, &dirs.eval, &logs] {
         std::fs::create_dir_all(d).with_context(|| format!("cannot create {}", d.display()))?;
     }
+    // Before any work: the closed-loop stage needs frictiond (built here when run by `cargo run`).
+    let exe = std::env::current_exe().context("cannot find the running executable")?;
+    let frictiond = if args.no_experiments {
+        None
+    } else {
+        Some(Binaries::locate()?.frictiond)
+    };
     let mut r = Runner {
-        exe: std::env::current_exe().context("cannot find the running executable")?,
+        exe,
+        frictiond,
         logs,
         stages: vec![],
         n: 0,

@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use frictionless::friction::{CvParams, ScvParams};
+use frictionless_dataset::fit_file::FittedModel;
 use frictl::experiment::controller::PAPER_KD_PER_S;
 use frictl::experiment::metrics::TrackCriterion;
 use frictl::experiment::report::{SuiteReport, slug, write_trace_csv};
@@ -14,7 +15,6 @@ use frictl::experiment::session::{
     Binaries, FrictionModel, LawSettings, Lpf, Mode, install_signal_flag,
 };
 use frictl::experiment::suite::{self, SuiteConfig, Task};
-use frictionless_dataset::fit_file::FittedModel;
 
 /// Which experiment.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]

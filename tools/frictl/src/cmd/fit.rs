@@ -5,13 +5,13 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
+use frictiond_config::FrictionModelName;
 use frictionless::friction::{CvParams, ScvCodeParams, ScvParams};
 use frictionless_dataset::Dataset;
+use frictionless_dataset::fit_file::FittedModel;
 use frictionless_ident::fit::{
     FitBounds, FitOptions, FitResult, Fittable, Loss, Method, fit, select, sliding_quadrant_mask,
 };
-use frictiond_config::FrictionModelName;
-use frictionless_dataset::fit_file::FittedModel;
 use serde::{Deserialize, Serialize};
 
 /// Static model to fit.
@@ -282,13 +282,15 @@ pub struct FitFile {
     pub dataset: String,
 }
 
-    /// The daemon's `friction_model` for this model (the code form runs as SCV with ka = ∞, α = 2).
+/// The daemon's `friction_model` for this model (the code form runs as SCV with ka = ∞, α = 2).
 fn daemon_friction_model(fitted: &FittedModel) -> FrictionModelName {
-        match fitted {
-            FittedModel::Cv { .. } => FrictionModelName::CoulombViscous,
-            FittedModel::Scv { .. } | FittedModel::ScvCode { .. } => FrictionModelName::CoulombViscousStribeck,
+    match fitted {
+        FittedModel::Cv { .. } => FrictionModelName::CoulombViscous,
+        FittedModel::Scv { .. } | FittedModel::ScvCode { .. } => {
+            FrictionModelName::CoulombViscousStribeck
         }
     }
+}
 
 #[cfg(test)]
 mod tests {

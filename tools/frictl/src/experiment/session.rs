@@ -44,10 +44,20 @@ pub struct Binaries {
 }
 
 impl Binaries {
-    /// `frictl` = this executable; `frictiond` = `$FRICTIOND`, else next to `frictl` (or one
-    /// directory up, for test binaries in `target/*/deps`), else on `PATH`.
+    /// `frictl` = this executable; `frictiond` = `$FRICTIOND`, else — when this `frictl` was started
+    /// by `cargo run` — `frictiond` built by the same cargo into the same target directory and
+    /// profile (see [`build_frictiond_with_cargo`]), else next to `frictl` (or one directory up, for
+    /// test binaries in `target/*/deps`), else on `PATH`.
     pub fn locate() -> anyhow::Result<Self> {
         let me = std::env::current_exe().context("cannot find the running executable")?;
+        if std::env::var_os("FRICTIOND").is_none()
+            && let Some(frictiond) = build_frictiond_with_cargo(&me)?
+        {
+            return Ok(Self {
+                frictl: me,
+                frictiond,
+            });
+        }
         Self::with_frictl(me)
     }
 
@@ -83,6 +93,86 @@ impl Binaries {
             ),
         }
     }
+}
+
+/// When this process is the `frictl` binary started by `cargo run` (cargo sets `CARGO` and
+/// `CARGO_MANIFEST_DIR` for the programs it runs), builds `frictiond` with that cargo, for the same
+/// profile and into the same target directory as this executable, and returns its path; `Ok(None)`
+/// otherwise (an installed `frictl`, a test harness).
+///
+/// This is what makes the README's `cargo run --release -p frictl -- demo` work on a fresh clone:
+/// cargo builds only the package it runs, and has no stable way for one package's binary to require
+/// another package's binary. Up to date, the build is a no-op of well under a second.
+pub fn build_frictiond_with_cargo(me: &Path) -> anyhow::Result<Option<PathBuf>> {
+    let (Some(cargo), Some(manifest_dir)) = (
+        std::env::var_os("CARGO"),
+        std::env::var_os("CARGO_MANIFEST_DIR"),
+    ) else {
+        return Ok(None);
+    };
+    if me.file_stem().and_then(|s| s.to_str()) != Some("frictl") {
+        return Ok(None);
+    }
+    // `<target>/<profile>/frictl` or, with `--target TRIPLE`, `<target>/<triple>/<profile>/frictl`;
+    // cargo marks its target directory with CACHEDIR.TAG.
+    let Some(profile_dir) = me.parent() else {
+        return Ok(None);
+    };
+    let Some(profile) = profile_dir.file_name().and_then(|s| s.to_str()) else {
+        return Ok(None);
+    };
+    let Some(up) = profile_dir.parent() else {
+        return Ok(None);
+    };
+    let (target_dir, triple) = if up.join("CACHEDIR.TAG").is_file() {
+        (up.to_path_buf(), None)
+    } else {
+        match up.parent() {
+            Some(root) if root.join("CACHEDIR.TAG").is_file() => {
+                (root.to_path_buf(), up.file_name().map(|t| t.to_owned()))
+            }
+            _ => return Ok(None),
+        }
+    };
+    // The `dev` profile builds into `debug/`; every other profile into a directory of its name.
+    let profile = if profile == "debug" { "dev" } else { profile };
+    let manifest = Path::new(&manifest_dir).join("Cargo.toml");
+    let mut cmd = Command::new(&cargo);
+    cmd.args([
+        "build",
+        "--profile",
+        profile,
+        "-p",
+        "frictiond",
+        "--bin",
+        "frictiond",
+    ])
+    .arg("--manifest-path")
+    .arg(&manifest)
+    .arg("--target-dir")
+    .arg(&target_dir);
+    if let Some(t) = &triple {
+        cmd.arg("--target").arg(t);
+    }
+    eprintln!(
+        "frictl: building frictiond with cargo (profile {profile}, target dir {})",
+        target_dir.display()
+    );
+    let status = cmd
+        .status()
+        .with_context(|| format!("cannot run {}", Path::new(&cargo).display()))?;
+    anyhow::ensure!(
+        status.success(),
+        "building frictiond failed ({status}); build it with `cargo build --profile {profile} -p \
+         frictiond` or set FRICTIOND=/path/to/frictiond"
+    );
+    let built = profile_dir.join("frictiond");
+    anyhow::ensure!(
+        built.is_file(),
+        "cargo built frictiond but {} does not exist",
+        built.display()
+    );
+    Ok(Some(built))
 }
 
 /// The friction model `frictiond` runs for one joint.
