@@ -7,7 +7,7 @@
 //! `--set key=value` (dotted keys). Unknown keys are errors, so a typo never silently does nothing.
 //!
 //! What it is not: the equations (see [`crate::plant`]) or the excitation protocol (the `protocol`
-//! table of the same preset file belongs to [`frictionless_acquire`]).
+//! table of the same preset file belongs to `frictionless-acquire`).
 
 use std::path::{Path, PathBuf};
 

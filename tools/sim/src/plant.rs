@@ -13,7 +13,7 @@
 //! positive in the joint's direction). The *commanded and measured current is in the robot's
 //! convention*: joint torque = r_signed·k_t·i, and θ_meas = r_signed·φ.
 //!
-//! What it is not: a controller, a protocol or a plant server (see [`frictionless_acquire`]).
+//! What it is not: a controller, a protocol or a plant server (see `frictionless-acquire`).
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

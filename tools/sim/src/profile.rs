@@ -8,7 +8,7 @@
 //! - `ramp:SLOPE[,MAX]` — SLOPE·t clipped at ±MAX [A/s, A];
 //! - `csv:FILE` — one column `i_ref_a` (header required), one row per 1 kHz sample, held after the end.
 //!
-//! What it is not: a controller (no feedback) — closed-loop excitation lives in [`frictionless_acquire`].
+//! What it is not: a controller (no feedback) — closed-loop excitation lives in `frictionless-acquire`.
 
 use std::path::PathBuf;
 
