@@ -29,6 +29,53 @@
 //! [motor rad/s]. The gear ratio `r` is **signed** (motor angle = r · joint angle, e.g. −160 for
 //! ergoCub's left ankle roll). Friction `τ_F` is joint side and opposes motion, so that
 //! `τ = r·k_t·i − τ_F`.
+//!
+//! ## Example: load a `.fwt`, estimate friction, command a current
+//! ```
+//! use frictionless::features::{JointSample, WarmupPolicy};
+//! use frictionless::law::{Gains, JointLaw, LawInput};
+//! use frictionless::model::{FrictionModel, PinnEstimator};
+//!
+//! // A shipped paper-size network (40 → 268 → 215 → 1, inputs [Δθ ×20, ṡ ×20], r = −160).
+//! let path = concat!(env!("CARGO_MANIFEST_DIR"), "/config/models/stress32_paper_f16_r-160.fwt");
+//! let file = frictionless::weights::read_file(std::path::Path::new(path))?;
+//! let r = file.meta.gear_ratio.get();
+//! let mut pinn = PinnEstimator::from_model_file(&file, WarmupPolicy::ZeroPad)?;
+//!
+//! let sample = JointSample {
+//!     s_rad: 0.1,
+//!     sdot_rad_s: 0.5,
+//!     theta_motor_rad: r * 0.1,
+//!     omega_motor_rad_s: r * 0.5,
+//!     temperature_c: f64::NAN,
+//! };
+//! pinn.reset(&sample); // enable: history cleared, Δθ latched at this sample
+//! let tau_f_nm = pinn.estimate(&sample); // allocation-free, one sample per tick
+//! assert!(tau_f_nm.is_finite());
+//!
+//! // i = (τ_des + kfc·τ̂_F)/(k_t·r), clamped; the law frictiond runs every tick.
+//! let gains = Gains {
+//!     kt_nm_per_a: 0.0665,
+//!     gear_ratio: r,
+//!     kfc: 0.85,
+//!     kp: 0.0,
+//!     ki: 0.0,
+//!     max_curr_a: 10.0,
+//!     max_output_friction_nm: f64::INFINITY,
+//!     joint_velocity_threshold_rad_s: 0.0,
+//!     dt_s: 1e-3,
+//! };
+//! let mut law = JointLaw::new(gains, None);
+//! let out = law.step(&LawInput {
+//!     tau_des_nm: 1.0,
+//!     friction_nm: tau_f_nm,
+//!     sdot_rad_s: sample.sdot_rad_s,
+//!     tau_meas_nm: 0.0,
+//! });
+//! let expected_a = (1.0 + 0.85 * tau_f_nm) / (0.0665 * r);
+//! assert!((out.i_a - expected_a.clamp(-10.0, 10.0)).abs() < 1e-9);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 #![warn(missing_docs)]
 

@@ -209,12 +209,9 @@ fn random_shapes_all_paths_all_dtypes() {
 fn ergocub_shape_with_real_normalisation_and_inputs() {
     let path = concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../shared/anchors/blf_jtc_ergoCubSN002_l_ankle_roll_pinn_2024-06.reference_io.json"
+        "/tests/fixtures/ergocub/blf_jtc_ergoCubSN002_l_ankle_roll_pinn_2024-06.reference_io.json"
     );
-    let Ok(text) = std::fs::read_to_string(path) else {
-        eprintln!("skipped: {path} not found");
-        return;
-    };
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{path}: {e}"));
     let j: serde_json::Value = serde_json::from_str(&text).expect("anchor JSON parses");
     let norm = &j["normalisation_folded_in_first_Gemm"];
     let vecf = |v: &serde_json::Value| -> Vec<f32> {

@@ -3,7 +3,7 @@
 //! What this module **is**: a thin wrapper around the system allocator. Counting is off unless the
 //! RT thread calls [`set_counting`]`(true)` (it does so after READY when the env var
 //! `FRICTIOND_ALLOC_REPORT` names a report file). Allocations inside an [`exempt`] scope (iceoryx2
-//! 0.10's one 48-byte `Box` per published sample, see `realtime-ipc-can.md` §2.6) are counted
+//! 0.10's one 48-byte `Box` per published sample, see `docs/realtime.md` §2.6) are counted
 //! separately so the report shows both numbers.
 //!
 //! What it is **not**: not a profiler; no stack traces; the cost when not counting is one

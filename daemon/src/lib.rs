@@ -11,6 +11,8 @@
 //! What it is **not**: no friction models and no control law (the `frictionless` crate), no ABI (`frictionless-shm-types`),
 //! no offline tooling (`frictl`).
 
+#![warn(missing_docs)]
+
 pub mod alloc_count;
 pub mod backend;
 pub mod config;

@@ -15,6 +15,8 @@
 //! besides reading the config and model files. Used by `frictiond` and by `frictl`; it depends on
 //! neither. Units: SI, joint side; the velocity threshold is in **rad/s** (BLF used deg/s).
 
+#![warn(missing_docs)]
+
 use std::path::{Path, PathBuf};
 
 use frictionless_shm_types::MAX_JOINTS;

@@ -73,7 +73,7 @@ impl Backend for ShmBackend {
     fn wait_input(&mut self, timeout_ns: u64) -> Result<bool, IoError> {
         // One blocking `Listener::timed_wait` on the states' event service (0 allocations). An
         // iceoryx2 WaitSet over both listeners would be the textbook choice, but it allocates
-        // twice per wake-up (measured, realtime-ipc-can.md §2.6) and `Inbox` does not expose its
+        // twice per wake-up (measured, `docs/realtime.md` §2.6) and `Inbox` does not expose its
         // listener; the lockstep trigger instead waits on the listener of the input it misses
         // (`wait_request` for the request), re-polling both after every wake.
         self.states.wait(Duration::from_nanos(timeout_ns))

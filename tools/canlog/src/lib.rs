@@ -16,6 +16,8 @@
 //! What it is **not**: no error-frame lines (ids with the CAN_ERR flag are refused), no filtering, no
 //! ASCII-art candump output.
 
+#![warn(missing_docs)]
+
 use std::fmt::Write as _;
 use std::io::{self, BufRead, Write};
 use std::path::Path;

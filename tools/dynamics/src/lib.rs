@@ -13,6 +13,30 @@
 //! What it is **not**: forward dynamics, contact solving, geometry or visualisation.
 //!
 //! The project's own model is `config/urdf/virtual_leg.urdf` ([`DEFAULT_URDF`]).
+//!
+//! ## Example: URDF → inverse dynamics
+//! ```
+//! use frictionless_dynamics::{Robot, Workspace};
+//!
+//! let robot: Robot = frictionless_dynamics::virtual_leg()?; // or Robot::from_urdf_file("robot.urdf")
+//! let n = robot.dof();
+//! let knee = robot.joint_index("l_knee")?;
+//! let mut ws = Workspace::new(&robot);
+//! let mut q = vec![0.0; n];
+//! q[knee] = -0.8; // rad
+//! let (qd, qdd) = (vec![0.0; n], vec![0.0; n]);
+//!
+//! // At rest, RNEA is the gravity torque; allocation-free once the workspace exists.
+//! let mut tau = vec![0.0; n];
+//! robot.rnea(&mut ws, &q, &qd, &qdd, &mut tau)?;
+//! let mut g = vec![0.0; n];
+//! robot.gravity_torques(&mut ws, &q, &mut g)?;
+//! assert!((tau[knee] - g[knee]).abs() < 1e-12);
+//! assert!(tau[knee].abs() > 0.1, "a bent knee holds its shank against gravity");
+//! # Ok::<(), frictionless_dynamics::DynamicsError>(())
+//! ```
+
+#![warn(missing_docs)]
 
 pub mod algorithms;
 pub mod error;

@@ -20,7 +20,7 @@
 //!   [`Fittable::value_jacobian_lanes`] in groups of [`LANES`], with branch-free [`exp_lanes`] /
 //!   [`ln_lanes`] (`frictionless::fastmath`, ≈ 1 ulp from libm, tested there) written one loop per operation so LLVM emits AVX2, and
 //!   JᵀJ/Jᵀr accumulated lane-wise; chunk sums are added in chunk order (bit-identical for any
-//!   thread count). Measured (`cargo bench -p frictl --bench fit`, same run, load 3.7): SCV 10⁶
+//!   thread count). Measured (`cargo bench -p frictionless-ident --bench fit`, same run, load 3.7): SCV 10⁶
 //!   632 ms → 91 ms, CV 84 ms → 39 ms; callgrind instructions per fit: SCV 5.48 G → 1.29 G,
 //!   CV 0.65 G → 0.20 G. An SCV fit still makes ~9 × 10⁶ model evaluations, 7 × 10⁶ of them in
 //!   the full-data polish (6 accepted LM steps along the ill-conditioned ks–vs–α valley); carrying

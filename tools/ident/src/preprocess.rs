@@ -1,5 +1,5 @@
 //! The friction-label pipeline: acquisition log → labelled dataset (paper §2–§4.3; reference
-//! `simulator-and-protocol.md` §5).
+//! `docs/simulator.md` §5).
 //!
 //! Steps: split the log into chunks (chunk-id change or time gap > `gap_s`), resample each chunk to
 //! `fs_hz` by linear interpolation, zero-phase Butterworth low-pass of the current (`sosfiltfilt`),

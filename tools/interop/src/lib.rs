@@ -18,6 +18,8 @@
 //! (that is [`frictionless::weights`]), no general ONNX runtime: anything that is not a single
 //! input→output chain of dense layers and ReLUs is refused with an error naming the node.
 
+#![warn(missing_docs)]
+
 pub mod onnx;
 pub mod safetensors;
 

@@ -328,12 +328,12 @@ fn starts_pre_wound_to_hold_gravity() {
 fn urdf_link_matches_the_ergocub_reference_values() {
     let urdf = concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../../../shared/robots/ergoCubSN001/model.urdf"
+        "/../../tests/fixtures/ergocub/ergoCubSN001.urdf"
     );
-    if !std::path::Path::new(urdf).is_file() {
-        eprintln!("skipped: {urdf} not present");
-        return;
-    }
+    assert!(
+        std::path::Path::new(urdf).is_file(),
+        "{urdf}: the vendored fixture is missing"
+    );
     for (joint, inertia, amp) in [("l_knee", 0.574, 16.6), ("l_ankle_roll", 0.0054, 0.64)] {
         let link = frictionless_sim::link::link_from_model(&LinkModel::Urdf {
             urdf: urdf.to_string(),

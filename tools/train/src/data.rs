@@ -15,7 +15,7 @@
 //!   and the label are finite. So no window ever straddles two chunks.
 //! - [`ChunkKey`] (dataset index, chunk id) and [`split_chunks`]: train/validation/test chosen as whole
 //!   chunks by a seeded shuffle (or explicit test chunks), never by overlapping windows (the authors'
-//!   leak, `paper-facts.md` §7).
+//!   leak, `docs/method.md` §7).
 //! - [`select`]: gathers one set's inputs and both targets (label, SCV prior of the newest ṡ).
 //!
 //! What it is **not**: no file reading (see `super::pipeline`), no filtering or labelling (that is

@@ -1,6 +1,6 @@
 //! Random hyper-parameter search over the paper's ranges (`frictl search`), parallel and resumable.
 //!
-//! What it **is**: [`SearchSpace`] (the authors' W&B sweep ranges, `paper-facts.md` §7.1: batch
+//! What it **is**: [`SearchSpace`] (the authors' W&B sweep ranges, `docs/method.md` §7.1: batch
 //! 3000–5000, hidden 150–300 each, lr 1e-5–1e-3 log-uniform, H 3–30, λ 0.1–0.5, dropout 0.01–0.1),
 //! [`draw`] (trial `k`'s hyper-parameters, a pure function of the search seed and `k`, so a resumed
 //! search draws what an uninterrupted one would, in any order), and [`run_search`]: the datasets are

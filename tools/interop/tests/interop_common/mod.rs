@@ -17,7 +17,7 @@ use rand::{Rng, SeedableRng};
 /// Path of the anchor ONNX model (without extension).
 pub fn anchor_base() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/anchors/blf_jtc_ergoCubSN002_l_ankle_roll_pinn_2024-06")
+        .join("../../tests/fixtures/ergocub/blf_jtc_ergoCubSN002_l_ankle_roll_pinn_2024-06")
 }
 
 /// The anchor ONNX path.
