@@ -113,26 +113,28 @@ pub fn build_frictiond_with_cargo(me: &Path) -> anyhow::Result<Option<PathBuf>> 
     if me.file_stem().and_then(|s| s.to_str()) != Some("frictl") {
         return Ok(None);
     }
-    // `<target>/<profile>/frictl` or, with `--target TRIPLE`, `<target>/<triple>/<profile>/frictl`;
-    // cargo marks its target directory with CACHEDIR.TAG.
+    // `<target>/<profile>/frictl` or, with `--target TRIPLE`, `<target>/<triple>/<profile>/frictl`.
+    // Cargo keeps `.cargo-lock` in every profile directory and `.rustc_info.json` in the target
+    // directory (CACHEDIR.TAG only when cargo created the directory itself).
     let Some(profile_dir) = me.parent() else {
         return Ok(None);
     };
+    if !profile_dir.join(".cargo-lock").exists() {
+        return Ok(None);
+    }
     let Some(profile) = profile_dir.file_name().and_then(|s| s.to_str()) else {
         return Ok(None);
     };
     let Some(up) = profile_dir.parent() else {
         return Ok(None);
     };
-    let (target_dir, triple) = if up.join("CACHEDIR.TAG").is_file() {
-        (up.to_path_buf(), None)
-    } else {
-        match up.parent() {
-            Some(root) if root.join("CACHEDIR.TAG").is_file() => {
-                (root.to_path_buf(), up.file_name().map(|t| t.to_owned()))
-            }
-            _ => return Ok(None),
+    let is_target_dir =
+        |d: &Path| d.join(".rustc_info.json").is_file() || d.join("CACHEDIR.TAG").is_file();
+    let (target_dir, triple) = match up.parent() {
+        Some(root) if !is_target_dir(up) && is_target_dir(root) => {
+            (root.to_path_buf(), up.file_name().map(|t| t.to_owned()))
         }
+        _ => (up.to_path_buf(), None),
     };
     // The `dev` profile builds into `debug/`; every other profile into a directory of its name.
     let profile = if profile == "debug" { "dev" } else { profile };
