@@ -49,18 +49,6 @@ fn config_text(prefix: &str, iox: &Path, trigger: &str) -> String {
     )
 }
 
-/// Sleeps until the absolute CLOCK_MONOTONIC time `t_ns` (the daemon's own way of sleeping).
-fn sleep_until(t_ns: u64) {
-    use nix::sys::time::TimeSpec;
-    use nix::time::{ClockId, ClockNanosleepFlags, clock_nanosleep};
-    let ts = TimeSpec::new((t_ns / 1_000_000_000) as _, (t_ns % 1_000_000_000) as _);
-    while let Err(nix::errno::Errno::EINTR) = clock_nanosleep(
-        ClockId::CLOCK_MONOTONIC,
-        ClockNanosleepFlags::TIMER_ABSTIME,
-        &ts,
-    ) {}
-}
-
 fn quantile(sorted: &[u64], q: f64) -> f64 {
     if sorted.is_empty() {
         return f64::NAN;
@@ -167,7 +155,7 @@ fn run(trigger: &str, n: usize, dir: &Path) {
                 let period = 997_000u64;
                 let mut next = monotonic_ns() + period;
                 for k in 1..=total {
-                    sleep_until(next);
+                    frictionless_shm_types::sleep_until_ns(next);
                     next += period;
                     let now = monotonic_ns();
                     js.seq = k as u64;

@@ -44,7 +44,7 @@ use frictionless_shm_types::{
     DaemonStatus, FAULT_FEEDBACK_STALE, FLAG_CURRENT_SATURATED, FLAG_DISABLED, FLAG_FAULT,
     FLAG_FRICTION_CLIPPED, FLAG_NON_FINITE, FLAG_STALE, FLAG_WARMING_UP, JointStates, MAX_JOINTS,
     MotorCurrentCommand, STATUS_CPU_PINNED, STATUS_INPUT_STALE, STATUS_MEMORY_LOCKED,
-    STATUS_SCHED_FIFO, STATUS_STOPPING, TorqueRequest, monotonic_ns,
+    STATUS_SCHED_FIFO, STATUS_STOPPING, TorqueRequest, monotonic_ns, sleep_until_ns,
 };
 
 use crate::alloc_count;
@@ -487,22 +487,6 @@ fn prefault_stack() {
     std::hint::black_box(&mut buf);
 }
 
-/// Sleeps until the absolute CLOCK_MONOTONIC time `deadline_ns` (retries on EINTR).
-#[inline]
-fn sleep_until(deadline_ns: u64) {
-    use nix::sys::time::TimeSpec;
-    use nix::time::{ClockId, ClockNanosleepFlags, clock_nanosleep};
-    let ts = TimeSpec::new(
-        (deadline_ns / 1_000_000_000) as _,
-        (deadline_ns % 1_000_000_000) as _,
-    );
-    while let Err(nix::errno::Errno::EINTR) = clock_nanosleep(
-        ClockId::CLOCK_MONOTONIC,
-        ClockNanosleepFlags::TIMER_ABSTIME,
-        &ts,
-    ) {}
-}
-
 /// How a lockstep wait ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum LockstepWake {
@@ -554,7 +538,7 @@ fn wait_lockstep(
         };
         if waited.is_err() {
             // A failing listener must not turn this into a busy loop.
-            sleep_until(monotonic_ns() + 100_000);
+            sleep_until_ns(monotonic_ns() + 100_000);
         }
     }
 }
@@ -888,7 +872,7 @@ fn wait_for_tick(
             timed_out,
         }
     } else {
-        sleep_until(deadline_ns);
+        sleep_until_ns(deadline_ns);
         let wake_ns = monotonic_ns();
         if stop.load(Ordering::Relaxed) {
             return Wake::Stop;
@@ -1086,7 +1070,7 @@ fn publish_stop(
         cmd.seq = cmd.seq.wrapping_add(1);
         cmd.stamp_ns = monotonic_ns();
         let _ = backend.publish_command(cmd);
-        sleep_until(monotonic_ns() + period_ns);
+        sleep_until_ns(monotonic_ns() + period_ns);
     }
     status.seq += 1;
     status.stamp_ns = monotonic_ns();

@@ -466,6 +466,27 @@ pub fn monotonic_ns() -> u64 {
     ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
 }
 
+/// Sleeps until the absolute CLOCK_MONOTONIC time `deadline_ns` (the clock of [`monotonic_ns`]),
+/// retrying on EINTR: `clock_nanosleep` with `TIMER_ABSTIME`, so a late wake-up never shifts later
+/// deadlines. Returns at once when the deadline has passed. Never allocates.
+#[inline]
+pub fn sleep_until_ns(deadline_ns: u64) {
+    let ts = libc::timespec {
+        tv_sec: (deadline_ns / 1_000_000_000) as _,
+        tv_nsec: (deadline_ns % 1_000_000_000) as _,
+    };
+    // SAFETY: `ts` is a valid timespec; the remaining-time pointer may be null with TIMER_ABSTIME.
+    while unsafe {
+        libc::clock_nanosleep(
+            libc::CLOCK_MONOTONIC,
+            libc::TIMER_ABSTIME,
+            &ts,
+            std::ptr::null_mut(),
+        )
+    } == libc::EINTR
+    {}
+}
+
 /// Why opening or using an IPC resource failed. Messages name the service and the cause.
 #[derive(Debug, thiserror::Error)]
 pub enum ShmError {

@@ -151,21 +151,6 @@ impl std::fmt::Display for ServeSummary {
 const PERIOD_S: f64 = 1e-3;
 const PERIOD_NS: u64 = 1_000_000;
 
-/// Sleeps until the absolute CLOCK_MONOTONIC time `deadline_ns` (retries on EINTR).
-fn sleep_until(deadline_ns: u64) {
-    use nix::sys::time::TimeSpec;
-    use nix::time::{ClockId, ClockNanosleepFlags, clock_nanosleep};
-    let ts = TimeSpec::new(
-        (deadline_ns / 1_000_000_000) as _,
-        (deadline_ns % 1_000_000_000) as _,
-    );
-    while let Err(nix::errno::Errno::EINTR) = clock_nanosleep(
-        ClockId::CLOCK_MONOTONIC,
-        ClockNanosleepFlags::TIMER_ABSTIME,
-        &ts,
-    ) {}
-}
-
 /// The plant's ports.
 struct PlantPorts {
     states_ch: Channel<JointStates>,
@@ -366,7 +351,7 @@ fn serve_loop(
                 }
             }
         } else {
-            sleep_until(deadline);
+            frictionless_shm_types::sleep_until_ns(deadline);
             match ports
                 .commands
                 .latest()
