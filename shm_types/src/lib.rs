@@ -19,6 +19,33 @@
 //! Layout rules: fixed capacity [`MAX_JOINTS`] plus a count `n_joints`; joint `j` is element `j` of
 //! every per-joint array; masks are `u64` bit sets (bit `j` = joint `j`). Type names are explicit and
 //! versioned (`frictionless::JointStates_v1`): change the layout ⇒ bump the version.
+//!
+//! ## Example: an MIT-mode torque command through the CAN codec
+//! ```
+//! use frictionless_shm_types::can::mit::{self, MitCommand, MitRanges, MitRx, MitSaturation};
+//!
+//! // frictiond's command: pure feed-forward torque (kp = kd = 0) to the drive with motor id 3.
+//! let ranges = MitRanges::MINI_CHEETAH; // T ±18 Nm in 12 bits
+//! let (frame, sat) = mit::encode_command(3, &MitCommand::torque(1.25), &ranges)?;
+//! assert_eq!((frame.id, frame.len, frame.extended), (3, 8, false));
+//! assert!(!sat.any());
+//!
+//! // What the drive decodes: the same torque within one quantisation step.
+//! let MitRx::Command(rx) = mit::decode_command(&frame, &ranges)? else {
+//!     panic!("a torque command is not a special frame");
+//! };
+//! let t_step_nm = ranges.steps()[4];
+//! assert!((rx.t_ff_nm - 1.25).abs() <= 0.5 * t_step_nm);
+//!
+//! // Out of range is clamped to the range end and reported, never wrapped.
+//! let (frame, sat) = mit::encode_command(3, &MitCommand::torque(-30.0), &ranges)?;
+//! assert!(sat.has(MitSaturation::T));
+//! let MitRx::Command(rx) = mit::decode_command(&frame, &ranges)? else {
+//!     panic!("not a special frame");
+//! };
+//! assert_eq!(rx.t_ff_nm, ranges.t_min_nm);
+//! # Ok::<(), frictionless_shm_types::can::CanCodecError>(())
+//! ```
 
 #![warn(missing_docs)]
 

@@ -14,6 +14,50 @@
 //! What it is **not**: no model construction or filter design (frictiond's `params`), no IPC, no I/O
 //! besides reading the config and model files. Used by `frictiond` and by `frictl`; it depends on
 //! neither. Units: SI, joint side; the velocity threshold is in **rad/s** (BLF used deg/s).
+//!
+//! ## Example: parse, read resolved values, write back with `toml::to_string`
+//! ```
+//! use std::path::Path;
+//! use frictiond_config::{LpfConfig, ModelSpec};
+//!
+//! // One CV joint: no model file needed. The path only names the file in errors (and resolves
+//! // relative model paths); nothing is read.
+//! let text = r#"
+//! [backend]
+//! kind = "shm"
+//!
+//! [[joint]]
+//! name = "knee"
+//! index = 0
+//! gear_ratio = -100.0   # signed: motor angle = r · joint angle
+//! kt = 0.157            # Nm/A
+//! max_curr = 5.0        # A
+//! friction_model = "coulomb_viscous"
+//! kc = 8.1
+//! ka = 50.84
+//! kv = 5.55
+//! "#;
+//! let cfg = frictiond_config::parse(Path::new("/etc/frictiond/knee.toml"), text)?;
+//! assert_eq!(cfg.period_ns(), 1_000_000, "[loop] defaults to 1 kHz");
+//! assert_eq!(cfg.raw.joint[0].kfc, 1.0, "kfc defaults to 1");
+//! let ModelSpec::Cv(cv) = &cfg.models[0] else { panic!("coulomb_viscous resolves to CV") };
+//! assert_eq!((cv.kc, cv.ka, cv.kv), (8.1, 50.84, 5.55));
+//!
+//! // Tools write configs through the same types: serialize, edit, re-parse (and re-validate).
+//! let mut raw = cfg.raw.clone();
+//! raw.joint[0].kfc = 0.85;
+//! raw.joint[0].lpf = Some(LpfConfig { order: 2, cutoff_hz: 10.0 });
+//! let written = toml::to_string(&raw)?;
+//! let back = frictiond_config::parse(Path::new("/tmp/written.toml"), &written)?;
+//! assert_eq!(back.raw, raw);
+//! assert_eq!(back.models, cfg.models);
+//!
+//! // Errors name the file, the key and the value.
+//! let bad = text.replace("kt = 0.157", "kt = -0.157");
+//! let err = frictiond_config::parse(Path::new("/etc/frictiond/knee.toml"), &bad).unwrap_err();
+//! assert!(err.to_string().contains("joint[0].kt"), "{err}");
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 #![warn(missing_docs)]
 

@@ -15,6 +15,37 @@
 //!
 //! What it is **not**: no error-frame lines (ids with the CAN_ERR flag are refused), no filtering, no
 //! ASCII-art candump output.
+//!
+//! ## Example: parse a `candump -L` log, re-write it, decode a frame
+//! ```
+//! use frictionless_canlog::{LogFrame, format_entry, parse_line, parse_log, write_entry};
+//! use frictionless_shm_types::can::mit::{self, MitRanges, MitRx, MitSpecial};
+//!
+//! // Motor 3 told to enter MIT motor mode, then an ODrive-style extended-id remote frame.
+//! let line = "(1700000000.000123) can0 003#FFFFFFFFFFFFFFFC";
+//! let e = parse_line(line, 1, "bus.log")?;
+//! assert_eq!((e.stamp_us, e.iface.as_str()), (1_700_000_000_000_123, "can0"));
+//! let LogFrame::Can { frame, len8_dlc: None } = &e.frame else { panic!("a classic frame") };
+//! assert_eq!((frame.id, frame.extended, frame.len), (3, false, 8));
+//! // The frames are the codecs' `WireFrame`s: decode with `frictionless-shm-types`.
+//! let rx = mit::decode_command(frame, &MitRanges::MINI_CHEETAH).expect("an MIT frame");
+//! assert_eq!(rx, MitRx::Special(MitSpecial::EnterMotorMode));
+//!
+//! // Writing gives the same text back, so a log survives read → write unchanged.
+//! assert_eq!(format_entry(&e), line);
+//! let log = format!("{line}\n(1700000000.001123) can0 00000069#R8\n");
+//! let entries = parse_log(log.as_bytes(), "bus.log")?;
+//! let mut out = Vec::new();
+//! for e in &entries {
+//!     write_entry(&mut out, e)?;
+//! }
+//! assert_eq!(String::from_utf8(out)?, log);
+//!
+//! // Errors name the file, the line and the text.
+//! let err = parse_line("(1.5) can0 003#00", 7, "bus.log").unwrap_err();
+//! assert!(err.to_string().starts_with("bus.log: line 7:"), "{err}");
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 #![warn(missing_docs)]
 

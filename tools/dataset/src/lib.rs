@@ -12,6 +12,50 @@
 //!
 //! What it is **not**: the raw acquisition log writer (`frictionless-acquire`, `acquire::log`) or the
 //! label pipeline (`frictionless-ident`, `preprocess`).
+//!
+//! ## Example: write a dataset CSV and read it back
+//! ```
+//! use frictionless_dataset::Dataset;
+//!
+//! // Five 1 kHz samples of a knee (r = −100) sliding at 0.5 rad/s with a CV-like label.
+//! let n = 5;
+//! let r = -100.0;
+//! let time_s: Vec<f64> = (0..n).map(|k| k as f64 * 1e-3).collect();
+//! let s_rad: Vec<f64> = time_s.iter().map(|t| -0.8 + 0.5 * t).collect();
+//! let col = |v: f64| vec![v; n];
+//! let ds = Dataset {
+//!     chunk: vec![0; n],
+//!     source_chunk: vec![0; n],
+//!     active: vec![true; n],
+//!     valid: vec![true; n],
+//!     theta_motor_rad: s_rad.iter().map(|s| r * s).collect(),
+//!     s_rad,
+//!     sdot_rad_s: col(0.5),
+//!     sddot_rad_s2: col(0.0),
+//!     delta_theta_motor_rad: col(0.0),
+//!     omega_motor_rad_s: col(r * 0.5),
+//!     i_meas_a: col(-0.61),
+//!     i_filt_a: col(-0.6),
+//!     tau_id_nm: col(0.1),
+//!     tau_f_label_nm: col(8.1 + 5.55 * 0.5),
+//!     temperature_c: col(35.0),
+//!     tau_f_true_nm: None,
+//!     phi_ddot_rad_s2: None,
+//!     time_s,
+//! };
+//! assert_eq!(ds.mismatched_column(), None, "one value per sample in every column");
+//!
+//! let path = std::env::temp_dir().join(format!("frictionless_dataset_doc_{}.csv", std::process::id()));
+//! ds.write_csv(&path)?;
+//! let back = Dataset::read_csv(&path);
+//! std::fs::remove_file(&path)?;
+//! let back = back?;
+//! // Shortest round-trip float text: the values come back bit for bit.
+//! assert_eq!(back, ds);
+//! assert_eq!(back.joint_sample(3).theta_motor_rad, r * (-0.8 + 0.5 * 3e-3));
+//! assert_eq!(back.columns().len(), frictionless_dataset::DATASET_COLUMNS.len());
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 #![warn(missing_docs)]
 

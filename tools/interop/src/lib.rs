@@ -17,6 +17,38 @@
 //! What it is **not**: no inference engine (use [`frictionless::kernel::Mlp`]), no `.fwt` byte codec
 //! (that is [`frictionless::weights`]), no general ONNX runtime: anything that is not a single
 //! input→output chain of dense layers and ReLUs is refused with an error naming the node.
+//!
+//! ## Example: `.fwt` → ONNX bytes → back, same outputs
+//! ```
+//! use frictionless::kernel::Mlp;
+//! use frictionless::mlp::StorageDtype;
+//! use frictionless_interop::onnx::{self, ExportOptions};
+//! use frictionless_interop::{ModelHints, max_output_change, random_inputs};
+//!
+//! // A shipped paper-size network (40 → 268 → 215 → 1, r = −160).
+//! let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/models/stress32_paper_f16_r-160.fwt");
+//! let file = frictionless::weights::read_file(std::path::Path::new(path))?;
+//!
+//! // Export with the model's metadata, so a re-import knows the joint without extra flags.
+//! let opts = ExportOptions {
+//!     metadata: ModelHints::from_meta(&file.meta).to_pairs(),
+//!     ..ExportOptions::default()
+//! };
+//! let bytes = onnx::export_bytes(&file.mlp, &opts)?;
+//! let back = onnx::import_bytes(&bytes)?;
+//! assert_eq!(back.mlp.sizes(), file.mlp.sizes());
+//! let hints = ModelHints::from_pairs(&back.metadata).expect("metadata written by us parses");
+//! assert_eq!(hints.gear_ratio, Some(-160.0));
+//!
+//! // Both run on the core's kernel: f32 weights survive the trip exactly.
+//! let mut a = Mlp::new(&file.mlp, StorageDtype::F32)?;
+//! let mut b = Mlp::new(&back.mlp, StorageDtype::F32)?;
+//! let inputs = random_inputs(&file.mlp.norm, 16, 7);
+//! let (max_diff, max_ref) = max_output_change(&mut a, &mut b, &inputs);
+//! assert!(max_ref > 0.0, "the network is not constant zero");
+//! assert!(max_diff <= 1e-6 * max_ref, "max |Δ| = {max_diff} of {max_ref}");
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 #![warn(missing_docs)]
 

@@ -16,6 +16,33 @@
 //!
 //! What it is **not**: the excitation protocol or any controller (`frictionless-acquire`), and not the
 //! plant process over shared memory or CAN (`frictl sim serve`, `frictl`'s `serve`).
+//!
+//! ## Example: push the knee with a constant current
+//! ```
+//! use frictionless_sim::{ParamError, Plant, PlantParams};
+//!
+//! let params = PlantParams::preset("knee")?; // r = −100, k_t = 0.157 Nm/A, 1 kHz samples
+//! let r = params.gear_ratio_signed;
+//! let s0_rad = params.initial_s_rad;
+//!
+//! // 100 ms at a constant current reference (robot convention), no external torque.
+//! let push = |i_a: f64| -> Result<f64, ParamError> {
+//!     let mut plant = Plant::from_params(params.clone(), 1)?; // at rest, holding gravity
+//!     let mut s_rad = s0_rad;
+//!     for _ in 0..100 {
+//!         let sample = plant.step(i_a, 0.0);
+//!         s_rad = sample.meas.s_rad; // the joint encoder, quantised
+//!     }
+//!     Ok(s_rad)
+//! };
+//!
+//! // Joint torque = r·k_t·i (signed r): with r < 0 a positive current turns the joint negative.
+//! assert!(r < 0.0);
+//! let (s_pos, s_neg) = (push(3.0)?, push(-3.0)?);
+//! assert!(s_pos < s0_rad - 0.01, "s = {s_pos} from {s0_rad}");
+//! assert!(s_neg > s0_rad + 0.01, "s = {s_neg} from {s0_rad}");
+//! # Ok::<(), ParamError>(())
+//! ```
 
 #![warn(missing_docs)]
 

@@ -29,6 +29,39 @@
 //! resumable random search (`frictl search`). The engine itself does **not** read files or fit the SCV
 //! model. Entry points: [`Trainer::new`] / [`Trainer::resume`], [`Trainer::train`],
 //! [`Trainer::save_checkpoint`], [`Predictor`] and [`rmse`].
+//!
+//! ## Example: train a small network on synthetic friction data, run it on the core's kernel
+//! ```
+//! use std::ops::ControlFlow;
+//! use frictionless::kernel::Mlp;
+//! use frictionless::mlp::StorageDtype;
+//! use frictionless_train::{TrainConfig, Trainer, rmse, synthetic};
+//!
+//! // Rows of 4 velocities + 4 current-like values (H = 4); label = SCV + history terms + noise.
+//! let train = synthetic::friction_task(2_000, 4, 1);
+//! let val = synthetic::friction_task(500, 4, 2);
+//! let cfg = TrainConfig {
+//!     hidden: vec![16, 16],
+//!     dropout: 0.0,
+//!     lambda: 0.1, // weight of the SCV prior in the loss
+//!     lr: 3e-3,
+//!     batch_size: 128,
+//!     epochs: 15,
+//!     threads: 1,
+//!     ..TrainConfig::default()
+//! };
+//! let mut trainer = Trainer::new(cfg, &train.dataset(), Some(&val.dataset()))?;
+//! let out = trainer.train(|_epoch| ControlFlow::Continue(()))?;
+//! let first = out.history[0].val_rmse_nm.expect("validation data given");
+//! let best = out.best_val_rmse_nm.expect("validation data given");
+//! assert!(best < 0.7 * first, "validation RMSE {first} → {best} Nm");
+//!
+//! // The result (normalisation included) runs on the kernel frictiond uses.
+//! let mut mlp = Mlp::new(&out.weights, StorageDtype::F32)?;
+//! let pred: Vec<f32> = val.x.chunks(val.n_inputs).map(|row| mlp.forward(row)).collect();
+//! assert!((rmse(&pred, &val.y_label_nm) - best).abs() < 1e-3 * best.max(1e-3));
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 #![warn(missing_docs)]
 
