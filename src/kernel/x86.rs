@@ -3,8 +3,8 @@
 //!
 //! Each path runs the *whole* forward pass inside one `#[target_feature]` function and every helper has
 //! the same `#[target_feature]` attribute plus `#[inline]`, so LLVM inlines them and compiles the
-//! surrounding loops with the wide registers too (measured pitfall: helpers without the attribute were
-//! up to 60× slower). Hidden layers keep `G` output blocks in registers (AVX-512: up to 8 zmm, AVX2: up to
+//! surrounding loops with the wide registers too (helpers without the attribute are not inlined into
+//! the wide-register code; `docs/decisions.md`, "Inference kernel"). Hidden layers keep `G` output blocks in registers (AVX-512: up to 8 zmm, AVX2: up to
 //! 4 × 2 ymm), preload the bias, broadcast `x[i]`, issue one FMA per block and fuse the ReLU into the
 //! store. Weights are decoded in-register: f16 with `vcvtph2ps`, bf16 by a 16-bit left shift.
 //!

@@ -13,18 +13,14 @@
 //!   basin (in parallel), the best converges on a ≤ 100 000-sample subsample, then 1–2 steps polish it
 //!   on all samples. Each pass evaluates τ and ∂τ/∂p together ([`Fittable::value_jacobian`]), and LM
 //!   stops as soon as the decrease its own linear model predicts is below `rel_tol` (no wasted data
-//!   passes on rejected steps near the optimum). 10⁶ SCV samples: 3.10 s → 2.15 s (same run, 2 cores
-//!   shared with ~8 compilers) with the fused pass and the predicted-decrease stop alone.
+//!   passes on rejected steps near the optimum).
 //!
 //!   The pass itself is vectorised by hand-shaped code, not a crate: samples go through
 //!   [`Fittable::value_jacobian_lanes`] in groups of [`LANES`], with branch-free [`exp_lanes`] /
 //!   [`ln_lanes`] (`frictionless::fastmath`, ≈ 1 ulp from libm, tested there) written one loop per operation so LLVM emits AVX2, and
 //!   JᵀJ/Jᵀr accumulated lane-wise; chunk sums are added in chunk order (bit-identical for any
-//!   thread count). Measured (`cargo bench -p frictionless-ident --bench fit`, same run, load 3.7): SCV 10⁶
-//!   632 ms → 91 ms, CV 84 ms → 39 ms; callgrind instructions per fit: SCV 5.48 G → 1.29 G,
-//!   CV 0.65 G → 0.20 G. An SCV fit still makes ~9 × 10⁶ model evaluations, 7 × 10⁶ of them in
-//!   the full-data polish (6 accepted LM steps along the ill-conditioned ks–vs–α valley); carrying
-//!   the medium stage's small λ into the polish was tried and took more passes (rejected GN steps).
+//!   thread count). Measurements and the alternatives tried are in `docs/decisions.md`
+//!   ("Identification"); `cargo bench -p frictionless-ident --bench fit` re-runs them.
 //!
 //!   Bounds ([`FitBounds`], defaults physically motivated, overridable by `frictl fit` flags): the
 //!   unbounded least-squares optimum runs away on real/simulated data (ka → 1e8 turns tanh into a

@@ -10,7 +10,7 @@
 //! (f′ = −δ·u^(δ−1)·f, libm at build time) at its two ends, in monomial form.
 //!
 //! Coverage: u ∈ [2^[`LOWEST_EXPONENT`], 2^e_top) with 2^e_top ≥ u_cut = 40^(1/δ) (where
-//! u^δ ≥ 40 and s < 4.3e-18; above the table s is 0, as on the previous fast path). Below the table
+//! u^δ ≥ 40 and s < 4.3e-18; above the table s is 0). Below the table
 //! (|ṡ| < v_s·2⁻²⁰, the stick phase) [`StribeckTable::shape`] falls back to the inlined
 //! `exp(−powf(u, δ))`.
 //!

@@ -5,12 +5,9 @@
 //! `b1`, …), so Adam, checkpoints and the gradient check treat them as one vector. This module does not
 //! know about losses, optimisers or epochs (see the parent module).
 //!
-//! Speed (bench workload 200k × 40, 268/215, batch 4096): the GEMMs cost ~0.63 s CPU per epoch at
-//! 60–70 GFMA/s per core (`FRICTL_BENCH_GEMM=1 cargo bench -p frictionless-train --bench train`); the elementwise
-//! passes were a third of the profile until they were made vectorisable (dropout drawn per block,
-//! then applied branch-free; ReLU gradient branch-free; bias sums one column block per thread).
-//! Same run, load 1.5: 0.89–0.95 → 0.59–0.61 s per epoch on 2 threads, 1.33 → 0.77 s CPU on 1.
-//! A fused single-output layer (dot per row in the last hidden pass) measured slower and was dropped.
+//! The elementwise passes are written to vectorise (dropout drawn per block, then applied branch-free;
+//! ReLU gradient branch-free; bias sums one column block per thread); the measurements behind that are in
+//! `docs/decisions.md` ("Training").
 
 use super::rng::{XorShift64Star, derive, tag};
 

@@ -11,19 +11,7 @@
 //! The defaults are sized for a run of about half a minute per joint on 2 loaded cores that beats
 //! SCV clearly on unseen closed-loop tracking data of the virtual joints: 128×128, H 30, batch 512,
 //! lr 1e-3, λ 0.01, no dropout, 10 epochs, Δθ latched once per dataset (`--delta-theta-offset run`).
-//! Measured on the demo datasets (one protocol seed with 2 starts + a closed-loop tracking set; test:
-//! an unseen tracking run at other amplitudes, frequencies and gain), unseen-tracking RMSE PINN/SCV
-//! went from 0.68 (ankle roll) / 0.68 (knee) with the old demo settings (64×64, H 10, batch 4096,
-//! 12 epochs, the paper's λ 0.164 and dropout 0.07, Δθ latched per chunk) to ≈ 0.11 / ≈ 0.26. What
-//! mattered, largest first:
-//! 1. the Δθ latch: latched at each chunk start, Δθ loses the stiction wind-up the transmission holds
-//!    when the chunk starts, which is the information the network needs in stick (0.68 → 0.21 ankle
-//!    roll, 0.68 → 0.47 knee, nothing else changed);
-//! 2. more Adam steps (batch 512 instead of 4096: ≈ 1 000 steps per epoch instead of ≈ 130);
-//! 3. λ ≈ 0: the optimum of `(1 − λ)·MSE(label) + λ·MSE(SCV)` is the label shrunk by λ towards SCV,
-//!    which predicts ≈ 0 in stick (λ 0.164 → 0.01: knee 1.13 → 1.04 Nm; ankle 0.19 → 0.14 Nm);
-//! 4. no dropout (ankle 0.156 → 0.142 Nm at λ 0);
-//! 5. H 30 instead of 20 on the knee (0.94–0.97 → 0.71–0.83 Nm over 3 seeds; ankle unchanged).
+//! Why each of them, with the measurements, is in `docs/decisions.md` ("Training").
 //!
 //! Choosing the weights by the validation RMSE adds seed-to-seed scatter on the knee (its protocol
 //! chunks do not predict tracking performance: gravity g(s) is not an input); with a separate test
