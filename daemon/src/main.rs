@@ -146,13 +146,35 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     // Signals first, before any thread exists; iceoryx2 nodes run with signal handling disabled.
     let mut signals = signal_hook::iterator::Signals::new([SIGTERM, SIGINT, SIGHUP])
         .context("installing signal handlers")?;
+    let alloc_report = std::env::var_os("FRICTIOND_ALLOC_REPORT").map(PathBuf::from);
+    // Loop statistics at exit (`key=value` lines, see `rt::RtSummary::report`), for benches.
+    let latency_report = std::env::var_os("FRICTIOND_LATENCY_REPORT").map(PathBuf::from);
+    let rt = start_rt(&cfg, params, alloc_report.is_some())?;
+    let mut cfg = cfg;
+    let stop_reason = supervise(&mut cfg, &cli.config, &mut signals, &rt)?;
+    shut_down(rt, stop_reason, alloc_report, latency_report)
+}
+
+/// The running RT thread and the supervisor's ends of its channels and shared atomics.
+struct Rt {
+    thread: std::thread::JoinHandle<Option<rt::RtSummary>>,
+    /// Replaced parameter sets coming back to be freed off the RT thread.
+    rx_old: std::sync::mpsc::Receiver<Box<params::Params>>,
+    /// New parameter sets from reloads.
+    tx_params: std::sync::mpsc::SyncSender<Box<params::Params>>,
+    shared: Arc<rt::Shared>,
+}
+
+/// Spawns the RT thread and waits (up to 30 s) until it reports its set-up result.
+fn start_rt(
+    cfg: &config::Config,
+    params: Box<params::Params>,
+    count_allocs: bool,
+) -> anyhow::Result<Rt> {
     let shared = Arc::new(rt::Shared::default());
     let (tx_params, rx_params) = std::sync::mpsc::sync_channel(1);
     let (tx_old, rx_old) = std::sync::mpsc::sync_channel(4);
     let (tx_started, rx_started) = std::sync::mpsc::sync_channel(1);
-    let alloc_report = std::env::var_os("FRICTIOND_ALLOC_REPORT").map(PathBuf::from);
-    // Loop statistics at exit (`key=value` lines, see `rt::RtSummary::report`), for benches.
-    let latency_report = std::env::var_os("FRICTIOND_LATENCY_REPORT").map(PathBuf::from);
     let setup = rt::RtSetup {
         config: cfg.clone(),
         params,
@@ -160,7 +182,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         tx_old,
         shared: shared.clone(),
         started: tx_started,
-        count_allocs: alloc_report.is_some(),
+        count_allocs,
     };
     let rt_thread = std::thread::Builder::new()
         .name("frictiond-rt".into())
@@ -181,8 +203,25 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         granted & frictionless_shm_types::STATUS_MEMORY_LOCKED != 0,
         granted & frictionless_shm_types::STATUS_CPU_PINNED != 0,
     );
+    Ok(Rt {
+        thread: rt_thread,
+        rx_old,
+        tx_params,
+        shared,
+    })
+}
 
-    let mut cfg = cfg;
+/// The supervisor loop (every 5 ms) until SIGTERM or SIGINT: handles SIGHUP reloads, frees
+/// replaced parameter sets, sends READY once the RT loop has run `ready_after_ticks`, pets the
+/// watchdog only while the heartbeat advances, and sends STATUS every second. Returns the signal
+/// that stopped it.
+fn supervise(
+    cfg: &mut config::Config,
+    config_path: &std::path::Path,
+    signals: &mut signal_hook::iterator::Signals,
+    rt: &Rt,
+) -> anyhow::Result<i32> {
+    let shared = &rt.shared;
     let ready_after = cfg.raw.loop_.ready_after_ticks;
     let wd = sdnotify::watchdog_interval();
     let mut ready = false;
@@ -197,15 +236,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         for sig in signals.pending() {
             match sig {
                 SIGTERM | SIGINT => stop_reason = Some(sig),
-                SIGHUP => reload(&mut cfg, &cli.config, &tx_params, &mut generation),
+                SIGHUP => reload(cfg, config_path, &rt.tx_params, &mut generation),
                 _ => {}
             }
         }
-        while let Ok(old) = rx_old.try_recv() {
+        while let Ok(old) = rt.rx_old.try_recv() {
             tracing::debug!("freeing parameter generation {}", old.generation);
             drop(old);
         }
-        if rt_thread.is_finished() {
+        if rt.thread.is_finished() {
             bail!("RT thread ended unexpectedly");
         }
         let beat = shared.heartbeat.load(Ordering::Relaxed);
@@ -236,15 +275,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         }
         if ready && last_status.elapsed() >= Duration::from_secs(1) {
             last_status = Instant::now();
-            let p99 = shared.lateness_p99_ns.load(Ordering::Relaxed);
-            let max = shared.lateness_max_ns.load(Ordering::Relaxed);
-            let missed = shared.missed.load(Ordering::Relaxed);
-            sdnotify::notify_logged(&format!(
-                "STATUS=ticks {beat}, lateness p99 <= {} us, max {} us, missed {missed}, generation {}",
-                p99 / 1000,
-                max / 1000,
-                shared.generation.load(Ordering::Relaxed)
-            ));
+            notify_status(shared, beat);
         }
         if last_beat_change.elapsed() > Duration::from_secs(5) {
             tracing::warn!("RT heartbeat has not advanced for 5 s (tick {beat})");
@@ -252,9 +283,40 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         }
         std::thread::sleep(Duration::from_millis(5));
     }
+    Ok(stop_reason.unwrap_or(0))
+}
+
+/// Sends the periodic `STATUS=` line: ticks, wake lateness, missed ticks, parameter generation.
+fn notify_status(shared: &rt::Shared, beat: u64) {
+    let p99 = shared.lateness_p99_ns.load(Ordering::Relaxed);
+    let max = shared.lateness_max_ns.load(Ordering::Relaxed);
+    let missed = shared.missed.load(Ordering::Relaxed);
+    sdnotify::notify_logged(&format!(
+        "STATUS=ticks {beat}, lateness p99 <= {} us, max {} us, missed {missed}, generation {}",
+        p99 / 1000,
+        max / 1000,
+        shared.generation.load(Ordering::Relaxed)
+    ));
+}
+
+/// Stops after `stop_reason`: STOPPING=1, a second SIGTERM/SIGINT exits at once, the RT thread
+/// publishes zero currents and ends, then the exit reports are written.
+fn shut_down(
+    rt: Rt,
+    stop_reason: i32,
+    alloc_report: Option<PathBuf>,
+    latency_report: Option<PathBuf>,
+) -> anyhow::Result<()> {
+    let Rt {
+        thread: rt_thread,
+        rx_old,
+        // Held (not dropped) until the end, as while supervising.
+        tx_params: _tx_params,
+        shared,
+    } = rt;
     tracing::info!(
         "signal {} received: publishing zero currents and stopping",
-        stop_reason.unwrap_or(0)
+        stop_reason
     );
     sdnotify::notify_logged("STOPPING=1");
     // A second SIGTERM/SIGINT while stopping exits at once with status 1.

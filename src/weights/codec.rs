@@ -172,7 +172,73 @@ pub(super) fn parse_header(b: &[u8]) -> Result<Header, WeightError> {
     let version_minor = rd_u16(b, off::VERSION_MINOR);
     let crc_stored = rd_u32(b, off::CRC);
 
-    // Features and inputs.
+    let (features, n_inputs) = parse_features(b)?;
+    let input_units = parse_units(b, &features)?;
+
+    let d_code = rd_u8(b, off::DTYPE);
+    let dtype = layout::dtype_from_code(d_code).ok_or_else(|| unknown("dtype", d_code))?;
+    let f_code = rd_u8(b, off::FILTERING);
+    let filtering =
+        layout::filtering_from_code(f_code).ok_or_else(|| unknown("filtering", f_code))?;
+
+    let (layers, n_params) = parse_layer_table(b, n_inputs)?;
+    let layout = Layout::new(
+        n_inputs as u64,
+        layers.len() as u64,
+        n_params,
+        dtype.size_bytes() as u64,
+    );
+    inconsistent(
+        "payload_offset",
+        rd_u32(b, off::PAYLOAD_OFFSET).into(),
+        layout.payload_offset,
+    )?;
+    inconsistent(
+        "payload_len",
+        rd_u64(b, off::PAYLOAD_LEN),
+        layout.payload_len,
+    )?;
+    inconsistent("file_len", rd_u64(b, off::FILE_LEN), layout.file_len)?;
+
+    let scv = if flag(b, off::SCV_PRESENT, "scv_present")? {
+        let v = |i: usize| rd_f64(b, off::SCV + 8 * i);
+        Some(ScvParams {
+            kc: v(0),
+            ka: v(1),
+            kv: v(2),
+            ks: v(3),
+            vs: v(4),
+            alpha: v(5),
+        })
+    } else {
+        None
+    };
+
+    Ok(Header {
+        version_minor,
+        crc_stored,
+        layout,
+        features,
+        input_units,
+        n_inputs,
+        dtype,
+        filtering,
+        layers,
+        gear_ratio: rd_f64(b, off::GEAR_RATIO),
+        kt_nm_per_a: rd_f64(b, off::KT),
+        scv,
+        dataset_sha256: rd(b, off::DATASET_SHA256),
+        val_rmse_nm: rd_f32(b, off::VAL_RMSE),
+        test_rmse_nm: rd_f32(b, off::TEST_RMSE),
+        created_unix_s: rd_u64(b, off::CREATED),
+        joint_name: text::<64>(b, off::JOINT_NAME, "joint_name")?,
+        tool_version: text::<32>(b, off::TOOL_VERSION, "tool_version")?,
+    })
+}
+
+/// Reads the feature set, block count, temperature flag and history, and checks the stored input
+/// count against them. Returns the feature spec and the input count.
+fn parse_features(b: &[u8]) -> Result<(FeatureSpec, usize), WeightError> {
     let set_code = rd_u16(b, off::FEATURE_SET);
     let set =
         layout::feature_set_from_code(set_code).ok_or_else(|| unknown("feature_set", set_code))?;
@@ -199,6 +265,19 @@ pub(super) fn parse_header(b: &[u8]) -> Result<Header, WeightError> {
         units.len() as u64 * history + u64::from(temperature),
     )?;
     let history = history as usize; // ≤ MAX_INPUTS after the check above
+    let features = FeatureSpec {
+        set,
+        history,
+        temperature,
+    };
+    Ok((features, n_inputs))
+}
+
+/// Checks the stored unit codes (one per block slot, the temperature unit, the output unit) against
+/// the feature set. Returns the units of the input blocks, temperature last if present.
+fn parse_units(b: &[u8], features: &FeatureSpec) -> Result<Vec<Unit>, WeightError> {
+    let units = layout::block_units(features.set);
+    let temperature = features.temperature;
     let mut input_units = Vec::with_capacity(units.len() + 1);
     for slot in 0..layout::MAX_BLOCKS {
         let code = rd_u8(b, off::BLOCK_UNITS + slot);
@@ -242,14 +321,13 @@ pub(super) fn parse_header(b: &[u8]) -> Result<Header, WeightError> {
         o_code.into(),
         layout::OUTPUT_UNIT.code().into(),
     )?;
+    Ok(input_units)
+}
 
-    let d_code = rd_u8(b, off::DTYPE);
-    let dtype = layout::dtype_from_code(d_code).ok_or_else(|| unknown("dtype", d_code))?;
-    let f_code = rd_u8(b, off::FILTERING);
-    let filtering =
-        layout::filtering_from_code(f_code).ok_or_else(|| unknown("filtering", f_code))?;
-
-    // Layer table: count first, then the bytes, then each entry against the limits.
+/// Reads the layer table: the count first (against the depth limit), then the header length and the
+/// bytes present, then each entry (width limits, chaining, activations). Nothing is allocated before
+/// the count and the bytes are checked. Returns the layers and the parameter count.
+fn parse_layer_table(b: &[u8], n_inputs: usize) -> Result<(Vec<LayerInfo>, u64), WeightError> {
     let n_layers = usize::from(rd_u8(b, off::N_LAYERS));
     if n_layers == 0 {
         return Err(MlpShapeError::Empty.into());
@@ -313,62 +391,7 @@ pub(super) fn parse_header(b: &[u8]) -> Result<Header, WeightError> {
         });
         prev_out = n_out;
     }
-    let layout = Layout::new(
-        n_inputs as u64,
-        n_layers as u64,
-        n_params,
-        dtype.size_bytes() as u64,
-    );
-    inconsistent(
-        "payload_offset",
-        rd_u32(b, off::PAYLOAD_OFFSET).into(),
-        layout.payload_offset,
-    )?;
-    inconsistent(
-        "payload_len",
-        rd_u64(b, off::PAYLOAD_LEN),
-        layout.payload_len,
-    )?;
-    inconsistent("file_len", rd_u64(b, off::FILE_LEN), layout.file_len)?;
-
-    let scv = if flag(b, off::SCV_PRESENT, "scv_present")? {
-        let v = |i: usize| rd_f64(b, off::SCV + 8 * i);
-        Some(ScvParams {
-            kc: v(0),
-            ka: v(1),
-            kv: v(2),
-            ks: v(3),
-            vs: v(4),
-            alpha: v(5),
-        })
-    } else {
-        None
-    };
-
-    Ok(Header {
-        version_minor,
-        crc_stored,
-        layout,
-        features: FeatureSpec {
-            set,
-            history,
-            temperature,
-        },
-        input_units,
-        n_inputs,
-        dtype,
-        filtering,
-        layers,
-        gear_ratio: rd_f64(b, off::GEAR_RATIO),
-        kt_nm_per_a: rd_f64(b, off::KT),
-        scv,
-        dataset_sha256: rd(b, off::DATASET_SHA256),
-        val_rmse_nm: rd_f32(b, off::VAL_RMSE),
-        test_rmse_nm: rd_f32(b, off::TEST_RMSE),
-        created_unix_s: rd_u64(b, off::CREATED),
-        joint_name: text::<64>(b, off::JOINT_NAME, "joint_name")?,
-        tool_version: text::<32>(b, off::TOOL_VERSION, "tool_version")?,
-    })
+    Ok((layers, n_params))
 }
 
 /// Byte ranges that must be zero in a file whose minor version this reader knows.

@@ -254,11 +254,17 @@ fn parse_link(link: &urdf_rs::Link, source: &str) -> Result<ParsedLink, Dynamics
     })
 }
 
-fn build(
-    urdf: &urdf_rs::Robot,
-    source: &str,
-    reduction: Option<&Reduction>,
-) -> Result<Robot, DynamicsError> {
+/// The URDF's link/joint graph, checked: names unique, every joint between known links, each link
+/// the child of at most one joint, exactly one root.
+struct Graph<'u> {
+    link_index: HashMap<&'u str, usize>,
+    urdf_joint_names: HashMap<&'u str, usize>,
+    /// URDF joint indices whose parent is each link, in file order.
+    children: Vec<Vec<usize>>,
+    root: usize,
+}
+
+fn index_graph<'u>(urdf: &'u urdf_rs::Robot, source: &str) -> Result<Graph<'u>, DynamicsError> {
     let src = || source.to_string();
     let mut link_index = HashMap::new();
     for (i, l) in urdf.links.iter().enumerate() {
@@ -317,103 +323,194 @@ fn build(
             ),
         });
     }
-    let root = roots[0];
+    Ok(Graph {
+        link_index,
+        urdf_joint_names,
+        children,
+        root: roots[0],
+    })
+}
 
-    // Validate the reduction against the URDF.
-    if let Some(r) = reduction {
-        for name in r.keep.iter().chain(r.locked_q.keys()) {
-            match urdf_joint_names.get(name.as_str()) {
-                None => {
-                    return Err(DynamicsError::UnknownJoint {
-                        source_name: src(),
-                        joint: name.clone(),
-                    });
-                }
-                Some(&ji) if urdf.joints[ji].joint_type == urdf_rs::JointType::Fixed => {
-                    return Err(DynamicsError::NotMovable {
-                        source_name: src(),
-                        joint: name.clone(),
-                    });
-                }
-                _ => {}
+/// Every joint the reduction names exists and is not fixed, and none is both kept and locked.
+fn validate_reduction(
+    urdf: &urdf_rs::Robot,
+    graph: &Graph<'_>,
+    r: &Reduction,
+    source: &str,
+) -> Result<(), DynamicsError> {
+    let src = || source.to_string();
+    for name in r.keep.iter().chain(r.locked_q.keys()) {
+        match graph.urdf_joint_names.get(name.as_str()) {
+            None => {
+                return Err(DynamicsError::UnknownJoint {
+                    source_name: src(),
+                    joint: name.clone(),
+                });
+            }
+            Some(&ji) if urdf.joints[ji].joint_type == urdf_rs::JointType::Fixed => {
+                return Err(DynamicsError::NotMovable {
+                    source_name: src(),
+                    joint: name.clone(),
+                });
+            }
+            _ => {}
+        }
+    }
+    if let Some(name) = r.keep.iter().find(|k| r.locked_q.contains_key(*k)) {
+        return Err(DynamicsError::Structure {
+            source_name: src(),
+            message: format!("joint '{name}' is both kept and locked"),
+        });
+    }
+    Ok(())
+}
+
+/// The kind of a URDF joint (`None` = fixed, or an unsupported type the reduction locks anyway)
+/// and its unit axis (`x` when it has no kind).
+fn joint_kind_and_axis(
+    j: &urdf_rs::Joint,
+    reduction: Option<&Reduction>,
+    source: &str,
+) -> Result<(Option<JointKind>, Vector3<f64>), DynamicsError> {
+    let kind = match j.joint_type {
+        urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => Some(JointKind::Revolute),
+        urdf_rs::JointType::Prismatic => Some(JointKind::Prismatic),
+        urdf_rs::JointType::Fixed => None,
+        ref other => {
+            let locked = reduction.is_some_and(|r| !r.keep.contains(&j.name));
+            if locked {
+                None
+            } else {
+                return Err(DynamicsError::UnsupportedJoint {
+                    source_name: source.to_string(),
+                    joint: j.name.clone(),
+                    kind: format!("{other:?}").to_lowercase(),
+                });
             }
         }
-        if let Some(name) = r.keep.iter().find(|k| r.locked_q.contains_key(*k)) {
-            return Err(DynamicsError::Structure {
-                source_name: src(),
-                message: format!("joint '{name}' is both kept and locked"),
+    };
+    let axis_raw = Vector3::from(j.axis.xyz.0);
+    let axis_norm = axis_raw.norm();
+    if kind.is_some() && !(axis_norm.is_finite() && axis_norm > 1e-9) {
+        return Err(DynamicsError::BadAxis {
+            source_name: source.to_string(),
+            joint: j.name.clone(),
+            axis: j.axis.xyz.0,
+        });
+    }
+    let axis = if kind.is_some() {
+        axis_raw / axis_norm
+    } else {
+        Vector3::x()
+    };
+    Ok((kind, axis))
+}
+
+/// The bodies of the model as the tree walk produces them.
+struct Bodies {
+    root_inertia: SpatialInertia,
+    joints: Vec<Joint>,
+    frames: Vec<Frame>,
+}
+
+/// Placement in its parent body of a child link behind a fixed joint, or behind a movable joint
+/// locked at its reduction position (0 if the reduction gives none).
+fn locked_placement(
+    j: &urdf_rs::Joint,
+    kind: Option<JointKind>,
+    axis: Vector3<f64>,
+    joint_in_body: Transform,
+    reduction: Option<&Reduction>,
+) -> Transform {
+    let q_lock = reduction
+        .and_then(|r| r.locked_q.get(&j.name).copied())
+        .unwrap_or(0.0);
+    match kind {
+        Some(k) => {
+            let tmp = Joint {
+                name: String::new(),
+                child_link: String::new(),
+                kind: k,
+                parent_body: 0,
+                tree: joint_in_body,
+                axis,
+                lower: 0.0,
+                upper: 0.0,
+                inertia: SpatialInertia::zero(),
+            };
+            tmp.placement(q_lock)
+        }
+        None => joint_in_body,
+    }
+}
+
+impl Bodies {
+    /// Lumps the child link of `j` (inertia `child_inertia`, placed at `child_in_body`) into `body`.
+    fn lump(
+        &mut self,
+        j: &urdf_rs::Joint,
+        body: usize,
+        child_in_body: Transform,
+        child_inertia: SpatialInertia,
+    ) {
+        let lumped = child_inertia.to_parent(&child_in_body);
+        if body == 0 {
+            self.root_inertia += lumped;
+        } else {
+            self.joints[body - 1].inertia += lumped;
+        }
+        for name in [&j.child.link, &j.name] {
+            self.frames.push(Frame {
+                name: name.clone(),
+                body,
+                placement: child_in_body,
             });
         }
     }
+}
 
-    let parsed: Vec<ParsedLink> = urdf
-        .links
-        .iter()
-        .map(|l| parse_link(l, source))
-        .collect::<Result<_, _>>()?;
-
-    let mut root_inertia = parsed[root].inertia;
-    let mut joints: Vec<Joint> = Vec::new();
-    let mut frames: Vec<Frame> = vec![Frame {
-        name: urdf.links[root].name.clone(),
-        body: 0,
-        placement: Transform::identity(),
-    }];
+/// Walks the tree depth-first from the root, children in file order: each movable joint (kept by
+/// the reduction) starts a body, every other child link is lumped into its parent's body.
+fn walk_tree(
+    urdf: &urdf_rs::Robot,
+    graph: &Graph<'_>,
+    parsed: &[ParsedLink],
+    reduction: Option<&Reduction>,
+    source: &str,
+) -> Result<Bodies, DynamicsError> {
+    let root = graph.root;
+    let mut bodies = Bodies {
+        root_inertia: parsed[root].inertia,
+        joints: Vec::new(),
+        frames: vec![Frame {
+            name: urdf.links[root].name.clone(),
+            body: 0,
+            placement: Transform::identity(),
+        }],
+    };
     let mut visited = vec![false; urdf.links.len()];
     visited[root] = true;
     // Depth-first, children in file order: (link, body, placement of link in body).
     let mut stack: Vec<(usize, usize, Transform)> = vec![(root, 0, Transform::identity())];
     while let Some((link, body, link_in_body)) = stack.pop() {
-        for &ji in children[link].iter().rev() {
+        for &ji in graph.children[link].iter().rev() {
             let j = &urdf.joints[ji];
-            let child = link_index[j.child.link.as_str()];
+            let child = graph.link_index[j.child.link.as_str()];
             if visited[child] {
                 return Err(DynamicsError::Structure {
-                    source_name: src(),
+                    source_name: source.to_string(),
                     message: format!("kinematic loop at joint '{}'", j.name),
                 });
             }
             visited[child] = true;
             let origin = Transform::from_xyz_rpy(j.origin.xyz.0, j.origin.rpy.0);
             let joint_in_body = link_in_body.compose(&origin);
-            let kind = match j.joint_type {
-                urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => {
-                    Some(JointKind::Revolute)
-                }
-                urdf_rs::JointType::Prismatic => Some(JointKind::Prismatic),
-                urdf_rs::JointType::Fixed => None,
-                ref other => {
-                    let locked = reduction.is_some_and(|r| !r.keep.contains(&j.name));
-                    if locked {
-                        None
-                    } else {
-                        return Err(DynamicsError::UnsupportedJoint {
-                            source_name: src(),
-                            joint: j.name.clone(),
-                            kind: format!("{other:?}").to_lowercase(),
-                        });
-                    }
-                }
-            };
-            let axis_raw = Vector3::from(j.axis.xyz.0);
-            let axis_norm = axis_raw.norm();
+            let (kind, axis) = joint_kind_and_axis(j, reduction, source)?;
             let movable = kind.is_some() && reduction.is_none_or(|r| r.keep.contains(&j.name));
-            if kind.is_some() && !(axis_norm.is_finite() && axis_norm > 1e-9) {
-                return Err(DynamicsError::BadAxis {
-                    source_name: src(),
-                    joint: j.name.clone(),
-                    axis: j.axis.xyz.0,
-                });
-            }
-            let axis = if kind.is_some() {
-                axis_raw / axis_norm
-            } else {
-                Vector3::x()
-            };
             if movable {
                 let kind = kind.expect("movable implies a kind");
-                let new_body = joints.len() + 1;
-                joints.push(Joint {
+                let new_body = bodies.joints.len() + 1;
+                bodies.joints.push(Joint {
                     name: j.name.clone(),
                     child_link: j.child.link.clone(),
                     kind,
@@ -425,7 +522,7 @@ fn build(
                     inertia: parsed[child].inertia,
                 });
                 for name in [&j.child.link, &j.name] {
-                    frames.push(Frame {
+                    bodies.frames.push(Frame {
                         name: name.clone(),
                         body: new_body,
                         placement: Transform::identity(),
@@ -434,43 +531,34 @@ fn build(
                 stack.push((child, new_body, Transform::identity()));
             } else {
                 // Fixed, or a movable joint locked at its reduction position.
-                let q_lock = reduction
-                    .and_then(|r| r.locked_q.get(&j.name).copied())
-                    .unwrap_or(0.0);
-                let child_in_body = match kind {
-                    Some(k) => {
-                        let tmp = Joint {
-                            name: String::new(),
-                            child_link: String::new(),
-                            kind: k,
-                            parent_body: body,
-                            tree: joint_in_body,
-                            axis,
-                            lower: 0.0,
-                            upper: 0.0,
-                            inertia: SpatialInertia::zero(),
-                        };
-                        tmp.placement(q_lock)
-                    }
-                    None => joint_in_body,
-                };
-                let lumped = parsed[child].inertia.to_parent(&child_in_body);
-                if body == 0 {
-                    root_inertia += lumped;
-                } else {
-                    joints[body - 1].inertia += lumped;
-                }
-                for name in [&j.child.link, &j.name] {
-                    frames.push(Frame {
-                        name: name.clone(),
-                        body,
-                        placement: child_in_body,
-                    });
-                }
+                let child_in_body = locked_placement(j, kind, axis, joint_in_body, reduction);
+                bodies.lump(j, body, child_in_body, parsed[child].inertia);
                 stack.push((child, body, child_in_body));
             }
         }
     }
+    Ok(bodies)
+}
+
+fn build(
+    urdf: &urdf_rs::Robot,
+    source: &str,
+    reduction: Option<&Reduction>,
+) -> Result<Robot, DynamicsError> {
+    let graph = index_graph(urdf, source)?;
+    if let Some(r) = reduction {
+        validate_reduction(urdf, &graph, r, source)?;
+    }
+    let parsed: Vec<ParsedLink> = urdf
+        .links
+        .iter()
+        .map(|l| parse_link(l, source))
+        .collect::<Result<_, _>>()?;
+    let Bodies {
+        root_inertia,
+        joints,
+        frames,
+    } = walk_tree(urdf, &graph, &parsed, reduction, source)?;
     if let Some(r) = reduction {
         // `keep` names a non-fixed joint (checked above), so it must have become movable.
         debug_assert!(r.keep.iter().all(|k| joints.iter().any(|j| &j.name == k)));
@@ -487,8 +575,8 @@ fn build(
         .collect();
     Ok(Robot {
         name: urdf.name.clone(),
-        source: src(),
-        root_link: urdf.links[root].name.clone(),
+        source: source.to_string(),
+        root_link: urdf.links[graph.root].name.clone(),
         root_inertia,
         joints,
         frames,

@@ -241,6 +241,45 @@ pub fn import_model(model: &ModelProto) -> Result<OnnxImport, OnnxError> {
         return Err(OnnxError::Opset { found: opset });
     }
     let graph = model.graph.as_ref().ok_or(OnnxError::NoGraph)?;
+    let (consts, constant_nodes) = collect_constants(graph)?;
+    let (input, output) = graph_io(graph, &consts)?;
+    let (batch_dim, in_width) = io_shape(input, "graph input")?;
+    io_shape(output, "graph output")?;
+
+    let mut chain = Chain::new(in_width);
+    walk(
+        graph,
+        &consts,
+        &constant_nodes,
+        &input.name,
+        &output.name,
+        &mut chain,
+    )?;
+    let (mlp, normalisation_found) = chain_to_mlp(chain)?;
+    Ok(OnnxImport {
+        mlp,
+        input_name: input.name.clone(),
+        output_name: output.name.clone(),
+        opset,
+        ir_version: model.ir_version,
+        producer: format!("{} {}", model.producer_name, model.producer_version)
+            .trim()
+            .to_string(),
+        normalisation_found,
+        batch_dim,
+        metadata: model
+            .metadata_props
+            .iter()
+            .map(|p| (p.key.clone(), p.value.clone()))
+            .collect(),
+    })
+}
+
+/// The graph's constants by name (initializers and `Constant` node outputs), and the indices of the
+/// `Constant` nodes.
+fn collect_constants(
+    graph: &GraphProto,
+) -> Result<(HashMap<&str, &TensorProto>, HashSet<usize>), OnnxError> {
     let mut consts: HashMap<&str, &TensorProto> = graph
         .initializer
         .iter()
@@ -272,8 +311,14 @@ pub fn import_model(model: &ModelProto) -> Result<OnnxImport, OnnxError> {
             constant_nodes.insert(k);
         }
     }
+    Ok((consts, constant_nodes))
+}
 
-    // The one real input (older exporters also list initializers as inputs).
+/// The one real graph input (older exporters also list initializers as inputs) and the one output.
+fn graph_io<'g>(
+    graph: &'g GraphProto,
+    consts: &HashMap<&str, &TensorProto>,
+) -> Result<(&'g ValueInfoProto, &'g ValueInfoProto), OnnxError> {
     let inputs: Vec<&ValueInfoProto> = graph
         .input
         .iter()
@@ -291,20 +336,13 @@ pub fn import_model(model: &ModelProto) -> Result<OnnxImport, OnnxError> {
             names: names(graph.output.iter().map(|o| o.name.as_str())),
         });
     }
-    let input = inputs[0];
-    let output = &graph.output[0];
-    let (batch_dim, in_width) = io_shape(input, "graph input")?;
-    io_shape(output, "graph output")?;
+    Ok((inputs[0], &graph.output[0]))
+}
 
-    let mut chain = Chain::new(in_width);
-    walk(
-        graph,
-        &consts,
-        &constant_nodes,
-        &input.name,
-        &output.name,
-        &mut chain,
-    )?;
+/// Turns the walked chain into the network: folds a leading diagonal layer into the input affine
+/// map, checks the Relu pattern, and reads the normalisation off the affine map. Returns the
+/// network and whether a normalisation was found.
+fn chain_to_mlp(chain: Chain) -> Result<(MlpWeights, bool), OnnxError> {
     let Chain {
         mut stages,
         input_affine,
@@ -329,6 +367,31 @@ pub fn import_model(model: &ModelProto) -> Result<OnnxImport, OnnxError> {
         }
         normalisation_found = true;
     }
+    check_relu_pattern(&stages)?;
+    let norm = normalisation_from_affine(&a, &c)?;
+    let last = stages.len() - 1;
+    let layers = stages
+        .iter()
+        .enumerate()
+        .map(|(k, s)| DenseLayer {
+            n_in: s.n_in,
+            n_out: s.n_out,
+            weight: s.weight.iter().map(|&v| v as f32).collect(),
+            bias: s.bias.iter().map(|&v| v as f32).collect(),
+            activation: if k == last {
+                Activation::Identity
+            } else {
+                Activation::Relu
+            },
+        })
+        .collect();
+    let mlp = MlpWeights { norm, layers };
+    mlp.validate()?;
+    Ok((mlp, normalisation_found))
+}
+
+/// Every dense layer but the last is followed by Relu; the last is not.
+fn check_relu_pattern(stages: &[Stage]) -> Result<(), OnnxError> {
     let last = stages.len() - 1;
     for (k, s) in stages.iter().enumerate() {
         if k < last && !s.relu {
@@ -346,7 +409,12 @@ pub fn import_model(model: &ModelProto) -> Result<OnnxImport, OnnxError> {
             });
         }
     }
+    Ok(())
+}
 
+/// The normalisation `(x − mean)/scale` equal to the input affine map `a·x + c`.
+fn normalisation_from_affine(a: &[f64], c: &[f64]) -> Result<Normalisation, OnnxError> {
+    let n_in = a.len();
     let mut mean = Vec::with_capacity(n_in);
     let mut scale = Vec::with_capacity(n_in);
     for i in 0..n_in {
@@ -360,43 +428,7 @@ pub fn import_model(model: &ModelProto) -> Result<OnnxImport, OnnxError> {
         scale.push(s as f32);
         mean.push((-c[i] * s) as f32);
     }
-    let layers = stages
-        .iter()
-        .enumerate()
-        .map(|(k, s)| DenseLayer {
-            n_in: s.n_in,
-            n_out: s.n_out,
-            weight: s.weight.iter().map(|&v| v as f32).collect(),
-            bias: s.bias.iter().map(|&v| v as f32).collect(),
-            activation: if k == last {
-                Activation::Identity
-            } else {
-                Activation::Relu
-            },
-        })
-        .collect();
-    let mlp = MlpWeights {
-        norm: Normalisation { mean, scale },
-        layers,
-    };
-    mlp.validate()?;
-    Ok(OnnxImport {
-        mlp,
-        input_name: input.name.clone(),
-        output_name: output.name.clone(),
-        opset,
-        ir_version: model.ir_version,
-        producer: format!("{} {}", model.producer_name, model.producer_version)
-            .trim()
-            .to_string(),
-        normalisation_found,
-        batch_dim,
-        metadata: model
-            .metadata_props
-            .iter()
-            .map(|p| (p.key.clone(), p.value.clone()))
-            .collect(),
-    })
+    Ok(Normalisation { mean, scale })
 }
 
 fn names<'a>(it: impl Iterator<Item = &'a str>) -> String {
@@ -749,6 +781,8 @@ fn broadcast(
     }
 }
 
+/// Applies one node of the chain to `chain`: a dense layer, a Relu, a no-op, or an element-wise
+/// affine op folded into the previous layer (or the input affine map).
 fn step(
     node: &NodeProto,
     k: usize,
@@ -756,106 +790,8 @@ fn step(
     consts: &HashMap<&str, &TensorProto>,
     chain: &mut Chain,
 ) -> Result<(), OnnxError> {
-    let label = node_label(node, k);
     match node.op_type.as_str() {
-        "Gemm" | "MatMul" => {
-            let is_gemm = node.op_type == "Gemm";
-            let n_inputs = node.input.iter().filter(|s| !s.is_empty()).count();
-            let ok_inputs = if is_gemm {
-                (2..=3).contains(&n_inputs)
-            } else {
-                n_inputs == 2
-            };
-            if !ok_inputs || node.input[0] != current {
-                return Err(node_err(
-                    node,
-                    k,
-                    "the running value must be the first input, with constant weights",
-                ));
-            }
-            let (trans_a, trans_b, alpha, beta) = if is_gemm {
-                (
-                    int_attr(node, k, "transA", 0)?,
-                    int_attr(node, k, "transB", 0)?,
-                    float_attr(node, k, "alpha", 1.0)? as f64,
-                    float_attr(node, k, "beta", 1.0)? as f64,
-                )
-            } else {
-                (0, 0, 1.0, 1.0)
-            };
-            if trans_a != 0 {
-                return Err(node_err(node, k, "transA = 1 is not supported"));
-            }
-            let b_name = &node.input[1];
-            let bt = consts.get(b_name.as_str()).ok_or_else(|| {
-                node_err(
-                    node,
-                    k,
-                    format!("weight `{b_name}` is not an initializer or Constant"),
-                )
-            })?;
-            let (dims, b) = read_f32_tensor(bt)?;
-            if dims.len() != 2 {
-                return Err(node_err(
-                    node,
-                    k,
-                    format!("weight `{b_name}` has shape {dims:?}, expected 2-D"),
-                ));
-            }
-            // transB = 0: B is [K, N]; transB = 1: B is [N, K].
-            let (n_in, n_out) = if trans_b != 0 {
-                (dims[1], dims[0])
-            } else {
-                (dims[0], dims[1])
-            };
-            if let Some(w) = chain.width
-                && w != n_in
-            {
-                return Err(node_err(
-                    node,
-                    k,
-                    format!(
-                        "weight `{b_name}` {dims:?} (transB={trans_b}) takes {n_in} inputs, the running value has {w}"
-                    ),
-                ));
-            }
-            let mut weight = vec![0.0; n_in * n_out];
-            for o in 0..n_out {
-                for i in 0..n_in {
-                    let v = if trans_b != 0 {
-                        b[o * n_in + i]
-                    } else {
-                        b[i * n_out + o]
-                    };
-                    weight[o * n_in + i] = alpha * v;
-                }
-            }
-            let bias = match node.input.get(2).filter(|s| !s.is_empty()) {
-                Some(c_name) => {
-                    let ct = consts.get(c_name.as_str()).ok_or_else(|| {
-                        node_err(
-                            node,
-                            k,
-                            format!("bias `{c_name}` is not an initializer or Constant"),
-                        )
-                    })?;
-                    let (cd, c) = read_f32_tensor(ct)?;
-                    let c = broadcast(node, k, c_name, &cd, c, n_out)?;
-                    c.into_iter().map(|v| beta * v).collect()
-                }
-                None => vec![0.0; n_out],
-            };
-            chain.stages.push(Stage {
-                n_in,
-                n_out,
-                weight,
-                bias,
-                relu: false,
-                node: label,
-                op_type: node.op_type.clone(),
-            });
-            chain.width = Some(n_out);
-        }
+        "Gemm" | "MatMul" => step_dense(node, k, current, consts, chain)?,
         "Relu" => match chain.stages.last_mut() {
             Some(s) if !s.relu => s.relu = true,
             Some(_) => return Err(node_err(node, k, "Relu applied twice")),
@@ -872,68 +808,215 @@ fn step(
             }
         }
         "Add" | "Sub" | "Mul" | "Div" => {
-            let (t, first) = binary_operand(node, k, current, consts)?;
-            let (dims, v) = read_f32_tensor(t)?;
-            let n = chain.width.ok_or_else(|| {
-                node_err(
-                    node,
-                    k,
-                    "the feature width is unknown here (give the graph input a fixed width)",
-                )
-            })?;
-            let v = broadcast(node, k, &t.name, &dims, v, n)?;
-            // y = p·x + q per feature, x the running value.
-            let (p, q): (Vec<f64>, Vec<f64>) = match (node.op_type.as_str(), first) {
-                ("Add", _) => (vec![1.0; n], v),
-                ("Sub", true) => (vec![1.0; n], v.iter().map(|x| -x).collect()),
-                ("Sub", false) => (vec![-1.0; n], v),
-                ("Mul", _) => (v, vec![0.0; n]),
-                ("Div", true) => {
-                    if let Some(i) = v.iter().position(|&d| d == 0.0) {
-                        return Err(node_err(node, k, format!("divides feature {i} by zero")));
-                    }
-                    (v.iter().map(|d| 1.0 / d).collect(), vec![0.0; n])
-                }
-                _ => {
-                    return Err(node_err(
-                        node,
-                        k,
-                        "divides a constant by the running value (not affine)",
-                    ));
-                }
-            };
-            match chain.stages.last_mut() {
-                None => {
-                    let (a, c) = chain
-                        .input_affine
-                        .get_or_insert_with(|| (vec![1.0; n], vec![0.0; n]));
-                    for i in 0..n {
-                        a[i] *= p[i];
-                        c[i] = p[i] * c[i] + q[i];
-                    }
-                }
-                Some(s) if !s.relu => {
-                    for o in 0..s.n_out {
-                        for w in &mut s.weight[o * s.n_in..(o + 1) * s.n_in] {
-                            *w *= p[o];
-                        }
-                        s.bias[o] = p[o] * s.bias[o] + q[o];
-                    }
-                }
-                Some(_) => {
-                    return Err(node_err(
-                        node,
-                        k,
-                        "element-wise op after Relu cannot be folded into a dense layer",
-                    ));
-                }
-            }
+            let (p, q) = elementwise_affine(node, k, current, consts, chain.width)?;
+            fold_affine(node, k, chain, &p, &q)?;
         }
         _ => {
             return Err(OnnxError::UnsupportedOp {
                 op_type: node.op_type.clone(),
-                node: label,
+                node: node_label(node, k),
             });
+        }
+    }
+    Ok(())
+}
+
+/// A `Gemm` or `MatMul` with constant weights: appends a dense stage (weights scaled by `alpha`,
+/// bias by `beta`).
+fn step_dense(
+    node: &NodeProto,
+    k: usize,
+    current: &str,
+    consts: &HashMap<&str, &TensorProto>,
+    chain: &mut Chain,
+) -> Result<(), OnnxError> {
+    let label = node_label(node, k);
+    let is_gemm = node.op_type == "Gemm";
+    let n_inputs = node.input.iter().filter(|s| !s.is_empty()).count();
+    let ok_inputs = if is_gemm {
+        (2..=3).contains(&n_inputs)
+    } else {
+        n_inputs == 2
+    };
+    if !ok_inputs || node.input[0] != current {
+        return Err(node_err(
+            node,
+            k,
+            "the running value must be the first input, with constant weights",
+        ));
+    }
+    let (trans_a, trans_b, alpha, beta) = if is_gemm {
+        (
+            int_attr(node, k, "transA", 0)?,
+            int_attr(node, k, "transB", 0)?,
+            float_attr(node, k, "alpha", 1.0)? as f64,
+            float_attr(node, k, "beta", 1.0)? as f64,
+        )
+    } else {
+        (0, 0, 1.0, 1.0)
+    };
+    if trans_a != 0 {
+        return Err(node_err(node, k, "transA = 1 is not supported"));
+    }
+    let b_name = &node.input[1];
+    let bt = consts.get(b_name.as_str()).ok_or_else(|| {
+        node_err(
+            node,
+            k,
+            format!("weight `{b_name}` is not an initializer or Constant"),
+        )
+    })?;
+    let (dims, b) = read_f32_tensor(bt)?;
+    if dims.len() != 2 {
+        return Err(node_err(
+            node,
+            k,
+            format!("weight `{b_name}` has shape {dims:?}, expected 2-D"),
+        ));
+    }
+    // transB = 0: B is [K, N]; transB = 1: B is [N, K].
+    let (n_in, n_out) = if trans_b != 0 {
+        (dims[1], dims[0])
+    } else {
+        (dims[0], dims[1])
+    };
+    if let Some(w) = chain.width
+        && w != n_in
+    {
+        return Err(node_err(
+            node,
+            k,
+            format!(
+                "weight `{b_name}` {dims:?} (transB={trans_b}) takes {n_in} inputs, the running value has {w}"
+            ),
+        ));
+    }
+    let mut weight = vec![0.0; n_in * n_out];
+    for o in 0..n_out {
+        for i in 0..n_in {
+            let v = if trans_b != 0 {
+                b[o * n_in + i]
+            } else {
+                b[i * n_out + o]
+            };
+            weight[o * n_in + i] = alpha * v;
+        }
+    }
+    let bias = dense_bias(node, k, consts, n_out, beta)?;
+    chain.stages.push(Stage {
+        n_in,
+        n_out,
+        weight,
+        bias,
+        relu: false,
+        node: label,
+        op_type: node.op_type.clone(),
+    });
+    chain.width = Some(n_out);
+    Ok(())
+}
+
+/// The bias of a dense node (its optional third input, broadcast to `n_out` and scaled by `beta`),
+/// zeros if absent.
+fn dense_bias(
+    node: &NodeProto,
+    k: usize,
+    consts: &HashMap<&str, &TensorProto>,
+    n_out: usize,
+    beta: f64,
+) -> Result<Vec<f64>, OnnxError> {
+    Ok(match node.input.get(2).filter(|s| !s.is_empty()) {
+        Some(c_name) => {
+            let ct = consts.get(c_name.as_str()).ok_or_else(|| {
+                node_err(
+                    node,
+                    k,
+                    format!("bias `{c_name}` is not an initializer or Constant"),
+                )
+            })?;
+            let (cd, c) = read_f32_tensor(ct)?;
+            let c = broadcast(node, k, c_name, &cd, c, n_out)?;
+            c.into_iter().map(|v| beta * v).collect()
+        }
+        None => vec![0.0; n_out],
+    })
+}
+
+/// An `Add`/`Sub`/`Mul`/`Div` with a constant operand as the per-feature affine map
+/// `y = p·x + q`, `x` the running value of width `width`.
+fn elementwise_affine(
+    node: &NodeProto,
+    k: usize,
+    current: &str,
+    consts: &HashMap<&str, &TensorProto>,
+    width: Option<usize>,
+) -> Result<(Vec<f64>, Vec<f64>), OnnxError> {
+    let (t, first) = binary_operand(node, k, current, consts)?;
+    let (dims, v) = read_f32_tensor(t)?;
+    let n = width.ok_or_else(|| {
+        node_err(
+            node,
+            k,
+            "the feature width is unknown here (give the graph input a fixed width)",
+        )
+    })?;
+    let v = broadcast(node, k, &t.name, &dims, v, n)?;
+    // y = p·x + q per feature, x the running value.
+    Ok(match (node.op_type.as_str(), first) {
+        ("Add", _) => (vec![1.0; n], v),
+        ("Sub", true) => (vec![1.0; n], v.iter().map(|x| -x).collect()),
+        ("Sub", false) => (vec![-1.0; n], v),
+        ("Mul", _) => (v, vec![0.0; n]),
+        ("Div", true) => {
+            if let Some(i) = v.iter().position(|&d| d == 0.0) {
+                return Err(node_err(node, k, format!("divides feature {i} by zero")));
+            }
+            (v.iter().map(|d| 1.0 / d).collect(), vec![0.0; n])
+        }
+        _ => {
+            return Err(node_err(
+                node,
+                k,
+                "divides a constant by the running value (not affine)",
+            ));
+        }
+    })
+}
+
+/// Folds `y = p·x + q` into the last dense stage (before its Relu), or into the input affine map
+/// when no stage exists yet.
+fn fold_affine(
+    node: &NodeProto,
+    k: usize,
+    chain: &mut Chain,
+    p: &[f64],
+    q: &[f64],
+) -> Result<(), OnnxError> {
+    let n = p.len();
+    match chain.stages.last_mut() {
+        None => {
+            let (a, c) = chain
+                .input_affine
+                .get_or_insert_with(|| (vec![1.0; n], vec![0.0; n]));
+            for i in 0..n {
+                a[i] *= p[i];
+                c[i] = p[i] * c[i] + q[i];
+            }
+        }
+        Some(s) if !s.relu => {
+            for o in 0..s.n_out {
+                for w in &mut s.weight[o * s.n_in..(o + 1) * s.n_in] {
+                    *w *= p[o];
+                }
+                s.bias[o] = p[o] * s.bias[o] + q[o];
+            }
+        }
+        Some(_) => {
+            return Err(node_err(
+                node,
+                k,
+                "element-wise op after Relu cannot be folded into a dense layer",
+            ));
         }
     }
     Ok(())

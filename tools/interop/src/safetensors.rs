@@ -195,6 +195,15 @@ fn metadata_vec(
     Ok(None)
 }
 
+/// The tensors of a state dict sorted by role: layer weights and biases by index, everything else.
+struct Grouped<'a> {
+    /// The common prefix of the layer tensors (e.g. `net.`), empty if none.
+    prefix: String,
+    weights: BTreeMap<usize, (String, TensorView<'a>)>,
+    biases: HashMap<usize, (String, TensorView<'a>)>,
+    others: Vec<(String, TensorView<'a>)>,
+}
+
 /// Imports a PyTorch `nn.Sequential` state dict from safetensors bytes.
 pub fn import_bytes(bytes: &[u8]) -> Result<SafetensorsImport, SafetensorsError> {
     let st =
@@ -207,10 +216,35 @@ pub fn import_bytes(bytes: &[u8]) -> Result<SafetensorsImport, SafetensorsError>
         .map(|m| m.iter().map(|(k, v)| (k.clone(), v.clone())).collect())
         .unwrap_or_default();
 
+    let Grouped {
+        prefix,
+        weights,
+        biases,
+        others,
+    } = group_tensors(&st)?;
+    let spacing = check_spacing(&weights)?;
+    let layers = dense_layers(&weights, &biases)?;
+    let n_in = layers[0].n_in;
+    let (norm, norm_source, ignored) = read_normalisation(&others, &prefix, n_in, &metadata)?;
+    let mlp = MlpWeights { norm, layers };
+    mlp.validate()?;
+    Ok(SafetensorsImport {
+        mlp,
+        spacing,
+        prefix,
+        norm_source,
+        ignored,
+        metadata,
+    })
+}
+
+/// Sorts the tensors into layer weights, layer biases (`prefix.<index>.weight|bias`, one prefix for
+/// all) and others; fails if there is no layer weight or a bias has no weight.
+fn group_tensors<'a>(st: &SafeTensors<'a>) -> Result<Grouped<'a>, SafetensorsError> {
     let mut prefix: Option<&str> = None;
-    let mut weights: BTreeMap<usize, (String, TensorView<'_>)> = BTreeMap::new();
-    let mut biases: HashMap<usize, (String, TensorView<'_>)> = HashMap::new();
-    let mut others: Vec<(String, TensorView<'_>)> = Vec::new();
+    let mut weights: BTreeMap<usize, (String, TensorView<'a>)> = BTreeMap::new();
+    let mut biases: HashMap<usize, (String, TensorView<'a>)> = HashMap::new();
+    let mut others: Vec<(String, TensorView<'a>)> = Vec::new();
     let mut all_names: Vec<String> = Vec::new();
     for (name, view) in st.iter() {
         all_names.push(name.to_string());
@@ -244,6 +278,17 @@ pub fn import_bytes(bytes: &[u8]) -> Result<SafetensorsImport, SafetensorsError>
             reason: format!("bias of layer index {idx} has no matching weight"),
         });
     }
+    Ok(Grouped {
+        prefix,
+        weights,
+        biases,
+        others,
+    })
+}
+
+/// The layer indices start at 0 and are evenly spaced by 2 or 3; returns the spacing (0 for a
+/// single layer). `weights` is not empty.
+fn check_spacing<T>(weights: &BTreeMap<usize, T>) -> Result<usize, SafetensorsError> {
     let indices: Vec<usize> = weights.keys().copied().collect();
     let spacing = if indices.len() > 1 {
         indices[1] - indices[0]
@@ -254,7 +299,15 @@ pub fn import_bytes(bytes: &[u8]) -> Result<SafetensorsImport, SafetensorsError>
     if indices[0] != 0 || (indices.len() > 1 && (!(2..=3).contains(&spacing) || !even)) {
         return Err(SafetensorsError::Spacing(indices));
     }
+    Ok(spacing)
+}
 
+/// The dense layers in index order, shapes checked to chain (`[out, in]`, PyTorch layout); Relu
+/// after every layer but the last.
+fn dense_layers(
+    weights: &BTreeMap<usize, (String, TensorView<'_>)>,
+    biases: &HashMap<usize, (String, TensorView<'_>)>,
+) -> Result<Vec<DenseLayer>, SafetensorsError> {
     let mut layers = Vec::with_capacity(weights.len());
     let n_layers = weights.len();
     for (k, (idx, (wname, wview))) in weights.iter().enumerate() {
@@ -301,14 +354,22 @@ pub fn import_bytes(bytes: &[u8]) -> Result<SafetensorsImport, SafetensorsError>
             },
         });
     }
-    let n_in = layers[0].n_in;
+    Ok(layers)
+}
 
-    // Normalisation: tensors first, then metadata.
+/// The input normalisation: `norm.mean`/`norm.scale` tensors first, then metadata, else the
+/// identity. Also returns the names of the other tensors (ignored), sorted.
+fn read_normalisation(
+    others: &[(String, TensorView<'_>)],
+    prefix: &str,
+    n_in: usize,
+    metadata: &BTreeMap<String, String>,
+) -> Result<(Normalisation, NormSource, Vec<String>), SafetensorsError> {
     let mut ignored = Vec::new();
     let mut mean_t = None;
     let mut scale_t = None;
-    for (name, view) in &others {
-        let bare = name.strip_prefix(prefix.as_str()).unwrap_or(name);
+    for (name, view) in others {
+        let bare = name.strip_prefix(prefix).unwrap_or(name);
         let slot = match bare {
             "norm.mean" => &mut mean_t,
             "norm.scale" => &mut scale_t,
@@ -332,8 +393,8 @@ pub fn import_bytes(bytes: &[u8]) -> Result<SafetensorsImport, SafetensorsError>
     let (norm, norm_source) = match (mean_t, scale_t) {
         (Some(mean), Some(scale)) => (Normalisation { mean, scale }, NormSource::Tensors),
         (None, None) => match (
-            metadata_vec(&metadata, "norm.mean")?,
-            metadata_vec(&metadata, "norm.scale")?,
+            metadata_vec(metadata, "norm.mean")?,
+            metadata_vec(metadata, "norm.scale")?,
         ) {
             (Some(mean), Some(scale)) => (Normalisation { mean, scale }, NormSource::Metadata),
             (None, None) => (Normalisation::identity(n_in), NormSource::Identity),
@@ -351,16 +412,7 @@ pub fn import_bytes(bytes: &[u8]) -> Result<SafetensorsImport, SafetensorsError>
             });
         }
     };
-    let mlp = MlpWeights { norm, layers };
-    mlp.validate()?;
-    Ok(SafetensorsImport {
-        mlp,
-        spacing,
-        prefix,
-        norm_source,
-        ignored,
-        metadata,
-    })
+    Ok((norm, norm_source, ignored))
 }
 
 /// The layout description written to `frictionless.layout`.

@@ -157,83 +157,16 @@ impl Trainer {
     ) -> Result<Self, TrainError> {
         let bytes = std::fs::read(path).map_err(|e| err(path, format!("cannot read: {e}")))?;
         let st = SafeTensors::deserialize(&bytes).map_err(|e| err(path, e))?;
-        let (_, meta) = SafeTensors::read_metadata(&bytes).map_err(|e| err(path, e))?;
-        let json = meta
-            .metadata()
-            .as_ref()
-            .and_then(|m| m.get(STATE_KEY))
-            .ok_or_else(|| {
-                err(
-                    path,
-                    format!("no metadata key {STATE_KEY:?}: not a training checkpoint"),
-                )
-            })?;
-        let state: State =
-            serde_json::from_str(json).map_err(|e| err(path, format!("state: {e}")))?;
-        if state.version != VERSION {
-            return Err(err(
-                path,
-                format!("version {} (this build reads {VERSION})", state.version),
-            ));
-        }
+        let state = read_state(path, &bytes)?;
         let mut cfg = state.config;
         cfg.dropout = f32::from_bits(state.config_f32_bits[0]);
         cfg.lambda = f32::from_bits(state.config_f32_bits[1]);
         cfg.lr = f32::from_bits(state.config_f32_bits[2]);
         cfg.abort_loss = state.abort_loss_bits.map(f32::from_bits);
         check_config(&cfg).map_err(|e| err(path, e))?;
-        train.validate("train")?;
-        if let Some(v) = val {
-            v.validate("validation")?;
-        }
-        let mut want_sizes = vec![train.n_inputs];
-        want_sizes.extend(&cfg.hidden);
-        want_sizes.push(1);
-        if state.sizes.first() != want_sizes.first() {
-            return Err(err(
-                path,
-                format!(
-                    "n_inputs = {:?} in the checkpoint, the given data have n_inputs = {}",
-                    state.sizes.first(),
-                    train.n_inputs
-                ),
-            ));
-        }
-        if state.sizes != want_sizes {
-            return Err(err(
-                path,
-                format!(
-                    "layer sizes {:?} do not match config/data {:?}",
-                    state.sizes, want_sizes
-                ),
-            ));
-        }
-        if fingerprint(train, val) != state.fingerprint {
-            return Err(err(
-                path,
-                "the given training/validation data differ from the checkpointed run's (SHA-256 fingerprint mismatch)",
-            ));
-        }
+        check_data(path, &state.sizes, &state.fingerprint, &cfg, train, val)?;
         let layout = Layout::new(&state.sizes);
-        let f32s = |name: &str, len: usize| -> Result<Vec<f32>, TrainError> {
-            let t = st
-                .tensor(name)
-                .map_err(|e| err(path, format!("tensor {name}: {e}")))?;
-            if t.dtype() != Dtype::F32 || t.shape() != [len] {
-                return Err(err(
-                    path,
-                    format!(
-                        "tensor {name}: {:?} {:?}, expected F32 [{len}]",
-                        t.dtype(),
-                        t.shape()
-                    ),
-                ));
-            }
-            Ok(t.data()
-                .chunks_exact(4)
-                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-                .collect())
-        };
+        let f32s = |name: &str, len: usize| f32_tensor(&st, path, name, len);
         let n = layout.n_params;
         let params = f32s("params", n)?;
         let adam = Adam {
@@ -266,35 +199,7 @@ impl Trainer {
             }),
             _ => None,
         };
-        let h = st
-            .tensor("history")
-            .map_err(|e| err(path, format!("tensor history: {e}")))?;
-        if h.dtype() != Dtype::F64 || h.shape().len() != 2 || h.shape()[1] != 6 {
-            return Err(err(
-                path,
-                format!(
-                    "tensor history: {:?} {:?}, expected F64 [n, 6]",
-                    h.dtype(),
-                    h.shape()
-                ),
-            ));
-        }
-        let hv: Vec<f64> = h
-            .data()
-            .chunks_exact(8)
-            .map(|b| f64::from_le_bytes(b.try_into().expect("8-byte chunk")))
-            .collect();
-        let history = hv
-            .chunks_exact(6)
-            .map(|r| EpochReport {
-                epoch: r[0] as usize,
-                train_loss: r[1],
-                val_loss: unopt(r[2]),
-                val_rmse_nm: unopt(r[3]),
-                seconds: r[4],
-                is_best: r[5] != 0.0,
-            })
-            .collect();
+        let history = read_history(&st, path)?;
         let mut t = Trainer::assemble(cfg, layout, norm, train, val, params, adam)?;
         t.epochs_done = state.epochs_done;
         t.best = best;
@@ -302,4 +207,131 @@ impl Trainer {
         t.history = history;
         Ok(t)
     }
+}
+
+/// The JSON state from the metadata, checked to be of this build's format version.
+fn read_state(path: &Path, bytes: &[u8]) -> Result<State, TrainError> {
+    let (_, meta) = SafeTensors::read_metadata(bytes).map_err(|e| err(path, e))?;
+    let json = meta
+        .metadata()
+        .as_ref()
+        .and_then(|m| m.get(STATE_KEY))
+        .ok_or_else(|| {
+            err(
+                path,
+                format!("no metadata key {STATE_KEY:?}: not a training checkpoint"),
+            )
+        })?;
+    let state: State = serde_json::from_str(json).map_err(|e| err(path, format!("state: {e}")))?;
+    if state.version != VERSION {
+        return Err(err(
+            path,
+            format!("version {} (this build reads {VERSION})", state.version),
+        ));
+    }
+    Ok(state)
+}
+
+/// The given data are valid and are the checkpointed run's: the stored layer `sizes` follow from
+/// `cfg` and the data's input count, and the data's fingerprint is `fingerprint_stored`.
+fn check_data(
+    path: &Path,
+    sizes: &[usize],
+    fingerprint_stored: &str,
+    cfg: &TrainConfig,
+    train: &Dataset<'_>,
+    val: Option<&Dataset<'_>>,
+) -> Result<(), TrainError> {
+    train.validate("train")?;
+    if let Some(v) = val {
+        v.validate("validation")?;
+    }
+    let mut want_sizes = vec![train.n_inputs];
+    want_sizes.extend(&cfg.hidden);
+    want_sizes.push(1);
+    if sizes.first() != want_sizes.first() {
+        return Err(err(
+            path,
+            format!(
+                "n_inputs = {:?} in the checkpoint, the given data have n_inputs = {}",
+                sizes.first(),
+                train.n_inputs
+            ),
+        ));
+    }
+    if sizes != want_sizes {
+        return Err(err(
+            path,
+            format!(
+                "layer sizes {:?} do not match config/data {:?}",
+                sizes, want_sizes
+            ),
+        ));
+    }
+    if fingerprint(train, val) != fingerprint_stored {
+        return Err(err(
+            path,
+            "the given training/validation data differ from the checkpointed run's (SHA-256 fingerprint mismatch)",
+        ));
+    }
+    Ok(())
+}
+
+/// The F32 tensor `name` of length `len`.
+fn f32_tensor(
+    st: &SafeTensors<'_>,
+    path: &Path,
+    name: &str,
+    len: usize,
+) -> Result<Vec<f32>, TrainError> {
+    let t = st
+        .tensor(name)
+        .map_err(|e| err(path, format!("tensor {name}: {e}")))?;
+    if t.dtype() != Dtype::F32 || t.shape() != [len] {
+        return Err(err(
+            path,
+            format!(
+                "tensor {name}: {:?} {:?}, expected F32 [{len}]",
+                t.dtype(),
+                t.shape()
+            ),
+        ));
+    }
+    Ok(t.data()
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect())
+}
+
+/// The `history` tensor (F64 `[epochs, 6]`) as epoch reports.
+fn read_history(st: &SafeTensors<'_>, path: &Path) -> Result<Vec<EpochReport>, TrainError> {
+    let h = st
+        .tensor("history")
+        .map_err(|e| err(path, format!("tensor history: {e}")))?;
+    if h.dtype() != Dtype::F64 || h.shape().len() != 2 || h.shape()[1] != 6 {
+        return Err(err(
+            path,
+            format!(
+                "tensor history: {:?} {:?}, expected F64 [n, 6]",
+                h.dtype(),
+                h.shape()
+            ),
+        ));
+    }
+    let hv: Vec<f64> = h
+        .data()
+        .chunks_exact(8)
+        .map(|b| f64::from_le_bytes(b.try_into().expect("8-byte chunk")))
+        .collect();
+    Ok(hv
+        .chunks_exact(6)
+        .map(|r| EpochReport {
+            epoch: r[0] as usize,
+            train_loss: r[1],
+            val_loss: unopt(r[2]),
+            val_rmse_nm: unopt(r[3]),
+            seconds: r[4],
+            is_best: r[5] != 0.0,
+        })
+        .collect())
 }
