@@ -1,7 +1,7 @@
 //! # `frictl` (library part): what only the `frictl` binary uses
 //!
 //! Crate table: `tools/frictl` (package `frictl`, lib + bin). The binary's command layer (`cmd/`,
-//! `anyhow` errors) runs the library crates of `tools/`: `frictionless-dynamics` (URDF, RNEA/CRBA),
+//! untyped errors) runs the library crates of `tools/`: `frictionless-dynamics` (URDF, RNEA/CRBA),
 //! `frictionless-sim` (virtual joint), `frictionless-acquire` (excitation protocol, logs),
 //! `frictionless-dataset` (file formats), `frictionless-ident` (label pipeline, CV/SCV fit),
 //! `frictionless-train` (PINN trainer, random search), `frictionless-interop` (ONNX, safetensors) and

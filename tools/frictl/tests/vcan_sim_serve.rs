@@ -40,7 +40,7 @@ enum Link {
 
 struct Emulator {
     stop: Arc<AtomicBool>,
-    handle: Option<JoinHandle<anyhow::Result<CanServeStats>>>,
+    handle: Option<JoinHandle<Result<CanServeStats, frictl::serve::ServeError>>>,
 }
 
 impl Emulator {
@@ -789,20 +789,20 @@ fn bad_options_are_refused_with_the_offending_value() {
         command_timeout_ms: 20,
         duration_s: Some(0.1),
     };
-    let e = run_with_stats(&mut joints, &opts, &stop).unwrap_err();
+    let e = anyhow::Error::from(run_with_stats(&mut joints, &opts, &stop).unwrap_err());
     assert!(format!("{e:#}").contains("nosuchcan7"), "{e:#}");
     opts.node_ids = vec![3, 3];
-    let e = run_with_stats(&mut joints, &opts, &stop).unwrap_err();
+    let e = anyhow::Error::from(run_with_stats(&mut joints, &opts, &stop).unwrap_err());
     assert!(
         format!("{e:#}").contains("node id 3 appears twice"),
         "{e:#}"
     );
     opts.node_ids = vec![3];
-    let e = run_with_stats(&mut joints, &opts, &stop).unwrap_err();
+    let e = anyhow::Error::from(run_with_stats(&mut joints, &opts, &stop).unwrap_err());
     assert!(format!("{e:#}").contains("1 ids for 2 joints"), "{e:#}");
     opts.node_ids = vec![1, 64];
     opts.protocol = Protocol::Odrive;
-    let e = run_with_stats(&mut joints, &opts, &stop).unwrap_err();
+    let e = anyhow::Error::from(run_with_stats(&mut joints, &opts, &stop).unwrap_err());
     assert!(format!("{e:#}").contains("64"), "{e:#}");
 }
 

@@ -286,5 +286,5 @@ fn serve_can(
         command_timeout_ms: a.command_timeout_ms,
         duration_s: a.duration_s,
     };
-    frictl::serve::can::run(joints, &opts, stop)
+    Ok(frictl::serve::can::run(joints, &opts, stop)?)
 }

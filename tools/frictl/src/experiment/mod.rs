@@ -19,3 +19,217 @@ pub mod run;
 pub mod search;
 pub mod session;
 pub mod suite;
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+/// Why an experiment, its processes or its reports failed. Messages name the file, service, joint or
+/// process and the cause.
+#[derive(Debug, thiserror::Error)]
+pub enum ExperimentError {
+    /// An I/O operation without more context (writing a report line, polling a child).
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+    /// A plant preset or `--set` override is not acceptable.
+    #[error(transparent)]
+    Param(#[from] frictionless_sim::params::ParamError),
+    /// Opening an iceoryx2 node or service failed.
+    #[error(transparent)]
+    Shm(#[from] frictionless_shm_types::ShmError),
+    /// Receiving from an iceoryx2 port failed.
+    #[error(transparent)]
+    ShmIo(#[from] frictionless_shm_types::IoError),
+    /// Publishing a payload failed.
+    #[error("publish {payload}")]
+    Publish {
+        /// The payload type, e.g. `TorqueRequest`.
+        payload: &'static str,
+        /// The port's error.
+        #[source]
+        source: frictionless_shm_types::IoError,
+    },
+    /// SIGINT / SIGTERM arrived.
+    #[error("interrupted")]
+    Interrupted,
+    /// A K_p search range that is empty or not positive.
+    #[error("K_p range [{lo}, {hi}]: need 0 < lo < hi")]
+    KpRange {
+        /// Lower end.
+        lo: f64,
+        /// Upper end.
+        hi: f64,
+    },
+    /// The oracle's τ̂_F low-pass cannot be designed.
+    #[error("oracle τ̂_F low-pass")]
+    OracleLpf(#[source] frictionless::filter::FilterError),
+    /// An oracle joint without the plant's `SimTruth`.
+    #[error("the oracle needs the plant's SimTruth, and the plant published none")]
+    OracleNoTruth,
+    /// The oracle's `SimTruth` is not the one of the state it answers.
+    #[error("oracle: SimTruth seq {truth_seq} does not match JointStates seq {state_seq}")]
+    OracleSeq {
+        /// `SimTruth::seq`.
+        truth_seq: u64,
+        /// `JointStates::seq`.
+        state_seq: u64,
+    },
+    /// The oracle outside lockstep or with the raw friction.
+    #[error(
+        "the oracle runs in lockstep only, with the shipped law (it pairs each request with the \
+         SimTruth of the state it answers)"
+    )]
+    OracleMode,
+    /// A joint index other than 0 (knee) or 1 (ankle_roll).
+    #[error("joint index {0} (0 = knee, 1 = ankle_roll)")]
+    JointIndex(usize),
+    /// A child died during the run.
+    #[error("after the run")]
+    AfterRun(#[source] Box<ExperimentError>),
+    /// The plant stopped publishing.
+    #[error(
+        "no new JointStates for 10 s after seq {last_seq}; plant log:\n{plant_log}\nfrictiond log:\n{frictiond_log}"
+    )]
+    NoStates {
+        /// The last state seen.
+        last_seq: u64,
+        /// Last lines of the plant's log.
+        plant_log: String,
+        /// Last lines of frictiond's log.
+        frictiond_log: String,
+    },
+    /// `std::env::current_exe` failed.
+    #[error("cannot find the running executable")]
+    CurrentExe(#[source] std::io::Error),
+    /// `$FRICTIOND` does not name a file.
+    #[error("$FRICTIOND = {} is not a file", .0.display())]
+    FrictiondEnv(PathBuf),
+    /// No `frictiond` next to `frictl` nor on `PATH`.
+    #[error(
+        "cannot find the `frictiond` executable (looked next to {} and on PATH; build it with \
+         `cargo build -p frictiond` or set FRICTIOND=/path/to/frictiond)",
+        .frictl.display()
+    )]
+    NoFrictiond {
+        /// The `frictl` executable.
+        frictl: PathBuf,
+    },
+    /// Cargo could not be started.
+    #[error("cannot run {}", .cargo.display())]
+    RunCargo {
+        /// The cargo executable.
+        cargo: PathBuf,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// `cargo build -p frictiond` failed.
+    #[error(
+        "building frictiond failed ({status}); build it with `cargo build --profile {profile} -p \
+         frictiond` or set FRICTIOND=/path/to/frictiond"
+    )]
+    CargoBuild {
+        /// Cargo's exit status.
+        status: std::process::ExitStatus,
+        /// The cargo profile.
+        profile: String,
+    },
+    /// Cargo succeeded but the binary is not where expected.
+    #[error("cargo built frictiond but {} does not exist", .0.display())]
+    CargoNoBinary(PathBuf),
+    /// The embedded `config/ankle_knee.toml` does not parse.
+    #[error("config/ankle_knee.toml does not parse")]
+    ShippedConfig(#[source] toml::de::Error),
+    /// The embedded `config/ankle_knee.toml` has no such joint.
+    #[error("config/ankle_knee.toml: no [[joint]] named `{0}`")]
+    ShippedJoint(String),
+    /// A PINN model path cannot be made absolute.
+    #[error("PINN file {}", .path.display())]
+    PinnPath {
+        /// The model file.
+        path: PathBuf,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A run's IPC config without a private root path.
+    #[error("a run needs its own iceoryx2 root path")]
+    NoRootPath,
+    /// The frictiond config does not serialise.
+    #[error("cannot serialise the frictiond config")]
+    SerializeConfig(#[source] toml::ser::Error),
+    /// Creating a file or directory failed.
+    #[error("cannot create {}", .path.display())]
+    Create {
+        /// The file or directory.
+        path: PathBuf,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// Writing a file failed.
+    #[error("cannot write {}", .path.display())]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// Drawing a figure failed.
+    #[error("plot {}: {reason}", .path.display())]
+    Plot {
+        /// The PNG file.
+        path: PathBuf,
+        /// The plotting backend's error.
+        reason: String,
+    },
+    /// Registering a signal handler failed.
+    #[error("cannot register signal {sig}")]
+    Signal {
+        /// The signal number.
+        sig: i32,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// Creating the run's private directory failed.
+    #[error("cannot create run directory {}", .path.display())]
+    RunDir {
+        /// The directory.
+        path: PathBuf,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A child process could not be started.
+    #[error("cannot start {name} ({program:?})")]
+    Spawn {
+        /// `plant` or `frictiond`.
+        name: &'static str,
+        /// The executable.
+        program: std::ffi::OsString,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A child process exited.
+    #[error("{name} exited ({status}); its log:\n{log}")]
+    Exited {
+        /// `plant` or `frictiond`.
+        name: &'static str,
+        /// Its exit status.
+        status: std::process::ExitStatus,
+        /// Last lines of its log.
+        log: String,
+    },
+    /// A child process did not report ready in time.
+    #[error("{name} did not become ready within {timeout:?}; its log:\n{log}")]
+    NotReady {
+        /// `plant` or `frictiond`.
+        name: String,
+        /// How long it was given.
+        timeout: Duration,
+        /// Last lines of its log.
+        log: String,
+    },
+}

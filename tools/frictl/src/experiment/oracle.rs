@@ -20,6 +20,7 @@
 use frictionless::filter::CausalButterworth;
 use frictionless::law::{Gains, JointLaw, LawInput};
 
+use super::ExperimentError;
 use super::session::{LawSettings, Lpf};
 
 /// Daemon tick rate [Hz] (the experiments' `period_us = 1000`).
@@ -34,12 +35,12 @@ pub struct OracleCompensation {
 
 impl OracleCompensation {
     /// The compensation of a joint whose law is `settings` (filter state zero, as after an enable).
-    pub fn new(settings: LawSettings) -> anyhow::Result<Self> {
+    pub fn new(settings: LawSettings) -> Result<Self, ExperimentError> {
         let lpf = match settings.lpf {
             Lpf::Off => None,
             Lpf::Butterworth { order, cutoff_hz } => Some(
                 CausalButterworth::design(order, cutoff_hz, FS_HZ)
-                    .map_err(|e| anyhow::anyhow!("oracle τ̂_F low-pass: {e}"))?,
+                    .map_err(ExperimentError::OracleLpf)?,
             ),
         };
         // Only τ̂_F is read back: unit kt·r, no torque feedback and no current clamp, so the current

@@ -11,8 +11,7 @@ use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::Path;
 
-use anyhow::Context;
-
+use super::ExperimentError;
 use super::metrics::{DisturbanceMetrics, TrackCriterion, TrackMetrics};
 use super::run::{JointTrace, Pulse};
 use super::search::{MinKp, sig3};
@@ -293,9 +292,11 @@ impl SuiteReport {
 }
 
 /// Writes a trace as CSV (`t_s,s_des_rad,s_rad,s_true_rad,tau_des_nm,tau_f_hat_nm,tau_f_true_nm,i_applied_a,tau_ext_nm,flags,sdot_rad_s,sdot_true_rad_s,theta_motor_rad,omega_motor_rad_s`).
-pub fn write_trace_csv(path: &Path, tr: &JointTrace) -> anyhow::Result<()> {
-    let f =
-        std::fs::File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+pub fn write_trace_csv(path: &Path, tr: &JointTrace) -> Result<(), ExperimentError> {
+    let f = std::fs::File::create(path).map_err(|source| ExperimentError::Create {
+        path: path.to_owned(),
+        source,
+    })?;
     let mut w = std::io::BufWriter::new(f);
     writeln!(
         w,
@@ -331,20 +332,26 @@ pub fn write_trace_csv(path: &Path, tr: &JointTrace) -> anyhow::Result<()> {
 /// (s_d and s), friction (τ̂_F as applied by frictiond, and the true τ_F; τ_ext when a disturbance
 /// acted) and τ_des. Text needs a font (see `crate::eval::plot::init_font`); without one the
 /// curves are drawn without labels.
-pub fn write_plots(out: &Path, traces: &[(String, JointTrace)]) -> anyhow::Result<()> {
+pub fn write_plots(out: &Path, traces: &[(String, JointTrace)]) -> Result<(), ExperimentError> {
     use plotters::prelude::*;
     if traces.is_empty() {
         return Ok(());
     }
     let dir = out.join("plots");
-    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    std::fs::create_dir_all(&dir).map_err(|source| ExperimentError::Create {
+        path: dir.clone(),
+        source,
+    })?;
     let font = crate::eval::plot::init_font().is_some();
     for (name, tr) in traces {
         if tr.t_s.len() < 2 {
             continue;
         }
         let path = dir.join(format!("{}.png", slug(name)));
-        let perr = |e: &dyn std::fmt::Display| anyhow::anyhow!("plot {}: {e}", path.display());
+        let perr = |e: &dyn std::fmt::Display| ExperimentError::Plot {
+            path: path.clone(),
+            reason: e.to_string(),
+        };
         let root = BitMapBackend::new(&path, (1200, 900)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| perr(&e))?;
         let panels = root.split_evenly((3, 1));

@@ -13,12 +13,12 @@
 
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, bail};
 use frictionless_shm_types::sim::{SimDisturbance, SimTruth};
 use frictionless_shm_types::{
     DaemonStatus, Inbox, Ipc, JointStates, Outbox, TorqueRequest, monotonic_ns,
 };
 
+use super::ExperimentError;
 use super::controller::{ComputedTorque, Reference};
 use super::oracle::OracleCompensation;
 use super::session::{
@@ -41,7 +41,7 @@ pub struct JointSetup {
 
 impl JointSetup {
     /// Loads `preset` with `--set` overrides `sets` (the same ones the plant gets).
-    pub fn load(preset: &str, sets: &[String]) -> anyhow::Result<Self> {
+    pub fn load(preset: &str, sets: &[String]) -> Result<Self, ExperimentError> {
         let table = load_table(preset, None, sets)?;
         let params = PlantParams::from_table(&table)?;
         let link = link_from_model(&params.link)?;
@@ -53,7 +53,7 @@ impl JointSetup {
     }
 
     /// Both presets in payload order ([`PRESETS`]).
-    pub fn both(sets: &[String]) -> anyhow::Result<[JointSetup; 2]> {
+    pub fn both(sets: &[String]) -> Result<[JointSetup; 2], ExperimentError> {
         frictionless_sim::params::check_set_joints(sets, &PRESETS)?;
         Ok([Self::load(PRESETS[0], sets)?, Self::load(PRESETS[1], sets)?])
     }
@@ -197,7 +197,7 @@ fn wait_for<T: std::fmt::Debug + Copy + iceoryx2::prelude::ZeroCopySend + 'stati
     inbox: &Inbox<T>,
     timeout: Duration,
     accept: impl Fn(&T) -> bool,
-) -> anyhow::Result<Option<T>> {
+) -> Result<Option<T>, ExperimentError> {
     let deadline = Instant::now() + timeout;
     loop {
         if let Some(v) = inbox.latest()?
@@ -218,7 +218,7 @@ pub fn run_trial(
     bins: &Binaries,
     setups: &[JointSetup; 2],
     spec: &TrialSpec,
-) -> anyhow::Result<TrialTrace> {
+) -> Result<TrialTrace, ExperimentError> {
     run_trial_with(bins, setups, spec, &TrialOptions::default())
 }
 
@@ -228,7 +228,7 @@ pub fn run_trial_with(
     setups: &[JointSetup; 2],
     spec: &TrialSpec,
     opts: &TrialOptions,
-) -> anyhow::Result<TrialTrace> {
+) -> Result<TrialTrace, ExperimentError> {
     let started = Instant::now();
     check_spec(spec)?;
     let mut session = Session::new()?;
@@ -272,7 +272,7 @@ pub fn run_trial_with(
                 opts.lpf[p.index],
             )
         })
-        .collect::<anyhow::Result<_>>()?;
+        .collect::<Result<_, _>>()?;
     let mut traces = empty_traces(setups, spec, &laws);
     let mut oracles: Vec<Option<OracleCompensation>> = spec
         .joints
@@ -283,7 +283,7 @@ pub fn run_trial_with(
                 .then(|| OracleCompensation::new(*law))
                 .transpose()
         })
-        .collect::<anyhow::Result<_>>()?;
+        .collect::<Result<_, _>>()?;
     let mut oracle_prev = vec![0.0f64; spec.joints.len()];
     let enable_mask = spec.joints.iter().fold(0u64, |m, p| m | (1u64 << p.index));
 
@@ -298,7 +298,7 @@ pub fn run_trial_with(
     let mut ticks = 0u64;
     loop {
         if interrupted() {
-            bail!("interrupted");
+            return Err(ExperimentError::Interrupted);
         }
         let js = next_state(&js_in, &mut session, last_seq, seq0.is_none())?;
         let s0 = *seq0.get_or_insert(js.seq);
@@ -310,7 +310,7 @@ pub fn run_trial_with(
         let truth: Option<SimTruth> = if truth_ok {
             let got = wait_for(&truth_in, Duration::from_millis(500), |tr| tr.seq >= js.seq)?;
             if got.is_none() && interrupted() {
-                bail!("interrupted");
+                return Err(ExperimentError::Interrupted);
             }
             if got.is_none() {
                 truth_ok = false;
@@ -343,15 +343,13 @@ pub fn run_trial_with(
             let mut tau = ctrls[k].tau_des_nm(js.s_rad[j], js.sdot_rad_s[j], &sp);
             let mut f_hat = status.map_or(f64::NAN, |x| x.tau_f_hat_nm[j]);
             if let Some(o) = &mut oracles[k] {
-                let tr = truth.with_context(
-                    || "the oracle needs the plant's SimTruth, and the plant published none",
-                )?;
-                anyhow::ensure!(
-                    tr.seq == js.seq,
-                    "oracle: SimTruth seq {} does not match JointStates seq {}",
-                    tr.seq,
-                    js.seq
-                );
+                let tr = truth.ok_or(ExperimentError::OracleNoTruth)?;
+                if tr.seq != js.seq {
+                    return Err(ExperimentError::OracleSeq {
+                        truth_seq: tr.seq,
+                        state_seq: js.seq,
+                    });
+                }
                 let comp = o.step(tr.tau_f_true_nm[j], js.sdot_rad_s[j]);
                 tau += comp;
                 f_hat = oracle_prev[k];
@@ -383,11 +381,16 @@ pub fn run_trial_with(
         req.n_joints = 2;
         req_out
             .publish(&req)
-            .map_err(|e| anyhow::anyhow!("publish TorqueRequest: {e}"))?;
+            .map_err(|source| ExperimentError::Publish {
+                payload: "TorqueRequest",
+                source,
+            })?;
         ticks += 1;
     }
     let loop_wall_s = loop_start.elapsed().as_secs_f64();
-    session.check_alive().context("after the run")?;
+    session
+        .check_alive()
+        .map_err(|e| ExperimentError::AfterRun(Box::new(e)))?;
     // Locals drop in reverse order: ports and node first, then the session (children, run dir).
     Ok(TrialTrace {
         joints: traces,
@@ -398,19 +401,14 @@ pub fn run_trial_with(
 }
 
 /// Joint indices are 0 or 1; the oracle only in lockstep with the shipped law.
-fn check_spec(spec: &TrialSpec) -> anyhow::Result<()> {
+fn check_spec(spec: &TrialSpec) -> Result<(), ExperimentError> {
     for p in &spec.joints {
-        anyhow::ensure!(
-            p.index < 2,
-            "joint index {} (0 = knee, 1 = ankle_roll)",
-            p.index
-        );
-        anyhow::ensure!(
-            !(p.model == FrictionModel::Oracle
-                && (spec.mode != Mode::Lockstep || spec.raw_friction)),
-            "the oracle runs in lockstep only, with the shipped law (it pairs each request with the \
-             SimTruth of the state it answers)"
-        );
+        if p.index >= 2 {
+            return Err(ExperimentError::JointIndex(p.index));
+        }
+        if p.model == FrictionModel::Oracle && (spec.mode != Mode::Lockstep || spec.raw_friction) {
+            return Err(ExperimentError::OracleMode);
+        }
     }
     Ok(())
 }
@@ -493,21 +491,21 @@ fn next_state(
     session: &mut Session,
     last_seq: u64,
     first: bool,
-) -> anyhow::Result<JointStates> {
+) -> Result<JointStates, ExperimentError> {
     match wait_for(js_in, Duration::from_secs(10), |s| {
         s.seq > last_seq || first
     })? {
         Some(js) => Ok(js),
         None => {
             if interrupted() {
-                bail!("interrupted");
+                return Err(ExperimentError::Interrupted);
             }
             session.check_alive()?;
-            bail!(
-                "no new JointStates for 10 s after seq {last_seq}; plant log:\n{}\nfrictiond log:\n{}",
-                session.log_tail("plant"),
-                session.log_tail("frictiond")
-            );
+            Err(ExperimentError::NoStates {
+                last_seq,
+                plant_log: session.log_tail("plant"),
+                frictiond_log: session.log_tail("frictiond"),
+            })
         }
     }
 }
@@ -517,14 +515,16 @@ fn publish_disturbance(
     out: &Outbox<SimDisturbance>,
     seq: u64,
     ext_nm: [f64; 2],
-) -> anyhow::Result<()> {
+) -> Result<(), ExperimentError> {
     let mut d = SimDisturbance::zeroed();
     d.seq = seq;
     d.stamp_ns = monotonic_ns();
     d.n_joints = 2;
     d.tau_ext_nm[..2].copy_from_slice(&ext_nm);
-    out.publish(&d)
-        .map_err(|e| anyhow::anyhow!("publish SimDisturbance: {e}"))
+    out.publish(&d).map_err(|source| ExperimentError::Publish {
+        payload: "SimDisturbance",
+        source,
+    })
 }
 
 /// What one tick records for one joint.

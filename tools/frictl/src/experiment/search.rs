@@ -13,6 +13,8 @@
 //!
 //! What it is **not**: no trial execution.
 
+use super::ExperimentError;
+
 /// Result of a search.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(tag = "outcome", rename_all = "snake_case")]
@@ -109,11 +111,10 @@ pub struct KpBisection {
 
 impl KpBisection {
     /// A search over `[lo, hi]` (0 < lo < hi) with `iterations` halvings.
-    pub fn new(lo: f64, hi: f64, iterations: u32) -> anyhow::Result<Self> {
-        anyhow::ensure!(
-            lo.is_finite() && hi.is_finite() && lo > 0.0 && hi > lo,
-            "K_p range [{lo}, {hi}]: need 0 < lo < hi"
-        );
+    pub fn new(lo: f64, hi: f64, iterations: u32) -> Result<Self, ExperimentError> {
+        if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && hi > lo) {
+            return Err(ExperimentError::KpRange { lo, hi });
+        }
         Ok(Self {
             lo,
             hi,

@@ -19,13 +19,14 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, bail};
 use frictiond_config::{
     BackendConfig, BackendKind, FrictionModelName, JointConfig, LoopConfig, LpfConfig, OnStale,
     RawConfig, SafetyConfig, Trigger, WarmupName,
 };
 use frictionless::friction::{CvParams, ScvParams};
 use frictionless_shm_types::IpcConfig;
+
+use super::ExperimentError;
 
 /// Shipped daemon config whose per-joint `kfc`, `max_curr`, `max_output_friction` and `lpf` the
 /// experiments use.
@@ -48,8 +49,8 @@ impl Binaries {
     /// by `cargo run` — `frictiond` built by the same cargo into the same target directory and
     /// profile (see [`build_frictiond_with_cargo`]), else next to `frictl` (or one directory up, for
     /// test binaries in `target/*/deps`), else on `PATH`.
-    pub fn locate() -> anyhow::Result<Self> {
-        let me = std::env::current_exe().context("cannot find the running executable")?;
+    pub fn locate() -> Result<Self, ExperimentError> {
+        let me = std::env::current_exe().map_err(ExperimentError::CurrentExe)?;
         if std::env::var_os("FRICTIOND").is_none()
             && let Some(frictiond) = build_frictiond_with_cargo(&me)?
         {
@@ -62,10 +63,12 @@ impl Binaries {
     }
 
     /// As [`Binaries::locate`] with an explicit `frictl` path (tests pass `CARGO_BIN_EXE_frictl`).
-    pub fn with_frictl(frictl: PathBuf) -> anyhow::Result<Self> {
+    pub fn with_frictl(frictl: PathBuf) -> Result<Self, ExperimentError> {
         if let Some(p) = std::env::var_os("FRICTIOND") {
             let p = PathBuf::from(p);
-            anyhow::ensure!(p.is_file(), "$FRICTIOND = {} is not a file", p.display());
+            if !p.is_file() {
+                return Err(ExperimentError::FrictiondEnv(p));
+            }
             return Ok(Self {
                 frictl,
                 frictiond: p,
@@ -86,11 +89,7 @@ impl Binaries {
                 frictl,
                 frictiond: p.clone(),
             }),
-            None => bail!(
-                "cannot find the `frictiond` executable (looked next to {} and on PATH; build it with \
-                 `cargo build -p frictiond` or set FRICTIOND=/path/to/frictiond)",
-                frictl.display()
-            ),
+            None => Err(ExperimentError::NoFrictiond { frictl }),
         }
     }
 }
@@ -103,7 +102,7 @@ impl Binaries {
 /// This is what makes the README's `cargo run --release -p frictl -- demo` work on a fresh clone:
 /// cargo builds only the package it runs, and has no stable way for one package's binary to require
 /// another package's binary. Up to date, the build is a no-op of well under a second.
-pub fn build_frictiond_with_cargo(me: &Path) -> anyhow::Result<Option<PathBuf>> {
+pub fn build_frictiond_with_cargo(me: &Path) -> Result<Option<PathBuf>, ExperimentError> {
     let (Some(cargo), Some(manifest_dir)) = (
         std::env::var_os("CARGO"),
         std::env::var_os("CARGO_MANIFEST_DIR"),
@@ -160,20 +159,20 @@ pub fn build_frictiond_with_cargo(me: &Path) -> anyhow::Result<Option<PathBuf>> 
         "frictl: building frictiond with cargo (profile {profile}, target dir {})",
         target_dir.display()
     );
-    let status = cmd
-        .status()
-        .with_context(|| format!("cannot run {}", Path::new(&cargo).display()))?;
-    anyhow::ensure!(
-        status.success(),
-        "building frictiond failed ({status}); build it with `cargo build --profile {profile} -p \
-         frictiond` or set FRICTIOND=/path/to/frictiond"
-    );
+    let status = cmd.status().map_err(|source| ExperimentError::RunCargo {
+        cargo: PathBuf::from(&cargo),
+        source,
+    })?;
+    if !status.success() {
+        return Err(ExperimentError::CargoBuild {
+            status,
+            profile: profile.to_owned(),
+        });
+    }
     let built = profile_dir.join("frictiond");
-    anyhow::ensure!(
-        built.is_file(),
-        "cargo built frictiond but {} does not exist",
-        built.display()
-    );
+    if !built.is_file() {
+        return Err(ExperimentError::CargoNoBinary(built));
+    }
     Ok(Some(built))
 }
 
@@ -253,7 +252,11 @@ pub struct LawSettings {
 impl LawSettings {
     /// The shipped law of joint `name` with `kfc` / `lpf` overrides (`None` = shipped); the daemon's
     /// defaults for absent keys (kfc 1, no clip, gate 0, no LPF).
-    pub fn shipped(name: &str, kfc: Option<f64>, lpf: Option<Lpf>) -> anyhow::Result<Self> {
+    pub fn shipped(
+        name: &str,
+        kfc: Option<f64>,
+        lpf: Option<Lpf>,
+    ) -> Result<Self, ExperimentError> {
         let j = shipped_joint(name)?;
         Ok(Self {
             kfc: kfc.unwrap_or(j.kfc),
@@ -305,14 +308,14 @@ pub enum Mode {
 
 /// The `[[joint]]` of `config/ankle_knee.toml` named `name`, typed by the daemon's schema (not
 /// validated: its model paths are relative to `config/`).
-fn shipped_joint(name: &str) -> anyhow::Result<JointConfig> {
+fn shipped_joint(name: &str) -> Result<JointConfig, ExperimentError> {
     let shipped: RawConfig =
-        toml::from_str(ANKLE_KNEE_TOML).context("config/ankle_knee.toml does not parse")?;
+        toml::from_str(ANKLE_KNEE_TOML).map_err(ExperimentError::ShippedConfig)?;
     shipped
         .joint
         .into_iter()
         .find(|j| j.name == name)
-        .with_context(|| format!("config/ankle_knee.toml: no [[joint]] named `{name}`"))
+        .ok_or_else(|| ExperimentError::ShippedJoint(name.to_owned()))
 }
 
 /// `kfc` of `name` in `config/ankle_knee.toml` (1.0 if absent, the daemon's default).
@@ -343,7 +346,7 @@ impl From<Lpf> for Option<LpfConfig> {
 /// `lpf` overrides); the model's keys. With `raw_friction`, only `max_curr` is taken from the shipped
 /// joint and `kfc` defaults to 1 (no clip, no LPF, `lpf` override ignored): the daemon's τ̂_F is then
 /// the model's output itself (used to check online against offline inference).
-pub fn daemon_joint(j: &DaemonJoint, raw_friction: bool) -> anyhow::Result<JointConfig> {
+pub fn daemon_joint(j: &DaemonJoint, raw_friction: bool) -> Result<JointConfig, ExperimentError> {
     let shipped = shipped_joint(&j.name)?;
     let mut out = JointConfig {
         name: j.name.clone(),
@@ -390,8 +393,10 @@ pub fn daemon_joint(j: &DaemonJoint, raw_friction: bool) -> anyhow::Result<Joint
             (out.ks, out.vs, out.alpha) = (Some(p.ks), Some(p.vs), Some(p.alpha));
         }
         FrictionModel::Pinn(file) => {
-            let abs = std::path::absolute(file)
-                .with_context(|| format!("PINN file {}", file.display()))?;
+            let abs = std::path::absolute(file).map_err(|source| ExperimentError::PinnPath {
+                path: file.clone(),
+                source,
+            })?;
             out.friction_model = FrictionModelName::Pinn;
             out.model = Some(abs);
             out.warmup = WarmupName::ZeroPad;
@@ -408,11 +413,8 @@ pub fn daemon_config(
     mode: Mode,
     joints: &[DaemonJoint],
     raw_friction: bool,
-) -> anyhow::Result<RawConfig> {
-    let root = ipc
-        .root_path
-        .as_ref()
-        .context("a run needs its own iceoryx2 root path")?;
+) -> Result<RawConfig, ExperimentError> {
+    let root = ipc.root_path.as_ref().ok_or(ExperimentError::NoRootPath)?;
     let (trigger, stale_after_ticks) = match mode {
         // Lockstep runs faster than real time but may pause on a busy machine: a stamp-age staleness
         // of 5 ms would inject random zero-current ticks, so allow 1 s.
@@ -441,7 +443,7 @@ pub fn daemon_config(
         joint: joints
             .iter()
             .map(|j| daemon_joint(j, raw_friction))
-            .collect::<anyhow::Result<_>>()?,
+            .collect::<Result<_, _>>()?,
         bus: Vec::new(),
     })
 }
@@ -453,13 +455,16 @@ pub fn write_daemon_config(
     mode: Mode,
     joints: &[DaemonJoint],
     raw_friction: bool,
-) -> anyhow::Result<String> {
+) -> Result<String, ExperimentError> {
     let cfg = daemon_config(ipc, mode, joints, raw_friction)?;
     let s = format!(
         "# Written by `frictl experiment` for one run.\n{}",
-        toml::to_string(&cfg).context("cannot serialise the frictiond config")?
+        toml::to_string(&cfg).map_err(ExperimentError::SerializeConfig)?
     );
-    std::fs::write(path, &s).with_context(|| format!("cannot write {}", path.display()))?;
+    std::fs::write(path, &s).map_err(|source| ExperimentError::Write {
+        path: path.to_owned(),
+        source,
+    })?;
     Ok(s)
 }
 
@@ -468,14 +473,14 @@ static INTERRUPT: OnceLock<Arc<AtomicBool>> = OnceLock::new();
 
 /// Registers SIGINT and SIGTERM to set the interrupt flag (idempotent). The run loop polls
 /// [`interrupted`] and returns an error; dropping the [`Session`] then stops the children.
-pub fn install_signal_flag() -> anyhow::Result<()> {
+pub fn install_signal_flag() -> Result<(), ExperimentError> {
     if INTERRUPT.get().is_some() {
         return Ok(());
     }
     let flag = Arc::new(AtomicBool::new(false));
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         signal_hook::flag::register(sig, flag.clone())
-            .with_context(|| format!("cannot register signal {sig}"))?;
+            .map_err(|source| ExperimentError::Signal { sig, source })?;
     }
     let _ = INTERRUPT.set(flag);
     Ok(())
@@ -487,7 +492,7 @@ pub fn interrupted() -> bool {
 }
 
 /// A unique private directory + service prefix for one run.
-fn unique_ipc() -> anyhow::Result<IpcConfig> {
+fn unique_ipc() -> Result<IpcConfig, ExperimentError> {
     static COUNTER: AtomicU64 = AtomicU64::new(0);
     let n = COUNTER.fetch_add(1, Ordering::Relaxed);
     let id = format!(
@@ -497,8 +502,10 @@ fn unique_ipc() -> anyhow::Result<IpcConfig> {
         frictionless_shm_types::monotonic_ns() % 1_000_000_000
     );
     let root = std::env::temp_dir().join(&id);
-    std::fs::create_dir_all(&root)
-        .with_context(|| format!("cannot create run directory {}", root.display()))?;
+    std::fs::create_dir_all(&root).map_err(|source| ExperimentError::RunDir {
+        path: root.clone(),
+        source,
+    })?;
     Ok(IpcConfig::new(Some(&root), &id))
 }
 
@@ -533,7 +540,7 @@ pub struct Session {
 
 impl Session {
     /// Creates the run directory and IPC names; starts nothing yet.
-    pub fn new() -> anyhow::Result<Self> {
+    pub fn new() -> Result<Self, ExperimentError> {
         let ipc = unique_ipc()?;
         let dir = ipc.root_path.clone().expect("unique_ipc sets a root");
         Ok(Self {
@@ -549,7 +556,11 @@ impl Session {
         self.keep_dir = keep;
     }
 
-    fn spawn(&mut self, name: &'static str, cmd: &mut Command) -> anyhow::Result<Arc<AtomicBool>> {
+    fn spawn(
+        &mut self,
+        name: &'static str,
+        cmd: &mut Command,
+    ) -> Result<Arc<AtomicBool>, ExperimentError> {
         let log = self.dir.join(format!("{name}.log"));
         // SAFETY: prctl is async-signal-safe; the closure touches no allocator or lock.
         unsafe {
@@ -567,10 +578,16 @@ impl Session {
                 std::env::var("RUST_LOG").unwrap_or_else(|_| "warn".into()),
             )
             .spawn()
-            .with_context(|| format!("cannot start {name} ({:?})", cmd.get_program()))?;
+            .map_err(|source| ExperimentError::Spawn {
+                name,
+                program: cmd.get_program().to_owned(),
+                source,
+            })?;
         let stderr = child.stderr.take().expect("piped");
-        let log_file = std::fs::File::create(&log)
-            .with_context(|| format!("cannot create {}", log.display()))?;
+        let log_file = std::fs::File::create(&log).map_err(|source| ExperimentError::Create {
+            path: log.clone(),
+            source,
+        })?;
         let ready = Arc::new(AtomicBool::new(false));
         let ready2 = ready.clone();
         self.procs.push(Proc { name, child, log });
@@ -602,16 +619,17 @@ impl Session {
     }
 
     /// Error if a child has exited.
-    pub fn check_alive(&mut self) -> anyhow::Result<()> {
+    pub fn check_alive(&mut self) -> Result<(), ExperimentError> {
         for i in 0..self.procs.len() {
             if let Some(status) = self.procs[i].child.try_wait()? {
                 let name = self.procs[i].name;
                 // let the stderr reader thread drain the pipe into the log first
                 std::thread::sleep(Duration::from_millis(100));
-                bail!(
-                    "{name} exited ({status}); its log:\n{}",
-                    self.log_tail(name)
-                );
+                return Err(ExperimentError::Exited {
+                    name,
+                    status,
+                    log: self.log_tail(name),
+                });
             }
         }
         Ok(())
@@ -626,7 +644,7 @@ impl Session {
         joints: &[DaemonJoint],
         raw_friction: bool,
         probe: impl Fn() -> usize,
-    ) -> anyhow::Result<()> {
+    ) -> Result<(), ExperimentError> {
         let cfg = self.dir.join("frictiond.toml");
         write_daemon_config(&cfg, &self.ipc, mode, joints, raw_friction)?;
         self.spawn(
@@ -643,7 +661,7 @@ impl Session {
         bins: &Binaries,
         mode: Mode,
         spec: &PlantSpec,
-    ) -> anyhow::Result<()> {
+    ) -> Result<(), ExperimentError> {
         let mut cmd = Command::new(&bins.frictl);
         cmd.args([
             "sim",
@@ -682,18 +700,19 @@ impl Session {
         name: &str,
         timeout: Duration,
         cond: impl Fn() -> bool,
-    ) -> anyhow::Result<()> {
+    ) -> Result<(), ExperimentError> {
         let t0 = Instant::now();
         while !cond() {
             if interrupted() {
-                bail!("interrupted");
+                return Err(ExperimentError::Interrupted);
             }
             self.check_alive()?;
             if t0.elapsed() > timeout {
-                bail!(
-                    "{name} did not become ready within {timeout:?}; its log:\n{}",
-                    self.log_tail(name)
-                );
+                return Err(ExperimentError::NotReady {
+                    name: name.to_owned(),
+                    timeout,
+                    log: self.log_tail(name),
+                });
             }
             std::thread::sleep(Duration::from_millis(5));
         }

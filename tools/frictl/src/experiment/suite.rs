@@ -12,6 +12,7 @@
 //!
 //! What it is **not**: no tables or files (see [`super::report`]).
 
+use super::ExperimentError;
 use super::controller::Reference;
 use super::metrics::{self, DisturbanceMetrics, TrackCriterion, TrackMetrics};
 use super::run::{
@@ -108,7 +109,7 @@ fn run_grouped(
     cfg: &SuiteConfig,
     plans: Vec<(JointPlan, f64)>,
     label: &str,
-) -> anyhow::Result<Vec<JointTrace>> {
+) -> Result<Vec<JointTrace>, ExperimentError> {
     let mut out: Vec<Option<JointTrace>> = vec![None; plans.len()];
     let mut pending: Vec<usize> = (0..plans.len()).collect();
     while !pending.is_empty() {
@@ -187,7 +188,7 @@ pub fn track(
     cfg: &SuiteConfig,
     tasks: &[Task],
     label: &str,
-) -> anyhow::Result<Vec<TrackResult>> {
+) -> Result<Vec<TrackResult>, ExperimentError> {
     let plans = tasks
         .iter()
         .map(|t| {
@@ -257,14 +258,14 @@ pub fn min_kp(
     setups: &[JointSetup; 2],
     cfg: &SuiteConfig,
     tasks: &[Task],
-) -> anyhow::Result<Vec<MinKpResult>> {
+) -> Result<Vec<MinKpResult>, ExperimentError> {
     let mut searches: Vec<KpBisection> = tasks
         .iter()
         .map(|t| {
             let (lo, hi) = cfg.kp_range[t.index];
             KpBisection::new(lo, hi, cfg.iterations)
         })
-        .collect::<anyhow::Result<_>>()?;
+        .collect::<Result<_, _>>()?;
     let mut steps: Vec<Vec<SearchStep>> = vec![vec![]; tasks.len()];
     let mut best: Vec<Option<TrackResult>> = vec![None; tasks.len()];
     let mut round = 0;
@@ -335,7 +336,7 @@ pub fn disturbance(
     cfg: &SuiteConfig,
     tasks: &[Task],
     label: &str,
-) -> anyhow::Result<Vec<DisturbanceResult>> {
+) -> Result<Vec<DisturbanceResult>, ExperimentError> {
     let plans = tasks
         .iter()
         .map(|t| {

@@ -40,13 +40,12 @@ use std::os::fd::AsRawFd;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, bail, ensure};
 use frictionless_shm_types::can::WireFrame;
 use frictionless_shm_types::can::mit::{self, MitCommand, MitRanges, MitReply, MitRx, MitSpecial};
 use frictionless_shm_types::can::odrive::{self, OdriveMsg};
 use socketcan::{CanFilter, CanFrame, CanSocket, Socket, SocketOptions};
 
-use super::ServedJoint;
+use super::{ServeError, ServedJoint};
 use frictionless_sim::{Measurement, PlantParams};
 
 /// Tick period [ns] (1 kHz).
@@ -195,22 +194,27 @@ impl Drive {
         node: u8,
         p: &PlantParams,
         command_timeout_ms: u64,
-    ) -> anyhow::Result<Self> {
+    ) -> Result<Self, ServeError> {
         match protocol {
-            Protocol::Mit => ensure!(
-                u32::from(node) != MIT_HOST_ID,
-                "MIT node id {node} is the host (reply) id {MIT_HOST_ID}"
-            ),
-            Protocol::Odrive => ensure!(
-                node <= odrive::NODE_MAX,
-                "ODrive node id {node} out of range 0..={}",
-                odrive::NODE_MAX
-            ),
+            Protocol::Mit if u32::from(node) == MIT_HOST_ID => {
+                return Err(ServeError::MitNodeIsHost {
+                    node,
+                    host: MIT_HOST_ID,
+                });
+            }
+            Protocol::Odrive if node > odrive::NODE_MAX => {
+                return Err(ServeError::OdriveNodeRange {
+                    node,
+                    max: odrive::NODE_MAX,
+                });
+            }
+            Protocol::Mit | Protocol::Odrive => {}
         }
         let ranges = mit_ranges(p);
-        ranges
-            .validate()
-            .with_context(|| format!("MIT ranges of joint `{}`", p.joint))?;
+        ranges.validate().map_err(|source| ServeError::MitRanges {
+            joint: p.joint.clone(),
+            source,
+        })?;
         Ok(Self {
             protocol,
             node,
@@ -488,32 +492,41 @@ impl Drive {
 
 /// Builds one drive per joint with node ids `opts.node_ids` (default 1, 2, …), checking they are
 /// unique and that there is one per joint.
-pub fn build_drives(joints: &[ServedJoint], opts: &CanServeOptions) -> anyhow::Result<Vec<Drive>> {
-    ensure!(!joints.is_empty(), "no joints to serve");
+pub fn build_drives(
+    joints: &[ServedJoint],
+    opts: &CanServeOptions,
+) -> Result<Vec<Drive>, ServeError> {
+    if joints.is_empty() {
+        return Err(ServeError::NoJoints);
+    }
     let ids: Vec<u8> = if opts.node_ids.is_empty() {
         (1..=joints.len())
-            .map(|k| u8::try_from(k).context("more than 255 joints"))
-            .collect::<anyhow::Result<_>>()?
+            .map(|k| u8::try_from(k).map_err(ServeError::TooManyCanJoints))
+            .collect::<Result<_, _>>()?
     } else {
         opts.node_ids.clone()
     };
-    ensure!(
-        ids.len() == joints.len(),
-        "--node-ids has {} ids for {} joints",
-        ids.len(),
-        joints.len()
-    );
+    if ids.len() != joints.len() {
+        return Err(ServeError::NodeIdCount {
+            ids: ids.len(),
+            joints: joints.len(),
+        });
+    }
     for (k, id) in ids.iter().enumerate() {
         if ids[..k].contains(id) {
-            bail!("--node-ids: node id {id} appears twice");
+            return Err(ServeError::DuplicateNodeId(*id));
         }
     }
     joints
         .iter()
         .zip(&ids)
         .map(|(j, &id)| {
-            Drive::new(opts.protocol, id, j.plant.params(), opts.command_timeout_ms)
-                .with_context(|| format!("joint `{}`", j.name))
+            Drive::new(opts.protocol, id, j.plant.params(), opts.command_timeout_ms).map_err(|e| {
+                ServeError::Joint {
+                    joint: j.name.clone(),
+                    source: Box::new(e),
+                }
+            })
         })
         .collect()
 }
@@ -524,7 +537,7 @@ pub fn run(
     joints: &mut [ServedJoint],
     opts: &CanServeOptions,
     stop: &AtomicBool,
-) -> anyhow::Result<()> {
+) -> Result<(), ServeError> {
     let st = run_with_stats(joints, opts, stop)?;
     tracing::info!(
         "sim serve can: {} ticks ({} late, {} skipped), rx {} (+{} other ids, {} rejected, {} error frames), tx {} ({} dropped, {} errors), {} command timeouts",
@@ -548,13 +561,18 @@ pub fn run_with_stats(
     joints: &mut [ServedJoint],
     opts: &CanServeOptions,
     stop: &AtomicBool,
-) -> anyhow::Result<CanServeStats> {
+) -> Result<CanServeStats, ServeError> {
     let drives = build_drives(joints, opts)?;
-    let sock = CanSocket::open(&opts.bus)
-        .with_context(|| format!("opening CAN interface `{}` (--bus)", opts.bus))?;
+    let sock = CanSocket::open(&opts.bus).map_err(|source| ServeError::OpenBus {
+        bus: opts.bus.clone(),
+        source,
+    })?;
     let filters: Vec<CanFilter> = drives.iter().map(Drive::filter).collect();
     sock.set_filters(&filters)
-        .with_context(|| format!("setting receive filters on `{}`", opts.bus))?;
+        .map_err(|source| ServeError::SetFilters {
+            bus: opts.bus.clone(),
+            source,
+        })?;
     // A larger receive buffer (needs CAP_NET_ADMIN; harmless to fail).
     let _ = sock.set_socket_option_int(libc::SOL_SOCKET, libc::SO_RCVBUFFORCE, 1 << 20);
     serve_drives(joints, drives, opts, &sock, stop)
@@ -567,7 +585,7 @@ pub fn serve_socket(
     opts: &CanServeOptions,
     sock: &CanSocket,
     stop: &AtomicBool,
-) -> anyhow::Result<CanServeStats> {
+) -> Result<CanServeStats, ServeError> {
     let drives = build_drives(joints, opts)?;
     serve_drives(joints, drives, opts, sock, stop)
 }
@@ -665,13 +683,18 @@ fn drain_rx(
     tick: u64,
     tx: &mut Tx,
     st: &mut CanServeStats,
-) -> anyhow::Result<()> {
+) -> Result<(), ServeError> {
     for _ in 0..RX_BURST_MAX {
         let frame = match sock.read_frame() {
             Ok(f) => f,
             Err(e) if e.kind() == io::ErrorKind::WouldBlock => return Ok(()),
             Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
-            Err(e) => return Err(e).context("reading from the CAN socket"),
+            Err(source) => {
+                return Err(ServeError::CanSocket {
+                    what: "reading from the CAN socket",
+                    source,
+                });
+            }
         };
         let Ok(wf) = WireFrame::try_from(&frame) else {
             st.rx_error_frames += 1;
@@ -706,9 +729,12 @@ fn serve_drives(
     opts: &CanServeOptions,
     sock: &CanSocket,
     stop: &AtomicBool,
-) -> anyhow::Result<CanServeStats> {
+) -> Result<CanServeStats, ServeError> {
     sock.set_nonblocking(true)
-        .context("setting the CAN socket non-blocking")?;
+        .map_err(|source| ServeError::CanSocket {
+            what: "setting the CAN socket non-blocking",
+            source,
+        })?;
     for (j, d) in joints.iter().zip(&drives) {
         let r = d.ranges();
         tracing::info!(
@@ -727,7 +753,7 @@ fn serve_drives(
     }
     let end_tick = match opts.duration_s {
         Some(d) if d.is_finite() && d >= 0.0 => Some((d * 1e3).round() as u64),
-        Some(d) => bail!("--duration-s {d}: must be finite and ≥ 0"),
+        Some(d) => return Err(ServeError::CanDuration(d)),
         None => None,
     };
     let fd = sock.as_raw_fd();
@@ -755,7 +781,10 @@ fn serve_drives(
             if !tx.queue.is_empty() {
                 wait = wait.min(TX_RETRY);
             }
-            wait_readable(fd, wait).context("waiting on the CAN socket")?;
+            wait_readable(fd, wait).map_err(|source| ServeError::CanSocket {
+                what: "waiting on the CAN socket",
+                source,
+            })?;
         }
         // One 1 ms step of every joint with its drive's current.
         for ((j, d), m) in joints

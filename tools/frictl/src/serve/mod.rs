@@ -15,8 +15,188 @@
 pub mod can;
 pub mod shm;
 
-use frictionless_sim::params::load_table;
+use frictionless_shm_types::can::CanCodecError;
+use frictionless_shm_types::{IoError, ShmError};
+use frictionless_sim::params::{ParamError, load_table};
 use frictionless_sim::{Plant, PlantParams};
+
+/// Why building, opening or serving the virtual joints failed. Messages name the option, joint,
+/// interface or service and the cause.
+#[derive(Debug, thiserror::Error)]
+pub enum ServeError {
+    /// A preset, parameter file or `--set` override is not acceptable.
+    #[error(transparent)]
+    Param(#[from] ParamError),
+    /// An empty name in the comma-separated preset list.
+    #[error("--preset `{presets}`: empty preset name")]
+    EmptyPreset {
+        /// The `--preset` value.
+        presets: String,
+    },
+    /// More presets than the payloads have joint slots.
+    #[error("--preset `{presets}`: more than {max} joints")]
+    TooManyPresets {
+        /// The `--preset` value.
+        presets: String,
+        /// [`frictionless_shm_types::MAX_JOINTS`].
+        max: usize,
+    },
+    /// `sigaction` failed.
+    #[error("installing the handler for signal {sig}")]
+    Signal {
+        /// The signal number.
+        sig: i32,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// Nothing to serve.
+    #[error("no joints to serve")]
+    NoJoints,
+    /// More joints than the shared-memory payloads hold.
+    #[error("{n} joints: at most {max}")]
+    TooManyJoints {
+        /// Joints requested.
+        n: usize,
+        /// [`frictionless_shm_types::MAX_JOINTS`].
+        max: usize,
+    },
+    /// `--initial-pose-rad` does not give one value per joint.
+    #[error("--initial-pose-rad has {values} values for {joints} joints")]
+    InitialPoseCount {
+        /// Values given.
+        values: usize,
+        /// Joints served.
+        joints: usize,
+    },
+    /// A non-finite initial pose.
+    #[error("--initial-pose-rad: value {k} is {value}")]
+    InitialPoseValue {
+        /// Position in the list.
+        k: usize,
+        /// The value.
+        value: f64,
+    },
+    /// The shared-memory plant's `--duration-s` is negative or not finite.
+    #[error("--duration-s must be ≥ 0, got {0}")]
+    ShmDuration(f64),
+    /// The CAN plant's `--duration-s` is negative or not finite.
+    #[error("--duration-s {0}: must be finite and ≥ 0")]
+    CanDuration(f64),
+    /// A joint whose plant does not run at the served 1 kHz.
+    #[error(
+        "joint {index} (`{joint}`): sample period {period_s} s, the served plant runs at 1 kHz (1e-3 s)"
+    )]
+    SamplePeriod {
+        /// Payload index.
+        index: usize,
+        /// Preset name.
+        joint: String,
+        /// The plant's sample period [s].
+        period_s: f64,
+    },
+    /// The live client's joint index does not fit the payloads.
+    #[error("--joint-index {index}: at most {max}")]
+    JointIndexRange {
+        /// The requested index.
+        index: usize,
+        /// The largest index.
+        max: usize,
+    },
+    /// Opening the iceoryx2 node failed.
+    #[error("opening iceoryx2 node")]
+    OpenNode(#[source] ShmError),
+    /// Opening an iceoryx2 service or port failed.
+    #[error(transparent)]
+    Shm(#[from] ShmError),
+    /// A send or receive on an iceoryx2 port failed.
+    #[error("{what}")]
+    Io {
+        /// What was being done, e.g. "receiving commands".
+        what: &'static str,
+        /// The port's error.
+        #[source]
+        source: IoError,
+    },
+    /// The live client failed.
+    #[error(transparent)]
+    Live(#[from] shm::LiveError),
+    /// An MIT drive on the host's reply id.
+    #[error("MIT node id {node} is the host (reply) id {host}")]
+    MitNodeIsHost {
+        /// The node id.
+        node: u8,
+        /// [`can::MIT_HOST_ID`].
+        host: u32,
+    },
+    /// An ODrive node id beyond the protocol's range.
+    #[error("ODrive node id {node} out of range 0..={max}")]
+    OdriveNodeRange {
+        /// The node id.
+        node: u8,
+        /// The largest ODrive node id.
+        max: u8,
+    },
+    /// The MIT ranges derived from a joint's parameters are not encodable.
+    #[error("MIT ranges of joint `{joint}`")]
+    MitRanges {
+        /// The joint named in its parameters.
+        joint: String,
+        /// The codec's reason.
+        #[source]
+        source: CanCodecError,
+    },
+    /// Default node ids only go to 255.
+    #[error("more than 255 joints")]
+    TooManyCanJoints(#[source] std::num::TryFromIntError),
+    /// `--node-ids` does not give one id per joint.
+    #[error("--node-ids has {ids} ids for {joints} joints")]
+    NodeIdCount {
+        /// Ids given.
+        ids: usize,
+        /// Joints served.
+        joints: usize,
+    },
+    /// A node id given twice.
+    #[error("--node-ids: node id {0} appears twice")]
+    DuplicateNodeId(u8),
+    /// Building one joint's drive failed.
+    #[error("joint `{joint}`")]
+    Joint {
+        /// The served joint's name.
+        joint: String,
+        /// Why.
+        #[source]
+        source: Box<ServeError>,
+    },
+    /// Opening the CAN interface failed.
+    #[error("opening CAN interface `{bus}` (--bus)")]
+    OpenBus {
+        /// The interface.
+        bus: String,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// Setting the receive filters failed.
+    #[error("setting receive filters on `{bus}`")]
+    SetFilters {
+        /// The interface.
+        bus: String,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// An operation on the open CAN socket failed.
+    #[error("{what}")]
+    CanSocket {
+        /// What was being done, e.g. "reading from the CAN socket".
+        what: &'static str,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+}
 
 /// One virtual joint on a payload index / bus node.
 pub struct ServedJoint {
@@ -35,17 +215,22 @@ pub fn build_joints(
     params_file: Option<&std::path::Path>,
     sets: &[String],
     seed: u64,
-) -> anyhow::Result<Vec<ServedJoint>> {
+) -> Result<Vec<ServedJoint>, ServeError> {
     let names: Vec<&str> = presets.split(',').map(str::trim).collect();
     frictionless_sim::params::check_set_joints(sets, &names)?;
     let mut out = Vec::new();
     for (index, name) in names.iter().copied().enumerate() {
-        anyhow::ensure!(!name.is_empty(), "--preset `{presets}`: empty preset name");
-        anyhow::ensure!(
-            index < frictionless_shm_types::MAX_JOINTS,
-            "--preset `{presets}`: more than {} joints",
-            frictionless_shm_types::MAX_JOINTS
-        );
+        if name.is_empty() {
+            return Err(ServeError::EmptyPreset {
+                presets: presets.to_owned(),
+            });
+        }
+        if index >= frictionless_shm_types::MAX_JOINTS {
+            return Err(ServeError::TooManyPresets {
+                presets: presets.to_owned(),
+                max: frictionless_shm_types::MAX_JOINTS,
+            });
+        }
         let table = load_table(name, params_file, sets)?;
         let p = PlantParams::from_table(&table)?;
         let plant = Plant::from_params(p, seed.wrapping_add(index as u64))?;
@@ -68,7 +253,7 @@ extern "C" fn on_stop_signal(_sig: libc::c_int) {
 /// Installs SIGINT and SIGTERM handlers that set a process-wide flag and returns it. Plain
 /// `sigaction` with an atomic store (async-signal-safe): the tools crate has no signal-hook
 /// dependency. Calling it again is harmless.
-pub fn install_stop_flag() -> anyhow::Result<&'static std::sync::atomic::AtomicBool> {
+pub fn install_stop_flag() -> Result<&'static std::sync::atomic::AtomicBool, ServeError> {
     for sig in [libc::SIGINT, libc::SIGTERM] {
         // SAFETY: a zeroed sigaction with a valid handler address and an empty mask; the handler
         // only stores to an atomic.
@@ -78,11 +263,12 @@ pub fn install_stop_flag() -> anyhow::Result<&'static std::sync::atomic::AtomicB
             libc::sigemptyset(&mut sa.sa_mask);
             libc::sigaction(sig, &sa, std::ptr::null_mut())
         };
-        anyhow::ensure!(
-            rc == 0,
-            "installing the handler for signal {sig}: {}",
-            std::io::Error::last_os_error()
-        );
+        if rc != 0 {
+            return Err(ServeError::Signal {
+                sig,
+                source: std::io::Error::last_os_error(),
+            });
+        }
     }
     Ok(&STOP)
 }

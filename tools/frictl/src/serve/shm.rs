@@ -35,14 +35,13 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use anyhow::Context;
 use frictionless_shm_types::sim::{SimDisturbance, SimTruth};
 use frictionless_shm_types::{
     Channel, Inbox, Ipc, IpcConfig, JointStates, MAX_JOINTS, MotorCurrentCommand, Outbox,
     monotonic_ns,
 };
 
-use super::ServedJoint;
+use super::{ServeError, ServedJoint};
 use frictionless_acquire::protocol::{AcquireError, JointIo, VelocityEstimator};
 use frictionless_sim::{Measurement, Truth};
 
@@ -177,36 +176,41 @@ pub fn run(
     joints: &mut [ServedJoint],
     opts: &ShmServeOptions,
     stop: &AtomicBool,
-) -> anyhow::Result<ServeSummary> {
-    anyhow::ensure!(!joints.is_empty(), "no joints to serve");
-    anyhow::ensure!(
-        joints.len() <= MAX_JOINTS,
-        "{} joints: at most {MAX_JOINTS}",
-        joints.len()
-    );
-    anyhow::ensure!(
-        opts.initial_pose_rad.is_empty() || opts.initial_pose_rad.len() == joints.len(),
-        "--initial-pose-rad has {} values for {} joints",
-        opts.initial_pose_rad.len(),
-        joints.len()
-    );
-    if let Some(d) = opts.duration_s {
-        anyhow::ensure!(
-            d.is_finite() && d >= 0.0,
-            "--duration-s must be ≥ 0, got {d}"
-        );
+) -> Result<ServeSummary, ServeError> {
+    if joints.is_empty() {
+        return Err(ServeError::NoJoints);
+    }
+    if joints.len() > MAX_JOINTS {
+        return Err(ServeError::TooManyJoints {
+            n: joints.len(),
+            max: MAX_JOINTS,
+        });
+    }
+    if !(opts.initial_pose_rad.is_empty() || opts.initial_pose_rad.len() == joints.len()) {
+        return Err(ServeError::InitialPoseCount {
+            values: opts.initial_pose_rad.len(),
+            joints: joints.len(),
+        });
+    }
+    if let Some(d) = opts.duration_s
+        && !(d.is_finite() && d >= 0.0)
+    {
+        return Err(ServeError::ShmDuration(d));
     }
     for j in joints.iter() {
         let p = j.plant.params().sample_period_s();
-        anyhow::ensure!(
-            (p - PERIOD_S).abs() < 1e-12,
-            "joint {} (`{}`): sample period {p} s, the served plant runs at 1 kHz (1e-3 s)",
-            j.index,
-            j.name
-        );
+        if (p - PERIOD_S).abs() >= 1e-12 || p.is_nan() {
+            return Err(ServeError::SamplePeriod {
+                index: j.index,
+                joint: j.name.clone(),
+                period_s: p,
+            });
+        }
     }
     for (k, &s0) in opts.initial_pose_rad.iter().enumerate() {
-        anyhow::ensure!(s0.is_finite(), "--initial-pose-rad: value {k} is {s0}");
+        if !s0.is_finite() {
+            return Err(ServeError::InitialPoseValue { k, value: s0 });
+        }
         joints[k].plant.reset_at_rest(s0);
     }
 
@@ -217,7 +221,7 @@ pub fn run(
     if cleaned > 0 {
         eprintln!("frictl sim serve: removed {cleaned} dead iceoryx2 node(s)");
     }
-    let ipc = Ipc::open(&opts.ipc, PLANT_NODE_NAME).context("opening iceoryx2 node")?;
+    let ipc = Ipc::open(&opts.ipc, PLANT_NODE_NAME).map_err(ServeError::OpenNode)?;
     let commands_ch = ipc.motor_current_command()?;
     let commands = commands_ch.inbox()?;
     let disturbance = ipc.sim_disturbance()?.inbox()?;
@@ -303,8 +307,8 @@ struct HeldCommand {
     at: u64,
 }
 
-fn io_err(what: &str, e: impl std::fmt::Display) -> anyhow::Error {
-    anyhow::anyhow!("{what}: {e}")
+fn io_err(what: &'static str, source: frictionless_shm_types::IoError) -> ServeError {
+    ServeError::Io { what, source }
 }
 
 fn serve_loop(
@@ -312,7 +316,7 @@ fn serve_loop(
     ports: &PlantPorts,
     opts: &ShmServeOptions,
     stop: &AtomicBool,
-) -> anyhow::Result<ServeSummary> {
+) -> Result<ServeSummary, ServeError> {
     let n = loops.len();
     let max_ticks = opts
         .duration_s
@@ -436,7 +440,7 @@ fn wait_answer(
     timeout: Duration,
     stop: &AtomicBool,
     summary: &mut ServeSummary,
-) -> anyhow::Result<Option<MotorCurrentCommand>> {
+) -> Result<Option<MotorCurrentCommand>, ServeError> {
     let deadline = Instant::now() + timeout;
     loop {
         if let Some(c) = ports
@@ -465,7 +469,7 @@ fn wait_answer(
     }
 }
 
-fn publish(loops: &[JointLoop<'_>], ports: &PlantPorts, seq: u64) -> anyhow::Result<()> {
+fn publish(loops: &[JointLoop<'_>], ports: &PlantPorts, seq: u64) -> Result<(), ServeError> {
     let n = loops.len();
     let stamp = monotonic_ns();
     ports
@@ -583,14 +587,15 @@ impl<'a> LiveJoint<'a> {
         connect_timeout: Duration,
         state_timeout: Duration,
         stop: &'a AtomicBool,
-    ) -> anyhow::Result<Self> {
-        anyhow::ensure!(
-            joint_index < MAX_JOINTS,
-            "--joint-index {joint_index}: at most {}",
-            MAX_JOINTS - 1
-        );
+    ) -> Result<Self, ServeError> {
+        if joint_index >= MAX_JOINTS {
+            return Err(ServeError::JointIndexRange {
+                index: joint_index,
+                max: MAX_JOINTS - 1,
+            });
+        }
         let _ = Ipc::cleanup_dead_nodes_for(cfg);
-        let ipc = Ipc::open(cfg, ACQUIRE_NODE_NAME).context("opening iceoryx2 node")?;
+        let ipc = Ipc::open(cfg, ACQUIRE_NODE_NAME).map_err(ServeError::OpenNode)?;
         // Inbox before outbox: a lockstep plant starts once it sees our command publisher.
         let states = ipc.joint_states()?.inbox()?;
         let commands = ipc.motor_current_command()?.outbox()?;
@@ -711,7 +716,7 @@ impl<'a> LiveJoint<'a> {
     }
 
     /// Sends 0 A for this joint (answering the newest state): call when done or aborting.
-    pub fn release(&mut self) -> anyhow::Result<()> {
+    pub fn release(&mut self) -> Result<(), ServeError> {
         self.send(0.0)?;
         Ok(())
     }
