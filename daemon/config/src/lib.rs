@@ -674,7 +674,8 @@ pub fn check_model_file(path: &Path, joint: &JointConfig, shared: bool) -> Resul
         return Ok(());
     }
     let kt = m.meta.kt_nm_per_a;
-    if !((kt - joint.kt).abs() <= KT_REL_TOLERANCE * joint.kt.abs()) {
+    // Both are finite: the file's k_t is validated by the reader, the config's before this call.
+    if (kt - joint.kt).abs() > KT_REL_TOLERANCE * joint.kt.abs() {
         return Err(format!(
             "model was trained with kt {kt} Nm/A, config says kt = {} Nm/A (the labels depend on it; must match within a relative {KT_REL_TOLERANCE:e})",
             joint.kt
