@@ -847,3 +847,85 @@ fn fuzz_seed_files_are_valid() {
         }
     }
 }
+
+/// Issue 14 #3: a model path that is not a regular file (a FIFO nobody writes, `/dev/zero`, a
+/// directory) is refused before anything is read: no blocking on the FIFO, no unbounded allocation.
+#[test]
+fn read_file_refuses_non_regular_files_before_reading() {
+    let dir = scratch_dir("nonregular");
+    let fifo = dir.join("model.fifo");
+    let _ = std::fs::remove_file(&fifo);
+    let c = std::ffi::CString::new(fifo.as_os_str().as_encoded_bytes()).unwrap();
+    // SAFETY: a valid NUL-terminated path.
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0, "mkfifo");
+    for path in [fifo.clone(), PathBuf::from("/dev/zero"), dir.clone()] {
+        let e = weights::read_file(&path).unwrap_err();
+        assert!(
+            matches!(&e, WeightError::NotRegularFile { path: p, .. } if p == &path),
+            "{}: {e}",
+            path.display()
+        );
+        assert!(e.to_string().contains("not a regular file"), "{e}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Issue 14 #3: a regular file larger than any valid `.fwt` is refused from its size alone.
+#[test]
+fn read_file_refuses_files_over_the_format_maximum() {
+    let dir = scratch_dir("huge");
+    let path = dir.join("huge.fwt");
+    let f = std::fs::File::create(&path).unwrap();
+    f.set_len(weights::layout::MAX_FILE_LEN + 1).unwrap(); // sparse: no disk used
+    drop(f);
+    let e = weights::read_file(&path).unwrap_err();
+    assert!(
+        matches!(e.kind(), WeightError::TooLarge { len, max } if *len == weights::layout::MAX_FILE_LEN + 1 && *max == weights::layout::MAX_FILE_LEN),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The largest network the limits allow encodes within `MAX_FILE_LEN`.
+#[test]
+fn max_file_len_covers_the_largest_network() {
+    use frictionless::mlp::limits;
+    let mut sizes = vec![limits::MAX_INPUTS];
+    sizes.extend(std::iter::repeat_n(
+        limits::MAX_WIDTH,
+        limits::MAX_HIDDEN_LAYERS,
+    ));
+    sizes.push(limits::MAX_OUTPUTS);
+    let len = spec_file_len(&sizes, 4) as u64;
+    assert!(len <= weights::layout::MAX_FILE_LEN, "{len}");
+}
+
+/// Issue 14 #8: a model whose output is not finite on representative inputs (a tiny normalisation
+/// scale, a huge weight) is refused by the reader, by `inspect` and by the writer.
+#[test]
+fn models_with_non_finite_output_are_refused() {
+    let (m, good) = small(StorageDtype::F32);
+    assert!(from_bytes(&good).is_ok());
+    let n = m.mlp.norm.scale.len();
+    let layers = m.mlp.layers.len();
+    let scale_at = FIXED + ENTRY * layers + 4 * n;
+    // 1e-45: a subnormal scale; every input normalises to ±inf (or NaN).
+    let mut tiny = good.clone();
+    tiny[scale_at..scale_at + 4].copy_from_slice(&1e-45f32.to_le_bytes());
+    fix_crc(&mut tiny);
+    let e = from_bytes(&tiny).unwrap_err();
+    assert!(matches!(e, WeightError::NonFiniteOutput { .. }), "{e}");
+    assert!(e.to_string().contains("not finite"), "{e}");
+    let i = inspect(&tiny).unwrap();
+    assert!(i.error.as_deref().unwrap_or("").contains("output"), "{i:?}");
+    // A 3e38 weight in every first-layer row: the hidden sums overflow to inf.
+    let mut huge = m.clone();
+    for w in &mut huge.mlp.layers[0].weight {
+        *w = 3e38;
+    }
+    for w in &mut huge.mlp.layers[1].weight {
+        *w = 3e38;
+    }
+    let e = to_bytes(&huge).unwrap_err();
+    assert!(matches!(e, WeightError::NonFiniteOutput { .. }), "{e}");
+}

@@ -410,7 +410,14 @@ fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, RtSetupError> {
         if libc::prctl(libc::PR_SET_TIMERSLACK, 1, 0, 0, 0) != 0 {
             refused.push(RtRefusal::TimerSlack(std::io::Error::last_os_error()));
         }
-        if let Some(cpu) = l.cpu {
+        // `libc::CPU_SET` indexes an array of CPU_SETSIZE bits and panics beyond it: the config
+        // refuses such CPUs, and an out-of-range index is a refusal here too, never a panic.
+        if let Some(cpu) = l.cpu.filter(|&c| c >= libc::CPU_SETSIZE as usize) {
+            refused.push(RtRefusal::Affinity {
+                cpu,
+                source: std::io::Error::from_raw_os_error(libc::EINVAL),
+            });
+        } else if let Some(cpu) = l.cpu {
             let mut set: libc::cpu_set_t = std::mem::zeroed();
             libc::CPU_SET(cpu, &mut set);
             let ok = libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) == 0;
@@ -1230,6 +1237,23 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
 mod tests {
     use super::*;
     use frictionless_shm_types::{FLAG_NON_FINITE, FLAG_STALE};
+
+    /// Issue 14 #5: a CPU index beyond CPU_SETSIZE (the config refuses it; a `Config` built in code
+    /// may not) is an affinity refusal, not a panic in `CPU_SET`.
+    #[test]
+    fn out_of_range_cpu_is_refused_without_panicking() {
+        let text = "[backend]\nkind = \"shm\"\n[[joint]]\nname = \"a\"\nindex = 0\ngear_ratio = 1.0\nkt = 0.1\nmax_curr = 1.0\nfriction_model = \"none\"\n";
+        let mut cfg = crate::config::parse(std::path::Path::new("t.toml"), text).unwrap();
+        for cpu in [libc::CPU_SETSIZE as usize, usize::MAX] {
+            cfg.raw.loop_.cpu = Some(cpu);
+            let c = cfg.clone();
+            let grant = std::thread::spawn(move || apply_rt_settings(&c).map(|g| g.flags))
+                .join()
+                .expect("no panic")
+                .expect("refusals are not fatal without require_rt");
+            assert_eq!(grant & STATUS_CPU_PINNED, 0, "cpu {cpu}");
+        }
+    }
 
     fn params(on_stale: &str) -> Box<Params> {
         let text = format!(

@@ -588,6 +588,12 @@ impl ServiceKind {
     }
 }
 
+/// Longest service prefix in bytes: iceoryx2 0.10 refuses service names longer than
+/// `iceoryx2::constants::MAX_SERVICE_NAME_LENGTH` (255 bytes, `ServiceNameError::ExceedsMaximumLength`),
+/// and the longest name built from a prefix is `<prefix>/motor_current_command` (22 bytes after it).
+pub const MAX_SERVICE_PREFIX_BYTES: usize =
+    iceoryx2::constants::MAX_SERVICE_NAME_LENGTH - "/motor_current_command".len();
+
 impl IpcConfig {
     /// A config with the given root path and prefix.
     pub fn new(root_path: Option<&Path>, service_prefix: &str) -> Self {
@@ -1093,6 +1099,30 @@ mod tests {
         std::thread::sleep(Duration::from_millis(2));
         let b = monotonic_ns();
         assert!(b > a + 1_000_000, "{a} → {b}");
+    }
+
+    #[test]
+    fn max_service_prefix_fits_every_service_name() {
+        let kinds = [
+            ServiceKind::JointStates,
+            ServiceKind::TorqueRequest,
+            ServiceKind::MotorCurrentCommand,
+            ServiceKind::DaemonStatus,
+            ServiceKind::SimTruth,
+            ServiceKind::SimDisturbance,
+        ];
+        let cfg = IpcConfig::new(None, &"p".repeat(MAX_SERVICE_PREFIX_BYTES));
+        for k in kinds {
+            let name = cfg.service_name(k);
+            assert!(
+                iceoryx2::prelude::ServiceName::new(&name).is_ok(),
+                "{} bytes",
+                name.len()
+            );
+        }
+        let cfg = IpcConfig::new(None, &"p".repeat(MAX_SERVICE_PREFIX_BYTES + 1));
+        let name = cfg.service_name(ServiceKind::MotorCurrentCommand);
+        assert!(iceoryx2::prelude::ServiceName::new(&name).is_err());
     }
 
     #[test]

@@ -523,6 +523,7 @@ pub(super) fn decode(b: &[u8]) -> Result<ModelFile, WeightError> {
         mlp: MlpWeights { norm, layers },
     };
     validate_model(&file)?;
+    probe_output(&file)?;
     Ok(file)
 }
 
@@ -686,6 +687,7 @@ fn put(b: &mut [u8], at: usize, v: &[u8]) {
 /// Validating encoder (see [`super::to_bytes`]).
 pub(super) fn encode(f: &ModelFile) -> Result<Vec<u8>, WeightError> {
     validate_model(f)?;
+    probe_output(f)?;
     let mlp = &f.mlp;
     let m = &f.meta;
     let lay = encoded_layout(mlp, f.dtype);
@@ -799,4 +801,25 @@ pub(super) fn encode(f: &ModelFile) -> Result<Vec<u8>, WeightError> {
     let crc = file_crc(&b);
     put(&mut b, off::CRC, &crc.to_le_bytes());
     Ok(b)
+}
+
+/// See [`super::probe_output`].
+pub(super) fn probe_output(f: &ModelFile) -> Result<(), WeightError> {
+    let mut net = crate::kernel::Mlp::new(&f.mlp, f.dtype)?;
+    let norm = &f.mlp.norm;
+    let neg: Vec<f32> = norm.scale.iter().map(|s| -s).collect();
+    let zeros = vec![0.0f32; norm.mean.len()];
+    let probes: [(&'static str, &[f32]); 4] = [
+        ("x = 0", &zeros),
+        ("x = mean", &norm.mean),
+        ("x = +scale", &norm.scale),
+        ("x = -scale", &neg),
+    ];
+    for (input, x) in probes {
+        let value = net.forward(x);
+        if !value.is_finite() {
+            return Err(WeightError::NonFiniteOutput { input, value });
+        }
+    }
+    Ok(())
 }

@@ -21,6 +21,19 @@ pub const FIXED_HEADER_LEN: usize = 320;
 pub const LAYER_ENTRY_LEN: usize = 16;
 /// Alignment of the payload start in bytes.
 pub const PAYLOAD_ALIGN: usize = 64;
+/// Upper bound on the size of any valid `.fwt` file [bytes]: the fixed header, the largest layer
+/// table and normalisation, the largest network the limits in [`crate::mlp::limits`] allow in f32,
+/// plus alignment slack. [`super::read_file`] refuses larger files before reading them.
+pub const MAX_FILE_LEN: u64 = {
+    use crate::mlp::limits::{MAX_HIDDEN_LAYERS, MAX_INPUTS, MAX_OUTPUTS, MAX_WIDTH};
+    let layers = MAX_HIDDEN_LAYERS + 1;
+    let header = FIXED_HEADER_LEN + LAYER_ENTRY_LEN * layers + 8 * MAX_INPUTS;
+    let weights = MAX_INPUTS * MAX_WIDTH
+        + (MAX_HIDDEN_LAYERS - 1) * MAX_WIDTH * MAX_WIDTH
+        + MAX_WIDTH * MAX_OUTPUTS;
+    let biases = MAX_HIDDEN_LAYERS * MAX_WIDTH + MAX_OUTPUTS;
+    (header + PAYLOAD_ALIGN * (layers + 1) + 4 * (weights + biases)) as u64
+};
 /// Longest joint name in bytes (UTF-8; the field is 64 bytes, NUL-padded).
 pub const JOINT_NAME_MAX: usize = 63;
 /// Longest tool-version string in bytes (UTF-8; the field is 32 bytes, NUL-padded).

@@ -222,6 +222,34 @@ pub enum WeightError {
         #[source]
         source: io::Error,
     },
+    /// The path is not a regular file (a FIFO, a device, a directory, a socket): refused before it is
+    /// opened for reading, so a FIFO cannot block and `/dev/zero` cannot grow memory.
+    #[error("{path}: not a regular file ({file_type}); a .fwt model must be a regular file")]
+    NotRegularFile {
+        /// The file.
+        path: PathBuf,
+        /// What it is instead, e.g. "FIFO", "character device", "directory".
+        file_type: &'static str,
+    },
+    /// The file is larger than any valid `.fwt` can be ([`layout::MAX_FILE_LEN`]).
+    #[error("file is {len} bytes, more than the largest valid .fwt ({max} bytes)")]
+    TooLarge {
+        /// Bytes in the file.
+        len: u64,
+        /// [`layout::MAX_FILE_LEN`].
+        max: u64,
+    },
+    /// The network's output is not finite on a representative input (see [`probe_output`]): the
+    /// model would command NaN friction on every tick.
+    #[error(
+        "model output is {value} (not finite) for the probe input {input}; the weights or the normalisation are unusable"
+    )]
+    NonFiniteOutput {
+        /// Which probe input, e.g. "x = +scale".
+        input: &'static str,
+        /// The output.
+        value: f32,
+    },
     /// A format error in a named file (from [`read_file`] / [`write_file`]).
     #[error("{path}: {source}")]
     InFile {
@@ -260,16 +288,83 @@ pub fn from_bytes(bytes: &[u8]) -> Result<ModelFile, WeightError> {
     codec::decode(bytes)
 }
 
+/// Runs `file`'s network through the inference kernel on representative inputs — all zeros, the
+/// normalisation mean, +scale and −scale — and fails if any output is not finite. A tiny
+/// normalisation scale or an overflowing weight passes every per-value check yet makes the model
+/// output NaN or ±inf on every input; [`to_bytes`] and [`from_bytes`] run this probe.
+pub fn probe_output(file: &ModelFile) -> Result<(), WeightError> {
+    codec::probe_output(file)
+}
+
 /// Reads and validates a `.fwt` file. Every error names `path`.
+///
+/// Only regular files are read: the path's type is checked before it is opened (a FIFO, a device
+/// such as `/dev/zero` or a directory is [`WeightError::NotRegularFile`]), the open uses
+/// `O_NONBLOCK` (a FIFO swapped in between check and open cannot block it), the open file's type
+/// and size are checked again, a file over [`layout::MAX_FILE_LEN`] is [`WeightError::TooLarge`],
+/// and the read is bounded by that size. Only then are the bytes decoded.
 pub fn read_file(path: &Path) -> Result<ModelFile, WeightError> {
-    let bytes = std::fs::read(path).map_err(|source| WeightError::Io {
-        path: path.to_owned(),
-        source,
-    })?;
+    let bytes = read_regular_bounded(path)?;
     from_bytes(&bytes).map_err(|e| WeightError::InFile {
         path: path.to_owned(),
         source: Box::new(e),
     })
+}
+
+fn file_type_name(t: std::fs::FileType) -> &'static str {
+    use std::os::unix::fs::FileTypeExt;
+    if t.is_dir() {
+        "directory"
+    } else if t.is_fifo() {
+        "FIFO"
+    } else if t.is_char_device() {
+        "character device"
+    } else if t.is_block_device() {
+        "block device"
+    } else if t.is_socket() {
+        "socket"
+    } else {
+        "not a regular file"
+    }
+}
+
+/// The bytes of the regular file `path`, at most [`layout::MAX_FILE_LEN`] of them (see [`read_file`]).
+fn read_regular_bounded(path: &Path) -> Result<Vec<u8>, WeightError> {
+    use std::io::Read;
+    use std::os::unix::fs::OpenOptionsExt;
+    let io = |source| WeightError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let check = |m: &std::fs::Metadata| -> Result<u64, WeightError> {
+        if !m.file_type().is_file() {
+            return Err(WeightError::NotRegularFile {
+                path: path.to_owned(),
+                file_type: file_type_name(m.file_type()),
+            });
+        }
+        if m.len() > layout::MAX_FILE_LEN {
+            return Err(WeightError::InFile {
+                path: path.to_owned(),
+                source: Box::new(WeightError::TooLarge {
+                    len: m.len(),
+                    max: layout::MAX_FILE_LEN,
+                }),
+            });
+        }
+        Ok(m.len())
+    };
+    check(&std::fs::metadata(path).map_err(io)?)?;
+    let f = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NONBLOCK)
+        .open(path)
+        .map_err(io)?;
+    let len = check(&f.metadata().map_err(io)?)?;
+    // One byte more than the size: a file that grew since `fstat` shows up as trailing data.
+    let mut bytes = Vec::with_capacity(len as usize + 1);
+    f.take(len + 1).read_to_end(&mut bytes).map_err(io)?;
+    Ok(bytes)
 }
 
 /// Writes a `.fwt` file atomically: a temporary file in the same directory is written, synced and

@@ -647,18 +647,72 @@ impl Checker<'_> {
     }
 }
 
-/// Reads and checks a `.fwt` model against the joint's configured gear ratio. Error text names the
-/// problem; the caller adds file and key.
-pub fn check_model_file(path: &Path, gear_ratio: f64) -> Result<(), String> {
+/// Relative tolerance of the k_t comparison between a `.fwt` header and `[[joint]] kt`.
+pub const KT_REL_TOLERANCE: f64 = 1e-6;
+
+/// Reads and checks a `.fwt` model against its `[[joint]]`. Error text names the problem and both
+/// values; the caller adds file and key.
+///
+/// The read accepts regular files only and runs the core's finite-output probe
+/// ([`frictionless::weights::read_file`]). Then the model must match the joint: always the gear
+/// ratio (sign and value, relative 1e-9: Δθ = r·s − θ). A file named by exactly one `[[joint]]`
+/// (`shared` false) must also carry that joint's k_t (relative [`KT_REL_TOLERANCE`]: the labels were
+/// computed with it) and its name (unless the file's name is empty: provenance unknown, e.g. an
+/// ONNX import without `--joint`). A file named by several `[[joint]]`s (`shared` true) is a
+/// template network — one net timed on many joints, as in `config/stress32.toml` — and cannot carry
+/// every joint's name and k_t, so only its gear ratio is compared.
+pub fn check_model_file(path: &Path, joint: &JointConfig, shared: bool) -> Result<(), String> {
     let m = frictionless::weights::read_file(path).map_err(|e| e.to_string())?;
     let r = m.meta.gear_ratio.get();
+    let gear_ratio = joint.gear_ratio;
     if (r - gear_ratio).abs() > 1e-9 * gear_ratio.abs() {
         return Err(format!(
             "model was trained with gear_ratio {r}, config says {gear_ratio} (sign and value must match)"
         ));
     }
+    if shared {
+        return Ok(());
+    }
+    let kt = m.meta.kt_nm_per_a;
+    // Both are finite: the file's k_t is validated by the reader, the config's before this call.
+    if (kt - joint.kt).abs() > KT_REL_TOLERANCE * joint.kt.abs() {
+        return Err(format!(
+            "model was trained with kt {kt} Nm/A, config says kt = {} Nm/A (the labels depend on it; must match within a relative {KT_REL_TOLERANCE:e})",
+            joint.kt
+        ));
+    }
+    let name = &m.meta.joint_name;
+    if !name.is_empty() && *name != joint.name {
+        return Err(format!(
+            "model is for joint {name:?}, config says name = {:?} (a model file used by one [[joint]] must carry its name)",
+            joint.name
+        ));
+    }
     Ok(())
 }
+
+/// The online CPUs as the kernel lists them in `/sys/devices/system/cpu/online` (none when the file
+/// cannot be read or parsed, e.g. without `/sys`).
+fn online_cpus() -> Option<Vec<std::ops::RangeInclusive<usize>>> {
+    parse_cpu_list(&std::fs::read_to_string("/sys/devices/system/cpu/online").ok()?)
+}
+
+/// Parses a kernel CPU list such as `0-3,6,8-9`.
+fn parse_cpu_list(text: &str) -> Option<Vec<std::ops::RangeInclusive<usize>>> {
+    let mut out = Vec::new();
+    for part in text.trim().split(',') {
+        let (a, b) = part.split_once('-').unwrap_or((part, part));
+        let (a, b) = (a.parse().ok()?, b.parse().ok()?);
+        if a > b {
+            return None;
+        }
+        out.push(a..=b);
+    }
+    Some(out)
+}
+
+/// Longest run of ticks `ready_after_ticks` and `stale_after_ticks` may span [s].
+pub const MAX_TICK_SPAN_S: u64 = 60;
 
 /// Reads, parses and validates `path`, including every model file. Touches no IPC.
 pub fn load(path: &Path) -> Result<Config, ConfigError> {
@@ -697,6 +751,59 @@ pub fn parse(path: &Path, text: &str) -> Result<Config, ConfigError> {
             "must fit the kernel's s32 PM QoS value (0..=2147483647)",
         ));
     }
+    if let Some(cpu) = l.cpu {
+        let setsize = libc::CPU_SETSIZE as usize;
+        if cpu >= setsize {
+            return Err(c.fail(
+                "loop.cpu".into(),
+                cpu,
+                &format!("must be below CPU_SETSIZE ({setsize}) and an online CPU"),
+            ));
+        }
+        if let Some(online) = online_cpus()
+            && !online.iter().any(|r| r.contains(&cpu))
+        {
+            let list: Vec<String> = online
+                .iter()
+                .map(|r| {
+                    if r.start() == r.end() {
+                        r.start().to_string()
+                    } else {
+                        format!("{}-{}", r.start(), r.end())
+                    }
+                })
+                .collect();
+            return Err(c.fail(
+                "loop.cpu".into(),
+                cpu,
+                &format!(
+                    "must be an online CPU (online: {}, /sys/devices/system/cpu/online)",
+                    list.join(",")
+                ),
+            ));
+        }
+    }
+    let max_ticks = MAX_TICK_SPAN_S * 1_000_000 / l.period_us;
+    if l.ready_after_ticks > max_ticks {
+        return Err(c.fail(
+            "loop.ready_after_ticks".into(),
+            l.ready_after_ticks,
+            &format!(
+                "must be <= {max_ticks} ({MAX_TICK_SPAN_S} s at period_us = {})",
+                l.period_us
+            ),
+        ));
+    }
+    if raw.safety.stale_after_ticks > max_ticks {
+        return Err(c.fail(
+            "safety.stale_after_ticks".into(),
+            raw.safety.stale_after_ticks,
+            &format!(
+                "must be <= {max_ticks} ({MAX_TICK_SPAN_S} s at period_us = {})",
+                l.period_us
+            ),
+        ));
+    }
     if l.status_every_ticks == 0 {
         return Err(c.fail("loop.status_every_ticks".into(), 0, "must be >= 1"));
     }
@@ -709,6 +816,37 @@ pub fn parse(path: &Path, text: &str) -> Result<Config, ConfigError> {
             format!("{:?}", raw.backend.service_prefix),
             "must be non-empty without NUL",
         ));
+    }
+    let prefix = &raw.backend.service_prefix;
+    let max_prefix = frictionless_shm_types::MAX_SERVICE_PREFIX_BYTES;
+    if prefix.len() > max_prefix {
+        let head: String = prefix.chars().take(32).collect();
+        return Err(c.fail(
+            "backend.service_prefix".into(),
+            format!("{head:?}… ({} bytes)", prefix.len()),
+            &format!(
+                "must be at most {max_prefix} bytes (iceoryx2 service names are at most 255 bytes, and `/motor_current_command` is appended)"
+            ),
+        ));
+    }
+    if prefix.starts_with("iox2://") {
+        return Err(c.fail(
+            "backend.service_prefix".into(),
+            format!("{prefix:?}"),
+            "must not start with `iox2://` (reserved by iceoryx2)",
+        ));
+    }
+    if let Some(root) = &raw.backend.root_path {
+        let resolved = base.join(root);
+        if let Ok(m) = std::fs::metadata(&resolved)
+            && !m.is_dir()
+        {
+            return Err(c.fail(
+                "backend.root_path".into(),
+                resolved.display(),
+                "exists and is not a directory (iceoryx2 creates its files under it)",
+            ));
+        }
     }
     if raw.joint.is_empty() {
         return Err(c.fail("joint".into(), "[]", "at least one [[joint]] is required"));
@@ -778,7 +916,19 @@ pub fn parse(path: &Path, text: &str) -> Result<Config, ConfigError> {
                 ));
             }
         }
-        models.push(model_spec(&c, base, k, j)?);
+        let shared = j.model.as_ref().is_some_and(|m| {
+            raw.joint
+                .iter()
+                .filter(|o| o.friction_model == FrictionModelName::Pinn)
+                .filter(|o| {
+                    o.model
+                        .as_ref()
+                        .is_some_and(|om| base.join(om) == base.join(m))
+                })
+                .count()
+                > 1
+        });
+        models.push(model_spec(&c, base, k, j, shared)?);
     }
     let buses = resolve_buses(&c, &raw, fs_hz)?;
     let root_path = raw.backend.root_path.as_ref().map(|p| base.join(p));
@@ -1134,6 +1284,7 @@ fn model_spec(
     base: &Path,
     k: usize,
     j: &JointConfig,
+    shared: bool,
 ) -> Result<ModelSpec, ConfigError> {
     use frictionless::friction::{CvParams, ScvParams, StaticFriction};
     let key = |name: &str| format!("joint[{k}].{name}");
@@ -1225,7 +1376,7 @@ fn model_spec(
                 )
             })?;
             let path = base.join(rel);
-            check_model_file(&path, j.gear_ratio).map_err(|message| ConfigError::Model {
+            check_model_file(&path, j, shared).map_err(|message| ConfigError::Model {
                 file: c.file.to_path_buf(),
                 key: key("model"),
                 path: path.clone(),
@@ -1589,5 +1740,175 @@ joints = [{ joint = "ankle", node_id = 3, command_unit = "joint_torque" }]
         assert!((c.buses[0].load.load - 0.75).abs() < 1e-12);
         let e = p(&mit_joints(3, 0.74)).unwrap_err().to_string();
         assert!(e.contains("75.0 %"), "{e}");
+    }
+
+    fn assert_refused(text: &str, key: &str, val: &str) {
+        let e = p(text).unwrap_err().to_string();
+        assert!(
+            e.contains("test.toml") && e.contains(&format!("`{key}`")) && e.contains(val),
+            "{key} = {val}: {e}"
+        );
+    }
+
+    /// Issue 14 #5: a CPU outside the online set (or beyond CPU_SETSIZE) is refused by `--check`.
+    #[test]
+    fn cpu_outside_the_online_set_is_refused() {
+        let with_cpu = |cpu: usize| {
+            GOOD.replace(
+                "period_us = 1000",
+                &format!("period_us = 1000\ncpu = {cpu}"),
+            )
+        };
+        assert_refused(&with_cpu(1024), "loop.cpu", "1024");
+        assert_refused(&with_cpu(usize::MAX), "loop.cpu", &usize::MAX.to_string());
+        let online = online_cpus().expect("/sys/devices/system/cpu/online is readable here");
+        let last = online.iter().map(|r| *r.end()).max().unwrap();
+        p(&with_cpu(*online[0].start())).unwrap();
+        if last + 1 < libc::CPU_SETSIZE as usize {
+            assert_refused(&with_cpu(last + 1), "loop.cpu", &(last + 1).to_string());
+        }
+    }
+
+    #[test]
+    fn cpu_lists_parse_as_the_kernel_writes_them() {
+        assert_eq!(parse_cpu_list("0-3\n"), Some(vec![0..=3]));
+        assert_eq!(parse_cpu_list("0,2-3,7"), Some(vec![0..=0, 2..=3, 7..=7]));
+        assert_eq!(parse_cpu_list(""), None);
+        assert_eq!(parse_cpu_list("x"), None);
+        assert_eq!(parse_cpu_list("3-1"), None);
+    }
+
+    /// Issue 14 #10: values `--check` accepted but the start refused, or that switch a protection off.
+    #[test]
+    fn start_time_failures_and_unbounded_tick_counts_are_refused() {
+        let long = "p".repeat(4000);
+        assert_refused(
+            &GOOD.replace(
+                "service_prefix = \"t\"",
+                &format!("service_prefix = \"{long}\""),
+            ),
+            "backend.service_prefix",
+            "4000 bytes",
+        );
+        let max = "p".repeat(frictionless_shm_types::MAX_SERVICE_PREFIX_BYTES);
+        p(&GOOD.replace(
+            "service_prefix = \"t\"",
+            &format!("service_prefix = \"{max}\""),
+        ))
+        .unwrap();
+        assert_refused(
+            &GOOD.replace("service_prefix = \"t\"", "service_prefix = \"iox2://x\""),
+            "backend.service_prefix",
+            "iox2://x",
+        );
+        let file = concat!(env!("CARGO_MANIFEST_DIR"), "/Cargo.toml");
+        assert_refused(
+            &GOOD.replace(
+                "service_prefix = \"t\"",
+                &format!("service_prefix = \"t\"\nroot_path = \"{file}\""),
+            ),
+            "backend.root_path",
+            "Cargo.toml",
+        );
+        // A directory, or a path not created yet, is fine.
+        let dir = env!("CARGO_MANIFEST_DIR");
+        p(&GOOD.replace(
+            "service_prefix = \"t\"",
+            &format!("service_prefix = \"t\"\nroot_path = \"{dir}\""),
+        ))
+        .unwrap();
+        p(&GOOD.replace(
+            "service_prefix = \"t\"",
+            "service_prefix = \"t\"\nroot_path = \"/nonexistent/iox\"",
+        ))
+        .unwrap();
+        let u64max = u64::MAX.to_string();
+        assert_refused(
+            &GOOD.replace(
+                "stale_after_ticks = 3",
+                &format!("stale_after_ticks = {u64max}"),
+            ),
+            "safety.stale_after_ticks",
+            &u64max,
+        );
+        assert_refused(
+            &GOOD.replace(
+                "period_us = 1000",
+                &format!("period_us = 1000\nready_after_ticks = {u64max}"),
+            ),
+            "loop.ready_after_ticks",
+            &u64max,
+        );
+        // 60 s at 1 kHz is the largest; at 10 kHz (period 100 µs) 600000 ticks.
+        p(&GOOD.replace("stale_after_ticks = 3", "stale_after_ticks = 60000")).unwrap();
+        assert_refused(
+            &GOOD.replace("stale_after_ticks = 3", "stale_after_ticks = 60001"),
+            "safety.stale_after_ticks",
+            "60001",
+        );
+        p(&GOOD.replace(
+            "period_us = 1000",
+            "period_us = 100\nready_after_ticks = 600000",
+        ))
+        .unwrap();
+    }
+
+    fn shipped_model() -> String {
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../config/models/stress32_paper_f16_r-100.fwt"
+        )
+        .to_owned()
+    }
+
+    fn pinn_joint(name: &str, kt: f64, model: &str) -> String {
+        format!(
+            "[[joint]]\nname = \"{name}\"\nindex = {}\ngear_ratio = -100.0\nkt = {kt:?}\nmax_curr = 5.0\nfriction_model = \"pinn\"\nmodel = \"{model}\"\n",
+            name.len()
+        )
+    }
+
+    /// Issue 14 #7: a model recorded for another joint, or another k_t, is refused naming both values.
+    #[test]
+    fn model_for_another_joint_or_kt_is_refused() {
+        let m = shipped_model();
+        let head = "[backend]\nkind = \"shm\"\n";
+        // The file records joint "stress32_r-100", gear ratio -100, k_t 0.156977705.
+        p(&format!(
+            "{head}{}",
+            pinn_joint("stress32_r-100", 0.156977705, &m)
+        ))
+        .unwrap();
+        let e = p(&format!("{head}{}", pinn_joint("l_knee", 0.156977705, &m)))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("joint[0].model")
+                && e.contains("\"stress32_r-100\"")
+                && e.contains("\"l_knee\""),
+            "{e}"
+        );
+        let e = p(&format!("{head}{}", pinn_joint("stress32_r-100", 0.18, &m)))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("joint[0].model") && e.contains("0.156977705") && e.contains("0.18"),
+            "{e}"
+        );
+        // A file shared by several joints (a template network, as in config/stress32.toml) is
+        // checked for the gear ratio only.
+        let shared = format!(
+            "{head}{}{}",
+            pinn_joint("a", 0.156977705, &m),
+            pinn_joint("bb", 0.066468037, &m)
+        );
+        p(&shared).unwrap();
+        let e = p(&shared.replacen("gear_ratio = -100.0", "gear_ratio = 100.0", 1))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("joint[0].model") && e.contains("gear_ratio"),
+            "{e}"
+        );
     }
 }
