@@ -50,14 +50,19 @@ for name, joint in joints.items():
         if m is None:
             bad.append(f"{name}: no model `{label}`")
             continue
-        kp = m.get("min_kp")
-        if not isinstance(kp, (int, float)) or not math.isfinite(kp) or kp <= 0:
-            bad.append(f"{name}/{label}: min_kp = {kp!r}")
+        # {"outcome": "found", "kp": …, "fail_kp": …}, or an outcome saying the range had no answer.
+        mk = m.get("min_kp")
+        if not isinstance(mk, dict) or "outcome" not in mk:
+            bad.append(f"{name}/{label}: min_kp = {mk!r}")
+        elif mk["outcome"] == "found":
+            kp = mk.get("kp")
+            if not isinstance(kp, (int, float)) or not math.isfinite(kp) or kp <= 0:
+                bad.append(f"{name}/{label}: min_kp.kp = {kp!r}")
     for label in ("CV", "SCV", "PINN"):
         rmse = models.get(label, {}).get("eval", {}).get("rmse_all")
         if not isinstance(rmse, (int, float)) or not math.isfinite(rmse) or rmse < 0:
             bad.append(f"{name}/{label}: eval.rmse_all = {rmse!r}")
 if bad:
     sys.exit(f"{path}: " + "; ".join(bad))
-print(f"readme-first-command: {path}: {len(joints)} joints, every model has a finite min_kp and an unseen-run friction RMSE")
+print(f"readme-first-command: {path}: {len(joints)} joints, every model has a min K_p result and an unseen-run friction RMSE")
 EOF
