@@ -88,7 +88,7 @@ fn can_rt_thread_allocates_nothing_over_socketpair() {
             &format!("ready_after_ticks = {READY_AFTER}"),
         )
         .replace("status_every_ticks = 10", "status_every_ticks = 1000")
-        .replace("stale_after_ticks = 20", "stale_after_ticks = 100000")
+        .replace("stale_after_ticks = 20", "stale_after_ticks = 60000")
         .replace(
             "feedback_timeout_ticks = 10",
             "feedback_timeout_ticks = 100000",

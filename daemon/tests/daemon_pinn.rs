@@ -88,6 +88,7 @@ max_curr = {MAX_I:?}
 kfc = {KFC:?}
 friction_model = "pinn"
 model = "{model1}"
+model_for = "knee"
 warmup = "zero_pad"
 "#
     )

@@ -367,6 +367,11 @@ pub struct JointConfig {
     /// `.fwt` model file for `pinn`, relative to the config file.
     #[serde(default)]
     pub model: Option<PathBuf>,
+    /// The joint name recorded in `model` when this joint deliberately runs another joint's network
+    /// (a template): the model check then compares the file's name with this instead of `name`, and
+    /// does not compare k_t. Unset: the model must be this joint's own.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_for: Option<String>,
     /// PINN warm-up policy.
     #[serde(default)]
     pub warmup: WarmupName,
@@ -655,13 +660,14 @@ pub const KT_REL_TOLERANCE: f64 = 1e-6;
 ///
 /// The read accepts regular files only and runs the core's finite-output probe
 /// ([`frictionless::weights::read_file`]). Then the model must match the joint: always the gear
-/// ratio (sign and value, relative 1e-9: Δθ = r·s − θ). A file named by exactly one `[[joint]]`
-/// (`shared` false) must also carry that joint's k_t (relative [`KT_REL_TOLERANCE`]: the labels were
-/// computed with it) and its name (unless the file's name is empty: provenance unknown, e.g. an
-/// ONNX import without `--joint`). A file named by several `[[joint]]`s (`shared` true) is a
-/// template network — one net timed on many joints, as in `config/stress32.toml` — and cannot carry
-/// every joint's name and k_t, so only its gear ratio is compared.
-pub fn check_model_file(path: &Path, joint: &JointConfig, shared: bool) -> Result<(), String> {
+/// ratio (sign and value, relative 1e-9: Δθ = r·s − θ), and the joint it was trained for: the file's
+/// joint name must be the `[[joint]]`'s `name` and its k_t the joint's `kt` (relative
+/// [`KT_REL_TOLERANCE`]: the labels were computed with it). A joint that deliberately runs another
+/// joint's network (a template, as in `config/stress32.toml`) says so with `model_for = "<name in the
+/// file>"`: the file's name is then compared with that, and k_t is not compared (the model's scale is
+/// the other joint's). A file with an empty joint name (provenance unknown, e.g. an ONNX import without
+/// `--joint`) is checked on the gear ratio and k_t only.
+pub fn check_model_file(path: &Path, joint: &JointConfig) -> Result<(), String> {
     let m = frictionless::weights::read_file(path).map_err(|e| e.to_string())?;
     let r = m.meta.gear_ratio.get();
     let gear_ratio = joint.gear_ratio;
@@ -670,21 +676,26 @@ pub fn check_model_file(path: &Path, joint: &JointConfig, shared: bool) -> Resul
             "model was trained with gear_ratio {r}, config says {gear_ratio} (sign and value must match)"
         ));
     }
-    if shared {
+    let name = &m.meta.joint_name;
+    if let Some(model_for) = &joint.model_for {
+        if name != model_for {
+            return Err(format!(
+                "model is for joint {name:?}, config says model_for = {model_for:?}"
+            ));
+        }
         return Ok(());
     }
     let kt = m.meta.kt_nm_per_a;
     // Both are finite: the file's k_t is validated by the reader, the config's before this call.
     if (kt - joint.kt).abs() > KT_REL_TOLERANCE * joint.kt.abs() {
         return Err(format!(
-            "model was trained with kt {kt} Nm/A, config says kt = {} Nm/A (the labels depend on it; must match within a relative {KT_REL_TOLERANCE:e})",
+            "model was trained with kt {kt} Nm/A, config says kt = {} Nm/A (the labels depend on it; must match within a relative {KT_REL_TOLERANCE:e}; a joint that runs another joint's model says so with model_for)",
             joint.kt
         ));
     }
-    let name = &m.meta.joint_name;
     if !name.is_empty() && *name != joint.name {
         return Err(format!(
-            "model is for joint {name:?}, config says name = {:?} (a model file used by one [[joint]] must carry its name)",
+            "model is for joint {name:?}, config says name = {:?} (to run another joint's model, set model_for = {name:?})",
             joint.name
         ));
     }
@@ -916,19 +927,7 @@ pub fn parse(path: &Path, text: &str) -> Result<Config, ConfigError> {
                 ));
             }
         }
-        let shared = j.model.as_ref().is_some_and(|m| {
-            raw.joint
-                .iter()
-                .filter(|o| o.friction_model == FrictionModelName::Pinn)
-                .filter(|o| {
-                    o.model
-                        .as_ref()
-                        .is_some_and(|om| base.join(om) == base.join(m))
-                })
-                .count()
-                > 1
-        });
-        models.push(model_spec(&c, base, k, j, shared)?);
+        models.push(model_spec(&c, base, k, j)?);
     }
     let buses = resolve_buses(&c, &raw, fs_hz)?;
     let root_path = raw.backend.root_path.as_ref().map(|p| base.join(p));
@@ -1284,7 +1283,6 @@ fn model_spec(
     base: &Path,
     k: usize,
     j: &JointConfig,
-    shared: bool,
 ) -> Result<ModelSpec, ConfigError> {
     use frictionless::friction::{CvParams, ScvParams, StaticFriction};
     let key = |name: &str| format!("joint[{k}].{name}");
@@ -1376,7 +1374,7 @@ fn model_spec(
                 )
             })?;
             let path = base.join(rel);
-            check_model_file(&path, j, shared).map_err(|message| ConfigError::Model {
+            check_model_file(&path, j).map_err(|message| ConfigError::Model {
                 file: c.file.to_path_buf(),
                 key: key("model"),
                 path: path.clone(),
@@ -1895,15 +1893,30 @@ joints = [{ joint = "ankle", node_id = 3, command_unit = "joint_torque" }]
             e.contains("joint[0].model") && e.contains("0.156977705") && e.contains("0.18"),
             "{e}"
         );
-        // A file shared by several joints (a template network, as in config/stress32.toml) is
-        // checked for the gear ratio only.
-        let shared = format!(
+        // Sharing a file does not lift the check: a joint that runs another joint's network must say
+        // so with model_for (a template, as in config/stress32.toml).
+        let other = format!(
             "{head}{}{}",
-            pinn_joint("a", 0.156977705, &m),
+            pinn_joint("stress32_r-100", 0.156977705, &m),
             pinn_joint("bb", 0.066468037, &m)
         );
-        p(&shared).unwrap();
-        let e = p(&shared.replacen("gear_ratio = -100.0", "gear_ratio = 100.0", 1))
+        let e = p(&other).unwrap_err().to_string();
+        assert!(
+            e.contains("joint[1].model") && e.contains("model_for"),
+            "{e}"
+        );
+        let template = other.replacen(
+            "name = \"bb\"",
+            "name = \"bb\"\nmodel_for = \"stress32_r-100\"",
+            1,
+        );
+        p(&template).unwrap();
+        // model_for must name what the file records, and the gear ratio is still compared.
+        let e = p(&template.replacen("model_for = \"stress32_r-100\"", "model_for = \"x\"", 1))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("joint[1].model") && e.contains("\"x\""), "{e}");
+        let e = p(&template.replacen("gear_ratio = -100.0", "gear_ratio = 100.0", 1))
             .unwrap_err()
             .to_string();
         assert!(

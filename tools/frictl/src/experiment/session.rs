@@ -370,6 +370,7 @@ pub fn daemon_joint(j: &DaemonJoint, raw_friction: bool) -> Result<JointConfig, 
         model: None,
         warmup: WarmupName::default(),
         delta_theta_offset_motor_rad: None,
+        model_for: None,
     };
     if !raw_friction {
         out.kfc = shipped.kfc;
