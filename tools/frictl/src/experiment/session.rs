@@ -775,7 +775,10 @@ mod tests {
     /// Writes the config of one joint, parses it back with frictiond's validation and checks it is
     /// what [`daemon_config`] intended; returns the joint.
     fn written(kfc: Option<f64>, lpf: Option<Lpf>, model: FrictionModel) -> JointConfig {
-        let dir = std::env::temp_dir().join(format!("loop4_cfg_{}", std::process::id()));
+        // One directory per call: the tests run in parallel threads and each removes its own.
+        static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+        let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let dir = std::env::temp_dir().join(format!("loop4_cfg_{}_{call}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let ipc = IpcConfig::new(Some(&dir), "t");
         let j = joint(kfc, lpf, model);
