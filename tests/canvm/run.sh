@@ -15,6 +15,7 @@
 # Knobs (env): CANVM_WORK (default target/canvm), CANVM_TIMEOUT seconds (default 600), CANVM_SKIP_APT=1,
 #              CANVM_PACKAGES (cargo packages whose test harnesses run in the VM; default "frictionless frictionless-shm-types frictiond frictionless-canlog frictl"),
 #              CANVM_FILTER (libtest name filter, default "vcan"), CANVM_ACCEL (auto|kvm|tcg, default auto),
+#              CANVM_MEM_MB (VM memory, default 2048: the initramfs is unpacked into it),
 #              CANVM_TESTS (only these integration-test targets, e.g. "shm_types_tests frictiond_e2e"; default all).
 # Last line: "canvm: N passed, N failed"; exit code non-zero on any failure or timeout.
 set -euo pipefail
@@ -100,6 +101,8 @@ for h in $harnesses; do
   base=$(basename "$h"); name=${base%-*}; n=$((n+1))
   cp "$h" "$IR/tests/$(printf '%02d' $n)-$name"
 done
+# Line tables are not needed inside the VM; the guest unpacks the initramfs into RAM.
+command -v strip >/dev/null && strip --strip-debug "$IR"/bin/frictl* "$IR"/bin/frictiond* "$IR"/tests/* 2>/dev/null || true
 cat > "$IR/init" <<INIT
 #!/bin/busybox sh
 /bin/busybox --install -s /bin
@@ -119,6 +122,7 @@ sync; poweroff -f
 INIT
 chmod +x "$IR/init"
 (cd "$IR" && find . | cpio -o -H newc --quiet | gzip -1 > "$WORK/initrd.img")
+log "initramfs $(du -sm "$IR" | cut -f1) MB unpacked, $(du -m "$WORK/initrd.img" | cut -f1) MB compressed; VM memory ${CANVM_MEM_MB:-2048} MB"
 
 # 5. Boot. KVM only if it can really work (PVM hosts advertise /dev/kvm but cannot boot a stock kernel).
 accel=${CANVM_ACCEL:-auto}
@@ -129,7 +133,7 @@ fi
 if [ "$accel" = kvm ]; then acc=(-accel kvm -cpu host); else acc=(-accel tcg,thread=multi -cpu max); fi
 log "booting ($accel), timeout ${TIMEOUT}s"
 set +e
-timeout "$TIMEOUT" qemu-system-x86_64 -machine q35 -m 1024 -smp 1 -nographic -no-reboot -nic none \
+timeout "$TIMEOUT" qemu-system-x86_64 -machine q35 -m "${CANVM_MEM_MB:-2048}" -smp 1 -nographic -no-reboot -nic none \
   -kernel "$KDIR/vmlinuz" -initrd "$WORK/initrd.img" "${acc[@]}" \
   -append "console=ttyS0 quiet panic=-1 oops=panic" > "$WORK/console.log" 2>&1
 qrc=$?
