@@ -328,8 +328,10 @@ fn file_type_name(t: std::fs::FileType) -> &'static str {
     }
 }
 
-/// The bytes of the regular file `path`, at most [`layout::MAX_FILE_LEN`] of them (see [`read_file`]).
-fn read_regular_bounded(path: &Path) -> Result<Vec<u8>, WeightError> {
+/// The bytes of the regular file `path`, at most [`layout::MAX_FILE_LEN`] of them, undecoded: the
+/// same refusals as [`read_file`] (no FIFO, device or directory; bounded size), for callers that look
+/// at a possibly broken file ([`inspect`]).
+pub fn read_regular_bounded(path: &Path) -> Result<Vec<u8>, WeightError> {
     use std::io::Read;
     use std::os::unix::fs::OpenOptionsExt;
     let io = |source| WeightError::Io {

@@ -20,7 +20,8 @@ pub struct Args {
 /// Runs `frictl inspect`: prints the view, then fails if the file is not valid.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let path = args.file.display();
-    let bytes = std::fs::read(&args.file).with_context(|| format!("cannot read {path}"))?;
+    // Regular files only, bounded (a FIFO or /dev/zero is refused before any read).
+    let bytes = frictionless::weights::read_regular_bounded(&args.file)?;
     let view = frictionless::weights::inspect(&bytes)
         .with_context(|| format!("{path}: not a readable .fwt weight file"))?;
     if args.json {
