@@ -361,3 +361,100 @@ fn every_model_subcommand_has_help() {
         assert!(stdout(&o).contains("Usage"), "{sub}: {}", stdout(&o));
     }
 }
+
+/// Issue 14 #6 and #9: an output that is one of the inputs (under any spelling) or lies in a missing
+/// directory is refused before any work, and the input is left byte for byte as it was.
+#[test]
+fn outputs_that_are_inputs_or_in_missing_dirs_are_refused_before_work() {
+    let dir = scratch("outputs_refused");
+    let fwt = import_anchor(&dir);
+    let onnx = dir.join("m.onnx");
+    std::fs::copy(anchor_onnx(), &onnx).unwrap();
+    // Stand-ins for a log, a dataset and a fit: the refusal must come before they are read.
+    let log = dir.join("log.csv");
+    std::fs::write(&log, "t_s\n0\n").unwrap();
+    std::fs::write(dir.join("log.json"), "{}").unwrap();
+    let scv = dir.join("scv.json");
+    std::fs::write(&scv, "{}").unwrap();
+    let same_fwt = dir.join(".").join("l_ankle_roll.fwt");
+    let missing = dir.join("no_such_dir").join("out.fwt");
+    let cases: Vec<(Vec<&str>, &Path, &str)> = vec![
+        (
+            vec!["convert", s(&fwt), "-o", s(&same_fwt), "--dtype", "f16"],
+            &fwt,
+            "is also an input",
+        ),
+        (
+            vec!["export", "onnx", s(&fwt), "-o", s(&fwt)],
+            &fwt,
+            "is also an input",
+        ),
+        (
+            vec![
+                "import",
+                "onnx",
+                s(&onnx),
+                "-o",
+                s(&onnx),
+                "--joint",
+                "j",
+                "--gear-ratio",
+                "-160",
+                "--kt",
+                "0.0665",
+            ],
+            &onnx,
+            "is also an input",
+        ),
+        (
+            vec!["preprocess", s(&log), "-o", s(&log)],
+            &log,
+            "is also an input",
+        ),
+        (
+            vec![
+                "train",
+                "--dataset",
+                s(&log),
+                "--scv",
+                s(&scv),
+                "--out",
+                s(&log),
+            ],
+            &log,
+            "is also an input",
+        ),
+        (
+            vec!["convert", s(&fwt), "-o", s(&missing), "--dtype", "f16"],
+            &fwt,
+            "does not exist",
+        ),
+        (
+            vec![
+                "train",
+                "--dataset",
+                s(&log),
+                "--scv",
+                s(&scv),
+                "--out",
+                s(&missing),
+            ],
+            &log,
+            "does not exist",
+        ),
+    ];
+    for (args, input, needle) in cases {
+        let before = std::fs::read(input).unwrap();
+        let o = frictl(&args);
+        let err = stderr(&o);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert!(err.contains(needle), "{args:?}: {err}");
+        assert_eq!(
+            std::fs::read(input).unwrap(),
+            before,
+            "{args:?} changed {}",
+            input.display()
+        );
+    }
+    assert!(!missing.exists());
+}

@@ -34,6 +34,7 @@ pub struct Args {
 
 /// Runs `frictl convert`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    super::check_outputs(&[&args.input], &[&args.output])?;
     let mut file = weights::read_file(&args.input)?;
     let old_dtype = file.dtype;
     let mut before = Mlp::new(&file.mlp, old_dtype)?;

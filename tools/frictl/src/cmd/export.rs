@@ -46,6 +46,7 @@ pub struct Args {
 
 /// Runs `frictl export`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    super::check_outputs(&[&args.input], &[&args.output])?;
     let file = frictionless::weights::read_file(&args.input)?;
     let mut meta = ModelHints::from_meta(&file.meta).to_pairs();
     meta.push((

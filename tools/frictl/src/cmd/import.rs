@@ -184,6 +184,7 @@ pub(crate) fn resolve_history(
 
 /// Runs `frictl import`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    super::check_outputs(&[&args.input], &[&args.output])?;
     let (mlp, hints, summary) = load_foreign(args.format, &args.input)?;
     let inp = args.input.display();
     let n = mlp.n_inputs();

@@ -95,6 +95,10 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let started = std::time::Instant::now();
     let sidecar_path = args.log.with_extension("json");
+    super::check_outputs(
+        &[&args.log, &sidecar_path],
+        &[&args.out, &args.out.with_extension("json")],
+    )?;
     let meta = LogMeta::read_json(&sidecar_path)?;
     let log = RawLog::read_csv(&args.log)?;
     let bytes =

@@ -199,6 +199,19 @@ pub fn parse_chunks(v: &Option<Vec<String>>) -> anyhow::Result<Option<Vec<ChunkK
 
 /// Runs `frictl train`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let report_path = args
+        .report
+        .clone()
+        .unwrap_or_else(|| pipeline::default_report_path(&args.out));
+    let sidecars: Vec<PathBuf> = args
+        .datasets
+        .iter()
+        .map(|d| d.with_extension("json"))
+        .collect();
+    let mut inputs: Vec<&std::path::Path> = args.datasets.iter().map(PathBuf::as_path).collect();
+    inputs.extend(sidecars.iter().map(PathBuf::as_path));
+    inputs.push(&args.scv);
+    super::check_outputs(&inputs, &[&args.out, &report_path])?;
     let sources = pipeline::load_sources(&args.datasets)?;
     let scv = pipeline::load_scv(&args.scv)?;
     let split_spec = SplitSpec {
@@ -300,10 +313,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ControlFlow::Continue(())
         })?;
     bar.finish_and_clear();
-    let report_path = args
-        .report
-        .clone()
-        .unwrap_or_else(|| pipeline::default_report_path(&args.out));
     pipeline::write_outputs(&mut trained, &args.out, &report_path)?;
     if !args.quiet {
         let r = &trained.report;
