@@ -351,6 +351,12 @@ fn predict_rejects_bad_rows_naming_the_file_and_row() {
     let o = frictl(&["predict", s(&fwt), "--input", s(&csv)]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("column 8"), "{}", stderr(&o));
+    // Issue 14 #11: an empty input is an error, not a silent success with no output.
+    let csv = dir.join("empty.csv");
+    std::fs::write(&csv, "").unwrap();
+    let o = frictl(&["predict", s(&fwt), "--input", s(&csv)]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("empty.csv: no rows"), "{}", stderr(&o));
 }
 
 #[test]

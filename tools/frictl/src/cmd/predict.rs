@@ -55,7 +55,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let n = mlp.n_inputs();
     let mut out = BufWriter::new(std::io::stdout().lock());
     let mut x = Vec::with_capacity(n);
+    let mut rows = 0usize;
     for (row, rec) in reader.records().enumerate() {
+        rows += 1;
         let line = row + 1;
         let rec = rec.with_context(|| format!("{csv_name}: row {line}"))?;
         if rec.len() != n {
@@ -84,5 +86,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         writeln!(out, "{y:?}")?;
     }
     out.flush()?;
+    if rows == 0 {
+        bail!("{csv_name}: no rows (the model takes {n} values per row)");
+    }
     Ok(())
 }
