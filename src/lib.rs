@@ -91,3 +91,62 @@ pub mod model;
 pub mod random;
 pub mod units;
 pub mod weights;
+
+/// An error and its causes on one line, `a: b: c`, leaving out a cause whose text the line already
+/// holds (many errors quote their source in their own message, e.g. `FILE: No such file or
+/// directory`). What `frictiond` and `frictl` print for a fatal error.
+pub fn error_line(e: &(dyn std::error::Error + 'static)) -> String {
+    let mut line = String::new();
+    let mut cause = Some(e);
+    while let Some(c) = cause {
+        let text = c.to_string();
+        if !line.contains(&text) {
+            if !line.is_empty() {
+                line.push_str(": ");
+            }
+            line.push_str(&text);
+        }
+        cause = c.source();
+    }
+    line
+}
+
+#[cfg(test)]
+mod tests {
+    #[derive(Debug)]
+    struct Quoting(std::io::Error);
+    impl std::fmt::Display for Quoting {
+        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            write!(f, "cfg.toml: {}", self.0)
+        }
+    }
+    impl std::error::Error for Quoting {
+        fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+            Some(&self.0)
+        }
+    }
+
+    #[test]
+    fn error_line_keeps_each_cause_once() {
+        let os = || std::io::Error::new(std::io::ErrorKind::NotFound, "not found");
+        // The message quotes its source: printed once.
+        assert_eq!(super::error_line(&Quoting(os())), "cfg.toml: not found");
+        // A source the message does not quote is appended.
+        #[derive(Debug)]
+        struct Wrap(std::io::Error);
+        impl std::fmt::Display for Wrap {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("loading the model")
+            }
+        }
+        impl std::error::Error for Wrap {
+            fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+                Some(&self.0)
+            }
+        }
+        assert_eq!(
+            super::error_line(&Wrap(os())),
+            "loading the model: not found"
+        );
+    }
+}

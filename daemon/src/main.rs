@@ -120,8 +120,8 @@ fn main() -> std::process::ExitCode {
     match run(cli) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            tracing::error!("{e:#}");
-            eprintln!("frictiond: error: {e:#}");
+            // One line, on stderr (the journal under systemd), whatever RUST_LOG filters.
+            eprintln!("frictiond: error: {}", frictionless::error_line(e.as_ref()));
             std::process::ExitCode::FAILURE
         }
     }
