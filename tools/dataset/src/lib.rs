@@ -280,6 +280,58 @@ pub struct DatasetSidecar {
     pub short_chunks: usize,
     /// Column documentation, in file order.
     pub columns: Vec<ColumnDocOwned>,
+    /// Where the friction label `tau_f_label_nm` comes from (older sidecars: the current label).
+    #[serde(default)]
+    pub label: LabelSource,
+    /// Runs (recordings) in the file, each a set of chunks; empty means the whole file is one run
+    /// (see [`DatasetSidecar::runs_or_whole`]). Evaluation can hold out whole runs.
+    #[serde(default)]
+    pub runs: Vec<RunInfo>,
+    /// Dataset columns the source log did not have: NaN in every row (e.g. `theta_motor_rad` for a
+    /// torque-sensed arm without a motor encoder). A feature set that needs one of them is refused.
+    #[serde(default)]
+    pub absent_columns: Vec<String>,
+}
+
+/// Where a dataset's friction label comes from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LabelSource {
+    /// τ_F = r·k_t·i − τ_ID: motor current through the gearbox minus the link's inverse dynamics
+    /// (the paper's label).
+    #[default]
+    Current,
+    /// τ_F = τ_motor − τ_joint: the motor-side torque (r·k_t·i or a commanded torque) minus a joint
+    /// torque sensor's link-side reading.
+    TorqueSensor,
+    /// τ_F given directly by a column of the source log.
+    Given,
+}
+
+/// One run (a recording, usually one source file) of a dataset: the chunks it holds.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunInfo {
+    /// Run name (by default the source file's stem), unique within the dataset.
+    pub name: String,
+    /// Source file as given.
+    pub source: String,
+    /// Dataset chunk ids (values of the `chunk` column) that belong to this run.
+    pub chunks: Vec<u32>,
+}
+
+impl DatasetSidecar {
+    /// The runs of the dataset: [`Self::runs`], or, when it is empty, one run named `whole_file_name`
+    /// holding every chunk `0..self.chunks`.
+    pub fn runs_or_whole(&self, whole_file_name: &str) -> Vec<RunInfo> {
+        if !self.runs.is_empty() {
+            return self.runs.clone();
+        }
+        vec![RunInfo {
+            name: whole_file_name.to_string(),
+            source: self.input_log.clone(),
+            chunks: (0..self.chunks as u32).collect(),
+        }]
+    }
 }
 
 /// Owned copy of a [`ColumnDoc`] (for deserialising sidecars).

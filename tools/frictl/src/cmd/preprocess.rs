@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use anyhow::Context;
-use frictionless_dataset::{ColumnDocOwned, DatasetSidecar};
+use frictionless_dataset::{ColumnDocOwned, DatasetSidecar, LabelSource};
 use frictionless_ident::kalman::KalmanConfig;
 use frictionless_ident::preprocess::{LogMeta, PreprocessConfig, RawLog, preprocess};
 use frictionless_sim::params::LinkModel;
@@ -197,6 +197,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         chunks: summary.chunks,
         short_chunks: summary.short_chunks,
         columns: ds.columns().iter().map(ColumnDocOwned::from).collect(),
+        label: LabelSource::Current,
+        runs: Vec::new(),
+        absent_columns: Vec::new(),
     };
     let side_path = args.out.with_extension("json");
     std::fs::write(&side_path, serde_json::to_string_pretty(&side)?)
