@@ -44,7 +44,7 @@ pub struct Args {
     #[arg(long)]
     pub resume: bool,
     /// Input feature set.
-    #[arg(long, value_enum, default_value_t = Features::DeltaThetaJointVel)]
+    #[arg(long, value_enum, default_value_t = Features::DEFAULT)]
     pub features: Features,
     /// Append the motor temperature as one more input.
     #[arg(long)]
