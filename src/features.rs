@@ -278,6 +278,12 @@ impl FeatureSet {
         }
     }
 
+    /// The unit of each block, in order, e.g. `["motor rad", "rad/s"]` (each block's
+    /// [`Feature::unit`]).
+    pub fn units(self) -> impl ExactSizeIterator<Item = &'static str> {
+        self.blocks().iter().map(|f| f.unit())
+    }
+
     /// The set whose blocks are exactly `blocks` (in order), if any.
     pub fn from_blocks(blocks: &[Feature]) -> Option<FeatureSet> {
         FeatureSet::ALL.into_iter().find(|s| s.blocks() == blocks)
@@ -1170,6 +1176,10 @@ mod tests {
             );
         }
         assert_eq!(FeatureSet::parse("joint-vel"), Ok(FeatureSet::JointVel));
+        assert_eq!(
+            FeatureSet::JointPosJointVel.units().collect::<Vec<_>>(),
+            ["rad", "rad/s"]
+        );
         assert_eq!(
             FeatureSet::parse("delta_theta_motor_vel_joint_vel"),
             Ok(FeatureSet::DeltaThetaMotorVelJointVel)
