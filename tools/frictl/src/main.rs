@@ -49,6 +49,8 @@ enum Command {
     Train(cmd::train::Args),
     /// Random hyper-parameter search over the paper's ranges.
     Search(cmd::search::Args),
+    /// A whole robot from one TOML file: every joint's pipeline, one frictiond config, a report.
+    Robot(cmd::robot::Args),
     /// Evaluate none/CV/SCV/PINN on held-out runs.
     Eval(cmd::eval::Args),
     /// Run the paper's closed-loop experiments against the virtual joints.
@@ -78,6 +80,7 @@ fn main() -> std::process::ExitCode {
         Command::Fit(a) => cmd::fit::run(a),
         Command::Train(a) => cmd::train::run(a),
         Command::Search(a) => cmd::search::run(a),
+        Command::Robot(a) => cmd::robot::run(a),
         Command::Eval(a) => cmd::eval::run(a),
         Command::Experiment(a) => cmd::experiment::run(a),
         Command::Monitor(a) => cmd::monitor::run(a),

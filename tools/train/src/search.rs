@@ -15,7 +15,16 @@
 //!
 //! Models are selected on validation RMSE only; the test RMSE is reported, never used to choose.
 //!
-//! What it is **not**: no Bayesian or early-pruning search strategy, no distributed workers.
+//! An external scheduler (a Ray cluster, a Slurm array, several shells) runs chosen trials with
+//! [`run_trials`] and publishes the tables with [`finish`]: the directory layout is the same, so a
+//! search started by [`run_search`] can be continued by trials run elsewhere and the other way round.
+//! Each result is appended as one `write(2)` of one line to a file opened with `O_APPEND`, so several
+//! processes on one machine (one local file system) may share `DIR`; a trial recorded twice (a retried
+//! task) counts once, an `ok` record winning over a `failed` one. The recorded settings are compared by
+//! content: dataset and SCV paths may differ between machines when their SHA-256 match.
+//!
+//! What it is **not**: no Bayesian or early-pruning search strategy, no scheduler of its own across
+//! machines (that is the cluster engine's job, see `docs/cluster.md`).
 
 use std::io::Write;
 use std::ops::ControlFlow;
@@ -166,6 +175,10 @@ pub struct SearchSettings {
     pub dataset_sha256: String,
     /// SCV JSON path.
     pub scv: String,
+    /// SHA-256 of the SCV JSON file (hex). When both the recorded and the current settings have it and
+    /// they match, the SCV path may differ (the same search on another machine).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scv_sha256: Option<String>,
 }
 
 /// How to run a search.
@@ -249,8 +262,14 @@ fn compare_settings(
 ) -> Result<(), SearchError> {
     let a = serde_json::to_value(rec).map_err(|e| ferr(path, e))?;
     let b = serde_json::to_value(now).map_err(|e| ferr(path, e))?;
+    // Paths name the content only on one machine; the hashes name it everywhere.
+    let same_scv = rec.scv_sha256.is_some() && rec.scv_sha256 == now.scv_sha256;
     if let (Some(a), Some(b)) = (a.as_object(), b.as_object()) {
         for (k, va) in a {
+            let one_scv_hash = rec.scv_sha256.is_none() || now.scv_sha256.is_none();
+            if k == "datasets" || (k == "scv_sha256" && one_scv_hash) || (k == "scv" && same_scv) {
+                continue;
+            }
             let vb = b.get(k).cloned().unwrap_or(serde_json::Value::Null);
             if *va != vb {
                 return Err(SearchError::Settings {
@@ -520,11 +539,33 @@ pub fn run_search(
     if let Some(e) = write_err {
         return Err(e);
     }
-    let mut all: Vec<TrialResult> = done
+    let all: Vec<TrialResult> = done
         .into_iter()
         .chain(finished.into_inner().unwrap_or_else(|e| e.into_inner()))
         .filter(|r| r.params.trial < run.trials)
         .collect();
+    publish(dir, all)
+}
+
+/// One record per trial: an `ok` record wins over a `failed` one, a later record over an earlier one
+/// of the same status (a trial run twice, e.g. a retried cluster task).
+pub fn dedup(results: Vec<TrialResult>) -> Vec<TrialResult> {
+    let mut by_trial: std::collections::BTreeMap<usize, TrialResult> = Default::default();
+    for r in results {
+        let keep_old = by_trial
+            .get(&r.params.trial)
+            .is_some_and(|old| old.status == "ok" && r.status != "ok");
+        if !keep_old {
+            by_trial.insert(r.params.trial, r);
+        }
+    }
+    by_trial.into_values().collect()
+}
+
+/// Ranks `all` (after [`dedup`]), writes `results.json` / `results.csv` and copies the best model to
+/// `best.fwt` (+ `best.train.json`).
+fn publish(dir: &Path, all: Vec<TrialResult>) -> Result<Vec<TrialResult>, SearchError> {
+    let mut all = dedup(all);
     rank(&mut all);
     write_tables(dir, &all)?;
     if let Some(best) = all.first().filter(|r| r.status == "ok")
@@ -540,6 +581,102 @@ pub fn run_search(
             .map_err(|e| ferr(&rdst, format!("cannot copy {}: {e}", rsrc.display())))?;
     }
     Ok(all)
+}
+
+/// `DIR/search.json`: written when absent (exclusive create, so concurrent starters agree on one),
+/// else compared with `settings` (paths may differ where the hashes match).
+fn claim_settings(dir: &Path, settings: &SearchSettings) -> Result<(), SearchError> {
+    let path = dir.join("search.json");
+    let json = serde_json::to_string_pretty(settings).map_err(|e| ferr(&path, e))?;
+    let tmp = dir.join(format!(".search.json.{}", std::process::id()));
+    std::fs::write(&tmp, &json).map_err(|e| ferr(&tmp, format!("cannot write: {e}")))?;
+    // link(2) fails if search.json exists: whoever links first defines the search.
+    let linked = std::fs::hard_link(&tmp, &path);
+    let _ = std::fs::remove_file(&tmp);
+    match linked {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+            let text = std::fs::read_to_string(&path)
+                .map_err(|e| ferr(&path, format!("cannot read: {e}")))?;
+            let rec: SearchSettings = serde_json::from_str(&text).map_err(|e| ferr(&path, e))?;
+            compare_settings(&path, &rec, settings)
+        }
+        Err(e) => Err(ferr(&path, format!("cannot create: {e}"))),
+    }
+}
+
+/// Appends one result to `results.jsonl`: the file opened with `O_APPEND` and the line written by
+/// one `write(2)`, so lines of concurrent writers on one file system never interleave.
+pub fn append_result(path: &Path, r: &TrialResult) -> Result<(), SearchError> {
+    let line = serde_json::to_string(r).map_err(|e| ferr(path, e))? + "\n";
+    let mut f = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .map_err(|e| ferr(path, format!("cannot open: {e}")))?;
+    match f.write(line.as_bytes()) {
+        Ok(n) if n == line.len() => Ok(()),
+        Ok(n) => Err(ferr(
+            path,
+            format!("short append ({n} of {} bytes)", line.len()),
+        )),
+        Err(e) => Err(ferr(path, format!("cannot append: {e}"))),
+    }
+}
+
+/// Runs exactly the trials `trials` of the search in `dir` (the entry point of an external
+/// scheduler): `search.json` is written if absent, else must match `settings`; trials already in
+/// `results.jsonl` are skipped; each finished trial is appended as it ends, one after the other, each
+/// with `threads` threads. Writes no tables (see [`finish`]). Returns the trials run.
+pub fn run_trials(
+    sources: &Sources,
+    scv: &ScvPrior,
+    settings: &SearchSettings,
+    dir: &Path,
+    trials: &[usize],
+    threads: usize,
+    on_trial: impl Fn(&TrialResult),
+) -> Result<Vec<TrialResult>, SearchError> {
+    if settings.split.val_frac <= 0.0 {
+        return Err(SearchError::Usage(format!(
+            "--val-frac = {}: the search selects on validation RMSE and needs a validation set",
+            settings.split.val_frac
+        )));
+    }
+    std::fs::create_dir_all(dir.join("trials"))
+        .map_err(|e| ferr(&dir.join("trials"), format!("cannot create: {e}")))?;
+    claim_settings(dir, settings)?;
+    let results_path = dir.join("results.jsonl");
+    let done = read_results(&results_path)?;
+    let split = pipeline::split_for(sources, &settings.split)?;
+    let mut ran = Vec::new();
+    for &k in trials {
+        if done.iter().any(|r| r.params.trial == k)
+            || ran.iter().any(|r: &TrialResult| r.params.trial == k)
+        {
+            continue;
+        }
+        let p = draw(&settings.space, settings.seed, k);
+        let r = run_trial(dir, sources, scv, &split, settings, &p, threads.max(1));
+        append_result(&results_path, &r)?;
+        on_trial(&r);
+        ran.push(r);
+    }
+    Ok(ran)
+}
+
+/// Publishes the tables of whatever `dir/results.jsonl` holds (trials `< trials` when given):
+/// `results.json`, `results.csv`, `best.fwt` (+ `best.train.json`), as [`run_search`] does at its end.
+pub fn finish(dir: &Path, trials: Option<usize>) -> Result<Vec<TrialResult>, SearchError> {
+    let results_path = dir.join("results.jsonl");
+    if !results_path.is_file() {
+        return Err(ferr(&results_path, "no such file: not a search directory"));
+    }
+    let all = read_results(&results_path)?
+        .into_iter()
+        .filter(|r| trials.is_none_or(|n| r.params.trial < n))
+        .collect();
+    publish(dir, all)
 }
 
 #[cfg(test)]
