@@ -48,7 +48,7 @@ enum Command {
     /// Train the physics-informed network.
     Train(cmd::train::Args),
     /// Random hyper-parameter search over the paper's ranges.
-    Search(cmd::search::Args),
+    Search(cmd::search::Cli),
     /// A whole robot from one TOML file: every joint's pipeline, one frictiond config, a report.
     Robot(cmd::robot::Args),
     /// Evaluate none/CV/SCV/PINN on held-out runs.
@@ -79,7 +79,7 @@ fn main() -> std::process::ExitCode {
         Command::Preprocess(a) => cmd::preprocess::run(a),
         Command::Fit(a) => cmd::fit::run(a),
         Command::Train(a) => cmd::train::run(a),
-        Command::Search(a) => cmd::search::run(a),
+        Command::Search(a) => cmd::search::run_cli(a),
         Command::Robot(a) => cmd::robot::run(a),
         Command::Eval(a) => cmd::eval::run(a),
         Command::Experiment(a) => cmd::experiment::run(a),

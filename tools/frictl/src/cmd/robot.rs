@@ -74,7 +74,8 @@ struct PlanArgs {
 }
 
 /// The last stage `--until` runs.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
 enum Until {
     Data,
     Fit,
@@ -89,7 +90,6 @@ struct Stage {
     /// Stage id (also the stamp's and the log's name).
     id: String,
     /// Where it belongs.
-    #[serde(skip)]
     phase: Until,
     /// `frictl` arguments.
     args: Vec<String>,

@@ -21,13 +21,40 @@ use frictionless_train::search::{
 
 use super::train::{Dtype, Features, Warmup, cores, parse_chunks};
 
-/// Arguments of `frictl search`.
+/// `frictl search`: a search, or one of its subcommands.
 #[derive(clap::Args, Debug)]
 #[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
-pub struct Args {
+pub struct Cli {
     /// `finish DIR`: publish the tables of a search run by trials elsewhere.
     #[command(subcommand)]
     pub action: Option<Action>,
+    /// The search.
+    #[command(flatten)]
+    pub search: Option<Args>,
+}
+
+/// Runs `frictl search` or its subcommand.
+pub fn run_cli(cli: Cli) -> anyhow::Result<()> {
+    match (cli.action, cli.search) {
+        (Some(Action::Finish { dir, trials }), _) => {
+            let all = finish(&dir, trials)?;
+            println!(
+                "frictl search finish: {} trial(s), {} ok; results in {} (results.csv, results.json)",
+                all.len(),
+                all.iter().filter(|r| r.status == "ok").count(),
+                dir.display()
+            );
+            print_best(&all, &dir);
+            Ok(())
+        }
+        (None, Some(args)) => run(args),
+        (None, None) => anyhow::bail!("frictl search: no arguments (see --help)"),
+    }
+}
+
+/// Arguments of `frictl search`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
     /// Preprocessed dataset CSV (repeatable; its `.json` sidecar must exist).
     #[arg(long = "dataset", required = true)]
     pub datasets: Vec<PathBuf>,
@@ -185,17 +212,6 @@ fn print_best(all: &[TrialResult], dir: &std::path::Path) {
 
 /// Runs `frictl search`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if let Some(Action::Finish { dir, trials }) = &args.action {
-        let all = finish(dir, *trials)?;
-        println!(
-            "frictl search finish: {} trial(s), {} ok; results in {} (results.csv, results.json)",
-            all.len(),
-            all.iter().filter(|r| r.status == "ok").count(),
-            dir.display()
-        );
-        print_best(&all, dir);
-        return Ok(());
-    }
     let scv_bytes = std::fs::read(&args.scv)
         .map_err(|e| anyhow::anyhow!("{}: cannot read: {e}", args.scv.display()))?;
     let sources = pipeline::load_sources(&args.datasets)?;
