@@ -243,7 +243,8 @@ def main(argv=None):
     threads = plan["threads_per_trial"]
 
     if args.address == "local":
-        ray.init(num_cpus=args.num_cpus, include_dashboard=False, log_to_driver=False,
+        ray.init(address="local", num_cpus=args.num_cpus, include_dashboard=False,
+                 log_to_driver=False,
                  object_store_memory=200 * 1024 * 1024)
     else:
         ray.init(address=args.address, log_to_driver=False)

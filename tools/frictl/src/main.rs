@@ -3,7 +3,8 @@
 //! What it **is**: one command-line tool for everything that is not the 1 kHz loop: the virtual
 //! harmonic-drive joints and their plant process (`sim`), data acquisition with the paper's excitation
 //! protocol (`acquire`), URDF rigid-body dynamics (`dynamics`), the label pipeline (`preprocess`),
-//! CV/SCV fitting (`fit`), PINN training and hyper-parameter search (`train`, `search`), model import,
+//! CV/SCV fitting (`fit`), PINN training and hyper-parameter search (`train`, `search`), a whole robot
+//! from one TOML file (`robot`; trials on a Ray cluster through `python/ray/frictl_ray.py`), model import,
 //! export and inspection (`import`, `export`, `convert`, `inspect`, `predict`), evaluation (`eval`),
 //! the paper's closed-loop experiments (`experiment`), live views of a running daemon (`monitor`,
 //! `record`), CAN tools (`can`) and the end-to-end `demo`.

@@ -590,8 +590,16 @@ fn claim_settings(dir: &Path, settings: &SearchSettings) -> Result<(), SearchErr
     let json = serde_json::to_string_pretty(settings).map_err(|e| ferr(&path, e))?;
     let tmp = dir.join(format!(".search.json.{}", std::process::id()));
     std::fs::write(&tmp, &json).map_err(|e| ferr(&tmp, format!("cannot write: {e}")))?;
-    // link(2) fails if search.json exists: whoever links first defines the search.
-    let linked = std::fs::hard_link(&tmp, &path);
+    // link(2) fails if search.json exists: whoever links first defines the search. File systems
+    // without hard links get an exclusive create instead (a concurrent reader may then see it empty).
+    let linked = match std::fs::hard_link(&tmp, &path) {
+        Err(e) if e.kind() != std::io::ErrorKind::AlreadyExists => std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&path)
+            .and_then(|mut f| f.write_all(json.as_bytes())),
+        other => other,
+    };
     let _ = std::fs::remove_file(&tmp);
     match linked {
         Ok(()) => Ok(()),

@@ -10,7 +10,9 @@
 //! SHA-256 of its arguments with every input file replaced by the SHA-256 of its content) matches is
 //! skipped. Stamps name no absolute path, so a joint directory made on another machine (a Ray
 //! worker) is recognised. The search stage always passes `--resume`: trials run elsewhere into
-//! `DIR/joints/J/search` (`frictl search --only-trials`) are kept and only the missing ones run.
+//! `DIR/joints/J/search` (`frictl search --only-trials`) are kept and only the missing ones run; a
+//! search whose settings changed in the robot file is refused there (remove `DIR/joints/J/search` to
+//! start it again).
 //!
 //! `frictl robot plan ROBOT.toml --out DIR` prints, as JSON, what the Ray driver needs: each joint's
 //! directory, its input files, the `frictl search` arguments (relative to `DIR`) and the trial count.
