@@ -6,6 +6,7 @@ mid-task has its trial retried, a search begun on this machine is finished by a 
 Needs FRICTL and FRICTIOND (the binaries; `tests/ray/run.sh` builds them and sets both).
 """
 
+import hashlib
 import json
 import os
 import secrets
@@ -65,6 +66,22 @@ def check_config(out):
         assert joint in proc.stdout and "pinn" in proc.stdout
 
 
+def close(a, b, where):
+    """Equal JSON, floats within 1e-9 relative (parallel reductions may differ in the last bit)."""
+    if isinstance(a, float) or isinstance(b, float):
+        assert a == pytest.approx(b, rel=1e-9, abs=0), where
+    elif isinstance(a, dict):
+        assert a.keys() == b.keys(), where
+        for k in a:
+            close(a[k], b[k], f"{where}.{k}")
+    elif isinstance(a, list):
+        assert len(a) == len(b), where
+        for i, (x, y) in enumerate(zip(a, b)):
+            close(x, y, f"{where}[{i}]")
+    else:
+        assert a == b, where
+
+
 def same_trials(a, b):
     """Trial by trial: identical hyper-parameters and seeds; validation RMSE equal to float
     reproducibility (each trial trains with 1 thread; see docs/cluster.md)."""
@@ -102,9 +119,12 @@ def test_ray_run_equals_single_machine_and_a_killed_worker_is_retried(single_mac
         recs = lines(out / "joints" / joint / "search" / "results.jsonl")
         assert sorted(r["params"]["trial"] for r in recs) == [0, 1, 2, 3], joint
         # the same data (content-addressed stages ran on workers)
-        for f in ["train_ds.csv", "test_ds.csv", "scv.json"]:
+        for f in ["train_ds.csv", "test_ds.csv"]:
             assert (out / "joints" / joint / f).read_bytes() == \
                 (single_machine / "joints" / joint / f).read_bytes(), f"{joint} {f}"
+        for f in ["cv.json", "scv.json"]:
+            close(json.loads((out / "joints" / joint / f).read_text()),
+                  json.loads((single_machine / "joints" / joint / f).read_text()), f"{joint} {f}")
         same_trials(ranked(out, joint), ranked(single_machine, joint))
         assert ranked(out, joint)[0]["params"] == ranked(single_machine, joint)[0]["params"]
     check_config(out)
@@ -119,10 +139,16 @@ def free_port():
 
 
 def test_search_begun_locally_is_finished_by_a_ray_start_cluster(single_machine, tmp_path):
+    """Also: files move through `[robot] shared_dir` (content-addressed) instead of the object store."""
     out = tmp_path / "out"
+    shared = tmp_path / "shared"
+    text = ROBOT.read_text()
+    assert "\nseed = 3\n" in text
+    robot = tmp_path / "robot.toml"
+    robot.write_text(text.replace("\nseed = 3\n", f'\nseed = 3\nshared_dir = "{shared}"\n'))
     # On this machine: the data and fits of both joints, then trials 0 and 2 of the knee.
-    frictl("robot", "run", ROBOT, "--out", out, "--until", "fit", cwd=tmp_path)
-    plan = json.loads(frictl("robot", "plan", ROBOT, "--out", out, cwd=tmp_path).stdout)
+    frictl("robot", "run", robot, "--out", out, "--until", "fit", cwd=tmp_path)
+    plan = json.loads(frictl("robot", "plan", robot, "--out", out, cwd=tmp_path).stdout)
     knee = plan["joints"][0]
     assert knee["name"] == "l_knee"
     frictl(*knee["search_args"], "--out", knee["search_dir"], "--only-trials", "0,2",
@@ -146,7 +172,7 @@ def test_search_begun_locally_is_finished_by_a_ray_start_cluster(single_machine,
         while time.monotonic() < deadline:
             proc = subprocess.run(
                 [sys.executable, str(DRIVER), "--frictl", FRICTL, "--address",
-                 f"127.0.0.1:{port}", str(ROBOT), "--out", str(out)],
+                 f"127.0.0.1:{port}", str(robot), "--out", str(out)],
                 cwd=tmp_path, capture_output=True, text=True, env=env)
             if proc.returncode == 0 or "ConnectionError" not in proc.stderr:
                 break
@@ -161,6 +187,11 @@ def test_search_begun_locally_is_finished_by_a_ray_start_cluster(single_machine,
             head.wait()
     recs = lines(out / knee["search_dir"] / "results.jsonl")
     assert sorted(r["params"]["trial"] for r in recs) == [0, 1, 2, 3]
+    # The trials' inputs went through the shared directory, each file under its SHA-256.
+    stored = sorted(p.name for p in (shared / "sha256").iterdir())
+    assert len(stored) >= 6, stored  # 2 joints x (dataset, sidecar, SCV fit)
+    for p in (shared / "sha256").iterdir():
+        assert hashlib.sha256(p.read_bytes()).hexdigest() == p.name
     for r in recs:
         if r["params"]["trial"] in local:
             assert r == local[r["params"]["trial"]], "trials run locally were kept, not re-run"
