@@ -736,4 +736,94 @@ mod tests {
         let order: Vec<usize> = r.iter().map(|t| t.params.trial).collect();
         assert_eq!(order, vec![2, 1, 0, 3]);
     }
+
+    fn settings(datasets: &str, scv: &str, scv_sha: Option<&str>, epochs: usize) -> SearchSettings {
+        let mut v: serde_json::Value = serde_json::from_str(
+            r#"{"space": {"batch": [256, 512], "hidden": [8, 16], "lr": [1e-05, 0.001],
+            "history": [3, 8], "lambda": [0.1, 0.5], "dropout": [0.01, 0.1]}, "seed": 3,
+            "epochs": 2, "features": "delta_theta_joint_vel", "temperature": false,
+            "warmup": "hold_zero", "delta_theta_offset": "run", "dtype": "f32", "patience": null,
+            "split": {"val_frac": 0.15, "test_frac": 0.15, "seed": 3, "test_chunks": null},
+            "datasets": [], "dataset_sha256": "ab", "scv": ""}"#,
+        )
+        .unwrap();
+        v["datasets"] = serde_json::json!([datasets]);
+        v["scv"] = scv.into();
+        v["epochs"] = epochs.into();
+        if let Some(h) = scv_sha {
+            v["scv_sha256"] = h.into();
+        }
+        serde_json::from_value(v).unwrap()
+    }
+
+    #[test]
+    fn settings_compare_by_content_where_hashes_are_recorded() {
+        let p = Path::new("search.json");
+        let here = settings("/a/ds.csv", "/a/scv.json", Some("11"), 2);
+        // Same content elsewhere: accepted.
+        compare_settings(
+            p,
+            &here,
+            &settings("/b/ds.csv", "/b/scv.json", Some("11"), 2),
+        )
+        .unwrap();
+        // Another SCV content, or any other setting: refused, naming the key.
+        let e = compare_settings(
+            p,
+            &here,
+            &settings("/a/ds.csv", "/a/scv.json", Some("22"), 2),
+        );
+        assert!(e.unwrap_err().to_string().contains("scv_sha256"));
+        let e = compare_settings(
+            p,
+            &here,
+            &settings("/a/ds.csv", "/a/scv.json", Some("11"), 3),
+        );
+        assert!(e.unwrap_err().to_string().contains("epochs"));
+        // A search recorded without the SCV hash still compares the SCV path.
+        let old = settings("/a/ds.csv", "/a/scv.json", None, 2);
+        compare_settings(p, &old, &here).unwrap();
+        let e = compare_settings(
+            p,
+            &old,
+            &settings("/b/ds.csv", "/b/scv.json", Some("11"), 2),
+        );
+        assert!(e.unwrap_err().to_string().contains("scv"));
+    }
+
+    #[test]
+    fn dedup_keeps_one_record_per_trial_an_ok_one_first() {
+        let mk = |trial, status: &str, v: Option<f64>| TrialResult {
+            params: draw(&SearchSpace::default(), 0, trial),
+            status: status.into(),
+            error: None,
+            val_rmse_nm: v,
+            test_rmse_nm: None,
+            train_rmse_nm: None,
+            best_epoch: None,
+            epochs_run: 0,
+            seconds: 0.0,
+            model: None,
+        };
+        let d = dedup(vec![
+            mk(1, "ok", Some(0.5)),
+            mk(0, "failed", None),
+            mk(1, "failed", None),
+            mk(0, "ok", Some(0.3)),
+            mk(2, "ok", Some(0.4)),
+            mk(2, "ok", Some(0.6)),
+        ]);
+        let got: Vec<(usize, &str, Option<f64>)> = d
+            .iter()
+            .map(|r| (r.params.trial, r.status.as_str(), r.val_rmse_nm))
+            .collect();
+        assert_eq!(
+            got,
+            [
+                (0, "ok", Some(0.3)),
+                (1, "ok", Some(0.5)),
+                (2, "ok", Some(0.6))
+            ]
+        );
+    }
 }

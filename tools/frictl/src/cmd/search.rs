@@ -8,8 +8,6 @@
 //! `frictl search finish DIR` writes the tables and `best.fwt` from whatever the directory holds.
 
 use std::path::PathBuf;
-
-use sha2::Digest;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use frictionless::features::WarmupPolicy;
@@ -18,6 +16,7 @@ use frictionless_train::pipeline;
 use frictionless_train::search::{
     SearchRun, SearchSettings, SearchSpace, TrialResult, finish, run_search, run_trials,
 };
+use sha2::Digest;
 
 use super::train::{Dtype, Features, Warmup, cores, parse_chunks};
 
