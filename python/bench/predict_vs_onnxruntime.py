@@ -6,8 +6,9 @@ The network is paper size (40 → 268 → 215 → 1, inputs [Δθ ×20, ṡ ×20
 weights, written with `frictionless.write_fwt` and exported with `frictl export onnx` (so both run the
 same weights). ONNX Runtime runs with `intra_op_num_threads = inter_op_num_threads = 1` and sequential
 execution; `predict` is single-threaded by construction. Each side runs the whole batch `--repeats`
-times after a warm-up; the script prints the median wall time per batch and per window, the
-largest output difference, and (for the per-tick path) the median cost of `Estimator.push`.
+times after a warm-up (the two sides alternate); the script prints the median wall time per batch and
+per window, the per-call time for batches of 1 and 100 windows, the largest output difference, and
+(for the per-tick path) the median cost of `Estimator.push` called from Python.
 Needs: numpy, onnxruntime, the built extension, and `frictl` ($FRICTL, --frictl, or on PATH /
 target/{release,debug}).
 """
@@ -41,14 +42,17 @@ def find_frictl(arg):
     sys.exit("frictl not found: build it (cargo build -p frictl) or pass --frictl / $FRICTL")
 
 
-def median_s(f, repeats):
-    f()  # warm-up
-    times = []
+def medians_s(fs, repeats):
+    """Median wall time of each callable; the callables alternate so load drifts hit both alike."""
+    for f in fs:
+        f()  # warm-up
+    times = [[] for _ in fs]
     for _ in range(repeats):
-        t0 = time.perf_counter()
-        f()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+        for f, t in zip(fs, times):
+            t0 = time.perf_counter()
+            f()
+            t.append(time.perf_counter() - t0)
+    return [statistics.median(t) for t in times]
 
 
 def main():
@@ -85,8 +89,22 @@ def main():
 
         y_fl = model.predict(x)
         y_ort = sess.run(None, {inp: x})[0].reshape(-1)
-        t_fl = median_s(lambda: model.predict(x), args.repeats)
-        t_ort = median_s(lambda: sess.run(None, {inp: x}), args.repeats)
+        t_fl, t_ort = medians_s(
+            [lambda: model.predict(x), lambda: sess.run(None, {inp: x})], args.repeats
+        )
+        # Small batches: per-call overhead (one window is what a control tick asks for).
+        small = {}
+        for b in (1, 100):
+            xb = x[:b]
+            reps = 2000 // b
+            def fl_calls():
+                for _ in range(reps):
+                    model.predict(xb)
+            def ort_calls():
+                for _ in range(reps):
+                    sess.run(None, {inp: xb})
+            tf, to = medians_s([fl_calls, ort_calls], args.repeats)
+            small[b] = (tf / reps, to / reps)
 
         est = fl.Estimator(model)
         s = rng.normal(0, 0.1, 20_000)
@@ -102,6 +120,9 @@ def main():
     print(f"frictionless Model.predict : {t_fl * 1e3:8.1f} ms/batch  {t_fl / args.n * 1e9:7.0f} ns/window")
     print(f"onnxruntime  (1 thread)    : {t_ort * 1e3:8.1f} ms/batch  {t_ort / args.n * 1e9:7.0f} ns/window")
     print(f"ratio onnxruntime/frictionless: {t_ort / t_fl:.2f}")
+    for b, (tf, to) in small.items():
+        print(f"batch {b:>3}: frictionless {tf * 1e6:8.1f} µs/call, onnxruntime {to * 1e6:8.1f} µs/call, "
+              f"ratio {to / tf:.2f}")
     print(f"max |difference| [Nm]: {float(np.max(np.abs(y_fl - y_ort))):.3g}")
     print(f"Estimator.push (one sample, from Python): {statistics.median(pushes) * 1e9:.0f} ns")
 

@@ -14,9 +14,10 @@
 //! own, no Python-side numerics. The Python API, its docstrings and type stubs are in
 //! `python/frictionless/`; the tests are `python/tests/` (pytest, run by `python/ci.sh`).
 //!
-//! Building: `pip install ./python` (maturin, see `python/pyproject.toml`). Maturin turns on PyO3's
-//! `extension-module` feature (`[tool.maturin] features`), so `cargo check/test/clippy --workspace`
-//! build this crate as an ordinary library without linking against a Python at all.
+//! Building: `pip install ./python` (maturin, see `python/pyproject.toml`). Only maturin turns on
+//! PyO3's `extension-module` feature (`[tool.maturin] features`: libpython left unlinked, as a wheel
+//! needs); `cargo build/test/clippy --workspace` build the crate like any PyO3 embedding (linked
+//! against the libpython PyO3 finds) and run no test binary of it.
 
 use pyo3::create_exception;
 use pyo3::exceptions::PyException;
