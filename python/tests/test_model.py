@@ -123,3 +123,27 @@ def test_predict_from_threads(shipped_model_path):
         got = list(ex.map(m.predict, xs))
     for g, w in zip(got, want):
         np.testing.assert_array_equal(g, w)
+
+
+def test_predict_releases_the_gil(shipped_model_path):
+    # While a worker thread is inside predict, this thread keeps waking up (each wake-up needs the
+    # GIL); if predict held the GIL, the wake-ups would wait for it to return.
+    import threading
+
+    m = fl.Model.load(shipped_model_path)
+    x = np.random.default_rng(0).normal(size=(50_000, 40)).astype(np.float32)
+    started, done = threading.Event(), threading.Event()
+
+    def work():
+        started.set()
+        m.predict(x)
+        done.set()
+
+    t = threading.Thread(target=work)
+    t.start()
+    started.wait()
+    wakeups = 0
+    while not done.wait(0.001):
+        wakeups += 1
+    t.join()
+    assert wakeups >= 5, wakeups
