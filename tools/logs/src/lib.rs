@@ -24,6 +24,8 @@
 #![warn(missing_docs)]
 
 pub mod csv_log;
+#[cfg(feature = "mat")]
+pub mod mat_log;
 pub mod mcap_log;
 mod roles;
 mod run;
