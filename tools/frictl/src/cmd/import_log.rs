@@ -285,6 +285,28 @@ fn finish(
         None if first.tau_joint_nm.is_some() => LabelSource::TorqueSensor,
         None => LabelSource::Current,
     };
+    let has = |role: &str| match role {
+        "time" => true,
+        "s" => first.s_rad.is_some(),
+        "sdot" => first.sdot_rad_s.is_some(),
+        "current" => first.current_a.is_some(),
+        "tau_joint" => first.tau_joint_nm.is_some(),
+        "tau_motor" => first.tau_motor_nm.is_some(),
+        "tau_f" => first.tau_f_nm.is_some(),
+        _ => false,
+    };
+    let lacking: Vec<&str> = required_signals(label)
+        .iter()
+        .copied()
+        .filter(|group| !group.split('|').any(has))
+        .collect();
+    if !lacking.is_empty() {
+        bail!(
+            "the {label:?} label needs {} but the log gives none of: {} (pick another --label or map the column)",
+            required_signals(label).join(", "),
+            lacking.join(", ")
+        );
+    }
     let (link_model, dynamics) = if label == LabelSource::Current {
         let (m, d) = urdf_link(common.urdf.as_deref(), joint, &common.fixed_joints)?;
         (Some(m), d)
