@@ -35,8 +35,12 @@
 //! Link model: `frictl preprocess --link auto` (default) uses the simulator's own link model when the
 //! log's sidecar has one, so a simulated log is labelled with the dynamics that produced it.
 //!
-//! What it is not: a reader of robot `.mat` logs, or windowing into network inputs (the trainer
-//! builds windows inside chunks from [`Dataset::chunk`]).
+//! Imported robot logs ([`RunSignals`], from `frictionless-logs`) go through [`preprocess_signals`]:
+//! the same chunk split, resampler, Butterworth and smoother, with absent signals as NaN columns and
+//! the label from current, a joint torque sensor or a given column.
+//!
+//! What it is not: a reader of robot log files (`frictionless-logs`), or windowing into network
+//! inputs (the trainer builds windows inside chunks from [`Dataset::chunk`]).
 
 use serde::{Deserialize, Serialize};
 

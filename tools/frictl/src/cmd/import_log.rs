@@ -270,7 +270,7 @@ fn sha256_file(path: &Path) -> anyhow::Result<String> {
 }
 
 fn finish(
-    runs: Vec<ImportedRun>,
+    mut runs: Vec<ImportedRun>,
     files: &[PathBuf],
     joint: &str,
     format: &str,
@@ -327,7 +327,11 @@ fn finish(
         cfg.gap_s = cfg.gap_s.max(1.0);
     }
     common.pipeline.apply(&mut cfg);
-    let signals: Vec<_> = runs.iter().map(|r| r.signals.clone()).collect();
+    // Moved out, not copied: memory stays one copy of the joint's signals plus the dataset.
+    let signals: Vec<_> = runs
+        .iter_mut()
+        .map(|r| std::mem::take(&mut r.signals))
+        .collect();
     let lab = SignalsLabel {
         source: label,
         gear_ratio_signed: common.gear_ratio,
