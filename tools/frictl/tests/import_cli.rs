@@ -253,3 +253,78 @@ fn mcap_bag_imports_with_the_effort_as_given_friction() {
     assert_eq!(side.runs[0].chunks, [0, 1]);
     assert!(side.absent_columns.iter().any(|c| c == "theta_motor_rad"));
 }
+
+#[cfg(feature = "mat")]
+#[test]
+fn mat_file_imports_with_the_current_label_and_two_chunks() {
+    let Some(py) = std::env::var_os("FRICTIONLESS_PY") else {
+        eprintln!("SKIPPED: FRICTIONLESS_PY is unset (python with numpy, h5py)");
+        return;
+    };
+    let d = dir();
+    let mat = d.join("robot_logger_device_2024_01_01_00_00_00.mat");
+    let script =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../logs/tests/fixtures/make_fixtures.py");
+    let st = Command::new(py)
+        .arg(script)
+        .arg("mat")
+        .arg(&mat)
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let ds = d.join("mat_ds.csv");
+    ok(
+        frictl(&[
+            "import",
+            "mat",
+            s(&mat),
+            "--gear-ratio",
+            "-100",
+            "--kt",
+            "0.11",
+            "-o",
+            s(&ds),
+        ]),
+        "import mat",
+    );
+    let side: frictionless_dataset::DatasetSidecar =
+        serde_json::from_str(&std::fs::read_to_string(d.join("mat_ds.json")).unwrap()).unwrap();
+    assert_eq!(
+        side.joint, "l_knee",
+        "picked from the desired-current channel"
+    );
+    assert_eq!(side.label, frictionless_dataset::LabelSource::Current);
+    assert_eq!(side.runs.len(), 1);
+    assert_eq!(
+        side.runs[0].chunks,
+        [0, 1],
+        "the 1.6 s gap of the desired current"
+    );
+    assert!(side.absent_columns.iter().any(|c| c == "temperature_c"));
+    let data = frictionless_dataset::Dataset::read_csv(&ds).unwrap();
+    // 2 s and 2.4 s of 500 Hz ticks on the 1 kHz grid (epoch stamps: the last grid point may fall a
+    // rounding error beyond the last tick).
+    let n0 = data.chunk.iter().filter(|c| **c == 0).count();
+    let n1 = data.chunk.iter().filter(|c| **c == 1).count();
+    assert!((1998..=1999).contains(&n0), "{n0}");
+    assert!((2398..=2399).contains(&n1), "{n1}");
+    let k = 500;
+    assert!((data.i_meas_a[k] - (0.2 + 0.1 * (3.0 * data.time_s[k]).sin())).abs() < 1e-6);
+    let e = err_text(
+        frictl(&[
+            "import",
+            "mat",
+            s(&mat),
+            "--joint",
+            "r_elbow",
+            "--gear-ratio",
+            "-100",
+            "--kt",
+            "0.11",
+            "-o",
+            s(&ds),
+        ]),
+        "unknown joint",
+    );
+    assert!(e.contains("r_elbow") && e.contains("l_knee"), "{e}");
+}

@@ -163,7 +163,8 @@ impl LogsError {
 }
 
 /// Opens `path` for reading only if it is a regular file: opened non-blocking (a FIFO never blocks
-/// the open) and checked with `fstat` before a byte is read, then switched back to blocking reads.
+/// the open) and checked with `fstat` before a byte is read (`O_NONBLOCK` has no effect on a regular
+/// file's reads).
 pub fn open_regular(path: &Path) -> Result<File, LogsError> {
     use std::os::unix::fs::OpenOptionsExt;
     let file = std::fs::OpenOptions::new()
@@ -176,16 +177,6 @@ pub fn open_regular(path: &Path) -> Result<File, LogsError> {
         return Err(LogsError::NotRegular {
             path: path.display().to_string(),
         });
-    }
-    // Regular files never block; clear O_NONBLOCK anyway so reads behave as usual.
-    use std::os::fd::AsRawFd;
-    let fd = file.as_raw_fd();
-    // SAFETY: `fd` is a valid open descriptor owned by `file` for the duration of these calls.
-    unsafe {
-        let flags = libc::fcntl(fd, libc::F_GETFL);
-        if flags >= 0 {
-            libc::fcntl(fd, libc::F_SETFL, flags & !libc::O_NONBLOCK);
-        }
     }
     Ok(file)
 }

@@ -67,6 +67,9 @@ pub struct CommonArgs {
     /// URDF for τ_ID of the current label (default `virtual_leg`).
     #[arg(long)]
     pub urdf: Option<String>,
+    /// The joint's name in the URDF when it differs from the log's (default: the log's joint name).
+    #[arg(long)]
+    pub urdf_joint: Option<String>,
     /// Position of another URDF joint, held fixed [rad] (repeatable; absent joints are 0).
     #[arg(long = "fixed-joint", value_name = "NAME=RAD")]
     pub fixed_joints: Vec<String>,
@@ -308,7 +311,8 @@ fn finish(
         );
     }
     let (link_model, dynamics) = if label == LabelSource::Current {
-        let (m, d) = urdf_link(common.urdf.as_deref(), joint, &common.fixed_joints)?;
+        let urdf_joint = common.urdf_joint.as_deref().unwrap_or(joint);
+        let (m, d) = urdf_link(common.urdf.as_deref(), urdf_joint, &common.fixed_joints)?;
         (Some(m), d)
     } else {
         (
