@@ -198,6 +198,47 @@ fn import_errors_name_the_column_header_and_unit() {
     assert!(!out.exists(), "nothing written on error");
 }
 
+#[test]
+fn a_friction_column_of_the_opposite_sign_is_warned_about() {
+    let d = dir();
+    let log = d.join("neg.csv");
+    write_log(&log, 2.0, 3);
+    let ds = d.join("neg_ds.csv");
+    let out = ok(
+        frictl(&[
+            "import",
+            "csv",
+            s(&log),
+            "--joint",
+            "wrist",
+            "--column",
+            "time=time",
+            "--column",
+            "s=q_deg",
+            "--column",
+            "tau_f=friction_nm",
+            "--unit",
+            "s=deg",
+            "--negate",
+            "tau_f",
+            "-o",
+            s(&ds),
+        ]),
+        "import csv --negate tau_f",
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("anti-correlated"), "{err}");
+    let side: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("neg_ds.json")).unwrap()).unwrap();
+    let w = side["settings"]["import"]["warnings"].to_string();
+    assert!(w.contains("anti-correlated"), "{w}");
+    let conv = side["settings"]["import"]["runs"][0]["report"]["conversions"].to_string();
+    assert!(
+        conv.contains("tau_f: Nm (no conversion), negated"),
+        "{conv}"
+    );
+}
+
 #[cfg(not(feature = "mat"))]
 #[test]
 fn import_mat_without_the_feature_says_how_to_build_it() {

@@ -1004,4 +1004,41 @@ mod tests {
         let e = preprocess_signals(&[run], &ts, None, &cfg).unwrap_err();
         assert!(e.to_string().contains("tau_joint"), "{e}");
     }
+
+    #[test]
+    fn torque_sensor_label_is_motor_minus_joint_torque() {
+        let n = 2000;
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * 0.002).collect();
+        let v: Vec<f64> = t.iter().map(|t| 0.5 + 0.1 * t).collect();
+        let run = RunSignals {
+            chunk: vec![0; n],
+            sdot_rad_s: Some(v),
+            tau_joint_nm: Some(vec![1.0; n]),
+            current_a: Some(vec![-0.5; n]),
+            time_s: t,
+            ..RunSignals::default()
+        };
+        let cfg = PreprocessConfig::for_joint("j");
+        let mut label = SignalsLabel {
+            source: frictionless_dataset::LabelSource::TorqueSensor,
+            gear_ratio_signed: Some(-100.0),
+            kt_nm_per_a: Some(0.1),
+        };
+        // τ_motor = r·k_t·i = −100·0.1·(−0.5) = 5 Nm; label 5 − 1 = 4 Nm.
+        let (ds, sum) = preprocess_signals(std::slice::from_ref(&run), &label, None, &cfg).unwrap();
+        assert!(ds.tau_f_label_nm.iter().all(|f| (f - 4.0).abs() < 1e-9));
+        assert!(sum.absent_columns.contains(&"s_rad"));
+        assert!(!sum.absent_columns.contains(&"i_filt_a"));
+        // A given motor-side torque takes precedence over r·k_t·i.
+        let with_motor = RunSignals {
+            tau_motor_nm: Some(vec![2.5; run.time_s.len()]),
+            ..run.clone()
+        };
+        let (ds, _) = preprocess_signals(&[with_motor], &label, None, &cfg).unwrap();
+        assert!(ds.tau_f_label_nm.iter().all(|f| (f - 1.5).abs() < 1e-9));
+        // Without a gear ratio r·k_t·i cannot be formed: an error naming the setting.
+        label.gear_ratio_signed = None;
+        let e = preprocess_signals(&[run], &label, None, &cfg).unwrap_err();
+        assert!(e.to_string().contains("gear_ratio_signed"), "{e}");
+    }
 }
