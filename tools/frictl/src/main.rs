@@ -28,7 +28,7 @@ struct Cli {
 enum Command {
     /// Print a weight file's header, shapes, metadata and CRC status.
     Inspect(cmd::inspect::Args),
-    /// Import a model from ONNX or safetensors into a .fwt weight file.
+    /// Import a model (ONNX, safetensors) into a .fwt file, or robot logs (CSV, .mat, MCAP) into a dataset.
     Import(cmd::import::Args),
     /// Export a .fwt weight file to ONNX or safetensors.
     Export(cmd::export::Args),

@@ -2,12 +2,14 @@
 //!
 //! Crate table: `tools/ident`; depends on `frictionless` (CV/SCV models), `frictionless-dataset` and
 //! `frictionless-sim` (link dynamics); used by `frictionless-acquire` (raw logs in memory) and `frictl`
-//! (`preprocess`, `fit`, `experiment`).
+//! (`preprocess`, `import`, `fit`, `experiment`) and `frictionless-logs` (its input type).
 //!
 //! What this crate **is**:
 //! - [`kalman`]: constant-acceleration Kalman filter and RTS smoother for ṡ, s̈;
 //! - [`preprocess`]: the label pipeline, acquisition log ([`preprocess::RawLog`], [`preprocess::LogMeta`])
-//!   → labelled [`frictionless_dataset::Dataset`] (`frictl preprocess`);
+//!   → labelled [`frictionless_dataset::Dataset`] (`frictl preprocess`), and the same pipeline for
+//!   imported robot signals ([`preprocess::preprocess_signals`], `frictl import csv|mat|mcap`: optional
+//!   signals, current / torque-sensor / given labels);
 //! - [`fit`]: least-squares fits of the static CV and SCV friction models to a dataset (`frictl fit`).
 //!
 //! The Butterworth filters it runs are the core's one implementation, [`frictionless::filter`].

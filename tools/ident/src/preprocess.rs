@@ -35,8 +35,12 @@
 //! Link model: `frictl preprocess --link auto` (default) uses the simulator's own link model when the
 //! log's sidecar has one, so a simulated log is labelled with the dynamics that produced it.
 //!
-//! What it is not: a reader of robot `.mat` logs, or windowing into network inputs (the trainer
-//! builds windows inside chunks from [`Dataset::chunk`]).
+//! Imported robot logs ([`RunSignals`], from `frictionless-logs`) go through [`preprocess_signals`]:
+//! the same chunk split, resampler, Butterworth and smoother, with absent signals as NaN columns and
+//! the label from current, a joint torque sensor or a given column.
+//!
+//! What it is not: a reader of robot log files (`frictionless-logs`), or windowing into network
+//! inputs (the trainer builds windows inside chunks from [`Dataset::chunk`]).
 
 use serde::{Deserialize, Serialize};
 
@@ -486,6 +490,421 @@ pub fn preprocess(
     Ok((ds, summary))
 }
 
+/// One run (one recording, usually one source file) of a robot's signals for one joint, on the
+/// source's own clock: the input of [`preprocess_signals`]. Every signal but time is optional; each
+/// present one has one value per entry of `time_s`, already in SI units with the project's signs
+/// (the importer converts and checks; `frictionless-logs`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RunSignals {
+    /// Time [s], non-decreasing, finite (any clock; the dataset keeps it).
+    pub time_s: Vec<f64>,
+    /// Source chunk id per sample (0 when the source has none); a change starts a new chunk.
+    pub chunk: Vec<u32>,
+    /// Joint position s [rad].
+    pub s_rad: Option<Vec<f64>>,
+    /// Joint velocity ṡ [rad/s] (absent: from s through the Kalman smoother).
+    pub sdot_rad_s: Option<Vec<f64>>,
+    /// Joint acceleration s̈ [rad/s²] (absent: from ṡ through the Kalman smoother).
+    pub sddot_rad_s2: Option<Vec<f64>>,
+    /// Motor position θ [motor rad].
+    pub theta_motor_rad: Option<Vec<f64>>,
+    /// Motor velocity ω [motor rad/s].
+    pub omega_motor_rad_s: Option<Vec<f64>>,
+    /// Motor current [A].
+    pub current_a: Option<Vec<f64>>,
+    /// Joint torque sensor, link side [Nm].
+    pub tau_joint_nm: Option<Vec<f64>>,
+    /// Commanded or motor-side torque, reflected to the joint [Nm] (torque-sensor label).
+    pub tau_motor_nm: Option<Vec<f64>>,
+    /// Friction torque given by the source [Nm] (label `given`).
+    pub tau_f_nm: Option<Vec<f64>>,
+    /// Temperature [°C].
+    pub temperature_c: Option<Vec<f64>>,
+}
+
+/// Which signals [`preprocess_signals`] needs for a label source, as role names (`s`, `current`, …);
+/// a group `a|b` means either.
+pub fn required_signals(label: frictionless_dataset::LabelSource) -> &'static [&'static str] {
+    use frictionless_dataset::LabelSource as L;
+    match label {
+        L::Current => &["time", "s", "current"],
+        L::TorqueSensor => &["time", "s|sdot", "tau_joint", "tau_motor|current"],
+        L::Given => &["time", "s|sdot", "tau_f"],
+    }
+}
+
+/// Label settings of [`preprocess_signals`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SignalsLabel {
+    /// Where the label comes from.
+    pub source: frictionless_dataset::LabelSource,
+    /// Signed gear ratio r (needed for r·k_t·i and for Δθ = r·s − θ).
+    pub gear_ratio_signed: Option<f64>,
+    /// Torque constant k_t [Nm/A] (needed for r·k_t·i).
+    pub kt_nm_per_a: Option<f64>,
+}
+
+/// What [`preprocess_signals`] did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SignalsSummary {
+    /// Dataset chunk ids of each run, in run order.
+    pub run_chunks: Vec<Vec<u32>>,
+    /// Δθ offset r·s₀ − θ₀ of each run [motor rad] (NaN without s or θ).
+    pub delta_theta_offsets_motor_rad: Vec<f64>,
+    /// Chunks too short for the zero-phase filter (their samples are invalid).
+    pub short_chunks: usize,
+    /// Chunks with a single sample, dropped.
+    pub dropped_single_sample_chunks: usize,
+    /// Dataset columns that are NaN in every row (no source signal).
+    pub absent_columns: Vec<&'static str>,
+    /// How each derived quantity was obtained (e.g. `sdot_rad_s: Kalman smoother on s`).
+    pub derivations: Vec<String>,
+}
+
+fn all_or_none(runs: &[RunSignals], f: impl Fn(&RunSignals) -> bool) -> Option<bool> {
+    let n = runs.iter().filter(|r| f(r)).count();
+    if n == 0 {
+        Some(false)
+    } else if n == runs.len() {
+        Some(true)
+    } else {
+        None
+    }
+}
+
+/// The label pipeline for imported robot signals: every run is split into chunks (source chunk id
+/// change or a gap > `cfg.gap_s`), each chunk linearly interpolated onto the uniform `cfg.fs_hz` grid
+/// from its first to its last sample (no extrapolation, nothing bridged across a gap), ṡ/s̈ taken as
+/// given or from the Kalman smoother (s → ṡ, s̈; a given ṡ → s̈), current and torque signals through the
+/// zero-phase Butterworth, then the label of `label.source`:
+/// - `current`: r·k_t·i_f − τ_ID (needs `link`, s, current, r and k_t);
+/// - `torque-sensor`: τ_motor − τ_joint, with τ_motor the given motor-side torque or r·k_t·i_f;
+/// - `given`: the source's τ_F.
+///
+/// Signals a run lacks become NaN columns listed in [`SignalsSummary::absent_columns`]; a signal
+/// must be present in all runs or none. Chunks are numbered across runs.
+pub fn preprocess_signals(
+    runs: &[RunSignals],
+    label: &SignalsLabel,
+    link: Option<&dyn LinkDynamics>,
+    cfg: &PreprocessConfig,
+) -> Result<(Dataset, SignalsSummary), PreprocessError> {
+    use frictionless_dataset::LabelSource as L;
+    cfg.validate()?;
+    if runs.is_empty() || runs.iter().all(|r| r.time_s.len() < 2) {
+        return Err(PreprocessError::Empty);
+    }
+    let missing = |column: &'static str| PreprocessError::MissingColumn {
+        path: "imported signals".into(),
+        column,
+    };
+    macro_rules! has {
+        ($f:ident, $name:literal) => {
+            all_or_none(runs, |r| r.$f.is_some()).ok_or(PreprocessError::Sidecar {
+                path: "imported signals".into(),
+                msg: format!("signal `{}` is present in some runs but not in all", $name),
+            })?
+        };
+    }
+    let has_s = has!(s_rad, "s");
+    let has_sdot = has!(sdot_rad_s, "sdot");
+    let has_sddot = has!(sddot_rad_s2, "sddot");
+    let has_theta = has!(theta_motor_rad, "theta");
+    let has_omega = has!(omega_motor_rad_s, "omega");
+    let has_i = has!(current_a, "current");
+    let has_tj = has!(tau_joint_nm, "tau_joint");
+    let has_tm = has!(tau_motor_nm, "tau_motor");
+    let has_tf = has!(tau_f_nm, "tau_f");
+    let has_temp = has!(temperature_c, "temperature");
+    if !has_s && !has_sdot {
+        return Err(missing("s (or sdot)"));
+    }
+    let r_opt = label.gear_ratio_signed;
+    let kt_opt = label.kt_nm_per_a;
+    let need_r = |what: &'static str| {
+        r_opt
+            .filter(|r| r.is_finite() && *r != 0.0)
+            .ok_or(PreprocessError::Config {
+                name: "gear_ratio_signed",
+                value: r_opt.unwrap_or(f64::NAN),
+                requirement: what,
+            })
+    };
+    let need_kt = |what: &'static str| {
+        kt_opt
+            .filter(|k| k.is_finite() && *k > 0.0)
+            .ok_or(PreprocessError::Config {
+                name: "kt_nm_per_a",
+                value: kt_opt.unwrap_or(f64::NAN),
+                requirement: what,
+            })
+    };
+    // r·k_t for the motor-side torque from current, when the label needs it.
+    let rkt = match label.source {
+        L::Current => {
+            if !has_s {
+                return Err(missing("s"));
+            }
+            if !has_i {
+                return Err(missing("current"));
+            }
+            if link.is_none() {
+                return Err(PreprocessError::Sidecar {
+                    path: "imported signals".into(),
+                    msg: "the current label needs link dynamics (a URDF joint or a link model)"
+                        .into(),
+                });
+            }
+            Some(
+                need_r("finite and non-zero (the current label needs the signed gear ratio)")?
+                    * need_kt("finite and > 0 (the current label needs k_t)")?,
+            )
+        }
+        L::TorqueSensor => {
+            if !has_tj {
+                return Err(missing("tau_joint"));
+            }
+            if has_tm {
+                None
+            } else if has_i {
+                Some(
+                    need_r("finite and non-zero (tau_motor = r*kt*current needs the gear ratio)")?
+                        * need_kt("finite and > 0 (tau_motor = r*kt*current needs k_t)")?,
+                )
+            } else {
+                return Err(missing("tau_motor (or current)"));
+            }
+        }
+        L::Given => {
+            if !has_tf {
+                return Err(missing("tau_f"));
+            }
+            None
+        }
+    };
+    let r_dtheta = if has_s && has_theta {
+        Some(need_r(
+            "finite and non-zero (delta theta = r*s - theta needs the gear ratio)",
+        )?)
+    } else {
+        None
+    };
+    let bw = Butterworth::lowpass(cfg.butter_order, cfg.butter_cutoff_hz, cfg.fs_hz)?;
+    let dt = 1.0 / cfg.fs_hz;
+    let mut ds = Dataset::default();
+    let mut sum = SignalsSummary::default();
+    let mut derivations: Vec<String> = Vec::new();
+    let mut derive = |d: &str| derivations.push(d.to_string());
+    if !has_sdot {
+        derive("sdot_rad_s: Kalman smoother on s (causal filter with `causal`)");
+    }
+    if !has_sddot {
+        derive(if has_sdot {
+            "sddot_rad_s2: Kalman smoother on the given sdot"
+        } else {
+            "sddot_rad_s2: Kalman smoother on s (causal filter with `causal`)"
+        });
+    }
+    if has_i {
+        derive("i_filt_a: zero-phase Butterworth of the current");
+    }
+    match label.source {
+        L::Current => derive("tau_f_label_nm: r*kt*i_filt - tau_id"),
+        L::TorqueSensor if has_tm => {
+            derive("tau_f_label_nm: tau_motor - tau_joint, both through the zero-phase Butterworth")
+        }
+        L::TorqueSensor => derive(
+            "tau_f_label_nm: r*kt*i_filt - tau_joint, tau_joint through the zero-phase Butterworth",
+        ),
+        L::Given => derive("tau_f_label_nm: the given tau_f, interpolated"),
+    }
+    sum.derivations = derivations;
+    let mut chunk_id = 0u32;
+    for run in runs {
+        let n_run = run.time_s.len();
+        for k in 1..n_run {
+            if run.time_s[k].is_nan() || run.time_s[k] < run.time_s[k - 1] {
+                return Err(PreprocessError::Time {
+                    index: k,
+                    prev: run.time_s[k - 1],
+                    next: run.time_s[k],
+                });
+            }
+        }
+        let mut run_chunks = Vec::new();
+        let mut offset: Option<f64> = None;
+        let chunk_col = if run.chunk.len() == n_run {
+            std::borrow::Cow::Borrowed(&run.chunk[..])
+        } else {
+            std::borrow::Cow::Owned(vec![0; n_run])
+        };
+        for (a, b) in split_chunks(&run.time_s, &chunk_col, cfg.gap_s) {
+            let t = &run.time_s[a..b];
+            if b - a < 2 || t[t.len() - 1] <= t[0] {
+                sum.dropped_single_sample_chunks += 1;
+                continue;
+            }
+            let n = ((t[t.len() - 1] - t[0]) / dt + 1e-9).floor() as usize + 1;
+            let tq: Vec<f64> = (0..n).map(|k| t[0] + k as f64 * dt).collect();
+            let li = |y: &Option<Vec<f64>>| y.as_ref().map(|y| interp(t, &y[a..b], &tq));
+            let mut chunk_ok = true;
+            let mut lowpass = |x: &[f64]| -> Result<Vec<f64>, PreprocessError> {
+                match bw.filtfilt(x) {
+                    Ok(y) => Ok(y),
+                    Err(FilterError::TooShort { .. }) => {
+                        chunk_ok = false;
+                        Ok(x.to_vec())
+                    }
+                    Err(e) => Err(e.into()),
+                }
+            };
+            let s = li(&run.s_rad);
+            let sdot_given = li(&run.sdot_rad_s);
+            let sddot_given = li(&run.sddot_rad_s2);
+            let theta = li(&run.theta_motor_rad);
+            let omega = li(&run.omega_motor_rad_s);
+            let im = li(&run.current_a);
+            let i_f = im.as_deref().map(&mut lowpass).transpose()?;
+            let tj = li(&run.tau_joint_nm)
+                .as_deref()
+                .map(&mut lowpass)
+                .transpose()?;
+            let tm = li(&run.tau_motor_nm)
+                .as_deref()
+                .map(&mut lowpass)
+                .transpose()?;
+            let tf = li(&run.tau_f_nm);
+            let temp = li(&run.temperature_c);
+            if !chunk_ok {
+                sum.short_chunks += 1;
+            }
+            // Non-causal estimates (label, sample filters) and the columns the models read.
+            let (vel_nc, acc_nc, vel_col, acc_col) = match (&s, &sdot_given) {
+                (_, Some(v)) => {
+                    let acc = match &sddot_given {
+                        Some(a) => (a.clone(), a.clone()),
+                        None => {
+                            let e = kalman::smooth(&cfg.kalman, dt, v)?;
+                            let c = if cfg.causal {
+                                kalman::filter(&cfg.kalman, dt, v)?.vel_rad_s
+                            } else {
+                                e.vel_rad_s.clone()
+                            };
+                            (e.vel_rad_s, c)
+                        }
+                    };
+                    (v.clone(), acc.0, v.clone(), acc.1)
+                }
+                (Some(s), None) => {
+                    let e = kalman::smooth(&cfg.kalman, dt, s)?;
+                    let c = if cfg.causal {
+                        kalman::filter(&cfg.kalman, dt, s)?
+                    } else {
+                        e.clone()
+                    };
+                    let (acc_nc, acc_col) = match &sddot_given {
+                        Some(a) => (a.clone(), a.clone()),
+                        None => (e.acc_rad_s2, c.acc_rad_s2),
+                    };
+                    (e.vel_rad_s, acc_nc, c.vel_rad_s, acc_col)
+                }
+                (None, None) => return Err(missing("s (or sdot)")),
+            };
+            let s0 = s.as_ref().map(|s| s[0]);
+            let off = match (r_dtheta, s0, &theta) {
+                (Some(r), Some(s0), Some(th)) => *offset.get_or_insert(r * s0 - th[0]),
+                _ => f64::NAN,
+            };
+            let l = &cfg.limits;
+            for k in 0..n {
+                let sk = s.as_ref().map_or(f64::NAN, |s| s[k]);
+                let (vk, ak) = (vel_nc[k], acc_nc[k]);
+                let tau_id = match (label.source, link) {
+                    (L::Current, Some(link)) => {
+                        link.inertia_kgm2(sk) * ak
+                            + link.velocity_torque_nm(sk, vk)
+                            + link.gravity_nm(sk)
+                    }
+                    _ => f64::NAN,
+                };
+                let ifk = i_f.as_ref().map_or(f64::NAN, |i| i[k]);
+                let tau_f = match label.source {
+                    L::Current => rkt.unwrap_or(f64::NAN) * ifk - tau_id,
+                    L::TorqueSensor => {
+                        let motor = match (&tm, rkt) {
+                            (Some(tm), _) => tm[k],
+                            (None, Some(rkt)) => rkt * ifk,
+                            (None, None) => f64::NAN,
+                        };
+                        motor - tj.as_ref().map_or(f64::NAN, |x| x[k])
+                    }
+                    L::Given => tf.as_ref().map_or(f64::NAN, |x| x[k]),
+                };
+                // A limit on an absent quantity (NaN) does not reject the sample.
+                let within = |x: f64, lim: f64| x.is_nan() || x.abs() < lim;
+                let valid = chunk_ok
+                    && tau_f.is_finite()
+                    && vk.is_finite()
+                    && within(ak, l.joint_acc_limit_rad_s2)
+                    && within(vk, l.joint_vel_limit_rad_s)
+                    && within(ifk, l.im_limit_a)
+                    && tau_f.abs() < l.tauf_limit_nm;
+                let at = |x: &Option<Vec<f64>>| x.as_ref().map_or(f64::NAN, |x| x[k]);
+                let thk = at(&theta);
+                ds.time_s.push(tq[k]);
+                ds.chunk.push(chunk_id);
+                ds.source_chunk.push(chunk_col[a]);
+                ds.active.push(true);
+                ds.valid.push(valid);
+                ds.s_rad.push(sk);
+                ds.sdot_rad_s.push(vel_col[k]);
+                ds.sddot_rad_s2.push(acc_col[k]);
+                ds.theta_motor_rad.push(thk);
+                ds.delta_theta_motor_rad
+                    .push(r_dtheta.map_or(f64::NAN, |r| r * sk - thk - off));
+                ds.omega_motor_rad_s.push(at(&omega));
+                ds.i_meas_a.push(at(&im));
+                ds.i_filt_a.push(ifk);
+                ds.tau_id_nm.push(tau_id);
+                ds.tau_f_label_nm.push(tau_f);
+                ds.temperature_c.push(at(&temp));
+            }
+            run_chunks.push(chunk_id);
+            chunk_id += 1;
+        }
+        sum.delta_theta_offsets_motor_rad
+            .push(offset.unwrap_or(f64::NAN));
+        sum.run_chunks.push(run_chunks);
+    }
+    if ds.is_empty() {
+        return Err(PreprocessError::Empty);
+    }
+    let mut absent = Vec::new();
+    if !has_s {
+        absent.push("s_rad");
+    }
+    if !has_theta {
+        absent.push("theta_motor_rad");
+    }
+    if r_dtheta.is_none() {
+        absent.push("delta_theta_motor_rad");
+    }
+    if !has_omega {
+        absent.push("omega_motor_rad_s");
+    }
+    if !has_i {
+        absent.extend(["i_meas_a", "i_filt_a"]);
+    }
+    if label.source != L::Current {
+        absent.push("tau_id_nm");
+    }
+    if !has_temp {
+        absent.push("temperature_c");
+    }
+    sum.absent_columns = absent;
+    Ok((ds, sum))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -507,5 +926,119 @@ mod tests {
             assert!((v - (1.0 + 1000.0 * q)).abs() < 1e-12);
         }
         assert_eq!(previous_index(&t, &tq), [0, 0, 1, 1, 2, 2, 3]);
+    }
+
+    #[test]
+    fn imported_signals_resample_jittered_time_and_split_on_gaps() {
+        // A 0.5 Hz sine sampled every 2–3 ms (deterministic jitter), with a 0.5 s gap at 2 s.
+        let mut t = Vec::new();
+        let mut x = 0.0;
+        let mut k = 0u64;
+        while x < 4.0 {
+            if !(2.0..2.5).contains(&x) {
+                t.push(x);
+            }
+            k += 1;
+            x += 0.002 + 0.001 * ((k * 7919) % 11) as f64 / 10.0;
+        }
+        let s: Vec<f64> = t.iter().map(|t| (std::f64::consts::PI * t).sin()).collect();
+        let f: Vec<f64> = t
+            .iter()
+            .map(|t| 2.0 * (std::f64::consts::PI * t).cos())
+            .collect();
+        let run = RunSignals {
+            chunk: vec![0; t.len()],
+            s_rad: Some(s),
+            tau_f_nm: Some(f),
+            time_s: t,
+            ..RunSignals::default()
+        };
+        let label = SignalsLabel {
+            source: frictionless_dataset::LabelSource::Given,
+            gear_ratio_signed: None,
+            kt_nm_per_a: None,
+        };
+        let mut cfg = PreprocessConfig::for_joint("j");
+        cfg.gap_s = 0.1;
+        let (ds, sum) = preprocess_signals(&[run.clone(), run], &label, None, &cfg).unwrap();
+        assert_eq!(sum.run_chunks, [vec![0, 1], vec![2, 3]]);
+        for k in 0..ds.len() {
+            let tk = ds.time_s[k];
+            let truth = (std::f64::consts::PI * tk).sin();
+            // Linear interpolation error of a sine over ≤ 3 ms: ≤ π²·(3e-3)²/8 ≈ 1.1e-5.
+            assert!((ds.s_rad[k] - truth).abs() < 2e-5, "t = {tk}");
+            assert!(
+                !(2.0..2.5).contains(&tk) || (tk - 2.0).abs() < 0.004 || (tk - 2.5).abs() < 0.004
+            );
+            if k > 0 && ds.chunk[k] == ds.chunk[k - 1] {
+                assert!((ds.time_s[k] - ds.time_s[k - 1] - 1e-3).abs() < 1e-9);
+            }
+        }
+        assert!(ds.theta_motor_rad.iter().all(|v| v.is_nan()));
+        assert!(sum.absent_columns.contains(&"theta_motor_rad"));
+        assert!(sum.absent_columns.contains(&"tau_id_nm"));
+        let valid = ds.valid.iter().filter(|v| **v).count();
+        assert!(valid > ds.len() * 9 / 10, "{valid} of {}", ds.len());
+    }
+
+    #[test]
+    fn imported_signals_name_what_a_label_lacks() {
+        let run = RunSignals {
+            time_s: vec![0.0, 0.001, 0.002],
+            chunk: vec![0; 3],
+            s_rad: Some(vec![0.0; 3]),
+            ..RunSignals::default()
+        };
+        let cfg = PreprocessConfig::for_joint("j");
+        let given = SignalsLabel {
+            source: frictionless_dataset::LabelSource::Given,
+            gear_ratio_signed: None,
+            kt_nm_per_a: None,
+        };
+        let e = preprocess_signals(std::slice::from_ref(&run), &given, None, &cfg).unwrap_err();
+        assert!(e.to_string().contains("tau_f"), "{e}");
+        let ts = SignalsLabel {
+            source: frictionless_dataset::LabelSource::TorqueSensor,
+            ..given
+        };
+        let e = preprocess_signals(&[run], &ts, None, &cfg).unwrap_err();
+        assert!(e.to_string().contains("tau_joint"), "{e}");
+    }
+
+    #[test]
+    fn torque_sensor_label_is_motor_minus_joint_torque() {
+        let n = 2000;
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * 0.002).collect();
+        let v: Vec<f64> = t.iter().map(|t| 0.5 + 0.1 * t).collect();
+        let run = RunSignals {
+            chunk: vec![0; n],
+            sdot_rad_s: Some(v),
+            tau_joint_nm: Some(vec![1.0; n]),
+            current_a: Some(vec![-0.5; n]),
+            time_s: t,
+            ..RunSignals::default()
+        };
+        let cfg = PreprocessConfig::for_joint("j");
+        let mut label = SignalsLabel {
+            source: frictionless_dataset::LabelSource::TorqueSensor,
+            gear_ratio_signed: Some(-100.0),
+            kt_nm_per_a: Some(0.1),
+        };
+        // τ_motor = r·k_t·i = −100·0.1·(−0.5) = 5 Nm; label 5 − 1 = 4 Nm.
+        let (ds, sum) = preprocess_signals(std::slice::from_ref(&run), &label, None, &cfg).unwrap();
+        assert!(ds.tau_f_label_nm.iter().all(|f| (f - 4.0).abs() < 1e-9));
+        assert!(sum.absent_columns.contains(&"s_rad"));
+        assert!(!sum.absent_columns.contains(&"i_filt_a"));
+        // A given motor-side torque takes precedence over r·k_t·i.
+        let with_motor = RunSignals {
+            tau_motor_nm: Some(vec![2.5; run.time_s.len()]),
+            ..run.clone()
+        };
+        let (ds, _) = preprocess_signals(&[with_motor], &label, None, &cfg).unwrap();
+        assert!(ds.tau_f_label_nm.iter().all(|f| (f - 1.5).abs() < 1e-9));
+        // Without a gear ratio r·k_t·i cannot be formed: an error naming the setting.
+        label.gear_ratio_signed = None;
+        let e = preprocess_signals(&[run], &label, None, &cfg).unwrap_err();
+        assert!(e.to_string().contains("gear_ratio_signed"), "{e}");
     }
 }

@@ -1,4 +1,5 @@
-//! `frictl import onnx|safetensors IN -o OUT.fwt …`: a foreign model into a `.fwt` weight file.
+//! `frictl import onnx|safetensors IN -o OUT.fwt …`: a foreign model into a `.fwt` weight file;
+//! `frictl import csv|mat|mcap LOG… -o OUT.csv …`: robot logs into a dataset (`super::import_log`).
 //!
 //! The network comes from [`frictionless_interop`]; the metadata a foreign file lacks (joint, signed gear
 //! ratio, k_t, feature set, history) comes from the command line, falling back to `frictionless.*`
@@ -52,8 +53,29 @@ impl From<Dtype> for StorageDtype {
 /// Arguments of `frictl import`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Source format.
-    pub format: Format,
+    /// What to import.
+    #[command(subcommand)]
+    pub what: What,
+}
+
+/// The `frictl import` subcommands.
+#[derive(clap::Subcommand, Debug)]
+pub enum What {
+    /// A model from ONNX (PyTorch export: Gemm/MatMul+Add/Relu chain) into a .fwt file.
+    Onnx(ModelArgs),
+    /// A model from safetensors (PyTorch nn.Sequential state dict) into a .fwt file.
+    Safetensors(ModelArgs),
+    /// CSV logs (any column names and units) into a dataset.
+    Csv(super::import_log::CsvArgs),
+    /// The YARP robot logger's MATLAB v7.3 files into a dataset (cargo feature `mat`).
+    Mat(super::import_log::MatArgs),
+    /// ROS 2 MCAP bags of sensor_msgs/JointState into a dataset.
+    Mcap(super::import_log::McapArgs),
+}
+
+/// Arguments of `frictl import onnx|safetensors`.
+#[derive(clap::Args, Debug)]
+pub struct ModelArgs {
     /// The ONNX or safetensors file.
     pub input: PathBuf,
     /// The `.fwt` file to write.
@@ -164,8 +186,19 @@ pub(crate) fn resolve_history(
 
 /// Runs `frictl import`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    match args.what {
+        What::Onnx(a) => run_model(Format::Onnx, a),
+        What::Safetensors(a) => run_model(Format::Safetensors, a),
+        What::Csv(a) => super::import_log::run_csv(a),
+        What::Mat(a) => super::import_log::run_mat(a),
+        What::Mcap(a) => super::import_log::run_mcap(a),
+    }
+}
+
+/// Runs `frictl import onnx|safetensors`.
+fn run_model(format: Format, args: ModelArgs) -> anyhow::Result<()> {
     super::check_outputs(&[&args.input], &[&args.output])?;
-    let (mlp, hints, summary) = load_foreign(args.format, &args.input)?;
+    let (mlp, hints, summary) = load_foreign(format, &args.input)?;
     let inp = args.input.display();
     let n = mlp.n_inputs();
     let temperature = args.temperature || hints.temperature.unwrap_or(false);

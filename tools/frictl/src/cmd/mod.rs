@@ -10,6 +10,7 @@ pub mod experiment;
 pub mod export;
 pub mod fit;
 pub mod import;
+pub mod import_log;
 pub mod inspect;
 pub mod monitor;
 pub mod predict;

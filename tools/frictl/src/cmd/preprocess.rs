@@ -23,35 +23,14 @@ pub enum LinkSource {
     Sidecar,
 }
 
-/// Arguments of `frictl preprocess`.
-#[derive(clap::Args, Debug)]
-pub struct Args {
-    /// Acquisition log CSV (its sidecar is the same path with `.json`).
-    pub log: PathBuf,
-    /// Output dataset CSV (its sidecar is written next to it with `.json`).
-    #[arg(short = 'o', long = "out")]
-    pub out: PathBuf,
+/// The label pipeline's settings shared by `frictl preprocess` and `frictl import csv|mat|mcap`
+/// (everything but the chunk gap, whose default differs).
+#[derive(clap::Args, Debug, Clone)]
+pub struct PipelineArgs {
     /// Causal ṡ/s̈ columns (forward Kalman filter, what the daemon sees) for training on causal
     /// signals; the label itself always uses the zero-phase current and the RTS smoother.
     #[arg(long)]
     pub causal: bool,
-    /// Which link dynamics give τ_ID. `auto` (default): the simulator's own link model when the
-    /// sidecar has one (`plant.link`, i.e. a simulated log) and no `--urdf` is given — the label is
-    /// then computed with exactly the dynamics that produced the data — else the URDF.
-    #[arg(long, value_enum, default_value_t = LinkSource::Auto)]
-    pub link: LinkSource,
-    /// URDF for inverse dynamics (default `virtual_leg` = the project's `config/urdf/virtual_leg.urdf`).
-    #[arg(long)]
-    pub urdf: Option<String>,
-    /// Joint name in the URDF (default: the sidecar's `joint`).
-    #[arg(long)]
-    pub joint: Option<String>,
-    /// Position of another URDF joint, held fixed [rad] (repeatable; absent joints are 0).
-    #[arg(long = "fixed-joint", value_name = "NAME=RAD")]
-    pub fixed_joints: Vec<String>,
-    /// Same as `--link sidecar` (kept for existing scripts).
-    #[arg(long)]
-    pub link_from_sidecar: bool,
     /// Butterworth order for the current.
     #[arg(long, default_value_t = 5)]
     pub butter_order: usize,
@@ -61,9 +40,6 @@ pub struct Args {
     /// Output sample rate [Hz].
     #[arg(long, default_value_t = 1000.0)]
     pub fs_hz: f64,
-    /// Time gap that starts a new chunk [s].
-    #[arg(long, default_value_t = 1.0)]
-    pub gap_s: f64,
     /// Kalman P₀ diagonal (pos, vel, acc).
     #[arg(long, num_args = 3, value_delimiter = ',', default_values_t = [1e-5, 1e-4, 1e4])]
     pub kalman_p0: Vec<f64>,
@@ -85,6 +61,93 @@ pub struct Args {
     /// |τ_F| limit [Nm] (default: 15 for ankle roll joints, else 100).
     #[arg(long)]
     pub tauf_limit: Option<f64>,
+}
+
+impl PipelineArgs {
+    /// Writes these settings into `cfg`.
+    pub fn apply(&self, cfg: &mut PreprocessConfig) {
+        cfg.fs_hz = self.fs_hz;
+        cfg.butter_order = self.butter_order;
+        cfg.butter_cutoff_hz = self.butter_cutoff_hz;
+        cfg.causal = self.causal;
+        cfg.kalman = KalmanConfig {
+            p0: [self.kalman_p0[0], self.kalman_p0[1], self.kalman_p0[2]],
+            q: [self.kalman_q[0], self.kalman_q[1], self.kalman_q[2]],
+            r: self.kalman_r,
+        };
+        cfg.limits.joint_acc_limit_rad_s2 = self.joint_acc_limit;
+        cfg.limits.joint_vel_limit_rad_s = self.joint_vel_limit;
+        if let Some(v) = self.im_limit {
+            cfg.limits.im_limit_a = v;
+        }
+        if let Some(v) = self.tauf_limit {
+            cfg.limits.tauf_limit_nm = v;
+        }
+    }
+}
+
+/// The URDF link model of `joint` (URDF default `virtual_leg`) with other joints held at the
+/// `NAME=RAD` positions, and its description for the sidecar.
+pub fn urdf_link(
+    urdf: Option<&str>,
+    joint: &str,
+    fixed_joints: &[String],
+) -> anyhow::Result<(LinkModel, String)> {
+    anyhow::ensure!(!joint.is_empty(), "no joint name: pass --joint");
+    let mut other = BTreeMap::new();
+    for s in fixed_joints {
+        let (n, v) = s
+            .split_once('=')
+            .with_context(|| format!("--fixed-joint {s:?}: expected NAME=RAD"))?;
+        let v: f64 = v
+            .trim()
+            .parse()
+            .with_context(|| format!("--fixed-joint {s:?}: {v:?} is not a number"))?;
+        other.insert(n.trim().to_owned(), v);
+    }
+    let urdf = urdf.unwrap_or("virtual_leg").to_string();
+    let d = format!("URDF {urdf} joint {joint}, other joints {other:?}, fixed base, g = 9.80665");
+    Ok((
+        LinkModel::Urdf {
+            urdf,
+            joint: joint.to_string(),
+            other_joints_rad: other,
+        },
+        d,
+    ))
+}
+
+/// Arguments of `frictl preprocess`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Acquisition log CSV (its sidecar is the same path with `.json`).
+    pub log: PathBuf,
+    /// Output dataset CSV (its sidecar is written next to it with `.json`).
+    #[arg(short = 'o', long = "out")]
+    pub out: PathBuf,
+    /// Resampling, filter, smoother and sample-limit settings.
+    #[command(flatten)]
+    pub pipeline: PipelineArgs,
+    /// Which link dynamics give τ_ID. `auto` (default): the simulator's own link model when the
+    /// sidecar has one (`plant.link`, i.e. a simulated log) and no `--urdf` is given — the label is
+    /// then computed with exactly the dynamics that produced the data — else the URDF.
+    #[arg(long, value_enum, default_value_t = LinkSource::Auto)]
+    pub link: LinkSource,
+    /// URDF for inverse dynamics (default `virtual_leg` = the project's `config/urdf/virtual_leg.urdf`).
+    #[arg(long)]
+    pub urdf: Option<String>,
+    /// Joint name in the URDF (default: the sidecar's `joint`).
+    #[arg(long)]
+    pub joint: Option<String>,
+    /// Position of another URDF joint, held fixed [rad] (repeatable; absent joints are 0).
+    #[arg(long = "fixed-joint", value_name = "NAME=RAD")]
+    pub fixed_joints: Vec<String>,
+    /// Same as `--link sidecar` (kept for existing scripts).
+    #[arg(long)]
+    pub link_from_sidecar: bool,
+    /// Time gap that starts a new chunk [s].
+    #[arg(long, default_value_t = 1.0)]
+    pub gap_s: f64,
     /// Ablation: subtract J·φ̈ (φ̈ from the motor encoder θ/r) from the label with this J [kg·m²];
     /// `sidecar` = the simulator's r²·J_m.
     #[arg(long)]
@@ -122,51 +185,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         (l, d)
     } else {
         let joint = args.joint.clone().unwrap_or_else(|| meta.joint.clone());
-        anyhow::ensure!(!joint.is_empty(), "no joint name: pass --joint");
-        let mut other = BTreeMap::new();
-        for s in &args.fixed_joints {
-            let (n, v) = s
-                .split_once('=')
-                .with_context(|| format!("--fixed-joint {s:?}: expected NAME=RAD"))?;
-            let v: f64 = v
-                .trim()
-                .parse()
-                .with_context(|| format!("--fixed-joint {s:?}: {v:?} is not a number"))?;
-            other.insert(n.trim().to_owned(), v);
-        }
-        let urdf = args.urdf.clone().unwrap_or_else(|| "virtual_leg".into());
-        let d =
-            format!("URDF {urdf} joint {joint}, other joints {other:?}, fixed base, g = 9.80665");
-        (
-            LinkModel::Urdf {
-                urdf,
-                joint,
-                other_joints_rad: other,
-            },
-            d,
-        )
+        urdf_link(args.urdf.as_deref(), &joint, &args.fixed_joints)?
     };
     let link = frictionless_sim::link::link_from_model(&link_model)?;
 
     let mut cfg = PreprocessConfig::for_joint(&meta.joint);
-    cfg.fs_hz = args.fs_hz;
+    args.pipeline.apply(&mut cfg);
     cfg.gap_s = args.gap_s;
-    cfg.butter_order = args.butter_order;
-    cfg.butter_cutoff_hz = args.butter_cutoff_hz;
-    cfg.causal = args.causal;
-    cfg.kalman = KalmanConfig {
-        p0: [args.kalman_p0[0], args.kalman_p0[1], args.kalman_p0[2]],
-        q: [args.kalman_q[0], args.kalman_q[1], args.kalman_q[2]],
-        r: args.kalman_r,
-    };
-    cfg.limits.joint_acc_limit_rad_s2 = args.joint_acc_limit;
-    cfg.limits.joint_vel_limit_rad_s = args.joint_vel_limit;
-    if let Some(v) = args.im_limit {
-        cfg.limits.im_limit_a = v;
-    }
-    if let Some(v) = args.tauf_limit {
-        cfg.limits.tauf_limit_nm = v;
-    }
     if let Some(j) = &args.subtract_reflected_inertia {
         cfg.subtract_reflected_inertia_kgm2 = if j == "sidecar" {
             meta.j_eq_kgm2.context(

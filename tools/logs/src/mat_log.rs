@@ -1,0 +1,336 @@
+//! The YARP robot logger's MATLAB v7.3 files (HDF5 with a 512-byte MAT userblock; layout in
+//! `docs/robot-logs.md` §1–§4), read with `hdf5-metno` through the system HDF5 library.
+//!
+//! One joint is picked by name in each channel's `elements_names` (cellstr: object references to
+//! UTF-16 char arrays under `/#refs#`). Signals: s = `joints_state/positions`, θ =
+//! `motors_state/positions`, ω = `motors_state/velocities`, current = `motors_state/currents`,
+//! temperature = `motors_state/temperatures` (when logged); ṡ and s̈ are left to the pipeline's
+//! smoother, as the authors do. Time is `timestamps − t₀` of `joints_state/positions`. Chunks are
+//! the spans of the exogenous `current_control/motors/desired/current` stream between its gaps
+//! larger than the given gap (1 s, the authors' rule); robot ticks outside every span are skipped
+//! (counted). Without that channel the whole file is one stream split by the pipeline's gap rule.
+//!
+//! Bounded: each channel's `data` (N, 1, n) is read as hyperslabs of 65 536 rows of the one joint's
+//! column, so memory is the joint's signals, whatever the file size.
+
+use std::io::Read;
+use std::path::Path;
+
+use hdf5_metno as h5;
+use hdf5_metno::ObjectReference1;
+
+use crate::run::RunBuilder;
+use crate::{ImportedRun, LogsError, Progress, Role, RoleMap, open_regular};
+
+/// How to read a `.mat` log.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MatSpec {
+    /// Joint name (default: the one named in the desired-current channel).
+    pub joint: Option<String>,
+    /// Roles to negate.
+    pub negate: Vec<Role>,
+    /// A gap of the desired-current stream larger than this closes a chunk [s].
+    pub desired_gap_s: f64,
+}
+
+const ROOT: &str = "robot_logger_device";
+const DESIRED: &str = "current_control/motors/desired/current";
+const BLOCK: usize = 1 << 16;
+
+/// One channel: its `data` dataset, sample count and the joint's column.
+struct Channel {
+    data: h5::Dataset,
+    col: usize,
+}
+
+fn h5err(path: &Path, what: &str, e: impl std::fmt::Display) -> LogsError {
+    LogsError::Format {
+        path: path.display().to_string(),
+        msg: format!("{what}: {e}"),
+    }
+}
+
+/// A MATLAB char array: u16 UTF-16 code units, or empty (`MATLAB_empty`).
+fn mat_string(ds: &h5::Dataset) -> Result<String, h5::Error> {
+    if ds.attr("MATLAB_empty").is_ok() {
+        return Ok(String::new());
+    }
+    let units: Vec<u16> = ds.read_raw()?;
+    Ok(String::from_utf16_lossy(&units))
+}
+
+/// A MATLAB cellstr: object references to char arrays.
+fn cellstr(file: &h5::File, ds: &h5::Dataset) -> Result<Vec<String>, h5::Error> {
+    let refs: Vec<ObjectReference1> = ds.read_raw()?;
+    refs.iter()
+        .map(|r| match file.dereference(r)? {
+            h5::ReferencedObject::Dataset(d) => mat_string(&d),
+            _ => Err("a cell reference does not point to a dataset".into()),
+        })
+        .collect()
+}
+
+/// Opens a channel group and finds `joint` in it; `Ok(None)` when the channel is absent.
+fn channel(
+    path: &Path,
+    file: &h5::File,
+    root: &h5::Group,
+    name: &str,
+    joint: &str,
+) -> Result<Option<(Channel, Vec<String>, usize)>, LogsError> {
+    if !root.link_exists(name.split('/').next().unwrap_or(name)) {
+        return Ok(None);
+    }
+    let Ok(g) = root.group(name) else {
+        return Ok(None);
+    };
+    if !g.link_exists("data") {
+        return Ok(None); // an empty struct: no data at save time
+    }
+    let e = |what: &str, err: h5::Error| h5err(path, &format!("{name}/{what}"), err);
+    let data = g.dataset("data").map_err(|x| e("data", x))?;
+    let names_ds = g
+        .dataset("elements_names")
+        .map_err(|x| e("elements_names", x))?;
+    let names = cellstr(file, &names_ds).map_err(|x| e("elements_names", x))?;
+    let shape = data.shape();
+    if shape.len() != 3 || shape[1] != 1 || shape[2] != names.len() {
+        return Err(LogsError::Format {
+            path: path.display().to_string(),
+            msg: format!(
+                "{name}/data has shape {shape:?}; expected (N, 1, {}) for {} elements_names",
+                names.len(),
+                names.len()
+            ),
+        });
+    }
+    let n = shape[0];
+    let Some(col) = names.iter().position(|x| x == joint) else {
+        return Err(LogsError::JointNotFound {
+            path: path.display().to_string(),
+            joint: joint.to_string(),
+            available: format!("({name}) {}", names.join(", ")),
+        });
+    };
+    Ok(Some((Channel { data, col }, names, n)))
+}
+
+fn timestamps(
+    path: &Path,
+    root: &h5::Group,
+    name: &str,
+    n: usize,
+) -> Result<h5::Dataset, LogsError> {
+    let ts = root
+        .group(name)
+        .and_then(|g| g.dataset("timestamps"))
+        .map_err(|e| h5err(path, &format!("{name}/timestamps"), e))?;
+    let shape = ts.shape();
+    if shape.first() != Some(&n) || shape.iter().product::<usize>() != n {
+        return Err(LogsError::Format {
+            path: path.display().to_string(),
+            msg: format!("{name}/timestamps has shape {shape:?}; expected ({n}, 1)"),
+        });
+    }
+    Ok(ts)
+}
+
+fn read_ts(path: &Path, ts: &h5::Dataset, a: usize, b: usize) -> Result<Vec<f64>, LogsError> {
+    let v: ndarray::Array1<f64> = if ts.ndim() == 2 {
+        ts.read_slice_1d(ndarray::s![a..b, 0])
+    } else {
+        ts.read_slice_1d(ndarray::s![a..b])
+    }
+    .map_err(|e| h5err(path, "timestamps", e))?;
+    Ok(v.to_vec())
+}
+
+/// Reads one joint from a YARP robot logger `.mat` file into a run named after the file stem. The
+/// joint's name is in the report's `sources["joint"]`.
+pub fn read(path: &Path, spec: &MatSpec, progress: Progress) -> Result<ImportedRun, LogsError> {
+    let p = path.display().to_string();
+    let fmt = |msg: String| LogsError::Format {
+        path: p.clone(),
+        msg,
+    };
+    let mut f = open_regular(path)?;
+    let total = f.metadata().map(|m| m.len()).unwrap_or(0);
+    if total == 0 {
+        return Err(LogsError::Empty {
+            path: p,
+            what: "empty file".into(),
+        });
+    }
+    let mut head = [0u8; 128];
+    let got = f.read(&mut head).map_err(|e| LogsError::io(path, e))?;
+    if got < 19 || !head.starts_with(b"MATLAB 7.3 MAT-file") {
+        return Err(fmt(
+            "not a MATLAB v7.3 file (no `MATLAB 7.3 MAT-file` header); save with -v7.3".into(),
+        ));
+    }
+    drop(f);
+    let file = h5::File::open(path).map_err(|e| h5err(path, "HDF5", e))?;
+    let root = file.group(ROOT).map_err(|_| {
+        fmt(format!(
+            "no `/{ROOT}` struct (not a YARP robot logger file); top level: {}",
+            file.member_names().unwrap_or_default().join(", ")
+        ))
+    })?;
+    let desired_joint = match root
+        .group(DESIRED)
+        .and_then(|g| g.dataset("elements_names"))
+    {
+        Ok(ds) => cellstr(&file, &ds)
+            .map_err(|e| h5err(path, DESIRED, e))?
+            .into_iter()
+            .next(),
+        Err(_) => None,
+    };
+    let joint = match (&spec.joint, &desired_joint) {
+        (Some(j), _) => j.clone(),
+        (None, Some(j)) => j.clone(),
+        (None, None) => {
+            return Err(LogsError::Usage(format!(
+                "{p}: no --joint and no `{DESIRED}` channel naming the moving joint"
+            )));
+        }
+    };
+    let wanted: [(Role, &str); 5] = [
+        (Role::S, "joints_state/positions"),
+        (Role::Theta, "motors_state/positions"),
+        (Role::Omega, "motors_state/velocities"),
+        (Role::Current, "motors_state/currents"),
+        (Role::Temperature, "motors_state/temperatures"),
+    ];
+    let mut chans: Vec<(Role, Channel)> = Vec::new();
+    let mut n_ticks = None;
+    let mut notes = Vec::new();
+    let mut sources = Vec::new();
+    for (role, name) in wanted {
+        match channel(path, &file, &root, name, &joint)? {
+            Some((ch, _, n)) => {
+                match n_ticks {
+                    None => n_ticks = Some(n),
+                    Some(m) if m != n => {
+                        notes.push(format!(
+                            "{name}: {n} samples, not the {m} of joints_state/positions: not used"
+                        ));
+                        continue;
+                    }
+                    _ => {}
+                }
+                sources.push((role, format!("{name} (element {})", ch.col)));
+                chans.push((role, ch));
+            }
+            None if role == Role::S => {
+                return Err(fmt(format!(
+                    "no `{ROOT}/joints_state/positions` channel (the joint position)"
+                )));
+            }
+            None => notes.push(format!("{name}: absent")),
+        }
+    }
+    let n = n_ticks.unwrap_or(0);
+    if n == 0 {
+        return Err(LogsError::Empty {
+            path: p,
+            what: "joints_state/positions has no samples".into(),
+        });
+    }
+    let ts = timestamps(path, &root, "joints_state/positions", n)?;
+    // Chunk spans from the desired-current stream.
+    let mut spans: Vec<(f64, f64)> = Vec::new();
+    if let Ok(g) = root.group(DESIRED)
+        && let Ok(dts) = g.dataset("timestamps")
+    {
+        let m = dts.shape().first().copied().unwrap_or(0);
+        let mut a = 0;
+        while a < m {
+            let b = (a + BLOCK).min(m);
+            for t in read_ts(path, &dts, a, b)? {
+                if !t.is_finite() {
+                    continue;
+                }
+                match spans.last_mut() {
+                    Some(s) if t - s.1 <= spec.desired_gap_s && t >= s.1 => s.1 = t,
+                    _ => spans.push((t, t)),
+                }
+            }
+            a = b;
+        }
+        notes.push(format!(
+            "chunks: {} spans of {DESIRED} between gaps > {} s",
+            spans.len(),
+            spec.desired_gap_s
+        ));
+    } else {
+        notes.push(format!(
+            "no {DESIRED} channel: chunks from gaps of the robot ticks"
+        ));
+    }
+    let roles: Vec<Role> = chans.iter().map(|c| c.0).collect();
+    let mut map = RoleMap::si(&roles);
+    for &r in &spec.negate {
+        map.negate(r)?;
+    }
+    // Map order is time then `roles` in order: the same as `chans`.
+    let mut b = RunBuilder::new(map, &p, "mat");
+    {
+        let rep = b.report_mut();
+        rep.sources.insert("joint".into(), joint.clone());
+        rep.sources.insert(
+            "time".into(),
+            "joints_state/positions/timestamps - t0".into(),
+        );
+        for (r, s) in sources {
+            rep.sources.insert(r.name().into(), s);
+        }
+        rep.notes.extend(notes);
+    }
+    let mut t0: Option<f64> = None;
+    let mut span_i = 0usize;
+    let mut a = 0;
+    while a < n {
+        let e = (a + BLOCK).min(n);
+        let t = read_ts(path, &ts, a, e)?;
+        let mut cols = Vec::with_capacity(chans.len());
+        for (role, ch) in &chans {
+            let v: ndarray::Array1<f64> = ch
+                .data
+                .read_slice_1d(ndarray::s![a..e, 0, ch.col])
+                .map_err(|x| h5err(path, &format!("{role} data"), x))?;
+            cols.push(v);
+        }
+        for (k, &tk) in t.iter().enumerate() {
+            let mut chunk = 0u32;
+            if !spans.is_empty() {
+                while span_i < spans.len() && tk > spans[span_i].1 {
+                    span_i += 1;
+                }
+                if span_i >= spans.len() || tk < spans[span_i].0 {
+                    b.skip("outside the desired-current stream");
+                    continue;
+                }
+                chunk = span_i as u32;
+            }
+            let origin = *t0.get_or_insert(tk);
+            let row = b.row_mut();
+            row[0] = tk - origin;
+            for (j, c) in cols.iter().enumerate() {
+                row[j + 1] = c[k];
+            }
+            b.push(|| format!("tick {}", a + k), chunk);
+        }
+        a = e;
+        progress(a as u64, n as u64);
+    }
+    if let Some(t0) = t0 {
+        b.report_mut()
+            .notes
+            .push(format!("time origin t0 = {t0:.6} s since the epoch"));
+    }
+    let name = path
+        .file_stem()
+        .map_or_else(|| "run".to_string(), |s| s.to_string_lossy().into_owned());
+    b.finish(&p, name)
+}

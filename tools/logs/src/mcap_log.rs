@@ -1,0 +1,352 @@
+//! ROS 2 MCAP bags: `sensor_msgs/msg/JointState` messages on one topic, one joint picked by name in
+//! every message (the name order may change between messages), streamed with the `mcap` crate's
+//! sans-io linear reader (memory ∝ one chunk of the file plus the joint's samples).
+//!
+//! Fields → roles: `position` → s [rad], `velocity` → ṡ [rad/s], `effort` → a torque role chosen by
+//! the caller (`tau_joint` by default: a torque-sensed arm's measured joint torque) [Nm]; an empty
+//! array means "not measured" for the whole message. Time is `header.stamp` minus the first
+//! message's stamp.
+//!
+//! The CDR payload is decoded by hand ([`decode_joint_state`]): the message is five fields of
+//! primitives, strings and sequences, every read is bounds-checked, and the serde-based `cdr` crate
+//! has had no release since 2021 — a dependency for twenty lines was not worth it.
+
+use std::collections::BTreeMap;
+use std::io::Read;
+use std::path::Path;
+
+use mcap::records::Record;
+use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
+
+use crate::run::RunBuilder;
+use crate::{ImportedRun, LogsError, Progress, Role, RoleMap, open_regular};
+
+/// How to read an MCAP bag.
+#[derive(Clone, Debug, PartialEq)]
+pub struct McapSpec {
+    /// Topic of the `JointState` messages.
+    pub topic: String,
+    /// Joint name.
+    pub joint: String,
+    /// Role of the `effort` field (`None`: ignore it).
+    pub effort_role: Option<Role>,
+    /// Roles to negate.
+    pub negate: Vec<Role>,
+}
+
+/// A decoded `sensor_msgs/msg/JointState`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct JointState {
+    /// `header.stamp` [s since the epoch].
+    pub stamp_s: f64,
+    /// `header.frame_id`.
+    pub frame_id: String,
+    /// Joint names.
+    pub name: Vec<String>,
+    /// Positions [rad].
+    pub position: Vec<f64>,
+    /// Velocities [rad/s].
+    pub velocity: Vec<f64>,
+    /// Efforts [Nm].
+    pub effort: Vec<f64>,
+}
+
+/// CDR cursor (XCDR1, alignment counted from the first byte after the 4-byte encapsulation header).
+struct Cdr<'a> {
+    buf: &'a [u8],
+    pos: usize,
+    le: bool,
+}
+
+impl<'a> Cdr<'a> {
+    fn align(&mut self, n: usize) -> Result<(), String> {
+        let pad = (n - self.pos % n) % n;
+        self.take(pad).map(|_| ())
+    }
+    fn take(&mut self, n: usize) -> Result<&'a [u8], String> {
+        let end = self
+            .pos
+            .checked_add(n)
+            .filter(|&e| e <= self.buf.len())
+            .ok_or_else(|| {
+                format!(
+                    "truncated message ({} bytes, needs {})",
+                    self.buf.len() + 4,
+                    self.pos + n + 4
+                )
+            })?;
+        let s = &self.buf[self.pos..end];
+        self.pos = end;
+        Ok(s)
+    }
+    fn u32(&mut self) -> Result<u32, String> {
+        self.align(4)?;
+        let b: [u8; 4] = self.take(4)?.try_into().map_err(|_| "u32".to_string())?;
+        Ok(if self.le {
+            u32::from_le_bytes(b)
+        } else {
+            u32::from_be_bytes(b)
+        })
+    }
+    fn i32(&mut self) -> Result<i32, String> {
+        self.u32().map(|v| v as i32)
+    }
+    fn f64(&mut self) -> Result<f64, String> {
+        self.align(8)?;
+        let b: [u8; 8] = self.take(8)?.try_into().map_err(|_| "f64".to_string())?;
+        Ok(if self.le {
+            f64::from_le_bytes(b)
+        } else {
+            f64::from_be_bytes(b)
+        })
+    }
+    fn count(&mut self, elem_size: usize) -> Result<usize, String> {
+        let n = self.u32()? as usize;
+        // Each element needs at least `elem_size` bytes: a corrupt count cannot allocate.
+        if n.saturating_mul(elem_size) > self.buf.len() - self.pos.min(self.buf.len()) {
+            return Err(format!("sequence length {n} exceeds the message"));
+        }
+        Ok(n)
+    }
+    fn string(&mut self) -> Result<String, String> {
+        let n = self.count(1)?;
+        let b = self.take(n)?;
+        let b = b.strip_suffix(&[0]).unwrap_or(b);
+        Ok(String::from_utf8_lossy(b).into_owned())
+    }
+    fn f64_seq(&mut self) -> Result<Vec<f64>, String> {
+        let n = self.count(8)?;
+        (0..n).map(|_| self.f64()).collect()
+    }
+}
+
+/// Decodes a CDR-encoded `sensor_msgs/msg/JointState` (little- or big-endian XCDR1).
+pub fn decode_joint_state(payload: &[u8]) -> Result<JointState, String> {
+    if payload.len() < 4 {
+        return Err("message shorter than the CDR header".into());
+    }
+    let le = match payload[1] {
+        0x01 => true,
+        0x00 => false,
+        k => return Err(format!("unsupported CDR encapsulation kind {k:#04x}")),
+    };
+    let mut c = Cdr {
+        buf: &payload[4..],
+        pos: 0,
+        le,
+    };
+    let sec = c.i32()?;
+    let nsec = c.u32()?;
+    let frame_id = c.string()?;
+    let n = c.count(4)?;
+    let name = (0..n).map(|_| c.string()).collect::<Result<Vec<_>, _>>()?;
+    let position = c.f64_seq()?;
+    let velocity = c.f64_seq()?;
+    let effort = c.f64_seq()?;
+    Ok(JointState {
+        stamp_s: f64::from(sec) + f64::from(nsec) * 1e-9,
+        frame_id,
+        name,
+        position,
+        velocity,
+        effort,
+    })
+}
+
+/// Largest MCAP record accepted [bytes] (a chunk; recorders write ~1 MiB).
+const MAX_RECORD: usize = 256 << 20;
+const SCHEMA: &str = "sensor_msgs/msg/JointState";
+
+/// Reads one joint from an MCAP bag into a run named after the file stem.
+pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<ImportedRun, LogsError> {
+    let p = path.display().to_string();
+    let fmt = |msg: String| LogsError::Format {
+        path: p.clone(),
+        msg,
+    };
+    let mut file = open_regular(path)?;
+    let total = file.metadata().map(|m| m.len()).unwrap_or(0);
+    if total == 0 {
+        return Err(LogsError::Empty {
+            path: p,
+            what: "empty file".into(),
+        });
+    }
+    let mut magic = [0u8; 8];
+    let got = file.read(&mut magic).map_err(|e| LogsError::io(path, e))?;
+    if got < 8 || magic != *mcap::MAGIC {
+        return Err(fmt("not an MCAP file (no MCAP magic at the start)".into()));
+    }
+    let mut reader = LinearReader::new_with_options(
+        LinearReaderOptions::default()
+            .with_skip_start_magic(true)
+            .with_record_length_limit(MAX_RECORD),
+    );
+    let mut schemas: BTreeMap<u16, (String, String)> = BTreeMap::new();
+    let mut wanted: Vec<u16> = Vec::new();
+    let mut topics: BTreeMap<String, String> = BTreeMap::new();
+    let mut names_seen: Vec<String> = Vec::new();
+    let mut roles = vec![Role::S, Role::Sdot];
+    if let Some(r) = spec.effort_role {
+        roles.push(r);
+    }
+    let mut map = RoleMap::si(&roles);
+    for &r in &spec.negate {
+        map.negate(r)?;
+    }
+    let mut b = RunBuilder::new(map, &p, "mcap");
+    {
+        let rep = b.report_mut();
+        rep.sources
+            .insert("time".into(), "header.stamp - first stamp".into());
+        rep.sources.insert("s".into(), "position".into());
+        rep.sources.insert("sdot".into(), "velocity".into());
+        if let Some(r) = spec.effort_role {
+            rep.sources.insert(r.name().into(), "effort".into());
+        }
+    }
+    let mut done: u64 = 8;
+    let mut msg_no: u64 = 0;
+    let mut t0: Option<f64> = None;
+    let mut empty = [0u64; 3];
+    while let Some(ev) = reader.next_event() {
+        match ev.map_err(|e| fmt(e.to_string()))? {
+            LinearReadEvent::ReadRequest(need) => {
+                let n = file
+                    .read(reader.insert(need))
+                    .map_err(|e| LogsError::io(path, e))?;
+                reader.notify_read(n);
+                done += n as u64;
+                progress(done, total);
+            }
+            LinearReadEvent::Record { data, opcode } => {
+                let rec = mcap::parse_record(opcode, data).map_err(|e| fmt(e.to_string()))?;
+                match rec {
+                    Record::Schema { header, .. } => {
+                        schemas.insert(header.id, (header.name, header.encoding));
+                    }
+                    Record::Channel(ch) => {
+                        let schema = schemas
+                            .get(&ch.schema_id)
+                            .map_or("?".to_string(), |s| s.0.clone());
+                        topics.insert(ch.topic.clone(), schema.clone());
+                        if ch.topic == spec.topic {
+                            if schema != SCHEMA {
+                                return Err(fmt(format!(
+                                    "topic {} carries `{schema}`, not {SCHEMA}",
+                                    ch.topic
+                                )));
+                            }
+                            if ch.message_encoding != "cdr" {
+                                return Err(fmt(format!(
+                                    "topic {} is encoded `{}`, not cdr",
+                                    ch.topic, ch.message_encoding
+                                )));
+                            }
+                            wanted.push(ch.id);
+                        }
+                    }
+                    Record::Message { header, data } => {
+                        if !wanted.contains(&header.channel_id) {
+                            continue;
+                        }
+                        msg_no += 1;
+                        let js = decode_joint_state(&data)
+                            .map_err(|e| fmt(format!("message {msg_no} on {}: {e}", spec.topic)))?;
+                        let Some(j) = js.name.iter().position(|n| n == &spec.joint) else {
+                            for n in js.name {
+                                if !names_seen.contains(&n) && names_seen.len() < 256 {
+                                    names_seen.push(n);
+                                }
+                            }
+                            b.skip("joint not in message");
+                            continue;
+                        };
+                        // An empty array is "not measured": a placeholder 0 now, and the whole
+                        // signal is dropped at the end if any message lacked it. A wrong length
+                        // is a broken message: NaN, counted and dropped.
+                        let pick = |v: &[f64], k: usize, empty: &mut [u64; 3]| {
+                            if v.is_empty() {
+                                empty[k] += 1;
+                                0.0
+                            } else if v.len() == js.name.len() {
+                                v[j]
+                            } else {
+                                f64::NAN
+                            }
+                        };
+                        let t = js.stamp_s - *t0.get_or_insert(js.stamp_s);
+                        let pos = pick(&js.position, 0, &mut empty);
+                        let vel = pick(&js.velocity, 1, &mut empty);
+                        let eff = pick(&js.effort, 2, &mut empty);
+                        let row = b.row_mut();
+                        row[0] = t;
+                        row[1] = pos;
+                        row[2] = vel;
+                        if spec.effort_role.is_some() {
+                            row[3] = eff;
+                        }
+                        b.push(|| format!("message {msg_no}"), 0);
+                    }
+                    _ => {}
+                }
+            }
+        }
+    }
+    if wanted.is_empty() {
+        let list: Vec<String> = topics.iter().map(|(t, s)| format!("{t} ({s})")).collect();
+        return Err(fmt(format!(
+            "no topic {}; the bag has: {}",
+            spec.topic,
+            if list.is_empty() {
+                "no channels".into()
+            } else {
+                list.join(", ")
+            }
+        )));
+    }
+    if msg_no > 0 && t0.is_none() {
+        return Err(LogsError::JointNotFound {
+            path: p,
+            joint: spec.joint.clone(),
+            available: names_seen.join(", "),
+        });
+    }
+    let rep = b.report_mut();
+    if let Some(t0) = t0 {
+        rep.notes.push(format!(
+            "time origin: first header.stamp = {t0:.9} s since the epoch"
+        ));
+    }
+    for (k, f) in ["position", "velocity", "effort"].iter().enumerate() {
+        if empty[k] > 0 {
+            rep.notes.push(format!(
+                "field `{f}` is empty in {} of {msg_no} messages: not used",
+                empty[k]
+            ));
+        }
+    }
+    let name = path
+        .file_stem()
+        .map_or_else(|| "run".to_string(), |s| s.to_string_lossy().into_owned());
+    let mut run = b.finish(&p, name)?;
+    if empty[0] > 0 {
+        run.signals.s_rad = None;
+    }
+    if empty[1] > 0 {
+        run.signals.sdot_rad_s = None;
+    }
+    if empty[2] > 0 {
+        run.signals.tau_joint_nm = None;
+        run.signals.tau_motor_nm = None;
+        run.signals.tau_f_nm = None;
+        run.signals.current_a = None;
+    }
+    if run.signals.s_rad.is_none() && run.signals.sdot_rad_s.is_none() {
+        return Err(fmt(format!(
+            "joint {}: neither position nor velocity is in every message",
+            spec.joint
+        )));
+    }
+    Ok(run)
+}

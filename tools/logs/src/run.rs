@@ -1,0 +1,328 @@
+//! One run being read: the role set with units and signs, the row accumulator every reader feeds
+//! (conversion, non-finite and time-order counting in one place), and the finished [`ImportedRun`].
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+use crate::{LogsError, Role, RunSignals, Unit};
+
+/// The roles a reader fills, each with its source unit and sign. `time` is always present.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RoleMap {
+    /// `(role, source unit, negate)`, `time` first, no role twice.
+    entries: Vec<(Role, Unit, bool)>,
+}
+
+impl RoleMap {
+    /// A map of `roles` (time added first if absent) in SI units, not negated.
+    pub fn si(roles: &[Role]) -> Self {
+        let mut entries = vec![(Role::Time, Role::Time.si(), false)];
+        for &r in roles {
+            if !entries.iter().any(|e| e.0 == r) {
+                entries.push((r, r.si(), false));
+            }
+        }
+        Self { entries }
+    }
+
+    /// Sets the source unit of a role (an error if the role is not mapped).
+    pub fn set_unit(&mut self, role: Role, unit: Unit) -> Result<(), LogsError> {
+        let e = self.entry(role, "--unit")?;
+        e.1 = unit;
+        Ok(())
+    }
+
+    /// Negates a role (sign convention; an error if the role is not mapped).
+    pub fn negate(&mut self, role: Role) -> Result<(), LogsError> {
+        let e = self.entry(role, "--negate")?;
+        e.2 = !e.2;
+        Ok(())
+    }
+
+    fn entry(&mut self, role: Role, what: &str) -> Result<&mut (Role, Unit, bool), LogsError> {
+        let mapped = self.roles().map(Role::name).collect::<Vec<_>>().join(", ");
+        self.entries
+            .iter_mut()
+            .find(|e| e.0 == role)
+            .ok_or_else(|| {
+                LogsError::Usage(format!(
+                    "{what} {role}: role {role} is not read from this log (mapped: {mapped})"
+                ))
+            })
+    }
+
+    /// The roles, `time` first.
+    pub fn roles(&self) -> impl Iterator<Item = Role> + '_ {
+        self.entries.iter().map(|e| e.0)
+    }
+
+    /// Number of roles (including time).
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    /// Never empty (time is always there).
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    /// True if `role` is mapped.
+    pub fn has(&self, role: Role) -> bool {
+        self.entries.iter().any(|e| e.0 == role)
+    }
+
+    /// One line per role: unit conversion and sign, for the sidecar.
+    pub fn conversions(&self) -> Vec<String> {
+        self.entries
+            .iter()
+            .map(|&(r, u, neg)| {
+                let si = r.si();
+                let mut s = if u.name == si.name {
+                    format!("{r}: {} (no conversion)", si.name)
+                } else {
+                    format!("{r}: {} x {} -> {}", u.name, u.factor, si.name)
+                };
+                if neg {
+                    s.push_str(", negated");
+                }
+                s
+            })
+            .collect()
+    }
+}
+
+/// What happened while reading one run (goes into the dataset sidecar).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct RunReport {
+    /// Source file as given.
+    pub source: String,
+    /// Format (`csv`, `mcap`, `mat`).
+    pub format: String,
+    /// Rows (CSV lines, messages, log ticks) read.
+    pub rows_read: u64,
+    /// Rows used.
+    pub rows_used: u64,
+    /// Rows dropped for a non-finite value, per role (a row can count in several roles).
+    pub non_finite: BTreeMap<String, u64>,
+    /// Rows dropped because their time was not after the previous used row's.
+    pub time_not_increasing: u64,
+    /// Rows dropped for another reason, by reason (e.g. `joint not in message`).
+    pub skipped: BTreeMap<String, u64>,
+    /// Which source field or column each role came from.
+    pub sources: BTreeMap<String, String>,
+    /// Unit and sign conversion per role.
+    pub conversions: Vec<String>,
+    /// Anything else the reader did (time origin, chunking rule, …).
+    pub notes: Vec<String>,
+}
+
+/// One imported run: the signals for the pipeline and the report of how they were read.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImportedRun {
+    /// Run name (the file stem; made unique by [`unique_run_names`]).
+    pub name: String,
+    /// The signals, SI units, project signs.
+    pub signals: RunSignals,
+    /// How they were read.
+    pub report: RunReport,
+}
+
+/// Accumulates rows of raw values in the map's role order, converts them and counts the rejects.
+pub(crate) struct RunBuilder {
+    map: RoleMap,
+    cols: Vec<Vec<f64>>,
+    chunk: Vec<u32>,
+    report: RunReport,
+    row: Vec<f64>,
+    last_t: f64,
+    first_backwards: Option<String>,
+}
+
+impl RunBuilder {
+    pub(crate) fn new(map: RoleMap, source: &str, format: &str) -> Self {
+        let n = map.len();
+        let report = RunReport {
+            source: source.to_string(),
+            format: format.to_string(),
+            conversions: map.conversions(),
+            ..RunReport::default()
+        };
+        Self {
+            map,
+            cols: vec![Vec::new(); n],
+            chunk: Vec::new(),
+            report,
+            row: vec![0.0; n],
+            last_t: f64::NEG_INFINITY,
+            first_backwards: None,
+        }
+    }
+
+    pub(crate) fn report_mut(&mut self) -> &mut RunReport {
+        &mut self.report
+    }
+
+    /// The row buffer to fill with raw values, in [`RoleMap::roles`] order (time first).
+    pub(crate) fn row_mut(&mut self) -> &mut [f64] {
+        &mut self.row
+    }
+
+    /// Counts a row that was read but skipped for `reason`.
+    pub(crate) fn skip(&mut self, reason: &str) {
+        self.report.rows_read += 1;
+        *self.report.skipped.entry(reason.to_string()).or_insert(0) += 1;
+    }
+
+    /// Takes the row in [`Self::row_mut`] (raw units) at `where_` (e.g. `line 12`) with chunk id
+    /// `chunk`.
+    pub(crate) fn push(&mut self, where_: impl FnOnce() -> String, chunk: u32) {
+        self.report.rows_read += 1;
+        let mut ok = true;
+        for (k, &(role, unit, neg)) in self.map.entries.iter().enumerate() {
+            let v = self.row[k] * unit.factor * if neg { -1.0 } else { 1.0 };
+            self.row[k] = v;
+            if !v.is_finite() {
+                ok = false;
+                *self
+                    .report
+                    .non_finite
+                    .entry(role.name().to_string())
+                    .or_insert(0) += 1;
+            }
+        }
+        if !ok {
+            return;
+        }
+        let t = self.row[0];
+        if t <= self.last_t {
+            self.report.time_not_increasing += 1;
+            if self.first_backwards.is_none() {
+                self.first_backwards = Some(where_());
+            }
+            return;
+        }
+        self.last_t = t;
+        for (c, v) in self.cols.iter_mut().zip(&self.row) {
+            c.push(*v);
+        }
+        self.chunk.push(chunk);
+        self.report.rows_used += 1;
+    }
+
+    /// The finished run; errors when nothing is usable or more than 1 % of the rows go back in time.
+    pub(crate) fn finish(mut self, path: &str, name: String) -> Result<ImportedRun, LogsError> {
+        let r = &self.report;
+        if r.rows_read == 0 {
+            return Err(LogsError::Empty {
+                path: path.to_string(),
+                what: "no data rows".into(),
+            });
+        }
+        if r.time_not_increasing * 100 > r.rows_read {
+            return Err(LogsError::NonMonotonic {
+                path: path.to_string(),
+                count: r.time_not_increasing,
+                rows: r.rows_read,
+                where_: self.first_backwards.take().unwrap_or_default(),
+            });
+        }
+        if r.rows_used < 2 {
+            let nf: Vec<String> = r
+                .non_finite
+                .iter()
+                .map(|(k, v)| format!("{k}: {v}"))
+                .collect();
+            return Err(LogsError::Empty {
+                path: path.to_string(),
+                what: format!(
+                    "fewer than 2 usable rows of {} (non-finite per role: {})",
+                    r.rows_read,
+                    if nf.is_empty() {
+                        "none".into()
+                    } else {
+                        nf.join(", ")
+                    }
+                ),
+            });
+        }
+        let mut sig = RunSignals {
+            chunk: self.chunk,
+            ..RunSignals::default()
+        };
+        for (role, col) in self.map.roles().zip(self.cols) {
+            let slot = match role {
+                Role::Time => {
+                    sig.time_s = col;
+                    continue;
+                }
+                Role::S => &mut sig.s_rad,
+                Role::Sdot => &mut sig.sdot_rad_s,
+                Role::Sddot => &mut sig.sddot_rad_s2,
+                Role::Theta => &mut sig.theta_motor_rad,
+                Role::Omega => &mut sig.omega_motor_rad_s,
+                Role::Current => &mut sig.current_a,
+                Role::TauJoint => &mut sig.tau_joint_nm,
+                Role::TauMotor => &mut sig.tau_motor_nm,
+                Role::TauF => &mut sig.tau_f_nm,
+                Role::Temperature => &mut sig.temperature_c,
+            };
+            *slot = Some(col);
+        }
+        Ok(ImportedRun {
+            name,
+            signals: sig,
+            report: self.report,
+        })
+    }
+}
+
+/// Makes run names unique in place (`a`, `a` → `a`, `a_2`).
+pub fn unique_run_names(runs: &mut [ImportedRun]) {
+    let mut seen: BTreeMap<String, usize> = BTreeMap::new();
+    let taken: Vec<String> = runs.iter().map(|r| r.name.clone()).collect();
+    for run in runs.iter_mut() {
+        let n = seen.entry(run.name.clone()).or_insert(0);
+        *n += 1;
+        if *n > 1 {
+            let mut k = *n;
+            while taken.contains(&format!("{}_{k}", run.name)) {
+                k += 1;
+            }
+            run.name = format!("{}_{k}", run.name);
+        }
+    }
+}
+
+/// A warning when a given friction label looks like the opposite sign convention: friction opposes
+/// motion, so τ_F correlates positively with sign(ṡ) on moving samples (|ṡ| > 0.01 rad/s, valid);
+/// `None` when it does or when there are too few moving samples (< 100).
+pub fn label_sign_warning(ds: &frictionless_dataset::Dataset) -> Option<String> {
+    let (mut sum, mut n) = (0.0, 0usize);
+    let (mut sx, mut sy, mut sxx, mut syy) = (0.0, 0.0, 0.0, 0.0);
+    for k in 0..ds.len() {
+        let (v, f) = (ds.sdot_rad_s[k], ds.tau_f_label_nm[k]);
+        if ds.valid[k] && v.abs() > 0.01 && f.is_finite() {
+            let x = v.signum();
+            sum += x * f;
+            sx += x;
+            sy += f;
+            sxx += x * x;
+            syy += f * f;
+            n += 1;
+        }
+    }
+    if n < 100 {
+        return None;
+    }
+    let nf = n as f64;
+    let cov = sum / nf - sx / nf * sy / nf;
+    let den = ((sxx / nf - (sx / nf).powi(2)) * (syy / nf - (sy / nf).powi(2))).sqrt();
+    let corr = if den > 0.0 { cov / den } else { 0.0 };
+    (corr < 0.0).then(|| {
+        format!(
+            "the friction label is anti-correlated with sign(sdot) (correlation {corr:.2} on {n} moving samples): \
+             friction opposes motion, so the log probably uses the opposite sign convention (try --negate tau_f)"
+        )
+    })
+}

@@ -1,0 +1,439 @@
+//! `frictionless-logs` tests: CSV logs written here (jittered time, deg and mA, NaN rows, a gap, bad
+//! inputs), MCAP and `.mat` fixtures written by independent tools (Python `mcap` + `mcap-ros2-support`,
+//! h5py) through `fixtures/make_fixtures.py` with the interpreter in `FRICTIONLESS_PY` (skipped, with
+//! the reason printed, when it is unset).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use frictionless_dataset::LabelSource;
+use frictionless_ident::preprocess::{PreprocessConfig, SignalsLabel, preprocess_signals};
+use frictionless_logs::csv_log::{self, CsvSpec};
+use frictionless_logs::mcap_log::{self, McapSpec};
+use frictionless_logs::{LogsError, Role};
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("frictionless_logs_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+fn no_progress() -> impl FnMut(u64, u64) {
+    |_, _| {}
+}
+
+fn spec(cols: &[&str], units: &[&str]) -> CsvSpec {
+    let c: Vec<String> = cols.iter().map(|s| s.to_string()).collect();
+    let u: Vec<String> = units.iter().map(|s| s.to_string()).collect();
+    CsvSpec::parse(&c, &u, &[]).unwrap()
+}
+
+const DEG: f64 = std::f64::consts::PI / 180.0;
+
+/// A jittered (2–3 ms) log in ms, deg and mA with `nan_rows` blank s fields and a 0.5 s gap at 2 s.
+fn jittered_csv(path: &Path, nan_rows: &[usize]) -> usize {
+    let mut text = String::from("t_ms,q_deg,i_mA,friction\n");
+    let (mut t, mut k, mut rows) = (0.0f64, 0u64, 0usize);
+    while t < 4.0 {
+        if !(2.0..2.5).contains(&t) {
+            let q = 30.0 * (std::f64::consts::PI * t).sin();
+            let i = 500.0 + 100.0 * t;
+            let f = 2.0 * (std::f64::consts::PI * t).cos();
+            if nan_rows.contains(&rows) {
+                text += &format!("{},,{i},{f}\n", t * 1e3);
+            } else {
+                text += &format!("{},{q},{i},{f}\n", t * 1e3);
+            }
+            rows += 1;
+        }
+        k += 1;
+        t += 0.002 + 0.001 * ((k * 7919) % 11) as f64 / 10.0;
+    }
+    std::fs::write(path, text).unwrap();
+    rows
+}
+
+#[test]
+fn csv_in_deg_ms_ma_with_nan_rows_and_a_gap_lands_on_the_1khz_grid() {
+    let path = tmp("jitter.csv");
+    let rows = jittered_csv(&path, &[10, 11, 500]);
+    let sp = spec(
+        &["time=t_ms", "s=q_deg", "current=i_mA", "tau_f=friction"],
+        &["time=ms", "s=deg", "current=mA"],
+    );
+    let run = csv_log::read(&path, &sp, &mut no_progress()).unwrap();
+    assert_eq!(run.name, "jitter");
+    assert_eq!(run.report.rows_read, rows as u64);
+    assert_eq!(run.report.rows_used, rows as u64 - 3);
+    assert_eq!(run.report.non_finite.get("s"), Some(&3));
+    assert_eq!(run.report.time_not_increasing, 0);
+    assert!(
+        run.report
+            .conversions
+            .iter()
+            .any(|c| c.starts_with("s: deg x")),
+        "{:?}",
+        run.report.conversions
+    );
+    let sig = &run.signals;
+    let i = sig.current_a.as_ref().unwrap();
+    for (t, i) in sig.time_s.iter().zip(i) {
+        assert!((i - (0.5 + 0.1 * t)).abs() < 1e-12, "mA -> A at {t}");
+    }
+    let label = SignalsLabel {
+        source: LabelSource::Given,
+        gear_ratio_signed: None,
+        kt_nm_per_a: None,
+    };
+    let mut cfg = PreprocessConfig::for_joint("j");
+    cfg.gap_s = 0.1;
+    let (ds, sum) = preprocess_signals(&[run.signals], &label, None, &cfg).unwrap();
+    assert_eq!(sum.run_chunks, [vec![0, 1]], "the 0.5 s gap splits the run");
+    assert!(ds.len() > 3400 && ds.len() < 3510, "{} samples", ds.len());
+    for k in 0..ds.len() {
+        let t = ds.time_s[k];
+        let truth = 30.0 * DEG * (std::f64::consts::PI * t).sin();
+        // Linear interpolation of a 0.52 rad sine over ≤ 3 ms (≤ 6 ms across the NaN rows).
+        assert!(
+            (ds.s_rad[k] - truth).abs() < 1e-4,
+            "t = {t}: {} vs {truth}",
+            ds.s_rad[k]
+        );
+        assert!((ds.i_meas_a[k] - (0.5 + 0.1 * t)).abs() < 1e-9);
+        assert!(
+            !(2.01..2.49).contains(&t),
+            "no sample inside the gap (t = {t})"
+        );
+    }
+    assert!(ds.theta_motor_rad.iter().all(|v| v.is_nan()));
+    assert!(frictionless_logs::label_sign_warning(&ds).is_none());
+    // The same label negated reads as the opposite convention.
+    let mut neg = ds.clone();
+    neg.tau_f_label_nm.iter_mut().for_each(|v| *v = -*v);
+    // sign(sdot) and cos(pi t) agree, so the given label correlates positively; negated it does not.
+    assert!(frictionless_logs::label_sign_warning(&neg).is_some());
+}
+
+#[test]
+fn bad_csv_inputs_are_clear_errors_or_counted() {
+    let path = tmp("bad.csv");
+    std::fs::write(&path, "time,pos\n0,1\n0.001,2\n").unwrap();
+    let e = csv_log::read(
+        &path,
+        &spec(&["time=time", "s=angle"], &[]),
+        &mut no_progress(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("`angle`") && e.contains("time, pos"), "{e}");
+
+    let e = CsvSpec::parse(&["time=t".into(), "speed=v".into()], &[], &[])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("speed") && e.contains("sdot"), "{e}");
+    let e = CsvSpec::parse(&["time=t".into(), "s=q".into()], &["s=furlong".into()], &[])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("furlong") && e.contains("rad, deg"), "{e}");
+    let e = CsvSpec::parse(&["time=t".into(), "s=q".into(), "s=q2".into()], &[], &[]).unwrap_err();
+    assert!(
+        matches!(e, LogsError::DuplicateRole { role: Role::S, .. }),
+        "{e}"
+    );
+    let e = CsvSpec::parse(&["s=q".into()], &[], &[])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("time"), "{e}");
+
+    // Text that is not a number: file, line, column and value.
+    std::fs::write(&path, "time,pos\n0,1\n0.001,abc\n").unwrap();
+    let e = csv_log::read(
+        &path,
+        &spec(&["time=time", "s=pos"], &[]),
+        &mut no_progress(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("line 3") && e.contains("`pos`") && e.contains("abc"),
+        "{e}"
+    );
+
+    // Empty file, header only.
+    std::fs::write(&path, "").unwrap();
+    let e = csv_log::read(&path, &spec(&["time=time"], &[]), &mut no_progress()).unwrap_err();
+    assert!(e.to_string().contains("empty file"), "{e}");
+    std::fs::write(&path, "time,pos\n").unwrap();
+    let e = csv_log::read(
+        &path,
+        &spec(&["time=time", "s=pos"], &[]),
+        &mut no_progress(),
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("no data rows"), "{e}");
+
+    // All rows non-finite: an error that counts them.
+    std::fs::write(&path, "time,pos\n0,nan\n0.001,\n0.002,inf\n").unwrap();
+    let e = csv_log::read(
+        &path,
+        &spec(&["time=time", "s=pos"], &[]),
+        &mut no_progress(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("s: 3"), "{e}");
+}
+
+#[test]
+fn time_going_back_is_counted_below_one_percent_and_an_error_above() {
+    let path = tmp("back.csv");
+    let mut text = String::from("t,q\n");
+    for k in 0..1000 {
+        let t = if k == 500 { 0.1 } else { k as f64 * 0.002 };
+        text += &format!("{t},{}\n", k as f64 * 1e-3);
+    }
+    std::fs::write(&path, &text).unwrap();
+    let sp = spec(&["time=t", "s=q"], &[]);
+    let run = csv_log::read(&path, &sp, &mut no_progress()).unwrap();
+    assert_eq!(run.report.time_not_increasing, 1);
+    assert_eq!(run.report.rows_used, 999);
+    assert!(run.signals.time_s.windows(2).all(|w| w[1] > w[0]));
+
+    let mut text = String::from("t,q\n");
+    for k in 0..100 {
+        let t = if k % 20 == 7 { 0.0 } else { k as f64 * 0.002 };
+        text += &format!("{t},0\n");
+    }
+    std::fs::write(&path, &text).unwrap();
+    let e = csv_log::read(&path, &sp, &mut no_progress())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("time goes back") && e.contains("line 9"), "{e}");
+}
+
+#[test]
+fn a_2gb_sparse_file_and_a_fifo_are_refused_quickly() {
+    let path = tmp("sparse.csv");
+    let f = std::fs::File::create(&path).unwrap();
+    f.set_len(2 << 30).unwrap();
+    drop(f);
+    let started = Instant::now();
+    let e = csv_log::read(&path, &spec(&["time=t"], &[]), &mut no_progress()).unwrap_err();
+    assert!(e.to_string().contains("NUL"), "{e}");
+    let mspec = McapSpec {
+        topic: "/joint_states".into(),
+        joint: "j".into(),
+        effort_role: None,
+        negate: vec![],
+    };
+    let e = mcap_log::read(&path, &mspec, &mut no_progress()).unwrap_err();
+    assert!(e.to_string().contains("not an MCAP file"), "{e}");
+    #[cfg(feature = "mat")]
+    {
+        let ms = frictionless_logs::mat_log::MatSpec {
+            joint: Some("j".into()),
+            negate: vec![],
+            desired_gap_s: 1.0,
+        };
+        let e = frictionless_logs::mat_log::read(&path, &ms, &mut no_progress()).unwrap_err();
+        assert!(e.to_string().contains("MATLAB 7.3"), "{e}");
+    }
+    assert!(
+        started.elapsed().as_secs() < 20,
+        "refused without scanning 2 GB"
+    );
+    std::fs::remove_file(&path).unwrap();
+
+    let fifo = tmp("fifo.csv");
+    let _ = std::fs::remove_file(&fifo);
+    let ok = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .map(|s| s.success())
+        .unwrap_or(false);
+    if ok {
+        let e = csv_log::read(&fifo, &spec(&["time=t"], &[]), &mut no_progress()).unwrap_err();
+        assert!(matches!(e, LogsError::NotRegular { .. }), "{e}");
+    } else {
+        eprintln!("mkfifo unavailable: FIFO case skipped");
+    }
+}
+
+#[test]
+fn cdr_decoder_rejects_truncated_and_oversized_messages() {
+    assert!(mcap_log::decode_joint_state(&[0, 1]).is_err());
+    // Header, stamp, empty frame id, then a name count of 2^31.
+    let mut m = vec![0, 1, 0, 0];
+    m.extend(5i32.to_le_bytes());
+    m.extend(7u32.to_le_bytes());
+    m.extend(1u32.to_le_bytes());
+    m.extend([0, 0, 0, 0]);
+    m.extend((1u32 << 31).to_le_bytes());
+    let e = mcap_log::decode_joint_state(&m).unwrap_err();
+    assert!(e.contains("exceeds"), "{e}");
+    for cut in 0..m.len() {
+        let _ = mcap_log::decode_joint_state(&m[..cut]);
+    }
+}
+
+/// The fixture generator run with `FRICTIONLESS_PY`, or `None` (with the reason printed).
+fn fixture(kind: &str, name: &str) -> Option<PathBuf> {
+    let Some(py) = std::env::var_os("FRICTIONLESS_PY") else {
+        eprintln!(
+            "SKIPPED: FRICTIONLESS_PY is unset (a python with numpy, h5py, mcap, mcap-ros2-support builds the {kind} fixture)"
+        );
+        return None;
+    };
+    let out = tmp(name);
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/make_fixtures.py");
+    let st = std::process::Command::new(py)
+        .arg(script)
+        .arg(kind)
+        .arg(&out)
+        .status()
+        .expect("run the fixture generator");
+    assert!(st.success(), "fixture generator failed for {kind}");
+    Some(out)
+}
+
+#[test]
+fn mcap_joint_state_bag_from_python_mcap() {
+    let Some(path) = fixture("mcap", "bag.mcap") else {
+        return;
+    };
+    let sp = McapSpec {
+        topic: "/joint_states".into(),
+        joint: "wrist".into(),
+        effort_role: Some(Role::TauF),
+        negate: vec![],
+    };
+    let run = mcap_log::read(&path, &sp, &mut no_progress()).unwrap();
+    assert_eq!(run.report.rows_read, 1200);
+    assert_eq!(run.report.rows_used, 1200);
+    let s = &run.signals;
+    let (pos, vel, eff) = (
+        s.s_rad.as_ref().unwrap(),
+        s.sdot_rad_s.as_ref().unwrap(),
+        s.tau_f_nm.as_ref().unwrap(),
+    );
+    // Stamps are relative to the first message; the generator's t starts one step after 0.
+    let t_first = 0.002 + 0.0004; // upper bound of the first step
+    for k in 0..s.time_s.len() {
+        // Recover the generator's t from the position and check the other fields against it.
+        let t = s.time_s[k];
+        assert!(t >= 0.0);
+        let tt = t + (pos[0] / 0.3).asin() / 2.0; // t0 = first stamp: t_gen = t + t_gen(0)
+        assert!((pos[k] - 0.3 * (2.0 * tt).sin()).abs() < 1e-6, "k = {k}");
+        assert!((vel[k] - 0.6 * (2.0 * tt).cos()).abs() < 1e-6, "k = {k}");
+        assert!(
+            (eff[k] - (1.5 * (2.0 * tt).sin() + 0.2)).abs() < 1e-6,
+            "k = {k}"
+        );
+    }
+    assert!((pos[0] / 0.3).asin() / 2.0 < t_first);
+    let label = SignalsLabel {
+        source: LabelSource::Given,
+        gear_ratio_signed: None,
+        kt_nm_per_a: None,
+    };
+    let mut cfg = PreprocessConfig::for_joint("wrist");
+    cfg.gap_s = 0.1;
+    let (ds, sum) = preprocess_signals(&[run.signals], &label, None, &cfg).unwrap();
+    assert_eq!(
+        sum.run_chunks,
+        [vec![0, 1]],
+        "the 0.5 s pause splits the bag"
+    );
+    assert!(ds.sdot_rad_s.iter().all(|v| v.is_finite()));
+
+    let e = mcap_log::read(
+        &path,
+        &McapSpec {
+            joint: "elbow".into(),
+            ..sp.clone()
+        },
+        &mut no_progress(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("`elbow` not found") && e.contains("wrist"),
+        "{e}"
+    );
+    let e = mcap_log::read(
+        &path,
+        &McapSpec {
+            topic: "/other".into(),
+            ..sp
+        },
+        &mut no_progress(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("/other") && e.contains("/joint_states (sensor_msgs/msg/JointState)"),
+        "{e}"
+    );
+}
+
+#[cfg(feature = "mat")]
+#[test]
+fn yarp_mat_file_from_h5py() {
+    use frictionless_logs::mat_log::{MatSpec, read};
+    let Some(path) = fixture("mat", "robot_logger_device_2024_01_01_00_00_00.mat") else {
+        return;
+    };
+    let sp = MatSpec {
+        joint: None,
+        negate: vec![],
+        desired_gap_s: 1.0,
+    };
+    let run = read(&path, &sp, &mut no_progress()).unwrap();
+    assert_eq!(
+        run.report.sources.get("joint").map(String::as_str),
+        Some("l_knee")
+    );
+    assert_eq!(run.report.rows_read, 3000);
+    assert_eq!(
+        run.report.rows_used, 2200,
+        "ticks 1000..1799 lie in the desired-current gap"
+    );
+    assert_eq!(
+        run.report.skipped.get("outside the desired-current stream"),
+        Some(&800)
+    );
+    let s = &run.signals;
+    assert_eq!(s.chunk.iter().filter(|c| **c == 0).count(), 1000);
+    assert_eq!(s.chunk.iter().filter(|c| **c == 1).count(), 1200);
+    let (q, th, om, i) = (
+        s.s_rad.as_ref().unwrap(),
+        s.theta_motor_rad.as_ref().unwrap(),
+        s.omega_motor_rad_s.as_ref().unwrap(),
+        s.current_a.as_ref().unwrap(),
+    );
+    for k in 0..s.time_s.len() {
+        let t = s.time_s[k];
+        let sk = 0.5 * (std::f64::consts::PI * t).sin();
+        assert!((q[k] - sk).abs() < 1e-6, "t = {t}");
+        assert!((th[k] - (-100.0 * sk + 0.01 * (7.0 * t).sin())).abs() < 1e-4);
+        assert!(
+            (om[k] + 50.0 * std::f64::consts::PI * (std::f64::consts::PI * t).cos()).abs() < 1e-4
+        );
+        assert!((i[k] - (0.2 + 0.1 * (3.0 * t).sin())).abs() < 1e-6);
+    }
+    assert!(s.temperature_c.is_none());
+    let e = read(
+        &path,
+        &MatSpec {
+            joint: Some("r_elbow".into()),
+            ..sp
+        },
+        &mut no_progress(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("r_elbow") && e.contains("l_knee") && e.contains("torso_roll"),
+        "{e}"
+    );
+}
