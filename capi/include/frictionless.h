@@ -286,8 +286,9 @@ fl_status fl_estimator_estimate(struct fl_estimator *est,
                                 const struct fl_joint_sample *sample,
                                 double *tau_f_nm);
 
-// Whether the next [`fl_estimator_estimate`] comes from the model rather than a warm-up 0 (static
-// models: always). Allocation-free.
+// Whether the history now holds enough samples for the model under the warm-up policy
+// (`FL_WARMUP_HOLD_ZERO`: H samples since the last reset; `FL_WARMUP_ZERO_PAD`: one; static models:
+// always). The estimate that filled the history already came from the model. Allocation-free.
 //
 // # Safety
 // `est` is NULL or a live handle; `ready` is NULL or writable.

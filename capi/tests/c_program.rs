@@ -36,15 +36,9 @@ fn compile(out: &Path, static_link: bool, extra: &[&str]) -> PathBuf {
         .arg("-o")
         .arg(&exe);
     if static_link {
-        cmd.arg(lib.join("libfrictionless.a")).args([
-            "-lpthread",
-            "-ldl",
-            "-lm",
-            "-lgcc_s",
-            "-lutil",
-            "-lrt",
-            "-lc",
-        ]);
+        // The link line the README and the header give for the static library.
+        cmd.arg(lib.join("libfrictionless.a"))
+            .args(["-lpthread", "-ldl", "-lm"]);
     } else {
         cmd.arg("-L")
             .arg(&lib)
