@@ -931,6 +931,10 @@ mod tests {
             datasets: vec![],
             models: [("none".to_owned(), metrics), ("cv".to_owned(), metrics)].into(),
             order: vec![],
+            band_edges_rad_s: vec![],
+            training_range: None,
+            per_run: vec![],
+            per_band: vec![],
         };
         let mut per_joint = BTreeMap::from([("l_knee".to_owned(), joint_entry(Some(&ev), &files))]);
         let track = r#"{"rmse_rad": 0.03, "max_abs_err_rad": 0.1, "tau_des_rms_nm": 2.0,

@@ -11,7 +11,7 @@ use frictionless_train::data::{DeltaThetaOffset, SplitSpec};
 use frictionless_train::pipeline;
 use frictionless_train::search::{SearchRun, SearchSettings, SearchSpace, run_search};
 
-use super::train::{Dtype, Features, Warmup, cores, parse_chunks};
+use super::train::{Dtype, Features, HeldOut, Warmup, cores};
 
 /// Arguments of `frictl search`.
 #[derive(clap::Args, Debug)]
@@ -58,6 +58,8 @@ pub struct Args {
     /// Explicit test chunks, comma separated: CHUNK or DATASET:CHUNK.
     #[arg(long, value_delimiter = ',')]
     pub test_chunks: Option<Vec<String>>,
+    #[command(flatten)]
+    pub held_out: HeldOut,
     /// Warm-up policy.
     #[arg(long, value_enum, default_value_t = Warmup::HoldZero)]
     pub warmup: Warmup,
@@ -78,7 +80,8 @@ pub struct Args {
 
 /// Runs `frictl search`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let sources = pipeline::load_sources(&args.datasets)?;
+    let datasets = args.held_out.all_datasets(&args.datasets);
+    let sources = pipeline::load_sources(&datasets)?;
     let scv = pipeline::load_scv(&args.scv)?;
     let settings = SearchSettings {
         space: SearchSpace::default(),
@@ -94,13 +97,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             val_frac: args.val_frac,
             test_frac: args.test_frac,
             seed: args.seed,
-            test_chunks: parse_chunks(&args.test_chunks)?,
+            test_chunks: args.held_out.test_chunks(
+                &sources,
+                &args.test_chunks,
+                args.datasets.len(),
+            )?,
         },
-        datasets: args
-            .datasets
-            .iter()
-            .map(|p| p.display().to_string())
-            .collect(),
+        datasets: datasets.iter().map(|p| p.display().to_string()).collect(),
         dataset_sha256: sources
             .dataset_sha256
             .iter()
