@@ -340,4 +340,15 @@ fn held_out_runs_are_the_test_set_and_validation_comes_from_the_training_runs() 
         assert!(range.rows > 0 && range.sdot_rad_s[0] < 0.0 && range.sdot_rad_s[1] > 0.0);
     }
     assert_eq!(by_run["split"], by_file["split"]);
+
+    // `frictl fit --test-run` leaves the run out (here: the whole file, so nothing is left to fit) and
+    // names the runs there are for an unknown name.
+    for (name, want) in [("ds5", "0 samples selected"), ("nope", "runs: ds5")] {
+        let out = Command::new(env!("CARGO_BIN_EXE_frictl"))
+            .args(["fit", "scv-code", s(&f.datasets[1]), "--test-run", name])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains(want), "{name}: {err}");
+    }
 }
