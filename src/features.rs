@@ -3,7 +3,13 @@
 //! What this module **is**: the definition of a network's input vector and the allocation-free machinery
 //! that builds it tick by tick.
 //! - [`FeatureSet`] names the per-tick signals (blocks) and their order; [`Feature`] is one signal with
-//!   its unit; [`FeatureSpec`] adds the history length H and the optional temperature slot.
+//!   its unit; [`FeatureSpec`] adds the history length H and the optional temperature slot;
+//!   [`Signal`] is a field of [`JointSample`] a feature reads ([`FeatureSet::required_signals`]), so a
+//!   dataset or a backend that lacks one can be refused by name.
+//! - Names: one spelling, hyphenated (`joint-pos-joint-vel`, `delta-theta`), printed everywhere
+//!   (`Display`, serde, the tools); [`FeatureSet::parse`] / [`Feature::parse`] (and `FromStr`, serde)
+//!   also accept the underscore spelling (`joint_pos_joint_vel`) so older files and commands keep
+//!   working.
 //! - Layout (block-major, oldest → newest, f32, as the authors train):
 //!   `x[b·H + j] = feature_b(t − (H−1) + j)`, `j = H−1` is the newest sample; with temperature, one
 //!   motor temperature [°C] (of the newest sample) follows the last block at `x[n_blocks·H]`.
@@ -18,6 +24,7 @@
 //! angle loses no precision in the Δθ subtraction.
 
 use std::fmt;
+use std::str::FromStr;
 
 use crate::units::GearRatio;
 
@@ -25,46 +32,171 @@ use crate::units::GearRatio;
 pub const MAX_HISTORY: usize = 64;
 
 /// Largest number of blocks of any [`FeatureSet`] (the size of [`History`]'s inline storage).
-pub const MAX_BLOCKS: usize = 2;
+pub const MAX_BLOCKS: usize = 3;
 
 /// Which per-tick signals a network consumes, in block order. Each block holds `H` samples, oldest
 /// first; the optional motor temperature comes last as one value.
+///
+/// Serialised (and printed) hyphenated, e.g. `"joint-pos-joint-vel"`; the underscore spelling is
+/// accepted when reading.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
+#[serde(rename_all = "kebab-case")]
 pub enum FeatureSet {
-    /// `[Δθ ×H, ṡ ×H]` with Δθ = r·s − θ [motor rad] (offset latched) and ṡ [rad/s] — the paper's.
+    /// `[Δθ ×H, ṡ ×H]` with Δθ = r·s − θ [motor rad] (offset latched) and ṡ [rad/s] — the paper's
+    /// (the authors' input type 1).
+    #[serde(alias = "delta_theta_joint_vel")]
     DeltaThetaJointVel,
-    /// `[ω_m ×H, ṡ ×H]` motor velocity [motor rad/s] and joint velocity [rad/s] — ergoCub since Oct 2024.
+    /// `[ω_m ×H, ṡ ×H]` motor velocity [motor rad/s] and joint velocity [rad/s] — ergoCub since
+    /// Oct 2024 (the authors' input type 2).
+    #[serde(alias = "motor_vel_joint_vel")]
     MotorVelJointVel,
     /// `[s ×H, θ ×H]` joint position [rad] and motor position [motor rad] — the June 2024 ergoCub model.
+    #[serde(alias = "joint_pos_motor_pos")]
     JointPosMotorPos,
+    /// `[s ×H, ṡ ×H]` joint position [rad] and joint velocity [rad/s] — for robots without a motor
+    /// encoder (torque-sensed arms).
+    #[serde(alias = "joint_pos_joint_vel")]
+    JointPosJointVel,
+    /// `[ṡ ×H]` joint velocity [rad/s] only — for robots without a motor encoder.
+    #[serde(alias = "joint_vel")]
+    JointVel,
+    /// `[Δθ ×H, ω_m ×H, ṡ ×H]` — the authors' input type 3.
+    #[serde(alias = "delta_theta_motor_vel_joint_vel")]
+    DeltaThetaMotorVelJointVel,
+    /// `[Δθ ×H, s ×H, ṡ ×H]` — the authors' input type 4.
+    #[serde(alias = "delta_theta_joint_pos_joint_vel")]
+    DeltaThetaJointPosJointVel,
 }
 
 /// One per-tick signal (one block of the input vector).
+///
+/// Serialised (and printed) hyphenated, e.g. `"delta-theta"`; the underscore spelling is accepted
+/// when reading.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
 pub enum Feature {
     /// Δθ = r·s − (θ − θ_off) [motor rad]: transmission deflection relative to the latch instant.
+    #[serde(rename = "delta-theta", alias = "delta_theta")]
     DeltaThetaMotorRad,
     /// Joint velocity ṡ [rad/s].
+    #[serde(rename = "joint-vel", alias = "joint_vel")]
     JointVelRadS,
     /// Motor velocity ω_m [motor rad/s].
+    #[serde(rename = "motor-vel", alias = "motor_vel")]
     MotorVelRadS,
     /// Joint position s [rad].
+    #[serde(rename = "joint-pos", alias = "joint_pos")]
     JointPosRad,
     /// Motor position θ [motor rad] (raw, no offset).
+    #[serde(rename = "motor-pos", alias = "motor_pos")]
     MotorPosRad,
 }
 
+/// A field of [`JointSample`] (and the dataset column of the same name) that features read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
+pub enum Signal {
+    /// Joint position s [rad] (`s_rad`).
+    #[serde(rename = "s_rad")]
+    JointPosRad,
+    /// Joint velocity ṡ [rad/s] (`sdot_rad_s`).
+    #[serde(rename = "sdot_rad_s")]
+    JointVelRadS,
+    /// Motor position θ [motor rad] (`theta_motor_rad`).
+    #[serde(rename = "theta_motor_rad")]
+    MotorPosRad,
+    /// Motor velocity ω_m [motor rad/s] (`omega_motor_rad_s`).
+    #[serde(rename = "omega_motor_rad_s")]
+    MotorVelRadS,
+    /// Motor temperature [°C] (`temperature_c`).
+    #[serde(rename = "temperature_c")]
+    TemperatureC,
+}
+
+impl Signal {
+    /// Every signal, in [`JointSample`] field order.
+    pub const ALL: [Signal; 5] = [
+        Signal::JointPosRad,
+        Signal::JointVelRadS,
+        Signal::MotorPosRad,
+        Signal::MotorVelRadS,
+        Signal::TemperatureC,
+    ];
+
+    /// The [`JointSample`] field name, which is also the dataset CSV column, e.g. `"theta_motor_rad"`.
+    pub fn field(self) -> &'static str {
+        match self {
+            Signal::JointPosRad => "s_rad",
+            Signal::JointVelRadS => "sdot_rad_s",
+            Signal::MotorPosRad => "theta_motor_rad",
+            Signal::MotorVelRadS => "omega_motor_rad_s",
+            Signal::TemperatureC => "temperature_c",
+        }
+    }
+
+    /// Unit of the values, e.g. `"motor rad/s"`.
+    pub fn unit(self) -> &'static str {
+        match self {
+            Signal::JointPosRad => "rad",
+            Signal::JointVelRadS => "rad/s",
+            Signal::MotorPosRad => "motor rad",
+            Signal::MotorVelRadS => "motor rad/s",
+            Signal::TemperatureC => "degC",
+        }
+    }
+
+    /// The value of this field in `sample`.
+    #[inline]
+    pub fn value(self, sample: &JointSample) -> f64 {
+        match self {
+            Signal::JointPosRad => sample.s_rad,
+            Signal::JointVelRadS => sample.sdot_rad_s,
+            Signal::MotorPosRad => sample.theta_motor_rad,
+            Signal::MotorVelRadS => sample.omega_motor_rad_s,
+            Signal::TemperatureC => sample.temperature_c,
+        }
+    }
+}
+
+impl fmt::Display for Signal {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.field())
+    }
+}
+
+/// A name that is not a known [`FeatureSet`] or [`Feature`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown {what} `{name}`; expected one of: {expected}")]
+pub struct UnknownName {
+    /// `"feature set"` or `"feature"`.
+    pub what: &'static str,
+    /// The name given.
+    pub name: String,
+    /// The accepted names (hyphenated), comma separated.
+    pub expected: String,
+}
+
+/// `name` trimmed, with `_` read as `-` (the accepted alias spelling).
+fn canonical(name: &str) -> String {
+    name.trim().replace('_', "-")
+}
+
 impl Feature {
-    /// Short snake_case name, e.g. `"delta_theta"` (for metadata and `inspect`).
+    /// Every feature, in code order.
+    pub const ALL: [Feature; 5] = [
+        Feature::DeltaThetaMotorRad,
+        Feature::JointVelRadS,
+        Feature::MotorVelRadS,
+        Feature::JointPosRad,
+        Feature::MotorPosRad,
+    ];
+
+    /// Hyphenated name, e.g. `"delta-theta"` (metadata, `inspect`, input labels).
     pub fn name(self) -> &'static str {
         match self {
-            Feature::DeltaThetaMotorRad => "delta_theta",
-            Feature::JointVelRadS => "joint_vel",
-            Feature::MotorVelRadS => "motor_vel",
-            Feature::JointPosRad => "joint_pos",
-            Feature::MotorPosRad => "motor_pos",
+            Feature::DeltaThetaMotorRad => "delta-theta",
+            Feature::JointVelRadS => "joint-vel",
+            Feature::MotorVelRadS => "motor-vel",
+            Feature::JointPosRad => "joint-pos",
+            Feature::MotorPosRad => "motor-pos",
         }
     }
 
@@ -77,6 +209,37 @@ impl Feature {
             Feature::JointPosRad => "rad",
         }
     }
+
+    /// The feature named `name` (hyphenated, or the underscore alias such as `"delta_theta"`).
+    pub fn parse(name: &str) -> Result<Feature, UnknownName> {
+        let c = canonical(name);
+        Feature::ALL
+            .into_iter()
+            .find(|f| f.name() == c)
+            .ok_or_else(|| UnknownName {
+                what: "feature",
+                name: name.to_owned(),
+                expected: Feature::ALL.map(Feature::name).join(", "),
+            })
+    }
+
+    /// The [`JointSample`] fields this feature is computed from.
+    pub fn signals(self) -> &'static [Signal] {
+        match self {
+            Feature::DeltaThetaMotorRad => &[Signal::JointPosRad, Signal::MotorPosRad],
+            Feature::JointVelRadS => &[Signal::JointVelRadS],
+            Feature::MotorVelRadS => &[Signal::MotorVelRadS],
+            Feature::JointPosRad => &[Signal::JointPosRad],
+            Feature::MotorPosRad => &[Signal::MotorPosRad],
+        }
+    }
+}
+
+impl FromStr for Feature {
+    type Err = UnknownName;
+    fn from_str(s: &str) -> Result<Self, UnknownName> {
+        Feature::parse(s)
+    }
 }
 
 impl fmt::Display for Feature {
@@ -87,19 +250,43 @@ impl fmt::Display for Feature {
 
 impl FeatureSet {
     /// Every feature set.
-    pub const ALL: [FeatureSet; 3] = [
+    pub const ALL: [FeatureSet; 7] = [
         FeatureSet::DeltaThetaJointVel,
         FeatureSet::MotorVelJointVel,
         FeatureSet::JointPosMotorPos,
+        FeatureSet::JointPosJointVel,
+        FeatureSet::JointVel,
+        FeatureSet::DeltaThetaMotorVelJointVel,
+        FeatureSet::DeltaThetaJointPosJointVel,
     ];
 
     /// The blocks, in input-vector order.
     pub fn blocks(self) -> &'static [Feature] {
+        use Feature::*;
         match self {
-            FeatureSet::DeltaThetaJointVel => &[Feature::DeltaThetaMotorRad, Feature::JointVelRadS],
-            FeatureSet::MotorVelJointVel => &[Feature::MotorVelRadS, Feature::JointVelRadS],
-            FeatureSet::JointPosMotorPos => &[Feature::JointPosRad, Feature::MotorPosRad],
+            FeatureSet::DeltaThetaJointVel => &[DeltaThetaMotorRad, JointVelRadS],
+            FeatureSet::MotorVelJointVel => &[MotorVelRadS, JointVelRadS],
+            FeatureSet::JointPosMotorPos => &[JointPosRad, MotorPosRad],
+            FeatureSet::JointPosJointVel => &[JointPosRad, JointVelRadS],
+            FeatureSet::JointVel => &[JointVelRadS],
+            FeatureSet::DeltaThetaMotorVelJointVel => {
+                &[DeltaThetaMotorRad, MotorVelRadS, JointVelRadS]
+            }
+            FeatureSet::DeltaThetaJointPosJointVel => {
+                &[DeltaThetaMotorRad, JointPosRad, JointVelRadS]
+            }
         }
+    }
+
+    /// The unit of each block, in order, e.g. `["motor rad", "rad/s"]` (each block's
+    /// [`Feature::unit`]).
+    pub fn units(self) -> impl ExactSizeIterator<Item = &'static str> {
+        self.blocks().iter().map(|f| f.unit())
+    }
+
+    /// The set whose blocks are exactly `blocks` (in order), if any.
+    pub fn from_blocks(blocks: &[Feature]) -> Option<FeatureSet> {
+        FeatureSet::ALL.into_iter().find(|s| s.blocks() == blocks)
     }
 
     /// Number of blocks (each H long).
@@ -112,13 +299,90 @@ impl FeatureSet {
         self.blocks().contains(&Feature::DeltaThetaMotorRad)
     }
 
-    /// snake_case name as in serde, e.g. `"delta_theta_joint_vel"`.
+    /// The [`JointSample`] fields (dataset columns) the blocks are computed from, in [`Signal`]
+    /// order, each once. Temperature is not among them: it depends on [`FeatureSpec::temperature`]
+    /// (see [`FeatureSpec::required_signals`]).
+    pub fn required_signals(self) -> &'static [Signal] {
+        use Signal::*;
+        match self {
+            FeatureSet::DeltaThetaJointVel => &[JointPosRad, JointVelRadS, MotorPosRad],
+            FeatureSet::MotorVelJointVel => &[JointVelRadS, MotorVelRadS],
+            FeatureSet::JointPosMotorPos => &[JointPosRad, MotorPosRad],
+            FeatureSet::JointPosJointVel => &[JointPosRad, JointVelRadS],
+            FeatureSet::JointVel => &[JointVelRadS],
+            FeatureSet::DeltaThetaMotorVelJointVel => {
+                &[JointPosRad, JointVelRadS, MotorPosRad, MotorVelRadS]
+            }
+            FeatureSet::DeltaThetaJointPosJointVel => &[JointPosRad, JointVelRadS, MotorPosRad],
+        }
+    }
+
+    /// Whether a block reads `signal`.
+    pub fn needs(self, signal: Signal) -> bool {
+        self.required_signals().contains(&signal)
+    }
+
+    /// Hyphenated name, e.g. `"joint-pos-joint-vel"` (as serde writes it).
     pub fn name(self) -> &'static str {
+        match self {
+            FeatureSet::DeltaThetaJointVel => "delta-theta-joint-vel",
+            FeatureSet::MotorVelJointVel => "motor-vel-joint-vel",
+            FeatureSet::JointPosMotorPos => "joint-pos-motor-pos",
+            FeatureSet::JointPosJointVel => "joint-pos-joint-vel",
+            FeatureSet::JointVel => "joint-vel",
+            FeatureSet::DeltaThetaMotorVelJointVel => "delta-theta-motor-vel-joint-vel",
+            FeatureSet::DeltaThetaJointPosJointVel => "delta-theta-joint-pos-joint-vel",
+        }
+    }
+
+    /// The underscore spelling [`FeatureSet::parse`] also accepts, e.g. `"joint_pos_joint_vel"`
+    /// (older files and command lines); never printed.
+    pub fn underscore_alias(self) -> &'static str {
         match self {
             FeatureSet::DeltaThetaJointVel => "delta_theta_joint_vel",
             FeatureSet::MotorVelJointVel => "motor_vel_joint_vel",
             FeatureSet::JointPosMotorPos => "joint_pos_motor_pos",
+            FeatureSet::JointPosJointVel => "joint_pos_joint_vel",
+            FeatureSet::JointVel => "joint_vel",
+            FeatureSet::DeltaThetaMotorVelJointVel => "delta_theta_motor_vel_joint_vel",
+            FeatureSet::DeltaThetaJointPosJointVel => "delta_theta_joint_pos_joint_vel",
         }
+    }
+
+    /// One-line description with the block layout, e.g. `"[s ×H, ṡ ×H] (no motor encoder)"` (help
+    /// texts).
+    pub fn description(self) -> &'static str {
+        match self {
+            FeatureSet::DeltaThetaJointVel => "[Δθ ×H, ṡ ×H], the paper's (authors' input type 1)",
+            FeatureSet::MotorVelJointVel => "[ω_m ×H, ṡ ×H] (authors' input type 2)",
+            FeatureSet::JointPosMotorPos => "[s ×H, θ ×H], the June 2024 ergoCub model",
+            FeatureSet::JointPosJointVel => "[s ×H, ṡ ×H], needs no motor encoder",
+            FeatureSet::JointVel => "[ṡ ×H], needs no motor encoder",
+            FeatureSet::DeltaThetaMotorVelJointVel => {
+                "[Δθ ×H, ω_m ×H, ṡ ×H] (authors' input type 3)"
+            }
+            FeatureSet::DeltaThetaJointPosJointVel => "[Δθ ×H, s ×H, ṡ ×H] (authors' input type 4)",
+        }
+    }
+
+    /// The set named `name`: the hyphenated name, or its underscore alias (`"joint_pos_motor_pos"`).
+    pub fn parse(name: &str) -> Result<FeatureSet, UnknownName> {
+        let c = canonical(name);
+        FeatureSet::ALL
+            .into_iter()
+            .find(|s| s.name() == c)
+            .ok_or_else(|| UnknownName {
+                what: "feature set",
+                name: name.to_owned(),
+                expected: FeatureSet::ALL.map(FeatureSet::name).join(", "),
+            })
+    }
+}
+
+impl FromStr for FeatureSet {
+    type Err = UnknownName;
+    fn from_str(s: &str) -> Result<Self, UnknownName> {
+        FeatureSet::parse(s)
     }
 }
 
@@ -222,6 +486,24 @@ impl FeatureSpec {
     /// Length of the input vector: n_blocks·H (+1 with temperature).
     pub fn n_inputs(&self) -> usize {
         self.set.n_blocks() * self.history + usize::from(self.temperature)
+    }
+
+    /// The [`JointSample`] fields (dataset columns) this spec reads: the set's
+    /// ([`FeatureSet::required_signals`]), then [`Signal::TemperatureC`] with temperature.
+    pub fn required_signals(&self) -> impl Iterator<Item = Signal> + use<> {
+        let temperature = self.temperature.then_some(Signal::TemperatureC);
+        self.set
+            .required_signals()
+            .iter()
+            .copied()
+            .chain(temperature)
+    }
+
+    /// The first required signal of `sample` that is not finite, if any (a NaN motor angle is fine
+    /// for `joint-vel`, not for `delta-theta-joint-vel`).
+    pub fn first_non_finite(&self, sample: &JointSample) -> Option<Signal> {
+        self.required_signals()
+            .find(|s| !s.value(sample).is_finite())
     }
 
     /// Checks `1 ≤ H ≤ MAX_HISTORY`.
@@ -598,36 +880,54 @@ mod tests {
         // Δθ offset latched at sample 0: θ_off = θ0 − r·s0 = 3.0 − 0.2 = 2.8.
         // Δθ_k = r·s_k − (θ_k − 2.8) = 0.2 + 0.02k − 3 + 2k + 2.8 = 2.02·k.
         let dtheta = |k: f32| 2.02 * k;
-        let cases: [(FeatureSet, [f32; 6]); 3] = [
-            (
-                FeatureSet::DeltaThetaJointVel,
-                [dtheta(2.0), dtheta(3.0), dtheta(4.0), -0.25, -0.125, 0.0],
-            ),
-            (
-                FeatureSet::MotorVelJointVel,
-                [12.0, 13.0, 14.0, -0.25, -0.125, 0.0],
-            ),
-            (
-                FeatureSet::JointPosMotorPos,
-                [0.12, 0.13, 0.14, -1.0, -3.0, -5.0],
-            ),
+        // Per block, the window's values (samples 2, 3, 4).
+        let dth = [dtheta(2.0), dtheta(3.0), dtheta(4.0)];
+        let sdot = [-0.25, -0.125, 0.0];
+        let omega = [12.0, 13.0, 14.0];
+        let s = [0.12, 0.13, 0.14];
+        let theta = [-1.0, -3.0, -5.0];
+        let cases: [(FeatureSet, &[[f32; 3]]); 7] = [
+            (FeatureSet::DeltaThetaJointVel, &[dth, sdot]),
+            (FeatureSet::MotorVelJointVel, &[omega, sdot]),
+            (FeatureSet::JointPosMotorPos, &[s, theta]),
+            (FeatureSet::JointPosJointVel, &[s, sdot]),
+            (FeatureSet::JointVel, &[sdot]),
+            (FeatureSet::DeltaThetaMotorVelJointVel, &[dth, omega, sdot]),
+            (FeatureSet::DeltaThetaJointPosJointVel, &[dth, s, sdot]),
         ];
-        for (set, want) in cases {
+        assert_eq!(cases.len(), FeatureSet::ALL.len(), "every set by hand");
+        for (set, blocks) in cases {
+            let want: Vec<f32> = blocks.iter().flatten().copied().collect();
             for temperature in [false, true] {
-                let mut h = History::new(spec(set, 3, temperature), gr).unwrap();
+                let sp = spec(set, 3, temperature);
+                let mut h = History::new(sp, gr).unwrap();
                 for k in 0..5 {
                     h.push(&sample(k));
                 }
                 let x = filled(&h);
-                assert_eq!(x.len(), 6 + usize::from(temperature));
-                for (i, (got, want)) in x.iter().zip(want).enumerate() {
+                assert_eq!(x.len(), 3 * blocks.len() + usize::from(temperature));
+                for (i, (got, want)) in x.iter().zip(&want).enumerate() {
                     assert!(
                         (got - want).abs() < 1e-5,
                         "{set} x[{i}] = {got}, want {want}"
                     );
+                    // The slot description agrees: block i / 3, age 2 − i % 3.
+                    assert_eq!(
+                        sp.slot(i),
+                        Some(InputSlot::History {
+                            feature: set.blocks()[i / 3],
+                            block: i / 3,
+                            age_ticks: 2 - i % 3
+                        })
+                    );
                 }
                 if temperature {
-                    assert_eq!(x[6], 34.0, "temperature slot holds the newest sample's");
+                    assert_eq!(
+                        x[3 * blocks.len()],
+                        34.0,
+                        "temperature slot holds the newest sample's"
+                    );
+                    assert_eq!(sp.slot(3 * blocks.len()), Some(InputSlot::TemperatureC));
                 }
             }
         }
@@ -799,7 +1099,7 @@ mod tests {
             FeatureError::Length {
                 got: 10,
                 expected: 11,
-                spec: "delta_theta_joint_vel H=5 +temperature".into()
+                spec: "delta-theta-joint-vel H=5 +temperature".into()
             }
         );
         for bad in [0, MAX_HISTORY + 1] {
@@ -841,13 +1141,101 @@ mod tests {
         assert_eq!(s.index(2, 0), None);
         let labels = s.input_labels();
         assert_eq!(labels.len(), 7);
-        assert_eq!(labels[2], "delta_theta[t] (motor rad)");
-        assert_eq!(labels[3], "joint_vel[t-2] (rad/s)");
+        assert_eq!(labels[2], "delta-theta[t] (motor rad)");
+        assert_eq!(labels[3], "joint-vel[t-2] (rad/s)");
         assert_eq!(s.slot(6).unwrap().unit(), "degC");
         for set in FeatureSet::ALL {
             let name = serde_json::to_string(&set).unwrap();
             assert_eq!(name, format!("\"{set}\""), "Display matches serde");
         }
+    }
+
+    #[test]
+    fn names_parse_with_both_spellings_and_print_hyphenated() {
+        for set in FeatureSet::ALL {
+            assert_eq!(FeatureSet::parse(set.name()), Ok(set));
+            let snake = set.name().replace('-', "_");
+            assert_eq!(set.underscore_alias(), snake);
+            assert_eq!(snake.parse::<FeatureSet>(), Ok(set), "alias {snake}");
+            assert_eq!(set.to_string(), set.name());
+            assert!(!set.name().contains('_'));
+            assert_eq!(
+                serde_json::from_str::<FeatureSet>(&format!("\"{snake}\"")).unwrap(),
+                set,
+                "serde alias {snake}"
+            );
+            assert_eq!(FeatureSet::from_blocks(set.blocks()), Some(set));
+            assert!(set.n_blocks() <= MAX_BLOCKS);
+        }
+        for f in Feature::ALL {
+            assert_eq!(Feature::parse(f.name()), Ok(f));
+            assert_eq!(f.name().replace('-', "_").parse::<Feature>(), Ok(f));
+            assert_eq!(
+                serde_json::to_string(&f).unwrap(),
+                format!("\"{}\"", f.name())
+            );
+        }
+        assert_eq!(FeatureSet::parse("joint-vel"), Ok(FeatureSet::JointVel));
+        assert_eq!(
+            FeatureSet::JointPosJointVel.units().collect::<Vec<_>>(),
+            ["rad", "rad/s"]
+        );
+        assert_eq!(
+            FeatureSet::parse("delta_theta_motor_vel_joint_vel"),
+            Ok(FeatureSet::DeltaThetaMotorVelJointVel)
+        );
+        let e = FeatureSet::parse("joint-torque").unwrap_err();
+        assert!(
+            e.to_string().contains("joint-torque") && e.to_string().contains("joint-pos-joint-vel")
+        );
+        assert!(Feature::parse("velocity").is_err());
+    }
+
+    #[test]
+    fn required_signals_are_what_the_blocks_read() {
+        for set in FeatureSet::ALL {
+            let mut from_blocks: Vec<Signal> = set
+                .blocks()
+                .iter()
+                .flat_map(|f| f.signals().iter().copied())
+                .collect();
+            from_blocks.sort();
+            from_blocks.dedup();
+            assert_eq!(set.required_signals(), &from_blocks[..], "{set}");
+            // A sample with every other field NaN still fills a finite input vector.
+            for temperature in [false, true] {
+                let sp = spec(set, 2, temperature);
+                let mut smp = JointSample {
+                    s_rad: f64::NAN,
+                    sdot_rad_s: f64::NAN,
+                    theta_motor_rad: f64::NAN,
+                    omega_motor_rad_s: f64::NAN,
+                    temperature_c: f64::NAN,
+                };
+                assert_eq!(sp.first_non_finite(&smp), sp.required_signals().next());
+                let full = sample(1);
+                for sig in sp.required_signals() {
+                    match sig {
+                        Signal::JointPosRad => smp.s_rad = full.s_rad,
+                        Signal::JointVelRadS => smp.sdot_rad_s = full.sdot_rad_s,
+                        Signal::MotorPosRad => smp.theta_motor_rad = full.theta_motor_rad,
+                        Signal::MotorVelRadS => smp.omega_motor_rad_s = full.omega_motor_rad_s,
+                        Signal::TemperatureC => smp.temperature_c = full.temperature_c,
+                    }
+                }
+                assert_eq!(sp.first_non_finite(&smp), None);
+                let mut h = History::new(sp, r(-100.0)).unwrap();
+                h.push(&smp);
+                h.push(&smp);
+                assert!(filled(&h).iter().all(|v| v.is_finite()), "{sp}");
+            }
+        }
+        assert_eq!(
+            FeatureSet::JointVel.required_signals(),
+            &[Signal::JointVelRadS]
+        );
+        assert!(!FeatureSet::JointPosJointVel.needs(Signal::MotorPosRad));
+        assert!(FeatureSet::DeltaThetaJointPosJointVel.needs(Signal::MotorPosRad));
     }
 
     fn any_set() -> impl Strategy<Value = FeatureSet> {

@@ -152,6 +152,19 @@ fn estimate_never_allocates_on_any_variant() {
                 WarmupPolicy::ZeroPad,
             ),
         ),
+        (
+            "pinn dtheta/omega/sdot H20 +T hold_zero (3 blocks)",
+            pinn(
+                FeatureSet::DeltaThetaMotorVelJointVel,
+                20,
+                true,
+                WarmupPolicy::HoldZero,
+            ),
+        ),
+        (
+            "pinn joint_vel H30 zero_pad (1 block)",
+            pinn(FeatureSet::JointVel, 30, false, WarmupPolicy::ZeroPad),
+        ),
     ];
     for (name, m) in &mut models {
         let before = allocs();

@@ -268,7 +268,8 @@ fn wrong_magic_and_version() {
 #[test]
 fn newer_minor_is_read_and_may_use_reserved_bytes() {
     let (m, b) = small(StorageDtype::F32);
-    // Minor 0: a non-zero reserved byte (offset 280, reserved to the end of the fixed header) is refused.
+    // Minor 1 (a version this reader writes): a non-zero reserved byte (offsets 288 to the end of the
+    // fixed header) is refused.
     let mut c = b.clone();
     c[300] = 1;
     fix_crc(&mut c);
@@ -718,12 +719,11 @@ fn reader_refuses_bad_text_and_gear_ratio() {
 
 #[test]
 fn temperature_and_feature_sets_round_trip() {
-    for set in [
-        FeatureSet::DeltaThetaJointVel,
-        FeatureSet::MotorVelJointVel,
-        FeatureSet::JointPosMotorPos,
-    ] {
-        let mut m = model(&[7, 5, 1], StorageDtype::F32, 4);
+    // Offset of `block_features` (minor ≥ 1) from docs/weights-format.md.
+    const BLOCK_FEATURES_AT: usize = 280;
+    for set in FeatureSet::ALL {
+        let n = set.n_blocks();
+        let mut m = model(&[3 * n + 1, 5, 1], StorageDtype::F32, 4);
         m.meta.features = FeatureSpec {
             set,
             history: 3,
@@ -731,11 +731,95 @@ fn temperature_and_feature_sets_round_trip() {
         };
         m.meta.scv = None;
         let bytes = to_bytes(&m).unwrap();
+        assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 1, "minor 1");
+        assert_eq!(usize::from(bytes[42]), n, "n_blocks");
+        // The header names each block, in order, unused slots zero.
+        let codes: Vec<u8> = set
+            .blocks()
+            .iter()
+            .map(|f| match f.name() {
+                "delta-theta" => 1,
+                "joint-vel" => 2,
+                "motor-vel" => 3,
+                "joint-pos" => 4,
+                "motor-pos" => 5,
+                other => panic!("no code for {other}"),
+            })
+            .collect();
+        assert_eq!(&bytes[BLOCK_FEATURES_AT..BLOCK_FEATURES_AT + n], &codes[..]);
+        assert!(
+            bytes[BLOCK_FEATURES_AT + n..BLOCK_FEATURES_AT + 8]
+                .iter()
+                .all(|&b| b == 0)
+        );
         let back = from_bytes(&bytes).unwrap();
         assert_eq!(back.meta.features, m.meta.features);
         let i = inspect(&bytes).unwrap();
-        assert_eq!(i.input_units.len(), 3, "two blocks + temperature");
-        assert_eq!(i.input_units[2], weights::Unit::Celsius);
+        assert_eq!(i.blocks, set.blocks());
+        assert_eq!(i.input_units.len(), n + 1, "{n} blocks + temperature");
+        assert_eq!(i.input_units[n], weights::Unit::Celsius);
+        let text = i.to_string();
+        assert!(
+            text.contains(&format!("features       {set}, H = 3")),
+            "{text}"
+        );
+        for f in set.blocks() {
+            assert!(
+                text.contains(&format!("{} [{}] ×3", f.name(), f.unit())),
+                "{text}"
+            );
+        }
+        let json = serde_json::to_value(&i).unwrap();
+        assert_eq!(json["features"]["set"], set.name());
+        assert_eq!(json["blocks"][0], set.blocks()[0].name());
+
+        // The same model as format 1.0 wrote it: minor 0, no block names; read as the same set.
+        let mut old = bytes.clone();
+        old[10..12].copy_from_slice(&0u16.to_le_bytes());
+        old[BLOCK_FEATURES_AT..BLOCK_FEATURES_AT + 8].fill(0);
+        fix_crc(&mut old);
+        let back = from_bytes(&old).expect("a 1.0 file");
+        assert_eq!(back.meta.features, m.meta.features);
+        assert_eq!(inspect(&old).unwrap().blocks, set.blocks());
+        // In 1.0 those bytes are reserved: non-zero is refused.
+        old[BLOCK_FEATURES_AT] = codes[0];
+        fix_crc(&mut old);
+        assert!(matches!(
+            from_bytes(&old),
+            Err(WeightError::NonZeroReserved { offset: 280, .. })
+        ));
+
+        // Minor 1 with block names that disagree with the set code: refused, naming the key.
+        let mut bad = bytes.clone();
+        bad[BLOCK_FEATURES_AT + n - 1] = if codes[n - 1] == 5 { 4 } else { 5 };
+        fix_crc(&mut bad);
+        assert!(matches!(
+            from_bytes(&bad),
+            Err(WeightError::Inconsistent {
+                field: "block_features",
+                ..
+            })
+        ));
+        let mut bad = bytes.clone();
+        bad[BLOCK_FEATURES_AT + n] = 2; // a block past the set's last
+        fix_crc(&mut bad);
+        assert!(matches!(
+            from_bytes(&bad),
+            Err(WeightError::Inconsistent {
+                field: "block_features",
+                ..
+            })
+        ));
+        let mut bad = bytes.clone();
+        bad[BLOCK_FEATURES_AT] = 99;
+        fix_crc(&mut bad);
+        assert!(matches!(
+            from_bytes(&bad),
+            Err(WeightError::UnknownCode {
+                field: "block_features",
+                value: 99
+            })
+        ));
     }
 }
 

@@ -2,7 +2,9 @@
 //! end of a `socketpair(AF_UNIX, SOCK_SEQPACKET)` as `interface = "fd:10"` and opens it as a real
 //! `socketcan::CanSocket`; the test holds the other end and emulates two MIT drives, and is the
 //! controller over shared memory. The same scenarios run on a real vcan in `vcan_daemon.rs`.
-//! Also: `frictiond --check` refusing an overloaded bus and bad `[[bus]]` keys with the numbers.
+//! Also: `frictiond --check` refusing an overloaded bus and bad `[[bus]]` keys with the numbers, and a
+//! PINN whose inputs the drives cannot supply (joint values derived from the motor encoder, no
+//! temperature).
 
 use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 use std::process::Command;
@@ -190,6 +192,81 @@ fn can_check_refuses_an_overloaded_bus_and_names_bad_keys() {
     let (ok, text) = check(&env, &good.replacen("t_max = 1", "t_max = 0.5", 1));
     assert!(
         !ok && text.contains("bus[0].joint[0].t_max") && text.contains("0.5"),
+        "{text}"
+    );
+}
+
+/// A random `.fwt` for the hip (r = HIP_R, k_t = HIP_KT) with the given inputs.
+fn hip_model(env: &TestEnv, spec: frictionless::features::FeatureSpec) -> std::path::PathBuf {
+    use frictionless::random::{RandomMlpSpec, seeded_mlp};
+    use frictionless::weights::{ModelFile, ModelMeta, TrainingMeta};
+    let path = env
+        .dir
+        .join(format!("hip_{}_{}.fwt", spec.set, spec.temperature));
+    let file = ModelFile {
+        meta: ModelMeta {
+            joint_name: "hip".into(),
+            gear_ratio: frictionless::units::GearRatio::new(HIP_R).unwrap(),
+            kt_nm_per_a: HIP_KT,
+            features: spec,
+            scv: None,
+            training: TrainingMeta::unknown("can_backend test", 0),
+        },
+        dtype: frictionless::mlp::StorageDtype::F32,
+        mlp: seeded_mlp(&RandomMlpSpec::new(&[spec.n_inputs(), 4, 1]), 3).unwrap(),
+    };
+    frictionless::weights::write_file(&path, &file).unwrap();
+    path
+}
+
+#[test]
+fn can_check_refuses_models_the_drives_cannot_feed() {
+    use frictionless::features::{FeatureSet, FeatureSpec};
+    let env = TestEnv::new("canfeat");
+    let good = mit_body("can0", 1000);
+    let hip_none = "max_curr = 4.0\nfriction_model = \"none\"";
+    assert!(good.contains(hip_none));
+    let with = |set: FeatureSet, temperature: bool| {
+        let spec = FeatureSpec {
+            set,
+            history: 4,
+            temperature,
+        };
+        let m = hip_model(&env, spec);
+        check(
+            &env,
+            &good.replacen(
+                hip_none,
+                &format!(
+                    "max_curr = 4.0\nfriction_model = \"pinn\"\nmodel = \"{}\"",
+                    m.display()
+                ),
+                1,
+            ),
+        )
+    };
+    for set in [
+        FeatureSet::JointVel,
+        FeatureSet::JointPosJointVel,
+        FeatureSet::MotorVelJointVel,
+    ] {
+        let (ok, text) = with(set, false);
+        assert!(ok, "{set}: {text}");
+    }
+    let (ok, text) = with(FeatureSet::DeltaThetaJointVel, false);
+    assert!(!ok);
+    for needle in [
+        "joint[1].model",
+        "joint hip",
+        "`delta-theta-joint-vel`",
+        "`s_rad`",
+        "protocol = \"mit\"",
+    ] {
+        assert!(text.contains(needle), "{needle}: {text}");
+    }
+    let (ok, text) = with(FeatureSet::JointVel, true);
+    assert!(
+        !ok && text.contains("`temperature_c`") && text.contains("`joint-vel`"),
         "{text}"
     );
 }

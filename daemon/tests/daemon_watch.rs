@@ -5,7 +5,6 @@
 //! `frictiond` (`target/<profile>/frictl`): if it is missing the test is skipped with a message
 //! when `FRICTIONLESS_REFS` is unset, and fails when it is set (the full test run).
 
-use std::path::PathBuf;
 use std::process::Command;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -16,25 +15,6 @@ use frictionless_shm_types::{FLAG_STALE, STATUS_INPUT_STALE};
 
 const TAU: [f64; 3] = [2.0, 1.0, 0.5];
 const V: [f64; 3] = [0.3, 0.4, -0.2];
-
-/// [`frictl_path`], or `None` (after the skip/fail rule) if it was not built.
-fn frictl_bin() -> Option<PathBuf> {
-    let bin = frictl_path();
-    if bin.exists() {
-        return Some(bin);
-    }
-    if std::env::var_os("FRICTIONLESS_REFS").is_some() {
-        panic!(
-            "{} not found: tests/run.sh builds it (`cargo build --workspace --bins`)",
-            bin.display()
-        );
-    }
-    eprintln!(
-        "skipped: {} not found (run tests/run.sh, or `cargo build -p frictl`)",
-        bin.display()
-    );
-    None
-}
 
 #[test]
 fn monitor_and_record_see_the_daemon_without_disturbing_it() {

@@ -1,7 +1,7 @@
 //! `frictiond` end to end: the one integration-test binary of the daemon package. Every test starts
 //! the real `frictiond` binary as a process (Cargo builds it for this target:
 //! `CARGO_BIN_EXE_frictiond`) and is the plant or controller itself over iceoryx2 shared memory, a
-//! socketpair or a vcan. `daemon_watch` also runs `frictl` (another package; see
+//! socketpair or a vcan. `daemon_watch` and `daemon_features` also run `frictl` (another package; see
 //! [`daemon_support::frictl_path`]).
 //!
 //! Tests named `vcan_*` need a kernel with CAN: `#[ignore]`d on the host, run inside the QEMU VM of
@@ -14,6 +14,7 @@ mod daemon_support;
 mod can_backend;
 mod daemon_alloc;
 mod daemon_e2e;
+mod daemon_features;
 mod daemon_lockstep;
 mod daemon_pinn;
 mod daemon_watch;

@@ -172,7 +172,7 @@ pub(super) fn parse_header(b: &[u8]) -> Result<Header, WeightError> {
     let version_minor = rd_u16(b, off::VERSION_MINOR);
     let crc_stored = rd_u32(b, off::CRC);
 
-    let (features, n_inputs) = parse_features(b)?;
+    let (features, n_inputs) = parse_features(b, version_minor)?;
     let input_units = parse_units(b, &features)?;
 
     let d_code = rd_u8(b, off::DTYPE);
@@ -236,12 +236,31 @@ pub(super) fn parse_header(b: &[u8]) -> Result<Header, WeightError> {
     })
 }
 
-/// Reads the feature set, block count, temperature flag and history, and checks the stored input
-/// count against them. Returns the feature spec and the input count.
-fn parse_features(b: &[u8]) -> Result<(FeatureSpec, usize), WeightError> {
+/// Reads the feature set, block count, block features (minor ≥ 1), temperature flag and history, and
+/// checks the stored input count against them. Returns the feature spec and the input count.
+fn parse_features(b: &[u8], version_minor: u16) -> Result<(FeatureSpec, usize), WeightError> {
     let set_code = rd_u16(b, off::FEATURE_SET);
     let set =
         layout::feature_set_from_code(set_code).ok_or_else(|| unknown("feature_set", set_code))?;
+    if version_minor >= layout::MINOR_BLOCK_FEATURES {
+        // The header names each block; it must be exactly the set's layout, in order.
+        let blocks = set.blocks();
+        for slot in 0..layout::MAX_BLOCKS {
+            let code = rd_u8(b, off::BLOCK_FEATURES + slot);
+            let want = blocks.get(slot).map_or(0, |&f| layout::feature_code(f));
+            if code != want {
+                let field = "block_features";
+                return Err(match layout::feature_from_code(code) {
+                    None if code != 0 => unknown(field, code),
+                    _ => WeightError::Inconsistent {
+                        field,
+                        stored: code.into(),
+                        expected: want.into(),
+                    },
+                });
+            }
+        }
+    }
     let units = layout::block_units(set);
     inconsistent(
         "n_blocks",
@@ -400,6 +419,9 @@ fn reserved_ranges(h: &Header) -> Vec<std::ops::Range<usize>> {
         off::RESERVED_A..off::RESERVED_A + 6,
         off::RESERVED_B..layout::FIXED_HEADER_LEN,
     ];
+    if h.version_minor < layout::MINOR_BLOCK_FEATURES {
+        r.push(off::BLOCK_FEATURES..off::BLOCK_FEATURES + layout::MAX_BLOCKS);
+    }
     if h.scv.is_none() {
         r.push(off::SCV..off::SCV + 48);
     }
@@ -740,6 +762,9 @@ pub(super) fn encode(f: &ModelFile) -> Result<Vec<u8>, WeightError> {
     b[off::FILTERING] = layout::filtering_code(m.training.filtering);
     for (i, u) in units.iter().enumerate() {
         b[off::BLOCK_UNITS + i] = u.code();
+    }
+    for (i, &f) in m.features.set.blocks().iter().enumerate() {
+        b[off::BLOCK_FEATURES + i] = layout::feature_code(f);
     }
     if m.features.temperature {
         b[off::TEMPERATURE_UNIT] = layout::TEMPERATURE_UNIT.code();

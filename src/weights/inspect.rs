@@ -5,7 +5,7 @@
 
 use std::fmt;
 
-use crate::features::FeatureSpec;
+use crate::features::{Feature, FeatureSpec};
 use crate::friction::ScvParams;
 use crate::mlp::{Activation, StorageDtype};
 
@@ -34,6 +34,9 @@ pub struct Inspection {
     pub version_minor: u16,
     /// Feature set, history H and temperature flag.
     pub features: FeatureSpec,
+    /// The feature of each input block, in order (from `block_features`, or for a 1.0 file from the
+    /// set code).
+    pub blocks: Vec<Feature>,
     /// Unit of each input block in order, then the temperature unit if present.
     pub input_units: Vec<Unit>,
     /// Unit of the output (joint-side friction torque).
@@ -114,6 +117,7 @@ pub(super) fn inspect(bytes: &[u8]) -> Result<Inspection, WeightError> {
         version_major: layout::VERSION_MAJOR,
         version_minor: h.version_minor,
         features: h.features,
+        blocks: h.features.set.blocks().to_vec(),
         input_units: h.input_units,
         output_unit: layout::OUTPUT_UNIT,
         n_inputs: n,
@@ -161,6 +165,19 @@ fn opt_f32(v: f32) -> String {
 impl fmt::Display for Inspection {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let units: Vec<&str> = self.input_units.iter().map(|u| u.symbol()).collect();
+        let h = self.features.history;
+        let mut blocks: Vec<String> = self
+            .blocks
+            .iter()
+            .zip(&self.input_units)
+            .map(|(b, u)| format!("{} [{}] ×{h}", b.name(), u.symbol()))
+            .collect();
+        if self.features.temperature {
+            blocks.push(format!(
+                "temperature [{}] ×1",
+                layout::TEMPERATURE_UNIT.symbol()
+            ));
+        }
         let sizes: Vec<String> = self.sizes.iter().map(usize::to_string).collect();
         writeln!(
             f,
@@ -172,9 +189,10 @@ impl fmt::Display for Inspection {
         writeln!(f, "kt             {} Nm/A", self.kt_nm_per_a)?;
         writeln!(
             f,
-            "features       {:?}, H = {}, temperature = {}",
+            "features       {}, H = {}, temperature = {}",
             self.features.set, self.features.history, self.features.temperature
         )?;
+        writeln!(f, "blocks         {}", blocks.join(", "))?;
         writeln!(
             f,
             "input units    [{}] ({} inputs)",

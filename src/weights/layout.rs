@@ -3,7 +3,7 @@
 //! This is the single source of truth the codec uses; `docs/weights-format.md` describes the same
 //! table in prose. It holds no I/O and no validation logic beyond code ↔ enum mapping.
 
-use crate::features::FeatureSet;
+use crate::features::{Feature, FeatureSet};
 use crate::mlp::{Activation, StorageDtype};
 
 use super::SignalFiltering;
@@ -13,8 +13,11 @@ use super::SignalFiltering;
 pub const MAGIC: [u8; 8] = *b"FWT\0\r\n\x1a\n";
 /// Format major version written and understood. Readers refuse any other major.
 pub const VERSION_MAJOR: u16 = 1;
-/// Format minor version written. Readers accept any minor of their major.
-pub const VERSION_MINOR: u16 = 0;
+/// Format minor version written. Readers accept any minor of their major. Minor 1 names the feature
+/// blocks (`block_features`); a minor-0 file has zeros there and its blocks follow from its set code.
+pub const VERSION_MINOR: u16 = 1;
+/// The first minor version whose header holds `block_features`.
+pub const MINOR_BLOCK_FEATURES: u16 = 1;
 /// Length of the fixed header in bytes (the layer table follows it).
 pub const FIXED_HEADER_LEN: usize = 320;
 /// Length of one layer-table entry in bytes.
@@ -38,7 +41,7 @@ pub const MAX_FILE_LEN: u64 = {
 pub const JOINT_NAME_MAX: usize = 63;
 /// Longest tool-version string in bytes (UTF-8; the field is 32 bytes, NUL-padded).
 pub const TOOL_VERSION_MAX: usize = 31;
-/// Number of per-block unit slots in the header.
+/// Number of per-block unit slots (and feature-code slots) in the header.
 pub const MAX_BLOCKS: usize = 8;
 
 /// Field offsets inside the fixed header (all little-endian).
@@ -103,8 +106,10 @@ pub mod off {
     pub const JOINT_NAME: usize = 184;
     /// `[u8; 32]` tool version, UTF-8, NUL-padded.
     pub const TOOL_VERSION: usize = 248;
-    /// `[u8; 40]` reserved, zero.
-    pub const RESERVED_B: usize = 280;
+    /// `[u8; 8]` feature code of each block in order, unused slots zero (minor ≥ 1; zero in 1.0).
+    pub const BLOCK_FEATURES: usize = 280;
+    /// `[u8; 32]` reserved, zero.
+    pub const RESERVED_B: usize = 288;
 }
 
 /// Physical unit codes used for the inputs and the output.
@@ -162,33 +167,56 @@ impl Unit {
     }
 }
 
-/// Stable code of a feature set. Codes 1 and 2 equal the authors' `input_type`; 3–5 are reserved for
-/// their other input types; 6 is the June 2024 `[s, θ]` model.
+/// Stable code of a feature set. Codes 1–4 equal the authors' `input_type`; 5 is reserved for their
+/// input type 5; 6 is the June 2024 `[s, θ]` model; 7 and 8 need no motor encoder.
 pub fn feature_set_code(set: FeatureSet) -> u16 {
     match set {
         FeatureSet::DeltaThetaJointVel => 1,
         FeatureSet::MotorVelJointVel => 2,
+        FeatureSet::DeltaThetaMotorVelJointVel => 3,
+        FeatureSet::DeltaThetaJointPosJointVel => 4,
         FeatureSet::JointPosMotorPos => 6,
+        FeatureSet::JointPosJointVel => 7,
+        FeatureSet::JointVel => 8,
     }
 }
 
 /// Feature set for a code, if known.
 pub fn feature_set_from_code(code: u16) -> Option<FeatureSet> {
-    Some(match code {
-        1 => FeatureSet::DeltaThetaJointVel,
-        2 => FeatureSet::MotorVelJointVel,
-        6 => FeatureSet::JointPosMotorPos,
-        _ => return None,
-    })
+    FeatureSet::ALL
+        .into_iter()
+        .find(|&s| feature_set_code(s) == code)
+}
+
+/// Stable code of one feature block (`block_features`; 0 marks an unused slot).
+pub fn feature_code(f: Feature) -> u8 {
+    match f {
+        Feature::DeltaThetaMotorRad => 1,
+        Feature::JointVelRadS => 2,
+        Feature::MotorVelRadS => 3,
+        Feature::JointPosRad => 4,
+        Feature::MotorPosRad => 5,
+    }
+}
+
+/// Feature for a block code, if known.
+pub fn feature_from_code(code: u8) -> Option<Feature> {
+    Feature::ALL.into_iter().find(|&f| feature_code(f) == code)
+}
+
+/// The unit of a feature block's values.
+pub fn feature_unit(f: Feature) -> Unit {
+    match f {
+        Feature::DeltaThetaMotorRad | Feature::MotorPosRad => Unit::MotorRad,
+        Feature::JointVelRadS => Unit::JointRadS,
+        Feature::MotorVelRadS => Unit::MotorRadS,
+        Feature::JointPosRad => Unit::JointRad,
+    }
 }
 
 /// Units of the blocks of a feature set, in block order.
-pub fn block_units(set: FeatureSet) -> &'static [Unit] {
-    match set {
-        FeatureSet::DeltaThetaJointVel => &[Unit::MotorRad, Unit::JointRadS],
-        FeatureSet::MotorVelJointVel => &[Unit::MotorRadS, Unit::JointRadS],
-        FeatureSet::JointPosMotorPos => &[Unit::JointRad, Unit::MotorRad],
-    }
+pub fn block_units(set: FeatureSet) -> Vec<Unit> {
+    set.blocks().iter().map(|&f| feature_unit(f)).collect()
 }
 
 /// The unit of the network output: joint-side friction torque.
@@ -305,14 +333,31 @@ mod tests {
             }
         }
         assert_eq!(seen, 6);
+        for c in 0..=255u8 {
+            if let Some(f) = feature_from_code(c) {
+                assert_eq!(feature_code(f), c);
+                assert_eq!(feature_unit(f).symbol(), f.unit(), "{f}");
+            }
+        }
+        assert_eq!(feature_from_code(0), None, "0 means an unused slot");
         assert_eq!(Unit::from_code(0), None, "0 means an unused slot");
+        let mut sets = 0;
         for c in 0..=u16::MAX {
             if let Some(s) = feature_set_from_code(c) {
                 assert_eq!(feature_set_code(s), c);
-                assert_eq!(block_units(s).len(), 2);
+                assert_eq!(block_units(s).len(), s.n_blocks());
+                assert!(s.n_blocks() <= MAX_BLOCKS);
+                sets += 1;
             }
         }
-        assert_eq!(feature_set_from_code(3), None, "reserved for input_type 3");
+        assert_eq!(sets, FeatureSet::ALL.len(), "every set has its own code");
+        // The authors' input types keep their numbers; the v1.0 codes are unchanged.
+        assert_eq!(feature_set_code(FeatureSet::DeltaThetaJointVel), 1);
+        assert_eq!(feature_set_code(FeatureSet::MotorVelJointVel), 2);
+        assert_eq!(feature_set_code(FeatureSet::DeltaThetaMotorVelJointVel), 3);
+        assert_eq!(feature_set_code(FeatureSet::DeltaThetaJointPosJointVel), 4);
+        assert_eq!(feature_set_code(FeatureSet::JointPosMotorPos), 6);
+        assert_eq!(feature_set_from_code(5), None, "reserved for input_type 5");
     }
 
     #[test]
@@ -349,7 +394,8 @@ mod tests {
             (off::CREATED, 8),
             (off::JOINT_NAME, JOINT_NAME_MAX + 1),
             (off::TOOL_VERSION, TOOL_VERSION_MAX + 1),
-            (off::RESERVED_B, 40),
+            (off::BLOCK_FEATURES, MAX_BLOCKS),
+            (off::RESERVED_B, 32),
         ];
         let mut at = 0;
         for (o, size) in fields {

@@ -63,6 +63,7 @@
 
 use std::path::{Path, PathBuf};
 
+use frictionless::features::{FeatureSpec, Signal};
 use frictionless_shm_types::MAX_JOINTS;
 use frictionless_shm_types::can::busload;
 use frictionless_shm_types::can::mit::MitRanges;
@@ -668,7 +669,13 @@ pub const KT_REL_TOLERANCE: f64 = 1e-6;
 /// the other joint's). A file with an empty joint name (provenance unknown, e.g. an ONNX import without
 /// `--joint`) is checked on the gear ratio and k_t only.
 pub fn check_model_file(path: &Path, joint: &JointConfig) -> Result<(), String> {
+    check_model(path, joint).map(|_| ())
+}
+
+/// [`check_model_file`], returning the model's input features.
+fn check_model(path: &Path, joint: &JointConfig) -> Result<FeatureSpec, String> {
     let m = frictionless::weights::read_file(path).map_err(|e| e.to_string())?;
+    let features = m.meta.features;
     let r = m.meta.gear_ratio.get();
     let gear_ratio = joint.gear_ratio;
     if (r - gear_ratio).abs() > 1e-9 * gear_ratio.abs() {
@@ -683,7 +690,7 @@ pub fn check_model_file(path: &Path, joint: &JointConfig) -> Result<(), String> 
                 "model is for joint {name:?}, config says model_for = {model_for:?}"
             ));
         }
-        return Ok(());
+        return Ok(features);
     }
     let kt = m.meta.kt_nm_per_a;
     // Both are finite: the file's k_t is validated by the reader, the config's before this call.
@@ -697,6 +704,90 @@ pub fn check_model_file(path: &Path, joint: &JointConfig) -> Result<(), String> 
         return Err(format!(
             "model is for joint {name:?}, config says name = {:?} (to run another joint's model, set model_for = {name:?})",
             joint.name
+        ));
+    }
+    Ok(features)
+}
+
+/// Where the daemon's value of one [`JointStates`](frictionless_shm_types::JointStates) field comes
+/// from, for a joint on a given backend.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SignalSupply {
+    /// Written by the shared-memory publisher (the robot's own software): whatever it measures; a
+    /// field it does not have is NaN there, which the config cannot know.
+    Publisher,
+    /// Measured by the drive and decoded from its feedback frames.
+    Measured,
+    /// Computed from another measured field of the same drive (s = θ/r, ṡ = ω/r with the signed
+    /// gear ratio r: the drive has only a motor-side encoder, so the transmission is taken as rigid).
+    DerivedFrom(Signal),
+    /// Not supplied: NaN in every tick.
+    Absent,
+}
+
+impl std::fmt::Display for SignalSupply {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SignalSupply::Publisher => f.write_str("written by the shared-memory publisher"),
+            SignalSupply::Measured => f.write_str("measured by the drive"),
+            SignalSupply::DerivedFrom(from) => {
+                write!(f, "derived from `{from}` (rigid transmission)")
+            }
+            SignalSupply::Absent => f.write_str("not supplied"),
+        }
+    }
+}
+
+/// What `backend` (and, for CAN, the bus's `protocol`) supplies for `signal`. Both CAN protocols
+/// report motor-side position and velocity only (MIT reply: p, v, i; ODrive Get_Encoder_Estimates:
+/// pos, vel in motor rev) and no temperature the daemon decodes.
+pub fn signal_supply(
+    backend: BackendKind,
+    protocol: Option<CanProtocol>,
+    signal: Signal,
+) -> SignalSupply {
+    match (backend, protocol) {
+        (BackendKind::Shm, _) | (BackendKind::Can, None) => SignalSupply::Publisher,
+        (BackendKind::Can, Some(CanProtocol::Mit | CanProtocol::Odrive)) => match signal {
+            Signal::MotorPosRad | Signal::MotorVelRadS => SignalSupply::Measured,
+            Signal::JointPosRad => SignalSupply::DerivedFrom(Signal::MotorPosRad),
+            Signal::JointVelRadS => SignalSupply::DerivedFrom(Signal::MotorVelRadS),
+            Signal::TemperatureC => SignalSupply::Absent,
+        },
+    }
+}
+
+/// Checks that the backend can supply every input of a PINN joint's model: each field the feature
+/// spec reads must be supplied, and Δθ = r·s − θ needs a joint position that is not derived from the
+/// motor encoder (derived, Δθ is the latched constant and carries no deflection). Returns the
+/// message naming joint, set and field.
+pub fn check_model_inputs(
+    joint: &str,
+    spec: &FeatureSpec,
+    backend: BackendKind,
+    protocol: Option<CanProtocol>,
+) -> Result<(), String> {
+    let where_ = match (backend, protocol) {
+        (BackendKind::Can, Some(CanProtocol::Mit)) => "the can backend (protocol = \"mit\")",
+        (BackendKind::Can, Some(CanProtocol::Odrive)) => "the can backend (protocol = \"odrive\")",
+        (BackendKind::Can, None) => "the can backend",
+        (BackendKind::Shm, _) => "the shm backend",
+    };
+    for signal in spec.required_signals() {
+        if signal_supply(backend, protocol, signal) == SignalSupply::Absent {
+            return Err(format!(
+                "joint {joint}: feature set `{}` ({spec}) needs `{signal}`, which {where_} does not supply",
+                spec.set
+            ));
+        }
+    }
+    if spec.set.uses_delta_theta()
+        && let SignalSupply::DerivedFrom(from) =
+            signal_supply(backend, protocol, Signal::JointPosRad)
+    {
+        return Err(format!(
+            "joint {joint}: feature set `{}` ({spec}) needs `s_rad` from a joint-side encoder for Δθ = r·s − θ, but {where_} derives `s_rad` from `{from}` (s = θ/r): Δθ would be constant; use a set without Δθ (e.g. motor-vel-joint-vel, joint-pos-joint-vel)",
+            spec.set
         ));
     }
     Ok(())
@@ -871,6 +962,7 @@ pub fn parse(path: &Path, text: &str) -> Result<Config, ConfigError> {
     }
     let fs_hz = 1e6 / l.period_us as f64;
     let mut models = Vec::with_capacity(raw.joint.len());
+    let mut pinn_features = Vec::with_capacity(raw.joint.len());
     for (k, j) in raw.joint.iter().enumerate() {
         let key = |name: &str| format!("joint[{k}].{name}");
         if j.name.is_empty() {
@@ -927,9 +1019,30 @@ pub fn parse(path: &Path, text: &str) -> Result<Config, ConfigError> {
                 ));
             }
         }
-        models.push(model_spec(&c, base, k, j)?);
+        let (model, features) = model_spec(&c, base, k, j)?;
+        models.push(model);
+        pinn_features.push(features);
     }
     let buses = resolve_buses(&c, &raw, fs_hz)?;
+    // Every PINN's inputs must be suppliable by the joint's backend (and, on CAN, its bus protocol).
+    for (k, (j, features)) in raw.joint.iter().zip(&pinn_features).enumerate() {
+        let Some(spec) = features else { continue };
+        let protocol = buses
+            .iter()
+            .find(|b| b.joints.iter().any(|d| d.index == j.index))
+            .map(|b| b.protocol);
+        if let Err(message) = check_model_inputs(&j.name, spec, raw.backend.kind, protocol) {
+            let Some(ModelSpec::Pinn { path, .. }) = models.get(k) else {
+                continue;
+            };
+            return Err(ConfigError::Model {
+                file: c.file.to_path_buf(),
+                key: format!("joint[{k}].model"),
+                path: path.clone(),
+                message,
+            });
+        }
+    }
     let root_path = raw.backend.root_path.as_ref().map(|p| base.join(p));
     Ok(Config {
         file: path.to_path_buf(),
@@ -1278,12 +1391,13 @@ fn check_interface(c: &Checker, key: &str, name: &str) -> Result<(), ConfigError
     }
 }
 
+/// The joint's resolved model, and for a PINN the model file's input features.
 fn model_spec(
     c: &Checker,
     base: &Path,
     k: usize,
     j: &JointConfig,
-) -> Result<ModelSpec, ConfigError> {
+) -> Result<(ModelSpec, Option<FeatureSpec>), ConfigError> {
     use frictionless::friction::{CvParams, ScvParams, StaticFriction};
     let key = |name: &str| format!("joint[{k}].{name}");
     let need = |name: &str, v: Option<f64>| -> Result<f64, ConfigError> {
@@ -1327,7 +1441,7 @@ fn model_spec(
                 ("alpha", j.alpha.is_some()),
                 ("model", j.model.is_some()),
             ])?;
-            Ok(ModelSpec::None)
+            Ok((ModelSpec::None, None))
         }
         FrictionModelName::CoulombViscous => {
             forbid(&[
@@ -1342,7 +1456,7 @@ fn model_spec(
                 kv: need("kv", j.kv)?,
             };
             p.validate().map_err(param_err)?;
-            Ok(ModelSpec::Cv(p))
+            Ok((ModelSpec::Cv(p), None))
         }
         FrictionModelName::CoulombViscousStribeck => {
             forbid(&[("model", j.model.is_some())])?;
@@ -1355,7 +1469,7 @@ fn model_spec(
                 alpha: need("alpha", j.alpha)?,
             };
             p.validate().map_err(param_err)?;
-            Ok(ModelSpec::Scv(p))
+            Ok((ModelSpec::Scv(p), None))
         }
         FrictionModelName::Pinn => {
             forbid(&[
@@ -1374,16 +1488,19 @@ fn model_spec(
                 )
             })?;
             let path = base.join(rel);
-            check_model_file(&path, j).map_err(|message| ConfigError::Model {
+            let features = check_model(&path, j).map_err(|message| ConfigError::Model {
                 file: c.file.to_path_buf(),
                 key: key("model"),
                 path: path.clone(),
                 message,
             })?;
-            Ok(ModelSpec::Pinn {
-                path,
-                warmup: j.warmup,
-            })
+            Ok((
+                ModelSpec::Pinn {
+                    path,
+                    warmup: j.warmup,
+                },
+                Some(features),
+            ))
         }
     }
 }
@@ -1922,6 +2039,108 @@ joints = [{ joint = "ankle", node_id = 3, command_unit = "joint_torque" }]
         assert!(
             e.contains("joint[0].model") && e.contains("gear_ratio"),
             "{e}"
+        );
+    }
+
+    /// A random `.fwt` for joint `name` (gear ratio `r`, k_t `kt`) with the given inputs, in a
+    /// scratch dir.
+    fn joint_model(name: &str, r: f64, kt: f64, spec: FeatureSpec) -> PathBuf {
+        use frictionless::random::{RandomMlpSpec, seeded_mlp};
+        use frictionless::weights::{ModelFile, ModelMeta, TrainingMeta};
+        let dir =
+            std::env::temp_dir().join(format!("frictiond_config_inputs_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join(format!("{name}_{}_{}.fwt", spec.set, spec.temperature));
+        let file = ModelFile {
+            meta: ModelMeta {
+                joint_name: name.into(),
+                gear_ratio: frictionless::units::GearRatio::new(r).unwrap(),
+                kt_nm_per_a: kt,
+                features: spec,
+                scv: None,
+                training: TrainingMeta::unknown("config test", 0),
+            },
+            dtype: frictionless::mlp::StorageDtype::F32,
+            mlp: seeded_mlp(&RandomMlpSpec::new(&[spec.n_inputs(), 4, 1]), 1).unwrap(),
+        };
+        frictionless::weights::write_file(&path, &file).unwrap();
+        path
+    }
+
+    /// Issue 13: a PINN whose inputs the backend cannot supply is refused at load (`--check`,
+    /// reload) naming joint, set and field: both CAN protocols report motor-side values only (joint
+    /// values derived, so Δθ carries nothing) and no temperature; shm takes what the publisher writes.
+    #[test]
+    fn models_whose_inputs_the_backend_cannot_supply_are_refused() {
+        use frictionless::features::FeatureSet;
+        // CAN: knee (joint 0) on the MIT bus, ankle (joint 1) on the ODrive bus.
+        let can_pinn = |model: &Path, k: usize| {
+            let none = "friction_model = \"none\"";
+            let pinn = format!("friction_model = \"pinn\"\nmodel = \"{}\"", model.display());
+            let mut parts: Vec<&str> = CAN.split(none).collect();
+            let tail = parts.split_off(k + 1);
+            format!("{}{pinn}{}", parts.join(none), tail.join(none))
+        };
+        for set in FeatureSet::ALL {
+            for temperature in [false, true] {
+                let spec = FeatureSpec {
+                    set,
+                    history: 3,
+                    temperature,
+                };
+                let m = joint_model("knee", -100.0, 0.157, spec);
+                let ankle = joint_model("ankle", 160.0, 0.0665, spec);
+                let shm = format!(
+                    "[backend]\nkind = \"shm\"\n{}",
+                    pinn_joint("knee", 0.157, m.to_str().unwrap())
+                );
+                p(&shm).unwrap_or_else(|e| panic!("shm runs {spec}: {e}"));
+                for (k, model, name, protocol) in
+                    [(0, &m, "knee", "mit"), (1, &ankle, "ankle", "odrive")]
+                {
+                    let r = p(&can_pinn(model, k));
+                    let why = format!("{spec} on {protocol}");
+                    if set.uses_delta_theta() || temperature {
+                        let e = r.expect_err(&why).to_string();
+                        // A missing field is reported before the derived joint position.
+                        let field = if temperature {
+                            "`temperature_c`"
+                        } else {
+                            "`s_rad`"
+                        };
+                        assert!(
+                            e.contains(&format!("joint[{k}].model"))
+                                && e.contains(&format!("joint {name}"))
+                                && e.contains(&format!("`{set}`"))
+                                && e.contains(field)
+                                && e.contains(protocol),
+                            "{why}: {e}"
+                        );
+                    } else {
+                        r.unwrap_or_else(|e| panic!("{why}: {e}"));
+                    }
+                }
+            }
+        }
+        assert_eq!(
+            signal_supply(
+                BackendKind::Can,
+                Some(CanProtocol::Odrive),
+                Signal::JointVelRadS
+            ),
+            SignalSupply::DerivedFrom(Signal::MotorVelRadS)
+        );
+        assert_eq!(
+            signal_supply(
+                BackendKind::Can,
+                Some(CanProtocol::Mit),
+                Signal::MotorPosRad
+            ),
+            SignalSupply::Measured
+        );
+        assert_eq!(
+            signal_supply(BackendKind::Shm, None, Signal::TemperatureC),
+            SignalSupply::Publisher
         );
     }
 }

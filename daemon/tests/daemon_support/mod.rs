@@ -43,6 +43,26 @@ pub fn frictl_path() -> PathBuf {
     dir.join("frictl")
 }
 
+/// [`frictl_path`], or `None` if it was not built: the test is then skipped with a message when
+/// `FRICTIONLESS_REFS` is unset, and fails when it is set (the full test run builds it).
+pub fn frictl_bin() -> Option<PathBuf> {
+    let bin = frictl_path();
+    if bin.exists() {
+        return Some(bin);
+    }
+    if std::env::var_os("FRICTIONLESS_REFS").is_some() {
+        panic!(
+            "{} not found: tests/run.sh builds it (`cargo build --workspace --bins`)",
+            bin.display()
+        );
+    }
+    eprintln!(
+        "skipped: {} not found (run tests/run.sh, or `cargo build -p frictl`)",
+        bin.display()
+    );
+    None
+}
+
 /// A per-test directory, iceoryx2 root path and service prefix; removed on drop.
 pub struct TestEnv {
     /// Scratch directory (config files, sockets, reports).

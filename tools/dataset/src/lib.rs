@@ -439,7 +439,98 @@ impl From<&ColumnDoc> for ColumnDocOwned {
     }
 }
 
+/// Why a dataset cannot feed a model's inputs: a column the feature spec reads is absent or not
+/// finite where it would be used. Names the column and the spec (set, H, temperature).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum InputColumnError {
+    /// The sidecar lists the column in `absent_columns` (the source log did not have it).
+    #[error(
+        "column `{column}` is absent from this dataset (sidecar `absent_columns`), but feature set `{set}` ({spec}) needs it; choose a set that does not read it (e.g. joint-pos-joint-vel or joint-vel without a motor encoder)"
+    )]
+    Absent {
+        /// Dataset column (= `JointSample` field).
+        column: &'static str,
+        /// The feature set's name.
+        set: &'static str,
+        /// The whole spec, rendered (`joint-vel H=30 +temperature`).
+        spec: String,
+    },
+    /// The column is NaN or infinite in rows the inputs would be built from.
+    #[error(
+        "column `{column}` is not finite in {rows} of {used} valid rows (first at row {first_row}), but feature set `{set}` ({spec}) needs it"
+    )]
+    NonFinite {
+        /// Dataset column (= `JointSample` field).
+        column: &'static str,
+        /// The feature set's name.
+        set: &'static str,
+        /// The whole spec, rendered.
+        spec: String,
+        /// Valid rows where it is not finite.
+        rows: usize,
+        /// Valid rows in the dataset.
+        used: usize,
+        /// 0-based data row of the first one.
+        first_row: usize,
+    },
+}
+
 impl Dataset {
+    /// The values of the column a [`Signal`](frictionless::features::Signal) names.
+    pub fn signal_column(&self, signal: frictionless::features::Signal) -> &[f64] {
+        use frictionless::features::Signal;
+        match signal {
+            Signal::JointPosRad => &self.s_rad,
+            Signal::JointVelRadS => &self.sdot_rad_s,
+            Signal::MotorPosRad => &self.theta_motor_rad,
+            Signal::MotorVelRadS => &self.omega_motor_rad_s,
+            Signal::TemperatureC => &self.temperature_c,
+        }
+    }
+
+    /// Checks that every column `spec` reads ([`FeatureSpec::required_signals`]) is present (not in
+    /// `absent_columns`, the sidecar's list) and finite in every `valid` row. Columns the spec does
+    /// not read are not looked at: a torque-sensed dataset with NaN motor angle, velocity and
+    /// current feeds `joint-pos-joint-vel` and `joint-vel`.
+    ///
+    /// [`FeatureSpec::required_signals`]: frictionless::features::FeatureSpec::required_signals
+    pub fn check_inputs(
+        &self,
+        spec: &frictionless::features::FeatureSpec,
+        absent_columns: &[String],
+    ) -> Result<(), InputColumnError> {
+        let used = self.valid.iter().filter(|v| **v).count();
+        for signal in spec.required_signals() {
+            let column = signal.field();
+            if absent_columns.iter().any(|c| c == column) {
+                return Err(InputColumnError::Absent {
+                    column,
+                    set: spec.set.name(),
+                    spec: spec.to_string(),
+                });
+            }
+            let values = self.signal_column(signal);
+            let mut bad = self
+                .valid
+                .iter()
+                .zip(values)
+                .enumerate()
+                .filter(|(_, (v, x))| **v && !x.is_finite())
+                .map(|(k, _)| k);
+            if let Some(first_row) = bad.next() {
+                return Err(InputColumnError::NonFinite {
+                    column,
+                    set: spec.set.name(),
+                    spec: spec.to_string(),
+                    rows: 1 + bad.count(),
+                    used,
+                    first_row,
+                });
+            }
+        }
+        Ok(())
+    }
+
     /// The model input sample of row `k` (what `frictiond` would read from `JointStates` at that
     /// instant). Shared by training and evaluation so both feed `History` identically.
     pub fn joint_sample(&self, k: usize) -> frictionless::features::JointSample {
@@ -640,6 +731,114 @@ mod ryu_like {
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+    use frictionless::features::{FeatureSet, FeatureSpec};
+
+    /// A torque-sensed dataset: no motor encoder, no current, no temperature sensor.
+    fn torque_sensed(n: usize) -> Dataset {
+        let nan = vec![f64::NAN; n];
+        Dataset {
+            time_s: (0..n).map(|k| k as f64 * 1e-3).collect(),
+            chunk: vec![0; n],
+            source_chunk: vec![0; n],
+            active: vec![true; n],
+            valid: vec![true; n],
+            s_rad: (0..n).map(|k| k as f64 * 1e-4).collect(),
+            sdot_rad_s: vec![0.1; n],
+            sddot_rad_s2: vec![0.0; n],
+            theta_motor_rad: nan.clone(),
+            delta_theta_motor_rad: nan.clone(),
+            omega_motor_rad_s: nan.clone(),
+            i_meas_a: nan.clone(),
+            i_filt_a: nan.clone(),
+            tau_id_nm: vec![0.0; n],
+            tau_f_label_nm: vec![0.5; n],
+            temperature_c: nan,
+            tau_f_true_nm: None,
+            phi_ddot_rad_s2: None,
+        }
+    }
+
+    fn spec(set: FeatureSet, temperature: bool) -> FeatureSpec {
+        FeatureSpec {
+            set,
+            history: 4,
+            temperature,
+        }
+    }
+
+    #[test]
+    fn check_inputs_refuses_only_the_columns_a_set_reads() {
+        let mut ds = torque_sensed(10);
+        let absent: Vec<String> = ["theta_motor_rad", "omega_motor_rad_s", "temperature_c"]
+            .map(String::from)
+            .to_vec();
+        for set in [FeatureSet::JointPosJointVel, FeatureSet::JointVel] {
+            ds.check_inputs(&spec(set, false), &absent).unwrap();
+            ds.check_inputs(&spec(set, false), &[]).unwrap();
+        }
+        // Listed absent: named with the set.
+        let e = ds
+            .check_inputs(&spec(FeatureSet::DeltaThetaJointVel, false), &absent)
+            .unwrap_err();
+        assert_eq!(
+            e,
+            InputColumnError::Absent {
+                column: "theta_motor_rad",
+                set: "delta-theta-joint-vel",
+                spec: "delta-theta-joint-vel H=4".into()
+            }
+        );
+        assert!(e.to_string().contains("`theta_motor_rad`"));
+        assert!(e.to_string().contains("`delta-theta-joint-vel`"));
+        let e = ds
+            .check_inputs(&spec(FeatureSet::JointVel, true), &absent)
+            .unwrap_err();
+        assert!(matches!(
+            e,
+            InputColumnError::Absent {
+                column: "temperature_c",
+                set: "joint-vel",
+                ..
+            }
+        ));
+        // Not listed, but NaN in valid rows: counted, first row named.
+        let e = ds
+            .check_inputs(&spec(FeatureSet::MotorVelJointVel, false), &[])
+            .unwrap_err();
+        assert!(matches!(
+            e,
+            InputColumnError::NonFinite {
+                column: "omega_motor_rad_s",
+                rows: 10,
+                used: 10,
+                first_row: 0,
+                ..
+            }
+        ));
+        // A NaN in an invalid row is not used.
+        ds.sdot_rad_s[3] = f64::NAN;
+        ds.valid[3] = false;
+        ds.check_inputs(&spec(FeatureSet::JointVel, false), &[])
+            .unwrap();
+        ds.valid[3] = true;
+        let e = ds
+            .check_inputs(&spec(FeatureSet::JointVel, false), &[])
+            .unwrap_err();
+        assert!(matches!(
+            e,
+            InputColumnError::NonFinite {
+                column: "sdot_rad_s",
+                rows: 1,
+                first_row: 3,
+                ..
+            }
+        ));
+    }
+}
+
+#[cfg(test)]
+mod run_tests {
     use super::*;
 
     fn ds(chunks: &[u32], s: &[f64], v: &[f64]) -> Dataset {

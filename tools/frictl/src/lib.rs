@@ -10,7 +10,8 @@
 //! What this library **is**, on top of those:
 //! - [`serve`]: the virtual joints as a plant process (shared memory, SocketCAN);
 //! - [`eval`]: model evaluation on datasets, with figures;
-//! - [`experiment`]: closed-loop experiments against a running `frictiond`.
+//! - [`experiment`]: closed-loop experiments against a running `frictiond`;
+//! - [`robot`]: the robot-level pipeline description (`frictl robot run ROBOT.toml`).
 //!
 //! What it is **not**: the real-time daemon; it never depends on it (experiments start `frictiond` as a
 //! process).
@@ -54,4 +55,5 @@
 
 pub mod eval;
 pub mod experiment;
+pub mod robot;
 pub mod serve;

@@ -3,7 +3,8 @@
 //! What it **is**: one command-line tool for everything that is not the 1 kHz loop: the virtual
 //! harmonic-drive joints and their plant process (`sim`), data acquisition with the paper's excitation
 //! protocol (`acquire`), URDF rigid-body dynamics (`dynamics`), the label pipeline (`preprocess`),
-//! CV/SCV fitting (`fit`), PINN training and hyper-parameter search (`train`, `search`), model import,
+//! CV/SCV fitting (`fit`), PINN training and hyper-parameter search (`train`, `search`), a whole robot
+//! from one TOML file (`robot`; trials on a Ray cluster through `python/ray/frictl_ray.py`), model import,
 //! export and inspection (`import`, `export`, `convert`, `inspect`, `predict`), evaluation (`eval`),
 //! the paper's closed-loop experiments (`experiment`), live views of a running daemon (`monitor`,
 //! `record`), CAN tools (`can`) and the end-to-end `demo`.
@@ -48,7 +49,9 @@ enum Command {
     /// Train the physics-informed network.
     Train(cmd::train::Args),
     /// Random hyper-parameter search over the paper's ranges.
-    Search(cmd::search::Args),
+    Search(cmd::search::Cli),
+    /// A whole robot from one TOML file: every joint's pipeline, one frictiond config, a report.
+    Robot(cmd::robot::Args),
     /// Evaluate none/CV/SCV/PINN on held-out runs.
     Eval(cmd::eval::Args),
     /// Run the paper's closed-loop experiments against the virtual joints.
@@ -77,7 +80,8 @@ fn main() -> std::process::ExitCode {
         Command::Preprocess(a) => cmd::preprocess::run(a),
         Command::Fit(a) => cmd::fit::run(a),
         Command::Train(a) => cmd::train::run(a),
-        Command::Search(a) => cmd::search::run(a),
+        Command::Search(a) => cmd::search::run_cli(a),
+        Command::Robot(a) => cmd::robot::run(a),
         Command::Eval(a) => cmd::eval::run(a),
         Command::Experiment(a) => cmd::experiment::run(a),
         Command::Monitor(a) => cmd::monitor::run(a),

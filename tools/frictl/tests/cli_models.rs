@@ -295,7 +295,7 @@ fn export_and_reimport_keep_outputs_and_metadata() {
         assert_eq!(v["joint_name"], "l_ankle_roll");
         assert_eq!(v["gear_ratio"], -160.0);
         assert_eq!(v["kt_nm_per_a"], 0.066468037);
-        assert_eq!(v["features"]["set"], "joint_pos_motor_pos");
+        assert_eq!(v["features"]["set"], "joint-pos-motor-pos");
     }
 }
 
@@ -463,4 +463,100 @@ fn outputs_that_are_inputs_or_in_missing_dirs_are_refused_before_work() {
         );
     }
     assert!(!missing.exists());
+}
+
+/// `import onnx --features` takes the hyphenated names (the one printed spelling) of every set,
+/// including the ones for robots without a motor encoder; `inspect` prints the blocks with units.
+#[test]
+fn import_accepts_hyphenated_feature_sets_and_inspect_names_the_blocks() {
+    let dir = scratch("hyphen");
+    let anchor = anchor_onnx();
+    // The anchor network takes 50 inputs: two blocks of H = 25.
+    for (set, blocks) in [
+        (
+            "joint-pos-joint-vel",
+            "joint-pos [rad] ×25, joint-vel [rad/s] ×25",
+        ),
+        (
+            "joint_pos_joint_vel",
+            "joint-pos [rad] ×25, joint-vel [rad/s] ×25",
+        ),
+        (
+            "motor-vel-joint-vel",
+            "motor-vel [motor rad/s] ×25, joint-vel [rad/s] ×25",
+        ),
+    ] {
+        let out = dir.join(format!("{set}.fwt"));
+        let o = frictl(&[
+            "import",
+            "onnx",
+            s(&anchor),
+            "-o",
+            s(&out),
+            "--features",
+            set,
+            "--joint",
+            "j",
+            "--gear-ratio",
+            "-160",
+            "--kt",
+            "0.07",
+        ]);
+        assert!(o.status.success(), "{set}: {}", stderr(&o));
+        let canonical = set.replace('_', "-");
+        let o = frictl(&["inspect", s(&out), "--json"]);
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(v["features"]["set"], canonical.as_str());
+        let o = frictl(&["inspect", s(&out)]);
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            text.contains(&format!("features       {canonical}, H = 25")),
+            "{text}"
+        );
+        assert!(text.contains(&format!("blocks         {blocks}")), "{text}");
+    }
+    // joint-vel has one block: 50 inputs are H = 50.
+    let out = dir.join("joint-vel.fwt");
+    let o = frictl(&[
+        "import",
+        "onnx",
+        s(&anchor),
+        "-o",
+        s(&out),
+        "--features",
+        "joint-vel",
+        "--joint",
+        "j",
+        "--gear-ratio",
+        "-160",
+        "--kt",
+        "0.07",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = frictl(&["inspect", s(&out), "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["features"]["set"], "joint-vel");
+    assert_eq!(v["features"]["history"], 50);
+    // An unknown name is refused by clap, listing the hyphenated names.
+    let o = frictl(&[
+        "import",
+        "onnx",
+        s(&anchor),
+        "-o",
+        s(&dir.join("bad.fwt")),
+        "--features",
+        "joint-torque",
+        "--joint",
+        "j",
+        "--gear-ratio",
+        "-160",
+        "--kt",
+        "0.07",
+    ]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(
+        err.contains("joint-pos-joint-vel") && !err.contains("joint_pos_joint_vel"),
+        "{err}"
+    );
 }

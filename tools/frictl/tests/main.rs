@@ -16,6 +16,7 @@ mod experiment_oracle;
 #[path = "../../interop/tests/interop_common/mod.rs"]
 mod interop_common;
 mod plant_common;
+mod robot_cli;
 mod search_cli;
 mod sim_serve_shm;
 mod train_cli;

@@ -478,3 +478,180 @@ fn bad_inputs_give_errors_naming_file_key_and_value() {
     let e = err_text(train(&out, &["--history", "0"]), "H = 0");
     assert!(e.contains("--history") && e.contains("H = 0"), "{e}");
 }
+
+/// A torque-sensed copy of the fixture: no motor encoder, no current, no temperature sensor (NaN in
+/// every row), listed in the sidecar's `absent_columns`.
+fn torque_sensed_dataset(name: &str) -> PathBuf {
+    let f = fixture();
+    let mut ds = Dataset::read_csv(&f.ds).unwrap();
+    for col in [
+        &mut ds.theta_motor_rad,
+        &mut ds.omega_motor_rad_s,
+        &mut ds.delta_theta_motor_rad,
+        &mut ds.i_meas_a,
+        &mut ds.i_filt_a,
+        &mut ds.temperature_c,
+    ] {
+        col.fill(f64::NAN);
+    }
+    let out = f.dir.join(format!("{name}.csv"));
+    ds.write_csv(&out).unwrap();
+    let mut side: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(f.ds.with_extension("json")).unwrap())
+            .unwrap();
+    side["absent_columns"] = serde_json::json!([
+        "theta_motor_rad",
+        "omega_motor_rad_s",
+        "delta_theta_motor_rad",
+        "i_meas_a",
+        "i_filt_a",
+        "temperature_c"
+    ]);
+    std::fs::write(out.with_extension("json"), side.to_string()).unwrap();
+    out
+}
+
+/// Issue 13: `joint-pos-joint-vel` and `joint-vel` train, fit and evaluate end to end on a dataset
+/// whose motor-side columns are NaN throughout; a set that reads one of them is refused naming the
+/// column and the set; the `.fwt` names its blocks and reproduces the trainer through the daemon's
+/// estimator.
+#[test]
+fn sets_without_motor_encoder_train_on_a_torque_sensed_dataset() {
+    let f = fixture();
+    let ds_path = torque_sensed_dataset("torque_sensed");
+    // The SCV fit reads only ṡ and the label.
+    let scv = f.dir.join("torque_sensed_scv.json");
+    ok(
+        frictl(&["fit", "scv", s(&ds_path), "--json", s(&scv)]),
+        "fit scv on NaN motor columns",
+    );
+    let ds = Dataset::read_csv(&ds_path).unwrap();
+    for (set, blocks) in [
+        ("joint-pos-joint-vel", vec!["joint-pos", "joint-vel"]),
+        ("joint-vel", vec!["joint-vel"]),
+    ] {
+        let out = f.dir.join(format!("ts_{set}.fwt"));
+        ok(
+            train(
+                &out,
+                &[
+                    "--dataset",
+                    s(&ds_path),
+                    "--scv",
+                    s(&scv),
+                    "--features",
+                    set,
+                ],
+            ),
+            set,
+        );
+        let file = read_file(&out).unwrap();
+        let spec = file.meta.features;
+        assert_eq!(spec.set.name(), set);
+        assert_eq!(spec.n_inputs(), 5 * blocks.len());
+        let names: Vec<&str> = spec.set.blocks().iter().map(|b| b.name()).collect();
+        assert_eq!(names, blocks);
+        assert!(file.meta.training.val_rmse_nm.is_finite());
+        let report: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(out.with_extension("train.json")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(report["features"]["set"], set);
+        assert!(
+            report["datasets"][0]["delta_theta_offset_motor_rad"].is_null(),
+            "no Δθ block, no offset to configure"
+        );
+        // Every sample of the daemon's path is finite and equals the trainer's batch inference.
+        let w = build_inputs(
+            &ds,
+            &spec,
+            file.meta.gear_ratio,
+            WarmupPolicy::HoldZero,
+            DeltaThetaOffset::Run,
+        )
+        .unwrap();
+        assert!(w.len() > 100, "{set}: {} samples", w.len());
+        assert_eq!(w.skipped_non_finite, 0, "NaN columns the set does not read");
+        let batched = Predictor::new(&file.mlp, 2).unwrap().predict(&w.x).unwrap();
+        let mut est = PinnEstimator::from_model_file(&file, WarmupPolicy::HoldZero).unwrap();
+        let mut worst = 0f64;
+        let mut i = 0;
+        for k in 0..ds.len() {
+            let smp = ds.joint_sample(k);
+            if k == 0 || ds.chunk[k] != ds.chunk[k - 1] {
+                est.reset(&smp);
+            }
+            let y = est.estimate(&smp);
+            if i < w.len() && w.rows[i] == k {
+                assert!(y.is_finite(), "{set} row {k}");
+                worst = worst.max((y - batched[i] as f64).abs());
+                i += 1;
+            }
+        }
+        assert_eq!(i, w.len());
+        assert!(
+            worst <= 1e-5,
+            "{set}: daemon path vs trainer differ by {worst} Nm"
+        );
+        // eval runs the PINN on the same dataset (and skips the Δθ hysteresis figure).
+        let json = f.dir.join(format!("ts_{set}_eval.json"));
+        ok(
+            frictl(&[
+                "eval",
+                "--dataset",
+                s(&ds_path),
+                "--scv",
+                s(&scv),
+                "--pinn",
+                s(&out),
+                "--json",
+                s(&json),
+            ]),
+            "eval",
+        );
+        let ev: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        assert!(ev.to_string().contains("rmse"), "{ev}");
+    }
+
+    // Sets that read a motor-side column, or the temperature, are refused naming column and set.
+    let out = f.dir.join("ts_refused.fwt");
+    for (extra, column, set) in [
+        (
+            vec!["--features", "delta-theta-joint-vel"],
+            "theta_motor_rad",
+            "delta-theta-joint-vel",
+        ),
+        (
+            vec!["--features", "motor-vel-joint-vel"],
+            "omega_motor_rad_s",
+            "motor-vel-joint-vel",
+        ),
+        (
+            vec!["--features", "joint-vel", "--temperature"],
+            "temperature_c",
+            "joint-vel",
+        ),
+    ] {
+        let mut args = vec!["--dataset", s(&ds_path), "--scv", s(&scv)];
+        args.extend(extra);
+        let e = err_text(train(&out, &args), column);
+        assert!(
+            e.contains(&format!("`{column}`")) && e.contains(&format!("`{set}`")),
+            "{e}"
+        );
+        assert!(e.contains("torque_sensed.csv"), "names the dataset: {e}");
+    }
+    assert!(!out.exists());
+    // eval refuses a PINN that reads a column the dataset lacks.
+    let dt = f.dir.join("ts_dt.fwt");
+    ok(train(&dt, &[]), "train delta-theta on the full fixture");
+    let e = err_text(
+        frictl(&["eval", "--dataset", s(&ds_path), "--pinn", s(&dt)]),
+        "eval of a delta-theta PINN on a torque-sensed dataset",
+    );
+    assert!(
+        e.contains("`theta_motor_rad`") && e.contains("`delta-theta-joint-vel`"),
+        "{e}"
+    );
+}

@@ -85,26 +85,6 @@ pub struct ModelHints {
     pub temperature: Option<bool>,
 }
 
-/// The snake_case name of a feature set, as used on the command line and in metadata.
-pub fn feature_set_name(set: FeatureSet) -> &'static str {
-    match set {
-        FeatureSet::DeltaThetaJointVel => "delta_theta_joint_vel",
-        FeatureSet::MotorVelJointVel => "motor_vel_joint_vel",
-        FeatureSet::JointPosMotorPos => "joint_pos_motor_pos",
-    }
-}
-
-/// Parses a feature-set name written by [`feature_set_name`]; `None` for anything else.
-pub fn parse_feature_set(name: &str) -> Option<FeatureSet> {
-    [
-        FeatureSet::DeltaThetaJointVel,
-        FeatureSet::MotorVelJointVel,
-        FeatureSet::JointPosMotorPos,
-    ]
-    .into_iter()
-    .find(|&s| feature_set_name(s) == name)
-}
-
 impl ModelHints {
     /// The hints a complete `.fwt` model carries.
     pub fn from_meta(meta: &ModelMeta) -> Self {
@@ -134,10 +114,7 @@ impl ModelHints {
         put("joint_name", self.joint_name.clone());
         put("gear_ratio", self.gear_ratio.map(|r| format!("{r:?}")));
         put("kt_nm_per_a", self.kt_nm_per_a.map(|k| format!("{k:?}")));
-        put(
-            "features",
-            self.features.map(|s| feature_set_name(s).to_string()),
-        );
+        put("features", self.features.map(|s| s.name().to_string()));
         put("history", self.history.map(|h| h.to_string()));
         put("temperature", self.temperature.map(|t| t.to_string()));
         v
@@ -156,7 +133,7 @@ impl ModelHints {
                 "joint_name" => h.joint_name = Some(v.clone()),
                 "gear_ratio" => h.gear_ratio = Some(v.parse().map_err(|_| bad())?),
                 "kt_nm_per_a" => h.kt_nm_per_a = Some(v.parse().map_err(|_| bad())?),
-                "features" => h.features = Some(parse_feature_set(v).ok_or_else(bad)?),
+                "features" => h.features = Some(FeatureSet::parse(v).map_err(|_| bad())?),
                 "history" => h.history = Some(v.parse().map_err(|_| bad())?),
                 "temperature" => h.temperature = Some(v.parse().map_err(|_| bad())?),
                 _ => {}
@@ -233,15 +210,23 @@ mod tests {
     }
 
     #[test]
-    fn feature_names_match_serde_names() {
-        for s in [
-            FeatureSet::DeltaThetaJointVel,
-            FeatureSet::MotorVelJointVel,
-            FeatureSet::JointPosMotorPos,
-        ] {
+    fn feature_names_are_the_core_names_and_old_files_still_parse() {
+        for s in FeatureSet::ALL {
+            let h = ModelHints {
+                features: Some(s),
+                ..ModelHints::default()
+            };
+            let pairs = h.to_pairs();
+            assert_eq!(
+                pairs,
+                vec![(format!("{META_PREFIX}features"), s.name().to_string())]
+            );
             let json = serde_json::to_string(&s).unwrap();
-            assert_eq!(json, format!("\"{}\"", feature_set_name(s)));
-            assert_eq!(parse_feature_set(feature_set_name(s)), Some(s));
+            assert_eq!(json, format!("\"{}\"", s.name()));
+            // Files exported before the hyphenated names carry the underscore spelling.
+            let mut map = BTreeMap::new();
+            map.insert(format!("{META_PREFIX}features"), s.name().replace('-', "_"));
+            assert_eq!(ModelHints::from_pairs(&map).unwrap().features, Some(s));
         }
     }
 }

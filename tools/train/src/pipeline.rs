@@ -29,10 +29,10 @@
 //! datasets[]        {path, sha256 (hex), samples, chunks, delta_theta_offset_motor_rad}
 //! dataset_sha256    hex, as stored in the .fwt
 //! scv               {path, model ("Cv" | "Scv" | "ScvCode"), params {kc, ka, kv, ks, vs, alpha} (paper form)}
-//! features          {set, history, temperature};  n_inputs;  warmup ("hold_zero" | "zero_pad")
+//! features          {set (e.g. "joint-vel"), history, temperature};  n_inputs;  warmup ("hold_zero" | "zero_pad")
 //! delta_theta_offset "run" | "chunk" | {"fixed": θ_off}: where Δθ was latched (see
 //!                   `data::DeltaThetaOffset`); datasets[].delta_theta_offset_motor_rad is the value
-//!                   (null per chunk) to configure in the daemon
+//!                   (null per chunk, or when the set has no Δθ block) to configure in the daemon
 //! config            {hidden[], dropout, lambda, lr, batch_size, epochs, seed, threads, patience, abort_loss}
 //! dtype             "f32" | "f16" | "bf16"
 //! split             {spec {val_frac, test_frac, seed, test_chunks}, train[], val[], test[] (each {dataset, chunk}),
@@ -108,6 +108,15 @@ pub enum PipelineError {
         /// Cause.
         #[source]
         source: DataError,
+    },
+    /// A dataset lacks a column the feature spec reads (absent, or not finite in valid rows).
+    #[error("{path}: {source}")]
+    InputColumn {
+        /// The dataset.
+        path: PathBuf,
+        /// Which column, and which set needs it.
+        #[source]
+        source: frictionless_dataset::InputColumnError,
     },
     /// The split options are not usable.
     #[error("split: {0}")]
@@ -478,6 +487,21 @@ fn list_chunks(c: &[ChunkKey]) -> String {
     }
 }
 
+/// Refuses a dataset that lacks a column `spec` reads: listed in its sidecar's `absent_columns`, or
+/// not finite in a valid row ([`frictionless_dataset::Dataset::check_inputs`]). Columns the spec
+/// does not read may be NaN throughout (a torque-sensed arm has no motor angle or current).
+pub fn check_inputs(sources: &Sources, spec: &FeatureSpec) -> Result<(), PipelineError> {
+    for s in &sources.list {
+        s.data
+            .check_inputs(spec, &s.sidecar.absent_columns)
+            .map_err(|source| PipelineError::InputColumn {
+                path: s.path.clone(),
+                source,
+            })?;
+    }
+    Ok(())
+}
+
 /// Builds the inputs of every dataset through the daemon's `History` and gathers the three sets.
 /// Errors if the training set, or a validation/test set with chunks, has no samples.
 pub fn prepare(
@@ -488,6 +512,7 @@ pub fn prepare(
     warmup: WarmupPolicy,
     offset: DeltaThetaOffset,
 ) -> Result<Prepared, PipelineError> {
+    check_inputs(sources, spec)?;
     let windows: Vec<Windows> = sources
         .list
         .iter()
@@ -584,7 +609,8 @@ pub struct DatasetInfo {
     /// Sidecar `chunks`.
     pub chunks: usize,
     /// The Δθ offset θ_off \[motor rad\] the inputs of this dataset were built with (`None` when
-    /// latched per chunk): the value for the daemon's `delta_theta_offset_motor_rad`.
+    /// latched per chunk, or when the feature set has no Δθ block): the value for the daemon's
+    /// `delta_theta_offset_motor_rad`.
     #[serde(default)]
     pub delta_theta_offset_motor_rad: Option<f64>,
 }
@@ -867,8 +893,14 @@ pub fn train_model(
                 samples: s.data.len(),
                 chunks: s.sidecar.chunks,
                 delta_theta_offset_motor_rad: job
-                    .delta_theta_offset
-                    .offset_for(&s.data, sources.gear_ratio),
+                    .spec
+                    .set
+                    .uses_delta_theta()
+                    .then(|| {
+                        job.delta_theta_offset
+                            .offset_for(&s.data, sources.gear_ratio)
+                    })
+                    .flatten(),
             })
             .collect(),
         dataset_sha256: hex(&sources.dataset_sha256),

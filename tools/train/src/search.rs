@@ -15,7 +15,16 @@
 //!
 //! Models are selected on validation RMSE only; the test RMSE is reported, never used to choose.
 //!
-//! What it is **not**: no Bayesian or early-pruning search strategy, no distributed workers.
+//! An external scheduler (a Ray cluster, a Slurm array, several shells) runs chosen trials with
+//! [`run_trials`] and publishes the tables with [`finish`]: the directory layout is the same, so a
+//! search started by [`run_search`] can be continued by trials run elsewhere and the other way round.
+//! Each result is appended as one `write(2)` of one line to a file opened with `O_APPEND`, so several
+//! processes on one machine (one local file system) may share `DIR`; a trial recorded twice (a retried
+//! task) counts once, an `ok` record winning over a `failed` one. The recorded settings are compared by
+//! content: dataset and SCV paths may differ between machines when their SHA-256 match.
+//!
+//! What it is **not**: no Bayesian or early-pruning search strategy, no scheduler of its own across
+//! machines (that is the cluster engine's job, see `docs/cluster.md`).
 
 use std::io::Write;
 use std::ops::ControlFlow;
@@ -166,6 +175,10 @@ pub struct SearchSettings {
     pub dataset_sha256: String,
     /// SCV JSON path.
     pub scv: String,
+    /// SHA-256 of the SCV JSON file (hex). When both the recorded and the current settings have it and
+    /// they match, the SCV path may differ (the same search on another machine).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scv_sha256: Option<String>,
 }
 
 /// How to run a search.
@@ -249,8 +262,14 @@ fn compare_settings(
 ) -> Result<(), SearchError> {
     let a = serde_json::to_value(rec).map_err(|e| ferr(path, e))?;
     let b = serde_json::to_value(now).map_err(|e| ferr(path, e))?;
+    // Paths name the content only on one machine; the hashes name it everywhere.
+    let same_scv = rec.scv_sha256.is_some() && rec.scv_sha256 == now.scv_sha256;
     if let (Some(a), Some(b)) = (a.as_object(), b.as_object()) {
         for (k, va) in a {
+            let one_scv_hash = rec.scv_sha256.is_none() || now.scv_sha256.is_none();
+            if k == "datasets" || (k == "scv_sha256" && one_scv_hash) || (k == "scv" && same_scv) {
+                continue;
+            }
             let vb = b.get(k).cloned().unwrap_or(serde_json::Value::Null);
             if *va != vb {
                 return Err(SearchError::Settings {
@@ -520,11 +539,33 @@ pub fn run_search(
     if let Some(e) = write_err {
         return Err(e);
     }
-    let mut all: Vec<TrialResult> = done
+    let all: Vec<TrialResult> = done
         .into_iter()
         .chain(finished.into_inner().unwrap_or_else(|e| e.into_inner()))
         .filter(|r| r.params.trial < run.trials)
         .collect();
+    publish(dir, all)
+}
+
+/// One record per trial: an `ok` record wins over a `failed` one, a later record over an earlier one
+/// of the same status (a trial run twice, e.g. a retried cluster task).
+pub fn dedup(results: Vec<TrialResult>) -> Vec<TrialResult> {
+    let mut by_trial: std::collections::BTreeMap<usize, TrialResult> = Default::default();
+    for r in results {
+        let keep_old = by_trial
+            .get(&r.params.trial)
+            .is_some_and(|old| old.status == "ok" && r.status != "ok");
+        if !keep_old {
+            by_trial.insert(r.params.trial, r);
+        }
+    }
+    by_trial.into_values().collect()
+}
+
+/// Ranks `all` (after [`dedup`]), writes `results.json` / `results.csv` and copies the best model to
+/// `best.fwt` (+ `best.train.json`).
+fn publish(dir: &Path, all: Vec<TrialResult>) -> Result<Vec<TrialResult>, SearchError> {
+    let mut all = dedup(all);
     rank(&mut all);
     write_tables(dir, &all)?;
     if let Some(best) = all.first().filter(|r| r.status == "ok")
@@ -540,6 +581,110 @@ pub fn run_search(
             .map_err(|e| ferr(&rdst, format!("cannot copy {}: {e}", rsrc.display())))?;
     }
     Ok(all)
+}
+
+/// `DIR/search.json`: written when absent (exclusive create, so concurrent starters agree on one),
+/// else compared with `settings` (paths may differ where the hashes match).
+fn claim_settings(dir: &Path, settings: &SearchSettings) -> Result<(), SearchError> {
+    let path = dir.join("search.json");
+    let json = serde_json::to_string_pretty(settings).map_err(|e| ferr(&path, e))?;
+    let tmp = dir.join(format!(".search.json.{}", std::process::id()));
+    std::fs::write(&tmp, &json).map_err(|e| ferr(&tmp, format!("cannot write: {e}")))?;
+    // link(2) fails if search.json exists: whoever links first defines the search. File systems
+    // without hard links get an exclusive create instead (a concurrent reader may then see it empty).
+    let linked = match std::fs::hard_link(&tmp, &path) {
+        Err(e) if e.kind() != std::io::ErrorKind::AlreadyExists => std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&path)
+            .and_then(|mut f| f.write_all(json.as_bytes())),
+        other => other,
+    };
+    let _ = std::fs::remove_file(&tmp);
+    match linked {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+            let text = std::fs::read_to_string(&path)
+                .map_err(|e| ferr(&path, format!("cannot read: {e}")))?;
+            let rec: SearchSettings = serde_json::from_str(&text).map_err(|e| ferr(&path, e))?;
+            compare_settings(&path, &rec, settings)
+        }
+        Err(e) => Err(ferr(&path, format!("cannot create: {e}"))),
+    }
+}
+
+/// Appends one result to `results.jsonl`: the file opened with `O_APPEND` and the line written by
+/// one `write(2)`, so lines of concurrent writers on one file system never interleave.
+pub fn append_result(path: &Path, r: &TrialResult) -> Result<(), SearchError> {
+    let line = serde_json::to_string(r).map_err(|e| ferr(path, e))? + "\n";
+    let mut f = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .map_err(|e| ferr(path, format!("cannot open: {e}")))?;
+    match f.write(line.as_bytes()) {
+        Ok(n) if n == line.len() => Ok(()),
+        Ok(n) => Err(ferr(
+            path,
+            format!("short append ({n} of {} bytes)", line.len()),
+        )),
+        Err(e) => Err(ferr(path, format!("cannot append: {e}"))),
+    }
+}
+
+/// Runs exactly the trials `trials` of the search in `dir` (the entry point of an external
+/// scheduler): `search.json` is written if absent, else must match `settings`; trials already in
+/// `results.jsonl` are skipped; each finished trial is appended as it ends, one after the other, each
+/// with `threads` threads. Writes no tables (see [`finish`]). Returns the trials run.
+pub fn run_trials(
+    sources: &Sources,
+    scv: &ScvPrior,
+    settings: &SearchSettings,
+    dir: &Path,
+    trials: &[usize],
+    threads: usize,
+    on_trial: impl Fn(&TrialResult),
+) -> Result<Vec<TrialResult>, SearchError> {
+    if settings.split.val_frac <= 0.0 {
+        return Err(SearchError::Usage(format!(
+            "--val-frac = {}: the search selects on validation RMSE and needs a validation set",
+            settings.split.val_frac
+        )));
+    }
+    std::fs::create_dir_all(dir.join("trials"))
+        .map_err(|e| ferr(&dir.join("trials"), format!("cannot create: {e}")))?;
+    claim_settings(dir, settings)?;
+    let results_path = dir.join("results.jsonl");
+    let done = read_results(&results_path)?;
+    let split = pipeline::split_for(sources, &settings.split)?;
+    let mut ran = Vec::new();
+    for &k in trials {
+        if done.iter().any(|r| r.params.trial == k)
+            || ran.iter().any(|r: &TrialResult| r.params.trial == k)
+        {
+            continue;
+        }
+        let p = draw(&settings.space, settings.seed, k);
+        let r = run_trial(dir, sources, scv, &split, settings, &p, threads.max(1));
+        append_result(&results_path, &r)?;
+        on_trial(&r);
+        ran.push(r);
+    }
+    Ok(ran)
+}
+
+/// Publishes the tables of whatever `dir/results.jsonl` holds (trials `< trials` when given):
+/// `results.json`, `results.csv`, `best.fwt` (+ `best.train.json`), as [`run_search`] does at its end.
+pub fn finish(dir: &Path, trials: Option<usize>) -> Result<Vec<TrialResult>, SearchError> {
+    let results_path = dir.join("results.jsonl");
+    if !results_path.is_file() {
+        return Err(ferr(&results_path, "no such file: not a search directory"));
+    }
+    let all = read_results(&results_path)?
+        .into_iter()
+        .filter(|r| trials.is_none_or(|n| r.params.trial < n))
+        .collect();
+    publish(dir, all)
 }
 
 #[cfg(test)]
@@ -590,5 +735,95 @@ mod tests {
         rank(&mut r);
         let order: Vec<usize> = r.iter().map(|t| t.params.trial).collect();
         assert_eq!(order, vec![2, 1, 0, 3]);
+    }
+
+    fn settings(datasets: &str, scv: &str, scv_sha: Option<&str>, epochs: usize) -> SearchSettings {
+        let mut v: serde_json::Value = serde_json::from_str(
+            r#"{"space": {"batch": [256, 512], "hidden": [8, 16], "lr": [1e-05, 0.001],
+            "history": [3, 8], "lambda": [0.1, 0.5], "dropout": [0.01, 0.1]}, "seed": 3,
+            "epochs": 2, "features": "delta_theta_joint_vel", "temperature": false,
+            "warmup": "hold_zero", "delta_theta_offset": "run", "dtype": "f32", "patience": null,
+            "split": {"val_frac": 0.15, "test_frac": 0.15, "seed": 3, "test_chunks": null},
+            "datasets": [], "dataset_sha256": "ab", "scv": ""}"#,
+        )
+        .unwrap();
+        v["datasets"] = serde_json::json!([datasets]);
+        v["scv"] = scv.into();
+        v["epochs"] = epochs.into();
+        if let Some(h) = scv_sha {
+            v["scv_sha256"] = h.into();
+        }
+        serde_json::from_value(v).unwrap()
+    }
+
+    #[test]
+    fn settings_compare_by_content_where_hashes_are_recorded() {
+        let p = Path::new("search.json");
+        let here = settings("/a/ds.csv", "/a/scv.json", Some("11"), 2);
+        // Same content elsewhere: accepted.
+        compare_settings(
+            p,
+            &here,
+            &settings("/b/ds.csv", "/b/scv.json", Some("11"), 2),
+        )
+        .unwrap();
+        // Another SCV content, or any other setting: refused, naming the key.
+        let e = compare_settings(
+            p,
+            &here,
+            &settings("/a/ds.csv", "/a/scv.json", Some("22"), 2),
+        );
+        assert!(e.unwrap_err().to_string().contains("scv_sha256"));
+        let e = compare_settings(
+            p,
+            &here,
+            &settings("/a/ds.csv", "/a/scv.json", Some("11"), 3),
+        );
+        assert!(e.unwrap_err().to_string().contains("epochs"));
+        // A search recorded without the SCV hash still compares the SCV path.
+        let old = settings("/a/ds.csv", "/a/scv.json", None, 2);
+        compare_settings(p, &old, &here).unwrap();
+        let e = compare_settings(
+            p,
+            &old,
+            &settings("/b/ds.csv", "/b/scv.json", Some("11"), 2),
+        );
+        assert!(e.unwrap_err().to_string().contains("scv"));
+    }
+
+    #[test]
+    fn dedup_keeps_one_record_per_trial_an_ok_one_first() {
+        let mk = |trial, status: &str, v: Option<f64>| TrialResult {
+            params: draw(&SearchSpace::default(), 0, trial),
+            status: status.into(),
+            error: None,
+            val_rmse_nm: v,
+            test_rmse_nm: None,
+            train_rmse_nm: None,
+            best_epoch: None,
+            epochs_run: 0,
+            seconds: 0.0,
+            model: None,
+        };
+        let d = dedup(vec![
+            mk(1, "ok", Some(0.5)),
+            mk(0, "failed", None),
+            mk(1, "failed", None),
+            mk(0, "ok", Some(0.3)),
+            mk(2, "ok", Some(0.4)),
+            mk(2, "ok", Some(0.6)),
+        ]);
+        let got: Vec<(usize, &str, Option<f64>)> = d
+            .iter()
+            .map(|r| (r.params.trial, r.status.as_str(), r.val_rmse_nm))
+            .collect();
+        assert_eq!(
+            got,
+            [
+                (0, "ok", Some(0.3)),
+                (1, "ok", Some(0.5)),
+                (2, "ok", Some(0.6))
+            ]
+        );
     }
 }

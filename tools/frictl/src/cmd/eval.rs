@@ -145,6 +145,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .ok()
             .and_then(|t| serde_json::from_str(&t).ok());
         let joint = side.as_ref().map(|s| s.joint.clone()).unwrap_or_default();
+        // A PINN whose inputs read a column this dataset lacks is refused by name (a torque-sensed
+        // dataset has no motor angle: fine for joint-vel, not for delta-theta-joint-vel).
+        let absent = side.as_ref().map_or(&[][..], |s| &s.absent_columns[..]);
+        for (fp, f) in &pinn_files {
+            ds.check_inputs(&f.meta.features, absent)
+                .with_context(|| format!("PINN {} on dataset {}", fp.display(), p.display()))?;
+        }
         if let Some(s) = &side {
             for (fp, f) in &pinn_files {
                 let r = f.meta.gear_ratio.get();
@@ -286,9 +293,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 let f = dir.join(format!("{stem}_timeseries.png"));
                 plot::timeseries(&f, ds, ev, &models, chunk, extrap)?;
                 written.push(f);
-                let f = dir.join(format!("{stem}_hysteresis.png"));
-                plot::hysteresis(&f, ds, chunk)?;
-                written.push(f);
+                // Δθ needs a motor encoder: a dataset without one (NaN column) has no hysteresis.
+                if ds.delta_theta_motor_rad[chunk.0..chunk.1]
+                    .iter()
+                    .any(|v| v.is_finite())
+                {
+                    let f = dir.join(format!("{stem}_hysteresis.png"));
+                    plot::hysteresis(&f, ds, chunk)?;
+                    written.push(f);
+                } else {
+                    eprintln!(
+                        "frictl eval: {}: no Δθ (no motor encoder): hysteresis figure skipped",
+                        p.display()
+                    );
+                }
             }
         }
         if let Some(r) = &args.train_report {

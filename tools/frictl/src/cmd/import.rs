@@ -26,29 +26,7 @@ pub enum Format {
     Safetensors,
 }
 
-/// Input feature set (block order of the input vector).
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Features {
-    /// [Δθ ×H, ṡ ×H]: motor-side deflection [motor rad], joint velocity [rad/s] (the paper's).
-    #[value(name = "delta_theta_joint_vel")]
-    DeltaThetaJointVel,
-    /// [ω_m ×H, ṡ ×H]: motor velocity [motor rad/s], joint velocity [rad/s].
-    #[value(name = "motor_vel_joint_vel")]
-    MotorVelJointVel,
-    /// [s ×H, θ ×H]: joint position [rad], motor position [motor rad] (the June 2024 ergoCub model).
-    #[value(name = "joint_pos_motor_pos")]
-    JointPosMotorPos,
-}
-
-impl From<Features> for FeatureSet {
-    fn from(f: Features) -> Self {
-        match f {
-            Features::DeltaThetaJointVel => FeatureSet::DeltaThetaJointVel,
-            Features::MotorVelJointVel => FeatureSet::MotorVelJointVel,
-            Features::JointPosMotorPos => FeatureSet::JointPosMotorPos,
-        }
-    }
-}
+use super::train::Features;
 
 /// Weight storage precision.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -151,17 +129,19 @@ pub(crate) fn load_foreign(
 /// Picks H for `n` inputs: the given one (checked), else the hint (checked), else n/2 or (n−1)/2.
 pub(crate) fn resolve_history(
     n_inputs: usize,
+    n_blocks: usize,
     temperature: bool,
     history: Option<usize>,
     hint: Option<usize>,
 ) -> anyhow::Result<usize> {
     let t = usize::from(temperature);
+    let b = n_blocks.max(1);
     let check = |h: usize, source: &str| -> anyhow::Result<usize> {
-        if h == 0 || 2 * h + t != n_inputs {
+        if h == 0 || b * h + t != n_inputs {
             bail!(
-                "{source} {h}{} needs {} inputs, but the model has {n_inputs}",
+                "{source} {h}{} needs {} inputs ({b} block(s) of H), but the model has {n_inputs}",
                 if temperature { " with temperature" } else { "" },
-                2 * h + t
+                b * h + t
             );
         }
         Ok(h)
@@ -172,11 +152,11 @@ pub(crate) fn resolve_history(
     if let Some(h) = hint {
         return check(h, "metadata `frictionless.history` =");
     }
-    if n_inputs > t && (n_inputs - t).is_multiple_of(2) {
-        Ok((n_inputs - t) / 2)
+    if n_inputs > t && (n_inputs - t).is_multiple_of(b) {
+        Ok((n_inputs - t) / b)
     } else {
         bail!(
-            "cannot infer the history from {n_inputs} inputs{}: an odd width means one extra input (pass --temperature) — or give --history",
+            "cannot infer the history from {n_inputs} inputs{} and {b} block(s): one extra input means temperature (pass --temperature) — or give --history",
             if temperature { " with temperature" } else { "" }
         )
     }
@@ -189,13 +169,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let inp = args.input.display();
     let n = mlp.n_inputs();
     let temperature = args.temperature || hints.temperature.unwrap_or(false);
-    let history = resolve_history(n, temperature, args.history, hints.history)
-        .with_context(|| format!("{inp}"))?;
     let set: FeatureSet = match (args.features, hints.features) {
         (Some(f), _) => f.into(),
         (None, Some(f)) => f,
         (None, None) => bail!("{inp}: the file does not say its feature set; pass --features"),
     };
+    let history = resolve_history(n, set.n_blocks(), temperature, args.history, hints.history)
+        .with_context(|| format!("{inp}"))?;
     let joint_name = args
         .joint
         .or(hints.joint_name)
@@ -242,7 +222,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let sizes: Vec<String> = back.mlp.sizes().iter().map(|s| s.to_string()).collect();
     println!("read   {inp}: {summary}");
     println!(
-        "wrote  {}: {} ({:?}), {} params, features {:?} H={} temperature={}",
+        "wrote  {}: {} ({:?}), {} params, features {} H={} temperature={}",
         args.output.display(),
         sizes.join(" → "),
         back.dtype,

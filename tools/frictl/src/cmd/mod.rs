@@ -15,6 +15,7 @@ pub mod monitor;
 pub mod predict;
 pub mod preprocess;
 pub mod record;
+pub mod robot;
 pub mod search;
 pub mod sim;
 pub mod train;

@@ -2,6 +2,10 @@
 //! cores, resumable; writes a results table (CSV + JSON, sorted by validation RMSE) and `best.fwt`.
 //! The machinery and the directory layout are documented in `frictionless_train::search`; this module only
 //! parses arguments and reports progress.
+//!
+//! For an external scheduler (the Ray driver in `python/ray/`, a Slurm array): `--only-trials 3,7`
+//! runs exactly those trials into `--out` (appending to the shared `results.jsonl`, no tables), and
+//! `frictl search finish DIR` writes the tables and `best.fwt` from whatever the directory holds.
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -9,9 +13,43 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use frictionless::features::WarmupPolicy;
 use frictionless_train::data::{DeltaThetaOffset, SplitSpec};
 use frictionless_train::pipeline;
-use frictionless_train::search::{SearchRun, SearchSettings, SearchSpace, run_search};
+use frictionless_train::search::{
+    SearchRun, SearchSettings, SearchSpace, TrialResult, finish, run_search, run_trials,
+};
+use sha2::Digest;
 
 use super::train::{Dtype, Features, HeldOut, Warmup, cores};
+
+/// `frictl search`: a search, or one of its subcommands.
+#[derive(clap::Args, Debug)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
+pub struct Cli {
+    /// `finish DIR`: publish the tables of a search run by trials elsewhere.
+    #[command(subcommand)]
+    pub action: Option<Action>,
+    /// The search.
+    #[command(flatten)]
+    pub search: Option<Args>,
+}
+
+/// Runs `frictl search` or its subcommand.
+pub fn run_cli(cli: Cli) -> anyhow::Result<()> {
+    match (cli.action, cli.search) {
+        (Some(Action::Finish { dir, trials }), _) => {
+            let all = finish(&dir, trials)?;
+            println!(
+                "frictl search finish: {} trial(s), {} ok; results in {} (results.csv, results.json)",
+                all.len(),
+                all.iter().filter(|r| r.status == "ok").count(),
+                dir.display()
+            );
+            print_best(&all, &dir);
+            Ok(())
+        }
+        (None, Some(args)) => run(args),
+        (None, None) => anyhow::bail!("frictl search: no arguments (see --help)"),
+    }
+}
 
 /// Arguments of `frictl search`.
 #[derive(clap::Args, Debug)]
@@ -44,7 +82,7 @@ pub struct Args {
     #[arg(long)]
     pub resume: bool,
     /// Input feature set.
-    #[arg(long, value_enum, default_value_t = Features::DeltaThetaJointVel)]
+    #[arg(long, value_enum, default_value_t = Features::DEFAULT)]
     pub features: Features,
     /// Append the motor temperature as one more input.
     #[arg(long)]
@@ -76,15 +114,112 @@ pub struct Args {
     /// No per-trial lines.
     #[arg(long)]
     pub quiet: bool,
+    /// Run exactly these trials (comma separated indices < --trials) into --out, one after the other,
+    /// each with --threads threads; appends to --out's results.jsonl (shared safely by several
+    /// processes on one file system), skips trials already there, writes no tables (`frictl search
+    /// finish`). --out's search.json, when present, must match these settings.
+    #[arg(long, value_delimiter = ',', value_name = "K,K,…")]
+    pub only_trials: Option<Vec<usize>>,
+    /// Search range of the batch size, MIN,MAX (default: the paper's 3000,5000).
+    #[arg(long, value_delimiter = ',', value_name = "MIN,MAX")]
+    pub batch_range: Option<Vec<usize>>,
+    /// Search range of each hidden width, MIN,MAX (default 150,300).
+    #[arg(long, value_delimiter = ',', value_name = "MIN,MAX")]
+    pub hidden_range: Option<Vec<usize>>,
+    /// Search range of the learning rate (log-uniform), MIN,MAX (default 1e-5,1e-3).
+    #[arg(long, value_delimiter = ',', value_name = "MIN,MAX")]
+    pub lr_range: Option<Vec<f32>>,
+    /// Search range of the history length H, MIN,MAX (default 3,30).
+    #[arg(long, value_delimiter = ',', value_name = "MIN,MAX")]
+    pub history_range: Option<Vec<usize>>,
+    /// Search range of λ, MIN,MAX (default 0.1,0.5).
+    #[arg(long, value_delimiter = ',', value_name = "MIN,MAX")]
+    pub lambda_range: Option<Vec<f32>>,
+    /// Search range of the dropout, MIN,MAX (default 0.01,0.1).
+    #[arg(long, value_delimiter = ',', value_name = "MIN,MAX")]
+    pub dropout_range: Option<Vec<f32>>,
+}
+
+/// `frictl search` subcommands.
+#[derive(clap::Subcommand, Debug)]
+pub enum Action {
+    /// Write results.json, results.csv and best.fwt from whatever DIR/results.jsonl holds.
+    Finish {
+        /// The search directory.
+        dir: PathBuf,
+        /// Only trials 0..N (default: every trial recorded).
+        #[arg(long)]
+        trials: Option<usize>,
+    },
+}
+
+/// The search space of `args`: the paper's ranges, each replaced where a `--*-range` is given.
+fn space(args: &Args) -> anyhow::Result<SearchSpace> {
+    fn pair<T: Copy + PartialOrd + std::fmt::Debug>(
+        name: &str,
+        v: &Option<Vec<T>>,
+        default: (T, T),
+    ) -> anyhow::Result<(T, T)> {
+        match v.as_deref() {
+            None => Ok(default),
+            Some([a, b]) if a <= b => Ok((*a, *b)),
+            Some(other) => {
+                anyhow::bail!("--{name}-range {other:?}: expected MIN,MAX with MIN ≤ MAX")
+            }
+        }
+    }
+    let d = SearchSpace::default();
+    let sp = SearchSpace {
+        batch: pair("batch", &args.batch_range, d.batch)?,
+        hidden: pair("hidden", &args.hidden_range, d.hidden)?,
+        lr: pair("lr", &args.lr_range, d.lr)?,
+        history: pair("history", &args.history_range, d.history)?,
+        lambda: pair("lambda", &args.lambda_range, d.lambda)?,
+        dropout: pair("dropout", &args.dropout_range, d.dropout)?,
+    };
+    anyhow::ensure!(
+        sp.lr.0 > 0.0 && sp.batch.0 > 0 && sp.hidden.0 > 0 && sp.history.0 > 0,
+        "--lr-range, --batch-range, --hidden-range and --history-range must be > 0"
+    );
+    Ok(sp)
+}
+
+/// One progress line of a finished trial.
+fn trial_line(n: usize, r: &TrialResult) {
+    let p = &r.params;
+    let res = match (&r.status[..], r.val_rmse_nm) {
+        ("ok", Some(v)) => format!("val RMSE {v:.4} Nm"),
+        _ => format!("failed: {}", r.error.as_deref().unwrap_or("?")),
+    };
+    eprintln!(
+        "[{n}] trial {:4}: batch {} hidden {:?} lr {:.2e} H {} λ {:.3} dropout {:.3} → {res} ({:.1} s)",
+        p.trial, p.batch_size, p.hidden, p.lr, p.history, p.lambda, p.dropout, r.seconds
+    );
+}
+
+/// Prints the best trial of a ranked list.
+fn print_best(all: &[TrialResult], dir: &std::path::Path) {
+    if let Some(b) = all.first().filter(|r| r.status == "ok") {
+        println!(
+            "best: trial {} val RMSE {:.4} Nm (test {}) -> {}",
+            b.params.trial,
+            b.val_rmse_nm.unwrap_or(f64::NAN),
+            b.test_rmse_nm
+                .map_or("-".to_string(), |t| format!("{t:.4} Nm")),
+            dir.join("best.fwt").display()
+        );
+    }
 }
 
 /// Runs `frictl search`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let scv_bytes = std::fs::read(&args.scv)
+        .map_err(|e| anyhow::anyhow!("{}: cannot read: {e}", args.scv.display()))?;
     let datasets = args.held_out.all_datasets(&args.datasets);
     let sources = pipeline::load_sources(&datasets)?;
     let scv = pipeline::load_scv(&args.scv)?;
     let settings = SearchSettings {
-        space: SearchSpace::default(),
+        space: space(&args)?,
         seed: args.seed,
         epochs: args.epochs,
         features: args.features.into(),
@@ -110,12 +245,48 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .map(|b| format!("{b:02x}"))
             .collect(),
         scv: args.scv.display().to_string(),
+        scv_sha256: Some(
+            sha2::Sha256::digest(&scv_bytes)
+                .iter()
+                .map(|b| format!("{b:02x}"))
+                .collect(),
+        ),
     };
+    let threads_total = args.threads.unwrap_or_else(cores);
+    if let Some(only) = &args.only_trials {
+        if let Some(k) = only.iter().find(|k| **k >= args.trials) {
+            anyhow::bail!("--only-trials {k}: not below --trials {}", args.trials);
+        }
+        let count = AtomicUsize::new(0);
+        let ran = run_trials(
+            &sources,
+            &scv,
+            &settings,
+            &args.out,
+            only,
+            threads_total,
+            |r| {
+                let n = count.fetch_add(1, Ordering::Relaxed) + 1;
+                if !args.quiet {
+                    trial_line(n, r);
+                }
+            },
+        )?;
+        if !args.quiet {
+            println!(
+                "frictl search: {} of {} requested trial(s) run into {} (`frictl search finish` writes the tables)",
+                ran.len(),
+                only.len(),
+                args.out.display()
+            );
+        }
+        return Ok(());
+    }
     let run = SearchRun {
         dir: args.out.clone(),
         trials: args.trials,
         parallel: args.parallel,
-        threads_total: args.threads.unwrap_or_else(cores),
+        threads_total,
         resume: args.resume,
     };
     let count = AtomicUsize::new(0);
@@ -124,15 +295,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let all = run_search(&sources, &scv, &settings, &run, |r| {
         let n = count.fetch_add(1, Ordering::Relaxed) + 1;
         if !quiet {
-            let p = &r.params;
-            let res = match (&r.status[..], r.val_rmse_nm) {
-                ("ok", Some(v)) => format!("val RMSE {v:.4} Nm"),
-                _ => format!("failed: {}", r.error.as_deref().unwrap_or("?")),
-            };
-            eprintln!(
-                "[{n}] trial {:4}: batch {} hidden {:?} lr {:.2e} H {} λ {:.3} dropout {:.3} → {res} ({:.1} s)",
-                p.trial, p.batch_size, p.hidden, p.lr, p.history, p.lambda, p.dropout, r.seconds
-            );
+            trial_line(n, r);
         }
     })?;
     if !quiet {
@@ -143,16 +306,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             started.elapsed().as_secs_f64(),
             args.out.display()
         );
-        if let Some(b) = all.first().filter(|r| r.status == "ok") {
-            println!(
-                "best: trial {} val RMSE {:.4} Nm (test {}) -> {}",
-                b.params.trial,
-                b.val_rmse_nm.unwrap_or(f64::NAN),
-                b.test_rmse_nm
-                    .map_or("-".to_string(), |t| format!("{t:.4} Nm")),
-                args.out.join("best.fwt").display()
-            );
-        }
+        print_best(&all, &args.out);
     }
     Ok(())
 }

@@ -30,24 +30,38 @@ use frictionless_train::data::{ChunkKey, DeltaThetaOffset, SplitSpec};
 use frictionless_train::pipeline::{self, Job};
 use indicatif::{ProgressBar, ProgressStyle};
 
-/// Feature set (block order of the input vector).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum Features {
-    /// `[Δθ ×H, ṡ ×H]` — the paper's (Δθ zeroed once per recording; see `--delta-theta-offset`).
-    DeltaThetaJointVel,
-    /// `[ω_m ×H, ṡ ×H]` — ergoCub since Oct 2024.
-    MotorVelJointVel,
-    /// `[s ×H, θ ×H]` — the June 2024 ergoCub model.
-    JointPosMotorPos,
+/// A feature set on the command line (`--features` of `train`, `search` and `import onnx`): the
+/// core's [`FeatureSet`] with its hyphenated name; the underscore spelling is accepted as an alias
+/// (hidden from the help). Names and help come from the core, so they exist once.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Features(pub FeatureSet);
+
+impl Features {
+    /// The paper's `[Δθ ×H, ṡ ×H]`, the default of `train` and `search`.
+    pub const DEFAULT: Features = Features(FeatureSet::DeltaThetaJointVel);
+}
+
+static FEATURE_VARIANTS: std::sync::LazyLock<Vec<Features>> =
+    std::sync::LazyLock::new(|| FeatureSet::ALL.into_iter().map(Features).collect());
+
+impl clap::ValueEnum for Features {
+    fn value_variants<'a>() -> &'a [Self] {
+        &FEATURE_VARIANTS
+    }
+
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        let set = self.0;
+        Some(
+            clap::builder::PossibleValue::new(set.name())
+                .alias(set.underscore_alias())
+                .help(set.description()),
+        )
+    }
 }
 
 impl From<Features> for FeatureSet {
     fn from(f: Features) -> Self {
-        match f {
-            Features::DeltaThetaJointVel => FeatureSet::DeltaThetaJointVel,
-            Features::MotorVelJointVel => FeatureSet::MotorVelJointVel,
-            Features::JointPosMotorPos => FeatureSet::JointPosMotorPos,
-        }
+        f.0
     }
 }
 
@@ -103,7 +117,7 @@ pub struct Args {
     #[arg(long)]
     pub out: PathBuf,
     /// Input feature set.
-    #[arg(long, value_enum, default_value_t = Features::DeltaThetaJointVel)]
+    #[arg(long, value_enum, default_value_t = Features::DEFAULT)]
     pub features: Features,
     /// History length H (samples per feature block; paper: 20–22; 30 was clearly better on the
     /// virtual knee, see the module doc).

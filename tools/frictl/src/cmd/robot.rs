@@ -1,0 +1,907 @@
+//! `frictl robot` — a whole robot from one TOML file (schema: `frictl::robot`).
+//!
+//! `frictl robot run ROBOT.toml --out DIR` runs, for every joint, the stages acquire (simulator
+//! presets) or preprocess (raw logs) → fit CV and SCV → search (or train) → eval → export ONNX, each as
+//! a `frictl` child started in `DIR` with paths relative to it, its output in `DIR/logs/`. Then it
+//! writes ONE frictiond config, `DIR/frictiond.toml` (through `frictiond-config`'s types, every joint
+//! with its trained PINN), and the per-joint report `DIR/report.json` + `DIR/report.md`.
+//!
+//! Resumable: a stage whose outputs exist and whose stamp (`DIR/joints/J/stamps/STAGE.sha256`, the
+//! SHA-256 of its arguments with every input file replaced by the SHA-256 of its content) matches is
+//! skipped. Stamps name no absolute path, so a joint directory made on another machine (a Ray
+//! worker) is recognised. The search stage always passes `--resume`: trials run elsewhere into
+//! `DIR/joints/J/search` (`frictl search --only-trials`) are kept and only the missing ones run; a
+//! search whose settings changed in the robot file is refused there (remove `DIR/joints/J/search` to
+//! start it again).
+//!
+//! `frictl robot plan ROBOT.toml --out DIR` prints, as JSON, what the Ray driver needs: each joint's
+//! directory, its input files, the `frictl search` arguments (relative to `DIR`) and the trial count.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use frictiond_config::{
+    BackendConfig, BackendKind, FrictionModelName, JointConfig, LoopConfig, LpfConfig, RawConfig,
+    SafetyConfig, WarmupName,
+};
+use frictionless_train::pipeline::{self, TrainReport};
+use frictionless_train::search::{TrialResult, read_results};
+use frictl::eval::Report as EvalReport;
+use frictl::robot::{DataSource, JointSection, RobotFile};
+use sha2::{Digest, Sha256};
+
+/// Arguments of `frictl robot`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    #[command(subcommand)]
+    action: Action,
+}
+
+#[derive(clap::Subcommand, Debug)]
+enum Action {
+    /// Run every joint's pipeline and write one frictiond config and the report.
+    Run(RunArgs),
+    /// Print the plan (joint directories, inputs, search arguments) as JSON for an external driver.
+    Plan(PlanArgs),
+}
+
+/// `frictl robot run`.
+#[derive(clap::Args, Debug)]
+struct RunArgs {
+    /// The robot file.
+    robot: PathBuf,
+    /// Output directory (created).
+    #[arg(long, default_value = "robot-out")]
+    out: PathBuf,
+    /// Only these joints (repeatable; default: all). Skips the config and the report unless every
+    /// joint is selected.
+    #[arg(long = "joint")]
+    joints: Vec<String>,
+    /// Stop after this stage of each joint: `data`, `fit`, `search` (or train), `eval`, `export`.
+    #[arg(long, value_enum)]
+    until: Option<Until>,
+}
+
+/// `frictl robot plan`.
+#[derive(clap::Args, Debug)]
+struct PlanArgs {
+    /// The robot file.
+    robot: PathBuf,
+    /// Output directory the plan's relative paths refer to.
+    #[arg(long, default_value = "robot-out")]
+    out: PathBuf,
+}
+
+/// The last stage `--until` runs.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+enum Until {
+    Data,
+    Fit,
+    Search,
+    Eval,
+    Export,
+}
+
+/// One `frictl` invocation of a joint's pipeline (paths relative to the output directory).
+#[derive(Clone, Debug, serde::Serialize)]
+struct Stage {
+    /// Stage id (also the stamp's and the log's name).
+    id: String,
+    /// Where it belongs.
+    phase: Until,
+    /// `frictl` arguments.
+    args: Vec<String>,
+    /// Input files (the stamp hashes their content).
+    inputs: Vec<String>,
+    /// Files that must exist for the stage to count as done.
+    outputs: Vec<String>,
+}
+
+/// The files of one joint, relative to the output directory.
+#[derive(Clone, Debug, serde::Serialize)]
+struct JointPlan {
+    name: String,
+    dir: String,
+    /// Training datasets.
+    train: Vec<String>,
+    /// Held-out datasets (empty: the evaluation uses the split's test chunks).
+    test: Vec<String>,
+    cv: String,
+    scv: String,
+    /// The PINN frictiond runs.
+    model: String,
+    /// Its train report.
+    model_report: String,
+    /// The search directory (`null` without a search).
+    search_dir: Option<String>,
+    /// Trials of the search (0: trained once).
+    trials: usize,
+    /// `frictl search` arguments without `--out`, `--resume`, `--parallel`, `--threads` (a driver adds
+    /// its own).
+    search_args: Vec<String>,
+    /// Files from outside the output directory the stages read (absolute).
+    external_inputs: Vec<String>,
+    stages: Vec<Stage>,
+}
+
+fn s(p: &Path) -> String {
+    p.display().to_string()
+}
+
+/// The stages of one joint.
+fn plan_joint(robot: &RobotFile, j: &JointSection) -> JointPlan {
+    let dir = format!("joints/{}", j.name);
+    let f = |name: &str| format!("{dir}/{name}");
+    let seed = robot.robot.seed;
+    let mut stages = vec![];
+    let mut external_inputs = vec![];
+    let (train, test) = match j.source() {
+        DataSource::Preset => {
+            let preset = j.preset.clone().unwrap_or_default();
+            let mut train_args: Vec<String> = vec![
+                "acquire".into(),
+                "--preset".into(),
+                preset.clone(),
+                "--seed".into(),
+                seed.to_string(),
+                "--out".into(),
+                dir.clone(),
+                "--name".into(),
+                "train".into(),
+            ];
+            train_args.extend(robot.acquire.set.iter().map(|k| format!("--set={k}")));
+            let mut test_args: Vec<String> = vec![
+                "acquire".into(),
+                "--preset".into(),
+                preset,
+                "--seed".into(),
+                (seed + 100).to_string(),
+                "--out".into(),
+                dir.clone(),
+                "--name".into(),
+                "test".into(),
+            ];
+            for k in [
+                "protocol.sines.enabled=false",
+                "protocol.ramps.enabled=false",
+                "protocol.steps.enabled=false",
+                "protocol.tracking.train.enabled=false",
+                "protocol.tracking.test.enabled=true",
+            ] {
+                test_args.push(format!("--set={k}"));
+            }
+            test_args.extend(robot.acquire.test_set.iter().map(|k| format!("--set={k}")));
+            for (what, args) in [("train", train_args), ("test", test_args)] {
+                stages.push(Stage {
+                    id: format!("acquire_{what}"),
+                    phase: Until::Data,
+                    args,
+                    inputs: vec![],
+                    outputs: vec![f(&format!("{what}.csv")), f(&format!("{what}.json"))],
+                });
+                stages.push(Stage {
+                    id: format!("preprocess_{what}"),
+                    phase: Until::Data,
+                    args: vec![
+                        "preprocess".into(),
+                        f(&format!("{what}.csv")),
+                        "--out".into(),
+                        f(&format!("{what}_ds.csv")),
+                        "--subtract-reflected-inertia".into(),
+                        "sidecar".into(),
+                    ]
+                    .into_iter()
+                    .chain(j.preprocess_args.iter().cloned())
+                    .collect(),
+                    inputs: vec![f(&format!("{what}.csv")), f(&format!("{what}.json"))],
+                    outputs: vec![f(&format!("{what}_ds.csv")), f(&format!("{what}_ds.json"))],
+                });
+            }
+            (vec![f("train_ds.csv")], vec![f("test_ds.csv")])
+        }
+        DataSource::Logs => {
+            let mut lists = (vec![], vec![]);
+            for (what, logs) in [("train", &j.logs), ("test", &j.test_logs)] {
+                for (i, log) in logs.iter().enumerate() {
+                    let ds = f(&format!("{what}_{i}_ds.csv"));
+                    let mut args = vec!["preprocess".into(), s(log), "--out".into(), ds.clone()];
+                    if let Some(u) = &robot.robot.urdf {
+                        args.extend(["--urdf".into(), s(u), "--joint".into(), j.name.clone()]);
+                        external_inputs.push(s(u));
+                    }
+                    args.extend(j.preprocess_args.iter().cloned());
+                    let sidecar = s(&log.with_extension("json"));
+                    external_inputs.extend([s(log), sidecar.clone()]);
+                    let mut inputs = vec![s(log), sidecar];
+                    inputs.extend(robot.robot.urdf.as_ref().map(|u| s(u)));
+                    stages.push(Stage {
+                        id: format!("preprocess_{what}_{i}"),
+                        phase: Until::Data,
+                        args,
+                        inputs,
+                        outputs: vec![ds.clone(), ds.replace(".csv", ".json")],
+                    });
+                    if what == "train" {
+                        lists.0.push(ds);
+                    } else {
+                        lists.1.push(ds);
+                    }
+                }
+            }
+            lists
+        }
+        DataSource::Datasets => {
+            let all = |v: &[PathBuf]| v.iter().map(|p| s(p)).collect::<Vec<_>>();
+            for p in j.datasets.iter().chain(&j.test_datasets) {
+                external_inputs.extend([s(p), s(&p.with_extension("json"))]);
+            }
+            (all(&j.datasets), all(&j.test_datasets))
+        }
+    };
+    let with_sidecars = |v: &[String]| {
+        v.iter()
+            .flat_map(|p| {
+                [
+                    p.clone(),
+                    Path::new(p).with_extension("json").display().to_string(),
+                ]
+            })
+            .collect::<Vec<_>>()
+    };
+    let (cv, scv) = (f("cv.json"), f("scv.json"));
+    for (m, out) in [("cv", &cv), ("scv", &scv)] {
+        stages.push(Stage {
+            id: format!("fit_{m}"),
+            phase: Until::Fit,
+            args: vec![
+                "fit".into(),
+                m.into(),
+                train[0].clone(),
+                "--json".into(),
+                out.clone(),
+            ],
+            inputs: with_sidecars(&train[..1]),
+            outputs: vec![out.clone()],
+        });
+    }
+    let sr = &robot.search;
+    let mut inputs = with_sidecars(&train);
+    inputs.push(scv.clone());
+    let mut search_args: Vec<String> = vec!["search".into()];
+    for d in &train {
+        search_args.extend(["--dataset".into(), d.clone()]);
+    }
+    search_args.extend([
+        "--scv".into(),
+        scv.clone(),
+        "--trials".into(),
+        sr.trials.to_string(),
+        "--seed".into(),
+        seed.to_string(),
+        "--epochs".into(),
+        sr.epochs.to_string(),
+        "--features".into(),
+        j.features.cli().into(),
+        "--val-frac".into(),
+        sr.val_frac.to_string(),
+        "--test-frac".into(),
+        sr.test_frac.to_string(),
+    ]);
+    if let Some(p) = sr.patience {
+        search_args.extend(["--max-epochs-without-improvement".into(), p.to_string()]);
+    }
+    let ranges: [(&str, Option<String>); 6] = [
+        ("batch", sr.batch.map(|r| format!("{},{}", r[0], r[1]))),
+        ("hidden", sr.hidden.map(|r| format!("{},{}", r[0], r[1]))),
+        ("lr", sr.lr.map(|r| format!("{:e},{:e}", r[0], r[1]))),
+        ("history", sr.history.map(|r| format!("{},{}", r[0], r[1]))),
+        ("lambda", sr.lambda.map(|r| format!("{},{}", r[0], r[1]))),
+        ("dropout", sr.dropout.map(|r| format!("{},{}", r[0], r[1]))),
+    ];
+    for (k, v) in ranges {
+        if let Some(v) = v {
+            search_args.push(format!("--{k}-range={v}"));
+        }
+    }
+    let (model, model_report, search_dir) = if sr.trials > 0 {
+        let sd = f("search");
+        let mut args = search_args.clone();
+        args.extend([
+            "--out".into(),
+            sd.clone(),
+            "--resume".into(),
+            "--parallel".into(),
+            sr.parallel.to_string(),
+            "--threads".into(),
+            (sr.parallel * sr.threads_per_trial).to_string(),
+            "--quiet".into(),
+        ]);
+        let (m, r) = (format!("{sd}/best.fwt"), format!("{sd}/best.train.json"));
+        stages.push(Stage {
+            id: "search".into(),
+            phase: Until::Search,
+            args,
+            inputs: inputs.clone(),
+            outputs: vec![m.clone(), r.clone(), format!("{sd}/results.json")],
+        });
+        (m, r, Some(sd))
+    } else {
+        let t = &robot.train;
+        let (m, r) = (f("pinn.fwt"), f("pinn.train.json"));
+        let mut args: Vec<String> = vec!["train".into()];
+        for d in &train {
+            args.extend(["--dataset".into(), d.clone()]);
+        }
+        args.extend([
+            "--scv".into(),
+            scv.clone(),
+            "--out".into(),
+            m.clone(),
+            "--report".into(),
+            r.clone(),
+            "--features".into(),
+            j.features.cli().into(),
+            "--hidden".into(),
+            t.hidden
+                .iter()
+                .map(|h| h.to_string())
+                .collect::<Vec<_>>()
+                .join(","),
+            "--history".into(),
+            t.history.to_string(),
+            "--epochs".into(),
+            t.epochs.to_string(),
+            "--batch".into(),
+            t.batch.to_string(),
+            "--lr".into(),
+            format!("{:e}", t.lr),
+            "--lambda".into(),
+            t.lambda.to_string(),
+            "--dropout".into(),
+            t.dropout.to_string(),
+            "--seed".into(),
+            seed.to_string(),
+            "--threads".into(),
+            sr.threads_per_trial.to_string(),
+            "--val-frac".into(),
+            sr.val_frac.to_string(),
+            "--test-frac".into(),
+            sr.test_frac.to_string(),
+        ]);
+        stages.push(Stage {
+            id: "train".into(),
+            phase: Until::Search,
+            args,
+            inputs: inputs.clone(),
+            outputs: vec![m.clone(), r.clone()],
+        });
+        (m, r, None)
+    };
+    let eval_json = f("eval.json");
+    let mut eval_args: Vec<String> = vec!["eval".into()];
+    let (eval_sets, test_only) = if test.is_empty() {
+        (&train, true)
+    } else {
+        (&test, false)
+    };
+    for d in eval_sets {
+        eval_args.extend(["--dataset".into(), d.clone()]);
+    }
+    eval_args.extend([
+        "--cv".into(),
+        cv.clone(),
+        "--scv".into(),
+        scv.clone(),
+        "--pinn".into(),
+        model.clone(),
+        "--train-report".into(),
+        model_report.clone(),
+        "--out".into(),
+        f("eval"),
+        "--json".into(),
+        eval_json.clone(),
+    ]);
+    if test_only {
+        eval_args.push("--test-only".into());
+    }
+    let mut eval_inputs = with_sidecars(eval_sets);
+    eval_inputs.extend([cv.clone(), scv.clone(), model.clone(), model_report.clone()]);
+    stages.push(Stage {
+        id: "eval".into(),
+        phase: Until::Eval,
+        args: eval_args,
+        inputs: eval_inputs,
+        outputs: vec![eval_json],
+    });
+    let onnx = f(&format!("{}.onnx", j.name));
+    stages.push(Stage {
+        id: "export".into(),
+        phase: Until::Export,
+        args: vec![
+            "export".into(),
+            "onnx".into(),
+            model.clone(),
+            "-o".into(),
+            onnx.clone(),
+        ],
+        inputs: vec![model.clone()],
+        outputs: vec![onnx],
+    });
+    JointPlan {
+        name: j.name.clone(),
+        dir,
+        train,
+        test,
+        cv,
+        scv,
+        model,
+        model_report,
+        search_dir,
+        trials: sr.trials,
+        search_args,
+        external_inputs,
+        stages,
+    }
+}
+
+/// SHA-256 of a file's content (hex).
+fn file_sha256(p: &Path) -> anyhow::Result<String> {
+    let bytes = std::fs::read(p).with_context(|| format!("cannot read {}", p.display()))?;
+    Ok(hex(&Sha256::digest(&bytes)))
+}
+
+fn hex(b: &[u8]) -> String {
+    b.iter().map(|x| format!("{x:02x}")).collect()
+}
+
+/// The stamp of a stage: its arguments with each input path replaced by its content hash.
+fn stamp(out: &Path, st: &Stage) -> anyhow::Result<String> {
+    let mut h = Sha256::new();
+    let mut hashes = BTreeMap::new();
+    for i in &st.inputs {
+        hashes.insert(i.clone(), file_sha256(&out.join(i))?);
+    }
+    for a in &st.args {
+        let part = hashes.get(a).map_or(a.as_str(), |x| x.as_str());
+        h.update(part.as_bytes());
+        h.update([0]);
+    }
+    for i in &st.inputs {
+        h.update(hashes[i].as_bytes());
+    }
+    Ok(hex(&h.finalize()))
+}
+
+/// Runs one stage unless its outputs exist and its stamp matches; returns (seconds, skipped).
+fn run_stage(exe: &Path, out: &Path, joint_dir: &str, st: &Stage) -> anyhow::Result<(f64, bool)> {
+    let stamps = out.join(joint_dir).join("stamps");
+    std::fs::create_dir_all(&stamps)
+        .with_context(|| format!("cannot create {}", stamps.display()))?;
+    let stamp_path = stamps.join(format!("{}.sha256", st.id));
+    for i in &st.inputs {
+        if !out.join(i).is_file() {
+            bail!("stage {}: input {} does not exist", st.id, i);
+        }
+    }
+    let want = stamp(out, st)?;
+    let have = std::fs::read_to_string(&stamp_path).unwrap_or_default();
+    if have.trim() == want && st.outputs.iter().all(|o| out.join(o).is_file()) {
+        eprintln!("     {joint_dir}: {} up to date", st.id);
+        return Ok((0.0, true));
+    }
+    let _ = std::fs::remove_file(&stamp_path);
+    let logs = out.join("logs");
+    std::fs::create_dir_all(&logs).with_context(|| format!("cannot create {}", logs.display()))?;
+    let log = logs.join(format!("{}_{}.log", joint_dir.replace('/', "_"), st.id));
+    let f =
+        std::fs::File::create(&log).with_context(|| format!("cannot create {}", log.display()))?;
+    eprintln!("     {joint_dir}: {} …", st.id);
+    let t0 = Instant::now();
+    let status = Command::new(exe)
+        .args(&st.args)
+        .current_dir(out)
+        .stdin(Stdio::null())
+        .stdout(f.try_clone()?)
+        .stderr(f)
+        .status()
+        .with_context(|| format!("cannot start {}", exe.display()))?;
+    let secs = t0.elapsed().as_secs_f64();
+    if !status.success() {
+        let text = std::fs::read_to_string(&log).unwrap_or_default();
+        let lines: Vec<&str> = text.lines().collect();
+        bail!(
+            "{joint_dir}: stage {} failed ({status}): frictl {}\n… {}:\n{}",
+            st.id,
+            st.args.join(" "),
+            log.display(),
+            lines[lines.len().saturating_sub(20)..].join("\n")
+        );
+    }
+    for o in &st.outputs {
+        if !out.join(o).is_file() {
+            bail!("{joint_dir}: stage {} wrote no {o}", st.id);
+        }
+    }
+    std::fs::write(&stamp_path, &want)
+        .with_context(|| format!("cannot write {}", stamp_path.display()))?;
+    eprintln!("       done in {secs:.1} s");
+    Ok((secs, false))
+}
+
+/// The data of a joint must be the joint the file names (name, signed gear ratio, k_t).
+fn check_data(
+    robot_path: &Path,
+    out: &Path,
+    i: usize,
+    j: &JointSection,
+    plan: &JointPlan,
+) -> anyhow::Result<()> {
+    let paths: Vec<PathBuf> = plan.train.iter().map(|p| out.join(p)).collect();
+    let src = pipeline::load_sources(&paths)?;
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-6 * a.abs().max(b.abs());
+    let r = src.gear_ratio.get();
+    let mismatch = |key: &str, given: String, data: String| {
+        anyhow::anyhow!(
+            "{}: joint[{i}].{key} = {given}, but the data ({}) has {data}",
+            robot_path.display(),
+            plan.train[0]
+        )
+    };
+    if src.joint != j.name {
+        return Err(mismatch(
+            "name",
+            format!("{:?}", j.name),
+            format!("{:?}", src.joint),
+        ));
+    }
+    if !close(r, j.gear_ratio) {
+        return Err(mismatch(
+            "gear_ratio",
+            j.gear_ratio.to_string(),
+            r.to_string(),
+        ));
+    }
+    if !close(src.kt_nm_per_a, j.kt_nm_per_a) {
+        return Err(mismatch(
+            "kt_nm_per_a",
+            j.kt_nm_per_a.to_string(),
+            src.kt_nm_per_a.to_string(),
+        ));
+    }
+    Ok(())
+}
+
+/// The Δθ offset frictiond keeps for a PINN: the one its training latched (all datasets the same),
+/// `None` (latch at enable) when training latched per chunk.
+fn trained_offset(report: &TrainReport) -> anyhow::Result<Option<f64>> {
+    let offsets: Vec<Option<f64>> = report
+        .datasets
+        .iter()
+        .map(|d| d.delta_theta_offset_motor_rad)
+        .collect();
+    match offsets.first() {
+        Some(Some(v)) if offsets.iter().all(|o| *o == Some(*v)) => Ok(Some(*v)),
+        Some(Some(_)) => bail!(
+            "the datasets were latched with different Δθ offsets ({offsets:?}); frictiond takes one"
+        ),
+        _ => Ok(None),
+    }
+}
+
+fn read_typed<T: serde::de::DeserializeOwned>(p: &Path) -> anyhow::Result<T> {
+    let t = std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
+    serde_json::from_str(&t).with_context(|| format!("{}: not the expected JSON", p.display()))
+}
+
+/// The frictiond config of the robot: every joint with its PINN (model paths relative to `out`).
+fn daemon_config(robot: &RobotFile, plans: &[JointPlan], out: &Path) -> anyhow::Result<RawConfig> {
+    let mut joints = vec![];
+    for (index, (j, p)) in robot.joint.iter().zip(plans).enumerate() {
+        let report: TrainReport = read_typed(&out.join(&p.model_report))?;
+        let offset = trained_offset(&report).with_context(|| p.model_report.clone())?;
+        joints.push(JointConfig {
+            name: j.name.clone(),
+            index,
+            gear_ratio: j.gear_ratio,
+            kt: j.kt_nm_per_a,
+            max_curr: j.max_curr_a,
+            kfc: j.kfc,
+            kp: 0.0,
+            ki: 0.0,
+            max_output_friction: j.max_output_friction_nm.unwrap_or(f64::INFINITY),
+            joint_velocity_threshold_rad_s: 0.0,
+            lpf: j.lpf.map(|l| LpfConfig {
+                order: l.order,
+                cutoff_hz: l.cutoff_hz,
+            }),
+            friction_model: FrictionModelName::Pinn,
+            kc: None,
+            kv: None,
+            ka: None,
+            ks: None,
+            vs: None,
+            alpha: None,
+            model: Some(PathBuf::from(&p.model)),
+            model_for: None,
+            warmup: WarmupName::HoldZero,
+            delta_theta_offset_motor_rad: offset,
+        });
+    }
+    Ok(RawConfig {
+        loop_: LoopConfig::default(),
+        backend: BackendConfig {
+            kind: BackendKind::Shm,
+            service_prefix: "frictionless".into(),
+            root_path: None,
+        },
+        safety: SafetyConfig::default(),
+        joint: joints,
+        bus: Vec::new(),
+    })
+}
+
+/// One joint's report entry.
+#[derive(serde::Serialize)]
+struct JointReport {
+    source: String,
+    gear_ratio: f64,
+    kt_nm_per_a: f64,
+    features: &'static str,
+    model: String,
+    onnx: String,
+    /// CV and SCV fit RMSE on the training data [Nm] (the fit JSON's `rmse_fitted_nm`).
+    fit_rmse_nm: BTreeMap<String, Option<f64>>,
+    search: Option<SearchSummary>,
+    /// Evaluation RMSE over all samples per model [Nm] (`null`: no value).
+    eval_rmse_nm: BTreeMap<String, Option<f64>>,
+    /// The evaluation's own JSON.
+    eval: String,
+    stages: Vec<StageRecord>,
+}
+
+#[derive(serde::Serialize)]
+struct SearchSummary {
+    trials: usize,
+    ok: usize,
+    failed: usize,
+    best_trial: Option<usize>,
+    best_val_rmse_nm: Option<f64>,
+    best_test_rmse_nm: Option<f64>,
+    trial_seconds_total: f64,
+}
+
+#[derive(Clone, serde::Serialize)]
+struct StageRecord {
+    id: String,
+    seconds: f64,
+    skipped: bool,
+}
+
+fn joint_report(
+    j: &JointSection,
+    p: &JointPlan,
+    out: &Path,
+    stages: Vec<StageRecord>,
+) -> anyhow::Result<JointReport> {
+    let mut fit_rmse_nm = BTreeMap::new();
+    for (m, f) in [("cv", &p.cv), ("scv", &p.scv)] {
+        let v: serde_json::Value = read_typed(&out.join(f))?;
+        fit_rmse_nm.insert(
+            m.to_owned(),
+            v.get("rmse_fitted_nm").and_then(|x| x.as_f64()),
+        );
+    }
+    let search = match &p.search_dir {
+        None => None,
+        Some(sd) => {
+            let rs: Vec<TrialResult> = frictionless_train::search::dedup(read_results(
+                &out.join(sd).join("results.jsonl"),
+            )?);
+            let mut ranked = rs.clone();
+            frictionless_train::search::rank(&mut ranked);
+            let best = ranked.first().filter(|r| r.status == "ok");
+            Some(SearchSummary {
+                trials: rs.len(),
+                ok: rs.iter().filter(|r| r.status == "ok").count(),
+                failed: rs.iter().filter(|r| r.status != "ok").count(),
+                best_trial: best.map(|b| b.params.trial),
+                best_val_rmse_nm: best.and_then(|b| b.val_rmse_nm),
+                best_test_rmse_nm: best.and_then(|b| b.test_rmse_nm),
+                trial_seconds_total: rs.iter().map(|r| r.seconds).sum(),
+            })
+        }
+    };
+    let eval_path = format!("{}/eval.json", p.dir);
+    let ev: EvalReport = read_typed(&out.join(&eval_path))?;
+    let eval_rmse_nm = ["none", "cv", "scv", "pinn"]
+        .iter()
+        .map(|k| ((*k).to_owned(), ev.models.get(*k).and_then(|m| m.rmse_all)))
+        .collect();
+    Ok(JointReport {
+        source: match j.source() {
+            DataSource::Preset => format!("preset {}", j.preset.as_deref().unwrap_or("")),
+            DataSource::Logs => format!("{} log(s)", j.logs.len()),
+            DataSource::Datasets => format!("{} dataset(s)", j.datasets.len()),
+        },
+        gear_ratio: j.gear_ratio,
+        kt_nm_per_a: j.kt_nm_per_a,
+        features: j.features.cli(),
+        model: p.model.clone(),
+        onnx: format!("{}/{}.onnx", p.dir, j.name),
+        fit_rmse_nm,
+        search,
+        eval_rmse_nm,
+        eval: eval_path,
+        stages,
+    })
+}
+
+fn opt(v: Option<f64>) -> String {
+    v.map_or("–".into(), |x| format!("{x:.4}"))
+}
+
+fn report_md(robot: &RobotFile, joints: &BTreeMap<String, JointReport>, total_s: f64) -> String {
+    let mut md = format!(
+        "# {}: friction models\n\nSeed {}; {} joint(s); search: {} trial(s) × {} epoch(s) per joint. Total {:.0} s.\nfrictiond config: `frictiond.toml` (`frictiond --config frictiond.toml --check`).\n\n",
+        robot.robot.name,
+        robot.robot.seed,
+        robot.joint.len(),
+        robot.search.trials,
+        robot.search.epochs,
+        total_s
+    );
+    md += "| joint | source | r | k_t [Nm/A] | best trial | val RMSE [Nm] | eval RMSE none / CV / SCV / PINN [Nm] |\n|---|---|---|---|---|---|---|\n";
+    for j in &robot.joint {
+        let Some(r) = joints.get(&j.name) else {
+            continue;
+        };
+        let e = |k: &str| opt(r.eval_rmse_nm.get(k).copied().flatten());
+        md += &format!(
+            "| {} | {} | {} | {} | {} | {} | {} / {} / {} / {} |\n",
+            j.name,
+            r.source,
+            r.gear_ratio,
+            r.kt_nm_per_a,
+            r.search
+                .as_ref()
+                .and_then(|s| s.best_trial)
+                .map_or("–".into(), |t| t.to_string()),
+            opt(r.search.as_ref().and_then(|s| s.best_val_rmse_nm)),
+            e("none"),
+            e("cv"),
+            e("scv"),
+            e("pinn"),
+        );
+    }
+    md += "\n## Stages\n\n| joint | stage | seconds | skipped |\n|---|---|---|---|\n";
+    for j in &robot.joint {
+        let Some(r) = joints.get(&j.name) else {
+            continue;
+        };
+        for st in &r.stages {
+            md += &format!(
+                "| {} | {} | {:.1} | {} |\n",
+                j.name,
+                st.id,
+                st.seconds,
+                if st.skipped { "yes" } else { "" }
+            );
+        }
+    }
+    md
+}
+
+/// Runs `frictl robot`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    match args.action {
+        Action::Plan(a) => {
+            let robot = frictl::robot::load(&a.robot)?;
+            let plans: Vec<JointPlan> = robot.joint.iter().map(|j| plan_joint(&robot, j)).collect();
+            let v = serde_json::json!({
+                "format": "frictionless-robot-plan-v1",
+                "out": s(&a.out),
+                "shared_dir": robot.robot.shared_dir.as_ref().map(|d| s(d)),
+                "threads_per_trial": robot.search.threads_per_trial,
+                "joints": plans,
+            });
+            println!("{}", serde_json::to_string_pretty(&v)?);
+            Ok(())
+        }
+        Action::Run(a) => run_robot(a),
+    }
+}
+
+fn run_robot(a: RunArgs) -> anyhow::Result<()> {
+    let started = Instant::now();
+    let robot = frictl::robot::load(&a.robot)?;
+    for name in &a.joints {
+        if !robot.joint.iter().any(|j| &j.name == name) {
+            bail!("--joint {name}: not a joint of {}", a.robot.display());
+        }
+    }
+    let out = &a.out;
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    // Children run in `out`: every path they get is relative to it or absolute.
+    let exe = std::env::current_exe().context("cannot find the running executable")?;
+    let until = a.until.unwrap_or(Until::Export);
+    let plans: Vec<JointPlan> = robot.joint.iter().map(|j| plan_joint(&robot, j)).collect();
+    let mut reports = BTreeMap::new();
+    for (i, (j, p)) in robot.joint.iter().zip(&plans).enumerate() {
+        if !a.joints.is_empty() && !a.joints.contains(&j.name) {
+            continue;
+        }
+        eprintln!("[{}/{}] {}", i + 1, robot.joint.len(), j.name);
+        std::fs::create_dir_all(out.join(&p.dir))
+            .with_context(|| format!("cannot create {}", out.join(&p.dir).display()))?;
+        let mut records = vec![];
+        let mut checked = false;
+        for st in p.stages.iter().filter(|st| st.phase <= until) {
+            if st.phase > Until::Data && !checked {
+                check_data(&a.robot, out, i, j, p)?;
+                checked = true;
+            }
+            let (seconds, skipped) = run_stage(&exe, out, &p.dir, st)?;
+            records.push(StageRecord {
+                id: st.id.clone(),
+                seconds,
+                skipped,
+            });
+        }
+        if until == Until::Data {
+            check_data(&a.robot, out, i, j, p)?;
+        }
+        if until == Until::Export {
+            reports.insert(j.name.clone(), joint_report(j, p, out, records)?);
+        }
+    }
+    if until < Until::Export || !a.joints.is_empty() && a.joints.len() < robot.joint.len() {
+        eprintln!(
+            "frictl robot run: stages done in {:.1} s (no config or report: not every joint ran to the end)",
+            started.elapsed().as_secs_f64()
+        );
+        return Ok(());
+    }
+    let cfg = daemon_config(&robot, &plans, out)?;
+    let cfg_path = out.join("frictiond.toml");
+    let text = format!(
+        "# Written by `frictl robot run {}`: every joint with its trained PINN (paths relative to this file).\n{}",
+        a.robot.display(),
+        toml::to_string(&cfg)?
+    );
+    // The config must load as frictiond loads it (model files, joint names, k_t).
+    frictiond_config::parse(&cfg_path, &text).with_context(|| {
+        format!(
+            "{}: the written config does not validate",
+            cfg_path.display()
+        )
+    })?;
+    std::fs::write(&cfg_path, &text)
+        .with_context(|| format!("cannot write {}", cfg_path.display()))?;
+    let total = started.elapsed().as_secs_f64();
+    let report = serde_json::json!({
+        "format": "frictionless-robot-v1",
+        "producer": format!("frictl {}", env!("CARGO_PKG_VERSION")),
+        "robot": robot.robot.name,
+        "seed": robot.robot.seed,
+        "config": "frictiond.toml",
+        "joints": reports,
+        "total_seconds": total,
+    });
+    std::fs::write(
+        out.join("report.json"),
+        serde_json::to_string_pretty(&report)?,
+    )
+    .context("cannot write report.json")?;
+    let md = report_md(&robot, &reports, total);
+    std::fs::write(out.join("report.md"), &md).context("cannot write report.md")?;
+    println!("{md}");
+    eprintln!(
+        "frictl robot run: done in {total:.0} s → {} (frictiond.toml, report.md, report.json)",
+        out.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,605 @@
+//! The robot-level pipeline description (`frictl robot run ROBOT.toml`): one TOML file listing every
+//! joint (a simulator preset, raw logs or preprocessed datasets; the URDF joint name, the signed gear
+//! ratio, k_t, the feature set, the daemon's per-joint limits) and the search space shared by all.
+//!
+//! What this module **is**: the typed schema ([`RobotFile`], `deny_unknown_fields` everywhere),
+//! [`load`] / [`parse`] with [`RobotError`] naming the file, the key and the value, and the checks
+//! serde cannot express (unique names, exactly one data source per joint, ranges ordered).
+//!
+//! What it is **not**: it runs nothing; the command layer (`frictl robot`) turns a joint into
+//! `frictl` stages, and the Ray driver (`python/ray/frictl_ray.py`) reads the same plan.
+//!
+//! ```toml
+//! [search]                      # trials = 0: one `frictl train` with [train] instead
+//! trials = 4
+//! epochs = 2
+//! hidden = [8, 16]              # every range MIN, MAX (defaults: the paper's)
+//!
+//! [[joint]]
+//! name = "l_knee"               # URDF joint name, the name frictiond and the model carry
+//! preset = "knee"               # or logs = [...] (raw logs) or datasets = [...] (preprocessed)
+//! gear_ratio = -100.0           # signed
+//! kt_nm_per_a = 0.157
+//! max_curr_a = 5.0
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+/// Why a robot file is refused.
+#[derive(Debug, thiserror::Error)]
+pub enum RobotError {
+    /// The file cannot be read.
+    #[error("{path}: cannot read: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// Not TOML of this schema (toml names the key and shows the value).
+    #[error("{path}: {message}")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// toml's message (line, key, what was expected).
+        message: String,
+    },
+    /// A value serde accepted but the pipeline cannot use.
+    #[error("{path}: {key} = {value}: {requirement}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// Dotted key, e.g. `joint[1].gear_ratio`.
+        key: String,
+        /// The value as written.
+        value: String,
+        /// What it must be.
+        requirement: String,
+    },
+}
+
+/// The whole file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotFile {
+    /// `[robot]`: name and seed.
+    #[serde(default)]
+    pub robot: RobotSection,
+    /// `[acquire]`: settings of the simulator acquisition for `preset` joints.
+    #[serde(default)]
+    pub acquire: AcquireSection,
+    /// `[search]`: the random search (every joint).
+    #[serde(default)]
+    pub search: SearchSection,
+    /// `[train]`: the fixed hyper-parameters when `search.trials = 0`.
+    #[serde(default)]
+    pub train: TrainSection,
+    /// `[[joint]]`, in payload-index order.
+    pub joint: Vec<JointSection>,
+}
+
+/// `[robot]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotSection {
+    /// Name (report title).
+    #[serde(default = "default_robot_name")]
+    pub name: String,
+    /// Seed: acquisition (the test run uses seed + 100), split, search draws, training.
+    #[serde(default)]
+    pub seed: u64,
+    /// URDF for preprocessing raw `logs` (relative to this file); absent: link from the log sidecar.
+    #[serde(default)]
+    pub urdf: Option<PathBuf>,
+    /// A directory every Ray worker sees (relative to this file): datasets are exchanged there by
+    /// SHA-256 instead of through Ray's object store. Ignored by `frictl robot run`.
+    #[serde(default)]
+    pub shared_dir: Option<PathBuf>,
+}
+
+fn default_robot_name() -> String {
+    "robot".into()
+}
+
+impl Default for RobotSection {
+    fn default() -> Self {
+        Self {
+            name: default_robot_name(),
+            seed: 0,
+            urdf: None,
+            shared_dir: None,
+        }
+    }
+}
+
+/// `[acquire]`: `frictl acquire --set` overrides.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AcquireSection {
+    /// Overrides of the training acquisition (`KEY=VALUE`, e.g. `protocol.n_starts=1`).
+    #[serde(default)]
+    pub set: Vec<String>,
+    /// Overrides of the held-out tracking test acquisition (after the ones that keep only the
+    /// tracking test part of the protocol).
+    #[serde(default)]
+    pub test_set: Vec<String>,
+}
+
+/// `[search]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SearchSection {
+    /// Trials per joint; 0 = train once with `[train]`.
+    #[serde(default = "default_trials")]
+    pub trials: usize,
+    /// Epochs per trial.
+    #[serde(default = "default_epochs")]
+    pub epochs: usize,
+    /// Threads per trial (1 makes trials reproducible across machines).
+    #[serde(default = "one")]
+    pub threads_per_trial: usize,
+    /// Trials at the same time in `frictl robot run`.
+    #[serde(default = "one")]
+    pub parallel: usize,
+    /// Validation fraction (the selection criterion).
+    #[serde(default = "default_frac")]
+    pub val_frac: f64,
+    /// Test fraction (reported only).
+    #[serde(default = "default_frac")]
+    pub test_frac: f64,
+    /// Early stopping patience [epochs].
+    #[serde(default)]
+    pub patience: Option<usize>,
+    /// Batch size range.
+    #[serde(default)]
+    pub batch: Option<[usize; 2]>,
+    /// Hidden width range.
+    #[serde(default)]
+    pub hidden: Option<[usize; 2]>,
+    /// Learning-rate range (log-uniform).
+    #[serde(default)]
+    pub lr: Option<[f32; 2]>,
+    /// History length range.
+    #[serde(default)]
+    pub history: Option<[usize; 2]>,
+    /// λ range.
+    #[serde(default)]
+    pub lambda: Option<[f32; 2]>,
+    /// Dropout range.
+    #[serde(default)]
+    pub dropout: Option<[f32; 2]>,
+}
+
+fn default_trials() -> usize {
+    100
+}
+fn default_epochs() -> usize {
+    350
+}
+fn one() -> usize {
+    1
+}
+fn default_frac() -> f64 {
+    0.15
+}
+
+impl Default for SearchSection {
+    fn default() -> Self {
+        Self {
+            trials: default_trials(),
+            epochs: default_epochs(),
+            threads_per_trial: 1,
+            parallel: 1,
+            val_frac: default_frac(),
+            test_frac: default_frac(),
+            patience: None,
+            batch: None,
+            hidden: None,
+            lr: None,
+            history: None,
+            lambda: None,
+            dropout: None,
+        }
+    }
+}
+
+/// `[train]` (`frictl train`'s defaults).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainSection {
+    /// Hidden widths.
+    #[serde(default = "default_hidden")]
+    pub hidden: Vec<usize>,
+    /// History length H.
+    #[serde(default = "default_history")]
+    pub history: usize,
+    /// Epochs.
+    #[serde(default = "default_train_epochs")]
+    pub epochs: usize,
+    /// Batch size.
+    #[serde(default = "default_batch")]
+    pub batch: usize,
+    /// Learning rate.
+    #[serde(default = "default_lr")]
+    pub lr: f32,
+    /// λ.
+    #[serde(default = "default_lambda")]
+    pub lambda: f32,
+    /// Dropout.
+    #[serde(default)]
+    pub dropout: f32,
+}
+
+fn default_hidden() -> Vec<usize> {
+    vec![128, 128]
+}
+fn default_history() -> usize {
+    30
+}
+fn default_train_epochs() -> usize {
+    10
+}
+fn default_batch() -> usize {
+    512
+}
+fn default_lr() -> f32 {
+    1e-3
+}
+fn default_lambda() -> f32 {
+    0.01
+}
+
+impl Default for TrainSection {
+    fn default() -> Self {
+        Self {
+            hidden: default_hidden(),
+            history: default_history(),
+            epochs: default_train_epochs(),
+            batch: default_batch(),
+            lr: default_lr(),
+            lambda: default_lambda(),
+            dropout: 0.0,
+        }
+    }
+}
+
+/// Input feature set (the `--features` names of `frictl train`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FeatureName {
+    /// Δθ and joint velocity (the paper's).
+    #[default]
+    DeltaThetaJointVel,
+    /// Motor and joint velocity.
+    MotorVelJointVel,
+    /// Joint and motor position.
+    JointPosMotorPos,
+}
+
+impl FeatureName {
+    /// The `frictl train/search --features` value.
+    pub fn cli(self) -> &'static str {
+        match self {
+            Self::DeltaThetaJointVel => "delta-theta-joint-vel",
+            Self::MotorVelJointVel => "motor-vel-joint-vel",
+            Self::JointPosMotorPos => "joint-pos-motor-pos",
+        }
+    }
+}
+
+/// frictiond's τ̂_F low-pass of one joint.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LpfSection {
+    /// Butterworth order.
+    pub order: usize,
+    /// Cut-off [Hz].
+    pub cutoff_hz: f64,
+}
+
+/// One `[[joint]]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointSection {
+    /// URDF joint name (the model and frictiond carry it; must match the data's sidecars).
+    pub name: String,
+    /// A simulator preset (`knee`, `ankle_roll`): acquired with `frictl acquire`.
+    #[serde(default)]
+    pub preset: Option<String>,
+    /// Raw logs (relative to this file), labelled with `frictl preprocess`.
+    #[serde(default)]
+    pub logs: Vec<PathBuf>,
+    /// Held-out raw logs for the evaluation.
+    #[serde(default)]
+    pub test_logs: Vec<PathBuf>,
+    /// Preprocessed dataset CSVs (their `.json` sidecars next to them).
+    #[serde(default)]
+    pub datasets: Vec<PathBuf>,
+    /// Held-out preprocessed datasets for the evaluation.
+    #[serde(default)]
+    pub test_datasets: Vec<PathBuf>,
+    /// Signed gear ratio r (motor angle per joint angle); checked against the data.
+    pub gear_ratio: f64,
+    /// Torque constant k_t [Nm/A] of the labels; checked against the data.
+    pub kt_nm_per_a: f64,
+    /// Input feature set.
+    #[serde(default)]
+    pub features: FeatureName,
+    /// frictiond's current clamp [A].
+    pub max_curr_a: f64,
+    /// frictiond's friction compensation gain.
+    #[serde(default = "default_kfc")]
+    pub kfc: f64,
+    /// frictiond's friction clip [Nm] (absent: none).
+    #[serde(default)]
+    pub max_output_friction_nm: Option<f64>,
+    /// frictiond's τ̂_F low-pass (absent: none).
+    #[serde(default)]
+    pub lpf: Option<LpfSection>,
+    /// Further `frictl preprocess` arguments for this joint's logs.
+    #[serde(default)]
+    pub preprocess_args: Vec<String>,
+}
+
+fn default_kfc() -> f64 {
+    1.0
+}
+
+/// Where a joint's data comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DataSource {
+    /// `preset`.
+    Preset,
+    /// `logs`.
+    Logs,
+    /// `datasets`.
+    Datasets,
+}
+
+impl JointSection {
+    /// The one data source of this joint (checked by [`parse`]).
+    pub fn source(&self) -> DataSource {
+        if self.preset.is_some() {
+            DataSource::Preset
+        } else if !self.logs.is_empty() {
+            DataSource::Logs
+        } else {
+            DataSource::Datasets
+        }
+    }
+}
+
+/// Reads and checks a robot file; relative paths in it are made relative to its directory.
+pub fn load(path: &Path) -> Result<RobotFile, RobotError> {
+    let text = std::fs::read_to_string(path).map_err(|source| RobotError::Read {
+        path: path.to_owned(),
+        source,
+    })?;
+    let mut file = parse(path, &text)?;
+    let base = path.parent().unwrap_or(Path::new(""));
+    let rebase = |p: &mut PathBuf| {
+        if p.is_relative() {
+            *p = base.join(&*p);
+        }
+    };
+    for j in &mut file.joint {
+        for p in j
+            .logs
+            .iter_mut()
+            .chain(&mut j.test_logs)
+            .chain(&mut j.datasets)
+            .chain(&mut j.test_datasets)
+        {
+            rebase(p);
+        }
+    }
+    if let Some(u) = &mut file.robot.urdf {
+        rebase(u);
+    }
+    if let Some(d) = &mut file.robot.shared_dir {
+        rebase(d);
+    }
+    Ok(file)
+}
+
+/// Parses and checks the text of a robot file (`path` names it in errors; paths are left as written).
+pub fn parse(path: &Path, text: &str) -> Result<RobotFile, RobotError> {
+    let file: RobotFile = toml::from_str(text).map_err(|e| RobotError::Parse {
+        path: path.to_owned(),
+        message: e.to_string(),
+    })?;
+    let bad = |key: String, value: String, req: &str| RobotError::Invalid {
+        path: path.to_owned(),
+        key,
+        value,
+        requirement: req.to_owned(),
+    };
+    if file.joint.is_empty() {
+        return Err(bad("joint".into(), "[]".into(), "at least one [[joint]]"));
+    }
+    let s = &file.search;
+    for (key, lo, hi) in [
+        (
+            "batch",
+            s.batch.map(|r| r[0] as f64),
+            s.batch.map(|r| r[1] as f64),
+        ),
+        (
+            "hidden",
+            s.hidden.map(|r| r[0] as f64),
+            s.hidden.map(|r| r[1] as f64),
+        ),
+        ("lr", s.lr.map(|r| r[0] as f64), s.lr.map(|r| r[1] as f64)),
+        (
+            "history",
+            s.history.map(|r| r[0] as f64),
+            s.history.map(|r| r[1] as f64),
+        ),
+        (
+            "lambda",
+            s.lambda.map(|r| r[0] as f64),
+            s.lambda.map(|r| r[1] as f64),
+        ),
+        (
+            "dropout",
+            s.dropout.map(|r| r[0] as f64),
+            s.dropout.map(|r| r[1] as f64),
+        ),
+    ] {
+        if let (Some(lo), Some(hi)) = (lo, hi)
+            && !(lo <= hi && lo >= 0.0 && (key == "lambda" || key == "dropout" || lo > 0.0))
+        {
+            return Err(bad(
+                format!("search.{key}"),
+                format!("[{lo}, {hi}]"),
+                "[MIN, MAX] with 0 < MIN ≤ MAX (0 ≤ MIN for lambda and dropout)",
+            ));
+        }
+    }
+    if s.epochs == 0 || s.threads_per_trial == 0 || s.parallel == 0 {
+        return Err(bad(
+            "search".into(),
+            format!(
+                "epochs {}, threads_per_trial {}, parallel {}",
+                s.epochs, s.threads_per_trial, s.parallel
+            ),
+            "each ≥ 1",
+        ));
+    }
+    if s.trials > 0 && s.val_frac <= 0.0 {
+        return Err(bad(
+            "search.val_frac".into(),
+            s.val_frac.to_string(),
+            "> 0 (the search selects on validation RMSE)",
+        ));
+    }
+    for (i, j) in file.joint.iter().enumerate() {
+        let key = |k: &str| format!("joint[{i}].{k}");
+        if j.name.is_empty() || j.name.contains(['/', '\\']) || j.name.starts_with('.') {
+            return Err(bad(
+                key("name"),
+                format!("{:?}", j.name),
+                "a non-empty joint name usable as a directory name",
+            ));
+        }
+        if file.joint[..i].iter().any(|o| o.name == j.name) {
+            return Err(bad(key("name"), format!("{:?}", j.name), "unique"));
+        }
+        let sources = usize::from(j.preset.is_some())
+            + usize::from(!j.logs.is_empty())
+            + usize::from(!j.datasets.is_empty());
+        if sources != 1 {
+            return Err(bad(
+                key("preset/logs/datasets"),
+                format!("{sources} given"),
+                "exactly one of preset, logs, datasets",
+            ));
+        }
+        if !j.test_logs.is_empty() && j.logs.is_empty() {
+            return Err(bad(
+                key("test_logs"),
+                format!("{:?}", j.test_logs),
+                "only with logs",
+            ));
+        }
+        if !j.test_datasets.is_empty() && j.datasets.is_empty() {
+            return Err(bad(
+                key("test_datasets"),
+                format!("{:?}", j.test_datasets),
+                "only with datasets",
+            ));
+        }
+        if !(j.gear_ratio.is_finite() && j.gear_ratio != 0.0) {
+            return Err(bad(
+                key("gear_ratio"),
+                j.gear_ratio.to_string(),
+                "finite and non-zero (signed)",
+            ));
+        }
+        for (k, v) in [("kt_nm_per_a", j.kt_nm_per_a), ("max_curr_a", j.max_curr_a)] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(bad(key(k), v.to_string(), "finite and > 0"));
+            }
+        }
+    }
+    Ok(file)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"
+[search]
+trials = 4
+epochs = 2
+hidden = [8, 16]
+
+[[joint]]
+name = "l_knee"
+preset = "knee"
+gear_ratio = -100.0
+kt_nm_per_a = 0.157
+max_curr_a = 5.0
+
+[[joint]]
+name = "l_ankle_roll"
+datasets = ["data/a.csv"]
+gear_ratio = -160.0
+kt_nm_per_a = 0.066
+max_curr_a = 3.0
+features = "motor-vel-joint-vel"
+"#;
+
+    #[test]
+    fn a_good_file_parses_with_defaults() {
+        let f = parse(Path::new("r.toml"), GOOD).unwrap();
+        assert_eq!(f.joint.len(), 2);
+        assert_eq!(f.search.trials, 4);
+        assert_eq!(f.search.hidden, Some([8, 16]));
+        assert_eq!(f.search.batch, None);
+        assert_eq!(f.joint[0].source(), DataSource::Preset);
+        assert_eq!(f.joint[1].source(), DataSource::Datasets);
+        assert_eq!(f.joint[1].features, FeatureName::MotorVelJointVel);
+        assert_eq!(f.joint[0].kfc, 1.0);
+        assert_eq!(f.robot.seed, 0);
+    }
+
+    #[test]
+    fn errors_name_the_file_the_key_and_the_value() {
+        let e = |text: &str| {
+            parse(Path::new("robot.toml"), text)
+                .unwrap_err()
+                .to_string()
+        };
+        let msg = e(&GOOD.replace("max_curr_a = 5.0", "max_curr_a = 5.0\nmax_cur = 1"));
+        assert!(msg.starts_with("robot.toml: "), "{msg}");
+        assert!(msg.contains("max_cur"), "{msg}");
+        let msg = e(&GOOD.replace("gear_ratio = -160.0", "gear_ratio = 0.0"));
+        assert!(msg.contains("joint[1].gear_ratio = 0"), "{msg}");
+        let msg = e(&GOOD.replace("hidden = [8, 16]", "hidden = [16, 8]"));
+        assert!(msg.contains("search.hidden = [16, 8]"), "{msg}");
+        let msg = e(&GOOD.replace("name = \"l_ankle_roll\"", "name = \"l_knee\""));
+        assert!(msg.contains("joint[1].name = \"l_knee\": unique"), "{msg}");
+        let msg = e(&GOOD.replace("preset = \"knee\"", "preset = \"knee\"\nlogs = [\"x.csv\"]"));
+        assert!(
+            msg.contains("joint[0].preset/logs/datasets = 2 given"),
+            "{msg}"
+        );
+        let msg = e(&GOOD.replace("\"motor-vel-joint-vel\"", "\"velocity\""));
+        assert!(msg.contains("velocity"), "{msg}");
+    }
+
+    #[test]
+    fn load_makes_paths_relative_to_the_file() {
+        let dir = std::env::temp_dir().join(format!("frictl-robot-load-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("robot.toml");
+        std::fs::write(&p, GOOD).unwrap();
+        let f = load(&p).unwrap();
+        assert_eq!(f.joint[1].datasets, vec![dir.join("data/a.csv")]);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
