@@ -129,9 +129,15 @@ fn peak_abs_dq(csv: &Path) -> anyhow::Result<f64> {
     let dq = cols
         .get("dq_rad_s")
         .with_context(|| format!("{}: no dq_rad_s column", csv.display()))?;
-    let mut v: Vec<f64> = dq.iter().filter(|v| v.is_finite()).map(|v| v.abs()).collect();
+    let mut v: Vec<f64> = dq
+        .iter()
+        .filter(|v| v.is_finite())
+        .map(|v| v.abs())
+        .collect();
     v.sort_by(f64::total_cmp);
-    Ok(v.get((v.len() as f64 * 0.995) as usize).copied().unwrap_or(0.0))
+    Ok(v.get((v.len() as f64 * 0.995) as usize)
+        .copied()
+        .unwrap_or(0.0))
 }
 
 /// The held-out run's entry of an eval report.
