@@ -11,6 +11,8 @@
 //! - [`config`]: every number as a serde struct (the `[protocol]` table of a preset);
 //! - [`protocol`]: the schedule, the controllers and the run loop over the [`protocol::JointIo`] seam;
 //! - [`log`]: CSV columns, units and the sidecar;
+//! - [`arm_log`]: the log of a torque-sensed arm (joint torque sensor, no motor encoder, optional
+//!   lower rate and jittered timestamps) for `frictl import csv`;
 //! - [`offline`]: the protocol on a fresh simulated plant ([`offline::run_offline`]) and its rows as
 //!   the label pipeline's input.
 //!
@@ -66,6 +68,7 @@
 
 #![warn(missing_docs)]
 
+pub mod arm_log;
 pub mod config;
 pub mod log;
 pub mod offline;

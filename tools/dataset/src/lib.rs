@@ -334,6 +334,90 @@ impl DatasetSidecar {
     }
 }
 
+/// The runs of the dataset at `path`: its sidecar's runs, or — a sidecar without runs, or none at all —
+/// one run named by the file stem holding every chunk of `data`.
+pub fn dataset_runs(path: &Path, sidecar: Option<&DatasetSidecar>, data: &Dataset) -> Vec<RunInfo> {
+    let stem = path.file_stem().map_or_else(
+        || path.display().to_string(),
+        |s| s.to_string_lossy().into_owned(),
+    );
+    match sidecar {
+        Some(s) if !s.runs.is_empty() => s.runs.clone(),
+        _ => {
+            let mut chunks: Vec<u32> = data.chunk.clone();
+            chunks.sort_unstable();
+            chunks.dedup();
+            vec![RunInfo {
+                name: stem,
+                source: sidecar.map_or_else(|| path.display().to_string(), |s| s.input_log.clone()),
+                chunks,
+            }]
+        }
+    }
+}
+
+/// The range of the model's physical inputs over a set of rows — what a model has seen in training.
+/// A row outside it (either coordinate) is an extrapolation. Empty ranges (no rows) contain nothing.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct InputRange {
+    /// Joint position s: [min, max] [rad].
+    pub s_rad: [f64; 2],
+    /// Joint velocity ṡ: [min, max] [rad/s].
+    pub sdot_rad_s: [f64; 2],
+    /// Rows the range was taken over.
+    pub rows: usize,
+}
+
+impl Default for InputRange {
+    fn default() -> Self {
+        Self {
+            s_rad: [f64::INFINITY, f64::NEG_INFINITY],
+            sdot_rad_s: [f64::INFINITY, f64::NEG_INFINITY],
+            rows: 0,
+        }
+    }
+}
+
+impl InputRange {
+    /// Widens the range by row `k` of `ds` (rows with a non-finite s or ṡ are ignored).
+    pub fn add_row(&mut self, ds: &Dataset, k: usize) {
+        let (s, v) = (ds.s_rad[k], ds.sdot_rad_s[k]);
+        if !(s.is_finite() && v.is_finite()) {
+            return;
+        }
+        self.s_rad = [self.s_rad[0].min(s), self.s_rad[1].max(s)];
+        self.sdot_rad_s = [self.sdot_rad_s[0].min(v), self.sdot_rad_s[1].max(v)];
+        self.rows += 1;
+    }
+
+    /// The range of the valid rows of `ds` whose chunk is in `chunks`.
+    pub fn of_chunks(ds: &Dataset, chunks: &[u32]) -> Self {
+        let mut r = Self::default();
+        for k in 0..ds.len() {
+            if ds.valid[k] && chunks.contains(&ds.chunk[k]) {
+                r.add_row(ds, k);
+            }
+        }
+        r
+    }
+
+    /// The union of two ranges.
+    pub fn merge(&mut self, o: &Self) {
+        self.s_rad = [self.s_rad[0].min(o.s_rad[0]), self.s_rad[1].max(o.s_rad[1])];
+        self.sdot_rad_s = [
+            self.sdot_rad_s[0].min(o.sdot_rad_s[0]),
+            self.sdot_rad_s[1].max(o.sdot_rad_s[1]),
+        ];
+        self.rows += o.rows;
+    }
+
+    /// Whether position `s_rad` and velocity `sdot_rad_s` both lie inside the range (bounds included).
+    pub fn contains(&self, s_rad: f64, sdot_rad_s: f64) -> bool {
+        (self.s_rad[0]..=self.s_rad[1]).contains(&s_rad)
+            && (self.sdot_rad_s[0]..=self.sdot_rad_s[1]).contains(&sdot_rad_s)
+    }
+}
+
 /// Owned copy of a [`ColumnDoc`] (for deserialising sidecars).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ColumnDocOwned {
@@ -750,5 +834,63 @@ mod tests {
                 ..
             }
         ));
+    }
+}
+
+#[cfg(test)]
+mod run_tests {
+    use super::*;
+
+    fn ds(chunks: &[u32], s: &[f64], v: &[f64]) -> Dataset {
+        let n = chunks.len();
+        Dataset {
+            time_s: (0..n).map(|k| k as f64 * 1e-3).collect(),
+            chunk: chunks.to_vec(),
+            source_chunk: chunks.to_vec(),
+            active: vec![true; n],
+            valid: vec![true; n],
+            s_rad: s.to_vec(),
+            sdot_rad_s: v.to_vec(),
+            sddot_rad_s2: vec![0.0; n],
+            theta_motor_rad: vec![0.0; n],
+            delta_theta_motor_rad: vec![0.0; n],
+            omega_motor_rad_s: vec![0.0; n],
+            i_meas_a: vec![0.0; n],
+            i_filt_a: vec![0.0; n],
+            tau_id_nm: vec![0.0; n],
+            tau_f_label_nm: vec![0.0; n],
+            temperature_c: vec![f64::NAN; n],
+            tau_f_true_nm: None,
+            phi_ddot_rad_s2: None,
+        }
+    }
+
+    #[test]
+    fn runs_default_to_the_file_stem_with_every_chunk() {
+        let d = ds(&[2, 2, 0, 5], &[0.0; 4], &[0.0; 4]);
+        let runs = dataset_runs(Path::new("/x/slow_run.csv"), None, &d);
+        assert_eq!(runs.len(), 1);
+        assert_eq!(runs[0].name, "slow_run");
+        assert_eq!(runs[0].chunks, [0, 2, 5]);
+    }
+
+    #[test]
+    fn input_range_of_chunks_and_contains() {
+        let d = ds(
+            &[0, 0, 1, 1],
+            &[-0.5, 0.2, 3.0, 0.0],
+            &[0.1, -0.3, 9.0, f64::NAN],
+        );
+        let r = InputRange::of_chunks(&d, &[0]);
+        assert_eq!(r.s_rad, [-0.5, 0.2]);
+        assert_eq!(r.sdot_rad_s, [-0.3, 0.1]);
+        assert_eq!(r.rows, 2);
+        assert!(r.contains(0.0, 0.0) && r.contains(0.2, -0.3));
+        assert!(!r.contains(0.0, 0.11) && !r.contains(0.21, 0.0));
+        let mut all = r;
+        all.merge(&InputRange::of_chunks(&d, &[1]));
+        assert_eq!(all.rows, 3, "the NaN row is ignored");
+        assert!(all.contains(3.0, 9.0));
+        assert!(!InputRange::default().contains(0.0, 0.0));
     }
 }

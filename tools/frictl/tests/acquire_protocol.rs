@@ -455,3 +455,105 @@ fn default_protocols_fit_the_joints() {
         );
     }
 }
+
+/// `frictl acquire --sensor torque`: a torque-sensed arm's log — no motor encoder, a 500 Hz log with
+/// jittered timestamps, and a joint torque sensor whose reading makes r·k_t·i − τ_joint the true
+/// friction up to the reflected rotor inertia, the sensor offset and the noise.
+#[test]
+fn torque_sensed_arm_log_has_no_motor_encoder_and_a_consistent_torque_sensor() {
+    let dir = tmpdir("torque_sensor");
+    let run = |extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_frictl"))
+            .args([
+                "acquire", "--preset", "knee", "--seed", "3", "--name", "arm", "--out",
+            ])
+            .arg(&dir)
+            .args([
+                "--sensor",
+                "torque",
+                "--set=protocol.n_starts=1",
+                "--set=protocol.sines.enabled=false",
+                "--set=protocol.ramps.enabled=false",
+                "--set=protocol.steps.enabled=false",
+                "--set=protocol.tracking.train.amplitudes_rad=[0.4]",
+                "--set=protocol.tracking.train.frequencies_hz=[0.35]",
+                "--set=plant.torque_sensor.offset_nm=0.3",
+            ])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let out = run(&["--log-period-ms", "2", "--jitter-ms", "0.3"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut r = csv::Reader::from_path(dir.join("arm.csv")).unwrap();
+    let header: Vec<String> = r.headers().unwrap().iter().map(String::from).collect();
+    assert_eq!(
+        header,
+        [
+            "time_s",
+            "q_rad",
+            "dq_rad_s",
+            "current_a",
+            "tau_joint_nm",
+            "tau_f_true_nm"
+        ],
+        "knee: no temperature sensor; never a motor encoder"
+    );
+    let rows: Vec<Vec<f64>> = r
+        .records()
+        .map(|rec| rec.unwrap().iter().map(|f| f.parse().unwrap()).collect())
+        .collect();
+    let side: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("arm.json")).unwrap()).unwrap();
+    let samples = side["summary"]["samples"].as_u64().unwrap() as usize;
+    assert_eq!(rows.len(), samples.div_ceil(2), "every second 1 kHz sample");
+    assert_eq!(side["columns"].as_array().unwrap().len(), header.len());
+    let mut jittered = 0;
+    for (k, row) in rows.iter().enumerate() {
+        let dt = row[0] - 2e-3 * k as f64;
+        assert!(dt.abs() <= 3e-4 + 1e-9, "row {k}: time {}", row[0]);
+        if dt.abs() > 1e-6 {
+            jittered += 1;
+        }
+        if k > 0 {
+            assert!(row[0] > rows[k - 1][0], "timestamps increase");
+        }
+    }
+    assert!(jittered > rows.len() / 2);
+    // label = r·k_t·i − τ_joint; label − truth = J_eq·φ̈ − offset − noise: its mean is −offset (φ̈
+    // averages out over whole tracking cycles), its spread small next to the friction.
+    let (r_signed, kt) = (
+        side["gear_ratio_signed"].as_f64().unwrap(),
+        side["kt_nm_per_a"].as_f64().unwrap(),
+    );
+    let tail = &rows[rows.len() / 4..];
+    let d: Vec<f64> = tail
+        .iter()
+        .map(|x| r_signed * kt * x[3] - x[4] - x[5])
+        .collect();
+    let mean = d.iter().sum::<f64>() / d.len() as f64;
+    let sd = (d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / d.len() as f64).sqrt();
+    let truth_rms = (tail.iter().map(|x| x[5] * x[5]).sum::<f64>() / tail.len() as f64).sqrt();
+    assert!((mean + 0.3).abs() < 0.1, "mean {mean}");
+    assert!(sd < 0.1 * truth_rms, "sd {sd} vs truth rms {truth_rms}");
+    // dq is the encoder difference: it follows the tracking velocity.
+    let dq_max = tail.iter().map(|x| x[2].abs()).fold(0.0, f64::max);
+    assert!(
+        (dq_max - 0.4 * 2.0 * std::f64::consts::PI * 0.35).abs() < 0.3,
+        "{dq_max}"
+    );
+
+    // Jitter must keep timestamps in order; the log period must be whole samples.
+    for bad in [
+        &["--log-period-ms", "2", "--jitter-ms", "1"][..],
+        &["--log-period-ms", "1.5"],
+    ] {
+        let out = run(bad);
+        assert!(!out.status.success(), "{bad:?}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -334,3 +334,170 @@ fn cli_writes_report_and_figures_and_filters_test_chunks() {
     assert_eq!(n_test as usize, CHUNK_ROWS - (H - 1));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Writes a dataset sidecar naming the three chunks as runs `slow`, `mid`, `fast` (the chunks' peak
+/// |ṡ| and |s| grow with the chunk id).
+fn write_run_sidecar(csv: &Path, ds: &Dataset) {
+    let runs: Vec<serde_json::Value> = ["slow", "mid", "fast"]
+        .iter()
+        .enumerate()
+        .map(|(c, n)| serde_json::json!({"name": n, "source": format!("{n}.csv"), "chunks": [c]}))
+        .collect();
+    let side = serde_json::json!({
+        "format": "frictionless-dataset-v1", "producer": "test", "input_log": "x", "input_sha256": "00",
+        "joint": "", "gear_ratio_signed": R, "kt_nm_per_a": 0.05, "fs_hz": 1000.0, "settings": {},
+        "dynamics": "", "delta_theta_offset_motor_rad": 0.0, "samples": ds.len(),
+        "valid_samples": ds.len(), "chunks": 3, "short_chunks": 0, "columns": [], "runs": runs
+    });
+    std::fs::write(csv.with_extension("json"), side.to_string()).unwrap();
+}
+
+#[test]
+fn cli_holds_out_runs_and_reports_per_run_per_band_and_extrapolation() {
+    let dir = std::env::temp_dir().join(format!("eval_runs_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = scv();
+    let ds = dataset(&|v, _| p.torque_nm(v), 5, DeltaThetaOffset::Run);
+    let csv = dir.join("three.csv");
+    ds.write_csv(&csv).unwrap();
+    write_run_sidecar(&csv, &ds);
+    let scv_json = dir.join("scv.json");
+    std::fs::write(
+        &scv_json,
+        serde_json::json!({"model": "Scv", "params": p}).to_string(),
+    )
+    .unwrap();
+    let json = dir.join("eval.json");
+    let run = |extra: &[&str]| -> (bool, String, serde_json::Value) {
+        let out = Command::new(env!("CARGO_BIN_EXE_frictl"))
+            .arg("eval")
+            .arg("--scv")
+            .arg(&scv_json)
+            .arg("--json")
+            .arg(&json)
+            .args(extra)
+            .output()
+            .unwrap();
+        let text = format!(
+            "{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let v = if out.status.success() {
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap()
+        } else {
+            serde_json::Value::Null
+        };
+        (out.status.success(), text, v)
+    };
+    let csv_s = csv.to_str().unwrap();
+    let n = |v: &serde_json::Value| v.as_u64().unwrap() as usize;
+
+    // Hold out the slowest and the fastest run: trained on mid only, slow lies inside its range of s
+    // and ṡ, fast has rows beyond it.
+    let (ok, text, v) = run(&[
+        "--dataset",
+        csv_s,
+        "--test-run",
+        "slow",
+        "--test-run",
+        "fast",
+    ]);
+    assert!(ok, "{text}");
+    assert!(
+        text.contains("Per run") && text.contains("Per |sdot| band"),
+        "{text}"
+    );
+    assert_eq!(
+        n(&v["models"]["scv"]["n_samples"]),
+        2 * CHUNK_ROWS,
+        "only the held-out runs"
+    );
+    let runs = v["per_run"].as_array().unwrap();
+    assert_eq!(runs.len(), 2);
+    assert_eq!(
+        (&runs[0]["run"], &runs[1]["run"]),
+        (&"slow".into(), &"fast".into())
+    );
+    assert_eq!(n(&runs[1]["evaluated"]), CHUNK_ROWS);
+    assert_eq!(n(&runs[0]["extrapolated"]), 0);
+    // The range is mid's: count the fast rows outside it independently.
+    let mid = CHUNK_ROWS..2 * CHUNK_ROWS;
+    let (mut s_lo, mut s_hi, mut v_lo, mut v_hi) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+    for k in mid {
+        s_lo = s_lo.min(ds.s_rad[k]);
+        s_hi = s_hi.max(ds.s_rad[k]);
+        v_lo = v_lo.min(ds.sdot_rad_s[k]);
+        v_hi = v_hi.max(ds.sdot_rad_s[k]);
+    }
+    let outside = (2 * CHUNK_ROWS..3 * CHUNK_ROWS)
+        .filter(|&k| {
+            !(s_lo..=s_hi).contains(&ds.s_rad[k]) || !(v_lo..=v_hi).contains(&ds.sdot_rad_s[k])
+        })
+        .count();
+    assert!(outside > 0);
+    assert_eq!(n(&runs[1]["extrapolated"]), outside);
+    assert_eq!(v["training_range"]["source"], "datasets");
+    assert_eq!(
+        v["training_range"]["range"]["sdot_rad_s"],
+        serde_json::json!([v_lo, v_hi])
+    );
+    assert!(runs[0]["models"]["scv"]["rmse_inside"].is_number());
+    assert!(runs[0]["models"]["scv"]["rmse_outside"].is_null());
+    let scv_fast = &runs[1]["models"]["scv"];
+    for key in ["rmse_all", "rmse_outside", "rmse_true_outside"] {
+        assert!(scv_fast[key].is_number(), "{key} = {}", scv_fast[key]);
+    }
+    // The true SCV: label noise only, vs the truth exactly 0 (also outside the range).
+    assert!((scv_fast["rmse_all"].as_f64().unwrap() - SIGMA).abs() < 0.15 * SIGMA);
+    assert!(scv_fast["rmse_true_outside"].as_f64().unwrap() < 1e-9);
+    // none is the friction itself: far worse.
+    assert!(runs[1]["models"]["none"]["rmse_all"].as_f64().unwrap() > 5.0 * SIGMA);
+    // Bands partition the rows; edges are the defaults.
+    let bands = v["per_band"].as_array().unwrap();
+    assert_eq!(bands.len(), 5);
+    assert_eq!(
+        bands.iter().map(|b| n(&b["n"])).sum::<usize>(),
+        2 * CHUNK_ROWS
+    );
+    assert!(bands[4]["hi_rad_s"].is_null());
+    let band_rows = (0..CHUNK_ROWS)
+        .chain(2 * CHUNK_ROWS..3 * CHUNK_ROWS)
+        .filter(|&k| (0.1..0.5).contains(&ds.sdot_rad_s[k].abs()))
+        .count();
+    assert_eq!(n(&bands[2]["n"]), band_rows);
+
+    // Hold out the middle run: slow + fast span it, nothing is extrapolated; custom band edges.
+    let (ok, text, v) = run(&[
+        "--dataset",
+        csv_s,
+        "--test-run",
+        "mid",
+        "--band-edges",
+        "0,0.5",
+    ]);
+    assert!(ok, "{text}");
+    assert_eq!(v["per_run"][0]["run"], "mid");
+    assert_eq!(n(&v["per_run"][0]["extrapolated"]), 0);
+    assert!(v["per_run"][0]["models"]["scv"]["rmse_outside"].is_null());
+    assert_eq!(v["per_band"].as_array().unwrap().len(), 2);
+    assert_eq!(v["band_edges_rad_s"], serde_json::json!([0.0, 0.5]));
+
+    // Everything scored without held-out runs: one entry per run, no extrapolation flags.
+    let (ok, text, v) = run(&["--test-dataset", csv_s]);
+    assert!(ok, "{text}");
+    assert_eq!(v["per_run"].as_array().unwrap().len(), 3);
+    assert!(v["training_range"].is_null());
+    assert!(v["per_run"][2]["extrapolated"].is_null());
+
+    // An unknown run name is an error naming it and the runs there are.
+    let (ok, text, _) = run(&["--dataset", csv_s, "--test-run", "medium"]);
+    assert!(!ok);
+    assert!(
+        text.contains("medium") && text.contains("slow, mid, fast"),
+        "{text}"
+    );
+    let (ok, text, _) = run(&["--dataset", csv_s, "--band-edges", "0.5,0.1"]);
+    assert!(!ok && text.contains("--band-edges"), "{text}");
+    std::fs::remove_dir_all(&dir).ok();
+}

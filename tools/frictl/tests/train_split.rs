@@ -251,3 +251,104 @@ fn split_is_seeded_and_recorded_in_the_report() {
                     })
     );
 }
+
+/// `--test-run` / `--test-dataset` hold out whole runs: every chunk of the held-out run is test, the
+/// validation chunks come from the training runs only, and the report records the training range.
+#[test]
+fn held_out_runs_are_the_test_set_and_validation_comes_from_the_training_runs() {
+    let f = fixture();
+    let src = sources();
+    let with_rows = pipeline::chunks_with_valid_rows(&src);
+    let of = |d: u32| -> Vec<ChunkKey> {
+        with_rows
+            .iter()
+            .copied()
+            .filter(|k| k.dataset == d)
+            .collect()
+    };
+    assert_eq!(
+        pipeline::held_out_chunks(&src, &["ds5".to_owned()], &[]).unwrap(),
+        of(1)
+    );
+    let e = pipeline::held_out_chunks(&src, &["nope".to_owned()], &[])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("nope") && e.contains("ds4") && e.contains("ds5"),
+        "{e}"
+    );
+
+    let keys =
+        |v: &serde_json::Value| -> Vec<ChunkKey> { serde_json::from_value(v.clone()).unwrap() };
+    let train = |tag: &str, data: &[&str]| -> serde_json::Value {
+        let out = f.dir.join(format!("{tag}.fwt"));
+        let mut args = vec!["train"];
+        args.extend_from_slice(data);
+        args.extend_from_slice(&[
+            "--scv",
+            s(&f.scv),
+            "--out",
+            s(&out),
+            "--history",
+            "4",
+            "--hidden",
+            "8,8",
+            "--epochs",
+            "1",
+            "--batch",
+            "2048",
+            "--val-frac",
+            "0.3",
+            "--quiet",
+        ]);
+        frictl(&args);
+        serde_json::from_str(&std::fs::read_to_string(out.with_extension("train.json")).unwrap())
+            .unwrap()
+    };
+    let by_run = train(
+        "heldrun",
+        &[
+            "--dataset",
+            s(&f.datasets[0]),
+            "--dataset",
+            s(&f.datasets[1]),
+            "--test-run",
+            "ds5",
+        ],
+    );
+    let by_file = train(
+        "heldfile",
+        &[
+            "--dataset",
+            s(&f.datasets[0]),
+            "--test-dataset",
+            s(&f.datasets[1]),
+        ],
+    );
+    for r in [&by_run, &by_file] {
+        assert_eq!(keys(&r["split"]["test"]), of(1));
+        let val = keys(&r["split"]["val"]);
+        assert!(!val.is_empty());
+        assert!(
+            val.iter()
+                .chain(&keys(&r["split"]["train"]))
+                .all(|k| k.dataset == 0),
+            "validation and training only from the training run"
+        );
+        let range: frictionless_dataset::InputRange =
+            serde_json::from_value(r["training_range"].clone()).unwrap();
+        assert!(range.rows > 0 && range.sdot_rad_s[0] < 0.0 && range.sdot_rad_s[1] > 0.0);
+    }
+    assert_eq!(by_run["split"], by_file["split"]);
+
+    // `frictl fit --test-run` leaves the run out (here: the whole file, so nothing is left to fit) and
+    // names the runs there are for an unknown name.
+    for (name, want) in [("ds5", "0 samples selected"), ("nope", "runs: ds5")] {
+        let out = Command::new(env!("CARGO_BIN_EXE_frictl"))
+            .args(["fit", "scv-code", s(&f.datasets[1]), "--test-run", name])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains(want), "{name}: {err}");
+    }
+}

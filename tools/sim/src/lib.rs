@@ -12,7 +12,9 @@
 //! - [`plant`]: the equations, 20 kHz semi-implicit Euler with the exact LuGre update, 1 kHz sensor
 //!   emulation and the true friction as diagnostics;
 //! - [`profile`]: open-loop current profiles for `frictl sim run`;
-//! - [`stribeck`]: the tabulated Stribeck shape exp(−u^δ) of the fast path.
+//! - [`stribeck`]: the tabulated Stribeck shape exp(−u^δ) of the fast path;
+//! - [`torque_sensor`]: a joint torque sensor at the output flange (a torque-sensed arm's reading) and
+//!   a logger's jittered timestamps.
 //!
 //! What it is **not**: the excitation protocol or any controller (`frictionless-acquire`), and not the
 //! plant process over shared memory or CAN (`frictl sim serve`, `frictl`'s `serve`).
@@ -51,6 +53,7 @@ pub mod params;
 pub mod plant;
 pub mod profile;
 pub mod stribeck;
+pub mod torque_sensor;
 
 pub use link::{LinkDynamics, Pendulum};
 pub use params::{LinkModel, ParamError, PlantParams, SensorParams};

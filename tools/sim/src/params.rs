@@ -227,6 +227,10 @@ pub struct PlantParams {
     pub link: LinkModel,
     /// Sensor emulation.
     pub sensors: SensorParams,
+    /// The joint torque sensor of a torque-sensed joint (`[plant.torque_sensor]`, optional; read only
+    /// by `frictl acquire --sensor torque`, see [`crate::torque_sensor`]).
+    #[serde(default)]
+    pub torque_sensor: crate::torque_sensor::TorqueSensorParams,
 }
 
 impl PlantParams {
@@ -275,6 +279,7 @@ impl PlantParams {
 
     /// Checks every value is finite and in its physical range.
     pub fn validate(&self) -> Result<(), ParamError> {
+        self.torque_sensor.validate()?;
         let pos = "must be > 0";
         let nonneg = "must be >= 0";
         check(

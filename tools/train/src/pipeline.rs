@@ -43,6 +43,8 @@
 //! rmse_nm           {train, val | null, test | null}: the stored (dtype-rounded) model vs the label, Nm
 //! scv_rmse_nm       {train, val | null, test | null}: the SCV prior alone vs the label, Nm
 //! train_seconds     wall time of the training loop
+//! training_range    {s_rad [min, max], sdot_rad_s [min, max], rows}: valid rows of the train and val
+//!                   chunks (what `frictl eval` counts as inside the training range)
 //! ```
 //! Losses are `(1 − λ)·MSE(label) + λ·MSE(SCV)` averaged over samples (true Nm², unlike the authors'
 //! divide-by-last-batch-size figure).
@@ -65,7 +67,7 @@ use super::data::{
     self, ChunkKey, DataError, DeltaThetaOffset, SetData, Split, SplitSpec, Windows,
 };
 use super::{EpochReport, PredictError, Predictor, TrainConfig, TrainError, Trainer, rmse};
-use frictionless_dataset::{Dataset, DatasetError, DatasetSidecar};
+use frictionless_dataset::{Dataset, DatasetError, DatasetSidecar, InputRange};
 
 /// Report format tag.
 pub const REPORT_FORMAT: &str = "frictionless-train-report-v1";
@@ -387,6 +389,82 @@ pub fn split_for(sources: &Sources, spec: &SplitSpec) -> Result<Split, PipelineE
     data::split_chunks(&chunks_with_valid_rows(sources), &spec).map_err(PipelineError::Split)
 }
 
+/// The chunks (with valid rows) of whole runs held out as the test set: every run named in `test_runs`
+/// (matched against each dataset's runs, [`frictionless_dataset::dataset_runs`]: the sidecar's `runs`,
+/// or one run named by the file stem) and every chunk of the datasets at indices `test_datasets`.
+/// Errors when a name matches no run, or a held-out run has no valid row.
+pub fn held_out_chunks(
+    sources: &Sources,
+    test_runs: &[String],
+    test_datasets: &[usize],
+) -> Result<Vec<ChunkKey>, PipelineError> {
+    let with_rows = chunks_with_valid_rows(sources);
+    let mut out = Vec::new();
+    let mut known = Vec::new();
+    for name in test_runs {
+        let mut found = false;
+        for (d, s) in sources.list.iter().enumerate() {
+            for run in frictionless_dataset::dataset_runs(&s.path, Some(&s.sidecar), &s.data) {
+                if &run.name == name {
+                    found = true;
+                    let before = out.len();
+                    out.extend(
+                        run.chunks
+                            .iter()
+                            .map(|&chunk| ChunkKey {
+                                dataset: d as u32,
+                                chunk,
+                            })
+                            .filter(|k| with_rows.contains(k)),
+                    );
+                    if out.len() == before {
+                        return Err(PipelineError::Split(DataError::Split {
+                            key: "--test-run",
+                            value: name.clone(),
+                            reason: format!("run {name} of {} has no valid row", s.path.display()),
+                        }));
+                    }
+                }
+                if !known.contains(&run.name) {
+                    known.push(run.name);
+                }
+            }
+        }
+        if !found {
+            return Err(PipelineError::Split(DataError::Split {
+                key: "--test-run",
+                value: name.clone(),
+                reason: format!(
+                    "no dataset has a run of that name (runs: {})",
+                    known.join(", ")
+                ),
+            }));
+        }
+    }
+    for &d in test_datasets {
+        out.extend(with_rows.iter().filter(|k| k.dataset as usize == d));
+    }
+    out.sort();
+    out.dedup();
+    Ok(out)
+}
+
+/// The range of s and ṡ over the valid rows of the training and validation chunks: what the model saw.
+pub fn training_range(sources: &Sources, split: &Split) -> InputRange {
+    let mut r = InputRange::default();
+    for (d, s) in sources.list.iter().enumerate() {
+        let chunks: Vec<u32> = split
+            .train
+            .iter()
+            .chain(&split.val)
+            .filter(|k| k.dataset as usize == d)
+            .map(|k| k.chunk)
+            .collect();
+        r.merge(&InputRange::of_chunks(&s.data, &chunks));
+    }
+    r
+}
+
 /// Inputs and targets of the three sets.
 #[derive(Clone, Debug, Default)]
 pub struct Prepared {
@@ -623,6 +701,10 @@ pub struct TrainReport {
     pub scv_rmse_nm: SetMetrics,
     /// Training wall time \[s\].
     pub train_seconds: f64,
+    /// Range of s and ṡ over the valid rows of the training and validation chunks (`frictl eval`
+    /// flags rows outside it as extrapolation); absent in older reports.
+    #[serde(default)]
+    pub training_range: Option<InputRange>,
 }
 
 /// A trained model and its report.
@@ -859,6 +941,7 @@ pub fn train_model(
             test: te_scv,
         },
         train_seconds,
+        training_range: Some(training_range(sources, split)),
     };
     Ok(Trained { model, report })
 }

@@ -3,12 +3,18 @@
 //! Offline against the simulator (default: fast, truth columns included), or live against a plant
 //! over shared memory (`--live-shm`: [`frictl::serve::shm::LiveJoint`], e.g. `frictl sim serve`),
 //! through the same `frictionless_acquire::JointIo` seam and the same controllers.
+//!
+//! `--sensor torque` (offline only) logs the joint as a torque-sensed arm would: joint position and
+//! velocity, current, a joint torque sensor at the output flange and no motor encoder
+//! (`frictionless_acquire::arm_log`), optionally at `--log-period-ms` with `--jitter-ms` timestamp
+//! jitter — a CSV for `frictl import csv`, not for `frictl preprocess`.
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::Context;
+use frictionless_acquire::arm_log::{ArmLog, ArmLogOptions, arm_columns};
 use frictionless_acquire::log::{
     CsvLog, LiveInfo, SOURCE_LIVE_SHM, SOURCE_OFFLINE_SIM, Sidecar, columns,
 };
@@ -17,6 +23,16 @@ use frictionless_acquire::protocol::{AcquireError, ControllerModel, schedule_dur
 use frictionless_acquire::{ProtocolConfig, run_offline, schedule};
 use frictionless_sim::PlantParams;
 use frictionless_sim::params::load_table;
+
+/// Which sensors the log holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Sensor {
+    /// The robot's log for `frictl preprocess`: joint and motor encoders, current (ergoCub).
+    MotorEncoder,
+    /// A torque-sensed arm's log for `frictl import csv`: q, dq, current, joint torque sensor
+    /// (`[plant.torque_sensor]`), no motor encoder; plus the true friction.
+    Torque,
+}
 
 /// Arguments of `frictl acquire`.
 #[derive(clap::Args, Debug)]
@@ -64,6 +80,15 @@ pub struct Args {
     /// Live: fail if the next joint state does not arrive within this time [ms].
     #[arg(long, default_value_t = 1000)]
     pub state_timeout_ms: u64,
+    /// The sensors logged (`torque`: offline only).
+    #[arg(long, value_enum, default_value_t = Sensor::MotorEncoder, conflicts_with = "live_shm")]
+    pub sensor: Sensor,
+    /// `--sensor torque`: log period [ms], a whole number of plant samples (e.g. 2 for a 500 Hz log).
+    #[arg(long, default_value_t = 1.0)]
+    pub log_period_ms: f64,
+    /// `--sensor torque`: timestamp jitter, uniform in ±this [ms] (below half the log period).
+    #[arg(long, default_value_t = 0.0)]
+    pub jitter_ms: f64,
 }
 
 /// Runs `frictl acquire`.
@@ -93,9 +118,36 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let link = frictionless_sim::link::link_from_model(&plant_params.link)?;
 
     let with_truth = !args.live_shm;
+    let torque = args.sensor == Sensor::Torque;
+    anyhow::ensure!(
+        torque || (args.log_period_ms == 1.0 && args.jitter_ms == 0.0),
+        "--log-period-ms and --jitter-ms need --sensor torque"
+    );
+    let every = args.log_period_ms * 1e-3 / period_s;
+    anyhow::ensure!(
+        every.is_finite() && every >= 1.0 && (every - every.round()).abs() < 1e-9,
+        "--log-period-ms {}: must be a whole number (>= 1) of plant samples of {} ms",
+        args.log_period_ms,
+        period_s * 1e3
+    );
     let file = std::fs::File::create(&csv_path)
         .with_context(|| format!("cannot create {}", csv_path.display()))?;
-    let mut log = CsvLog::new(std::io::BufWriter::with_capacity(1 << 20, file), with_truth)?;
+    let writer = std::io::BufWriter::with_capacity(1 << 20, file);
+    let mut log = if torque {
+        Log::Arm(Box::new(ArmLog::new(
+            writer,
+            ArmLogOptions {
+                every_samples: every.round() as u32,
+                jitter_s: args.jitter_ms * 1e-3,
+                sample_period_s: period_s,
+                with_temperature: plant_params.sensors.temperature_sensor,
+                sensor: plant_params.torque_sensor.clone(),
+                seed: args.seed,
+            },
+        )?))
+    } else {
+        Log::Robot(CsvLog::new(writer, with_truth)?)
+    };
     let bar = if std::io::stderr().is_terminal() {
         indicatif::ProgressBar::new(total)
     } else {
@@ -155,6 +207,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         run.summary
     };
     bar.finish_and_clear();
+    let rows = log.rows(summary.samples);
     log.finish()?
         .into_inner()
         .map_err(|e| anyhow::anyhow!("cannot flush {}: {}", csv_path.display(), e.error()))?;
@@ -184,7 +237,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         plant: Some(&plant_params),
         protocol: &protocol,
         csv: &csv_name,
-        columns: columns(with_truth),
+        columns: if torque {
+            arm_columns(plant_params.sensors.temperature_sensor)
+        } else {
+            columns(with_truth)
+        },
         chunks: &blocks,
         summary: &summary,
     };
@@ -192,8 +249,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     std::fs::write(&json_path, json)
         .with_context(|| format!("cannot write {}", json_path.display()))?;
     eprintln!(
-        "frictl acquire: {} samples ({:.1} simulated min, {} chunks, {} active, {} guard holds) in {:.2} s -> {}",
+        "frictl acquire: {} samples{} ({:.1} simulated min, {} chunks, {} active, {} guard holds) in {:.2} s -> {}",
         summary.samples,
+        if torque {
+            format!(", {rows} rows (torque-sensed arm log)")
+        } else {
+            String::new()
+        },
         summary.duration_s / 60.0,
         summary.chunks,
         summary.active_samples,
@@ -202,4 +264,34 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         csv_path.display()
     );
     Ok(())
+}
+
+/// The log being written: the robot's (motor encoder) or a torque-sensed arm's.
+enum Log<W: std::io::Write> {
+    Robot(CsvLog<W>),
+    Arm(Box<ArmLog<W>>),
+}
+
+impl<W: std::io::Write> Log<W> {
+    fn write(&mut self, row: &frictionless_acquire::LogRow) -> Result<(), AcquireError> {
+        match self {
+            Log::Robot(l) => l.write(row),
+            Log::Arm(l) => l.write(row),
+        }
+    }
+
+    /// Rows in the file (`samples` for the robot log: one per sample).
+    fn rows(&self, samples: u64) -> u64 {
+        match self {
+            Log::Robot(_) => samples,
+            Log::Arm(l) => l.rows(),
+        }
+    }
+
+    fn finish(self) -> Result<W, AcquireError> {
+        match self {
+            Log::Robot(l) => l.finish(),
+            Log::Arm(l) => l.finish(),
+        }
+    }
 }

@@ -27,6 +27,9 @@
 //! estimator reaches under the shipped law. A model at the oracle's K_p is limited by the control
 //! structure (kfc < 1 leaves (1 − kfc)·F_s of stiction to the position loop), not by its estimate;
 //! a model below it gets there by something other than estimating friction (the SCV's dither).
+//!
+//! `frictl demo --sensor torque` runs the chain on a torque-sensed joint instead (submodule `torque`):
+//! acquisition at three speeds → `frictl import csv` → fit → train on two speeds → eval on the third.
 
 use std::collections::BTreeMap;
 use std::io::IsTerminal;
@@ -70,7 +73,22 @@ pub struct Args {
     /// subtracted with the simulator's r²·J_m, see the module doc).
     #[arg(long)]
     pub with_rotor_inertia: bool,
+    /// `torque`: the chain on a torque-sensed joint instead (no motor encoder; import, training on two
+    /// speed runs, evaluation on the held-out third; no closed-loop experiments), see `demo::torque`.
+    #[arg(long, value_enum, default_value_t = DemoSensor::MotorEncoder)]
+    pub sensor: DemoSensor,
 }
+
+/// Which joint the demo runs on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum DemoSensor {
+    /// The robot's joints (motor and joint encoders, current): the paper's chain and the experiments.
+    MotorEncoder,
+    /// A torque-sensed joint (joint torque sensor, no motor encoder): `demo::torque`.
+    Torque,
+}
+
+mod torque;
 
 /// Sizes of one demo flavour.
 struct Sizes {
@@ -423,6 +441,13 @@ const EVAL_MODELS: [(&str, &str); 4] = [
 
 /// Runs `frictl demo`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.sensor == DemoSensor::Torque {
+        anyhow::ensure!(
+            !args.causal && !args.with_rotor_inertia,
+            "--causal and --with-rotor-inertia are options of the motor-encoder demo's preprocess stage"
+        );
+        return torque::run(&args);
+    }
     install_signal_flag()?;
     let started = Instant::now();
     let sizes = Sizes::for_args(&args);
@@ -931,6 +956,10 @@ mod tests {
             datasets: vec![],
             models: [("none".to_owned(), metrics), ("cv".to_owned(), metrics)].into(),
             order: vec![],
+            band_edges_rad_s: vec![],
+            training_range: None,
+            per_run: vec![],
+            per_band: vec![],
         };
         let mut per_joint = BTreeMap::from([("l_knee".to_owned(), joint_entry(Some(&ev), &files))]);
         let track = r#"{"rmse_rad": 0.03, "max_abs_err_rad": 0.1, "tau_des_rms_nm": 2.0,

@@ -6,9 +6,9 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use frictionless::features::WarmupPolicy;
-use frictionless_dataset::{Dataset, DatasetSidecar};
+use frictionless_dataset::{Dataset, DatasetSidecar, InputRange, RunInfo, dataset_runs};
 use frictionless_train::data::DeltaThetaOffset;
-use frictl::eval::{self, EvalOptions, ModelSpec, plot};
+use frictl::eval::{self, EvalOptions, ModelSpec, TrainingRange, plot};
 
 /// PINN warm-up policy (as the daemon is configured).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -22,9 +22,22 @@ pub enum Warmup {
 /// Arguments of `frictl eval`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Held-out dataset CSV from `frictl preprocess` (repeatable).
-    #[arg(long = "dataset", required = true)]
+    /// Dataset CSV from `frictl preprocess` or `frictl import` (repeatable). Every row is scored, unless
+    /// --test-run or --test-dataset name held-out runs: then only those are scored, and the other runs
+    /// are the training runs whose range of s and ṡ marks extrapolation.
+    #[arg(long = "dataset", required_unless_present = "test_datasets")]
     pub datasets: Vec<PathBuf>,
+    /// Score only this run (repeatable): a run name of a dataset's sidecar (`runs`), or the file stem
+    /// of a dataset without runs. The runs not named are the training runs.
+    #[arg(long = "test-run", value_name = "NAME")]
+    pub test_runs: Vec<String>,
+    /// A held-out dataset, scored as a whole (repeatable); the --dataset files are then the training
+    /// runs (not scored).
+    #[arg(long = "test-dataset", value_name = "FILE")]
+    pub test_datasets: Vec<PathBuf>,
+    /// |ṡ| band edges [rad/s], comma separated, increasing (the last band is open).
+    #[arg(long, value_delimiter = ',', default_values_t = eval::runs::DEFAULT_BAND_EDGES_RAD_S)]
+    pub band_edges: Vec<f64>,
     /// CV model: the JSON of `frictl fit cv --json`.
     #[arg(long)]
     pub cv: Option<PathBuf>,
@@ -34,7 +47,8 @@ pub struct Args {
     /// PINN model file `.fwt` (repeatable).
     #[arg(long = "pinn")]
     pub pinns: Vec<PathBuf>,
-    /// Training report of `frictl train --report` (training-curve figure; test split for --test-only).
+    /// Training report of `frictl train --report` (training-curve figure; test split for --test-only;
+    /// its training range when no training runs are given).
     #[arg(long)]
     pub train_report: Option<PathBuf>,
     /// Use only the chunks the training report marks as its test split.
@@ -107,18 +121,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
         pinn_files.push((p.clone(), f));
     }
+    eval::runs::check_band_edges(&args.band_edges)?;
+    let all_paths: Vec<PathBuf> = args
+        .datasets
+        .iter()
+        .chain(&args.test_datasets)
+        .cloned()
+        .collect();
     let test_chunks: Option<Vec<BTreeSet<u32>>> = if args.test_only {
         let r = args
             .train_report
             .as_ref()
             .context("--test-only needs --train-report")?;
-        Some(eval::test_chunks_from_report(r, &args.datasets)?)
+        Some(eval::test_chunks_from_report(r, &all_paths)?)
     } else {
         None
     };
 
     let mut loaded = Vec::new();
-    for p in &args.datasets {
+    for p in &all_paths {
         let ds = Dataset::read_csv(p)?;
         let side: Option<DatasetSidecar> = std::fs::read_to_string(p.with_extension("json"))
             .ok()
@@ -155,16 +176,96 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 }
             }
         }
-        loaded.push((p.clone(), ds, joint));
+        let runs = dataset_runs(p, side.as_ref(), &ds);
+        loaded.push((p.clone(), ds, joint, runs));
     }
 
-    let mut evals = Vec::new();
-    for (i, (p, ds, joint)) in loaded.iter().enumerate() {
-        let filter = test_chunks.as_ref().map(|t| &t[i]);
-        let ev = eval::evaluate(&p.display().to_string(), ds, &models, filter, &opts)?;
-        evals.push((ev, ds, joint.clone()));
+    // Held-out runs: the named runs and every run of a --test-dataset; the rest are training runs.
+    let holding_out = !args.test_runs.is_empty() || !args.test_datasets.is_empty();
+    let mut held: Vec<Vec<RunInfo>> = Vec::new();
+    let mut train_range = InputRange::default();
+    for (i, (_, ds, _, runs)) in loaded.iter().enumerate() {
+        let whole = i >= args.datasets.len();
+        let (h, t): (Vec<RunInfo>, Vec<RunInfo>) = runs
+            .iter()
+            .cloned()
+            .partition(|r| !holding_out || whole || args.test_runs.contains(&r.name));
+        for r in &t {
+            train_range.merge(&InputRange::of_chunks(ds, &r.chunks));
+        }
+        held.push(h);
     }
-    let report = eval::build_report(&models, &evals, &opts, args.test_only);
+    for name in &args.test_runs {
+        if !held.iter().flatten().any(|r| &r.name == name) {
+            let known: Vec<&str> = loaded
+                .iter()
+                .flat_map(|l| l.3.iter().map(|r| r.name.as_str()))
+                .collect();
+            anyhow::bail!(
+                "--test-run {name}: no dataset has a run of that name (runs: {})",
+                known.join(", ")
+            );
+        }
+    }
+    let training_range = if holding_out && train_range.rows > 0 {
+        Some(TrainingRange {
+            source: "datasets".into(),
+            range: train_range,
+        })
+    } else if let Some(r) = &args.train_report {
+        let text =
+            std::fs::read_to_string(r).with_context(|| format!("cannot read {}", r.display()))?;
+        let v: serde_json::Value =
+            serde_json::from_str(&text).with_context(|| format!("{} is not JSON", r.display()))?;
+        match v.get("training_range").filter(|x| !x.is_null()) {
+            Some(x) => Some(TrainingRange {
+                source: "train_report".into(),
+                range: serde_json::from_value(x.clone()).with_context(|| {
+                    format!("{}: key `training_range` is not a range", r.display())
+                })?,
+            }),
+            None => None,
+        }
+    } else {
+        None
+    };
+
+    let mut evals = Vec::new();
+    let mut parts = Vec::new();
+    let mut evaluated_loaded = Vec::new();
+    for (i, (p, ds, joint, _)) in loaded.iter().enumerate() {
+        if held[i].is_empty() {
+            continue;
+        }
+        let held_chunks: BTreeSet<u32> = held[i].iter().flat_map(|r| r.chunks.clone()).collect();
+        let filter: Option<BTreeSet<u32>> = match (&test_chunks, holding_out) {
+            (Some(t), true) => Some(t[i].intersection(&held_chunks).copied().collect()),
+            (Some(t), false) => Some(t[i].clone()),
+            (None, true) => Some(held_chunks),
+            (None, false) => None,
+        };
+        let ev = eval::evaluate(
+            &p.display().to_string(),
+            ds,
+            &models,
+            filter.as_ref(),
+            &opts,
+        )?;
+        let extrap = eval::runs::extrapolated_mask(ds, training_range.as_ref().map(|t| &t.range));
+        parts.push((held[i].clone(), extrap));
+        evals.push((ev, ds, joint.clone()));
+        evaluated_loaded.push(p.clone());
+    }
+    let mut report = eval::build_report(&models, &evals, &opts, args.test_only);
+    eval::add_breakdown(
+        &mut report,
+        &models,
+        &evals,
+        &parts,
+        &args.band_edges,
+        training_range.clone(),
+        opts.v_sliding_rad_s,
+    );
     print!("{}", eval::format_table(&report));
     if let Some(p) = &args.json {
         std::fs::write(p, serde_json::to_string_pretty(&report)?)
@@ -179,25 +280,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
         }
         let mut written = Vec::new();
-        for ((ev, ds, _), (p, _, _)) in evals.iter().zip(&loaded) {
+        let range = training_range.as_ref().map(|t| &t.range);
+        for (((ev, ds, _), p), (_, extrap)) in evals.iter().zip(&evaluated_loaded).zip(&parts) {
             let stem = p
                 .file_stem()
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_else(|| "dataset".into());
             let f = dir.join(format!("{stem}_friction_vs_velocity.png"));
-            plot::friction_vs_velocity(&f, ds, ev, &models)?;
+            plot::friction_vs_velocity(&f, ds, ev, &models, range)?;
             written.push(f);
-            if let Some(range) = plot::pick_chunk(ds, ev, opts.v_sliding_rad_s, args.plot_chunk) {
+            if let Some(chunk) = plot::pick_chunk(ds, ev, opts.v_sliding_rad_s, args.plot_chunk) {
                 let f = dir.join(format!("{stem}_timeseries.png"));
-                plot::timeseries(&f, ds, ev, &models, range)?;
+                plot::timeseries(&f, ds, ev, &models, chunk, extrap)?;
                 written.push(f);
                 // Δθ needs a motor encoder: a dataset without one (NaN column) has no hysteresis.
-                if ds.delta_theta_motor_rad[range.0..range.1]
+                if ds.delta_theta_motor_rad[chunk.0..chunk.1]
                     .iter()
                     .any(|v| v.is_finite())
                 {
                     let f = dir.join(format!("{stem}_hysteresis.png"));
-                    plot::hysteresis(&f, ds, range)?;
+                    plot::hysteresis(&f, ds, chunk)?;
                     written.push(f);
                 } else {
                     eprintln!(

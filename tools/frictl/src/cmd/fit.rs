@@ -83,6 +83,10 @@ pub struct Args {
     /// Write the JSON result here.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Leave out a run held out for testing (repeatable): a run name of the dataset's sidecar
+    /// (`runs`), or its file stem for a dataset without runs — as `frictl train --test-run`.
+    #[arg(long = "test-run", value_name = "NAME")]
+    pub test_runs: Vec<String>,
 }
 
 /// Runs `frictl fit`.
@@ -96,6 +100,28 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ds.tau_f_label_nm.clone()
     };
     let mut mask = ds.valid.clone();
+    if !args.test_runs.is_empty() {
+        let side: Option<frictionless_dataset::DatasetSidecar> =
+            std::fs::read_to_string(args.dataset.with_extension("json"))
+                .ok()
+                .and_then(|t| serde_json::from_str(&t).ok());
+        let runs = frictionless_dataset::dataset_runs(&args.dataset, side.as_ref(), &ds);
+        let mut held = Vec::new();
+        for name in &args.test_runs {
+            let run = runs.iter().find(|r| &r.name == name).with_context(|| {
+                let known: Vec<&str> = runs.iter().map(|r| r.name.as_str()).collect();
+                format!(
+                    "--test-run {name}: {} has no run of that name (runs: {})",
+                    args.dataset.display(),
+                    known.join(", ")
+                )
+            })?;
+            held.extend(run.chunks.iter().copied());
+        }
+        for (m, c) in mask.iter_mut().zip(&ds.chunk) {
+            *m &= !held.contains(c);
+        }
+    }
     if args.sliding_quadrants {
         for (m, s) in
             mask.iter_mut()

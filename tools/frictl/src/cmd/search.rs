@@ -18,7 +18,7 @@ use frictionless_train::search::{
 };
 use sha2::Digest;
 
-use super::train::{Dtype, Features, Warmup, cores, parse_chunks};
+use super::train::{Dtype, Features, HeldOut, Warmup, cores};
 
 /// `frictl search`: a search, or one of its subcommands.
 #[derive(clap::Args, Debug)]
@@ -96,6 +96,8 @@ pub struct Args {
     /// Explicit test chunks, comma separated: CHUNK or DATASET:CHUNK.
     #[arg(long, value_delimiter = ',')]
     pub test_chunks: Option<Vec<String>>,
+    #[command(flatten)]
+    pub held_out: HeldOut,
     /// Warm-up policy.
     #[arg(long, value_enum, default_value_t = Warmup::HoldZero)]
     pub warmup: Warmup,
@@ -213,7 +215,8 @@ fn print_best(all: &[TrialResult], dir: &std::path::Path) {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let scv_bytes = std::fs::read(&args.scv)
         .map_err(|e| anyhow::anyhow!("{}: cannot read: {e}", args.scv.display()))?;
-    let sources = pipeline::load_sources(&args.datasets)?;
+    let datasets = args.held_out.all_datasets(&args.datasets);
+    let sources = pipeline::load_sources(&datasets)?;
     let scv = pipeline::load_scv(&args.scv)?;
     let settings = SearchSettings {
         space: space(&args)?,
@@ -229,13 +232,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             val_frac: args.val_frac,
             test_frac: args.test_frac,
             seed: args.seed,
-            test_chunks: parse_chunks(&args.test_chunks)?,
+            test_chunks: args.held_out.test_chunks(
+                &sources,
+                &args.test_chunks,
+                args.datasets.len(),
+            )?,
         },
-        datasets: args
-            .datasets
-            .iter()
-            .map(|p| p.display().to_string())
-            .collect(),
+        datasets: datasets.iter().map(|p| p.display().to_string()).collect(),
         dataset_sha256: sources
             .dataset_sha256
             .iter()

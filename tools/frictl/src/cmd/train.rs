@@ -157,6 +157,8 @@ pub struct Args {
     /// Explicit test chunks, comma separated: CHUNK (first dataset) or DATASET:CHUNK.
     #[arg(long, value_delimiter = ',')]
     pub test_chunks: Option<Vec<String>>,
+    #[command(flatten)]
+    pub held_out: HeldOut,
     /// Warm-up policy.
     #[arg(long, value_enum, default_value_t = Warmup::HoldZero)]
     pub warmup: Warmup,
@@ -192,6 +194,50 @@ pub struct Args {
     pub quiet: bool,
 }
 
+/// Whole runs held out as the test set (`frictl train` and `frictl search`); validation is then drawn
+/// from the remaining (training) runs only.
+#[derive(clap::Args, Debug, Default, Clone)]
+pub struct HeldOut {
+    /// Hold out a whole run as the test set (repeatable): a run name of a dataset's sidecar (`runs`),
+    /// or the file stem of a dataset without runs. Adds to --test-chunks; --test-frac is then ignored.
+    #[arg(long = "test-run", value_name = "NAME")]
+    pub test_runs: Vec<String>,
+    /// A dataset used only as test set (repeatable): loaded like --dataset, every chunk held out.
+    #[arg(long = "test-dataset", value_name = "FILE")]
+    pub test_datasets: Vec<PathBuf>,
+}
+
+impl HeldOut {
+    /// `--dataset` files followed by the `--test-dataset` files (the order of the loaded sources).
+    pub fn all_datasets(&self, datasets: &[PathBuf]) -> Vec<PathBuf> {
+        datasets
+            .iter()
+            .chain(&self.test_datasets)
+            .cloned()
+            .collect()
+    }
+
+    /// The test chunks: `--test-chunks` plus every chunk of the held-out runs and test datasets
+    /// (`None` when none of the three is given). `n_train_datasets` = number of `--dataset` files.
+    pub fn test_chunks(
+        &self,
+        sources: &pipeline::Sources,
+        test_chunks: &Option<Vec<String>>,
+        n_train_datasets: usize,
+    ) -> anyhow::Result<Option<Vec<ChunkKey>>> {
+        let explicit = parse_chunks(test_chunks)?;
+        if self.test_runs.is_empty() && self.test_datasets.is_empty() {
+            return Ok(explicit);
+        }
+        let test_ds: Vec<usize> = (n_train_datasets..sources.list.len()).collect();
+        let mut keys = pipeline::held_out_chunks(sources, &self.test_runs, &test_ds)?;
+        keys.extend(explicit.unwrap_or_default());
+        keys.sort();
+        keys.dedup();
+        Ok(Some(keys))
+    }
+}
+
 /// Number of cores available to this process (≥ 1).
 pub fn cores() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
@@ -217,22 +263,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .report
         .clone()
         .unwrap_or_else(|| pipeline::default_report_path(&args.out));
-    let sidecars: Vec<PathBuf> = args
-        .datasets
-        .iter()
-        .map(|d| d.with_extension("json"))
-        .collect();
-    let mut inputs: Vec<&std::path::Path> = args.datasets.iter().map(PathBuf::as_path).collect();
+    let datasets = args.held_out.all_datasets(&args.datasets);
+    let sidecars: Vec<PathBuf> = datasets.iter().map(|d| d.with_extension("json")).collect();
+    let mut inputs: Vec<&std::path::Path> = datasets.iter().map(PathBuf::as_path).collect();
     inputs.extend(sidecars.iter().map(PathBuf::as_path));
     inputs.push(&args.scv);
     super::check_outputs(&inputs, &[&args.out, &report_path])?;
-    let sources = pipeline::load_sources(&args.datasets)?;
+    let sources = pipeline::load_sources(&datasets)?;
     let scv = pipeline::load_scv(&args.scv)?;
     let split_spec = SplitSpec {
         val_frac: args.val_frac,
         test_frac: args.test_frac,
         seed: args.seed,
-        test_chunks: parse_chunks(&args.test_chunks)?,
+        test_chunks: args
+            .held_out
+            .test_chunks(&sources, &args.test_chunks, args.datasets.len())?,
     };
     let split = pipeline::split_for(&sources, &split_spec)?;
     let spec = FeatureSpec {

@@ -12,10 +12,13 @@
 //! - [`Metrics`] / [`evaluate`]: RMSE [Nm] against the label τ_F (and against the simulator's true
 //!   friction when the dataset has `tau_f_true_nm`) on all evaluated rows, on sliding rows
 //!   (|ṡ| > `v_sliding_rad_s`, default 0.03 rad/s) and on stick rows (the rest);
+//! - [`runs`]: the breakdown per run and per |ṡ| band, with rows outside the training range (s or ṡ
+//!   beyond what the training runs covered) counted and scored apart;
 //! - [`Report`]: the JSON written by `frictl eval --json` (schema below), read by `frictl demo`;
 //! - [`plot`]: the PNG figures (plotters, bitmap backend).
 //!
-//! Which rows are evaluated: rows with `valid = 1`, in the selected chunks (all, or a PINN's test
+//! Which rows are evaluated: rows with `valid = 1`, in the selected chunks (all; the held-out runs of
+//! `--test-run` / `--test-dataset`, the other runs then being the training runs; and/or a PINN's test
 //! split with `--test-only`), where every PINN's history is ready under the warm-up policy (with
 //! `hold_zero` the first H−1 rows of each chunk are skipped for **all** models, so every model is
 //! scored on the same rows). Rows where any model's output is not finite are skipped and counted.
@@ -31,6 +34,13 @@
 //!                     has_truth, label_std_nm, models {NAME: METRICS}}
 //! models             {NAME: METRICS}   pooled over all datasets (what `frictl demo` reads)
 //! order[]            model names in the order given (none, cv, scv, pinn…)
+//! band_edges_rad_s[] |ṡ| band edges; band j = [edges[j], edges[j+1]), the last one open
+//! training_range     {source "datasets" | "train_report", range {s_rad [lo, hi], sdot_rad_s [lo, hi],
+//!                     rows}} or null: rows with s or ṡ outside it are extrapolation
+//! per_run[]          {dataset, run, source, evaluated, extrapolated, extrapolated_share,
+//!                     models {NAME: {rmse_all, rmse_sliding, rmse_stick, rmse_inside, rmse_outside,
+//!                     rmse_true_all, rmse_true_inside, rmse_true_outside}}, bands[] (as per_band)}
+//! per_band[]         {lo_rad_s, hi_rad_s | null, n, models {NAME: {rmse, rmse_true}}}, all runs pooled
 //! METRICS            {rmse_all, rmse_sliding, rmse_stick,                 vs the label [Nm]
 //!                     rmse_true_all, rmse_true_sliding, rmse_true_stick,  vs the truth [Nm] or null
 //!                     mae_all, n_samples, n_sliding, n_stick}
@@ -42,6 +52,7 @@
 //! `frictl experiment`). It never changes a model: the PINN is run exactly as stored.
 
 pub mod plot;
+pub mod runs;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -492,6 +503,55 @@ pub struct Report {
     pub models: BTreeMap<String, Metrics>,
     /// Model names in the order given.
     pub order: Vec<String>,
+    /// |ṡ| band edges [rad/s] of `per_band` and `per_run[].bands` (the last band is open).
+    #[serde(default)]
+    pub band_edges_rad_s: Vec<f64>,
+    /// The training range rows are checked against (None: no extrapolation flags).
+    #[serde(default)]
+    pub training_range: Option<TrainingRange>,
+    /// Per run of every evaluated dataset (runs without a scored row left out).
+    #[serde(default)]
+    pub per_run: Vec<runs::RunReport>,
+    /// Per |ṡ| band, pooled over every scored row.
+    #[serde(default)]
+    pub per_band: Vec<runs::BandReport>,
+}
+
+/// Where the training range came from, and the range.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrainingRange {
+    /// `"datasets"` (the training runs given to eval) or `"train_report"` (its `training_range`).
+    pub source: String,
+    /// The range.
+    pub range: frictionless_dataset::InputRange,
+}
+
+/// Adds `per_run`, `per_band`, the band edges and the training range to a report.
+/// `parts[i]` = the runs and extrapolation mask of evaluation `evals[i]`.
+pub fn add_breakdown(
+    report: &mut Report,
+    models: &[ModelSpec],
+    evals: &[(DatasetEval, &Dataset, String)],
+    parts: &[(Vec<frictionless_dataset::RunInfo>, Vec<bool>)],
+    edges: &[f64],
+    training_range: Option<TrainingRange>,
+    v_sliding_rad_s: f64,
+) {
+    let with_range = training_range.is_some();
+    let mut pooled: Vec<runs::Sums> = vec![runs::Sums::default(); edges.len()];
+    for ((ev, ds, _), (run_list, extrap)) in evals.iter().zip(parts) {
+        for r in runs::breakdown(ds, ev, run_list, extrap, edges, v_sliding_rad_s) {
+            for (p, b) in pooled.iter_mut().zip(&r.bands) {
+                p.merge(b);
+            }
+            report
+                .per_run
+                .push(runs::run_report(models, edges, &r, with_range));
+        }
+    }
+    report.per_band = runs::band_reports(models, edges, &pooled);
+    report.band_edges_rad_s = edges.to_vec();
+    report.training_range = training_range;
 }
 
 /// Standard deviation of the label on the masked rows.
@@ -549,6 +609,10 @@ pub fn build_report(
             .map(|(m, s)| (m.name.clone(), s.metrics()))
             .collect(),
         order: models.iter().map(|m| m.name.clone()).collect(),
+        band_edges_rad_s: Vec::new(),
+        training_range: None,
+        per_run: Vec::new(),
+        per_band: Vec::new(),
     }
 }
 
@@ -590,6 +654,61 @@ pub fn format_table(r: &Report) -> String {
     if r.datasets.len() > 1 {
         for d in &r.datasets {
             table(&mut s, &format!("\n{} ({})", d.path, d.joint), &d.models);
+        }
+    }
+    if !r.per_run.is_empty() {
+        let range = match &r.training_range {
+            Some(t) => format!(
+                "training range ({}): s [{:.4}, {:.4}] rad, sdot [{:.4}, {:.4}] rad/s",
+                t.source, t.range.s_rad[0], t.range.s_rad[1], t.range.sdot_rad_s[0], t.range.sdot_rad_s[1]
+            ),
+            None => "no training range (give the training runs or a train report): no extrapolation flags".into(),
+        };
+        s.push_str(&format!(
+            "\nPer run: RMSE [Nm] vs label; inside/outside = s and sdot inside/outside the {range}\n{:<22} {:<22} {:>8} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9}\n",
+            "run", "model", "n", "extrap", "all", "sliding", "stick", "inside", "outside"
+        ));
+        for run in &r.per_run {
+            let share = run
+                .extrapolated_share
+                .map_or_else(|| "-".into(), |x| format!("{:.1}%", 100.0 * x));
+            for name in &r.order {
+                if let Some(m) = run.models.get(name) {
+                    s.push_str(&format!(
+                        "{:<22} {:<22} {:>8} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9}\n",
+                        run.run,
+                        name,
+                        run.evaluated,
+                        share,
+                        f(m.rmse_all),
+                        f(m.rmse_sliding),
+                        f(m.rmse_stick),
+                        f(m.rmse_inside),
+                        f(m.rmse_outside)
+                    ));
+                }
+            }
+        }
+    }
+    if !r.per_band.is_empty() {
+        s.push_str("\nPer |sdot| band [rad/s]: RMSE [Nm] vs label, all runs\n");
+        s.push_str(&format!("{:<16} {:>8}", "band", "n"));
+        for name in &r.order {
+            s.push_str(&format!(" {name:>12}"));
+        }
+        s.push('\n');
+        for b in &r.per_band {
+            let hi = b.hi_rad_s.map_or_else(|| "inf".into(), |h| h.to_string());
+            s.push_str(&format!(
+                "{:<16} {:>8}",
+                format!("[{}, {hi})", b.lo_rad_s),
+                b.n
+            ));
+            for name in &r.order {
+                let v = b.models.get(name).and_then(|m| m.rmse);
+                s.push_str(&format!(" {:>12}", f(v)));
+            }
+            s.push('\n');
         }
     }
     s

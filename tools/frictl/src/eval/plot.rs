@@ -2,9 +2,10 @@
 //!
 //! What it is: four figures written into a directory —
 //! - `<stem>_friction_vs_velocity.png`: the label τ_F against ṡ (evaluated rows, subsampled), the
-//!   fitted static models (CV/SCV) as curves and each PINN's predictions as points;
+//!   fitted static models (CV/SCV) as curves and each PINN's predictions as points; velocities outside
+//!   the training range shaded;
 //! - `<stem>_timeseries.png`: one chunk over time — label, true friction (simulated data) and every
-//!   model's τ̂_F;
+//!   model's τ̂_F; the stretches outside the training range (s or ṡ) shaded;
 //! - `<stem>_hysteresis.png`: τ_F against Δθ (latched at the chunk start, as the daemon latches it)
 //!   over the same chunk — the pre-sliding loops a history model can exploit;
 //! - `training_curves.png`: every per-epoch number of a `frictl train` report (`epochs[]`), e.g.
@@ -23,7 +24,7 @@ use std::sync::OnceLock;
 use plotters::prelude::*;
 
 use super::{DatasetEval, ModelSpec, chunk_ranges};
-use frictionless_dataset::Dataset;
+use frictionless_dataset::{Dataset, InputRange};
 
 /// Plotting errors (the message names the figure file).
 #[derive(Debug, thiserror::Error)]
@@ -173,12 +174,17 @@ fn legend<'a, DB: DrawingBackend + 'a>(c: &mut ChartContext<'a, DB, Xy>) -> Resu
     Ok(())
 }
 
-/// Friction against velocity: label scatter, static-model curves, PINN points.
+/// Shading of extrapolation (rows outside the training range).
+const EXTRAPOLATION: RGBColor = RGBColor(240, 80, 60);
+
+/// Friction against velocity: label scatter, static-model curves, PINN points; the velocities outside
+/// the training range (`range`) shaded.
 pub fn friction_vs_velocity(
     path: &Path,
     ds: &Dataset,
     ev: &DatasetEval,
     models: &[ModelSpec],
+    training_range: Option<&InputRange>,
 ) -> Result<(), PlotError> {
     let idx: Vec<usize> = (0..ds.len()).filter(|&k| ev.mask[k]).collect();
     let pts = subsample(&idx, MAX_POINTS);
@@ -195,6 +201,27 @@ pub fn friction_vs_velocity(
             "joint velocity [rad/s]",
             "friction torque [Nm]",
         )?;
+        if let Some(r) = training_range {
+            let shade = EXTRAPOLATION.mix(0.12).filled();
+            let spans = [
+                (xr.0, r.sdot_rad_s[0].min(xr.1)),
+                (r.sdot_rad_s[1].max(xr.0), xr.1),
+            ];
+            c.draw_series(
+                spans
+                    .into_iter()
+                    .filter(|(a, b)| a < b)
+                    .map(|(a, b)| Rectangle::new([(a, yr.0), (b, yr.1)], shade)),
+            )
+            .map_err(|e| e.to_string())?
+            .label("outside the training range")
+            .legend(|(x, y)| {
+                Rectangle::new(
+                    [(x, y - 5), (x + 20, y + 5)],
+                    EXTRAPOLATION.mix(0.3).filled(),
+                )
+            });
+        }
         let grey = RGBColor(60, 60, 60).mix(0.25);
         c.draw_series(
             pts.iter()
@@ -273,13 +300,15 @@ pub fn pick_chunk(
         .map(|(_, a, b)| (a, b))
 }
 
-/// Time series of one chunk `[a, b)`: label, truth and every model.
+/// Time series of one chunk `[a, b)`: label, truth and every model; rows with `extrapolated[k]`
+/// (outside the training range) shaded.
 pub fn timeseries(
     path: &Path,
     ds: &Dataset,
     ev: &DatasetEval,
     models: &[ModelSpec],
     (a, b): (usize, usize),
+    extrapolated: &[bool],
 ) -> Result<(), PlotError> {
     let t0 = ds.time_s[a];
     let mut ys: Vec<f64> = ds.tau_f_label_nm[a..b].to_vec();
@@ -302,6 +331,37 @@ pub fn timeseries(
             "time in chunk [s]",
             "friction torque [Nm]",
         )?;
+        // Runs of consecutive extrapolated rows as shaded spans.
+        let mut spans = Vec::new();
+        let mut k = a;
+        while k < b {
+            if extrapolated.get(k).copied().unwrap_or(false) {
+                let start = k;
+                while k < b && extrapolated.get(k).copied().unwrap_or(false) {
+                    k += 1;
+                }
+                let end = ds.time_s[(k).min(b - 1)];
+                spans.push((ds.time_s[start] - t0, end - t0));
+            } else {
+                k += 1;
+            }
+        }
+        if !spans.is_empty() {
+            let shade = EXTRAPOLATION.mix(0.12).filled();
+            c.draw_series(
+                spans
+                    .into_iter()
+                    .map(|(x0, x1)| Rectangle::new([(x0, yr.0), (x1.max(x0 + 1e-3), yr.1)], shade)),
+            )
+            .map_err(|e| e.to_string())?
+            .label("outside the training range")
+            .legend(|(x, y)| {
+                Rectangle::new(
+                    [(x, y - 5), (x + 20, y + 5)],
+                    EXTRAPOLATION.mix(0.3).filled(),
+                )
+            });
+        }
         let line =
             |v: &[f64]| -> Vec<(f64, f64)> { (a..b).map(|k| (ds.time_s[k] - t0, v[k])).collect() };
         let dark = RGBColor(40, 40, 40);

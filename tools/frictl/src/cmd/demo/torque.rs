@@ -1,0 +1,437 @@
+//! `frictl demo --sensor torque`: the method on a torque-sensed arm's logs, every stage through the
+//! CLI, evaluated on a held-out run.
+//!
+//! The virtual knee logged as a torque-sensed arm would (`frictl acquire --sensor torque`: q, dq,
+//! current and a joint torque sensor, no motor encoder, a 500 Hz log with jittered timestamps) at three
+//! speeds, one file each (`slow`, `mid`, `fast`: closed-loop sine tracking at increasing frequencies) →
+//! `frictl import csv` of the three files into one dataset with three runs, label `torque-sensor`
+//! (r·k_t·i − τ_joint: no link model), and again with label `given` from the simulator's true friction
+//! (for scoring against the truth) → `frictl fit cv|scv` on the slow and fast runs → `frictl train
+//! --features joint-pos-joint-vel --test-run mid` (the feature set that needs no motor encoder) →
+//! `frictl eval --test-run mid` on both datasets: RMSE per run and per |ṡ| band, with the training
+//! range of the slow and fast runs.
+//!
+//! Writes to `--out`: `report.json` (format `frictionless-demo-torque-v1`, keys below), `report.md`,
+//! `data/`, `models/`, `eval/` (both eval reports and figures) and `logs/`.
+//!
+//! ```text
+//! format, producer, settings ("quick" | "default" | "full"), seed, joint, features, held_out_run,
+//! training_runs[], network {hidden, history, epochs, batch}, runs {NAME: {file, peak_abs_sdot_rad_s}},
+//! held_out {label: {MODEL: RunMetrics}, truth: {MODEL: RunMetrics}, extrapolated_share},
+//! stages[] {name, seconds}, total_seconds
+//! ```
+//!
+//! What it is not: the closed-loop experiments (they need a model frictiond runs on the motor-encoder
+//! joint; the default `frictl demo` does those).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context;
+use frictl::eval::Report as EvalReport;
+use frictl::eval::runs::RunMetrics;
+
+use super::{Args, Runner, Stage, read_json, read_typed, s, settings_name};
+
+/// The preset logged as a torque-sensed joint.
+const PRESET: &str = "knee";
+/// Tracking centre, amplitudes and the frequencies of each speed run (peak |ṡ| = A·2πf).
+const SPEEDS: [(&str, &str); 3] = [
+    ("slow", "[0.1, 0.15]"),
+    ("mid", "[0.25, 0.35]"),
+    ("fast", "[0.5, 0.7]"),
+];
+/// The run held out for testing: the middle speed (inside the range of the other two).
+const HELD_OUT: &str = "mid";
+/// The feature set: joint position and velocity history (no motor encoder on this joint).
+const FEATURES: &str = "joint-pos-joint-vel";
+
+/// Sizes of one flavour.
+struct Sizes {
+    amplitudes: &'static str,
+    cycles: f64,
+    hidden: &'static str,
+    history: u32,
+    epochs: u32,
+    batch: u32,
+}
+
+impl Sizes {
+    fn for_args(args: &Args) -> Self {
+        if args.quick {
+            Self {
+                amplitudes: "[0.3]",
+                cycles: 1.0,
+                hidden: "16,16",
+                history: 10,
+                epochs: 2,
+                batch: 2048,
+            }
+        } else if args.full {
+            Self {
+                amplitudes: "[0.2, 0.4, 0.6]",
+                cycles: 3.0,
+                hidden: "268,215",
+                history: 20,
+                epochs: 100,
+                batch: 4316,
+            }
+        } else {
+            Self {
+                amplitudes: "[0.2, 0.4, 0.6]",
+                cycles: 3.0,
+                hidden: "128,128",
+                history: 30,
+                epochs: 10,
+                batch: 512,
+            }
+        }
+    }
+}
+
+/// `report.json`.
+#[derive(serde::Serialize)]
+struct TorqueReport<'a> {
+    format: &'static str,
+    producer: String,
+    settings: &'static str,
+    seed: u64,
+    joint: String,
+    features: &'static str,
+    held_out_run: &'static str,
+    training_runs: Vec<&'static str>,
+    network: super::Network,
+    runs: BTreeMap<String, RunEntry>,
+    held_out: HeldOut,
+    stages: &'a [Stage],
+    total_seconds: f64,
+}
+
+/// `report.json` `runs.NAME`.
+#[derive(serde::Serialize)]
+struct RunEntry {
+    file: String,
+    peak_abs_sdot_rad_s: f64,
+}
+
+/// `report.json` `held_out`: the held-out run's numbers per model.
+#[derive(serde::Serialize)]
+struct HeldOut {
+    label: BTreeMap<String, RunMetrics>,
+    truth: BTreeMap<String, RunMetrics>,
+    extrapolated_share: Option<f64>,
+}
+
+/// The 99.5 % quantile of |dq| of an arm log (the speed of the run, robust to single spikes).
+fn peak_abs_dq(csv: &Path) -> anyhow::Result<f64> {
+    let cols = frictionless_dataset::read_columns(csv)?;
+    let dq = cols
+        .get("dq_rad_s")
+        .with_context(|| format!("{}: no dq_rad_s column", csv.display()))?;
+    let mut v: Vec<f64> = dq
+        .iter()
+        .filter(|v| v.is_finite())
+        .map(|v| v.abs())
+        .collect();
+    v.sort_by(f64::total_cmp);
+    Ok(v.get((v.len() as f64 * 0.995) as usize)
+        .copied()
+        .unwrap_or(0.0))
+}
+
+/// The held-out run's entry of an eval report.
+fn held_out_models(ev: &EvalReport) -> anyhow::Result<(BTreeMap<String, RunMetrics>, Option<f64>)> {
+    let run = ev
+        .per_run
+        .iter()
+        .find(|r| r.run == HELD_OUT)
+        .context("the eval report has no entry for the held-out run")?;
+    Ok((run.models.clone(), run.extrapolated_share))
+}
+
+/// Runs `frictl demo --sensor torque`.
+pub fn run(args: &Args) -> anyhow::Result<()> {
+    super::install_signal_flag()?;
+    let started = Instant::now();
+    let sizes = Sizes::for_args(args);
+    let out = &args.out;
+    let data = out.join("data");
+    let models = out.join("models");
+    let eval = out.join("eval");
+    let logs = out.join("logs");
+    for d in [&data, &models, &eval, &logs] {
+        std::fs::create_dir_all(d).with_context(|| format!("cannot create {}", d.display()))?;
+    }
+    let mut r = Runner {
+        exe: std::env::current_exe().context("cannot find the running executable")?,
+        frictiond: None,
+        logs,
+        stages: vec![],
+        n: 0,
+    };
+    eprintln!(
+        "frictl demo --sensor torque → {} ({} settings; logs in {}/logs)",
+        out.display(),
+        settings_name(args),
+        out.display()
+    );
+
+    // 1. Acquire: one torque-sensed log per speed.
+    let mut logs_csv: Vec<PathBuf> = Vec::new();
+    let mut runs = BTreeMap::new();
+    for (k, (name, freqs)) in SPEEDS.iter().enumerate() {
+        let seed = args.seed + k as u64;
+        r.frictl(
+            &format!("acquire {PRESET} torque-sensed ({name}, seed {seed})"),
+            &[
+                "acquire".into(),
+                "--preset".into(),
+                PRESET.into(),
+                "--seed".into(),
+                seed.to_string(),
+                "--out".into(),
+                s(&data),
+                "--name".into(),
+                (*name).into(),
+                "--sensor".into(),
+                "torque".into(),
+                "--log-period-ms".into(),
+                "2".into(),
+                "--jitter-ms".into(),
+                "0.2".into(),
+                "--set=protocol.n_starts=1".into(),
+                // start at the tracking centre: no fast re-centring move in the log
+                "--set=plant.initial_s_rad=-0.8".into(),
+                "--set=protocol.sines.enabled=false".into(),
+                "--set=protocol.ramps.enabled=false".into(),
+                "--set=protocol.steps.enabled=false".into(),
+                format!(
+                    "--set=protocol.tracking.train.amplitudes_rad={}",
+                    sizes.amplitudes
+                ),
+                format!("--set=protocol.tracking.train.frequencies_hz={freqs}"),
+                format!("--set=protocol.tracking.train.cycles={}", sizes.cycles),
+            ],
+        )?;
+        let csv = data.join(format!("{name}.csv"));
+        runs.insert(
+            (*name).to_owned(),
+            RunEntry {
+                file: s(&csv),
+                peak_abs_sdot_rad_s: peak_abs_dq(&csv)?,
+            },
+        );
+        logs_csv.push(csv);
+    }
+    // The joint's facts from the acquisition sidecar (what a user reads off the robot's datasheet).
+    let side = read_json(&logs_csv[0].with_extension("json"))?;
+    let joint = side["joint"].as_str().unwrap_or_default().to_owned();
+    let r_signed = side["gear_ratio_signed"]
+        .as_f64()
+        .context("acquisition sidecar: gear_ratio_signed")?;
+    let kt = side["kt_nm_per_a"]
+        .as_f64()
+        .context("acquisition sidecar: kt_nm_per_a")?;
+
+    // 2. Import: torque-sensor label, and the truth as a `given` label for scoring.
+    let ds = data.join("arm.csv");
+    let ds_truth = data.join("arm_truth.csv");
+    for (dst, label, extra) in [
+        (&ds, "torque-sensor", None),
+        (&ds_truth, "given", Some("--column=tau_f=tau_f_true_nm")),
+    ] {
+        let mut a: Vec<String> = vec!["import".into(), "csv".into()];
+        a.extend(logs_csv.iter().map(|p| s(p)));
+        a.extend(
+            [
+                "--joint",
+                &joint,
+                "--column=time=time_s",
+                "--column=s=q_rad",
+                "--column=sdot=dq_rad_s",
+                "--column=current=current_a",
+                "--column=tau_joint=tau_joint_nm",
+                "--label",
+                label,
+                "--out",
+                &s(dst),
+            ]
+            .map(String::from),
+        );
+        a.push(format!("--gear-ratio={r_signed}"));
+        a.push(format!("--kt={kt}"));
+        a.extend(extra.map(String::from));
+        r.frictl(&format!("import csv ({label} label)"), &a)?;
+    }
+
+    // 3. Fit CV and SCV on the training runs.
+    let cv = models.join("cv.json");
+    let scv = models.join("scv.json");
+    for (m, f) in [("cv", &cv), ("scv", &scv)] {
+        r.frictl(
+            &format!("fit {m} (training runs)"),
+            &[
+                "fit".into(),
+                m.into(),
+                s(&ds),
+                "--test-run".into(),
+                HELD_OUT.into(),
+                "--json".into(),
+                s(f),
+            ],
+        )?;
+    }
+
+    // 4. Train on slow + fast, the middle speed held out (validation would take a whole run: none).
+    let fwt = models.join("pinn.fwt");
+    let train_report = models.join("pinn_train.json");
+    r.frictl(
+        "train (held-out run: mid)",
+        &[
+            "train".into(),
+            "--dataset".into(),
+            s(&ds),
+            "--test-run".into(),
+            HELD_OUT.into(),
+            "--val-frac".into(),
+            "0".into(),
+            "--features".into(),
+            FEATURES.into(),
+            "--scv".into(),
+            s(&scv),
+            "--out".into(),
+            s(&fwt),
+            "--report".into(),
+            s(&train_report),
+            "--hidden".into(),
+            sizes.hidden.into(),
+            "--history".into(),
+            sizes.history.to_string(),
+            "--epochs".into(),
+            sizes.epochs.to_string(),
+            "--batch".into(),
+            sizes.batch.to_string(),
+            "--seed".into(),
+            args.seed.to_string(),
+        ],
+    )?;
+
+    // 5. Evaluate on the held-out run, against the label and against the truth.
+    let mut held = Vec::new();
+    for (d, tag) in [(&ds, "label"), (&ds_truth, "truth")] {
+        let json = eval.join(format!("{tag}.json"));
+        r.frictl(
+            &format!("eval held-out run (vs {tag})"),
+            &[
+                "eval".into(),
+                "--dataset".into(),
+                s(d),
+                "--test-run".into(),
+                HELD_OUT.into(),
+                "--cv".into(),
+                s(&cv),
+                "--scv".into(),
+                s(&scv),
+                "--pinn".into(),
+                s(&fwt),
+                "--train-report".into(),
+                s(&train_report),
+                "--out".into(),
+                s(&eval.join(tag)),
+                "--json".into(),
+                s(&json),
+            ],
+        )?;
+        let ev: EvalReport = read_typed(&json)?;
+        held.push(held_out_models(&ev)?);
+    }
+    let (truth, _) = held.pop().context("two evaluations")?;
+    let (label, extrapolated_share) = held.pop().context("two evaluations")?;
+
+    let total = started.elapsed().as_secs_f64();
+    let report = TorqueReport {
+        format: "frictionless-demo-torque-v1",
+        producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
+        settings: settings_name(args),
+        seed: args.seed,
+        joint,
+        features: FEATURES,
+        held_out_run: HELD_OUT,
+        training_runs: SPEEDS
+            .iter()
+            .map(|(n, _)| *n)
+            .filter(|n| *n != HELD_OUT)
+            .collect(),
+        network: super::Network {
+            hidden: sizes.hidden,
+            history: sizes.history,
+            epochs: sizes.epochs,
+            batch: sizes.batch,
+        },
+        runs,
+        held_out: HeldOut {
+            label,
+            truth,
+            extrapolated_share,
+        },
+        stages: &r.stages,
+        total_seconds: total,
+    };
+    std::fs::write(
+        out.join("report.json"),
+        serde_json::to_string_pretty(&report)?,
+    )?;
+    let md = report_md(&report);
+    std::fs::write(out.join("report.md"), &md)?;
+    println!("{md}");
+    eprintln!(
+        "frictl demo --sensor torque: done in {total:.0} s → {}/report.md",
+        out.display()
+    );
+    Ok(())
+}
+
+fn report_md(r: &TorqueReport) -> String {
+    let f = |v: Option<f64>| v.map_or_else(|| "-".into(), |x| format!("{x:.3}"));
+    let mut md = format!(
+        "# frictionless demo: a torque-sensed joint\n\nThe virtual {} logged with a joint torque sensor and no motor encoder, three speed runs \
+         (peak |ṡ|: {}), label r·k_t·i − τ_joint, PINN [{}] (hidden {}, H {}, {} epochs) trained on {} and tested on the \
+         held-out run `{}` ({} settings, seed {}, {:.0} s).\n\n",
+        r.joint,
+        r.runs
+            .iter()
+            .map(|(n, e)| format!("{n} {:.2} rad/s", e.peak_abs_sdot_rad_s))
+            .collect::<Vec<_>>()
+            .join(", "),
+        r.features,
+        r.network.hidden,
+        r.network.history,
+        r.network.epochs,
+        r.training_runs.join(" + "),
+        r.held_out_run,
+        r.settings,
+        r.seed,
+        r.total_seconds
+    );
+    md += &format!(
+        "Friction RMSE on the held-out run [Nm]; {} of its samples lie outside the training runs' range of s and ṡ.\n\n\
+         | model | vs label: all | sliding | stick | vs truth: all | sliding | stick |\n|---|---|---|---|---|---|---|\n",
+        r.held_out
+            .extrapolated_share
+            .map_or_else(|| "-".into(), |x| format!("{:.1} %", 100.0 * x))
+    );
+    for (key, name) in super::EVAL_MODELS {
+        let (l, t) = (r.held_out.label.get(key), r.held_out.truth.get(key));
+        md += &format!(
+            "| {name} | {} | {} | {} | {} | {} | {} |\n",
+            f(l.and_then(|m| m.rmse_all)),
+            f(l.and_then(|m| m.rmse_sliding)),
+            f(l.and_then(|m| m.rmse_stick)),
+            f(t.and_then(|m| m.rmse_all)),
+            f(t.and_then(|m| m.rmse_sliding)),
+            f(t.and_then(|m| m.rmse_stick)),
+        );
+    }
+    md
+}
