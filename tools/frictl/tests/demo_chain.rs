@@ -136,7 +136,6 @@ fn compensation_with_fitted_models_lowers_tracking_error_at_the_same_kp() {
 /// (joint-pos-joint-vel, the middle speed held out) → eval. The report names the held-out run, every
 /// model has numbers on it against the label and the truth, and the eval reports scored that run only.
 #[test]
-#[ignore = "needs `frictl import csv` (branch import): remove this line when it is merged"]
 fn torque_sensed_demo_trains_on_two_speeds_and_tests_on_the_third() {
     let dir = std::env::temp_dir().join(format!("frictl_demo_torque_{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
