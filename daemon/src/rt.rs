@@ -42,9 +42,10 @@ use frictionless::law::{LawFlags, LawInput, LawOutput};
 use frictionless::model::{FrictionModel, JointModel};
 use frictionless_shm_types::{
     DaemonStatus, FAULT_FEEDBACK_STALE, FLAG_CURRENT_SATURATED, FLAG_DISABLED, FLAG_FAULT,
-    FLAG_FRICTION_CLIPPED, FLAG_NON_FINITE, FLAG_STALE, FLAG_WARMING_UP, JointStates, MAX_JOINTS,
-    MotorCurrentCommand, STATUS_CPU_PINNED, STATUS_INPUT_STALE, STATUS_MEMORY_LOCKED,
-    STATUS_SCHED_FIFO, STATUS_STOPPING, TorqueRequest, monotonic_ns, sleep_until_ns,
+    FLAG_FRICTION_CLIPPED, FLAG_NON_FINITE, FLAG_OUT_OF_RANGE, FLAG_STALE, FLAG_WARMING_UP,
+    JointStates, MAX_JOINTS, MotorCurrentCommand, STATUS_CPU_PINNED, STATUS_INPUT_STALE,
+    STATUS_MEMORY_LOCKED, STATUS_SCHED_FIFO, STATUS_STOPPING, TorqueRequest, monotonic_ns,
+    sleep_until_ns,
 };
 
 use crate::alloc_count;
@@ -206,9 +207,14 @@ pub fn compute(
                 // Bumpless enable: fresh history and filter state.
                 j.model.reset(&sample);
                 j.law.reset();
+                j.ood.reset();
             }
             active |= bit;
-            let f = j.model.estimate(&sample);
+            let model_nm = j.model.estimate(&sample);
+            // Out of the training range: flagged, counted (Telemetry::record) and, with a static
+            // model configured, blended to it over the ramp.
+            let ood = j.ood.out_of_range(&j.model, &sample);
+            let f = j.ood.blend(model_nm, ood, &sample);
             let o = j.law.step(&LawInput {
                 tau_des_nm: rq.tau_des_nm[k],
                 friction_nm: f,
@@ -220,7 +226,8 @@ pub fn compute(
             } else {
                 0
             };
-            JointOut::from_law(o, warming)
+            let ood_flag = if ood { FLAG_OUT_OF_RANGE } else { 0 };
+            JointOut::from_law(o, warming | ood_flag)
         };
         cmd.i_ref_a[k] = out.i_a;
         cmd.flags[k] = out.flags;
@@ -980,12 +987,14 @@ struct Telemetry {
 
 impl Telemetry {
     /// Records one tick: wake lateness (clock trigger only: lockstep has no deadline), compute
-    /// time, input age, staleness.
+    /// time, input age, staleness, out-of-range joints.
+    #[allow(clippy::too_many_arguments)] // one tick's pieces, called once
     #[inline]
     fn record(
         &mut self,
         plan: &LoopPlan,
         inputs: &Inputs,
+        cmd: &MotorCurrentCommand,
         fresh: Freshness,
         wake_ns: u64,
         deadline_ns: u64,
@@ -1005,6 +1014,11 @@ impl Telemetry {
         }
         if fresh.state_stale {
             self.stale_ticks += 1;
+        }
+        for (n, &flags) in s.out_of_range_ticks.iter_mut().zip(&cmd.flags) {
+            if flags & FLAG_OUT_OF_RANGE != 0 {
+                *n += 1;
+            }
         }
     }
 
@@ -1172,7 +1186,7 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
         // 4. output, telemetry, heartbeat
         let _ = backend.publish_command(&cmd);
         let done = monotonic_ns();
-        tele.record(&plan, &inputs, fresh, wake_ns, deadline, done);
+        tele.record(&plan, &inputs, &cmd, fresh, wake_ns, deadline, done);
         tick += 1;
         if tick.is_multiple_of(plan.status_every) {
             tele.publish(
