@@ -227,18 +227,27 @@ fn leaving_the_training_range_switches_to_the_static_model_and_counts() {
         if ood && k >= 60 + RAMP_TICKS {
             // After the ramp: exactly the static law's value (and not the PINN's).
             assert!((c.i_ref_a[0] - current(k, static_nm)).abs() <= 1e-6);
-            assert!((c.i_ref_a[0] - want1).abs() > 1e-4, "tick {k}: PINN ≈ static");
+            assert!(
+                (c.i_ref_a[0] - want1).abs() > 1e-4,
+                "tick {k}: PINN ≈ static"
+            );
             at_static += 1;
         }
         if k >= 120 + RAMP_TICKS {
-            assert!((c.i_ref_a[0] - want1).abs() <= 1e-6, "tick {k}: back to PINN");
+            assert!(
+                (c.i_ref_a[0] - want1).abs() <= 1e-6,
+                "tick {k}: back to PINN"
+            );
             at_pinn_after += 1;
         }
         if k == 60 {
             // The first out-of-range tick is one ramp step, not a switch.
             let full = current(k, static_nm);
             let d_step = (c.i_ref_a[0] - want1).abs();
-            assert!(d_step < 0.1 * (full - want1).abs() + 1e-9, "no current step");
+            assert!(
+                d_step < 0.1 * (full - want1).abs() + 1e-9,
+                "no current step"
+            );
         }
     }
     assert_eq!((at_static, at_pinn_after), (40, 60));
