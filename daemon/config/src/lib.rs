@@ -2079,6 +2079,69 @@ joints = [{ joint = "ankle", node_id = 3, command_unit = "joint_torque" }]
         )
     }
 
+    /// `ood = "static"` needs the joint's static model (CV, or SCV with all three Stribeck keys) and
+    /// a PINN; the margin and the ramp are range-checked; without `ood` a PINN joint flags only and
+    /// still refuses static-model keys.
+    #[test]
+    fn out_of_range_settings_are_typed_and_checked() {
+        let m = joint_model(
+            "knee",
+            -100.0,
+            0.157,
+            FeatureSpec {
+                set: frictionless::features::FeatureSet::DeltaThetaJointVel,
+                history: 3,
+                temperature: false,
+            },
+        );
+        let base = format!(
+            "[backend]\nkind = \"shm\"\n{}",
+            pinn_joint("knee", 0.157, m.to_str().unwrap())
+        );
+        let c = p(&base).unwrap();
+        assert_eq!(c.raw.joint[0].ood, OodMode::Flag);
+        assert_eq!(c.raw.joint[0].ood_margin, 0.1);
+        assert_eq!(c.raw.joint[0].ood_ramp_ms, 20.0);
+        assert!(matches!(c.models[0], ModelSpec::Pinn { fallback: None, .. }));
+        // No static model configured: refused at --check, naming the missing key.
+        let e = p(&format!("{base}ood = \"static\"\n")).unwrap_err().to_string();
+        assert!(e.contains("joint[0].kc") && e.contains("ood"), "{e}");
+        let cv = format!("{base}ood = \"static\"\nkc = 1.0\nka = 20.0\nkv = 0.5\n");
+        let c = p(&cv).unwrap();
+        assert!(matches!(
+            c.models[0],
+            ModelSpec::Pinn {
+                fallback: Some(StaticFallback::Cv(cv)),
+                ..
+            } if cv.kc == 1.0
+        ));
+        let scv = format!("{cv}ks = 1.5\nvs = 0.1\nalpha = 1.0\n");
+        assert!(matches!(
+            p(&scv).unwrap().models[0],
+            ModelSpec::Pinn {
+                fallback: Some(StaticFallback::Scv(_)),
+                ..
+            }
+        ));
+        // Half an SCV is refused; static keys without `ood = "static"` too.
+        let e = p(&format!("{cv}ks = 1.5\n")).unwrap_err().to_string();
+        assert!(e.contains("joint[0].vs"), "{e}");
+        let e = p(&format!("{base}kc = 1.0\n")).unwrap_err().to_string();
+        assert!(e.contains("joint[0].kc"), "{e}");
+        for (key, bad) in [("ood_margin", "-0.1"), ("ood_margin", "nan"), ("ood_ramp_ms", "5000.0")]
+        {
+            let e = p(&format!("{cv}{key} = {bad}\n")).unwrap_err().to_string();
+            assert!(e.contains(&format!("joint[0].{key}")), "{e}");
+        }
+        let e = p(&format!("{base}ood = \"sometimes\"\n")).unwrap_err().to_string();
+        assert!(e.contains("sometimes") || e.contains("unknown variant"), "{e}");
+        // A static-model joint cannot fall back to itself.
+        let e = p(&GOOD.replacen("kv = 5.55", "kv = 5.55\nood = \"static\"", 1))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("joint[0].ood"), "{e}");
+    }
+
     /// Issue 14 #7: a model recorded for another joint, or another k_t, is refused naming both values.
     #[test]
     fn model_for_another_joint_or_kt_is_refused() {
