@@ -2102,9 +2102,14 @@ joints = [{ joint = "ankle", node_id = 3, command_unit = "joint_torque" }]
         assert_eq!(c.raw.joint[0].ood, OodMode::Flag);
         assert_eq!(c.raw.joint[0].ood_margin, 0.1);
         assert_eq!(c.raw.joint[0].ood_ramp_ms, 20.0);
-        assert!(matches!(c.models[0], ModelSpec::Pinn { fallback: None, .. }));
+        assert!(matches!(
+            c.models[0],
+            ModelSpec::Pinn { fallback: None, .. }
+        ));
         // No static model configured: refused at --check, naming the missing key.
-        let e = p(&format!("{base}ood = \"static\"\n")).unwrap_err().to_string();
+        let e = p(&format!("{base}ood = \"static\"\n"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("joint[0].kc") && e.contains("ood"), "{e}");
         let cv = format!("{base}ood = \"static\"\nkc = 1.0\nka = 20.0\nkv = 0.5\n");
         let c = p(&cv).unwrap();
@@ -2128,13 +2133,21 @@ joints = [{ joint = "ankle", node_id = 3, command_unit = "joint_torque" }]
         assert!(e.contains("joint[0].vs"), "{e}");
         let e = p(&format!("{base}kc = 1.0\n")).unwrap_err().to_string();
         assert!(e.contains("joint[0].kc"), "{e}");
-        for (key, bad) in [("ood_margin", "-0.1"), ("ood_margin", "nan"), ("ood_ramp_ms", "5000.0")]
-        {
+        for (key, bad) in [
+            ("ood_margin", "-0.1"),
+            ("ood_margin", "nan"),
+            ("ood_ramp_ms", "5000.0"),
+        ] {
             let e = p(&format!("{cv}{key} = {bad}\n")).unwrap_err().to_string();
             assert!(e.contains(&format!("joint[0].{key}")), "{e}");
         }
-        let e = p(&format!("{base}ood = \"sometimes\"\n")).unwrap_err().to_string();
-        assert!(e.contains("sometimes") || e.contains("unknown variant"), "{e}");
+        let e = p(&format!("{base}ood = \"sometimes\"\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("sometimes") || e.contains("unknown variant"),
+            "{e}"
+        );
         // A static-model joint cannot fall back to itself.
         let e = p(&GOOD.replacen("kv = 5.55", "kv = 5.55\nood = \"static\"", 1))
             .unwrap_err()
