@@ -13,10 +13,13 @@
 //!    `seq` and `stamp_ns` (lockstep: by `seq` and the timeout, since its time is not wall time);
 //! 2. parameter hand-over: `try_recv` a new `Box<Params>` (built off-thread), send the old one back
 //!    to be freed off-thread;
-//! 3. [`compute`]: per joint, enable edge → reset (bumpless), model estimate, control law
+//! 3. [`compute`]: per joint, enable edge → reset (bumpless), model estimate, out-of-training-range
+//!    check of the newest sample (`FLAG_OUT_OF_RANGE`; under `ood = "static"` the estimate ramps to
+//!    the joint's static model, see [`crate::params::OodRt`]), control law
 //!    ([`frictionless::law`], its [`LawFlags`] mapped to the ABI's `FLAG_*` by [`abi_flags`]),
 //!    stale/fault/NaN handling → [`MotorCurrentCommand`];
-//! 4. publish (+ notify); record lateness / compute time / input age in fixed histograms;
+//! 4. publish (+ notify); record lateness / compute time / input age in fixed histograms and the
+//!    out-of-range ticks per joint;
 //!    publish [`DaemonStatus`] every `status_every_ticks`; advance the heartbeat.
 //!
 //! [`run`] reads top to bottom as these steps, each a named function or method in this module

@@ -434,7 +434,8 @@ fn parse_layer_table(b: &[u8], n_inputs: usize) -> Result<(Vec<LayerInfo>, u64),
 
 /// Byte ranges that must be zero in a file whose minor version this reader knows.
 fn reserved_ranges(h: &Header) -> Vec<std::ops::Range<usize>> {
-    let mut r = vec![off::RESERVED_A..off::RESERVED_A + 5];
+    let mut r = Vec::with_capacity(8 + h.layers.len());
+    r.push(off::RESERVED_A..off::RESERVED_A + 5);
     if h.version_minor < layout::MINOR_INPUT_RANGE {
         r.push(off::RANGE_PRESENT..off::RANGE_PRESENT + 1);
         r.push(off::INPUT_RANGE..layout::FIXED_HEADER_LEN);
