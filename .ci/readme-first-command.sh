@@ -58,11 +58,17 @@ for name, joint in joints.items():
             kp = mk.get("kp")
             if not isinstance(kp, (int, float)) or not math.isfinite(kp) or kp <= 0:
                 bad.append(f"{name}/{label}: min_kp.kp = {kp!r}")
+            # The estimators' closed-loop τ̂_F/kfc error at that K_p (`none` estimates nothing: null).
+            e = m.get("closed_loop_tau_f_rmse_nm", "missing")
+            if label != "none" and (
+                not isinstance(e, (int, float)) or not math.isfinite(e) or e < 0
+            ):
+                bad.append(f"{name}/{label}: closed_loop_tau_f_rmse_nm = {e!r}")
     for label in ("CV", "SCV", "PINN"):
         rmse = models.get(label, {}).get("eval", {}).get("rmse_all")
         if not isinstance(rmse, (int, float)) or not math.isfinite(rmse) or rmse < 0:
             bad.append(f"{name}/{label}: eval.rmse_all = {rmse!r}")
 if bad:
     sys.exit(f"{path}: " + "; ".join(bad))
-print(f"readme-first-command: {path}: {len(joints)} joints, every model has a min K_p result and an unseen-run friction RMSE")
+print(f"readme-first-command: {path}: {len(joints)} joints, every model has a min K_p result (with its closed-loop τ̂_F RMSE) and an unseen-run friction RMSE")
 EOF

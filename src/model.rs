@@ -246,6 +246,28 @@ impl PinnEstimator {
         &self.x
     }
 
+    /// Whether `sample`'s model inputs lie outside the training range stored in the model file,
+    /// each range widened on both sides by `margin` times its width (see
+    /// [`crate::weights::InputRange::within`]). Each feature block is judged on `sample` alone (the
+    /// newest value; older history samples were judged when they were newest), with the current Δθ
+    /// latch, and the temperature if the model takes it. A model without a stored range is never out
+    /// of range. Allocation-free; a non-finite input counts as out of range.
+    #[inline]
+    pub fn out_of_range(&self, sample: &JointSample, margin: f32) -> bool {
+        use crate::weights::InputRange;
+        let Some(r) = &self.meta.training.input_range else {
+            return false;
+        };
+        let spec = self.history.spec();
+        for (&feature, range) in spec.set.blocks().iter().zip(&r.blocks) {
+            let v = self.history.feature_value(feature, sample) as f32;
+            if !InputRange::within(*range, v, margin) {
+                return true;
+            }
+        }
+        spec.temperature && !InputRange::within(r.temperature, sample.temperature_c as f32, margin)
+    }
+
     /// Fixes the Δθ offset θ_off [motor rad] so [`FrictionModel::reset`] (enable) no longer
     /// re-latches it (see [`History::fix_delta_theta_offset`]); `None` restores latching at enable.
     /// Use the offset the training data were recorded with (e.g. 0 for the virtual joints, whose
@@ -439,6 +461,41 @@ mod tests {
 
     fn close(a: f64, b: f64) -> bool {
         (a - b).abs() <= 1e-4 * (1.0 + b.abs())
+    }
+
+    #[test]
+    fn out_of_range_judges_each_block_and_the_temperature_of_the_newest_sample() {
+        let spec = FeatureSpec {
+            set: FeatureSet::MotorVelJointVel,
+            history: 3,
+            temperature: true,
+        };
+        let mut f = model_file(spec, -160.0, 5);
+        let s = |omega: f64, sdot: f64, t: f64| JointSample {
+            s_rad: 0.0,
+            sdot_rad_s: sdot,
+            theta_motor_rad: 0.0,
+            omega_motor_rad_s: omega,
+            temperature_c: t,
+        };
+        // No stored range: never out of range.
+        let mut p = PinnEstimator::from_model_file(&f, WarmupPolicy::ZeroPad).unwrap();
+        p.estimate(&s(1e6, 1e6, 1e6));
+        assert!(!p.out_of_range(&s(1e6, 1e6, 1e6), 0.0));
+        f.meta.training.input_range = Some(crate::weights::InputRange {
+            blocks: [[-100.0, 100.0], [-0.5, 0.5], [0.0, 0.0]],
+            temperature: [20.0, 40.0],
+        });
+        let p = PinnEstimator::from_model_file(&f, WarmupPolicy::ZeroPad).unwrap();
+        assert!(!p.out_of_range(&s(90.0, 0.4, 30.0), 0.0));
+        assert!(p.out_of_range(&s(101.0, 0.4, 30.0), 0.0), "motor velocity");
+        assert!(p.out_of_range(&s(90.0, -0.6, 30.0), 0.0), "joint velocity");
+        assert!(
+            !p.out_of_range(&s(90.0, -0.6, 30.0), 0.25),
+            "within the margin"
+        );
+        assert!(p.out_of_range(&s(90.0, 0.4, 41.0), 0.0), "temperature");
+        assert!(p.out_of_range(&s(f64::NAN, 0.4, 30.0), 0.0), "NaN");
     }
 
     #[test]

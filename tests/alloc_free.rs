@@ -110,6 +110,43 @@ fn sample(k: usize) -> JointSample {
 }
 
 #[test]
+fn out_of_range_check_never_allocates() {
+    let JointModel::Pinn(template) = pinn(
+        FeatureSet::DeltaThetaMotorVelJointVel,
+        20,
+        true,
+        WarmupPolicy::ZeroPad,
+    ) else {
+        unreachable!()
+    };
+    // The same model with a range the samples leave part of the time (ṡ ∈ [−0.2, 0.2] of ±0.4).
+    let mut meta = template.meta().clone();
+    meta.training.input_range = Some(frictionless::weights::InputRange {
+        blocks: [[-100.0, 100.0], [-100.0, 100.0], [-0.2, 0.2]],
+        temperature: [0.0, 50.0],
+    });
+    let file = ModelFile {
+        mlp: mlp(&[meta.features.n_inputs(), 268, 215, 1]),
+        meta,
+        dtype: StorageDtype::F32,
+    };
+    let mut p = PinnEstimator::from_model_file(&file, WarmupPolicy::ZeroPad).unwrap();
+    let before = allocs();
+    let mut out = 0usize;
+    for k in 0..10_000 {
+        let x = sample(k);
+        p.estimate(&x);
+        out += usize::from(p.out_of_range(&x, 0.05));
+    }
+    let n = allocs() - before;
+    assert_eq!(n, 0, "estimate + out_of_range allocated {n} times");
+    assert!(
+        (2_000..8_000).contains(&out),
+        "{out} of 10 000 out of range"
+    );
+}
+
+#[test]
 fn estimate_never_allocates_on_any_variant() {
     let mut models: Vec<(&str, JointModel)> = vec![
         ("none", JointModel::None(NoFriction)),

@@ -12,8 +12,8 @@ use frictionless::mlp::{MlpShapeError, StorageDtype};
 use frictionless::random::{RandomMlpSpec, seeded_mlp};
 use frictionless::units::GearRatio;
 use frictionless::weights::{
-    self, ModelFile, ModelMeta, SignalFiltering, TrainingMeta, WeightError, from_bytes, inspect,
-    to_bytes,
+    self, InputRange, ModelFile, ModelMeta, SignalFiltering, TrainingMeta, WeightError, from_bytes,
+    inspect, to_bytes,
 };
 
 // Offsets from docs/weights-format.md.
@@ -74,6 +74,7 @@ fn model(sizes: &[usize], dtype: StorageDtype, seed: u64) -> ModelFile {
                 created_unix_s: 1_718_000_000,
                 tool_version: "frictl 0.1.0".into(),
                 filtering: SignalFiltering::Causal,
+                input_range: None,
             },
         },
         dtype,
@@ -268,8 +269,8 @@ fn wrong_magic_and_version() {
 #[test]
 fn newer_minor_is_read_and_may_use_reserved_bytes() {
     let (m, b) = small(StorageDtype::F32);
-    // Minor 1 (a version this reader writes): a non-zero reserved byte (offsets 288 to the end of the
-    // fixed header) is refused.
+    // Minor 2 (the version this reader writes), no input range: a non-zero byte in the unused range
+    // field (offsets 288 to the end of the fixed header) is refused.
     let mut c = b.clone();
     c[300] = 1;
     fix_crc(&mut c);
@@ -731,7 +732,7 @@ fn temperature_and_feature_sets_round_trip() {
         };
         m.meta.scv = None;
         let bytes = to_bytes(&m).unwrap();
-        assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 1, "minor 1");
+        assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 2, "minor 2");
         assert_eq!(usize::from(bytes[42]), n, "n_blocks");
         // The header names each block, in order, unused slots zero.
         let codes: Vec<u8> = set
@@ -1012,4 +1013,184 @@ fn models_with_non_finite_output_are_refused() {
     }
     let e = to_bytes(&huge).unwrap_err();
     assert!(matches!(e, WeightError::NonFiniteOutput { .. }), "{e}");
+}
+
+/// Offsets of the input range (format 1.2) from docs/weights-format.md.
+const RANGE_PRESENT_AT: usize = 66;
+const INPUT_RANGE_AT: usize = 288;
+
+fn ranged() -> ModelFile {
+    // [Δθ, ṡ] with H = 2 and temperature: 5 inputs.
+    let mut m = model(&[5, 3, 1], StorageDtype::F32, 11);
+    m.meta.training.input_range = Some(InputRange {
+        blocks: [[-0.02, 0.03], [-1.5, 1.25], [0.0, 0.0]],
+        temperature: [20.0, 45.5],
+    });
+    m
+}
+
+#[test]
+fn input_range_round_trips_at_its_documented_offsets_and_prints() {
+    let m = ranged();
+    let b = to_bytes(&m).unwrap();
+    assert_eq!(b[RANGE_PRESENT_AT], 1);
+    let f = |k: usize| {
+        let at = INPUT_RANGE_AT + 4 * k;
+        f32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]])
+    };
+    assert_eq!((f(0), f(1), f(2), f(3)), (-0.02, 0.03, -1.5, 1.25));
+    assert_eq!((f(4), f(5), f(6), f(7)), (0.0, 0.0, 20.0, 45.5));
+    let back = from_bytes(&b).unwrap();
+    assert_eq!(back.meta.training.input_range, m.meta.training.input_range);
+    let text = inspect(&b).unwrap().to_string();
+    assert!(
+        text.contains("input range    delta-theta [-0.02, 0.03] motor rad, joint-vel [-1.5, 1.25] rad/s, temperature [20, 45.5] °C"),
+        "{text}"
+    );
+    // Without a range: flag 0, the field all zero, inspect says so.
+    let (_, plain) = small(StorageDtype::F32);
+    assert_eq!(plain[RANGE_PRESENT_AT], 0);
+    assert!(plain[INPUT_RANGE_AT..FIXED].iter().all(|&x| x == 0));
+    assert!(
+        from_bytes(&plain)
+            .unwrap()
+            .meta
+            .training
+            .input_range
+            .is_none()
+    );
+    assert!(
+        inspect(&plain)
+            .unwrap()
+            .to_string()
+            .contains("input range    none")
+    );
+}
+
+#[test]
+fn a_1_1_file_reads_without_a_range_and_refuses_range_bytes() {
+    let b = to_bytes(&ranged()).unwrap();
+    // As a 1.1 writer would have it: no range, minor 1.
+    let mut old = b.clone();
+    old[10..12].copy_from_slice(&1u16.to_le_bytes());
+    old[RANGE_PRESENT_AT] = 0;
+    old[INPUT_RANGE_AT..FIXED].fill(0);
+    fix_crc(&mut old);
+    assert!(
+        from_bytes(&old)
+            .unwrap()
+            .meta
+            .training
+            .input_range
+            .is_none()
+    );
+    // In 1.1 both fields are reserved: non-zero is refused.
+    let mut c = old.clone();
+    c[RANGE_PRESENT_AT] = 1;
+    fix_crc(&mut c);
+    assert!(matches!(
+        from_bytes(&c),
+        Err(WeightError::NonZeroReserved { offset: 66, .. })
+    ));
+    // A bad presence flag in 1.2 is an unknown code.
+    let mut c = b.clone();
+    c[RANGE_PRESENT_AT] = 2;
+    fix_crc(&mut c);
+    assert!(matches!(
+        from_bytes(&c),
+        Err(WeightError::UnknownCode {
+            field: "range_present",
+            value: 2
+        })
+    ));
+}
+
+#[test]
+fn bad_input_ranges_are_refused_by_writer_and_reader() {
+    let cases: [(&str, InputRange); 3] = [
+        (
+            "min > max",
+            InputRange {
+                blocks: [[1.0, -1.0], [0.0, 1.0], [0.0, 0.0]],
+                temperature: [20.0, 30.0],
+            },
+        ),
+        (
+            "unused block slot set",
+            InputRange {
+                blocks: [[-1.0, 1.0], [0.0, 1.0], [0.0, 0.5]],
+                temperature: [20.0, 30.0],
+            },
+        ),
+        (
+            "not finite",
+            InputRange {
+                blocks: [[-1.0, f32::INFINITY], [0.0, 1.0], [0.0, 0.0]],
+                temperature: [20.0, 30.0],
+            },
+        ),
+    ];
+    let good = to_bytes(&ranged()).unwrap();
+    for (what, r) in cases {
+        let mut m = ranged();
+        m.meta.training.input_range = Some(r);
+        assert!(
+            matches!(
+                to_bytes(&m),
+                Err(WeightError::Invalid {
+                    field: "input_range",
+                    ..
+                })
+            ),
+            "writer accepted {what}"
+        );
+        // The same values patched into a good file: the reader refuses them too.
+        let mut c = good.clone();
+        let values = r.blocks.iter().chain(std::iter::once(&r.temperature));
+        for (k, s) in values.enumerate() {
+            let at = INPUT_RANGE_AT + 8 * k;
+            c[at..at + 4].copy_from_slice(&s[0].to_le_bytes());
+            c[at + 4..at + 8].copy_from_slice(&s[1].to_le_bytes());
+        }
+        fix_crc(&mut c);
+        assert!(
+            matches!(
+                from_bytes(&c),
+                Err(WeightError::Invalid {
+                    field: "input_range",
+                    ..
+                })
+            ),
+            "reader accepted {what}"
+        );
+    }
+    // Without a temperature input the temperature slot must be [0, 0].
+    let mut m = model(&[4, 3, 1], StorageDtype::F32, 3);
+    m.meta.training.input_range = Some(InputRange {
+        blocks: [[-1.0, 1.0], [0.0, 1.0], [0.0, 0.0]],
+        temperature: [20.0, 30.0],
+    });
+    assert!(to_bytes(&m).is_err());
+}
+
+#[test]
+fn input_range_of_rows_is_per_block_and_the_margin_widens_it() {
+    let spec = FeatureSpec {
+        set: FeatureSet::DeltaThetaJointVel,
+        history: 2,
+        temperature: true,
+    };
+    let rows: [&[f32]; 2] = [&[0.1, -0.2, 1.0, 2.0, 30.0], &[0.3, 0.0, -3.0, 0.5, 25.0]];
+    let r = InputRange::from_rows(&spec, rows).unwrap();
+    assert_eq!(r.blocks, [[-0.2, 0.3], [-3.0, 2.0], [0.0, 0.0]]);
+    assert_eq!(r.temperature, [25.0, 30.0]);
+    assert!(InputRange::from_rows(&spec, std::iter::empty()).is_none());
+    let short: [&[f32]; 1] = [&[0.0; 4]];
+    assert!(InputRange::from_rows(&spec, short).is_none());
+    // Width 5: margin 0.1 accepts up to 0.5 beyond either end.
+    assert!(InputRange::within([-3.0, 2.0], 2.49, 0.1));
+    assert!(!InputRange::within([-3.0, 2.0], 2.51, 0.1));
+    assert!(!InputRange::within([-3.0, 2.0], -3.51, 0.1));
+    assert!(!InputRange::within([-3.0, 2.0], 2.01, 0.0));
+    assert!(!InputRange::within([-3.0, 2.0], f32::NAN, 0.1));
 }

@@ -10,7 +10,7 @@ use std::hint::black_box;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use frictiond::config::OnStale;
-use frictiond::params::{JointRt, Params};
+use frictiond::params::{JointRt, OodRt, Params};
 use frictiond::rt::{Freshness, Inputs, Latest, compute};
 use frictionless::features::{FeatureSet, FeatureSpec, WarmupPolicy};
 use frictionless::filter::CausalButterworth;
@@ -91,6 +91,7 @@ fn params(n: usize, pinn: Option<StorageDtype>) -> Box<Params> {
                 gains,
                 Some(CausalButterworth::design(2, 30.0, 1000.0).unwrap()),
             ),
+            ood: OodRt::off(),
         })
         .collect();
     Box::new(Params {

@@ -87,8 +87,22 @@ fn summary(cfg: &config::Config) -> String {
                 "scv kc={} ka={} kv={} ks={} vs={} alpha={}",
                 p.kc, p.ka, p.kv, p.ks, p.vs, p.alpha
             ),
-            config::ModelSpec::Pinn { path, warmup } => {
-                format!("pinn {} (warmup {warmup:?})", path.display())
+            config::ModelSpec::Pinn {
+                path,
+                warmup,
+                fallback,
+            } => {
+                let ood = match fallback {
+                    Some(config::StaticFallback::Cv(_)) => "cv",
+                    Some(config::StaticFallback::Scv(_)) => "scv",
+                    None => "none",
+                };
+                format!(
+                    "pinn {} (warmup {warmup:?}; out of range: {:?}, margin {}, static {ood})",
+                    path.display(),
+                    j.ood,
+                    j.ood_margin
+                )
             }
         };
         let _ = writeln!(

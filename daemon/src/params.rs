@@ -9,15 +9,15 @@
 
 use std::path::PathBuf;
 
-use frictionless::features::WarmupPolicy;
-use frictionless::model::{JointModel, ModelError, NoFriction, PinnEstimator};
+use frictionless::features::{JointSample, WarmupPolicy};
+use frictionless::model::{FrictionModel, JointModel, ModelError, NoFriction, PinnEstimator};
 use frictionless::weights::WeightError;
 use frictionless_shm_types::model_kind;
 
 use frictionless::filter::{CausalButterworth, FilterError};
 use frictionless::law::{Gains, JointLaw};
 
-use crate::config::{Config, ModelSpec, OnStale, WarmupName};
+use crate::config::{Config, ModelSpec, OnStale, OodMode, StaticFallback, WarmupName};
 
 /// Why the runtime parameters could not be built. Messages name the joint, the file and the cause.
 #[derive(Debug, thiserror::Error)]
@@ -75,6 +75,79 @@ pub struct JointRt {
     pub model: JointModel,
     /// Control law and its state.
     pub law: JointLaw,
+    /// Out-of-training-range check and blend.
+    pub ood: OodRt,
+}
+
+/// One joint's out-of-training-range handling on the RT thread: the check's settings, the static
+/// model blended in under `ood = "static"`, and the blend state. Allocation-free.
+#[derive(Debug)]
+pub struct OodRt {
+    /// `[[joint]] ood`.
+    pub mode: OodMode,
+    /// `[[joint]] ood_margin` [fraction of each range's width].
+    pub margin: f32,
+    /// The static model (CV or SCV) blended in while out of range; `None` = flag only.
+    pub fallback: Option<JointModel>,
+    /// Blend weight change per tick (`period / ood_ramp`; 1 = switch at once).
+    pub step_per_tick: f64,
+    /// Current blend weight of the static model: 0 = the joint's model only, 1 = static only.
+    pub weight: f64,
+}
+
+impl OodRt {
+    /// No check: never out of range.
+    pub fn off() -> Self {
+        Self {
+            mode: OodMode::Off,
+            margin: 0.0,
+            fallback: None,
+            step_per_tick: 1.0,
+            weight: 0.0,
+        }
+    }
+
+    /// Whether `model`'s inputs for `sample` (already pushed by `estimate`) are out of its training
+    /// range. Only a PINN with a stored range can be.
+    #[inline]
+    pub fn out_of_range(&self, model: &JointModel, sample: &JointSample) -> bool {
+        match (self.mode, model) {
+            (OodMode::Off, _) => false,
+            (_, JointModel::Pinn(p)) => p.out_of_range(sample, self.margin),
+            _ => false,
+        }
+    }
+
+    /// The friction estimate to use this tick [Nm]: `model_nm` moved one ramp step towards the
+    /// static model's estimate while `out_of_range`, back towards `model_nm` otherwise (without a
+    /// static model, `model_nm` unchanged).
+    #[inline]
+    pub fn blend(&mut self, model_nm: f64, out_of_range: bool, sample: &JointSample) -> f64 {
+        let Some(fallback) = self.fallback.as_mut() else {
+            return model_nm;
+        };
+        let target = if out_of_range { 1.0 } else { 0.0 };
+        self.weight = if self.weight < target {
+            (self.weight + self.step_per_tick).min(target)
+        } else {
+            (self.weight - self.step_per_tick).max(target)
+        };
+        if self.weight <= 0.0 {
+            return model_nm;
+        }
+        let static_nm = fallback.estimate(sample);
+        if self.weight >= 1.0 {
+            static_nm
+        } else {
+            (1.0 - self.weight) * model_nm + self.weight * static_nm
+        }
+    }
+
+    /// Enable edge: the blend restarts from the joint's own model.
+    #[inline]
+    pub fn reset(&mut self) {
+        self.weight = 0.0;
+    }
 }
 
 /// The RT thread's parameter set; swapped atomically (as a `Box`) on reload.
@@ -99,11 +172,20 @@ pub fn build(cfg: &Config, generation: u64) -> Result<Box<Params>, ParamsError> 
     let mut joints = Vec::with_capacity(cfg.raw.joint.len());
     let mut configured_mask = 0u64;
     for (j, spec) in cfg.raw.joint.iter().zip(&cfg.models) {
+        let mut fallback = None;
         let model = match spec {
             ModelSpec::None => JointModel::None(NoFriction),
             ModelSpec::Cv(p) => JointModel::Cv(*p),
             ModelSpec::Scv(p) => JointModel::Scv(*p),
-            ModelSpec::Pinn { path, warmup } => {
+            ModelSpec::Pinn {
+                path,
+                warmup,
+                fallback: fb,
+            } => {
+                fallback = fb.map(|f| match f {
+                    StaticFallback::Cv(p) => JointModel::Cv(p),
+                    StaticFallback::Scv(p) => JointModel::Scv(p),
+                });
                 let file = frictionless::weights::read_file(path).map_err(|source| {
                     ParamsError::ReadModel {
                         joint: j.name.clone(),
@@ -151,10 +233,19 @@ pub fn build(cfg: &Config, generation: u64) -> Result<Box<Params>, ParamsError> 
             dt_s,
         };
         configured_mask |= 1u64 << j.index;
+        let ramp_s = j.ood_ramp_ms * 1e-3;
+        let ood = OodRt {
+            mode: j.ood,
+            margin: j.ood_margin as f32,
+            fallback,
+            step_per_tick: if ramp_s > dt_s { dt_s / ramp_s } else { 1.0 },
+            weight: 0.0,
+        };
         joints.push(JointRt {
             index: j.index,
             model,
             law: JointLaw::new(gains, lpf),
+            ood,
         });
     }
     Ok(Box::new(Params {

@@ -13,10 +13,13 @@
 //!    `seq` and `stamp_ns` (lockstep: by `seq` and the timeout, since its time is not wall time);
 //! 2. parameter hand-over: `try_recv` a new `Box<Params>` (built off-thread), send the old one back
 //!    to be freed off-thread;
-//! 3. [`compute`]: per joint, enable edge → reset (bumpless), model estimate, control law
+//! 3. [`compute`]: per joint, enable edge → reset (bumpless), model estimate, out-of-training-range
+//!    check of the newest sample (`FLAG_OUT_OF_RANGE`; under `ood = "static"` the estimate ramps to
+//!    the joint's static model, see [`crate::params::OodRt`]), control law
 //!    ([`frictionless::law`], its [`LawFlags`] mapped to the ABI's `FLAG_*` by [`abi_flags`]),
 //!    stale/fault/NaN handling → [`MotorCurrentCommand`];
-//! 4. publish (+ notify); record lateness / compute time / input age in fixed histograms;
+//! 4. publish (+ notify); record lateness / compute time / input age in fixed histograms and the
+//!    out-of-range ticks per joint;
 //!    publish [`DaemonStatus`] every `status_every_ticks`; advance the heartbeat.
 //!
 //! [`run`] reads top to bottom as these steps, each a named function or method in this module
@@ -42,9 +45,10 @@ use frictionless::law::{LawFlags, LawInput, LawOutput};
 use frictionless::model::{FrictionModel, JointModel};
 use frictionless_shm_types::{
     DaemonStatus, FAULT_FEEDBACK_STALE, FLAG_CURRENT_SATURATED, FLAG_DISABLED, FLAG_FAULT,
-    FLAG_FRICTION_CLIPPED, FLAG_NON_FINITE, FLAG_STALE, FLAG_WARMING_UP, JointStates, MAX_JOINTS,
-    MotorCurrentCommand, STATUS_CPU_PINNED, STATUS_INPUT_STALE, STATUS_MEMORY_LOCKED,
-    STATUS_SCHED_FIFO, STATUS_STOPPING, TorqueRequest, monotonic_ns, sleep_until_ns,
+    FLAG_FRICTION_CLIPPED, FLAG_NON_FINITE, FLAG_OUT_OF_RANGE, FLAG_STALE, FLAG_WARMING_UP,
+    JointStates, MAX_JOINTS, MotorCurrentCommand, STATUS_CPU_PINNED, STATUS_INPUT_STALE,
+    STATUS_MEMORY_LOCKED, STATUS_SCHED_FIFO, STATUS_STOPPING, TorqueRequest, monotonic_ns,
+    sleep_until_ns,
 };
 
 use crate::alloc_count;
@@ -206,9 +210,14 @@ pub fn compute(
                 // Bumpless enable: fresh history and filter state.
                 j.model.reset(&sample);
                 j.law.reset();
+                j.ood.reset();
             }
             active |= bit;
-            let f = j.model.estimate(&sample);
+            let model_nm = j.model.estimate(&sample);
+            // Out of the training range: flagged, counted (Telemetry::record) and, with a static
+            // model configured, blended to it over the ramp.
+            let ood = j.ood.out_of_range(&j.model, &sample);
+            let f = j.ood.blend(model_nm, ood, &sample);
             let o = j.law.step(&LawInput {
                 tau_des_nm: rq.tau_des_nm[k],
                 friction_nm: f,
@@ -220,7 +229,8 @@ pub fn compute(
             } else {
                 0
             };
-            JointOut::from_law(o, warming)
+            let ood_flag = if ood { FLAG_OUT_OF_RANGE } else { 0 };
+            JointOut::from_law(o, warming | ood_flag)
         };
         cmd.i_ref_a[k] = out.i_a;
         cmd.flags[k] = out.flags;
@@ -980,12 +990,14 @@ struct Telemetry {
 
 impl Telemetry {
     /// Records one tick: wake lateness (clock trigger only: lockstep has no deadline), compute
-    /// time, input age, staleness.
+    /// time, input age, staleness, out-of-range joints.
+    #[allow(clippy::too_many_arguments)] // one tick's pieces, called once
     #[inline]
     fn record(
         &mut self,
         plan: &LoopPlan,
         inputs: &Inputs,
+        cmd: &MotorCurrentCommand,
         fresh: Freshness,
         wake_ns: u64,
         deadline_ns: u64,
@@ -1005,6 +1017,11 @@ impl Telemetry {
         }
         if fresh.state_stale {
             self.stale_ticks += 1;
+        }
+        for (n, &flags) in s.out_of_range_ticks.iter_mut().zip(&cmd.flags) {
+            if flags & FLAG_OUT_OF_RANGE != 0 {
+                *n += 1;
+            }
         }
     }
 
@@ -1172,7 +1189,7 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
         // 4. output, telemetry, heartbeat
         let _ = backend.publish_command(&cmd);
         let done = monotonic_ns();
-        tele.record(&plan, &inputs, fresh, wake_ns, deadline, done);
+        tele.record(&plan, &inputs, &cmd, fresh, wake_ns, deadline, done);
         tick += 1;
         if tick.is_multiple_of(plan.status_every) {
             tele.publish(

@@ -4,18 +4,52 @@
 //! The daemon's counting global allocator is activated by `FRICTIOND_ALLOC_REPORT=<file>`; the
 //! report is written at exit. The loop runs at a 50 µs period so 100 000 ticks take seconds.
 //! Scope: steady state. A new peer connecting (e.g. `frictl monitor` attaching) makes iceoryx2 set up
-//! connection state on the RT thread; that is not covered by this claim.
+//! connection state on the RT thread; that is not covered by this claim. Joint 2 is a small PINN
+//! whose stored training range its velocity leaves and re-enters, with `ood = "static"`: the range
+//! check, the counter and the blend run too.
 
 use std::time::Duration;
 
 use crate::daemon_support::*;
+use frictionless::features::{FeatureSet, FeatureSpec};
+use frictionless::mlp::StorageDtype;
+use frictionless::random::{RandomMlpSpec, seeded_mlp};
+use frictionless::units::GearRatio;
+use frictionless::weights::{InputRange, ModelFile, ModelMeta, TrainingMeta};
 use frictionless_shm_types::{JointStates, TorqueRequest};
+
+/// A 2·4 → 8 → 1 `[Δθ, ṡ]` network trained (so its file says) on ṡ ∈ [−1, 1] rad/s.
+fn ranged_pinn() -> ModelFile {
+    let features = FeatureSpec {
+        set: FeatureSet::DeltaThetaJointVel,
+        history: 4,
+        temperature: false,
+    };
+    let mut training = TrainingMeta::unknown("daemon_alloc test", 0);
+    training.input_range = Some(InputRange {
+        blocks: [[-1.0, 1.0], [-1.0, 1.0], [0.0, 0.0]],
+        temperature: [0.0, 0.0],
+    });
+    ModelFile {
+        meta: ModelMeta {
+            joint_name: "hip".into(),
+            gear_ratio: GearRatio::new(-100.0).unwrap(),
+            kt_nm_per_a: 0.1,
+            features,
+            scv: None,
+            training,
+        },
+        dtype: StorageDtype::F32,
+        mlp: seeded_mlp(&RandomMlpSpec::new(&[8, 8, 1]), 5).unwrap(),
+    }
+}
 
 #[test]
 fn rt_thread_allocates_nothing_over_100k_ticks_after_ready() {
     const READY_AFTER: u64 = 20_000;
     const TICKS: u64 = 100_000;
     let env = TestEnv::new("alloc");
+    frictionless::weights::write_file(&env.dir.join("hip.fwt"), &ranged_pinn()).unwrap();
     let cfg = env.write_config(
         r#"
 [loop]
@@ -55,6 +89,24 @@ kv = 0.29
 ks = 6.0
 vs = 0.13
 alpha = 0.6
+
+[[joint]]
+name = "hip"
+index = 2
+gear_ratio = -100.0
+kt = 0.1
+max_curr = 5.0
+friction_model = "pinn"
+model = "hip.fwt"
+warmup = "zero_pad"
+delta_theta_offset_motor_rad = 0.0
+ood = "static"
+kc = 0.5
+ka = 20.0
+kv = 0.3
+ks = 0.8
+vs = 0.1
+alpha = 1.0
 "#,
     );
     let report = env.dir.join("alloc_report.txt");
@@ -64,27 +116,31 @@ alpha = 0.6
     );
     let mut plant = Plant::open(&env.ipc, "plant");
     let mut js = JointStates::zeroed();
-    js.n_joints = 2;
+    js.n_joints = 3;
     let mut rq = TorqueRequest::zeroed();
-    rq.n_joints = 2;
-    rq.enable_mask = 0b11;
+    rq.n_joints = 3;
+    rq.enable_mask = 0b111;
     let mut k = 0u64;
     let t0 = std::time::Instant::now();
     // Peers must connect before counting starts: iceoryx2 sets up per-connection state (allocating)
     // the first time a port sees a new peer. Steady state is what the test measures.
     let mut connected_early = None;
+    let mut ood_seen = 0u64;
     loop {
         // Changing inputs so every code path (enable, filter, clamp) runs.
         k += 1;
         let x = (k as f64 * 0.01).sin();
         js.sdot_rad_s[0] = x;
         js.sdot_rad_s[1] = -x;
+        js.sdot_rad_s[2] = 2.0 * x; // out of the PINN's training range while |x| > 0.5
         rq.tau_des_nm[0] = 30.0 * x;
         rq.tau_des_nm[1] = 2.0 * x;
-        rq.enable_mask = if k % 500 < 450 { 0b11 } else { 0b01 };
+        rq.tau_des_nm[2] = x;
+        rq.enable_mask = if k % 500 < 450 { 0b111 } else { 0b101 };
         plant.send(&js, &rq);
         std::thread::sleep(Duration::from_millis(1));
         if let Some(s) = plant.status.latest().unwrap() {
+            ood_seen = ood_seen.max(s.out_of_range_ticks[2]);
             connected_early.get_or_insert(s.ticks < READY_AFTER);
             if s.ticks >= READY_AFTER + TICKS + 1_000 {
                 break;
@@ -120,6 +176,10 @@ alpha = 0.6
     );
     assert!(ticks >= TICKS, "only {ticks} ticks counted");
     assert_eq!(allocs, 0, "RT-thread allocations after READY: {text}");
+    assert!(
+        ood_seen > 1_000,
+        "the range check ran: {ood_seen} out-of-range ticks"
+    );
     // The exemption is exactly iceoryx2's one allocation per published sample, nothing more:
     // at most one per command + one per status.
     assert!(

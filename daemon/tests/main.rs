@@ -16,6 +16,7 @@ mod daemon_alloc;
 mod daemon_e2e;
 mod daemon_features;
 mod daemon_lockstep;
+mod daemon_ood;
 mod daemon_pinn;
 mod daemon_watch;
 mod vcan_daemon;

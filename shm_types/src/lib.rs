@@ -92,6 +92,9 @@ pub const FLAG_DISABLED: u32 = 1 << 4;
 pub const FLAG_FAULT: u32 = 1 << 5;
 /// Per-joint flag: the friction model is warming up (history not yet full).
 pub const FLAG_WARMING_UP: u32 = 1 << 6;
+/// Per-joint flag: the newest sample's model inputs lie outside the model's training range (widened
+/// by the joint's `ood_margin`); under `ood = "static"` the estimate blends to the static model.
+pub const FLAG_OUT_OF_RANGE: u32 = 1 << 7;
 
 /// Daemon-wide flag in [`DaemonStatus::flags`]: the loop runs with SCHED_FIFO.
 pub const STATUS_SCHED_FIFO: u32 = 1 << 0;
@@ -370,7 +373,7 @@ impl Default for Histogram {
 /// Daemon health snapshot (daemon → monitors, ≈ 10–100 Hz).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
-#[type_name("frictionless::DaemonStatus_v2")]
+#[type_name("frictionless::DaemonStatus_v3")]
 pub struct DaemonStatus {
     /// Sequence number, +1 per message.
     pub seq: u64,
@@ -408,6 +411,9 @@ pub struct DaemonStatus {
     pub model_kind: [u8; MAX_JOINTS],
     /// Field-bus counters summed over every bus (all zero for the shared-memory backend).
     pub bus: BusCounters,
+    /// Ticks since start in which the joint's model inputs were out of its training range
+    /// ([`FLAG_OUT_OF_RANGE`]), per joint.
+    pub out_of_range_ticks: [u64; MAX_JOINTS],
 }
 
 /// Field-bus (SocketCAN) health counters since start, summed over the daemon's buses.
@@ -471,6 +477,7 @@ impl DaemonStatus {
             joint_flags: [0; MAX_JOINTS],
             model_kind: [0; MAX_JOINTS],
             bus: BusCounters::zeroed(),
+            out_of_range_ticks: [0; MAX_JOINTS],
         }
     }
 }
@@ -956,6 +963,15 @@ impl<T: Debug + ZeroCopySend + Copy + 'static> Inbox<T> {
 mod tests {
     use super::*;
 
+    #[test]
+    fn daemon_status_layout_ends_with_the_out_of_range_counters() {
+        use std::mem::{align_of, offset_of, size_of};
+        let at = offset_of!(DaemonStatus, out_of_range_ticks);
+        assert_eq!(at, offset_of!(DaemonStatus, bus) + size_of::<BusCounters>());
+        assert_eq!(at % align_of::<u64>(), 0);
+        assert_eq!(size_of::<DaemonStatus>(), at + 8 * MAX_JOINTS);
+    }
+
     fn unique_config(tag: &str) -> IpcConfig {
         let id = format!(
             "fl_shm_{tag}_{}_{}",
@@ -1027,7 +1043,9 @@ mod tests {
         ds.lateness.record(12_345);
         ds.model_kind[5] = model_kind::PINN;
         ds.tau_f_hat_nm[5] = 0.5;
+        ds.out_of_range_ticks[63] = 42;
         let got = round_trip(&cfg, Ipc::daemon_status, ds);
+        assert_eq!(got.out_of_range_ticks[63], 42);
         assert_eq!(got.lateness.total, 1);
         assert_eq!(got.lateness.max_ns, 12_345);
         assert_eq!(got.model_kind[5], model_kind::PINN);

@@ -106,6 +106,7 @@ pub(super) struct Header {
     pub created_unix_s: u64,
     pub joint_name: String,
     pub tool_version: String,
+    pub input_range: Option<super::InputRange>,
 }
 
 fn unknown(field: &'static str, value: impl Into<u64>) -> WeightError {
@@ -214,7 +215,25 @@ pub(super) fn parse_header(b: &[u8]) -> Result<Header, WeightError> {
         None
     };
 
+    // Before minor 2 these bytes are reserved (checked to be zero by `decode`, ignored here).
+    let input_range = if version_minor >= layout::MINOR_INPUT_RANGE
+        && flag(b, off::RANGE_PRESENT, "range_present")?
+    {
+        let v = |i: usize| rd_f32(b, off::INPUT_RANGE + 4 * i);
+        let mut r = super::InputRange {
+            blocks: [[0.0; 2]; layout::RANGE_BLOCKS],
+            temperature: [v(2 * layout::RANGE_BLOCKS), v(2 * layout::RANGE_BLOCKS + 1)],
+        };
+        for (k, s) in r.blocks.iter_mut().enumerate() {
+            *s = [v(2 * k), v(2 * k + 1)];
+        }
+        Some(r)
+    } else {
+        None
+    };
+
     Ok(Header {
+        input_range,
         version_minor,
         crc_stored,
         layout,
@@ -415,10 +434,14 @@ fn parse_layer_table(b: &[u8], n_inputs: usize) -> Result<(Vec<LayerInfo>, u64),
 
 /// Byte ranges that must be zero in a file whose minor version this reader knows.
 fn reserved_ranges(h: &Header) -> Vec<std::ops::Range<usize>> {
-    let mut r = vec![
-        off::RESERVED_A..off::RESERVED_A + 6,
-        off::RESERVED_B..layout::FIXED_HEADER_LEN,
-    ];
+    let mut r = Vec::with_capacity(8 + h.layers.len());
+    r.push(off::RESERVED_A..off::RESERVED_A + 5);
+    if h.version_minor < layout::MINOR_INPUT_RANGE {
+        r.push(off::RANGE_PRESENT..off::RANGE_PRESENT + 1);
+        r.push(off::INPUT_RANGE..layout::FIXED_HEADER_LEN);
+    } else if h.input_range.is_none() {
+        r.push(off::INPUT_RANGE..layout::FIXED_HEADER_LEN);
+    }
     if h.version_minor < layout::MINOR_BLOCK_FEATURES {
         r.push(off::BLOCK_FEATURES..off::BLOCK_FEATURES + layout::MAX_BLOCKS);
     }
@@ -539,6 +562,7 @@ pub(super) fn decode(b: &[u8]) -> Result<ModelFile, WeightError> {
                 created_unix_s: h.created_unix_s,
                 tool_version: h.tool_version,
                 filtering: h.filtering,
+                input_range: h.input_range,
             },
         },
         dtype: h.dtype,
@@ -686,6 +710,9 @@ fn validate_model(f: &ModelFile) -> Result<(), WeightError> {
             finite(name, v)?;
         }
     }
+    if let Some(r) = &m.training.input_range {
+        validate_range(r, spec)?;
+    }
     for (field, v) in [
         ("val_rmse_nm", m.training.val_rmse_nm),
         ("test_rmse_nm", m.training.test_rmse_nm),
@@ -696,6 +723,37 @@ fn validate_model(f: &ModelFile) -> Result<(), WeightError> {
                 field,
                 value: v.to_string(),
                 reason: "must be NaN (unknown) or finite and ≥ 0",
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Every used slot finite with min ≤ max; every unused slot (blocks beyond the set's, temperature
+/// without a temperature input) exactly `[0, 0]`.
+fn validate_range(r: &super::InputRange, spec: &FeatureSpec) -> Result<(), WeightError> {
+    let n_blocks = spec.set.n_blocks();
+    let slots = r
+        .blocks
+        .iter()
+        .enumerate()
+        .map(|(k, s)| (k < n_blocks, s))
+        .chain(std::iter::once((spec.temperature, &r.temperature)));
+    for (used, s) in slots {
+        let value = format!("[{}, {}]", s[0], s[1]);
+        if !used {
+            if s[0] != 0.0 || s[1] != 0.0 {
+                return Err(WeightError::Invalid {
+                    field: "input_range",
+                    value,
+                    reason: "an unused slot (no such block / no temperature input) must be [0, 0]",
+                });
+            }
+        } else if !(s[0].is_finite() && s[1].is_finite() && s[0] <= s[1]) {
+            return Err(WeightError::Invalid {
+                field: "input_range",
+                value,
+                reason: "must be finite with min ≤ max",
             });
         }
     }
@@ -778,6 +836,14 @@ pub(super) fn encode(f: &ModelFile) -> Result<Vec<u8>, WeightError> {
             .enumerate()
         {
             put(&mut b, off::SCV + 8 * i, &v.to_le_bytes());
+        }
+    }
+    if let Some(r) = &m.training.input_range {
+        b[off::RANGE_PRESENT] = 1;
+        let values = r.blocks.iter().chain(std::iter::once(&r.temperature));
+        for (k, s) in values.enumerate() {
+            put(&mut b, off::INPUT_RANGE + 8 * k, &s[0].to_le_bytes());
+            put(&mut b, off::INPUT_RANGE + 8 * k + 4, &s[1].to_le_bytes());
         }
     }
     put(&mut b, off::DATASET_SHA256, &m.training.dataset_sha256);

@@ -73,6 +73,8 @@ pub struct Inspection {
     pub tool_version: String,
     /// Signal filtering used for training.
     pub filtering: SignalFiltering,
+    /// Range of the training inputs (format ≥ 1.2), `None` if the file has none.
+    pub input_range: Option<super::InputRange>,
     /// Header length in bytes (unpadded).
     pub header_len: u64,
     /// Payload offset in bytes (64-aligned).
@@ -142,6 +144,7 @@ pub(super) fn inspect(bytes: &[u8]) -> Result<Inspection, WeightError> {
         created_unix_s: h.created_unix_s,
         tool_version: h.tool_version,
         filtering: h.filtering,
+        input_range: h.input_range,
         header_len: h.layout.header_len,
         payload_offset: h.layout.payload_offset,
         payload_len: h.layout.payload_len,
@@ -220,6 +223,27 @@ impl fmt::Display for Inspection {
         writeln!(f, "created        {} (unix s)", self.created_unix_s)?;
         writeln!(f, "tool           {}", self.tool_version)?;
         writeln!(f, "filtering      {:?}", self.filtering)?;
+        match &self.input_range {
+            None => writeln!(f, "input range    none (never out of range)")?,
+            Some(r) => {
+                let mut parts: Vec<String> = self
+                    .blocks
+                    .iter()
+                    .zip(&r.blocks)
+                    .zip(&self.input_units)
+                    .map(|((b, s), u)| format!("{} [{}, {}] {}", b.name(), s[0], s[1], u.symbol()))
+                    .collect();
+                if self.features.temperature {
+                    parts.push(format!(
+                        "temperature [{}, {}] {}",
+                        r.temperature[0],
+                        r.temperature[1],
+                        layout::TEMPERATURE_UNIT.symbol()
+                    ));
+                }
+                writeln!(f, "input range    {}", parts.join(", "))?;
+            }
+        }
         writeln!(
             f,
             "layout         header {} B, payload @{} ({} B), file {} B (present {} B)",

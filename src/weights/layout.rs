@@ -15,9 +15,15 @@ pub const MAGIC: [u8; 8] = *b"FWT\0\r\n\x1a\n";
 pub const VERSION_MAJOR: u16 = 1;
 /// Format minor version written. Readers accept any minor of their major. Minor 1 names the feature
 /// blocks (`block_features`); a minor-0 file has zeros there and its blocks follow from its set code.
-pub const VERSION_MINOR: u16 = 1;
+/// Minor 2 adds the optional training input range (`range_present`, `input_range`).
+pub const VERSION_MINOR: u16 = 2;
 /// The first minor version whose header holds `block_features`.
 pub const MINOR_BLOCK_FEATURES: u16 = 1;
+/// The first minor version whose header may hold the training input range.
+pub const MINOR_INPUT_RANGE: u16 = 2;
+/// Feature-block slots of the input range (no feature set has more blocks); the temperature range
+/// follows them.
+pub const RANGE_BLOCKS: usize = 3;
 /// Length of the fixed header in bytes (the layer table follows it).
 pub const FIXED_HEADER_LEN: usize = 320;
 /// Length of one layer-table entry in bytes.
@@ -86,8 +92,10 @@ pub mod off {
     pub const TEMPERATURE_UNIT: usize = 64;
     /// `u8` SCV presence flag (0 or 1).
     pub const SCV_PRESENT: usize = 65;
-    /// `[u8; 6]` reserved, zero.
-    pub const RESERVED_A: usize = 66;
+    /// `u8` training-input-range presence flag (0 or 1; minor ≥ 2, reserved zero before).
+    pub const RANGE_PRESENT: usize = 66;
+    /// `[u8; 5]` reserved, zero.
+    pub const RESERVED_A: usize = 67;
     /// `f64` signed gear ratio.
     pub const GEAR_RATIO: usize = 72;
     /// `f64` torque constant \[Nm/A\].
@@ -108,8 +116,9 @@ pub mod off {
     pub const TOOL_VERSION: usize = 248;
     /// `[u8; 8]` feature code of each block in order, unused slots zero (minor ≥ 1; zero in 1.0).
     pub const BLOCK_FEATURES: usize = 280;
-    /// `[u8; 32]` reserved, zero.
-    pub const RESERVED_B: usize = 288;
+    /// `[f32; 8]` training input range (minor ≥ 2): `min, max` of feature blocks 0, 1, 2, then of the
+    /// temperature; unused slots and an absent range zero.
+    pub const INPUT_RANGE: usize = 288;
 }
 
 /// Physical unit codes used for the inputs and the output.
@@ -384,7 +393,8 @@ mod tests {
             (off::BLOCK_UNITS, MAX_BLOCKS),
             (off::TEMPERATURE_UNIT, 1),
             (off::SCV_PRESENT, 1),
-            (off::RESERVED_A, 6),
+            (off::RANGE_PRESENT, 1),
+            (off::RESERVED_A, 5),
             (off::GEAR_RATIO, 8),
             (off::KT, 8),
             (off::SCV, 48),
@@ -395,7 +405,7 @@ mod tests {
             (off::JOINT_NAME, JOINT_NAME_MAX + 1),
             (off::TOOL_VERSION, TOOL_VERSION_MAX + 1),
             (off::BLOCK_FEATURES, MAX_BLOCKS),
-            (off::RESERVED_B, 32),
+            (off::INPUT_RANGE, 4 * 2 * (RANGE_BLOCKS + 1)),
         ];
         let mut at = 0;
         for (o, size) in fields {

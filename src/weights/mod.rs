@@ -25,7 +25,7 @@ use crate::units::GearRatio;
 
 pub use codec::{encoded_layout, round_to_dtype};
 pub use inspect::{Inspection, LayerInfo};
-pub use layout::{Layout, Unit};
+pub use layout::{Layout, RANGE_BLOCKS, Unit};
 
 /// Which velocity/current signals the model was trained on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -54,6 +54,79 @@ pub struct TrainingMeta {
     pub tool_version: String,
     /// Signals the model was trained on.
     pub filtering: SignalFiltering,
+    /// Range of the training inputs (training rows only, not validation or test); `None` if unknown
+    /// (an imported network, a file before format 1.2): then no input is ever out of range.
+    pub input_range: Option<InputRange>,
+}
+
+/// The range `[min, max]` the training rows covered, per feature block (the H samples of one signal
+/// share one range) and for the temperature, each in its input's unit. Unused slots are `[0, 0]`.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct InputRange {
+    /// `[min, max]` of feature block `b` (input order) in the block's unit; slots at or beyond the
+    /// feature set's block count are `[0, 0]`.
+    pub blocks: [[f32; 2]; layout::RANGE_BLOCKS],
+    /// `[min, max]` of the motor temperature \[°C\]; `[0, 0]` for a model without temperature.
+    pub temperature: [f32; 2],
+}
+
+impl InputRange {
+    /// The range of the network input rows `rows` (each `spec.n_inputs()` long, laid out as
+    /// [`crate::features`] builds them: block `b` at `b·H .. (b+1)·H`, temperature last). `None` if
+    /// there are no rows, a row has the wrong length, or a value is not finite.
+    pub fn from_rows<'a>(
+        spec: &FeatureSpec,
+        rows: impl IntoIterator<Item = &'a [f32]>,
+    ) -> Option<InputRange> {
+        let n_blocks = spec.set.n_blocks().min(layout::RANGE_BLOCKS);
+        let h = spec.history;
+        let mut lo = [f32::INFINITY; layout::RANGE_BLOCKS + 1];
+        let mut hi = [f32::NEG_INFINITY; layout::RANGE_BLOCKS + 1];
+        let mut any = false;
+        for row in rows {
+            if row.len() != spec.n_inputs() {
+                return None;
+            }
+            for b in 0..n_blocks {
+                for &v in &row[b * h..(b + 1) * h] {
+                    lo[b] = lo[b].min(v);
+                    hi[b] = hi[b].max(v);
+                }
+            }
+            if spec.temperature {
+                let v = row[n_blocks * h];
+                lo[layout::RANGE_BLOCKS] = lo[layout::RANGE_BLOCKS].min(v);
+                hi[layout::RANGE_BLOCKS] = hi[layout::RANGE_BLOCKS].max(v);
+            }
+            any = true;
+        }
+        if !any {
+            return None;
+        }
+        let mut r = InputRange {
+            blocks: [[0.0; 2]; layout::RANGE_BLOCKS],
+            temperature: [0.0; 2],
+        };
+        for b in 0..n_blocks {
+            r.blocks[b] = [lo[b], hi[b]];
+        }
+        if spec.temperature {
+            r.temperature = [lo[layout::RANGE_BLOCKS], hi[layout::RANGE_BLOCKS]];
+        }
+        let finite = r
+            .blocks
+            .iter()
+            .chain(std::iter::once(&r.temperature))
+            .all(|s| s[0].is_finite() && s[1].is_finite());
+        finite.then_some(r)
+    }
+
+    /// Whether `value` lies in `range` widened on each side by `margin` times its width
+    /// (`margin` = 0.1 accepts 10 % beyond either end). Allocation-free; NaN is out of range.
+    pub fn within(range: [f32; 2], value: f32, margin: f32) -> bool {
+        let pad = margin * (range[1] - range[0]);
+        value >= range[0] - pad && value <= range[1] + pad
+    }
 }
 
 impl TrainingMeta {
@@ -67,6 +140,7 @@ impl TrainingMeta {
             created_unix_s,
             tool_version: tool_version.into(),
             filtering: SignalFiltering::Unknown,
+            input_range: None,
         }
     }
 }

@@ -313,6 +313,22 @@ pub enum WarmupName {
     HoldZero,
 }
 
+/// What a joint does while its model's inputs are out of the model's training range.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum OodMode {
+    /// Not checked: never flagged, never counted.
+    Off,
+    /// Flagged (`FLAG_OUT_OF_RANGE`) and counted in `DaemonStatus::out_of_range_ticks`; the model's
+    /// estimate is used unchanged. A model without a stored range is never out of range.
+    #[default]
+    Flag,
+    /// Flagged and counted, and the estimate blends (over `ood_ramp_ms`) to the joint's static
+    /// model (`kc`, `ka`, `kv` = CV; plus `ks`, `vs`, `alpha` = SCV) while out of range, and back
+    /// when in range. PINN joints only.
+    Static,
+}
+
 /// One `[[joint]]` as written.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -381,10 +397,29 @@ pub struct JointConfig {
     /// training logs were latched with (0 for the virtual joints).
     #[serde(default)]
     pub delta_theta_offset_motor_rad: Option<f64>,
+    /// Out-of-training-range handling (PINN joints): `off`, `flag` (default) or `static`.
+    #[serde(default)]
+    pub ood: OodMode,
+    /// Margin of the range check [fraction of each training range's width on either side, 0–10]:
+    /// 0.1 (default) accepts inputs up to 10 % of the range's width beyond its ends.
+    #[serde(default = "default_ood_margin")]
+    pub ood_margin: f64,
+    /// Duration of the blend between the PINN and the static model under `ood = "static"` [ms,
+    /// 0–1000; 0 = switch at once]. Default 20.
+    #[serde(default = "default_ood_ramp_ms")]
+    pub ood_ramp_ms: f64,
 }
 
 fn one() -> f64 {
     1.0
+}
+/// Default [`JointConfig::ood_margin`].
+pub fn default_ood_margin() -> f64 {
+    0.1
+}
+/// Default [`JointConfig::ood_ramp_ms`].
+pub fn default_ood_ramp_ms() -> f64 {
+    20.0
 }
 fn infinite() -> f64 {
     f64::INFINITY
@@ -507,7 +542,18 @@ pub enum ModelSpec {
         path: PathBuf,
         /// Warm-up policy.
         warmup: WarmupName,
+        /// The static model blended in while out of the training range (`ood = "static"`).
+        fallback: Option<StaticFallback>,
     },
+}
+
+/// The static model a PINN joint falls back to under `ood = "static"`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum StaticFallback {
+    /// CV (`kc`, `ka`, `kv`).
+    Cv(frictionless::friction::CvParams),
+    /// SCV, paper form (`kc`, `ka`, `kv`, `ks`, `vs`, `alpha`).
+    Scv(frictionless::friction::ScvParams),
 }
 
 /// A validated configuration.
@@ -1019,6 +1065,19 @@ pub fn parse(path: &Path, text: &str) -> Result<Config, ConfigError> {
                 ));
             }
         }
+        if !(j.ood_margin.is_finite() && (0.0..=10.0).contains(&j.ood_margin)) {
+            return Err(c.fail(key("ood_margin"), j.ood_margin, "must be in [0, 10]"));
+        }
+        if !(j.ood_ramp_ms.is_finite() && (0.0..=1000.0).contains(&j.ood_ramp_ms)) {
+            return Err(c.fail(key("ood_ramp_ms"), j.ood_ramp_ms, "must be in [0, 1000] ms"));
+        }
+        if j.ood == OodMode::Static && j.friction_model != FrictionModelName::Pinn {
+            return Err(c.fail(
+                key("ood"),
+                "\"static\"",
+                "only a PINN joint can fall back to a static model",
+            ));
+        }
         let (model, features) = model_spec(&c, base, k, j)?;
         models.push(model);
         pinn_features.push(features);
@@ -1472,14 +1531,50 @@ fn model_spec(
             Ok((ModelSpec::Scv(p), None))
         }
         FrictionModelName::Pinn => {
-            forbid(&[
-                ("kc", j.kc.is_some()),
-                ("kv", j.kv.is_some()),
-                ("ka", j.ka.is_some()),
-                ("ks", j.ks.is_some()),
-                ("vs", j.vs.is_some()),
-                ("alpha", j.alpha.is_some()),
-            ])?;
+            let fallback = if j.ood == OodMode::Static {
+                // The static model: kc, ka, kv (CV) and, if any of ks, vs, alpha is given, all
+                // three (SCV).
+                let need_static = |name: &str, v: Option<f64>| {
+                    v.ok_or_else(|| {
+                        c.fail(
+                            key(name),
+                            "<missing>",
+                            "required by ood = \"static\" (the static model of a PINN joint)",
+                        )
+                    })
+                };
+                let (kc, ka, kv) = (
+                    need_static("kc", j.kc)?,
+                    need_static("ka", j.ka)?,
+                    need_static("kv", j.kv)?,
+                );
+                Some(if j.ks.is_some() || j.vs.is_some() || j.alpha.is_some() {
+                    let p = ScvParams {
+                        kc,
+                        ka,
+                        kv,
+                        ks: need_static("ks", j.ks)?,
+                        vs: need_static("vs", j.vs)?,
+                        alpha: need_static("alpha", j.alpha)?,
+                    };
+                    p.validate().map_err(param_err)?;
+                    StaticFallback::Scv(p)
+                } else {
+                    let p = CvParams { kc, ka, kv };
+                    p.validate().map_err(param_err)?;
+                    StaticFallback::Cv(p)
+                })
+            } else {
+                forbid(&[
+                    ("kc", j.kc.is_some()),
+                    ("kv", j.kv.is_some()),
+                    ("ka", j.ka.is_some()),
+                    ("ks", j.ks.is_some()),
+                    ("vs", j.vs.is_some()),
+                    ("alpha", j.alpha.is_some()),
+                ])?;
+                None
+            };
             let rel = j.model.as_ref().ok_or_else(|| {
                 c.fail(
                     key("model"),
@@ -1498,6 +1593,7 @@ fn model_spec(
                 ModelSpec::Pinn {
                     path,
                     warmup: j.warmup,
+                    fallback,
                 },
                 Some(features),
             ))
@@ -1981,6 +2077,82 @@ joints = [{ joint = "ankle", node_id = 3, command_unit = "joint_torque" }]
             "[[joint]]\nname = \"{name}\"\nindex = {}\ngear_ratio = -100.0\nkt = {kt:?}\nmax_curr = 5.0\nfriction_model = \"pinn\"\nmodel = \"{model}\"\n",
             name.len()
         )
+    }
+
+    /// `ood = "static"` needs the joint's static model (CV, or SCV with all three Stribeck keys) and
+    /// a PINN; the margin and the ramp are range-checked; without `ood` a PINN joint flags only and
+    /// still refuses static-model keys.
+    #[test]
+    fn out_of_range_settings_are_typed_and_checked() {
+        let m = joint_model(
+            "knee",
+            -100.0,
+            0.157,
+            FeatureSpec {
+                set: frictionless::features::FeatureSet::DeltaThetaJointVel,
+                history: 3,
+                temperature: false,
+            },
+        );
+        let base = format!(
+            "[backend]\nkind = \"shm\"\n{}",
+            pinn_joint("knee", 0.157, m.to_str().unwrap())
+        );
+        let c = p(&base).unwrap();
+        assert_eq!(c.raw.joint[0].ood, OodMode::Flag);
+        assert_eq!(c.raw.joint[0].ood_margin, 0.1);
+        assert_eq!(c.raw.joint[0].ood_ramp_ms, 20.0);
+        assert!(matches!(
+            c.models[0],
+            ModelSpec::Pinn { fallback: None, .. }
+        ));
+        // No static model configured: refused at --check, naming the missing key.
+        let e = p(&format!("{base}ood = \"static\"\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("joint[0].kc") && e.contains("ood"), "{e}");
+        let cv = format!("{base}ood = \"static\"\nkc = 1.0\nka = 20.0\nkv = 0.5\n");
+        let c = p(&cv).unwrap();
+        assert!(matches!(
+            c.models[0],
+            ModelSpec::Pinn {
+                fallback: Some(StaticFallback::Cv(cv)),
+                ..
+            } if cv.kc == 1.0
+        ));
+        let scv = format!("{cv}ks = 1.5\nvs = 0.1\nalpha = 1.0\n");
+        assert!(matches!(
+            p(&scv).unwrap().models[0],
+            ModelSpec::Pinn {
+                fallback: Some(StaticFallback::Scv(_)),
+                ..
+            }
+        ));
+        // Half an SCV is refused; static keys without `ood = "static"` too.
+        let e = p(&format!("{cv}ks = 1.5\n")).unwrap_err().to_string();
+        assert!(e.contains("joint[0].vs"), "{e}");
+        let e = p(&format!("{base}kc = 1.0\n")).unwrap_err().to_string();
+        assert!(e.contains("joint[0].kc"), "{e}");
+        for (key, bad) in [
+            ("ood_margin", "-0.1"),
+            ("ood_margin", "nan"),
+            ("ood_ramp_ms", "5000.0"),
+        ] {
+            let e = p(&format!("{cv}{key} = {bad}\n")).unwrap_err().to_string();
+            assert!(e.contains(&format!("joint[0].{key}")), "{e}");
+        }
+        let e = p(&format!("{base}ood = \"sometimes\"\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("sometimes") || e.contains("unknown variant"),
+            "{e}"
+        );
+        // A static-model joint cannot fall back to itself.
+        let e = p(&GOOD.replacen("kv = 5.55", "kv = 5.55\nood = \"static\"", 1))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("joint[0].ood"), "{e}");
     }
 
     /// Issue 14 #7: a model recorded for another joint, or another k_t, is refused naming both values.

@@ -202,6 +202,19 @@ fn model_loads_in_the_daemon_loader_and_reproduces_the_trainer_on_the_test_split
     let x: Vec<f32> = idx.iter().flat_map(|&i| w.input(i).to_vec()).collect();
     let batched = Predictor::new(&file.mlp, 2).unwrap().predict(&x).unwrap();
 
+    // The stored input range is the one of the training split's rows (not validation or test).
+    let train_chunks: Vec<u32> = report["split"]["train"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|k| k["chunk"].as_u64().unwrap() as u32)
+        .collect();
+    let train_rows = (0..w.len())
+        .filter(|&i| train_chunks.contains(&w.chunk[i]))
+        .map(|i| w.input(i));
+    let want = frictionless::weights::InputRange::from_rows(&spec, train_rows).unwrap();
+    assert_eq!(m.training.input_range, Some(want));
+
     // The daemon's path: one estimator, enabled (reset) at each chunk start with the Δθ offset the
     // report lists for the dataset (a daemon configured with `delta_theta_offset_motor_rad`), one
     // estimate per row. `reset` latches θ_off = θ − r·s of the sample it is given.

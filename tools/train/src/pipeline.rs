@@ -58,7 +58,7 @@ use frictionless::friction::{ScvParams, StaticFriction};
 use frictionless::mlp::StorageDtype;
 use frictionless::units::GearRatio;
 use frictionless::weights::{
-    ModelFile, ModelMeta, SignalFiltering, TrainingMeta, WeightError, round_to_dtype,
+    InputRange, ModelFile, ModelMeta, SignalFiltering, TrainingMeta, WeightError, round_to_dtype,
 };
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -865,6 +865,14 @@ pub fn train_model(
                 created_unix_s: created_unix_s(),
                 tool_version: format!("frictl {}", env!("CARGO_PKG_VERSION")),
                 filtering: sources.filtering,
+                // Training rows only: validation and test stay unseen.
+                input_range: InputRange::from_rows(
+                    &job.spec,
+                    prepared
+                        .train
+                        .x
+                        .chunks_exact(prepared.train.n_inputs.max(1)),
+                ),
             },
         },
         dtype: job.dtype,

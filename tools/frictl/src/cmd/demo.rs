@@ -407,6 +407,9 @@ struct ModelEntry {
 #[derive(serde::Serialize)]
 struct ClosedLoopEntry {
     min_kp: Option<MinKp>,
+    /// RMSE of τ̂_F/kfc against the true friction during tracking at the model's minimum K_p [Nm]
+    /// (`null` for `none`, which estimates nothing, or without a minimum K_p).
+    closed_loop_tau_f_rmse_nm: Option<f64>,
     tracking_rmse_at_min_kp_rad: Option<f64>,
     tracking_rmse_at_low_kp_rad: Option<f64>,
     disturbance_rmse_own_kp_rad: Option<f64>,
@@ -418,6 +421,10 @@ impl From<&Cell> for ClosedLoopEntry {
     fn from(c: &Cell) -> Self {
         Self {
             min_kp: c.min_kp,
+            closed_loop_tau_f_rmse_nm: c
+                .track_at_min_kp
+                .map(|t| t.friction_est_rmse_nm)
+                .filter(|v| v.is_finite()),
             tracking_rmse_at_min_kp_rad: c.track_at_min_kp.map(|t| t.rmse_rad),
             tracking_rmse_at_low_kp_rad: c.track_at_low_kp.map(|(_, t)| t.rmse_rad),
             disturbance_rmse_own_kp_rad: c
@@ -974,7 +981,11 @@ mod tests {
         let suite = format!(
             r#"{{"mode": "lockstep", "seed": 1, "criterion": null, "kd_per_s": 10.0, "references": {{}},
             "configuration": {{}}, "pulses": {{}}, "low_kp_source": {{}}, "wall_s": 1.0, "trials": 3,
-            "joints": {{"l_knee": {{"none": {cell}, "{ORACLE_LABEL}": {cell}}}}}}}"#
+            "joints": {{"l_knee": {{"none": {cell}, "{ORACLE_LABEL}": {oracle}}}}}}}"#,
+            oracle = cell.replace(
+                r#""friction_est_rmse_nm": null"#,
+                r#""friction_est_rmse_nm": 0.25"#
+            )
         );
         let ex: SuiteReport = serde_json::from_str(&suite).unwrap();
         let cells = &ex.joints["l_knee"];
@@ -1002,6 +1013,7 @@ mod tests {
         let models = &entry["models"];
         assert_eq!(key_set(models), ["CV", "PINN", "SCV", "none", ORACLE_LABEL]);
         let closed = [
+            "closed_loop_tau_f_rmse_nm",
             "disturbance_rmse_low_kp_rad",
             "disturbance_rmse_own_kp_rad",
             "low_kp",
@@ -1010,7 +1022,7 @@ mod tests {
             "tracking_rmse_at_min_kp_rad",
         ];
         let mut with_eval = closed.map(String::from).to_vec();
-        with_eval.insert(2, "eval".into());
+        with_eval.insert(3, "eval".into());
         assert_eq!(key_set(&models["none"]), with_eval);
         assert_eq!(key_set(&models[ORACLE_LABEL]), closed);
         assert_eq!(key_set(&models["CV"]), ["eval"]);
@@ -1024,6 +1036,11 @@ mod tests {
         );
         assert_eq!(models["none"]["low_kp"], 146.0);
         assert_eq!(models["none"]["tracking_rmse_at_min_kp_rad"], 0.03);
+        assert!(
+            models["none"]["closed_loop_tau_f_rmse_nm"].is_null(),
+            "none estimates nothing"
+        );
+        assert_eq!(models[ORACLE_LABEL]["closed_loop_tau_f_rmse_nm"], 0.25);
         assert_eq!(models["none"]["disturbance_rmse_own_kp_rad"], 0.02);
         assert_eq!(
             models["none"]["min_kp"],

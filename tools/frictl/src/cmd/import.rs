@@ -15,7 +15,7 @@ use frictionless::features::{FeatureSet, FeatureSpec};
 use frictionless::kernel::Mlp;
 use frictionless::mlp::{MlpWeights, StorageDtype};
 use frictionless::units::GearRatio;
-use frictionless::weights::{self, ModelFile, ModelMeta, TrainingMeta};
+use frictionless::weights::{self, InputRange, ModelFile, ModelMeta, TrainingMeta};
 use frictionless_interop::{self as interop, ModelHints, onnx, safetensors};
 
 /// Source format.
@@ -102,6 +102,52 @@ pub struct ModelArgs {
     /// Weight storage precision of the written file.
     #[arg(long, value_enum, default_value = "f32")]
     pub dtype: Dtype,
+    /// Training range of the inputs: one `MIN:MAX` per feature block in input order, then one for
+    /// the temperature with `--temperature`, in the inputs' units (e.g. `-0.05:0.05,-2:2`).
+    /// Omitted: the file stores no range and frictiond never flags the model out of range.
+    #[arg(long, allow_hyphen_values = true)]
+    pub input_range: Option<String>,
+}
+
+/// Parses `--input-range` for `spec`: `MIN:MAX` per block, then the temperature's if any.
+fn parse_input_range(text: &str, spec: &FeatureSpec) -> anyhow::Result<InputRange> {
+    let pairs: Vec<[f32; 2]> = text
+        .split(',')
+        .map(|p| {
+            let (lo, hi) = p
+                .split_once(':')
+                .with_context(|| format!("--input-range: `{p}` is not MIN:MAX"))?;
+            let v = |x: &str| {
+                x.trim()
+                    .parse::<f32>()
+                    .with_context(|| format!("--input-range: `{x}` is not a number"))
+            };
+            Ok([v(lo)?, v(hi)?])
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let n_blocks = spec.set.n_blocks();
+    let want = n_blocks + usize::from(spec.temperature);
+    if pairs.len() != want {
+        bail!(
+            "--input-range: {} ranges given, {spec} needs {want} ({} block(s){})",
+            pairs.len(),
+            n_blocks,
+            if spec.temperature {
+                " + temperature"
+            } else {
+                ""
+            }
+        );
+    }
+    let mut r = InputRange {
+        blocks: [[0.0; 2]; weights::RANGE_BLOCKS],
+        temperature: [0.0; 2],
+    };
+    r.blocks[..n_blocks].copy_from_slice(&pairs[..n_blocks]);
+    if spec.temperature {
+        r.temperature = pairs[n_blocks];
+    }
+    Ok(r)
 }
 
 /// The network and metadata hints read from a foreign file, plus a one-line summary.
@@ -224,23 +270,30 @@ fn run_model(format: Format, args: ModelArgs) -> anyhow::Result<()> {
     if !(kt.is_finite() && kt > 0.0) {
         bail!("--kt {kt}: the torque constant must be finite and positive");
     }
+    let features = FeatureSpec {
+        set,
+        history,
+        temperature,
+    };
+    let mut training = TrainingMeta::unknown(
+        format!("frictl {}", env!("CARGO_PKG_VERSION")),
+        SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs()),
+    );
+    training.input_range = args
+        .input_range
+        .as_deref()
+        .map(|t| parse_input_range(t, &features))
+        .transpose()?;
     let file = ModelFile {
         meta: ModelMeta {
             joint_name,
             gear_ratio,
             kt_nm_per_a: kt,
-            features: FeatureSpec {
-                set,
-                history,
-                temperature,
-            },
+            features,
             scv: None,
-            training: TrainingMeta::unknown(
-                format!("frictl {}", env!("CARGO_PKG_VERSION")),
-                SystemTime::now()
-                    .duration_since(UNIX_EPOCH)
-                    .map_or(0, |d| d.as_secs()),
-            ),
+            training,
         },
         dtype: args.dtype.into(),
         mlp,
@@ -274,4 +327,27 @@ fn run_model(format: Format, args: ModelArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn input_range_parses_per_block_then_temperature() {
+        let spec = FeatureSpec {
+            set: FeatureSet::DeltaThetaJointVel,
+            history: 4,
+            temperature: true,
+        };
+        let r = parse_input_range("-0.05:0.05, -2:2.5,20:45", &spec).unwrap();
+        assert_eq!(r.blocks, [[-0.05, 0.05], [-2.0, 2.5], [0.0, 0.0]]);
+        assert_eq!(r.temperature, [20.0, 45.0]);
+        let e = parse_input_range("-1:1,-2:2", &spec)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("2 ranges given") && e.contains("needs 3"), "{e}");
+        assert!(parse_input_range("-1:1,x:2,1:2", &spec).is_err());
+        assert!(parse_input_range("-1,1", &spec).is_err());
+    }
 }

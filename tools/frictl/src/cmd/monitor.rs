@@ -13,8 +13,9 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use frictionless_shm_types::{
     DaemonStatus, FLAG_CURRENT_SATURATED, FLAG_DISABLED, FLAG_FAULT, FLAG_FRICTION_CLIPPED,
-    FLAG_NON_FINITE, FLAG_STALE, FLAG_WARMING_UP, Histogram, Ipc, IpcConfig, STATUS_CPU_PINNED,
-    STATUS_INPUT_STALE, STATUS_MEMORY_LOCKED, STATUS_SCHED_FIFO, STATUS_STOPPING, model_kind,
+    FLAG_NON_FINITE, FLAG_OUT_OF_RANGE, FLAG_STALE, FLAG_WARMING_UP, Histogram, Ipc, IpcConfig,
+    STATUS_CPU_PINNED, STATUS_INPUT_STALE, STATUS_MEMORY_LOCKED, STATUS_SCHED_FIFO,
+    STATUS_STOPPING, model_kind,
 };
 
 /// Arguments of `frictl monitor`.
@@ -57,6 +58,7 @@ fn flag_names(f: u32) -> String {
         (FLAG_DISABLED, "off"),
         (FLAG_FAULT, "FAULT"),
         (FLAG_WARMING_UP, "warm"),
+        (FLAG_OUT_OF_RANGE, "OOD"),
     ];
     let v: Vec<&str> = names
         .iter()
@@ -113,14 +115,15 @@ pub fn render(s: &DaemonStatus) -> String {
         hist_line("compute", &s.compute),
         hist_line("input age", &s.input_age),
     );
-    out.push_str(" idx  model     τ̂_F [Nm]    i_ref [A]  flags\n");
+    out.push_str(" idx  model     τ̂_F [Nm]    i_ref [A]  out-of-range ticks  flags\n");
     for k in 0..(s.n_joints as usize).min(frictionless_shm_types::MAX_JOINTS) {
         // Joints are sparse by index; show those with any activity or a configured model.
         out.push_str(&format!(
-            " {k:>3}  {:<8} {:>10.4} {:>11.4}  {}\n",
+            " {k:>3}  {:<8} {:>10.4} {:>11.4}  {:>18}  {}\n",
             kind_name(s.model_kind[k]),
             s.tau_f_hat_nm[k],
             s.i_ref_a[k],
+            s.out_of_range_ticks[k],
             flag_names(s.joint_flags[k])
         ));
     }
@@ -163,5 +166,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn render_shows_the_out_of_range_count_and_flag() {
+        let mut s = DaemonStatus::zeroed();
+        s.n_joints = 2;
+        s.model_kind[1] = model_kind::PINN;
+        s.out_of_range_ticks[1] = 1234;
+        s.joint_flags[1] = FLAG_OUT_OF_RANGE;
+        let text = render(&s);
+        let line = text
+            .lines()
+            .find(|l| l.split_whitespace().next() == Some("1"))
+            .unwrap();
+        assert!(
+            line.contains("pinn") && line.contains(" 1234 ") && line.ends_with("OOD"),
+            "{line}"
+        );
+        assert!(text.contains("out-of-range ticks"), "{text}");
     }
 }

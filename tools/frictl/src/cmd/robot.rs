@@ -24,8 +24,8 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use frictiond_config::{
-    BackendConfig, BackendKind, FrictionModelName, JointConfig, LoopConfig, LpfConfig, RawConfig,
-    SafetyConfig, WarmupName,
+    BackendConfig, BackendKind, FrictionModelName, JointConfig, LoopConfig, LpfConfig, OodMode,
+    RawConfig, SafetyConfig, WarmupName, default_ood_margin, default_ood_ramp_ms,
 };
 use frictionless_train::pipeline::{self, TrainReport};
 use frictionless_train::search::{TrialResult, read_results};
@@ -629,6 +629,9 @@ fn daemon_config(robot: &RobotFile, plans: &[JointPlan], out: &Path) -> anyhow::
             model_for: None,
             warmup: WarmupName::HoldZero,
             delta_theta_offset_motor_rad: offset,
+            ood: OodMode::default(),
+            ood_margin: default_ood_margin(),
+            ood_ramp_ms: default_ood_ramp_ms(),
         });
     }
     Ok(RawConfig {

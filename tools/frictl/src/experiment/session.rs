@@ -21,7 +21,7 @@ use std::time::{Duration, Instant};
 
 use frictiond_config::{
     BackendConfig, BackendKind, FrictionModelName, JointConfig, LoopConfig, LpfConfig, OnStale,
-    RawConfig, SafetyConfig, Trigger, WarmupName,
+    OodMode, RawConfig, SafetyConfig, Trigger, WarmupName, default_ood_margin, default_ood_ramp_ms,
 };
 use frictionless::friction::{CvParams, ScvParams};
 use frictionless_shm_types::IpcConfig;
@@ -371,6 +371,9 @@ pub fn daemon_joint(j: &DaemonJoint, raw_friction: bool) -> Result<JointConfig, 
         warmup: WarmupName::default(),
         delta_theta_offset_motor_rad: None,
         model_for: None,
+        ood: OodMode::default(),
+        ood_margin: default_ood_margin(),
+        ood_ramp_ms: default_ood_ramp_ms(),
     };
     if !raw_friction {
         out.kfc = shipped.kfc;
