@@ -16,5 +16,6 @@ mod daemon_alloc;
 mod daemon_e2e;
 mod daemon_lockstep;
 mod daemon_pinn;
+mod daemon_reliability;
 mod daemon_watch;
 mod vcan_daemon;
