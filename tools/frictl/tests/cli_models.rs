@@ -464,3 +464,19 @@ fn outputs_that_are_inputs_or_in_missing_dirs_are_refused_before_work() {
     }
     assert!(!missing.exists());
 }
+
+#[test]
+fn convert_into_an_unwritable_place_names_the_output_not_a_temporary_file() {
+    let dir = scratch("convert_unwritable");
+    let fwt = import_anchor(&dir);
+    // /proc takes no new files, whoever runs the test (root included).
+    let out = Path::new("/proc/frictl_cli_models_convert.fwt");
+    let o = frictl(&["convert", s(&fwt), "-o", s(out), "--dtype", "f16"]);
+    let err = stderr(&o);
+    assert!(!o.status.success());
+    assert!(err.contains(s(out)), "names the user's path: {err}");
+    assert!(
+        !err.contains(".tmp"),
+        "no temporary file in the message: {err}"
+    );
+}
