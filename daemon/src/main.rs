@@ -3,7 +3,7 @@
 //! What this binary **is**: the supervisor. It parses and validates the config and every model
 //! file, builds the runtime parameters, starts the RT thread ([`rt`]), and then handles signals
 //! (SIGTERM/SIGINT → zero currents, STOPPING=1, exit 0; SIGHUP → reload config and models on a
-//! worker thread bounded by [`RELOAD_BOUND`], hand them over lock-free, keep the running set if the
+//! worker thread ([`ReloadWorker`]) bounded by [`RELOAD_BOUND`], hand them over lock-free, keep the running set if the
 //! new one is bad; the signal loop never reads a file), systemd
 //! notifications (READY, WATCHDOG gated on the RT heartbeat, STATUS, RELOADING + MONOTONIC_USEC) and
 //! freeing of replaced parameter sets, and logs stale input once on entry and once on recovery
@@ -383,22 +383,45 @@ const MAX_BLOCKED_RELOADS: usize = 4;
 /// root path) and its parameters, or why it was rejected.
 type ReloadResult = Result<(config::Config, Box<params::Params>), String>;
 
-/// A reload running on its worker thread.
-struct PendingReload {
+/// The reload worker: one long-lived thread that loads configs on request, so the signal loop never
+/// reads a file and the process does not gain a thread (and an allocator arena) per SIGHUP. A worker
+/// that blocks past [`RELOAD_BOUND`] is abandoned (it exits when its read returns) and the next
+/// SIGHUP starts a fresh one.
+struct ReloadWorker {
+    tx: std::sync::mpsc::SyncSender<(config::Config, PathBuf, u64)>,
     rx: std::sync::mpsc::Receiver<ReloadResult>,
     thread: std::thread::JoinHandle<()>,
-    started: Instant,
-    path: PathBuf,
 }
 
-/// SIGHUP reloads: the running config, the generation, the reload in flight (at most one) and the
-/// abandoned ones. Nothing here reads a file on the signal-handling thread.
+impl ReloadWorker {
+    fn spawn() -> std::io::Result<Self> {
+        let (tx, rx_req) = std::sync::mpsc::sync_channel::<(config::Config, PathBuf, u64)>(1);
+        let (tx_res, rx) = std::sync::mpsc::sync_channel(1);
+        let thread = std::thread::Builder::new()
+            .name("frictiond-reload".into())
+            .spawn(move || {
+                while let Ok((running, path, generation)) = rx_req.recv() {
+                    if tx_res
+                        .send(load_for_reload(&running, &path, generation))
+                        .is_err()
+                    {
+                        break; // abandoned
+                    }
+                }
+            })?;
+        Ok(Self { tx, rx, thread })
+    }
+}
+
+/// SIGHUP reloads: the running config, the generation, the worker, the reload in flight (at most
+/// one: when it started and which file) and the abandoned workers.
 struct Reloads {
     /// What the RT thread was started with: `[loop]`, `[backend]` and the root path stay these
     /// until a restart, and every reload is compared against them.
     running: config::Config,
     generation: u64,
-    pending: Option<PendingReload>,
+    worker: Option<ReloadWorker>,
+    pending: Option<(Instant, PathBuf)>,
     abandoned: Vec<std::thread::JoinHandle<()>>,
 }
 
@@ -454,12 +477,13 @@ impl Reloads {
         Self {
             running,
             generation: 0,
+            worker: None,
             pending: None,
             abandoned: Vec::new(),
         }
     }
 
-    /// SIGHUP: starts a reload on a worker thread, unless one is in flight or too many are blocked.
+    /// SIGHUP: hands the reload to the worker, unless one is in flight or too many are blocked.
     fn start(&mut self, path: &std::path::Path) {
         if self.pending.is_some() {
             tracing::warn!("SIGHUP ignored: the previous reload is still running");
@@ -477,63 +501,64 @@ impl Reloads {
             "RELOADING=1\nMONOTONIC_USEC={}\nSTATUS=reloading",
             sdnotify::monotonic_usec()
         ));
-        let (tx, rx) = std::sync::mpsc::sync_channel(1);
-        let running = self.running.clone();
-        let owned = path.to_path_buf();
-        let generation = self.generation + 1;
-        let spawned = std::thread::Builder::new()
-            .name("frictiond-reload".into())
-            .spawn(move || {
-                let _ = tx.send(load_for_reload(&running, &owned, generation));
-            });
-        match spawned {
-            Ok(thread) => {
-                self.pending = Some(PendingReload {
-                    rx,
-                    thread,
-                    started: Instant::now(),
-                    path: path.to_path_buf(),
-                })
-            }
-            Err(e) => {
-                tracing::error!("reload rejected: spawning the reload thread: {e}");
-                sdnotify::notify_logged("READY=1\nSTATUS=running");
+        if self.worker.is_none() {
+            match ReloadWorker::spawn() {
+                Ok(w) => self.worker = Some(w),
+                Err(e) => {
+                    tracing::error!("reload rejected: spawning the reload thread: {e}");
+                    sdnotify::notify_logged("READY=1\nSTATUS=running");
+                    return;
+                }
             }
         }
+        let w = self.worker.as_ref().expect("set above");
+        let request = (
+            self.running.clone(),
+            path.to_path_buf(),
+            self.generation + 1,
+        );
+        if w.tx.try_send(request).is_err() {
+            // The worker ended (it never does while its channels live): start afresh next time.
+            self.worker = None;
+            tracing::error!("reload rejected: the reload thread is gone");
+            sdnotify::notify_logged("READY=1\nSTATUS=running");
+            return;
+        }
+        self.pending = Some((Instant::now(), path.to_path_buf()));
     }
 
     /// Every supervisor pass: applies a finished reload (hands the parameters to the RT thread),
-    /// or abandons one past [`RELOAD_BOUND`].
+    /// or abandons the worker past [`RELOAD_BOUND`].
     fn poll(&mut self, tx: &std::sync::mpsc::SyncSender<Box<params::Params>>) {
-        let Some(p) = &self.pending else { return };
-        let result = match p.rx.try_recv() {
+        let (Some((started, _)), Some(w)) = (&self.pending, &self.worker) else {
+            return;
+        };
+        let result = match w.rx.try_recv() {
             Ok(r) => r,
             Err(std::sync::mpsc::TryRecvError::Empty) => {
-                if p.started.elapsed() < RELOAD_BOUND {
+                if started.elapsed() < RELOAD_BOUND {
                     return;
                 }
+                let w = self.worker.take().expect("checked above");
+                self.abandoned.push(w.thread);
                 Err(format!(
                     "not finished within {} s (blocked reading a file?): abandoned",
                     RELOAD_BOUND.as_secs()
                 ))
             }
             Err(std::sync::mpsc::TryRecvError::Disconnected) => {
+                self.worker = None;
                 Err("the reload thread ended without a result".to_owned())
             }
         };
-        let p = self.pending.take().expect("checked above");
-        if p.thread.is_finished() {
-            let _ = p.thread.join();
-        } else {
-            self.abandoned.push(p.thread);
-        }
+        let (_, path) = self.pending.take().expect("checked above");
         match result {
             Ok((new, params)) => match tx.try_send(params) {
                 Ok(()) => {
                     self.generation += 1;
                     tracing::info!(
                         "reloaded {}: generation {}",
-                        p.path.display(),
+                        path.display(),
                         self.generation
                     );
                     // Keeps the running [loop]/[backend] (load_for_reload put them back).
