@@ -214,6 +214,7 @@ fn stale_input_is_logged_on_entry_and_recovery_rate_limited() {
     let env = TestEnv::new("stalelog");
     let cfg = env.write_config(THREE_JOINTS);
     let mut d = Daemon::start(&cfg, &[]);
+    let started = Instant::now();
     let mut plant = Plant::open(&env.ipc, "plant");
     let (js, rq) = inputs([2.0, 1.0, 0.5], [0.3, 0.4, -0.2]);
     // Several stale episodes: fresh, then silent well past stale_after_ticks (20 ms).
@@ -239,8 +240,15 @@ fn stale_input_is_logged_on_entry_and_recovery_rate_limited() {
     let recoveries = log.matches("input fresh again").count();
     assert!(entries >= 1, "stale entry logged:\n{log}");
     assert!(recoveries >= 1, "recovery logged:\n{log}");
-    // Five entries and five recoveries within about a second: rate-limited to one each (the
-    // start, stale until the plant's first sample, counts as the first entry).
-    assert_eq!(entries, 1, "entries rate-limited:\n{log}");
-    assert!(recoveries <= 2, "recoveries rate-limited:\n{log}");
+    // Five entries and five recoveries (the start, stale until the plant's first sample, is the
+    // first entry), usually within two seconds: at most one line of each per 10 s window.
+    let windows = 1 + started.elapsed().as_secs() as usize / 10;
+    assert!(
+        entries <= windows,
+        "entries rate-limited ({windows} windows):\n{log}"
+    );
+    assert!(
+        recoveries <= windows,
+        "recoveries rate-limited ({windows} windows):\n{log}"
+    );
 }
