@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Soak: frictiond (clock trigger, 1 kHz, two paper-size PINN joints) in closed loop with the plant
 # (`frictl sim serve`, knee + ankle roll) and a controller answering every state
-# (daemon/benches/soak_controller.rs), for N ticks, with a SIGHUP every SOAK_HUP_S seconds. The
+# (daemon/benches/soak_controller.rs), for N periods of 1 ms (N/1000 s of wall time: the report
+# gives the ticks run and the periods missed), with a SIGHUP every SOAK_HUP_S seconds. The
 # reloads cycle through: a valid change (kfc), the original config, and a config naming a corrupt
 # model (must be refused, the running model kept).
 #
