@@ -4,7 +4,7 @@
 //! runtime parameters built from it ([`params`], with the per-joint control law of
 //! `frictionless::law`), the I/O backends ([`backend`]: iceoryx2 shared memory, SocketCAN), the RT
 //! loop ([`rt`], the tick top to bottom in one module), systemd notification ([`sdnotify`]) and the
-//! RT-thread allocation counter ([`alloc_count`]). The
+//! RT-thread allocation counter ([`alloc_count`]), the one-daemon-per-prefix lock ([`instance`]). The
 //! binary `frictiond` (`main.rs`) is the supervisor that wires them together; the library exists so
 //! benches and tests can drive the same code.
 //!
@@ -75,6 +75,7 @@
 pub mod alloc_count;
 pub mod backend;
 pub mod config;
+pub mod instance;
 pub mod params;
 pub mod rt;
 pub mod sdnotify;

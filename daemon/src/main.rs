@@ -2,10 +2,13 @@
 //!
 //! What this binary **is**: the supervisor. It parses and validates the config and every model
 //! file, builds the runtime parameters, starts the RT thread ([`rt`]), and then handles signals
-//! (SIGTERM/SIGINT → zero currents, STOPPING=1, exit 0; SIGHUP → reload config and models off the RT
-//! thread, hand them over lock-free, keep the running set if the new one is bad), systemd
+//! (SIGTERM/SIGINT → zero currents, STOPPING=1, exit 0; SIGHUP → reload config and models on a
+//! worker thread ([`ReloadWorker`]) bounded by [`RELOAD_BOUND`], hand them over lock-free, keep the running set if the
+//! new one is bad; the signal loop never reads a file), systemd
 //! notifications (READY, WATCHDOG gated on the RT heartbeat, STATUS, RELOADING + MONOTONIC_USEC) and
-//! freeing of replaced parameter sets. `frictiond --config FILE --check` validates without IPC.
+//! freeing of replaced parameter sets, and logs stale input once on entry and once on recovery
+//! (rate-limited, [`StaleLog`]). One daemon per service prefix ([`instance::InstanceLock`]).
+//! `frictiond --config FILE --check` validates without IPC.
 //!
 //! Environment: `FRICTIOND_ALLOC_REPORT=FILE` counts RT-thread allocations after READY and writes
 //! them at exit; `FRICTIOND_LATENCY_REPORT=FILE` writes the loop statistics at exit (wake lateness
@@ -14,7 +17,7 @@
 //! What it is **not**: the control law (`frictionless::law`), the tick (`frictiond::rt`), or the
 //! config schema (`frictiond::config`) — those live in the library.
 
-use frictiond::{alloc_count, config, params, rt, sdnotify};
+use frictiond::{alloc_count, config, instance, params, rt, sdnotify};
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -149,6 +152,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         print!("{}", summary(&cfg));
         return Ok(());
     }
+    // Before any port exists: a second daemon on this prefix would command the same motors.
+    let _instance = instance::InstanceLock::acquire(&cfg)?;
     let params = params::build(&cfg, 0)?;
     tracing::info!(
         "config {} validated: {} joint(s), period {} µs",
@@ -164,8 +169,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     // Loop statistics at exit (`key=value` lines, see `rt::RtSummary::report`), for benches.
     let latency_report = std::env::var_os("FRICTIOND_LATENCY_REPORT").map(PathBuf::from);
     let rt = start_rt(&cfg, params, alloc_report.is_some())?;
-    let mut cfg = cfg;
-    let stop_reason = supervise(&mut cfg, &cli.config, &mut signals, &rt)?;
+    let stop_reason = supervise(cfg, &cli.config, &mut signals, &rt)?;
     shut_down(rt, stop_reason, alloc_report, latency_report)
 }
 
@@ -230,19 +234,20 @@ fn start_rt(
 /// watchdog only while the heartbeat advances, and sends STATUS every second. Returns the signal
 /// that stopped it.
 fn supervise(
-    cfg: &mut config::Config,
+    cfg: config::Config,
     config_path: &std::path::Path,
     signals: &mut signal_hook::iterator::Signals,
     rt: &Rt,
 ) -> anyhow::Result<i32> {
     let shared = &rt.shared;
     let ready_after = cfg.raw.loop_.ready_after_ticks;
+    let mut reloads = Reloads::new(cfg);
+    let mut stale_log = StaleLog::default();
     let wd = sdnotify::watchdog_interval();
     let mut ready = false;
     let mut last_wd = Instant::now();
     let mut last_wd_beat = 0u64;
     let mut last_status = Instant::now();
-    let mut generation = 0u64;
     let mut last_beat = 0u64;
     let mut last_beat_change = Instant::now();
     let mut stop_reason = None;
@@ -250,8 +255,19 @@ fn supervise(
         for sig in signals.pending() {
             match sig {
                 SIGTERM | SIGINT => stop_reason = Some(sig),
-                SIGHUP => reload(cfg, config_path, &rt.tx_params, &mut generation),
+                SIGHUP => reloads.start(config_path),
                 _ => {}
+            }
+        }
+        reloads.poll(&rt.tx_params);
+        for line in stale_log.observe(
+            shared.stale_episodes.load(Ordering::Relaxed),
+            shared.input_stale.load(Ordering::Relaxed),
+            Instant::now(),
+        ) {
+            match line {
+                StaleLine::Entry(m) => tracing::warn!("{m}"),
+                StaleLine::Recovery(m) => tracing::info!("{m}"),
             }
         }
         while let Ok(old) = rt.rx_old.try_recv() {
@@ -369,42 +385,326 @@ fn shut_down(
     Ok(())
 }
 
-/// SIGHUP: reload config and models off the RT thread; on success hand the new parameters over,
-/// on failure keep the running ones and log why.
-fn reload(
-    cfg: &mut config::Config,
-    path: &std::path::Path,
-    tx: &std::sync::mpsc::SyncSender<Box<params::Params>>,
-    generation: &mut u64,
-) {
-    sdnotify::notify_logged(&format!(
-        "RELOADING=1\nMONOTONIC_USEC={}\nSTATUS=reloading",
-        sdnotify::monotonic_usec()
-    ));
-    let result = config::load(path)
-        .map_err(|e| e.to_string())
-        .and_then(|new| {
-            if new.raw.loop_ != cfg.raw.loop_
-                || new.raw.backend != cfg.raw.backend
-                || new.root_path != cfg.root_path
-            {
-                tracing::warn!(
-                    "[loop] and [backend] changes need a restart; applying joints and safety only"
-                );
-            }
-            let p = params::build(&new, *generation + 1).map_err(|e| e.to_string())?;
-            Ok((new, p))
-        });
-    match result {
-        Ok((new, p)) => match tx.try_send(p) {
-            Ok(()) => {
-                *generation += 1;
-                tracing::info!("reloaded {}: generation {}", path.display(), generation);
-                *cfg = new;
-            }
-            Err(_) => tracing::error!("reload skipped: the previous hand-over is still pending"),
-        },
-        Err(e) => tracing::error!("reload rejected, keeping generation {generation}: {e}"),
+/// How long a reload (reading the config and every model, building the parameters) may take on its
+/// worker thread before it is abandoned and the running parameters kept. Regular files load in
+/// milliseconds; a config path that is a FIFO or a hung network file system blocks forever.
+const RELOAD_BOUND: Duration = Duration::from_secs(10);
+
+/// Abandoned (still blocked) reload threads after which further SIGHUPs are refused.
+const MAX_BLOCKED_RELOADS: usize = 4;
+
+/// What a reload worker sends back: the new config (with the running `[loop]`, `[backend]` and
+/// root path) and its parameters, or why it was rejected.
+type ReloadResult = Result<(config::Config, Box<params::Params>), String>;
+
+/// The reload worker: one long-lived thread that loads configs on request, so the signal loop never
+/// reads a file and the process does not gain a thread (and an allocator arena) per SIGHUP. A worker
+/// that blocks past [`RELOAD_BOUND`] is abandoned (it exits when its read returns) and the next
+/// SIGHUP starts a fresh one.
+struct ReloadWorker {
+    tx: std::sync::mpsc::SyncSender<(config::Config, PathBuf, u64)>,
+    rx: std::sync::mpsc::Receiver<ReloadResult>,
+    thread: std::thread::JoinHandle<()>,
+}
+
+impl ReloadWorker {
+    fn spawn() -> std::io::Result<Self> {
+        let (tx, rx_req) = std::sync::mpsc::sync_channel::<(config::Config, PathBuf, u64)>(1);
+        let (tx_res, rx) = std::sync::mpsc::sync_channel(1);
+        let thread = std::thread::Builder::new()
+            .name("frictiond-reload".into())
+            .spawn(move || {
+                while let Ok((running, path, generation)) = rx_req.recv() {
+                    if tx_res
+                        .send(load_for_reload(&running, &path, generation))
+                        .is_err()
+                    {
+                        break; // abandoned
+                    }
+                }
+            })?;
+        Ok(Self { tx, rx, thread })
     }
-    sdnotify::notify_logged("READY=1\nSTATUS=running");
+}
+
+/// SIGHUP reloads: the running config, the generation, the worker, the reload in flight (at most
+/// one: when it started and which file) and the abandoned workers.
+struct Reloads {
+    /// What the RT thread was started with: `[loop]`, `[backend]` and the root path stay these
+    /// until a restart, and every reload is compared against them.
+    running: config::Config,
+    generation: u64,
+    worker: Option<ReloadWorker>,
+    pending: Option<(Instant, PathBuf)>,
+    abandoned: Vec<std::thread::JoinHandle<()>>,
+}
+
+/// What a reload would change that only a restart applies (empty: nothing). Compared against the
+/// running config, not the last file read.
+pub(crate) fn needs_restart(running: &config::Config, new: &config::Config) -> Vec<&'static str> {
+    let mut v = Vec::new();
+    if new.raw.loop_ != running.raw.loop_ {
+        v.push("[loop]");
+    }
+    if new.raw.backend != running.raw.backend || new.root_path != running.root_path {
+        v.push("[backend]");
+    }
+    v
+}
+
+/// The reload itself (on the worker thread): load and validate `path`, warn about what needs a
+/// restart, keep the running `[loop]`/`[backend]`/root (so joints are built for the period the
+/// loop runs at), build the parameters as `generation`.
+fn load_for_reload(
+    running: &config::Config,
+    path: &std::path::Path,
+    generation: u64,
+) -> ReloadResult {
+    let mut new = config::load(path).map_err(|e| e.to_string())?;
+    if running.raw.backend.kind == config::BackendKind::Can {
+        let fixed = frictiond::backend::can::reload_conflicts(running, &new);
+        if !fixed.is_empty() {
+            return Err(format!(
+                "{} needs a restart: the CAN backend fixed these when it opened ({}); nothing applied",
+                path.display(),
+                fixed.join("; ")
+            ));
+        }
+    }
+    let restart = needs_restart(running, &new);
+    if !restart.is_empty() {
+        tracing::warn!(
+            "{} changes need a restart; applying joints and safety only (running with the {} the daemon started with)",
+            restart.join(" and "),
+            restart.join(" and ")
+        );
+    }
+    new.raw.loop_ = running.raw.loop_.clone();
+    new.raw.backend = running.raw.backend.clone();
+    new.root_path = running.root_path.clone();
+    let p = params::build(&new, generation).map_err(|e| e.to_string())?;
+    Ok((new, p))
+}
+
+impl Reloads {
+    fn new(running: config::Config) -> Self {
+        Self {
+            running,
+            generation: 0,
+            worker: None,
+            pending: None,
+            abandoned: Vec::new(),
+        }
+    }
+
+    /// SIGHUP: hands the reload to the worker, unless one is in flight or too many are blocked.
+    fn start(&mut self, path: &std::path::Path) {
+        if self.pending.is_some() {
+            tracing::warn!("SIGHUP ignored: the previous reload is still running");
+            return;
+        }
+        self.abandoned.retain(|t| !t.is_finished());
+        if self.abandoned.len() >= MAX_BLOCKED_RELOADS {
+            tracing::error!(
+                "SIGHUP refused: {} earlier reloads are still blocked reading their files; restart frictiond",
+                self.abandoned.len()
+            );
+            return;
+        }
+        sdnotify::notify_logged(&format!(
+            "RELOADING=1\nMONOTONIC_USEC={}\nSTATUS=reloading",
+            sdnotify::monotonic_usec()
+        ));
+        if self.worker.is_none() {
+            match ReloadWorker::spawn() {
+                Ok(w) => self.worker = Some(w),
+                Err(e) => {
+                    tracing::error!("reload rejected: spawning the reload thread: {e}");
+                    sdnotify::notify_logged("READY=1\nSTATUS=running");
+                    return;
+                }
+            }
+        }
+        let w = self.worker.as_ref().expect("set above");
+        let request = (
+            self.running.clone(),
+            path.to_path_buf(),
+            self.generation + 1,
+        );
+        if w.tx.try_send(request).is_err() {
+            // The worker ended (it never does while its channels live): start afresh next time.
+            self.worker = None;
+            tracing::error!("reload rejected: the reload thread is gone");
+            sdnotify::notify_logged("READY=1\nSTATUS=running");
+            return;
+        }
+        self.pending = Some((Instant::now(), path.to_path_buf()));
+    }
+
+    /// Every supervisor pass: applies a finished reload (hands the parameters to the RT thread),
+    /// or abandons the worker past [`RELOAD_BOUND`].
+    fn poll(&mut self, tx: &std::sync::mpsc::SyncSender<Box<params::Params>>) {
+        let (Some((started, _)), Some(w)) = (&self.pending, &self.worker) else {
+            return;
+        };
+        let result = match w.rx.try_recv() {
+            Ok(r) => r,
+            Err(std::sync::mpsc::TryRecvError::Empty) => {
+                if started.elapsed() < RELOAD_BOUND {
+                    return;
+                }
+                let w = self.worker.take().expect("checked above");
+                self.abandoned.push(w.thread);
+                Err(format!(
+                    "not finished within {} s (blocked reading a file?): abandoned",
+                    RELOAD_BOUND.as_secs()
+                ))
+            }
+            Err(std::sync::mpsc::TryRecvError::Disconnected) => {
+                self.worker = None;
+                Err("the reload thread ended without a result".to_owned())
+            }
+        };
+        let (_, path) = self.pending.take().expect("checked above");
+        match result {
+            Ok((new, params)) => match tx.try_send(params) {
+                Ok(()) => {
+                    self.generation += 1;
+                    tracing::info!(
+                        "reloaded {}: generation {}",
+                        path.display(),
+                        self.generation
+                    );
+                    // Keeps the running [loop]/[backend] (load_for_reload put them back).
+                    self.running = new;
+                }
+                Err(_) => {
+                    tracing::error!("reload skipped: the previous hand-over is still pending")
+                }
+            },
+            Err(e) => tracing::error!(
+                "reload rejected, keeping generation {}: {e}",
+                self.generation
+            ),
+        }
+        sdnotify::notify_logged("READY=1\nSTATUS=running");
+    }
+}
+
+/// Rate limit of the stale-input log lines: at most one entry and one recovery line per window.
+const STALE_LOG_WINDOW: Duration = Duration::from_secs(10);
+
+/// A stale-input log line.
+#[derive(Debug, Clone, PartialEq)]
+enum StaleLine {
+    /// Input became stale (warn).
+    Entry(String),
+    /// Input fresh again (info).
+    Recovery(String),
+}
+
+/// Turns the RT thread's stale flag and episode counter into log lines: one when input goes
+/// stale, one when it recovers, each at most once per [`STALE_LOG_WINDOW`]; episodes in between are
+/// counted into the next line.
+#[derive(Debug, Default)]
+struct StaleLog {
+    episodes: u64,
+    stale: bool,
+    last_entry: Option<Instant>,
+    last_recovery: Option<Instant>,
+    unlogged_entries: u64,
+    unlogged_recoveries: u64,
+}
+
+impl StaleLog {
+    fn observe(&mut self, episodes: u64, stale: bool, now: Instant) -> Vec<StaleLine> {
+        let mut out = Vec::new();
+        let new_entries = episodes.saturating_sub(self.episodes);
+        // Every entry but a still-running last one has recovered.
+        let new_recoveries = if new_entries > 0 {
+            new_entries - u64::from(stale) + u64::from(self.stale)
+        } else {
+            u64::from(self.stale && !stale)
+        };
+        self.episodes = episodes;
+        self.stale = stale;
+        let due =
+            |last: Option<Instant>| last.is_none_or(|t| now.duration_since(t) >= STALE_LOG_WINDOW);
+        let more = |n: u64| {
+            if n > 0 {
+                format!(" ({n} more since the last message)")
+            } else {
+                String::new()
+            }
+        };
+        if new_entries > 0 {
+            if due(self.last_entry) {
+                out.push(StaleLine::Entry(format!(
+                    "input stale (no joint states or torque request within stale_after_ticks): safe output{}",
+                    more(self.unlogged_entries + new_entries - 1)
+                )));
+                self.last_entry = Some(now);
+                self.unlogged_entries = 0;
+            } else {
+                self.unlogged_entries += new_entries;
+            }
+        }
+        if new_recoveries > 0 {
+            if due(self.last_recovery) {
+                out.push(StaleLine::Recovery(format!(
+                    "input fresh again{}",
+                    more(self.unlogged_recoveries + new_recoveries - 1)
+                )));
+                self.last_recovery = Some(now);
+                self.unlogged_recoveries = 0;
+            } else {
+                self.unlogged_recoveries += new_recoveries;
+            }
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stale_log_logs_entry_and_recovery_once_per_window_and_counts_the_rest() {
+        let t0 = Instant::now();
+        let mut l = StaleLog::default();
+        assert!(l.observe(0, false, t0).is_empty());
+        let v = l.observe(1, true, t0);
+        assert!(
+            matches!(&v[..], [StaleLine::Entry(m)] if !m.contains("more")),
+            "{v:?}"
+        );
+        assert!(
+            l.observe(1, true, t0 + Duration::from_millis(5)).is_empty(),
+            "once per entry"
+        );
+        let v = l.observe(1, false, t0 + Duration::from_millis(10));
+        assert!(matches!(&v[..], [StaleLine::Recovery(_)]), "{v:?}");
+        // Three more episodes within the window (one still stale): nothing logged.
+        assert!(l.observe(4, true, t0 + Duration::from_secs(1)).is_empty());
+        assert!(l.observe(4, false, t0 + Duration::from_secs(2)).is_empty());
+        // After the window the next entry carries the count of the unlogged ones.
+        let v = l.observe(5, true, t0 + Duration::from_secs(11));
+        assert_eq!(
+            v,
+            vec![StaleLine::Entry(
+                "input stale (no joint states or torque request within stale_after_ticks): safe output (3 more since the last message)".into()
+            )]
+        );
+        let v = l.observe(5, false, t0 + Duration::from_secs(12));
+        assert_eq!(
+            v,
+            vec![StaleLine::Recovery(
+                "input fresh again (3 more since the last message)".into()
+            )]
+        );
+        // Entry and recovery both between two polls.
+        let v = l.observe(6, false, t0 + Duration::from_secs(30));
+        assert_eq!(v.len(), 2, "{v:?}");
+    }
 }

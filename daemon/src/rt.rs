@@ -75,6 +75,11 @@ pub struct Shared {
     pub rt_flags: AtomicU32,
     /// Ticks during which RT-thread allocations were counted.
     pub counted_ticks: AtomicU64,
+    /// Whether the last tick's input (joint states or torque request) was stale.
+    pub input_stale: AtomicBool,
+    /// Stale episodes so far (fresh → stale transitions, the start counting as one): the supervisor
+    /// logs entries and recoveries from this and [`Shared::input_stale`] (the RT thread never logs).
+    pub stale_episodes: AtomicU64,
 }
 
 /// Newest value of one input with its freshness.
@@ -1141,6 +1146,7 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
     let mut prev_active = 0u64;
     let mut missed = 0u64;
     let mut tick = 0u64;
+    let mut was_stale = false;
     // SAFETY: gettid/sched_getcpu have no preconditions.
     let tid = unsafe { libc::gettid() };
     let cpu_start = unsafe { libc::sched_getcpu() };
@@ -1175,6 +1181,14 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
         // 3. compute
         let stale_after = slot.params.stale_after_ticks;
         let fresh = Freshness::judge(&plan, &inputs, tick, wake_ns, timed_out, stale_after);
+        let stale_now = fresh.state_stale || fresh.request_stale;
+        if stale_now != was_stale {
+            was_stale = stale_now;
+            if stale_now {
+                shared.stale_episodes.fetch_add(1, Ordering::Relaxed);
+            }
+            shared.input_stale.store(stale_now, Ordering::Relaxed);
+        }
         compute(
             &mut slot.params,
             &inputs,

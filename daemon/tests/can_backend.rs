@@ -290,3 +290,95 @@ fn can_example_configs_validate() {
         );
     }
 }
+
+#[test]
+fn can_reload_of_values_fixed_at_open_is_refused_naming_them() {
+    let env = TestEnv::new("canhup");
+    let body = mit_body(&format!("fd:{CHILD_FD}"), 1000);
+    let cfg = write_can_config(&env, &body);
+    let (test_end, daemon_end) = socketpair();
+    let v_motor = [-30.0, 12.0];
+    let emu = MitEmulator::start(test_end, v_motor);
+    let mut d = start_daemon(&cfg, Some(&daemon_end), &[]);
+    drop(daemon_end);
+    let mut plant = Plant::open(&env.ipc, "controller");
+    plant.wait_for_daemon(T);
+    // The hip asks for 6 A: clamped at its max_curr = 4 A.
+    let tau = [3.0, 30.0];
+    let want = expected_currents(tau, v_motor);
+    assert_eq!(want[1], 4.0);
+    let rq = request(tau);
+    drive_until(&mut plant, &rq, T, |c| {
+        (c.i_ref_a[0] - want[0]).abs() < 1e-9
+    });
+
+    // kt 0.157 → 0.18 (the CAN unit conversion), a raised max_curr (the CAN clamp), another node id.
+    let changed = body
+        .replacen(&format!("kt = {KNEE_KT}"), "kt = 0.18", 1)
+        .replacen("max_curr = 4.0", "max_curr = 6.0", 1)
+        .replacen(
+            "feedback_timeout_ticks = 10",
+            "feedback_timeout_ticks = 12",
+            1,
+        );
+    assert_ne!(changed, body);
+    write_can_config(&env, &changed);
+    d.signal(libc::SIGHUP);
+    for _ in 0..300 {
+        drive_until(&mut plant, &rq, T, |_| true);
+    }
+    // What the law commands and what reaches the drives agree: knee motor torque = kt·i with one
+    // kt, hip current = the law's (clamped) current.
+    let t0 = std::time::Instant::now();
+    loop {
+        let c = drive_until(&mut plant, &rq, T, |_| true);
+        let (k, h) = (emu.log(1), emu.log(2));
+        let knee_ok = (k.last_t - KNEE_KT * want[0]).abs() <= t_tol(1)
+            && (c.i_ref_a[0] - want[0]).abs() < 1e-9;
+        let hip_ok = (h.last_t - c.i_ref_a[1]).abs() <= t_tol(2) && c.i_ref_a[1] == 4.0;
+        if knee_ok && hip_ok {
+            break;
+        }
+        assert!(
+            t0.elapsed() < T,
+            "half-applied reload: law knee {} A (want {}), wire knee {} Nm (want {}); law hip {} A, wire hip {} A",
+            c.i_ref_a[0],
+            want[0],
+            k.last_t,
+            KNEE_KT * want[0],
+            c.i_ref_a[1],
+            h.last_t
+        );
+    }
+    let s = plant.status_until(None, T, |_| true);
+    assert_eq!(s.generation, 0, "the reload was refused");
+
+    // Values the backend does not hold still reload: kc only.
+    let only_law = body.replace(
+        &format!("kc = {}", KNEE_CV.0),
+        &format!("kc = {}", KNEE_CV.0 * 0.5),
+    );
+    assert_ne!(only_law, body);
+    write_can_config(&env, &only_law);
+    d.signal(libc::SIGHUP);
+    let s = plant.status_until(None, T, |s| s.generation == 1);
+    assert_eq!(s.generation, 1);
+
+    d.signal(libc::SIGTERM);
+    let (st, log) = d.wait_exit(T);
+    assert!(st.success(), "{log}");
+    for needle in [
+        "needs a restart",
+        "knee",
+        "kt 0.157 → 0.18",
+        "hip",
+        "max_curr 4 → 6",
+        "feedback_timeout_ticks 10 → 12",
+    ] {
+        assert!(log.contains(needle), "{needle}: {log}");
+    }
+    assert!(
+        !log.contains("reloaded") || log.matches("reloaded").count() == 1,
+        "{log}"
+    );
+}

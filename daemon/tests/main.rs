@@ -18,5 +18,6 @@ mod daemon_features;
 mod daemon_lockstep;
 mod daemon_ood;
 mod daemon_pinn;
+mod daemon_reliability;
 mod daemon_watch;
 mod vcan_daemon;

@@ -444,15 +444,22 @@ pub fn read_regular_bounded(path: &Path) -> Result<Vec<u8>, WeightError> {
 }
 
 /// Writes a `.fwt` file atomically: a temporary file in the same directory is written, synced and
-/// renamed over `path`, so readers see either the old or the new file, never a partial one.
+/// renamed over `path`, so readers see either the old or the new file, never a partial one. Every
+/// error names `path` (the temporary file is an implementation detail the caller never chose).
 pub fn write_file(path: &Path, file: &ModelFile) -> Result<(), WeightError> {
     let bytes = to_bytes(file).map_err(|e| WeightError::InFile {
         path: path.to_owned(),
         source: Box::new(e),
     })?;
-    let io_err = |p: &Path| {
-        let p = p.to_owned();
-        move |source| WeightError::Io { path: p, source }
+    let io_err = |_: &Path| {
+        let p = path.to_owned();
+        move |source: io::Error| WeightError::Io {
+            path: p,
+            source: io::Error::new(
+                source.kind(),
+                format!("writing through a temporary file in its directory: {source}"),
+            ),
+        }
     };
     let name = path.file_name().ok_or_else(|| WeightError::Io {
         path: path.to_owned(),

@@ -4,7 +4,7 @@
 # This machine's kernel has no CAN. The script boots Debian's stock kernel (`linux-image-amd64`, which
 # carries can.ko, can-raw.ko, vcan.ko, can-gw.ko; NOT the cloud flavour) from a tiny initramfs holding
 # busybox, those modules (loaded in dependency order), the project's statically linked (musl) binaries
-# and test harnesses. Inside, /init creates vcan0 (classic MTU 16) and vcan1, then runs every harness with
+# and the test harnesses that hold a `vcan` test. Inside, /init creates vcan0 (classic MTU 16) and vcan1, then runs each with
 # `--include-ignored --test-threads=1 --show-output vcan` (tests named `vcan…` and marked
 # #[ignore = "needs vcan"] on the host). The release binaries of the built packages (frictiond, frictl) are
 # in the VM's /bin (on PATH; FRICTIONLESS_IN_CANVM=1 tells tests to look there). Lines a test prints that
@@ -16,7 +16,8 @@
 #              CANVM_PACKAGES (cargo packages whose test harnesses run in the VM; default "frictionless frictionless-shm-types frictiond frictionless-canlog frictl"),
 #              CANVM_FILTER (libtest name filter, default "vcan"), CANVM_ACCEL (auto|kvm|tcg, default auto),
 #              CANVM_MEM_MB (VM memory, default 2048: the initramfs is unpacked into it),
-#              CANVM_TESTS (only these integration-test targets, e.g. "shm_types_tests frictiond_e2e"; default all).
+#              CANVM_TESTS (only these integration-test targets, e.g. "shm_types_tests frictiond_e2e"; default:
+#              every harness of the packages that has a test matching CANVM_FILTER, found with `--list`).
 # Last line: "canvm: N passed, N failed"; exit code non-zero on any failure or timeout.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -78,6 +79,17 @@ for l in sys.stdin:
     if m.get("reason")=="compiler-artifact" and m.get("executable") and m.get("profile",{}).get("test"):
         print(m["executable"])')
 [ -n "$harnesses" ] || { tail -n 30 "$WORK/build-tests.log" >&2; log "building the test harnesses failed"; echo "canvm: 0 passed, 1 failed"; exit 1; }
+# Only the harnesses that hold a test matching FILTER go into the VM (the static musl harnesses list
+# their tests on the host too): the rest would only grow the initramfs the guest unpacks into RAM.
+if [ -z "${CANVM_TESTS:-}" ]; then
+  selected=""
+  for h in $harnesses; do
+    if "$h" --list --include-ignored "$FILTER" 2>/dev/null | grep -q ': test$'; then selected="$selected $h"; fi
+  done
+  log "harnesses with tests matching '$FILTER':$(for h in $selected; do printf ' %s' "$(basename "${h%-*}")"; done)"
+  harnesses=$selected
+  [ -n "$harnesses" ] || { log "no harness has a test matching '$FILTER'"; echo "canvm: 0 passed, 1 failed"; exit 1; }
+fi
 
 # 4. initramfs.
 IR="$WORK/initramfs"

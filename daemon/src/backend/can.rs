@@ -32,6 +32,10 @@
 //!   closed loop (without axis error) is re-armed at the same rate; drop sends 0 and exits motor
 //!   mode / sets the axis idle.
 //!
+//! - What open fixes (buses, node ids, unit conversion with k_t and the signed gear ratio, MIT
+//!   ranges, the `max_curr` clamp) cannot change on SIGHUP: [`reload_conflicts`] lists the
+//!   differences and frictiond refuses such a reload naming them (restart to apply).
+//!
 //! Interfaces named `fd:N` use an inherited, already open CAN socket (e.g. one end of a
 //! `socketpair(AF_UNIX, SOCK_SEQPACKET)` in tests); kernel filters are then best effort.
 //!
@@ -237,6 +241,112 @@ pub fn owned_ids(bus: &ResolvedBus) -> Vec<u32> {
             })
             .collect(),
     }
+}
+
+/// What a reload from `running` to `new` would change that this backend fixed when it opened: the
+/// buses (interface, protocol, host id, feedback timeout, bitrate) and per drive the node id, the
+/// unit conversion (command unit, k_t, signed gear ratio, feedback angle unit), the MIT ranges and
+/// the `max_curr` clamp. Each entry names the bus or joint and the old and new value; empty when
+/// nothing differs. frictiond refuses such a reload (a restart applies it) instead of running the
+/// law with values the bus does not use.
+pub fn reload_conflicts(running: &Config, new: &Config) -> Vec<String> {
+    let mut out = Vec::new();
+    if running.buses.len() != new.buses.len() {
+        out.push(format!(
+            "[[bus]] count {} → {}",
+            running.buses.len(),
+            new.buses.len()
+        ));
+        return out;
+    }
+    let name = |cfg: &Config, d: &ResolvedDrive| {
+        cfg.raw
+            .joint
+            .get(d.joint_pos)
+            .map(|j| j.name.clone())
+            .unwrap_or_else(|| format!("index {}", d.index))
+    };
+    for (b, (old, new_bus)) in running.buses.iter().zip(&new.buses).enumerate() {
+        let mut bus_field = |what: &str, a: String, z: String| {
+            if a != z {
+                out.push(format!("bus[{b}] {what} {a} → {z}"));
+            }
+        };
+        bus_field(
+            "interface",
+            format!("{:?}", old.interface),
+            format!("{:?}", new_bus.interface),
+        );
+        bus_field(
+            "protocol",
+            format!("{:?}", old.protocol),
+            format!("{:?}", new_bus.protocol),
+        );
+        bus_field(
+            "host_id",
+            old.host_id.to_string(),
+            new_bus.host_id.to_string(),
+        );
+        bus_field(
+            "feedback_timeout_ticks",
+            old.feedback_timeout_ticks.to_string(),
+            new_bus.feedback_timeout_ticks.to_string(),
+        );
+        bus_field(
+            "bitrate",
+            old.load.bitrate_bps.to_string(),
+            new_bus.load.bitrate_bps.to_string(),
+        );
+        let old_names: Vec<String> = old.joints.iter().map(|d| name(running, d)).collect();
+        let new_names: Vec<String> = new_bus.joints.iter().map(|d| name(new, d)).collect();
+        if old_names != new_names {
+            out.push(format!("bus[{b}] drives {old_names:?} → {new_names:?}"));
+            continue;
+        }
+        for ((o, n), joint) in old.joints.iter().zip(&new_bus.joints).zip(&old_names) {
+            let mut field = |what: &str, a: String, z: String| {
+                if a != z {
+                    out.push(format!("bus[{b}] joint {joint}: {what} {a} → {z}"));
+                }
+            };
+            field("node_id", o.node_id.to_string(), n.node_id.to_string());
+            field("index", o.index.to_string(), n.index.to_string());
+            field(
+                "command_unit",
+                format!("{:?}", o.units.command),
+                format!("{:?}", n.units.command),
+            );
+            field(
+                "kt",
+                o.units.kt_nm_per_a.to_string(),
+                n.units.kt_nm_per_a.to_string(),
+            );
+            field(
+                "gear_ratio",
+                o.units.gear_ratio.to_string(),
+                n.units.gear_ratio.to_string(),
+            );
+            field(
+                "feedback angle unit",
+                format!("{:?}", o.units.feedback_angle),
+                format!("{:?}", n.units.feedback_angle),
+            );
+            if o.reply_units != n.reply_units {
+                field(
+                    "reply units",
+                    format!("{:?}", o.reply_units),
+                    format!("{:?}", n.reply_units),
+                );
+            }
+            field("MIT ranges", format!("{:?}", o.mit), format!("{:?}", n.mit));
+            field(
+                "max_curr",
+                o.max_curr_a.to_string(),
+                n.max_curr_a.to_string(),
+            );
+        }
+    }
+    out
 }
 
 impl CanBackend {

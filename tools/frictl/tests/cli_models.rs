@@ -558,5 +558,19 @@ fn import_accepts_hyphenated_feature_sets_and_inspect_names_the_blocks() {
     assert!(
         err.contains("joint-pos-joint-vel") && !err.contains("joint_pos_joint_vel"),
         "{err}"
+
+#[test]
+fn convert_into_an_unwritable_place_names_the_output_not_a_temporary_file() {
+    let dir = scratch("convert_unwritable");
+    let fwt = import_anchor(&dir);
+    // /proc takes no new files, whoever runs the test (root included).
+    let out = Path::new("/proc/frictl_cli_models_convert.fwt");
+    let o = frictl(&["convert", s(&fwt), "-o", s(out), "--dtype", "f16"]);
+    let err = stderr(&o);
+    assert!(!o.status.success());
+    assert!(err.contains(s(out)), "names the user's path: {err}");
+    assert!(
+        !err.contains(".tmp"),
+        "no temporary file in the message: {err}"
     );
 }

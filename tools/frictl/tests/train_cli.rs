@@ -667,4 +667,57 @@ fn sets_without_motor_encoder_train_on_a_torque_sensed_dataset() {
         e.contains("`theta_motor_rad`") && e.contains("`delta-theta-joint-vel`"),
         "{e}"
     );
+
+#[test]
+fn an_unwritable_output_is_named_not_a_hidden_temporary_file() {
+    // /proc takes no new files, whoever runs the test (root included).
+    let out = Path::new("/proc/frictl_train_cli_model.fwt");
+    let e = err_text(train(out, &["--epochs", "1"]), "unwritable model");
+    assert!(e.contains(s(out)), "names the user's path: {e}");
+    assert!(!e.contains(".tmp"), "no temporary file in the message: {e}");
+    let ckpt = Path::new("/proc/frictl_train_cli.ckpt");
+    let ok_out = fixture().dir.join("unwritable_ckpt.fwt");
+    let e = err_text(
+        train(&ok_out, &["--epochs", "1", "--checkpoint", s(ckpt)]),
+        "unwritable checkpoint",
+    );
+    assert!(e.contains(s(ckpt)), "names the user's path: {e}");
+    assert!(!e.contains(".tmp"), "no temporary file in the message: {e}");
+}
+
+#[test]
+fn fit_names_the_csv_line_of_a_non_finite_sample() {
+    let f = fixture();
+    let dir = f.dir.join("fit_nan");
+    std::fs::create_dir_all(&dir).unwrap();
+    let ds = dir.join("ds.csv");
+    std::fs::copy(f.ds.with_extension("json"), ds.with_extension("json")).unwrap();
+    let text = std::fs::read_to_string(&f.ds).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let col = header.iter().position(|c| *c == "tau_f_label_nm").unwrap();
+    // Line 3001 of the file (the header is line 1): a NaN label on a valid sample.
+    const LINE: usize = 3001;
+    let out: Vec<String> = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| {
+            if i + 1 == LINE {
+                let mut v: Vec<&str> = l.split(',').collect();
+                v[col] = "NaN";
+                v.join(",")
+            } else {
+                l.to_owned()
+            }
+        })
+        .collect();
+    std::fs::write(&ds, out.join("\n") + "\n").unwrap();
+    let e = err_text(
+        frictl(&["fit", "cv", s(&ds), "--sliding-quadrants", "false"]),
+        "NaN label",
+    );
+    assert!(
+        e.contains(&format!("line {LINE}")),
+        "names the CSV line: {e}"
+    );
+    assert!(e.contains(s(&ds)), "names the file: {e}");
 }

@@ -138,14 +138,12 @@ impl Trainer {
         let bytes = safetensors::serialize(views, Some(meta)).map_err(|e| err(path, e))?;
         let mut tmp = path.as_os_str().to_owned();
         tmp.push(".tmp");
-        std::fs::write(&tmp, &bytes).map_err(|e| {
-            err(
-                path,
-                format!("cannot write {}: {e}", Path::new(&tmp).display()),
-            )
-        })?;
-        std::fs::rename(&tmp, path)
-            .map_err(|e| err(path, format!("cannot rename the temporary file: {e}")))
+        // Errors name `path`, never the temporary file beside it.
+        let written = std::fs::write(&tmp, &bytes).and_then(|()| std::fs::rename(&tmp, path));
+        written.map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            err(path, format!("cannot write: {e}"))
+        })
     }
 
     /// Restores a run saved by [`Trainer::save_checkpoint`]. `train` and `val` must be the same data

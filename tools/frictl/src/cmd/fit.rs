@@ -10,7 +10,8 @@ use frictionless::friction::{CvParams, ScvCodeParams, ScvParams};
 use frictionless_dataset::Dataset;
 use frictionless_dataset::fit_file::FittedModel;
 use frictionless_ident::fit::{
-    FitBounds, FitOptions, FitResult, Fittable, Loss, Method, fit, select, sliding_quadrant_mask,
+    FitBounds, FitError, FitOptions, FitResult, Fittable, Loss, Method, fit, select,
+    sliding_quadrant_mask,
 };
 use serde::{Deserialize, Serialize};
 
@@ -132,6 +133,31 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let v = select(&ds.sdot_rad_s, &mask);
     let t = select(&target, &mask);
+    // The fit numbers the selected samples; errors name the dataset's CSV line instead (one line
+    // per sample after the header line).
+    let rows: Vec<usize> = mask
+        .iter()
+        .enumerate()
+        .filter_map(|(i, &m)| m.then_some(i))
+        .collect();
+    let at_line = |e: FitError| -> anyhow::Error {
+        match e {
+            FitError::NonFinite { index, v, tau } => {
+                let row = rows.get(index).copied().unwrap_or(index);
+                anyhow::anyhow!(
+                    "{}: line {}: sample not finite (sdot_rad_s = {v}, {} = {tau})",
+                    args.dataset.display(),
+                    row + 2,
+                    if args.truth {
+                        "tau_f_true_nm"
+                    } else {
+                        "tau_f_label_nm"
+                    }
+                )
+            }
+            e => anyhow::Error::new(e),
+        }
+    };
     let opts = FitOptions {
         method: args.method,
         adam_loss: args.loss,
@@ -151,21 +177,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let started = std::time::Instant::now();
     let (toml, json) = match args.model {
         ModelKind::Cv => report(
-            fit::<CvParams>(&v, &t, &opts)?,
+            fit::<CvParams>(&v, &t, &opts).map_err(at_line)?,
             |params| FittedModel::Cv { params },
             &ds,
             &target,
             &args,
         ),
         ModelKind::Scv => report(
-            fit::<ScvParams>(&v, &t, &opts)?,
+            fit::<ScvParams>(&v, &t, &opts).map_err(at_line)?,
             |params| FittedModel::Scv { params },
             &ds,
             &target,
             &args,
         ),
         ModelKind::ScvCode => report(
-            fit::<ScvCodeParams>(&v, &t, &opts)?,
+            fit::<ScvCodeParams>(&v, &t, &opts).map_err(at_line)?,
             |params| FittedModel::ScvCode { params },
             &ds,
             &target,
