@@ -359,7 +359,7 @@ pub fn dataset_runs(path: &Path, sidecar: Option<&DatasetSidecar>, data: &Datase
 /// The range of the model's physical inputs over a set of rows — what a model has seen in training.
 /// A row outside it (either coordinate) is an extrapolation. Empty ranges (no rows) contain nothing.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct InputRange {
+pub struct MotionRange {
     /// Joint position s: [min, max] [rad].
     pub s_rad: [f64; 2],
     /// Joint velocity ṡ: [min, max] [rad/s].
@@ -368,7 +368,7 @@ pub struct InputRange {
     pub rows: usize,
 }
 
-impl Default for InputRange {
+impl Default for MotionRange {
     fn default() -> Self {
         Self {
             s_rad: [f64::INFINITY, f64::NEG_INFINITY],
@@ -378,7 +378,7 @@ impl Default for InputRange {
     }
 }
 
-impl InputRange {
+impl MotionRange {
     /// Widens the range by row `k` of `ds` (rows with a non-finite s or ṡ are ignored).
     pub fn add_row(&mut self, ds: &Dataset, k: usize) {
         let (s, v) = (ds.s_rad[k], ds.sdot_rad_s[k]);
@@ -881,16 +881,16 @@ mod run_tests {
             &[-0.5, 0.2, 3.0, 0.0],
             &[0.1, -0.3, 9.0, f64::NAN],
         );
-        let r = InputRange::of_chunks(&d, &[0]);
+        let r = MotionRange::of_chunks(&d, &[0]);
         assert_eq!(r.s_rad, [-0.5, 0.2]);
         assert_eq!(r.sdot_rad_s, [-0.3, 0.1]);
         assert_eq!(r.rows, 2);
         assert!(r.contains(0.0, 0.0) && r.contains(0.2, -0.3));
         assert!(!r.contains(0.0, 0.11) && !r.contains(0.21, 0.0));
         let mut all = r;
-        all.merge(&InputRange::of_chunks(&d, &[1]));
+        all.merge(&MotionRange::of_chunks(&d, &[1]));
         assert_eq!(all.rows, 3, "the NaN row is ignored");
         assert!(all.contains(3.0, 9.0));
-        assert!(!InputRange::default().contains(0.0, 0.0));
+        assert!(!MotionRange::default().contains(0.0, 0.0));
     }
 }

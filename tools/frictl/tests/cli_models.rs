@@ -558,6 +558,8 @@ fn import_accepts_hyphenated_feature_sets_and_inspect_names_the_blocks() {
     assert!(
         err.contains("joint-pos-joint-vel") && !err.contains("joint_pos_joint_vel"),
         "{err}"
+    );
+}
 
 #[test]
 fn convert_into_an_unwritable_place_names_the_output_not_a_temporary_file() {

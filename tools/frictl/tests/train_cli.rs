@@ -667,6 +667,7 @@ fn sets_without_motor_encoder_train_on_a_torque_sensed_dataset() {
         e.contains("`theta_motor_rad`") && e.contains("`delta-theta-joint-vel`"),
         "{e}"
     );
+}
 
 #[test]
 fn an_unwritable_output_is_named_not_a_hidden_temporary_file() {

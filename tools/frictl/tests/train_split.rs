@@ -335,7 +335,7 @@ fn held_out_runs_are_the_test_set_and_validation_comes_from_the_training_runs() 
                 .all(|k| k.dataset == 0),
             "validation and training only from the training run"
         );
-        let range: frictionless_dataset::InputRange =
+        let range: frictionless_dataset::MotionRange =
             serde_json::from_value(r["training_range"].clone()).unwrap();
         assert!(range.rows > 0 && range.sdot_rad_s[0] < 0.0 && range.sdot_rad_s[1] > 0.0);
     }

@@ -67,7 +67,7 @@ use super::data::{
     self, ChunkKey, DataError, DeltaThetaOffset, SetData, Split, SplitSpec, Windows,
 };
 use super::{EpochReport, PredictError, Predictor, TrainConfig, TrainError, Trainer, rmse};
-use frictionless_dataset::{Dataset, DatasetError, DatasetSidecar, InputRange};
+use frictionless_dataset::{Dataset, DatasetError, DatasetSidecar, MotionRange};
 
 /// Report format tag.
 pub const REPORT_FORMAT: &str = "frictionless-train-report-v1";
@@ -450,8 +450,8 @@ pub fn held_out_chunks(
 }
 
 /// The range of s and ṡ over the valid rows of the training and validation chunks: what the model saw.
-pub fn training_range(sources: &Sources, split: &Split) -> InputRange {
-    let mut r = InputRange::default();
+pub fn training_range(sources: &Sources, split: &Split) -> MotionRange {
+    let mut r = MotionRange::default();
     for (d, s) in sources.list.iter().enumerate() {
         let chunks: Vec<u32> = split
             .train
@@ -460,7 +460,7 @@ pub fn training_range(sources: &Sources, split: &Split) -> InputRange {
             .filter(|k| k.dataset as usize == d)
             .map(|k| k.chunk)
             .collect();
-        r.merge(&InputRange::of_chunks(&s.data, &chunks));
+        r.merge(&MotionRange::of_chunks(&s.data, &chunks));
     }
     r
 }
@@ -704,7 +704,7 @@ pub struct TrainReport {
     /// Range of s and ṡ over the valid rows of the training and validation chunks (`frictl eval`
     /// flags rows outside it as extrapolation); absent in older reports.
     #[serde(default)]
-    pub training_range: Option<InputRange>,
+    pub training_range: Option<MotionRange>,
 }
 
 /// A trained model and its report.

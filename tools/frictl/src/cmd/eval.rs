@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use frictionless::features::WarmupPolicy;
-use frictionless_dataset::{Dataset, DatasetSidecar, InputRange, RunInfo, dataset_runs};
+use frictionless_dataset::{Dataset, DatasetSidecar, MotionRange, RunInfo, dataset_runs};
 use frictionless_train::data::DeltaThetaOffset;
 use frictl::eval::{self, EvalOptions, ModelSpec, TrainingRange, plot};
 
@@ -183,7 +183,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // Held-out runs: the named runs and every run of a --test-dataset; the rest are training runs.
     let holding_out = !args.test_runs.is_empty() || !args.test_datasets.is_empty();
     let mut held: Vec<Vec<RunInfo>> = Vec::new();
-    let mut train_range = InputRange::default();
+    let mut train_range = MotionRange::default();
     for (i, (_, ds, _, runs)) in loaded.iter().enumerate() {
         let whole = i >= args.datasets.len();
         let (h, t): (Vec<RunInfo>, Vec<RunInfo>) = runs
@@ -191,7 +191,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .cloned()
             .partition(|r| !holding_out || whole || args.test_runs.contains(&r.name));
         for r in &t {
-            train_range.merge(&InputRange::of_chunks(ds, &r.chunks));
+            train_range.merge(&MotionRange::of_chunks(ds, &r.chunks));
         }
         held.push(h);
     }

@@ -523,7 +523,7 @@ pub struct TrainingRange {
     /// `"datasets"` (the training runs given to eval) or `"train_report"` (its `training_range`).
     pub source: String,
     /// The range.
-    pub range: frictionless_dataset::InputRange,
+    pub range: frictionless_dataset::MotionRange,
 }
 
 /// Adds `per_run`, `per_band`, the band edges and the training range to a report.

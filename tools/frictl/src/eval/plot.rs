@@ -24,7 +24,7 @@ use std::sync::OnceLock;
 use plotters::prelude::*;
 
 use super::{DatasetEval, ModelSpec, chunk_ranges};
-use frictionless_dataset::{Dataset, InputRange};
+use frictionless_dataset::{Dataset, MotionRange};
 
 /// Plotting errors (the message names the figure file).
 #[derive(Debug, thiserror::Error)]
@@ -184,7 +184,7 @@ pub fn friction_vs_velocity(
     ds: &Dataset,
     ev: &DatasetEval,
     models: &[ModelSpec],
-    training_range: Option<&InputRange>,
+    training_range: Option<&MotionRange>,
 ) -> Result<(), PlotError> {
     let idx: Vec<usize> = (0..ds.len()).filter(|&k| ev.mask[k]).collect();
     let pts = subsample(&idx, MAX_POINTS);

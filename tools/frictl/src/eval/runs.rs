@@ -4,7 +4,7 @@
 //! What it is: [`breakdown`] splits the rows an evaluation scored ([`super::DatasetEval::mask`]) by run
 //! ([`frictionless_dataset::RunInfo`]: the dataset sidecar's runs, or the whole file as one run) and by
 //! |ṡ| band ([`DEFAULT_BAND_EDGES_RAD_S`] or `--band-edges`: band j is `edges[j] ≤ |ṡ| < edges[j+1]`, the
-//! last one open), and, given the training range ([`InputRange`]: s and ṡ over the training runs' valid
+//! last one open), and, given the training range ([`MotionRange`]: s and ṡ over the training runs' valid
 //! rows), scores rows inside and outside it separately; [`RunReport`] / [`BandReport`] are the
 //! `per_run[]` / `per_band[]` entries of the eval report.
 //!
@@ -12,7 +12,7 @@
 
 use std::collections::BTreeMap;
 
-use frictionless_dataset::{Dataset, InputRange, RunInfo};
+use frictionless_dataset::{Dataset, MotionRange, RunInfo};
 use serde::{Deserialize, Serialize};
 
 use super::{DatasetEval, EvalError, ModelSpec};
@@ -46,7 +46,7 @@ pub fn band_of(edges: &[f64], sdot_rad_s: f64) -> Option<usize> {
 }
 
 /// Rows where s or ṡ lies outside `range` (every row false without a range).
-pub fn extrapolated_mask(ds: &Dataset, range: Option<&InputRange>) -> Vec<bool> {
+pub fn extrapolated_mask(ds: &Dataset, range: Option<&MotionRange>) -> Vec<bool> {
     (0..ds.len())
         .map(|k| range.is_some_and(|r| !r.contains(ds.s_rad[k], ds.sdot_rad_s[k])))
         .collect()
