@@ -21,6 +21,8 @@ if [ -z "${SKIP_PY:-}" ]; then
     echo "== reference vectors: $gen"
     "$VENV/bin/python" "$gen" --out "$FRICTIONLESS_REFS"
   done
+  # The log importers' tests build their .mat (h5py) and MCAP (mcap) fixtures with this interpreter.
+  export FRICTIONLESS_PY="$VENV/bin/python"
 else
   unset FRICTIONLESS_REFS
 fi
@@ -32,3 +34,13 @@ cargo build --workspace --bins
 
 echo "== cargo test"
 cargo test --workspace --no-fail-fast 2>&1 | tee target/cargo-test.log
+
+# `frictl import mat` needs the system HDF5 library (cargo feature `mat`, off by default so the first
+# command needs no C library): tested where libhdf5-dev is installed (CI installs it).
+if pkg-config --exists hdf5 2>/dev/null || [ -e /usr/include/hdf5/serial/hdf5.h ] || [ -e /usr/include/hdf5.h ]; then
+  echo "== cargo test --features mat (YARP .mat import through HDF5)"
+  cargo test -p frictionless-logs --features mat --no-fail-fast 2>&1 | tee -a target/cargo-test.log
+  cargo test -p frictl --features mat --test frictl --no-fail-fast import_cli 2>&1 | tee -a target/cargo-test.log
+else
+  echo "== skipped: .mat import tests (no system HDF5; apt install libhdf5-dev)"
+fi
