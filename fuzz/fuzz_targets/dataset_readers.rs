@@ -1,5 +1,5 @@
 //! Fuzz target: the dataset CSV reader (`Dataset::read_csv`, `read_columns`) and the JSON sidecar
-//! (`DatasetSidecar`, `runs_or_whole`) and fit-file readers (`FittedModel::read`) of
+//! (`DatasetSidecar`, `dataset_runs`) and fit-file readers (`FittedModel::read`) of
 //! `frictionless-dataset`, as `frictl train`, `fit`, `eval` and `predict` read them.
 //!
 //! Input: the CSV bytes, then (after the first 0xFF byte, which never occurs in UTF-8) the JSON
@@ -44,11 +44,10 @@ fuzz_target!(|data: &[u8]| {
     }
     let _ = frictionless_dataset::read_columns(&csv_path);
     if let Ok(side) = serde_json::from_slice::<DatasetSidecar>(json) {
-        // `runs_or_whole` lists one id per chunk the file claims (`chunks` is not checked against
-        // the CSV): only called for counts a dataset can have.
-        if side.chunks <= 1 << 20 {
-            let _ = side.runs_or_whole("ds");
-        }
+        // The runs come from the sidecar when it lists them, else from the data's own chunk column
+        // (never from the sidecar's claimed chunk count).
+        let empty = frictionless_dataset::Dataset::default();
+        let _ = frictionless_dataset::dataset_runs(&csv_path, Some(&side), &empty);
     }
     let fit_path = dir().join("fit.json");
     std::fs::write(&fit_path, json).expect("write scratch JSON");

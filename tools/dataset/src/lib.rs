@@ -284,7 +284,7 @@ pub struct DatasetSidecar {
     #[serde(default)]
     pub label: LabelSource,
     /// Runs (recordings) in the file, each a set of chunks; empty means the whole file is one run
-    /// (see [`DatasetSidecar::runs_or_whole`]). Evaluation can hold out whole runs.
+    /// (see [`dataset_runs`], which takes the chunks from the data, not from the sidecar's count). Evaluation can hold out whole runs.
     #[serde(default)]
     pub runs: Vec<RunInfo>,
     /// Dataset columns the source log did not have: NaN in every row (e.g. `theta_motor_rad` for a
@@ -317,21 +317,6 @@ pub struct RunInfo {
     pub source: String,
     /// Dataset chunk ids (values of the `chunk` column) that belong to this run.
     pub chunks: Vec<u32>,
-}
-
-impl DatasetSidecar {
-    /// The runs of the dataset: [`Self::runs`], or, when it is empty, one run named `whole_file_name`
-    /// holding every chunk `0..self.chunks`.
-    pub fn runs_or_whole(&self, whole_file_name: &str) -> Vec<RunInfo> {
-        if !self.runs.is_empty() {
-            return self.runs.clone();
-        }
-        vec![RunInfo {
-            name: whole_file_name.to_string(),
-            source: self.input_log.clone(),
-            chunks: (0..self.chunks as u32).collect(),
-        }]
-    }
 }
 
 /// The runs of the dataset at `path`: its sidecar's runs, or — a sidecar without runs, or none at all —
