@@ -171,7 +171,7 @@ typedef uint32_t fl_dtype;
 typedef struct fl_model_info {
     // Joint name, e.g. `"l_ankle_roll"` (NUL-terminated UTF-8).
     const char *joint_name;
-    // Feature-set name, e.g. `"delta_theta_joint_vel"` (NUL-terminated).
+    // Feature-set name, e.g. `"delta-theta-joint-vel"` (NUL-terminated).
     const char *feature_set;
     // Number of feature blocks (each `history` values long); describe each with
     // [`fl_model_feature_block`].
@@ -202,7 +202,7 @@ typedef struct fl_model_info {
 
 // One feature block (filled by [`fl_model_feature_block`]); the strings are static.
 typedef struct fl_feature_block {
-    // Signal name, e.g. `"delta_theta"`, `"joint_vel"` (NUL-terminated).
+    // Signal name, e.g. `"delta-theta"`, `"joint-vel"` (NUL-terminated).
     const char *name;
     // Unit of the values, e.g. `"motor rad"`, `"rad/s"` (NUL-terminated).
     const char *unit;

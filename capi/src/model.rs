@@ -45,7 +45,7 @@ pub struct fl_model {
 pub struct fl_model_info {
     /// Joint name, e.g. `"l_ankle_roll"` (NUL-terminated UTF-8).
     pub joint_name: *const c_char,
-    /// Feature-set name, e.g. `"delta_theta_joint_vel"` (NUL-terminated).
+    /// Feature-set name, e.g. `"delta-theta-joint-vel"` (NUL-terminated).
     pub feature_set: *const c_char,
     /// Number of feature blocks (each `history` values long); describe each with
     /// [`fl_model_feature_block`].
@@ -78,7 +78,7 @@ pub struct fl_model_info {
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct fl_feature_block {
-    /// Signal name, e.g. `"delta_theta"`, `"joint_vel"` (NUL-terminated).
+    /// Signal name, e.g. `"delta-theta"`, `"joint-vel"` (NUL-terminated).
     pub name: *const c_char,
     /// Unit of the values, e.g. `"motor rad"`, `"rad/s"` (NUL-terminated).
     pub unit: *const c_char,

@@ -43,7 +43,7 @@ fn cpp_device_example_builds_and_runs() {
         );
         if with_model {
             assert!(
-                text.contains("block 0: delta_theta [motor rad] x 20"),
+                text.contains("block 0: delta-theta [motor rad] x 20"),
                 "{text}"
             );
         }

@@ -121,7 +121,7 @@ PathType = Union[str, "PathLike[str]"]
 
 @dataclass(frozen=True)
 class FeatureBlock:
-    """One per-tick signal of a feature set: its name (e.g. ``"delta_theta"``) and unit."""
+    """One per-tick signal of a feature set: its name (e.g. ``"delta-theta"``) and unit."""
 
     name: str
     unit: str
@@ -261,7 +261,7 @@ def fwt_bytes(
     layers: Sequence[Tuple[Any, Any]],
     *,
     norm: Optional[Tuple[Any, Any]] = None,
-    features: str = "delta_theta_joint_vel",
+    features: str = "delta-theta-joint-vel",
     history: Optional[int] = None,
     temperature: bool = False,
     joint: str = "joint",
@@ -328,7 +328,7 @@ def write_fwt(path: PathType, layers: Sequence[Tuple[Any, Any]], **kwargs: Any) 
     output [Nm]. Keywords:
 
     - ``norm=(mean, scale)``: per-input ``x_norm = (x - mean) / scale`` (default identity);
-    - ``features``: the feature set name (default the paper's ``"delta_theta_joint_vel"``; see
+    - ``features``: the feature set name (default the paper's ``"delta-theta-joint-vel"``; see
       :func:`feature_sets`), ``history`` H (default: inferred from the input width),
       ``temperature`` (one motor temperature [°C] appended);
     - ``joint`` name, ``gear_ratio`` (signed r, required), ``kt`` [Nm/A] (required);

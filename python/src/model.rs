@@ -62,7 +62,7 @@ fn parse_filtering(s: &str) -> PyResult<SignalFiltering> {
     }
 }
 
-/// The feature set named `name` (its `FeatureSet::name()`, e.g. `"delta_theta_joint_vel"`).
+/// The feature set named `name` (its `FeatureSet::name()`, e.g. `"delta-theta-joint-vel"`).
 pub(crate) fn parse_feature_set(name: &str) -> PyResult<FeatureSet> {
     FeatureSet::ALL
         .iter()

@@ -111,9 +111,9 @@ def test_generic_feature_set_with_temperature(tmp_path):
     # [ω_m ×H, ṡ ×H, T]: blocks taken from model.info, not hard-coded per set.
     h = 6
     layers = random_layers([2 * h + 1, 10, 1], seed=9, amp=0.05)
-    m = fl.write_fwt(tmp_path / "mv.fwt", layers, features="motor_vel_joint_vel", temperature=True,
+    m = fl.write_fwt(tmp_path / "mv.fwt", layers, features="motor-vel-joint-vel", temperature=True,
                      gear_ratio=R, kt=0.1)
-    assert [b.name for b in m.info.blocks] == ["motor_vel", "joint_vel"]
+    assert [b.name for b in m.info.blocks] == ["motor-vel", "joint-vel"]
     s, sdot, theta, omega, temp = motion(50, seed=3)
     est = fl.Estimator(m)
     got = [est.push(*x) for x in zip(s, sdot, theta, omega, temp)]

@@ -24,7 +24,7 @@ def test_round_trip_f32_is_exact(small_model):
     np.testing.assert_array_equal(scale, norm[1])
     i = loaded.info
     assert (i.joint, i.gear_ratio, i.kt_nm_per_a) == ("knee", -100.0, 0.157)
-    assert (i.feature_set, i.history, i.temperature) == ("delta_theta_joint_vel", 10, False)
+    assert (i.feature_set, i.history, i.temperature) == ("delta-theta-joint-vel", 10, False)
     assert i.layers == (20, 16, 12, 1) and i.dtype == "f32"
     assert i.created_unix_s == 1 and i.tool_version.startswith("frictionless-py")
     assert i.scv_prior is None and math.isnan(i.val_rmse_nm)
@@ -58,12 +58,12 @@ def test_round_trip_reduced_precision_rounds_weights(dtype, half, tmp_path):
 
 def test_metadata_options_and_inferred_history(tmp_path):
     sets = fl.feature_sets()
-    assert "delta_theta_joint_vel" in sets and "motor_vel_joint_vel" in sets
-    assert sets["motor_vel_joint_vel"][0] == fl.FeatureBlock("motor_vel", "motor rad/s")
+    assert "delta-theta-joint-vel" in sets and "motor-vel-joint-vel" in sets
+    assert sets["motor-vel-joint-vel"][0] == fl.FeatureBlock("motor-vel", "motor rad/s")
     prior = dict(kc=8.1, ka=50.0, kv=5.5, ks=9.0, vs=0.1, alpha=2.0)
     layers = random_layers([2 * 7 + 1, 8, 1], seed=3)
     m = fl.write_fwt(
-        tmp_path / "t.fwt", layers, features="motor_vel_joint_vel", temperature=True,
+        tmp_path / "t.fwt", layers, features="motor-vel-joint-vel", temperature=True,
         joint="hip", gear_ratio=-50.0, kt=0.1, scv_prior=prior, val_rmse_nm=0.5,
         test_rmse_nm=0.75, filtering="causal", created_unix_s=1700000000, tool_version="my trainer",
     )

@@ -27,8 +27,8 @@ def frictl_predict(frictl, model_path, x, tmp_path):
 def test_shipped_model_info(shipped_model_path):
     m = fl.Model.load(shipped_model_path)
     i = m.info
-    assert i.feature_set == "delta_theta_joint_vel"
-    assert [b.name for b in i.blocks] == ["delta_theta", "joint_vel"]
+    assert i.feature_set == "delta-theta-joint-vel"
+    assert [b.name for b in i.blocks] == ["delta-theta", "joint-vel"]
     assert [b.unit for b in i.blocks] == ["motor rad", "rad/s"]
     assert i.history == 20 and not i.temperature
     assert i.n_inputs == m.n_inputs == 40
@@ -36,7 +36,7 @@ def test_shipped_model_info(shipped_model_path):
     assert i.gear_ratio == -160.0
     assert i.dtype == "f16"
     assert i.kt_nm_per_a > 0
-    assert len(i.input_labels) == 40 and i.input_labels[19].startswith("delta_theta[t]")
+    assert len(i.input_labels) == 40 and i.input_labels[19].startswith("delta-theta[t]")
     assert m.kernel_path in ("avx512", "avx2", "portable")
 
 

@@ -96,8 +96,13 @@ pub struct Args {
     /// Explicit test chunks, comma separated: CHUNK or DATASET:CHUNK.
     #[arg(long, value_delimiter = ',')]
     pub test_chunks: Option<Vec<String>>,
-    #[command(flatten)]
-    pub held_out: HeldOut,
+    /// Hold out a whole run as the test set (repeatable): a run name of a dataset's sidecar (`runs`),
+    /// or the file stem of a dataset without runs. Adds to --test-chunks; --test-frac is then ignored.
+    #[arg(long = "test-run", value_name = "NAME")]
+    pub test_runs: Vec<String>,
+    /// A dataset used only as test set (repeatable): loaded like --dataset, every chunk held out.
+    #[arg(long = "test-dataset", value_name = "FILE")]
+    pub test_datasets: Vec<PathBuf>,
     /// Warm-up policy.
     #[arg(long, value_enum, default_value_t = Warmup::HoldZero)]
     pub warmup: Warmup,
@@ -215,7 +220,13 @@ fn print_best(all: &[TrialResult], dir: &std::path::Path) {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let scv_bytes = std::fs::read(&args.scv)
         .map_err(|e| anyhow::anyhow!("{}: cannot read: {e}", args.scv.display()))?;
-    let datasets = args.held_out.all_datasets(&args.datasets);
+    // Not a flattened `HeldOut`: clap reports a flattened `Option<Args>` (see `Cli`) as absent when
+    // it holds a nested flatten, so the two options are spelled out here.
+    let held_out = HeldOut {
+        test_runs: args.test_runs.clone(),
+        test_datasets: args.test_datasets.clone(),
+    };
+    let datasets = held_out.all_datasets(&args.datasets);
     let sources = pipeline::load_sources(&datasets)?;
     let scv = pipeline::load_scv(&args.scv)?;
     let settings = SearchSettings {
@@ -232,11 +243,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             val_frac: args.val_frac,
             test_frac: args.test_frac,
             seed: args.seed,
-            test_chunks: args.held_out.test_chunks(
-                &sources,
-                &args.test_chunks,
-                args.datasets.len(),
-            )?,
+            test_chunks: held_out.test_chunks(&sources, &args.test_chunks, args.datasets.len())?,
         },
         datasets: datasets.iter().map(|p| p.display().to_string()).collect(),
         dataset_sha256: sources
