@@ -61,11 +61,14 @@ int main(int argc, char **argv) {
     const char *model_path = nullptr;
     long ticks = 1000;
     std::size_t n_joints = 3;
+    const char *trace_path = nullptr;  // diagnostics: one line per joint per tick (a test compares it)
     for (int i = 1; i < argc; i++) {
         if (!std::strcmp(argv[i], "--ticks") && i + 1 < argc) {
             ticks = std::atol(argv[++i]);
         } else if (!std::strcmp(argv[i], "--joints") && i + 1 < argc) {
             n_joints = static_cast<std::size_t>(std::atol(argv[++i]));
+        } else if (!std::strcmp(argv[i], "--trace") && i + 1 < argc) {
+            trace_path = argv[++i];
         } else {
             model_path = argv[i];
         }
@@ -115,6 +118,11 @@ int main(int argc, char **argv) {
             j.law.reset(l);
         }
         model.reset();  // estimators keep what they need
+        // Diagnostics only (a real device would not write a file in its loop): joint, sample, tau_F.
+        std::FILE *trace = trace_path ? std::fopen(trace_path, "w") : nullptr;
+        if (trace_path && !trace) {
+            throw std::runtime_error(std::string("cannot write ") + trace_path);
+        }
 
         // The 1 kHz loop: no allocation, no exception, status codes checked.
         auto next = std::chrono::steady_clock::now();
@@ -131,6 +139,11 @@ int main(int argc, char **argv) {
                 }
                 double f = 0.0;
                 failures += fl_estimator_estimate(j.estimator.get(), &s, &f) != FL_STATUS_OK;
+                if (trace) {
+                    std::fprintf(trace, "%zu,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g\n", k, s.s_rad,
+                                 s.sdot_rad_s, s.theta_motor_rad, s.omega_motor_rad_s,
+                                 s.temperature_c, f);
+                }
                 fl_law_input in{};
                 in.tau_des_nm = 1.0 * std::sin(1e-3 * static_cast<double>(tick));
                 in.friction_nm = f;
@@ -145,6 +158,9 @@ int main(int argc, char **argv) {
                 overruns++;
             }
             std::this_thread::sleep_until(next);
+        }
+        if (trace) {
+            std::fclose(trace);
         }
         std::printf("ticks %ld joints %zu failures %ld overruns %ld max_abs_i_a %.6g\n", ticks,
                     joints.size(), failures, overruns, max_abs_i);
