@@ -555,6 +555,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `frictl acquire --set` overrides that turn a preset's protocol into its unseen test run: the
+/// closed-loop tracking test set only (no sines, ramps, steps or training tracking). Used by the demo
+/// and by `frictl robot`.
+pub const UNSEEN_TEST_RUN: [&str; 5] = [
+    "protocol.sines.enabled=false",
+    "protocol.ramps.enabled=false",
+    "protocol.steps.enabled=false",
+    "protocol.tracking.train.enabled=false",
+    "protocol.tracking.test.enabled=true",
+];
+
 /// Stage 1, acquisition: the protocol (training) and an unseen closed-loop tracking set (test).
 fn acquire(
     r: &mut Runner,
@@ -591,15 +602,7 @@ fn acquire(
         "--name".into(),
         format!("{joint}_test"),
     ];
-    for k in [
-        "protocol.sines.enabled=false",
-        "protocol.ramps.enabled=false",
-        "protocol.steps.enabled=false",
-        "protocol.tracking.train.enabled=false",
-        "protocol.tracking.test.enabled=true",
-    ] {
-        test_args.push(format!("--set={k}"));
-    }
+    test_args.extend(UNSEEN_TEST_RUN.iter().map(|k| format!("--set={k}")));
     r.frictl(
         &format!("acquire {preset} (test, seed {})", seed + 100),
         &test_args,

@@ -165,15 +165,11 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> JointPlan {
                 "--name".into(),
                 "test".into(),
             ];
-            for k in [
-                "protocol.sines.enabled=false",
-                "protocol.ramps.enabled=false",
-                "protocol.steps.enabled=false",
-                "protocol.tracking.train.enabled=false",
-                "protocol.tracking.test.enabled=true",
-            ] {
-                test_args.push(format!("--set={k}"));
-            }
+            test_args.extend(
+                super::demo::UNSEEN_TEST_RUN
+                    .iter()
+                    .map(|k| format!("--set={k}")),
+            );
             test_args.extend(robot.acquire.test_set.iter().map(|k| format!("--set={k}")));
             for (what, args) in [("train", train_args), ("test", test_args)] {
                 stages.push(Stage {
