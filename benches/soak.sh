@@ -9,7 +9,8 @@
 #   bash benches/soak.sh [TICKS]        (or env SOAK_TICKS; default 1000000 = 16.7 min)
 #
 # Reports: ticks, missed ticks, wake lateness p99 / max, RSS of frictiond shortly after READY and at
-# the end, reloads applied / refused (from its log), RT-thread allocations counted after READY
+# the end (and at every tenth of the run: does it plateau?), reloads applied / refused (from its
+# log), RT-thread allocations counted after READY
 # (FRICTIOND_ALLOC_REPORT; must be 0), stale-input log lines. Exit status non-zero if frictiond
 # did not exit cleanly, a reload was applied or refused against the plan, or the RT thread allocated.
 # Not part of CI (it takes N/1000 s).
@@ -138,6 +139,7 @@ while awk -v e="$(elapsed)" -v s="$SECS" 'BEGIN { exit !(e + 0 < s + 0) }'; do
     mv "$WORK/frictiond.toml.new" "$WORK/frictiond.toml"
     kill -HUP "$D_PID"
     HUPS=$((HUPS + 1))
+    echo "$(elapsed) $(rss_kb "$D_PID")" >>"$WORK/rss.txt"
 done
 RSS_END=$(rss_kb "$D_PID")
 kill -TERM "$D_PID"
@@ -156,6 +158,10 @@ echo "  ticks                 $(get latency.txt ticks) (asked $TICKS), missed $(
 echo "  wake lateness         p99 <= $(get latency.txt lateness_p99_ns) ns, p99.9 <= $(get latency.txt lateness_p999_ns) ns, max $(get latency.txt lateness_max_ns) ns"
 echo "  compute               p99 <= $(get latency.txt compute_p99_ns) ns, max $(get latency.txt compute_max_ns) ns"
 echo "  RSS                   ${RSS_START} kB after READY, ${RSS_END} kB at the end"
+# RSS sampled at every SIGHUP: the value at each tenth of the run shows whether it plateaus.
+if [ -s "$WORK/rss.txt" ]; then
+    echo "  RSS by tenth of run   $(awk '{ t[NR] = $1; r[NR] = $2 } END { for (k = 1; k <= 10; k++) { i = int(NR * k / 10); if (i < 1) i = 1; printf "%s%d", (k > 1 ? " " : ""), r[i] } print " kB" }' "$WORK/rss.txt")"
+fi
 echo "  reloads               $HUPS SIGHUPs: $APPLIED applied (plan $WANT_APPLIED), $REFUSED refused (plan $WANT_REFUSED)"
 echo "  RT-thread allocations ${ALLOCS:-?} over $(get alloc.txt rt_counted_ticks) counted ticks ($(get alloc.txt rt_exempt_allocations) exempt: iceoryx2's documented per-sample Box)"
 echo "  stale-input log lines $STALE_LINES; frictiond exit status $rc"
