@@ -100,6 +100,8 @@ fn params(n: usize, pinn: Option<StorageDtype>) -> Box<Params> {
         stale_after_ticks: 20,
         on_stale: OnStale::Zero,
         configured_mask: if n == 64 { u64::MAX } else { (1u64 << n) - 1 },
+        split: n,
+        helper_mask: 0,
     })
 }
 
