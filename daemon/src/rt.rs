@@ -22,6 +22,15 @@
 //!    out-of-range ticks per joint;
 //!    publish [`DaemonStatus`] every `status_every_ticks`; advance the heartbeat.
 //!
+//! With `[loop] rt_threads = 2`, step 3 is [`Crew::compute`]: the joints were split at load into two
+//! halves balanced by weight bytes ([`Params::split_threads`]); this thread posts the second half to
+//! the helper thread (its loop, `helper_main`, is in this module too), computes the first with the
+//! same [`compute_joints`], waits for the helper (bounded: ¾ period after the wake, else its joints
+//! are published as 0 A + `FLAG_STALE`) and merges by joint index — bit for bit the output of one
+//! thread. Step 2 hands parameters over only while the helper holds no job. With `[loop] prefetch`,
+//! each thread walks its half's network weights into cache after publishing (`"after"`) or
+//! `prefetch_lead_us` before the next deadline (`"lead"`, inside step 0's sleep).
+//!
 //! [`run`] reads top to bottom as these steps, each a named function or method in this module
 //! (`wait_for_tick`, `ParamSlot::hand_over`, `Freshness::judge`, [`compute`], `Telemetry::record`
 //! / `Telemetry::publish`, `next_deadline`), then `publish_stop` on the way out.
@@ -1472,6 +1481,13 @@ fn start(
     Some((backend, grant, crew))
 }
 
+/// The main RT thread's half, `p.joints[..p.split]`, without a reference to the helper's half
+/// (which a late helper may still hold).
+#[inline]
+pub fn main_half(p: &Params) -> &[JointRt] {
+    joints_prefix(p, p.split)
+}
+
 /// `joints[..n]` of `p` without a reference to the rest of the buffer (the helper may hold
 /// `joints[split..]`).
 #[inline]
@@ -1821,7 +1837,7 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
         let Wake::Tick { wake_ns, timed_out } = wait_for_tick(
             &plan,
             &crew_plan,
-            joints_prefix(&slot.params, slot.params.split),
+            main_half(&slot.params),
             &mut backend,
             &mut inputs,
             tick,
@@ -1886,7 +1902,7 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
         // 4. output, telemetry, heartbeat
         let _ = backend.publish_command(&cmd);
         let done = monotonic_ns();
-        prefetch_after_publish(&crew_plan, joints_prefix(&slot.params, slot.params.split));
+        prefetch_after_publish(&crew_plan, main_half(&slot.params));
         tele.record(&plan, &inputs, &cmd, fresh, wake_ns, deadline, done);
         tick += 1;
         if tick.is_multiple_of(plan.status_every) {
