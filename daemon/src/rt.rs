@@ -25,9 +25,9 @@
 //! With `[loop] rt_threads = 2`, step 3 is [`Crew::compute`]: the joints were split at load into two
 //! halves balanced by weight bytes ([`Params::split_threads`]); this thread posts the second half to
 //! the helper thread (its loop, `helper_main`, is in this module too), computes the first with the
-//! same [`compute_joints`], waits for the helper (bounded: ¾ period after the wake, else its joints
-//! are published as 0 A + `FLAG_STALE`) and merges by joint index — bit for bit the output of one
-//! thread. Step 2 hands parameters over only while the helper holds no job. With `[loop] prefetch`,
+//! same [`compute_joints`], waits for the helper (bounded: ¾ period after the wake, under lockstep
+//! `lockstep_timeout_ms`; else its joints are published as 0 A + `FLAG_STALE`) and merges by joint
+//! index — bit for bit the output of one thread. Step 2 hands parameters over only while the helper holds no job. With `[loop] prefetch`,
 //! each thread walks its half's network weights into cache after publishing (`"after"`) or
 //! `prefetch_lead_us` before the next deadline (`"lead"`, inside step 0's sleep).
 //!
@@ -375,8 +375,8 @@ impl JointOut {
 // helper is idle, then bumps `epoch` (and wakes the helper with a futex only if it parked). The
 // helper computes its half into `JobOut`, stores the epoch in `done` (results ready), prefetches
 // if configured, then stores it in `idle` (it no longer touches the job or the joints). The main
-// thread computes its own half, spins for `done` until ¾ period after the wake, merges the helper's
-// joints by index and publishes. Parameters are handed over (reload) only while the helper is idle,
+// thread computes its own half, spins for `done` until ¾ period after the wake (lockstep:
+// `lockstep_timeout_ms`), merges the helper's joints by index and publishes. Parameters are handed over (reload) only while the helper is idle,
 // so it never sees a half-swapped set; a helper that is late gets its joints published as 0 A +
 // FLAG_STALE, is not given a new job until idle, and its joints get a bumpless reset afterwards.
 // ---------------------------------------------------------------------------------------------
@@ -474,17 +474,28 @@ fn futex_wake(word: &AtomicU32) {
     }
 }
 
-/// Spins until `word` holds `want` or the clock passes `by_ns`; whether it got there.
+/// How long a join spins before it yields the CPU between checks (the other thread may be waiting
+/// for this CPU) [ns].
+const JOIN_SPIN_NS: u64 = 50_000;
+
+/// Spins until `word` holds `want` or the clock passes `by_ns` (after [`JOIN_SPIN_NS`] with a
+/// `sched_yield` between checks); whether it got there.
 #[inline]
 fn spin_until_eq(word: &AtomicU32, want: u32, by_ns: u64) -> bool {
+    let yield_after = monotonic_ns().saturating_add(JOIN_SPIN_NS);
     loop {
         if word.load(Ordering::Acquire) == want {
             return true;
         }
-        if monotonic_ns() >= by_ns {
+        let now = monotonic_ns();
+        if now >= by_ns {
             return word.load(Ordering::Acquire) == want;
         }
-        std::hint::spin_loop();
+        if now >= yield_after {
+            std::thread::yield_now();
+        } else {
+            std::hint::spin_loop();
+        }
     }
 }
 
@@ -493,7 +504,8 @@ fn spin_until_eq(word: &AtomicU32, want: u32, by_ns: u64) -> bool {
 pub struct CrewPlan {
     /// Loop period [ns].
     pub period_ns: u64,
-    /// The join waits for the helper until this long after the wake [ns] (¾ period in frictiond).
+    /// The join waits for the helper until this long after the wake [ns]: ¾ period in frictiond
+    /// (clock trigger), `lockstep_timeout_ms` under lockstep (no deadline: a simulation waits).
     pub budget_ns: u64,
     /// `[loop] prefetch`.
     pub prefetch: Prefetch,
@@ -508,12 +520,17 @@ impl CrewPlan {
     pub fn of(config: &Config) -> Self {
         let l = &config.raw.loop_;
         let period_ns = config.period_ns();
+        let lockstep = l.trigger == Trigger::Lockstep;
         Self {
             period_ns,
-            budget_ns: period_ns / 4 * 3,
+            budget_ns: if lockstep {
+                l.lockstep_timeout_ms.saturating_mul(1_000_000)
+            } else {
+                period_ns / 4 * 3
+            },
             prefetch: l.prefetch,
             lead_ns: l.prefetch_lead_us.saturating_mul(1000),
-            lockstep: l.trigger == Trigger::Lockstep,
+            lockstep,
         }
     }
 }
