@@ -26,8 +26,8 @@ use std::hint::black_box;
 use frictiond::config::Prefetch;
 use frictiond::params::Params;
 use frictiond::rt::{
-    Crew, CrewPlan, Freshness, Inputs, ThreadRt, compute, main_half, prefetch_after_publish,
-    prefetch_joints, sleep_to_deadline,
+    Crew, CrewPlan, Freshness, HELPER_RELEASE_GRACE_NS, Inputs, ThreadRt, compute, main_half,
+    prefetch_after_publish, prefetch_joints, sleep_to_deadline,
 };
 use frictionless::kernel::Mlp;
 use frictionless::mlp::StorageDtype;
@@ -205,7 +205,7 @@ fn paced(
         match crew.as_deref_mut() {
             None => compute(p, &inp, FRESH, &mut prev, &mut cmd, &mut tau_f),
             Some(c) => {
-                c.release(wake + plan.budget_ns);
+                c.release(wake + plan.release_ns);
                 c.compute(
                     p, &inp, FRESH, &mut prev, &mut cmd, &mut tau_f, wake, deadline,
                 );
@@ -284,6 +284,7 @@ fn main() {
                     let plan = CrewPlan {
                         period_ns: PERIOD_NS,
                         budget_ns: PERIOD_NS / 4 * 3,
+                        release_ns: HELPER_RELEASE_GRACE_NS,
                         prefetch,
                         lead_ns: LEAD_NS,
                         lockstep: false,

@@ -378,12 +378,18 @@ impl JointOut {
 // thread computes its own half, spins for `done` until ¾ period after the wake (lockstep:
 // `lockstep_timeout_ms`), merges the helper's joints by index and publishes. Parameters are handed over (reload) only while the helper is idle,
 // so it never sees a half-swapped set; a helper that is late gets its joints published as 0 A +
-// FLAG_STALE, is not given a new job until idle, and its joints get a bumpless reset afterwards.
+// FLAG_STALE, is not given a new job until idle (the next tick waits at most
+// `HELPER_RELEASE_GRACE_NS` for that, lockstep its full budget), and its joints get a bumpless reset
+// afterwards.
 // ---------------------------------------------------------------------------------------------
 
 /// How long the helper spins for the next job after its timer wake (or after a job, under
 /// lockstep) before it parks on the futex [ns].
 const HELPER_SPIN_NS: u64 = 100_000;
+
+/// Clock trigger: how long a tick waits for a helper that has not released the previous job before
+/// it computes its own half without it (the helper's joints are then late again) [ns].
+pub const HELPER_RELEASE_GRACE_NS: u64 = 50_000;
 
 /// Longest single futex park of the helper, so a stop request is seen promptly [ns].
 const HELPER_PARK_NS: u64 = 20_000_000;
@@ -507,6 +513,10 @@ pub struct CrewPlan {
     /// The join waits for the helper until this long after the wake [ns]: ¾ period in frictiond
     /// (clock trigger), `lockstep_timeout_ms` under lockstep (no deadline: a simulation waits).
     pub budget_ns: u64,
+    /// A helper still holding the previous (late) job is waited for at most this long after the
+    /// wake before this tick goes on without it [ns]: [`HELPER_RELEASE_GRACE_NS`] (clock trigger),
+    /// `budget_ns` under lockstep.
+    pub release_ns: u64,
     /// `[loop] prefetch`.
     pub prefetch: Prefetch,
     /// `[loop] prefetch_lead_us` [ns].
@@ -521,12 +531,18 @@ impl CrewPlan {
         let l = &config.raw.loop_;
         let period_ns = config.period_ns();
         let lockstep = l.trigger == Trigger::Lockstep;
+        let budget_ns = if lockstep {
+            l.lockstep_timeout_ms.saturating_mul(1_000_000)
+        } else {
+            period_ns / 4 * 3
+        };
         Self {
             period_ns,
-            budget_ns: if lockstep {
-                l.lockstep_timeout_ms.saturating_mul(1_000_000)
+            budget_ns,
+            release_ns: if lockstep {
+                budget_ns
             } else {
-                period_ns / 4 * 3
+                HELPER_RELEASE_GRACE_NS.min(budget_ns)
             },
             prefetch: l.prefetch,
             lead_ns: l.prefetch_lead_us.saturating_mul(1000),
@@ -682,13 +698,14 @@ impl Crew {
         deadline_ns: u64,
     ) -> bool {
         let by_ns = wake_ns.saturating_add(self.plan.budget_ns);
+        let release_by_ns = wake_ns.saturating_add(self.plan.release_ns);
         let cx = TickCtx::begin(p, inp, fresh, *prev_active, cmd);
         let n = p.joints.len();
         let split = p.split.min(n);
         // Raw halves: the helper may still hold a late job's half (then it is not reposted and
         // this thread never touches it); `as_mut_ptr` creates no reference to the whole buffer.
         let base = p.joints.as_mut_ptr();
-        let posted = split < n && self.release(by_ns) && {
+        let posted = split < n && self.release(release_by_ns) && {
             // SAFETY: the helper is idle (released the previous job), so it reads nothing here.
             let job = unsafe { &mut *self.ren.job_in.get() };
             // SAFETY: `split <= n`: the pointer stays inside (or one past) the joints buffer.
@@ -1868,7 +1885,7 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
         // set; the new set's joints were split at build)
         let helper_free = crew
             .as_mut()
-            .is_none_or(|c| c.release(wake_ns.saturating_add(crew_plan.budget_ns)));
+            .is_none_or(|c| c.release(wake_ns.saturating_add(crew_plan.release_ns)));
         if helper_free && slot.hand_over() {
             prev_active = 0; // every enabled joint gets a bumpless reset
             let generation = slot.params.generation;
@@ -2277,6 +2294,7 @@ kv = 0.0
         let plan = CrewPlan {
             period_ns: 1_000_000,
             budget_ns,
+            release_ns: budget_ns,
             prefetch: Prefetch::After,
             lead_ns: 0,
             lockstep: true,
