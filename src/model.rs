@@ -276,6 +276,19 @@ impl PinnEstimator {
     pub fn fix_delta_theta_offset(&mut self, theta_off_motor_rad: Option<f64>) {
         self.history.fix_delta_theta_offset(theta_off_motor_rad);
     }
+
+    /// Brings the network's weights towards the core ([`Mlp::prefetch`]) so the next
+    /// [`FrictionModel::estimate`] does not wait for memory; for the idle part of a real-time period.
+    /// Allocation-free; changes no result.
+    #[inline]
+    pub fn prefetch(&self) {
+        self.mlp.prefetch();
+    }
+
+    /// Bytes of weight storage one inference streams ([`Mlp::weight_bytes`]).
+    pub fn weight_bytes(&self) -> usize {
+        self.mlp.weight_bytes()
+    }
 }
 
 impl FrictionModel for PinnEstimator {
@@ -318,6 +331,25 @@ pub enum JointModel {
     ScvCode(ScvCodeParams),
     /// PINN (boxed: it is large and holds the network).
     Pinn(Box<PinnEstimator>),
+}
+
+impl JointModel {
+    /// Prefetches the model's network weights ([`PinnEstimator::prefetch`]); a no-op for the static
+    /// models (CV, SCV, none), which have no weights to stream.
+    #[inline]
+    pub fn prefetch(&self) {
+        if let JointModel::Pinn(p) = self {
+            p.prefetch();
+        }
+    }
+
+    /// Bytes of network weights one estimate streams (0 for the static models).
+    pub fn weight_bytes(&self) -> usize {
+        match self {
+            JointModel::Pinn(p) => p.weight_bytes(),
+            _ => 0,
+        }
+    }
 }
 
 impl Default for JointModel {

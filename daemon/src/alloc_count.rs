@@ -61,6 +61,11 @@ pub fn set_counting(on: bool) {
     COUNTING.with(|c| c.set(on));
 }
 
+/// Whether counting is on for the calling thread.
+pub fn counting() -> bool {
+    COUNTING.try_with(Cell::get).unwrap_or(false)
+}
+
 /// Runs `f` with its allocations counted as exempt.
 #[inline]
 pub fn exempt<R>(f: impl FnOnce() -> R) -> R {

@@ -68,7 +68,7 @@ fn summary(cfg: &config::Config) -> String {
     use std::fmt::Write;
     let l = &cfg.raw.loop_;
     let mut s = format!(
-        "{}: OK\n  loop: period {} µs ({:.0} Hz), cpu {:?}, priority {:?}, lock_memory {}, cpu_dma_latency_us {:?}\n  backend: {:?} prefix {:?} root {:?}\n  safety: stale after {} ticks → {:?}\n",
+        "{}: OK\n  loop: period {} µs ({:.0} Hz), cpu {:?}, priority {:?}, lock_memory {}, cpu_dma_latency_us {:?}, rt_threads {} (helper_cpu {:?}), prefetch {:?}\n  backend: {:?} prefix {:?} root {:?}\n  safety: stale after {} ticks → {:?}\n",
         cfg.file.display(),
         l.period_us,
         1e6 / l.period_us as f64,
@@ -76,6 +76,9 @@ fn summary(cfg: &config::Config) -> String {
         l.priority,
         l.lock_memory,
         l.cpu_dma_latency_us,
+        l.rt_threads,
+        l.helper_cpu,
+        l.prefetch,
         cfg.raw.backend.kind,
         cfg.raw.backend.service_prefix,
         cfg.root_path,

@@ -163,6 +163,56 @@ pub struct Params {
     pub on_stale: OnStale,
     /// Bit set of configured joint indices.
     pub configured_mask: u64,
+    /// `joints[..split]` are computed by the main RT thread, `joints[split..]` by the helper thread
+    /// (`[loop] rt_threads = 2`); `split == joints.len()` with one RT thread. Set by
+    /// [`Params::split_threads`].
+    pub split: usize,
+    /// Bit set of the joint indices in `joints[split..]` (the helper's half); set with `split`.
+    pub helper_mask: u64,
+}
+
+/// Per-joint cost the split adds to a network's weight bytes (the law, the history, a static model):
+/// joints without a network are still spread evenly.
+const JOINT_BASE_COST: usize = 1024;
+
+impl Params {
+    /// Splits the joints once into the halves the RT threads compute: with `rt_threads = 2`, two
+    /// halves balanced by network weight bytes (greedy, heaviest first, ties by index), each kept
+    /// in index order, the main thread's half first; with 1, every joint on the main thread.
+    /// Reorders `joints` (outputs are written by [`JointRt::index`], so the order changes nothing
+    /// else). Off the RT thread.
+    pub fn split_threads(&mut self, rt_threads: u8) {
+        if rt_threads < 2 || self.joints.len() < 2 {
+            self.split = self.joints.len();
+            self.helper_mask = 0;
+            return;
+        }
+        let cost = |j: &JointRt| j.model.weight_bytes() + JOINT_BASE_COST;
+        let mut order: Vec<usize> = (0..self.joints.len()).collect();
+        order.sort_by(|&a, &b| {
+            cost(&self.joints[b])
+                .cmp(&cost(&self.joints[a]))
+                .then(self.joints[a].index.cmp(&self.joints[b].index))
+        });
+        let mut helper = vec![false; self.joints.len()];
+        let (mut main_cost, mut helper_cost) = (0usize, 0usize);
+        for k in order {
+            if helper_cost < main_cost {
+                helper[k] = true;
+                helper_cost += cost(&self.joints[k]);
+            } else {
+                main_cost += cost(&self.joints[k]);
+            }
+        }
+        let mut tagged: Vec<(bool, JointRt)> =
+            helper.into_iter().zip(self.joints.drain(..)).collect();
+        tagged.sort_by_key(|(h, j)| (*h, j.index));
+        self.split = tagged.iter().filter(|(h, _)| !h).count();
+        self.joints = tagged.into_iter().map(|(_, j)| j).collect();
+        self.helper_mask = self.joints[self.split..]
+            .iter()
+            .fold(0, |m, j| m | 1u64 << j.index);
+    }
 }
 
 /// Builds the runtime parameters (loads model files, designs filters). Off the RT thread.
@@ -248,11 +298,15 @@ pub fn build(cfg: &Config, generation: u64) -> Result<Box<Params>, ParamsError> 
             ood,
         });
     }
-    Ok(Box::new(Params {
+    let mut p = Box::new(Params {
         generation,
         joints,
         stale_after_ticks: cfg.raw.safety.stale_after_ticks,
         on_stale: cfg.raw.safety.on_stale,
         configured_mask,
-    }))
+        split: 0,
+        helper_mask: 0,
+    });
+    p.split_threads(cfg.raw.loop_.rt_threads);
+    Ok(p)
 }

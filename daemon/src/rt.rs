@@ -22,6 +22,15 @@
 //!    out-of-range ticks per joint;
 //!    publish [`DaemonStatus`] every `status_every_ticks`; advance the heartbeat.
 //!
+//! With `[loop] rt_threads = 2`, step 3 is [`Crew::compute`]: the joints were split at load into two
+//! halves balanced by weight bytes ([`Params::split_threads`]); this thread posts the second half to
+//! the helper thread (its loop, `helper_main`, is in this module too), computes the first with the
+//! same [`compute_joints`], waits for the helper (bounded: ¾ period after the wake, under lockstep
+//! `lockstep_timeout_ms`; else its joints are published as 0 A + `FLAG_STALE`) and merges by joint
+//! index — bit for bit the output of one thread. Step 2 hands parameters over only while the helper holds no job. With `[loop] prefetch`,
+//! each thread walks its half's network weights into cache after publishing (`"after"`) or
+//! `prefetch_lead_us` before the next deadline (`"lead"`, inside step 0's sleep).
+//!
 //! [`run`] reads top to bottom as these steps, each a named function or method in this module
 //! (`wait_for_tick`, `ParamSlot::hand_over`, `Freshness::judge`, [`compute`], `Telemetry::record`
 //! / `Telemetry::publish`, `next_deadline`), then `publish_stop` on the way out.
@@ -53,8 +62,8 @@ use frictionless_shm_types::{
 
 use crate::alloc_count;
 use crate::backend::{AnyBackend, Backend, BackendError};
-use crate::config::{BackendKind, Config, OnStale, Trigger};
-use crate::params::Params;
+use crate::config::{BackendKind, Config, OnStale, Prefetch, Trigger};
+use crate::params::{JointRt, Params};
 
 /// State shared between the RT thread and the supervisor (atomics only).
 #[derive(Debug, Default)]
@@ -80,6 +89,8 @@ pub struct Shared {
     /// Stale episodes so far (fresh → stale transitions, the start counting as one): the supervisor
     /// logs entries and recoveries from this and [`Shared::input_stale`] (the RT thread never logs).
     pub stale_episodes: AtomicU64,
+    /// Ticks whose helper half (`rt_threads = 2`) was late and published as 0 A + `FLAG_STALE`.
+    pub helper_late: AtomicU64,
 }
 
 /// Newest value of one input with its freshness.
@@ -129,7 +140,7 @@ impl<T: Copy> Latest<T> {
 }
 
 /// Task 1: the inputs.
-#[derive(Debug)]
+#[derive(Debug, Clone, Copy)]
 pub struct Inputs {
     /// Joint states.
     pub states: Latest<JointStates>,
@@ -154,7 +165,9 @@ pub struct Freshness {
     pub request_stale: bool,
 }
 
-/// Task 3: computes the command for one tick. Pure apart from the models' and laws' own state.
+/// Task 3: computes the command for one tick on the calling thread, every joint. Pure apart from
+/// the models' and laws' own state. (With `[loop] rt_threads = 2` the loop runs [`Crew::compute`]
+/// instead, which runs the same [`compute_joints`] on two threads.)
 ///
 /// `prev_active` holds the joints that ran the normal (model + law) path last tick: a joint entering
 /// it — enable edge, or first fresh state after a stale/fault gap — gets a bumpless reset (model
@@ -168,22 +181,76 @@ pub fn compute(
     cmd: &mut MotorCurrentCommand,
     tau_f_out: &mut [f64; MAX_JOINTS],
 ) {
-    let st = &inp.states.value;
-    let rq = &inp.request.value;
-    let enabled_now = if inp.request.have {
-        rq.enable_mask & p.configured_mask
-    } else {
-        0
-    };
-    cmd.valid_mask = enabled_now;
-    cmd.n_joints = p.joints.len() as u32;
-    cmd.state_stamp_ns = if inp.states.have { st.stamp_ns } else { 0 };
-    cmd.state_seq = if inp.states.have { st.seq } else { 0 };
+    let cx = TickCtx::begin(p, inp, fresh, *prev_active, cmd);
+    *prev_active = compute_joints(
+        &mut p.joints,
+        &cx,
+        &mut cmd.i_ref_a,
+        &mut cmd.flags,
+        tau_f_out,
+    );
+}
+
+/// What every joint of one tick reads, the same on both RT threads.
+#[derive(Debug, Clone, Copy)]
+pub struct TickCtx<'a> {
+    st: &'a JointStates,
+    rq: &'a TorqueRequest,
+    enabled_now: u64,
+    fresh: Freshness,
+    on_stale: OnStale,
+    prev_active: u64,
+}
+
+impl<'a> TickCtx<'a> {
+    /// The tick's enable mask and the command's header (valid mask, joint count, state stamp/seq).
+    #[inline]
+    fn begin(
+        p: &Params,
+        inp: &'a Inputs,
+        fresh: Freshness,
+        prev_active: u64,
+        cmd: &mut MotorCurrentCommand,
+    ) -> Self {
+        let st = &inp.states.value;
+        let rq = &inp.request.value;
+        let enabled_now = if inp.request.have {
+            rq.enable_mask & p.configured_mask
+        } else {
+            0
+        };
+        cmd.valid_mask = enabled_now;
+        cmd.n_joints = p.joints.len() as u32;
+        cmd.state_stamp_ns = if inp.states.have { st.stamp_ns } else { 0 };
+        cmd.state_seq = if inp.states.have { st.seq } else { 0 };
+        Self {
+            st,
+            rq,
+            enabled_now,
+            fresh,
+            on_stale: p.on_stale,
+            prev_active,
+        }
+    }
+}
+
+/// Task 3 for a set of joints (all of them, or one RT thread's half): per joint, enable edge →
+/// reset, model, range check, law, stale/fault/NaN handling, written at the joint's index into
+/// `i_a`, `flags` and `tau_f_out`. Returns the bits of the joints that ran the normal path.
+#[inline]
+pub fn compute_joints(
+    joints: &mut [JointRt],
+    cx: &TickCtx<'_>,
+    i_a: &mut [f64; MAX_JOINTS],
+    flags: &mut [u32; MAX_JOINTS],
+    tau_f_out: &mut [f64; MAX_JOINTS],
+) -> u64 {
+    let (st, rq, fresh) = (cx.st, cx.rq, cx.fresh);
     let mut active = 0u64;
-    for j in p.joints.iter_mut() {
+    for j in joints.iter_mut() {
         let k = j.index;
         let bit = 1u64 << k;
-        let out = if enabled_now & bit == 0 {
+        let out = if cx.enabled_now & bit == 0 {
             JointOut::zero(FLAG_DISABLED)
         } else if fresh.request_stale || (k as u32) >= rq.n_joints {
             JointOut::zero(FLAG_STALE)
@@ -194,7 +261,7 @@ pub fn compute(
             // Whole-state staleness, or this joint's drive fell silent on a field bus (the CAN
             // backend marks it with FAULT_FEEDBACK_STALE alone): the configured safe output. A
             // drive fault reported alongside wins (the fault branch below).
-            match p.on_stale {
+            match cx.on_stale {
                 OnStale::Zero => JointOut::zero(FLAG_STALE),
                 OnStale::StaticModel => {
                     JointOut::from_law(j.law.feed_forward_only(rq.tau_des_nm[k]), FLAG_STALE)
@@ -211,7 +278,7 @@ pub fn compute(
                 omega_motor_rad_s: st.omega_motor_rad_s[k],
                 temperature_c: st.temperature_c[k],
             };
-            if *prev_active & bit == 0 {
+            if cx.prev_active & bit == 0 {
                 // Bumpless enable: fresh history and filter state.
                 j.model.reset(&sample);
                 j.law.reset();
@@ -237,11 +304,11 @@ pub fn compute(
             let ood_flag = if ood { FLAG_OUT_OF_RANGE } else { 0 };
             JointOut::from_law(o, warming | ood_flag)
         };
-        cmd.i_ref_a[k] = out.i_a;
-        cmd.flags[k] = out.flags;
+        i_a[k] = out.i_a;
+        flags[k] = out.flags;
         tau_f_out[k] = out.tau_f_hat_nm;
     }
-    *prev_active = active;
+    active
 }
 
 /// Whether a PINN joint's feature history is not full yet (its estimate is a warm-up 0 under
@@ -300,6 +367,518 @@ impl JointOut {
     }
 }
 
+// ---------------------------------------------------------------------------------------------
+// Two RT threads (`[loop] rt_threads = 2`): the helper thread and its deterministic join.
+//
+// Protocol (no locks, no allocation): the main RT thread writes a job (`JobIn`: the helper's joints
+// as a raw slice of the current `Params`, a copy of the inputs, the tick's context) only while the
+// helper is idle, then bumps `epoch` (and wakes the helper with a futex only if it parked). The
+// helper computes its half into `JobOut`, stores the epoch in `done` (results ready), prefetches
+// if configured, then stores it in `idle` (it no longer touches the job or the joints). The main
+// thread computes its own half, spins for `done` until ¾ period after the wake (lockstep:
+// `lockstep_timeout_ms`), merges the helper's joints by index and publishes. Parameters are handed over (reload) only while the helper is idle,
+// so it never sees a half-swapped set; a helper that is late gets its joints published as 0 A +
+// FLAG_STALE, is not given a new job until idle (the next tick waits at most
+// `HELPER_RELEASE_GRACE_NS` for that, lockstep its full budget), and its joints get a bumpless reset
+// afterwards.
+// ---------------------------------------------------------------------------------------------
+
+/// How long the helper spins for the next job after its timer wake (or after a job, under
+/// lockstep) before it parks on the futex [ns].
+const HELPER_SPIN_NS: u64 = 100_000;
+
+/// Clock trigger: how long a tick waits for a helper that has not released the previous job before
+/// it computes its own half without it (the helper's joints are then late again) [ns].
+pub const HELPER_RELEASE_GRACE_NS: u64 = 50_000;
+
+/// Longest single futex park of the helper, so a stop request is seen promptly [ns].
+const HELPER_PARK_NS: u64 = 20_000_000;
+
+/// The job the main RT thread posts (read by the helper between `epoch` and `idle`).
+struct JobIn {
+    joints: *mut JointRt,
+    n: usize,
+    inputs: Inputs,
+    fresh: Freshness,
+    enabled_now: u64,
+    prev_active: u64,
+    on_stale: OnStale,
+    /// The tick's deadline (0 under lockstep): the helper's next wake is one period later.
+    deadline_ns: u64,
+    count_allocs: bool,
+}
+
+/// The helper's results (written by the helper before `done`, read by the main thread after it).
+struct JobOut {
+    i_a: [f64; MAX_JOINTS],
+    flags: [u32; MAX_JOINTS],
+    tau_f_nm: [f64; MAX_JOINTS],
+    active: u64,
+}
+
+/// What the two RT threads share.
+struct Rendezvous {
+    /// Job counter: bumped by the main thread to post a job (the futex word the helper parks on).
+    epoch: AtomicU32,
+    /// Epoch whose results are in `job_out`.
+    done: AtomicU32,
+    /// Epoch after which the helper no longer touches `job_in` or the joints.
+    idle: AtomicU32,
+    /// The helper is parked (or about to park) on `epoch`: the main thread must wake it.
+    parked: AtomicU32,
+    /// End the helper (set before a last epoch bump).
+    stop: AtomicBool,
+    job_in: std::cell::UnsafeCell<JobIn>,
+    job_out: std::cell::UnsafeCell<JobOut>,
+}
+
+// SAFETY: `job_in` is written by the main thread only while `idle == epoch` (the helper is not
+// reading it) and read by the helper only between seeing a new `epoch` and storing `idle`; `job_out`
+// is written by the helper only before it stores `done` and read by the main thread only after
+// loading that `done` and before the next post. The epochs are Release/Acquire (SeqCst with
+// `parked`), which orders every access. The joints behind `JobIn::joints` are `Send` (checked
+// below) and touched by one thread at a time under the same rule.
+unsafe impl Sync for Rendezvous {}
+unsafe impl Send for Rendezvous {}
+
+const _: fn() = || {
+    fn send<T: Send>() {}
+    send::<JointRt>();
+};
+
+/// `FUTEX_WAIT_PRIVATE` on `word` while it equals `expected`, at most `timeout_ns`.
+fn futex_wait(word: &AtomicU32, expected: u32, timeout_ns: u64) {
+    let ts = libc::timespec {
+        tv_sec: (timeout_ns / 1_000_000_000) as _,
+        tv_nsec: (timeout_ns % 1_000_000_000) as _,
+    };
+    // SAFETY: `word` is a live, aligned u32; `ts` is a valid relative timeout. Spurious returns
+    // (EAGAIN, EINTR, ETIMEDOUT) are fine: the caller re-checks the word.
+    unsafe {
+        libc::syscall(
+            libc::SYS_futex,
+            word.as_ptr(),
+            libc::FUTEX_WAIT | libc::FUTEX_PRIVATE_FLAG,
+            expected,
+            &ts as *const libc::timespec,
+            std::ptr::null::<u32>(),
+            0u32,
+        );
+    }
+}
+
+/// `FUTEX_WAKE_PRIVATE`: wakes every waiter on `word`.
+fn futex_wake(word: &AtomicU32) {
+    // SAFETY: `word` is a live, aligned u32.
+    unsafe {
+        libc::syscall(
+            libc::SYS_futex,
+            word.as_ptr(),
+            libc::FUTEX_WAKE | libc::FUTEX_PRIVATE_FLAG,
+            i32::MAX,
+        );
+    }
+}
+
+/// How long a join spins before it yields the CPU between checks (the other thread may be waiting
+/// for this CPU) [ns].
+const JOIN_SPIN_NS: u64 = 50_000;
+
+/// Spins until `word` holds `want` or the clock passes `by_ns` (after [`JOIN_SPIN_NS`] with a
+/// `sched_yield` between checks); whether it got there.
+#[inline]
+fn spin_until_eq(word: &AtomicU32, want: u32, by_ns: u64) -> bool {
+    let yield_after = monotonic_ns().saturating_add(JOIN_SPIN_NS);
+    loop {
+        if word.load(Ordering::Acquire) == want {
+            return true;
+        }
+        let now = monotonic_ns();
+        if now >= by_ns {
+            return word.load(Ordering::Acquire) == want;
+        }
+        if now >= yield_after {
+            std::thread::yield_now();
+        } else {
+            std::hint::spin_loop();
+        }
+    }
+}
+
+/// How the two RT threads run: budgets and the prefetch policy (from `[loop]`).
+#[derive(Debug, Clone, Copy)]
+pub struct CrewPlan {
+    /// Loop period [ns].
+    pub period_ns: u64,
+    /// The join waits for the helper until this long after the wake [ns]: ¾ period in frictiond
+    /// (clock trigger), `lockstep_timeout_ms` under lockstep (no deadline: a simulation waits).
+    pub budget_ns: u64,
+    /// A helper still holding the previous (late) job is waited for at most this long after the
+    /// wake before this tick goes on without it [ns]: [`HELPER_RELEASE_GRACE_NS`] (clock trigger),
+    /// `budget_ns` under lockstep.
+    pub release_ns: u64,
+    /// `[loop] prefetch`.
+    pub prefetch: Prefetch,
+    /// `[loop] prefetch_lead_us` [ns].
+    pub lead_ns: u64,
+    /// Lockstep trigger: no deadlines (the helper parks between jobs; `lead` acts as `after`).
+    pub lockstep: bool,
+}
+
+impl CrewPlan {
+    /// The plan `[loop]` asks for.
+    pub fn of(config: &Config) -> Self {
+        let l = &config.raw.loop_;
+        let period_ns = config.period_ns();
+        let lockstep = l.trigger == Trigger::Lockstep;
+        let budget_ns = if lockstep {
+            l.lockstep_timeout_ms.saturating_mul(1_000_000)
+        } else {
+            period_ns / 4 * 3
+        };
+        Self {
+            period_ns,
+            budget_ns,
+            release_ns: if lockstep {
+                budget_ns
+            } else {
+                HELPER_RELEASE_GRACE_NS.min(budget_ns)
+            },
+            prefetch: l.prefetch,
+            lead_ns: l.prefetch_lead_us.saturating_mul(1000),
+            lockstep,
+        }
+    }
+}
+
+/// RT settings of one thread (`[loop]` `cpu` / `helper_cpu`, `priority`, `lock_memory`).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ThreadRt {
+    /// CPU to pin to.
+    pub cpu: Option<usize>,
+    /// SCHED_FIFO priority.
+    pub priority: Option<i32>,
+    /// `mlockall` (again from this thread, so its stack is locked too).
+    pub lock_memory: bool,
+}
+
+/// How the helper thread ran (for the latency report).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct HelperReport {
+    /// Granted `STATUS_*` flags (`STATUS_CPU_PINNED` only with `helper_cpu`).
+    pub rt_flags: u32,
+    /// Scheduling policy at the end.
+    pub policy: i32,
+    /// Priority at the end.
+    pub priority: i32,
+    /// Jobs run.
+    pub jobs: u64,
+    /// Page faults and context switches during the loop.
+    pub usage: ThreadUsage,
+}
+
+/// The second RT thread of `[loop] rt_threads = 2` and the main thread's side of the join.
+pub struct Crew {
+    ren: Arc<Rendezvous>,
+    thread: Option<std::thread::JoinHandle<HelperReport>>,
+    plan: CrewPlan,
+    /// Epoch of the last job posted.
+    posted: u32,
+    /// A posted job the helper has not released (`idle != posted`).
+    busy: bool,
+    /// Ticks whose helper half was not done in time.
+    late: u64,
+}
+
+impl std::fmt::Debug for Crew {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Crew")
+            .field("plan", &self.plan)
+            .field("posted", &self.posted)
+            .field("busy", &self.busy)
+            .field("late", &self.late)
+            .finish()
+    }
+}
+
+impl Crew {
+    /// Starts the helper thread with the RT settings `rt` (set-up: allocates). Returns the
+    /// settings it was granted (`STATUS_*`) and the refusals, or why it could not start.
+    pub fn spawn(plan: CrewPlan, rt: ThreadRt) -> std::io::Result<(Self, u32, Vec<RtRefusal>)> {
+        let ren = Arc::new(Rendezvous {
+            epoch: AtomicU32::new(0),
+            done: AtomicU32::new(0),
+            idle: AtomicU32::new(0),
+            parked: AtomicU32::new(0),
+            stop: AtomicBool::new(false),
+            job_in: std::cell::UnsafeCell::new(JobIn {
+                joints: std::ptr::null_mut(),
+                n: 0,
+                inputs: Inputs {
+                    states: Latest::new(JointStates::zeroed()),
+                    request: Latest::new(TorqueRequest::zeroed()),
+                },
+                fresh: Freshness {
+                    state_stale: true,
+                    request_stale: true,
+                },
+                enabled_now: 0,
+                prev_active: 0,
+                on_stale: OnStale::Zero,
+                deadline_ns: 0,
+                count_allocs: false,
+            }),
+            job_out: std::cell::UnsafeCell::new(JobOut {
+                i_a: [0.0; MAX_JOINTS],
+                flags: [0; MAX_JOINTS],
+                tau_f_nm: [0.0; MAX_JOINTS],
+                active: 0,
+            }),
+        });
+        let (tx, rx) = std::sync::mpsc::sync_channel(1);
+        let r = ren.clone();
+        let thread = std::thread::Builder::new()
+            .name("frictiond-rt2".into())
+            .stack_size(2 << 20)
+            .spawn(move || {
+                let mut refused = Vec::new();
+                let flags = apply_thread_rt(rt, &mut refused);
+                prefault_stack();
+                let _ = tx.send((flags, refused));
+                helper_main(&r, plan, flags)
+            })?;
+        let (flags, refused) = rx
+            .recv()
+            .map_err(|_| std::io::Error::other("the helper RT thread ended during set-up"))?;
+        Ok((
+            Self {
+                ren,
+                thread: Some(thread),
+                plan,
+                posted: 0,
+                busy: false,
+                late: 0,
+            },
+            flags,
+            refused,
+        ))
+    }
+
+    /// Ticks whose helper half was not done within the budget (published as 0 A + FLAG_STALE).
+    pub fn late_ticks(&self) -> u64 {
+        self.late
+    }
+
+    /// Waits (spinning, until `by_ns`) for the helper to release its last job; `true` when it has
+    /// (then the parameters may be swapped and a new job posted).
+    #[inline]
+    pub fn release(&mut self, by_ns: u64) -> bool {
+        if self.busy && spin_until_eq(&self.ren.idle, self.posted, by_ns) {
+            self.busy = false;
+        }
+        !self.busy
+    }
+
+    /// Task 3 on two threads: posts `p.joints[p.split..]` to the helper, computes
+    /// `p.joints[..p.split]` here, joins (until `wake_ns` + the budget) and merges by joint index.
+    /// Output bit for bit that of [`compute`]. Returns whether the helper's half was on time; if
+    /// not, its enabled joints are 0 A with `FLAG_STALE` (disabled ones `FLAG_DISABLED`) and get a
+    /// bumpless reset when they are back. `deadline_ns` is the tick's deadline (0 under lockstep).
+    #[allow(clippy::too_many_arguments)] // compute's arguments plus the tick's times
+    #[inline]
+    pub fn compute(
+        &mut self,
+        p: &mut Params,
+        inp: &Inputs,
+        fresh: Freshness,
+        prev_active: &mut u64,
+        cmd: &mut MotorCurrentCommand,
+        tau_f_out: &mut [f64; MAX_JOINTS],
+        wake_ns: u64,
+        deadline_ns: u64,
+    ) -> bool {
+        let by_ns = wake_ns.saturating_add(self.plan.budget_ns);
+        let release_by_ns = wake_ns.saturating_add(self.plan.release_ns);
+        let cx = TickCtx::begin(p, inp, fresh, *prev_active, cmd);
+        let n = p.joints.len();
+        let split = p.split.min(n);
+        // Raw halves: the helper may still hold a late job's half (then it is not reposted and
+        // this thread never touches it); `as_mut_ptr` creates no reference to the whole buffer.
+        let base = p.joints.as_mut_ptr();
+        let posted = split < n && self.release(release_by_ns) && {
+            // SAFETY: the helper is idle (released the previous job), so it reads nothing here.
+            let job = unsafe { &mut *self.ren.job_in.get() };
+            // SAFETY: `split <= n`: the pointer stays inside (or one past) the joints buffer.
+            job.joints = unsafe { base.add(split) };
+            job.n = n - split;
+            job.inputs = *inp;
+            job.fresh = fresh;
+            job.enabled_now = cx.enabled_now;
+            job.prev_active = cx.prev_active;
+            job.on_stale = cx.on_stale;
+            job.deadline_ns = deadline_ns;
+            job.count_allocs = alloc_count::counting();
+            self.posted = self.posted.wrapping_add(1);
+            self.busy = true;
+            self.ren.epoch.store(self.posted, Ordering::SeqCst);
+            if self.ren.parked.load(Ordering::SeqCst) != 0 {
+                futex_wake(&self.ren.epoch);
+            }
+            true
+        };
+        // SAFETY: `joints[..split]` is this thread's half; the helper only ever gets `[split..]`.
+        let mine = unsafe { std::slice::from_raw_parts_mut(base, split) };
+        let mut active = compute_joints(mine, &cx, &mut cmd.i_ref_a, &mut cmd.flags, tau_f_out);
+        let on_time = posted && spin_until_eq(&self.ren.done, self.posted, by_ns);
+        let mut bits = p.helper_mask;
+        if on_time {
+            // SAFETY: `done == posted` (Acquire): the helper finished writing `job_out`.
+            let out = unsafe { &*self.ren.job_out.get() };
+            while bits != 0 {
+                let k = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                cmd.i_ref_a[k] = out.i_a[k];
+                cmd.flags[k] = out.flags[k];
+                tau_f_out[k] = out.tau_f_nm[k];
+            }
+            active |= out.active;
+        } else {
+            while bits != 0 {
+                let k = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let flag = if cx.enabled_now & (1 << k) != 0 {
+                    FLAG_STALE
+                } else {
+                    FLAG_DISABLED
+                };
+                cmd.i_ref_a[k] = 0.0;
+                cmd.flags[k] = flag;
+                tau_f_out[k] = 0.0;
+            }
+            if split < n {
+                self.late += 1;
+            }
+        }
+        *prev_active = active;
+        on_time || split >= n
+    }
+
+    /// Whether the helper holds a job it has not released (its joints must not be touched).
+    pub fn busy(&self) -> bool {
+        self.busy
+    }
+
+    /// Stops and joins the helper (waits for its current job); its report.
+    pub fn stop(mut self) -> HelperReport {
+        self.stop_inner().unwrap_or_default()
+    }
+
+    fn stop_inner(&mut self) -> Option<HelperReport> {
+        let t = self.thread.take()?;
+        self.ren.stop.store(true, Ordering::SeqCst);
+        self.ren.epoch.fetch_add(1, Ordering::SeqCst);
+        futex_wake(&self.ren.epoch);
+        t.join().ok()
+    }
+}
+
+impl Drop for Crew {
+    fn drop(&mut self) {
+        // The helper may hold pointers into the caller's parameters: it ends before they can go.
+        let _ = self.stop_inner();
+    }
+}
+
+/// Walks the networks of `joints` into cache, last joint first (so the first ones computed are the
+/// most recently fetched). Allocation-free.
+#[inline]
+pub fn prefetch_joints(joints: &[JointRt]) {
+    for j in joints.iter().rev() {
+        j.model.prefetch();
+    }
+}
+
+/// The helper thread's loop: wait for a job (timer to the next deadline, spin, then park), compute
+/// its half, report `done`, prefetch per the plan, report `idle`.
+fn helper_main(ren: &Rendezvous, plan: CrewPlan, rt_flags: u32) -> HelperReport {
+    let usage_start = ThreadUsage::now();
+    let mut seen = 0u32;
+    let mut wake_at_ns = 0u64;
+    let mut jobs = 0u64;
+    loop {
+        if wake_at_ns != 0 {
+            sleep_until_ns(wake_at_ns);
+        }
+        let mut spin_end = monotonic_ns() + HELPER_SPIN_NS;
+        let epoch = loop {
+            let e = ren.epoch.load(Ordering::Acquire);
+            if e != seen {
+                break e;
+            }
+            if monotonic_ns() < spin_end {
+                std::hint::spin_loop();
+                continue;
+            }
+            ren.parked.store(1, Ordering::SeqCst);
+            if ren.epoch.load(Ordering::SeqCst) == seen {
+                futex_wait(&ren.epoch, seen, HELPER_PARK_NS);
+            }
+            ren.parked.store(0, Ordering::SeqCst);
+            spin_end = 0;
+        };
+        if ren.stop.load(Ordering::SeqCst) {
+            break;
+        }
+        seen = epoch;
+        jobs += 1;
+        // SAFETY: a new epoch: the main thread wrote the job and will not touch it (or the joints
+        // it points to) until `idle == seen`.
+        let job = unsafe { &*ren.job_in.get() };
+        alloc_count::set_counting(job.count_allocs);
+        // SAFETY: `joints[..n]` is the helper's half of live parameters, kept alive and untouched by
+        // the main thread until `idle == seen`.
+        let joints = unsafe { std::slice::from_raw_parts_mut(job.joints, job.n) };
+        // SAFETY: the main thread reads `job_out` only after `done == seen`.
+        let out = unsafe { &mut *ren.job_out.get() };
+        let cx = TickCtx {
+            st: &job.inputs.states.value,
+            rq: &job.inputs.request.value,
+            enabled_now: job.enabled_now,
+            fresh: job.fresh,
+            on_stale: job.on_stale,
+            prev_active: job.prev_active,
+        };
+        out.active = compute_joints(joints, &cx, &mut out.i_a, &mut out.flags, &mut out.tau_f_nm);
+        ren.done.store(seen, Ordering::Release);
+        let next_ns = if plan.lockstep || job.deadline_ns == 0 {
+            0
+        } else {
+            job.deadline_ns + plan.period_ns
+        };
+        match plan.prefetch {
+            Prefetch::Off => {}
+            Prefetch::After => prefetch_joints(joints),
+            Prefetch::Lead => {
+                if next_ns > plan.lead_ns {
+                    sleep_until_ns(next_ns - plan.lead_ns);
+                }
+                prefetch_joints(joints);
+            }
+        }
+        ren.idle.store(seen, Ordering::Release);
+        wake_at_ns = next_ns;
+    }
+    alloc_count::set_counting(false);
+    let (policy, priority) = sched_of_self();
+    HelperReport {
+        rt_flags,
+        policy,
+        priority,
+        jobs,
+        usage: ThreadUsage::now().since(usage_start),
+    }
+}
+
 /// Everything the RT thread gets from the supervisor.
 pub struct RtSetup {
     /// The validated config (loop, backend, safety).
@@ -329,6 +908,9 @@ pub enum RtSetupError {
         /// Why.
         source: BackendError,
     },
+    /// The helper thread of `rt_threads = 2` could not be started.
+    #[error("starting the helper RT thread (rt_threads = 2): {0}")]
+    Helper(#[source] std::io::Error),
     /// `[loop] require_rt = true` and at least one RT setting was refused.
     #[error("loop.require_rt = true and RT settings were refused: {}", join_refusals(.0))]
     RtRefused(Vec<RtRefusal>),
@@ -400,10 +982,10 @@ fn hold_cpu_dma_latency(us: u32) -> std::io::Result<(std::fs::File, i32)> {
     Ok((f, i32::from_ne_bytes(b)))
 }
 
-/// Applies RT settings to the calling thread; returns what was granted. Logs refusals.
+/// Applies RT settings to the calling (main RT) thread: PM QoS, then [`apply_thread_rt`] with
+/// `[loop] cpu`; returns what was granted. Logs refusals.
 fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, RtSetupError> {
     let l = &cfg.raw.loop_;
-    let mut flags = 0;
     let mut refused = Vec::new();
     let (mut pm_qos, mut pm_qos_us) = (None, None);
     if let Some(us) = l.cpu_dma_latency_us {
@@ -419,6 +1001,32 @@ fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, RtSetupError> {
             Err(source) => refused.push(RtRefusal::CpuDmaLatency { us, source }),
         }
     }
+    let flags = apply_thread_rt(
+        ThreadRt {
+            cpu: l.cpu,
+            priority: l.priority,
+            lock_memory: l.lock_memory,
+        },
+        &mut refused,
+    );
+    for r in &refused {
+        tracing::warn!("RT setting refused: {r}");
+    }
+    if l.require_rt && !refused.is_empty() {
+        return Err(RtSetupError::RtRefused(refused));
+    }
+    Ok(RtGrant {
+        flags,
+        _pm_qos: pm_qos,
+        pm_qos_us,
+    })
+}
+
+/// Per-thread RT settings on the calling thread (timer slack, affinity, SCHED_FIFO, mlockall);
+/// returns the granted `STATUS_*` flags and appends refusals to `refused`. Shared by the main RT
+/// thread and the helper of `rt_threads = 2`.
+fn apply_thread_rt(t: ThreadRt, refused: &mut Vec<RtRefusal>) -> u32 {
+    let mut flags = 0;
     // SAFETY: plain syscalls on the calling thread with valid arguments.
     unsafe {
         // Timer slack 1 ns (default 50 µs would dominate SCHED_OTHER lateness).
@@ -427,12 +1035,12 @@ fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, RtSetupError> {
         }
         // `libc::CPU_SET` indexes an array of CPU_SETSIZE bits and panics beyond it: the config
         // refuses such CPUs, and an out-of-range index is a refusal here too, never a panic.
-        if let Some(cpu) = l.cpu.filter(|&c| c >= libc::CPU_SETSIZE as usize) {
+        if let Some(cpu) = t.cpu.filter(|&c| c >= libc::CPU_SETSIZE as usize) {
             refused.push(RtRefusal::Affinity {
                 cpu,
                 source: std::io::Error::from_raw_os_error(libc::EINVAL),
             });
-        } else if let Some(cpu) = l.cpu {
+        } else if let Some(cpu) = t.cpu {
             let mut set: libc::cpu_set_t = std::mem::zeroed();
             libc::CPU_SET(cpu, &mut set);
             let ok = libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) == 0;
@@ -447,7 +1055,7 @@ fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, RtSetupError> {
                 });
             }
         }
-        if let Some(prio) = l.priority {
+        if let Some(prio) = t.priority {
             // Zeroed then set: musl's sched_param has extra (sporadic-server) fields glibc lacks.
             let mut sp: libc::sched_param = std::mem::zeroed();
             sp.sched_priority = prio;
@@ -464,7 +1072,7 @@ fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, RtSetupError> {
                 });
             }
         }
-        if l.lock_memory {
+        if t.lock_memory {
             // MCL_FUTURE under a finite RLIMIT_MEMLOCK makes later allocations past the limit fail:
             // only ask for it when the limit is unlimited (or we are root).
             let mut rl = libc::rlimit {
@@ -486,17 +1094,7 @@ fn apply_rt_settings(cfg: &Config) -> Result<RtGrant, RtSetupError> {
             }
         }
     }
-    for r in &refused {
-        tracing::warn!("RT setting refused: {r}");
-    }
-    if l.require_rt && !refused.is_empty() {
-        return Err(RtSetupError::RtRefused(refused));
-    }
-    Ok(RtGrant {
-        flags,
-        _pm_qos: pm_qos,
-        pm_qos_us,
-    })
+    flags
 }
 
 /// Touches `bytes` of stack so the loop never page-faults on it.
@@ -687,6 +1285,10 @@ pub struct RtSummary {
     pub status: Box<DaemonStatus>,
     /// How the RT thread ran: what it was granted and what happened to it during the loop.
     pub thread: RtThreadReport,
+    /// How the helper thread ran (`rt_threads = 2`), if there was one.
+    pub helper: Option<HelperReport>,
+    /// Ticks whose helper half was late (published as 0 A + `FLAG_STALE`).
+    pub helper_late: u64,
 }
 
 /// How the RT thread ran (for the latency report).
@@ -712,14 +1314,19 @@ pub struct RtThreadReport {
 
 impl RtThreadReport {
     fn policy_name(&self) -> &'static str {
-        match self.policy {
-            libc::SCHED_FIFO => "SCHED_FIFO",
-            libc::SCHED_RR => "SCHED_RR",
-            libc::SCHED_OTHER => "SCHED_OTHER",
-            libc::SCHED_BATCH => "SCHED_BATCH",
-            libc::SCHED_IDLE => "SCHED_IDLE",
-            _ => "unknown",
-        }
+        policy_name(self.policy)
+    }
+}
+
+/// Name of a `SCHED_*` policy.
+fn policy_name(policy: i32) -> &'static str {
+    match policy {
+        libc::SCHED_FIFO => "SCHED_FIFO",
+        libc::SCHED_RR => "SCHED_RR",
+        libc::SCHED_OTHER => "SCHED_OTHER",
+        libc::SCHED_BATCH => "SCHED_BATCH",
+        libc::SCHED_IDLE => "SCHED_IDLE",
+        _ => "unknown",
     }
 }
 
@@ -780,6 +1387,25 @@ impl RtSummary {
             t.usage.nvcsw,
             t.usage.nivcsw
         );
+        let _ = writeln!(
+            s,
+            "rt_threads={}\nhelper_late={}",
+            if self.helper.is_some() { 2 } else { 1 },
+            self.helper_late
+        );
+        if let Some(h) = &self.helper {
+            let _ = writeln!(
+                s,
+                "helper_policy={}\nhelper_priority={}\nhelper_cpu_pinned={}\nhelper_jobs={}\nhelper_minflt={}\nhelper_majflt={}\nhelper_nivcsw={}",
+                policy_name(h.policy),
+                h.priority,
+                h.rt_flags & STATUS_CPU_PINNED != 0,
+                h.jobs,
+                h.usage.minflt,
+                h.usage.majflt,
+                h.usage.nivcsw
+            );
+        }
         for (name, h) in [
             ("compute", &self.status.compute),
             ("input_age", &self.status.input_age),
@@ -826,13 +1452,14 @@ impl LoopPlan {
 }
 
 /// Set-up on the RT thread: opens the backend (its iceoryx2 ports are `!Send`), applies the RT
-/// settings, pre-faults the stack and reports the outcome through `started`. `None` if set-up
-/// failed (the error went to `started`).
+/// settings, starts the helper thread of `rt_threads = 2` (same priority and memory locking,
+/// `helper_cpu`; its refusals count like the main thread's), pre-faults the stack and reports the
+/// outcome through `started`. `None` if set-up failed (the error went to `started`).
 fn start(
     config: &Config,
     shared: &Shared,
     started: &SyncSender<Result<u32, RtSetupError>>,
-) -> Option<(AnyBackend, RtGrant)> {
+) -> Option<(AnyBackend, RtGrant, Option<Crew>)> {
     let backend = match AnyBackend::open(config) {
         Ok(b) => b,
         Err(source) => {
@@ -843,17 +1470,89 @@ fn start(
             return None;
         }
     };
-    let grant = match apply_rt_settings(config) {
+    let mut grant = match apply_rt_settings(config) {
         Ok(g) => g,
         Err(e) => {
             let _ = started.send(Err(e));
             return None;
         }
     };
+    let l = &config.raw.loop_;
+    let crew = if l.rt_threads >= 2 {
+        let rt = ThreadRt {
+            cpu: l.helper_cpu,
+            priority: l.priority,
+            lock_memory: l.lock_memory,
+        };
+        match Crew::spawn(CrewPlan::of(config), rt) {
+            Ok((crew, flags, refused)) => {
+                for r in &refused {
+                    tracing::warn!("RT setting refused (helper thread): {r}");
+                }
+                if l.require_rt && !refused.is_empty() {
+                    let _ = started.send(Err(RtSetupError::RtRefused(refused)));
+                    return None;
+                }
+                // A setting counts as granted only when both threads got it.
+                let both = STATUS_SCHED_FIFO | STATUS_MEMORY_LOCKED;
+                grant.flags &= flags | !both;
+                if l.helper_cpu.is_some() && flags & STATUS_CPU_PINNED == 0 {
+                    grant.flags &= !STATUS_CPU_PINNED;
+                }
+                Some(crew)
+            }
+            Err(e) => {
+                let _ = started.send(Err(RtSetupError::Helper(e)));
+                return None;
+            }
+        }
+    } else {
+        None
+    };
     shared.rt_flags.store(grant.flags, Ordering::Relaxed);
     prefault_stack();
     let _ = started.send(Ok(grant.flags));
-    Some((backend, grant))
+    Some((backend, grant, crew))
+}
+
+/// The main RT thread's half, `p.joints[..p.split]`, without a reference to the helper's half
+/// (which a late helper may still hold).
+#[inline]
+pub fn main_half(p: &Params) -> &[JointRt] {
+    joints_prefix(p, p.split)
+}
+
+/// `joints[..n]` of `p` without a reference to the rest of the buffer (the helper may hold
+/// `joints[split..]`).
+#[inline]
+fn joints_prefix(p: &Params, n: usize) -> &[JointRt] {
+    // SAFETY: `as_ptr` creates no reference to the buffer; `n` is clamped to the length; the
+    // prefix is not mutated while the returned borrow of `p` lives.
+    unsafe { std::slice::from_raw_parts(p.joints.as_ptr(), n.min(p.joints.len())) }
+}
+
+/// Step 0 of the clock trigger: sleeps until `deadline_ns`; with `prefetch = "lead"` it wakes
+/// `lead_ns` earlier to walk `joints` (this thread's half) into cache first (skipped when that
+/// moment has passed).
+#[inline]
+pub fn sleep_to_deadline(deadline_ns: u64, prefetch: Prefetch, lead_ns: u64, joints: &[JointRt]) {
+    if prefetch == Prefetch::Lead && deadline_ns > lead_ns {
+        let at = deadline_ns - lead_ns;
+        if monotonic_ns() < at {
+            sleep_until_ns(at);
+            prefetch_joints(joints);
+        }
+    }
+    sleep_until_ns(deadline_ns);
+}
+
+/// After publishing: with `prefetch = "after"` (or `"lead"` under lockstep, which has no
+/// deadline to lead) walks `joints` (this thread's half) into cache.
+#[inline]
+pub fn prefetch_after_publish(plan: &CrewPlan, joints: &[JointRt]) {
+    if plan.prefetch == Prefetch::After || (plan.prefetch == Prefetch::Lead && plan.lockstep) {
+        prefetch_joints(joints);
+    }
 }
 
 /// How steps 0–1 of a tick ended.
@@ -868,8 +1567,11 @@ enum Wake {
 /// Steps 0 and 1: waits for the trigger (clock deadline or lockstep inputs), then the inputs are
 /// polled for tick `tick`.
 #[inline]
+#[allow(clippy::too_many_arguments)] // the wait's inputs, called once per tick
 fn wait_for_tick(
     plan: &LoopPlan,
+    crew_plan: &CrewPlan,
+    own_joints: &[JointRt],
     backend: &mut AnyBackend,
     inputs: &mut Inputs,
     tick: u64,
@@ -894,7 +1596,12 @@ fn wait_for_tick(
             timed_out,
         }
     } else {
-        sleep_until_ns(deadline_ns);
+        sleep_to_deadline(
+            deadline_ns,
+            crew_plan.prefetch,
+            crew_plan.lead_ns,
+            own_joints,
+        );
         let wake_ns = monotonic_ns();
         if stop.load(Ordering::Relaxed) {
             return Wake::Stop;
@@ -1039,6 +1746,7 @@ impl Telemetry {
         backend: &mut AnyBackend,
         shared: &Shared,
         params: &Params,
+        joints: &[JointRt],
         cmd: &MotorCurrentCommand,
         tau_f: &[f64; MAX_JOINTS],
         state_stale: bool,
@@ -1053,7 +1761,7 @@ impl Telemetry {
         s.stale_ticks = self.stale_ticks;
         s.n_joints = params.joints.len() as u32;
         s.flags = rt_flags | if state_stale { STATUS_INPUT_STALE } else { 0 };
-        for j in params.joints.iter() {
+        for j in joints {
             s.model_kind[j.index] = crate::params::kind_code(&j.model);
         }
         s.tau_f_hat_nm = *tau_f;
@@ -1120,9 +1828,10 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
         count_allocs,
     } = setup;
     // `grant` is held until this function returns (the PM QoS request lives while its file is open).
-    let (mut backend, grant) = start(&config, &shared, &started)?;
+    let (mut backend, grant, mut crew) = start(&config, &shared, &started)?;
     let rt_flags = grant.flags;
     let plan = LoopPlan::of(&config);
+    let crew_plan = CrewPlan::of(&config);
 
     let mut slot = ParamSlot {
         params,
@@ -1161,6 +1870,8 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
         // 0. wait (the only step that differs between the triggers) and 1. inputs
         let Wake::Tick { wake_ns, timed_out } = wait_for_tick(
             &plan,
+            &crew_plan,
+            main_half(&slot.params),
             &mut backend,
             &mut inputs,
             tick,
@@ -1170,8 +1881,12 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
             break;
         };
 
-        // 2. parameter hand-over
-        if slot.hand_over() {
+        // 2. parameter hand-over (only while the helper holds no job: it never sees a half-swapped
+        // set; the new set's joints were split at build)
+        let helper_free = crew
+            .as_mut()
+            .is_none_or(|c| c.release(wake_ns.saturating_add(crew_plan.release_ns)));
+        if helper_free && slot.hand_over() {
             prev_active = 0; // every enabled joint gets a bumpless reset
             let generation = slot.params.generation;
             shared.generation.store(generation, Ordering::Relaxed);
@@ -1189,27 +1904,52 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
             }
             shared.input_stale.store(stale_now, Ordering::Relaxed);
         }
-        compute(
-            &mut slot.params,
-            &inputs,
-            fresh,
-            &mut prev_active,
-            &mut cmd,
-            &mut tau_f,
-        );
+        match crew.as_mut() {
+            None => compute(
+                &mut slot.params,
+                &inputs,
+                fresh,
+                &mut prev_active,
+                &mut cmd,
+                &mut tau_f,
+            ),
+            Some(c) => {
+                let tick_deadline = if plan.lockstep { 0 } else { deadline };
+                let on_time = c.compute(
+                    &mut slot.params,
+                    &inputs,
+                    fresh,
+                    &mut prev_active,
+                    &mut cmd,
+                    &mut tau_f,
+                    wake_ns,
+                    tick_deadline,
+                );
+                if !on_time {
+                    shared.helper_late.store(c.late_ticks(), Ordering::Relaxed);
+                }
+            }
+        }
         cmd.seq = cmd.seq.wrapping_add(1);
         cmd.stamp_ns = monotonic_ns();
 
         // 4. output, telemetry, heartbeat
         let _ = backend.publish_command(&cmd);
         let done = monotonic_ns();
+        prefetch_after_publish(&crew_plan, main_half(&slot.params));
         tele.record(&plan, &inputs, &cmd, fresh, wake_ns, deadline, done);
         tick += 1;
         if tick.is_multiple_of(plan.status_every) {
+            // A late helper still holds its half: only this thread's joints are read.
+            let readable = match &crew {
+                Some(c) if c.busy() => slot.params.split,
+                _ => slot.params.joints.len(),
+            };
             tele.publish(
                 &mut backend,
                 &shared,
                 &slot.params,
+                joints_prefix(&slot.params, readable),
                 &cmd,
                 &tau_f,
                 fresh.state_stale,
@@ -1228,6 +1968,9 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
     }
     alloc_count::set_counting(false);
     let usage = ThreadUsage::now().since(usage_start);
+    let helper_late = crew.as_ref().map_or(0, Crew::late_ticks);
+    // The helper ends (after its current job) before the parameters can be freed.
+    let helper = crew.take().map(Crew::stop);
     let (policy, priority) = sched_of_self();
     let thread = RtThreadReport {
         tid,
@@ -1261,6 +2004,8 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
         lateness: tele.lateness_fine,
         status: Box::new(tele.status),
         thread,
+        helper,
+        helper_late,
     })
 }
 
@@ -1398,6 +2143,278 @@ kv = 0.0
         assert_eq!(run(&mut p, &none, FRESH, &mut prev).valid_mask, 0);
     }
 
+    /// `n` joints at indices 0, 3, 6, …: PINNs of different sizes and dtypes (seeded random
+    /// weights), CV and SCV models; the law with a filter and clamps.
+    fn mixed_params(n: usize, rt_threads: u8) -> Box<Params> {
+        use crate::params::{JointRt, OodRt};
+        use frictionless::features::{FeatureSet, FeatureSpec, WarmupPolicy};
+        use frictionless::filter::CausalButterworth;
+        use frictionless::friction::{CvParams, ScvParams};
+        use frictionless::law::{Gains, JointLaw};
+        use frictionless::mlp::StorageDtype;
+        use frictionless::model::PinnEstimator;
+        use frictionless::random::{RandomMlpSpec, seeded_mlp};
+        use frictionless::units::GearRatio;
+        use frictionless::weights::{ModelFile, ModelMeta, TrainingMeta};
+        let r = -100.0;
+        let joints = (0..n)
+            .map(|k| {
+                let model = match k % 4 {
+                    0 | 1 => {
+                        let features = FeatureSpec {
+                            set: FeatureSet::DeltaThetaJointVel,
+                            history: 4 + k % 3,
+                            temperature: false,
+                        };
+                        let width = 16 + 8 * (k % 5);
+                        let file = ModelFile {
+                            meta: ModelMeta {
+                                joint_name: format!("j{k}"),
+                                gear_ratio: GearRatio::new(r).unwrap(),
+                                kt_nm_per_a: 0.1,
+                                features,
+                                scv: None,
+                                training: TrainingMeta::unknown("rt test", 0),
+                            },
+                            dtype: [StorageDtype::F32, StorageDtype::F16, StorageDtype::Bf16]
+                                [k % 3],
+                            mlp: seeded_mlp(
+                                &RandomMlpSpec::new(&[features.n_inputs(), width, width, 1]),
+                                k as u64,
+                            )
+                            .unwrap(),
+                        };
+                        let policy = if k % 2 == 0 {
+                            WarmupPolicy::HoldZero
+                        } else {
+                            WarmupPolicy::ZeroPad
+                        };
+                        JointModel::Pinn(Box::new(
+                            PinnEstimator::from_model_file(&file, policy).unwrap(),
+                        ))
+                    }
+                    2 => JointModel::Cv(CvParams {
+                        kc: 1.0,
+                        ka: 50.0,
+                        kv: 0.3,
+                    }),
+                    _ => JointModel::Scv(ScvParams {
+                        kc: 1.0,
+                        ka: 2.78,
+                        kv: 0.29,
+                        ks: 6.0,
+                        vs: 0.13,
+                        alpha: 0.6,
+                    }),
+                };
+                let gains = Gains {
+                    kt_nm_per_a: 0.1,
+                    gear_ratio: r,
+                    kfc: 0.8,
+                    kp: 0.1,
+                    ki: 0.5,
+                    max_curr_a: 4.0,
+                    max_output_friction_nm: 3.0,
+                    joint_velocity_threshold_rad_s: 0.05,
+                    dt_s: 1e-3,
+                };
+                JointRt {
+                    index: 3 * k,
+                    model,
+                    law: JointLaw::new(
+                        gains,
+                        Some(CausalButterworth::design(2, 30.0, 1000.0).unwrap()),
+                    ),
+                    ood: OodRt::off(),
+                }
+            })
+            .collect();
+        let configured_mask = (0..n).fold(0u64, |m, k| m | 1 << (3 * k));
+        let mut p = Box::new(Params {
+            generation: 0,
+            joints,
+            stale_after_ticks: 5,
+            on_stale: OnStale::StaticModel,
+            configured_mask,
+            split: 0,
+            helper_mask: 0,
+        });
+        p.split_threads(rt_threads);
+        p
+    }
+
+    /// Tick `t`'s inputs for joints at 0, 3, 6, …: moving states, NaN samples, faults, enable
+    /// toggles and stale stretches.
+    fn changing_inputs(n: usize, t: u64) -> (Inputs, Freshness) {
+        let mut st = JointStates::zeroed();
+        let mut rq = TorqueRequest::zeroed();
+        st.n_joints = (3 * n) as u32;
+        rq.n_joints = (3 * n) as u32;
+        st.seq = t;
+        rq.enable_mask = u64::MAX;
+        for k in 0..n {
+            let i = 3 * k;
+            let x = (t as f64 * 0.013 + k as f64).sin();
+            st.s_rad[i] = 0.3 * x;
+            st.sdot_rad_s[i] = 0.8 * (t as f64 * 0.007 + k as f64 * 0.5).cos();
+            st.theta_motor_rad[i] = -100.0 * st.s_rad[i] + 0.02 * x;
+            st.omega_motor_rad_s[i] = -100.0 * st.sdot_rad_s[i];
+            st.tau_meas_nm[i] = 2.0 * x;
+            rq.tau_des_nm[i] = 3.0 * x;
+            if (t + k as u64).is_multiple_of(97) {
+                st.sdot_rad_s[i] = f64::NAN;
+            }
+            if (t / 50 + k as u64).is_multiple_of(7) {
+                rq.enable_mask &= !(1 << i);
+            }
+            if (t + 3 * k as u64) % 211 == 5 {
+                st.fault_flags[i] = 1;
+            }
+        }
+        let fresh = Freshness {
+            state_stale: t % 400 >= 390,
+            request_stale: t % 900 >= 895,
+        };
+        let inp = Inputs {
+            states: Latest {
+                value: st,
+                have: true,
+                new_at_tick: t,
+            },
+            request: Latest {
+                value: rq,
+                have: t > 3,
+                new_at_tick: t,
+            },
+        };
+        (inp, fresh)
+    }
+
+    fn test_crew(budget_ns: u64) -> Crew {
+        let plan = CrewPlan {
+            period_ns: 1_000_000,
+            budget_ns,
+            release_ns: budget_ns,
+            prefetch: Prefetch::After,
+            lead_ns: 0,
+            lockstep: true,
+        };
+        Crew::spawn(plan, ThreadRt::default()).unwrap().0
+    }
+
+    #[test]
+    fn two_threads_give_the_one_thread_output_bit_for_bit() {
+        let n = 11;
+        let mut one = mixed_params(n, 1);
+        let mut two = mixed_params(n, 2);
+        assert_eq!(one.split, n);
+        assert!(two.split > 0 && two.split < n, "split {}", two.split);
+        assert_ne!(two.helper_mask, 0);
+        assert_eq!(two.helper_mask & !two.configured_mask, 0);
+        // A budget no scheduler delay reaches: the helper is never late here.
+        let mut crew = test_crew(60_000_000_000);
+        let (mut prev1, mut prev2) = (0u64, 0u64);
+        let (mut c1, mut c2) = (MotorCurrentCommand::zeroed(), MotorCurrentCommand::zeroed());
+        let (mut f1, mut f2) = ([0.0; MAX_JOINTS], [0.0; MAX_JOINTS]);
+        let mut nonzero = 0;
+        for t in 0..3000 {
+            let (inp, fresh) = changing_inputs(n, t);
+            compute(&mut one, &inp, fresh, &mut prev1, &mut c1, &mut f1);
+            let wake = monotonic_ns();
+            assert!(crew.compute(&mut two, &inp, fresh, &mut prev2, &mut c2, &mut f2, wake, 0));
+            assert_eq!(prev1, prev2, "tick {t}");
+            assert_eq!(
+                (c1.valid_mask, c1.n_joints, c1.state_seq),
+                (c2.valid_mask, c2.n_joints, c2.state_seq)
+            );
+            for k in 0..MAX_JOINTS {
+                assert_eq!(
+                    c1.i_ref_a[k].to_bits(),
+                    c2.i_ref_a[k].to_bits(),
+                    "tick {t} joint {k}"
+                );
+                assert_eq!(c1.flags[k], c2.flags[k], "tick {t} joint {k}");
+                assert_eq!(f1[k].to_bits(), f2[k].to_bits(), "tick {t} joint {k}");
+                nonzero += usize::from(c1.i_ref_a[k] != 0.0);
+            }
+        }
+        assert_eq!(crew.late_ticks(), 0);
+        assert!(nonzero > 10_000, "the joints were driven: {nonzero}");
+        let h = crew.stop();
+        assert_eq!(h.jobs, 3000);
+    }
+
+    #[test]
+    fn a_late_helper_marks_its_joints_stale_and_never_hangs() {
+        let n = 8;
+        let mut one = mixed_params(n, 1);
+        let mut two = mixed_params(n, 2);
+        let helper_mask = two.helper_mask;
+        // No budget at all: the join gives up as soon as this thread's half is done.
+        let mut crew = test_crew(0);
+        let (mut prev1, mut prev2) = (0u64, 0u64);
+        let (mut c1, mut c2) = (MotorCurrentCommand::zeroed(), MotorCurrentCommand::zeroed());
+        let (mut f1, mut f2) = ([0.0; MAX_JOINTS], [0.0; MAX_JOINTS]);
+        let mut late = 0;
+        for t in 0..500 {
+            let (inp, fresh) = changing_inputs(n, t);
+            compute(&mut one, &inp, fresh, &mut prev1, &mut c1, &mut f1);
+            let on_time = crew.compute(
+                &mut two,
+                &inp,
+                fresh,
+                &mut prev2,
+                &mut c2,
+                &mut f2,
+                monotonic_ns(),
+                0,
+            );
+            for k in 0..MAX_JOINTS {
+                if helper_mask & (1 << k) != 0 && !on_time {
+                    assert_eq!(c2.i_ref_a[k], 0.0, "tick {t} joint {k}");
+                    let want = if c2.valid_mask & (1 << k) != 0 {
+                        FLAG_STALE
+                    } else {
+                        FLAG_DISABLED
+                    };
+                    assert_eq!(c2.flags[k], want, "tick {t} joint {k}");
+                } else if helper_mask & (1 << k) == 0 {
+                    // This thread's joints are never affected by the helper.
+                    assert_eq!(
+                        c1.i_ref_a[k].to_bits(),
+                        c2.i_ref_a[k].to_bits(),
+                        "tick {t} joint {k}"
+                    );
+                }
+            }
+            late += usize::from(!on_time);
+        }
+        assert_eq!(crew.late_ticks(), late as u64);
+        drop(crew); // joins the helper before the parameters go
+    }
+
+    #[test]
+    fn the_split_balances_weight_bytes_and_keeps_index_order() {
+        let p = mixed_params(12, 2);
+        let bytes = |js: &[JointRt]| js.iter().map(|j| j.model.weight_bytes()).sum::<usize>();
+        let (a, b) = (bytes(&p.joints[..p.split]), bytes(&p.joints[p.split..]));
+        let heaviest = p
+            .joints
+            .iter()
+            .map(|j| j.model.weight_bytes())
+            .max()
+            .unwrap();
+        assert!(a.abs_diff(b) <= heaviest, "{a} vs {b}");
+        for half in [&p.joints[..p.split], &p.joints[p.split..]] {
+            assert!(half.windows(2).all(|w| w[0].index < w[1].index));
+        }
+        let mut all: Vec<usize> = p.joints.iter().map(|j| j.index).collect();
+        all.sort_unstable();
+        assert_eq!(all, (0..12).map(|k| 3 * k).collect::<Vec<_>>());
+        let q = mixed_params(12, 1);
+        assert_eq!((q.split, q.helper_mask), (12, 0));
+    }
+
     #[test]
     fn fine_histogram_quantiles_have_1us_resolution() {
         let mut h = FineHistogram::new();
@@ -1427,6 +2444,8 @@ kv = 0.0
                 },
                 ..RtThreadReport::default()
             },
+            helper: None,
+            helper_late: 0,
         }
         .report();
         assert!(s.contains("trigger=clock\n"), "{s}");

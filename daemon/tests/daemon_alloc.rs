@@ -46,16 +46,27 @@ fn ranged_pinn() -> ModelFile {
 
 #[test]
 fn rt_thread_allocates_nothing_over_100k_ticks_after_ready() {
+    alloc_run("alloc", "");
+}
+
+/// The same with `rt_threads = 2` (the helper thread computes part of the joints and counts its
+/// allocations into the same report) and lead prefetching on both threads.
+#[test]
+fn rt_and_helper_threads_allocate_nothing_over_100k_ticks_after_ready() {
+    alloc_run(
+        "alloc2",
+        "rt_threads = 2\nprefetch = \"lead\"\nprefetch_lead_us = 20\n",
+    );
+}
+
+fn alloc_run(tag: &str, extra_loop: &str) {
     const READY_AFTER: u64 = 20_000;
     const TICKS: u64 = 100_000;
-    let env = TestEnv::new("alloc");
+    let env = TestEnv::new(tag);
     frictionless::weights::write_file(&env.dir.join("hip.fwt"), &ranged_pinn()).unwrap();
-    let cfg = env.write_config(
+    let cfg = env.write_config(&format!(
+        "[loop]\nperiod_us = 50\nstatus_every_ticks = 1000\nready_after_ticks = 20000\n{extra_loop}{}",
         r#"
-[loop]
-period_us = 50
-status_every_ticks = 1000
-ready_after_ticks = 20000
 
 [safety]
 stale_after_ticks = 100000
@@ -107,12 +118,16 @@ kv = 0.3
 ks = 0.8
 vs = 0.1
 alpha = 1.0
-"#,
-    );
+"#
+    ));
     let report = env.dir.join("alloc_report.txt");
+    let latency = env.dir.join("latency_report.txt");
     let mut d = Daemon::start(
         &cfg,
-        &[("FRICTIOND_ALLOC_REPORT", report.to_str().unwrap())],
+        &[
+            ("FRICTIOND_ALLOC_REPORT", report.to_str().unwrap()),
+            ("FRICTIOND_LATENCY_REPORT", latency.to_str().unwrap()),
+        ],
     );
     let mut plant = Plant::open(&env.ipc, "plant");
     let mut js = JointStates::zeroed();
@@ -176,6 +191,25 @@ alpha = 1.0
     );
     assert!(ticks >= TICKS, "only {ticks} ticks counted");
     assert_eq!(allocs, 0, "RT-thread allocations after READY: {text}");
+    let lat = std::fs::read_to_string(&latency).expect("latency report written at exit");
+    if extra_loop.contains("rt_threads = 2") {
+        assert!(lat.contains("rt_threads=2\n"), "{lat}");
+        let jobs: u64 = lat
+            .lines()
+            .find_map(|l| l.strip_prefix("helper_jobs="))
+            .unwrap_or_else(|| panic!("helper_jobs missing: {lat}"))
+            .parse()
+            .unwrap();
+        // At a 50 µs period on a loaded machine the helper is often still busy (late ticks get no
+        // job): require that a good share of the counted ticks ran a helper job.
+        eprintln!("helper: {jobs} jobs over {ticks} counted ticks + {READY_AFTER} before");
+        assert!(
+            jobs >= READY_AFTER + TICKS / 10,
+            "the helper ran only {jobs} jobs: {lat}"
+        );
+    } else {
+        assert!(lat.contains("rt_threads=1\n"), "{lat}");
+    }
     assert!(
         ood_seen > 1_000,
         "the range check ran: {ood_seen} out-of-range ticks"

@@ -178,8 +178,21 @@ fn sigterm_publishes_zero_currents_and_exits_zero() {
 
 #[test]
 fn sighup_switches_to_a_valid_model_and_keeps_the_old_on_a_corrupt_one() {
-    let env = TestEnv::new("hup");
-    let cfg = env.write_config(THREE_JOINTS);
+    sighup_switch("hup", THREE_JOINTS);
+}
+
+/// The same with `rt_threads = 2`: the knee (joint 1) is the helper thread's joint, so the new
+/// parameters reach the helper through the same hand-over.
+#[test]
+fn sighup_switches_models_with_two_rt_threads() {
+    let base = THREE_JOINTS.replace("[loop]\n", "[loop]\nrt_threads = 2\n");
+    assert_ne!(base, THREE_JOINTS);
+    sighup_switch("hup2", &base);
+}
+
+fn sighup_switch(tag: &str, base: &str) {
+    let env = TestEnv::new(tag);
+    let cfg = env.write_config(base);
     let mut d = Daemon::start(&cfg, &[]);
     let mut plant = Plant::open(&env.ipc, "plant");
     let tau = [0.0, 0.0, 0.0];
@@ -189,7 +202,7 @@ fn sighup_switches_to_a_valid_model_and_keeps_the_old_on_a_corrupt_one() {
     plant.until(&js, &rq, T, |c| close(c.i_ref_a[1], old[1]));
 
     // A valid new model for the knee: CV with kc = 2.
-    env.write_config_at(&cfg, &THREE_JOINTS.replace("kc = 8.1", "kc = 2.0"));
+    env.write_config_at(&cfg, &base.replace("kc = 8.1", "kc = 2.0"));
     d.signal(libc::SIGHUP);
     let new1 = current_ref(
         0.0,
@@ -211,7 +224,7 @@ fn sighup_switches_to_a_valid_model_and_keeps_the_old_on_a_corrupt_one() {
     std::fs::write(env.dir.join("bad.fwt"), b"this is not a weight file").unwrap();
     env.write_config_at(
         &cfg,
-        &THREE_JOINTS.replace(
+        &base.replace(
             "friction_model = \"cv\"\nkc = 8.1\nka = 50.84\nkv = 5.55",
             "friction_model = \"pinn\"\nmodel = \"bad.fwt\"",
         ),

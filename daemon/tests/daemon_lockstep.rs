@@ -235,3 +235,73 @@ fn throughput_and_zero_allocations_over_20k_lockstep_ticks() {
         "lockstep RT-thread allocations: {text}"
     );
 }
+
+/// One lockstep run of the scripted sequence (with a NaN velocity, a disabled joint and a fault now
+/// and then) against a daemon with `extra` appended to `[loop]`; every command's currents (bits)
+/// and flags, in state order.
+fn scripted_run(tag: &str, extra: &str) -> Vec<([u64; 3], [u32; 3], u64)> {
+    let env = TestEnv::new(tag);
+    let cfg = env.write_config(&lockstep_config(true, NEVER_MS, 10).replace(
+        "trigger = \"lockstep\"\n",
+        &format!("trigger = \"lockstep\"\n{extra}"),
+    ));
+    let mut d = Daemon::start(&cfg, &[]);
+    let mut plant = Plant::open(&env.ipc, "plant");
+    plant.wait_for_daemon(T);
+    let mut out = Vec::new();
+    for step in 0..400u64 {
+        let (tau, v) = script(step);
+        let (mut js, mut rq) = inputs(tau, v);
+        if step % 37 == 5 {
+            js.sdot_rad_s[(step % 3) as usize] = f64::NAN;
+        }
+        if step % 50 >= 45 {
+            rq.enable_mask = 0b101;
+        }
+        if step % 61 == 7 {
+            js.fault_flags[2] = 1;
+        }
+        let k = plant.publish_state(&js);
+        plant.publish_request(&rq, k);
+        let c = plant
+            .command_for(k, T)
+            .unwrap_or_else(|| panic!("{tag}: no command for state {k}"));
+        assert_eq!(c.state_seq, k);
+        out.push((
+            [0, 1, 2].map(|j| c.i_ref_a[j].to_bits()),
+            [0, 1, 2].map(|j| c.flags[j]),
+            c.valid_mask,
+        ));
+    }
+    d.signal(libc::SIGTERM);
+    let (st, log) = d.wait_exit(T);
+    assert!(st.success(), "{log}");
+    out
+}
+
+/// `[loop] rt_threads = 2` (a helper thread computes part of the joints) gives the commands of one
+/// RT thread bit for bit, state by state — with and without prefetching.
+#[test]
+fn two_rt_threads_command_what_one_does_bit_for_bit() {
+    let one = scripted_run("rt1", "");
+    assert!(
+        one.iter()
+            .filter(|(i, _, _)| i.iter().any(|&b| f64::from_bits(b) != 0.0))
+            .count()
+            > 300,
+        "the joints were driven"
+    );
+    for (tag, extra) in [
+        ("rt2", "rt_threads = 2\n"),
+        ("rt2pf", "rt_threads = 2\nprefetch = \"lead\"\n"),
+    ] {
+        let two = scripted_run(tag, extra);
+        assert_eq!(one.len(), two.len());
+        for (k, (a, b)) in one.iter().zip(&two).enumerate() {
+            assert_eq!(
+                a, b,
+                "{tag}: state {k} (currents as bits, flags, valid mask)"
+            );
+        }
+    }
+}

@@ -36,6 +36,7 @@ use crate::mlp::{Activation, MlpShapeError, MlpWeights, StorageDtype, limits};
 use thiserror::Error;
 
 mod portable;
+mod prefetch;
 #[cfg(target_arch = "x86_64")]
 mod x86;
 

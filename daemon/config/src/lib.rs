@@ -160,6 +160,41 @@ pub struct LoopConfig {
     /// has (stale rules apply) [ms].
     #[serde(default = "default_lockstep_timeout_ms")]
     pub lockstep_timeout_ms: u64,
+    /// RT threads computing a tick: 1, or 2 (the joints are split once at load into two halves
+    /// balanced by network weight bytes; a helper thread computes the second half and the main RT
+    /// thread joins it before publishing).
+    #[serde(default = "default_rt_threads")]
+    pub rt_threads: u8,
+    /// With `rt_threads = 2`: CPU to pin the helper thread to (none = no pinning). Same rules as
+    /// `cpu`, and not the same CPU as `cpu`.
+    #[serde(default)]
+    pub helper_cpu: Option<usize>,
+    /// Cache warming of each RT thread's network weights in the idle part of the period.
+    #[serde(default)]
+    pub prefetch: Prefetch,
+    /// `prefetch = "lead"`: wake this long before each deadline to prefetch [µs] (< `period_us`).
+    #[serde(default = "default_prefetch_lead_us")]
+    pub prefetch_lead_us: u64,
+}
+
+/// When the RT threads walk their networks' weights into cache (`[loop] prefetch`).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Prefetch {
+    /// Never.
+    #[default]
+    Off,
+    /// Right after publishing a tick.
+    After,
+    /// `prefetch_lead_us` before the next deadline (clock trigger; under lockstep, as `after`).
+    Lead,
+}
+
+fn default_rt_threads() -> u8 {
+    1
+}
+fn default_prefetch_lead_us() -> u64 {
+    200
 }
 
 /// What starts a tick.
@@ -204,6 +239,10 @@ impl Default for LoopConfig {
             trigger: Trigger::Clock,
             lockstep_wait_request: true,
             lockstep_timeout_ms: default_lockstep_timeout_ms(),
+            rt_threads: default_rt_threads(),
+            helper_cpu: None,
+            prefetch: Prefetch::Off,
+            prefetch_lead_us: default_prefetch_lead_us(),
         }
     }
 }
@@ -862,6 +901,41 @@ fn parse_cpu_list(text: &str) -> Option<Vec<std::ops::RangeInclusive<usize>>> {
 /// Longest run of ticks `ready_after_ticks` and `stale_after_ticks` may span [s].
 pub const MAX_TICK_SPAN_S: u64 = 60;
 
+/// `cpu`-like keys: below `CPU_SETSIZE` and in the machine's online set.
+fn check_cpu(c: &Checker<'_>, key: &str, cpu: usize) -> Result<(), ConfigError> {
+    let setsize = libc::CPU_SETSIZE as usize;
+    if cpu >= setsize {
+        return Err(c.fail(
+            key.into(),
+            cpu,
+            &format!("must be below CPU_SETSIZE ({setsize}) and an online CPU"),
+        ));
+    }
+    if let Some(online) = online_cpus()
+        && !online.iter().any(|r| r.contains(&cpu))
+    {
+        let list: Vec<String> = online
+            .iter()
+            .map(|r| {
+                if r.start() == r.end() {
+                    r.start().to_string()
+                } else {
+                    format!("{}-{}", r.start(), r.end())
+                }
+            })
+            .collect();
+        return Err(c.fail(
+            key.into(),
+            cpu,
+            &format!(
+                "must be an online CPU (online: {}, /sys/devices/system/cpu/online)",
+                list.join(",")
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// Reads, parses and validates `path`, including every model file. Touches no IPC.
 pub fn load(path: &Path) -> Result<Config, ConfigError> {
     let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
@@ -900,36 +974,41 @@ pub fn parse(path: &Path, text: &str) -> Result<Config, ConfigError> {
         ));
     }
     if let Some(cpu) = l.cpu {
-        let setsize = libc::CPU_SETSIZE as usize;
-        if cpu >= setsize {
+        check_cpu(&c, "loop.cpu", cpu)?;
+    }
+    if !(1..=2).contains(&l.rt_threads) {
+        return Err(c.fail(
+            "loop.rt_threads".into(),
+            l.rt_threads,
+            "must be 1 or 2 (RT threads computing a tick)",
+        ));
+    }
+    if let Some(cpu) = l.helper_cpu {
+        if l.rt_threads != 2 {
             return Err(c.fail(
-                "loop.cpu".into(),
+                "loop.helper_cpu".into(),
                 cpu,
-                &format!("must be below CPU_SETSIZE ({setsize}) and an online CPU"),
+                "only with rt_threads = 2 (there is no helper thread to pin)",
             ));
         }
-        if let Some(online) = online_cpus()
-            && !online.iter().any(|r| r.contains(&cpu))
-        {
-            let list: Vec<String> = online
-                .iter()
-                .map(|r| {
-                    if r.start() == r.end() {
-                        r.start().to_string()
-                    } else {
-                        format!("{}-{}", r.start(), r.end())
-                    }
-                })
-                .collect();
+        check_cpu(&c, "loop.helper_cpu", cpu)?;
+        if l.cpu == Some(cpu) {
             return Err(c.fail(
-                "loop.cpu".into(),
+                "loop.helper_cpu".into(),
                 cpu,
-                &format!(
-                    "must be an online CPU (online: {}, /sys/devices/system/cpu/online)",
-                    list.join(",")
-                ),
+                "must differ from loop.cpu (the main RT thread waits for the helper; on one CPU at the same SCHED_FIFO priority it would never run)",
             ));
         }
+    }
+    if l.prefetch == Prefetch::Lead && !(1..l.period_us).contains(&l.prefetch_lead_us) {
+        return Err(c.fail(
+            "loop.prefetch_lead_us".into(),
+            l.prefetch_lead_us,
+            &format!(
+                "must be 1..{} (below period_us) with prefetch = \"lead\"",
+                l.period_us
+            ),
+        ));
     }
     let max_ticks = MAX_TICK_SPAN_S * 1_000_000 / l.period_us;
     if l.ready_after_ticks > max_ticks {
@@ -1977,6 +2056,89 @@ joints = [{ joint = "ankle", node_id = 3, command_unit = "joint_torque" }]
         p(&with_cpu(*online[0].start())).unwrap();
         if last + 1 < libc::CPU_SETSIZE as usize {
             assert_refused(&with_cpu(last + 1), "loop.cpu", &(last + 1).to_string());
+        }
+    }
+
+    #[test]
+    fn rt_threads_helper_cpu_and_prefetch_are_checked() {
+        let with =
+            |extra: &str| GOOD.replace("period_us = 1000", &format!("period_us = 1000\n{extra}"));
+        let c = p(&with("")).unwrap();
+        assert_eq!(
+            (
+                c.raw.loop_.rt_threads,
+                c.raw.loop_.helper_cpu,
+                c.raw.loop_.prefetch
+            ),
+            (1, None, Prefetch::Off),
+            "one RT thread, no prefetch by default"
+        );
+        let c = p(&with(
+            "rt_threads = 2\nprefetch = \"lead\"\nprefetch_lead_us = 150",
+        ))
+        .unwrap();
+        assert_eq!(
+            (
+                c.raw.loop_.rt_threads,
+                c.raw.loop_.prefetch,
+                c.raw.loop_.prefetch_lead_us
+            ),
+            (2, Prefetch::Lead, 150)
+        );
+        assert_eq!(
+            p(&with("prefetch = \"after\"")).unwrap().raw.loop_.prefetch,
+            Prefetch::After
+        );
+        for bad in [0, 3] {
+            assert_refused(
+                &with(&format!("rt_threads = {bad}")),
+                "loop.rt_threads",
+                &bad.to_string(),
+            );
+        }
+        let e = p(&with("prefetch = \"sometimes\""))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("prefetch") && e.contains("sometimes"), "{e}");
+        assert_refused(
+            &with("prefetch = \"lead\"\nprefetch_lead_us = 1000"),
+            "loop.prefetch_lead_us",
+            "1000",
+        );
+        assert_refused(
+            &with("prefetch = \"lead\"\nprefetch_lead_us = 0"),
+            "loop.prefetch_lead_us",
+            "0",
+        );
+        // The lead is only checked when it is used.
+        p(&with("prefetch_lead_us = 5000")).unwrap();
+        let online = online_cpus().expect("/sys/devices/system/cpu/online is readable here");
+        let first = *online[0].start();
+        let last = online.iter().map(|r| *r.end()).max().unwrap();
+        assert_refused(
+            &with(&format!("helper_cpu = {first}")),
+            "loop.helper_cpu",
+            &first.to_string(),
+        );
+        p(&with(&format!("rt_threads = 2\nhelper_cpu = {first}"))).unwrap();
+        assert_refused(
+            &with(&format!(
+                "rt_threads = 2\ncpu = {first}\nhelper_cpu = {first}"
+            )),
+            "loop.helper_cpu",
+            &first.to_string(),
+        );
+        assert_refused(
+            &with("rt_threads = 2\nhelper_cpu = 1024"),
+            "loop.helper_cpu",
+            "1024",
+        );
+        if last + 1 < libc::CPU_SETSIZE as usize {
+            assert_refused(
+                &with(&format!("rt_threads = 2\nhelper_cpu = {}", last + 1)),
+                "loop.helper_cpu",
+                &(last + 1).to_string(),
+            );
         }
     }
 

@@ -1,0 +1,317 @@
+//! The RT tick's compute time at 1 kHz pacing, as frictiond runs it: per tick, sleep to the next
+//! 1 ms boundary (with `prefetch = "lead"` waking earlier to prefetch, as the RT loop does), then
+//! the compute step on one thread ([`frictiond::rt::compute`]) or two ([`frictiond::rt::Crew`], the
+//! helper thread of `[loop] rt_threads = 2`, joints split by [`Params::split_threads`]); the time
+//! from the wake to the end of the compute step is recorded, as frictiond's `compute` histogram.
+//! Between ticks the rest of the machine runs and evicts the weights from the caches — the cost a
+//! hot loop (`--bench tick`) does not see.
+//!
+//! Prints markdown:
+//! 1. where the time goes: bytes of weights per tick per dtype; one paper-size network hot vs right
+//!    after a full-cache eviction (a 64 MiB write), and the same for its first layer alone (the
+//!    second layer by difference); a 32-joint tick hot, after eviction, and after eviction followed
+//!    by a prefetch walk of every joint (and how long that walk takes);
+//! 2. p50 / p99 / p99.9 of the paced compute time for 1, 15 and 32 joints × the storage dtypes
+//!    ([`DTYPES`], one array) × 1 and 2 RT threads × prefetch off / after / lead, next to the hot
+//!    single-model floor and the hot back-to-back tick.
+//!
+//! No asserts, no criterion for the paced part. Run: `cargo bench -p frictiond --bench tick_paced`
+//! (about 5 minutes: 54 cells × `TICKS` ticks at 1 kHz; `TICK_PACED_TICKS=n` changes the count).
+//! Runs as an ordinary thread (SCHED_OTHER) unless `TICK_PACED_PRIORITY=p` asks for SCHED_FIFO `p`
+//! for the bench thread and the helper (as frictiond's `[loop] priority`); timer slack 1 ns as in
+//! frictiond. On a shared machine the numbers include its load — note `uptime` next to them.
+
+use std::hint::black_box;
+
+use frictiond::config::Prefetch;
+use frictiond::params::Params;
+use frictiond::rt::{
+    Crew, CrewPlan, Freshness, HELPER_RELEASE_GRACE_NS, Inputs, ThreadRt, compute, main_half,
+    prefetch_after_publish, prefetch_joints, sleep_to_deadline,
+};
+use frictionless::kernel::Mlp;
+use frictionless::mlp::StorageDtype;
+use frictionless::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
+use frictionless_shm_types::{MAX_JOINTS, MotorCurrentCommand, monotonic_ns};
+
+#[path = "support/tick_params.rs"]
+mod tick_params;
+use tick_params::{H, inputs, params};
+
+/// Storage dtypes measured (one array: a new `.fwt` dtype is one more entry).
+const DTYPES: [(&str, StorageDtype); 3] = [
+    ("f32", StorageDtype::F32),
+    ("f16", StorageDtype::F16),
+    ("bf16", StorageDtype::Bf16),
+];
+/// Joint counts: one joint, ergoCub legs + torso, a whole humanoid.
+const JOINTS: [usize; 3] = [1, 15, 32];
+/// Prefetch policies (`[loop] prefetch`).
+const PREFETCH: [(&str, Prefetch); 3] = [
+    ("off", Prefetch::Off),
+    ("after", Prefetch::After),
+    ("lead", Prefetch::Lead),
+];
+/// Paced ticks per cell (≥ 5000).
+const TICKS: usize = 5000;
+/// Period [ns] (1 kHz).
+const PERIOD_NS: u64 = 1_000_000;
+/// `prefetch_lead_us` used for "lead" [ns] (frictiond's default).
+const LEAD_NS: u64 = 200_000;
+/// Bytes written to evict every cache level (L3 here is 32 MiB).
+const EVICT_BYTES: usize = 64 << 20;
+
+const FRESH: Freshness = Freshness {
+    state_stale: false,
+    request_stale: false,
+};
+
+fn quantile(sorted: &[u64], q: f64) -> u64 {
+    if sorted.is_empty() {
+        return 0;
+    }
+    let k = ((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len()) - 1;
+    sorted[k]
+}
+
+fn us(ns: u64) -> String {
+    format!("{:.1}", ns as f64 / 1000.0)
+}
+
+/// Writes one byte per cache line of `buf`: every cache level then holds `buf`, not the weights.
+fn evict(buf: &mut [u8]) {
+    for k in (0..buf.len()).step_by(64) {
+        buf[k] = buf[k].wrapping_add(1);
+    }
+    black_box(&buf);
+}
+
+fn paper_net(sizes: &[usize], seed: u64, dtype: StorageDtype) -> Mlp {
+    let spec = RandomMlpSpec {
+        weights: WeightInit::HeUniform,
+        norm: NormInit::Identity,
+        ..RandomMlpSpec::new(sizes)
+    };
+    Mlp::new(&seeded_mlp(&spec, seed).expect("valid bench net"), dtype).expect("valid layout")
+}
+
+/// Median time of one forward [ns], hot (back to back) and right after an eviction.
+fn forward_hot_cold(m: &mut Mlp, evict_buf: &mut [u8]) -> (u64, u64) {
+    let x: Vec<f32> = (0..m.n_inputs()).map(|i| (i as f32 * 0.1).sin()).collect();
+    let mut hot = Vec::with_capacity(2000);
+    for _ in 0..2000 {
+        let t = monotonic_ns();
+        black_box(m.forward(black_box(&x)));
+        hot.push(monotonic_ns() - t);
+    }
+    let mut cold = Vec::with_capacity(100);
+    for _ in 0..100 {
+        evict(evict_buf);
+        let t = monotonic_ns();
+        black_box(m.forward(black_box(&x)));
+        cold.push(monotonic_ns() - t);
+    }
+    hot.sort_unstable();
+    cold.sort_unstable();
+    (quantile(&hot, 0.5), quantile(&cold, 0.5))
+}
+
+/// Runs `p` past warm-up so every tick runs every network.
+fn warm(p: &mut Params, inp: &Inputs) -> (MotorCurrentCommand, [f64; MAX_JOINTS], u64) {
+    let mut cmd = MotorCurrentCommand::zeroed();
+    let mut tau_f = [0.0; MAX_JOINTS];
+    let mut prev = 0u64;
+    for _ in 0..H + 1 {
+        compute(p, inp, FRESH, &mut prev, &mut cmd, &mut tau_f);
+    }
+    (cmd, tau_f, prev)
+}
+
+fn where_the_time_goes(evict_buf: &mut [u8]) {
+    println!("### Where the time goes (one paper-size network; a 32-joint tick)\n");
+    println!(
+        "| dtype | weights / net [KiB] | 32 nets [MiB] | net hot [µs] | net cold [µs] | layer 1 hot / cold [µs] | layer 2 (diff.) hot / cold [µs] | 32-joint tick hot [µs] | 32-joint tick cold [µs] | prefetch walk, cold [µs] | tick after walk [µs] |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    for (name, dtype) in DTYPES {
+        let mut full = paper_net(&[40, 268, 215, 1], 1, dtype);
+        let mut first = paper_net(&[40, 268, 1], 1, dtype);
+        let (full_hot, full_cold) = forward_hot_cold(&mut full, evict_buf);
+        let (l1_hot, l1_cold) = forward_hot_cold(&mut first, evict_buf);
+        let mut p = params(32, Some(dtype), 1);
+        let bytes: usize = p.joints.iter().map(|j| j.model.weight_bytes()).sum();
+        let mut inp = inputs(32);
+        let (mut cmd, mut tau_f, mut prev) = warm(&mut p, &inp);
+        let (mut hot, mut cold, mut walk, mut warmed) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for k in 0..600u64 {
+            inp.states.value.sdot_rad_s[31] = 0.4 + (k % 100) as f64 * 1e-3;
+            // 0: after a tick of the same nets (hot but for what did not fit); 1: after an
+            // eviction; 2: after an eviction and a prefetch walk of every joint.
+            let case = k % 3;
+            if case >= 1 {
+                evict(evict_buf);
+            }
+            if case == 2 {
+                let t = monotonic_ns();
+                prefetch_joints(&p.joints);
+                walk.push(monotonic_ns() - t);
+            }
+            let t = monotonic_ns();
+            compute(&mut p, &inp, FRESH, &mut prev, &mut cmd, &mut tau_f);
+            let dt = monotonic_ns() - t;
+            [&mut hot, &mut cold, &mut warmed][case as usize].push(dt);
+        }
+        for v in [&mut hot, &mut cold, &mut walk, &mut warmed] {
+            v.sort_unstable();
+        }
+        println!(
+            "| {name} | {:.0} | {:.2} | {} | {} | {} / {} | {} / {} | {} | {} | {} | {} |",
+            full.weight_bytes() as f64 / 1024.0,
+            bytes as f64 / (1 << 20) as f64,
+            us(full_hot),
+            us(full_cold),
+            us(l1_hot),
+            us(l1_cold),
+            us(full_hot.saturating_sub(l1_hot)),
+            us(full_cold.saturating_sub(l1_cold)),
+            us(quantile(&hot, 0.5)),
+            us(quantile(&cold, 0.5)),
+            us(quantile(&walk, 0.5)),
+            us(quantile(&warmed, 0.5)),
+        );
+    }
+    println!();
+}
+
+/// Paced ticks of `p` on one thread or with `crew`: compute time from wake [ns], sorted, and the
+/// helper's late ticks.
+fn paced(
+    p: &mut Params,
+    n: usize,
+    mut crew: Option<&mut Crew>,
+    plan: &CrewPlan,
+    ticks: usize,
+) -> (Vec<u64>, u64) {
+    let mut inp = inputs(n);
+    let (mut cmd, mut tau_f, mut prev) = warm(p, &inp);
+    let mut samples = Vec::with_capacity(ticks);
+    let late0 = crew.as_ref().map_or(0, |c| c.late_ticks());
+    for k in 0..ticks as u64 {
+        inp.states.value.sdot_rad_s[n - 1] = 0.4 + (k % 100) as f64 * 1e-3;
+        let deadline = (monotonic_ns() / PERIOD_NS + 1) * PERIOD_NS;
+        sleep_to_deadline(deadline, plan.prefetch, plan.lead_ns, main_half(p));
+        let wake = monotonic_ns();
+        match crew.as_deref_mut() {
+            None => compute(p, &inp, FRESH, &mut prev, &mut cmd, &mut tau_f),
+            Some(c) => {
+                c.release(wake + plan.release_ns);
+                c.compute(
+                    p, &inp, FRESH, &mut prev, &mut cmd, &mut tau_f, wake, deadline,
+                );
+            }
+        }
+        let done = monotonic_ns();
+        black_box(&cmd);
+        prefetch_after_publish(plan, main_half(p));
+        samples.push(done - wake);
+    }
+    samples.sort_unstable();
+    let late = crew.as_ref().map_or(0, |c| c.late_ticks()) - late0;
+    (samples, late)
+}
+
+/// `TICK_PACED_PRIORITY=p`: run the bench thread and the helper SCHED_FIFO at `p`, as frictiond
+/// with `[loop] priority = p` (needs CAP_SYS_NICE); `None` when unset or refused.
+fn fifo_priority() -> Option<i32> {
+    let prio: i32 = std::env::var("TICK_PACED_PRIORITY").ok()?.parse().ok()?;
+    // SAFETY: zeroed sched_param with its priority set, for the calling thread.
+    let ok = unsafe {
+        let mut sp: libc::sched_param = std::mem::zeroed();
+        sp.sched_priority = prio;
+        libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &sp) == 0
+    };
+    if !ok {
+        eprintln!("TICK_PACED_PRIORITY={prio}: SCHED_FIFO refused; running SCHED_OTHER");
+    }
+    ok.then_some(prio)
+}
+
+fn main() {
+    // `cargo bench` passes `--bench`; a test run (`cargo test --benches`) passes nothing: be quick.
+    let full = std::env::args().any(|a| a == "--bench");
+    let priority = fifo_priority();
+    // SAFETY: no preconditions.
+    unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1, 0, 0, 0) };
+    let ticks = std::env::var("TICK_PACED_TICKS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(if full { TICKS } else { 50 });
+    let mut evict_buf = vec![0u8; if full { EVICT_BYTES } else { 1 << 20 }];
+    let t0 = monotonic_ns();
+    where_the_time_goes(&mut evict_buf);
+
+    println!(
+        "### Paced at 1 kHz: compute time per tick, wake → commands ready [µs], {ticks} ticks per cell, {}\n",
+        match priority {
+            Some(p) => format!("SCHED_FIFO {p}"),
+            None => "SCHED_OTHER".to_owned(),
+        }
+    );
+    println!(
+        "| joints | dtype | hot 1 net p50 | hot tick p50 | threads | prefetch | p50 | p99 | p99.9 | late |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|");
+    for n in JOINTS {
+        for (name, dtype) in DTYPES {
+            let mut net = paper_net(&[40, 268, 215, 1], 1, dtype);
+            let (net_hot, _) = forward_hot_cold(&mut net, &mut evict_buf[..0]);
+            // Hot back-to-back tick of the same joints.
+            let mut p = params(n, Some(dtype), 1);
+            let mut inp = inputs(n);
+            let (mut cmd, mut tau_f, mut prev) = warm(&mut p, &inp);
+            let mut hot = Vec::with_capacity(1000);
+            for k in 0..1000u64 {
+                inp.states.value.sdot_rad_s[n - 1] = 0.4 + (k % 100) as f64 * 1e-3;
+                let t = monotonic_ns();
+                compute(&mut p, &inp, FRESH, &mut prev, &mut cmd, &mut tau_f);
+                hot.push(monotonic_ns() - t);
+            }
+            hot.sort_unstable();
+            for threads in [1u8, 2] {
+                let mut p = params(n, Some(dtype), threads);
+                for (pname, prefetch) in PREFETCH {
+                    let plan = CrewPlan {
+                        period_ns: PERIOD_NS,
+                        budget_ns: PERIOD_NS / 4 * 3,
+                        release_ns: HELPER_RELEASE_GRACE_NS,
+                        prefetch,
+                        lead_ns: LEAD_NS,
+                        lockstep: false,
+                    };
+                    let (s, late) = if threads == 2 {
+                        let rt = ThreadRt {
+                            priority,
+                            ..ThreadRt::default()
+                        };
+                        let (mut crew, _, _) = Crew::spawn(plan, rt).expect("helper thread");
+                        let r = paced(&mut p, n, Some(&mut crew), &plan, ticks);
+                        crew.stop();
+                        r
+                    } else {
+                        paced(&mut p, n, None, &plan, ticks)
+                    };
+                    println!(
+                        "| {n} | {name} | {} | {} | {threads} | {pname} | {} | {} | {} | {late} |",
+                        us(net_hot),
+                        us(quantile(&hot, 0.5)),
+                        us(quantile(&s, 0.5)),
+                        us(quantile(&s, 0.99)),
+                        us(quantile(&s, 0.999)),
+                    );
+                }
+            }
+        }
+    }
+    println!("\n(bench ran {:.0} s)", (monotonic_ns() - t0) as f64 / 1e9);
+}
