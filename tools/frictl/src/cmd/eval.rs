@@ -1,5 +1,6 @@
 //! `frictl eval` — RMSE of none / CV / SCV / PINN models on held-out datasets, a printed table, a JSON
-//! report and PNG figures. See `frictl::eval` for the method, the rows evaluated and the JSON schema.
+//! report and PNG figures; with `--drift`, the drift monitor on a new log (`frictl::eval::drift`). See
+//! `frictl::eval` for the method, the rows evaluated and the JSON schema.
 
 use std::collections::BTreeSet;
 use std::path::PathBuf;
