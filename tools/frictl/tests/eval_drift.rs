@@ -86,6 +86,7 @@ fn dataset(dir: &Path, name: &str, seed: &str, extra: &[&str]) -> PathBuf {
         ]),
         "preprocess",
     );
+    std::fs::remove_file(&raw).ok(); // the raw log is large; the dataset is all the tests read
     ds
 }
 
