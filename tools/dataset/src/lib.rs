@@ -8,7 +8,9 @@
 //! [`DATASET_COLUMNS`] (names, units, meaning), the CSV writer/reader and [`DatasetSidecar`] (what was
 //! done to produce it), written by `frictl preprocess` and read by `frictl fit`, the trainer and `eval`;
 //! [`fit_file::FittedModel`], the fitted CV/SCV model in the JSON `frictl fit --json` writes and eval,
-//! the trainer's SCV prior and the experiments read.
+//! the trainer's SCV prior and the experiments read; [`bands`], the |ṡ| bands, temperature bins and
+//! residual statistics per bin that `frictl eval` (per-band RMSE, drift monitor) and `frictl train`
+//! (reference residuals in its report) share.
 //!
 //! What it is **not**: the raw acquisition log writer (`frictionless-acquire`, `acquire::log`) or the
 //! label pipeline (`frictionless-ident`, `preprocess`).
@@ -59,6 +61,7 @@
 
 #![warn(missing_docs)]
 
+pub mod bands;
 pub mod fit_file;
 
 use std::path::Path;

@@ -7,6 +7,7 @@ mod acquire_protocol;
 mod cli_models;
 mod demo_chain;
 mod dynamics_cli;
+mod eval_drift;
 mod eval_synthetic;
 mod experiment_controller;
 mod experiment_online_offline;

@@ -45,6 +45,13 @@
 //! train_seconds     wall time of the training loop
 //! training_range    {s_rad [min, max], sdot_rad_s [min, max], rows}: valid rows of the train and val
 //!                   chunks (what `frictl eval` counts as inside the training range)
+//! residual_reference {set ("val", or "train" without a validation set), band_edges_rad_s[],
+//!                   temperature_bin_c, all STATS, bands[] {lo_rad_s, hi_rad_s | null, STATS…},
+//!                   temperature[] {lo_c, hi_c, STATS…}} with STATS = {n, mean_residual_nm,
+//!                   mean_along_motion_nm (residual·sign(ṡ)), rmse_nm}: the stored
+//!                   model's residual (label − τ̂_F, Nm) per |ṡ| band (the default edges of
+//!                   `frictionless_dataset::bands`) and per 5 °C bin — the reference of
+//!                   `frictl eval --drift`; absent in older reports
 //! ```
 //! Losses are `(1 − λ)·MSE(label) + λ·MSE(SCV)` averaged over samples (true Nm², unlike the authors'
 //! divide-by-last-batch-size figure).
@@ -67,6 +74,9 @@ use super::data::{
     self, ChunkKey, DataError, DeltaThetaOffset, SetData, Split, SplitSpec, Windows,
 };
 use super::{EpochReport, PredictError, Predictor, TrainConfig, TrainError, Trainer, rmse};
+use frictionless_dataset::bands::{
+    DEFAULT_BAND_EDGES_RAD_S, DEFAULT_TEMPERATURE_BIN_C, ResidualProfile,
+};
 use frictionless_dataset::{Dataset, DatasetError, DatasetSidecar, MotionRange};
 
 /// Report format tag.
@@ -705,6 +715,20 @@ pub struct TrainReport {
     /// flags rows outside it as extrapolation); absent in older reports.
     #[serde(default)]
     pub training_range: Option<MotionRange>,
+    /// The stored model's residuals per |ṡ| band and temperature bin on the validation set (the
+    /// training set without one): the reference of `frictl eval --drift`; absent in older reports.
+    #[serde(default)]
+    pub residual_reference: Option<ResidualReference>,
+}
+
+/// The residual profile a model had at training time (`residual_reference` in the report).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ResidualReference {
+    /// `"val"`, or `"train"` when there is no validation set (in-sample: an optimistic reference).
+    pub set: String,
+    /// The profile (default band edges, default temperature bin width).
+    #[serde(flatten)]
+    pub profile: ResidualProfile,
 }
 
 /// A trained model and its report.
@@ -795,6 +819,40 @@ fn set_rmse(
     ))
 }
 
+/// The residual profile of `pred` on `set` (rows mapped back to `sources` for ṡ and T).
+fn residual_reference(
+    pred: &mut Predictor,
+    sources: &Sources,
+    set: &SetData,
+    name: &str,
+) -> Result<Option<ResidualReference>, PipelineError> {
+    if set.is_empty() {
+        return Ok(None);
+    }
+    let y = pred.predict(&set.x)?;
+    let rows = set
+        .rows
+        .iter()
+        .zip(&y)
+        .zip(&set.y_label_nm)
+        .map(|((&(d, k), &p), &l)| {
+            let ds = &sources.list[d as usize].data;
+            (
+                ds.sdot_rad_s[k],
+                ds.temperature_c[k],
+                f64::from(l) - f64::from(p),
+            )
+        });
+    Ok(Some(ResidualReference {
+        set: name.into(),
+        profile: ResidualProfile::from_rows(
+            rows,
+            &DEFAULT_BAND_EDGES_RAD_S,
+            DEFAULT_TEMPERATURE_BIN_C,
+        ),
+    }))
+}
+
 /// Trains one model on prepared sets: new run or `--resume`, checkpoints every
 /// `job.checkpoint_every` epochs and at the end, best-on-validation weights rounded to `job.dtype`,
 /// RMSEs of the stored model on every set. `on_epoch` sees every epoch (return `Break` to stop early;
@@ -850,6 +908,10 @@ pub fn train_model(
     let (tr, tr_scv) = set_rmse(&mut pred, &prepared.train)?;
     let (va, va_scv) = set_rmse(&mut pred, &prepared.val)?;
     let (te, te_scv) = set_rmse(&mut pred, &prepared.test)?;
+    let residual_reference = match residual_reference(&mut pred, sources, &prepared.val, "val")? {
+        Some(r) => Some(r),
+        None => residual_reference(&mut pred, sources, &prepared.train, "train")?,
+    };
     let nan = |v: Option<f64>| v.map_or(f32::NAN, |x| x as f32);
     let model = ModelFile {
         meta: ModelMeta {
@@ -950,6 +1012,7 @@ pub fn train_model(
         },
         train_seconds,
         training_range: Some(training_range(sources, split)),
+        residual_reference,
     };
     Ok(Trained { model, report })
 }

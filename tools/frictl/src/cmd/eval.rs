@@ -1,14 +1,17 @@
 //! `frictl eval` — RMSE of none / CV / SCV / PINN models on held-out datasets, a printed table, a JSON
-//! report and PNG figures. See `frictl::eval` for the method, the rows evaluated and the JSON schema.
+//! report and PNG figures; with `--drift`, the drift monitor on a new log (`frictl::eval::drift`). See
+//! `frictl::eval` for the method, the rows evaluated and the JSON schema.
 
 use std::collections::BTreeSet;
 use std::path::PathBuf;
 
 use anyhow::Context;
 use frictionless::features::WarmupPolicy;
+use frictionless_dataset::bands::ResidualProfile;
 use frictionless_dataset::{Dataset, DatasetSidecar, MotionRange, RunInfo, dataset_runs};
 use frictionless_train::data::DeltaThetaOffset;
-use frictl::eval::{self, EvalOptions, ModelSpec, TrainingRange, plot};
+use frictl::eval::drift::{self, Coverage, DriftOptions, DriftReport};
+use frictl::eval::{self, DatasetEval, EvalOptions, ModelSpec, TrainingRange, plot};
 
 /// PINN warm-up policy (as the daemon is configured).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -73,6 +76,78 @@ pub struct Args {
     /// Chunk shown in the time-series and hysteresis figures (default: most sliding rows).
     #[arg(long)]
     pub plot_chunk: Option<u32>,
+    /// Drift monitor: each model's residual (label − τ̂_F) on the scored rows per |ṡ| band
+    /// (--band-edges) and temperature bin against its reference (--reference, else the train report's
+    /// `residual_reference`, else the `.fwt`'s validation RMSE), the PINN's input-range coverage, and a
+    /// `retrain` / `ok` verdict (rule: `frictl::eval::drift`; JSON key `drift`; figure
+    /// `drift_<model>.png`).
+    #[arg(long)]
+    pub drift: bool,
+    /// Reference dataset of --drift (repeatable), e.g. the model's training dataset: every valid row
+    /// is scored.
+    #[arg(long = "reference", value_name = "FILE", requires = "drift")]
+    pub references: Vec<PathBuf>,
+    /// --drift: fewest rows a band or temperature bin needs to be checked (and a reference bin to be
+    /// compared with; else the reference's all rows).
+    #[arg(long, default_value_t = DriftOptions::default().min_samples)]
+    pub drift_min_samples: usize,
+    /// --drift: a check fires when RMSE_new > this × RMSE_ref + --drift-floor.
+    #[arg(long, default_value_t = DriftOptions::default().rmse_ratio)]
+    pub drift_rmse_ratio: f64,
+    /// --drift: … or when the mean residual, or its mean along the motion (residual·sign(ṡ)), moved by
+    /// more than this × RMSE_ref + --drift-floor.
+    #[arg(long, default_value_t = DriftOptions::default().mean_ratio)]
+    pub drift_mean_ratio: f64,
+    /// --drift: absolute slack of both limits [Nm].
+    #[arg(long, default_value_t = DriftOptions::default().floor_nm)]
+    pub drift_floor: f64,
+    /// --drift: `extrapolating` above this share (0–1) of rows outside the PINN's input range.
+    #[arg(long, default_value_t = DriftOptions::default().max_out_of_range)]
+    pub drift_max_out_of_range: f64,
+    /// --drift: margin of the input-range test (fraction of each range's width; frictiond's
+    /// `ood_margin` default).
+    #[arg(long, default_value_t = DriftOptions::default().range_margin)]
+    pub drift_range_margin: f64,
+    /// --drift: width of the temperature bins [°C].
+    #[arg(long, default_value_t = DriftOptions::default().temperature_bin_c)]
+    pub drift_temperature_bin: f64,
+}
+
+impl Args {
+    /// The --drift thresholds, checked.
+    fn drift_options(&self) -> anyhow::Result<DriftOptions> {
+        let o = DriftOptions {
+            temperature_bin_c: self.drift_temperature_bin,
+            min_samples: self.drift_min_samples,
+            rmse_ratio: self.drift_rmse_ratio,
+            mean_ratio: self.drift_mean_ratio,
+            floor_nm: self.drift_floor,
+            max_out_of_range: self.drift_max_out_of_range,
+            range_margin: self.drift_range_margin,
+        };
+        let nonneg = |k: &str, v: f64| {
+            anyhow::ensure!(
+                v.is_finite() && v >= 0.0,
+                "{k} = {v}: must be finite and >= 0"
+            );
+            Ok(())
+        };
+        nonneg("--drift-rmse-ratio", o.rmse_ratio)?;
+        nonneg("--drift-mean-ratio", o.mean_ratio)?;
+        nonneg("--drift-floor", o.floor_nm)?;
+        nonneg("--drift-range-margin", o.range_margin)?;
+        anyhow::ensure!(
+            (0.0..=1.0).contains(&o.max_out_of_range),
+            "--drift-max-out-of-range = {}: must be in [0, 1]",
+            o.max_out_of_range
+        );
+        anyhow::ensure!(
+            o.temperature_bin_c.is_finite() && o.temperature_bin_c > 0.0,
+            "--drift-temperature-bin = {}: must be finite and > 0",
+            o.temperature_bin_c
+        );
+        Ok(o)
+    }
 }
 
 fn pinn_names(paths: &[PathBuf]) -> Vec<String> {
@@ -122,6 +197,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         pinn_files.push((p.clone(), f));
     }
     eval::runs::check_band_edges(&args.band_edges)?;
+    let drift_opts = args.drift.then(|| args.drift_options()).transpose()?;
     let all_paths: Vec<PathBuf> = args
         .datasets
         .iter()
@@ -267,8 +343,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         opts.v_sliding_rad_s,
     );
     print!("{}", eval::format_table(&report));
+    let drift_report = match &drift_opts {
+        Some(o) => {
+            let d = drift_monitor(&args, o, &models, &pinn_files, &evals, &opts)?;
+            print!("{}", drift::format_drift(&d));
+            Some(d)
+        }
+        None => None,
+    };
     if let Some(p) = &args.json {
-        std::fs::write(p, serde_json::to_string_pretty(&report)?)
+        let mut v = serde_json::to_value(&report)?;
+        if let (Some(d), Some(m)) = (&drift_report, v.as_object_mut()) {
+            m.insert("drift".into(), serde_json::to_value(d)?);
+        }
+        std::fs::write(p, serde_json::to_string_pretty(&v)?)
             .with_context(|| format!("cannot write {}", p.display()))?;
     }
 
@@ -309,6 +397,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 }
             }
         }
+        for m in drift_report.iter().flat_map(|d| &d.models) {
+            let name: String = m
+                .model
+                .chars()
+                .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+                .collect();
+            let f = dir.join(format!("drift_{name}.png"));
+            plot::drift_bands(&f, m)?;
+            written.push(f);
+        }
         if let Some(r) = &args.train_report {
             let text = std::fs::read_to_string(r)
                 .with_context(|| format!("cannot read {}", r.display()))?;
@@ -331,4 +429,96 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         started.elapsed().as_secs_f64()
     );
     Ok(())
+}
+
+/// `--drift`: every model but `none` on the scored rows against its reference (see
+/// `frictl::eval::drift` for the reference order and the rule).
+fn drift_monitor(
+    args: &Args,
+    o: &DriftOptions,
+    models: &[ModelSpec],
+    pinn_files: &[(PathBuf, frictionless::weights::ModelFile)],
+    evals: &[(DatasetEval, &Dataset, String)],
+    opts: &EvalOptions,
+) -> anyhow::Result<DriftReport> {
+    // The reference datasets, scored like the new log (every valid row whose history is ready).
+    let mut refs = Vec::new();
+    for p in &args.references {
+        let ds = Dataset::read_csv(p)?;
+        let side: Option<DatasetSidecar> = std::fs::read_to_string(p.with_extension("json"))
+            .ok()
+            .and_then(|t| serde_json::from_str(&t).ok());
+        let absent = side.as_ref().map_or(&[][..], |s| &s.absent_columns[..]);
+        for (fp, f) in pinn_files {
+            ds.check_inputs(&f.meta.features, absent)
+                .with_context(|| format!("PINN {} on reference {}", fp.display(), p.display()))?;
+        }
+        let ev = eval::evaluate(&p.display().to_string(), &ds, models, None, opts)?;
+        refs.push((ev, ds));
+    }
+    let ref_pairs: Vec<(&DatasetEval, &Dataset)> = refs.iter().map(|(e, d)| (e, d)).collect();
+    let new_pairs: Vec<(&DatasetEval, &Dataset)> = evals.iter().map(|(e, d, _)| (e, *d)).collect();
+    let train_report: Option<serde_json::Value> = match &args.train_report {
+        Some(r) => Some(
+            serde_json::from_str(
+                &std::fs::read_to_string(r)
+                    .with_context(|| format!("cannot read {}", r.display()))?,
+            )
+            .with_context(|| format!("{} is not JSON", r.display()))?,
+        ),
+        None => None,
+    };
+    let first_pinn = models.len() - pinn_files.len();
+    let mut out = Vec::new();
+    for (i, m) in models.iter().enumerate().skip(1) {
+        let new = ResidualProfile::from_rows(
+            drift::residual_rows(&new_pairs, i),
+            &args.band_edges,
+            o.temperature_bin_c,
+        );
+        let file = i.checked_sub(first_pinn).map(|j| &pinn_files[j].1);
+        let reference = if !ref_pairs.is_empty() {
+            Some(drift::Reference {
+                source: "reference_datasets".into(),
+                profile: ResidualProfile::from_rows(
+                    drift::residual_rows(&ref_pairs, i),
+                    &args.band_edges,
+                    o.temperature_bin_c,
+                ),
+            })
+        } else {
+            let from_report = train_report
+                .as_ref()
+                .filter(|_| file.is_some() && pinn_files.len() == 1)
+                .and_then(|v| {
+                    drift::train_report_reference(v, &args.band_edges, o.temperature_bin_c)
+                });
+            from_report.or_else(|| file.and_then(drift::fwt_reference))
+        };
+        let mut coverage: Option<Coverage> = None;
+        for (ev, ds) in &new_pairs {
+            let Some(mask) =
+                drift::out_of_range_mask(ds, &m.model, opts.delta_theta_offset, o.range_margin)
+            else {
+                continue;
+            };
+            let c = coverage.get_or_insert(Coverage {
+                rows: 0,
+                out_of_range: 0,
+                out_of_range_share: 0.0,
+                margin: o.range_margin,
+            });
+            for (k, &out) in mask.iter().enumerate() {
+                if ev.mask[k] {
+                    c.rows += 1;
+                    c.out_of_range += usize::from(out);
+                }
+            }
+        }
+        if let Some(c) = &mut coverage {
+            c.out_of_range_share = c.out_of_range as f64 / c.rows.max(1) as f64;
+        }
+        out.push(drift::model_drift(&m.name, new, reference, coverage, o));
+    }
+    Ok(drift::report(out, o))
 }

@@ -15,6 +15,8 @@
 //! - [`runs`]: the breakdown per run and per |ṡ| band, with rows outside the training range (s or ṡ
 //!   beyond what the training runs covered) counted and scored apart;
 //! - [`Report`]: the JSON written by `frictl eval --json` (schema below), read by `frictl demo`;
+//! - [`drift`]: the drift monitor (`--drift`): residual per band and temperature bin on a new log
+//!   against the model's reference, input-range coverage, and a `retrain` / `ok` verdict;
 //! - [`plot`]: the PNG figures (plotters, bitmap backend).
 //!
 //! Which rows are evaluated: rows with `valid = 1`, in the selected chunks (all; the held-out runs of
@@ -41,6 +43,19 @@
 //!                     models {NAME: {rmse_all, rmse_sliding, rmse_stick, rmse_inside, rmse_outside,
 //!                     rmse_true_all, rmse_true_inside, rmse_true_outside}}, bands[] (as per_band)}
 //! per_band[]         {lo_rad_s, hi_rad_s | null, n, models {NAME: {rmse, rmse_true}}}, all runs pooled
+//! drift              only with --drift (a [`drift::DriftReport`], added next to [`Report`]'s keys):
+//!                     {rule, options {temperature_bin_c, min_samples, rmse_ratio, mean_ratio,
+//!                     floor_nm, max_out_of_range, range_margin}, verdict ("retrain" | "ok" |
+//!                     "no_reference"), extrapolating, models[] {model, new PROFILE, reference_source
+//!                     ("reference_datasets" | "train_report:val|train" | "fwt:val_rmse_nm|test_rmse_nm"
+//!                     | null), reference PROFILE | null, coverage {rows, out_of_range,
+//!                     out_of_range_share, margin} | null, checks[] {what, new STATS, reference STATS,
+//!                     reference_bin ("same" | "all"), rmse_limit_nm, mean_shift_limit_nm, fired},
+//!                     unchecked[], verdict, extrapolating, reasons[]}} — see [`drift`]
+//! PROFILE            {band_edges_rad_s[], temperature_bin_c, all STATS, bands[] {lo_rad_s, hi_rad_s |
+//!                     null, STATS…}, temperature[] {lo_c, hi_c, STATS…}}
+//! STATS              {n, mean_residual_nm, mean_along_motion_nm (residual·sign(ṡ)), rmse_nm}:
+//!                     residual = label − τ̂_F [Nm], null over zero rows
 //! METRICS            {rmse_all, rmse_sliding, rmse_stick,                 vs the label [Nm]
 //!                     rmse_true_all, rmse_true_sliding, rmse_true_stick,  vs the truth [Nm] or null
 //!                     mae_all, n_samples, n_sliding, n_stick}
@@ -51,6 +66,7 @@
 //! What it is not: training, fitting or closed-loop testing (see `frictl train`, `frictl fit`,
 //! `frictl experiment`). It never changes a model: the PINN is run exactly as stored.
 
+pub mod drift;
 pub mod plot;
 pub mod runs;
 

@@ -1,6 +1,6 @@
 //! PNG figures of an evaluation (plotters, bitmap backend).
 //!
-//! What it is: four figures written into a directory —
+//! What it is: the figures written into a directory —
 //! - `<stem>_friction_vs_velocity.png`: the label τ_F against ṡ (evaluated rows, subsampled), the
 //!   fitted static models (CV/SCV) as curves and each PINN's predictions as points; velocities outside
 //!   the training range shaded;
@@ -8,6 +8,9 @@
 //!   model's τ̂_F; the stretches outside the training range (s or ṡ) shaded;
 //! - `<stem>_hysteresis.png`: τ_F against Δθ (latched at the chunk start, as the daemon latches it)
 //!   over the same chunk — the pre-sliding loops a history model can exploit;
+//! - `drift_<model>.png` (`--drift`): per |ṡ| band (x: band index, labelled in the text output), the
+//!   residual RMSE (top) and mean residual along the motion, (label − τ̂_F)·sign(ṡ) (bottom), of the
+//!   new log (filled) next to the reference (hollow), the bands whose check fired outlined in red;
 //! - `training_curves.png`: every per-epoch number of a `frictl train` report (`epochs[]`), e.g.
 //!   train/validation loss, on a log axis when positive.
 //!
@@ -268,6 +271,98 @@ pub fn friction_vs_velocity(
             }
         }
         legend(&mut c)?;
+        root.present().map_err(|e| e.to_string())
+    };
+    draw().map_err(|e| perr(path, e))
+}
+
+/// The drift figure of one model: per |ṡ| band, RMSE (top panel) and mean residual along the motion
+/// (bottom panel),
+/// new log filled, reference hollow; a band whose check fired is outlined in red.
+pub fn drift_bands(path: &Path, m: &super::drift::ModelDrift) -> Result<(), PlotError> {
+    let n = m.new.bands.len();
+    let reference = |j: usize| {
+        m.reference
+            .as_ref()
+            .and_then(|r| r.bands.get(j))
+            .map(|b| b.stats)
+    };
+    let fired = |j: usize| {
+        let b = &m.new.bands[j];
+        let hi = b.hi_rad_s.map_or_else(|| "inf".into(), |h| h.to_string());
+        let what = format!("band [{}, {hi}) rad/s", b.lo_rad_s);
+        m.checks.iter().any(|c| c.fired && c.what == what)
+    };
+    let draw = || -> Result<(), String> {
+        let root = BitMapBackend::new(path, SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let (top, bottom) = root.split_vertically(SIZE.1 / 2);
+        type Pick = fn(&frictionless_dataset::bands::ResidualStats) -> Option<f64>;
+        let panels: [(&DrawingArea<_, _>, &str, &str, Pick); 2] = [
+            (&top, "residual RMSE per |sdot| band", "RMSE [Nm]", |s| {
+                s.rmse_nm
+            }),
+            (
+                &bottom,
+                "mean of (label - prediction)·sign(sdot) per |sdot| band",
+                "mean along the motion [Nm]",
+                |s| s.mean_along_motion_nm,
+            ),
+        ];
+        for (area, title, ydesc, pick) in panels {
+            let vals: Vec<f64> = (0..n)
+                .flat_map(|j| {
+                    [
+                        pick(&m.new.bands[j].stats),
+                        reference(j).and_then(|s| pick(&s)),
+                    ]
+                })
+                .flatten()
+                .collect();
+            let lo = vals.iter().copied().fold(0.0f64, f64::min);
+            let hi = vals.iter().copied().fold(0.0f64, f64::max);
+            let pad = ((hi - lo) * 0.1).max(1e-3);
+            let title = format!("{}: {} ({})", m.model, title, m.verdict);
+            let mut c = chart(
+                area,
+                &title,
+                (-0.5, n as f64 - 0.5),
+                (lo - pad, hi + pad),
+                "|sdot| band index (edges in the text output)",
+                ydesc,
+            )?;
+            let new_col = color(1);
+            let ref_col = RGBColor(60, 60, 60);
+            c.draw_series((0..n).filter_map(|j| {
+                pick(&m.new.bands[j].stats).map(|v| {
+                    let x = j as f64;
+                    Rectangle::new([(x - 0.38, 0.0), (x - 0.02, v)], new_col.filled())
+                })
+            }))
+            .map_err(|e| e.to_string())?
+            .label("new log")
+            .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 20, y + 5)], new_col.filled()));
+            c.draw_series((0..n).filter_map(|j| {
+                reference(j).and_then(|s| pick(&s)).map(|v| {
+                    let x = j as f64;
+                    Rectangle::new([(x + 0.02, 0.0), (x + 0.38, v)], ref_col.stroke_width(2))
+                })
+            }))
+            .map_err(|e| e.to_string())?
+            .label("reference")
+            .legend(move |(x, y)| {
+                Rectangle::new([(x, y - 5), (x + 20, y + 5)], ref_col.stroke_width(2))
+            });
+            c.draw_series((0..n).filter(|&j| fired(j)).map(|j| {
+                let x = j as f64;
+                Rectangle::new(
+                    [(x - 0.45, lo - pad * 0.5), (x + 0.45, hi + pad * 0.5)],
+                    EXTRAPOLATION.stroke_width(2),
+                )
+            }))
+            .map_err(|e| e.to_string())?;
+            legend(&mut c)?;
+        }
         root.present().map_err(|e| e.to_string())
     };
     draw().map_err(|e| perr(path, e))

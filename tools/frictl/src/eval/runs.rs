@@ -8,7 +8,8 @@
 //! rows), scores rows inside and outside it separately; [`RunReport`] / [`BandReport`] are the
 //! `per_run[]` / `per_band[]` entries of the eval report.
 //!
-//! What it is not: prediction or the main metrics (see [`super::evaluate`]).
+//! What it is not: prediction or the main metrics (see [`super::evaluate`]), or the banding itself
+//! (`frictionless_dataset::bands`, shared with the drift monitor and the trainer).
 
 use std::collections::BTreeMap;
 
@@ -17,8 +18,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{DatasetEval, EvalError, ModelSpec};
 
-/// Default |ṡ| band edges [rad/s]: stick/creep, slow, medium, fast sliding, and the rest (≥ 1 rad/s).
-pub const DEFAULT_BAND_EDGES_RAD_S: [f64; 5] = [0.0, 0.02, 0.1, 0.5, 1.0];
+pub use frictionless_dataset::bands::{DEFAULT_BAND_EDGES_RAD_S, band_of};
 
 /// Checks band edges: at least one, finite, ≥ 0 and strictly increasing.
 pub fn check_band_edges(edges: &[f64]) -> Result<(), EvalError> {
@@ -34,15 +34,6 @@ pub fn check_band_edges(edges: &[f64]) -> Result<(), EvalError> {
             reason: "needs at least one edge, finite, >= 0 and strictly increasing",
         })
     }
-}
-
-/// Index of the band of `|sdot_rad_s|` (None below the first edge or for a non-finite velocity).
-pub fn band_of(edges: &[f64], sdot_rad_s: f64) -> Option<usize> {
-    let v = sdot_rad_s.abs();
-    if !v.is_finite() || edges.first().is_none_or(|e| v < *e) {
-        return None;
-    }
-    Some(edges.iter().rposition(|e| v >= *e).unwrap_or(0))
 }
 
 /// Rows where s or ṡ lies outside `range` (every row false without a range).
@@ -312,16 +303,8 @@ mod tests {
     use super::*;
 
     #[test]
-    fn bands_cover_every_velocity_from_the_first_edge() {
+    fn band_edges_are_checked() {
         let e = DEFAULT_BAND_EDGES_RAD_S;
-        assert_eq!(band_of(&e, 0.0), Some(0));
-        assert_eq!(band_of(&e, -0.019), Some(0));
-        assert_eq!(band_of(&e, 0.02), Some(1));
-        assert_eq!(band_of(&e, -0.7), Some(3));
-        assert_eq!(band_of(&e, 1.0), Some(4));
-        assert_eq!(band_of(&e, 50.0), Some(4));
-        assert_eq!(band_of(&e, f64::NAN), None);
-        assert_eq!(band_of(&[0.1, 1.0], 0.05), None);
         assert!(check_band_edges(&e).is_ok());
         assert!(check_band_edges(&[]).is_err());
         assert!(check_band_edges(&[0.0, 0.1, 0.1]).is_err());
