@@ -213,6 +213,28 @@ fn round_trip_int8_per_channel() {
             "{what} scale accepted"
         );
     }
+    // Non-canonical int8: a −128 code, a scale that is not its row's.
+    let mut c = bytes.clone();
+    c[704] = 0x80;
+    fix_crc(&mut c);
+    assert!(matches!(
+        from_bytes(&c),
+        Err(WeightError::Invalid {
+            field: "int8 code",
+            ..
+        })
+    ));
+    let mut c = bytes.clone();
+    // Row 0 of layer 0 with every code 1: its scale is no longer max |w| / 127.
+    c[704..744].fill(1);
+    fix_crc(&mut c);
+    assert!(matches!(
+        from_bytes(&c),
+        Err(WeightError::Invalid {
+            field: "int8 scale",
+            ..
+        })
+    ));
     // A negative measured error is refused by the writer; in a 1.2 file the field is reserved.
     let mut w = m.clone();
     w.meta.training.quant_max_error_nm = Some(-1.0);
@@ -1009,6 +1031,10 @@ fn fuzz_seed_files_are_valid() {
             model(&[6, 5, 4, 3, 1], StorageDtype::Bf16, 13),
         ),
         ("wide_f16.fwt", model(&[20, 40, 1], StorageDtype::F16, 14)),
+        (
+            "deep_int8.fwt",
+            model(&[6, 5, 4, 3, 1], StorageDtype::Int8, 15),
+        ),
     ];
     let dir = std::env::var_os("FWT_FUZZ_SEED_DIR").map(PathBuf::from);
     for (name, m) in seeds {

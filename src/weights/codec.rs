@@ -232,8 +232,21 @@ pub(super) fn parse_header(b: &[u8]) -> Result<Header, WeightError> {
         None
     };
 
-    let quant_max_error_nm = Some(rd_f32(b, off::QUANT_MAX_ERROR))
-        .filter(|v| version_minor >= layout::MINOR_INT8 && !v.is_nan());
+    // NaN = not measured; only the canonical quiet NaN the writer uses (so re-encoding reproduces the
+    // file); a value is checked (finite, ≥ 0) with the rest of the metadata.
+    let quant_max_error_nm = if version_minor >= layout::MINOR_INT8 {
+        let v = rd_f32(b, off::QUANT_MAX_ERROR);
+        if v.is_nan() && v.to_bits() != f32::NAN.to_bits() {
+            return Err(WeightError::Invalid {
+                field: "quant_max_error_nm",
+                value: format!("NaN {:#010x}", v.to_bits()),
+                reason: "not measured is the quiet NaN 0x7fc00000",
+            });
+        }
+        Some(v).filter(|v| !v.is_nan())
+    } else {
+        None
+    };
 
     Ok(Header {
         input_range,
@@ -485,8 +498,9 @@ fn decode_values(b: &[u8], at: usize, n: usize, dtype: StorageDtype) -> Vec<f32>
 }
 
 /// Decodes one int8 hidden layer at `at`: codes `[n_out][n_in]`, scales `[n_out]`, biases `[n_out]`.
-/// Returns the dequantised weights, the biases and the bytes consumed. A scale must be finite and
-/// ≥ 0.
+/// Returns the dequantised weights, the biases and the bytes consumed. A scale must be finite, ≥ 0
+/// and canonical (what the writer computes for the dequantised row, so re-encoding reproduces the
+/// file), and a code must not be −128.
 fn decode_int8_layer(
     b: &[u8],
     at: usize,
@@ -505,11 +519,28 @@ fn decode_int8_layer(
             reason: "must be ≥ 0",
         });
     }
-    let weight = codes
+    if codes.contains(&-128.0) {
+        return Err(WeightError::Invalid {
+            field: "int8 code",
+            value: "-128".into(),
+            reason: "codes are symmetric, −127 … 127",
+        });
+    }
+    let weight: Vec<f32> = codes
         .chunks(n_in.max(1))
         .zip(&scales)
         .flat_map(|(row, &s)| row.iter().map(move |&q| q * s))
         .collect();
+    for (row, &s) in weight.chunks(n_in.max(1)).zip(&scales) {
+        let canonical = crate::kernel::int8_channel_scale(row);
+        if canonical.to_bits() != s.to_bits() {
+            return Err(WeightError::Invalid {
+                field: "int8 scale",
+                value: s.to_string(),
+                reason: "not the canonical scale of its row (max |w| / 127, as the writer computes it)",
+            });
+        }
+    }
     Ok((weight, bias, n_in * n_out + 8 * n_out))
 }
 
