@@ -17,17 +17,34 @@
 //! as its weight row zero-padded to a multiple of 16 and evaluated as a 16-lane dot product followed by a
 //! horizontal sum. All buffers are 64-byte aligned ([`Block`]-sized chunks).
 //!
+//! [`StorageDtype::Int8`] lays the hidden layers out as `[ceil(out/16)][ceil(in/4)][16][4]` int8: one
+//! 64-byte row holds 4 consecutive inputs of each of 16 outputs (what `vpdpbusd` consumes), with one
+//! f32 scale per output channel (indexed like the biases); the output layer stays f32 rows. Every
+//! weight byte of a net lives in its `Store` (`Net::weight_spans` lists the byte ranges).
+//!
 //! The input normalisation `(x − mean) / scale` is applied first, in f32, exactly as written (not folded
 //! into the first layer), so reduced-precision storage rounds the *same* weights the trainer produced.
 //!
 //! ## Precision
-//! Computation is always f32 with f32 biases and normalisation. Weights are stored as f32, IEEE f16 or
-//! bf16 ([`StorageDtype`]), rounded to nearest-even once at load and decoded inside the kernel
-//! (`vcvtph2ps` for f16, a 16-bit left shift for bf16). [`storage_rounded`] gives the exact weights a
-//! reduced-precision kernel computes with, for validation against the f32 model.
+//! Accumulation is f32 (i32 for the VNNI dot products) with f32 biases and normalisation. Weights are
+//! stored as f32, IEEE f16, bf16 or int8 ([`StorageDtype`]): f16/bf16 rounded to nearest-even once at
+//! load and decoded inside the kernel (`vcvtph2ps` for f16, a 16-bit left shift for bf16); int8
+//! quantised per output channel ([`int8_channel_scale`], [`int8_code`]) and either decoded to f32
+//! (sign-extending shifts, then FMA with f32 activations: "weight-only") or, on
+//! [`KernelPath::Avx512Vnni`], multiplied with u8 activations: every hidden layer after the first
+//! quantises its input (≥ 0 after the ReLU) per call to `round(x · 255 / max x)`, accumulates
+//! `vpdpbusd` in i32 and rescales by weight scale × `max x / 255` (the first layer, whose inputs are
+//! signed, stays weight-only). [`storage_rounded`] gives the exact weights a reduced-precision kernel
+//! computes with (for int8 the dequantised weights; the VNNI path's activation rounding comes on top),
+//! for validation against the f32 model; `frictl convert` gates a conversion on the measured error.
+//!
+//! Not here: a bf16 dot-product path (`vdpbf16ps`, AVX512-BF16) and an AMX path. bf16 weights are
+//! decoded to f32 on every path. AMX is absent on the development CPU (AMD Zen 4), so no AMX code
+//! exists (none could be tested).
 //!
 //! ## Paths
-//! [`KernelPath::Avx512`] (AVX-512F intrinsics), [`KernelPath::Avx2Fma`] (AVX2 + FMA + F16C intrinsics)
+//! [`KernelPath::Avx512Vnni`] (AVX-512F/BW/VNNI: int8 as above, every other dtype exactly as
+//! `Avx512`), [`KernelPath::Avx512`] (AVX-512F intrinsics), [`KernelPath::Avx2Fma`] (AVX2 + FMA + F16C intrinsics)
 //! and [`KernelPath::Portable`] (plain Rust that the compiler auto-vectorises; correct on any CPU, uses
 //! FMA only when the build enables it). [`Mlp::new`] picks the fastest path the running CPU supports;
 //! [`Mlp::with_path`] forces one (tests compare all of them).
