@@ -2,11 +2,15 @@
 //!
 //! - `hot/<model>/<path>/<dtype>` (criterion): back-to-back single inferences, weights hot in cache, for
 //!   the paper-size PINN 40→268→215→1 and the ergoCub-size 50→450→210→280→1, every available kernel path
-//!   × f32/f16/bf16.
+//!   × f32/f16/bf16/int8 (int8 on `avx512vnni` = u8 activations × int8 weights with `vpdpbusd`; on the
+//!   other paths int8 weights decoded to f32). `hot/layer1`, `hot/layer2`: the paper net's two hidden
+//!   layers as separate nets (40→268→1, and 4→268→215→1 whose 268→215 layer dominates) on the
+//!   detected path, for the per-layer cost.
 //! - `paced/...` (custom loop): one inference per tick with a 0.9 ms sleep between ticks (1 kHz), p50/p99.
-//! - `tick32/...` (custom loop): 32 distinct paper-size nets once each per 1 kHz tick, f32/f16/bf16, on one
-//!   thread and split over two threads (a spinning worker), p50/p99; plus the accuracy cost of f16/bf16
-//!   (max |error| in Nm against f32 on nets scaled to output a few Nm).
+//! - `tick32/...` (custom loop): 32 distinct paper-size nets once each per 1 kHz tick, every dtype, on
+//!   one thread and split over two threads (a spinning worker), p50/p99; plus the accuracy cost of
+//!   f16/bf16/int8 (int8 weight-only and int8 VNNI) as max |error| in Nm against f32 on nets scaled to
+//!   output a few Nm.
 //! - `ort/...` (feature `ort-bench`, custom loop): ONNX Runtime vs this kernel, single sample, one thread;
 //!   run through `benches/ort_compare.sh`.
 //!
@@ -26,15 +30,11 @@ use std::time::{Duration, Instant};
 
 const PAPER: &[usize] = &[40, 268, 215, 1];
 const ERGOCUB: &[usize] = &[50, 450, 210, 280, 1];
-const DTYPES: [StorageDtype; 3] = [StorageDtype::F32, StorageDtype::F16, StorageDtype::Bf16];
+const DTYPES: [StorageDtype; 4] = StorageDtype::ALL;
 const N_INPUTS: usize = 64;
 
 fn dtype_name(d: StorageDtype) -> &'static str {
-    match d {
-        StorageDtype::F32 => "f32",
-        StorageDtype::F16 => "f16",
-        StorageDtype::Bf16 => "bf16",
-    }
+    d.name()
 }
 
 /// A random MLP (He-uniform weights, small biases, non-trivial normalisation) from the library's seeded
@@ -164,6 +164,29 @@ fn hot(c: &mut Criterion) {
         }
         g.finish();
     }
+    // Per-layer cost on the detected path: the paper net's first hidden layer (40→268, with a 268→1
+    // output) and its second behind a tiny first layer (4→268→215→1, so that on the VNNI path the
+    // 268→215 layer runs as a later layer, with u8 activations, as in the paper net).
+    let path = KernelPath::detect();
+    for (model, sizes) in [
+        ("layer1", &[40, 268, 1][..]),
+        ("layer2", &[4, 268, 215, 1][..]),
+    ] {
+        let w = random_net(&mut rng, sizes);
+        let xs = random_inputs(&mut rng, &w, N_INPUTS);
+        let mut g = c.benchmark_group(format!("hot/{model}"));
+        for dtype in DTYPES {
+            let mut m = Mlp::new(&w, dtype).expect("valid net");
+            let mut i = 0usize;
+            g.bench_function(format!("{path}/{}", dtype_name(dtype)), |b| {
+                b.iter(|| {
+                    i = (i + 1) % N_INPUTS;
+                    m.forward(black_box(&xs[i]))
+                })
+            });
+        }
+        g.finish();
+    }
 }
 
 /// One inference per 1 kHz tick (0.9 ms sleep in between): the weights cool down between calls.
@@ -209,7 +232,8 @@ fn tick32_nets(rng: &mut ChaCha8Rng) -> (Vec<MlpWeights>, Vec<Vec<Vec<f32>>>) {
     (nets, inputs)
 }
 
-/// 32 distinct paper-size nets per tick: accuracy of f16/bf16, then paced tick timing on 1 and 2 threads.
+/// 32 distinct paper-size nets per tick: accuracy of f16/bf16/int8, then paced tick timing on 1 and 2
+/// threads.
 fn tick32(cli: &Cli) {
     let mut rng = ChaCha8Rng::seed_from_u64(42);
     let (nets, inputs) = tick32_nets(&mut rng);
@@ -231,12 +255,21 @@ fn tick32(cli: &Cli) {
             "tick32/accuracy: f32 outputs span [{:.3}, {:.3}] Nm over 32 nets × {N_INPUTS} inputs",
             range.0, range.1
         );
-        for dtype in [StorageDtype::F16, StorageDtype::Bf16] {
+        let variants = [
+            (StorageDtype::F16, path),
+            (StorageDtype::Bf16, path),
+            (StorageDtype::Int8, KernelPath::Portable),
+            (StorageDtype::Int8, path),
+        ];
+        for (dtype, p) in variants {
             let mut worst = 0f32;
             let mut sum = 0f64;
             let mut n = 0usize;
             for ((w, xs), mf) in nets.iter().zip(&inputs).zip(&mut f32_m) {
-                let mut m = Mlp::new(w, dtype).expect("valid");
+                let mut m = Mlp::new(w, dtype)
+                    .expect("valid")
+                    .with_path(p)
+                    .expect("available");
                 for x in xs {
                     let e = (m.forward(x) - mf.forward(x)).abs();
                     worst = worst.max(e);
@@ -245,7 +278,7 @@ fn tick32(cli: &Cli) {
                 }
             }
             println!(
-                "tick32/accuracy/{:<5} vs f32: max |error| {:.2e} Nm, mean |error| {:.2e} Nm",
+                "tick32/accuracy/{:<5} ({p}) vs f32: max |error| {:.2e} Nm, mean |error| {:.2e} Nm",
                 dtype_name(dtype),
                 worst,
                 sum / n as f64

@@ -57,14 +57,39 @@ pub enum StorageDtype {
     F16,
     /// bfloat16 (decoded to f32 inside the kernel).
     Bf16,
+    /// Symmetric int8 hidden-layer weights with one f32 scale per output channel (zero-point 0):
+    /// `w ≈ q · scale[o]`, `q ∈ [−127, 127]`. Biases, the output layer and the normalisation stay f32.
+    /// Decoded to f32 inside the kernel, or multiplied as int8 × u8 activations with `vpdpbusd`
+    /// ([`crate::kernel::KernelPath::Avx512Vnni`]).
+    Int8,
 }
 
 impl StorageDtype {
-    /// Bytes per stored value.
+    /// All storage dtypes, widest first.
+    pub const ALL: [StorageDtype; 4] = [
+        StorageDtype::F32,
+        StorageDtype::F16,
+        StorageDtype::Bf16,
+        StorageDtype::Int8,
+    ];
+
+    /// Bytes per stored weight (for [`StorageDtype::Int8`]: per hidden-layer weight; its scales,
+    /// biases and output layer are f32).
     pub fn size_bytes(self) -> usize {
         match self {
             StorageDtype::F32 => 4,
             StorageDtype::F16 | StorageDtype::Bf16 => 2,
+            StorageDtype::Int8 => 1,
+        }
+    }
+
+    /// Short lowercase name (`f32`, `f16`, `bf16`, `int8`), the spelling the tools print and parse.
+    pub fn name(self) -> &'static str {
+        match self {
+            StorageDtype::F32 => "f32",
+            StorageDtype::F16 => "f16",
+            StorageDtype::Bf16 => "bf16",
+            StorageDtype::Int8 => "int8",
         }
     }
 }

@@ -246,7 +246,7 @@ fn kernel_forward_never_allocates_on_any_path_or_dtype() {
     let w = mlp(&[50, 450, 210, 280, 1]);
     let x: Vec<f32> = (0..50).map(|i| (i % 7) as f32 * 0.1 - 0.3).collect();
     let bad = vec![0.0f32; 49];
-    for dtype in [StorageDtype::F32, StorageDtype::F16, StorageDtype::Bf16] {
+    for dtype in StorageDtype::ALL {
         for path in KernelPath::available() {
             let mut m = Mlp::new(&w, dtype).unwrap().with_path(path).unwrap();
             let before = allocs();

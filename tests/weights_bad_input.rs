@@ -75,6 +75,7 @@ fn model(sizes: &[usize], dtype: StorageDtype, seed: u64) -> ModelFile {
                 tool_version: "frictl 0.1.0".into(),
                 filtering: SignalFiltering::Causal,
                 input_range: None,
+                quant_max_error_nm: None,
             },
         },
         dtype,
@@ -152,6 +153,114 @@ fn round_trip_f16_within_rounding() {
 #[test]
 fn round_trip_bf16_within_rounding() {
     check_rounded(StorageDtype::Bf16, 7);
+}
+
+/// int8 (format 1.3): hidden weights within half a channel step, biases and the output layer exact,
+/// re-encoding the decoded model gives the same bytes, the size follows the spec's int8 formula, the
+/// measured conversion error round-trips, and a negative or non-finite scale is refused.
+#[test]
+fn round_trip_int8_per_channel() {
+    let sizes = [40, 268, 215, 1];
+    let mut m = model(&sizes, StorageDtype::Int8, 9);
+    m.meta.training.quant_max_error_nm = Some(0.0042);
+    let bytes = to_bytes(&m).unwrap();
+    // Spec: hidden layers n_in·n_out + 8·n_out bytes, output layer 4·(n_in + 1).
+    let payload = (40 * 268 + 8 * 268) + (268 * 215 + 8 * 215) + 4 * (215 + 1);
+    assert_eq!(bytes.len(), 704 + payload);
+    assert_eq!(bytes.len(), 704 + 73_068);
+    assert_eq!(bytes[53], 4, "dtype code");
+    let back = from_bytes(&bytes).unwrap();
+    assert_eq!(back.dtype, StorageDtype::Int8);
+    assert_eq!(back.meta.training.quant_max_error_nm, Some(0.0042));
+    let n = m.mlp.layers.len();
+    for (k, (lo, lb)) in m.mlp.layers.iter().zip(&back.mlp.layers).enumerate() {
+        assert_eq!(lo.bias, lb.bias, "biases are f32");
+        if k + 1 == n {
+            assert_eq!(lo.weight, lb.weight, "the output layer is f32");
+            continue;
+        }
+        for (ro, rb) in lo.weight.chunks(lo.n_in).zip(lb.weight.chunks(lb.n_in)) {
+            let step = ro.iter().fold(0f32, |a, v| a.max(v.abs())) / 127.0;
+            for (a, b) in ro.iter().zip(rb) {
+                assert!(
+                    (a - b).abs() <= 0.5 * step * 1.0001,
+                    "{a} → {b} (step {step})"
+                );
+            }
+            assert!(ro != rb, "int8 must actually quantise");
+        }
+    }
+    assert_eq!(to_bytes(&back).unwrap(), bytes);
+    assert_eq!(
+        weights::round_to_dtype(&m.mlp, StorageDtype::Int8),
+        back.mlp
+    );
+    assert_eq!(
+        weights::encoded_layout(&m.mlp, StorageDtype::Int8).file_len,
+        bytes.len() as u64
+    );
+    // The first scale of layer 0 sits right after its 40·268 codes.
+    let scale_at = 704 + 40 * 268;
+    for (bad, what) in [(-1.0f32, "negative"), (f32::INFINITY, "infinite")] {
+        let mut c = bytes.clone();
+        c[scale_at..scale_at + 4].copy_from_slice(&bad.to_le_bytes());
+        fix_crc(&mut c);
+        assert!(
+            matches!(
+                from_bytes(&c),
+                Err(WeightError::Invalid { .. } | WeightError::NonFinite { .. })
+            ),
+            "{what} scale accepted"
+        );
+    }
+    // Non-canonical int8: a −128 code, a scale that is not its row's.
+    let mut c = bytes.clone();
+    c[704] = 0x80;
+    fix_crc(&mut c);
+    assert!(matches!(
+        from_bytes(&c),
+        Err(WeightError::Invalid {
+            field: "int8 code",
+            ..
+        })
+    ));
+    let mut c = bytes.clone();
+    // Row 0 of layer 0 with every code 1: its scale is no longer max |w| / 127.
+    c[704..744].fill(1);
+    fix_crc(&mut c);
+    assert!(matches!(
+        from_bytes(&c),
+        Err(WeightError::Invalid {
+            field: "int8 scale",
+            ..
+        })
+    ));
+    // A negative measured error is refused by the writer; in a 1.2 file the field is reserved.
+    let mut w = m.clone();
+    w.meta.training.quant_max_error_nm = Some(-1.0);
+    assert!(to_bytes(&w).is_err());
+    let (f, fb) = small(StorageDtype::F16);
+    assert_eq!(
+        from_bytes(&fb).unwrap().meta.training.quant_max_error_nm,
+        None
+    );
+    let mut old = to_bytes(&f).unwrap();
+    old[10..12].copy_from_slice(&2u16.to_le_bytes());
+    old[QUANT_ERROR_AT..QUANT_ERROR_AT + 4].copy_from_slice(&0.5f32.to_le_bytes());
+    fix_crc(&mut old);
+    assert!(matches!(
+        from_bytes(&old),
+        Err(WeightError::NonZeroReserved {
+            offset: 68..=71,
+            ..
+        })
+    ));
+    old[QUANT_ERROR_AT..QUANT_ERROR_AT + 4].fill(0);
+    fix_crc(&mut old);
+    assert_eq!(
+        from_bytes(&old).unwrap().meta.training.quant_max_error_nm,
+        None
+    );
 }
 
 #[test]
@@ -450,12 +559,12 @@ fn shapes_over_limits_are_refused_before_allocating() {
             value: 9
         })
     ));
-    let b = hand_file(6, 3, &[(6, 4, 1), (4, 1, 2)], 4, 4);
+    let b = hand_file(6, 3, &[(6, 4, 1), (4, 1, 2)], 5, 4);
     assert!(matches!(
         from_bytes(&b),
         Err(WeightError::UnknownCode {
             field: "dtype",
-            value: 4
+            value: 5
         })
     ));
     // History that does not match the input count.
@@ -732,7 +841,7 @@ fn temperature_and_feature_sets_round_trip() {
         };
         m.meta.scv = None;
         let bytes = to_bytes(&m).unwrap();
-        assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 2, "minor 2");
+        assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 3, "minor 3");
         assert_eq!(usize::from(bytes[42]), n, "n_blocks");
         // The header names each block, in order, unused slots zero.
         let codes: Vec<u8> = set
@@ -778,6 +887,7 @@ fn temperature_and_feature_sets_round_trip() {
         let mut old = bytes.clone();
         old[10..12].copy_from_slice(&0u16.to_le_bytes());
         old[BLOCK_FEATURES_AT..BLOCK_FEATURES_AT + 8].fill(0);
+        old[QUANT_ERROR_AT..QUANT_ERROR_AT + 4].fill(0);
         fix_crc(&mut old);
         let back = from_bytes(&old).expect("a 1.0 file");
         assert_eq!(back.meta.features, m.meta.features);
@@ -921,6 +1031,10 @@ fn fuzz_seed_files_are_valid() {
             model(&[6, 5, 4, 3, 1], StorageDtype::Bf16, 13),
         ),
         ("wide_f16.fwt", model(&[20, 40, 1], StorageDtype::F16, 14)),
+        (
+            "deep_int8.fwt",
+            model(&[6, 5, 4, 3, 1], StorageDtype::Int8, 15),
+        ),
     ];
     let dir = std::env::var_os("FWT_FUZZ_SEED_DIR").map(PathBuf::from);
     for (name, m) in seeds {
@@ -1017,6 +1131,8 @@ fn models_with_non_finite_output_are_refused() {
 
 /// Offsets of the input range (format 1.2) from docs/weights-format.md.
 const RANGE_PRESENT_AT: usize = 66;
+/// `quant_max_error_nm` (f32, format 1.3; reserved zero before).
+const QUANT_ERROR_AT: usize = 68;
 const INPUT_RANGE_AT: usize = 288;
 
 fn ranged() -> ModelFile {
@@ -1073,6 +1189,7 @@ fn a_1_1_file_reads_without_a_range_and_refuses_range_bytes() {
     // As a 1.1 writer would have it: no range, minor 1.
     let mut old = b.clone();
     old[10..12].copy_from_slice(&1u16.to_le_bytes());
+    old[QUANT_ERROR_AT..QUANT_ERROR_AT + 4].fill(0);
     old[RANGE_PRESENT_AT] = 0;
     old[INPUT_RANGE_AT..FIXED].fill(0);
     fix_crc(&mut old);

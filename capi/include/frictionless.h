@@ -223,6 +223,9 @@ typedef struct fl_feature_block {
 // bfloat16 weights.
 #define FL_DTYPE_BF16 2
 
+// Symmetric int8 hidden-layer weights with per-output-channel f32 scales (output layer f32).
+#define FL_DTYPE_INT8 3
+
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus

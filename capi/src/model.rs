@@ -26,6 +26,8 @@ pub const FL_DTYPE_F32: fl_dtype = 0;
 pub const FL_DTYPE_F16: fl_dtype = 1;
 /// bfloat16 weights.
 pub const FL_DTYPE_BF16: fl_dtype = 2;
+/// Symmetric int8 hidden-layer weights with per-output-channel f32 scales (output layer f32).
+pub const FL_DTYPE_INT8: fl_dtype = 3;
 
 /// An open `.fwt` model. Opaque; immutable; safe to use from several threads at once.
 pub struct fl_model {
@@ -259,6 +261,7 @@ pub unsafe extern "C" fn fl_model_describe(
                 StorageDtype::F32 => FL_DTYPE_F32,
                 StorageDtype::F16 => FL_DTYPE_F16,
                 StorageDtype::Bf16 => FL_DTYPE_BF16,
+                StorageDtype::Int8 => FL_DTYPE_INT8,
             },
             n_layer_sizes: m.layer_sizes.len() as u32,
             layer_sizes: m.layer_sizes.as_ptr(),

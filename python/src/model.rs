@@ -23,13 +23,9 @@ use pyo3::types::{PyBytes, PyDict, PyList};
 
 use crate::{ModelError, WeightFileError, message};
 
-/// The storage dtype's name (`"f32"`, `"f16"`, `"bf16"`).
+/// The storage dtype's name (`"f32"`, `"f16"`, `"bf16"`, `"int8"`).
 pub(crate) fn dtype_name(d: StorageDtype) -> &'static str {
-    match d {
-        StorageDtype::F32 => "f32",
-        StorageDtype::F16 => "f16",
-        StorageDtype::Bf16 => "bf16",
-    }
+    d.name()
 }
 
 fn parse_dtype(s: &str) -> PyResult<StorageDtype> {
@@ -37,8 +33,9 @@ fn parse_dtype(s: &str) -> PyResult<StorageDtype> {
         "f32" | "float32" => Ok(StorageDtype::F32),
         "f16" | "float16" => Ok(StorageDtype::F16),
         "bf16" | "bfloat16" => Ok(StorageDtype::Bf16),
+        "int8" => Ok(StorageDtype::Int8),
         _ => Err(PyValueError::new_err(format!(
-            "dtype `{s}`: expected \"f32\", \"f16\" or \"bf16\""
+            "dtype `{s}`: expected \"f32\", \"f16\", \"bf16\" or \"int8\""
         ))),
     }
 }

@@ -17,17 +17,34 @@
 //! as its weight row zero-padded to a multiple of 16 and evaluated as a 16-lane dot product followed by a
 //! horizontal sum. All buffers are 64-byte aligned ([`Block`]-sized chunks).
 //!
+//! [`StorageDtype::Int8`] lays the hidden layers out as `[ceil(out/16)][ceil(in/4)][16][4]` int8: one
+//! 64-byte row holds 4 consecutive inputs of each of 16 outputs (what `vpdpbusd` consumes), with one
+//! f32 scale per output channel (indexed like the biases); the output layer stays f32 rows. Every
+//! weight byte of a net lives in its `Store` (`Net::weight_spans` lists the byte ranges).
+//!
 //! The input normalisation `(x − mean) / scale` is applied first, in f32, exactly as written (not folded
 //! into the first layer), so reduced-precision storage rounds the *same* weights the trainer produced.
 //!
 //! ## Precision
-//! Computation is always f32 with f32 biases and normalisation. Weights are stored as f32, IEEE f16 or
-//! bf16 ([`StorageDtype`]), rounded to nearest-even once at load and decoded inside the kernel
-//! (`vcvtph2ps` for f16, a 16-bit left shift for bf16). [`storage_rounded`] gives the exact weights a
-//! reduced-precision kernel computes with, for validation against the f32 model.
+//! Accumulation is f32 (i32 for the VNNI dot products) with f32 biases and normalisation. Weights are
+//! stored as f32, IEEE f16, bf16 or int8 ([`StorageDtype`]): f16/bf16 rounded to nearest-even once at
+//! load and decoded inside the kernel (`vcvtph2ps` for f16, a 16-bit left shift for bf16); int8
+//! quantised per output channel ([`int8_channel_scale`], [`int8_code`]) and either decoded to f32
+//! (sign-extending shifts, then FMA with f32 activations: "weight-only") or, on
+//! [`KernelPath::Avx512Vnni`], multiplied with u8 activations: every hidden layer after the first
+//! quantises its input (≥ 0 after the ReLU) per call to `round(x · 255 / max x)`, accumulates
+//! `vpdpbusd` in i32 and rescales by weight scale × `max x / 255` (the first layer, whose inputs are
+//! signed, stays weight-only). [`storage_rounded`] gives the exact weights a reduced-precision kernel
+//! computes with (for int8 the dequantised weights; the VNNI path's activation rounding comes on top),
+//! for validation against the f32 model; `frictl convert` gates a conversion on the measured error.
+//!
+//! Not here: a bf16 dot-product path (`vdpbf16ps`, AVX512-BF16) and an AMX path. bf16 weights are
+//! decoded to f32 on every path. AMX is absent on the development CPU (AMD Zen 4), so no AMX code
+//! exists (none could be tested).
 //!
 //! ## Paths
-//! [`KernelPath::Avx512`] (AVX-512F intrinsics), [`KernelPath::Avx2Fma`] (AVX2 + FMA + F16C intrinsics)
+//! [`KernelPath::Avx512Vnni`] (AVX-512F/BW/VNNI: int8 as above, every other dtype exactly as
+//! `Avx512`), [`KernelPath::Avx512`] (AVX-512F intrinsics), [`KernelPath::Avx2Fma`] (AVX2 + FMA + F16C intrinsics)
 //! and [`KernelPath::Portable`] (plain Rust that the compiler auto-vectorises; correct on any CPU, uses
 //! FMA only when the build enables it). [`Mlp::new`] picks the fastest path the running CPU supports;
 //! [`Mlp::with_path`] forces one (tests compare all of them).
@@ -35,10 +52,14 @@
 use crate::mlp::{Activation, MlpShapeError, MlpWeights, StorageDtype, limits};
 use thiserror::Error;
 
+mod int8;
 mod portable;
 mod prefetch;
 #[cfg(target_arch = "x86_64")]
 mod x86;
+
+use int8::{ByteBlock, Int8Store, QuadBlock};
+pub use int8::{int8_channel_scale, int8_code};
 
 /// Lanes per block: outputs are processed 16 at a time (one zmm, or two ymm).
 pub const LANES: usize = 16;
@@ -63,11 +84,17 @@ pub(crate) mod dt {
     pub const F16: u8 = 1;
     /// bfloat16 rows (32 bytes).
     pub const BF16: u8 = 2;
+    /// int8 quad rows (64 bytes = 16 lanes × 4 inputs), f32 output layer.
+    pub const INT8: u8 = 3;
 }
 
 /// Which implementation [`Mlp::forward`] runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum KernelPath {
+    /// AVX-512F + BW + VNNI (x86-64 only, detected at run time): for [`StorageDtype::Int8`] the hidden
+    /// layers after the first multiply int8 weights by dynamically quantised u8 activations with
+    /// `vpdpbusd` (i32 accumulation); every other dtype runs exactly the [`KernelPath::Avx512`] code.
+    Avx512Vnni,
     /// AVX-512F intrinsics (x86-64 only, detected at run time).
     Avx512,
     /// AVX2 + FMA + F16C intrinsics (x86-64 only, detected at run time).
@@ -78,7 +105,8 @@ pub enum KernelPath {
 
 impl KernelPath {
     /// All paths, fastest first.
-    pub const ALL: [KernelPath; 3] = [
+    pub const ALL: [KernelPath; 4] = [
+        KernelPath::Avx512Vnni,
         KernelPath::Avx512,
         KernelPath::Avx2Fma,
         KernelPath::Portable,
@@ -88,6 +116,12 @@ impl KernelPath {
     pub fn is_available(self) -> bool {
         match self {
             KernelPath::Portable => true,
+            #[cfg(target_arch = "x86_64")]
+            KernelPath::Avx512Vnni => {
+                std::is_x86_feature_detected!("avx512f")
+                    && std::is_x86_feature_detected!("avx512bw")
+                    && std::is_x86_feature_detected!("avx512vnni")
+            }
             #[cfg(target_arch = "x86_64")]
             KernelPath::Avx512 => std::is_x86_feature_detected!("avx512f"),
             #[cfg(target_arch = "x86_64")]
@@ -114,9 +148,10 @@ impl KernelPath {
         Self::ALL.into_iter().filter(|p| p.is_available()).collect()
     }
 
-    /// Short lowercase name (`avx512`, `avx2fma`, `portable`).
+    /// Short lowercase name (`avx512vnni`, `avx512`, `avx2fma`, `portable`).
     pub fn name(self) -> &'static str {
         match self {
+            KernelPath::Avx512Vnni => "avx512vnni",
             KernelPath::Avx512 => "avx512",
             KernelPath::Avx2Fma => "avx2fma",
             KernelPath::Portable => "portable",
@@ -155,6 +190,8 @@ pub(crate) enum Store {
     F32(Vec<Block>),
     /// f16 or bf16 bit patterns, two rows per [`HalfBlock`].
     Half(Vec<HalfBlock>),
+    /// int8 hidden layers (quad rows + per-channel scales) and an f32 output layer.
+    Int8(Int8Store),
 }
 
 /// Everything the kernels read (immutable after construction).
@@ -179,6 +216,9 @@ pub(crate) struct Scratch {
     /// Ping-pong activation buffers, each `max hidden blocks` long.
     pub(crate) a: Vec<Block>,
     pub(crate) b: Vec<Block>,
+    /// The u8-quantised input of the current layer (VNNI path), at least `4 · ceil(max width / 4)`
+    /// bytes.
+    pub(crate) q: Vec<ByteBlock>,
 }
 
 /// An MLP laid out for inference. Built once (allocates), then [`Mlp::forward`] never allocates.
@@ -199,8 +239,10 @@ fn encode_half(v: f32, dtype: StorageDtype) -> u16 {
 }
 
 /// The weights a kernel with storage `dtype` actually computes with: every layer weight rounded to
-/// `dtype` (round to nearest, ties to even) and back to f32. Biases and normalisation stay f32, as in the
-/// kernel. Use it to validate a reduced-precision model against its f32 original.
+/// `dtype` (round to nearest, ties to even) and back to f32; for [`StorageDtype::Int8`] every
+/// hidden-layer weight quantised per output channel ([`int8_channel_scale`], [`int8_code`]) and
+/// dequantised, the output layer unchanged. Biases and normalisation stay f32, as in the kernel (the
+/// VNNI path additionally quantises activations, which this does not model). Use it to validate a reduced-precision model against its f32 original.
 pub fn storage_rounded(w: &MlpWeights, dtype: StorageDtype) -> MlpWeights {
     let mut r = w.clone();
     for l in &mut r.layers {
@@ -209,7 +251,19 @@ pub fn storage_rounded(w: &MlpWeights, dtype: StorageDtype) -> MlpWeights {
                 StorageDtype::F32 => *v,
                 StorageDtype::F16 => half::f16::from_f32(*v).to_f32(),
                 StorageDtype::Bf16 => half::bf16::from_f32(*v).to_f32(),
+                StorageDtype::Int8 => *v, // per channel below
             };
+        }
+    }
+    if dtype == StorageDtype::Int8 {
+        let n_hidden = r.layers.len().saturating_sub(1);
+        for l in &mut r.layers[..n_hidden] {
+            for row in l.weight.chunks_mut(l.n_in.max(1)) {
+                let sc = int8_channel_scale(row);
+                for v in row {
+                    *v = f32::from(int8_code(*v, sc)) * sc;
+                }
+            }
         }
     }
     r
@@ -217,6 +271,44 @@ pub fn storage_rounded(w: &MlpWeights, dtype: StorageDtype) -> MlpWeights {
 
 fn blocks(n: usize) -> usize {
     n.div_ceil(LANES)
+}
+
+/// Quantises the hidden layers of `w` into the int8 quad layout and copies the output layer as f32
+/// rows; re-points `hidden[k].row0` at quad rows and `out.row0` at the output store.
+fn int8_store(
+    w: &MlpWeights,
+    hidden: &mut [LayerPlan],
+    out: &mut LayerPlan,
+    n_bias_blk: usize,
+) -> Int8Store {
+    let n_quads: usize = hidden.iter().map(|p| p.n_blk * int8::quads(p.n_in)).sum();
+    let mut quads = vec![QuadBlock([0; 4 * LANES]); n_quads.max(1)];
+    let mut scale = vec![ZERO_BLOCK; n_bias_blk];
+    let mut row = 0usize;
+    for (p, l) in hidden.iter_mut().zip(&w.layers) {
+        let nq = int8::quads(l.n_in);
+        p.row0 = row;
+        for (o, wrow) in l.weight.chunks(l.n_in).enumerate() {
+            let (blk, lane) = (o / LANES, o % LANES);
+            let sc = int8_channel_scale(wrow);
+            scale[p.bias_blk0 + blk].0[lane] = sc;
+            for (i, &v) in wrow.iter().enumerate() {
+                quads[row + blk * nq + i / 4].0[4 * lane + i % 4] = int8_code(v, sc);
+            }
+        }
+        row += p.n_blk * nq;
+    }
+    let last = &w.layers[hidden.len()];
+    let mut out_rows = vec![ZERO_BLOCK; out.n_blk];
+    for (i, &v) in last.weight.iter().enumerate() {
+        out_rows[i / LANES].0[i % LANES] = v;
+    }
+    out.row0 = 0;
+    Int8Store {
+        quads,
+        scale,
+        out: out_rows,
+    }
 }
 
 impl Mlp {
@@ -245,7 +337,7 @@ impl Mlp {
         }
         let last = &w.layers[n_hidden];
         debug_assert_eq!(last.activation, Activation::Identity);
-        let out = LayerPlan {
+        let mut out = LayerPlan {
             n_in: last.n_in,
             n_blk: blocks(last.n_in),
             row0: row,
@@ -270,6 +362,9 @@ impl Mlp {
             rows[out.row0 + i / LANES].0[i % LANES] = v;
         }
         let store = match dtype {
+            StorageDtype::Int8 => {
+                Store::Int8(int8_store(w, &mut hidden[..n_hidden], &mut out, bias.len()))
+            }
             StorageDtype::F32 => Store::F32(rows),
             StorageDtype::F16 | StorageDtype::Bf16 => {
                 let mut hb = vec![HalfBlock([0; 2 * LANES]); n_rows.div_ceil(2)];
@@ -297,6 +392,10 @@ impl Mlp {
             xin: vec![ZERO_BLOCK; blocks(n_in)],
             a: vec![ZERO_BLOCK; max_blk],
             b: vec![ZERO_BLOCK; max_blk],
+            q: vec![
+                ByteBlock([0; 4 * LANES]);
+                (max_blk.max(blocks(n_in)) * LANES).div_ceil(4 * LANES)
+            ],
         };
         Ok(Self {
             net,
@@ -332,10 +431,7 @@ impl Mlp {
 
     /// Bytes of weight storage the kernel streams per inference (padding included, biases excluded).
     pub fn weight_bytes(&self) -> usize {
-        match &self.net.store {
-            Store::F32(v) => std::mem::size_of_val(v.as_slice()),
-            Store::Half(v) => std::mem::size_of_val(v.as_slice()),
-        }
+        self.net.weight_spans().iter().map(|s| s.len()).sum()
     }
 
     /// One inference on a raw (un-normalised) input; returns the single output (joint-side friction, Nm).
@@ -353,24 +449,53 @@ impl Mlp {
             (StorageDtype::F32, Store::F32(_)) => dt::F32,
             (StorageDtype::F16, Store::Half(_)) => dt::F16,
             (StorageDtype::Bf16, Store::Half(_)) => dt::BF16,
+            (StorageDtype::Int8, Store::Int8(_)) => dt::INT8,
             _ => return f32::NAN, // unreachable by construction
         };
         match self.path {
             #[cfg(target_arch = "x86_64")]
-            KernelPath::Avx512 => x86::forward_avx512(net, s, code),
+            KernelPath::Avx512Vnni if code == dt::INT8 => x86::forward_vnni(net, s),
+            #[cfg(target_arch = "x86_64")]
+            KernelPath::Avx512 | KernelPath::Avx512Vnni => x86::forward_avx512(net, s, code),
             #[cfg(target_arch = "x86_64")]
             KernelPath::Avx2Fma => x86::forward_avx2(net, s, code),
+            _ if code == dt::INT8 => int8::forward_portable(net, s),
             _ => portable::forward(net, s, code),
         }
     }
 }
 
 impl Net {
-    /// Rows in the weight store.
+    /// Every byte range holding weights of this net (for int8 also the per-channel scales), in the
+    /// order the kernel streams them; unused slots are empty. Each span starts 64-byte aligned.
+    pub(crate) fn weight_spans(&self) -> [&[u8]; 3] {
+        fn bytes<T: Copy>(v: &[T]) -> &[u8] {
+            // SAFETY: only instantiated with `Block`, `HalfBlock` and `QuadBlock`: `repr(C)` arrays of
+            // plain numbers whose size equals their alignment (64), so there are no padding bytes and
+            // every byte is initialised; the slice borrows `v`.
+            unsafe { std::slice::from_raw_parts(v.as_ptr().cast::<u8>(), std::mem::size_of_val(v)) }
+        }
+        match &self.store {
+            Store::F32(v) => [bytes(v), &[], &[]],
+            Store::Half(v) => [bytes(v), &[], &[]],
+            Store::Int8(st) => [bytes(&st.quads), bytes(&st.scale), bytes(&st.out)],
+        }
+    }
+
+    /// Rows in the weight store (for int8: quad rows of the hidden layers).
     fn n_rows(&self) -> usize {
         match &self.store {
             Store::F32(v) => v.len(),
             Store::Half(v) => 2 * v.len(),
+            Store::Int8(st) => st.quads.len(),
+        }
+    }
+
+    /// Rows of the output layer's store.
+    fn n_out_rows(&self) -> usize {
+        match &self.store {
+            Store::Int8(st) => st.out.len(),
+            _ => self.n_rows(),
         }
     }
 
@@ -382,9 +507,20 @@ impl Net {
         if s.xin.len() < prev_blk || self.n_hidden > self.hidden.len() {
             return false;
         }
+        let int8 = match &self.store {
+            Store::Int8(st) => Some(st),
+            _ => None,
+        };
         for p in &self.hidden[..self.n_hidden] {
-            let ok = blocks(p.n_in) <= prev_blk
-                && p.row0 + p.n_blk * p.n_in <= self.n_rows()
+            // int8: quad rows; the kernels read 4·ceil(n_in/4) inputs and as many quantised bytes.
+            let (rows, n_x) = match int8 {
+                Some(_) => (int8::quads(p.n_in), 4 * int8::quads(p.n_in)),
+                None => (p.n_in, p.n_in),
+            };
+            let ok = n_x <= prev_blk * LANES
+                && n_x <= s.q.len() * 4 * LANES
+                && int8.is_none_or(|st| p.bias_blk0 + p.n_blk <= st.scale.len())
+                && p.row0 + p.n_blk * rows <= self.n_rows()
                 && p.bias_blk0 + p.n_blk <= self.bias.len()
                 && p.n_blk <= s.a.len()
                 && p.n_blk <= s.b.len();
@@ -393,7 +529,7 @@ impl Net {
             }
             prev_blk = p.n_blk;
         }
-        self.out.n_blk <= prev_blk && self.out.row0 + self.out.n_blk <= self.n_rows()
+        self.out.n_blk <= prev_blk && self.out.row0 + self.out.n_blk <= self.n_out_rows()
     }
 }
 

@@ -37,12 +37,13 @@ pub(super) fn forward(net: &Net, s: &mut Scratch, code: u8) -> f32 {
             let bits = &v[r / 2].0[(r % 2) * LANES..];
             std::array::from_fn(|l| f32::from_bits(u32::from(bits[l]) << 16))
         }),
+        (Store::Int8(_), _) => super::int8::forward_portable(net, s),
     }
 }
 
 #[inline(always)]
 fn run<R: Fn(usize) -> [f32; LANES]>(net: &Net, s: &mut Scratch, row: R) -> f32 {
-    let Scratch { xin, a, b } = s;
+    let Scratch { xin, a, b, .. } = s;
     for (k, p) in net.hidden[..net.n_hidden].iter().enumerate() {
         let bias = &net.bias[p.bias_blk0..p.bias_blk0 + p.n_blk];
         if k == 0 {

@@ -11,6 +11,7 @@
 //! `unsafe` is confined here: raw-pointer loads/stores whose bounds `Net::fits` checks once per call, and
 //! the calls into `#[target_feature]` functions, made only after run-time feature detection.
 
+use super::int8::{Int8Store, quads};
 use super::{LANES, LayerPlan, Net, Scratch, Store, dt};
 
 /// Bytes of one 16-wide weight row for a dtype code.
@@ -23,7 +24,28 @@ fn weight_ptr(store: &Store) -> *const u8 {
     match store {
         Store::F32(v) => v.as_ptr().cast(),
         Store::Half(v) => v.as_ptr().cast(),
+        Store::Int8(st) => st.quads.as_ptr().cast(),
     }
+}
+
+/// AVX-512 VNNI int8 forward pass (u8 activations × int8 weights after the first layer); falls back
+/// to the AVX-512 weight-only int8 path if the CPU lacks AVX-512BW or VNNI.
+pub(super) fn forward_vnni(net: &Net, s: &mut Scratch) -> f32 {
+    if !(std::is_x86_feature_detected!("avx512f")
+        && std::is_x86_feature_detected!("avx512bw")
+        && std::is_x86_feature_detected!("avx512vnni"))
+    {
+        return forward_avx512(net, s, dt::INT8);
+    }
+    let Store::Int8(st) = &net.store else {
+        return f32::NAN;
+    };
+    if !net.fits(s) {
+        return f32::NAN;
+    }
+    // SAFETY: AVX-512F/BW/VNNI are present (checked above); `fits` bounds every quad row, scale, bias,
+    // activation and quantised-activation byte the kernel addresses.
+    unsafe { avx512_i8::run_vnni(net, st, s) }
 }
 
 /// AVX-512 forward pass; falls back to the portable path if the CPU lacks AVX-512F.
@@ -33,6 +55,13 @@ pub(super) fn forward_avx512(net: &Net, s: &mut Scratch, code: u8) -> f32 {
     }
     if !net.fits(s) {
         return f32::NAN;
+    }
+    if code == dt::INT8 {
+        let Store::Int8(st) = &net.store else {
+            return f32::NAN;
+        };
+        // SAFETY: AVX-512F is present; `fits` bounds every row, scale, bias and activation block.
+        return unsafe { avx512_i8::run_decode(net, st, s) };
     }
     let w = weight_ptr(&net.store);
     // SAFETY: AVX-512F is present (checked above); `fits` guarantees every row, bias block and activation
@@ -57,6 +86,13 @@ pub(super) fn forward_avx2(net: &Net, s: &mut Scratch, code: u8) -> f32 {
     }
     if !net.fits(s) {
         return f32::NAN;
+    }
+    if code == dt::INT8 {
+        let Store::Int8(st) = &net.store else {
+            return f32::NAN;
+        };
+        // SAFETY: AVX2 and FMA are present; `fits` bounds every row, scale, bias and activation block.
+        return unsafe { avx2_i8::run(net, st, s) };
     }
     let w = weight_ptr(&net.store);
     // SAFETY: as in `forward_avx512`, with AVX2, FMA and F16C detected above.
@@ -370,6 +406,437 @@ mod avx2 {
             unsafe {
                 _mm256_store_ps(y.add(g * LANES), _mm256_max_ps(a[0], z));
                 _mm256_store_ps(y.add(g * LANES + 8), _mm256_max_ps(a[1], z));
+            }
+        }
+    }
+}
+
+/// int8 on AVX-512: the weight-only decode path (`run_decode`: sign-extend each byte of a quad row
+/// with two shifts, convert, FMA with the f32 activation) and the VNNI path (`run_vnni`: the first
+/// hidden layer as in `run_decode`; every later hidden layer quantises its input to u8 with a per-call
+/// scale `max / 255` and accumulates `vpdpbusd` in i32, then scales by weight scale × activation scale,
+/// adds the f32 bias and applies the ReLU). The output layer is an f32 dot product in both.
+mod avx512_i8 {
+    use super::*;
+    use std::arch::x86_64::*;
+
+    /// Output blocks per pass (8 zmm accumulators).
+    const MAX_G: usize = 8;
+
+    /// Quad row `r` of the store (64 bytes, 64-byte aligned).
+    ///
+    /// # Safety
+    /// Row `r` must exist.
+    #[target_feature(enable = "avx512f")]
+    #[inline]
+    unsafe fn row(w: *const u8, r: usize) -> __m512i {
+        // SAFETY: caller contract; quad rows are 64-byte aligned.
+        unsafe { _mm512_load_si512(w.add(r * 64).cast()) }
+    }
+
+    /// Weight-only pass (int8 weights decoded to f32, f32 activations).
+    ///
+    /// # Safety
+    /// AVX-512F must be available and `net.fits(s)` must hold for `net.store == Store::Int8(st)`.
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn run_decode(net: &Net, st: &Int8Store, s: &mut Scratch) -> f32 {
+        let w = st.quads.as_ptr().cast::<u8>();
+        let a = s.a.as_mut_ptr().cast::<f32>();
+        let b = s.b.as_mut_ptr().cast::<f32>();
+        let mut src = s.xin.as_ptr().cast::<f32>();
+        for (k, p) in net.hidden[..net.n_hidden].iter().enumerate() {
+            let dst = if k % 2 == 0 { a } else { b };
+            // SAFETY: `fits` bounds this layer; src and dst are distinct buffers.
+            unsafe { dense_decode(w, st, net, p, src, dst) };
+            src = dst;
+        }
+        // SAFETY: as above.
+        unsafe { out_dot(net, st, src) }
+    }
+
+    /// VNNI pass.
+    ///
+    /// # Safety
+    /// AVX-512F, BW and VNNI must be available and `net.fits(s)` must hold for
+    /// `net.store == Store::Int8(st)`.
+    #[target_feature(enable = "avx512f,avx512bw,avx512vnni")]
+    pub(super) unsafe fn run_vnni(net: &Net, st: &Int8Store, s: &mut Scratch) -> f32 {
+        let w = st.quads.as_ptr().cast::<u8>();
+        let a = s.a.as_mut_ptr().cast::<f32>();
+        let b = s.b.as_mut_ptr().cast::<f32>();
+        let qb = s.q.as_mut_ptr().cast::<u8>();
+        let mut src = s.xin.as_ptr().cast::<f32>();
+        for (k, p) in net.hidden[..net.n_hidden].iter().enumerate() {
+            let dst = if k % 2 == 0 { a } else { b };
+            // SAFETY: `fits` bounds this layer, its input blocks and the quantised bytes; src, dst and
+            // qb are distinct buffers.
+            unsafe {
+                if k == 0 {
+                    dense_decode(w, st, net, p, src, dst);
+                } else {
+                    let sa = quantise(src, p.n_in.div_ceil(LANES), qb);
+                    dense_vnni(w, st, net, p, qb, sa, dst);
+                }
+            }
+            src = dst;
+        }
+        // SAFETY: as above.
+        unsafe { out_dot(net, st, src) }
+    }
+
+    /// The f32 output layer.
+    ///
+    /// # Safety
+    /// `out.n_blk` rows of `st.out` from `out.row0` and as many activation blocks at `src`.
+    #[target_feature(enable = "avx512f")]
+    #[inline]
+    unsafe fn out_dot(net: &Net, st: &Int8Store, src: *const f32) -> f32 {
+        let o = &net.out;
+        let wo = st.out.as_ptr().cast::<f32>();
+        let mut acc = [_mm512_setzero_ps(); 4];
+        for r in 0..o.n_blk {
+            // SAFETY: caller contract.
+            let (wv, xv) = unsafe {
+                (
+                    _mm512_load_ps(wo.add((o.row0 + r) * LANES)),
+                    _mm512_load_ps(src.add(r * LANES)),
+                )
+            };
+            acc[r % 4] = _mm512_fmadd_ps(wv, xv, acc[r % 4]);
+        }
+        let sum = _mm512_add_ps(_mm512_add_ps(acc[0], acc[1]), _mm512_add_ps(acc[2], acc[3]));
+        _mm512_reduce_add_ps(sum) + net.out_bias
+    }
+
+    /// Quantises `n_blk` blocks of non-negative f32 at `x` to u8 at `q` (`round(x · 255 / max)`);
+    /// returns the activation scale `max / 255` (0 if every value is 0).
+    ///
+    /// # Safety
+    /// `n_blk` readable blocks at `x` (64-byte aligned), `16 · n_blk` writable bytes at `q`.
+    #[target_feature(enable = "avx512f,avx512bw,avx512vnni")]
+    #[inline]
+    unsafe fn quantise(x: *const f32, n_blk: usize, q: *mut u8) -> f32 {
+        let mut m = _mm512_setzero_ps();
+        for b in 0..n_blk {
+            // SAFETY: caller contract.
+            m = _mm512_max_ps(m, unsafe { _mm512_load_ps(x.add(b * LANES)) });
+        }
+        let m = _mm512_reduce_max_ps(m);
+        let (inv, sa) = if m > 0.0 {
+            (255.0 / m, m / 255.0)
+        } else {
+            (0.0, 0.0)
+        };
+        let inv = _mm512_set1_ps(inv);
+        for b in 0..n_blk {
+            // SAFETY: caller contract. Values are ≥ 0 (after ReLU); the unsigned saturating narrow
+            // clamps a rounding overshoot to 255.
+            unsafe {
+                let u = _mm512_cvtps_epi32(_mm512_mul_ps(_mm512_load_ps(x.add(b * LANES)), inv));
+                _mm_storeu_si128(q.add(b * LANES).cast(), _mm512_cvtusepi32_epi8(u));
+            }
+        }
+        sa
+    }
+
+    /// Hidden layer, weight-only: `y = relu(scale ⊙ (Q x) + b)`.
+    ///
+    /// # Safety
+    /// As `run_decode` for layer `p`: its quad rows, scale and bias blocks, `4·ceil(n_in/4)` floats at
+    /// `x`, `p.n_blk` blocks at `y`; `x` and `y` distinct.
+    #[target_feature(enable = "avx512f")]
+    #[inline]
+    unsafe fn dense_decode(
+        w: *const u8,
+        st: &Int8Store,
+        net: &Net,
+        p: &LayerPlan,
+        x: *const f32,
+        y: *mut f32,
+    ) {
+        let nq = quads(p.n_in);
+        let sc = st.scale.as_ptr().cast::<f32>();
+        let bi = net.bias.as_ptr().cast::<f32>();
+        let mut blk = 0;
+        while blk < p.n_blk {
+            let g = (p.n_blk - blk).min(MAX_G);
+            let r0 = p.row0 + blk * nq;
+            let off = (p.bias_blk0 + blk) * LANES;
+            // SAFETY: blocks blk..blk+g of this layer (caller contract).
+            unsafe {
+                let (s0, b0, y0) = (sc.add(off), bi.add(off), y.add(blk * LANES));
+                match g {
+                    8 => group_decode::<8>(w, r0, nq, x, s0, b0, y0),
+                    7 => group_decode::<7>(w, r0, nq, x, s0, b0, y0),
+                    6 => group_decode::<6>(w, r0, nq, x, s0, b0, y0),
+                    5 => group_decode::<5>(w, r0, nq, x, s0, b0, y0),
+                    4 => group_decode::<4>(w, r0, nq, x, s0, b0, y0),
+                    3 => group_decode::<3>(w, r0, nq, x, s0, b0, y0),
+                    2 => group_decode::<2>(w, r0, nq, x, s0, b0, y0),
+                    _ => group_decode::<1>(w, r0, nq, x, s0, b0, y0),
+                }
+            }
+            blk += g;
+        }
+    }
+
+    /// `G` output blocks, weight-only; block `g`'s quad `q` is row `row0 + g·nq + q`.
+    ///
+    /// # Safety
+    /// As for `dense_decode`, restricted to these `G` blocks.
+    #[target_feature(enable = "avx512f")]
+    #[inline]
+    unsafe fn group_decode<const G: usize>(
+        w: *const u8,
+        row0: usize,
+        nq: usize,
+        x: *const f32,
+        scale: *const f32,
+        bias: *const f32,
+        y: *mut f32,
+    ) {
+        let mut acc = [_mm512_setzero_ps(); G];
+        for q in 0..nq {
+            // SAFETY: 4·nq floats at x.
+            let xs = unsafe {
+                [
+                    _mm512_set1_ps(*x.add(4 * q)),
+                    _mm512_set1_ps(*x.add(4 * q + 1)),
+                    _mm512_set1_ps(*x.add(4 * q + 2)),
+                    _mm512_set1_ps(*x.add(4 * q + 3)),
+                ]
+            };
+            for (g, a) in acc.iter_mut().enumerate() {
+                // SAFETY: row row0 + g·nq + q belongs to this layer.
+                let v = unsafe { row(w, row0 + g * nq + q) };
+                // Byte j of each 32-bit lane is input 4q + j: shift it to the top, sign-extend down.
+                let w0 = _mm512_srai_epi32::<24>(_mm512_slli_epi32::<24>(v));
+                let w1 = _mm512_srai_epi32::<24>(_mm512_slli_epi32::<16>(v));
+                let w2 = _mm512_srai_epi32::<24>(_mm512_slli_epi32::<8>(v));
+                let w3 = _mm512_srai_epi32::<24>(v);
+                *a = _mm512_fmadd_ps(_mm512_cvtepi32_ps(w0), xs[0], *a);
+                *a = _mm512_fmadd_ps(_mm512_cvtepi32_ps(w1), xs[1], *a);
+                *a = _mm512_fmadd_ps(_mm512_cvtepi32_ps(w2), xs[2], *a);
+                *a = _mm512_fmadd_ps(_mm512_cvtepi32_ps(w3), xs[3], *a);
+            }
+        }
+        let z = _mm512_setzero_ps();
+        for (g, a) in acc.iter().enumerate() {
+            // SAFETY: G scale, bias and output blocks, 64-byte aligned.
+            unsafe {
+                let v = _mm512_fmadd_ps(
+                    *a,
+                    _mm512_load_ps(scale.add(g * LANES)),
+                    _mm512_load_ps(bias.add(g * LANES)),
+                );
+                _mm512_store_ps(y.add(g * LANES), _mm512_max_ps(v, z));
+            }
+        }
+    }
+
+    /// Hidden layer, VNNI: `y = relu((scale · sa) ⊙ (Q u) + b)` with `u` the u8 input at `q`.
+    ///
+    /// # Safety
+    /// As `dense_decode`, with `4·ceil(n_in/4)` readable bytes at `q` instead of floats at `x`.
+    #[target_feature(enable = "avx512f,avx512bw,avx512vnni")]
+    #[inline]
+    unsafe fn dense_vnni(
+        w: *const u8,
+        st: &Int8Store,
+        net: &Net,
+        p: &LayerPlan,
+        q: *const u8,
+        sa: f32,
+        y: *mut f32,
+    ) {
+        let nq = quads(p.n_in);
+        let sc = st.scale.as_ptr().cast::<f32>();
+        let bi = net.bias.as_ptr().cast::<f32>();
+        let sa = _mm512_set1_ps(sa);
+        let mut blk = 0;
+        while blk < p.n_blk {
+            let g = (p.n_blk - blk).min(MAX_G);
+            let r0 = p.row0 + blk * nq;
+            let off = (p.bias_blk0 + blk) * LANES;
+            // SAFETY: blocks blk..blk+g of this layer (caller contract).
+            unsafe {
+                let (s0, b0, y0) = (sc.add(off), bi.add(off), y.add(blk * LANES));
+                match g {
+                    8 => group_vnni::<8>(w, r0, nq, q, s0, sa, b0, y0),
+                    7 => group_vnni::<7>(w, r0, nq, q, s0, sa, b0, y0),
+                    6 => group_vnni::<6>(w, r0, nq, q, s0, sa, b0, y0),
+                    5 => group_vnni::<5>(w, r0, nq, q, s0, sa, b0, y0),
+                    4 => group_vnni::<4>(w, r0, nq, q, s0, sa, b0, y0),
+                    3 => group_vnni::<3>(w, r0, nq, q, s0, sa, b0, y0),
+                    2 => group_vnni::<2>(w, r0, nq, q, s0, sa, b0, y0),
+                    _ => group_vnni::<1>(w, r0, nq, q, s0, sa, b0, y0),
+                }
+            }
+            blk += g;
+        }
+    }
+
+    /// `G` output blocks, VNNI.
+    ///
+    /// # Safety
+    /// As for `dense_vnni`, restricted to these `G` blocks.
+    #[allow(clippy::too_many_arguments)]
+    #[target_feature(enable = "avx512f,avx512bw,avx512vnni")]
+    #[inline]
+    unsafe fn group_vnni<const G: usize>(
+        w: *const u8,
+        row0: usize,
+        nq: usize,
+        q: *const u8,
+        scale: *const f32,
+        sa: __m512,
+        bias: *const f32,
+        y: *mut f32,
+    ) {
+        let mut acc = [_mm512_setzero_si512(); G];
+        for qi in 0..nq {
+            // SAFETY: 4·nq readable bytes at q.
+            let u = _mm512_set1_epi32(unsafe { q.add(4 * qi).cast::<i32>().read_unaligned() });
+            for (g, a) in acc.iter_mut().enumerate() {
+                // SAFETY: row row0 + g·nq + qi belongs to this layer.
+                *a = _mm512_dpbusd_epi32(*a, u, unsafe { row(w, row0 + g * nq + qi) });
+            }
+        }
+        let z = _mm512_setzero_ps();
+        for (g, a) in acc.iter().enumerate() {
+            // SAFETY: G scale, bias and output blocks, 64-byte aligned.
+            unsafe {
+                let s = _mm512_mul_ps(_mm512_load_ps(scale.add(g * LANES)), sa);
+                let v = _mm512_fmadd_ps(
+                    _mm512_cvtepi32_ps(*a),
+                    s,
+                    _mm512_load_ps(bias.add(g * LANES)),
+                );
+                _mm512_store_ps(y.add(g * LANES), _mm512_max_ps(v, z));
+            }
+        }
+    }
+}
+
+/// int8 on AVX2 + FMA: the weight-only decode path (16 lanes in two ymm, as `avx512_i8::run_decode`).
+mod avx2_i8 {
+    use super::*;
+    use std::arch::x86_64::*;
+
+    /// Output blocks per pass (2 × 2 ymm accumulators; the decode needs registers too).
+    const MAX_G: usize = 2;
+
+    /// The whole pass.
+    ///
+    /// # Safety
+    /// AVX2 and FMA must be available and `net.fits(s)` must hold for `net.store == Store::Int8(st)`.
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) unsafe fn run(net: &Net, st: &Int8Store, s: &mut Scratch) -> f32 {
+        let w = st.quads.as_ptr().cast::<u8>();
+        let sc = st.scale.as_ptr().cast::<f32>();
+        let bi = net.bias.as_ptr().cast::<f32>();
+        let a = s.a.as_mut_ptr().cast::<f32>();
+        let b = s.b.as_mut_ptr().cast::<f32>();
+        let mut src = s.xin.as_ptr().cast::<f32>();
+        for (k, p) in net.hidden[..net.n_hidden].iter().enumerate() {
+            let dst = if k % 2 == 0 { a } else { b };
+            let nq = quads(p.n_in);
+            let mut blk = 0;
+            while blk < p.n_blk {
+                let g = (p.n_blk - blk).min(MAX_G);
+                let r0 = p.row0 + blk * nq;
+                let off = (p.bias_blk0 + blk) * LANES;
+                // SAFETY: `fits` bounds blocks blk..blk+g of this layer; src and dst are distinct.
+                unsafe {
+                    let (s0, b0, y0) = (sc.add(off), bi.add(off), dst.add(blk * LANES));
+                    if g == 2 {
+                        group::<2>(w, r0, nq, src, s0, b0, y0);
+                    } else {
+                        group::<1>(w, r0, nq, src, s0, b0, y0);
+                    }
+                }
+                blk += g;
+            }
+            src = dst;
+        }
+        let o = &net.out;
+        let wo = st.out.as_ptr().cast::<f32>();
+        let mut acc = [_mm256_setzero_ps(); 2];
+        for r in 0..o.n_blk {
+            for (h, ah) in acc.iter_mut().enumerate() {
+                // SAFETY: output rows and activation blocks in bounds (`fits`), 32-byte aligned halves.
+                let (wv, xv) = unsafe {
+                    (
+                        _mm256_load_ps(wo.add((o.row0 + r) * LANES + 8 * h)),
+                        _mm256_load_ps(src.add(r * LANES + 8 * h)),
+                    )
+                };
+                *ah = _mm256_fmadd_ps(wv, xv, *ah);
+            }
+        }
+        let s8 = _mm256_add_ps(acc[0], acc[1]);
+        let s4 = _mm_add_ps(_mm256_castps256_ps128(s8), _mm256_extractf128_ps::<1>(s8));
+        let s2 = _mm_add_ps(s4, _mm_movehl_ps(s4, s4));
+        let s1 = _mm_add_ss(s2, _mm_shuffle_ps::<1>(s2, s2));
+        _mm_cvtss_f32(s1) + net.out_bias
+    }
+
+    /// `G` output blocks of one hidden layer.
+    ///
+    /// # Safety
+    /// As for `avx512_i8::group_decode`.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    unsafe fn group<const G: usize>(
+        w: *const u8,
+        row0: usize,
+        nq: usize,
+        x: *const f32,
+        scale: *const f32,
+        bias: *const f32,
+        y: *mut f32,
+    ) {
+        let mut acc = [[_mm256_setzero_ps(); 2]; G];
+        for q in 0..nq {
+            // SAFETY: 4·nq floats at x.
+            let xs = unsafe {
+                [
+                    _mm256_set1_ps(*x.add(4 * q)),
+                    _mm256_set1_ps(*x.add(4 * q + 1)),
+                    _mm256_set1_ps(*x.add(4 * q + 2)),
+                    _mm256_set1_ps(*x.add(4 * q + 3)),
+                ]
+            };
+            for (g, a) in acc.iter_mut().enumerate() {
+                for (h, ah) in a.iter_mut().enumerate() {
+                    // SAFETY: half h of quad row row0 + g·nq + q (32-byte aligned).
+                    let v = unsafe {
+                        _mm256_load_si256(w.add((row0 + g * nq + q) * 64 + 32 * h).cast())
+                    };
+                    let w0 = _mm256_srai_epi32::<24>(_mm256_slli_epi32::<24>(v));
+                    let w1 = _mm256_srai_epi32::<24>(_mm256_slli_epi32::<16>(v));
+                    let w2 = _mm256_srai_epi32::<24>(_mm256_slli_epi32::<8>(v));
+                    let w3 = _mm256_srai_epi32::<24>(v);
+                    *ah = _mm256_fmadd_ps(_mm256_cvtepi32_ps(w0), xs[0], *ah);
+                    *ah = _mm256_fmadd_ps(_mm256_cvtepi32_ps(w1), xs[1], *ah);
+                    *ah = _mm256_fmadd_ps(_mm256_cvtepi32_ps(w2), xs[2], *ah);
+                    *ah = _mm256_fmadd_ps(_mm256_cvtepi32_ps(w3), xs[3], *ah);
+                }
+            }
+        }
+        let z = _mm256_setzero_ps();
+        for (g, a) in acc.iter().enumerate() {
+            for (h, ah) in a.iter().enumerate() {
+                // SAFETY: G scale, bias and output blocks; halves 32-byte aligned.
+                unsafe {
+                    let o = g * LANES + 8 * h;
+                    let v = _mm256_fmadd_ps(
+                        *ah,
+                        _mm256_load_ps(scale.add(o)),
+                        _mm256_load_ps(bias.add(o)),
+                    );
+                    _mm256_store_ps(y.add(o), _mm256_max_ps(v, z));
+                }
             }
         }
     }

@@ -107,6 +107,7 @@ pub(super) struct Header {
     pub joint_name: String,
     pub tool_version: String,
     pub input_range: Option<super::InputRange>,
+    pub quant_max_error_nm: Option<f32>,
 }
 
 fn unknown(field: &'static str, value: impl Into<u64>) -> WeightError {
@@ -182,13 +183,12 @@ pub(super) fn parse_header(b: &[u8]) -> Result<Header, WeightError> {
     let filtering =
         layout::filtering_from_code(f_code).ok_or_else(|| unknown("filtering", f_code))?;
 
-    let (layers, n_params) = parse_layer_table(b, n_inputs)?;
-    let layout = Layout::new(
-        n_inputs as u64,
-        layers.len() as u64,
-        n_params,
-        dtype.size_bytes() as u64,
-    );
+    let (layers, _) = parse_layer_table(b, n_inputs)?;
+    let dims: Vec<(u64, u64)> = layers
+        .iter()
+        .map(|l| (l.n_in as u64, l.n_out as u64))
+        .collect();
+    let layout = Layout::for_layers(n_inputs as u64, dtype, &dims);
     inconsistent(
         "payload_offset",
         rd_u32(b, off::PAYLOAD_OFFSET).into(),
@@ -232,8 +232,25 @@ pub(super) fn parse_header(b: &[u8]) -> Result<Header, WeightError> {
         None
     };
 
+    // NaN = not measured; only the canonical quiet NaN the writer uses (so re-encoding reproduces the
+    // file); a value is checked (finite, ≥ 0) with the rest of the metadata.
+    let quant_max_error_nm = if version_minor >= layout::MINOR_INT8 {
+        let v = rd_f32(b, off::QUANT_MAX_ERROR);
+        if v.is_nan() && v.to_bits() != f32::NAN.to_bits() {
+            return Err(WeightError::Invalid {
+                field: "quant_max_error_nm",
+                value: format!("NaN {:#010x}", v.to_bits()),
+                reason: "not measured is the quiet NaN 0x7fc00000",
+            });
+        }
+        Some(v).filter(|v| !v.is_nan())
+    } else {
+        None
+    };
+
     Ok(Header {
         input_range,
+        quant_max_error_nm,
         version_minor,
         crc_stored,
         layout,
@@ -435,7 +452,11 @@ fn parse_layer_table(b: &[u8], n_inputs: usize) -> Result<(Vec<LayerInfo>, u64),
 /// Byte ranges that must be zero in a file whose minor version this reader knows.
 fn reserved_ranges(h: &Header) -> Vec<std::ops::Range<usize>> {
     let mut r = Vec::with_capacity(8 + h.layers.len());
-    r.push(off::RESERVED_A..off::RESERVED_A + 5);
+    if h.version_minor < layout::MINOR_INT8 {
+        r.push(off::RESERVED_A..off::QUANT_MAX_ERROR + 4);
+    } else {
+        r.push(off::RESERVED_A..off::QUANT_MAX_ERROR);
+    }
     if h.version_minor < layout::MINOR_INPUT_RANGE {
         r.push(off::RANGE_PRESENT..off::RANGE_PRESENT + 1);
         r.push(off::INPUT_RANGE..layout::FIXED_HEADER_LEN);
@@ -472,7 +493,55 @@ fn decode_values(b: &[u8], at: usize, n: usize, dtype: StorageDtype) -> Vec<f32>
             .chunks_exact(2)
             .map(|c| bf16::from_le_bytes([c[0], c[1]]).to_f32())
             .collect(),
+        StorageDtype::Int8 => bytes.iter().map(|&c| f32::from(c as i8)).collect(),
     }
+}
+
+/// Decodes one int8 hidden layer at `at`: codes `[n_out][n_in]`, scales `[n_out]`, biases `[n_out]`.
+/// Returns the dequantised weights, the biases and the bytes consumed. A scale must be finite, ≥ 0
+/// and canonical (what the writer computes for the dequantised row, so re-encoding reproduces the
+/// file), and a code must not be −128.
+fn decode_int8_layer(
+    b: &[u8],
+    at: usize,
+    n_in: usize,
+    n_out: usize,
+    layer: usize,
+) -> Result<(Vec<f32>, Vec<f32>, usize), WeightError> {
+    let codes = decode_values(b, at, n_in * n_out, StorageDtype::Int8);
+    let scales = decode_values(b, at + n_in * n_out, n_out, StorageDtype::F32);
+    let bias = decode_values(b, at + n_in * n_out + 4 * n_out, n_out, StorageDtype::F32);
+    finite_all(|| format!("layer {layer} int8 scale"), &scales)?;
+    if let Some(&s) = scales.iter().find(|&&s| s < 0.0) {
+        return Err(WeightError::Invalid {
+            field: "int8 scale",
+            value: s.to_string(),
+            reason: "must be ≥ 0",
+        });
+    }
+    if codes.contains(&-128.0) {
+        return Err(WeightError::Invalid {
+            field: "int8 code",
+            value: "-128".into(),
+            reason: "codes are symmetric, −127 … 127",
+        });
+    }
+    let weight: Vec<f32> = codes
+        .chunks(n_in.max(1))
+        .zip(&scales)
+        .flat_map(|(row, &s)| row.iter().map(move |&q| q * s))
+        .collect();
+    for (row, &s) in weight.chunks(n_in.max(1)).zip(&scales) {
+        let canonical = crate::kernel::int8_channel_scale(row);
+        if canonical.to_bits() != s.to_bits() {
+            return Err(WeightError::Invalid {
+                field: "int8 scale",
+                value: s.to_string(),
+                reason: "not the canonical scale of its row (max |w| / 127, as the writer computes it)",
+            });
+        }
+    }
+    Ok((weight, bias, n_in * n_out + 8 * n_out))
 }
 
 /// Full validating decode (see [`super::from_bytes`]).
@@ -533,13 +602,25 @@ pub(super) fn decode(b: &[u8]) -> Result<ModelFile, WeightError> {
         scale: decode_values(b, norm_at + 4 * n, n, StorageDtype::F32),
     };
     let mut at = h.layout.payload_offset as usize;
-    let s = h.dtype.size_bytes();
     let mut layers = Vec::with_capacity(h.layers.len());
-    for l in &h.layers {
-        let weight = decode_values(b, at, l.n_in * l.n_out, h.dtype);
-        at += l.n_in * l.n_out * s;
-        let bias = decode_values(b, at, l.n_out, h.dtype);
-        at += l.n_out * s;
+    for (k, l) in h.layers.iter().enumerate() {
+        // int8: hidden layers as codes + scales + f32 biases, the output layer f32.
+        let dtype = match h.dtype {
+            StorageDtype::Int8 if k + 1 == h.layers.len() => StorageDtype::F32,
+            d => d,
+        };
+        let (weight, bias) = if dtype == StorageDtype::Int8 {
+            let (w, bias, used) = decode_int8_layer(b, at, l.n_in, l.n_out, k)?;
+            at += used;
+            (w, bias)
+        } else {
+            let s = dtype.size_bytes();
+            let weight = decode_values(b, at, l.n_in * l.n_out, dtype);
+            at += l.n_in * l.n_out * s;
+            let bias = decode_values(b, at, l.n_out, dtype);
+            at += l.n_out * s;
+            (weight, bias)
+        };
         layers.push(DenseLayer {
             n_in: l.n_in,
             n_out: l.n_out,
@@ -563,6 +644,7 @@ pub(super) fn decode(b: &[u8]) -> Result<ModelFile, WeightError> {
                 tool_version: h.tool_version,
                 filtering: h.filtering,
                 input_range: h.input_range,
+                quant_max_error_nm: h.quant_max_error_nm,
             },
         },
         dtype: h.dtype,
@@ -620,13 +702,18 @@ fn round_one(v: f32, dtype: StorageDtype) -> f32 {
         StorageDtype::F32 => v,
         StorageDtype::F16 => f16::from_f32(v).to_f32(),
         StorageDtype::Bf16 => bf16::from_f32(v).to_f32(),
+        StorageDtype::Int8 => v, // per channel, see `round_to_dtype`
     }
 }
 
 /// A copy of `mlp` with every weight and bias rounded to `dtype` (what [`super::from_bytes`]
 /// returns after a [`super::to_bytes`] round trip). The normalisation is not rounded (it is stored
-/// as f32). Values too large for the dtype become ±∞; [`super::to_bytes`] refuses those.
+/// as f32); for int8 only the hidden-layer weights are (per output channel), the rest is f32. Values too large for the dtype become ±∞; [`super::to_bytes`] refuses those.
 pub fn round_to_dtype(mlp: &MlpWeights, dtype: StorageDtype) -> MlpWeights {
+    if dtype == StorageDtype::Int8 {
+        // Hidden weights quantised per channel; biases and the output layer are stored as f32.
+        return crate::kernel::storage_rounded(mlp, dtype);
+    }
     let mut out = mlp.clone();
     for l in &mut out.layers {
         for v in l.weight.iter_mut().chain(l.bias.iter_mut()) {
@@ -638,12 +725,12 @@ pub fn round_to_dtype(mlp: &MlpWeights, dtype: StorageDtype) -> MlpWeights {
 
 /// The sizes of the file [`super::to_bytes`] writes for `mlp` stored as `dtype`.
 pub fn encoded_layout(mlp: &MlpWeights, dtype: StorageDtype) -> Layout {
-    Layout::new(
-        mlp.n_inputs() as u64,
-        mlp.layers.len() as u64,
-        mlp.n_params() as u64,
-        dtype.size_bytes() as u64,
-    )
+    let dims: Vec<(u64, u64)> = mlp
+        .layers
+        .iter()
+        .map(|l| (l.n_in as u64, l.n_out as u64))
+        .collect();
+    Layout::for_layers(mlp.n_inputs() as u64, dtype, &dims)
 }
 
 /// Everything the writer and the reader both require of a model.
@@ -716,6 +803,10 @@ fn validate_model(f: &ModelFile) -> Result<(), WeightError> {
     for (field, v) in [
         ("val_rmse_nm", m.training.val_rmse_nm),
         ("test_rmse_nm", m.training.test_rmse_nm),
+        (
+            "quant_max_error_nm",
+            m.training.quant_max_error_nm.unwrap_or(f32::NAN),
+        ),
     ] {
         let ok = v.is_nan() || (v.is_finite() && v >= 0.0);
         if !ok {
@@ -850,6 +941,14 @@ pub(super) fn encode(f: &ModelFile) -> Result<Vec<u8>, WeightError> {
     put(&mut b, off::VAL_RMSE, &m.training.val_rmse_nm.to_le_bytes());
     put(
         &mut b,
+        off::QUANT_MAX_ERROR,
+        &m.training
+            .quant_max_error_nm
+            .unwrap_or(f32::NAN)
+            .to_le_bytes(),
+    );
+    put(
+        &mut b,
         off::TEST_RMSE,
         &m.training.test_rmse_nm.to_le_bytes(),
     );
@@ -878,14 +977,36 @@ pub(super) fn encode(f: &ModelFile) -> Result<Vec<u8>, WeightError> {
     }
     debug_assert_eq!(at as u64, lay.header_len);
     at = lay.payload_offset as usize;
-    for l in &mlp.layers {
+    for (k, l) in mlp.layers.iter().enumerate() {
+        let dtype = match f.dtype {
+            StorageDtype::Int8 if k + 1 == mlp.layers.len() => StorageDtype::F32,
+            d => d,
+        };
+        if dtype == StorageDtype::Int8 {
+            let rows = l.weight.chunks(l.n_in.max(1));
+            let scales: Vec<f32> = rows
+                .clone()
+                .map(crate::kernel::int8_channel_scale)
+                .collect();
+            for (row, &sc) in rows.zip(&scales) {
+                for &v in row {
+                    b[at] = crate::kernel::int8_code(v, sc) as u8;
+                    at += 1;
+                }
+            }
+            for &v in scales.iter().chain(&l.bias) {
+                put(&mut b, at, &v.to_le_bytes());
+                at += 4;
+            }
+            continue;
+        }
         for &v in l.weight.iter().chain(&l.bias) {
-            match f.dtype {
-                StorageDtype::F32 => put(&mut b, at, &v.to_le_bytes()),
+            match dtype {
+                StorageDtype::F32 | StorageDtype::Int8 => put(&mut b, at, &v.to_le_bytes()),
                 StorageDtype::F16 => put(&mut b, at, &f16::from_f32(v).to_le_bytes()),
                 StorageDtype::Bf16 => put(&mut b, at, &bf16::from_f32(v).to_le_bytes()),
             }
-            at += f.dtype.size_bytes();
+            at += dtype.size_bytes();
         }
     }
     debug_assert_eq!(at as u64, lay.file_len);

@@ -75,6 +75,8 @@ pub struct Inspection {
     pub filtering: SignalFiltering,
     /// Range of the training inputs (format ≥ 1.2), `None` if the file has none.
     pub input_range: Option<super::InputRange>,
+    /// Max |Δτ̂_F| \[Nm\] against the f32 original measured by `frictl convert` (format ≥ 1.3), if any.
+    pub quant_max_error_nm: Option<f32>,
     /// Header length in bytes (unpadded).
     pub header_len: u64,
     /// Payload offset in bytes (64-aligned).
@@ -145,6 +147,7 @@ pub(super) fn inspect(bytes: &[u8]) -> Result<Inspection, WeightError> {
         tool_version: h.tool_version,
         filtering: h.filtering,
         input_range: h.input_range,
+        quant_max_error_nm: h.quant_max_error_nm,
         header_len: h.layout.header_len,
         payload_offset: h.layout.payload_offset,
         payload_len: h.layout.payload_len,
@@ -204,6 +207,12 @@ impl fmt::Display for Inspection {
         )?;
         writeln!(f, "output unit    {}", self.output_unit.symbol())?;
         writeln!(f, "network        {} ({:?})", sizes.join(" → "), self.dtype)?;
+        if let Some(e) = self.quant_max_error_nm {
+            writeln!(
+                f,
+                "conversion     max |Δτ̂_F| {e:.3e} Nm against the f32 original"
+            )?;
+        }
         writeln!(f, "params / MACs  {} / {}", self.n_params, self.macs)?;
         match &self.scv {
             Some(s) => writeln!(

@@ -15,12 +15,15 @@ pub const MAGIC: [u8; 8] = *b"FWT\0\r\n\x1a\n";
 pub const VERSION_MAJOR: u16 = 1;
 /// Format minor version written. Readers accept any minor of their major. Minor 1 names the feature
 /// blocks (`block_features`); a minor-0 file has zeros there and its blocks follow from its set code.
-/// Minor 2 adds the optional training input range (`range_present`, `input_range`).
-pub const VERSION_MINOR: u16 = 2;
+/// Minor 2 adds the optional training input range (`range_present`, `input_range`). Minor 3 adds the
+/// int8 storage dtype (code 4) and the measured conversion error (`quant_max_error_nm`).
+pub const VERSION_MINOR: u16 = 3;
 /// The first minor version whose header holds `block_features`.
 pub const MINOR_BLOCK_FEATURES: u16 = 1;
 /// The first minor version whose header may hold the training input range.
 pub const MINOR_INPUT_RANGE: u16 = 2;
+/// The first minor version with the int8 dtype and the `quant_max_error_nm` header field.
+pub const MINOR_INT8: u16 = 3;
 /// Feature-block slots of the input range (no feature set has more blocks); the temperature range
 /// follows them.
 pub const RANGE_BLOCKS: usize = 3;
@@ -94,8 +97,11 @@ pub mod off {
     pub const SCV_PRESENT: usize = 65;
     /// `u8` training-input-range presence flag (0 or 1; minor ≥ 2, reserved zero before).
     pub const RANGE_PRESENT: usize = 66;
-    /// `[u8; 5]` reserved, zero.
+    /// Reserved, zero: `u8` (minor ≥ 3), `[u8; 5]` up to and including `QUANT_MAX_ERROR` before.
     pub const RESERVED_A: usize = 67;
+    /// `f32` max |Δτ̂_F| \[Nm\] of this reduced-precision file against its f32 original, as measured
+    /// by `frictl convert` (minor ≥ 3; NaN = not measured; reserved zero before).
+    pub const QUANT_MAX_ERROR: usize = 68;
     /// `f64` signed gear ratio.
     pub const GEAR_RATIO: usize = 72;
     /// `f64` torque constant \[Nm/A\].
@@ -239,6 +245,7 @@ pub fn dtype_code(d: StorageDtype) -> u8 {
         StorageDtype::F32 => 1,
         StorageDtype::F16 => 2,
         StorageDtype::Bf16 => 3,
+        StorageDtype::Int8 => 4,
     }
 }
 
@@ -248,6 +255,7 @@ pub fn dtype_from_code(code: u8) -> Option<StorageDtype> {
         1 => StorageDtype::F32,
         2 => StorageDtype::F16,
         3 => StorageDtype::Bf16,
+        4 => StorageDtype::Int8,
         _ => return None,
     })
 }
@@ -316,6 +324,33 @@ impl Layout {
             payload_len,
             file_len: payload_offset + payload_len,
         }
+    }
+
+    /// The layout for `n_inputs` raw inputs and the dense layers `(n_in, n_out)` (first to last)
+    /// stored as `dtype`: [`Layout::new`] for f32/f16/bf16; for int8 every hidden layer takes
+    /// `n_in·n_out` bytes of codes plus `n_out` f32 scales and `n_out` f32 biases, the output layer
+    /// `4·(n_in + n_out)` bytes (f32).
+    pub fn for_layers(n_inputs: u64, dtype: StorageDtype, layers: &[(u64, u64)]) -> Self {
+        let n_layers = layers.len() as u64;
+        if dtype != StorageDtype::Int8 {
+            let n_params = layers.iter().map(|&(i, o)| (i + 1) * o).sum();
+            return Self::new(n_inputs, n_layers, n_params, dtype.size_bytes() as u64);
+        }
+        let payload_len: u64 = layers
+            .iter()
+            .enumerate()
+            .map(|(k, &(i, o))| {
+                if k + 1 == layers.len() {
+                    4 * (i * o + o)
+                } else {
+                    i * o + 8 * o
+                }
+            })
+            .sum();
+        let mut l = Self::new(n_inputs, n_layers, 0, 0);
+        l.payload_len = payload_len;
+        l.file_len = l.payload_offset + payload_len;
+        l
     }
 }
 
@@ -394,7 +429,8 @@ mod tests {
             (off::TEMPERATURE_UNIT, 1),
             (off::SCV_PRESENT, 1),
             (off::RANGE_PRESENT, 1),
-            (off::RESERVED_A, 5),
+            (off::RESERVED_A, 1),
+            (off::QUANT_MAX_ERROR, 4),
             (off::GEAR_RATIO, 8),
             (off::KT, 8),
             (off::SCV, 48),

@@ -57,6 +57,10 @@ pub struct TrainingMeta {
     /// Range of the training inputs (training rows only, not validation or test); `None` if unknown
     /// (an imported network, a file before format 1.2): then no input is ever out of range.
     pub input_range: Option<InputRange>,
+    /// Max |Δτ̂_F| \[Nm\] of this (reduced-precision) model against its f32 original as measured by
+    /// the conversion accuracy gate (`frictl convert`); `None` if not measured (f32 models, files
+    /// before format 1.3). Stored as NaN when `None`; when present finite and ≥ 0.
+    pub quant_max_error_nm: Option<f32>,
 }
 
 /// The range `[min, max]` the training rows covered, per feature block (the H samples of one signal
@@ -141,6 +145,7 @@ impl TrainingMeta {
             tool_version: tool_version.into(),
             filtering: SignalFiltering::Unknown,
             input_range: None,
+            quant_max_error_nm: None,
         }
     }
 }

@@ -935,6 +935,7 @@ pub fn train_model(
                         .x
                         .chunks_exact(prepared.train.n_inputs.max(1)),
                 ),
+                quant_max_error_nm: None,
             },
         },
         dtype: job.dtype,

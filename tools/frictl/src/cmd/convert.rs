@@ -1,17 +1,46 @@
-//! `frictl convert IN.fwt -o OUT.fwt --dtype f32|f16|bf16`: re-write a weight file with another
-//! storage precision and report how much the outputs move.
+//! `frictl convert IN.fwt -o OUT.fwt --dtype f32|f16|bf16|int8|auto [--max-error-nm 0.01]
+//! [--dataset FILE]`: re-write a weight file with another storage precision, behind an accuracy gate.
 //!
-//! The output change is measured through the real kernel on random inputs drawn around the model's
-//! normalisation statistics (mean + scale·N(0,1)). Biases and normalisation stay f32 in every dtype.
-//! Not a quantiser with calibration: rounding is round-to-nearest-even.
+//! The gate compares the converted model with the input model (computed in f32) on a probe set: random
+//! inputs drawn uniformly inside the file's stored training input range (`.fwt` ≥ 1.2; every one of a
+//! block's H samples inside that block's range, the temperature inside its range) or, for a file
+//! without a range, inside mean ± 3·scale of the normalisation; plus, with `--dataset`, every input row
+//! the model's feature set builds from that dataset CSV (hold-zero warm-up, Δθ latched at the first
+//! row, as `frictl train` builds them). The converted model runs on **every kernel path this CPU
+//! has** (the daemon runs the fastest: for int8 with AVX-512 VNNI, u8 activations); the reference is
+//! the input model's f32 reference forward pass. It prints max and p99 |Δτ̂_F| in Nm per path and
+//! refuses (non-zero exit, nothing written) when the worst path's max exceeds `--max-error-nm`.
+//! `--dtype auto` writes the smallest dtype that passes (int8, then f16, bf16; f32 when none does). The
+//! measured max
+//! is stored in the output's `quant_max_error_nm` header field (format 1.3).
+//!
+//! Not a quantiser with calibration: f16/bf16 round to nearest-even, int8 is symmetric per output
+//! channel (`max |w| / 127`). Biases and the normalisation stay f32 in every dtype.
 
 use std::path::PathBuf;
 
-use frictionless::kernel::Mlp;
-use frictionless::weights;
-use frictionless_interop as interop;
+use anyhow::{Context, bail};
+use frictionless::features::WarmupPolicy;
+use frictionless::kernel::{KernelPath, Mlp};
+use frictionless::mlp::{MlpWeights, StorageDtype};
+use frictionless::weights::{self, ModelFile};
+use frictionless_dataset::Dataset;
+use frictionless_train::data::{DeltaThetaOffset, build_inputs};
 
-use super::import::Dtype;
+/// Target precision of `frictl convert`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Target {
+    /// IEEE binary32.
+    F32,
+    /// IEEE binary16.
+    F16,
+    /// bfloat16.
+    Bf16,
+    /// int8 hidden-layer weights with per-output-channel scales (output layer f32).
+    Int8,
+    /// The smallest dtype within the bound: int8, then f16, bf16, f32.
+    Auto,
+}
 
 /// Arguments of `frictl convert`.
 #[derive(clap::Args, Debug)]
@@ -23,37 +52,211 @@ pub struct Args {
     pub output: PathBuf,
     /// Storage precision of the written file.
     #[arg(long, value_enum)]
-    pub dtype: Dtype,
-    /// Number of random inputs for the output-change report.
+    pub dtype: Target,
+    /// Largest max |Δτ̂_F| [Nm] against the input model accepted on any kernel path.
+    #[arg(long, default_value_t = 0.01)]
+    pub max_error_nm: f32,
+    /// A dataset CSV whose input rows are added to the probe set.
+    #[arg(long)]
+    pub dataset: Option<PathBuf>,
+    /// Number of random probe inputs (inside the training range).
     #[arg(long, default_value_t = 1000)]
     pub samples: usize,
-    /// Seed of the random inputs.
+    /// Seed of the random probe inputs.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+}
+
+/// The error of one converted model on one kernel path.
+#[derive(Clone, Copy, Debug)]
+pub struct PathError {
+    /// The kernel path.
+    pub path: KernelPath,
+    /// max |Δτ̂_F| over the probe set [Nm].
+    pub max_nm: f32,
+    /// 99th percentile of |Δτ̂_F| [Nm].
+    pub p99_nm: f32,
+}
+
+/// Random probe inputs inside the training range of `file` (or mean ± 3·scale without one).
+pub fn probe_inputs(file: &ModelFile, count: usize, seed: u64) -> Vec<Vec<f32>> {
+    // SplitMix64: uniform in [0, 1) from the top 24 bits.
+    let mut state = seed;
+    let mut uniform = move || {
+        state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let norm = &file.mlp.norm;
+    let spec = &file.meta.features;
+    let n = file.mlp.n_inputs();
+    let h = spec.history;
+    let n_blocks = spec.set.n_blocks();
+    let range_of = |i: usize| -> [f32; 2] {
+        match &file.meta.training.input_range {
+            Some(r) if i < n_blocks * h => r.blocks[(i / h).min(r.blocks.len() - 1)],
+            Some(r) if spec.temperature => r.temperature,
+            _ => [
+                norm.mean[i] - 3.0 * norm.scale[i].abs(),
+                norm.mean[i] + 3.0 * norm.scale[i].abs(),
+            ],
+        }
+    };
+    let ranges: Vec<[f32; 2]> = (0..n).map(range_of).collect();
+    (0..count)
+        .map(|_| {
+            ranges
+                .iter()
+                .map(|r| r[0] + (r[1] - r[0]) * uniform())
+                .collect()
+        })
+        .collect()
+}
+
+/// The input rows the model's feature set builds from a dataset CSV.
+fn dataset_inputs(file: &ModelFile, path: &std::path::Path) -> anyhow::Result<Vec<Vec<f32>>> {
+    let ds = Dataset::read_csv(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let w = build_inputs(
+        &ds,
+        &file.meta.features,
+        file.meta.gear_ratio,
+        WarmupPolicy::HoldZero,
+        DeltaThetaOffset::Run,
+    )
+    .with_context(|| format!("{}: cannot build the model's inputs", path.display()))?;
+    Ok((0..w.len()).map(|i| w.input(i).to_vec()).collect())
+}
+
+/// |Δτ̂_F| of `mlp` stored as `dtype` against `reference` (its f32 outputs on `inputs`) on every
+/// available kernel path.
+pub fn errors_per_path(
+    mlp: &MlpWeights,
+    dtype: StorageDtype,
+    inputs: &[Vec<f32>],
+    reference: &[f32],
+) -> anyhow::Result<Vec<PathError>> {
+    let mut out = Vec::new();
+    for path in KernelPath::available() {
+        let mut m = Mlp::new(mlp, dtype)?.with_path(path)?;
+        let mut e: Vec<f32> = inputs
+            .iter()
+            .zip(reference)
+            .map(|(x, &y)| {
+                let d = (m.forward(x) - y).abs();
+                if d.is_nan() { f32::INFINITY } else { d }
+            })
+            .collect();
+        e.sort_by(f32::total_cmp);
+        let p99 = e
+            .get(((e.len() as f64 * 0.99).ceil() as usize).saturating_sub(1))
+            .copied()
+            .unwrap_or(0.0);
+        out.push(PathError {
+            path,
+            max_nm: e.last().copied().unwrap_or(0.0),
+            p99_nm: p99,
+        });
+    }
+    Ok(out)
 }
 
 /// Runs `frictl convert`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     super::check_outputs(&[&args.input], &[&args.output])?;
+    if !(args.max_error_nm.is_finite() && args.max_error_nm >= 0.0) {
+        bail!(
+            "--max-error-nm {}: must be finite and ≥ 0",
+            args.max_error_nm
+        );
+    }
     let mut file = weights::read_file(&args.input)?;
     let old_dtype = file.dtype;
-    let mut before = Mlp::new(&file.mlp, old_dtype)?;
-    file.dtype = args.dtype.into();
-    weights::write_file(&args.output, &file)?;
-    let back = weights::read_file(&args.output)?;
-    let mut after = Mlp::new(&back.mlp, back.dtype)?;
-    let inputs = interop::random_inputs(&file.mlp.norm, args.samples, args.seed);
-    let (diff, max_ref) = interop::max_output_change(&mut before, &mut after, &inputs);
+    let mut inputs = probe_inputs(&file, args.samples, args.seed);
+    let n_random = inputs.len();
+    if let Some(ds) = &args.dataset {
+        inputs.extend(dataset_inputs(&file, ds)?);
+    }
+    if inputs.is_empty() {
+        bail!("no probe inputs: use --samples > 0 or --dataset");
+    }
+    let reference: Vec<f32> = inputs
+        .iter()
+        .map(|x| file.mlp.forward_reference(x)[0])
+        .collect();
+    let max_ref = reference.iter().fold(0f32, |m, y| m.max(y.abs()));
     println!(
-        "wrote {}: {:?} → {:?}",
-        args.output.display(),
-        old_dtype,
-        back.dtype
+        "probe set: {n_random} random inputs {} + {} dataset rows; max |τ̂_F| {max_ref:.3} Nm",
+        if file.meta.training.input_range.is_some() {
+            "inside the training range"
+        } else {
+            "inside mean ± 3·scale (no training range stored)"
+        },
+        inputs.len() - n_random
     );
-    println!(
-        "max |Δoutput| on {} random inputs: {diff:.3e} Nm (max |output| {max_ref:.3} Nm, relative {:.3e})",
-        args.samples,
-        if max_ref > 0.0 { diff / max_ref } else { 0.0 }
-    );
-    Ok(())
+    let candidates: &[StorageDtype] = match args.dtype {
+        Target::F32 => &[StorageDtype::F32],
+        Target::F16 => &[StorageDtype::F16],
+        Target::Bf16 => &[StorageDtype::Bf16],
+        Target::Int8 => &[StorageDtype::Int8],
+        // f32 is the lossless fallback: written whatever its rounding-level difference.
+        Target::Auto => &[
+            StorageDtype::Int8,
+            StorageDtype::F16,
+            StorageDtype::Bf16,
+            StorageDtype::F32,
+        ],
+    };
+    let joint = file.meta.joint_name.clone();
+    let mut last_refusal = String::new();
+    for &dtype in candidates {
+        let errs = errors_per_path(&file.mlp, dtype, &inputs, &reference)?;
+        for e in &errs {
+            println!(
+                "{:<5} {:<10} max |Δτ̂_F| {:.3e} Nm, p99 {:.3e} Nm",
+                dtype.name(),
+                e.path.name(),
+                e.max_nm,
+                e.p99_nm
+            );
+        }
+        let worst = errs
+            .iter()
+            .max_by(|a, b| a.max_nm.total_cmp(&b.max_nm))
+            .copied()
+            .context("no kernel path available")?;
+        let lossless_fallback = args.dtype == Target::Auto && dtype == StorageDtype::F32;
+        if !(worst.max_nm <= args.max_error_nm || lossless_fallback) {
+            last_refusal = format!(
+                "model `{joint}` ({}) as {}: max |Δτ̂_F| {:.3e} Nm (path {}) exceeds the bound {:.3e} Nm",
+                args.input.display(),
+                dtype.name(),
+                worst.max_nm,
+                worst.path,
+                args.max_error_nm
+            );
+            if args.dtype == Target::Auto {
+                println!("{last_refusal}; trying a wider dtype");
+            }
+            continue;
+        }
+        file.dtype = dtype;
+        file.meta.training.quant_max_error_nm =
+            (dtype != StorageDtype::F32).then_some(worst.max_nm);
+        weights::write_file(&args.output, &file)?;
+        let back = weights::read_file(&args.output)?;
+        println!(
+            "wrote {}: {} → {} (max |Δτ̂_F| {:.3e} Nm on {}, p99 {:.3e} Nm, bound {:.3e} Nm)",
+            args.output.display(),
+            old_dtype.name(),
+            back.dtype.name(),
+            worst.max_nm,
+            worst.path,
+            worst.p99_nm,
+            args.max_error_nm
+        );
+        return Ok(());
+    }
+    bail!("{last_refusal}; {} not written", args.output.display())
 }

@@ -38,6 +38,8 @@ pub enum Dtype {
     F16,
     /// bfloat16.
     Bf16,
+    /// int8 hidden-layer weights, per-output-channel scales (output layer f32).
+    Int8,
 }
 
 impl From<Dtype> for StorageDtype {
@@ -46,6 +48,7 @@ impl From<Dtype> for StorageDtype {
             Dtype::F32 => StorageDtype::F32,
             Dtype::F16 => StorageDtype::F16,
             Dtype::Bf16 => StorageDtype::Bf16,
+            Dtype::Int8 => StorageDtype::Int8,
         }
     }
 }
