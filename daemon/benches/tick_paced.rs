@@ -16,7 +16,7 @@
 //!    single-model floor and the hot back-to-back tick.
 //!
 //! No asserts, no criterion for the paced part. Run: `cargo bench -p frictiond --bench tick_paced`
-//! (about 5 minutes: 54 cells × `TICKS` ticks at 1 kHz; `TICK_PACED_TICKS=n` changes the count).
+//! (about 6 minutes: 72 cells × `TICKS` ticks at 1 kHz; `TICK_PACED_TICKS=n` changes the count).
 //! Runs as an ordinary thread (SCHED_OTHER) unless `TICK_PACED_PRIORITY=p` asks for SCHED_FIFO `p`
 //! for the bench thread and the helper (as frictiond's `[loop] priority`); timer slack 1 ns as in
 //! frictiond. On a shared machine the numbers include its load — note `uptime` next to them.
@@ -39,10 +39,11 @@ mod tick_params;
 use tick_params::{H, inputs, params};
 
 /// Storage dtypes measured (one array: a new `.fwt` dtype is one more entry).
-const DTYPES: [(&str, StorageDtype); 3] = [
+const DTYPES: [(&str, StorageDtype); 4] = [
     ("f32", StorageDtype::F32),
     ("f16", StorageDtype::F16),
     ("bf16", StorageDtype::Bf16),
+    ("int8", StorageDtype::Int8),
 ];
 /// Joint counts: one joint, ergoCub legs + torso, a whole humanoid.
 const JOINTS: [usize; 3] = [1, 15, 32];

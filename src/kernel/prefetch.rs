@@ -10,7 +10,7 @@
 //! What it is **not**: no inference, no allocation, no writes to the network; it changes only which
 //! lines the caches hold.
 
-use super::{Block, HalfBlock, Mlp, Store};
+use super::{Block, HalfBlock, Mlp};
 
 /// Bytes per cache line (the stores are 64-byte aligned, one [`Block`] / [`HalfBlock`] per line).
 const LINE: usize = 64;
@@ -48,13 +48,13 @@ const _: () =
 
 impl Mlp {
     /// Brings this network's weights and biases towards the core (`prefetcht1` per 64-byte line on
-    /// x86-64, a read per line elsewhere): every variant of the weight store, then the biases.
+    /// x86-64, a read per line elsewhere): every byte range of the weight store (`Net::weight_spans`,
+    /// whatever the storage dtype), then the biases.
     /// Allocation-free, lock-free, never panics; does not change any result.
     #[inline]
     pub fn prefetch(&self) {
-        match &self.net.store {
-            Store::F32(v) => touch(v),
-            Store::Half(v) => touch(v),
+        for span in self.net.weight_spans() {
+            touch(span);
         }
         touch(&self.net.bias);
     }
@@ -70,7 +70,7 @@ mod tests {
     fn prefetch_walks_every_dtype_and_changes_no_result() {
         let w = seeded_mlp(&RandomMlpSpec::new(&[6, 40, 33, 1]), 3).unwrap();
         let x = [0.1, -0.2, 0.3, 0.05, -0.4, 0.2];
-        for dtype in [StorageDtype::F32, StorageDtype::F16, StorageDtype::Bf16] {
+        for dtype in StorageDtype::ALL {
             let mut m = Mlp::new(&w, dtype).unwrap();
             let before = m.forward(&x);
             m.prefetch();
