@@ -1,8 +1,18 @@
 //! `frictl demo` — the whole method end to end on the virtual joints, every stage through the real
 //! CLI (`frictl <stage>` subprocesses of this executable, `frictiond` for the experiments):
 //! acquire (knee and ankle roll; a training protocol run and an unseen tracking test run) →
-//! preprocess (label) → fit CV and SCV → train the PINN → evaluate on the test runs → export ONNX →
-//! closed-loop experiments (minimum K_p, disturbance at the own and at the PINN's K_p) → tables.
+//! preprocess (label) → fit CV and SCV → train the PINN → on-policy rounds → evaluate on the test
+//! runs → export ONNX → closed-loop experiments (minimum K_p, disturbance at the own and at the
+//! PINN's K_p) → tables.
+//!
+//! On-policy rounds (`--onpolicy-rounds N`, dataset aggregation): the open-loop protocol does not
+//! cover the velocities and accelerations the PINN meets once it compensates in the loop. Each round
+//! finds the current PINN's minimum K_p (`frictl experiment min-kp --model pinn`), records varied
+//! runs around that gain with it compensating (`frictl experiment record`), labels them with the
+//! same pipeline (`frictl preprocess`) and continues training from the current model on the union of
+//! every dataset so far (`frictl train --init`, the first model's Δθ offset kept for all). The
+//! report's `onpolicy_rounds` has per round the minimum K_p, the closed-loop τ̂_F error there and the
+//! offline error on the unseen run; the last round's PINN is the one every other table shows.
 //!
 //! Writes to `--out` (default `demo-out/`): `report.md`, `report.json` (per joint and model: the
 //! evaluation RMSEs, min K_p, tracking RMSE at it, disturbance-return RMSE at the own and at the
@@ -548,7 +558,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )?);
     }
     for ((preset, joint), files) in JOINTS.into_iter().zip(&all_files) {
-        let eval_result = evaluate(&mut r, &dirs, preset, joint, &files);
+        let eval_result = evaluate(&mut r, &dirs, preset, joint, files);
         if let Err(e) = &eval_result {
             // The closed-loop experiments do not need the offline evaluation: report and go on.
             eprintln!("warning: {e:#}");
@@ -556,7 +566,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 "\n**{joint}**: the evaluation stage failed (see logs/); no offline RMSEs.\n"
             );
         }
-        export(&mut r, preset, &files)?;
+        export(&mut r, preset, files)?;
         let ev: Option<EvalReport> = match eval_result {
             Ok(()) => Some(read_typed(&files.eval_json)?),
             Err(_) => None,

@@ -1,6 +1,8 @@
-//! `frictl experiment track|min-kp|disturbance|all` — the paper's closed-loop experiments on the
-//! virtual joints, through real processes: the plant (`frictl sim serve`) and `frictiond` as child
-//! processes, the computed-torque controller in this process (see `frictl::experiment`).
+//! `frictl experiment track|min-kp|disturbance|all|record` — the paper's closed-loop experiments on
+//! the virtual joints, through real processes: the plant (`frictl sim serve`) and `frictiond` as
+//! child processes, the computed-torque controller in this process (see `frictl::experiment`).
+//! `record` runs varied closed-loop runs with a model compensating and writes them as acquisition
+//! logs for `frictl preprocess` (on-policy data, see `frictl::experiment::onpolicy`).
 
 use std::path::{Path, PathBuf};
 

@@ -189,8 +189,8 @@ pub fn write_raw_log(
         let n = tr.t_s.len();
         let keep = unlabelled_mask(&tr.tau_ext_nm, n);
         let mut in_segment = false;
-        for k in 0..n {
-            if !keep[k] {
+        for (k, &kept) in keep.iter().enumerate() {
+            if !kept {
                 if in_segment {
                     chunk += 1;
                     in_segment = false;
