@@ -14,7 +14,7 @@ use crate::MAX_JOINTS;
 /// True plant quantities behind the [`crate::JointStates`] sample with the same `seq`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
-#[type_name("frictionless::SimTruth_v1")]
+#[type_name("frictionless::SimTruth_v2")]
 pub struct SimTruth {
     /// Equal to the `seq` of the [`crate::JointStates`] published with it.
     pub seq: u64,
@@ -38,6 +38,9 @@ pub struct SimTruth {
     pub current_true_a: [f64; MAX_JOINTS],
     /// Current reference the plant applied during the last step [A] (after hold/timeout rules).
     pub i_applied_a: [f64; MAX_JOINTS],
+    /// True motor acceleration reflected to the joint φ̈ [rad/s²] (the `phi_ddot` column of a
+    /// simulated acquisition log).
+    pub phi_ddot_rad_s2: [f64; MAX_JOINTS],
 }
 
 impl SimTruth {
@@ -55,6 +58,7 @@ impl SimTruth {
             sdot_true_rad_s: [0.0; MAX_JOINTS],
             current_true_a: [0.0; MAX_JOINTS],
             i_applied_a: [0.0; MAX_JOINTS],
+            phi_ddot_rad_s2: [0.0; MAX_JOINTS],
         }
     }
 }

@@ -13,6 +13,7 @@ mod experiment_controller;
 mod experiment_online_offline;
 mod experiment_oracle;
 mod import_cli;
+mod onpolicy_cli;
 // The ONNX graph builder and ergoCub anchor helpers of the interop tests (one copy, owned by
 // `frictionless-interop`).
 #[path = "../../interop/tests/interop_common/mod.rs"]

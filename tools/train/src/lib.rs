@@ -230,6 +230,15 @@ pub enum TrainError {
         /// Cause.
         source: rayon::ThreadPoolBuildError,
     },
+    /// The starting model of a continued run (`Trainer::from_init`) has another architecture
+    /// than the run asks for.
+    #[error("the initial model is {init}, this run is {run}: continue with the same architecture")]
+    InitArchitecture {
+        /// The initial model's architecture, e.g. `60 inputs, hidden [128, 128], 1 output`.
+        init: String,
+        /// The run's architecture in the same form.
+        run: String,
+    },
     /// A checkpoint file could not be read or written.
     #[error("checkpoint {path}: {detail}")]
     Checkpoint {
@@ -381,6 +390,30 @@ fn check_config(cfg: &TrainConfig) -> Result<(), TrainError> {
     Ok(())
 }
 
+/// The configuration, the training data and the validation data (same inputs per row).
+fn check_inputs(
+    cfg: &TrainConfig,
+    train: &Dataset<'_>,
+    val: Option<&Dataset<'_>>,
+) -> Result<(), TrainError> {
+    check_config(cfg)?;
+    train.validate("train")?;
+    if let Some(v) = val {
+        v.validate("validation")?;
+        if v.n_inputs != train.n_inputs {
+            return Err(TrainError::Data {
+                set: "validation",
+                what: "n_inputs".into(),
+                detail: format!(
+                    "{} features per row, training data has {}",
+                    v.n_inputs, train.n_inputs
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
 /// SHA-256 over the raw bytes of the data the run is tied to (checked on resume).
 fn fingerprint(train: &Dataset<'_>, val: Option<&Dataset<'_>>) -> String {
     use sha2::{Digest, Sha256};
@@ -406,21 +439,7 @@ impl Trainer {
         train: &Dataset<'_>,
         val: Option<&Dataset<'_>>,
     ) -> Result<Self, TrainError> {
-        check_config(&cfg)?;
-        train.validate("train")?;
-        if let Some(v) = val {
-            v.validate("validation")?;
-            if v.n_inputs != train.n_inputs {
-                return Err(TrainError::Data {
-                    set: "validation",
-                    what: "n_inputs".into(),
-                    detail: format!(
-                        "{} features per row, training data has {}",
-                        v.n_inputs, train.n_inputs
-                    ),
-                });
-            }
-        }
+        check_inputs(&cfg, train, val)?;
         let norm = fit_normalisation(train.x, train.n_inputs);
         let mut sizes = vec![train.n_inputs];
         sizes.extend(&cfg.hidden);
@@ -432,6 +451,82 @@ impl Trainer {
             cfg,
             layout,
             norm,
+            train,
+            val,
+            params,
+            Adam {
+                m: vec![0.0; n],
+                v: vec![0.0; n],
+                t: 0,
+            },
+        )
+    }
+
+    /// Starts a run that continues from `init` (a model trained before, e.g. on part of this data):
+    /// its weights are the starting point and its input normalisation is kept (not refitted on
+    /// `train`), so the network starts out computing exactly what `init` computes. The optimiser
+    /// state starts afresh. `init` must have `train.n_inputs` inputs, the hidden widths
+    /// `cfg.hidden` (ReLU) and one linear output; otherwise [`TrainError::InitArchitecture`] names
+    /// both architectures.
+    pub fn from_init(
+        cfg: TrainConfig,
+        init: &MlpWeights,
+        train: &Dataset<'_>,
+        val: Option<&Dataset<'_>>,
+    ) -> Result<Self, TrainError> {
+        check_inputs(&cfg, train, val)?;
+        let mut sizes = vec![train.n_inputs];
+        sizes.extend(&cfg.hidden);
+        sizes.push(1);
+        let describe = |s: &[usize]| {
+            format!(
+                "{} inputs, hidden {:?}, {} output",
+                s.first().copied().unwrap_or(0),
+                &s[1..s.len().saturating_sub(1)],
+                s.last().copied().unwrap_or(0)
+            )
+        };
+        let mut init_sizes = vec![init.layers.first().map_or(0, |l| l.n_in)];
+        init_sizes.extend(init.layers.iter().map(|l| l.n_out));
+        let activations_ok = init.layers.iter().enumerate().all(|(k, l)| {
+            l.activation
+                == if k + 1 == init.layers.len() {
+                    Activation::Identity
+                } else {
+                    Activation::Relu
+                }
+        });
+        let shapes_ok = init
+            .layers
+            .iter()
+            .all(|l| l.weight.len() == l.n_in * l.n_out && l.bias.len() == l.n_out)
+            && init.layers.windows(2).all(|w| w[0].n_out == w[1].n_in)
+            && init.norm.mean.len() == train.n_inputs
+            && init.norm.scale.len() == train.n_inputs;
+        if init_sizes != sizes || !activations_ok || !shapes_ok {
+            return Err(TrainError::InitArchitecture {
+                init: if activations_ok {
+                    describe(&init_sizes)
+                } else {
+                    format!(
+                        "{} (not ReLU hidden layers with a linear output)",
+                        describe(&init_sizes)
+                    )
+                },
+                run: describe(&sizes),
+            });
+        }
+        let layout = Layout::new(&sizes);
+        let mut params = vec![0f32; layout.n_params];
+        for (k, l) in init.layers.iter().enumerate() {
+            params[layout.w_off[k]..layout.w_off[k] + l.weight.len()].copy_from_slice(&l.weight);
+            params[layout.b_off[k]..layout.b_off[k] + l.bias.len()].copy_from_slice(&l.bias);
+        }
+        let n = layout.n_params;
+        Self::assemble(
+            cfg,
+            layout,
+            init.norm.clone(),
             train,
             val,
             params,

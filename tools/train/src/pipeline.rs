@@ -62,7 +62,7 @@ use std::time::Instant;
 
 use frictionless::features::{FeatureSpec, WarmupPolicy};
 use frictionless::friction::{ScvParams, StaticFriction};
-use frictionless::mlp::StorageDtype;
+use frictionless::mlp::{MlpWeights, StorageDtype};
 use frictionless::units::GearRatio;
 use frictionless::weights::{
     InputRange, ModelFile, ModelMeta, SignalFiltering, TrainingMeta, WeightError, round_to_dtype,
@@ -594,6 +594,9 @@ pub struct Job {
     pub checkpoint_every: usize,
     /// Continue from `checkpoint` instead of starting afresh.
     pub resume: bool,
+    /// Start from these weights and keep their normalisation ([`Trainer::from_init`]) instead of
+    /// a fresh initialisation (`frictl train --init MODEL.fwt`; not with `resume`).
+    pub init: Option<MlpWeights>,
 }
 
 /// RMSE per set \[Nm\] (`None` for an empty set).
@@ -870,6 +873,12 @@ pub fn train_model(
     let val_view = prepared.val.view();
     let val = (!prepared.val.is_empty()).then_some(&val_view);
     let ckpt = job.checkpoint.as_deref();
+    if job.resume && job.init.is_some() {
+        return Err(PipelineError::Usage(
+            "--resume continues a checkpointed run; --init starts a new run from a model: give one"
+                .into(),
+        ));
+    }
     let mut trainer = if job.resume {
         let path =
             ckpt.ok_or_else(|| PipelineError::Usage("--resume needs --checkpoint FILE".into()))?;
@@ -877,6 +886,8 @@ pub fn train_model(
         check_resume(path, t.config(), &job.config)?;
         t.set_epochs(job.config.epochs);
         t
+    } else if let Some(init) = &job.init {
+        Trainer::from_init(job.config.clone(), init, &train, val)?
     } else {
         Trainer::new(job.config.clone(), &train, val)?
     };

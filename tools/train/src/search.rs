@@ -398,6 +398,7 @@ fn run_trial(
         checkpoint: None,
         checkpoint_every: 1,
         resume: false,
+        init: None,
     };
     let result = (|| -> Result<pipeline::Trained, PipelineError> {
         let prepared = pipeline::prepare(

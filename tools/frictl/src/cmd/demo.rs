@@ -1,8 +1,18 @@
 //! `frictl demo` — the whole method end to end on the virtual joints, every stage through the real
 //! CLI (`frictl <stage>` subprocesses of this executable, `frictiond` for the experiments):
 //! acquire (knee and ankle roll; a training protocol run and an unseen tracking test run) →
-//! preprocess (label) → fit CV and SCV → train the PINN → evaluate on the test runs → export ONNX →
-//! closed-loop experiments (minimum K_p, disturbance at the own and at the PINN's K_p) → tables.
+//! preprocess (label) → fit CV and SCV → train the PINN → on-policy rounds → evaluate on the test
+//! runs → export ONNX → closed-loop experiments (minimum K_p, disturbance at the own and at the
+//! PINN's K_p) → tables.
+//!
+//! On-policy rounds (`--onpolicy-rounds N`, dataset aggregation): the open-loop protocol does not
+//! cover the velocities and accelerations the PINN meets once it compensates in the loop. Each round
+//! finds the current PINN's minimum K_p (`frictl experiment min-kp --model pinn`), records varied
+//! runs around that gain with it compensating (`frictl experiment record`), labels them with the
+//! same pipeline (`frictl preprocess`) and continues training from the current model on the union of
+//! every dataset so far (`frictl train --init`, the first model's Δθ offset kept for all). The
+//! report's `onpolicy_rounds` has per round the minimum K_p, the closed-loop τ̂_F error there and the
+//! offline error on the unseen run; the last round's PINN is the one every other table shows.
 //!
 //! Writes to `--out` (default `demo-out/`): `report.md`, `report.json` (per joint and model: the
 //! evaluation RMSEs, min K_p, tracking RMSE at it, disturbance-return RMSE at the own and at the
@@ -73,6 +83,13 @@ pub struct Args {
     /// subtracted with the simulator's r²·J_m, see the module doc).
     #[arg(long)]
     pub with_rotor_inertia: bool,
+    /// On-policy (DAgger) rounds before the closed-loop experiments (default: 1; `--quick` 0,
+    /// `--full` 2; 0 = train on the open-loop protocol only). Each round finds the current PINN's
+    /// minimum K_p, records varied closed-loop runs with it compensating through the real processes
+    /// (`frictl experiment record`), labels them (`frictl preprocess`) and continues training from
+    /// the current model on the union of every dataset so far (`frictl train --init`).
+    #[arg(long)]
+    pub onpolicy_rounds: Option<u32>,
     /// `torque`: the chain on a torque-sensed joint instead (no motor encoder; import, training on two
     /// speed runs, evaluation on the held-out third; no closed-loop experiments), see `demo::torque`.
     #[arg(long, value_enum, default_value_t = DemoSensor::MotorEncoder)]
@@ -101,6 +118,12 @@ struct Sizes {
     periods: f64,
     /// Further `frictl train` flags.
     train_extra: &'static [&'static str],
+    /// Default number of on-policy rounds.
+    onpolicy_rounds: u32,
+    /// Epochs of each on-policy round's continued training.
+    onpolicy_epochs: u32,
+    /// On-policy runs per joint and round (`frictl experiment record --record-runs`).
+    onpolicy_runs: u32,
 }
 
 const JOINTS: [(&str, &str); 2] = [("knee", "l_knee"), ("ankle_roll", "l_ankle_roll")];
@@ -277,6 +300,9 @@ impl Sizes {
                 periods: 3.0,
                 // `frictl train`'s defaults are the demo's measured ones; the paper's values explicitly.
                 train_extra: &["--lr", "7.6e-4", "--lambda", "0.164", "--dropout", "0.07"],
+                onpolicy_rounds: 2,
+                onpolicy_epochs: 50,
+                onpolicy_runs: 6,
             }
         } else if args.quick {
             Sizes {
@@ -288,6 +314,9 @@ impl Sizes {
                 iterations: 4,
                 periods: 2.0,
                 train_extra: &["--val-frac", "0", "--test-frac", "0"],
+                onpolicy_rounds: 0,
+                onpolicy_epochs: 2,
+                onpolicy_runs: 2,
             }
         } else {
             // `frictl train`'s defaults (128×128, H 30, batch 512, 10 epochs): ≈ 1 min per joint. The
@@ -303,6 +332,9 @@ impl Sizes {
                 iterations: 6,
                 periods: 3.0,
                 train_extra: &["--val-frac", "0", "--test-frac", "0"],
+                onpolicy_rounds: 1,
+                onpolicy_epochs: 5,
+                onpolicy_runs: 6,
             }
         }
     }
@@ -329,6 +361,8 @@ struct Dirs {
 
 /// The files one joint's stages produce.
 struct JointFiles {
+    /// The PINN's training datasets (the protocol's, then each on-policy round's).
+    datasets: Vec<PathBuf>,
     train_ds: PathBuf,
     test_ds: PathBuf,
     cv: PathBuf,
@@ -341,6 +375,7 @@ struct JointFiles {
 impl JointFiles {
     fn new(d: &Dirs, joint: &str) -> Self {
         Self {
+            datasets: vec![d.data.join(format!("{joint}_train_ds.csv"))],
             train_ds: d.data.join(format!("{joint}_train_ds.csv")),
             test_ds: d.data.join(format!("{joint}_test_ds.csv")),
             cv: d.models.join(format!("{joint}_cv.json")),
@@ -363,6 +398,9 @@ struct DemoReport<'a> {
     network: Network,
     protocol_starts: u32,
     joints: &'a BTreeMap<String, JointEntry>,
+    /// One entry per on-policy round (round 0 = the PINN trained on the protocol only; the last
+    /// round's PINN is the one in `joints`); empty with `--onpolicy-rounds 0`.
+    onpolicy_rounds: &'a [RoundEntry],
     stages: &'a [Stage],
     total_seconds: f64,
 }
@@ -494,13 +532,33 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     let mut per_joint: BTreeMap<String, JointEntry> = BTreeMap::new();
     let mut eval_md = String::new();
+    let mut all_files = vec![];
     for (preset, joint) in JOINTS {
         let files = JointFiles::new(&dirs, joint);
         acquire(&mut r, &args, &sizes, &dirs, preset, joint)?;
         label(&mut r, &args, &dirs, preset, joint, &files)?;
         fit(&mut r, preset, &files)?;
         train(&mut r, &sizes, args.seed, preset, &files)?;
-        let eval_result = evaluate(&mut r, &dirs, preset, joint, &files);
+        all_files.push(files);
+    }
+    let rounds = if args.no_experiments {
+        0
+    } else {
+        args.onpolicy_rounds.unwrap_or(sizes.onpolicy_rounds)
+    };
+    let mut onpolicy = vec![];
+    for k in 1..=rounds {
+        onpolicy.push(onpolicy_round(
+            &mut r,
+            &args,
+            &sizes,
+            &dirs,
+            &mut all_files,
+            k,
+        )?);
+    }
+    for ((preset, joint), files) in JOINTS.into_iter().zip(&all_files) {
+        let eval_result = evaluate(&mut r, &dirs, preset, joint, files);
         if let Err(e) = &eval_result {
             // The closed-loop experiments do not need the offline evaluation: report and go on.
             eprintln!("warning: {e:#}");
@@ -508,7 +566,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 "\n**{joint}**: the evaluation stage failed (see logs/); no offline RMSEs.\n"
             );
         }
-        export(&mut r, preset, &files)?;
+        export(&mut r, preset, files)?;
         let ev: Option<EvalReport> = match eval_result {
             Ok(()) => Some(read_typed(&files.eval_json)?),
             Err(_) => None,
@@ -516,13 +574,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if let Some(ev) = &ev {
             eval_md += &eval_table(joint, ev);
         }
-        per_joint.insert(joint.into(), joint_entry(ev.as_ref(), &files));
+        per_joint.insert(joint.into(), joint_entry(ev.as_ref(), files));
     }
     let (exp_md, exp_temps) = if args.no_experiments {
         (String::new(), vec![])
     } else {
-        experiments(&mut r, &sizes, args.seed, &dirs, &mut per_joint)?
+        experiments(&mut r, &sizes, args.seed, &dirs, &all_files, &mut per_joint)?
     };
+    if rounds > 0 {
+        onpolicy.push(final_round(rounds, &all_files, &per_joint));
+    }
     let total = started.elapsed().as_secs_f64();
     let report = DemoReport {
         format: "frictionless-demo-v1",
@@ -538,6 +599,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
         protocol_starts: sizes.n_starts,
         joints: &per_joint,
+        onpolicy_rounds: &onpolicy,
         stages: &r.stages,
         total_seconds: total,
     };
@@ -545,7 +607,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         out.join("report.json"),
         serde_json::to_string_pretty(&report)?,
     )?;
-    let md = report_md(&args, &sizes, &report, &eval_md, &exp_md, &exp_temps);
+    let mut md = report_md(&args, &sizes, &report, &eval_md, &exp_md, &exp_temps);
+    if !onpolicy.is_empty() {
+        md += &onpolicy_md(&onpolicy, &per_joint);
+    }
     std::fs::write(out.join("report.md"), &md)?;
     println!("{md}");
     eprintln!(
@@ -801,6 +866,7 @@ fn experiments(
     sizes: &Sizes,
     seed: u64,
     dirs: &Dirs,
+    files: &[JointFiles],
     per_joint: &mut BTreeMap<String, JointEntry>,
 ) -> anyhow::Result<(String, Vec<String>)> {
     let models = &dirs.models;
@@ -813,30 +879,8 @@ fn experiments(
     };
     let exp_dir = &dirs.experiments;
     let exp_json = exp_dir.join("report.json");
-    // frictiond keeps the Δθ offset the PINN was trained with (not re-latched at enable).
-    let mut offsets = vec![];
-    for (key, joint) in JOINTS {
-        let v = pinn_offset_arg(&models.join(format!("{joint}_train.json")))?;
-        offsets.push(format!("{key}={v}"));
-    }
-    // Each joint's plant starts at the winding temperature of its training recording: the models
-    // are compared in the conditions they were identified in (none of them reads temperature; a
-    // plant several °C hotter than its training data has less sliding friction than any model
-    // learnt, which matters as kfc approaches 1).
-    let mut plant_t0 = vec![];
-    let mut exp_temps = vec![];
-    for (key, joint) in JOINTS {
-        // The acquisition sidecar (written by `frictl acquire`; its struct borrows, so read one key).
-        let sidecar = dirs.data.join(format!("{joint}_train.json"));
-        let t0 = read_json(&sidecar)?
-            .get("initial_temperature_c")
-            .and_then(|v| v.as_f64())
-            .with_context(|| format!("{}: no initial_temperature_c", sidecar.display()))?;
-        exp_temps.push(format!("{key} {t0:.1} °C"));
-        for bound in ["t0_min_c", "t0_max_c"] {
-            plant_t0.push(format!("--set={key}:plant.{bound}={t0}"));
-        }
-    }
+    let offsets = pinn_offsets_arg(files)?;
+    let (plant_t0, exp_temps) = plant_t0_sets(dirs)?;
     r.frictl(
         "experiment all (both joints; none, CV, SCV, PINN, oracle)",
         &[
@@ -851,9 +895,9 @@ fn experiments(
             "--scv".into(),
             f("_scv.json"),
             "--pinn".into(),
-            f(".fwt"),
+            pinn_arg(files),
             "--pinn-delta-theta-offset".into(),
-            offsets.join(","),
+            offsets,
             "--seed".into(),
             seed.to_string(),
             "--iterations".into(),
@@ -879,6 +923,327 @@ fn experiments(
         }
     }
     Ok((exp_md, exp_temps))
+}
+
+/// `knee=FWT,ankle_roll=FWT` of the current PINNs.
+fn pinn_arg(files: &[JointFiles]) -> String {
+    JOINTS
+        .iter()
+        .zip(files)
+        .map(|((key, _), f)| format!("{key}={}", s(&f.fwt)))
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+/// `knee=V,ankle_roll=W`: the Δθ offset frictiond keeps for each current PINN (the one it was
+/// trained with, not re-latched at enable).
+fn pinn_offsets_arg(files: &[JointFiles]) -> anyhow::Result<String> {
+    let mut offsets = vec![];
+    for ((key, _), f) in JOINTS.iter().zip(files) {
+        offsets.push(format!("{key}={}", pinn_offset_arg(&f.train_report)?));
+    }
+    Ok(offsets.join(","))
+}
+
+/// `--set` overrides that start each joint's plant at the winding temperature of its training
+/// recording, and their description. The models are compared in the conditions they were
+/// identified in (none of them reads temperature; a plant several °C hotter than its training data
+/// has less sliding friction than any model learnt, which matters as kfc approaches 1).
+fn plant_t0_sets(dirs: &Dirs) -> anyhow::Result<(Vec<String>, Vec<String>)> {
+    let mut plant_t0 = vec![];
+    let mut exp_temps = vec![];
+    for (key, joint) in JOINTS {
+        // The acquisition sidecar (written by `frictl acquire`; its struct borrows, so read one key).
+        let sidecar = dirs.data.join(format!("{joint}_train.json"));
+        let t0 = read_json(&sidecar)?
+            .get("initial_temperature_c")
+            .and_then(|v| v.as_f64())
+            .with_context(|| format!("{}: no initial_temperature_c", sidecar.display()))?;
+        exp_temps.push(format!("{key} {t0:.1} °C"));
+        for bound in ["t0_min_c", "t0_max_c"] {
+            plant_t0.push(format!("--set={key}:plant.{bound}={t0}"));
+        }
+    }
+    Ok((plant_t0, exp_temps))
+}
+
+/// `report.json` `onpolicy_rounds[]`.
+#[derive(serde::Serialize)]
+struct RoundEntry {
+    /// 0 = the PINN trained on the open-loop protocol only.
+    round: u32,
+    /// Joint name → this round's PINN.
+    joints: BTreeMap<String, RoundJoint>,
+}
+
+/// `report.json` `onpolicy_rounds[].joints.JOINT`.
+#[derive(serde::Serialize)]
+struct RoundJoint {
+    /// The PINN of this round.
+    model: String,
+    /// Its minimum K_p (the PINN-only search of the round; the last round's from the experiments).
+    min_kp: Option<MinKp>,
+    /// RMSE of τ̂_F/kfc against the true friction during tracking at that K_p [Nm].
+    closed_loop_tau_f_rmse_nm: Option<f64>,
+    /// Friction RMSE on the unseen tracking run against the label [Nm] (offline, `frictl eval`).
+    offline_rmse_nm: Option<f64>,
+    /// The same against the simulator's true friction [Nm].
+    offline_rmse_true_nm: Option<f64>,
+    /// Datasets the model was trained on (the protocol's first, then the on-policy rounds').
+    datasets: Vec<String>,
+}
+
+/// One on-policy round `k` ≥ 1 (see `--onpolicy-rounds`): the current PINNs' minimum K_p and
+/// offline error (the round k − 1 entry), on-policy runs around that K_p with them, labelled and
+/// added to each joint's datasets, and training continued from them. Replaces `files[].fwt` and
+/// `train_report` by the new models.
+fn onpolicy_round(
+    r: &mut Runner,
+    args: &Args,
+    sizes: &Sizes,
+    dirs: &Dirs,
+    files: &mut [JointFiles],
+    k: u32,
+) -> anyhow::Result<RoundEntry> {
+    let (plant_t0, _) = plant_t0_sets(dirs)?;
+    let offsets = pinn_offsets_arg(files)?;
+    let search_dir = dirs.experiments.join(format!("onpolicy_round{}", k - 1));
+    r.frictl(
+        &format!("on-policy round {k}: min K_p of the round-{} PINN", k - 1),
+        &[
+            "experiment",
+            "min-kp",
+            "--joint",
+            "both",
+            "--model",
+            "pinn",
+            "--no-plots",
+        ]
+        .map(String::from)
+        .into_iter()
+        .chain([
+            "--pinn".into(),
+            pinn_arg(files),
+            "--pinn-delta-theta-offset".into(),
+            offsets.clone(),
+            "--seed".into(),
+            args.seed.to_string(),
+            "--iterations".into(),
+            sizes.iterations.to_string(),
+            "--periods".into(),
+            sizes.periods.to_string(),
+            "--out".into(),
+            s(&search_dir),
+        ])
+        .chain(plant_t0.iter().cloned())
+        .collect::<Vec<String>>(),
+    )?;
+    let ex: SuiteReport = read_typed(&search_dir.join("report.json"))?;
+    let mut entry = RoundEntry {
+        round: k - 1,
+        joints: BTreeMap::new(),
+    };
+    let mut kp = vec![];
+    for ((preset, joint), f) in JOINTS.iter().zip(files.iter()) {
+        let cell = ex.joints.get(*joint).and_then(|c| c.get("PINN"));
+        let min_kp = cell.and_then(|c| c.min_kp);
+        let kp_centre = min_kp
+            .map(|m| m.kp_for_runs())
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .with_context(|| format!("{search_dir:?}: no minimum K_p for the {joint} PINN"))?;
+        kp.push(format!("{preset}={kp_centre}"));
+        let eval_json = dirs
+            .eval
+            .join(format!("{joint}_onpolicy_round{}.json", k - 1));
+        r.frictl(
+            &format!("on-policy round {k}: eval {preset} round-{} PINN", k - 1),
+            &[
+                "eval".into(),
+                "--dataset".into(),
+                s(&f.test_ds),
+                "--pinn".into(),
+                s(&f.fwt),
+                "--json".into(),
+                s(&eval_json),
+            ],
+        )?;
+        let ev: EvalReport = read_typed(&eval_json)?;
+        let pinn = ev.models.get("pinn");
+        entry.joints.insert(
+            (*joint).to_owned(),
+            RoundJoint {
+                model: s(&f.fwt),
+                min_kp,
+                closed_loop_tau_f_rmse_nm: cell
+                    .and_then(|c| c.track_at_min_kp)
+                    .map(|t| t.friction_est_rmse_nm)
+                    .filter(|v| v.is_finite()),
+                offline_rmse_nm: pinn.and_then(|m| m.rmse_all),
+                offline_rmse_true_nm: pinn.and_then(|m| m.rmse_true_all),
+                datasets: f.datasets.iter().map(|d| s(d)).collect(),
+            },
+        );
+    }
+    let rec_dir = dirs.data.join(format!("onpolicy{k}"));
+    r.frictl(
+        &format!("on-policy round {k}: record (both joints, PINN compensating)"),
+        &[
+            "experiment",
+            "record",
+            "--joint",
+            "both",
+            "--model",
+            "pinn",
+            "--no-plots",
+        ]
+        .map(String::from)
+        .into_iter()
+        .chain([
+            "--pinn".into(),
+            pinn_arg(files),
+            "--pinn-delta-theta-offset".into(),
+            offsets.clone(),
+            "--kp".into(),
+            kp.join(","),
+            "--record-runs".into(),
+            sizes.onpolicy_runs.to_string(),
+            "--periods".into(),
+            sizes.periods.to_string(),
+            "--seed".into(),
+            (args.seed + 1000 * u64::from(k)).to_string(),
+            "--out".into(),
+            s(&rec_dir),
+        ])
+        .chain(plant_t0.iter().cloned())
+        .collect::<Vec<String>>(),
+    )?;
+    for ((preset, joint), f) in JOINTS.iter().zip(files.iter_mut()) {
+        let raw = rec_dir.join(format!("{joint}_onpolicy.csv"));
+        let ds = dirs.data.join(format!("{joint}_onpolicy{k}_ds.csv"));
+        r.frictl(&format!("on-policy round {k}: preprocess {preset}"), &{
+            let mut a = vec!["preprocess".into(), s(&raw), "--out".into(), s(&ds)];
+            if args.causal {
+                a.push("--causal".to_string());
+            }
+            if !args.with_rotor_inertia {
+                a.push("--subtract-reflected-inertia".into());
+                a.push("sidecar".into());
+            }
+            a
+        })?;
+        std::fs::remove_file(&raw).ok();
+        f.datasets.push(ds);
+        // The Δθ offset stays the one the first model was trained with, for every dataset: frictiond
+        // runs one fixed offset per joint.
+        let offset = match pinn_offset_arg(&f.train_report)?.as_str() {
+            "enable" => "chunk".to_owned(),
+            v => v.to_owned(),
+        };
+        let fwt = dirs.models.join(format!("{joint}_onpolicy{k}.fwt"));
+        let report = dirs.models.join(format!("{joint}_onpolicy{k}_train.json"));
+        let mut a: Vec<String> = vec!["train".into()];
+        for d in &f.datasets {
+            a.push("--dataset".into());
+            a.push(s(d));
+        }
+        a.extend([
+            "--init".into(),
+            s(&f.fwt),
+            "--scv".into(),
+            s(&f.scv),
+            "--out".into(),
+            s(&fwt),
+            "--report".into(),
+            s(&report),
+            "--hidden".into(),
+            sizes.hidden.into(),
+            "--history".into(),
+            sizes.history.to_string(),
+            "--epochs".into(),
+            sizes.onpolicy_epochs.to_string(),
+            "--batch".into(),
+            sizes.batch.to_string(),
+            "--seed".into(),
+            args.seed.to_string(),
+            format!("--delta-theta-offset={offset}"),
+        ]);
+        a.extend(sizes.train_extra.iter().map(|x| x.to_string()));
+        r.frictl(&format!("on-policy round {k}: train {preset} (--init)"), &a)?;
+        f.fwt = fwt;
+        f.train_report = report;
+    }
+    Ok(entry)
+}
+
+/// The last round's entry: the final PINNs' results from the experiments and the evaluation.
+fn final_round(
+    rounds: u32,
+    files: &[JointFiles],
+    per_joint: &BTreeMap<String, JointEntry>,
+) -> RoundEntry {
+    let joints = JOINTS
+        .iter()
+        .zip(files)
+        .map(|((_, joint), f)| {
+            let pinn = per_joint.get(*joint).and_then(|e| e.models.get("PINN"));
+            let cl = pinn.and_then(|m| m.closed_loop.as_ref());
+            let ev = pinn.and_then(|m| m.eval.flatten());
+            (
+                (*joint).to_owned(),
+                RoundJoint {
+                    model: s(&f.fwt),
+                    min_kp: cl.and_then(|c| c.min_kp),
+                    closed_loop_tau_f_rmse_nm: cl.and_then(|c| c.closed_loop_tau_f_rmse_nm),
+                    offline_rmse_nm: ev.and_then(|m| m.rmse_all),
+                    offline_rmse_true_nm: ev.and_then(|m| m.rmse_true_all),
+                    datasets: f.datasets.iter().map(|d| s(d)).collect(),
+                },
+            )
+        })
+        .collect();
+    RoundEntry {
+        round: rounds,
+        joints,
+    }
+}
+
+/// The on-policy rounds as a markdown table (with the oracle's closed-loop τ̂_F error for scale).
+fn onpolicy_md(rounds: &[RoundEntry], per_joint: &BTreeMap<String, JointEntry>) -> String {
+    let mut md = String::from(
+        "\n## On-policy rounds (DAgger)\n\nRound 0 is the PINN trained on the open-loop protocol; each round \
+         adds closed-loop runs recorded with the previous round's PINN compensating and continues its \
+         training on the union. Closed-loop τ̂_F error: RMSE of τ̂_F/kfc against the true friction \
+         while tracking at the model's minimum K_p; offline: on the unseen tracking run (label, truth \
+         in parentheses).\n\n| joint | round | min K_p | closed-loop τ̂_F error [Nm] | oracle's [Nm] | offline RMSE [Nm] | datasets |\n|---|---|---|---|---|---|---|\n",
+    );
+    let f = |v: Option<f64>| v.map_or("–".to_owned(), |x| format!("{x:.3}"));
+    for (_, joint) in JOINTS {
+        let oracle = per_joint
+            .get(joint)
+            .and_then(|e| e.models.get(ORACLE_LABEL))
+            .and_then(|m| m.closed_loop.as_ref())
+            .and_then(|c| c.closed_loop_tau_f_rmse_nm);
+        for re in rounds {
+            let Some(j) = re.joints.get(joint) else {
+                continue;
+            };
+            let kp = match j.min_kp {
+                Some(MinKp::Found { kp, .. }) => frictl::experiment::search::sig3(kp).to_string(),
+                Some(other) => format!("{other:?}"),
+                None => "–".into(),
+            };
+            md += &format!(
+                "| {joint} | {} | {kp} | {} | {} | {} ({}) | {} |\n",
+                re.round,
+                f(j.closed_loop_tau_f_rmse_nm),
+                f(oracle),
+                f(j.offline_rmse_nm),
+                f(j.offline_rmse_true_nm),
+                j.datasets.len()
+            );
+        }
+    }
+    md
 }
 
 /// Stage 8, report: `report.md` (`report.json` is written by [`run`]).

@@ -1,6 +1,8 @@
-//! `frictl experiment track|min-kp|disturbance|all` — the paper's closed-loop experiments on the
-//! virtual joints, through real processes: the plant (`frictl sim serve`) and `frictiond` as child
-//! processes, the computed-torque controller in this process (see `frictl::experiment`).
+//! `frictl experiment track|min-kp|disturbance|all|record` — the paper's closed-loop experiments on
+//! the virtual joints, through real processes: the plant (`frictl sim serve`) and `frictiond` as
+//! child processes, the computed-torque controller in this process (see `frictl::experiment`).
+//! `record` runs varied closed-loop runs with a model compensating and writes them as acquisition
+//! logs for `frictl preprocess` (on-policy data, see `frictl::experiment::onpolicy`).
 
 use std::path::{Path, PathBuf};
 
@@ -28,6 +30,11 @@ pub enum Kind {
     Disturbance,
     /// min-kp, then disturbance at the own and at the PINN's K_p, and tracking at the PINN's K_p.
     All,
+    /// On-policy recording (DAgger): varied sine-tracking and disturbance runs around `--kp` with
+    /// one model per joint compensating, written as acquisition logs `--out/<joint>_onpolicy.csv`
+    /// (+ `.json`) for `frictl preprocess` (see `frictl::experiment::onpolicy`), and
+    /// `--out/record.json` with each run's τ̂_F/kfc error against the true friction.
+    Record,
 }
 
 /// Which joints.
@@ -104,6 +111,10 @@ pub struct Args {
     /// applies it to one (`--set ankle_roll:plant.t0_min_c=31`).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub sets: Vec<String>,
+    /// `record`: runs per joint (at most 6: sines of other amplitudes, frequencies and gains than
+    /// the test sine, then pulses of both signs).
+    #[arg(long, default_value_t = 6)]
+    pub record_runs: usize,
     /// Tracking criterion: RMSE ≤ this fraction of the sine amplitude.
     #[arg(long, default_value_t = 0.1)]
     pub criterion_frac: f64,
@@ -362,6 +373,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let kp = [kp[0].unwrap_or(30.0), kp[1].unwrap_or(550.0)];
             suite.track(&|j, _| kp[j], "track", false, "track")?;
         }
+        (Kind::Record, kp) => {
+            let kp = kp.context("record needs --kp (the gain the runs vary around)")?;
+            record(&args, &suite, kp)?;
+            return Ok(());
+        }
         (Kind::Disturbance, Some(kp)) => {
             let kp = [kp[0].unwrap_or(30.0), kp[1].unwrap_or(550.0)];
             for &j in &suite.joints {
@@ -387,6 +403,79 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     suite.report.trials = suite.trials;
     suite.report.wall_s = started.elapsed().as_secs_f64();
     write_outputs(&args, &suite.report, &suite.traces)
+}
+
+/// `frictl experiment record`: the on-policy runs of every selected joint, their logs and
+/// `record.json`.
+fn record(args: &Args, suite: &Suite, kp: [Option<f64>; 2]) -> anyhow::Result<()> {
+    use frictl::experiment::metrics;
+    use frictl::experiment::onpolicy;
+    for &j in &suite.joints {
+        let n = suite.models.iter().filter(|(i, _)| *i == j).count();
+        anyhow::ensure!(
+            n == 1,
+            "record runs one model per joint; {} has {n} (pass --model)",
+            suite.names[j]
+        );
+    }
+    let mut plans = vec![];
+    for &j in &suite.joints {
+        let kp = kp[j].with_context(|| format!("--kp: no gain for {}", suite.names[j]))?;
+        plans.extend(onpolicy::plans(j, kp, args.record_runs, args.periods));
+    }
+    let traces = onpolicy::record(
+        &suite.bins,
+        &suite.setups,
+        &suite.cfg,
+        &suite.models,
+        &plans,
+    )?;
+    let mut summary = serde_json::Map::new();
+    for &j in &suite.joints {
+        let runs: Vec<(&onpolicy::RecordPlan, &JointTrace)> = plans
+            .iter()
+            .zip(&traces)
+            .filter(|(p, _)| p.index == j)
+            .collect();
+        let csv = args.out.join(format!("{}_onpolicy.csv", suite.names[j]));
+        let per_run: Vec<serde_json::Value> = runs
+            .iter()
+            .map(|(p, t)| {
+                let m = metrics::track(t, 1.0, f64::INFINITY);
+                serde_json::json!({
+                    "plan": p,
+                    "tau_f_rmse_nm": m.friction_est_rmse_nm,
+                    "tracking_rmse_rad": m.rmse_rad,
+                })
+            })
+            .collect();
+        let model = suite
+            .models
+            .iter()
+            .find(|(i, _)| *i == j)
+            .map_or("", |(_, m)| m.label());
+        let rows = onpolicy::write_raw_log(
+            &csv,
+            &suite.setups[j],
+            &runs.iter().map(|(_, t)| *t).collect::<Vec<_>>(),
+            args.seed,
+            serde_json::json!({ "model": model, "runs": per_run }),
+        )?;
+        eprintln!(
+            "frictl experiment record: {} ({model}) {} runs, {rows} rows -> {}",
+            suite.names[j],
+            runs.len(),
+            csv.display()
+        );
+        summary.insert(
+            suite.names[j].clone(),
+            serde_json::json!({ "model": model, "csv": csv.display().to_string(), "runs": per_run }),
+        );
+    }
+    let path = args.out.join("record.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&summary)?)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(())
 }
 
 /// The friction model of every (joint, `--model`) pair, loaded from the `--cv` / `--scv` / `--pinn`

@@ -180,6 +180,12 @@ pub struct Args {
     /// Continue the run saved in --checkpoint (same data and hyper-parameters; --epochs may grow).
     #[arg(long)]
     pub resume: bool,
+    /// Continue from this model (`.fwt`): its weights are the starting point and its input
+    /// normalisation is kept, the optimiser starts afresh (e.g. a DAgger round: the old model on the
+    /// union of its data and new on-policy runs). It must have this run's features, history,
+    /// temperature input and hidden widths; a different architecture is refused, naming both.
+    #[arg(long, value_name = "MODEL.fwt", conflicts_with = "resume")]
+    pub init: Option<PathBuf>,
     /// Training report JSON (default: the model path with extension `.train.json`).
     #[arg(long)]
     pub report: Option<PathBuf>,
@@ -257,6 +263,25 @@ pub fn parse_chunks(v: &Option<Vec<String>>) -> anyhow::Result<Option<Vec<ChunkK
         .transpose()
 }
 
+/// The weights of `--init`, refused when the model's inputs (feature set, history, temperature)
+/// differ from this run's `spec` (the hidden widths are checked by the trainer).
+fn init_weights(
+    path: &std::path::Path,
+    spec: &FeatureSpec,
+) -> anyhow::Result<frictionless::mlp::MlpWeights> {
+    let model = frictionless::weights::read_file(path)
+        .with_context(|| format!("--init {}", path.display()))?;
+    anyhow::ensure!(
+        model.meta.features == *spec,
+        "--init {}: the model's inputs are [{}], this run's are [{}]: continue with the same \
+         --features, --history and --temperature",
+        path.display(),
+        model.meta.features,
+        spec
+    );
+    Ok(model.mlp)
+}
+
 /// Runs `frictl train`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let report_path = args
@@ -287,6 +312,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     spec.validate().context("--history")?;
     let warmup: WarmupPolicy = args.warmup.into();
+    let init = args
+        .init
+        .as_deref()
+        .map(|p| init_weights(p, &spec))
+        .transpose()?;
     let prepared = pipeline::prepare(
         &sources,
         &scv,
@@ -316,6 +346,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         checkpoint: args.checkpoint.clone(),
         checkpoint_every: args.checkpoint_every,
         resume: args.resume,
+        init,
     };
     if !args.quiet {
         eprintln!(

@@ -30,7 +30,7 @@ use frictionless_sim::link::LinkDynamics;
 pub const PAPER_KD_PER_S: f64 = 4.0;
 
 /// Desired joint trajectory.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub enum Reference {
     /// `s_d(t) = centre − A·cos(2π f t)`: starts at rest at `centre − A` (no velocity step) and
     /// oscillates around `centre` with amplitude `A`.

@@ -13,6 +13,7 @@
 
 pub mod controller;
 pub mod metrics;
+pub mod onpolicy;
 pub mod oracle;
 pub mod report;
 pub mod run;

@@ -177,6 +177,17 @@ pub struct JointTrace {
     pub tau_ext_nm: Vec<f64>,
     /// Daemon flags per tick (DaemonStatus::joint_flags).
     pub flags: Vec<u32>,
+    /// Measured motor current [A] as published (robot convention: joint torque = r·k_t·i).
+    pub i_meas_a: Vec<f64>,
+    /// Winding temperature [°C] as published (NaN without a sensor).
+    pub temperature_c: Vec<f64>,
+    /// frictiond's current reference [A] (DaemonStatus::i_ref_a, with the same one-row lag as
+    /// `tau_f_hat_nm`: row k holds the command computed for state k − 1; NaN before the first
+    /// status).
+    pub i_ref_a: Vec<f64>,
+    /// True motor acceleration reflected to the joint φ̈ [rad/s²] (SimTruth; NaN when the plant
+    /// sent none).
+    pub phi_ddot_rad_s2: Vec<f64>,
 }
 
 /// Everything recorded in a trial.
@@ -562,5 +573,11 @@ impl JointTrace {
             .push(truth.map_or(f64::NAN, |x| x.i_applied_a[j]));
         self.tau_f_hat_nm.push(r.tau_f_hat_nm);
         self.flags.push(r.status.map_or(0, |x| x.joint_flags[j]));
+        self.i_meas_a.push(js.current_a[j]);
+        self.temperature_c.push(js.temperature_c[j]);
+        self.i_ref_a
+            .push(r.status.map_or(f64::NAN, |x| x.i_ref_a[j]));
+        self.phi_ddot_rad_s2
+            .push(truth.map_or(f64::NAN, |x| x.phi_ddot_rad_s2[j]));
     }
 }

@@ -102,8 +102,9 @@ pub struct Task {
     pub kp_per_s2: f64,
 }
 
-/// Runs `plans` grouped so each trial has distinct joints; returns traces in plan order.
-fn run_grouped(
+/// Runs `plans` (each with its duration [s]) grouped so each trial has distinct joints; returns
+/// traces in plan order.
+pub fn run_grouped(
     bins: &Binaries,
     setups: &[JointSetup; 2],
     cfg: &SuiteConfig,

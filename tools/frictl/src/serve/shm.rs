@@ -504,6 +504,7 @@ fn publish(loops: &[JointLoop<'_>], ports: &PlantPorts, seq: u64) -> Result<(), 
                 t.sdot_true_rad_s[j] = l.truth.state.s_dot_rad_s;
                 t.current_true_a[j] = l.truth.state.i_a;
                 t.i_applied_a[j] = l.i_applied_a;
+                t.phi_ddot_rad_s2[j] = l.truth.phi_ddot_rad_s2;
             }
         })
         .map_err(|e| io_err("publishing sim truth", e))?;
