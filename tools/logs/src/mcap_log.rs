@@ -28,10 +28,36 @@ pub struct McapSpec {
     pub topic: String,
     /// Joint name.
     pub joint: String,
-    /// Role of the `effort` field (`None`: ignore it).
+    /// Role of the `effort` field (`None`: ignore it); one of [`EFFORT_ROLES`] ([`read`] refuses
+    /// another).
     pub effort_role: Option<Role>,
     /// Roles to negate.
     pub negate: Vec<Role>,
+}
+
+/// The roles the `effort` field can be read as (a torque or a motor current).
+pub const EFFORT_ROLES: [Role; 4] = [Role::TauJoint, Role::TauMotor, Role::TauF, Role::Current];
+
+/// Parses the `effort` field's role (the command line's `--effort`): `none` (ignore the field) or
+/// one of [`EFFORT_ROLES`].
+pub fn parse_effort(text: &str) -> Result<Option<Role>, LogsError> {
+    if text.trim() == "none" {
+        return Ok(None);
+    }
+    let role = Role::parse(text)?;
+    check_effort(role)?;
+    Ok(Some(role))
+}
+
+fn check_effort(role: Role) -> Result<(), LogsError> {
+    if EFFORT_ROLES.contains(&role) {
+        Ok(())
+    } else {
+        Err(LogsError::Usage(format!(
+            "effort role {role}: must be {} or none",
+            EFFORT_ROLES.map(Role::name).join(", ")
+        )))
+    }
 }
 
 /// A decoded `sensor_msgs/msg/JointState`.
@@ -159,6 +185,10 @@ const SCHEMA: &str = "sensor_msgs/msg/JointState";
 
 /// Reads one joint from an MCAP bag into a run named after the file stem.
 pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<ImportedRun, LogsError> {
+    if let Some(r) = spec.effort_role {
+        // Time, s or ṡ as the effort's role would overwrite a field read from elsewhere.
+        check_effort(r)?;
+    }
     let p = path.display().to_string();
     let fmt = |msg: String| LogsError::Format {
         path: p.clone(),

@@ -276,6 +276,80 @@ fn cdr_decoder_rejects_truncated_and_oversized_messages() {
     }
 }
 
+/// The uncompressed bag of the `log_importers` fuzz seed (written by `fixtures/make_fixtures.py
+/// mcap-seed`: 24 `JointState` messages on `/joint_states`, joints `a`, `wrist`, `b`), with the fuzz
+/// target's spec and 0xFF separator stripped, copied to a temporary file.
+fn seed_bag() -> PathBuf {
+    let seed =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/seeds/log_importers/mcap_plain");
+    let data = std::fs::read(&seed).unwrap();
+    let cut = data.iter().position(|&b| b == 0xFF).unwrap();
+    let path = tmp("seed_bag.mcap");
+    std::fs::write(&path, &data[cut + 1..]).unwrap();
+    path
+}
+
+#[test]
+fn mcap_effort_read_as_time_or_a_position_is_refused_not_a_panic() {
+    // `McapSpec`'s fields are public: an effort role of time, s or sdot would index past the row (a
+    // panic; the `log_importers` fuzz target reads its effort as any role) and theta would take the
+    // effort as the motor position. `read` refuses every role but a torque or a current.
+    let path = seed_bag();
+    let sp = |effort_role| McapSpec {
+        topic: "/joint_states".into(),
+        joint: "wrist".into(),
+        effort_role,
+        negate: vec![],
+    };
+    for role in [
+        Role::Time,
+        Role::S,
+        Role::Sdot,
+        Role::Theta,
+        Role::Temperature,
+    ] {
+        let e = mcap_log::read(&path, &sp(Some(role)), &mut no_progress())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(&format!("effort role {role}"))
+                && e.contains("tau_joint, tau_motor, tau_f, current"),
+            "{e}"
+        );
+    }
+    for (text, want) in [
+        ("none", None),
+        ("tau-f", Some(Role::TauF)),
+        ("current", Some(Role::Current)),
+    ] {
+        assert_eq!(mcap_log::parse_effort(text).unwrap(), want, "{text}");
+    }
+    assert!(mcap_log::parse_effort("sdot").is_err());
+    assert!(mcap_log::parse_effort("speed").is_err());
+    // Every accepted role reads the seed: 24 messages, effort = 1.5 sin(2 t) + 0.2 with position
+    // 0.3 sin(2 t) at the same t.
+    for role in mcap_log::EFFORT_ROLES {
+        let run = mcap_log::read(&path, &sp(Some(role)), &mut no_progress()).unwrap();
+        assert_eq!(run.report.rows_used, 24, "{role}");
+        let s = &run.signals;
+        let eff = match role {
+            Role::TauJoint => s.tau_joint_nm.as_ref(),
+            Role::TauMotor => s.tau_motor_nm.as_ref(),
+            Role::TauF => s.tau_f_nm.as_ref(),
+            _ => s.current_a.as_ref(),
+        }
+        .unwrap();
+        let pos = s.s_rad.as_ref().unwrap();
+        for k in 0..24 {
+            let t = (pos[k] / 0.3).asin() / 2.0;
+            assert!(
+                (eff[k] - (1.5 * (2.0 * t).sin() + 0.2)).abs() < 1e-9,
+                "{role} k = {k}"
+            );
+        }
+    }
+}
+
 /// The fixture generator run with `FRICTIONLESS_PY`, or `None` (with the reason printed).
 fn fixture(kind: &str, name: &str) -> Option<PathBuf> {
     let Some(py) = std::env::var_os("FRICTIONLESS_PY") else {
