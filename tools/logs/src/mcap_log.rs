@@ -1,6 +1,9 @@
 //! ROS 2 MCAP bags: `sensor_msgs/msg/JointState` messages on one topic, one joint picked by name in
 //! every message (the name order may change between messages), streamed with the `mcap` crate's
-//! sans-io linear reader (memory ∝ one chunk of the file plus the joint's samples).
+//! sans-io linear reader (memory ∝ one chunk of the file plus the joint's samples). The reader is fed
+//! at most 1 MiB per read and only schema, channel and message records are parsed, each after its
+//! length fields are checked against the record, so a corrupt length costs an error, never an
+//! allocation of what it claims.
 //!
 //! Fields → roles: `position` → s [rad], `velocity` → ṡ [rad/s], `effort` → a torque role chosen by
 //! the caller (`tau_joint` by default: a torque-sensed arm's measured joint torque) [Nm]; an empty
@@ -15,7 +18,7 @@ use std::collections::BTreeMap;
 use std::io::Read;
 use std::path::Path;
 
-use mcap::records::Record;
+use mcap::records::{Record, op};
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
 
 use crate::run::RunBuilder;
@@ -181,6 +184,67 @@ pub fn decode_joint_state(payload: &[u8]) -> Result<JointState, String> {
 
 /// Largest MCAP record accepted [bytes] (a chunk; recorders write ~1 MiB).
 const MAX_RECORD: usize = 256 << 20;
+/// Most bytes handed to the MCAP reader per read [bytes]: its buffer grows with the bytes the file
+/// really holds, never by a length field's claim (a corrupt chunk header can ask for 4 GiB).
+const READ_STEP: usize = 1 << 20;
+
+/// Walks the length prefixes of a Schema or Channel record (other records: nothing to check).
+struct Prefixes<'a> {
+    data: &'a [u8],
+    pos: usize,
+}
+
+impl Prefixes<'_> {
+    fn fixed(&mut self, n: usize) -> Option<()> {
+        self.pos = self.pos.checked_add(n).filter(|&e| e <= self.data.len())?;
+        Some(())
+    }
+    /// A u32-length-prefixed field; returns where its bytes start.
+    fn sized(&mut self) -> Option<usize> {
+        let b: [u8; 4] = self
+            .data
+            .get(self.pos..self.pos.checked_add(4)?)?
+            .try_into()
+            .ok()?;
+        self.fixed(4)?;
+        let start = self.pos;
+        self.fixed(u32::from_le_bytes(b) as usize)?;
+        Some(start)
+    }
+}
+
+/// Whether every length prefix of a Schema or Channel record fits in the record. The `mcap` crate
+/// reserves a string's claimed length before reading it, so a corrupt length in a few bytes of file
+/// would allocate up to 4 GiB (an abort, not an error); checked before [`mcap::parse_record`].
+fn prefixes_fit(opcode: u8, data: &[u8]) -> bool {
+    let mut c = Prefixes { data, pos: 0 };
+    let mut walk = || -> Option<()> {
+        match opcode {
+            op::SCHEMA => {
+                c.fixed(2)?; // id
+                c.sized()?; // name
+                c.sized()?; // encoding
+                c.sized()?; // data
+            }
+            op::CHANNEL => {
+                c.fixed(4)?; // id, schema id
+                c.sized()?; // topic
+                c.sized()?; // message encoding
+                let start = c.sized()?; // metadata: key/value strings
+                let end = c.pos;
+                c.pos = start;
+                while c.pos < end {
+                    c.sized()?;
+                    c.sized()?;
+                }
+                (c.pos == end).then_some(())?;
+            }
+            _ => {}
+        }
+        Some(())
+    };
+    walk().is_some()
+}
 const SCHEMA: &str = "sensor_msgs/msg/JointState";
 
 /// Reads one joint from an MCAP bag into a run named after the file stem.
@@ -243,13 +307,28 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
         match ev.map_err(|e| fmt(e.to_string()))? {
             LinearReadEvent::ReadRequest(need) => {
                 let n = file
-                    .read(reader.insert(need))
+                    .read(reader.insert(need.min(READ_STEP)))
                     .map_err(|e| LogsError::io(path, e))?;
                 reader.notify_read(n);
                 done += n as u64;
                 progress(done, total);
             }
             LinearReadEvent::Record { data, opcode } => {
+                // Only schemas, channels and messages are used; the rest is never parsed.
+                if !matches!(opcode, op::SCHEMA | op::CHANNEL | op::MESSAGE) {
+                    continue;
+                }
+                if !prefixes_fit(opcode, data) {
+                    return Err(fmt(format!(
+                        "a {} record's length field exceeds the record ({} bytes)",
+                        if opcode == op::SCHEMA {
+                            "schema"
+                        } else {
+                            "channel"
+                        },
+                        data.len()
+                    )));
+                }
                 let rec = mcap::parse_record(opcode, data).map_err(|e| fmt(e.to_string()))?;
                 match rec {
                     Record::Schema { header, .. } => {

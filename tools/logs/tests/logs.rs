@@ -350,6 +350,80 @@ fn mcap_effort_read_as_time_or_a_position_is_refused_not_a_panic() {
     }
 }
 
+/// An MCAP file: the magic, a header record (empty profile and library), then `records` as
+/// `(opcode, data)`.
+fn mcap_bytes(records: &[(u8, Vec<u8>)]) -> Vec<u8> {
+    let mut f = b"\x89MCAP0\r\n".to_vec();
+    for (op, data) in [(0x01u8, vec![0u8; 8])].iter().chain(records) {
+        f.push(*op);
+        f.extend((data.len() as u64).to_le_bytes());
+        f.extend(data);
+    }
+    f
+}
+
+#[test]
+fn mcap_length_fields_beyond_the_record_are_errors_not_allocations() {
+    // Found by the `log_importers` fuzz target: a channel record whose topic length claimed
+    // 3.7 GB made the `mcap` crate reserve it (an out-of-memory abort). Every claim here is ~4 GiB
+    // in a file of a few dozen bytes.
+    let sp = McapSpec {
+        topic: "/joint_states".into(),
+        joint: "wrist".into(),
+        effort_role: None,
+        negate: vec![],
+    };
+    let huge = 0xF000_0000u32.to_le_bytes();
+    // Channel: id, schema id, topic length (huge), …
+    let mut channel = vec![1, 0, 0, 0];
+    channel.extend(huge);
+    channel.extend(b"/joint_states");
+    // Channel with a sane topic and encoding but a metadata key whose length is huge.
+    let mut meta = vec![1, 0, 0, 0];
+    for s in ["/joint_states", "cdr"] {
+        meta.extend((s.len() as u32).to_le_bytes());
+        meta.extend(s.as_bytes());
+    }
+    meta.extend(8u32.to_le_bytes());
+    meta.extend(huge);
+    meta.extend([0u8; 4]);
+    // Schema: id, name length (huge), …
+    let mut schema = vec![1, 0];
+    schema.extend(huge);
+    schema.extend(b"sensor_msgs/msg/JointState");
+    for (what, rec) in [
+        ("channel", (0x04, channel)),
+        ("channel", (0x04, meta)),
+        ("schema", (0x03, schema)),
+    ] {
+        let path = tmp(&format!("huge_{what}.mcap"));
+        std::fs::write(&path, mcap_bytes(&[rec])).unwrap();
+        let e = mcap_log::read(&path, &sp, &mut no_progress())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(&format!(
+                "a {what} record's length field exceeds the record"
+            )),
+            "{e}"
+        );
+    }
+    // A chunk whose compression-name length claims ~4 GiB: the reader asks for that many bytes;
+    // it is fed what the file holds and ends at its end.
+    let mut chunk = vec![0u8; 28];
+    chunk.extend(0xFFFF_FFF0u32.to_le_bytes());
+    chunk.extend([0u8; 8]);
+    let path = tmp("huge_chunk_header.mcap");
+    std::fs::write(&path, mcap_bytes(&[(0x06, chunk)])).unwrap();
+    let t0 = Instant::now();
+    let e = mcap_log::read(&path, &sp, &mut no_progress()).unwrap_err();
+    assert!(matches!(e, LogsError::Format { .. }), "{e}");
+    eprintln!("huge chunk header: {e} ({:?})", t0.elapsed());
+    // The seed bag still reads (its records pass the same checks).
+    let run = mcap_log::read(&seed_bag(), &sp, &mut no_progress()).unwrap();
+    assert_eq!(run.report.rows_used, 24);
+}
+
 /// The fixture generator run with `FRICTIONLESS_PY`, or `None` (with the reason printed).
 fn fixture(kind: &str, name: &str) -> Option<PathBuf> {
     let Some(py) = std::env::var_os("FRICTIONLESS_PY") else {
