@@ -213,6 +213,22 @@ impl Prefixes<'_> {
     }
 }
 
+/// The reader's next event, with a panic inside the `mcap` crate turned into an error: an
+/// uncompressed chunk whose inner record claims more bytes than the chunk has left underflows a
+/// counter there (`mcap` 0.24: a panic where overflow checks are on, as in test builds; a wrapped
+/// counter and a later end-of-file error where they are off).
+fn next_event(reader: &mut LinearReader) -> Option<Result<LinearReadEvent<'_>, String>> {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(move || {
+        let r = reader; // moved: the event borrows the reader, not the closure
+        r.next_event()
+    })) {
+        Ok(ev) => ev.map(|r| r.map_err(|e| e.to_string())),
+        Err(_) => Some(Err(
+            "malformed chunk: a record runs past the end of its chunk".into(),
+        )),
+    }
+}
+
 /// Whether every length prefix of a Schema or Channel record fits in the record. The `mcap` crate
 /// reserves a string's claimed length before reading it, so a corrupt length in a few bytes of file
 /// would allocate up to 4 GiB (an abort, not an error); checked before [`mcap::parse_record`].
@@ -303,8 +319,8 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
     let mut msg_no: u64 = 0;
     let mut t0: Option<f64> = None;
     let mut empty = [0u64; 3];
-    while let Some(ev) = reader.next_event() {
-        match ev.map_err(|e| fmt(e.to_string()))? {
+    while let Some(ev) = next_event(&mut reader) {
+        match ev.map_err(fmt)? {
             LinearReadEvent::ReadRequest(need) => {
                 let n = file
                     .read(reader.insert(need.min(READ_STEP)))

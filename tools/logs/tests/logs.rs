@@ -419,6 +419,22 @@ fn mcap_length_fields_beyond_the_record_are_errors_not_allocations() {
     let e = mcap_log::read(&path, &sp, &mut no_progress()).unwrap_err();
     assert!(matches!(e, LogsError::Format { .. }), "{e}");
     eprintln!("huge chunk header: {e} ({:?})", t0.elapsed());
+    // An uncompressed chunk (compressed size 9) holding a record that claims 20 bytes, with more
+    // bytes after the chunk: found by the fuzz target as an arithmetic overflow in the `mcap` crate.
+    let mut chunk = vec![0u8; 24];
+    chunk.extend(0u32.to_le_bytes()); // uncompressed CRC
+    chunk.extend(0u32.to_le_bytes()); // compression "" (none)
+    chunk.extend(9u64.to_le_bytes()); // compressed size
+    chunk.push(0x05);
+    chunk.extend(20u64.to_le_bytes());
+    let mut file = mcap_bytes(&[(0x06, chunk)]);
+    file.extend([0u8; 64]);
+    let path = tmp("record_past_its_chunk.mcap");
+    std::fs::write(&path, file).unwrap();
+    let e = mcap_log::read(&path, &sp, &mut no_progress())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("malformed chunk"), "{e}");
     // The seed bag still reads (its records pass the same checks).
     let run = mcap_log::read(&seed_bag(), &sp, &mut no_progress()).unwrap();
     assert_eq!(run.report.rows_used, 24);
