@@ -280,11 +280,18 @@ fn cdr_decoder_rejects_truncated_and_oversized_messages() {
 /// mcap-seed`: 24 `JointState` messages on `/joint_states`, joints `a`, `wrist`, `b`), with the fuzz
 /// target's spec and 0xFF separator stripped, copied to a temporary file.
 fn seed_bag() -> PathBuf {
-    let seed =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/seeds/log_importers/mcap_plain");
+    seed_bag_named("mcap_plain")
+}
+
+/// [`seed_bag`] of the seed `name` (`mcap_plain`: uncompressed 1 KB chunks; `mcap_zstd`: one
+/// zstd chunk).
+fn seed_bag_named(name: &str) -> PathBuf {
+    let seed = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fuzz/seeds/log_importers")
+        .join(name);
     let data = std::fs::read(&seed).unwrap();
     let cut = data.iter().position(|&b| b == 0xFF).unwrap();
-    let path = tmp("seed_bag.mcap");
+    let path = tmp(&format!("{name}.mcap"));
     std::fs::write(&path, &data[cut + 1..]).unwrap();
     path
 }
@@ -435,9 +442,11 @@ fn mcap_length_fields_beyond_the_record_are_errors_not_allocations() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("malformed chunk"), "{e}");
-    // The seed bag still reads (its records pass the same checks).
-    let run = mcap_log::read(&seed_bag(), &sp, &mut no_progress()).unwrap();
-    assert_eq!(run.report.rows_used, 24);
+    // The seed bags still read (their records pass the same checks), uncompressed and zstd.
+    for name in ["mcap_plain", "mcap_zstd"] {
+        let run = mcap_log::read(&seed_bag_named(name), &sp, &mut no_progress()).unwrap();
+        assert_eq!(run.report.rows_used, 24, "{name}");
+    }
 }
 
 /// The fixture generator run with `FRICTIONLESS_PY`, or `None` (with the reason printed).
