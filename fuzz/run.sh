@@ -1,13 +1,18 @@
 #!/usr/bin/env bash
 # Fuzz every target for SECONDS each (default 60):
-#   fuzz/run.sh 60                     # all targets, 60 s each (CI: 7 targets = 7 min)
+#   fuzz/run.sh 60                     # all targets, 60 s each (8 targets = 8 min)
 #   fuzz/run.sh 30 candump_parse       # only the named targets
 #   FUZZ_RUNS=1000000 fuzz/run.sh 0 onnx_import   # a fixed number of executions instead of a time
 # Targets: weights_reader (.fwt reader), can_mit_decode (MIT command/reply/special decoders),
 # can_odrive_decode (ODrive CAN Simple decoder), candump_parse (candump -L line parser),
 # frictiond_config (the TOML config through what `frictiond --check` runs), dataset_readers (dataset
-# CSV, JSON sidecar and fit file), onnx_import (ONNX and safetensors importers). The last three start
-# from the files in fuzz/seeds/<target>/ (shipped configs, a small dataset + sidecar, small exports).
+# CSV, JSON sidecar and fit file), onnx_import (ONNX and safetensors importers), log_importers (the CSV
+# and ROS 2 MCAP robot-log importers of `frictl import csv|mcap`, with the column/unit/sign spec taken
+# from the input). The last four start from the files in fuzz/seeds/<target>/ (shipped configs, a small
+# dataset + sidecar, small exports, small CSV logs and MCAP bags written by
+# tools/logs/tests/fixtures/make_fixtures.py mcap-seed). Not fuzzed: the `.mat` importer
+# (`frictl import mat`), which reads HDF5 through the C library (cargo feature `mat`); its bad-input
+# handling is tested in tools/logs/tests/ against files h5py writes.
 # Installs cargo-fuzz if missing, seeds each corpus (the .fwt corpus with valid files written by the test
 # `fuzz_seed_files_are_valid` in tests/weights_bad_input.rs; the CAN corpora with a few valid frames and
 # log lines written here), builds all targets once, then runs libFuzzer with ASan on the stable toolchain
@@ -16,7 +21,7 @@
 set -euo pipefail
 SECS="${1:-60}"
 shift || true
-ALL=(weights_reader can_mit_decode can_odrive_decode candump_parse frictiond_config dataset_readers onnx_import)
+ALL=(weights_reader can_mit_decode can_odrive_decode candump_parse frictiond_config dataset_readers onnx_import log_importers)
 if [ $# -gt 0 ]; then TARGETS=("$@"); else TARGETS=("${ALL[@]}"); fi
 cd "$(dirname "$0")/.."
 ROOT="$(pwd)"
@@ -53,7 +58,7 @@ for t in "${TARGETS[@]}"; do
       seed "$t" classic '(1700000000.123456) vcan0 001#7FFF7FF0000007FF\n(1700000000.124456) vcan0 000#018000800800\n'
       seed "$t" ext_rtr '(0.000001) can0 12345678#R\n(0.000002) can0 02C#R8\n'
       seed "$t" fd '(1.000000) vcan1 123##1DEADBEEF\n(1.000001) vcan1 123#0011223344556677_C\n' ;;
-    frictiond_config|dataset_readers|onnx_import)
+    frictiond_config|dataset_readers|onnx_import|log_importers)
       cp "$ROOT/fuzz/seeds/$t/"* "$ROOT/fuzz/corpus/$t/" ;;
     *) echo "unknown fuzz target $t (known: ${ALL[*]})" >&2; exit 2 ;;
   esac
@@ -73,8 +78,8 @@ for t in "${TARGETS[@]}"; do
     echo "== fuzzing $t for ${SECS}s"
     limit=(-max_total_time="$SECS")
   fi
-  # The text and protobuf targets: inputs up to 64 KiB (their seeds are a few KB).
-  case "$t" in frictiond_config|dataset_readers|onnx_import) limit+=(-max_len=65536) ;; esac
+  # The text, protobuf and log targets: inputs up to 64 KiB (their seeds are a few KB).
+  case "$t" in frictiond_config|dataset_readers|onnx_import|log_importers) limit+=(-max_len=65536) ;; esac
   RUSTC_BOOTSTRAP=1 cargo fuzz run "$t" "$ROOT/fuzz/corpus/$t" -- "${limit[@]}" \
     -print_final_stats=1 2> "$log" || { tail -n 60 "$log" >&2; echo "fuzz: $t FAILED (see $log)"; exit 1; }
   runs=$(grep -oE 'stat::number_of_executed_units: *[0-9]+' "$log" | grep -oE '[0-9]+$' | tail -n1)

@@ -382,3 +382,18 @@ fn can_reload_of_values_fixed_at_open_is_refused_naming_them() {
         "{log}"
     );
 }
+
+#[test]
+fn can_sighup_applies_kfc_and_refuses_kt_node_id_gear_ratio_over_socketpair() {
+    // The scenario `vcan_daemon_sighup_applies_kfc_and_refuses_kt_node_id_gear_ratio` runs on vcan.
+    let env = TestEnv::new("canhup2");
+    let body = mit_body(&format!("fd:{CHILD_FD}"), 1000);
+    let cfg = write_can_config(&env, &body);
+    let (test_end, daemon_end) = socketpair();
+    let v_motor = [-30.0, 12.0];
+    let emu = MitEmulator::start(test_end, v_motor);
+    let mut d = start_daemon(&cfg, Some(&daemon_end), &[]);
+    drop(daemon_end);
+    let mut plant = Plant::open(&env.ipc, "controller");
+    sighup_scenario(&env, &body, &mut d, &mut plant, &emu, v_motor);
+}

@@ -3,6 +3,9 @@
 //! - the test process emulates two MIT drives on a raw socket and is the controller over shared
 //!   memory: commands decode to the control-law currents, a silent drive gets 0 A alone, all silent →
 //!   0 A everywhere, injected error frames show up in `DaemonStatus.bus`, SIGTERM leaves motor mode;
+//! - SIGHUP: a law value (kfc) is applied, values the backend fixed at open (k_t, node id, gear
+//!   ratio) are refused naming old → new while the daemon runs on with the old ones (wire and law
+//!   agree, nothing goes to the new node id);
 //! - closed loop with `frictl sim serve --backend can --protocol mit` as the drives: the knee moves,
 //!   every published current equals the law for the published friction estimate, and the frames on
 //!   the wire carry k_t·i within the MIT quantisation.
@@ -73,6 +76,20 @@ fn vcan_daemon_mit_law_stale_errors_and_exit() {
         let l = emu.log(id);
         assert_eq!(l.specials.last(), Some(&MitSpecial::ExitMotorMode), "{l:?}");
     }
+}
+
+#[test]
+#[ignore = "needs vcan (run tests/canvm/run.sh)"]
+fn vcan_daemon_sighup_applies_kfc_and_refuses_kt_node_id_gear_ratio() {
+    let env = TestEnv::new("vcanhup");
+    let body = mit_body("vcan0", 1000);
+    let cfg = write_can_config(&env, &body);
+    let emu = MitEmulator::start(CanSocket::open("vcan0").expect("vcan0"), [-30.0, 12.0]);
+    let mut d = start_daemon(&cfg, None, &[]);
+    let mut plant = Plant::open(&env.ipc, "controller");
+    let log = sighup_scenario(&env, &body, &mut d, &mut plant, &emu, [-30.0, 12.0]);
+    // The refusal names the file it read.
+    assert!(log.contains("frictiond.toml needs a restart"), "{log}");
 }
 
 /// The daemon joints matching `frictl sim serve --preset knee,ankle_roll` (kt, r), SCV friction

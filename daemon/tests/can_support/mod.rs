@@ -214,6 +214,8 @@ pub struct EmuState {
     pub silent: Vec<u32>,
     /// Reported motor velocity per id [motor rad/s].
     pub v_motor: HashMap<u32, f64>,
+    /// Standard data frames seen on ids other than the drives' (1, 2), counted per id.
+    pub other_ids: HashMap<u32, u64>,
 }
 
 /// MIT drives 1 and 2 emulated on `sock` in a thread: every command is decoded and logged and —
@@ -246,7 +248,11 @@ impl MitEmulator {
                 let Ok(w) = WireFrame::try_from(&f) else {
                     continue;
                 };
-                if !(w.id == 1 || w.id == 2) || w.extended || w.rtr {
+                if w.extended || w.rtr {
+                    continue;
+                }
+                if !(w.id == 1 || w.id == 2) {
+                    *st.lock().unwrap().other_ids.entry(w.id).or_insert(0) += 1;
                     continue;
                 }
                 let r = ranges(w.id);
@@ -302,6 +308,17 @@ impl MitEmulator {
             .unwrap_or_default()
     }
 
+    /// How many standard data frames were seen on `id` when it is not a drive's (1, 2).
+    pub fn frames_to_other_id(&self, id: u32) -> u64 {
+        self.state
+            .lock()
+            .unwrap()
+            .other_ids
+            .get(&id)
+            .copied()
+            .unwrap_or(0)
+    }
+
     /// Silences (or un-silences) motor `id`.
     pub fn set_silent(&self, id: u32, silent: bool) {
         let mut s = self.state.lock().unwrap();
@@ -335,7 +352,13 @@ pub fn decoded_sdot(v_motor: f64, r: f64) -> f64 {
 
 /// The control law's expected currents (knee, hip) for `tau_des` at the motor velocities `v_motor`.
 pub fn expected_currents(tau_des: [f64; 2], v_motor: [f64; 2]) -> [f64; 2] {
-    let (kc, ka, kv, kfc) = KNEE_CV;
+    expected_currents_kfc(tau_des, v_motor, KNEE_CV.3)
+}
+
+/// [`expected_currents`] with the knee's friction compensation fraction `kfc` in place of
+/// [`mit_body`]'s.
+pub fn expected_currents_kfc(tau_des: [f64; 2], v_motor: [f64; 2], kfc: f64) -> [f64; 2] {
+    let (kc, ka, kv, _) = KNEE_CV;
     let sd_knee = decoded_sdot(v_motor[0], KNEE_R);
     let sd_hip = decoded_sdot(v_motor[1], HIP_R);
     [
@@ -494,4 +517,181 @@ pub fn closed_loop_scenario(plant: &mut Plant, emu: &MitEmulator, v_motor: [f64;
     assert!(emu.log(2).last_t.abs() <= t_tol(2));
     emu.set_silent(1, false);
     emu.set_silent(2, false);
+}
+
+/// A running daemon's stderr, read line by line by a thread as it comes, so a test can wait for a
+/// log line while the daemon runs. Takes the child's stderr: [`Daemon::wait_exit`] then returns an
+/// empty text; [`LogTail::finish`] returns the whole log.
+pub struct LogTail {
+    text: Arc<Mutex<String>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl LogTail {
+    /// Starts reading `d`'s stderr.
+    pub fn take(d: &mut Daemon) -> Self {
+        use std::io::BufRead;
+        let stderr = d.child.stderr.take().expect("the daemon's stderr is piped");
+        let text = Arc::new(Mutex::new(String::new()));
+        let t = text.clone();
+        let thread = std::thread::spawn(move || {
+            for line in std::io::BufReader::new(stderr).lines() {
+                let Ok(line) = line else { break };
+                let mut s = t.lock().unwrap();
+                s.push_str(&line);
+                s.push('\n');
+            }
+        });
+        Self {
+            text,
+            thread: Some(thread),
+        }
+    }
+
+    /// The log so far.
+    pub fn text(&self) -> String {
+        self.text.lock().unwrap().clone()
+    }
+
+    /// Waits until the log holds `needle` `count` times; panics with the log after `timeout`.
+    pub fn wait_for(&self, needle: &str, count: usize, timeout: Duration) {
+        let t0 = Instant::now();
+        while self.text().matches(needle).count() < count {
+            assert!(
+                t0.elapsed() < timeout,
+                "no {count}× `{needle}` in the daemon's log within {timeout:?}:\n{}",
+                self.text()
+            );
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    /// The whole log, once the daemon has exited (its stderr closed).
+    pub fn finish(mut self) -> String {
+        if let Some(t) = self.thread.take() {
+            t.join().unwrap();
+        }
+        self.text()
+    }
+}
+
+/// Drives `rq` until the mirrored command has the law's currents `want` and the drives received
+/// them: knee motor torque k_t·i (the k_t of [`mit_body`]), hip current i, within quantisation;
+/// every drive's command count grows by at least 10 on the way. Panics after `timeout`.
+pub fn wire_agrees_with_law(
+    plant: &mut Plant,
+    emu: &MitEmulator,
+    rq: &TorqueRequest,
+    want: [f64; 2],
+    timeout: Duration,
+) {
+    let c = drive_until(plant, rq, timeout, |c| {
+        c.valid_mask == 0b11
+            && (c.i_ref_a[0] - want[0]).abs() < 1e-9
+            && (c.i_ref_a[1] - want[1]).abs() < 1e-9
+    });
+    assert_eq!((c.flags[0] & FLAG_FAULT, c.flags[1] & FLAG_FAULT), (0, 0));
+    let before = [emu.log(1).commands, emu.log(2).commands];
+    let t0 = Instant::now();
+    loop {
+        let c = drive_until(plant, rq, timeout, |_| true);
+        let (k, h) = (emu.log(1), emu.log(2));
+        let law = (c.i_ref_a[0] - want[0]).abs() < 1e-9 && (c.i_ref_a[1] - want[1]).abs() < 1e-9;
+        let wire = (k.last_t - KNEE_KT * want[0]).abs() <= t_tol(1)
+            && (h.last_t - want[1]).abs() <= t_tol(2);
+        if law && wire && k.commands >= before[0] + 10 && h.commands >= before[1] + 10 {
+            return;
+        }
+        assert!(
+            t0.elapsed() < timeout,
+            "law knee {} A, hip {} A (want {want:?}); wire knee {} Nm (want {}), hip {} A; commands {} / {} since {before:?}",
+            c.i_ref_a[0],
+            c.i_ref_a[1],
+            k.last_t,
+            KNEE_KT * want[0],
+            h.last_t,
+            k.commands,
+            h.commands
+        );
+    }
+}
+
+/// SIGHUP on a running CAN daemon `d` started from `body` ([`mit_body`], written with
+/// [`write_can_config`] in `env`) whose bus peer is `emu` (motor velocities `v_motor`):
+/// 1. kfc 0.85 → 0.4 (the law only): applied as generation 1; the knee current moves to the new
+///    law's and the drives receive it;
+/// 2. on top of that, the knee's k_t 0.157 → 0.18, node id 1 → 3 and gear ratio −100 → −120 (all
+///    fixed when the backend opened): refused, naming each old → new; the daemon runs on as
+///    generation 1 (kfc 0.4, the old k_t, node id and r): the law's currents and what drive 1
+///    receives agree, and no frame goes to node 3;
+/// 3. SIGTERM: a clean exit; exactly one reload was applied.
+///
+/// Takes the daemon's stderr (see [`LogTail`]); returns its whole log.
+pub fn sighup_scenario(
+    env: &TestEnv,
+    body: &str,
+    d: &mut Daemon,
+    plant: &mut Plant,
+    emu: &MitEmulator,
+    v_motor: [f64; 2],
+) -> String {
+    let t = Duration::from_secs(30);
+    let tail = LogTail::take(d);
+    plant.wait_for_daemon(t);
+    let tau = [3.0, 1.5];
+    let rq = request(tau);
+    let want_before = expected_currents(tau, v_motor);
+    wire_agrees_with_law(plant, emu, &rq, want_before, t);
+    assert_eq!(plant.status_until(None, t, |_| true).generation, 0);
+
+    // 1. A law value: applied.
+    let kfc = 0.4;
+    let applied = body.replacen(&format!("kfc = {}", KNEE_CV.3), &format!("kfc = {kfc}"), 1);
+    assert_ne!(applied, body);
+    write_can_config(env, &applied);
+    d.signal(libc::SIGHUP);
+    plant.status_until(None, t, |s| s.generation == 1);
+    tail.wait_for("reloaded", 1, t);
+    let want = expected_currents_kfc(tau, v_motor, kfc);
+    assert!(
+        (want[0] - want_before[0]).abs() > 0.1,
+        "kfc moves the knee current: {want_before:?} → {want:?}"
+    );
+    wire_agrees_with_law(plant, emu, &rq, want, t);
+
+    // 2. Values the backend fixed at open: refused, nothing applied.
+    let fixed = applied
+        .replacen(&format!("kt = {KNEE_KT}"), "kt = 0.18", 1)
+        .replacen("node_id = 1\n", "node_id = 3\n", 1)
+        .replacen(&format!("gear_ratio = {KNEE_R}"), "gear_ratio = -120", 1);
+    assert_eq!(
+        fixed.lines().filter(|l| !applied.contains(*l)).count(),
+        3,
+        "three lines changed:\n{fixed}"
+    );
+    write_can_config(env, &fixed);
+    d.signal(libc::SIGHUP);
+    tail.wait_for("needs a restart", 1, t);
+    assert!(d.alive(), "frictiond runs on after a refused reload");
+    wire_agrees_with_law(plant, emu, &rq, want, t);
+    let s = plant.status_until(None, t, |_| true);
+    assert_eq!(s.generation, 1, "the refused reload applied nothing");
+    assert_eq!(emu.frames_to_other_id(3), 0, "nothing is sent to node 3");
+
+    // 3. Exit.
+    d.signal(libc::SIGTERM);
+    let (st, _) = d.wait_exit(t);
+    let log = tail.finish();
+    assert!(st.success(), "{log}");
+    for needle in [
+        "needs a restart",
+        "knee",
+        "kt 0.157 → 0.18",
+        "node_id 1 → 3",
+        "gear_ratio -100 → -120",
+    ] {
+        assert!(log.contains(needle), "{needle}: {log}");
+    }
+    assert_eq!(log.matches("reloaded").count(), 1, "{log}");
+    log
 }

@@ -1,6 +1,9 @@
 //! ROS 2 MCAP bags: `sensor_msgs/msg/JointState` messages on one topic, one joint picked by name in
 //! every message (the name order may change between messages), streamed with the `mcap` crate's
-//! sans-io linear reader (memory ∝ one chunk of the file plus the joint's samples).
+//! sans-io linear reader (memory ∝ one chunk of the file plus the joint's samples). The reader is fed
+//! at most 1 MiB per read; chunks are split and decompressed here; only schema, channel and message
+//! records are parsed, each after its length fields are checked against the record, so a corrupt
+//! length costs an error, never an allocation of what it claims.
 //!
 //! Fields → roles: `position` → s [rad], `velocity` → ṡ [rad/s], `effort` → a torque role chosen by
 //! the caller (`tau_joint` by default: a torque-sensed arm's measured joint torque) [Nm]; an empty
@@ -15,7 +18,7 @@ use std::collections::BTreeMap;
 use std::io::Read;
 use std::path::Path;
 
-use mcap::records::Record;
+use mcap::records::{Record, op};
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
 
 use crate::run::RunBuilder;
@@ -28,10 +31,36 @@ pub struct McapSpec {
     pub topic: String,
     /// Joint name.
     pub joint: String,
-    /// Role of the `effort` field (`None`: ignore it).
+    /// Role of the `effort` field (`None`: ignore it); one of [`EFFORT_ROLES`] ([`read`] refuses
+    /// another).
     pub effort_role: Option<Role>,
     /// Roles to negate.
     pub negate: Vec<Role>,
+}
+
+/// The roles the `effort` field can be read as (a torque or a motor current).
+pub const EFFORT_ROLES: [Role; 4] = [Role::TauJoint, Role::TauMotor, Role::TauF, Role::Current];
+
+/// Parses the `effort` field's role (the command line's `--effort`): `none` (ignore the field) or
+/// one of [`EFFORT_ROLES`].
+pub fn parse_effort(text: &str) -> Result<Option<Role>, LogsError> {
+    if text.trim() == "none" {
+        return Ok(None);
+    }
+    let role = Role::parse(text)?;
+    check_effort(role)?;
+    Ok(Some(role))
+}
+
+fn check_effort(role: Role) -> Result<(), LogsError> {
+    if EFFORT_ROLES.contains(&role) {
+        Ok(())
+    } else {
+        Err(LogsError::Usage(format!(
+            "effort role {role}: must be {} or none",
+            EFFORT_ROLES.map(Role::name).join(", ")
+        )))
+    }
 }
 
 /// A decoded `sensor_msgs/msg/JointState`.
@@ -155,10 +184,137 @@ pub fn decode_joint_state(payload: &[u8]) -> Result<JointState, String> {
 
 /// Largest MCAP record accepted [bytes] (a chunk; recorders write ~1 MiB).
 const MAX_RECORD: usize = 256 << 20;
+/// Most bytes handed to the MCAP reader per read [bytes]: its buffer grows with the bytes the file
+/// really holds, never by a length field's claim (a corrupt chunk header can ask for 4 GiB).
+const READ_STEP: usize = 1 << 20;
+
+/// Walks the length prefixes of a Schema or Channel record (other records: nothing to check).
+struct Prefixes<'a> {
+    data: &'a [u8],
+    pos: usize,
+}
+
+impl Prefixes<'_> {
+    fn fixed(&mut self, n: usize) -> Option<()> {
+        self.pos = self.pos.checked_add(n).filter(|&e| e <= self.data.len())?;
+        Some(())
+    }
+    /// A u32-length-prefixed field; returns where its bytes start.
+    fn sized(&mut self) -> Option<usize> {
+        let b: [u8; 4] = self
+            .data
+            .get(self.pos..self.pos.checked_add(4)?)?
+            .try_into()
+            .ok()?;
+        self.fixed(4)?;
+        let start = self.pos;
+        self.fixed(u32::from_le_bytes(b) as usize)?;
+        Some(start)
+    }
+}
+
+/// The records of a chunk record's `data`: its header checked, its records decompressed (none,
+/// zstd, lz4) as a stream to exactly the size the header gives (at most [`MAX_RECORD`]). The chunk
+/// is handled here, not by the `mcap` crate's reader (which underflows a counter when a record
+/// claims more than its chunk holds).
+fn chunk_records(data: &[u8]) -> Result<std::borrow::Cow<'_, [u8]>, String> {
+    let bad = || "malformed chunk: its header runs past the chunk".to_string();
+    let u64_at = |at: usize| -> Result<u64, String> {
+        let mut b = [0u8; 8];
+        b.copy_from_slice(data.get(at..at + 8).ok_or_else(bad)?);
+        Ok(u64::from_le_bytes(b))
+    };
+    let mut c = Prefixes { data, pos: 0 };
+    c.fixed(16).ok_or_else(bad)?; // message start and end time
+    let uncompressed = u64_at(c.pos)?;
+    c.fixed(8 + 4).ok_or_else(bad)?; // uncompressed size, CRC
+    let name = c.sized().ok_or_else(bad)?;
+    let compression = &data[name..c.pos];
+    let compressed = u64_at(c.pos)?;
+    c.fixed(8).ok_or_else(bad)?;
+    let body = usize::try_from(compressed)
+        .ok()
+        .and_then(|n| c.pos.checked_add(n))
+        .and_then(|end| data.get(c.pos..end))
+        .ok_or_else(|| {
+            format!("malformed chunk: compressed size {compressed} exceeds the chunk")
+        })?;
+    let n = usize::try_from(uncompressed)
+        .ok()
+        .filter(|&n| n <= MAX_RECORD)
+        .ok_or_else(|| {
+            format!("chunk of {uncompressed} bytes uncompressed: more than {MAX_RECORD}")
+        })?;
+    let stream = |r: std::io::Result<Box<dyn Read + '_>>| -> Result<Vec<u8>, String> {
+        let mut out = Vec::new();
+        r.and_then(|r| r.take(n as u64 + 1).read_to_end(&mut out))
+            .map_err(|e| format!("chunk ({}): {e}", String::from_utf8_lossy(compression)))?;
+        Ok(out)
+    };
+    let records = match compression {
+        b"" => std::borrow::Cow::Borrowed(body),
+        b"zstd" => std::borrow::Cow::Owned(stream(
+            zstd::stream::read::Decoder::new(body).map(|d| Box::new(d) as Box<dyn Read>),
+        )?),
+        b"lz4" => std::borrow::Cow::Owned(stream(
+            lz4::Decoder::new(body).map(|d| Box::new(d) as Box<dyn Read>),
+        )?),
+        other => {
+            return Err(format!(
+                "chunk compression `{}` is not supported (none, zstd, lz4)",
+                String::from_utf8_lossy(other)
+            ));
+        }
+    };
+    if records.len() != n {
+        return Err(format!(
+            "malformed chunk: its records are {} bytes, its header says {n}",
+            records.len()
+        ));
+    }
+    Ok(records)
+}
+
+/// Whether every length prefix of a Schema or Channel record fits in the record. The `mcap` crate
+/// reserves a string's claimed length before reading it, so a corrupt length in a few bytes of file
+/// would allocate up to 4 GiB (an abort, not an error); checked before [`mcap::parse_record`].
+fn prefixes_fit(opcode: u8, data: &[u8]) -> bool {
+    let mut c = Prefixes { data, pos: 0 };
+    let mut walk = || -> Option<()> {
+        match opcode {
+            op::SCHEMA => {
+                c.fixed(2)?; // id
+                c.sized()?; // name
+                c.sized()?; // encoding
+                c.sized()?; // data
+            }
+            op::CHANNEL => {
+                c.fixed(4)?; // id, schema id
+                c.sized()?; // topic
+                c.sized()?; // message encoding
+                let start = c.sized()?; // metadata: key/value strings
+                let end = c.pos;
+                c.pos = start;
+                while c.pos < end {
+                    c.sized()?;
+                    c.sized()?;
+                }
+                (c.pos == end).then_some(())?;
+            }
+            _ => {}
+        }
+        Some(())
+    };
+    walk().is_some()
+}
 const SCHEMA: &str = "sensor_msgs/msg/JointState";
 
 /// Reads one joint from an MCAP bag into a run named after the file stem.
 pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<ImportedRun, LogsError> {
+    if let Some(r) = spec.effort_role {
+        // Time, s or ṡ as the effort's role would overwrite a field read from elsewhere.
+        check_effort(r)?;
+    }
     let p = path.display().to_string();
     let fmt = |msg: String| LogsError::Format {
         path: p.clone(),
@@ -180,6 +336,7 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
     let mut reader = LinearReader::new_with_options(
         LinearReaderOptions::default()
             .with_skip_start_magic(true)
+            .with_emit_chunks(true)
             .with_record_length_limit(MAX_RECORD),
     );
     let mut schemas: BTreeMap<u16, (String, String)> = BTreeMap::new();
@@ -209,88 +366,126 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
     let mut msg_no: u64 = 0;
     let mut t0: Option<f64> = None;
     let mut empty = [0u64; 3];
+    // One record (top level or inside a chunk).
+    let mut handle = |opcode: u8, data: &[u8]| -> Result<(), LogsError> {
+        // Only schemas, channels and messages are used; the rest is never parsed.
+        if !matches!(opcode, op::SCHEMA | op::CHANNEL | op::MESSAGE) {
+            return Ok(());
+        }
+        if !prefixes_fit(opcode, data) {
+            return Err(fmt(format!(
+                "a {} record's length field exceeds the record ({} bytes)",
+                if opcode == op::SCHEMA {
+                    "schema"
+                } else {
+                    "channel"
+                },
+                data.len()
+            )));
+        }
+        let rec = mcap::parse_record(opcode, data).map_err(|e| fmt(e.to_string()))?;
+        match rec {
+            Record::Schema { header, .. } => {
+                schemas.insert(header.id, (header.name, header.encoding));
+            }
+            Record::Channel(ch) => {
+                let schema = schemas
+                    .get(&ch.schema_id)
+                    .map_or("?".to_string(), |s| s.0.clone());
+                topics.insert(ch.topic.clone(), schema.clone());
+                if ch.topic == spec.topic {
+                    if schema != SCHEMA {
+                        return Err(fmt(format!(
+                            "topic {} carries `{schema}`, not {SCHEMA}",
+                            ch.topic
+                        )));
+                    }
+                    if ch.message_encoding != "cdr" {
+                        return Err(fmt(format!(
+                            "topic {} is encoded `{}`, not cdr",
+                            ch.topic, ch.message_encoding
+                        )));
+                    }
+                    wanted.push(ch.id);
+                }
+            }
+            Record::Message { header, data } => {
+                if !wanted.contains(&header.channel_id) {
+                    return Ok(());
+                }
+                msg_no += 1;
+                let js = decode_joint_state(&data)
+                    .map_err(|e| fmt(format!("message {msg_no} on {}: {e}", spec.topic)))?;
+                let Some(j) = js.name.iter().position(|n| n == &spec.joint) else {
+                    for n in js.name {
+                        if !names_seen.contains(&n) && names_seen.len() < 256 {
+                            names_seen.push(n);
+                        }
+                    }
+                    b.skip("joint not in message");
+                    return Ok(());
+                };
+                // An empty array is "not measured": a placeholder 0 now, and the whole
+                // signal is dropped at the end if any message lacked it. A wrong length
+                // is a broken message: NaN, counted and dropped.
+                let pick = |v: &[f64], k: usize, empty: &mut [u64; 3]| {
+                    if v.is_empty() {
+                        empty[k] += 1;
+                        0.0
+                    } else if v.len() == js.name.len() {
+                        v[j]
+                    } else {
+                        f64::NAN
+                    }
+                };
+                let t = js.stamp_s - *t0.get_or_insert(js.stamp_s);
+                let pos = pick(&js.position, 0, &mut empty);
+                let vel = pick(&js.velocity, 1, &mut empty);
+                let eff = pick(&js.effort, 2, &mut empty);
+                let row = b.row_mut();
+                row[0] = t;
+                row[1] = pos;
+                row[2] = vel;
+                if spec.effort_role.is_some() {
+                    row[3] = eff;
+                }
+                b.push(|| format!("message {msg_no}"), 0);
+            }
+            _ => {}
+        }
+        Ok(())
+    };
     while let Some(ev) = reader.next_event() {
         match ev.map_err(|e| fmt(e.to_string()))? {
             LinearReadEvent::ReadRequest(need) => {
                 let n = file
-                    .read(reader.insert(need))
+                    .read(reader.insert(need.min(READ_STEP)))
                     .map_err(|e| LogsError::io(path, e))?;
                 reader.notify_read(n);
                 done += n as u64;
                 progress(done, total);
             }
-            LinearReadEvent::Record { data, opcode } => {
-                let rec = mcap::parse_record(opcode, data).map_err(|e| fmt(e.to_string()))?;
-                match rec {
-                    Record::Schema { header, .. } => {
-                        schemas.insert(header.id, (header.name, header.encoding));
-                    }
-                    Record::Channel(ch) => {
-                        let schema = schemas
-                            .get(&ch.schema_id)
-                            .map_or("?".to_string(), |s| s.0.clone());
-                        topics.insert(ch.topic.clone(), schema.clone());
-                        if ch.topic == spec.topic {
-                            if schema != SCHEMA {
-                                return Err(fmt(format!(
-                                    "topic {} carries `{schema}`, not {SCHEMA}",
-                                    ch.topic
-                                )));
-                            }
-                            if ch.message_encoding != "cdr" {
-                                return Err(fmt(format!(
-                                    "topic {} is encoded `{}`, not cdr",
-                                    ch.topic, ch.message_encoding
-                                )));
-                            }
-                            wanted.push(ch.id);
-                        }
-                    }
-                    Record::Message { header, data } => {
-                        if !wanted.contains(&header.channel_id) {
-                            continue;
-                        }
-                        msg_no += 1;
-                        let js = decode_joint_state(&data)
-                            .map_err(|e| fmt(format!("message {msg_no} on {}: {e}", spec.topic)))?;
-                        let Some(j) = js.name.iter().position(|n| n == &spec.joint) else {
-                            for n in js.name {
-                                if !names_seen.contains(&n) && names_seen.len() < 256 {
-                                    names_seen.push(n);
-                                }
-                            }
-                            b.skip("joint not in message");
-                            continue;
-                        };
-                        // An empty array is "not measured": a placeholder 0 now, and the whole
-                        // signal is dropped at the end if any message lacked it. A wrong length
-                        // is a broken message: NaN, counted and dropped.
-                        let pick = |v: &[f64], k: usize, empty: &mut [u64; 3]| {
-                            if v.is_empty() {
-                                empty[k] += 1;
-                                0.0
-                            } else if v.len() == js.name.len() {
-                                v[j]
-                            } else {
-                                f64::NAN
-                            }
-                        };
-                        let t = js.stamp_s - *t0.get_or_insert(js.stamp_s);
-                        let pos = pick(&js.position, 0, &mut empty);
-                        let vel = pick(&js.velocity, 1, &mut empty);
-                        let eff = pick(&js.effort, 2, &mut empty);
-                        let row = b.row_mut();
-                        row[0] = t;
-                        row[1] = pos;
-                        row[2] = vel;
-                        if spec.effort_role.is_some() {
-                            row[3] = eff;
-                        }
-                        b.push(|| format!("message {msg_no}"), 0);
-                    }
-                    _ => {}
+            LinearReadEvent::Record { data, opcode } if opcode == op::CHUNK => {
+                let records = chunk_records(data).map_err(fmt)?;
+                let mut pos = 0usize;
+                while pos < records.len() {
+                    let head = records.get(pos..pos + 9).ok_or_else(|| {
+                        fmt("malformed chunk: it ends inside a record header".into())
+                    })?;
+                    let mut len = [0u8; 8];
+                    len.copy_from_slice(&head[1..]);
+                    let end = usize::try_from(u64::from_le_bytes(len))
+                        .ok()
+                        .and_then(|l| (pos + 9).checked_add(l))
+                        .filter(|&e| e <= records.len())
+                        .ok_or_else(|| {
+                            fmt("malformed chunk: a record runs past the end of its chunk".into())
+                        })?;
+                    handle(head[0], &records[pos + 9..end])?;
+                    pos = end;
                 }
             }
+            LinearReadEvent::Record { data, opcode } => handle(opcode, data)?,
         }
     }
     if wanted.is_empty() {

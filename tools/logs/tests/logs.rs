@@ -276,6 +276,179 @@ fn cdr_decoder_rejects_truncated_and_oversized_messages() {
     }
 }
 
+/// The uncompressed bag of the `log_importers` fuzz seed (written by `fixtures/make_fixtures.py
+/// mcap-seed`: 24 `JointState` messages on `/joint_states`, joints `a`, `wrist`, `b`), with the fuzz
+/// target's spec and 0xFF separator stripped, copied to a temporary file.
+fn seed_bag() -> PathBuf {
+    seed_bag_named("mcap_plain")
+}
+
+/// [`seed_bag`] of the seed `name` (`mcap_plain`: uncompressed 1 KB chunks; `mcap_zstd`: one
+/// zstd chunk).
+fn seed_bag_named(name: &str) -> PathBuf {
+    let seed = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fuzz/seeds/log_importers")
+        .join(name);
+    let data = std::fs::read(&seed).unwrap();
+    let cut = data.iter().position(|&b| b == 0xFF).unwrap();
+    let path = tmp(&format!("{name}.mcap"));
+    std::fs::write(&path, &data[cut + 1..]).unwrap();
+    path
+}
+
+#[test]
+fn mcap_effort_read_as_time_or_a_position_is_refused_not_a_panic() {
+    // `McapSpec`'s fields are public: an effort role of time, s or sdot would index past the row (a
+    // panic; the `log_importers` fuzz target reads its effort as any role) and theta would take the
+    // effort as the motor position. `read` refuses every role but a torque or a current.
+    let path = seed_bag();
+    let sp = |effort_role| McapSpec {
+        topic: "/joint_states".into(),
+        joint: "wrist".into(),
+        effort_role,
+        negate: vec![],
+    };
+    for role in [
+        Role::Time,
+        Role::S,
+        Role::Sdot,
+        Role::Theta,
+        Role::Temperature,
+    ] {
+        let e = mcap_log::read(&path, &sp(Some(role)), &mut no_progress())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(&format!("effort role {role}"))
+                && e.contains("tau_joint, tau_motor, tau_f, current"),
+            "{e}"
+        );
+    }
+    for (text, want) in [
+        ("none", None),
+        ("tau-f", Some(Role::TauF)),
+        ("current", Some(Role::Current)),
+    ] {
+        assert_eq!(mcap_log::parse_effort(text).unwrap(), want, "{text}");
+    }
+    assert!(mcap_log::parse_effort("sdot").is_err());
+    assert!(mcap_log::parse_effort("speed").is_err());
+    // Every accepted role reads the seed: 24 messages, effort = 1.5 sin(2 t) + 0.2 with position
+    // 0.3 sin(2 t) at the same t.
+    for role in mcap_log::EFFORT_ROLES {
+        let run = mcap_log::read(&path, &sp(Some(role)), &mut no_progress()).unwrap();
+        assert_eq!(run.report.rows_used, 24, "{role}");
+        let s = &run.signals;
+        let eff = match role {
+            Role::TauJoint => s.tau_joint_nm.as_ref(),
+            Role::TauMotor => s.tau_motor_nm.as_ref(),
+            Role::TauF => s.tau_f_nm.as_ref(),
+            _ => s.current_a.as_ref(),
+        }
+        .unwrap();
+        let pos = s.s_rad.as_ref().unwrap();
+        for k in 0..24 {
+            let t = (pos[k] / 0.3).asin() / 2.0;
+            assert!(
+                (eff[k] - (1.5 * (2.0 * t).sin() + 0.2)).abs() < 1e-9,
+                "{role} k = {k}"
+            );
+        }
+    }
+}
+
+/// An MCAP file: the magic, a header record (empty profile and library), then `records` as
+/// `(opcode, data)`.
+fn mcap_bytes(records: &[(u8, Vec<u8>)]) -> Vec<u8> {
+    let mut f = b"\x89MCAP0\r\n".to_vec();
+    for (op, data) in [(0x01u8, vec![0u8; 8])].iter().chain(records) {
+        f.push(*op);
+        f.extend((data.len() as u64).to_le_bytes());
+        f.extend(data);
+    }
+    f
+}
+
+#[test]
+fn mcap_length_fields_beyond_the_record_are_errors_not_allocations() {
+    // Found by the `log_importers` fuzz target: a channel record whose topic length claimed
+    // 3.7 GB made the `mcap` crate reserve it (an out-of-memory abort). Every claim here is ~4 GiB
+    // in a file of a few dozen bytes.
+    let sp = McapSpec {
+        topic: "/joint_states".into(),
+        joint: "wrist".into(),
+        effort_role: None,
+        negate: vec![],
+    };
+    let huge = 0xF000_0000u32.to_le_bytes();
+    // Channel: id, schema id, topic length (huge), …
+    let mut channel = vec![1, 0, 0, 0];
+    channel.extend(huge);
+    channel.extend(b"/joint_states");
+    // Channel with a sane topic and encoding but a metadata key whose length is huge.
+    let mut meta = vec![1, 0, 0, 0];
+    for s in ["/joint_states", "cdr"] {
+        meta.extend((s.len() as u32).to_le_bytes());
+        meta.extend(s.as_bytes());
+    }
+    meta.extend(8u32.to_le_bytes());
+    meta.extend(huge);
+    meta.extend([0u8; 4]);
+    // Schema: id, name length (huge), …
+    let mut schema = vec![1, 0];
+    schema.extend(huge);
+    schema.extend(b"sensor_msgs/msg/JointState");
+    for (what, rec) in [
+        ("channel", (0x04, channel)),
+        ("channel", (0x04, meta)),
+        ("schema", (0x03, schema)),
+    ] {
+        let path = tmp(&format!("huge_{what}.mcap"));
+        std::fs::write(&path, mcap_bytes(&[rec])).unwrap();
+        let e = mcap_log::read(&path, &sp, &mut no_progress())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(&format!(
+                "a {what} record's length field exceeds the record"
+            )),
+            "{e}"
+        );
+    }
+    // A chunk whose compression-name length claims ~4 GiB: the reader asks for that many bytes;
+    // it is fed what the file holds and ends at its end.
+    let mut chunk = vec![0u8; 28];
+    chunk.extend(0xFFFF_FFF0u32.to_le_bytes());
+    chunk.extend([0u8; 8]);
+    let path = tmp("huge_chunk_header.mcap");
+    std::fs::write(&path, mcap_bytes(&[(0x06, chunk)])).unwrap();
+    let t0 = Instant::now();
+    let e = mcap_log::read(&path, &sp, &mut no_progress()).unwrap_err();
+    assert!(matches!(e, LogsError::Format { .. }), "{e}");
+    eprintln!("huge chunk header: {e} ({:?})", t0.elapsed());
+    // An uncompressed chunk (compressed size 9) holding a record that claims 20 bytes, with more
+    // bytes after the chunk: found by the fuzz target as an arithmetic overflow in the `mcap` crate.
+    let mut chunk = vec![0u8; 24];
+    chunk.extend(0u32.to_le_bytes()); // uncompressed CRC
+    chunk.extend(0u32.to_le_bytes()); // compression "" (none)
+    chunk.extend(9u64.to_le_bytes()); // compressed size
+    chunk.push(0x05);
+    chunk.extend(20u64.to_le_bytes());
+    let mut file = mcap_bytes(&[(0x06, chunk)]);
+    file.extend([0u8; 64]);
+    let path = tmp("record_past_its_chunk.mcap");
+    std::fs::write(&path, file).unwrap();
+    let e = mcap_log::read(&path, &sp, &mut no_progress())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("malformed chunk"), "{e}");
+    // The seed bags still read (their records pass the same checks), uncompressed and zstd.
+    for name in ["mcap_plain", "mcap_zstd"] {
+        let run = mcap_log::read(&seed_bag_named(name), &sp, &mut no_progress()).unwrap();
+        assert_eq!(run.report.rows_used, 24, "{name}");
+    }
+}
+
 /// The fixture generator run with `FRICTIONLESS_PY`, or `None` (with the reason printed).
 fn fixture(kind: &str, name: &str) -> Option<PathBuf> {
     let Some(py) = std::env::var_os("FRICTIONLESS_PY") else {

@@ -189,20 +189,8 @@ pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
 
 /// Runs `frictl import mcap`.
 pub fn run_mcap(args: McapArgs) -> anyhow::Result<()> {
-    let effort_role = match args.effort.as_str() {
-        "none" => None,
-        r => {
-            let role = Role::parse(r)?;
-            anyhow::ensure!(
-                matches!(
-                    role,
-                    Role::TauJoint | Role::TauMotor | Role::TauF | Role::Current
-                ),
-                "--effort {r}: must be tau_joint, tau_motor, tau_f, current or none"
-            );
-            Some(role)
-        }
-    };
+    let effort_role = mcap_log::parse_effort(&args.effort)
+        .map_err(|e| anyhow::anyhow!("--effort {}: {e}", args.effort))?;
     let negate = args
         .common
         .negate
