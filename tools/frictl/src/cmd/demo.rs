@@ -725,6 +725,18 @@ fn fit(r: &mut Runner, preset: &str, files: &JointFiles) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The PINN's input set per joint. The knee carries its link's gravity load through the harmonic drive,
+/// so Δθ (the drive's wind-up) alone does not tell friction from gravity torque: the knee gets the
+/// authors' input type 4 `[Δθ, s, ṡ]`, which measured 0.66 → 0.27 Nm offline and 0.84 → 0.26 Nm in
+/// closed loop on the virtual knee (docs/inputs.md). The ankle roll keeps `[Δθ, ṡ]` (type 4 gave no
+/// closed-loop gain there).
+fn feature_set(preset: &str) -> &'static str {
+    match preset {
+        "knee" => "delta-theta-joint-pos-joint-vel",
+        _ => "delta-theta-joint-vel",
+    }
+}
+
 /// Stage 4, train: the PINN with the SCV fit as its physics prior.
 fn train(
     r: &mut Runner,
@@ -755,6 +767,8 @@ fn train(
             seed.to_string(),
             "--report".into(),
             s(&files.train_report),
+            "--features".into(),
+            feature_set(preset).into(),
         ]
         .into_iter()
         .chain(sizes.train_extra.iter().map(|a| a.to_string()))
@@ -1166,6 +1180,8 @@ fn onpolicy_round(
             "--seed".into(),
             args.seed.to_string(),
             format!("--delta-theta-offset={offset}"),
+            "--features".into(),
+            feature_set(preset).into(),
         ]);
         a.extend(sizes.train_extra.iter().map(|x| x.to_string()));
         r.frictl(&format!("on-policy round {k}: train {preset} (--init)"), &a)?;
