@@ -186,18 +186,19 @@ fn where_the_time_goes(evict_buf: &mut [u8]) {
 }
 
 /// Paced ticks of `p` on one thread or with `crew`: compute time from wake [ns], sorted, and the
-/// helper's late ticks.
+/// helper's late ticks and the ticks whose helper half the bench thread ran itself (stolen).
 fn paced(
     p: &mut Params,
     n: usize,
     mut crew: Option<&mut Crew>,
     plan: &CrewPlan,
     ticks: usize,
-) -> (Vec<u64>, u64) {
+) -> (Vec<u64>, u64, u64) {
     let mut inp = inputs(n);
     let (mut cmd, mut tau_f, mut prev) = warm(p, &inp);
     let mut samples = Vec::with_capacity(ticks);
     let late0 = crew.as_ref().map_or(0, |c| c.late_ticks());
+    let stolen0 = crew.as_ref().map_or(0, |c| c.stolen_ticks());
     for k in 0..ticks as u64 {
         inp.states.value.sdot_rad_s[n - 1] = 0.4 + (k % 100) as f64 * 1e-3;
         let deadline = (monotonic_ns() / PERIOD_NS + 1) * PERIOD_NS;
@@ -219,7 +220,8 @@ fn paced(
     }
     samples.sort_unstable();
     let late = crew.as_ref().map_or(0, |c| c.late_ticks()) - late0;
-    (samples, late)
+    let stolen = crew.as_ref().map_or(0, |c| c.stolen_ticks()) - stolen0;
+    (samples, late, stolen)
 }
 
 /// `TICK_PACED_PRIORITY=p`: run the bench thread and the helper SCHED_FIFO at `p`, as frictiond
@@ -260,9 +262,9 @@ fn main() {
         }
     );
     println!(
-        "| joints | dtype | hot 1 net p50 | hot tick p50 | threads | prefetch | p50 | p99 | p99.9 | late |"
+        "| joints | dtype | hot 1 net p50 | hot tick p50 | threads | prefetch | p50 | p99 | p99.9 | late | stolen |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for n in JOINTS {
         for (name, dtype) in DTYPES {
             let mut net = paper_net(&[40, 268, 215, 1], 1, dtype);
@@ -290,7 +292,7 @@ fn main() {
                         lead_ns: LEAD_NS,
                         lockstep: false,
                     };
-                    let (s, late) = if threads == 2 {
+                    let (s, late, stolen) = if threads == 2 {
                         let rt = ThreadRt {
                             priority,
                             ..ThreadRt::default()
@@ -303,7 +305,7 @@ fn main() {
                         paced(&mut p, n, None, &plan, ticks)
                     };
                     println!(
-                        "| {n} | {name} | {} | {} | {threads} | {pname} | {} | {} | {} | {late} |",
+                        "| {n} | {name} | {} | {} | {threads} | {pname} | {} | {} | {} | {late} | {stolen} |",
                         us(net_hot),
                         us(quantile(&hot, 0.5)),
                         us(quantile(&s, 0.5)),

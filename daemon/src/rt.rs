@@ -372,10 +372,14 @@ impl JointOut {
 //
 // Protocol (no locks, no allocation): the main RT thread writes a job (`JobIn`: the helper's joints
 // as a raw slice of the current `Params`, a copy of the inputs, the tick's context) only while the
-// helper is idle, then bumps `epoch` (and wakes the helper with a futex only if it parked). The
-// helper computes its half into `JobOut`, stores the epoch in `done` (results ready), prefetches
-// if configured, then stores it in `idle` (it no longer touches the job or the joints). The main
-// thread computes its own half, spins for `done` until ¾ period after the wake (lockstep:
+// helper is idle, then bumps `epoch` (and wakes the helper with a futex only if it parked). Whoever
+// first moves `claimed` from the previous epoch to the posted one runs the job: the helper when it
+// picks the job up, or the main thread itself when it has finished its own half and the helper has
+// not started (a helper whose timer wake came late on a busy or virtualised CPU), so a late wake
+// costs time, never outputs. The helper computes its half into `JobOut`, stores the epoch in `done`
+// (results ready), prefetches if configured, then stores it in `idle` (it no longer touches the job
+// or the joints); a helper that lost the claim touches neither. The main thread computes its own
+// half, then steals the job or spins for `done` until ¾ period after the wake (lockstep:
 // `lockstep_timeout_ms`), merges the helper's joints by index and publishes. Parameters are handed over (reload) only while the helper is idle,
 // so it never sees a half-swapped set; a helper that is late gets its joints published as 0 A +
 // FLAG_STALE, is not given a new job until idle (the next tick waits at most
@@ -426,6 +430,12 @@ struct Rendezvous {
     idle: AtomicU32,
     /// The helper is parked (or about to park) on `epoch`: the main thread must wake it.
     parked: AtomicU32,
+    /// Epoch of the last job claimed — by the helper, or by the main thread running it itself.
+    /// Every job is claimed before the next is posted, so a claim is `epoch − 1 → epoch`.
+    claimed: AtomicU32,
+    /// Tests: the helper waits before claiming while set (a helper that wakes late, on demand).
+    #[cfg(test)]
+    hold: AtomicBool,
     /// End the helper (set before a last epoch bump).
     stop: AtomicBool,
     job_in: std::cell::UnsafeCell<JobIn>,
@@ -588,6 +598,8 @@ pub struct Crew {
     busy: bool,
     /// Ticks whose helper half was not done in time.
     late: u64,
+    /// Ticks whose helper half this thread ran itself (the helper had not picked the job up).
+    stolen: u64,
 }
 
 impl std::fmt::Debug for Crew {
@@ -597,6 +609,7 @@ impl std::fmt::Debug for Crew {
             .field("posted", &self.posted)
             .field("busy", &self.busy)
             .field("late", &self.late)
+            .field("stolen", &self.stolen)
             .finish()
     }
 }
@@ -610,6 +623,9 @@ impl Crew {
             done: AtomicU32::new(0),
             idle: AtomicU32::new(0),
             parked: AtomicU32::new(0),
+            claimed: AtomicU32::new(0),
+            #[cfg(test)]
+            hold: AtomicBool::new(false),
             stop: AtomicBool::new(false),
             job_in: std::cell::UnsafeCell::new(JobIn {
                 joints: std::ptr::null_mut(),
@@ -658,6 +674,7 @@ impl Crew {
                 posted: 0,
                 busy: false,
                 late: 0,
+                stolen: 0,
             },
             flags,
             refused,
@@ -667,6 +684,12 @@ impl Crew {
     /// Ticks whose helper half was not done within the budget (published as 0 A + FLAG_STALE).
     pub fn late_ticks(&self) -> u64 {
         self.late
+    }
+
+    /// Ticks whose helper half the main RT thread computed itself because the helper had not
+    /// started it when the main half was done (same outputs; the tick took longer).
+    pub fn stolen_ticks(&self) -> u64 {
+        self.stolen
     }
 
     /// Waits (spinning, until `by_ns`) for the helper to release its last job; `true` when it has
@@ -729,8 +752,31 @@ impl Crew {
         // SAFETY: `joints[..split]` is this thread's half; the helper only ever gets `[split..]`.
         let mine = unsafe { std::slice::from_raw_parts_mut(base, split) };
         let mut active = compute_joints(mine, &cx, &mut cmd.i_ref_a, &mut cmd.flags, tau_f_out);
-        let on_time = posted && spin_until_eq(&self.ren.done, self.posted, by_ns);
+        // The helper has not claimed the job: run its half here (it will never touch this job).
+        let stolen = posted
+            && self.ren.done.load(Ordering::Acquire) != self.posted
+            && self
+                .ren
+                .claimed
+                .compare_exchange(
+                    self.posted.wrapping_sub(1),
+                    self.posted,
+                    Ordering::AcqRel,
+                    Ordering::Acquire,
+                )
+                .is_ok();
         let mut bits = p.helper_mask;
+        if stolen {
+            self.busy = false;
+            self.stolen += 1;
+            // SAFETY: the claim is ours, so the helper never reads this job or `joints[split..]`;
+            // `split < n` because a job was posted.
+            let theirs = unsafe { std::slice::from_raw_parts_mut(base.add(split), n - split) };
+            *prev_active =
+                active | compute_joints(theirs, &cx, &mut cmd.i_ref_a, &mut cmd.flags, tau_f_out);
+            return true;
+        }
+        let on_time = posted && spin_until_eq(&self.ren.done, self.posted, by_ns);
         if on_time {
             // SAFETY: `done == posted` (Acquire): the helper finished writing `job_out`.
             let out = unsafe { &*self.ren.job_out.get() };
@@ -830,6 +876,24 @@ fn helper_main(ren: &Rendezvous, plan: CrewPlan, rt_flags: u32) -> HelperReport 
             break;
         }
         seen = epoch;
+        #[cfg(test)]
+        while ren.hold.load(Ordering::Acquire) && !ren.stop.load(Ordering::Acquire) {
+            std::hint::spin_loop();
+        }
+        if ren
+            .claimed
+            .compare_exchange(
+                epoch.wrapping_sub(1),
+                epoch,
+                Ordering::AcqRel,
+                Ordering::Acquire,
+            )
+            .is_err()
+        {
+            // The main thread ran this job itself: nothing of it is ours. Wait for the next post.
+            wake_at_ns = 0;
+            continue;
+        }
         jobs += 1;
         // SAFETY: a new epoch: the main thread wrote the job and will not touch it (or the joints
         // it points to) until `idle == seen`.
@@ -1289,6 +1353,8 @@ pub struct RtSummary {
     pub helper: Option<HelperReport>,
     /// Ticks whose helper half was late (published as 0 A + `FLAG_STALE`).
     pub helper_late: u64,
+    /// Ticks whose helper half the main RT thread ran itself (the helper had not started it).
+    pub helper_stolen: u64,
 }
 
 /// How the RT thread ran (for the latency report).
@@ -1389,9 +1455,10 @@ impl RtSummary {
         );
         let _ = writeln!(
             s,
-            "rt_threads={}\nhelper_late={}",
+            "rt_threads={}\nhelper_late={}\nhelper_stolen={}",
             if self.helper.is_some() { 2 } else { 1 },
-            self.helper_late
+            self.helper_late,
+            self.helper_stolen
         );
         if let Some(h) = &self.helper {
             let _ = writeln!(
@@ -1969,6 +2036,7 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
     alloc_count::set_counting(false);
     let usage = ThreadUsage::now().since(usage_start);
     let helper_late = crew.as_ref().map_or(0, Crew::late_ticks);
+    let helper_stolen = crew.as_ref().map_or(0, Crew::stolen_ticks);
     // The helper ends (after its current job) before the parameters can be freed.
     let helper = crew.take().map(Crew::stop);
     let (policy, priority) = sched_of_self();
@@ -2006,6 +2074,7 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
         thread,
         helper,
         helper_late,
+        helper_stolen,
     })
 }
 
@@ -2340,8 +2409,61 @@ kv = 0.0
         }
         assert_eq!(crew.late_ticks(), 0);
         assert!(nonzero > 10_000, "the joints were driven: {nonzero}");
+        let stolen = crew.stolen_ticks();
         let h = crew.stop();
-        assert_eq!(h.jobs, 3000);
+        assert_eq!(h.jobs + stolen, 3000, "every job ran once, on one thread or the other");
+    }
+
+    #[test]
+    fn a_helper_that_has_not_started_loses_its_half_to_the_main_thread_same_outputs() {
+        let n = 9;
+        let mut one = mixed_params(n, 1);
+        let mut two = mixed_params(n, 2);
+        // No budget to wait for the helper at all: only the claim keeps its joints from going stale.
+        let mut crew = test_crew(0);
+        let (mut prev1, mut prev2) = (0u64, 0u64);
+        let (mut c1, mut c2) = (MotorCurrentCommand::zeroed(), MotorCurrentCommand::zeroed());
+        let (mut f1, mut f2) = ([0.0; MAX_JOINTS], [0.0; MAX_JOINTS]);
+        crew.ren.hold.store(true, Ordering::Release);
+        for t in 0..600 {
+            if t == 300 {
+                // The helper wakes up: from here on it may claim jobs again (or lose them).
+                crew.ren.hold.store(false, Ordering::Release);
+            }
+            let (inp, fresh) = changing_inputs(n, t);
+            compute(&mut one, &inp, fresh, &mut prev1, &mut c1, &mut f1);
+            let on_time = crew.compute(
+                &mut two,
+                &inp,
+                fresh,
+                &mut prev2,
+                &mut c2,
+                &mut f2,
+                monotonic_ns(),
+                0,
+            );
+            if t < 300 {
+                assert!(on_time, "tick {t}: a held helper's half is run here, never late");
+                assert_eq!(crew.stolen_ticks(), t as u64 + 1);
+            }
+            if !on_time {
+                // Claimed by the helper and not done within a zero budget: the stale path (tested
+                // below); its joints restart bumplessly afterwards and are no longer comparable.
+                break;
+            }
+            assert_eq!(prev1, prev2, "tick {t}");
+            for k in 0..MAX_JOINTS {
+                assert_eq!(
+                    c1.i_ref_a[k].to_bits(),
+                    c2.i_ref_a[k].to_bits(),
+                    "tick {t} joint {k}"
+                );
+                assert_eq!(c1.flags[k], c2.flags[k], "tick {t} joint {k}");
+                assert_eq!(f1[k].to_bits(), f2[k].to_bits(), "tick {t} joint {k}");
+            }
+        }
+        assert!(crew.stolen_ticks() >= 300);
+        drop(crew);
     }
 
     #[test]
@@ -2446,6 +2568,7 @@ kv = 0.0
             },
             helper: None,
             helper_late: 0,
+            helper_stolen: 0,
         }
         .report();
         assert!(s.contains("trigger=clock\n"), "{s}");
