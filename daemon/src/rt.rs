@@ -2411,7 +2411,11 @@ kv = 0.0
         assert!(nonzero > 10_000, "the joints were driven: {nonzero}");
         let stolen = crew.stolen_ticks();
         let h = crew.stop();
-        assert_eq!(h.jobs + stolen, 3000, "every job ran once, on one thread or the other");
+        assert_eq!(
+            h.jobs + stolen,
+            3000,
+            "every job ran once, on one thread or the other"
+        );
     }
 
     #[test]
@@ -2443,7 +2447,10 @@ kv = 0.0
                 0,
             );
             if t < 300 {
-                assert!(on_time, "tick {t}: a held helper's half is run here, never late");
+                assert!(
+                    on_time,
+                    "tick {t}: a held helper's half is run here, never late"
+                );
                 assert_eq!(crew.stolen_ticks(), t as u64 + 1);
             }
             if !on_time {

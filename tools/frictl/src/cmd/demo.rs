@@ -956,6 +956,29 @@ fn pinn_arg(files: &[JointFiles]) -> String {
         .join(",")
 }
 
+/// `frictl experiment KIND` on both joints with only the current PINNs (and the Δθ offsets they were
+/// trained with), no plots: the on-policy rounds' min-K_p search and recording.
+fn pinn_experiment(kind: &str, files: &[JointFiles], offsets: &str) -> Vec<String> {
+    [
+        "experiment",
+        kind,
+        "--joint",
+        "both",
+        "--model",
+        "pinn",
+        "--no-plots",
+        "--pinn",
+    ]
+    .map(String::from)
+    .into_iter()
+    .chain([
+        pinn_arg(files),
+        "--pinn-delta-theta-offset".into(),
+        offsets.to_owned(),
+    ])
+    .collect()
+}
+
 /// `knee=V,ankle_roll=W`: the Δθ offset frictiond keeps for each current PINN (the one it was
 /// trained with, not re-latched at enable).
 fn pinn_offsets_arg(files: &[JointFiles]) -> anyhow::Result<String> {
@@ -1031,33 +1054,20 @@ fn onpolicy_round(
     let search_dir = dirs.experiments.join(format!("onpolicy_round{}", k - 1));
     r.frictl(
         &format!("on-policy round {k}: min K_p of the round-{} PINN", k - 1),
-        &[
-            "experiment",
-            "min-kp",
-            "--joint",
-            "both",
-            "--model",
-            "pinn",
-            "--no-plots",
-        ]
-        .map(String::from)
-        .into_iter()
-        .chain([
-            "--pinn".into(),
-            pinn_arg(files),
-            "--pinn-delta-theta-offset".into(),
-            offsets.clone(),
-            "--seed".into(),
-            args.seed.to_string(),
-            "--iterations".into(),
-            sizes.iterations.to_string(),
-            "--periods".into(),
-            sizes.periods.to_string(),
-            "--out".into(),
-            s(&search_dir),
-        ])
-        .chain(plant_t0.iter().cloned())
-        .collect::<Vec<String>>(),
+        &pinn_experiment("min-kp", files, &offsets)
+            .into_iter()
+            .chain([
+                "--seed".into(),
+                args.seed.to_string(),
+                "--iterations".into(),
+                sizes.iterations.to_string(),
+                "--periods".into(),
+                sizes.periods.to_string(),
+                "--out".into(),
+                s(&search_dir),
+            ])
+            .chain(plant_t0.iter().cloned())
+            .collect::<Vec<String>>(),
     )?;
     let ex: SuiteReport = read_typed(&search_dir.join("report.json"))?;
     let mut entry = RoundEntry {
@@ -1108,35 +1118,22 @@ fn onpolicy_round(
     let rec_dir = dirs.data.join(format!("onpolicy{k}"));
     r.frictl(
         &format!("on-policy round {k}: record (both joints, PINN compensating)"),
-        &[
-            "experiment",
-            "record",
-            "--joint",
-            "both",
-            "--model",
-            "pinn",
-            "--no-plots",
-        ]
-        .map(String::from)
-        .into_iter()
-        .chain([
-            "--pinn".into(),
-            pinn_arg(files),
-            "--pinn-delta-theta-offset".into(),
-            offsets.clone(),
-            "--kp".into(),
-            kp.join(","),
-            "--record-runs".into(),
-            sizes.onpolicy_runs.to_string(),
-            "--periods".into(),
-            sizes.periods.to_string(),
-            "--seed".into(),
-            (args.seed + 1000 * u64::from(k)).to_string(),
-            "--out".into(),
-            s(&rec_dir),
-        ])
-        .chain(plant_t0.iter().cloned())
-        .collect::<Vec<String>>(),
+        &pinn_experiment("record", files, &offsets)
+            .into_iter()
+            .chain([
+                "--kp".into(),
+                kp.join(","),
+                "--record-runs".into(),
+                sizes.onpolicy_runs.to_string(),
+                "--periods".into(),
+                sizes.periods.to_string(),
+                "--seed".into(),
+                (args.seed + 1000 * u64::from(k)).to_string(),
+                "--out".into(),
+                s(&rec_dir),
+            ])
+            .chain(plant_t0.iter().cloned())
+            .collect::<Vec<String>>(),
     )?;
     for ((preset, joint), f) in JOINTS.iter().zip(files.iter_mut()) {
         let raw = rec_dir.join(format!("{joint}_onpolicy.csv"));
