@@ -219,7 +219,7 @@ class Model:
 
     @property
     def kernel_path(self) -> str:
-        """The inference kernel path on this CPU (``"avx512"``, ``"avx2"`` or ``"portable"``)."""
+        """The inference kernel path on this CPU: ``"avx512vnni"``, ``"avx512"``, ``"avx2fma"`` or ``"portable"``."""
         return self._m.kernel_path
 
     def predict(self, x: Any) -> np.ndarray:

@@ -175,7 +175,7 @@ impl Model {
         self.file.mlp.n_inputs()
     }
 
-    /// The inference path the kernel uses on this CPU (e.g. `"avx2"`).
+    /// The inference path the kernel uses on this CPU (`"avx512vnni"`, `"avx512"`, `"avx2fma"`, `"portable"`).
     #[getter]
     fn kernel_path(&self) -> String {
         let m = self.mlp.lock().unwrap_or_else(|p| p.into_inner());

@@ -37,7 +37,7 @@ def test_shipped_model_info(shipped_model_path):
     assert i.dtype == "f16"
     assert i.kt_nm_per_a > 0
     assert len(i.input_labels) == 40 and i.input_labels[19].startswith("delta-theta[t]")
-    assert m.kernel_path in ("avx512", "avx2", "portable")
+    assert m.kernel_path in ("avx512vnni", "avx512", "avx2fma", "portable")
 
 
 @pytest.mark.parametrize("which", ["shipped", "small"])
