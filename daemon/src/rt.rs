@@ -2451,7 +2451,7 @@ kv = 0.0
                     on_time,
                     "tick {t}: a held helper's half is run here, never late"
                 );
-                assert_eq!(crew.stolen_ticks(), t as u64 + 1);
+                assert_eq!(crew.stolen_ticks(), t + 1);
             }
             if !on_time {
                 // Claimed by the helper and not done within a zero budget: the stale path (tested
