@@ -697,17 +697,10 @@ fn label(
         (&train_csv, &files.train_ds, "train"),
         (&test_csv, &files.test_ds, "test"),
     ] {
-        r.frictl(&format!("preprocess {preset} ({what})"), &{
-            let mut a = vec!["preprocess".into(), s(src), "--out".into(), s(dst)];
-            if args.causal {
-                a.push("--causal".to_string());
-            }
-            if !args.with_rotor_inertia {
-                a.push("--subtract-reflected-inertia".into());
-                a.push("sidecar".into());
-            }
-            a
-        })?;
+        r.frictl(
+            &format!("preprocess {preset} ({what})"),
+            &preprocess_args(args, src, dst),
+        )?;
         std::fs::remove_file(src).ok(); // the raw log is large; the dataset keeps every column used later
     }
     Ok(())
@@ -752,36 +745,70 @@ fn train(
     preset: &str,
     files: &JointFiles,
 ) -> anyhow::Result<()> {
-    r.frictl(
-        &format!("train {preset}"),
-        &[
-            "train".into(),
-            "--dataset".into(),
-            s(&files.train_ds),
-            "--scv".into(),
-            s(&files.scv),
-            "--out".into(),
-            s(&files.fwt),
-            "--hidden".into(),
-            sizes.hidden.into(),
-            "--history".into(),
-            sizes.history.to_string(),
-            "--epochs".into(),
-            sizes.epochs.to_string(),
-            "--batch".into(),
-            sizes.batch.to_string(),
-            "--seed".into(),
-            seed.to_string(),
-            "--report".into(),
-            s(&files.train_report),
-            "--features".into(),
-            feature_set(preset).into(),
-        ]
-        .into_iter()
-        .chain(sizes.train_extra.iter().map(|a| a.to_string()))
-        .collect::<Vec<String>>(),
-    )?;
+    let mut a = train_args(
+        sizes,
+        seed,
+        preset,
+        &[&files.train_ds],
+        [&files.scv, &files.fwt, &files.train_report],
+        sizes.epochs,
+    );
+    a.extend(sizes.train_extra.iter().map(|x| x.to_string()));
+    r.frictl(&format!("train {preset}"), &a)?;
     Ok(())
+}
+
+/// `frictl preprocess SRC --out DST` with the demo's label choices (causal filter, reflected rotor
+/// inertia subtracted unless `--with-rotor-inertia`): one labelling for the protocol, the test run
+/// and the on-policy recordings.
+fn preprocess_args(args: &Args, src: &Path, dst: &Path) -> Vec<String> {
+    let mut a = vec!["preprocess".into(), s(src), "--out".into(), s(dst)];
+    if args.causal {
+        a.push("--causal".to_string());
+    }
+    if !args.with_rotor_inertia {
+        a.push("--subtract-reflected-inertia".into());
+        a.push("sidecar".into());
+    }
+    a
+}
+
+/// `frictl train` with the demo's network, history, batch, seed and the joint's feature set: on
+/// `datasets` with the SCV fit `scv` as the physics prior, the model to `out`, the report to
+/// `report`, for `epochs` epochs.
+fn train_args(
+    sizes: &Sizes,
+    seed: u64,
+    preset: &str,
+    datasets: &[&Path],
+    [scv, out, report]: [&Path; 3],
+    epochs: u32,
+) -> Vec<String> {
+    let mut a: Vec<String> = vec!["train".into()];
+    for d in datasets {
+        a.extend(["--dataset".into(), s(d)]);
+    }
+    a.extend([
+        "--scv".into(),
+        s(scv),
+        "--out".into(),
+        s(out),
+        "--report".into(),
+        s(report),
+        "--hidden".into(),
+        sizes.hidden.into(),
+        "--history".into(),
+        sizes.history.to_string(),
+        "--epochs".into(),
+        epochs.to_string(),
+        "--batch".into(),
+        sizes.batch.to_string(),
+        "--seed".into(),
+        seed.to_string(),
+        "--features".into(),
+        feature_set(preset).into(),
+    ]);
+    a
 }
 
 /// Stage 5, evaluate: every model on the unseen tracking run.
@@ -1138,17 +1165,10 @@ fn onpolicy_round(
     for ((preset, joint), f) in JOINTS.iter().zip(files.iter_mut()) {
         let raw = rec_dir.join(format!("{joint}_onpolicy.csv"));
         let ds = dirs.data.join(format!("{joint}_onpolicy{k}_ds.csv"));
-        r.frictl(&format!("on-policy round {k}: preprocess {preset}"), &{
-            let mut a = vec!["preprocess".into(), s(&raw), "--out".into(), s(&ds)];
-            if args.causal {
-                a.push("--causal".to_string());
-            }
-            if !args.with_rotor_inertia {
-                a.push("--subtract-reflected-inertia".into());
-                a.push("sidecar".into());
-            }
-            a
-        })?;
+        r.frictl(
+            &format!("on-policy round {k}: preprocess {preset}"),
+            &preprocess_args(args, &raw, &ds),
+        )?;
         std::fs::remove_file(&raw).ok();
         f.datasets.push(ds);
         // The Δθ offset stays the one the first model was trained with, for every dataset: frictiond
@@ -1159,33 +1179,19 @@ fn onpolicy_round(
         };
         let fwt = dirs.models.join(format!("{joint}_onpolicy{k}.fwt"));
         let report = dirs.models.join(format!("{joint}_onpolicy{k}_train.json"));
-        let mut a: Vec<String> = vec!["train".into()];
-        for d in &f.datasets {
-            a.push("--dataset".into());
-            a.push(s(d));
-        }
+        let datasets: Vec<&Path> = f.datasets.iter().map(PathBuf::as_path).collect();
+        let mut a = train_args(
+            sizes,
+            args.seed,
+            preset,
+            &datasets,
+            [&f.scv, &fwt, &report],
+            sizes.onpolicy_epochs,
+        );
         a.extend([
             "--init".into(),
             s(&f.fwt),
-            "--scv".into(),
-            s(&f.scv),
-            "--out".into(),
-            s(&fwt),
-            "--report".into(),
-            s(&report),
-            "--hidden".into(),
-            sizes.hidden.into(),
-            "--history".into(),
-            sizes.history.to_string(),
-            "--epochs".into(),
-            sizes.onpolicy_epochs.to_string(),
-            "--batch".into(),
-            sizes.batch.to_string(),
-            "--seed".into(),
-            args.seed.to_string(),
             format!("--delta-theta-offset={offset}"),
-            "--features".into(),
-            feature_set(preset).into(),
         ]);
         if let Some(lr) = sizes.onpolicy_lr {
             a.extend(["--lr".into(), lr.into()]);
