@@ -148,10 +148,26 @@ mod avx512 {
             unsafe { dense::<D>(w, p, bias.add(p.bias_blk0 * LANES), src, dst) };
             src = dst;
         }
-        let o = &net.out;
+        // SAFETY: `fits` bounds the output rows and the last activation blocks.
+        unsafe { output::<D>(w, &net.out, src, net.out_bias) }
+    }
+
+    /// The output neuron: the dot product of rows `o.row0 .. o.row0 + o.n_blk` of store `w` with
+    /// the activation blocks at `src`, plus `out_bias` (also the int8 paths' f32 output layer).
+    ///
+    /// # Safety
+    /// Those rows and `o.n_blk` activation blocks at `src` must be valid.
+    #[target_feature(enable = "avx512f")]
+    #[inline]
+    pub(super) unsafe fn output<const D: u8>(
+        w: *const u8,
+        o: &LayerPlan,
+        src: *const f32,
+        out_bias: f32,
+    ) -> f32 {
         let mut acc = [_mm512_setzero_ps(); 4];
         for r in 0..o.n_blk {
-            // SAFETY: rows row0..row0+n_blk and activation blocks 0..n_blk are in bounds (`fits`).
+            // SAFETY: caller contract.
             let (wv, xv) = unsafe {
                 (
                     load_row::<D>(w, o.row0 + r),
@@ -161,7 +177,7 @@ mod avx512 {
             acc[r % 4] = _mm512_fmadd_ps(wv, xv, acc[r % 4]);
         }
         let sum = _mm512_add_ps(_mm512_add_ps(acc[0], acc[1]), _mm512_add_ps(acc[2], acc[3]));
-        _mm512_reduce_add_ps(sum) + net.out_bias
+        _mm512_reduce_add_ps(sum) + out_bias
     }
 
     /// One hidden layer `y = relu(W x + b)`.
@@ -310,10 +326,26 @@ mod avx2 {
             unsafe { dense::<D>(w, p, bias.add(p.bias_blk0 * LANES), src, dst) };
             src = dst;
         }
-        let o = &net.out;
+        // SAFETY: `fits` bounds the output rows and the last activation blocks.
+        unsafe { output::<D>(w, &net.out, src, net.out_bias) }
+    }
+
+    /// The output neuron: the dot product of rows `o.row0 .. o.row0 + o.n_blk` of store `w` with
+    /// the activation blocks at `src`, plus `out_bias` (also the int8 path's f32 output layer).
+    ///
+    /// # Safety
+    /// Those rows and `o.n_blk` activation blocks at `src` must be valid.
+    #[target_feature(enable = "avx2,fma,f16c")]
+    #[inline]
+    pub(super) unsafe fn output<const D: u8>(
+        w: *const u8,
+        o: &LayerPlan,
+        src: *const f32,
+        out_bias: f32,
+    ) -> f32 {
         let mut acc = [_mm256_setzero_ps(); 4];
         for r in 0..o.n_blk {
-            // SAFETY: rows row0..row0+n_blk and activation blocks 0..n_blk are in bounds (`fits`).
+            // SAFETY: caller contract.
             let (wv, xv) =
                 unsafe { (load_row::<D>(w, o.row0 + r), load_block(src.add(r * LANES))) };
             let k = 2 * (r % 2);
@@ -324,7 +356,7 @@ mod avx2 {
         let s4 = _mm_add_ps(_mm256_castps256_ps128(s8), _mm256_extractf128_ps::<1>(s8));
         let s2 = _mm_add_ps(s4, _mm_movehl_ps(s4, s4));
         let s1 = _mm_add_ss(s2, _mm_shuffle_ps::<1>(s2, s2));
-        _mm_cvtss_f32(s1) + net.out_bias
+        _mm_cvtss_f32(s1) + out_bias
     }
 
     /// One hidden layer `y = relu(W x + b)`.
@@ -491,21 +523,15 @@ mod avx512_i8 {
     #[target_feature(enable = "avx512f")]
     #[inline]
     unsafe fn out_dot(net: &Net, st: &Int8Store, src: *const f32) -> f32 {
-        let o = &net.out;
-        let wo = st.out.as_ptr().cast::<f32>();
-        let mut acc = [_mm512_setzero_ps(); 4];
-        for r in 0..o.n_blk {
-            // SAFETY: caller contract.
-            let (wv, xv) = unsafe {
-                (
-                    _mm512_load_ps(wo.add((o.row0 + r) * LANES)),
-                    _mm512_load_ps(src.add(r * LANES)),
-                )
-            };
-            acc[r % 4] = _mm512_fmadd_ps(wv, xv, acc[r % 4]);
+        // SAFETY: caller contract (the f32 output rows of `st.out`).
+        unsafe {
+            super::avx512::output::<{ dt::F32 }>(
+                st.out.as_ptr().cast(),
+                &net.out,
+                src,
+                net.out_bias,
+            )
         }
-        let sum = _mm512_add_ps(_mm512_add_ps(acc[0], acc[1]), _mm512_add_ps(acc[2], acc[3]));
-        _mm512_reduce_add_ps(sum) + net.out_bias
     }
 
     /// Quantises `n_blk` blocks of non-negative f32 at `x` to u8 at `q` (`round(x · 255 / max)`);
@@ -759,26 +785,10 @@ mod avx2_i8 {
             }
             src = dst;
         }
-        let o = &net.out;
-        let wo = st.out.as_ptr().cast::<f32>();
-        let mut acc = [_mm256_setzero_ps(); 2];
-        for r in 0..o.n_blk {
-            for (h, ah) in acc.iter_mut().enumerate() {
-                // SAFETY: output rows and activation blocks in bounds (`fits`), 32-byte aligned halves.
-                let (wv, xv) = unsafe {
-                    (
-                        _mm256_load_ps(wo.add((o.row0 + r) * LANES + 8 * h)),
-                        _mm256_load_ps(src.add(r * LANES + 8 * h)),
-                    )
-                };
-                *ah = _mm256_fmadd_ps(wv, xv, *ah);
-            }
+        // SAFETY: the f32 output rows and the last activation blocks are in bounds (`fits`).
+        unsafe {
+            super::avx2::output::<{ dt::F32 }>(st.out.as_ptr().cast(), &net.out, src, net.out_bias)
         }
-        let s8 = _mm256_add_ps(acc[0], acc[1]);
-        let s4 = _mm_add_ps(_mm256_castps256_ps128(s8), _mm256_extractf128_ps::<1>(s8));
-        let s2 = _mm_add_ps(s4, _mm_movehl_ps(s4, s4));
-        let s1 = _mm_add_ss(s2, _mm_shuffle_ps::<1>(s2, s2));
-        _mm_cvtss_f32(s1) + net.out_bias
     }
 
     /// `G` output blocks of one hidden layer.
