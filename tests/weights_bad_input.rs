@@ -235,6 +235,27 @@ fn round_trip_int8_per_channel() {
             ..
         })
     ));
+    // A zero scale with non-zero codes decodes to a zero row whose re-encoding has zero codes: refused
+    // (found by the weights_reader fuzz target).
+    for (scale, code) in [(0.0f32, 0xacu8), (0.0, 0x01)] {
+        let mut c = bytes.clone();
+        c[704..744].fill(0);
+        c[704] = code;
+        c[scale_at..scale_at + 4].copy_from_slice(&scale.to_le_bytes());
+        fix_crc(&mut c);
+        let refused = from_bytes(&c);
+        assert!(
+            matches!(
+                refused,
+                Err(WeightError::Invalid {
+                    field: "int8 code" | "int8 scale",
+                    ..
+                })
+            ),
+            "scale {scale:e} with code {code:#x}: {:?}",
+            refused.map(|_| "accepted")
+        );
+    }
     // A negative measured error is refused by the writer; in a 1.2 file the field is reserved.
     let mut w = m.clone();
     w.meta.training.quant_max_error_nm = Some(-1.0);

@@ -531,7 +531,25 @@ fn decode_int8_layer(
         .zip(&scales)
         .flat_map(|(row, &s)| row.iter().map(move |&q| q * s))
         .collect();
-    for (row, &s) in weight.chunks(n_in.max(1)).zip(&scales) {
+    for ((row, &s), q_row) in weight
+        .chunks(n_in.max(1))
+        .zip(&scales)
+        .zip(codes.chunks(n_in.max(1)))
+    {
+        // Every code must be what the writer computes for its dequantised weight: a zero scale with
+        // non-zero codes, or a scale so small that code·scale rounds, would re-encode differently.
+        if let Some(&q) = row
+            .iter()
+            .zip(q_row)
+            .find(|&(&w, &q)| f32::from(crate::kernel::int8_code(w, s)) != q)
+            .map(|(_, q)| q)
+        {
+            return Err(WeightError::Invalid {
+                field: "int8 code",
+                value: format!("{q} (layer {layer}, scale {s:e})"),
+                reason: "does not re-encode to itself at its row's scale (a zero or too small scale)",
+            });
+        }
         let canonical = crate::kernel::int8_channel_scale(row);
         if canonical.to_bits() != s.to_bits() {
             return Err(WeightError::Invalid {
