@@ -30,7 +30,7 @@ use std::time::{Duration, Instant};
 
 const PAPER: &[usize] = &[40, 268, 215, 1];
 const ERGOCUB: &[usize] = &[50, 450, 210, 280, 1];
-const DTYPES: [StorageDtype; 4] = StorageDtype::ALL;
+const DTYPES: [StorageDtype; 5] = StorageDtype::ALL;
 const N_INPUTS: usize = 64;
 
 fn dtype_name(d: StorageDtype) -> &'static str {
@@ -260,6 +260,7 @@ fn tick32(cli: &Cli) {
             (StorageDtype::Bf16, path),
             (StorageDtype::Int8, KernelPath::Portable),
             (StorageDtype::Int8, path),
+            (StorageDtype::Int16, path),
         ];
         for (dtype, p) in variants {
             let mut worst = 0f32;

@@ -62,34 +62,43 @@ pub enum StorageDtype {
     /// Decoded to f32 inside the kernel, or multiplied as int8 × u8 activations with `vpdpbusd`
     /// ([`crate::kernel::KernelPath::Avx512Vnni`]).
     Int8,
+    /// Symmetric 14-bit fixed point in int16 hidden-layer weights with one f32 scale per output
+    /// channel: `w ≈ q · scale[o]`, `q ∈ [−8191, 8191]`; biases, the output layer and the
+    /// normalisation stay f32. Every kernel path multiplies them with per-call int16 activations
+    /// (`|a| ≤ 16383`) in exact i32 arithmetic (`vpdpwssd` on AVX-512 VNNI, `vpmaddwd` elsewhere), so
+    /// all paths give bit-identical outputs ([`crate::kernel`], "int16").
+    Int16,
 }
 
 impl StorageDtype {
     /// All storage dtypes, widest first.
-    pub const ALL: [StorageDtype; 4] = [
+    pub const ALL: [StorageDtype; 5] = [
         StorageDtype::F32,
         StorageDtype::F16,
         StorageDtype::Bf16,
+        StorageDtype::Int16,
         StorageDtype::Int8,
     ];
 
-    /// Bytes per stored weight (for [`StorageDtype::Int8`]: per hidden-layer weight; its scales,
-    /// biases and output layer are f32).
+    /// Bytes per stored weight (for [`StorageDtype::Int8`] and [`StorageDtype::Int16`]: per
+    /// hidden-layer weight; their scales, biases and output layer are f32).
     pub fn size_bytes(self) -> usize {
         match self {
             StorageDtype::F32 => 4,
-            StorageDtype::F16 | StorageDtype::Bf16 => 2,
+            StorageDtype::F16 | StorageDtype::Bf16 | StorageDtype::Int16 => 2,
             StorageDtype::Int8 => 1,
         }
     }
 
-    /// Short lowercase name (`f32`, `f16`, `bf16`, `int8`), the spelling the tools print and parse.
+    /// Short lowercase name (`f32`, `f16`, `bf16`, `int16`, `int8`), the spelling the tools print and
+    /// parse.
     pub fn name(self) -> &'static str {
         match self {
             StorageDtype::F32 => "f32",
             StorageDtype::F16 => "f16",
             StorageDtype::Bf16 => "bf16",
             StorageDtype::Int8 => "int8",
+            StorageDtype::Int16 => "int16",
         }
     }
 }

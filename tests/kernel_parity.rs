@@ -56,7 +56,9 @@ fn rounded(w: &MlpWeights, dtype: StorageDtype) -> MlpWeights {
                 StorageDtype::F32 => *v,
                 StorageDtype::F16 => half::f16::from_f32(*v).to_f32(),
                 StorageDtype::Bf16 => half::bf16::from_f32(*v).to_f32(),
-                StorageDtype::Int8 => return frictionless::kernel::storage_rounded(w, dtype),
+                StorageDtype::Int8 | StorageDtype::Int16 => {
+                    return frictionless::kernel::storage_rounded(w, dtype);
+                }
             };
         }
     }
@@ -66,10 +68,15 @@ fn rounded(w: &MlpWeights, dtype: StorageDtype) -> MlpWeights {
 /// Relative bound of the int8 VNNI path (u8 activations) against the dequantised-weight reference.
 const VNNI_BOUND: f64 = 5e-3;
 
+/// Relative bound of the int16 paths (15-bit activations) against the dequantised-weight reference.
+const INT16_BOUND: f64 = 1e-3;
+
 /// The bound for a path × dtype (see the module doc).
 fn bound(path: KernelPath, dtype: StorageDtype) -> f64 {
     if path == KernelPath::Avx512Vnni && dtype == StorageDtype::Int8 {
         VNNI_BOUND
+    } else if dtype == StorageDtype::Int16 {
+        INT16_BOUND
     } else {
         1e-5
     }
@@ -107,7 +114,7 @@ fn forward_f64_with_magnitude(w: &MlpWeights, x: &[f32]) -> (f64, f64) {
     unreachable!("a validated net has at least one layer")
 }
 
-const DTYPES: [StorageDtype; 4] = StorageDtype::ALL;
+const DTYPES: [StorageDtype; 5] = StorageDtype::ALL;
 
 /// Checks every available path × dtype on `w` with `n_inputs` random inputs; returns the worst
 /// relative error seen.
@@ -146,6 +153,8 @@ fn check_net(rng: &mut ChaCha8Rng, w: &MlpWeights, n_inputs: usize) -> f64 {
                 );
                 if bound(path, dtype) == 1e-5 {
                     worst = worst.max(rel);
+                } else if dtype == StorageDtype::Int16 {
+                    worst_int16().set(worst_int16().get().max(rel));
                 } else {
                     worst_vnni().set(worst_vnni().get().max(rel));
                 }
@@ -159,6 +168,69 @@ fn check_net(rng: &mut ChaCha8Rng, w: &MlpWeights, n_inputs: usize) -> f64 {
 fn worst_vnni() -> &'static std::thread::LocalKey<std::cell::Cell<f64>> {
     thread_local!(static W: std::cell::Cell<f64> = const { std::cell::Cell::new(0.0) });
     &W
+}
+
+/// Worst relative error of the int16 paths seen by this thread (reported, not part of `worst`).
+fn worst_int16() -> &'static std::thread::LocalKey<std::cell::Cell<f64>> {
+    thread_local!(static W: std::cell::Cell<f64> = const { std::cell::Cell::new(0.0) });
+    &W
+}
+
+/// int16 is exact integer arithmetic plus the same f32 steps in the same order on every path: the
+/// outputs are bit-identical across paths (odd widths, inputs not a multiple of a chunk, up to the
+/// deepest nets), and the error against the dequantised-weight f64 reference stays within
+/// `INT16_BOUND`.
+#[test]
+fn int16_paths_are_bit_identical() {
+    let mut rng = ChaCha8Rng::seed_from_u64(16);
+    let paths = KernelPath::available();
+    let shapes: [&[usize]; 6] = [
+        &[1, 1, 1],
+        &[3, 17, 1],
+        &[40, 268, 215, 1],
+        &[50, 450, 210, 280, 1],
+        &[33, 15, 31, 47, 9, 1],
+        &[17, 16, 1],
+    ];
+    let mut worst = 0f64;
+    for sizes in shapes {
+        let w = random_net(&mut rng, sizes);
+        let wr = frictionless::kernel::storage_rounded(&w, StorageDtype::Int16);
+        let mut nets: Vec<Mlp> = paths
+            .iter()
+            .map(|&p| {
+                Mlp::new(&w, StorageDtype::Int16)
+                    .unwrap()
+                    .with_path(p)
+                    .unwrap()
+            })
+            .collect();
+        for _ in 0..50 {
+            let x = random_input(&mut rng, &w);
+            let y: Vec<f32> = nets.iter_mut().map(|m| m.forward(&x)).collect();
+            for (p, v) in paths.iter().zip(&y) {
+                assert_eq!(
+                    v.to_bits(),
+                    y[0].to_bits(),
+                    "{sizes:?}: {p} gives {v}, {} gives {}",
+                    paths[0],
+                    y[0]
+                );
+            }
+            let (y_ref, mag) = forward_f64_with_magnitude(&wr, &x);
+            let rel = (f64::from(y[0]) - y_ref).abs() / y_ref.abs().max(mag).max(1e-30);
+            assert!(
+                rel <= INT16_BOUND,
+                "{sizes:?}: {} vs {y_ref} ({rel:.2e})",
+                y[0]
+            );
+            worst = worst.max(rel);
+        }
+    }
+    eprintln!(
+        "int16 on {} paths, bit-identical; worst relative error {worst:.2e}",
+        paths.len()
+    );
 }
 
 #[test]
@@ -295,6 +367,7 @@ fn reduced_precision_error_vs_f32_is_bounded() {
         (StorageDtype::F16, 2e-3),
         (StorageDtype::Bf16, 2e-2),
         (StorageDtype::Int8, 2e-2),
+        (StorageDtype::Int16, 5e-4),
     ] {
         let mut m = Mlp::new(&w, dtype).unwrap();
         let mut worst = 0f64;

@@ -11,6 +11,7 @@ use frictionless::friction::ScvParams;
 use frictionless::mlp::{MlpShapeError, StorageDtype};
 use frictionless::random::{RandomMlpSpec, seeded_mlp};
 use frictionless::units::GearRatio;
+use frictionless::weights::layout::VERSION_MINOR;
 use frictionless::weights::{
     self, InputRange, ModelFile, ModelMeta, SignalFiltering, TrainingMeta, WeightError, from_bytes,
     inspect, to_bytes,
@@ -153,6 +154,87 @@ fn round_trip_f16_within_rounding() {
 #[test]
 fn round_trip_bf16_within_rounding() {
     check_rounded(StorageDtype::Bf16, 7);
+}
+
+/// int16 (format 1.4): hidden weights within half a channel step (`max |w| / 8191`), biases and the
+/// output layer exact, re-encoding reproduces the bytes, the size follows the spec's int16 formula;
+/// codes outside ±8191, a non-canonical scale, a zero scale with non-zero codes and int16 in a 1.3
+/// file are refused.
+#[test]
+fn round_trip_int16_per_channel() {
+    let sizes = [40, 268, 215, 1];
+    let m = model(&sizes, StorageDtype::Int16, 19);
+    let bytes = to_bytes(&m).unwrap();
+    // Spec: hidden layers 2·n_in·n_out + 8·n_out bytes, output layer 4·(n_in + 1).
+    let payload = (2 * 40 * 268 + 8 * 268) + (2 * 268 * 215 + 8 * 215) + 4 * (215 + 1);
+    assert_eq!(bytes.len(), 704 + payload);
+    assert_eq!(bytes[53], 5, "dtype code");
+    assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 4, "minor 4");
+    let back = from_bytes(&bytes).unwrap();
+    assert_eq!(back.dtype, StorageDtype::Int16);
+    let n = m.mlp.layers.len();
+    for (k, (lo, lb)) in m.mlp.layers.iter().zip(&back.mlp.layers).enumerate() {
+        assert_eq!(lo.bias, lb.bias, "biases are f32");
+        if k + 1 == n {
+            assert_eq!(lo.weight, lb.weight, "the output layer is f32");
+            continue;
+        }
+        for (ro, rb) in lo.weight.chunks(lo.n_in).zip(lb.weight.chunks(lb.n_in)) {
+            let step = ro.iter().fold(0f32, |a, v| a.max(v.abs())) / 8191.0;
+            for (a, b) in ro.iter().zip(rb) {
+                // Half a step, plus the f32 rounding of code · scale.
+                assert!(
+                    (a - b).abs() <= 0.5 * step + 2.0 * f32::EPSILON * a.abs(),
+                    "{a} → {b} (step {step})"
+                );
+            }
+            assert!(ro != rb, "int16 must actually quantise");
+        }
+    }
+    assert_eq!(to_bytes(&back).unwrap(), bytes);
+    assert_eq!(
+        weights::round_to_dtype(&m.mlp, StorageDtype::Int16),
+        back.mlp
+    );
+    assert_eq!(
+        weights::encoded_layout(&m.mlp, StorageDtype::Int16).file_len,
+        bytes.len() as u64
+    );
+    // Layer 0's first code sits at 704; its first scale after 40·268 codes of 2 bytes.
+    let scale_at = 704 + 2 * 40 * 268;
+    let refused = |c: &mut Vec<u8>, field: &str| {
+        fix_crc(c);
+        match from_bytes(c) {
+            Err(WeightError::Invalid { field: f, .. }) => assert_eq!(f, field),
+            other => panic!(
+                "expected {field} refused, got {:?}",
+                other.map(|_| "accepted")
+            ),
+        }
+    };
+    let mut c = bytes.clone();
+    c[704..706].copy_from_slice(&8192i16.to_le_bytes());
+    refused(&mut c, "int16 code");
+    let mut c = bytes.clone();
+    c[704..706].copy_from_slice(&(-8192i16).to_le_bytes());
+    refused(&mut c, "int16 code");
+    // Row 0 of layer 0 with every code 1: its scale is no longer max |w| / 8191.
+    let mut c = bytes.clone();
+    for i in 0..40 {
+        c[704 + 2 * i..706 + 2 * i].copy_from_slice(&1i16.to_le_bytes());
+    }
+    refused(&mut c, "int16 scale");
+    // A zero scale with non-zero codes.
+    let mut c = bytes.clone();
+    c[scale_at..scale_at + 4].copy_from_slice(&0f32.to_le_bytes());
+    refused(&mut c, "int16 code");
+    let mut c = bytes.clone();
+    c[scale_at..scale_at + 4].copy_from_slice(&(-1f32).to_le_bytes());
+    refused(&mut c, "int16 scale");
+    // int16 exists from 1.4 on.
+    let mut c = bytes.clone();
+    c[10..12].copy_from_slice(&3u16.to_le_bytes());
+    refused(&mut c, "dtype");
 }
 
 /// int8 (format 1.3): hidden weights within half a channel step, biases and the output layer exact,
@@ -580,12 +662,12 @@ fn shapes_over_limits_are_refused_before_allocating() {
             value: 9
         })
     ));
-    let b = hand_file(6, 3, &[(6, 4, 1), (4, 1, 2)], 5, 4);
+    let b = hand_file(6, 3, &[(6, 4, 1), (4, 1, 2)], 6, 4);
     assert!(matches!(
         from_bytes(&b),
         Err(WeightError::UnknownCode {
             field: "dtype",
-            value: 5
+            value: 6
         })
     ));
     // History that does not match the input count.
@@ -862,7 +944,11 @@ fn temperature_and_feature_sets_round_trip() {
         };
         m.meta.scv = None;
         let bytes = to_bytes(&m).unwrap();
-        assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 3, "minor 3");
+        assert_eq!(
+            u16::from_le_bytes([bytes[10], bytes[11]]),
+            VERSION_MINOR,
+            "current minor"
+        );
         assert_eq!(usize::from(bytes[42]), n, "n_blocks");
         // The header names each block, in order, unused slots zero.
         let codes: Vec<u8> = set
@@ -1055,6 +1141,10 @@ fn fuzz_seed_files_are_valid() {
         (
             "deep_int8.fwt",
             model(&[6, 5, 4, 3, 1], StorageDtype::Int8, 15),
+        ),
+        (
+            "deep_int16.fwt",
+            model(&[6, 5, 4, 3, 1], StorageDtype::Int16, 16),
         ),
     ];
     let dir = std::env::var_os("FWT_FUZZ_SEED_DIR").map(PathBuf::from);

@@ -52,14 +52,19 @@
 use crate::mlp::{Activation, MlpShapeError, MlpWeights, StorageDtype, limits};
 use thiserror::Error;
 
+mod int16;
 mod int8;
 mod portable;
 mod prefetch;
 #[cfg(target_arch = "x86_64")]
 mod x86;
+#[cfg(target_arch = "x86_64")]
+mod x86_int16;
 
 use int8::{ByteBlock, Int8Store, QuadBlock};
 pub use int8::{int8_channel_scale, int8_code};
+pub use int16::{I16_AMAX, I16_CHUNK, I16_WMAX, int16_channel_scale, int16_code};
+use int16::{Int16Store, PairBlock};
 
 /// Lanes per block: outputs are processed 16 at a time (one zmm, or two ymm).
 pub const LANES: usize = 16;
@@ -86,6 +91,8 @@ pub(crate) mod dt {
     pub const BF16: u8 = 2;
     /// int8 quad rows (64 bytes = 16 lanes × 4 inputs), f32 output layer.
     pub const INT8: u8 = 3;
+    /// int16 pair rows (64 bytes = 16 lanes × 2 inputs), f32 output layer.
+    pub const INT16: u8 = 4;
 }
 
 /// Which implementation [`Mlp::forward`] runs.
@@ -192,6 +199,8 @@ pub(crate) enum Store {
     Half(Vec<HalfBlock>),
     /// int8 hidden layers (quad rows + per-channel scales) and an f32 output layer.
     Int8(Int8Store),
+    /// int16 hidden layers (pair rows + per-channel scales) and an f32 output layer.
+    Int16(Int16Store),
 }
 
 /// Everything the kernels read (immutable after construction).
@@ -216,8 +225,9 @@ pub(crate) struct Scratch {
     /// Ping-pong activation buffers, each `max hidden blocks` long.
     pub(crate) a: Vec<Block>,
     pub(crate) b: Vec<Block>,
-    /// The u8-quantised input of the current layer (VNNI path), at least `4 · ceil(max width / 4)`
-    /// bytes.
+    /// The quantised input of the current layer: u8 for the int8 VNNI path (at least
+    /// `4 · ceil(max width / 4)` bytes), i16 for the int16 paths (at least `2 · ceil(max width / 2)`
+    /// values).
     pub(crate) q: Vec<ByteBlock>,
 }
 
@@ -239,10 +249,11 @@ fn encode_half(v: f32, dtype: StorageDtype) -> u16 {
 }
 
 /// The weights a kernel with storage `dtype` actually computes with: every layer weight rounded to
-/// `dtype` (round to nearest, ties to even) and back to f32; for [`StorageDtype::Int8`] every
-/// hidden-layer weight quantised per output channel ([`int8_channel_scale`], [`int8_code`]) and
-/// dequantised, the output layer unchanged. Biases and normalisation stay f32, as in the kernel (the
-/// VNNI path additionally quantises activations, which this does not model). Use it to validate a reduced-precision model against its f32 original.
+/// `dtype` (round to nearest, ties to even) and back to f32; for [`StorageDtype::Int8`] and
+/// [`StorageDtype::Int16`] every hidden-layer weight quantised per output channel
+/// ([`int8_channel_scale`]/[`int8_code`], [`int16_channel_scale`]/[`int16_code`]) and dequantised,
+/// the output layer unchanged. Biases and normalisation stay f32, as in the kernel (the int8 VNNI
+/// path and the int16 paths additionally quantise activations, which this does not model). Use it to validate a reduced-precision model against its f32 original.
 pub fn storage_rounded(w: &MlpWeights, dtype: StorageDtype) -> MlpWeights {
     let mut r = w.clone();
     for l in &mut r.layers {
@@ -251,18 +262,27 @@ pub fn storage_rounded(w: &MlpWeights, dtype: StorageDtype) -> MlpWeights {
                 StorageDtype::F32 => *v,
                 StorageDtype::F16 => half::f16::from_f32(*v).to_f32(),
                 StorageDtype::Bf16 => half::bf16::from_f32(*v).to_f32(),
-                StorageDtype::Int8 => *v, // per channel below
+                StorageDtype::Int8 | StorageDtype::Int16 => *v, // per channel below
             };
         }
     }
-    if dtype == StorageDtype::Int8 {
-        let n_hidden = r.layers.len().saturating_sub(1);
-        for l in &mut r.layers[..n_hidden] {
-            for row in l.weight.chunks_mut(l.n_in.max(1)) {
-                let sc = int8_channel_scale(row);
-                for v in row {
-                    *v = f32::from(int8_code(*v, sc)) * sc;
+    let n_hidden = r.layers.len().saturating_sub(1);
+    for l in &mut r.layers[..n_hidden] {
+        for row in l.weight.chunks_mut(l.n_in.max(1)) {
+            match dtype {
+                StorageDtype::Int8 => {
+                    let sc = int8_channel_scale(row);
+                    for v in row {
+                        *v = f32::from(int8_code(*v, sc)) * sc;
+                    }
                 }
+                StorageDtype::Int16 => {
+                    let sc = int16_channel_scale(row);
+                    for v in row {
+                        *v = f32::from(int16_code(*v, sc)) * sc;
+                    }
+                }
+                _ => {}
             }
         }
     }
@@ -306,6 +326,45 @@ fn int8_store(
     out.row0 = 0;
     Int8Store {
         quads,
+        scale,
+        out: out_rows,
+    }
+}
+
+/// Quantises the hidden layers of `w` into the int16 pair layout and copies the output layer as f32
+/// rows; re-points `hidden[k].row0` at pair rows and `out.row0` at the output store.
+fn int16_store(
+    w: &MlpWeights,
+    hidden: &mut [LayerPlan],
+    out: &mut LayerPlan,
+    n_bias_blk: usize,
+) -> Int16Store {
+    let n_pairs: usize = hidden.iter().map(|p| p.n_blk * int16::pairs(p.n_in)).sum();
+    let mut pairs = vec![PairBlock([0; 2 * LANES]); n_pairs.max(1)];
+    let mut scale = vec![ZERO_BLOCK; n_bias_blk];
+    let mut row = 0usize;
+    for (p, l) in hidden.iter_mut().zip(&w.layers) {
+        let np = int16::pairs(l.n_in);
+        p.row0 = row;
+        for (o, wrow) in l.weight.chunks(l.n_in).enumerate() {
+            let (blk, lane) = (o / LANES, o % LANES);
+            let sc = int16_channel_scale(wrow);
+            scale[p.bias_blk0 + blk].0[lane] = sc;
+            for (i, &v) in wrow.iter().enumerate() {
+                pairs[int16::pair_row(row, p.n_blk, np, blk, i / 2)].0[2 * lane + i % 2] =
+                    int16_code(v, sc);
+            }
+        }
+        row += p.n_blk * np;
+    }
+    let last = &w.layers[hidden.len()];
+    let mut out_rows = vec![ZERO_BLOCK; out.n_blk];
+    for (i, &v) in last.weight.iter().enumerate() {
+        out_rows[i / LANES].0[i % LANES] = v;
+    }
+    out.row0 = 0;
+    Int16Store {
+        pairs,
         scale,
         out: out_rows,
     }
@@ -365,6 +424,12 @@ impl Mlp {
             StorageDtype::Int8 => {
                 Store::Int8(int8_store(w, &mut hidden[..n_hidden], &mut out, bias.len()))
             }
+            StorageDtype::Int16 => Store::Int16(int16_store(
+                w,
+                &mut hidden[..n_hidden],
+                &mut out,
+                bias.len(),
+            )),
             StorageDtype::F32 => Store::F32(rows),
             StorageDtype::F16 | StorageDtype::Bf16 => {
                 let mut hb = vec![HalfBlock([0; 2 * LANES]); n_rows.div_ceil(2)];
@@ -392,9 +457,10 @@ impl Mlp {
             xin: vec![ZERO_BLOCK; blocks(n_in)],
             a: vec![ZERO_BLOCK; max_blk],
             b: vec![ZERO_BLOCK; max_blk],
+            // Two bytes per value (int16), a multiple of 4 (int8 quads).
             q: vec![
                 ByteBlock([0; 4 * LANES]);
-                (max_blk.max(blocks(n_in)) * LANES).div_ceil(4 * LANES)
+                (2 * max_blk.max(blocks(n_in)) * LANES).div_ceil(4 * LANES)
             ],
         };
         Ok(Self {
@@ -450,11 +516,19 @@ impl Mlp {
             (StorageDtype::F16, Store::Half(_)) => dt::F16,
             (StorageDtype::Bf16, Store::Half(_)) => dt::BF16,
             (StorageDtype::Int8, Store::Int8(_)) => dt::INT8,
+            (StorageDtype::Int16, Store::Int16(_)) => dt::INT16,
             _ => return f32::NAN, // unreachable by construction
         };
         match self.path {
             #[cfg(target_arch = "x86_64")]
             KernelPath::Avx512Vnni if code == dt::INT8 => x86::forward_vnni(net, s),
+            #[cfg(target_arch = "x86_64")]
+            KernelPath::Avx512Vnni if code == dt::INT16 => x86_int16::forward_vnni(net, s),
+            #[cfg(target_arch = "x86_64")]
+            KernelPath::Avx512 if code == dt::INT16 => x86_int16::forward_avx512(net, s),
+            #[cfg(target_arch = "x86_64")]
+            KernelPath::Avx2Fma if code == dt::INT16 => x86_int16::forward_avx2(net, s),
+            _ if code == dt::INT16 => int16::forward_portable(net, s),
             #[cfg(target_arch = "x86_64")]
             KernelPath::Avx512 | KernelPath::Avx512Vnni => x86::forward_avx512(net, s, code),
             #[cfg(target_arch = "x86_64")]
@@ -470,7 +544,7 @@ impl Net {
     /// order the kernel streams them; unused slots are empty. Each span starts 64-byte aligned.
     pub(crate) fn weight_spans(&self) -> [&[u8]; 3] {
         fn bytes<T: Copy>(v: &[T]) -> &[u8] {
-            // SAFETY: only instantiated with `Block`, `HalfBlock` and `QuadBlock`: `repr(C)` arrays of
+            // SAFETY: only instantiated with `Block`, `HalfBlock`, `QuadBlock` and `PairBlock`: `repr(C)` arrays of
             // plain numbers whose size equals their alignment (64), so there are no padding bytes and
             // every byte is initialised; the slice borrows `v`.
             unsafe { std::slice::from_raw_parts(v.as_ptr().cast::<u8>(), std::mem::size_of_val(v)) }
@@ -479,15 +553,17 @@ impl Net {
             Store::F32(v) => [bytes(v), &[], &[]],
             Store::Half(v) => [bytes(v), &[], &[]],
             Store::Int8(st) => [bytes(&st.quads), bytes(&st.scale), bytes(&st.out)],
+            Store::Int16(st) => [bytes(&st.pairs), bytes(&st.scale), bytes(&st.out)],
         }
     }
 
-    /// Rows in the weight store (for int8: quad rows of the hidden layers).
+    /// Rows in the weight store (int8: quad rows, int16: pair rows of the hidden layers).
     fn n_rows(&self) -> usize {
         match &self.store {
             Store::F32(v) => v.len(),
             Store::Half(v) => 2 * v.len(),
             Store::Int8(st) => st.quads.len(),
+            Store::Int16(st) => st.pairs.len(),
         }
     }
 
@@ -495,7 +571,17 @@ impl Net {
     fn n_out_rows(&self) -> usize {
         match &self.store {
             Store::Int8(st) => st.out.len(),
+            Store::Int16(st) => st.out.len(),
             _ => self.n_rows(),
+        }
+    }
+
+    /// Per-channel weight scale blocks (int8, int16).
+    fn n_scale_blocks(&self) -> Option<usize> {
+        match &self.store {
+            Store::Int8(st) => Some(st.scale.len()),
+            Store::Int16(st) => Some(st.scale.len()),
+            _ => None,
         }
     }
 
@@ -507,19 +593,26 @@ impl Net {
         if s.xin.len() < prev_blk || self.n_hidden > self.hidden.len() {
             return false;
         }
-        let int8 = match &self.store {
-            Store::Int8(st) => Some(st),
-            _ => None,
-        };
+        let n_scale = self.n_scale_blocks();
         for p in &self.hidden[..self.n_hidden] {
             // int8: quad rows; the kernels read 4·ceil(n_in/4) inputs and as many quantised bytes.
-            let (rows, n_x) = match int8 {
-                Some(_) => (int8::quads(p.n_in), 4 * int8::quads(p.n_in)),
-                None => (p.n_in, p.n_in),
+            // int16: pair rows; 2·ceil(n_in/2) inputs and twice as many quantised bytes.
+            let (rows, n_x, q_bytes) = match &self.store {
+                Store::Int8(_) => (
+                    int8::quads(p.n_in),
+                    4 * int8::quads(p.n_in),
+                    4 * int8::quads(p.n_in),
+                ),
+                // (the SIMD quantisers write whole blocks of codes)
+                Store::Int16(_) => {
+                    let np = int16::pairs(p.n_in);
+                    (np, 2 * np, 2 * LANES * (2 * np).div_ceil(LANES))
+                }
+                _ => (p.n_in, p.n_in, 0),
             };
             let ok = n_x <= prev_blk * LANES
-                && n_x <= s.q.len() * 4 * LANES
-                && int8.is_none_or(|st| p.bias_blk0 + p.n_blk <= st.scale.len())
+                && q_bytes <= s.q.len() * 4 * LANES
+                && n_scale.is_none_or(|n| p.bias_blk0 + p.n_blk <= n)
                 && p.row0 + p.n_blk * rows <= self.n_rows()
                 && p.bias_blk0 + p.n_blk <= self.bias.len()
                 && p.n_blk <= s.a.len()

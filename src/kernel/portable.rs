@@ -38,6 +38,7 @@ pub(super) fn forward(net: &Net, s: &mut Scratch, code: u8) -> f32 {
             std::array::from_fn(|l| f32::from_bits(u32::from(bits[l]) << 16))
         }),
         (Store::Int8(_), _) => super::int8::forward_portable(net, s),
+        (Store::Int16(_), _) => super::int16::forward_portable(net, s),
     }
 }
 

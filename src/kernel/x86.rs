@@ -25,6 +25,7 @@ fn weight_ptr(store: &Store) -> *const u8 {
         Store::F32(v) => v.as_ptr().cast(),
         Store::Half(v) => v.as_ptr().cast(),
         Store::Int8(st) => st.quads.as_ptr().cast(),
+        Store::Int16(st) => st.pairs.as_ptr().cast(),
     }
 }
 
@@ -105,7 +106,7 @@ pub(super) fn forward_avx2(net: &Net, s: &mut Scratch, code: u8) -> f32 {
     }
 }
 
-mod avx512 {
+pub(super) mod avx512 {
     use super::*;
     use std::arch::x86_64::*;
 
@@ -159,7 +160,7 @@ mod avx512 {
     /// Those rows and `o.n_blk` activation blocks at `src` must be valid.
     #[target_feature(enable = "avx512f")]
     #[inline]
-    pub(super) unsafe fn output<const D: u8>(
+    pub(in crate::kernel) unsafe fn output<const D: u8>(
         w: *const u8,
         o: &LayerPlan,
         src: *const f32,
@@ -264,7 +265,7 @@ mod avx512 {
     }
 }
 
-mod avx2 {
+pub(super) mod avx2 {
     use super::*;
     use std::arch::x86_64::*;
 
@@ -337,7 +338,7 @@ mod avx2 {
     /// Those rows and `o.n_blk` activation blocks at `src` must be valid.
     #[target_feature(enable = "avx2,fma,f16c")]
     #[inline]
-    pub(super) unsafe fn output<const D: u8>(
+    pub(in crate::kernel) unsafe fn output<const D: u8>(
         w: *const u8,
         o: &LayerPlan,
         src: *const f32,

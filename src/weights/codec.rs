@@ -179,6 +179,13 @@ pub(super) fn parse_header(b: &[u8]) -> Result<Header, WeightError> {
 
     let d_code = rd_u8(b, off::DTYPE);
     let dtype = layout::dtype_from_code(d_code).ok_or_else(|| unknown("dtype", d_code))?;
+    if dtype == StorageDtype::Int16 && version_minor < layout::MINOR_INT16 {
+        return Err(WeightError::Invalid {
+            field: "dtype",
+            value: format!("int16 (code {d_code}) in a 1.{version_minor} file"),
+            reason: "int16 storage exists from format 1.4 on",
+        });
+    }
     let f_code = rd_u8(b, off::FILTERING);
     let filtering =
         layout::filtering_from_code(f_code).ok_or_else(|| unknown("filtering", f_code))?;
@@ -494,36 +501,78 @@ fn decode_values(b: &[u8], at: usize, n: usize, dtype: StorageDtype) -> Vec<f32>
             .map(|c| bf16::from_le_bytes([c[0], c[1]]).to_f32())
             .collect(),
         StorageDtype::Int8 => bytes.iter().map(|&c| f32::from(c as i8)).collect(),
+        StorageDtype::Int16 => bytes
+            .chunks_exact(2)
+            .map(|c| f32::from(i16::from_le_bytes([c[0], c[1]])))
+            .collect(),
     }
 }
 
-/// Decodes one int8 hidden layer at `at`: codes `[n_out][n_in]`, scales `[n_out]`, biases `[n_out]`.
-/// Returns the dequantised weights, the biases and the bytes consumed. A scale must be finite, ≥ 0
-/// and canonical (what the writer computes for the dequantised row, so re-encoding reproduces the
-/// file), and a code must not be −128.
-fn decode_int8_layer(
+/// Decodes one int8 or int16 hidden layer at `at`: codes `[n_out][n_in]` (1 or 2 bytes each), scales
+/// `[n_out]`, biases `[n_out]`. Returns the dequantised weights, the biases and the bytes consumed. A
+/// scale must be finite, ≥ 0 and canonical (what the writer computes for the dequantised row, so
+/// re-encoding reproduces the file); a code must lie in the symmetric range (int8 ±127, int16 ±8191)
+/// and re-encode to itself at its row's scale.
+fn decode_int_layer(
     b: &[u8],
     at: usize,
     n_in: usize,
     n_out: usize,
     layer: usize,
+    dtype: StorageDtype,
 ) -> Result<(Vec<f32>, Vec<f32>, usize), WeightError> {
-    let codes = decode_values(b, at, n_in * n_out, StorageDtype::Int8);
-    let scales = decode_values(b, at + n_in * n_out, n_out, StorageDtype::F32);
-    let bias = decode_values(b, at + n_in * n_out + 4 * n_out, n_out, StorageDtype::F32);
-    finite_all(|| format!("layer {layer} int8 scale"), &scales)?;
+    /// What differs between the int8 and int16 layers.
+    struct IntCodes {
+        code_field: &'static str,
+        scale_field: &'static str,
+        q_max: f32,
+        channel_scale: fn(&[f32]) -> f32,
+        code_of: fn(f32, f32) -> f32,
+    }
+    let IntCodes {
+        code_field,
+        scale_field,
+        q_max,
+        channel_scale,
+        code_of,
+    } = if dtype == StorageDtype::Int16 {
+        IntCodes {
+            code_field: "int16 code",
+            scale_field: "int16 scale",
+            q_max: f32::from(crate::kernel::I16_WMAX),
+            channel_scale: crate::kernel::int16_channel_scale,
+            code_of: |w, s| f32::from(crate::kernel::int16_code(w, s)),
+        }
+    } else {
+        IntCodes {
+            code_field: "int8 code",
+            scale_field: "int8 scale",
+            q_max: 127.0,
+            channel_scale: crate::kernel::int8_channel_scale,
+            code_of: |w, s| f32::from(crate::kernel::int8_code(w, s)),
+        }
+    };
+    let code_bytes = n_in * n_out * dtype.size_bytes();
+    let codes = decode_values(b, at, n_in * n_out, dtype);
+    let scales = decode_values(b, at + code_bytes, n_out, StorageDtype::F32);
+    let bias = decode_values(b, at + code_bytes + 4 * n_out, n_out, StorageDtype::F32);
+    finite_all(|| format!("layer {layer} {scale_field}"), &scales)?;
     if let Some(&s) = scales.iter().find(|&&s| s < 0.0) {
         return Err(WeightError::Invalid {
-            field: "int8 scale",
+            field: scale_field,
             value: s.to_string(),
             reason: "must be ≥ 0",
         });
     }
-    if codes.contains(&-128.0) {
+    if let Some(&q) = codes.iter().find(|q| q.abs() > q_max) {
         return Err(WeightError::Invalid {
-            field: "int8 code",
-            value: "-128".into(),
-            reason: "codes are symmetric, −127 … 127",
+            field: code_field,
+            value: format!("{q} (layer {layer})"),
+            reason: if dtype == StorageDtype::Int16 {
+                "codes are symmetric, −8191 … 8191"
+            } else {
+                "codes are symmetric, −127 … 127"
+            },
         });
     }
     let weight: Vec<f32> = codes
@@ -541,25 +590,25 @@ fn decode_int8_layer(
         if let Some(&q) = row
             .iter()
             .zip(q_row)
-            .find(|&(&w, &q)| f32::from(crate::kernel::int8_code(w, s)) != q)
+            .find(|&(&w, &q)| code_of(w, s) != q)
             .map(|(_, q)| q)
         {
             return Err(WeightError::Invalid {
-                field: "int8 code",
+                field: code_field,
                 value: format!("{q} (layer {layer}, scale {s:e})"),
                 reason: "does not re-encode to itself at its row's scale (a zero or too small scale)",
             });
         }
-        let canonical = crate::kernel::int8_channel_scale(row);
+        let canonical = channel_scale(row);
         if canonical.to_bits() != s.to_bits() {
             return Err(WeightError::Invalid {
-                field: "int8 scale",
+                field: scale_field,
                 value: s.to_string(),
-                reason: "not the canonical scale of its row (max |w| / 127, as the writer computes it)",
+                reason: "not the canonical scale of its row (max |w| / code range, as the writer computes it)",
             });
         }
     }
-    Ok((weight, bias, n_in * n_out + 8 * n_out))
+    Ok((weight, bias, code_bytes + 8 * n_out))
 }
 
 /// Full validating decode (see [`super::from_bytes`]).
@@ -622,13 +671,15 @@ pub(super) fn decode(b: &[u8]) -> Result<ModelFile, WeightError> {
     let mut at = h.layout.payload_offset as usize;
     let mut layers = Vec::with_capacity(h.layers.len());
     for (k, l) in h.layers.iter().enumerate() {
-        // int8: hidden layers as codes + scales + f32 biases, the output layer f32.
+        // int8/int16: hidden layers as codes + scales + f32 biases, the output layer f32.
         let dtype = match h.dtype {
-            StorageDtype::Int8 if k + 1 == h.layers.len() => StorageDtype::F32,
+            StorageDtype::Int8 | StorageDtype::Int16 if k + 1 == h.layers.len() => {
+                StorageDtype::F32
+            }
             d => d,
         };
-        let (weight, bias) = if dtype == StorageDtype::Int8 {
-            let (w, bias, used) = decode_int8_layer(b, at, l.n_in, l.n_out, k)?;
+        let (weight, bias) = if matches!(dtype, StorageDtype::Int8 | StorageDtype::Int16) {
+            let (w, bias, used) = decode_int_layer(b, at, l.n_in, l.n_out, k, dtype)?;
             at += used;
             (w, bias)
         } else {
@@ -720,15 +771,16 @@ fn round_one(v: f32, dtype: StorageDtype) -> f32 {
         StorageDtype::F32 => v,
         StorageDtype::F16 => f16::from_f32(v).to_f32(),
         StorageDtype::Bf16 => bf16::from_f32(v).to_f32(),
-        StorageDtype::Int8 => v, // per channel, see `round_to_dtype`
+        StorageDtype::Int8 | StorageDtype::Int16 => v, // per channel, see `round_to_dtype`
     }
 }
 
 /// A copy of `mlp` with every weight and bias rounded to `dtype` (what [`super::from_bytes`]
 /// returns after a [`super::to_bytes`] round trip). The normalisation is not rounded (it is stored
-/// as f32); for int8 only the hidden-layer weights are (per output channel), the rest is f32. Values too large for the dtype become ±∞; [`super::to_bytes`] refuses those.
+/// as f32); for int8 and int16 only the hidden-layer weights are (per output channel), the rest is
+/// f32. Values too large for the dtype become ±∞; [`super::to_bytes`] refuses those.
 pub fn round_to_dtype(mlp: &MlpWeights, dtype: StorageDtype) -> MlpWeights {
-    if dtype == StorageDtype::Int8 {
+    if matches!(dtype, StorageDtype::Int8 | StorageDtype::Int16) {
         // Hidden weights quantised per channel; biases and the output layer are stored as f32.
         return crate::kernel::storage_rounded(mlp, dtype);
     }
@@ -997,9 +1049,29 @@ pub(super) fn encode(f: &ModelFile) -> Result<Vec<u8>, WeightError> {
     at = lay.payload_offset as usize;
     for (k, l) in mlp.layers.iter().enumerate() {
         let dtype = match f.dtype {
-            StorageDtype::Int8 if k + 1 == mlp.layers.len() => StorageDtype::F32,
+            StorageDtype::Int8 | StorageDtype::Int16 if k + 1 == mlp.layers.len() => {
+                StorageDtype::F32
+            }
             d => d,
         };
+        if dtype == StorageDtype::Int16 {
+            let rows = l.weight.chunks(l.n_in.max(1));
+            let scales: Vec<f32> = rows
+                .clone()
+                .map(crate::kernel::int16_channel_scale)
+                .collect();
+            for (row, &sc) in rows.zip(&scales) {
+                for &v in row {
+                    put(&mut b, at, &crate::kernel::int16_code(v, sc).to_le_bytes());
+                    at += 2;
+                }
+            }
+            for &v in scales.iter().chain(&l.bias) {
+                put(&mut b, at, &v.to_le_bytes());
+                at += 4;
+            }
+            continue;
+        }
         if dtype == StorageDtype::Int8 {
             let rows = l.weight.chunks(l.n_in.max(1));
             let scales: Vec<f32> = rows
@@ -1020,7 +1092,9 @@ pub(super) fn encode(f: &ModelFile) -> Result<Vec<u8>, WeightError> {
         }
         for &v in l.weight.iter().chain(&l.bias) {
             match dtype {
-                StorageDtype::F32 | StorageDtype::Int8 => put(&mut b, at, &v.to_le_bytes()),
+                StorageDtype::F32 | StorageDtype::Int8 | StorageDtype::Int16 => {
+                    put(&mut b, at, &v.to_le_bytes())
+                }
                 StorageDtype::F16 => put(&mut b, at, &f16::from_f32(v).to_le_bytes()),
                 StorageDtype::Bf16 => put(&mut b, at, &bf16::from_f32(v).to_le_bytes()),
             }

@@ -16,14 +16,17 @@ pub const VERSION_MAJOR: u16 = 1;
 /// Format minor version written. Readers accept any minor of their major. Minor 1 names the feature
 /// blocks (`block_features`); a minor-0 file has zeros there and its blocks follow from its set code.
 /// Minor 2 adds the optional training input range (`range_present`, `input_range`). Minor 3 adds the
-/// int8 storage dtype (code 4) and the measured conversion error (`quant_max_error_nm`).
-pub const VERSION_MINOR: u16 = 3;
+/// int8 storage dtype (code 4) and the measured conversion error (`quant_max_error_nm`). Minor 4 adds
+/// the int16 storage dtype (code 5).
+pub const VERSION_MINOR: u16 = 4;
 /// The first minor version whose header holds `block_features`.
 pub const MINOR_BLOCK_FEATURES: u16 = 1;
 /// The first minor version whose header may hold the training input range.
 pub const MINOR_INPUT_RANGE: u16 = 2;
 /// The first minor version with the int8 dtype and the `quant_max_error_nm` header field.
 pub const MINOR_INT8: u16 = 3;
+/// The first minor version with the int16 dtype.
+pub const MINOR_INT16: u16 = 4;
 /// Feature-block slots of the input range (no feature set has more blocks); the temperature range
 /// follows them.
 pub const RANGE_BLOCKS: usize = 3;
@@ -246,6 +249,7 @@ pub fn dtype_code(d: StorageDtype) -> u8 {
         StorageDtype::F16 => 2,
         StorageDtype::Bf16 => 3,
         StorageDtype::Int8 => 4,
+        StorageDtype::Int16 => 5,
     }
 }
 
@@ -256,6 +260,7 @@ pub fn dtype_from_code(code: u8) -> Option<StorageDtype> {
         2 => StorageDtype::F16,
         3 => StorageDtype::Bf16,
         4 => StorageDtype::Int8,
+        5 => StorageDtype::Int16,
         _ => return None,
     })
 }
@@ -327,12 +332,12 @@ impl Layout {
     }
 
     /// The layout for `n_inputs` raw inputs and the dense layers `(n_in, n_out)` (first to last)
-    /// stored as `dtype`: [`Layout::new`] for f32/f16/bf16; for int8 every hidden layer takes
-    /// `n_in·n_out` bytes of codes plus `n_out` f32 scales and `n_out` f32 biases, the output layer
-    /// `4·(n_in + n_out)` bytes (f32).
+    /// stored as `dtype`: [`Layout::new`] for f32/f16/bf16; for int8 (int16) every hidden layer takes
+    /// `n_in·n_out` (`2·n_in·n_out`) bytes of codes plus `n_out` f32 scales and `n_out` f32 biases,
+    /// the output layer `4·(n_in + n_out)` bytes (f32).
     pub fn for_layers(n_inputs: u64, dtype: StorageDtype, layers: &[(u64, u64)]) -> Self {
         let n_layers = layers.len() as u64;
-        if dtype != StorageDtype::Int8 {
+        if !matches!(dtype, StorageDtype::Int8 | StorageDtype::Int16) {
             let n_params = layers.iter().map(|&(i, o)| (i + 1) * o).sum();
             return Self::new(n_inputs, n_layers, n_params, dtype.size_bytes() as u64);
         }
@@ -343,7 +348,7 @@ impl Layout {
                 if k + 1 == layers.len() {
                     4 * (i * o + o)
                 } else {
-                    i * o + 8 * o
+                    dtype.size_bytes() as u64 * i * o + 8 * o
                 }
             })
             .sum();
