@@ -226,6 +226,10 @@ typedef struct fl_feature_block {
 // Symmetric int8 hidden-layer weights with per-output-channel f32 scales (output layer f32).
 #define FL_DTYPE_INT8 3
 
+// Symmetric 14-bit fixed-point hidden-layer weights in int16 with per-output-channel f32 scales
+// (output layer f32), multiplied with per-call 15-bit activations in exact integer arithmetic.
+#define FL_DTYPE_INT16 4
+
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus

@@ -28,6 +28,9 @@ pub const FL_DTYPE_F16: fl_dtype = 1;
 pub const FL_DTYPE_BF16: fl_dtype = 2;
 /// Symmetric int8 hidden-layer weights with per-output-channel f32 scales (output layer f32).
 pub const FL_DTYPE_INT8: fl_dtype = 3;
+/// Symmetric 14-bit fixed-point hidden-layer weights in int16 with per-output-channel f32 scales
+/// (output layer f32), multiplied with per-call 15-bit activations in exact integer arithmetic.
+pub const FL_DTYPE_INT16: fl_dtype = 4;
 
 /// An open `.fwt` model. Opaque; immutable; safe to use from several threads at once.
 pub struct fl_model {
@@ -262,6 +265,7 @@ pub unsafe extern "C" fn fl_model_describe(
                 StorageDtype::F16 => FL_DTYPE_F16,
                 StorageDtype::Bf16 => FL_DTYPE_BF16,
                 StorageDtype::Int8 => FL_DTYPE_INT8,
+                StorageDtype::Int16 => FL_DTYPE_INT16,
             },
             n_layer_sizes: m.layer_sizes.len() as u32,
             layer_sizes: m.layer_sizes.as_ptr(),

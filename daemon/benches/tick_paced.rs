@@ -16,7 +16,8 @@
 //!    single-model floor and the hot back-to-back tick.
 //!
 //! No asserts, no criterion for the paced part. Run: `cargo bench -p frictiond --bench tick_paced`
-//! (about 6 minutes: 72 cells × `TICKS` ticks at 1 kHz; `TICK_PACED_TICKS=n` changes the count).
+//! (about 8 minutes: 90 cells × `TICKS` ticks at 1 kHz; `TICK_PACED_TICKS=n` changes the count,
+//! `TICK_PACED_DTYPES=int16,f16` measures only those dtypes).
 //! Runs as an ordinary thread (SCHED_OTHER) unless `TICK_PACED_PRIORITY=p` asks for SCHED_FIFO `p`
 //! for the bench thread and the helper (as frictiond's `[loop] priority`); timer slack 1 ns as in
 //! frictiond. On a shared machine the numbers include its load — note `uptime` next to them.
@@ -39,12 +40,24 @@ mod tick_params;
 use tick_params::{H, inputs, params};
 
 /// Storage dtypes measured (one array: a new `.fwt` dtype is one more entry).
-const DTYPES: [(&str, StorageDtype); 4] = [
+const DTYPES: [(&str, StorageDtype); 5] = [
     ("f32", StorageDtype::F32),
     ("f16", StorageDtype::F16),
     ("bf16", StorageDtype::Bf16),
+    ("int16", StorageDtype::Int16),
     ("int8", StorageDtype::Int8),
 ];
+
+/// [`DTYPES`], or those named in `TICK_PACED_DTYPES` (comma-separated, e.g. `int16,f16`).
+fn dtypes() -> Vec<(&'static str, StorageDtype)> {
+    match std::env::var("TICK_PACED_DTYPES") {
+        Ok(list) => DTYPES
+            .into_iter()
+            .filter(|(n, _)| list.split(',').any(|w| w.trim() == *n))
+            .collect(),
+        Err(_) => DTYPES.to_vec(),
+    }
+}
 /// Joint counts: one joint, ergoCub legs + torso, a whole humanoid.
 const JOINTS: [usize; 3] = [1, 15, 32];
 /// Prefetch policies (`[loop] prefetch`).
@@ -134,7 +147,7 @@ fn where_the_time_goes(evict_buf: &mut [u8]) {
         "| dtype | weights / net [KiB] | 32 nets [MiB] | net hot [µs] | net cold [µs] | layer 1 hot / cold [µs] | layer 2 (diff.) hot / cold [µs] | 32-joint tick hot [µs] | 32-joint tick cold [µs] | prefetch walk, cold [µs] | tick after walk [µs] |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|");
-    for (name, dtype) in DTYPES {
+    for (name, dtype) in dtypes() {
         let mut full = paper_net(&[40, 268, 215, 1], 1, dtype);
         let mut first = paper_net(&[40, 268, 1], 1, dtype);
         let (full_hot, full_cold) = forward_hot_cold(&mut full, evict_buf);
@@ -266,7 +279,7 @@ fn main() {
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for n in JOINTS {
-        for (name, dtype) in DTYPES {
+        for (name, dtype) in dtypes() {
             let mut net = paper_net(&[40, 268, 215, 1], 1, dtype);
             let (net_hot, _) = forward_hot_cold(&mut net, &mut evict_buf[..0]);
             // Hot back-to-back tick of the same joints.

@@ -391,6 +391,11 @@ impl JointOut {
 /// lockstep) before it parks on the futex [ns].
 const HELPER_SPIN_NS: u64 = 100_000;
 
+/// How long before the next deadline the helper's timer wakes it, so it is already spinning when
+/// the job is posted rather than still coming out of its sleep (a helper that has not claimed the
+/// job when the main thread finishes its own half loses it to the main thread) [ns].
+const HELPER_EARLY_NS: u64 = 20_000;
+
 /// Clock trigger: how long a tick waits for a helper that has not released the previous job before
 /// it computes its own half without it (the helper's joints are then late again) [ns].
 pub const HELPER_RELEASE_GRACE_NS: u64 = 50_000;
@@ -930,7 +935,11 @@ fn helper_main(ren: &Rendezvous, plan: CrewPlan, rt_flags: u32) -> HelperReport 
             }
         }
         ren.idle.store(seen, Ordering::Release);
-        wake_at_ns = next_ns;
+        wake_at_ns = if next_ns == 0 {
+            0
+        } else {
+            next_ns.saturating_sub(HELPER_EARLY_NS).max(1)
+        };
     }
     alloc_count::set_counting(false);
     let (policy, priority) = sched_of_self();

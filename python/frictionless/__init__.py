@@ -148,7 +148,7 @@ class ModelInfo:
     n_inputs: int
     input_labels: Tuple[str, ...]
     dtype: str
-    """Weight storage: ``"f32"``, ``"f16"``, ``"bf16"`` or ``"int8"`` (computation is float32)."""
+    """Weight storage: ``"f32"``, ``"f16"``, ``"bf16"``, ``"int16"`` or ``"int8"`` (computation is float32)."""
     layers: Tuple[int, ...]
     """Layer sizes including input and output, e.g. ``(40, 268, 215, 1)``."""
     n_params: int
@@ -332,7 +332,7 @@ def write_fwt(path: PathType, layers: Sequence[Tuple[Any, Any]], **kwargs: Any) 
       :func:`feature_sets`), ``history`` H (default: inferred from the input width),
       ``temperature`` (one motor temperature [°C] appended);
     - ``joint`` name, ``gear_ratio`` (signed r, required), ``kt`` [Nm/A] (required);
-    - ``dtype``: weight storage ``"f32"``, ``"f16"``, ``"bf16"`` or ``"int8"``;
+    - ``dtype``: weight storage ``"f32"``, ``"f16"``, ``"bf16"``, ``"int16"`` or ``"int8"``;
     - ``scv_prior``: dict kc, ka, kv, ks, vs, alpha; ``val_rmse_nm``, ``test_rmse_nm``,
       ``filtering`` (``"unknown"``, ``"causal"``, ``"non_causal"``), ``created_unix_s``,
       ``tool_version`` (provenance).

@@ -23,7 +23,7 @@ use pyo3::types::{PyBytes, PyDict, PyList};
 
 use crate::{ModelError, WeightFileError, message};
 
-/// The storage dtype's name (`"f32"`, `"f16"`, `"bf16"`, `"int8"`).
+/// The storage dtype's name (`"f32"`, `"f16"`, `"bf16"`, `"int16"`, `"int8"`).
 pub(crate) fn dtype_name(d: StorageDtype) -> &'static str {
     d.name()
 }
@@ -34,8 +34,9 @@ fn parse_dtype(s: &str) -> PyResult<StorageDtype> {
         "f16" | "float16" => Ok(StorageDtype::F16),
         "bf16" | "bfloat16" => Ok(StorageDtype::Bf16),
         "int8" => Ok(StorageDtype::Int8),
+        "int16" => Ok(StorageDtype::Int16),
         _ => Err(PyValueError::new_err(format!(
-            "dtype `{s}`: expected \"f32\", \"f16\", \"bf16\" or \"int8\""
+            "dtype `{s}`: expected \"f32\", \"f16\", \"bf16\", \"int16\" or \"int8\""
         ))),
     }
 }

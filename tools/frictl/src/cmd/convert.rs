@@ -1,4 +1,4 @@
-//! `frictl convert IN.fwt -o OUT.fwt --dtype f32|f16|bf16|int8|auto [--max-error-nm 0.01]
+//! `frictl convert IN.fwt -o OUT.fwt --dtype f32|f16|bf16|int16|int8|auto [--max-error-nm 0.01]
 //! [--dataset FILE]`: re-write a weight file with another storage precision, behind an accuracy gate.
 //!
 //! The gate compares the converted model with the input model (computed in f32) on a probe set: random
@@ -7,15 +7,17 @@
 //! without a range, inside mean ± 3·scale of the normalisation; plus, with `--dataset`, every input row
 //! the model's feature set builds from that dataset CSV (hold-zero warm-up, Δθ latched at the first
 //! row, as `frictl train` builds them). The converted model runs on **every kernel path this CPU
-//! has** (the daemon runs the fastest: for int8 with AVX-512 VNNI, u8 activations); the reference is
+//! has** (the daemon runs the fastest: for int8 with AVX-512 VNNI, u8 activations; int16 gives the
+//! same bits on every path); the reference is
 //! the input model's f32 reference forward pass. It prints max and p99 |Δτ̂_F| in Nm per path and
 //! refuses (non-zero exit, nothing written) when the worst path's max exceeds `--max-error-nm`.
-//! `--dtype auto` writes the smallest dtype that passes (int8, then f16, bf16; f32 when none does). The
-//! measured max
-//! is stored in the output's `quant_max_error_nm` header field (format 1.3).
+//! `--dtype auto` writes the smallest dtype that passes (int8; then int16, the fastest 2-byte
+//! storage; then f16, bf16; f32 when none does). The measured max is stored in the output's
+//! `quant_max_error_nm` header field (format ≥ 1.3).
 //!
-//! Not a quantiser with calibration: f16/bf16 round to nearest-even, int8 is symmetric per output
-//! channel (`max |w| / 127`). Biases and the normalisation stay f32 in every dtype.
+//! Not a quantiser with calibration: f16/bf16 round to nearest-even, int8 and int16 are symmetric per
+//! output channel (`max |w| / 127`, `max |w| / 8191`). Biases and the normalisation stay f32 in every
+//! dtype.
 
 use std::path::PathBuf;
 
@@ -38,7 +40,10 @@ pub enum Target {
     Bf16,
     /// int8 hidden-layer weights with per-output-channel scales (output layer f32).
     Int8,
-    /// The smallest dtype within the bound: int8, then f16, bf16, f32.
+    /// 14-bit fixed-point hidden-layer weights in int16 with per-output-channel scales, 15-bit
+    /// activations (output layer f32).
+    Int16,
+    /// The smallest dtype within the bound: int8, then int16, f16, bf16, f32.
     Auto,
 }
 
@@ -200,9 +205,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Target::F16 => &[StorageDtype::F16],
         Target::Bf16 => &[StorageDtype::Bf16],
         Target::Int8 => &[StorageDtype::Int8],
+        Target::Int16 => &[StorageDtype::Int16],
         // f32 is the lossless fallback: written whatever its rounding-level difference.
         Target::Auto => &[
             StorageDtype::Int8,
+            StorageDtype::Int16,
             StorageDtype::F16,
             StorageDtype::Bf16,
             StorageDtype::F32,

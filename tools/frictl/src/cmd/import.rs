@@ -40,6 +40,9 @@ pub enum Dtype {
     Bf16,
     /// int8 hidden-layer weights, per-output-channel scales (output layer f32).
     Int8,
+    /// 14-bit fixed-point hidden-layer weights in int16, per-output-channel scales (output layer
+    /// f32).
+    Int16,
 }
 
 impl From<Dtype> for StorageDtype {
@@ -49,6 +52,7 @@ impl From<Dtype> for StorageDtype {
             Dtype::F16 => StorageDtype::F16,
             Dtype::Bf16 => StorageDtype::Bf16,
             Dtype::Int8 => StorageDtype::Int8,
+            Dtype::Int16 => StorageDtype::Int16,
         }
     }
 }
