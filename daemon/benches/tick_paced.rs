@@ -7,6 +7,8 @@
 //! hot loop (`--bench tick`) does not see.
 //!
 //! Prints markdown:
+//! 0. the accuracy gate on the 32 tick networks: max |Δτ̂_F| of each reduced dtype against f32 on
+//!    every kernel path, and how many networks stay within 0.01 Nm;
 //! 1. where the time goes: bytes of weights per tick per dtype; one paper-size network hot vs right
 //!    after a full-cache eviction (a 64 MiB write), and the same for its first layer alone (the
 //!    second layer by difference); a 32-joint tick hot, after eviction, and after eviction followed
@@ -30,14 +32,14 @@ use frictiond::rt::{
     Crew, CrewPlan, Freshness, HELPER_RELEASE_GRACE_NS, Inputs, ThreadRt, compute, main_half,
     prefetch_after_publish, prefetch_joints, sleep_to_deadline,
 };
-use frictionless::kernel::Mlp;
+use frictionless::kernel::{KernelPath, Mlp};
 use frictionless::mlp::StorageDtype;
 use frictionless::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
 use frictionless_shm_types::{MAX_JOINTS, MotorCurrentCommand, monotonic_ns};
 
 #[path = "support/tick_params.rs"]
 mod tick_params;
-use tick_params::{H, inputs, params};
+use tick_params::{H, inputs, paper_weights, params};
 
 /// Storage dtypes measured (one array: a new `.fwt` dtype is one more entry).
 const DTYPES: [(&str, StorageDtype); 5] = [
@@ -66,6 +68,8 @@ const PREFETCH: [(&str, Prefetch); 3] = [
     ("after", Prefetch::After),
     ("lead", Prefetch::Lead),
 ];
+/// The accuracy gate of the done-when: max |Δτ̂_F| against f32 [Nm].
+const GATE_NM: f32 = 0.01;
 /// Paced ticks per cell (≥ 5000).
 const TICKS: usize = 5000;
 /// Period [ns] (1 kHz).
@@ -253,6 +257,88 @@ fn fifo_priority() -> Option<i32> {
     ok.then_some(prio)
 }
 
+/// The accuracy gate `frictl convert` applies, on the 32 tick networks: per dtype, max |Δτ̂_F|
+/// against the same network in f32 over `probes` random inputs inside mean ± 3·scale (what `convert`
+/// probes for a file without a training range) on every kernel path this CPU has.
+fn accuracy_gate(probes: usize) {
+    println!(
+        "### Accuracy gate on the 32 tick networks (max |Δτ̂_F| vs f32, {probes} probes in mean ± 3·scale per net, every kernel path; gate {GATE_NM} Nm)\n"
+    );
+    println!(
+        "| dtype | max over nets [Nm] | worst net | nets within the gate | f32 outputs span [Nm] |"
+    );
+    println!("|---|---|---|---|---|");
+    let nets: Vec<_> = (0..32).map(paper_weights).collect();
+    let mut rng = 0x9e37_79b9_7f4a_7c15u64;
+    let mut uniform = move || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        (rng >> 11) as f32 / (1u64 << 53) as f32
+    };
+    let xs: Vec<Vec<Vec<f32>>> = nets
+        .iter()
+        .map(|w| {
+            (0..probes)
+                .map(|_| {
+                    w.norm
+                        .mean
+                        .iter()
+                        .zip(&w.norm.scale)
+                        .map(|(m, s)| m + s * (6.0 * uniform() - 3.0))
+                        .collect()
+                })
+                .collect()
+        })
+        .collect();
+    let reference: Vec<Vec<f32>> = nets
+        .iter()
+        .zip(&xs)
+        .map(|(w, xs)| {
+            let mut m = Mlp::new(w, StorageDtype::F32).expect("valid");
+            xs.iter().map(|x| m.forward(x)).collect()
+        })
+        .collect();
+    let span = reference
+        .iter()
+        .flatten()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &y| {
+            (lo.min(y), hi.max(y))
+        });
+    for (name, dtype) in dtypes() {
+        if dtype == StorageDtype::F32 {
+            continue;
+        }
+        let mut per_net = Vec::with_capacity(nets.len());
+        for ((w, xs), refs) in nets.iter().zip(&xs).zip(&reference) {
+            let mut worst = 0f32;
+            for path in KernelPath::available() {
+                let mut m = Mlp::new(w, dtype)
+                    .expect("valid")
+                    .with_path(path)
+                    .expect("available");
+                for (x, y) in xs.iter().zip(refs) {
+                    worst = worst.max((m.forward(x) - y).abs());
+                }
+            }
+            per_net.push(worst);
+        }
+        let (arg, max) =
+            per_net.iter().enumerate().fold(
+                (0, 0f32),
+                |(a, m), (k, &e)| if e > m { (k, e) } else { (a, m) },
+            );
+        let within = per_net.iter().filter(|&&e| e <= GATE_NM).count();
+        println!(
+            "| {name} | {max:.2e} | j{arg} | {within}/{} | [{:.2}, {:.2}] |",
+            nets.len(),
+            span.0,
+            span.1
+        );
+    }
+    println!();
+}
+
 fn main() {
     // `cargo bench` passes `--bench`; a test run (`cargo test --benches`) passes nothing: be quick.
     let full = std::env::args().any(|a| a == "--bench");
@@ -265,6 +351,7 @@ fn main() {
         .unwrap_or(if full { TICKS } else { 50 });
     let mut evict_buf = vec![0u8; if full { EVICT_BYTES } else { 1 << 20 }];
     let t0 = monotonic_ns();
+    accuracy_gate(if full { 1000 } else { 20 });
     where_the_time_goes(&mut evict_buf);
 
     println!(

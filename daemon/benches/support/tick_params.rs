@@ -21,18 +21,25 @@ use frictionless_shm_types::{JointStates, TorqueRequest};
 pub const R: f64 = -160.0;
 pub const H: usize = 20;
 
+/// The weights of joint `seed`'s network (`[Δθ ×20, ṡ ×20]` → 268 → 215 → 1, He-uniform, identity
+/// normalisation).
+pub fn paper_weights(seed: u64) -> frictionless::mlp::MlpWeights {
+    let spec = RandomMlpSpec {
+        weights: WeightInit::HeUniform,
+        norm: NormInit::Identity,
+        ..RandomMlpSpec::new(&[2 * H, 268, 215, 1])
+    };
+    seeded_mlp(&spec, seed).expect("valid bench net")
+}
+
 pub fn paper_pinn(seed: u64, dtype: StorageDtype) -> JointModel {
     let features = FeatureSpec {
         set: FeatureSet::DeltaThetaJointVel,
         history: H,
         temperature: false,
     };
-    let spec = RandomMlpSpec {
-        weights: WeightInit::HeUniform,
-        norm: NormInit::Identity,
-        ..RandomMlpSpec::new(&[features.n_inputs(), 268, 215, 1])
-    };
-    let mlp = seeded_mlp(&spec, seed).expect("valid bench net");
+    let mlp = paper_weights(seed);
+    debug_assert_eq!(mlp.n_inputs(), features.n_inputs());
     let file = ModelFile {
         meta: ModelMeta {
             joint_name: format!("j{seed}"),
