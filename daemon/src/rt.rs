@@ -372,7 +372,8 @@ impl JointOut {
 //
 // Protocol (no locks, no allocation): the main RT thread writes a job (`JobIn`: the helper's joints
 // as a raw slice of the current `Params`, a copy of the inputs, the tick's context) only while the
-// helper is idle, then bumps `epoch` (and wakes the helper with a futex only if it parked). Whoever
+// helper is idle, then bumps `epoch` (and wakes the helper with a futex only if it parked; the
+// helper's timer wakes it `HELPER_EARLY_NS` before the deadline, so it is normally spinning). Whoever
 // first moves `claimed` from the previous epoch to the posted one runs the job: the helper when it
 // picks the job up, or the main thread itself when it has finished its own half and the helper has
 // not started (a helper whose timer wake came late on a busy or virtualised CPU), so a late wake

@@ -19,8 +19,11 @@
 //!
 //! [`StorageDtype::Int8`] lays the hidden layers out as `[ceil(out/16)][ceil(in/4)][16][4]` int8: one
 //! 64-byte row holds 4 consecutive inputs of each of 16 outputs (what `vpdpbusd` consumes), with one
-//! f32 scale per output channel (indexed like the biases); the output layer stays f32 rows. Every
-//! weight byte of a net lives in its `Store` (`Net::weight_spans` lists the byte ranges).
+//! f32 scale per output channel (indexed like the biases); the output layer stays f32 rows.
+//! [`StorageDtype::Int16`] lays them out as 64-byte rows of 16 outputs × 2 consecutive inputs (int16,
+//! what `vpdpwssd`/`vpmaddwd` consume), grouped 8 output blocks at a time with a group's rows ordered
+//! `[input pair][block]` so a group streams sequentially (`int16.rs`). Every weight byte of a net
+//! lives in its `Store` (`Net::weight_spans` lists the byte ranges).
 //!
 //! The input normalisation `(x − mean) / scale` is applied first, in f32, exactly as written (not folded
 //! into the first layer), so reduced-precision storage rounds the *same* weights the trainer produced.
@@ -34,7 +37,10 @@
 //! [`KernelPath::Avx512Vnni`], multiplied with u8 activations: every hidden layer after the first
 //! quantises its input (≥ 0 after the ReLU) per call to `round(x · 255 / max x)`, accumulates
 //! `vpdpbusd` in i32 and rescales by weight scale × `max x / 255` (the first layer, whose inputs are
-//! signed, stays weight-only). [`storage_rounded`] gives the exact weights a reduced-precision kernel
+//! signed, stays weight-only). [`StorageDtype::Int16`] is fixed point on every path: 14-bit weight
+//! codes ([`int16_channel_scale`], [`int16_code`]) times 15-bit activation codes quantised per layer
+//! and call, summed exactly in i32 over chunks of [`I16_CHUNK`] inputs, then in f32 in a fixed order,
+//! so every path returns the same bits. [`storage_rounded`] gives the exact weights a reduced-precision kernel
 //! computes with (for int8 the dequantised weights; the VNNI path's activation rounding comes on top),
 //! for validation against the f32 model; `frictl convert` gates a conversion on the measured error.
 //!
@@ -43,8 +49,8 @@
 //! exists (none could be tested).
 //!
 //! ## Paths
-//! [`KernelPath::Avx512Vnni`] (AVX-512F/BW/VNNI: int8 as above, every other dtype exactly as
-//! `Avx512`), [`KernelPath::Avx512`] (AVX-512F intrinsics), [`KernelPath::Avx2Fma`] (AVX2 + FMA + F16C intrinsics)
+//! [`KernelPath::Avx512Vnni`] (AVX-512F/BW/VNNI: int8 as above, int16 with `vpdpwssd`, every other
+//! dtype exactly as `Avx512`; int16 on `Avx512` uses `vpmaddwd` (AVX-512BW), on `Avx2Fma` `vpmaddwd` on ymm), [`KernelPath::Avx512`] (AVX-512F intrinsics), [`KernelPath::Avx2Fma`] (AVX2 + FMA + F16C intrinsics)
 //! and [`KernelPath::Portable`] (plain Rust that the compiler auto-vectorises; correct on any CPU, uses
 //! FMA only when the build enables it). [`Mlp::new`] picks the fastest path the running CPU supports;
 //! [`Mlp::with_path`] forces one (tests compare all of them).
@@ -100,7 +106,8 @@ pub(crate) mod dt {
 pub enum KernelPath {
     /// AVX-512F + BW + VNNI (x86-64 only, detected at run time): for [`StorageDtype::Int8`] the hidden
     /// layers after the first multiply int8 weights by dynamically quantised u8 activations with
-    /// `vpdpbusd` (i32 accumulation); every other dtype runs exactly the [`KernelPath::Avx512`] code.
+    /// `vpdpbusd` (i32 accumulation); for [`StorageDtype::Int16`] `vpdpwssd` (the same bits as every
+    /// other path); every other dtype runs exactly the [`KernelPath::Avx512`] code.
     Avx512Vnni,
     /// AVX-512F intrinsics (x86-64 only, detected at run time).
     Avx512,
