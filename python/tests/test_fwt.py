@@ -56,6 +56,28 @@ def test_round_trip_reduced_precision_rounds_weights(dtype, half, tmp_path):
     np.testing.assert_allclose(m.predict(x), numpy_forward(rounded, None, x), rtol=1e-5, atol=1e-5)
 
 
+def test_int16_quantises_hidden_rows_per_channel(tmp_path):
+    """int16: hidden weights within half a step of max |w| / 8191 per output row, biases and the output
+    layer f32, and predictions within the 15-bit activations' error of the dequantised model."""
+    layers = random_layers([40, 32, 24, 1], seed=12)
+    path = tmp_path / "m_int16.fwt"
+    fl.write_fwt(path, layers, gear_ratio=160.0, kt=0.0665, dtype="int16", joint="ankle_roll")
+    m = fl.Model.load(path)
+    assert m.info.dtype == "int16"
+    got = m.weights()[0]
+    for k, ((w, b), (w0, b0)) in enumerate(zip(got, layers)):
+        np.testing.assert_array_equal(b, b0.astype(np.float32))
+        if k == len(layers) - 1:
+            np.testing.assert_array_equal(w, w0.astype(np.float32))
+            continue
+        step = np.abs(w0).max(axis=1, keepdims=True) / 8191.0
+        assert np.all(np.abs(w - w0) <= 0.5 * step + 4 * np.finfo(np.float32).eps * np.abs(w0))
+        assert not np.array_equal(w, w0.astype(np.float32))
+    x = np.random.default_rng(3).normal(size=(50, 40))
+    want = numpy_forward(got, None, x)
+    np.testing.assert_allclose(m.predict(x), want, rtol=1e-3, atol=1e-3 * np.abs(want).max())
+
+
 def test_metadata_options_and_inferred_history(tmp_path):
     sets = fl.feature_sets()
     assert "delta-theta-joint-vel" in sets and "motor-vel-joint-vel" in sets
