@@ -78,30 +78,12 @@ pub(crate) fn pair_row(row0: usize, n_blk: usize, np: usize, blk: usize, p: usiz
 /// dequantised weights again gives the same scale and codes (a `.fwt` int16 round trip is exact).
 /// 0 for an all-zero channel.
 pub fn int16_channel_scale(row: &[f32]) -> f32 {
-    let m = row.iter().fold(0f32, |m, v| m.max(v.abs()));
-    if m == 0.0 || !m.is_finite() {
-        return 0.0;
-    }
-    let k = f32::from(I16_WMAX);
-    let s = m / k;
-    let mut c = s;
-    for _ in 0..8 {
-        if (k * c) / k == c && (k * c) >= m {
-            return c;
-        }
-        c = f32::from_bits(c.to_bits() + 1);
-    }
-    s
+    super::symmetric_scale(row, f32::from(I16_WMAX))
 }
 
 /// The int16 code of `w` at channel scale `scale` (round to nearest, ties away from zero; ±8191).
 pub fn int16_code(w: f32, scale: f32) -> i16 {
-    if scale == 0.0 {
-        return 0;
-    }
-    (w / scale)
-        .round()
-        .clamp(-f32::from(I16_WMAX), f32::from(I16_WMAX)) as i16
+    super::symmetric_code(w, scale, f32::from(I16_WMAX)) as i16
 }
 
 /// Activation scale of a layer input whose largest magnitude is `max_abs`: returns

@@ -43,27 +43,12 @@ pub(crate) fn quads(n_in: usize) -> usize {
 /// which `(127 · scale) / 127 == scale` in f32, so that quantising the dequantised weights again gives
 /// the same scale and the same codes (a `.fwt` int8 round trip is exact). 0 for an all-zero channel.
 pub fn int8_channel_scale(row: &[f32]) -> f32 {
-    let m = row.iter().fold(0f32, |m, v| m.max(v.abs()));
-    if m == 0.0 || !m.is_finite() {
-        return 0.0;
-    }
-    let s = m / 127.0;
-    let mut c = s;
-    for _ in 0..8 {
-        if (127.0 * c) / 127.0 == c && (127.0 * c) >= m {
-            return c;
-        }
-        c = f32::from_bits(c.to_bits() + 1);
-    }
-    s
+    super::symmetric_scale(row, 127.0)
 }
 
 /// The int8 code of `w` at channel scale `scale` (round to nearest, ties away from zero; ±127).
 pub fn int8_code(w: f32, scale: f32) -> i8 {
-    if scale == 0.0 {
-        return 0;
-    }
-    (w / scale).round().clamp(-127.0, 127.0) as i8
+    super::symmetric_code(w, scale, 127.0) as i8
 }
 
 /// One portable int8 inference on the normalised input in `s.xin` ("int8 weights, f32 activations").

@@ -300,8 +300,70 @@ fn blocks(n: usize) -> usize {
     n.div_ceil(LANES)
 }
 
-/// Quantises the hidden layers of `w` into the int8 quad layout and copies the output layer as f32
-/// rows; re-points `hidden[k].row0` at quad rows and `out.row0` at the output store.
+/// The symmetric per-channel scale of `row` for codes up to ±`qmax`: `max |w| / qmax`, nudged (by at
+/// most a few ulps) to a value with `fl(fl(qmax · scale) / qmax) == scale` and `qmax · scale ≥ max |w|`,
+/// so quantising the dequantised row again gives the same scale and codes. 0 for an all-zero row.
+pub(crate) fn symmetric_scale(row: &[f32], qmax: f32) -> f32 {
+    let m = row.iter().fold(0f32, |m, v| m.max(v.abs()));
+    if m == 0.0 || !m.is_finite() {
+        return 0.0;
+    }
+    let s = m / qmax;
+    let mut c = s;
+    for _ in 0..8 {
+        if (qmax * c) / qmax == c && (qmax * c) >= m {
+            return c;
+        }
+        c = f32::from_bits(c.to_bits() + 1);
+    }
+    s
+}
+
+/// The code of `w` at `scale`: `round(w / scale)` (ties away from zero) clamped to ±`qmax`; 0 at scale 0.
+pub(crate) fn symmetric_code(w: f32, scale: f32, qmax: f32) -> f32 {
+    if scale == 0.0 {
+        return 0.0;
+    }
+    (w / scale).round().clamp(-qmax, qmax)
+}
+
+/// The shared part of the int8 and int16 stores: sets `hidden[k].row0` (rows of `rows_per_blk(n_in)`
+/// per output block, layer after layer), computes each hidden row's channel scale, hands every weight
+/// to `put(layer plan, block, lane, input, weight, scale)`, and returns the scale blocks and the
+/// output layer as f32 rows (re-pointing `out.row0` at them).
+fn quantise_hidden(
+    w: &MlpWeights,
+    hidden: &mut [LayerPlan],
+    out: &mut LayerPlan,
+    n_bias_blk: usize,
+    rows_per_blk: fn(usize) -> usize,
+    channel_scale: fn(&[f32]) -> f32,
+    mut put: impl FnMut(&LayerPlan, usize, usize, usize, f32, f32),
+) -> (Vec<Block>, Vec<Block>) {
+    let mut scale = vec![ZERO_BLOCK; n_bias_blk];
+    let mut row = 0usize;
+    for (p, l) in hidden.iter_mut().zip(&w.layers) {
+        p.row0 = row;
+        for (o, wrow) in l.weight.chunks(l.n_in).enumerate() {
+            let (blk, lane) = (o / LANES, o % LANES);
+            let sc = channel_scale(wrow);
+            scale[p.bias_blk0 + blk].0[lane] = sc;
+            for (i, &v) in wrow.iter().enumerate() {
+                put(p, blk, lane, i, v, sc);
+            }
+        }
+        row += p.n_blk * rows_per_blk(l.n_in);
+    }
+    let last = &w.layers[hidden.len()];
+    let mut out_rows = vec![ZERO_BLOCK; out.n_blk];
+    for (i, &v) in last.weight.iter().enumerate() {
+        out_rows[i / LANES].0[i % LANES] = v;
+    }
+    out.row0 = 0;
+    (scale, out_rows)
+}
+
+/// Quantises the hidden layers of `w` into the int8 quad layout (`[blk][quad][lane][4]`).
 fn int8_store(
     w: &MlpWeights,
     hidden: &mut [LayerPlan],
@@ -310,36 +372,22 @@ fn int8_store(
 ) -> Int8Store {
     let n_quads: usize = hidden.iter().map(|p| p.n_blk * int8::quads(p.n_in)).sum();
     let mut quads = vec![QuadBlock([0; 4 * LANES]); n_quads.max(1)];
-    let mut scale = vec![ZERO_BLOCK; n_bias_blk];
-    let mut row = 0usize;
-    for (p, l) in hidden.iter_mut().zip(&w.layers) {
-        let nq = int8::quads(l.n_in);
-        p.row0 = row;
-        for (o, wrow) in l.weight.chunks(l.n_in).enumerate() {
-            let (blk, lane) = (o / LANES, o % LANES);
-            let sc = int8_channel_scale(wrow);
-            scale[p.bias_blk0 + blk].0[lane] = sc;
-            for (i, &v) in wrow.iter().enumerate() {
-                quads[row + blk * nq + i / 4].0[4 * lane + i % 4] = int8_code(v, sc);
-            }
-        }
-        row += p.n_blk * nq;
-    }
-    let last = &w.layers[hidden.len()];
-    let mut out_rows = vec![ZERO_BLOCK; out.n_blk];
-    for (i, &v) in last.weight.iter().enumerate() {
-        out_rows[i / LANES].0[i % LANES] = v;
-    }
-    out.row0 = 0;
-    Int8Store {
-        quads,
-        scale,
-        out: out_rows,
-    }
+    let (scale, out) = quantise_hidden(
+        w,
+        hidden,
+        out,
+        n_bias_blk,
+        int8::quads,
+        int8_channel_scale,
+        |p, blk, lane, i, v, sc| {
+            let nq = int8::quads(p.n_in);
+            quads[p.row0 + blk * nq + i / 4].0[4 * lane + i % 4] = int8_code(v, sc);
+        },
+    );
+    Int8Store { quads, scale, out }
 }
 
-/// Quantises the hidden layers of `w` into the int16 pair layout and copies the output layer as f32
-/// rows; re-points `hidden[k].row0` at pair rows and `out.row0` at the output store.
+/// Quantises the hidden layers of `w` into the int16 pair layout ([`int16::pair_row`]).
 fn int16_store(
     w: &MlpWeights,
     hidden: &mut [LayerPlan],
@@ -348,33 +396,20 @@ fn int16_store(
 ) -> Int16Store {
     let n_pairs: usize = hidden.iter().map(|p| p.n_blk * int16::pairs(p.n_in)).sum();
     let mut pairs = vec![PairBlock([0; 2 * LANES]); n_pairs.max(1)];
-    let mut scale = vec![ZERO_BLOCK; n_bias_blk];
-    let mut row = 0usize;
-    for (p, l) in hidden.iter_mut().zip(&w.layers) {
-        let np = int16::pairs(l.n_in);
-        p.row0 = row;
-        for (o, wrow) in l.weight.chunks(l.n_in).enumerate() {
-            let (blk, lane) = (o / LANES, o % LANES);
-            let sc = int16_channel_scale(wrow);
-            scale[p.bias_blk0 + blk].0[lane] = sc;
-            for (i, &v) in wrow.iter().enumerate() {
-                pairs[int16::pair_row(row, p.n_blk, np, blk, i / 2)].0[2 * lane + i % 2] =
-                    int16_code(v, sc);
-            }
-        }
-        row += p.n_blk * np;
-    }
-    let last = &w.layers[hidden.len()];
-    let mut out_rows = vec![ZERO_BLOCK; out.n_blk];
-    for (i, &v) in last.weight.iter().enumerate() {
-        out_rows[i / LANES].0[i % LANES] = v;
-    }
-    out.row0 = 0;
-    Int16Store {
-        pairs,
-        scale,
-        out: out_rows,
-    }
+    let (scale, out) = quantise_hidden(
+        w,
+        hidden,
+        out,
+        n_bias_blk,
+        int16::pairs,
+        int16_channel_scale,
+        |p, blk, lane, i, v, sc| {
+            let np = int16::pairs(p.n_in);
+            pairs[int16::pair_row(p.row0, p.n_blk, np, blk, i / 2)].0[2 * lane + i % 2] =
+                int16_code(v, sc);
+        },
+    );
+    Int16Store { pairs, scale, out }
 }
 
 impl Mlp {
