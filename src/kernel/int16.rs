@@ -43,17 +43,9 @@ const _: () = assert!(
 #[repr(C, align(64))]
 pub(crate) struct PairBlock(pub(crate) [i16; 2 * LANES]);
 
-/// The int16 weight store of one network (every weight byte of the net lives in these `Vec`s).
-#[derive(Clone, Debug)]
-pub(crate) struct Int16Store {
-    /// Hidden-layer weights; layer `k` starts at pair row `hidden[k].row0` and has
-    /// `n_blk · ceil(n_in / 2)` pair rows (block `b`, pair `p` at [`pair_row`]).
-    pub(crate) pairs: Vec<PairBlock>,
-    /// Per-output-channel weight scales, indexed exactly like `Net::bias` (padding lanes 0).
-    pub(crate) scale: Vec<Block>,
-    /// The output layer's f32 weight rows (`out.row0` indexes this `Vec`).
-    pub(crate) out: Vec<Block>,
-}
+/// The int16 weight store of one network: hidden-layer pair rows; layer `k` starts at row
+/// `hidden[k].row0` and has `n_blk · ceil(n_in / 2)` rows (block `b`, pair `p` at [`pair_row`]).
+pub(crate) type Int16Store = super::QuantStore<PairBlock>;
 
 /// Number of input pairs of a layer with `n_in` inputs.
 pub(crate) fn pairs(n_in: usize) -> usize {
@@ -144,7 +136,7 @@ pub(super) fn forward_portable(net: &Net, s: &mut Scratch) -> f32 {
                 let pair1 = (pair0 + I16_CHUNK / 2).min(np);
                 let mut ci = [0i32; LANES];
                 for pr in pair0..pair1 {
-                    let w = &st.pairs[pair_row(p.row0, p.n_blk, np, blk, pr)].0;
+                    let w = &st.rows[pair_row(p.row0, p.n_blk, np, blk, pr)].0;
                     let (a0, a1) = (i32::from(qa[2 * pr]), i32::from(qa[2 * pr + 1]));
                     for (l, c) in ci.iter_mut().enumerate() {
                         *c += i32::from(w[2 * l]) * a0 + i32::from(w[2 * l + 1]) * a1;

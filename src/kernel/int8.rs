@@ -22,17 +22,10 @@ pub(crate) struct QuadBlock(pub(crate) [i8; 4 * LANES]);
 #[repr(C, align(64))]
 pub(crate) struct ByteBlock(pub(crate) [u8; 4 * LANES]);
 
-/// The int8 weight store of one network (every weight byte of the net lives in these `Vec`s).
-#[derive(Clone, Debug)]
-pub(crate) struct Int8Store {
-    /// Hidden-layer weights; layer `k` starts at quad row `hidden[k].row0` and has
-    /// `n_blk · ceil(n_in / 4)` quad rows (block `b`, quad `q` at `row0 + b · ceil(n_in/4) + q`).
-    pub(crate) quads: Vec<QuadBlock>,
-    /// Per-output-channel weight scales, indexed exactly like `Net::bias` (padding lanes 0).
-    pub(crate) scale: Vec<Block>,
-    /// The output layer's f32 weight rows (`out.row0` indexes this `Vec`).
-    pub(crate) out: Vec<Block>,
-}
+/// The int8 weight store of one network: hidden-layer quad rows; layer `k` starts at row
+/// `hidden[k].row0` and has `n_blk · ceil(n_in / 4)` rows (block `b`, quad `q` at
+/// `row0 + b · ceil(n_in/4) + q`).
+pub(crate) type Int8Store = super::QuantStore<QuadBlock>;
 
 /// Number of input quads of a layer with `n_in` inputs.
 pub(crate) fn quads(n_in: usize) -> usize {
@@ -70,7 +63,7 @@ pub(super) fn forward_portable(net: &Net, s: &mut Scratch) -> f32 {
         for (blk, yb) in y[..p.n_blk].iter_mut().enumerate() {
             let mut acc = [0f32; LANES];
             for q in 0..nq {
-                let w = &st.quads[p.row0 + blk * nq + q].0;
+                let w = &st.rows[p.row0 + blk * nq + q].0;
                 for j in 0..4 {
                     let i = 4 * q + j;
                     let xi = x[i / LANES].0[i % LANES];

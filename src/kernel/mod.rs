@@ -197,6 +197,18 @@ pub(crate) struct LayerPlan {
     pub(crate) bias_blk0: usize,
 }
 
+/// The weight store of a quantised network (int8 quad rows or int16 pair rows): every weight byte of
+/// the net lives in these `Vec`s.
+#[derive(Clone, Debug)]
+pub(crate) struct QuantStore<R> {
+    /// Hidden-layer code rows (64 bytes each; layout per dtype in `int8.rs` / `int16.rs`).
+    pub(crate) rows: Vec<R>,
+    /// Per-output-channel weight scales, indexed exactly like `Net::bias` (padding lanes 0).
+    pub(crate) scale: Vec<Block>,
+    /// The output layer's f32 weight rows (`out.row0` indexes this `Vec`).
+    pub(crate) out: Vec<Block>,
+}
+
 /// The re-laid-out weights.
 #[derive(Clone, Debug)]
 pub(crate) enum Store {
@@ -384,7 +396,11 @@ fn int8_store(
             quads[p.row0 + blk * nq + i / 4].0[4 * lane + i % 4] = int8_code(v, sc);
         },
     );
-    Int8Store { quads, scale, out }
+    Int8Store {
+        rows: quads,
+        scale,
+        out,
+    }
 }
 
 /// Quantises the hidden layers of `w` into the int16 pair layout ([`int16::pair_row`]).
@@ -409,7 +425,11 @@ fn int16_store(
                 int16_code(v, sc);
         },
     );
-    Int16Store { pairs, scale, out }
+    Int16Store {
+        rows: pairs,
+        scale,
+        out,
+    }
 }
 
 impl Mlp {
@@ -594,8 +614,8 @@ impl Net {
         match &self.store {
             Store::F32(v) => [bytes(v), &[], &[]],
             Store::Half(v) => [bytes(v), &[], &[]],
-            Store::Int8(st) => [bytes(&st.quads), bytes(&st.scale), bytes(&st.out)],
-            Store::Int16(st) => [bytes(&st.pairs), bytes(&st.scale), bytes(&st.out)],
+            Store::Int8(st) => [bytes(&st.rows), bytes(&st.scale), bytes(&st.out)],
+            Store::Int16(st) => [bytes(&st.rows), bytes(&st.scale), bytes(&st.out)],
         }
     }
 
@@ -604,8 +624,8 @@ impl Net {
         match &self.store {
             Store::F32(v) => v.len(),
             Store::Half(v) => 2 * v.len(),
-            Store::Int8(st) => st.quads.len(),
-            Store::Int16(st) => st.pairs.len(),
+            Store::Int8(st) => st.rows.len(),
+            Store::Int16(st) => st.rows.len(),
         }
     }
 

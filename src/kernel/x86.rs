@@ -24,8 +24,8 @@ fn weight_ptr(store: &Store) -> *const u8 {
     match store {
         Store::F32(v) => v.as_ptr().cast(),
         Store::Half(v) => v.as_ptr().cast(),
-        Store::Int8(st) => st.quads.as_ptr().cast(),
-        Store::Int16(st) => st.pairs.as_ptr().cast(),
+        Store::Int8(st) => st.rows.as_ptr().cast(),
+        Store::Int16(st) => st.rows.as_ptr().cast(),
     }
 }
 
@@ -473,7 +473,7 @@ mod avx512_i8 {
     /// AVX-512F must be available and `net.fits(s)` must hold for `net.store == Store::Int8(st)`.
     #[target_feature(enable = "avx512f")]
     pub(super) unsafe fn run_decode(net: &Net, st: &Int8Store, s: &mut Scratch) -> f32 {
-        let w = st.quads.as_ptr().cast::<u8>();
+        let w = st.rows.as_ptr().cast::<u8>();
         let a = s.a.as_mut_ptr().cast::<f32>();
         let b = s.b.as_mut_ptr().cast::<f32>();
         let mut src = s.xin.as_ptr().cast::<f32>();
@@ -494,7 +494,7 @@ mod avx512_i8 {
     /// `net.store == Store::Int8(st)`.
     #[target_feature(enable = "avx512f,avx512bw,avx512vnni")]
     pub(super) unsafe fn run_vnni(net: &Net, st: &Int8Store, s: &mut Scratch) -> f32 {
-        let w = st.quads.as_ptr().cast::<u8>();
+        let w = st.rows.as_ptr().cast::<u8>();
         let a = s.a.as_mut_ptr().cast::<f32>();
         let b = s.b.as_mut_ptr().cast::<f32>();
         let qb = s.q.as_mut_ptr().cast::<u8>();
@@ -759,7 +759,7 @@ mod avx2_i8 {
     /// AVX2 and FMA must be available and `net.fits(s)` must hold for `net.store == Store::Int8(st)`.
     #[target_feature(enable = "avx2,fma")]
     pub(super) unsafe fn run(net: &Net, st: &Int8Store, s: &mut Scratch) -> f32 {
-        let w = st.quads.as_ptr().cast::<u8>();
+        let w = st.rows.as_ptr().cast::<u8>();
         let sc = st.scale.as_ptr().cast::<f32>();
         let bi = net.bias.as_ptr().cast::<f32>();
         let a = s.a.as_mut_ptr().cast::<f32>();

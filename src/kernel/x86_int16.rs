@@ -104,7 +104,7 @@ macro_rules! avx512_int16 {
             /// `net.store == Store::Int16(st)`.
             #[target_feature(enable = $feat)]
             pub(super) unsafe fn run(net: &Net, st: &Int16Store, s: &mut Scratch) -> f32 {
-                let w = st.pairs.as_ptr().cast::<u8>();
+                let w = st.rows.as_ptr().cast::<u8>();
                 let sc = st.scale.as_ptr().cast::<f32>();
                 let bi = net.bias.as_ptr().cast::<f32>();
                 let a = s.a.as_mut_ptr().cast::<f32>();
@@ -288,7 +288,7 @@ mod avx2 {
     /// AVX2 and FMA must be available and `net.fits(s)` must hold for `net.store == Store::Int16(st)`.
     #[target_feature(enable = "avx2,fma")]
     pub(super) unsafe fn run(net: &Net, st: &Int16Store, s: &mut Scratch) -> f32 {
-        let w = st.pairs.as_ptr().cast::<u8>();
+        let w = st.rows.as_ptr().cast::<u8>();
         let sc = st.scale.as_ptr().cast::<f32>();
         let bi = net.bias.as_ptr().cast::<f32>();
         let a = s.a.as_mut_ptr().cast::<f32>();
