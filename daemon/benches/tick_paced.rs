@@ -342,6 +342,10 @@ fn accuracy_gate(probes: usize) {
 fn main() {
     // `cargo bench` passes `--bench`; a test run (`cargo test --benches`) passes nothing: be quick.
     let full = std::env::args().any(|a| a == "--bench");
+    // Weights from the heap, advised onto huge pages, as frictiond places them.
+    if std::env::var_os("TICK_PACED_NO_HUGE").is_none() {
+        frictiond::params::heap_for_weights();
+    }
     let priority = fifo_priority();
     // SAFETY: no preconditions.
     unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1, 0, 0, 0) };
@@ -352,6 +356,15 @@ fn main() {
     let mut evict_buf = vec![0u8; if full { EVICT_BYTES } else { 1 << 20 }];
     let t0 = monotonic_ns();
     accuracy_gate(if full { 1000 } else { 20 });
+    {
+        let p = params(32, Some(StorageDtype::Int16), 2);
+        let bytes: usize = p.joints.iter().map(|j| j.model.weight_bytes()).sum();
+        println!(
+            "Huge pages: `Params::advise_huge_pages` collapsed {:.1} MiB of heap around the 32 int16 networks' {:.1} MiB of weights into 2 MiB pages (TICK_PACED_NO_HUGE=1 turns it off)\n",
+            p.advise_huge_pages() as f64 / f64::from(1 << 20),
+            bytes as f64 / f64::from(1 << 20)
+        );
+    }
     where_the_time_goes(&mut evict_buf);
 
     println!(
