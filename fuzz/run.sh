@@ -10,9 +10,10 @@
 # and ROS 2 MCAP robot-log importers of `frictl import csv|mcap`, with the column/unit/sign spec taken
 # from the input). The last four start from the files in fuzz/seeds/<target>/ (shipped configs, a small
 # dataset + sidecar, small exports, small CSV logs and MCAP bags written by
-# tools/logs/tests/fixtures/make_fixtures.py mcap-seed). Not fuzzed: the `.mat` importer
-# (`frictl import mat`), which reads HDF5 through the C library (cargo feature `mat`); its bad-input
-# handling is tested in tools/logs/tests/ against files h5py writes.
+# tools/logs/tests/fixtures/make_fixtures.py mcap-seed). mat_import (the YARP `.mat` importer of
+# `frictl import mat`, cargo feature `mat`) is structure-aware: each input is the plan of an HDF5 file
+# that the target writes and imports; it needs the system HDF5 library and is left out of the default
+# list, with a message, where pkg-config finds none.
 # Installs cargo-fuzz if missing, seeds each corpus (the .fwt corpus with valid files written by the test
 # `fuzz_seed_files_are_valid` in tests/weights_bad_input.rs; the CAN corpora with a few valid frames and
 # log lines written here), builds all targets once, then runs libFuzzer with ASan on the stable toolchain
@@ -22,6 +23,11 @@ set -euo pipefail
 SECS="${1:-60}"
 shift || true
 ALL=(weights_reader can_mit_decode can_odrive_decode candump_parse frictiond_config dataset_readers onnx_import log_importers)
+if pkg-config --exists hdf5 2>/dev/null || [ -e /usr/include/hdf5/serial/hdf5.h ]; then
+  ALL+=(mat_import)
+else
+  echo "fuzz: no system HDF5 (apt install libhdf5-dev): mat_import left out"
+fi
 if [ $# -gt 0 ]; then TARGETS=("$@"); else TARGETS=("${ALL[@]}"); fi
 cd "$(dirname "$0")/.."
 ROOT="$(pwd)"
@@ -60,13 +66,16 @@ for t in "${TARGETS[@]}"; do
       seed "$t" fd '(1.000000) vcan1 123##1DEADBEEF\n(1.000001) vcan1 123#0011223344556677_C\n' ;;
     frictiond_config|dataset_readers|onnx_import|log_importers)
       cp "$ROOT/fuzz/seeds/$t/"* "$ROOT/fuzz/corpus/$t/" ;;
+    mat_import) ;; # structure-aware: libFuzzer starts from the empty plan
     *) echo "unknown fuzz target $t (known: ${ALL[*]})" >&2; exit 2 ;;
   esac
 done
 
 echo "== building ${TARGETS[*]}"
+features() { [ "$1" = mat_import ] && echo "--features=mat"; true; }
 for t in "${TARGETS[@]}"; do
-  RUSTC_BOOTSTRAP=1 cargo fuzz build "$t"
+  # shellcheck disable=SC2046
+  RUSTC_BOOTSTRAP=1 cargo fuzz build $(features "$t") "$t"
 done
 for t in "${TARGETS[@]}"; do
   log="$ROOT/fuzz/artifacts/$t.log"
@@ -80,7 +89,10 @@ for t in "${TARGETS[@]}"; do
   fi
   # The text, protobuf and log targets: inputs up to 64 KiB (their seeds are a few KB).
   case "$t" in frictiond_config|dataset_readers|onnx_import|log_importers) limit+=(-max_len=65536) ;; esac
-  RUSTC_BOOTSTRAP=1 cargo fuzz run "$t" "$ROOT/fuzz/corpus/$t" -- "${limit[@]}" \
+  # An HDF5 file per input: a plan that makes the importer read for more than 10 s is a hang.
+  case "$t" in mat_import) limit+=(-max_len=4096 -timeout=10) ;; esac
+  # shellcheck disable=SC2046
+  RUSTC_BOOTSTRAP=1 cargo fuzz run $(features "$t") "$t" "$ROOT/fuzz/corpus/$t" -- "${limit[@]}" \
     -print_final_stats=1 2> "$log" || { tail -n 60 "$log" >&2; echo "fuzz: $t FAILED (see $log)"; exit 1; }
   runs=$(grep -oE 'stat::number_of_executed_units: *[0-9]+' "$log" | grep -oE '[0-9]+$' | tail -n1)
   secs=$(grep -oE 'Done [0-9]+ runs in [0-9]+ second' "$log" | grep -oE '[0-9]+ second' | grep -oE '[0-9]+' | tail -n1)

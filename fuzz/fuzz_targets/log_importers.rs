@@ -1,7 +1,7 @@
 //! Fuzz target: the robot-log importers of `frictionless-logs` as `frictl import csv|mcap` calls them:
 //! `CsvSpec::parse` (the `--column`/`--unit`/`--negate` texts) + `csv_log::read`, and
 //! `mcap_log::parse_effort` (the `--effort` text) + `mcap_log::read` (ROS 2 `JointState` bags).
-//! `.mat` (HDF5 through the C library) is not fuzzed here.
+//! `.mat` (HDF5 through the C library) has its own target, `mat_import`.
 //!
 //! Input: a spec, then (after the first 0xFF byte, which never occurs in UTF-8) the log file's bytes;
 //! without a 0xFF byte the whole input is the file and the spec is empty. The spec is text, one
@@ -22,10 +22,14 @@
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
+use frictionless_logs::Role;
 use frictionless_logs::csv_log::{self, CsvSpec};
 use frictionless_logs::mcap_log::{self, McapSpec};
-use frictionless_logs::{ImportedRun, Role};
 use libfuzzer_sys::fuzz_target;
+
+#[path = "common/imported_run.rs"]
+mod imported_run;
+use imported_run::check;
 
 /// One scratch directory per fuzzing process (the readers take paths).
 fn dir() -> &'static PathBuf {
@@ -40,38 +44,6 @@ fn dir() -> &'static PathBuf {
         std::fs::create_dir_all(&d).expect("scratch dir");
         d
     })
-}
-
-/// The invariants of an accepted run.
-fn check(run: &ImportedRun) {
-    let s = &run.signals;
-    let n = s.time_s.len();
-    assert!(n >= 2, "an accepted run has at least 2 rows");
-    assert_eq!(s.chunk.len(), n, "one chunk id per row");
-    assert_eq!(run.report.rows_used, n as u64, "rows_used counts the rows");
-    assert!(run.report.rows_used <= run.report.rows_read);
-    assert!(
-        s.time_s.iter().all(|t| t.is_finite()) && s.time_s.windows(2).all(|w| w[0] < w[1]),
-        "time is finite and strictly increasing"
-    );
-    for col in [
-        &s.s_rad,
-        &s.sdot_rad_s,
-        &s.sddot_rad_s2,
-        &s.theta_motor_rad,
-        &s.omega_motor_rad_s,
-        &s.current_a,
-        &s.tau_joint_nm,
-        &s.tau_motor_nm,
-        &s.tau_f_nm,
-        &s.temperature_c,
-    ]
-    .into_iter()
-    .flatten()
-    {
-        assert_eq!(col.len(), n, "one value per row in every signal");
-        assert!(col.iter().all(|v| v.is_finite()), "every value is finite");
-    }
 }
 
 fuzz_target!(|data: &[u8]| {

@@ -11,7 +11,10 @@
 //! (counted). Without that channel the whole file is one stream split by the pipeline's gap rule.
 //!
 //! Bounded: each channel's `data` (N, 1, n) is read as hyperslabs of 65 536 rows of the one joint's
-//! column, so memory is the joint's signals, whatever the file size.
+//! column, so memory is the joint's signals, whatever the file size. Sizes are checked before
+//! anything is read: a cellstr holds at most [`MAX_NAMES`] names of at most [`MAX_NAME_UNITS`] code
+//! units, and a dataset may not declare more bytes than the file could hold ([`check_stored`]: an
+//! HDF5 dataset whose chunks were never written reads as fill values of any declared size).
 
 use std::io::Read;
 use std::path::Path;
@@ -36,6 +39,16 @@ pub struct MatSpec {
 const ROOT: &str = "robot_logger_device";
 const DESIRED: &str = "current_control/motors/desired/current";
 const BLOCK: usize = 1 << 16;
+/// Most names a cellstr (`elements_names`) may hold (a robot has tens of joints).
+pub const MAX_NAMES: usize = 1 << 16;
+/// Longest name, in UTF-16 code units.
+pub const MAX_NAME_UNITS: usize = 4096;
+/// deflate's largest compression ratio is 1032:1 (RFC 1951: a 258-byte match per 2 bits): a dataset
+/// that declares more than this many times its stored bytes (plus [`STORED_SLACK`]) holds unwritten
+/// chunks, not data. MATLAB v7.3 compresses with deflate only.
+const MAX_RATIO: u64 = 1032;
+/// Small datasets pass [`check_stored`] whatever their storage (headers, fill-value defaults).
+const STORED_SLACK: u64 = 1 << 20;
 
 /// One channel: its `data` dataset, sample count and the joint's column.
 struct Channel {
@@ -50,17 +63,51 @@ fn h5err(path: &Path, what: &str, e: impl std::fmt::Display) -> LogsError {
     }
 }
 
-/// A MATLAB char array: u16 UTF-16 code units, or empty (`MATLAB_empty`).
+/// Refuses a dataset that declares more bytes than it stores beyond what compression explains
+/// ([`MAX_RATIO`]): reading it would return fill values for as long as the declared size says.
+fn check_stored(path: &Path, what: &str, ds: &h5::Dataset) -> Result<(), LogsError> {
+    let elem = ds.dtype().map(|t| t.size()).unwrap_or(8).max(1) as u64;
+    let declared = (ds.size() as u64).saturating_mul(elem);
+    let stored = ds.storage_size();
+    if declared
+        > stored
+            .saturating_mul(MAX_RATIO)
+            .saturating_add(STORED_SLACK)
+    {
+        return Err(LogsError::Format {
+            path: path.display().to_string(),
+            msg: format!(
+                "{what} declares {} elements ({declared} bytes) but the file stores {stored} bytes \
+                 of it: unwritten chunks, not a log",
+                ds.size()
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// A MATLAB char array: u16 UTF-16 code units, or empty (`MATLAB_empty`); at most
+/// [`MAX_NAME_UNITS`] units.
 fn mat_string(ds: &h5::Dataset) -> Result<String, h5::Error> {
     if ds.attr("MATLAB_empty").is_ok() {
         return Ok(String::new());
+    }
+    if ds.size() > MAX_NAME_UNITS {
+        return Err(format!(
+            "a name of {} characters (at most {MAX_NAME_UNITS})",
+            ds.size()
+        )
+        .into());
     }
     let units: Vec<u16> = ds.read_raw()?;
     Ok(String::from_utf16_lossy(&units))
 }
 
-/// A MATLAB cellstr: object references to char arrays.
+/// A MATLAB cellstr: object references to char arrays; at most [`MAX_NAMES`] of them.
 fn cellstr(file: &h5::File, ds: &h5::Dataset) -> Result<Vec<String>, h5::Error> {
+    if ds.size() > MAX_NAMES {
+        return Err(format!("{} names (at most {MAX_NAMES})", ds.size()).into());
+    }
     let refs: Vec<ObjectReference1> = ds.read_raw()?;
     refs.iter()
         .map(|r| match file.dereference(r)? {
@@ -104,6 +151,7 @@ fn channel(
             ),
         });
     }
+    check_stored(path, &format!("{name}/data"), &data)?;
     let n = shape[0];
     let Some(col) = names.iter().position(|x| x == joint) else {
         return Err(LogsError::JointNotFound {
@@ -132,6 +180,7 @@ fn timestamps(
             msg: format!("{name}/timestamps has shape {shape:?}; expected ({n}, 1)"),
         });
     }
+    check_stored(path, &format!("{name}/timestamps"), &ts)?;
     Ok(ts)
 }
 
@@ -243,6 +292,7 @@ pub fn read(path: &Path, spec: &MatSpec, progress: Progress) -> Result<ImportedR
     if let Ok(g) = root.group(DESIRED)
         && let Ok(dts) = g.dataset("timestamps")
     {
+        check_stored(path, &format!("{DESIRED}/timestamps"), &dts)?;
         let m = dts.shape().first().copied().unwrap_or(0);
         let mut a = 0;
         while a < m {

@@ -610,3 +610,29 @@ fn yarp_mat_file_from_h5py() {
         "{e}"
     );
 }
+
+/// A dataset that declares 2³⁶ rows whose chunks were never written (a few KB on disk) is refused
+/// before any read, naming the dataset; trusting the declared size read fill values for hours.
+#[cfg(feature = "mat")]
+#[test]
+fn mat_dataset_declaring_more_than_it_stores_is_refused() {
+    use frictionless_logs::mat_log::{MatSpec, read};
+    let Some(path) = fixture("mat-hollow", "hollow.mat") else {
+        return;
+    };
+    assert!(std::fs::metadata(&path).unwrap().len() < 4 << 20);
+    let sp = MatSpec {
+        joint: None,
+        negate: vec![],
+        desired_gap_s: 1.0,
+    };
+    let e = read(&path, &sp, &mut no_progress())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("hollow.mat")
+            && e.contains("joints_state/positions/data")
+            && e.contains("declares 1030792151040 elements"),
+        "{e}"
+    );
+}

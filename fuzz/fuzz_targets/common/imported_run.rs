@@ -1,0 +1,37 @@
+//! What every accepted [`ImportedRun`] must satisfy, whichever importer produced it (shared by the
+//! `log_importers` and `mat_import` targets through `#[path]`).
+
+use frictionless_logs::ImportedRun;
+
+/// The invariants of an accepted run: at least two rows, one chunk id and one finite value per row in
+/// every signal, strictly increasing finite time, and a report that counts the rows it used.
+pub fn check(run: &ImportedRun) {
+    let s = &run.signals;
+    let n = s.time_s.len();
+    assert!(n >= 2, "an accepted run has at least 2 rows");
+    assert_eq!(s.chunk.len(), n, "one chunk id per row");
+    assert_eq!(run.report.rows_used, n as u64, "rows_used counts the rows");
+    assert!(run.report.rows_used <= run.report.rows_read);
+    assert!(
+        s.time_s.iter().all(|t| t.is_finite()) && s.time_s.windows(2).all(|w| w[0] < w[1]),
+        "time is finite and strictly increasing"
+    );
+    for col in [
+        &s.s_rad,
+        &s.sdot_rad_s,
+        &s.sddot_rad_s2,
+        &s.theta_motor_rad,
+        &s.omega_motor_rad_s,
+        &s.current_a,
+        &s.tau_joint_nm,
+        &s.tau_motor_nm,
+        &s.tau_f_nm,
+        &s.temperature_c,
+    ]
+    .into_iter()
+    .flatten()
+    {
+        assert_eq!(col.len(), n, "one value per row in every signal");
+        assert!(col.iter().all(|v| v.is_finite()), "every value is finite");
+    }
+}
