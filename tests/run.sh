@@ -27,20 +27,21 @@ else
   unset FRICTIONLESS_REFS
 fi
 
-# Cargo builds a package's own binaries for its integration tests (frictiond for daemon/tests), not
-# another package's: the frictiond tests that run `frictl` find it in target/<profile>/, built here.
-echo "== cargo build --bins (end-to-end tests start frictiond and frictl as processes)"
-cargo build --workspace --bins
-
-echo "== cargo test"
-cargo test --workspace --no-fail-fast 2>&1 | tee target/cargo-test.log
-
 # `frictl import mat` needs the system HDF5 library (cargo feature `mat`, off by default so the first
-# command needs no C library): tested where libhdf5-dev is installed (CI installs it).
+# command needs no C library): where libhdf5-dev is installed (CI installs it), the whole run is built
+# with it, so the .mat tests run in the same build instead of a second one.
+FEATURES=()
 if pkg-config --exists hdf5 2>/dev/null || [ -e /usr/include/hdf5/serial/hdf5.h ] || [ -e /usr/include/hdf5.h ]; then
-  echo "== cargo test --features mat (YARP .mat import through HDF5)"
-  cargo test -p frictionless-logs --features mat --no-fail-fast 2>&1 | tee -a target/cargo-test.log
-  cargo test -p frictl --features mat --test frictl --no-fail-fast import_cli 2>&1 | tee -a target/cargo-test.log
+  FEATURES=(--features frictl/mat,frictionless-logs/mat)
+  echo "== with the .mat importer (system HDF5 found): ${FEATURES[*]}"
 else
   echo "== skipped: .mat import tests (no system HDF5; apt install libhdf5-dev)"
 fi
+
+# Cargo builds a package's own binaries for its integration tests (frictiond for daemon/tests), not
+# another package's: the frictiond tests that run `frictl` find it in target/<profile>/, built here.
+echo "== cargo build --bins (end-to-end tests start frictiond and frictl as processes)"
+cargo build --workspace --bins "${FEATURES[@]}"
+
+echo "== cargo test"
+cargo test --workspace "${FEATURES[@]}" --no-fail-fast 2>&1 | tee target/cargo-test.log

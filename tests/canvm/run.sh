@@ -6,7 +6,8 @@
 # busybox, those modules (loaded in dependency order), the project's statically linked (musl) binaries
 # and the test harnesses that hold a `vcan` test. Inside, /init creates vcan0 (classic MTU 16) and vcan1, then runs each with
 # `--include-ignored --test-threads=1 --show-output vcan` (tests named `vcan…` and marked
-# #[ignore = "needs vcan"] on the host). The release binaries of the built packages (frictiond, frictl) are
+# #[ignore = "needs vcan"] on the host). The optimised binaries (cargo profile `canvm`: release without LTO
+# or debug info, half the build time) of the built packages (frictiond, frictl) are
 # in the VM's /bin (on PATH; FRICTIONLESS_IN_CANVM=1 tells tests to look there). Lines a test prints that
 # start with `bench:` (the in-VM benchmarks) are echoed here and saved to $CANVM_WORK/bench.txt.
 # Everything comes from apt, rustup and crates.io.
@@ -69,9 +70,9 @@ export CARGO_TARGET_DIR="$WORK/cargo"
 export RUSTFLAGS="-C target-cpu=x86-64-v2"
 pkgargs=""; for p in $PACKAGES; do pkgargs="$pkgargs -p $p"; done
 log "building bins and test harnesses for $TARGET ($PACKAGES)"
-cargo build --release --target "$TARGET" $pkgargs --bins 2>&1 | tail -n 3 >&2
+cargo build --profile canvm --target "$TARGET" $pkgargs --bins 2>&1 | tail -n 3 >&2
 testargs=""; for t in ${CANVM_TESTS:-}; do testargs="$testargs --test $t"; done
-harnesses=$(cargo test --release --target "$TARGET" $pkgargs $testargs --no-run --message-format=json 2>"$WORK/build-tests.log" |
+harnesses=$(cargo test --profile canvm --target "$TARGET" $pkgargs $testargs --no-run --message-format=json 2>"$WORK/build-tests.log" |
   python3 -c 'import json,sys
 for l in sys.stdin:
     try: m=json.loads(l)
@@ -99,7 +100,7 @@ for m in drivers/net/can/dev/can-dev.ko drivers/net/can/vcan.ko drivers/net/can/
          net/can/can-raw.ko net/can/can-bcm.ko net/can/can-gw.ko; do
   cp "$MODS/$m" "$IR/mods/"
 done
-for b in "$CARGO_TARGET_DIR/$TARGET/release/"*; do
+for b in "$CARGO_TARGET_DIR/$TARGET/canvm/"*; do
   [ -f "$b" ] && [ -x "$b" ] && cp "$b" "$IR/bin/" || true
 done
 # The closed-loop tests start these from PATH: make sure they are there when their package is built.
