@@ -19,7 +19,14 @@
 //!
 //! No asserts, no criterion for the paced part. Run: `cargo bench -p frictiond --bench tick_paced`
 //! (about 8 minutes: 90 cells × `TICKS` ticks at 1 kHz; `TICK_PACED_TICKS=n` changes the count,
-//! `TICK_PACED_DTYPES=int16,f16` measures only those dtypes).
+//! `TICK_PACED_DTYPES=int16,f16` measures only those dtypes, `TICK_PACED_JOINTS=32`,
+//! `TICK_PACED_THREADS=2` and `TICK_PACED_PREFETCH=lead` only those cells, and
+//! `TICK_PACED_REPEAT=k` runs each paced cell k times, `TICK_PACED_ONLY_PACED=1` skips parts 0
+//! and 1; `TICK_PACED_NO_HUGE=1` leaves the weights on
+//! 4 KiB pages instead of [`Params::advise_huge_pages`]' 2 MiB pages — a process-wide choice, since
+//! heap advised once stays advised: compare the two in alternating runs).
+//! Each paced cell also reports the time the hypervisor stole from this VM's vCPUs meanwhile
+//! (`steal` in `/proc/stat`, all CPUs, ms): a cell with steal did not run on a quiet machine.
 //! Runs as an ordinary thread (SCHED_OTHER) unless `TICK_PACED_PRIORITY=p` asks for SCHED_FIFO `p`
 //! for the bench thread and the helper (as frictiond's `[loop] priority`); timer slack 1 ns as in
 //! frictiond. On a shared machine the numbers include its load — note `uptime` next to them.
@@ -52,16 +59,35 @@ const DTYPES: [(&str, StorageDtype); 5] = [
 
 /// [`DTYPES`], or those named in `TICK_PACED_DTYPES` (comma-separated, e.g. `int16,f16`).
 fn dtypes() -> Vec<(&'static str, StorageDtype)> {
-    match std::env::var("TICK_PACED_DTYPES") {
-        Ok(list) => DTYPES
-            .into_iter()
-            .filter(|(n, _)| list.split(',').any(|w| w.trim() == *n))
-            .collect(),
-        Err(_) => DTYPES.to_vec(),
-    }
+    only("TICK_PACED_DTYPES", &DTYPES, |d| d.0.to_owned())
 }
 /// Joint counts: one joint, ergoCub legs + torso, a whole humanoid.
 const JOINTS: [usize; 3] = [1, 15, 32];
+
+/// The items of `all` whose name is listed in the environment variable `var` (comma-separated), or
+/// all of them when it is unset.
+fn only<T: Copy>(var: &str, all: &[T], name: impl Fn(&T) -> String) -> Vec<T> {
+    match std::env::var(var) {
+        Ok(list) => all
+            .iter()
+            .filter(|x| list.split(',').any(|w| w.trim() == name(x)))
+            .copied()
+            .collect(),
+        Err(_) => all.to_vec(),
+    }
+}
+
+/// Time stolen by the hypervisor from all of this VM's CPUs so far [ms] (`/proc/stat` `cpu` line,
+/// 8th value, in USER_HZ = 100 ticks/s); 0 where it is not reported.
+fn steal_ms() -> u64 {
+    std::fs::read_to_string("/proc/stat")
+        .ok()
+        .and_then(|t| {
+            let line = t.lines().next()?.to_owned();
+            line.split_whitespace().nth(8)?.parse::<u64>().ok()
+        })
+        .map_or(0, |ticks| ticks * 10)
+}
 /// Prefetch policies (`[loop] prefetch`).
 const PREFETCH: [(&str, Prefetch); 3] = [
     ("off", Prefetch::Off),
@@ -355,8 +381,11 @@ fn main() {
         .unwrap_or(if full { TICKS } else { 50 });
     let mut evict_buf = vec![0u8; if full { EVICT_BYTES } else { 1 << 20 }];
     let t0 = monotonic_ns();
-    accuracy_gate(if full { 1000 } else { 20 });
-    {
+    let paced_only = std::env::var_os("TICK_PACED_ONLY_PACED").is_some();
+    if !paced_only {
+        accuracy_gate(if full { 1000 } else { 20 });
+    }
+    if std::env::var_os("TICK_PACED_NO_HUGE").is_none() {
         let p = params(32, Some(StorageDtype::Int16), 2);
         let bytes: usize = p.joints.iter().map(|j| j.model.weight_bytes()).sum();
         println!(
@@ -365,7 +394,9 @@ fn main() {
             bytes as f64 / f64::from(1 << 20)
         );
     }
-    where_the_time_goes(&mut evict_buf);
+    if !paced_only {
+        where_the_time_goes(&mut evict_buf);
+    }
 
     println!(
         "### Paced at 1 kHz: compute time per tick, wake → commands ready [µs], {ticks} ticks per cell, {}\n",
@@ -374,11 +405,20 @@ fn main() {
             None => "SCHED_OTHER".to_owned(),
         }
     );
+    let repeat: usize = std::env::var("TICK_PACED_REPEAT")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1);
+    let pages = if std::env::var_os("TICK_PACED_NO_HUGE").is_some() {
+        "4 KiB"
+    } else {
+        "2 MiB"
+    };
     println!(
-        "| joints | dtype | hot 1 net p50 | hot tick p50 | threads | prefetch | p50 | p99 | p99.9 | late | stolen |"
+        "| joints | dtype | hot 1 net p50 | hot tick p50 | threads | prefetch | pages | p50 | p99 | p99.9 | late | stolen | steal [ms] |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|");
-    for n in JOINTS {
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for n in only("TICK_PACED_JOINTS", &JOINTS, |j| j.to_string()) {
         for (name, dtype) in dtypes() {
             let mut net = paper_net(&[40, 268, 215, 1], 1, dtype);
             let (net_hot, _) = forward_hot_cold(&mut net, &mut evict_buf[..0]);
@@ -394,37 +434,42 @@ fn main() {
                 hot.push(monotonic_ns() - t);
             }
             hot.sort_unstable();
-            for threads in [1u8, 2] {
-                let mut p = params(n, Some(dtype), threads);
-                for (pname, prefetch) in PREFETCH {
-                    let plan = CrewPlan {
-                        period_ns: PERIOD_NS,
-                        budget_ns: PERIOD_NS / 4 * 3,
-                        release_ns: HELPER_RELEASE_GRACE_NS,
-                        prefetch,
-                        lead_ns: LEAD_NS,
-                        lockstep: false,
-                    };
-                    let (s, late, stolen) = if threads == 2 {
-                        let rt = ThreadRt {
-                            priority,
-                            ..ThreadRt::default()
+            for threads in only("TICK_PACED_THREADS", &[1u8, 2], |t| t.to_string()) {
+                for (pname, prefetch) in only("TICK_PACED_PREFETCH", &PREFETCH, |p| p.0.into()) {
+                    for _ in 0..repeat {
+                        let mut p = params(n, Some(dtype), threads);
+                        let plan = CrewPlan {
+                            period_ns: PERIOD_NS,
+                            budget_ns: PERIOD_NS / 4 * 3,
+                            release_ns: HELPER_RELEASE_GRACE_NS,
+                            prefetch,
+                            lead_ns: LEAD_NS,
+                            lockstep: false,
                         };
-                        let (mut crew, _, _) = Crew::spawn(plan, rt).expect("helper thread");
-                        let r = paced(&mut p, n, Some(&mut crew), &plan, ticks);
-                        crew.stop();
-                        r
-                    } else {
-                        paced(&mut p, n, None, &plan, ticks)
-                    };
-                    println!(
-                        "| {n} | {name} | {} | {} | {threads} | {pname} | {} | {} | {} | {late} | {stolen} |",
-                        us(net_hot),
-                        us(quantile(&hot, 0.5)),
-                        us(quantile(&s, 0.5)),
-                        us(quantile(&s, 0.99)),
-                        us(quantile(&s, 0.999)),
-                    );
+                        let steal0 = steal_ms();
+                        let (s, late, stolen) = if threads == 2 {
+                            let rt = ThreadRt {
+                                priority,
+                                ..ThreadRt::default()
+                            };
+                            let (mut crew, _, _) = Crew::spawn(plan, rt).expect("helper thread");
+                            let r = paced(&mut p, n, Some(&mut crew), &plan, ticks);
+                            crew.stop();
+                            r
+                        } else {
+                            paced(&mut p, n, None, &plan, ticks)
+                        };
+                        println!(
+                            "| {n} | {name} | {} | {} | {threads} | {pname} | {} | {} | {} | {} | {late} | {stolen} | {} |",
+                            us(net_hot),
+                            us(quantile(&hot, 0.5)),
+                            pages,
+                            us(quantile(&s, 0.5)),
+                            us(quantile(&s, 0.99)),
+                            us(quantile(&s, 0.999)),
+                            steal_ms() - steal0,
+                        );
+                    }
                 }
             }
         }
