@@ -289,11 +289,6 @@ impl PinnEstimator {
     pub fn weight_bytes(&self) -> usize {
         self.mlp.weight_bytes()
     }
-
-    /// The memory one inference streams ([`Mlp::weight_memory`]).
-    pub fn weight_memory(&self) -> impl Iterator<Item = &[u8]> {
-        self.mlp.weight_memory()
-    }
 }
 
 impl FrictionModel for PinnEstimator {
@@ -353,15 +348,6 @@ impl JointModel {
         match self {
             JointModel::Pinn(p) => p.weight_bytes(),
             _ => 0,
-        }
-    }
-
-    /// The memory one estimate streams ([`PinnEstimator::weight_memory`]; nothing for the static
-    /// models).
-    pub fn weight_memory(&self) -> Vec<&[u8]> {
-        match self {
-            JointModel::Pinn(p) => p.weight_memory().collect(),
-            _ => Vec::new(),
         }
     }
 }

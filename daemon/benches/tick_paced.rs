@@ -22,9 +22,7 @@
 //! `TICK_PACED_DTYPES=int16,f16` measures only those dtypes, `TICK_PACED_JOINTS=32`,
 //! `TICK_PACED_THREADS=2` and `TICK_PACED_PREFETCH=lead` only those cells, and
 //! `TICK_PACED_REPEAT=k` runs each paced cell k times, `TICK_PACED_ONLY_PACED=1` skips parts 0
-//! and 1; `TICK_PACED_NO_HUGE=1` leaves the weights on
-//! 4 KiB pages instead of [`Params::advise_huge_pages`]' 2 MiB pages — a process-wide choice, since
-//! heap advised once stays advised: compare the two in alternating runs).
+//! and 1).
 //! Each paced cell also reports the time the hypervisor stole from this VM's vCPUs meanwhile
 //! (`steal` in `/proc/stat`, all CPUs, ms): a cell with steal did not run on a quiet machine.
 //! Runs as an ordinary thread (SCHED_OTHER) unless `TICK_PACED_PRIORITY=p` asks for SCHED_FIFO `p`
@@ -368,10 +366,6 @@ fn accuracy_gate(probes: usize) {
 fn main() {
     // `cargo bench` passes `--bench`; a test run (`cargo test --benches`) passes nothing: be quick.
     let full = std::env::args().any(|a| a == "--bench");
-    // Weights from the heap, advised onto huge pages, as frictiond places them.
-    if std::env::var_os("TICK_PACED_NO_HUGE").is_none() {
-        frictiond::params::heap_for_weights();
-    }
     let priority = fifo_priority();
     // SAFETY: no preconditions.
     unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1, 0, 0, 0) };
@@ -384,15 +378,6 @@ fn main() {
     let paced_only = std::env::var_os("TICK_PACED_ONLY_PACED").is_some();
     if !paced_only {
         accuracy_gate(if full { 1000 } else { 20 });
-    }
-    if std::env::var_os("TICK_PACED_NO_HUGE").is_none() {
-        let p = params(32, Some(StorageDtype::Int16), 2);
-        let bytes: usize = p.joints.iter().map(|j| j.model.weight_bytes()).sum();
-        println!(
-            "Huge pages: `Params::advise_huge_pages` collapsed {:.1} MiB of heap around the 32 int16 networks' {:.1} MiB of weights into 2 MiB pages (TICK_PACED_NO_HUGE=1 turns it off)\n",
-            p.advise_huge_pages() as f64 / f64::from(1 << 20),
-            bytes as f64 / f64::from(1 << 20)
-        );
     }
     if !paced_only {
         where_the_time_goes(&mut evict_buf);
@@ -409,15 +394,10 @@ fn main() {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(1);
-    let pages = if std::env::var_os("TICK_PACED_NO_HUGE").is_some() {
-        "4 KiB"
-    } else {
-        "2 MiB"
-    };
     println!(
-        "| joints | dtype | hot 1 net p50 | hot tick p50 | threads | prefetch | pages | p50 | p99 | p99.9 | late | stolen | steal [ms] |"
+        "| joints | dtype | hot 1 net p50 | hot tick p50 | threads | prefetch | p50 | p99 | p99.9 | late | stolen | steal [ms] |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     for n in only("TICK_PACED_JOINTS", &JOINTS, |j| j.to_string()) {
         for (name, dtype) in dtypes() {
             let mut net = paper_net(&[40, 268, 215, 1], 1, dtype);
@@ -460,10 +440,9 @@ fn main() {
                             paced(&mut p, n, None, &plan, ticks)
                         };
                         println!(
-                            "| {n} | {name} | {} | {} | {threads} | {pname} | {} | {} | {} | {} | {late} | {stolen} | {} |",
+                            "| {n} | {name} | {} | {} | {threads} | {pname} | {} | {} | {} | {late} | {stolen} | {} |",
                             us(net_hot),
                             us(quantile(&hot, 0.5)),
-                            pages,
                             us(quantile(&s, 0.5)),
                             us(quantile(&s, 0.99)),
                             us(quantile(&s, 0.999)),

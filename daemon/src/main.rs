@@ -148,7 +148,6 @@ fn main() -> std::process::ExitCode {
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
-    frictiond::params::heap_for_weights();
     let cfg = config::load(&cli.config)?;
     if cli.check {
         // Also build the runtime parameters (filters, models) so --check catches everything.

@@ -4,8 +4,8 @@
 //! What this module **is**: construction of per-joint friction estimators and control laws (filter
 //! coefficients designed here, not on the RT thread), and the model-file check used by `--check`.
 //!
-//! What it is **not**: no I/O besides reading model files (and `/proc/self/maps` to place the weights
-//! on huge pages); nothing here runs on the RT thread except the `#[inline]` estimator calls.
+//! What it is **not**: no I/O besides reading model files; nothing here runs on the RT thread except
+//! the `#[inline]` estimator calls.
 
 use std::path::PathBuf;
 
@@ -308,100 +308,5 @@ pub fn build(cfg: &Config, generation: u64) -> Result<Box<Params>, ParamsError> 
         helper_mask: 0,
     });
     p.split_threads(cfg.raw.loop_.rt_threads);
-    p.advise_huge_pages();
     Ok(p)
-}
-
-/// Makes large allocations come from the main heap (one mapping) rather than one `mmap` each, so
-/// that [`Params::advise_huge_pages`] can back the networks' weights with 2 MiB pages. Call once, at
-/// start-up, before building parameters (glibc only; elsewhere a no-op).
-pub fn heap_for_weights() {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    // SAFETY: `mallopt` only changes glibc's allocation policy for later allocations.
-    unsafe {
-        libc::mallopt(libc::M_MMAP_THRESHOLD, 64 << 20);
-    }
-}
-
-/// 2 MiB: an x86-64 / arm64 transparent huge page.
-#[cfg(target_os = "linux")]
-const HUGE_PAGE: usize = 2 << 20;
-
-/// `madvise` advice 25 (Linux ≥ 6.1): collapse the range into huge pages now. A kernel ABI value;
-/// older kernels refuse it with `EINVAL`, which is ignored.
-#[cfg(target_os = "linux")]
-const MADV_COLLAPSE: libc::c_int = 25;
-
-impl Params {
-    /// Asks the kernel to back the memory the networks stream every tick with 2 MiB pages
-    /// (`MADV_HUGEPAGE`, then `MADV_COLLAPSE` per 2 MiB) so a tick's weights take a handful of TLB
-    /// entries instead of one per 4 KiB (on a VM every miss is a nested page walk). Only inside the
-    /// process heap (`[heap]` in `/proc/self/maps`, where [`heap_for_weights`] puts them), never on
-    /// shared-memory or other mappings. Off the RT thread (called while building parameters); best
-    /// effort: returns the bytes of the 2 MiB-aligned heap range around the weights that the kernel
-    /// collapsed (0 where the kernel or the allocator does not allow it).
-    pub fn advise_huge_pages(&self) -> usize {
-        #[cfg(target_os = "linux")]
-        {
-            let (mut lo, mut hi) = (usize::MAX, 0usize);
-            for j in &self.joints {
-                for m in j.model.weight_memory() {
-                    lo = lo.min(m.as_ptr() as usize);
-                    hi = hi.max(m.as_ptr() as usize + m.len());
-                }
-            }
-            let Some((heap_lo, heap_hi)) = heap_range() else {
-                return 0;
-            };
-            if lo >= hi || lo < heap_lo || hi > heap_hi {
-                return 0;
-            }
-            let start = (lo & !(HUGE_PAGE - 1)).max(heap_lo.next_multiple_of(HUGE_PAGE));
-            let end = hi
-                .next_multiple_of(HUGE_PAGE)
-                .min(heap_hi & !(HUGE_PAGE - 1));
-            if start >= end {
-                return 0;
-            }
-            // SAFETY: `[start, end)` lies inside this process's heap mapping; the advice changes how
-            // the kernel backs those pages, never their contents.
-            unsafe { libc::madvise(start as *mut libc::c_void, end - start, libc::MADV_HUGEPAGE) };
-            let mut collapsed = 0;
-            let mut a = start;
-            while a < end {
-                // SAFETY: as above, one 2 MiB-aligned chunk inside the heap.
-                if unsafe { libc::madvise(a as *mut libc::c_void, HUGE_PAGE, MADV_COLLAPSE) } == 0 {
-                    collapsed += HUGE_PAGE;
-                }
-                a += HUGE_PAGE;
-            }
-            collapsed
-        }
-        #[cfg(not(target_os = "linux"))]
-        0
-    }
-}
-
-/// The heap's address range from `/proc/self/maps` (bounded read): from the first `[heap]` line's
-/// start to the last one's end (advice splits the heap into several `[heap]` lines; the brk area is
-/// one contiguous range), if any.
-#[cfg(target_os = "linux")]
-fn heap_range() -> Option<(usize, usize)> {
-    use std::io::Read;
-    let mut text = String::new();
-    std::fs::File::open("/proc/self/maps")
-        .ok()?
-        .take(4 << 20)
-        .read_to_string(&mut text)
-        .ok()?;
-    let mut range: Option<(usize, usize)> = None;
-    for line in text.lines().filter(|l| l.ends_with("[heap]")) {
-        let (lo, hi) = line.split_whitespace().next()?.split_once('-')?;
-        let (lo, hi) = (
-            usize::from_str_radix(lo, 16).ok()?,
-            usize::from_str_radix(hi, 16).ok()?,
-        );
-        range = Some(range.map_or((lo, hi), |(a, b)| (a.min(lo), b.max(hi))));
-    }
-    range
 }

@@ -2381,35 +2381,6 @@ kv = 0.0
         Crew::spawn(plan, ThreadRt::default()).unwrap().0
     }
 
-    /// `Params::advise_huge_pages` (what frictiond does after building parameters) reports whole
-    /// 2 MiB pages and changes no output: the same inputs give the same commands bit for bit.
-    #[test]
-    fn huge_page_advice_changes_no_output() {
-        crate::params::heap_for_weights();
-        let n = 11;
-        let mut plain = mixed_params(n, 1);
-        let mut advised = mixed_params(n, 1);
-        let collapsed = advised.advise_huge_pages();
-        assert_eq!(collapsed % (2 << 20), 0, "{collapsed}");
-        eprintln!("collapsed {} MiB", collapsed >> 20);
-        let (mut pa, mut pb) = (0u64, 0u64);
-        let (mut ca, mut cb) = (MotorCurrentCommand::zeroed(), MotorCurrentCommand::zeroed());
-        let (mut fa, mut fb) = ([0.0; MAX_JOINTS], [0.0; MAX_JOINTS]);
-        for t in 0..500 {
-            let (inp, fresh) = changing_inputs(n, t);
-            compute(&mut plain, &inp, fresh, &mut pa, &mut ca, &mut fa);
-            compute(&mut advised, &inp, fresh, &mut pb, &mut cb, &mut fb);
-            for k in 0..3 * n {
-                assert_eq!(
-                    ca.i_ref_a[k].to_bits(),
-                    cb.i_ref_a[k].to_bits(),
-                    "tick {t} joint {k}"
-                );
-                assert_eq!(ca.flags[k], cb.flags[k]);
-            }
-        }
-    }
-
     #[test]
     fn two_threads_give_the_one_thread_output_bit_for_bit() {
         let n = 11;

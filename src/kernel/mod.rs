@@ -562,24 +562,6 @@ impl Mlp {
         self.net.weight_spans().iter().map(|s| s.len()).sum()
     }
 
-    /// The memory one inference streams (the weight store's byte ranges, then the biases), for
-    /// callers that place it (e.g. advise huge pages) — read-only; empty ranges are left out.
-    pub fn weight_memory(&self) -> impl Iterator<Item = &[u8]> {
-        let bias = {
-            let b = &self.net.bias;
-            // SAFETY: `Block` is `repr(C, align(64))` around `[f32; 16]`: no padding, every byte
-            // initialised; the slice borrows `self`.
-            unsafe {
-                std::slice::from_raw_parts(b.as_ptr().cast::<u8>(), std::mem::size_of_val(&b[..]))
-            }
-        };
-        self.net
-            .weight_spans()
-            .into_iter()
-            .chain([bias])
-            .filter(|s| !s.is_empty())
-    }
-
     /// One inference on a raw (un-normalised) input; returns the single output (joint-side friction, Nm).
     ///
     /// Never allocates and never panics. Returns `f32::NAN` if `x.len() != self.n_inputs()` or if any

@@ -106,10 +106,6 @@ pub fn params(n: usize, pinn: Option<StorageDtype>, rt_threads: u8) -> Box<Param
         helper_mask: 0,
     });
     p.split_threads(rt_threads);
-    // As frictiond builds its parameters (TICK_PACED_NO_HUGE=1 leaves the weights on 4 KiB pages).
-    if std::env::var_os("TICK_PACED_NO_HUGE").is_none() {
-        p.advise_huge_pages();
-    }
     p
 }
 
