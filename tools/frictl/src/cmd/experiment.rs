@@ -45,7 +45,7 @@ pub enum JointSel {
     /// The ankle roll (index 1).
     #[value(name = "ankle_roll", alias = "ankle-roll")]
     AnkleRoll,
-    /// Both, in the same trials.
+    /// Both (sharing trials, unless `--jobs` leaves a core idle).
     Both,
 }
 
@@ -171,6 +171,11 @@ pub struct Args {
     /// for and 25× more damping on the ankle roll).
     #[arg(long, value_enum, default_value_t = ControllerInertia::Link)]
     pub controller_inertia: ControllerInertia,
+    /// Lockstep trials run at once, each with its own frictiond, plant and IPC namespace (the
+    /// results do not change, only the wall time). Default: the CPUs available. Real-time trials
+    /// always run one at a time.
+    #[arg(long)]
+    pub jobs: Option<usize>,
 }
 
 /// What the computed-torque controller's M contains.
@@ -615,6 +620,14 @@ fn suite_config(
         },
         lpf,
         rotor_inertia_in_m: args.controller_inertia == ControllerInertia::LinkRotor,
+        jobs: match (mode, args.jobs) {
+            (_, Some(0)) => anyhow::bail!("--jobs 0: at least one trial must run"),
+            (Mode::Realtime, Some(j)) if j > 1 => {
+                anyhow::bail!("--jobs {j}: real-time trials run one at a time (lockstep only)")
+            }
+            (_, Some(j)) => j,
+            (_, None) => std::thread::available_parallelism().map_or(1, |n| n.get()),
+        },
     })
 }
 

@@ -4,7 +4,10 @@
 //! joint and model that tracks within a [`TrackCriterion`], by [`KpBisection`]) and [`disturbance`]
 //! (hold, external torque pulse, release, position RMSE after release). Tasks on *different* joints
 //! share a trial (the knee and the ankle roll are independent plants in one plant process), so a
-//! `both` run costs no more trials than one joint.
+//! `both` run costs no more trials than one joint. In lockstep, trials of one batch run
+//! [`SuiteConfig::jobs`] at a time, each with its own frictiond, plant and IPC namespace: a lockstep
+//! trial is a chain of processes waking one another and leaves a core mostly idle, and its result
+//! does not depend on what else runs, so only the wall time changes.
 //!
 //! The references (paper-like, reference doc §9): ankle roll `0 − 0.15·cos(2π·0.25·t)` rad, knee
 //! `−0.8 − 0.4·cos(2π·0.2·t)` rad (centred in the knee's range, gravity-loaded); disturbance holds
@@ -52,6 +55,8 @@ pub struct SuiteConfig {
     pub lpf: [Option<Lpf>; 2],
     /// Reflected rotor inertia in the controller's M (see [`TrialOptions::rotor_inertia_in_m`]).
     pub rotor_inertia_in_m: bool,
+    /// Trials run at once (≥ 1; real-time trials run one at a time whatever this says).
+    pub jobs: usize,
 }
 
 /// The sine reference of joint `index` (0 = knee, 1 = ankle_roll).
@@ -102,8 +107,9 @@ pub struct Task {
     pub kp_per_s2: f64,
 }
 
-/// Runs `plans` (each with its duration [s]) grouped so each trial has distinct joints; returns
-/// traces in plan order.
+/// Runs `plans` (each with its duration [s]) grouped so each trial has distinct joints, up to
+/// [`SuiteConfig::jobs`] trials at once in lockstep; returns traces in plan order. The first error
+/// (in trial order) is returned once the trials under way have ended; no new trial starts after one.
 pub fn run_grouped(
     bins: &Binaries,
     setups: &[JointSetup; 2],
@@ -111,7 +117,7 @@ pub fn run_grouped(
     plans: Vec<(JointPlan, f64)>,
     label: &str,
 ) -> Result<Vec<JointTrace>, ExperimentError> {
-    let mut out: Vec<Option<JointTrace>> = vec![None; plans.len()];
+    let mut groups: Vec<Vec<usize>> = vec![];
     let mut pending: Vec<usize> = (0..plans.len()).collect();
     while !pending.is_empty() {
         let mut group: Vec<usize> = vec![];
@@ -121,6 +127,9 @@ pub fn run_grouped(
             }
         }
         pending.retain(|p| !group.contains(p));
+        groups.push(group);
+    }
+    let run_group = |group: &Vec<usize>| {
         let spec = TrialSpec {
             mode: cfg.mode,
             duration_s: group.iter().map(|&g| plans[g].1).fold(0.0, f64::max),
@@ -154,7 +163,28 @@ pub fn run_grouped(
                 trace.ticks as f64 * 1e-3 / trace.total_wall_s.max(1e-9)
             );
         }
-        for (g, jt) in group.into_iter().zip(trace.joints) {
+        Ok(trace)
+    };
+    let jobs = match cfg.mode {
+        Mode::Lockstep => cfg.jobs.max(1),
+        Mode::Realtime => 1,
+    };
+    // Fewer trials than jobs: give joints sharing a trial trials of their own (each plant has its
+    // own seed and each joint its own law, so a joint's trace does not depend on its company).
+    while groups.len() < jobs {
+        let Some(k) = groups.iter().position(|g| g.len() > 1) else {
+            break;
+        };
+        let last = groups[k].pop().expect("len > 1");
+        groups.insert(k + 1, vec![last]);
+    }
+    let jobs = jobs.min(groups.len().max(1));
+    let results = run_parallel(jobs, &groups, run_group);
+    let mut out: Vec<Option<JointTrace>> = vec![None; plans.len()];
+    for (group, result) in groups.iter().zip(results) {
+        // `None`: not started because an earlier trial failed; that error comes first.
+        let Some(trace) = result else { continue };
+        for (&g, jt) in group.iter().zip(trace?.joints) {
             out[g] = Some(jt);
         }
     }
@@ -162,6 +192,44 @@ pub fn run_grouped(
         .into_iter()
         .map(|t| t.expect("every plan ran"))
         .collect())
+}
+
+/// Runs `f` on every item with up to `jobs` threads, results in item order; after the first error
+/// no further item starts (those are `None`).
+fn run_parallel<T: Sync, R: Send>(
+    jobs: usize,
+    items: &[T],
+    f: impl Fn(&T) -> Result<R, ExperimentError> + Sync,
+) -> Vec<Option<Result<R, ExperimentError>>> {
+    use std::sync::Mutex;
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+    let next = AtomicUsize::new(0);
+    let failed = AtomicBool::new(false);
+    let results: Mutex<Vec<Option<Result<R, ExperimentError>>>> =
+        Mutex::new(items.iter().map(|_| None).collect());
+    let work = || {
+        loop {
+            let k = next.fetch_add(1, Ordering::Relaxed);
+            if k >= items.len() || failed.load(Ordering::Relaxed) {
+                return;
+            }
+            let r = f(&items[k]);
+            if r.is_err() {
+                failed.store(true, Ordering::Relaxed);
+            }
+            results.lock().unwrap_or_else(|e| e.into_inner())[k] = Some(r);
+        }
+    };
+    if jobs <= 1 {
+        work();
+    } else {
+        std::thread::scope(|s| {
+            for _ in 0..jobs {
+                s.spawn(&work);
+            }
+        });
+    }
+    results.into_inner().unwrap_or_else(|e| e.into_inner())
 }
 
 /// A tracking run's result.
@@ -372,4 +440,43 @@ pub fn disturbance(
             }
         })
         .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn run_parallel_keeps_item_order_and_stops_starting_after_an_error() {
+        let items: Vec<u64> = (0..9).collect();
+        for jobs in [1, 2, 4, 20] {
+            let out = run_parallel(jobs, &items, |&k| {
+                // Later items finish first when run at once.
+                std::thread::sleep(std::time::Duration::from_millis(9 - k));
+                Ok(k * 10)
+            });
+            let got: Vec<u64> = out.into_iter().map(|r| r.unwrap().unwrap()).collect();
+            assert_eq!(
+                got,
+                (0..9).map(|k| k * 10).collect::<Vec<_>>(),
+                "jobs {jobs}"
+            );
+        }
+        let started = std::sync::atomic::AtomicUsize::new(0);
+        let out = run_parallel(1, &items, |&k| {
+            started.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            if k == 3 {
+                Err(ExperimentError::Interrupted)
+            } else {
+                Ok(k)
+            }
+        });
+        assert_eq!(
+            started.into_inner(),
+            4,
+            "nothing starts after the failing item"
+        );
+        assert!(matches!(out[3], Some(Err(ExperimentError::Interrupted))));
+        assert!(out[4..].iter().all(Option::is_none));
+    }
 }
