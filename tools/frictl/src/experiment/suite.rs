@@ -225,7 +225,7 @@ fn run_parallel<T: Sync, R: Send>(
     } else {
         std::thread::scope(|s| {
             for _ in 0..jobs {
-                s.spawn(&work);
+                s.spawn(work);
             }
         });
     }
