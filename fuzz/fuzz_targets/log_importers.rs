@@ -19,32 +19,14 @@
 //! time and a report that counts what it used.
 #![no_main]
 
-use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
-
 use frictionless_logs::Role;
 use frictionless_logs::csv_log::{self, CsvSpec};
 use frictionless_logs::mcap_log::{self, McapSpec};
 use libfuzzer_sys::fuzz_target;
 
-#[path = "common/imported_run.rs"]
-mod imported_run;
-use imported_run::check;
-
-/// One scratch directory per fuzzing process (the readers take paths).
-fn dir() -> &'static PathBuf {
-    static D: OnceLock<PathBuf> = OnceLock::new();
-    D.get_or_init(|| {
-        let base = if Path::new("/dev/shm").is_dir() {
-            PathBuf::from("/dev/shm")
-        } else {
-            std::env::temp_dir()
-        };
-        let d = base.join(format!("frictionless-fuzz-logs-{}", std::process::id()));
-        std::fs::create_dir_all(&d).expect("scratch dir");
-        d
-    })
-}
+#[path = "common/log_import.rs"]
+mod log_import;
+use log_import::{check, scratch_dir};
 
 fuzz_target!(|data: &[u8]| {
     let (spec, file) = match data.iter().position(|&b| b == 0xFF) {
@@ -89,7 +71,7 @@ fuzz_target!(|data: &[u8]| {
     }
     let mut no_progress = |_: u64, _: u64| {};
 
-    let csv_path = dir().join("log.csv");
+    let csv_path = scratch_dir().join("log.csv");
     std::fs::write(&csv_path, file).expect("write scratch CSV");
     if let Ok(mut sp) = CsvSpec::parse(&columns, &units, &negate) {
         sp.delimiter = delimiter;
@@ -98,7 +80,7 @@ fuzz_target!(|data: &[u8]| {
         }
     }
 
-    let mcap_path = dir().join("log.mcap");
+    let mcap_path = scratch_dir().join("log.mcap");
     std::fs::write(&mcap_path, file).expect("write scratch MCAP");
     // frictl's `--effort` check, then any role (`read` refuses the ones that are not an effort).
     let effort_role = match mcap_log::parse_effort(&effort) {

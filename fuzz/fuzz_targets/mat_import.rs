@@ -13,11 +13,10 @@
 //! gaps in the desired-current stream), plus the MAT header, the root struct's name, the joint asked
 //! for, `--negate` roles and the chunk gap. The file is written with `hdf5-metno` to a scratch file;
 //! `mat_log::read` must then return a run that passes the shared invariants
-//! (`common/imported_run.rs`) or an error — never panic, never hang, never allocate without bound.
+//! (`common/log_import.rs`) or an error — never panic, never hang, never allocate without bound.
 #![no_main]
 
-use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
+use std::path::Path;
 
 use frictionless_logs::Role;
 use frictionless_logs::mat_log::{self, MatSpec};
@@ -25,24 +24,9 @@ use hdf5_metno as h5;
 use libfuzzer_sys::arbitrary::{Result as AResult, Unstructured};
 use libfuzzer_sys::fuzz_target;
 
-#[path = "common/imported_run.rs"]
-mod imported_run;
-use imported_run::check;
-
-/// One scratch directory per fuzzing process (the reader takes a path).
-fn dir() -> &'static PathBuf {
-    static D: OnceLock<PathBuf> = OnceLock::new();
-    D.get_or_init(|| {
-        let base = if Path::new("/dev/shm").is_dir() {
-            PathBuf::from("/dev/shm")
-        } else {
-            std::env::temp_dir()
-        };
-        let d = base.join(format!("frictionless-fuzz-mat-{}", std::process::id()));
-        std::fs::create_dir_all(&d).expect("scratch dir");
-        d
-    })
-}
+#[path = "common/log_import.rs"]
+mod log_import;
+use log_import::{check, scratch_dir};
 
 /// The channels the importer reads, under `/robot_logger_device`.
 const CHANNELS: [&str; 6] = [
@@ -317,7 +301,7 @@ fn write(u: &mut Unstructured, path: &Path) -> Option<()> {
 
 fuzz_target!(|data: &[u8]| {
     let mut u = Unstructured::new(data);
-    let path = dir().join("log.mat");
+    let path = scratch_dir().join("log.mat");
     let _ = std::fs::remove_file(&path);
     if write(&mut u, &path).is_none() {
         return;

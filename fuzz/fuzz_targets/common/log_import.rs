@@ -1,7 +1,26 @@
-//! What every accepted [`ImportedRun`] must satisfy, whichever importer produced it (shared by the
-//! `log_importers` and `mat_import` targets through `#[path]`).
+//! What the robot-log importer targets share (`log_importers`, `mat_import`, through `#[path]`): a
+//! scratch directory for the files the readers open, and what every accepted [`ImportedRun`] must
+//! satisfy, whichever importer produced it.
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
 use frictionless_logs::ImportedRun;
+
+/// One scratch directory per fuzzing process (the readers take paths), in /dev/shm where it exists.
+pub fn scratch_dir() -> &'static PathBuf {
+    static D: OnceLock<PathBuf> = OnceLock::new();
+    D.get_or_init(|| {
+        let base = if Path::new("/dev/shm").is_dir() {
+            PathBuf::from("/dev/shm")
+        } else {
+            std::env::temp_dir()
+        };
+        let d = base.join(format!("frictionless-fuzz-logs-{}", std::process::id()));
+        std::fs::create_dir_all(&d).expect("scratch dir");
+        d
+    })
+}
 
 /// The invariants of an accepted run: at least two rows, one chunk id and one finite value per row in
 /// every signal, strictly increasing finite time, and a report that counts the rows it used.
