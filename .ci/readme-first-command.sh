@@ -31,7 +31,7 @@ git clone -q "$ROOT" "$work/clone"
 mkdir -p "$work/target"
 cd "$work/clone"
 start=$(date +%s)
-env CARGO_TARGET_DIR="$work/target" bash -c "$cmd" </dev/null
+env -u CARGO_INCREMENTAL CARGO_TARGET_DIR="$work/target" bash -c "$cmd" </dev/null
 echo "readme-first-command: finished in $(( $(date +%s) - start )) s (build from an empty target dir included)"
 
 python3 - "$work/clone/demo-out/report.json" <<'EOF'

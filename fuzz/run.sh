@@ -18,13 +18,17 @@
 # `fuzz_seed_files_are_valid` in tests/weights_bad_input.rs; the CAN corpora with a few valid frames and
 # log lines written here), builds all targets once, then runs libFuzzer with ASan on the stable toolchain
 # (RUSTC_BOOTSTRAP=1 unlocks the -Z flags cargo-fuzz needs) and prints each target's execution count.
+# FUZZ_BUILD_ONLY=1: seed and build, do not run.
 # Exits non-zero on the first crash; the reproducer is left in fuzz/artifacts/<target>/.
 set -euo pipefail
 SECS="${1:-60}"
 shift || true
 ALL=(weights_reader can_mit_decode can_odrive_decode candump_parse frictiond_config dataset_readers onnx_import log_importers)
-if pkg-config --exists hdf5 2>/dev/null || [ -e /usr/include/hdf5/serial/hdf5.h ]; then
+FEATURES=()
+if bash "$(dirname "$0")/../tests/have-hdf5.sh" >/dev/null; then
   ALL+=(mat_import)
+  # Every target is built with it (one build; it only adds what mat_import needs).
+  FEATURES=(--features=mat)
 else
   echo "fuzz: no system HDF5 (apt install libhdf5-dev): mat_import left out"
 fi
@@ -72,11 +76,12 @@ for t in "${TARGETS[@]}"; do
 done
 
 echo "== building ${TARGETS[*]}"
-features() { [ "$1" = mat_import ] && echo "--features=mat"; true; }
-for t in "${TARGETS[@]}"; do
-  # shellcheck disable=SC2046
-  RUSTC_BOOTSTRAP=1 cargo fuzz build $(features "$t") "$t"
-done
+if [ $# -gt 0 ]; then
+  for t in "${TARGETS[@]}"; do RUSTC_BOOTSTRAP=1 cargo fuzz build "${FEATURES[@]}" "$t"; done
+else
+  RUSTC_BOOTSTRAP=1 cargo fuzz build "${FEATURES[@]}"   # every target in one cargo build
+fi
+[ -z "${FUZZ_BUILD_ONLY:-}" ] || exit 0
 for t in "${TARGETS[@]}"; do
   log="$ROOT/fuzz/artifacts/$t.log"
   mkdir -p "$ROOT/fuzz/artifacts"
@@ -91,8 +96,7 @@ for t in "${TARGETS[@]}"; do
   case "$t" in frictiond_config|dataset_readers|onnx_import|log_importers) limit+=(-max_len=65536) ;; esac
   # An HDF5 file per input: a plan that makes the importer read for more than 10 s is a hang.
   case "$t" in mat_import) limit+=(-max_len=4096 -timeout=10) ;; esac
-  # shellcheck disable=SC2046
-  RUSTC_BOOTSTRAP=1 cargo fuzz run $(features "$t") "$t" "$ROOT/fuzz/corpus/$t" -- "${limit[@]}" \
+  RUSTC_BOOTSTRAP=1 cargo fuzz run "${FEATURES[@]}" "$t" "$ROOT/fuzz/corpus/$t" -- "${limit[@]}" \
     -print_final_stats=1 2> "$log" || { tail -n 60 "$log" >&2; echo "fuzz: $t FAILED (see $log)"; exit 1; }
   runs=$(grep -oE 'stat::number_of_executed_units: *[0-9]+' "$log" | grep -oE '[0-9]+$' | tail -n1)
   secs=$(grep -oE 'Done [0-9]+ runs in [0-9]+ second' "$log" | grep -oE '[0-9]+ second' | grep -oE '[0-9]+' | tail -n1)

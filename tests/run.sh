@@ -31,8 +31,8 @@ fi
 # command needs no C library): where libhdf5-dev is installed (CI installs it), the whole run is built
 # with it, so the .mat tests run in the same build instead of a second one.
 FEATURES=()
-if pkg-config --exists hdf5 2>/dev/null || [ -e /usr/include/hdf5/serial/hdf5.h ] || [ -e /usr/include/hdf5.h ]; then
-  FEATURES=(--features frictl/mat,frictionless-logs/mat)
+if mat=$(bash tests/have-hdf5.sh); then
+  read -r -a FEATURES <<< "$mat"
   echo "== with the .mat importer (system HDF5 found): ${FEATURES[*]}"
 else
   echo "== skipped: .mat import tests (no system HDF5; apt install libhdf5-dev)"

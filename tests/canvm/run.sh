@@ -19,6 +19,12 @@
 #              CANVM_MEM_MB (VM memory, default 2048: the initramfs is unpacked into it),
 #              CANVM_TESTS (only these integration-test targets, e.g. "shm_types_tests frictiond_e2e"; default:
 #              every harness of the packages that has a test matching CANVM_FILTER, found with `--list`).
+#              CANVM_BUILD (musl | host, default musl): `host` runs the host target's (glibc) binaries and
+#              harnesses instead of building a static musl set: built in the normal target dir with cargo
+#              profile CANVM_PROFILE (default dev), CANVM_CARGO_ARGS (e.g. the features the test run
+#              used) and --workspace (CANVM_PACKAGES then only says which binaries must be there), so after
+#              `bash tests/run.sh` nothing is rebuilt; the ELF interpreter and every shared
+#              library `ldd` lists for them are copied into the initramfs at their host paths. CI uses it.
 # Last line: "canvm: N passed, N failed"; exit code non-zero on any failure or timeout.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -62,17 +68,34 @@ if [ ! -f "$KDIR/vmlinuz" ]; then
 fi
 MODS=$(ls -d "$KDIR"/lib/modules/*/kernel)
 
-# 3. Static binaries and test harnesses (separate target dir keeps the host build untouched).
-rustup target list --installed 2>/dev/null | grep -q "^$TARGET\$" || rustup target add "$TARGET" >/dev/null
-export CARGO_TARGET_DIR="$WORK/cargo"
-# The VM's TCG CPU has no AVX-512; build for the portable baseline so nothing depends on host features
-# (the kernel's runtime dispatch still picks the best available path).
-export RUSTFLAGS="-C target-cpu=x86-64-v2"
+# 3. Binaries and test harnesses: static musl ones in a separate target dir (keeps the host build
+#    untouched), or the host build's own (CANVM_BUILD=host).
+BUILD=${CANVM_BUILD:-musl}
+case "$BUILD" in
+  musl)
+    rustup target list --installed 2>/dev/null | grep -q "^$TARGET\$" || rustup target add "$TARGET" >/dev/null
+    export CARGO_TARGET_DIR="$WORK/cargo"
+    # The VM's TCG CPU has no AVX-512; build for the portable baseline so nothing depends on host
+    # features (the kernel's runtime dispatch still picks the best available path).
+    export RUSTFLAGS="-C target-cpu=x86-64-v2"
+    cargoargs=(--profile canvm --target "$TARGET")
+    BINDIR="$CARGO_TARGET_DIR/$TARGET/canvm" ;;
+  host)
+    # The host build as it is (x86-64-v3 from .cargo/config.toml: TCG's `-cpu max` has AVX2 and FMA).
+    profile=${CANVM_PROFILE:-dev}
+    # shellcheck disable=SC2206
+    cargoargs=(--profile "$profile" ${CANVM_CARGO_ARGS:-})
+    dir=$profile; [ "$profile" = dev ] && dir=debug
+    BINDIR="${CARGO_TARGET_DIR:-$ROOT/target}/$dir" ;;
+  *) log "CANVM_BUILD=$BUILD: expected musl or host"; exit 2 ;;
+esac
 pkgargs=""; for p in $PACKAGES; do pkgargs="$pkgargs -p $p"; done
-log "building bins and test harnesses for $TARGET ($PACKAGES)"
-cargo build --profile canvm --target "$TARGET" $pkgargs --bins 2>&1 | tail -n 3 >&2
+# The host build is the workspace's (same feature unification as `cargo test --workspace`, so it is reused).
+[ "$BUILD" = host ] && pkgargs="--workspace"
+log "building bins and test harnesses ($BUILD: ${cargoargs[*]}; $PACKAGES)"
+cargo build "${cargoargs[@]}" $pkgargs --bins 2>&1 | tail -n 3 >&2
 testargs=""; for t in ${CANVM_TESTS:-}; do testargs="$testargs --test $t"; done
-harnesses=$(cargo test --profile canvm --target "$TARGET" $pkgargs $testargs --no-run --message-format=json 2>"$WORK/build-tests.log" |
+harnesses=$(cargo test "${cargoargs[@]}" $pkgargs $testargs --no-run --message-format=json 2>"$WORK/build-tests.log" |
   python3 -c 'import json,sys
 for l in sys.stdin:
     try: m=json.loads(l)
@@ -100,7 +123,7 @@ for m in drivers/net/can/dev/can-dev.ko drivers/net/can/vcan.ko drivers/net/can/
          net/can/can-raw.ko net/can/can-bcm.ko net/can/can-gw.ko; do
   cp "$MODS/$m" "$IR/mods/"
 done
-for b in "$CARGO_TARGET_DIR/$TARGET/canvm/"*; do
+for b in "$BINDIR/"*; do
   [ -f "$b" ] && [ -x "$b" ] && cp "$b" "$IR/bin/" || true
 done
 # The closed-loop tests start these from PATH: make sure they are there when their package is built.
@@ -116,6 +139,16 @@ for h in $harnesses; do
 done
 # Line tables are not needed inside the VM; the guest unpacks the initramfs into RAM.
 command -v strip >/dev/null && strip --strip-debug "$IR"/bin/frictl* "$IR"/bin/frictiond* "$IR"/tests/* 2>/dev/null || true
+if [ "$BUILD" = host ]; then
+  # Dynamically linked: the ELF interpreter and every library the binaries need, at their host paths.
+  for f in "$IR"/bin/frictl* "$IR"/bin/frictiond* "$IR"/tests/*; do
+    [ -f "$f" ] && ldd "$f" 2>/dev/null | grep -oE '/[^ ]+' || true
+  done | sort -u | while read -r lib; do
+    [ -e "$lib" ] || continue
+    mkdir -p "$IR$(dirname "$lib")"
+    cp -L "$lib" "$IR$lib"
+  done
+fi
 cat > "$IR/init" <<INIT
 #!/bin/busybox sh
 /bin/busybox --install -s /bin
