@@ -18,7 +18,6 @@
 # `fuzz_seed_files_are_valid` in tests/weights_bad_input.rs; the CAN corpora with a few valid frames and
 # log lines written here), builds all targets once, then runs libFuzzer with ASan on the stable toolchain
 # (RUSTC_BOOTSTRAP=1 unlocks the -Z flags cargo-fuzz needs) and prints each target's execution count.
-# FUZZ_BUILD_ONLY=1: seed and build, do not run.
 # Exits non-zero on the first crash; the reproducer is left in fuzz/artifacts/<target>/.
 set -euo pipefail
 SECS="${1:-60}"
@@ -81,7 +80,6 @@ if [ $# -gt 0 ]; then
 else
   RUSTC_BOOTSTRAP=1 cargo fuzz build "${FEATURES[@]}"   # every target in one cargo build
 fi
-[ -z "${FUZZ_BUILD_ONLY:-}" ] || exit 0
 for t in "${TARGETS[@]}"; do
   log="$ROOT/fuzz/artifacts/$t.log"
   mkdir -p "$ROOT/fuzz/artifacts"
