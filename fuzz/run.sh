@@ -18,13 +18,16 @@
 # `fuzz_seed_files_are_valid` in tests/weights_bad_input.rs; the CAN corpora with a few valid frames and
 # log lines written here), builds all targets once, then runs libFuzzer with ASan on the stable toolchain
 # (RUSTC_BOOTSTRAP=1 unlocks the -Z flags cargo-fuzz needs) and prints each target's execution count.
-# Exits non-zero on the first crash; the reproducer is left in fuzz/artifacts/<target>/.
+# Runs FUZZ_JOBS targets at a time (default: the CPU count). Exits non-zero when a target crashes; the
+# reproducer is left in fuzz/artifacts/<target>/.
 set -euo pipefail
 SECS="${1:-60}"
 shift || true
 ALL=(weights_reader can_mit_decode can_odrive_decode candump_parse frictiond_config dataset_readers onnx_import log_importers)
 FEATURES=()
-if bash "$(dirname "$0")/../tests/have-hdf5.sh" >/dev/null; then
+TEST_FEATURES=()
+if mat=$(bash "$(dirname "$0")/../tests/have-hdf5.sh"); then
+  read -r -a TEST_FEATURES <<< "$mat"
   ALL+=(mat_import)
   # Every target is built with it (one build; it only adds what mat_import needs).
   FEATURES=(--features=mat)
@@ -48,8 +51,10 @@ for t in "${TARGETS[@]}"; do
   case "$t" in
     weights_reader)
       echo "== seeding fuzz/corpus/weights_reader"
+      # `--workspace` and tests/run.sh's features, so that after tests/run.sh nothing is rebuilt (with
+      # `-p frictionless` cargo would resolve the dependencies' features for that package alone).
       FWT_FUZZ_SEED_DIR="$ROOT/fuzz/corpus/weights_reader" \
-        cargo test -q -p frictionless --test frictionless_tests weights_bad_input::fuzz_seed_files_are_valid ;;
+        cargo test -q --workspace "${TEST_FEATURES[@]}" --test frictionless_tests weights_bad_input::fuzz_seed_files_are_valid ;;
     can_mit_decode)
       # byte 0: flags (bit 0 extended, bit 1 RTR) | length << 4; bytes 1..4 id (LE); 4..12 data; then
       # f64 fields for commands and ranges.
@@ -80,14 +85,14 @@ if [ $# -gt 0 ]; then
 else
   RUSTC_BOOTSTRAP=1 cargo fuzz build "${FEATURES[@]}"   # every target in one cargo build
 fi
-for t in "${TARGETS[@]}"; do
-  log="$ROOT/fuzz/artifacts/$t.log"
-  mkdir -p "$ROOT/fuzz/artifacts"
+# One libFuzzer process per core (FUZZ_JOBS, default: the CPU count): each is single-threaded.
+JOBS=${FUZZ_JOBS:-$(nproc)}
+mkdir -p "$ROOT/fuzz/artifacts"
+fuzz_one() { # fuzz_one <target>: runs it, prints one line; non-zero on a crash
+  local t=$1 log="$ROOT/fuzz/artifacts/$1.log" limit runs secs
   if [ -n "${FUZZ_RUNS:-}" ]; then
-    echo "== fuzzing $t for ${FUZZ_RUNS} executions"
     limit=(-runs="$FUZZ_RUNS")
   else
-    echo "== fuzzing $t for ${SECS}s"
     limit=(-max_total_time="$SECS")
   fi
   # The text, protobuf and log targets: inputs up to 64 KiB (their seeds are a few KB).
@@ -95,8 +100,29 @@ for t in "${TARGETS[@]}"; do
   # An HDF5 file per input: a plan that makes the importer read for more than 10 s is a hang.
   case "$t" in mat_import) limit+=(-max_len=4096 -timeout=10) ;; esac
   RUSTC_BOOTSTRAP=1 cargo fuzz run "${FEATURES[@]}" "$t" "$ROOT/fuzz/corpus/$t" -- "${limit[@]}" \
-    -print_final_stats=1 2> "$log" || { tail -n 60 "$log" >&2; echo "fuzz: $t FAILED (see $log)"; exit 1; }
+    -print_final_stats=1 > "$log" 2>&1 || { tail -n 60 "$log" >&2; echo "fuzz: $t FAILED (see $log)"; return 1; }
   runs=$(grep -oE 'stat::number_of_executed_units: *[0-9]+' "$log" | grep -oE '[0-9]+$' | tail -n1)
   secs=$(grep -oE 'Done [0-9]+ runs in [0-9]+ second' "$log" | grep -oE '[0-9]+ second' | grep -oE '[0-9]+' | tail -n1)
   echo "fuzz: $t ok, ${runs:-?} executions in ${secs:-$SECS}s, corpus $(ls "$ROOT/fuzz/corpus/$t" | wc -l) inputs"
+}
+if [ -n "${FUZZ_RUNS:-}" ]; then
+  echo "== fuzzing ${TARGETS[*]} for ${FUZZ_RUNS} executions each, $JOBS at a time"
+else
+  echo "== fuzzing ${TARGETS[*]} for ${SECS}s each, $JOBS at a time"
+fi
+failed=0
+running=0
+for t in "${TARGETS[@]}"; do
+  if [ "$running" -ge "$JOBS" ]; then
+    wait -n || failed=1
+    running=$((running - 1))
+  fi
+  [ "$failed" -eq 0 ] || break
+  fuzz_one "$t" &
+  running=$((running + 1))
 done
+while [ "$running" -gt 0 ]; do
+  wait -n || failed=1
+  running=$((running - 1))
+done
+[ "$failed" -eq 0 ] || { echo "fuzz: a target crashed; its reproducer is in fuzz/artifacts/<target>/" >&2; exit 1; }

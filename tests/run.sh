@@ -38,10 +38,17 @@ else
   echo "== skipped: .mat import tests (no system HDF5; apt install libhdf5-dev)"
 fi
 
-# Cargo builds a package's own binaries for its integration tests (frictiond for daemon/tests), not
-# another package's: the frictiond tests that run `frictl` find it in target/<profile>/, built here.
-echo "== cargo build --bins (end-to-end tests start frictiond and frictl as processes)"
-cargo build --workspace --bins "${FEATURES[@]}"
+# One build: `cargo test --workspace --no-run` compiles every test harness and, for the end-to-end
+# tests, the `frictiond` and `frictl` binaries (cargo builds a package's binaries for its integration
+# tests; the frictiond tests that run `frictl` find it in target/<profile>/). A separate
+# `cargo build --bins` would resolve the dependencies' features without the dev-dependencies' and
+# compile most of them a second time (CI's log: 270 crates compiled again, stop 22).
+echo "== cargo test --no-run (test harnesses and the binaries the end-to-end tests start)"
+cargo test --workspace "${FEATURES[@]}" --no-run
+for bin in frictiond frictl; do
+  exe="${CARGO_TARGET_DIR:-$ROOT/target}/debug/$bin"
+  [ -x "$exe" ] || { echo "tests/run.sh: cargo test --no-run left no $exe" >&2; exit 1; }
+done
 
 echo "== cargo test"
 cargo test --workspace "${FEATURES[@]}" --no-fail-fast 2>&1 | tee target/cargo-test.log

@@ -90,10 +90,13 @@ case "$BUILD" in
   *) log "CANVM_BUILD=$BUILD: expected musl or host"; exit 2 ;;
 esac
 pkgargs=""; for p in $PACKAGES; do pkgargs="$pkgargs -p $p"; done
-# The host build is the workspace's (same feature unification as `cargo test --workspace`, so it is reused).
+# The host build is the workspace's (tests/run.sh's `cargo test --workspace`, so it is reused).
 [ "$BUILD" = host ] && pkgargs="--workspace"
 log "building bins and test harnesses ($BUILD: ${cargoargs[*]}; $PACKAGES)"
-cargo build "${cargoargs[@]}" $pkgargs --bins 2>&1 | tail -n 3 >&2
+# `cargo test --no-run`, not `cargo build --bins`: the binaries come out of the same build as the
+# harnesses (the packages' integration tests need them), with the dev-dependencies' features, so the
+# dependencies compile once.
+cargo test "${cargoargs[@]}" $pkgargs --no-run 2>&1 | tail -n 3 >&2
 testargs=""; for t in ${CANVM_TESTS:-}; do testargs="$testargs --test $t"; done
 harnesses=$(cargo test "${cargoargs[@]}" $pkgargs $testargs --no-run --message-format=json 2>"$WORK/build-tests.log" |
   python3 -c 'import json,sys
