@@ -79,7 +79,7 @@ for t in "${TARGETS[@]}"; do
   esac
 done
 
-echo "== building ${TARGETS[*]}"
+echo "== [${SECONDS} s] building ${TARGETS[*]}"
 if [ $# -gt 0 ]; then
   for t in "${TARGETS[@]}"; do RUSTC_BOOTSTRAP=1 cargo fuzz build "${FEATURES[@]}" "$t"; done
 else
@@ -106,9 +106,9 @@ fuzz_one() { # fuzz_one <target>: runs it, prints one line; non-zero on a crash
   echo "fuzz: $t ok, ${runs:-?} executions in ${secs:-$SECS}s, corpus $(ls "$ROOT/fuzz/corpus/$t" | wc -l) inputs"
 }
 if [ -n "${FUZZ_RUNS:-}" ]; then
-  echo "== fuzzing ${TARGETS[*]} for ${FUZZ_RUNS} executions each, $JOBS at a time"
+  echo "== [${SECONDS} s] fuzzing ${TARGETS[*]} for ${FUZZ_RUNS} executions each, $JOBS at a time"
 else
-  echo "== fuzzing ${TARGETS[*]} for ${SECS}s each, $JOBS at a time"
+  echo "== [${SECONDS} s] fuzzing ${TARGETS[*]} for ${SECS}s each, $JOBS at a time"
 fi
 failed=0
 running=0
@@ -126,3 +126,4 @@ while [ "$running" -gt 0 ]; do
   running=$((running - 1))
 done
 [ "$failed" -eq 0 ] || { echo "fuzz: a target crashed; its reproducer is in fuzz/artifacts/<target>/" >&2; exit 1; }
+echo "== [${SECONDS} s] fuzz: every target ok"

@@ -35,7 +35,7 @@ PACKAGES=${CANVM_PACKAGES:-"frictionless frictionless-shm-types frictiond fricti
 FILTER=${CANVM_FILTER:-vcan}
 TARGET=x86_64-unknown-linux-musl
 mkdir -p "$WORK"
-log() { echo "canvm: $*" >&2; }
+log() { echo "canvm: [${SECONDS} s] $*" >&2; }
 
 # 1. Host packages.
 if [ -z "${CANVM_SKIP_APT:-}" ]; then
@@ -186,6 +186,7 @@ timeout "$TIMEOUT" qemu-system-x86_64 -machine q35 -m "${CANVM_MEM_MB:-2048}" -s
   -kernel "$KDIR/vmlinuz" -initrd "$WORK/initrd.img" "${acc[@]}" \
   -append "console=ttyS0 quiet panic=-1 oops=panic" > "$WORK/console.log" 2>&1
 qrc=$?
+log "VM exited (qemu rc $qrc)"
 set -e
 tr -d '\r' < "$WORK/console.log" | sed 's/\x1b\[[0-9;?]*[a-zA-Z]//g; s/\x1bc//g' > "$WORK/console.txt"
 grep -E '^(test |CANVM_|running|insmod|thread|---- |  left|  right|failures)' "$WORK/console.txt" || true
