@@ -10,19 +10,27 @@ ROOT=$(pwd)
 export FRICTIONLESS_REFS="$ROOT/target/refs"
 mkdir -p "$FRICTIONLESS_REFS"
 
+PY_PID=""
 if [ -z "${SKIP_PY:-}" ]; then
   VENV="$ROOT/target/venv"
-  if [ ! -x "$VENV/bin/python" ]; then
-    python3 -m venv "$VENV"
-  fi
-  "$VENV/bin/pip" install -q --disable-pip-version-check -r tests/python/requirements.txt
-  for gen in tests/python/gen_*.py; do
-    [ -e "$gen" ] || continue
-    echo "== reference vectors: $gen"
-    "$VENV/bin/python" "$gen" --out "$FRICTIONLESS_REFS"
-  done
   # The log importers' tests build their .mat (h5py) and MCAP (mcap) fixtures with this interpreter.
   export FRICTIONLESS_PY="$VENV/bin/python"
+  # In the background while cargo builds: neither needs the other until the tests run.
+  PY_LOG="$ROOT/target/python-refs.log"
+  echo "== Python reference tools and vectors (in the background; log: $PY_LOG)"
+  (
+    if [ ! -x "$VENV/bin/python" ]; then
+      python3 -m venv "$VENV"
+    fi
+    "$VENV/bin/pip" install -q --disable-pip-version-check -r tests/python/requirements.txt
+    for gen in tests/python/gen_*.py; do
+      [ -e "$gen" ] || continue
+      echo "== reference vectors: $gen"
+      "$VENV/bin/python" "$gen" --out "$FRICTIONLESS_REFS"
+    done
+  ) > "$PY_LOG" 2>&1 &
+  PY_PID=$!
+  trap 'kill "$PY_PID" 2>/dev/null || true' EXIT
 else
   unset FRICTIONLESS_REFS
 fi
@@ -49,6 +57,15 @@ for bin in frictiond frictl; do
   exe="${CARGO_TARGET_DIR:-$ROOT/target}/debug/$bin"
   [ -x "$exe" ] || { echo "tests/run.sh: cargo test --no-run left no $exe" >&2; exit 1; }
 done
+
+if [ -n "$PY_PID" ]; then
+  if ! wait "$PY_PID"; then
+    cat "$PY_LOG" >&2
+    echo "tests/run.sh: setting up the Python reference tools failed (log above, $PY_LOG)" >&2
+    exit 1
+  fi
+  cat "$PY_LOG"
+fi
 
 echo "== cargo test"
 cargo test --workspace "${FEATURES[@]}" --no-fail-fast 2>&1 | tee target/cargo-test.log
