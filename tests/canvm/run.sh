@@ -84,7 +84,10 @@ case "$BUILD" in
     # The host build as it is (x86-64-v3 from .cargo/config.toml: TCG's `-cpu max` has AVX2 and FMA).
     profile=${CANVM_PROFILE:-dev}
     # shellcheck disable=SC2206
-    cargoargs=(--profile "$profile" ${CANVM_CARGO_ARGS:-})
+    cargoargs=(${CANVM_CARGO_ARGS:-})
+    # Plain `cargo test` builds with the `test` profile (dev's settings, output in debug/), as
+    # tests/run.sh did; `--profile dev` would name a different profile and rebuild everything.
+    [ "$profile" = dev ] || cargoargs+=(--profile "$profile")
     dir=$profile; [ "$profile" = dev ] && dir=debug
     BINDIR="${CARGO_TARGET_DIR:-$ROOT/target}/$dir" ;;
   *) log "CANVM_BUILD=$BUILD: expected musl or host"; exit 2 ;;
