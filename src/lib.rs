@@ -89,6 +89,7 @@ pub mod mlp;
 pub mod model;
 #[cfg(feature = "random")]
 pub mod random;
+pub mod regular_file;
 pub mod units;
 pub mod weights;
 

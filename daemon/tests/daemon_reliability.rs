@@ -2,6 +2,7 @@
 //! change the loop period, a FIFO as config or model path, stale-input logging. Real `frictiond`
 //! processes against the test process as the plant; each test has its own iceoryx2 root and prefix.
 
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 use crate::daemon_support::*;
@@ -181,8 +182,8 @@ fn sighup_with_a_fifo_as_model_or_config_keeps_sigterm_prompt_and_ends_at_zero_a
             std::fs::rename(&fifo, &cfg).unwrap();
         }
         d.signal(libc::SIGHUP);
-        // The reload is blocked on the FIFO (config) or refused (model); either way the loop runs
-        // on and SIGTERM ends it.
+        // The reload refuses the FIFO before reading it (config or model); the loop runs on and
+        // SIGTERM ends it.
         for _ in 0..20 {
             plant.send(&js, &rq);
             std::thread::sleep(Duration::from_millis(5));
@@ -200,12 +201,49 @@ fn sighup_with_a_fifo_as_model_or_config_keeps_sigterm_prompt_and_ends_at_zero_a
         assert!(st.success(), "{what}: {st:?}\n{log}");
         let c = plant.cmd.latest().unwrap().expect("a command");
         assert_eq!(c.i_ref_a[..3], [0.0; 3], "{what}: last command 0 A");
-        if what == "model" {
-            assert!(
-                log.contains("FIFO"),
-                "the refusal names the file type: {log}"
-            );
+        assert!(
+            log.contains("FIFO"),
+            "{what}: the refusal names the file type: {log}"
+        );
+    }
+}
+
+/// `frictiond --config PATH --check` with a FIFO or a device as the config: refused at once, naming
+/// the path and what it is (before, a FIFO blocked the start forever).
+#[test]
+fn a_config_that_is_a_fifo_or_a_device_is_refused_at_start() {
+    let env = TestEnv::new("fifo-start");
+    let fifo = env.dir.join("frictiond.toml");
+    mkfifo(&fifo);
+    for (path, what) in [
+        (fifo.as_path(), "FIFO"),
+        (Path::new("/dev/zero"), "character device"),
+    ] {
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_frictiond"))
+            .arg("--config")
+            .arg(path)
+            .arg("--check")
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // A hang detector, not a timing assert: the refusal needs no I/O at all.
+        let t0 = Instant::now();
+        while child.try_wait().unwrap().is_none() && t0.elapsed() < Duration::from_secs(60) {
+            std::thread::sleep(Duration::from_millis(20));
         }
+        if child.try_wait().unwrap().is_none() {
+            child.kill().unwrap();
+            panic!("frictiond --config {} --check hung", path.display());
+        }
+        let out = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success());
+        assert!(
+            err.contains(&*path.to_string_lossy()) && err.contains(what),
+            "{}: {err}",
+            path.display()
+        );
     }
 }
 

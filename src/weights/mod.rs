@@ -390,62 +390,25 @@ pub fn read_file(path: &Path) -> Result<ModelFile, WeightError> {
     })
 }
 
-fn file_type_name(t: std::fs::FileType) -> &'static str {
-    use std::os::unix::fs::FileTypeExt;
-    if t.is_dir() {
-        "directory"
-    } else if t.is_fifo() {
-        "FIFO"
-    } else if t.is_char_device() {
-        "character device"
-    } else if t.is_block_device() {
-        "block device"
-    } else if t.is_socket() {
-        "socket"
-    } else {
-        "not a regular file"
-    }
-}
-
 /// The bytes of the regular file `path`, at most [`layout::MAX_FILE_LEN`] of them, undecoded: the
 /// same refusals as [`read_file`] (no FIFO, device or directory; bounded size), for callers that look
 /// at a possibly broken file ([`inspect`]).
 pub fn read_regular_bounded(path: &Path) -> Result<Vec<u8>, WeightError> {
-    use std::io::Read;
-    use std::os::unix::fs::OpenOptionsExt;
-    let io = |source| WeightError::Io {
-        path: path.to_owned(),
-        source,
-    };
-    let check = |m: &std::fs::Metadata| -> Result<u64, WeightError> {
-        if !m.file_type().is_file() {
-            return Err(WeightError::NotRegularFile {
-                path: path.to_owned(),
-                file_type: file_type_name(m.file_type()),
-            });
-        }
-        if m.len() > layout::MAX_FILE_LEN {
-            return Err(WeightError::InFile {
-                path: path.to_owned(),
-                source: Box::new(WeightError::TooLarge {
-                    len: m.len(),
-                    max: layout::MAX_FILE_LEN,
-                }),
-            });
-        }
-        Ok(m.len())
-    };
-    check(&std::fs::metadata(path).map_err(io)?)?;
-    let f = std::fs::OpenOptions::new()
-        .read(true)
-        .custom_flags(libc::O_NONBLOCK)
-        .open(path)
-        .map_err(io)?;
-    let len = check(&f.metadata().map_err(io)?)?;
-    // One byte more than the size: a file that grew since `fstat` shows up as trailing data.
-    let mut bytes = Vec::with_capacity(len as usize + 1);
-    f.take(len + 1).read_to_end(&mut bytes).map_err(io)?;
-    Ok(bytes)
+    use crate::regular_file::{self, Refused};
+    regular_file::read(path, layout::MAX_FILE_LEN).map_err(|e| match Refused::of(&e) {
+        Some(&Refused::NotRegular { file_type }) => WeightError::NotRegularFile {
+            path: path.to_owned(),
+            file_type,
+        },
+        Some(&Refused::TooLarge { len, max }) => WeightError::InFile {
+            path: path.to_owned(),
+            source: Box::new(WeightError::TooLarge { len, max }),
+        },
+        None => WeightError::Io {
+            path: path.to_owned(),
+            source: e,
+        },
+    })
 }
 
 /// Writes a `.fwt` file atomically: a temporary file in the same directory is written, synced and

@@ -17,12 +17,17 @@ root-link frame. Each external wrench acts ON the robot at the frame origin, exp
 Joints are named, never indexed: Pinocchio's order is depth-first and differs from ours.
 
 Models: iCub 3 (`iCubGenova09` from icub-models==2.8.1) and the real ergoCub URDF
-(`--ergocub PATH`, default tests/fixtures/ergocub/ergoCubSN001.urdf in the repository).
+(`--ergocub PATH`, default tests/fixtures/ergocub/ergoCubSN001.urdf in the repository): fixed base,
+legs-only and floating base with sole wrenches. Then every URDF of example-robot-data==6.0.0 (about 70
+real descriptions: Panda, UR, Talos, TIAGo, G1, Go2, ANYmal, Baxter, PR2, Romeo, iCub, ...; model
+label "erd:<path under robots/>") that Pinocchio loads: fixed base twice (the first at rest) and
+floating base once. Continuous joints (Pinocchio nq = 2) are given by angle, like revolute ones.
 """
 
 import argparse
 import json
 import sys
+import sysconfig
 from pathlib import Path
 
 import numpy as np
@@ -43,18 +48,24 @@ def joint_limits(model, jid):
 
 
 def revolute_joints(model):
-    """(name, joint id) for every 1-DoF joint, skipping the universe and a free-flyer."""
+    """(name, joint id) for every 1-DoF joint (revolute, prismatic, continuous), skipping the universe
+    and a free-flyer."""
     out = []
     for jid in range(1, model.njoints):
-        if model.joints[jid].nq == 1:
+        if model.joints[jid].nv == 1:
             out.append((model.names[jid], jid))
     return out
+
+
+def is_continuous(model, jid):
+    """A continuous joint: Pinocchio stores its angle as (cos, sin)."""
+    return model.joints[jid].nq == 2
 
 
 def random_state(model, rng):
     q, qd, qdd = {}, {}, {}
     for name, jid in revolute_joints(model):
-        lo, hi = joint_limits(model, jid)
+        lo, hi = (-np.pi, np.pi) if is_continuous(model, jid) else joint_limits(model, jid)
         q[name] = float(rng.uniform(lo, hi))
         qd[name] = float(rng.uniform(-2.0, 2.0))
         qdd[name] = float(rng.uniform(-5.0, 5.0))
@@ -70,7 +81,10 @@ def to_vectors(model, q, qd, qdd, base=None):
         av[0:6] = base["acc"]
     for name, jid in revolute_joints(model):
         j = model.joints[jid]
-        qv[j.idx_q] = q.get(name, 0.0)
+        if is_continuous(model, jid):
+            qv[j.idx_q], qv[j.idx_q + 1] = np.cos(q.get(name, 0.0)), np.sin(q.get(name, 0.0))
+        else:
+            qv[j.idx_q] = q.get(name, 0.0)
         vv[j.idx_v] = qd.get(name, 0.0)
         av[j.idx_v] = qdd.get(name, 0.0)
     return qv, vv, av
@@ -161,6 +175,42 @@ def cases_for(label, urdf, rng, n_fixed, n_legs, n_float):
     return cases
 
 
+def erd_cases(rng):
+    """Fixed (twice, the first at rest) and floating-base cases for every example-robot-data URDF
+    Pinocchio loads; prints the ones it refuses."""
+    root = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix" / "share" / "example-robot-data" / "robots"
+    urdfs = sorted(root.glob("**/*.urdf"))
+    if not urdfs:
+        sys.exit(f"gen_pinocchio_refs: no URDF under {root} (needs example-robot-data==6.0.0)")
+    cases = []
+    for urdf in urdfs:
+        label = "erd:" + str(urdf.relative_to(root))
+        try:
+            fixed = pin.buildModelFromUrdf(str(urdf))
+            floating = pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer())
+        except Exception as e:  # noqa: BLE001 - Pinocchio raises plain exceptions
+            print(f"gen_pinocchio_refs: skipped {label}: Pinocchio refuses it ({str(e).splitlines()[0]})")
+            continue
+        for i in range(2):
+            q, qd, qdd = random_state(fixed, rng)
+            if i == 0:
+                qd = {k: 0.0 for k in qd}
+                qdd = {k: 0.0 for k in qdd}
+            tau, _ = run_rnea(fixed, q, qd, qdd)
+            cases.append({
+                "model": label, "urdf": str(urdf), "kind": "fixed", "keep": None, "locked_q": {},
+                "q": q, "qd": qd, "qdd": qdd, "base": None, "wrenches": {}, "tau": tau, "base_wrench": None,
+            })
+        q, qd, qdd = random_state(floating, rng)
+        base = random_base(rng)
+        tau, bw = run_rnea(floating, q, qd, qdd, base)
+        cases.append({
+            "model": label, "urdf": str(urdf), "kind": "floating", "keep": None, "locked_q": {},
+            "q": q, "qd": qd, "qdd": qdd, "base": base, "wrenches": {}, "tau": tau, "base_wrench": bw,
+        })
+    return cases
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", required=True, help="output directory")
@@ -180,6 +230,7 @@ def main():
     rng = np.random.default_rng(SEED)
     cases = cases_for("iCubGenova09", icub3, rng, n_fixed=12, n_legs=6, n_float=8)
     cases += cases_for("ergoCubSN001", ergocub, rng, n_fixed=8, n_legs=4, n_float=6)
+    cases += erd_cases(rng)
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -1,6 +1,7 @@
 //! # `frictionless-canlog`: candump log files (`candump -L` format): parse, write, record, replay
 //!
-//! Crate table: `tools/canlog`; depends on `frictionless-shm-types` (wire frames) and socketcan; used by
+//! Crate table: `tools/canlog`; depends on `frictionless-shm-types` (wire frames), socketcan and
+//! `frictionless` (its [`frictionless::regular_file`] reads); used by
 //! `frictl` (`frictl can record/replay`) and the fuzz crate (`candump_parse`).
 //!
 //! What this crate **is**:
@@ -290,7 +291,7 @@ pub fn parse_log(reader: impl BufRead, path: &str) -> Result<Vec<LogEntry>, CanL
 
 /// Reads and parses a log file.
 pub fn read_log(path: &Path) -> Result<Vec<LogEntry>, CanLogError> {
-    let f = std::fs::File::open(path).map_err(|source| CanLogError::Io {
+    let (f, _) = frictionless::regular_file::open(path).map_err(|source| CanLogError::Io {
         what: "opening",
         path: path.display().to_string(),
         source,

@@ -668,7 +668,8 @@ pub fn read_columns(
         path: p.clone(),
         msg: e.to_string(),
     };
-    let mut r = csv::Reader::from_path(path).map_err(|e| io(&e))?;
+    let (file, _) = frictionless::regular_file::open(path).map_err(|e| io(&e))?;
+    let mut r = csv::Reader::from_reader(file);
     let names: Vec<String> = r
         .headers()
         .map_err(|e| io(&e))?

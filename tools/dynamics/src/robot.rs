@@ -123,7 +123,11 @@ impl Robot {
     ) -> Result<Robot, DynamicsError> {
         let path = path.as_ref();
         let source = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| DynamicsError::Read {
+        let text = frictionless::regular_file::read_to_string(
+            path,
+            frictionless::regular_file::MAX_TEXT_BYTES,
+        )
+        .map_err(|e| DynamicsError::Read {
             path: source.clone(),
             message: e.to_string(),
         })?;
@@ -141,10 +145,11 @@ impl Robot {
         source: &str,
         reduction: Option<&Reduction>,
     ) -> Result<Robot, DynamicsError> {
-        let urdf = urdf_rs::read_from_string(text).map_err(|e| DynamicsError::Read {
-            path: source.to_string(),
-            message: e.to_string(),
-        })?;
+        let urdf =
+            urdf_rs::read_from_string(&dynamics_only(text)).map_err(|e| DynamicsError::Read {
+                path: source.to_string(),
+                message: e.to_string(),
+            })?;
         build(&urdf, source, reduction)
     }
 
@@ -206,6 +211,51 @@ impl Robot {
         }
         Ok(v)
     }
+}
+
+/// The URDF without what dynamics never reads: every `<visual>` and `<collision>` element and the
+/// robot-level `<material>` definitions. Real robot descriptions carry geometry urdf-rs refuses
+/// although URDF parsers accept it (iCub's and Romeo's `<texture />` without a `filename`), and a
+/// model's inertias and joints should not fail to load over a mesh. Text that is not well-formed XML
+/// is returned unchanged, so that urdf-rs reports the error.
+fn dynamics_only(text: &str) -> std::borrow::Cow<'_, str> {
+    use quick_xml::events::Event;
+    let mut reader = quick_xml::Reader::from_str(text);
+    let mut drop: Vec<std::ops::Range<usize>> = Vec::new();
+    let mut depth = 0usize;
+    loop {
+        let start = reader.buffer_position() as usize;
+        let unused = |name: &[u8], depth: usize| {
+            name == b"visual" || name == b"collision" || (name == b"material" && depth == 1)
+        };
+        match reader.read_event() {
+            Ok(Event::Start(e)) if unused(e.name().as_ref(), depth) => {
+                if reader.read_to_end(e.name()).is_err() {
+                    return text.into();
+                }
+                drop.push(start..reader.buffer_position() as usize);
+            }
+            Ok(Event::Empty(e)) if unused(e.name().as_ref(), depth) => {
+                drop.push(start..reader.buffer_position() as usize);
+            }
+            Ok(Event::Start(_)) => depth += 1,
+            Ok(Event::End(_)) => depth = depth.saturating_sub(1),
+            Ok(Event::Eof) => break,
+            Ok(_) => {}
+            Err(_) => return text.into(),
+        }
+    }
+    if drop.is_empty() {
+        return text.into();
+    }
+    let mut kept = String::with_capacity(text.len());
+    let mut at = 0;
+    for r in drop {
+        kept.push_str(text.get(at..r.start).unwrap_or_default());
+        at = r.end;
+    }
+    kept.push_str(text.get(at..).unwrap_or_default());
+    kept.into()
 }
 
 struct ParsedLink {
@@ -311,6 +361,13 @@ fn index_graph<'u>(urdf: &'u urdf_rs::Robot, source: &str) -> Result<Graph<'u>, 
     let roots: Vec<usize> = (0..urdf.links.len())
         .filter(|&i| parent_joint[i].is_none())
         .collect();
+    if urdf.links.is_empty() {
+        return Err(DynamicsError::Structure {
+            source_name: src(),
+            message: "no <link> elements (a xacro file of macros only? expand it with xacro first)"
+                .to_string(),
+        });
+    }
     if roots.len() != 1 {
         return Err(DynamicsError::Structure {
             source_name: src(),

@@ -539,3 +539,86 @@ fn errors_name_the_culprit() {
     let e = BaseState::from_arrays([0.0; 3], [0.0; 4], [0.0; 6], [0.0; 6]).unwrap_err();
     assert!(e.to_string().contains("quaternion"), "{e}");
 }
+
+/// Real robot descriptions carry geometry urdf-rs alone refuses (iCub's and Romeo's `<texture />`
+/// without a filename, a `<mesh>` without one, a `<visual>` without `<geometry>`): the model's
+/// dynamics do not depend on it, so it loads, with the same result as without the geometry.
+#[test]
+fn visual_collision_and_material_quirks_do_not_stop_a_model() {
+    let plain = r#"<robot name="arm">
+  <link name="base"/>
+  <link name="upper"><inertial><origin xyz="0 0 -0.2"/><mass value="1.5"/>
+    <inertia ixx="0.02" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.01"/></inertial></link>
+  <joint name="shoulder" type="revolute"><parent link="base"/><child link="upper"/><axis xyz="0 1 0"/>
+    <limit lower="-2" upper="2" effort="50" velocity="3"/></joint>
+</robot>"#;
+    let quirky = r#"<?xml version="1.0"?>
+<robot name="arm">
+  <material name="skin"><color rgba="0.9 0.8 0.7 1"/><texture /></material>
+  <material name="bare"/>
+  <link name="base">
+    <visual><geometry><mesh/></geometry><material name="skin"><texture /></material></visual>
+  </link>
+  <link name="upper"><inertial><origin xyz="0 0 -0.2"/><mass value="1.5"/>
+    <inertia ixx="0.02" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.01"/></inertial>
+    <visual name="no geometry"/>
+    <collision><origin xyz="0 0 -0.2"/><geometry><cylinder radius="0.05"/></geometry></collision>
+    <visual><geometry><mesh filename="package://arm/meshes/upper.stl" scale="1 1 1"/></geometry></visual>
+  </link>
+  <joint name="shoulder" type="revolute"><parent link="base"/><child link="upper"/><axis xyz="0 1 0"/>
+    <limit lower="-2" upper="2" effort="50" velocity="3"/></joint>
+</robot>"#;
+    assert!(
+        urdf_rs::read_from_string(quirky).is_err(),
+        "the fixture must hold something urdf-rs itself refuses"
+    );
+    let (a, b) = (
+        Robot::from_urdf_str(plain, "plain.urdf").unwrap(),
+        Robot::from_urdf_str(quirky, "quirky.urdf").unwrap(),
+    );
+    let (mut wa, mut wb) = (Workspace::new(&a), Workspace::new(&b));
+    let (mut ta, mut tb) = ([0.0], [0.0]);
+    a.rnea(&mut wa, &[0.7], &[1.2], &[-3.0], &mut ta).unwrap();
+    b.rnea(&mut wb, &[0.7], &[1.2], &[-3.0], &mut tb).unwrap();
+    assert!(ta[0].abs() > 1.0);
+    assert_eq!(ta, tb);
+    assert_eq!(a.total_mass_kg(), b.total_mass_kg());
+
+    // A xacro file of macros only (the UR description ships one as `ur3.urdf`) has no links.
+    let e = Robot::from_urdf_str(
+        r#"<robot xmlns:xacro="http://wiki.ros.org/xacro"><xacro:macro name="m"/></robot>"#,
+        "macros.urdf",
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("no <link>"), "{e}");
+
+    // Text that is not XML is still urdf-rs's error, naming the source.
+    let e = Robot::from_urdf_str("<robot name='x'><link name='a'>", "cut.urdf").unwrap_err();
+    assert!(e.to_string().contains("cut.urdf"), "{e}");
+}
+
+/// A URDF path that is a FIFO or a device is refused before a byte is read (no hang, no unbounded
+/// read), naming the path.
+#[test]
+fn a_urdf_path_that_is_not_a_regular_file_is_refused() {
+    let dir = std::env::temp_dir().join(format!("frictionless-urdf-fifo-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let fifo = dir.join("robot.urdf");
+    let _ = std::fs::remove_file(&fifo);
+    let status = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let e = Robot::from_urdf_file(&fifo).unwrap_err().to_string();
+    assert!(
+        e.contains(&*fifo.to_string_lossy()) && e.contains("FIFO"),
+        "{e}"
+    );
+    let e = Robot::from_urdf_file("/dev/zero").unwrap_err().to_string();
+    assert!(
+        e.contains("/dev/zero") && e.contains("character device"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

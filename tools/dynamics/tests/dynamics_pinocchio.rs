@@ -1,7 +1,9 @@
 //! Cross-check of the Rust RNEA against Pinocchio on iCub 3 (`iCubGenova09`, icub-models 2.8.1) and the
 //! real ergoCub URDF: fixed base over all joints, legs-only reduced models, floating base with sole
-//! wrenches. References come from `tests/python/gen_pinocchio_refs.py` via `tests/run.sh`; joints are
-//! compared **by name**, tolerance 1e-6 N·m.
+//! wrenches; and on every URDF of example-robot-data 6.0.0 Pinocchio loads (≈ 70 robots written by
+//! others: arms, quadrupeds, humanoids, hands, mobile manipulators; fixed and floating base, continuous
+//! and prismatic joints). References come from `tests/python/gen_pinocchio_refs.py` via
+//! `tests/run.sh`; joints are compared **by name**, tolerance 1e-6 N·m.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -151,5 +153,30 @@ fn rnea_matches_pinocchio_by_joint_name() {
             );
         }
     }
-    println!("pinocchio cross-check: {counts:?}, worst abs error {worst:.3e}");
+    // The robots of example-robot-data: each with fixed- and floating-base cases, and (nearly) all
+    // of the package's URDFs present (a generator that silently skipped most would prove little).
+    let erd: std::collections::BTreeSet<&str> = counts
+        .keys()
+        .filter_map(|(m, _)| m.strip_prefix("erd:"))
+        .collect();
+    for m in &erd {
+        for kind in ["fixed", "floating"] {
+            assert!(
+                counts.contains_key(&(format!("erd:{m}"), kind.to_string())),
+                "no erd:{m} {kind} cases in {}",
+                path.display()
+            );
+        }
+    }
+    assert!(
+        erd.len() >= 60,
+        "only {} example-robot-data models in {}",
+        erd.len(),
+        path.display()
+    );
+    println!(
+        "pinocchio cross-check: {} cases, {} example-robot-data models, worst abs error {worst:.3e}",
+        counts.values().sum::<usize>(),
+        erd.len()
+    );
 }

@@ -12,6 +12,7 @@ mod eval_synthetic;
 mod experiment_controller;
 mod experiment_online_offline;
 mod experiment_oracle;
+mod files_cli;
 mod import_cli;
 mod onpolicy_cli;
 // The ONNX graph builder and ergoCub anchor helpers of the interop tests (one copy, owned by

@@ -55,6 +55,11 @@
 pub mod onnx;
 pub mod safetensors;
 
+/// Largest ONNX or safetensors file an import reads (256 MiB): a friction MLP within
+/// [`frictionless::mlp::limits`] is a few MB; anything far larger is not one, and is refused before
+/// it is read (as is a FIFO or a device: see [`frictionless::regular_file`]).
+pub const MAX_IMPORT_BYTES: u64 = 256 << 20;
+
 use std::collections::BTreeMap;
 
 use frictionless::features::{FeatureSet, FeatureSpec};

@@ -211,10 +211,13 @@ pub struct ExportOptions {
 
 /// Imports an ONNX file; every error names `path`.
 pub fn import_file(path: &Path) -> Result<OnnxImport, OnnxError> {
-    let bytes = std::fs::read(path).map_err(|source| OnnxError::Io {
-        path: path.to_owned(),
-        source,
-    })?;
+    let bytes =
+        frictionless::regular_file::read(path, crate::MAX_IMPORT_BYTES).map_err(|source| {
+            OnnxError::Io {
+                path: path.to_owned(),
+                source,
+            }
+        })?;
     import_bytes(&bytes).map_err(|e| OnnxError::InFile {
         path: path.to_owned(),
         source: Box::new(e),

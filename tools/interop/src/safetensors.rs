@@ -121,10 +121,13 @@ pub struct SafetensorsImport {
 
 /// Imports a safetensors file; every error names `path`.
 pub fn import_file(path: &Path) -> Result<SafetensorsImport, SafetensorsError> {
-    let bytes = std::fs::read(path).map_err(|source| SafetensorsError::Io {
-        path: path.to_owned(),
-        source,
-    })?;
+    let bytes =
+        frictionless::regular_file::read(path, crate::MAX_IMPORT_BYTES).map_err(|source| {
+            SafetensorsError::Io {
+                path: path.to_owned(),
+                source,
+            }
+        })?;
     import_bytes(&bytes).map_err(|e| SafetensorsError::InFile {
         path: path.to_owned(),
         source: Box::new(e),

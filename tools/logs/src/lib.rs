@@ -1,7 +1,8 @@
 //! # `frictionless-logs`: robot logs in
 //!
 //! Crate table: `tools/logs`; depends on `frictionless-ident` (its [`RunSignals`] is what this crate
-//! produces) and `frictionless-dataset`; used by `frictl import csv|mat|mcap`.
+//! produces), `frictionless-dataset` and `frictionless` (its [`frictionless::regular_file`] opens);
+//! used by `frictl import csv|mat|mcap`.
 //!
 //! What this crate **is**: readers that turn one joint of a robot's log into one in-memory time series
 //! per signal per run ([`ImportedRun`]: time [s], s, ṡ, s̈, θ, ω, current, τ_joint, τ_motor, τ_F,
@@ -49,10 +50,12 @@ pub enum LogsError {
         msg: String,
     },
     /// The path is not a regular file (FIFO, device, directory).
-    #[error("{path}: not a regular file (a FIFO, device or directory is refused)")]
+    #[error("{path}: not a regular file ({file_type}); a FIFO, device or directory is refused")]
     NotRegular {
         /// File.
         path: String,
+        /// What it is instead, e.g. "FIFO", "character device", "directory".
+        file_type: &'static str,
     },
     /// The file has no data.
     #[error("{path}: {what}")]
@@ -162,23 +165,20 @@ impl LogsError {
     }
 }
 
-/// Opens `path` for reading only if it is a regular file: opened non-blocking (a FIFO never blocks
-/// the open) and checked with `fstat` before a byte is read (`O_NONBLOCK` has no effect on a regular
-/// file's reads).
+/// Opens `path` for reading only if it is a regular file ([`frictionless::regular_file::open`]: a
+/// FIFO never blocks, a device is refused before a byte is read).
 pub fn open_regular(path: &Path) -> Result<File, LogsError> {
-    use std::os::unix::fs::OpenOptionsExt;
-    let file = std::fs::OpenOptions::new()
-        .read(true)
-        .custom_flags(libc::O_NONBLOCK)
-        .open(path)
-        .map_err(|e| LogsError::io(path, e))?;
-    let meta = file.metadata().map_err(|e| LogsError::io(path, e))?;
-    if !meta.file_type().is_file() {
-        return Err(LogsError::NotRegular {
-            path: path.display().to_string(),
-        });
+    use frictionless::regular_file::{self, Refused};
+    match regular_file::open(path) {
+        Ok((file, _)) => Ok(file),
+        Err(e) => match Refused::of(&e) {
+            Some(&Refused::NotRegular { file_type }) => Err(LogsError::NotRegular {
+                path: path.display().to_string(),
+                file_type,
+            }),
+            _ => Err(LogsError::io(path, e)),
+        },
     }
-    Ok(file)
 }
 
 /// A progress callback: `(bytes or rows done, total)`. Readers call it every so often; the command

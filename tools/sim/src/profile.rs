@@ -123,7 +123,8 @@ impl CurrentProfile {
             path: path.clone(),
             why,
         };
-        let mut rd = csv::Reader::from_path(&path).map_err(|e| err(e.to_string()))?;
+        let (file, _) = frictionless::regular_file::open(&path).map_err(|e| err(e.to_string()))?;
+        let mut rd = csv::Reader::from_reader(file);
         let col = rd
             .headers()
             .map_err(|e| err(e.to_string()))?

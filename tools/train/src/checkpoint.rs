@@ -153,7 +153,8 @@ impl Trainer {
         train: &Dataset<'_>,
         val: Option<&Dataset<'_>>,
     ) -> Result<Self, TrainError> {
-        let bytes = std::fs::read(path).map_err(|e| err(path, format!("cannot read: {e}")))?;
+        let bytes = frictionless::regular_file::read(path, u64::MAX)
+            .map_err(|e| err(path, format!("cannot read: {e}")))?;
         let st = SafeTensors::deserialize(&bytes).map_err(|e| err(path, e))?;
         let state = read_state(path, &bytes)?;
         let mut cfg = state.config;

@@ -223,12 +223,17 @@ pub fn load_sources(paths: &[PathBuf]) -> Result<Sources, PipelineError> {
     }
     let mut list = Vec::with_capacity(paths.len());
     for path in paths {
-        let bytes = std::fs::read(path).map_err(|e| file_err(path, format!("cannot read: {e}")))?;
+        let bytes = frictionless::regular_file::read(path, u64::MAX)
+            .map_err(|e| file_err(path, format!("cannot read: {e}")))?;
         let sha256: [u8; 32] = Sha256::digest(&bytes).into();
         drop(bytes);
         let data = Dataset::read_csv(path)?;
         let side_path = path.with_extension("json");
-        let text = std::fs::read_to_string(&side_path).map_err(|e| {
+        let text = frictionless::regular_file::read_to_string(
+            &side_path,
+            frictionless::regular_file::MAX_TEXT_BYTES,
+        )
+        .map_err(|e| {
             file_err(
                 &side_path,
                 format!(

@@ -238,7 +238,7 @@ fn ferr(path: &Path, detail: impl std::fmt::Display) -> SearchError {
 
 /// Reads `results.jsonl` (missing file: empty). A torn last line (crash mid-write) is ignored.
 pub fn read_results(path: &Path) -> Result<Vec<TrialResult>, SearchError> {
-    let text = match std::fs::read_to_string(path) {
+    let text = match frictionless::regular_file::read_to_string(path, u64::MAX) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
         Err(e) => return Err(ferr(path, format!("cannot read: {e}"))),
@@ -480,7 +480,10 @@ pub fn run_search(
     let settings_path = dir.join("search.json");
     let results_path = dir.join("results.jsonl");
     let done = if run.resume {
-        match std::fs::read_to_string(&settings_path) {
+        match frictionless::regular_file::read_to_string(
+            &settings_path,
+            frictionless::regular_file::MAX_TEXT_BYTES,
+        ) {
             Ok(t) => {
                 let rec: SearchSettings =
                     serde_json::from_str(&t).map_err(|e| ferr(&settings_path, e))?;
@@ -605,8 +608,11 @@ fn claim_settings(dir: &Path, settings: &SearchSettings) -> Result<(), SearchErr
     match linked {
         Ok(()) => Ok(()),
         Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-            let text = std::fs::read_to_string(&path)
-                .map_err(|e| ferr(&path, format!("cannot read: {e}")))?;
+            let text = frictionless::regular_file::read_to_string(
+                &path,
+                frictionless::regular_file::MAX_TEXT_BYTES,
+            )
+            .map_err(|e| ferr(&path, format!("cannot read: {e}")))?;
             let rec: SearchSettings = serde_json::from_str(&text).map_err(|e| ferr(&path, e))?;
             compare_settings(&path, &rec, settings)
         }

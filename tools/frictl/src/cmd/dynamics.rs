@@ -172,7 +172,7 @@ fn rnea(a: RneaArgs) -> anyhow::Result<()> {
     let reader: Box<dyn BufRead> = if a.cases.as_os_str() == "-" {
         Box::new(std::io::stdin().lock())
     } else {
-        let f = std::fs::File::open(&a.cases)
+        let (f, _) = frictionless::regular_file::open(&a.cases)
             .with_context(|| format!("cannot open cases file {}", a.cases.display()))?;
         Box::new(std::io::BufReader::new(f))
     };

@@ -46,12 +46,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     };
     let csv_name = args.input.display();
+    let (input, _) = frictionless::regular_file::open(&args.input)
+        .with_context(|| format!("cannot read {csv_name}"))?;
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(false)
         .trim(csv::Trim::All)
         .flexible(true)
-        .from_path(&args.input)
-        .with_context(|| format!("cannot read {csv_name}"))?;
+        .from_reader(input);
     let n = mlp.n_inputs();
     let mut out = BufWriter::new(std::io::stdout().lock());
     let mut x = Vec::with_capacity(n);

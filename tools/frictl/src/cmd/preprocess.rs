@@ -164,8 +164,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     )?;
     let meta = LogMeta::read_json(&sidecar_path)?;
     let log = RawLog::read_csv(&args.log)?;
-    let bytes =
-        std::fs::read(&args.log).with_context(|| format!("cannot read {}", args.log.display()))?;
+    let bytes = frictionless::regular_file::read(&args.log, u64::MAX)
+        .with_context(|| format!("cannot read {}", args.log.display()))?;
     let sha = format!("{:x}", sha2::Sha256::digest(&bytes));
     drop(bytes);
 

@@ -446,7 +446,8 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> JointPlan {
 
 /// SHA-256 of a file's content (hex).
 fn file_sha256(p: &Path) -> anyhow::Result<String> {
-    let bytes = std::fs::read(p).with_context(|| format!("cannot read {}", p.display()))?;
+    let bytes = frictionless::regular_file::read(p, u64::MAX)
+        .with_context(|| format!("cannot read {}", p.display()))?;
     Ok(hex(&Sha256::digest(&bytes)))
 }
 
@@ -589,7 +590,9 @@ fn trained_offset(report: &TrainReport) -> anyhow::Result<Option<f64>> {
 }
 
 fn read_typed<T: serde::de::DeserializeOwned>(p: &Path) -> anyhow::Result<T> {
-    let t = std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))?;
+    let t =
+        frictionless::regular_file::read_to_string(p, frictionless::regular_file::MAX_TEXT_BYTES)
+            .with_context(|| format!("cannot read {}", p.display()))?;
     serde_json::from_str(&t).with_context(|| format!("{}: not the expected JSON", p.display()))
 }
 

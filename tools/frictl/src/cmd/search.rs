@@ -218,8 +218,9 @@ fn print_best(all: &[TrialResult], dir: &std::path::Path) {
 
 /// Runs `frictl search`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let scv_bytes = std::fs::read(&args.scv)
-        .map_err(|e| anyhow::anyhow!("{}: cannot read: {e}", args.scv.display()))?;
+    let scv_bytes =
+        frictionless::regular_file::read(&args.scv, frictionless::regular_file::MAX_TEXT_BYTES)
+            .map_err(|e| anyhow::anyhow!("{}: cannot read: {e}", args.scv.display()))?;
     // Not a flattened `HeldOut`: clap reports a flattened `Option<Args>` (see `Cli`) as absent when
     // it holds a nested flatten, so the two options are spelled out here.
     let held_out = HeldOut {

@@ -745,7 +745,11 @@ pub fn test_chunks_from_report(
         path: p.clone(),
         msg,
     };
-    let text = std::fs::read_to_string(report_path).map_err(|e| EvalError::Io {
+    let text = frictionless::regular_file::read_to_string(
+        report_path,
+        frictionless::regular_file::MAX_TEXT_BYTES,
+    )
+    .map_err(|e| EvalError::Io {
         path: p.clone(),
         msg: e.to_string(),
     })?;
@@ -762,7 +766,7 @@ pub fn test_chunks_from_report(
         .unwrap_or_default();
     let mut hashes = Vec::new();
     for d in dataset_paths {
-        let bytes = std::fs::read(d).map_err(|e| EvalError::Io {
+        let bytes = frictionless::regular_file::read(d, u64::MAX).map_err(|e| EvalError::Io {
             path: d.display().to_string(),
             msg: e.to_string(),
         })?;
