@@ -5,7 +5,9 @@
 //!   × f32/f16/bf16/int8 (int8 on `avx512vnni` = u8 activations × int8 weights with `vpdpbusd`; on the
 //!   other paths int8 weights decoded to f32). `hot/layer1`, `hot/layer2`: the paper net's two hidden
 //!   layers as separate nets (40→268→1, and 4→268→215→1 whose 268→215 layer dominates) on the
-//!   detected path, for the per-layer cost.
+//!   detected path, for the per-layer cost. `hot/floor/<dtype>`: only reading the paper net's weight
+//!   bytes in that dtype (32-byte loads summed, no arithmetic on them), back to back: the memory floor
+//!   under a hot single inference (138–278 KB stream from L2, which is larger than L1).
 //! - `paced/...` (custom loop): one inference per tick with a 0.9 ms sleep between ticks (1 kHz), p50/p99.
 //! - `tick32/...` (custom loop): 32 distinct paper-size nets once each per 1 kHz tick, every dtype, on
 //!   one thread and split over two threads (a spinning worker), p50/p99; plus the accuracy cost of
@@ -187,6 +189,59 @@ fn hot(c: &mut Criterion) {
         }
         g.finish();
     }
+    // The memory floor: the paper net's weight bytes in each dtype, only read.
+    let w = random_net(&mut rng, PAPER);
+    let mut g = c.benchmark_group("hot/floor");
+    for dtype in DTYPES {
+        let bytes = Mlp::new(&w, dtype).expect("valid net").weight_bytes();
+        let lines = vec![Line([1; 64]); bytes.div_ceil(64)];
+        g.bench_function(format!("{}/{}KB", dtype_name(dtype), bytes / 1000), |b| {
+            b.iter(|| stream(black_box(&lines)))
+        });
+    }
+    g.finish();
+}
+
+/// 64 bytes, 64-byte aligned: the streamed buffer of `hot/floor`.
+#[derive(Clone, Copy)]
+#[repr(C, align(64))]
+struct Line([u8; 64]);
+
+/// Reads every byte of `lines` once (sums them as u64 words in four independent chains) and returns the
+/// sum: the cost of streaming those bytes from wherever they are, with no arithmetic on them to speak
+/// of. Hand-written for the floor measurement only; on x86-64 with AVX2, 32-byte loads as the kernels do.
+fn stream(lines: &[Line]) -> u64 {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: AVX2 is present.
+        return unsafe { stream_avx2(lines) };
+    }
+    let mut acc = [0u64; 4];
+    for l in lines {
+        for (k, w) in l.0.chunks_exact(8).enumerate() {
+            acc[k % 4] = acc[k % 4].wrapping_add(u64::from_ne_bytes(w.try_into().unwrap()));
+        }
+    }
+    acc.iter().fold(0, |a, &b| a.wrapping_add(b))
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn stream_avx2(lines: &[Line]) -> u64 {
+    use std::arch::x86_64::*;
+    let (mut a, mut b) = (_mm256_setzero_si256(), _mm256_setzero_si256());
+    for l in lines {
+        // SAFETY: each line is 64 readable, 64-byte aligned bytes.
+        unsafe {
+            let p = l.0.as_ptr().cast::<__m256i>();
+            a = _mm256_add_epi64(a, _mm256_load_si256(p));
+            b = _mm256_add_epi64(b, _mm256_load_si256(p.add(1)));
+        }
+    }
+    let mut out = [0u64; 4];
+    // SAFETY: 32 writable bytes.
+    unsafe { _mm256_storeu_si256(out.as_mut_ptr().cast(), _mm256_add_epi64(a, b)) };
+    out.iter().fold(0, |x, &y| x.wrapping_add(y))
 }
 
 /// One inference per 1 kHz tick (0.9 ms sleep in between): the weights cool down between calls.
