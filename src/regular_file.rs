@@ -15,7 +15,7 @@
 //! ```
 //! use frictionless::regular_file;
 //! let dir = std::env::temp_dir();
-//! let err = regular_file::read_to_string(&dir, regular_file::MAX_TEXT_BYTES).unwrap_err();
+//! let err = regular_file::read_text(&dir).unwrap_err();
 //! assert_eq!(
 //!     regular_file::Refused::of(&err),
 //!     Some(&regular_file::Refused::NotRegular { file_type: "directory" })
@@ -143,6 +143,12 @@ pub fn read(path: &Path, max: u64) -> io::Result<Vec<u8>> {
         .into_io());
     }
     Ok(bytes)
+}
+
+/// The UTF-8 text of a regular file of at most [`MAX_TEXT_BYTES`]: a URDF, a TOML config, a JSON
+/// sidecar or report.
+pub fn read_text(path: &Path) -> io::Result<String> {
+    read_to_string(path, MAX_TEXT_BYTES)
 }
 
 /// The UTF-8 text of the regular file `path`, refused if it holds more than `max` bytes.

@@ -938,11 +938,7 @@ fn check_cpu(c: &Checker<'_>, key: &str, cpu: usize) -> Result<(), ConfigError> 
 
 /// Reads, parses and validates `path`, including every model file. Touches no IPC.
 pub fn load(path: &Path) -> Result<Config, ConfigError> {
-    let text = frictionless::regular_file::read_to_string(
-        path,
-        frictionless::regular_file::MAX_TEXT_BYTES,
-    )
-    .map_err(|source| ConfigError::Read {
+    let text = frictionless::regular_file::read_text(path).map_err(|source| ConfigError::Read {
         file: path.to_path_buf(),
         source,
     })?;

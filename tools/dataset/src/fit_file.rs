@@ -90,14 +90,11 @@ impl FittedModel {
     /// Reads the `model` and `params` of a fit file (other keys are ignored, so hand-written files
     /// with just these two read too).
     pub fn read(path: &Path) -> Result<Self, FitFileError> {
-        let text = frictionless::regular_file::read_to_string(
-            path,
-            frictionless::regular_file::MAX_TEXT_BYTES,
-        )
-        .map_err(|source| FitFileError::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text =
+            frictionless::regular_file::read_text(path).map_err(|source| FitFileError::Read {
+                path: path.to_path_buf(),
+                source,
+            })?;
         serde_json::from_str(&text).map_err(|e| FitFileError::Parse {
             path: path.to_path_buf(),
             message: e.to_string(),

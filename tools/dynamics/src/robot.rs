@@ -123,14 +123,11 @@ impl Robot {
     ) -> Result<Robot, DynamicsError> {
         let path = path.as_ref();
         let source = path.display().to_string();
-        let text = frictionless::regular_file::read_to_string(
-            path,
-            frictionless::regular_file::MAX_TEXT_BYTES,
-        )
-        .map_err(|e| DynamicsError::Read {
-            path: source.clone(),
-            message: e.to_string(),
-        })?;
+        let text =
+            frictionless::regular_file::read_text(path).map_err(|e| DynamicsError::Read {
+                path: source.clone(),
+                message: e.to_string(),
+            })?;
         Self::from_urdf_str_reduced(&text, &source, reduction)
     }
 

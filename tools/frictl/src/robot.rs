@@ -373,11 +373,7 @@ impl JointSection {
 
 /// Reads and checks a robot file; relative paths in it are made relative to its directory.
 pub fn load(path: &Path) -> Result<RobotFile, RobotError> {
-    let text = frictionless::regular_file::read_to_string(
-        path,
-        frictionless::regular_file::MAX_TEXT_BYTES,
-    )
-    .map_err(|source| RobotError::Read {
+    let text = frictionless::regular_file::read_text(path).map_err(|source| RobotError::Read {
         path: path.to_owned(),
         source,
     })?;

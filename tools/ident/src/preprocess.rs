@@ -270,11 +270,7 @@ impl LogMeta {
             path: p.clone(),
             msg,
         };
-        let text = frictionless::regular_file::read_to_string(
-            path,
-            frictionless::regular_file::MAX_TEXT_BYTES,
-        )
-        .map_err(|e| err(e.to_string()))?;
+        let text = frictionless::regular_file::read_text(path).map_err(|e| err(e.to_string()))?;
         let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| err(e.to_string()))?;
         let num = |k: &str| {
             v.get(k)

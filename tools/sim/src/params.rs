@@ -443,11 +443,7 @@ fn parse_table(text: &str, origin: &str) -> Result<toml::Table, ParamError> {
 }
 
 fn read_table(path: &Path) -> Result<toml::Table, ParamError> {
-    let text = frictionless::regular_file::read_to_string(
-        path,
-        frictionless::regular_file::MAX_TEXT_BYTES,
-    )
-    .map_err(|source| ParamError::Io {
+    let text = frictionless::regular_file::read_text(path).map_err(|source| ParamError::Io {
         path: path.to_owned(),
         source,
     })?;

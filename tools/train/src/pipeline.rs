@@ -229,11 +229,7 @@ pub fn load_sources(paths: &[PathBuf]) -> Result<Sources, PipelineError> {
         drop(bytes);
         let data = Dataset::read_csv(path)?;
         let side_path = path.with_extension("json");
-        let text = frictionless::regular_file::read_to_string(
-            &side_path,
-            frictionless::regular_file::MAX_TEXT_BYTES,
-        )
-        .map_err(|e| {
+        let text = frictionless::regular_file::read_text(&side_path).map_err(|e| {
             file_err(
                 &side_path,
                 format!(

@@ -480,10 +480,7 @@ pub fn run_search(
     let settings_path = dir.join("search.json");
     let results_path = dir.join("results.jsonl");
     let done = if run.resume {
-        match frictionless::regular_file::read_to_string(
-            &settings_path,
-            frictionless::regular_file::MAX_TEXT_BYTES,
-        ) {
+        match frictionless::regular_file::read_text(&settings_path) {
             Ok(t) => {
                 let rec: SearchSettings =
                     serde_json::from_str(&t).map_err(|e| ferr(&settings_path, e))?;
@@ -608,11 +605,8 @@ fn claim_settings(dir: &Path, settings: &SearchSettings) -> Result<(), SearchErr
     match linked {
         Ok(()) => Ok(()),
         Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-            let text = frictionless::regular_file::read_to_string(
-                &path,
-                frictionless::regular_file::MAX_TEXT_BYTES,
-            )
-            .map_err(|e| ferr(&path, format!("cannot read: {e}")))?;
+            let text = frictionless::regular_file::read_text(&path)
+                .map_err(|e| ferr(&path, format!("cannot read: {e}")))?;
             let rec: SearchSettings = serde_json::from_str(&text).map_err(|e| ferr(&path, e))?;
             compare_settings(&path, &rec, settings)
         }

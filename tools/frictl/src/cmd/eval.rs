@@ -217,12 +217,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut loaded = Vec::new();
     for p in &all_paths {
         let ds = Dataset::read_csv(p)?;
-        let side: Option<DatasetSidecar> = frictionless::regular_file::read_to_string(
-            &p.with_extension("json"),
-            frictionless::regular_file::MAX_TEXT_BYTES,
-        )
-        .ok()
-        .and_then(|t| serde_json::from_str(&t).ok());
+        let side: Option<DatasetSidecar> =
+            frictionless::regular_file::read_text(&p.with_extension("json"))
+                .ok()
+                .and_then(|t| serde_json::from_str(&t).ok());
         let joint = side.as_ref().map(|s| s.joint.clone()).unwrap_or_default();
         // A PINN whose inputs read a column this dataset lacks is refused by name (a torque-sensed
         // dataset has no motor angle: fine for joint-vel, not for delta-theta-joint-vel).
@@ -292,11 +290,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             range: train_range,
         })
     } else if let Some(r) = &args.train_report {
-        let text = frictionless::regular_file::read_to_string(
-            r,
-            frictionless::regular_file::MAX_TEXT_BYTES,
-        )
-        .with_context(|| format!("cannot read {}", r.display()))?;
+        let text = frictionless::regular_file::read_text(r)
+            .with_context(|| format!("cannot read {}", r.display()))?;
         let v: serde_json::Value =
             serde_json::from_str(&text).with_context(|| format!("{} is not JSON", r.display()))?;
         match v.get("training_range").filter(|x| !x.is_null()) {
@@ -414,11 +409,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             written.push(f);
         }
         if let Some(r) = &args.train_report {
-            let text = frictionless::regular_file::read_to_string(
-                r,
-                frictionless::regular_file::MAX_TEXT_BYTES,
-            )
-            .with_context(|| format!("cannot read {}", r.display()))?;
+            let text = frictionless::regular_file::read_text(r)
+                .with_context(|| format!("cannot read {}", r.display()))?;
             let v: serde_json::Value = serde_json::from_str(&text)
                 .with_context(|| format!("{} is not JSON", r.display()))?;
             let f = dir.join("training_curves.png");
@@ -454,12 +446,10 @@ fn drift_monitor(
     let mut refs = Vec::new();
     for p in &args.references {
         let ds = Dataset::read_csv(p)?;
-        let side: Option<DatasetSidecar> = frictionless::regular_file::read_to_string(
-            &p.with_extension("json"),
-            frictionless::regular_file::MAX_TEXT_BYTES,
-        )
-        .ok()
-        .and_then(|t| serde_json::from_str(&t).ok());
+        let side: Option<DatasetSidecar> =
+            frictionless::regular_file::read_text(&p.with_extension("json"))
+                .ok()
+                .and_then(|t| serde_json::from_str(&t).ok());
         let absent = side.as_ref().map_or(&[][..], |s| &s.absent_columns[..]);
         for (fp, f) in pinn_files {
             ds.check_inputs(&f.meta.features, absent)
@@ -473,11 +463,8 @@ fn drift_monitor(
     let train_report: Option<serde_json::Value> = match &args.train_report {
         Some(r) => Some(
             serde_json::from_str(
-                &frictionless::regular_file::read_to_string(
-                    r,
-                    frictionless::regular_file::MAX_TEXT_BYTES,
-                )
-                .with_context(|| format!("cannot read {}", r.display()))?,
+                &frictionless::regular_file::read_text(r)
+                    .with_context(|| format!("cannot read {}", r.display()))?,
             )
             .with_context(|| format!("{} is not JSON", r.display()))?,
         ),

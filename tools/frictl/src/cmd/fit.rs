@@ -103,12 +103,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut mask = ds.valid.clone();
     if !args.test_runs.is_empty() {
         let side: Option<frictionless_dataset::DatasetSidecar> =
-            frictionless::regular_file::read_to_string(
-                &args.dataset.with_extension("json"),
-                frictionless::regular_file::MAX_TEXT_BYTES,
-            )
-            .ok()
-            .and_then(|t| serde_json::from_str(&t).ok());
+            frictionless::regular_file::read_text(&args.dataset.with_extension("json"))
+                .ok()
+                .and_then(|t| serde_json::from_str(&t).ok());
         let runs = frictionless_dataset::dataset_runs(&args.dataset, side.as_ref(), &ds);
         let mut held = Vec::new();
         for name in &args.test_runs {

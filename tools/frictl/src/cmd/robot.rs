@@ -590,9 +590,8 @@ fn trained_offset(report: &TrainReport) -> anyhow::Result<Option<f64>> {
 }
 
 fn read_typed<T: serde::de::DeserializeOwned>(p: &Path) -> anyhow::Result<T> {
-    let t =
-        frictionless::regular_file::read_to_string(p, frictionless::regular_file::MAX_TEXT_BYTES)
-            .with_context(|| format!("cannot read {}", p.display()))?;
+    let t = frictionless::regular_file::read_text(p)
+        .with_context(|| format!("cannot read {}", p.display()))?;
     serde_json::from_str(&t).with_context(|| format!("{}: not the expected JSON", p.display()))
 }
 

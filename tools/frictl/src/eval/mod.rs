@@ -745,11 +745,7 @@ pub fn test_chunks_from_report(
         path: p.clone(),
         msg,
     };
-    let text = frictionless::regular_file::read_to_string(
-        report_path,
-        frictionless::regular_file::MAX_TEXT_BYTES,
-    )
-    .map_err(|e| EvalError::Io {
+    let text = frictionless::regular_file::read_text(report_path).map_err(|e| EvalError::Io {
         path: p.clone(),
         msg: e.to_string(),
     })?;
