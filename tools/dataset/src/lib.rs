@@ -322,6 +322,22 @@ pub struct RunInfo {
     pub chunks: Vec<u32>,
 }
 
+/// SHA-256 of a regular file's content, streamed (a multi-GB log is never held in memory; a FIFO or
+/// device is refused: [`frictionless::regular_file::open`]). The fingerprint datasets, sidecars,
+/// reports and stage stamps record of their inputs.
+pub fn file_sha256(path: &Path) -> std::io::Result<[u8; 32]> {
+    use sha2::Digest;
+    let (mut file, _) = frictionless::regular_file::open(path)?;
+    let mut h = sha2::Sha256::new();
+    std::io::copy(&mut file, &mut h)?;
+    Ok(h.finalize().into())
+}
+
+/// [`file_sha256`] as 64 lower-case hex digits.
+pub fn file_sha256_hex(path: &Path) -> std::io::Result<String> {
+    Ok(file_sha256(path)?.iter().map(|b| format!("{b:02x}")).collect())
+}
+
 /// The runs of the dataset at `path`: its sidecar's runs, or — a sidecar without runs, or none at all —
 /// one run named by the file stem holding every chunk of `data`.
 pub fn dataset_runs(path: &Path, sidecar: Option<&DatasetSidecar>, data: &Dataset) -> Vec<RunInfo> {

@@ -223,10 +223,8 @@ pub fn load_sources(paths: &[PathBuf]) -> Result<Sources, PipelineError> {
     }
     let mut list = Vec::with_capacity(paths.len());
     for path in paths {
-        let bytes = frictionless::regular_file::read(path, u64::MAX)
+        let sha256 = frictionless_dataset::file_sha256(path)
             .map_err(|e| file_err(path, format!("cannot read: {e}")))?;
-        let sha256: [u8; 32] = Sha256::digest(&bytes).into();
-        drop(bytes);
         let data = Dataset::read_csv(path)?;
         let side_path = path.with_extension("json");
         let text = frictionless::regular_file::read_text(&side_path).map_err(|e| {

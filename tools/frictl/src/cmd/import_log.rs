@@ -252,13 +252,6 @@ fn check(files: &[PathBuf], common: &CommonArgs) -> anyhow::Result<()> {
     super::check_outputs(&inputs, &[&common.out, &side])
 }
 
-/// SHA-256 of a file, streamed.
-fn sha256_file(path: &Path) -> anyhow::Result<String> {
-    let mut f = frictionless_logs::open_regular(path)?;
-    let mut h = sha2::Sha256::new();
-    std::io::copy(&mut f, &mut h).with_context(|| format!("cannot read {}", path.display()))?;
-    Ok(format!("{:x}", h.finalize()))
-}
 
 fn finish(
     mut runs: Vec<ImportedRun>,
@@ -373,7 +366,10 @@ fn finish(
     ds.write_csv(&common.out)?;
     let mut hashes = Vec::new();
     for f in files {
-        hashes.push(sha256_file(f)?);
+        hashes.push(
+            frictionless_dataset::file_sha256_hex(f)
+                .with_context(|| format!("cannot read {}", f.display()))?,
+        );
     }
     let input_sha256 = if hashes.len() == 1 {
         hashes[0].clone()

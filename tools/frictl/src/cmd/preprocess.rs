@@ -10,7 +10,6 @@ use frictionless_dataset::{ColumnDocOwned, DatasetSidecar, LabelSource};
 use frictionless_ident::kalman::KalmanConfig;
 use frictionless_ident::preprocess::{LogMeta, PreprocessConfig, RawLog, preprocess};
 use frictionless_sim::params::LinkModel;
-use sha2::Digest;
 
 /// Source of the link dynamics for τ_ID.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -164,10 +163,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     )?;
     let meta = LogMeta::read_json(&sidecar_path)?;
     let log = RawLog::read_csv(&args.log)?;
-    let bytes = frictionless::regular_file::read(&args.log, u64::MAX)
+    let sha = frictionless_dataset::file_sha256_hex(&args.log)
         .with_context(|| format!("cannot read {}", args.log.display()))?;
-    let sha = format!("{:x}", sha2::Sha256::digest(&bytes));
-    drop(bytes);
 
     let use_sidecar = match (args.link_from_sidecar, args.link) {
         (true, _) | (_, LinkSource::Sidecar) => true,

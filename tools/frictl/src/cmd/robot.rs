@@ -446,9 +446,7 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> JointPlan {
 
 /// SHA-256 of a file's content (hex).
 fn file_sha256(p: &Path) -> anyhow::Result<String> {
-    let bytes = frictionless::regular_file::read(p, u64::MAX)
-        .with_context(|| format!("cannot read {}", p.display()))?;
-    Ok(hex(&Sha256::digest(&bytes)))
+    frictionless_dataset::file_sha256_hex(p).with_context(|| format!("cannot read {}", p.display()))
 }
 
 fn hex(b: &[u8]) -> String {

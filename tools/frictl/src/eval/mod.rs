@@ -739,7 +739,6 @@ pub fn test_chunks_from_report(
     report_path: &Path,
     dataset_paths: &[PathBuf],
 ) -> Result<Vec<BTreeSet<u32>>, EvalError> {
-    use sha2::Digest;
     let p = report_path.display().to_string();
     let err = |msg: String| EvalError::TrainReport {
         path: p.clone(),
@@ -762,11 +761,12 @@ pub fn test_chunks_from_report(
         .unwrap_or_default();
     let mut hashes = Vec::new();
     for d in dataset_paths {
-        let bytes = frictionless::regular_file::read(d, u64::MAX).map_err(|e| EvalError::Io {
-            path: d.display().to_string(),
-            msg: e.to_string(),
-        })?;
-        hashes.push(format!("{:x}", sha2::Sha256::digest(&bytes)));
+        hashes.push(
+            frictionless_dataset::file_sha256_hex(d).map_err(|e| EvalError::Io {
+                path: d.display().to_string(),
+                msg: e.to_string(),
+            })?,
+        );
     }
     // Report dataset index → evaluated dataset index.
     let map: Vec<Option<usize>> = rep_ds
