@@ -23,7 +23,7 @@
 set -euo pipefail
 SECS="${1:-60}"
 shift || true
-ALL=(weights_reader can_mit_decode can_odrive_decode candump_parse frictiond_config dataset_readers onnx_import log_importers)
+ALL=(weights_reader can_mit_decode can_odrive_decode candump_parse frictiond_config dataset_readers onnx_import log_importers urdf_robot)
 FEATURES=()
 TEST_FEATURES=()
 if mat=$(bash "$(dirname "$0")/../tests/have-hdf5.sh"); then
@@ -72,7 +72,7 @@ for t in "${TARGETS[@]}"; do
       seed "$t" classic '(1700000000.123456) vcan0 001#7FFF7FF0000007FF\n(1700000000.124456) vcan0 000#018000800800\n'
       seed "$t" ext_rtr '(0.000001) can0 12345678#R\n(0.000002) can0 02C#R8\n'
       seed "$t" fd '(1.000000) vcan1 123##1DEADBEEF\n(1.000001) vcan1 123#0011223344556677_C\n' ;;
-    frictiond_config|dataset_readers|onnx_import|log_importers)
+    frictiond_config|dataset_readers|onnx_import|log_importers|urdf_robot)
       cp "$ROOT/fuzz/seeds/$t/"* "$ROOT/fuzz/corpus/$t/" ;;
     mat_import) ;; # structure-aware: libFuzzer starts from the empty plan
     *) echo "unknown fuzz target $t (known: ${ALL[*]})" >&2; exit 2 ;;
