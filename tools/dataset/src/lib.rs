@@ -335,7 +335,10 @@ pub fn file_sha256(path: &Path) -> std::io::Result<[u8; 32]> {
 
 /// [`file_sha256`] as 64 lower-case hex digits.
 pub fn file_sha256_hex(path: &Path) -> std::io::Result<String> {
-    Ok(file_sha256(path)?.iter().map(|b| format!("{b:02x}")).collect())
+    Ok(file_sha256(path)?
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect())
 }
 
 /// The runs of the dataset at `path`: its sidecar's runs, or — a sidecar without runs, or none at all —

@@ -252,7 +252,6 @@ fn check(files: &[PathBuf], common: &CommonArgs) -> anyhow::Result<()> {
     super::check_outputs(&inputs, &[&common.out, &side])
 }
 
-
 fn finish(
     mut runs: Vec<ImportedRun>,
     files: &[PathBuf],
