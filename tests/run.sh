@@ -57,6 +57,10 @@ for bin in frictiond frictl; do
   exe="${CARGO_TARGET_DIR:-$ROOT/target}/debug/$bin"
   [ -x "$exe" ] || { echo "tests/run.sh: cargo test --no-run left no $exe" >&2; exit 1; }
 done
+# The frictiond the experiments and the demo in the tests start: this build's. Without it, a `frictl`
+# started by a test harness inherits cargo's CARGO and CARGO_MANIFEST_DIR, takes itself for a
+# `cargo run`, and builds frictiond again in the middle of the test run, with other features.
+export FRICTIOND="${CARGO_TARGET_DIR:-$ROOT/target}/debug/frictiond"
 
 if [ -n "$PY_PID" ]; then
   if ! wait "$PY_PID"; then
