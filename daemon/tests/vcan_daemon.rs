@@ -220,32 +220,34 @@ fn vcan_daemon_closed_loop_with_frictl_sim_serve_odrive() {
     closed_loop_with_sim(true);
 }
 
-/// Knee joint position [rad] in a knee feedback frame, or the knee command value [motor Nm] in a
-/// knee command frame.
+/// What a frame on the bus says about the knee: its joint position [rad] (feedback), a command
+/// value [motor Nm], or an MIT enter-motor-mode.
 enum Seen {
-    KneePos(f64),
-    KneeCmd(f64),
+    Position(f64),
+    Command(f64),
+    Enter,
 }
 
 fn classify(w: &WireFrame, odrive_bus: bool) -> Option<Seen> {
     let r_knee = knee_ranges();
     if odrive_bus {
         match odrive::decode(w).ok()? {
-            (1, OdriveMsg::EncoderEstimates { pos_rev, .. }) => Some(Seen::KneePos(
+            (1, OdriveMsg::EncoderEstimates { pos_rev, .. }) => Some(Seen::Position(
                 f64::from(pos_rev) * std::f64::consts::TAU / -100.0,
             )),
             (1, OdriveMsg::SetInputTorque { torque_nm }) => {
-                Some(Seen::KneeCmd(f64::from(torque_nm)))
+                Some(Seen::Command(f64::from(torque_nm)))
             }
             _ => None,
         }
     } else if w.id == 0 && w.len >= 6 && w.data[0] == 1 {
-        Some(Seen::KneePos(
+        Some(Seen::Position(
             mit::decode_reply(w, &r_knee).ok()?.p_rad / -100.0,
         ))
     } else if w.id == 1 {
         match mit::decode_command(w, &r_knee).ok()? {
-            MitRx::Command(c) => Some(Seen::KneeCmd(c.t_ff_nm)),
+            MitRx::Command(c) => Some(Seen::Command(c.t_ff_nm)),
+            MitRx::Special(MitSpecial::EnterMotorMode) => Some(Seen::Enter),
             MitRx::Special(_) => None,
         }
     } else {
@@ -253,8 +255,9 @@ fn classify(w: &WireFrame, odrive_bus: bool) -> Option<Seen> {
     }
 }
 
-/// frictiond + `frictl sim serve --backend can` on vcan0: the knee moves, every published current is
-/// the law for the published friction estimate, the knee frames carry k_t·i.
+/// frictiond + `frictl sim serve --backend can` on vcan0, the drives started after the joints were
+/// enabled: the knee moves, every published current is the law for the published friction estimate,
+/// the knee frames carry k_t·i.
 fn closed_loop_with_sim(odrive_bus: bool) {
     let env = TestEnv::new(if odrive_bus {
         "vcansimod"
@@ -271,6 +274,27 @@ fn closed_loop_with_sim(odrive_bus: bool) {
     let sniff = CanSocket::open("vcan0").expect("vcan0");
     sniff.set_nonblocking(true).unwrap();
     let _ = sniff.set_socket_option_int(libc::SOL_SOCKET, libc::SO_RCVBUFFORCE, 8 << 20);
+    let mut d = start_daemon(&cfg, None, &[]);
+    let mut plant = Plant::open(&env.ipc, "controller");
+    plant.wait_for_daemon(T);
+    // The knee pushed with −25 Nm, the ankle held with 0 Nm. At −0.8 rad gravity pushes the knee
+    // towards 0 with ≈ 16.6·sin(0.8) = 11.9 Nm, more than its ≈ 8 Nm breakaway: a drive that does not
+    // apply the commands lets it rise towards −0.36 rad; one that does drives it down (net ≈ −13 Nm).
+    let tau = [-25.0, 0.0];
+    let mut rq = TorqueRequest::zeroed();
+    rq.n_joints = 2;
+    rq.enable_mask = 0b11;
+    rq.tau_des_nm[0] = tau[0];
+    rq.tau_des_nm[1] = tau[1];
+    // The drives come up after the joints were enabled (as a drive powered on late, or reset): the
+    // daemon's enable-edge frames go unheard, and the drives must still end up applying commands.
+    for _ in 0..300 {
+        plant.seq += 1;
+        rq.seq = plant.seq;
+        rq.stamp_ns = frictionless_shm_types::monotonic_ns();
+        plant.request.publish(&rq).unwrap();
+        std::thread::sleep(Duration::from_millis(1));
+    }
     let mut sim = Child(
         Command::new(frictl_path())
             .args([
@@ -295,22 +319,12 @@ fn closed_loop_with_sim(odrive_bus: bool) {
             .spawn()
             .expect("spawn frictl sim serve"),
     );
-    let mut d = start_daemon(&cfg, None, &[]);
-    let mut plant = Plant::open(&env.ipc, "controller");
-    plant.wait_for_daemon(T);
 
     if let Some(st) = sim.0.try_wait().unwrap() {
         let mut err = String::new();
         let _ = std::io::Read::read_to_string(sim.0.stderr.as_mut().unwrap(), &mut err);
         panic!("frictl sim serve exited ({st}): {err}");
     }
-    // The knee pushed with −15 Nm (beyond its ≈ 8 Nm breakaway), the ankle held with 0 Nm.
-    let tau = [-15.0, 0.0];
-    let mut rq = TorqueRequest::zeroed();
-    rq.n_joints = 2;
-    rq.enable_mask = 0b11;
-    rq.tau_des_nm[0] = tau[0];
-    rq.tau_des_nm[1] = tau[1];
     let (kt, r, imax) = ([0.157, 0.0665], [-100.0, -160.0], [5.0, 3.0]);
     let r_knee = knee_ranges();
     let mut p_first: Option<f64> = None;
@@ -320,7 +334,13 @@ fn closed_loop_with_sim(odrive_bus: bool) {
     let mut friction_seen = false;
     let t0 = Instant::now();
     let mut last_status_seq = 0;
-    while t0.elapsed() < Duration::from_secs(4) || statuses < 20 {
+    // 4 s from the drive's first reply (the simulator takes a while to start in a TCG VM).
+    let mut t_first: Option<Instant> = None;
+    let mut enters = 0;
+    let mut enters_after = 0;
+    let mut p_min = f64::INFINITY;
+    let mut p_max = f64::NEG_INFINITY;
+    while t_first.is_none_or(|t| t.elapsed() < Duration::from_secs(4)) || statuses < 20 {
         assert!(t0.elapsed() < T, "only {statuses} statuses");
         plant.seq += 1;
         rq.seq = plant.seq;
@@ -332,12 +352,22 @@ fn closed_loop_with_sim(odrive_bus: bool) {
                 continue;
             };
             match classify(&w, odrive_bus) {
-                Some(Seen::KneePos(s)) => {
+                Some(Seen::Position(s)) => {
                     p_first.get_or_insert(s);
+                    t_first.get_or_insert_with(Instant::now);
+                    p_min = p_min.min(s);
+                    p_max = p_max.max(s);
                     p_last = s;
                 }
-                Some(Seen::KneeCmd(t)) => t_wire.push(t),
-                None => {}
+                // Commands from the drive's first reply on (before it, the joint is stale: 0 A).
+                Some(Seen::Command(t)) if p_first.is_some() => t_wire.push(t),
+                Some(Seen::Enter) => {
+                    enters += 1;
+                    if p_first.is_some() {
+                        enters_after += 1;
+                    }
+                }
+                Some(Seen::Command(_)) | None => {}
             }
         }
         if let Some(s) = plant.status.latest().unwrap()
@@ -361,7 +391,20 @@ fn closed_loop_with_sim(odrive_bus: bool) {
         }
     }
     let (p0, p1) = (p_first.expect("knee replies on the bus"), p_last);
-    assert!((p1 - p0).abs() > 0.05, "knee did not move: {p0} → {p1}");
+    if p0 - p1 < 0.1 {
+        // SAFETY: signalling our own child.
+        unsafe { libc::kill(sim.0.id() as i32, libc::SIGTERM) };
+        let _ = sim.0.wait();
+        let mut err = String::new();
+        let _ = std::io::Read::read_to_string(sim.0.stderr.as_mut().unwrap(), &mut err);
+        let wire = (
+            t_wire.len(),
+            t_wire.iter().sum::<f64>() / t_wire.len().max(1) as f64,
+        );
+        panic!(
+            "knee did not go down (commanded −25 Nm): {p0} → {p1} (min {p_min} max {p_max}); {enters} enter-motor-mode frames ({enters_after} after the first reply), (count, mean) of knee torque commands {wire:?}; frictl sim serve said:\n{err}"
+        );
+    }
     assert!(friction_seen, "no friction compensation while moving");
     // Knee frames on the wire carry k_t·i within ±k_t·max_curr, and not all the same.
     assert!(t_wire.len() > 1000, "{} knee commands seen", t_wire.len());

@@ -27,8 +27,10 @@
 //!   (`CAN_ERR_CRTL` with RX/TX passive). The RT thread only bumps atomics; a logger thread started
 //!   at open logs changes at most once per second (off the RT thread).
 //! - Open enters MIT motor mode (`FF…FC`) / ODrive torque control + closed loop; an MIT drive (which
-//!   reports no mode) is sent enter-motor-mode again on every enable edge of its joint and, while its
-//!   feedback is stale, every [`REENTER_EVERY_TICKS`]; an ODrive reporting a state other than
+//!   reports no mode, and answers commands in rest mode without applying them) is sent
+//!   enter-motor-mode again on every enable edge of its joint, on the first reply after its feedback
+//!   was stale (never answered, or fell silent), and while its feedback is stale every
+//!   [`REENTER_EVERY_TICKS`]; an ODrive reporting a state other than
 //!   closed loop (without axis error) is re-armed at the same rate; drop sends 0 and exits motor
 //!   mode / sets the axis idle.
 //!
@@ -129,6 +131,9 @@ struct Drive {
     heartbeat: Option<(u32, u8)>,
     /// Whether the last command had this joint valid (enable edges re-enter MIT motor mode).
     was_valid: bool,
+    /// Whether the feedback was stale at the previous tick (true before the first reply): an MIT
+    /// drive answering again is re-entered at once.
+    was_stale: bool,
 }
 
 /// One bus: its socket and drives.
@@ -398,6 +403,7 @@ impl CanBackend {
                         last_enter_tick: 0,
                         heartbeat: None,
                         was_valid: false,
+                        was_stale: true,
                     }
                 })
                 .collect();
@@ -669,13 +675,21 @@ impl Backend for CanBackend {
                     flags |= FAULT_DRIVE;
                 }
                 self.states.fault_flags[k] = flags;
-                let rearm = match bus.protocol {
-                    CanProtocol::Mit => is_stale,
-                    CanProtocol::Odrive => drive.heartbeat.is_some_and(|(err, state)| {
-                        err == 0 && u32::from(state) != odrive::AXIS_STATE_CLOSED_LOOP_CONTROL
-                    }),
+                // An MIT drive answers in rest mode too (and ignores torque commands there): one
+                // that answers again after silence — it started after our enable edge, or reset —
+                // is re-entered at once, not only at the next enable edge.
+                let (rearm, answers_again) = match bus.protocol {
+                    CanProtocol::Mit => (is_stale, drive.was_stale && !is_stale),
+                    CanProtocol::Odrive => (
+                        drive.heartbeat.is_some_and(|(err, state)| {
+                            err == 0 && u32::from(state) != odrive::AXIS_STATE_CLOSED_LOOP_CONTROL
+                        }),
+                        false,
+                    ),
                 };
-                if rearm && self.tick - drive.last_enter_tick >= REENTER_EVERY_TICKS {
+                self.buses[b].drives[d].was_stale = is_stale;
+                let since_enter = self.tick - self.buses[b].drives[d].last_enter_tick;
+                if answers_again || (rearm && since_enter >= REENTER_EVERY_TICKS) {
                     self.enter(b, d);
                 }
             }
@@ -1040,6 +1054,14 @@ i_max = 40.0
         assert!(st.tau_meas_nm[0].is_nan(), "no torque sensor on the bus");
         assert_eq!(b.bus_counters().stale_feedback_mask, 0);
         assert_eq!(b.bus_counters().rx_frames, 2);
+        // First replies after silence: enter motor mode again (a drive that answers may be in rest
+        // mode — it started after open's frames, or reset).
+        for id in [1, 2] {
+            assert_eq!(
+                mit_cmd(&drive),
+                (id, MitRx::Special(MitSpecial::EnterMotorMode))
+            );
+        }
 
         // Commands: knee in motor torque kt·i, hip in amperes; invalid, NaN and over-limit cases.
         let mut cmd = MotorCurrentCommand::zeroed();
@@ -1097,7 +1119,7 @@ i_max = 40.0
             (2, MitRx::Special(MitSpecial::EnterMotorMode))
         );
         let _ = mit_cmd(&drive);
-        assert_eq!(b.bus_counters().tx_frames, 2 + 2 + 6 + 3);
+        assert_eq!(b.bus_counters().tx_frames, 2 + 2 + 2 + 6 + 3);
         drop(b);
         // Drop: zero torque, then exit motor mode, per drive.
         near(torque(mit_cmd(&drive).1), 0.0, 1e-3);
@@ -1139,6 +1161,67 @@ i_max = 40.0
             assert!(last.is_none_or(|s| st.seq > s));
             last = Some(st.seq);
         }
+    }
+
+    /// Enter-motor-mode frames the drive end has received so far, by motor id (others drained).
+    fn enters(drive: &CanSocket) -> Vec<u32> {
+        let mut ids = Vec::new();
+        while let Ok(f) = drive.read_frame() {
+            let w = WireFrame::try_from(&f).unwrap();
+            let t_max = if w.id == 1 { 1.0 } else { 10.0 };
+            if mit::decode_command(&w, &ranges(t_max))
+                == Ok(MitRx::Special(MitSpecial::EnterMotorMode))
+            {
+                ids.push(w.id);
+            }
+        }
+        ids
+    }
+
+    /// The race a closed loop met in the CAN VM: the joint was enabled (edge → enter-motor-mode)
+    /// before the drive listened; the drive then answered our torque commands from rest mode, never
+    /// applying them. Its first reply — and the first after any silence — re-enters it at once.
+    #[test]
+    fn mit_drive_answering_after_silence_is_entered_again_at_once() {
+        let e = env("late", MIT2);
+        let (host, drive) = pair();
+        drive.set_nonblocking(true).unwrap();
+        let mut b = CanBackend::with_sockets(&e.cfg, vec![host]).unwrap();
+        let mut cmd = MotorCurrentCommand::zeroed();
+        cmd.valid_mask = 0b101;
+        cmd.i_ref_a[0] = 1.0;
+        // Enabled while nobody answers: open's and the edge's frames go unheard.
+        for _ in 0..5 {
+            assert!(b.read_states().unwrap().is_none());
+            b.publish_command(&cmd).unwrap();
+        }
+        assert_eq!(enters(&drive), [1, 2, 1, 2], "open, then the enable edge");
+        // Only the knee's drive wakes up: it alone is entered, once, on its first reply.
+        mit_reply(&drive, 1, 0.0, 0.0, 0.0, 1.0);
+        b.read_states().unwrap().expect("knee feedback");
+        b.publish_command(&cmd).unwrap();
+        assert_eq!(enters(&drive), [1]);
+        for _ in 0..3 {
+            mit_reply(&drive, 1, 0.0, 0.0, 0.0, 1.0);
+            b.read_states().unwrap().expect("knee feedback");
+            b.publish_command(&cmd).unwrap();
+        }
+        assert_eq!(enters(&drive), [0u32; 0], "answering drive: no repeats");
+        // Silent past the timeout (3 ticks), then back: entered again on the first reply.
+        for _ in 0..5 {
+            b.read_states().unwrap();
+            b.publish_command(&cmd).unwrap();
+        }
+        assert_eq!(b.bus_counters().stale_feedback_mask & 1, 1);
+        assert_eq!(
+            enters(&drive),
+            [0u32; 0],
+            "re-arm while stale waits REENTER_EVERY_TICKS"
+        );
+        mit_reply(&drive, 1, 0.0, 0.0, 0.0, 1.0);
+        b.read_states().unwrap().expect("knee feedback");
+        assert_eq!(b.bus_counters().stale_feedback_mask & 1, 0);
+        assert_eq!(enters(&drive), [1]);
     }
 
     #[test]
