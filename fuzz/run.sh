@@ -51,10 +51,20 @@ for t in "${TARGETS[@]}"; do
   case "$t" in
     weights_reader)
       echo "== seeding fuzz/corpus/weights_reader"
-      # `--workspace` and tests/run.sh's features, so that after tests/run.sh nothing is rebuilt (with
-      # `-p frictionless` cargo would resolve the dependencies' features for that package alone).
+      # The harness from tests/run.sh's own build (`cargo test --workspace` with its features), found in
+      # cargo's list: after tests/run.sh nothing is rebuilt. Selecting it with `-p frictionless` or
+      # `--test frictionless_tests` changes the unit graph and rebuilt ≈ 60 crates.
+      harness=$(cargo test --workspace "${TEST_FEATURES[@]}" --no-run --message-format=json 2>/dev/null |
+        python3 -c 'import json,sys
+for l in sys.stdin:
+    try: m=json.loads(l)
+    except Exception: continue
+    t=m.get("target",{})
+    if m.get("reason")=="compiler-artifact" and m.get("executable") and t.get("name")=="frictionless_tests" and "test" in t.get("kind",[]):
+        print(m["executable"])')
+      [ -n "$harness" ] || { echo "fuzz: building the frictionless_tests harness failed" >&2; exit 1; }
       FWT_FUZZ_SEED_DIR="$ROOT/fuzz/corpus/weights_reader" \
-        cargo test -q --workspace "${TEST_FEATURES[@]}" --test frictionless_tests weights_bad_input::fuzz_seed_files_are_valid ;;
+        "$harness" -q --exact weights_bad_input::fuzz_seed_files_are_valid ;;
     can_mit_decode)
       # byte 0: flags (bit 0 extended, bit 1 RTR) | length << 4; bytes 1..4 id (LE); 4..12 data; then
       # f64 fields for commands and ranges.
