@@ -43,24 +43,17 @@ pub fn frictl_path() -> PathBuf {
     dir.join("frictl")
 }
 
-/// [`frictl_path`], or `None` if it was not built: the test is then skipped with a message when
-/// `FRICTIONLESS_REFS` is unset, and fails when it is set (the full test run builds it).
-pub fn frictl_bin() -> Option<PathBuf> {
+/// [`frictl_path`]; panics if it was not built. The tests that need it are `#[ignore]`d
+/// (`cargo test -p frictiond` does not build another package's binary); `tests/run.sh` builds the
+/// workspace and runs them with `--include-ignored`.
+pub fn frictl_bin() -> PathBuf {
     let bin = frictl_path();
-    if bin.exists() {
-        return Some(bin);
-    }
-    if std::env::var_os("FRICTIONLESS_REFS").is_some() {
-        panic!(
-            "{} not found: tests/run.sh builds it (`cargo build --workspace --bins`)",
-            bin.display()
-        );
-    }
-    eprintln!(
-        "skipped: {} not found (run tests/run.sh, or `cargo build -p frictl`)",
+    assert!(
+        bin.exists(),
+        "{} not found: run bash tests/run.sh, or `cargo build -p frictl` first",
         bin.display()
     );
-    None
+    bin
 }
 
 /// A per-test directory, iceoryx2 root path and service prefix; removed on drop.
