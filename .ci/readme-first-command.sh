@@ -75,7 +75,7 @@ if not isinstance(rounds, list) or not rounds:
 if bad:
     sys.exit(f"{path}: " + "; ".join(bad))
 # Printed, not asserted (floating point differs across kernel paths): the PINN's closed-loop error
-# against the perfect estimator's under the same law (issue target: within 1.2x).
+# against the perfect estimator's under the same law (the project's target: within 1.2x).
 for name, joint in joints.items():
     models = joint.get("models", {})
     p = models.get("PINN", {}).get("closed_loop_tau_f_rmse_nm")

@@ -1,4 +1,5 @@
-//! Inference benchmarks of [`frictionless::kernel::Mlp`] (numbers for the README; no timing asserts).
+//! Inference benchmarks of [`frictionless::kernel::Mlp`] (results in docs/performance.md; no timing
+//! asserts).
 //!
 //! - `hot/<model>/<path>/<dtype>` (criterion): back-to-back single inferences, weights hot in cache, for
 //!   the paper-size PINN 40→268→215→1 and the ergoCub-size 50→450→210→280→1, every available kernel path

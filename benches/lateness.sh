@@ -22,7 +22,7 @@
 #    again (it then has no subscriber; its CPU load on the plant CPU is the same).
 # While each runs, the script prints every thread of the measured process with its policy, priority,
 # affinity and the CPU it is on (from ps/taskset, i.e. /proc), and whether the PM QoS was held.
-# Prints p50 / p99 / p99.9 / max [µs] of both side by side. No pass/fail: numbers for the README.
+# Prints p50 / p99 / p99.9 / max [µs] of both side by side. No pass/fail; results in docs/performance.md.
 # Each frictiond chunk is a fresh process (its first ticks after start-up included), like each
 # cyclictest chunk.
 #

@@ -53,7 +53,7 @@ for t in "${TARGETS[@]}"; do
       echo "== seeding fuzz/corpus/weights_reader"
       # The harness from tests/run.sh's own build (`cargo test --workspace` with its features), found in
       # cargo's list: after tests/run.sh nothing is rebuilt. Selecting it with `-p frictionless` or
-      # `--test frictionless_tests` changes the unit graph and rebuilt ≈ 60 crates.
+      # `--test frictionless_tests` changes the unit graph and rebuilds dependencies (docs/decisions.md).
       harness=$(cargo test --workspace "${TEST_FEATURES[@]}" --no-run --message-format=json 2>/dev/null |
         python3 -c 'import json,sys
 for l in sys.stdin:

@@ -3,13 +3,16 @@
 //! What this crate **is**: the pure, I/O-free heart of the project.
 //! - [`friction`]: static joint-side friction models, Coulomb–viscous (CV) and Stribeck–Coulomb–viscous
 //!   (SCV, paper form and the authors' code form), with parameter Jacobians for fitting.
-//! - [`features`]: feature sets (`[Δθ, ṡ]`, `[ω_m, ṡ]`, `[s, θ]`, optional motor temperature), their
-//!   block-major oldest→newest layout, fixed-capacity per-joint history buffers, warm-up policies and the
-//!   explicit Δθ offset latch.
-//! - [`mlp`]: the plain description of a trained multilayer perceptron (PyTorch order), shape limits.
+//! - [`features`]: the seven feature sets (`[Δθ, ṡ]`, `[ω_m, ṡ]`, `[s, θ]`, `[s, ṡ]`, `[ṡ]` and the
+//!   authors' types 3 `[Δθ, ω_m, ṡ]` and 4 `[Δθ, s, ṡ]`, each optionally with the motor temperature),
+//!   their block-major oldest→newest layout, fixed-capacity per-joint history buffers, warm-up policies
+//!   and the explicit Δθ offset latch.
+//! - [`mlp`]: the plain description of a trained multilayer perceptron (PyTorch order), shape limits and
+//!   the storage dtypes (f32, f16, bf16, int16, int8).
 //! - [`weights`]: the `.fwt` fixed-size, versioned, CRC-checked weight file (spec in `docs/weights-format.md`).
 //! - [`kernel`]: the allocation-free single-sample MLP inference kernel with runtime CPU dispatch
-//!   (AVX-512 / AVX2+FMA / portable) and f16/bf16 weight storage.
+//!   (AVX-512 VNNI / AVX-512 / AVX2+FMA / portable) for every storage dtype, and cache prefetch of a
+//!   network's weights.
 //! - [`model`]: none / CV / SCV / PINN behind one trait, so the daemon treats them alike.
 //! - [`units`]: the signed gear ratio and unit conventions.
 //! - [`law`]: the per-joint torque-to-current control law (friction compensation gain, velocity-gated
@@ -18,11 +21,15 @@
 //! - [`filter`]: the one Butterworth low-pass (scipy-equal design, allocation-free per-sample step,
 //!   offline `sosfilt`/`sosfiltfilt`).
 //! - [`fastmath`]: inlinable exp/ln/powf/tanh kernels with stated error bounds (scalar and lane-wise).
+//! - [`regular_file`]: opening the files a user names (regular files only, never blocking, size-bounded),
+//!   used by every crate that reads a path from a command line or a config.
+//! - [`error_line`]: an error and its causes on one line, as `frictiond` and `frictl` print it.
 //! - `random` (cargo feature `random`, off by default): seeded random ReLU networks for tests, benches
 //!   and tools.
 //!
-//! What it is **not**: no threads, no IPC, no logging, no file-system access beyond the explicit
-//! `read`/`write` helpers of [`weights`]. The daemon (`frictiond`) and the tools (`frictl`) build on it.
+//! What it is **not**: no threads, no IPC, no logging. It touches the file system only where a caller
+//! asks it to: [`regular_file`]'s checked reads and [`weights`]' `read_file`/`write_file`. The daemon
+//! (`frictiond`) and the tools (`frictl`) build on it.
 //!
 //! ## Conventions
 //! Joint side is SI: `s` [rad], `ṡ` [rad/s], torques [Nm]. Motor side: `θ` [motor rad], `ω_m`

@@ -50,7 +50,7 @@ fi
 # tests, the `frictiond` and `frictl` binaries (cargo builds a package's binaries for its integration
 # tests; the frictiond tests that run `frictl` find it in target/<profile>/). A separate
 # `cargo build --bins` would resolve the dependencies' features without the dev-dependencies' and
-# compile most of them a second time (CI's log: 270 crates compiled again, stop 22).
+# compile most of them a second time (docs/decisions.md, "one feature resolution per build").
 echo "== cargo test --no-run (test harnesses and the binaries the end-to-end tests start)"
 cargo test --workspace "${FEATURES[@]}" --no-run
 for bin in frictiond frictl; do

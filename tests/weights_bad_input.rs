@@ -1158,7 +1158,7 @@ fn fuzz_seed_files_are_valid() {
     }
 }
 
-/// Issue 14 #3: a model path that is not a regular file (a FIFO nobody writes, `/dev/zero`, a
+/// A model path that is not a regular file (a FIFO nobody writes, `/dev/zero`, a
 /// directory) is refused before anything is read: no blocking on the FIFO, no unbounded allocation.
 #[test]
 fn read_file_refuses_non_regular_files_before_reading() {
@@ -1180,7 +1180,7 @@ fn read_file_refuses_non_regular_files_before_reading() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// Issue 14 #3: a regular file larger than any valid `.fwt` is refused from its size alone.
+/// A regular file larger than any valid `.fwt` is refused from its size alone.
 #[test]
 fn read_file_refuses_files_over_the_format_maximum() {
     let dir = scratch_dir("huge");
@@ -1210,7 +1210,7 @@ fn max_file_len_covers_the_largest_network() {
     assert!(len <= weights::layout::MAX_FILE_LEN, "{len}");
 }
 
-/// Issue 14 #8: a model whose output is not finite on representative inputs (a tiny normalisation
+/// A model whose output is not finite on representative inputs (a tiny normalisation
 /// scale, a huge weight) is refused by the reader, by `inspect` and by the writer.
 #[test]
 fn models_with_non_finite_output_are_refused() {

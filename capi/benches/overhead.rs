@@ -1,5 +1,5 @@
-//! Per-call cost of the C API's estimator step against the core called directly (numbers for the
-//! README; no timing asserts). One thread, hot loop, the same model and samples for every variant:
+//! Per-call cost of the C API's estimator step against the core called directly (results in
+//! docs/performance.md; no timing asserts). One thread, hot loop, the same model and samples for every variant:
 //!
 //! - `rust_core`: `frictionless::model::JointModel::estimate` (what frictiond calls);
 //! - `c_entry_from_rust`: `fl_estimator_estimate` called in-process (null checks, `catch_unwind`,

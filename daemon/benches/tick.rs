@@ -4,8 +4,8 @@
 //! f16 and bf16 (the `.fwt` storage dtypes: 32 distinct f32 networks are 8.9 MB of weights, more
 //! than this machine's caches; half precision halves the bytes streamed per tick) — and, for
 //! reference, the same joint counts with the SCV model, back to back (hot caches; the 1 kHz-paced
-//! cost with one or two RT threads and prefetching is `--bench tick_paced`). Numbers for the README;
-//! no asserts.
+//! cost with one or two RT threads and prefetching is `--bench tick_paced`). Results in
+//! docs/performance.md; no asserts.
 //! Run: `cargo bench -p frictiond --bench tick` (filter e.g. `-- 'tick/pinn.*/32'`).
 
 use std::hint::black_box;

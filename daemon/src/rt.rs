@@ -2093,7 +2093,7 @@ mod tests {
     use super::*;
     use frictionless_shm_types::{FLAG_NON_FINITE, FLAG_STALE};
 
-    /// Issue 14 #5: a CPU index beyond CPU_SETSIZE (the config refuses it; a `Config` built in code
+    /// A CPU index beyond CPU_SETSIZE (the config refuses it; a `Config` built in code
     /// may not) is an affinity refusal, not a panic in `CPU_SET`.
     #[test]
     fn out_of_range_cpu_is_refused_without_panicking() {

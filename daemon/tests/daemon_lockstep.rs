@@ -1,7 +1,7 @@
 //! `frictiond` with `[loop] trigger = "lockstep"` against the test process as the plant (real
-//! processes, real iceoryx2): one tick per joint state, no sleeping (the protocol in the README /
-//! preamble). Each test uses its own iceoryx2 root path and service prefix. No timing asserts; the
-//! throughput test prints ticks/s.
+//! processes, real iceoryx2): one tick per joint state, no sleeping (the protocol in
+//! docs/frictiond.md). Each test uses its own iceoryx2 root path and service prefix. No timing
+//! asserts; the throughput test prints ticks/s.
 
 use std::time::{Duration, Instant};
 

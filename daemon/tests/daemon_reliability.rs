@@ -1,4 +1,4 @@
-//! Faults between processes (issue 14): a second daemon on the same service prefix, reloads that
+//! Faults between processes: a second daemon on the same service prefix, reloads that
 //! change the loop period, a FIFO as config or model path, stale-input logging. Real `frictiond`
 //! processes against the test process as the plant; each test has its own iceoryx2 root and prefix.
 

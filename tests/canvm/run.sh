@@ -101,7 +101,7 @@ log "building bins and test harnesses ($BUILD: ${cargoargs[*]}; $PACKAGES)"
 # dependencies compile once.
 # CANVM_TESTS picks harnesses by target name from this one build's list: selecting them with `--test`
 # instead changes the unit graph (it leaves out targets whose dependencies shape the proc-macro
-# crates' profile) and rebuilt ≈ 60 crates, 4.5 min of CI, over a build tests/run.sh had just made.
+# crates' profile) and rebuilds dependencies tests/run.sh had just built (docs/decisions.md).
 cargo test "${cargoargs[@]}" $pkgargs --no-run 2>&1 | tail -n 3 >&2
 harnesses=$(cargo test "${cargoargs[@]}" $pkgargs --no-run --message-format=json 2>"$WORK/build-tests.log" |
   CANVM_TESTS="${CANVM_TESTS:-}" python3 -c 'import json,os,sys

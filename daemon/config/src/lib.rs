@@ -2040,7 +2040,7 @@ joints = [{ joint = "ankle", node_id = 3, command_unit = "joint_torque" }]
         );
     }
 
-    /// Issue 14 #5: a CPU outside the online set (or beyond CPU_SETSIZE) is refused by `--check`.
+    /// A CPU outside the online set (or beyond CPU_SETSIZE) is refused by `--check`.
     #[test]
     fn cpu_outside_the_online_set_is_refused() {
         let with_cpu = |cpu: usize| {
@@ -2151,7 +2151,7 @@ joints = [{ joint = "ankle", node_id = 3, command_unit = "joint_torque" }]
         assert_eq!(parse_cpu_list("3-1"), None);
     }
 
-    /// Issue 14 #10: values `--check` accepted but the start refused, or that switch a protection off.
+    /// Values `--check` accepted but the start refused, or that switch a protection off.
     #[test]
     fn start_time_failures_and_unbounded_tick_counts_are_refused() {
         let long = "p".repeat(4000);
@@ -2317,7 +2317,7 @@ joints = [{ joint = "ankle", node_id = 3, command_unit = "joint_torque" }]
         assert!(e.contains("joint[0].ood"), "{e}");
     }
 
-    /// Issue 14 #7: a model recorded for another joint, or another k_t, is refused naming both values.
+    /// A model recorded for another joint, or another k_t, is refused naming both values.
     #[test]
     fn model_for_another_joint_or_kt_is_refused() {
         let m = shipped_model();
@@ -2401,7 +2401,7 @@ joints = [{ joint = "ankle", node_id = 3, command_unit = "joint_torque" }]
         path
     }
 
-    /// Issue 13: a PINN whose inputs the backend cannot supply is refused at load (`--check`,
+    /// A PINN whose inputs the backend cannot supply is refused at load (`--check`,
     /// reload) naming joint, set and field: both CAN protocols report motor-side values only (joint
     /// values derived, so Δθ carries nothing) and no temperature; shm takes what the publisher writes.
     #[test]

@@ -76,7 +76,7 @@ fn bench(c: &mut Criterion) {
             black_box(table.gravity_nm(black_box(s)))
         })
     });
-    // The brief's budget, measured directly: 10⁶ fixed-base RNEA evaluations in one batch.
+    // The project's budget (≤ 5 s), measured directly: 10⁶ fixed-base RNEA evaluations in one batch.
     let t0 = std::time::Instant::now();
     for i in 0..1_000_000u32 {
         let mut qq = [0.0; 32];

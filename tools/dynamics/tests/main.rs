@@ -1,6 +1,6 @@
 //! Integration tests of `frictionless-dynamics` (analytic cases, Pinocchio reference values, the virtual leg).
 //!
-//! One test binary for the crate: each module is one former integration-test file.
+//! One test binary for the crate (one link step); each module tests one area.
 
 mod dynamics_analytic;
 mod dynamics_pinocchio;

@@ -86,7 +86,7 @@ fn schedule_plays_the_configured_amplitudes_frequencies_and_starts() {
     let total_min = frictionless_acquire::protocol::schedule_duration_s(&blocks) / 60.0;
     assert!(
         (15.0..28.0).contains(&total_min),
-        "ankle protocol ≥ 15 min (issue #3), got {total_min}"
+        "ankle protocol ≥ 15 min (the project's minimum acquisition length), got {total_min}"
     );
     let (_, knee) = load("knee", &["protocol.tracking.train.enabled=false"]);
     let knee_min = frictionless_acquire::protocol::schedule_duration_s(&schedule(&knee)) / 60.0;
@@ -382,7 +382,7 @@ fn acquire_is_deterministic_for_a_seed() {
     }
 }
 
-/// The default protocol of each preset fits its joint (issue #3 §3): most sine chunks complete instead
+/// The default protocol of each preset fits its joint: most sine chunks complete instead
 /// of ending at the position guard, at most half of all chunks end at a guard, the active data holds both
 /// stick (|ṡ| < 0.03 rad/s, the reference's split) and sliding in a reasonable proportion, velocities
 /// reach the paper's range (label filter |ṡ| < 10 rad/s; ergoCub's tracking data reaches a few rad/s),

@@ -453,7 +453,7 @@ fn predict_rejects_bad_rows_naming_the_file_and_row() {
     let o = frictl(&["predict", s(&fwt), "--input", s(&csv)]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("column 8"), "{}", stderr(&o));
-    // Issue 14 #11: an empty input is an error, not a silent success with no output.
+    // An empty input is an error, not a silent success with no output.
     let csv = dir.join("empty.csv");
     std::fs::write(&csv, "").unwrap();
     let o = frictl(&["predict", s(&fwt), "--input", s(&csv)]);
@@ -470,7 +470,7 @@ fn every_model_subcommand_has_help() {
     }
 }
 
-/// Issue 14 #6 and #9: an output that is one of the inputs (under any spelling) or lies in a missing
+/// An output that is one of the inputs (under any spelling) or lies in a missing
 /// directory is refused before any work, and the input is left byte for byte as it was.
 #[test]
 fn outputs_that_are_inputs_or_in_missing_dirs_are_refused_before_work() {

@@ -1,6 +1,6 @@
 //! Integration tests of `frictl`: the binary as a process (`CARGO_BIN_EXE_frictl`), the plant server, experiments with `frictiond`.
 //!
-//! One test binary for the crate: each module is one former integration-test file.
+//! One test binary for the crate (one link step); each module tests one area.
 
 mod acquire_live;
 mod acquire_protocol;

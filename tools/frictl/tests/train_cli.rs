@@ -524,7 +524,7 @@ fn torque_sensed_dataset(name: &str) -> PathBuf {
     out
 }
 
-/// Issue 13: `joint-pos-joint-vel` and `joint-vel` train, fit and evaluate end to end on a dataset
+/// `joint-pos-joint-vel` and `joint-vel` train, fit and evaluate end to end on a dataset
 /// whose motor-side columns are NaN throughout; a set that reads one of them is refused naming the
 /// column and the set; the `.fwt` names its blocks and reproduces the trainer through the daemon's
 /// estimator.

@@ -11,27 +11,18 @@
 //! `causal = true` makes the ṡ and s̈ **columns** (what a model reads) come from the forward-only
 //! Kalman filter, as the daemon sees them; the label and the sample filters always use the
 //! non-causal estimates, because the label is an offline target and a causal label only adds the lag
-//! mismatch of two different causal filters (current vs. s̈) to it (measured on the knee test run:
-//! label error 0.95 Nm causal vs 0.77 Nm non-causal).
+//! mismatch of two different causal filters (current vs. s̈) to it.
 //!
 //! ## Label accuracy (simulator, `tools/acquire/tests/ident_label.rs`)
 //! label − τ_F,true = J_eq·φ̈ + r·k_t·(i_f − i) − I_L·(ŝ̈ − s̈), i.e. the reflected motor inertia the
 //! paper neglects, current noise after the filter, and the smoother's acceleration error. On the
-//! knee test run (sine, ramp and 0.5/1 Hz tracking blocks, sliding rows) these are 0.78, 0.20 and
-//! 0.28 Nm RMS; the total is 0.77 Nm. So the paper's label is dominated by J_eq·φ̈ (r²·J_m = 0.23
-//! kg·m² knee, 0.128 ankle roll), which grows with the accelerations of the data — it is **not** a
-//! pipeline defect and it is kept by default (the authors' label; the network can learn it from the
-//! ṡ history, and the motor must supply it anyway). The documented noise floor of the pipeline
-//! itself, label − τ_F,true − J_eq·φ̈_true, is 0.34 Nm knee and 0.12 Nm ankle roll (ankle test run:
-//! paper label 0.39 Nm, J_eq·φ̈ alone 0.41 Nm).
-//! `subtract_reflected_inertia_kgm2` (ablation, `--subtract-reflected-inertia sidecar`) removes
-//! J_eq·φ̂̈ with φ̂̈ the smoothed acceleration of θ/r from the **motor** encoder — the physically right
-//! term (φ̈, not s̈: they differ by the flexspline oscillation) — and brings the label to 0.29 Nm
-//! knee / 0.07 Nm ankle roll, inside the reference targets (0.5 / 0.2 Nm).
-//! Kalman tuning: the authors' knee P/Q/R are the default. A much larger Q_acc/R (e.g. Q = diag(1e-12,
-//! 1e-10, 1e2), R = 1e-8, matched to the 2¹⁸-count encoder) cuts the s̈ error by a third, but the
-//! paper's label error then rises (0.79 vs 0.77 Nm), because the smoother's s̈ lag partly cancels
-//! J_eq·φ̈; so the default is unchanged and the tuning is left to the user (`--kalman-q/-r`).
+//! virtual joints the J_eq·φ̈ term dominates; it is **not** a pipeline defect and it is kept by
+//! default (the authors' label; the network can learn it from the ṡ history, and the motor must
+//! supply it anyway). `subtract_reflected_inertia_kgm2` (ablation, `--subtract-reflected-inertia
+//! sidecar`) removes J_eq·φ̂̈ with φ̂̈ the smoothed acceleration of θ/r from the **motor** encoder —
+//! the physically right term (φ̈, not s̈: they differ by the flexspline oscillation).
+//! Kalman tuning: the authors' knee P/Q/R are the default; `--kalman-q/-r` changes it. The measured
+//! label errors behind these choices are in `docs/decisions.md` ("Identification").
 //! Link model: `frictl preprocess --link auto` (default) uses the simulator's own link model when the
 //! log's sidecar has one, so a simulated log is labelled with the dynamics that produced it.
 //!

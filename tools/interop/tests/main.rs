@@ -1,6 +1,6 @@
 //! Integration tests of `frictionless-interop` (ONNX and safetensors import/export, reference vectors).
 //!
-//! One test binary for the crate: each module is one former integration-test file.
+//! One test binary for the crate (one link step); each module tests one area.
 
 mod interop_common;
 mod interop_onnx;

@@ -1,5 +1,5 @@
 //! Integration tests of `frictionless-sim` (physics of the virtual joint, determinism).
 //!
-//! One test binary for the crate: each module is one former integration-test file.
+//! One test binary for the crate (one link step); each module tests one area.
 
 mod sim_physics;

@@ -13,11 +13,10 @@
 //! normalisation included) ready for `frictionless::weights::write_file`.
 //!
 //! **Why hand-written, not a framework:** the model and loss are fixed, so the trainer is about eight
-//! GEMM calls per step plus a few fused elementwise passes. Measured on this workload (200k × 40,
-//! 268/215, batch 4096, 2 threads) it ran 1.36× faster than PyTorch CPU and builds in ~29 s, against
-//! 1.31 s/epoch and 522 s of build for burn, 3.5–3.9 s/epoch and 814 s for candle
-//! (see `docs/`). The GEMMs are the well-exercised `gemm` crate
-//! (the kernel under candle and burn); only the glue is ours.
+//! GEMM calls per step plus a few fused elementwise passes. The GEMMs are the well-exercised `gemm`
+//! crate (the kernel under candle and burn); only the glue is ours. The comparison with PyTorch, burn
+//! and candle that led here is in `docs/decisions.md` (Training); current speed in
+//! `docs/performance.md`.
 //!
 //! **Determinism:** one seed drives everything through counter-based streams (see `rng`), the
 //! elementwise passes use fixed row chunks, reductions run in a fixed order and `gemm` splits work only

@@ -20,7 +20,7 @@
 //! with PNG plots) and every stage's log (`logs/`). Children are stopped on Ctrl-C; the experiment
 //! runs clean up their shared-memory directories themselves.
 //!
-//! Two choices that decide whether the PINN helps in the closed loop (measured, see the README):
+//! Two choices that decide whether the PINN helps in the closed loop (the measurements are in docs/results.md):
 //! - the label is the friction without the reflected rotor inertia (`preprocess
 //!   --subtract-reflected-inertia sidecar`; `--with-rotor-inertia` keeps the paper's label). A
 //!   network trained on τ_F + J_eq·φ̈ feeds kfc·J_eq·φ̈ back with its history and filter lag, which
@@ -300,7 +300,7 @@ impl Sizes {
                 batch: 4316,
                 iterations: 8,
                 periods: 3.0,
-                // `frictl train`'s defaults are the demo's measured ones; the paper's values explicitly.
+                // `frictl train`'s defaults are the demo's own (docs/decisions.md); the paper's values explicitly.
                 train_extra: &["--lr", "7.6e-4", "--lambda", "0.164", "--dropout", "0.07"],
                 onpolicy_rounds: 2,
                 onpolicy_epochs: 50,
@@ -325,8 +325,8 @@ impl Sizes {
         } else {
             // `frictl train`'s defaults (128×128, H 30, batch 512, 10 epochs): ≈ 1 min per joint. The
             // demo has its own unseen test run, so every training chunk is used and the last epoch kept
-            // (`--val-frac 0 --test-frac 0`: on the knee, epoch selection on protocol chunks measured worse
-            // on tracking, 0.36–0.38 vs 0.32–0.33 × SCV).
+            // (`--val-frac 0 --test-frac 0`: on the knee, epoch selection on protocol chunks did worse on
+            // tracking; docs/results.md).
             Sizes {
                 n_starts: 2,
                 hidden: "128,128",
@@ -727,8 +727,8 @@ fn fit(r: &mut Runner, preset: &str, files: &JointFiles) -> anyhow::Result<()> {
 
 /// The PINN's input set per joint. The knee carries its link's gravity load through the harmonic drive,
 /// so Δθ (the drive's wind-up) alone does not tell friction from gravity torque: the knee gets the
-/// authors' input type 4 `[Δθ, s, ṡ]`, which measured 0.66 → 0.27 Nm offline and 0.84 → 0.26 Nm in
-/// closed loop on the virtual knee (docs/inputs.md). The ankle roll keeps `[Δθ, ṡ]` (type 4 gave no
+/// authors' input type 4 `[Δθ, s, ṡ]`, which is more accurate offline and in closed loop on the
+/// virtual knee (measured in docs/inputs.md §2.1). The ankle roll keeps `[Δθ, ṡ]` (type 4 gave no
 /// closed-loop gain there).
 fn feature_set(preset: &str) -> &'static str {
     match preset {

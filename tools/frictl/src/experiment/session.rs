@@ -142,7 +142,7 @@ pub fn build_frictiond_with_cargo(me: &Path) -> Result<Option<PathBuf>, Experime
     // `-p frictl` too, though only frictiond's binary is built: cargo resolves the dependencies'
     // features over every `-p` package, and frictiond's are a subset of frictl's, so the libraries
     // this `cargo run` just built are reused as they are instead of being rebuilt with frictiond's
-    // smaller feature set (measured: 58 crates, 1 min 49 s of the README's first command).
+    // smaller feature set (docs/decisions.md, "one feature resolution per build").
     cmd.args([
         "build",
         "--profile",
