@@ -1,7 +1,8 @@
 //! Forward dynamics by the articulated-body algorithm (ABA, Featherstone): q̈ from (q, q̇, τ) for a
 //! fixed base, `M(q)·q̈ + C(q, q̇)·q̇ + g(q) = τ`.
 //!
-//! What it **is**: the three-pass O(n) recursion in body coordinates, Pinocchio's `aba` for a fixed
+//! What it **is**: the three-pass O(n) recursion in world coordinates (Pinocchio's WORLD
+//! convention: a child's articulated inertia adds to its parent's without a 6×6 transform), Pinocchio's `aba` for a fixed
 //! base (root link welded to the world at identity, gravity [0, 0, −9.80665] m/s², no damping,
 //! friction or rotor inertia), allocation-free into a caller-owned [`Workspace`]. Checked against
 //! the CRBA/RNEA solve `M⁻¹·(τ − h)` (unit tests) and against Pinocchio on the ergoCub URDF
@@ -53,28 +54,6 @@ pub(crate) fn inertia6(i: &SpatialInertia) -> Matrix6<f64> {
     m
 }
 
-/// `F·I·Fᵀ` with `F` the force transform child → parent of `x` (`[[R, [p]×R], [0, R]]`): a child-frame
-/// articulated inertia expressed in the parent frame. Done on 3×3 blocks: rotate, then shift.
-#[inline]
-fn articulated_to_parent(i: &Matrix6<f64>, x: &Transform) -> Matrix6<f64> {
-    let r = &x.rot;
-    let rt = r.transpose();
-    let a = r * i.fixed_view::<3, 3>(0, 0) * rt;
-    let b = r * i.fixed_view::<3, 3>(0, 3) * rt;
-    let c = r * i.fixed_view::<3, 3>(3, 3) * rt;
-    let p = skew(&x.pos);
-    // T = [[1, P], [0, 1]]: T·[[A, B], [Bᵀ, C]]·Tᵀ with Pᵀ = −P
-    let pc = p * c;
-    let b2 = b + pc;
-    let a2 = a + p * b.transpose() - b * p - pc * p;
-    let mut out = Matrix6::zeros();
-    out.fixed_view_mut::<3, 3>(0, 0).copy_from(&a2);
-    out.fixed_view_mut::<3, 3>(0, 3).copy_from(&b2);
-    out.fixed_view_mut::<3, 3>(3, 0).copy_from(&b2.transpose());
-    out.fixed_view_mut::<3, 3>(3, 3).copy_from(&c);
-    out
-}
-
 impl Robot {
     /// Fixed-base forward dynamics (ABA): q̈ = M(q)⁻¹·(τ − C(q, q̇)·q̇ − g(q)) into `qdd`
     /// [rad/s² or m/s²], for joint torques `tau` [N·m or N]. Allocation-free.
@@ -114,18 +93,23 @@ impl Robot {
             check_len("armature", n, a.len())?;
         }
         ws.check(self)?;
-        // Pass 1 (root → leaves): placements, velocities, velocity-product accelerations c_i,
-        // rigid-body inertias and bias forces v ×* I·v.
+        // Everything in world (= root) coordinates, Pinocchio's WORLD convention: articulated
+        // inertias of children add to their parent's without a transform.
+        // Pass 1 (root → leaves): world placements, joint axes, velocities, velocity-product
+        // accelerations c = v × S·q̇, rigid-body inertias and bias forces v ×* I·v.
         ws.v[0] = Motion::ZERO;
+        ws.x[0] = Transform::identity();
         for (j, jt) in self.joints.iter().enumerate() {
             let b = j + 1;
-            let x = jt.placement(q[j]);
-            let s = self.joint_motion(j);
+            let x = ws.x[jt.parent_body].compose(&jt.placement(q[j]));
+            let s = x.motion_to_parent(&self.joint_motion(j));
             let vj = Motion::new(s.ang * qd[j], s.lin * qd[j]);
-            let v = x.motion_to_child(&ws.v[jt.parent_body]) + vj;
+            let v = ws.v[jt.parent_body] + vj;
+            let inertia = jt.inertia.to_parent(&x);
             ws.a[b] = v.cross_motion(&vj);
-            ws.f[b] = v.cross_force(&jt.inertia.apply(&v));
-            ws.ia[b] = inertia6(&jt.inertia);
+            ws.f[b] = v.cross_force(&inertia.apply(&v));
+            ws.ia[b] = inertia6(&inertia);
+            ws.aba_s[j] = motion6(&s);
             ws.x[b] = x;
             ws.v[b] = v;
         }
@@ -133,7 +117,7 @@ impl Robot {
         // joint into its parent. The root is welded to the world: nothing is propagated into it.
         for j in (0..n).rev() {
             let b = j + 1;
-            let s6 = motion6(&self.joint_motion(j));
+            let s6 = ws.aba_s[j];
             let ia = ws.ia[b];
             let u6 = ia * s6;
             let d = s6.dot(&u6) + armature.map_or(0.0, |a| a[j]);
@@ -144,7 +128,8 @@ impl Robot {
                     value: d,
                 });
             }
-            let u = tau[j] - s6.dot(&force6(&ws.f[b]));
+            let f6 = force6(&ws.f[b]);
+            let u = tau[j] - s6.dot(&f6);
             ws.aba_u[j] = u6;
             ws.aba_d[j] = d;
             ws.aba_tau[j] = u;
@@ -153,24 +138,29 @@ impl Robot {
                 continue;
             }
             let inv_d = 1.0 / d;
-            let ia_a = ia - u6 * u6.transpose() * inv_d;
-            let pa = force6(&ws.f[b]) + ia_a * motion6(&ws.a[b]) + u6 * (u * inv_d);
-            let x = ws.x[b];
-            let moved = articulated_to_parent(&ia_a, &x);
-            ws.ia[p] += moved;
-            let fp = x.force_to_parent(&to_force(&pa));
-            ws.f[p] += fp;
+            let ia_a = ia - u6 * (u6.transpose() * inv_d);
+            let pa = f6 + ia_a * motion6(&ws.a[b]) + u6 * (u * inv_d);
+            ws.ia[p] += ia_a;
+            ws.f[p] += to_force(&pa);
         }
         // Pass 3 (root → leaves): accelerations; the root's is −gravity (gravity as a base acceleration).
         ws.a[0] = Motion::new(Vector3::zeros(), -gravity_world());
         for (j, jt) in self.joints.iter().enumerate() {
             let b = j + 1;
-            let a_in = ws.x[b].motion_to_child(&ws.a[jt.parent_body]) + ws.a[b];
+            let a_in = ws.a[jt.parent_body] + ws.a[b];
             let qdd_j = (ws.aba_tau[j] - ws.aba_u[j].dot(&motion6(&a_in))) / ws.aba_d[j];
             qdd[j] = qdd_j;
-            ws.a[b] = a_in.add_scaled(&self.joint_motion(j), qdd_j);
+            ws.a[b] = a_in.add_scaled(&self.joint_motion_world(&ws.aba_s[j]), qdd_j);
         }
         Ok(())
+    }
+
+    #[inline(always)]
+    fn joint_motion_world(&self, s6: &Vector6<f64>) -> Motion {
+        Motion::new(
+            Vector3::new(s6[0], s6[1], s6[2]),
+            Vector3::new(s6[3], s6[4], s6[5]),
+        )
     }
 }
 

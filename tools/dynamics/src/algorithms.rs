@@ -40,6 +40,8 @@ pub struct Workspace {
     ic: Vec<SpatialInertia>,
     /// ABA: articulated inertias per body.
     pub(crate) ia: Vec<Matrix6<f64>>,
+    /// ABA: joint axis S in world coordinates per joint.
+    pub(crate) aba_s: Vec<Vector6<f64>>,
     /// ABA: U = I^A·S per joint.
     pub(crate) aba_u: Vec<Vector6<f64>>,
     /// ABA: D = Sᵀ·I^A·S per joint.
@@ -59,6 +61,7 @@ impl Workspace {
             f: vec![Force::ZERO; nb],
             ic: vec![SpatialInertia::zero(); nb],
             ia: vec![Matrix6::zeros(); nb],
+            aba_s: vec![Vector6::zeros(); nb - 1],
             aba_u: vec![Vector6::zeros(); nb - 1],
             aba_d: vec![0.0; nb - 1],
             aba_tau: vec![0.0; nb - 1],
