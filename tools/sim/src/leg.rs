@@ -594,14 +594,22 @@ impl LegPlant {
                     })?,
             );
         }
-        debug_assert_eq!(n, params.joints.len());
         // drives in robot order; joint k of the parameters draws from seed + k·stride
         let mut slots: Vec<Option<Drive>> = (0..n).map(|_| None).collect();
         for (k, p) in params.joints.iter().enumerate() {
             let s = seed.wrapping_add((k as u64).wrapping_mul(SEED_STRIDE));
-            slots[order[k]] = Some(Drive::new(p.clone(), s));
+            if let Some(slot) = slots.get_mut(order[k]) {
+                *slot = Some(Drive::new(p.clone(), s));
+            }
         }
-        let drives: Vec<Drive> = slots.into_iter().map(|d| d.expect("every slot")).collect();
+        let drives: Vec<Drive> = slots.into_iter().flatten().collect();
+        if drives.len() != n || n != params.joints.len() {
+            return Err(LegError::Param(ParamError::Link(format!(
+                "{}: the reduced model has {n} movable joints for {} drives",
+                params.urdf,
+                params.joints.len()
+            ))));
+        }
         let armature = drives.iter().map(|d| d.j_eq).collect();
         let mut leg = Self {
             ws: Workspace::new(&robot),
