@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Reference inverse-dynamics cases from Pinocchio for frictl's Rust RNEA (tools/dynamics/tests/dynamics_pinocchio.rs).
+"""Reference inverse- and forward-dynamics cases from Pinocchio for frictl's Rust RNEA and ABA
+(tools/dynamics/tests/dynamics_pinocchio.rs).
 
 Writes OUT/pinocchio_rnea.jsonl, one JSON object per line:
 
@@ -15,6 +16,15 @@ Conventions (Pinocchio's): gravity [0, 0, -9.80665]; fixed base = root link weld
 floating base = free-flyer with body-fixed velocity (linear first) and q = [pos, quat xyzw]; base_wrench in the
 root-link frame. Each external wrench acts ON the robot at the frame origin, expressed in the frame's axes.
 Joints are named, never indexed: Pinocchio's order is depth-first and differs from ours.
+
+Also writes OUT/pinocchio_aba.jsonl (fixed-base forward dynamics, Pinocchio's `aba`), one JSON object per line:
+
+  {"model": ..., "urdf": ..., "kind": "fixed" | "left_leg", "keep": [joint names] | null, "locked_q": {joint: rad},
+   "q": {joint: rad}, "qd": {joint: rad/s}, "tau": {joint: Nm}, "qdd": {joint: rad/s^2}}
+
+for the ergoCub and iCub 3 left legs (the six joints movable, every other joint locked at a random position)
+with random torques, and for the whole models with the torques of a random acceleration (random tau on a
+finger would give accelerations of 1e7 rad/s^2).
 
 Models: iCub 3 (`iCubGenova09` from icub-models==2.8.1) and the real ergoCub URDF
 (`--ergocub PATH`, default tests/fixtures/ergocub/ergoCubSN001.urdf in the repository): fixed base,
@@ -175,6 +185,43 @@ def cases_for(label, urdf, rng, n_fixed, n_legs, n_float):
     return cases
 
 
+def run_aba(model, q, qd, tau):
+    model.gravity.linear = GRAVITY
+    data = model.createData()
+    qv, vv, _ = to_vectors(model, q, qd, {})
+    tv = np.zeros(model.nv)
+    for name, jid in revolute_joints(model):
+        tv[model.joints[jid].idx_v] = tau[name]
+    ddq = pin.aba(model, data, qv, vv, tv)
+    return {name: float(ddq[model.joints[jid].idx_v]) for name, jid in revolute_joints(model)}
+
+
+def aba_cases_for(label, urdf, rng, n_fixed, n_leg):
+    urdf = str(Path(urdf).resolve())
+    fixed = pin.buildModelFromUrdf(urdf)
+    cases = []
+    for _ in range(n_fixed):
+        q, qd, qdd = random_state(fixed, rng)
+        tau, _ = run_rnea(fixed, q, qd, qdd)
+        cases.append({"model": label, "urdf": urdf, "kind": "fixed", "keep": None, "locked_q": {},
+                      "q": q, "qd": qd, "tau": tau, "qdd": run_aba(fixed, q, qd, tau)})
+    left = [j for j in LEG_JOINTS if j.startswith("l_")]
+    ids_to_lock = [jid for name, jid in revolute_joints(fixed) if name not in left]
+    for _ in range(n_leg):
+        q_all, qd_all, _ = random_state(fixed, rng)
+        locked = {fixed.names[jid]: q_all[fixed.names[jid]] for jid in ids_to_lock}
+        q_ref, _, _ = to_vectors(fixed, q_all, {}, {})
+        reduced = pin.buildReducedModel(fixed, ids_to_lock, q_ref)
+        q = {k: q_all[k] for k in left}
+        qd = {k: qd_all[k] for k in left}
+        tau = {k: float(rng.uniform(-30.0, 30.0)) for k in left}
+        qdd = run_aba(reduced, q, qd, tau)
+        assert sorted(qdd) == sorted(left), sorted(qdd)
+        cases.append({"model": label, "urdf": urdf, "kind": "left_leg", "keep": left, "locked_q": locked,
+                      "q": q, "qd": qd, "tau": tau, "qdd": qdd})
+    return cases
+
+
 def erd_cases(rng):
     """Fixed (twice, the first at rest) and floating-base cases for every example-robot-data URDF
     Pinocchio loads; prints the ones it refuses."""
@@ -239,6 +286,16 @@ def main():
         for c in cases:
             f.write(json.dumps(c) + "\n")
     print(f"gen_pinocchio_refs: wrote {len(cases)} cases (pinocchio {pin.__version__}) to {path}")
+
+    # Forward dynamics: its own generator stream, so the RNEA cases above stay what they were.
+    rng = np.random.default_rng(SEED + 1)
+    aba = aba_cases_for("ergoCubSN001", ergocub, rng, n_fixed=4, n_leg=40)
+    aba += aba_cases_for("iCubGenova09", icub3, rng, n_fixed=4, n_leg=10)
+    path = out / "pinocchio_aba.jsonl"
+    with open(path, "w") as f:
+        for c in aba:
+            f.write(json.dumps(c) + "\n")
+    print(f"gen_pinocchio_refs: wrote {len(aba)} forward-dynamics cases to {path}")
 
 
 if __name__ == "__main__":

@@ -14,9 +14,9 @@
 //! External wrenches are applied **to** the robot (by the environment) at a named frame's origin,
 //! expressed in that frame's coordinates: τ = M·ν̇ + h − Jᵀ·f_ext.
 //!
-//! What it is **not**: forward dynamics or integration (the simulator owns those).
+//! Forward dynamics (ABA) is in [`super::aba`]. What it is **not**: integration (the simulator owns it).
 
-use nalgebra::{DMatrix, UnitQuaternion, Vector3};
+use nalgebra::{DMatrix, Matrix6, UnitQuaternion, Vector3, Vector6};
 
 use super::error::DynamicsError;
 use super::robot::{FrameId, JointKind, Robot};
@@ -33,11 +33,21 @@ pub fn gravity_world() -> Vector3<f64> {
 /// Preallocated scratch space for the algorithms (one per thread; reuse it across calls).
 #[derive(Clone, Debug)]
 pub struct Workspace {
-    x: Vec<Transform>,
-    v: Vec<Motion>,
-    a: Vec<Motion>,
-    f: Vec<Force>,
+    pub(crate) x: Vec<Transform>,
+    pub(crate) v: Vec<Motion>,
+    pub(crate) a: Vec<Motion>,
+    pub(crate) f: Vec<Force>,
     ic: Vec<SpatialInertia>,
+    /// ABA: articulated inertias per body.
+    pub(crate) ia: Vec<Matrix6<f64>>,
+    /// ABA: joint axis S in world coordinates per joint.
+    pub(crate) aba_s: Vec<Vector6<f64>>,
+    /// ABA: U = I^A·S per joint.
+    pub(crate) aba_u: Vec<Vector6<f64>>,
+    /// ABA: D = Sᵀ·I^A·S per joint.
+    pub(crate) aba_d: Vec<f64>,
+    /// ABA: u = τ − Sᵀ·p^A per joint.
+    pub(crate) aba_tau: Vec<f64>,
 }
 
 impl Workspace {
@@ -50,10 +60,15 @@ impl Workspace {
             a: vec![Motion::ZERO; nb],
             f: vec![Force::ZERO; nb],
             ic: vec![SpatialInertia::zero(); nb],
+            ia: vec![Matrix6::zeros(); nb],
+            aba_s: vec![Vector6::zeros(); nb - 1],
+            aba_u: vec![Vector6::zeros(); nb - 1],
+            aba_d: vec![0.0; nb - 1],
+            aba_tau: vec![0.0; nb - 1],
         }
     }
 
-    fn check(&self, robot: &Robot) -> Result<(), DynamicsError> {
+    pub(crate) fn check(&self, robot: &Robot) -> Result<(), DynamicsError> {
         check_len("workspace bodies", robot.dof() + 1, self.x.len())
     }
 }
@@ -134,7 +149,11 @@ pub struct ExternalWrench {
     pub wrench: Force,
 }
 
-fn check_len(what: &'static str, expected: usize, got: usize) -> Result<(), DynamicsError> {
+pub(crate) fn check_len(
+    what: &'static str,
+    expected: usize,
+    got: usize,
+) -> Result<(), DynamicsError> {
     if expected == got {
         Ok(())
     } else {
@@ -148,7 +167,7 @@ fn check_len(what: &'static str, expected: usize, got: usize) -> Result<(), Dyna
 
 impl Robot {
     #[inline]
-    fn joint_motion(&self, j: usize) -> Motion {
+    pub(crate) fn joint_motion(&self, j: usize) -> Motion {
         let jt = &self.joints[j];
         match jt.kind {
             JointKind::Revolute => Motion::new(jt.axis, Vector3::zeros()),

@@ -94,4 +94,16 @@ pub enum DynamicsError {
         /// The value.
         value: String,
     },
+    /// A joint whose articulated inertia about its axis is not positive: M(q) is singular there.
+    #[error(
+        "{source_name}: joint '{joint}' moves a subtree with no inertia about its axis (articulated inertia {value}): forward dynamics is undefined"
+    )]
+    Singular {
+        /// File path or label.
+        source_name: String,
+        /// Joint name.
+        joint: String,
+        /// Sᵀ·I^A·S [kg·m² or kg].
+        value: f64,
+    },
 }

@@ -8,13 +8,13 @@
 //! What this crate **is**: a URDF loader that builds a kinematic tree with fixed joints lumped and optional
 //! joint locking ([`Robot`], [`Reduction`]), and allocation-free algorithms on it: fixed- and
 //! floating-base RNEA with external wrenches, CRBA mass matrix, gravity and bias torques
-//! ([`Workspace`]), plus the single-joint link-side view used by the virtual joint simulator
+//! ([`Workspace`]), fixed-base forward dynamics by the articulated-body algorithm ([`aba`]), plus the single-joint link-side view used by the virtual joint simulator
 //! ([`SingleJoint`]). Conventions follow Pinocchio (see [`algorithms`]); results are cross-checked
 //! against Pinocchio on iCub 3, ergoCub and the 68 URDFs of example-robot-data 6.0.0 that Pinocchio
 //! loads (arms, quadrupeds, humanoids, hands, mobile manipulators; worst difference 7e-13 N·m) in
 //! `tools/dynamics/tests/dynamics_pinocchio.rs`.
 //!
-//! What it is **not**: forward dynamics, contact solving, geometry or visualisation.
+//! What it is **not**: an integrator, contact solving, geometry or visualisation.
 //!
 //! The project's own model is `config/urdf/virtual_leg.urdf` ([`DEFAULT_URDF`]).
 //!
@@ -42,6 +42,7 @@
 
 #![warn(missing_docs)]
 
+pub mod aba;
 pub mod algorithms;
 pub mod error;
 pub mod robot;

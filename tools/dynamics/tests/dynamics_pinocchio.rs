@@ -179,3 +179,79 @@ fn rnea_matches_pinocchio_by_joint_name() {
         erd.len()
     );
 }
+
+#[derive(Deserialize)]
+struct AbaCase {
+    model: String,
+    urdf: String,
+    kind: String,
+    keep: Option<Vec<String>>,
+    locked_q: HashMap<String, f64>,
+    q: HashMap<String, f64>,
+    qd: HashMap<String, f64>,
+    tau: HashMap<String, f64>,
+    qdd: HashMap<String, f64>,
+}
+
+/// Forward dynamics: the Rust ABA against Pinocchio's `aba` on random states (q, q̇, τ) of the ergoCub and
+/// iCub 3 left legs (every other joint locked at a random position) and of the whole models; joints by
+/// name, ≤ 1e-9 relative to the largest acceleration of the case (at least 1 rad/s²).
+#[test]
+#[ignore = "needs FRICTIONLESS_REFS (tests/run.sh)"]
+fn aba_matches_pinocchio_by_joint_name() {
+    let dir = std::env::var_os("FRICTIONLESS_REFS")
+        .expect("FRICTIONLESS_REFS must name the directory of tests/python/gen_*.py's output");
+    let path = PathBuf::from(dir).join("pinocchio_aba.jsonl");
+    let text = std::fs::read_to_string(&path)
+        .unwrap_or_else(|e| panic!("{}: {e} (run tests/run.sh)", path.display()));
+    let mut counts: HashMap<(String, String), usize> = HashMap::new();
+    let mut worst = 0.0f64;
+    for (line_no, line) in text.lines().enumerate() {
+        let at = || format!("{} line {}", path.display(), line_no + 1);
+        let c: AbaCase = serde_json::from_str(line).unwrap_or_else(|e| panic!("{}: {e}", at()));
+        let red = c.keep.as_ref().map(|keep| Reduction {
+            keep: keep.clone(),
+            locked_q: c.locked_q.clone(),
+        });
+        let robot = Robot::from_urdf_file_reduced(&c.urdf, red.as_ref())
+            .unwrap_or_else(|e| panic!("{}: {e}", at()));
+        let n = robot.dof();
+        assert_eq!(n, c.qdd.len(), "{}: joint count", at());
+        let vec_of = |m: &HashMap<String, f64>| {
+            robot
+                .vector_from_names(m.iter().map(|(k, v)| (k.as_str(), *v)))
+                .unwrap_or_else(|e| panic!("{}: {e}", at()))
+        };
+        let (q, qd, tau) = (vec_of(&c.q), vec_of(&c.qd), vec_of(&c.tau));
+        let mut ws = Workspace::new(&robot);
+        let mut qdd = vec![0.0; n];
+        robot.aba(&mut ws, &q, &qd, &tau, &mut qdd).unwrap();
+        let scale = c.qdd.values().fold(1.0f64, |m, x| m.max(x.abs()));
+        for (name, &expect) in &c.qdd {
+            let got = qdd[robot.joint_index(name).unwrap()];
+            let rel = (got - expect).abs() / scale;
+            worst = worst.max(rel);
+            assert!(
+                rel <= 1e-9,
+                "{} ({} {}): joint {name}: {got} rad/s² vs pinocchio {expect} rad/s² (relative {rel:e})",
+                at(),
+                c.model,
+                c.kind
+            );
+        }
+        *counts.entry((c.model.clone(), c.kind.clone())).or_default() += 1;
+    }
+    for model in ["ergoCubSN001", "iCubGenova09"] {
+        for kind in ["fixed", "left_leg"] {
+            assert!(
+                counts.contains_key(&(model.to_string(), kind.to_string())),
+                "no {model} {kind} cases in {}",
+                path.display()
+            );
+        }
+    }
+    println!(
+        "pinocchio aba cross-check: {} cases, worst relative error {worst:.3e}",
+        counts.values().sum::<usize>()
+    );
+}

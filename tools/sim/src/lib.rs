@@ -8,6 +8,8 @@
 //! generate datasets and to test the whole method without a robot:
 //! - [`params`]: every parameter as a serde struct, the `knee` / `ankle_roll` presets and the
 //!   `--params FILE` / `--set key=value` override layering;
+//! - [`leg`]: the coupled virtual leg ([`LegPlant`]): one drive per joint of a URDF leg (the ergoCub
+//!   left leg by default, `config/presets/leg.toml`), coupled through the rigid-body dynamics (ABA);
 //! - [`link`]: the [`LinkDynamics`](link::LinkDynamics) trait (I_L(s), g(s)) and an analytic pendulum;
 //! - [`plant`]: the equations, 20 kHz semi-implicit Euler with the exact LuGre update, 1 kHz sensor
 //!   emulation and the true friction as diagnostics;
@@ -48,6 +50,7 @@
 
 #![warn(missing_docs)]
 
+pub mod leg;
 pub mod link;
 pub mod params;
 pub mod plant;
@@ -55,6 +58,7 @@ pub mod profile;
 pub mod stribeck;
 pub mod torque_sensor;
 
+pub use leg::{JointSample, LegError, LegParams, LegPlant, Perturbation};
 pub use link::{LinkDynamics, Pendulum};
 pub use params::{LinkModel, ParamError, PlantParams, SensorParams};
 pub use plant::{Measurement, Plant, PlantState, Sample, Truth};

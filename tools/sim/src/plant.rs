@@ -125,7 +125,7 @@ fn sin_cos_small(d: f64) -> (f64, f64) {
 /// motor ripple angle 2|r|φ advances by up to 0.8 rad per step at |φ̇| ≈ 50 rad/s on the ankle); the
 /// rounding drift over the ≤ 20 steps of a sample (re-synchronised every sample) is a few ulp.
 #[inline(always)]
-fn rotate(sin_a: &mut f64, cos_a: &mut f64, d: f64, new_angle: f64) {
+pub(crate) fn rotate(sin_a: &mut f64, cos_a: &mut f64, d: f64, new_angle: f64) {
     let a = d.abs();
     let (sd, cd) = if a < 1e-3 {
         // the joint angle's step (|ṡ|·dt < 1e-3 below 20 rad/s): to d⁵ and d⁶ (truncation < 2e-25)
@@ -163,9 +163,8 @@ pub struct Plant<L: LinkDynamics = Box<dyn LinkDynamics>> {
     dt: f64,
     current_gain: f64,
     c_th: f64,
-    // motor-velocity window (quantised θ of the last N samples, ring)
-    theta_hist: Vec<f64>,
-    theta_pos: usize,
+    // encoders, motor-velocity window, current and temperature sensors
+    sensors: Sensors,
     samples: u64,
     last_meas: Measurement,
     last_truth: Truth,
@@ -181,12 +180,128 @@ pub struct Plant<L: LinkDynamics = Box<dyn LinkDynamics>> {
 /// Temperature-dependent coefficients, evaluated once per 1 kHz sample: T changes by well under
 /// 1 mK per millisecond (τ_th = 300 s), and the exp() per physics step would cost ~10 % of run time.
 #[derive(Clone, Copy)]
-struct ThermalCoeffs {
-    f_c0: f64,
-    delta_f_c: f64,
-    f_s: f64,
-    sigma2m: f64,
-    sigma2j: f64,
+pub(crate) struct ThermalCoeffs {
+    pub(crate) f_c0: f64,
+    pub(crate) delta_f_c: f64,
+    pub(crate) f_s: f64,
+    pub(crate) sigma2m: f64,
+    pub(crate) sigma2j: f64,
+}
+
+impl ThermalCoeffs {
+    /// The coefficients of `p` at winding temperature `temperature_c` [°C].
+    pub(crate) fn at(p: &PlantParams, temperature_c: f64) -> Self {
+        let dt = temperature_c - 25.0;
+        let c = 1.0 - p.beta_c_per_k * dt;
+        let v = (-p.beta_v_per_k * dt).exp();
+        ThermalCoeffs {
+            f_c0: p.f_c0_nm * c,
+            delta_f_c: p.delta_f_c_nm * c,
+            f_s: p.f_s0_nm * c,
+            sigma2m: p.sigma2m_nms_per_rad * v,
+            sigma2j: p.sigma2j_nms_per_rad * v,
+        }
+    }
+}
+
+/// Flexspline elastic torque (no damping) of `p` for a deflection Δ = φ − s [Nm].
+#[inline]
+pub(crate) fn spring_nm(p: &PlantParams, delta_rad: f64) -> f64 {
+    let d = dead_zone(p, delta_rad);
+    d * (p.k1_nm_per_rad + p.k3_nm_per_rad3 * d * d)
+}
+
+/// Smoothed lost-motion dead-zone of `p`; the identity when `lost_motion_rad` is 0.
+#[inline]
+fn dead_zone(p: &PlantParams, x: f64) -> f64 {
+    let b = p.lost_motion_rad;
+    if b == 0.0 {
+        return x;
+    }
+    let e2 = p.lost_motion_smoothing_rad * p.lost_motion_smoothing_rad;
+    let a = x - b;
+    let c = x + b;
+    0.5 * (a + (a * a + e2).sqrt()) + 0.5 * (c - (c * c + e2).sqrt())
+}
+
+/// The deflection Δ with spring_nm(Δ) = `tau_nm` (bisection on the monotone spring law, dead-zone
+/// included): the wind-up that holds `tau_nm` at rest.
+pub(crate) fn spring_deflection_rad(p: &PlantParams, tau_nm: f64) -> f64 {
+    let (mut lo, mut hi) = (-1.0_f64, 1.0_f64);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if spring_nm(p, mid) < tau_nm {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+/// The emulated sensors of one joint: encoders, motor-velocity window, noisy current, temperature.
+#[derive(Clone, Debug)]
+pub(crate) struct Sensors {
+    /// Quantised θ of the last N + 1 samples (ring).
+    theta_hist: Vec<f64>,
+    theta_pos: usize,
+}
+
+impl Sensors {
+    pub(crate) fn new(p: &PlantParams) -> Self {
+        Self {
+            theta_hist: vec![0.0; p.sensors.motor_velocity_window_samples as usize + 1],
+            theta_pos: 0,
+        }
+    }
+
+    /// Motor encoder θ = r_signed·φ quantised [motor rad].
+    pub(crate) fn theta_quantised(p: &PlantParams, st: &PlantState) -> f64 {
+        let q = std::f64::consts::TAU / f64::from(p.sensors.motor_encoder_counts_per_rev);
+        quantise(p.gear_ratio_signed * st.phi_rad, q)
+    }
+
+    /// Fills the motor-velocity window with the current θ (a joint at rest).
+    pub(crate) fn reset(&mut self, p: &PlantParams, st: &PlantState) {
+        let theta_q = Self::theta_quantised(p, st);
+        self.theta_hist.iter_mut().for_each(|t| *t = theta_q);
+    }
+
+    /// One sample of every sensor at `time_s` (draws the current noise from `rng`).
+    pub(crate) fn measure(
+        &mut self,
+        p: &PlantParams,
+        st: &PlantState,
+        rng: &mut ChaCha8Rng,
+        time_s: f64,
+    ) -> Measurement {
+        let sens = &p.sensors;
+        let q_s = std::f64::consts::TAU / f64::from(sens.joint_encoder_counts_per_rev);
+        let theta = Self::theta_quantised(p, st);
+        // ring of the last N+1 quantised motor angles
+        let n = self.theta_hist.len();
+        self.theta_pos = (self.theta_pos + 1) % n;
+        self.theta_hist[self.theta_pos] = theta;
+        let oldest = self.theta_hist[(self.theta_pos + 1) % n];
+        let window_s = (n - 1) as f64 * p.sample_period_s();
+        let noise: f64 = rng.sample(StandardNormal);
+        let i_meas = quantise(
+            st.i_a + sens.current_noise_std_a * noise,
+            sens.current_resolution_a,
+        );
+        Measurement {
+            time_s,
+            s_rad: quantise(st.s_rad, q_s),
+            theta_motor_rad: theta,
+            omega_motor_rad_s: (theta - oldest) / window_s,
+            i_meas_a: i_meas,
+            temperature_c: if sens.temperature_sensor {
+                quantise(st.temperature_c, sens.temperature_resolution_c)
+            } else {
+                f64::NAN
+            },
+        }
+    }
 }
 
 impl<L: LinkDynamics> Plant<L> {
@@ -201,7 +316,6 @@ impl<L: LinkDynamics> Plant<L> {
         };
         let r_signed = params.gear_ratio_signed;
         let dt = params.dt_physics_s;
-        let window = params.sensors.motor_velocity_window_samples as usize;
         let mut plant = Self {
             r_abs: r_signed.abs(),
             j_eq: params.j_eq_kgm2(),
@@ -221,8 +335,7 @@ impl<L: LinkDynamics> Plant<L> {
                 i_a: 0.0,
                 temperature_c: t0,
             },
-            theta_hist: vec![0.0; window + 1],
-            theta_pos: 0,
+            sensors: Sensors::new(&params),
             samples: 0,
             last_meas: Measurement {
                 time_s: 0.0,
@@ -252,24 +365,14 @@ impl<L: LinkDynamics> Plant<L> {
     pub fn reset_at_rest(&mut self, s0_rad: f64) {
         let g = self.link.gravity_nm(s0_rad);
         // Bisection on the monotone spring law (dead-zone included): robust for any parameters.
-        let (mut lo, mut hi) = (-1.0_f64, 1.0_f64);
-        for _ in 0..200 {
-            let mid = 0.5 * (lo + hi);
-            if self.spring_nm(mid) < g {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        let delta = 0.5 * (lo + hi);
+        let delta = spring_deflection_rad(&self.p, g);
         self.st.s_rad = s0_rad;
         self.st.s_dot_rad_s = 0.0;
         self.st.phi_rad = s0_rad + delta;
         self.st.phi_dot_rad_s = 0.0;
         self.st.z_rad = 0.0;
         self.st.i_a = g / (self.r_signed * self.p.kt_nm_per_a);
-        let theta_q = self.theta_quantised();
-        self.theta_hist.iter_mut().for_each(|t| *t = theta_q);
+        self.sensors.reset(&self.p, &self.st);
         self.last_truth = Truth {
             gravity_nm: g,
             tau_t_nm: g,
@@ -340,34 +443,11 @@ impl<L: LinkDynamics> Plant<L> {
     /// Flexspline elastic torque (no damping) for a deflection Δ = φ − s [Nm].
     #[inline]
     fn spring_nm(&self, delta_rad: f64) -> f64 {
-        let d = self.dead_zone(delta_rad);
-        d * (self.p.k1_nm_per_rad + self.p.k3_nm_per_rad3 * d * d)
-    }
-
-    /// Smoothed lost-motion dead-zone; the identity when `lost_motion_rad` is 0.
-    #[inline]
-    fn dead_zone(&self, x: f64) -> f64 {
-        let b = self.p.lost_motion_rad;
-        if b == 0.0 {
-            return x;
-        }
-        let e2 = self.p.lost_motion_smoothing_rad * self.p.lost_motion_smoothing_rad;
-        let a = x - b;
-        let c = x + b;
-        0.5 * (a + (a * a + e2).sqrt()) + 0.5 * (c - (c * c + e2).sqrt())
+        spring_nm(&self.p, delta_rad)
     }
 
     fn thermal_coeffs(&self) -> ThermalCoeffs {
-        let dt = self.st.temperature_c - 25.0;
-        let c = 1.0 - self.p.beta_c_per_k * dt;
-        let v = (-self.p.beta_v_per_k * dt).exp();
-        ThermalCoeffs {
-            f_c0: self.p.f_c0_nm * c,
-            delta_f_c: self.p.delta_f_c_nm * c,
-            f_s: self.p.f_s0_nm * c,
-            sigma2m: self.p.sigma2m_nms_per_rad * v,
-            sigma2j: self.p.sigma2j_nms_per_rad * v,
-        }
+        ThermalCoeffs::at(&self.p, self.st.temperature_c)
     }
 
     /// Steady-state LuGre level g_ss(ṡ) [Nm] at the current position and flexspline torque.
@@ -679,38 +759,9 @@ impl<L: LinkDynamics> Plant<L> {
         (st, truth)
     }
 
-    fn theta_quantised(&self) -> f64 {
-        let q = std::f64::consts::TAU / f64::from(self.p.sensors.motor_encoder_counts_per_rev);
-        quantise(self.r_signed * self.st.phi_rad, q)
-    }
-
     fn measure(&mut self, time_s: f64) -> Measurement {
-        let sens = &self.p.sensors;
-        let q_s = std::f64::consts::TAU / f64::from(sens.joint_encoder_counts_per_rev);
-        let theta = self.theta_quantised();
-        // ring of the last N+1 quantised motor angles
-        let n = self.theta_hist.len();
-        self.theta_pos = (self.theta_pos + 1) % n;
-        self.theta_hist[self.theta_pos] = theta;
-        let oldest = self.theta_hist[(self.theta_pos + 1) % n];
-        let window_s = (n - 1) as f64 * self.p.sample_period_s();
-        let noise: f64 = self.rng.sample(StandardNormal);
-        let i_meas = quantise(
-            self.st.i_a + sens.current_noise_std_a * noise,
-            sens.current_resolution_a,
-        );
-        Measurement {
-            time_s,
-            s_rad: quantise(self.st.s_rad, q_s),
-            theta_motor_rad: theta,
-            omega_motor_rad_s: (theta - oldest) / window_s,
-            i_meas_a: i_meas,
-            temperature_c: if sens.temperature_sensor {
-                quantise(self.st.temperature_c, sens.temperature_resolution_c)
-            } else {
-                f64::NAN
-            },
-        }
+        self.sensors
+            .measure(&self.p, &self.st, &mut self.rng, time_s)
     }
 
     /// Stored energy [J]: kinetic (½J_eq·φ̇² + ½I_L·ṡ²), flexspline elastic (½k1·Δ² + ¼k3·Δ⁴) and
