@@ -99,7 +99,9 @@ fuzz_target!(|data: &[u8]| {
     };
     let sp = McapSpec {
         topic,
-        joint,
+        joints: vec![joint],
+        all_joints: false,
+        state_joints: None,
         effort_role,
         negate,
     };

@@ -328,7 +328,9 @@ fuzz_target!(|data: &[u8]| {
         _ => 1.0,
     };
     let spec = MatSpec {
-        joint,
+        joints: joint.into_iter().collect(),
+        all_joints: false,
+        state_joints: None,
         negate,
         desired_gap_s,
     };

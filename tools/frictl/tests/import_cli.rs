@@ -367,3 +367,436 @@ fn mat_file_imports_with_the_current_label_and_two_chunks() {
     );
     assert!(e.contains("r_elbow") && e.contains("l_knee"), "{e}");
 }
+
+/// The whole-body log of `make_fixtures.py leg` (Pinocchio on the ergoCub URDF: the six left-leg
+/// joints move, the other leg and torso joints are held; knee current = (whole-body τ_ID + SCV
+/// friction)/(r·k_t)), written once per test process.
+fn leg_fixture() -> PathBuf {
+    static DIR: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    DIR.get_or_init(|| {
+        let py = std::env::var_os("FRICTIONLESS_PY")
+            .expect("FRICTIONLESS_PY must name a python with pinocchio, h5py, mcap (tests/run.sh)");
+        let d = dir().join("leg");
+        let script =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../logs/tests/fixtures/make_fixtures.py");
+        let st = Command::new(py)
+            .arg(script)
+            .arg("leg")
+            .arg(ergocub_urdf())
+            .arg(&d)
+            .status()
+            .unwrap();
+        assert!(st.success(), "make_fixtures.py leg failed");
+        d
+    })
+    .clone()
+}
+
+fn ergocub_urdf() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/fixtures/ergocub/ergoCubSN001.urdf")
+}
+
+const LEG: [&str; 6] = [
+    "l_hip_pitch",
+    "l_hip_roll",
+    "l_hip_yaw",
+    "l_knee",
+    "l_ankle_pitch",
+    "l_ankle_roll",
+];
+
+/// A column of the fixture's reference CSV (1 kHz from t = 0).
+fn leg_ref(column: &str) -> Vec<f64> {
+    let cols = frictionless_dataset::read_columns(&leg_fixture().join("leg_ref.csv")).unwrap();
+    cols.get(column)
+        .unwrap_or_else(|| panic!("leg_ref.csv has no {column}"))
+        .clone()
+}
+
+/// RMS of `column(ds) − reference` over the dataset's valid samples, the reference indexed by the
+/// sample time (both 1 kHz grids from the log's first sample).
+fn rms_vs(ds: &frictionless_dataset::Dataset, got: &[f64], reference: &[f64]) -> (f64, usize) {
+    let (mut e2, mut n) = (0.0, 0usize);
+    for k in 0..ds.len() {
+        let i = (ds.time_s[k] * 1000.0).round() as usize;
+        if ds.valid[k] && i < reference.len() {
+            e2 += (got[k] - reference[i]).powi(2);
+            n += 1;
+        }
+    }
+    ((e2 / n.max(1) as f64).sqrt(), n)
+}
+
+fn dataset(path: &Path) -> frictionless_dataset::Dataset {
+    frictionless_dataset::Dataset::read_csv(path).unwrap()
+}
+
+fn sidecar(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path.with_extension("json")).unwrap()).unwrap()
+}
+
+#[test]
+#[ignore = "needs FRICTIONLESS_PY (tests/run.sh): Pinocchio writes the whole-body log"]
+fn csv_whole_body_label_matches_pinocchio_and_the_single_joint_view_does_not() {
+    let d = leg_fixture();
+    let log = d.join("leg.csv");
+    let urdf = ergocub_urdf();
+    let tau_ref = leg_ref("tau_id_l_knee");
+    let f_ref = leg_ref("tau_f_l_knee");
+    let common = [
+        "--column",
+        "time=t",
+        "--column",
+        "s=q_{joint}",
+        "--column",
+        "current=i_{joint}",
+        "--urdf",
+        s(&urdf),
+        "--gear-ratio",
+        "100",
+        "--kt",
+        "0.1",
+    ];
+    // Whole body: every q_<joint> column of a URDF joint.
+    let out = d.join("whole_knee.csv");
+    let mut args = vec!["import", "csv", s(&log), "--joint", "l_knee"];
+    args.extend(common);
+    args.extend(["--positions", "q_{joint}", "-o", s(&out)]);
+    let run = ok(frictl(&args), "import csv --positions");
+    let err = String::from_utf8_lossy(&run.stderr);
+    let ds = dataset(&out);
+    let (rms, n) = rms_vs(&ds, &ds.tau_id_nm, &tau_ref);
+    eprintln!("whole body: knee tau_ID RMS {rms:.4} Nm on {n} samples");
+    assert!(n > 10_000, "{n} valid samples");
+    assert!(rms < 0.15, "whole-body knee tau_ID RMS {rms} Nm vs Pinocchio");
+    let (label_rms, _) = rms_vs(&ds, &ds.tau_f_label_nm, &f_ref);
+    eprintln!("whole body: knee label RMS {label_rms:.4} Nm vs the true friction");
+    assert!(label_rms < 0.3, "knee label RMS {label_rms}");
+    let side = sidecar(&out);
+    let wb = &side["settings"]["import"]["whole_body"];
+    let from_log: Vec<&str> = wb["from_log"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    assert_eq!(from_log.len(), 15, "{from_log:?}");
+    for j in LEG.iter().chain(&["torso_pitch", "r_knee"]) {
+        assert!(from_log.contains(j), "{j} not in {from_log:?}");
+    }
+    let held0 = wb["held_at_zero"].to_string();
+    assert!(held0.contains("neck_pitch") && held0.contains("r_elbow"), "{held0}");
+    assert!(
+        err.contains("held at 0 rad") && err.contains("neck_pitch"),
+        "{err}"
+    );
+    assert!(
+        side["dynamics"].as_str().unwrap().starts_with("whole-body RNEA"),
+        "{}",
+        side["dynamics"]
+    );
+
+    // The single-joint view on the same log, the other joints at their mean positions.
+    let mut fixed = Vec::new();
+    let cols = frictionless_dataset::read_columns(&log).unwrap();
+    for (name, v) in &cols {
+        if let Some(j) = name.strip_prefix("q_")
+            && j != "l_knee"
+        {
+            fixed.push(format!("{j}={}", v.iter().sum::<f64>() / v.len() as f64));
+        }
+    }
+    let single = d.join("single_knee.csv");
+    let mut args = vec!["import", "csv", s(&log), "--joint", "l_knee"];
+    args.extend(common);
+    for f in &fixed {
+        args.extend(["--fixed-joint", f.as_str()]);
+    }
+    args.extend(["-o", s(&single)]);
+    ok(frictl(&args), "import csv (single-joint view)");
+    let ds1 = dataset(&single);
+    let (rms1, _) = rms_vs(&ds1, &ds1.tau_id_nm, &tau_ref);
+    eprintln!("single-joint view: knee tau_ID RMS {rms1:.4} Nm");
+    assert!(
+        rms1 > 0.5,
+        "the single-joint view should miss the other joints' motion: {rms1}"
+    );
+    assert!(
+        sidecar(&single)["dynamics"]
+            .as_str()
+            .unwrap()
+            .starts_with("single-joint view"),
+    );
+    // Pinocchio's own single-joint view agrees with ours.
+    let (rms_pin, _) = rms_vs(&ds1, &ds1.tau_id_nm, &leg_ref("tau_single_l_knee"));
+    assert!(rms_pin < 0.15, "single-joint view vs Pinocchio's: {rms_pin}");
+}
+
+#[test]
+#[ignore = "needs FRICTIONLESS_PY (tests/run.sh): Pinocchio writes the whole-body log"]
+fn csv_joints_all_labels_every_leg_joint_in_one_pass() {
+    let d = leg_fixture();
+    let out = d.join("all_{joint}.csv");
+    let urdf = ergocub_urdf();
+    let run = ok(
+        frictl(&[
+            "import",
+            "csv",
+            s(&d.join("leg.csv")),
+            "--joints",
+            "all",
+            "--column",
+            "time=t",
+            "--column",
+            "s=q_{joint}",
+            "--column",
+            "current=i_{joint}",
+            "--positions",
+            "q_{joint}",
+            "--urdf",
+            s(&urdf),
+            "--gear-ratio",
+            "100",
+            "--kt",
+            "0.1",
+            "-o",
+            s(&out),
+        ]),
+        "import csv --joints all",
+    );
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(err.contains("6 joint(s)"), "{err}");
+    for j in LEG {
+        let p = d.join(format!("all_{j}.csv"));
+        let ds = dataset(&p);
+        let (rms, n) = rms_vs(&ds, &ds.tau_id_nm, &leg_ref(&format!("tau_id_{j}")));
+        eprintln!("{j}: tau_ID RMS {rms:.4} Nm on {n} samples");
+        assert!(n > 10_000 && rms < 0.15, "{j}: RMS {rms} on {n}");
+        assert_eq!(sidecar(&p)["joint"], j);
+    }
+    // Held joints have no current column: not labelled, and said so.
+    assert!(!d.join("all_torso_pitch.csv").exists());
+    let notes = sidecar(&d.join("all_l_knee.csv"))["settings"]["import"]["runs"][0]["report"]
+        ["notes"]
+        .to_string();
+    assert!(notes.contains("not labelled") && notes.contains("torso_pitch"), "{notes}");
+}
+
+#[test]
+#[ignore = "needs FRICTIONLESS_PY (tests/run.sh): Pinocchio writes the whole-body log"]
+fn mcap_whole_body_labels_two_joints_from_every_name() {
+    let d = leg_fixture();
+    let out = d.join("bag_{joint}.csv");
+    let urdf = ergocub_urdf();
+    let run = ok(
+        frictl(&[
+            "import",
+            "mcap",
+            s(&d.join("leg.mcap")),
+            "--joint",
+            "l_knee",
+            "--joint",
+            "l_ankle_pitch",
+            "--effort",
+            "current",
+            "--urdf",
+            s(&urdf),
+            "--gear-ratio",
+            "100",
+            "--kt",
+            "0.1",
+            "-o",
+            s(&out),
+        ]),
+        "import mcap",
+    );
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(err.contains("l_foot_dummy"), "a name the URDF lacks is listed: {err}");
+    for j in ["l_knee", "l_ankle_pitch"] {
+        let ds = dataset(&d.join(format!("bag_{j}.csv")));
+        let (rms, n) = rms_vs(&ds, &ds.tau_id_nm, &leg_ref(&format!("tau_id_{j}")));
+        eprintln!("mcap {j}: tau_ID RMS {rms:.4} Nm on {n} samples");
+        assert!(n > 10_000 && rms < 0.15, "{j}: RMS {rms} on {n}");
+    }
+    let wb = &sidecar(&d.join("bag_l_knee.csv"))["settings"]["import"]["whole_body"];
+    assert_eq!(wb["not_in_urdf"], serde_json::json!(["l_foot_dummy"]));
+}
+
+#[cfg(feature = "mat")]
+#[test]
+#[ignore = "needs FRICTIONLESS_PY (tests/run.sh): Pinocchio writes the whole-body log"]
+fn mat_whole_body_label_matches_pinocchio() {
+    let d = leg_fixture();
+    let out = d.join("mat_knee.csv");
+    let urdf = ergocub_urdf();
+    ok(
+        frictl(&[
+            "import",
+            "mat",
+            s(&d.join("leg.mat")),
+            "--urdf",
+            s(&urdf),
+            "--gear-ratio",
+            "100",
+            "--kt",
+            "0.1",
+            "-o",
+            s(&out),
+        ]),
+        "import mat",
+    );
+    let ds = dataset(&out);
+    let (rms, n) = rms_vs(&ds, &ds.tau_id_nm, &leg_ref("tau_id_l_knee"));
+    eprintln!("mat: knee tau_ID RMS {rms:.4} Nm on {n} samples");
+    assert!(n > 10_000 && rms < 0.15, "RMS {rms} on {n}");
+    let side = sidecar(&out);
+    assert_eq!(side["joint"], "l_knee");
+    assert_eq!(
+        side["settings"]["import"]["whole_body"]["not_in_urdf"],
+        serde_json::json!(["l_foot_dummy"])
+    );
+}
+
+#[test]
+#[ignore = "needs FRICTIONLESS_PY (tests/run.sh): Pinocchio writes the whole-body log"]
+fn whole_body_bad_templates_are_clear_errors() {
+    let d = leg_fixture();
+    let urdf = ergocub_urdf();
+    let base = |positions: &str| {
+        frictl(&[
+            "import",
+            "csv",
+            s(&d.join("leg.csv")),
+            "--joint",
+            "l_knee",
+            "--column",
+            "time=t",
+            "--column",
+            "s=q_l_knee",
+            "--column",
+            "current=i_l_knee",
+            "--positions",
+            positions,
+            "--urdf",
+            s(&urdf),
+            "--gear-ratio",
+            "100",
+            "--kt",
+            "0.1",
+            "-o",
+            s(&d.join("bad.csv")),
+        ])
+    };
+    let e = err_text(base("pos_{joint}"), "a template matching no column");
+    assert!(
+        e.contains("pos_{joint}") && e.contains("matches no column") && e.contains("q_l_knee"),
+        "{e}"
+    );
+    let e = err_text(base("q_knee"), "a template without {joint}");
+    assert!(e.contains("{joint}"), "{e}");
+    assert!(!d.join("bad.csv").exists());
+    // Several joints need {joint} in -o.
+    let e = err_text(
+        frictl(&[
+            "import",
+            "csv",
+            s(&d.join("leg.csv")),
+            "--joint",
+            "l_knee",
+            "--joint",
+            "l_hip_pitch",
+            "--column",
+            "time=t",
+            "--column",
+            "s=q_{joint}",
+            "--column",
+            "current=i_{joint}",
+            "--positions",
+            "q_{joint}",
+            "--urdf",
+            s(&urdf),
+            "--gear-ratio",
+            "100",
+            "--kt",
+            "0.1",
+            "-o",
+            s(&d.join("two.csv")),
+        ]),
+        "two joints, one output",
+    );
+    assert!(e.contains("-o must hold {joint}"), "{e}");
+}
+
+/// An acquisition log of the knee of `virtual_leg` (the format `frictl preprocess` reads) with a
+/// `q_l_hip_pitch` column: `hip_amp_rad` · sin(2π·0.7 t).
+fn knee_acquisition_log(path: &Path, hip_amp_rad: f64) {
+    let mut text = String::from(
+        "time_s,chunk,s_rad,theta_motor_rad,omega_motor_rad_s,i_meas_a,q_l_hip_pitch\n",
+    );
+    for k in 0..6000 {
+        let t = k as f64 * 1e-3;
+        let s = -0.8 + 0.3 * (std::f64::consts::TAU * 0.5 * t).sin();
+        let hip = hip_amp_rad * (std::f64::consts::TAU * 0.7 * t).sin();
+        let i = 0.5 * (3.0 * t).sin();
+        text += &format!("{t},0,{s},{},{},{i},{hip}\n", 100.0 * s, 0.0);
+    }
+    std::fs::write(path, text).unwrap();
+    std::fs::write(
+        path.with_extension("json"),
+        r#"{"joint": "l_knee", "gear_ratio_signed": 100.0, "kt_nm_per_a": 0.1}"#,
+    )
+    .unwrap();
+}
+
+#[test]
+fn preprocess_reads_the_other_joints_positions_the_same_way() {
+    let d = dir();
+    let tau = |log: &Path, out: &Path, whole: bool| {
+        let mut args = vec!["preprocess", s(log), "--out", s(out), "--link", "urdf"];
+        if whole {
+            args.extend(["--positions", "q_{joint}"]);
+        }
+        ok(frictl(&args), "preprocess");
+        (dataset(out).tau_id_nm, sidecar(out))
+    };
+    // The hip still at 0: the whole body and the single-joint view (others at 0) agree.
+    let still = d.join("acq_still.csv");
+    knee_acquisition_log(&still, 0.0);
+    let (single, _) = tau(&still, &d.join("pre_single.csv"), false);
+    let (whole, side) = tau(&still, &d.join("pre_whole.csv"), true);
+    assert_eq!(single.len(), whole.len());
+    let max = single
+        .iter()
+        .zip(&whole)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    assert!(max < 1e-6, "max difference {max} N·m");
+    assert_eq!(
+        side["settings"]["whole_body"]["from_log"],
+        serde_json::json!(["l_hip_pitch", "l_knee"])
+    );
+    // The hip moving 0.3 rad changes the knee's τ_ID; the single-joint view cannot see it.
+    let moving = d.join("acq_moving.csv");
+    knee_acquisition_log(&moving, 0.3);
+    let (whole_m, _) = tau(&moving, &d.join("pre_moving.csv"), true);
+    let rms = (single
+        .iter()
+        .zip(&whole_m)
+        .map(|(a, b)| (a - b).powi(2))
+        .sum::<f64>()
+        / single.len() as f64)
+        .sqrt();
+    assert!(rms > 0.1, "hip motion changes the knee's tau_ID by {rms} N·m RMS");
+    let e = err_text(
+        frictl(&[
+            "preprocess",
+            s(&moving),
+            "--out",
+            s(&d.join("pre_bad.csv")),
+            "--positions",
+            "q_hip",
+        ]),
+        "template without {joint}",
+    );
+    assert!(e.contains("{joint}"), "{e}");
+}

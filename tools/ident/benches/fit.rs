@@ -1,5 +1,7 @@
 //! Criterion bench: LM fit of CV and SCV on 10⁶ synthetic samples (the ≤ 1 s budget of `frictl fit`),
-//! and the label pipeline's zero-phase Butterworth + RTS smoother on 10⁶ samples.
+//! the label pipeline's zero-phase Butterworth + RTS smoother on 10⁶ samples, and the whole-body
+//! label of a 15-joint 1 kHz log (every joint of the project's leg model moving and labelled in one
+//! pass; 10 s of log per iteration: × 360 for an hour of log).
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use frictionless::filter::Butterworth;
@@ -45,5 +47,59 @@ fn bench(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench);
+/// 10 s of a 15-joint 1 kHz log: every joint of `virtual_leg` moves (0.1–0.4 rad sines) and carries
+/// a current; all 15 are labelled in one pass (one RNEA per sample).
+fn whole_body(c: &mut Criterion) {
+    use frictionless_dataset::LabelSource;
+    use frictionless_ident::preprocess::{
+        Dynamics, JointLabel, JointStates, PreprocessConfig, RunJoints, RunSignals, SignalsLabel,
+        WholeBody, preprocess_joints,
+    };
+    let robot = frictionless_dynamics::virtual_leg().unwrap();
+    let names: Vec<String> = robot.joint_names().map(str::to_string).collect();
+    let n = 10_000;
+    let t: Vec<f64> = (0..n).map(|k| k as f64 * 1e-3).collect();
+    let mut state = JointStates::with_names(names.clone(), &[], &[], n);
+    let mut signals = Vec::new();
+    for (j, q) in state.q.iter_mut().enumerate() {
+        let (a, f) = (0.1 + 0.02 * j as f64, 0.3 + 0.05 * j as f64);
+        *q = t
+            .iter()
+            .map(|t| a * (std::f64::consts::TAU * f * t).sin())
+            .collect();
+        signals.push(RunSignals {
+            time_s: t.clone(),
+            chunk: vec![0; n],
+            s_rad: Some(q.clone()),
+            current_a: Some(t.iter().map(|t| 0.3 * (5.0 * t).sin()).collect()),
+            ..RunSignals::default()
+        });
+    }
+    let joints: Vec<JointLabel> = names
+        .iter()
+        .map(|j| JointLabel {
+            joint: j.clone(),
+            label: SignalsLabel {
+                source: LabelSource::Current,
+                gear_ratio_signed: Some(100.0),
+                kt_nm_per_a: Some(0.1),
+            },
+            cfg: PreprocessConfig::for_joint(j),
+        })
+        .collect();
+    let body = WholeBody::new(robot, Default::default()).unwrap();
+    let runs = [RunJoints {
+        signals: signals.iter().collect(),
+        state: Some(&state),
+    }];
+    let mut g = c.benchmark_group("whole_body_label_15_joints_1khz");
+    g.sample_size(10);
+    g.throughput(criterion::Throughput::Elements(n as u64));
+    g.bench_function("10s_log_all_15_joints", |b| {
+        b.iter(|| preprocess_joints(&runs, &joints, Dynamics::WholeBody(&body)).unwrap())
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench, whole_body);
 criterion_main!(benches);

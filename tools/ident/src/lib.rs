@@ -1,7 +1,7 @@
 //! # `frictionless-ident`: the friction label pipeline and static-model fitting
 //!
-//! Crate table: `tools/ident`; depends on `frictionless` (CV/SCV models), `frictionless-dataset` and
-//! `frictionless-sim` (link dynamics); used by `frictionless-acquire` (raw logs in memory) and `frictl`
+//! Crate table: `tools/ident`; depends on `frictionless` (CV/SCV models), `frictionless-dataset`,
+//! `frictionless-sim` (link dynamics) and `frictionless-dynamics` (the whole-body RNEA); used by `frictionless-acquire` (raw logs in memory) and `frictl`
 //! (`preprocess`, `import`, `fit`, `experiment`) and `frictionless-logs` (its input type).
 //!
 //! What this crate **is**:
@@ -9,7 +9,10 @@
 //! - [`preprocess`]: the label pipeline, acquisition log ([`preprocess::RawLog`], [`preprocess::LogMeta`])
 //!   → labelled [`frictionless_dataset::Dataset`] (`frictl preprocess`), and the same pipeline for
 //!   imported robot signals ([`preprocess::preprocess_signals`], `frictl import csv|mat|mcap`: optional
-//!   signals, current / torque-sensor / given labels);
+//!   signals, current / torque-sensor / given labels; several joints in one pass with
+//!   [`preprocess::preprocess_joints`]);
+//! - [`whole_body`]: τ_ID = RNEA(q, q̇, q̈) on the whole URDF from every joint a log has, for the
+//!   `current` label;
 //! - [`fit`]: least-squares fits of the static CV and SCV friction models to a dataset (`frictl fit`).
 //!
 //! The Butterworth filters it runs are the core's one implementation, [`frictionless::filter`].
@@ -49,3 +52,4 @@
 pub mod fit;
 pub mod kalman;
 pub mod preprocess;
+pub mod whole_body;

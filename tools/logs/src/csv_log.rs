@@ -15,14 +15,52 @@ use crate::{ImportedRun, LogsError, Progress, Role, RoleMap, open_regular};
 /// How to read a CSV log.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CsvSpec {
-    /// `(role, column name)`; `time` is required.
+    /// `(role, column name)`; `time` is required. A name may hold `{joint}`, replaced by each of
+    /// [`Self::joints`].
     pub columns: Vec<(Role, String)>,
+    /// The labelled joints (empty: one joint, no `{joint}` in any column).
+    pub joints: Vec<String>,
+    /// Label every joint of the whole-body state that has every mapped column (needs `state`).
+    pub all_joints: bool,
+    /// The whole-body state to read, if any.
+    pub state: Option<CsvState>,
     /// Source units per role (missing: SI).
     pub units: Vec<(Role, crate::Unit)>,
     /// Roles to negate.
     pub negate: Vec<Role>,
     /// Field delimiter.
     pub delimiter: u8,
+}
+
+/// The whole-body state of a CSV log: column-name templates with `{joint}` tried for every
+/// candidate joint name (the URDF's); the `s`, `sdot` and `sddot` roles' units apply.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CsvState {
+    /// Position column template, e.g. `q_{joint}`.
+    pub positions: String,
+    /// Velocity column template (joints without the column go through the smoother).
+    pub velocities: Option<String>,
+    /// Acceleration column template.
+    pub accelerations: Option<String>,
+    /// The joint names to look for (the URDF's movable joints).
+    pub joints: Vec<String>,
+    /// Columns of the root link's orientation quaternion `[x, y, z, w]` (absent: fixed base).
+    pub base_quat: Option<[String; 4]>,
+}
+
+const JOINT: &str = "{joint}";
+
+/// The columns of `header` that fit `template` (`prefix{joint}suffix`), with the joint part.
+fn template_matches<'h>(template: &str, header: &'h [String]) -> Vec<(&'h str, usize)> {
+    let Some((pre, suf)) = template.split_once(JOINT) else {
+        return Vec::new();
+    };
+    header
+        .iter()
+        .enumerate()
+        .filter(|(_, h)| h.len() > pre.len() + suf.len() && h.starts_with(pre) && h.ends_with(suf))
+        .map(|(k, h)| (&h[pre.len()..h.len() - suf.len()], k))
+        .collect()
 }
 
 impl CsvSpec {
@@ -62,7 +100,10 @@ impl CsvSpec {
             if us.iter().any(|x| x.0 == role) {
                 return Err(LogsError::Usage(format!("--unit {role} is given twice")));
             }
-            if !cols.iter().any(|c| c.0 == role) {
+            // s, sdot, sddot units also apply to the whole-body state (checked by `read`).
+            if !cols.iter().any(|c| c.0 == role)
+                && !matches!(role, Role::S | Role::Sdot | Role::Sddot)
+            {
                 return Err(LogsError::Usage(format!(
                     "--unit {t}: role {role} has no --column"
                 )));
@@ -75,10 +116,21 @@ impl CsvSpec {
             .collect::<Result<Vec<_>, _>>()?;
         Ok(Self {
             columns: cols,
+            joints: Vec::new(),
+            all_joints: false,
+            state: None,
             units: us,
             negate: neg,
             delimiter: b',',
         })
+    }
+
+    /// The source unit factor of a role (1 for SI).
+    fn factor(&self, role: Role) -> f64 {
+        self.units
+            .iter()
+            .find(|u| u.0 == role)
+            .map_or(1.0, |u| u.1.factor)
     }
 
     /// The role map (units and signs) this spec reads into.
@@ -86,7 +138,26 @@ impl CsvSpec {
         let roles: Vec<Role> = self.columns.iter().map(|c| c.0).collect();
         let mut map = RoleMap::si(&roles);
         for &(r, u) in &self.units {
-            map.set_unit(r, u)?;
+            if map.has(r) {
+                map.set_unit(r, u)?;
+            } else {
+                let used = self.state.as_ref().is_some_and(|st| match r {
+                    Role::S => true,
+                    Role::Sdot => st.velocities.is_some(),
+                    _ => st.accelerations.is_some(),
+                });
+                if !used {
+                    return Err(LogsError::Usage(format!(
+                        "--unit {r}={}: role {r} has no --column{}",
+                        u.name,
+                        match r {
+                            Role::S => " and no --positions",
+                            Role::Sdot => " and no --velocities",
+                            _ => " and no --accelerations",
+                        }
+                    )));
+                }
+            }
         }
         for &r in &self.negate {
             map.negate(r)?;
@@ -129,6 +200,123 @@ impl<R: Read> Read for Guard<R> {
     }
 }
 
+/// The state layout and the column indices of its values (in [`crate::StateLayout`] row order).
+fn state_columns(
+    st: &CsvState,
+    spec: &CsvSpec,
+    header: &[String],
+    p: &str,
+    notes: &mut Vec<String>,
+) -> Result<(crate::StateLayout, Vec<usize>), LogsError> {
+    for (flag, t) in [
+        ("--positions", Some(&st.positions)),
+        ("--velocities", st.velocities.as_ref()),
+        ("--accelerations", st.accelerations.as_ref()),
+    ] {
+        if let Some(t) = t
+            && !t.contains(JOINT)
+        {
+            return Err(LogsError::Usage(format!(
+                "{flag} {t:?}: the template must hold {JOINT} (e.g. `q_{JOINT}`)"
+            )));
+        }
+    }
+    let col = |template: &str, joint: &str| {
+        let name = template.replace(JOINT, joint);
+        header.iter().position(|h| *h == name)
+    };
+    let no_match = |flag: &str, t: &str| LogsError::Format {
+        path: p.to_string(),
+        msg: format!(
+            "{flag} {t:?} matches no column for any of the {} URDF joints ({}); the header has: {}",
+            st.joints.len(),
+            st.joints.iter().take(8).cloned().collect::<Vec<_>>().join(", ")
+                + if st.joints.len() > 8 { ", …" } else { "" },
+            header.join(", ")
+        ),
+    };
+    let mut names = Vec::new();
+    let mut q_idx = Vec::new();
+    for j in &st.joints {
+        if let Some(k) = col(&st.positions, j) {
+            names.push(j.clone());
+            q_idx.push(k);
+        }
+    }
+    if names.is_empty() {
+        return Err(no_match("--positions", &st.positions));
+    }
+    let unknown: Vec<&str> = template_matches(&st.positions, header)
+        .into_iter()
+        .map(|(j, _)| j)
+        .filter(|j| !st.joints.iter().any(|n| n == j))
+        .collect();
+    if !unknown.is_empty() {
+        notes.push(format!(
+            "columns fitting --positions {:?} whose joint the URDF lacks (not used): {}",
+            st.positions,
+            unknown.join(", ")
+        ));
+    }
+    let derivative = |t: &Option<String>, flag: &str| -> Result<Vec<Option<usize>>, LogsError> {
+        match t {
+            None => Ok(vec![None; names.len()]),
+            Some(t) => {
+                let v: Vec<Option<usize>> = names.iter().map(|j| col(t, j)).collect();
+                if v.iter().all(Option::is_none) {
+                    return Err(no_match(flag, t));
+                }
+                Ok(v)
+            }
+        }
+    };
+    let qd = derivative(&st.velocities, "--velocities")?;
+    let qdd = derivative(&st.accelerations, "--accelerations")?;
+    let mut idx = Vec::new();
+    for k in 0..names.len() {
+        idx.push(q_idx[k]);
+        idx.extend(qd[k]);
+        idx.extend(qdd[k]);
+    }
+    if let Some(cols) = &st.base_quat {
+        for c in cols {
+            idx.push(
+                header
+                    .iter()
+                    .position(|h| h == c)
+                    .ok_or_else(|| LogsError::MissingColumn {
+                        path: p.to_string(),
+                        column: c.clone(),
+                        role: Role::S,
+                        header: header.join(", "),
+                    })?,
+            );
+        }
+    }
+    notes.push(format!(
+        "whole-body state: {} joints from --positions {:?}{}",
+        names.len(),
+        st.positions,
+        if st.base_quat.is_some() {
+            ", base orientation from the quaternion columns"
+        } else {
+            ""
+        }
+    ));
+    let layout = crate::StateLayout {
+        qdot: qd.iter().map(Option::is_some).collect(),
+        qddot: qdd.iter().map(Option::is_some).collect(),
+        factors: [
+            spec.factor(Role::S),
+            spec.factor(Role::Sdot),
+            spec.factor(Role::Sddot),
+        ],
+        base_quat: st.base_quat.is_some(),
+        names,
+    };
+    Ok((layout, idx))
+}
+
 /// Reads one CSV log into a run named after the file stem.
 pub fn read(path: &Path, spec: &CsvSpec, progress: Progress) -> Result<ImportedRun, LogsError> {
     let p = path.display().to_string();
@@ -164,31 +352,109 @@ pub fn read(path: &Path, spec: &CsvSpec, progress: Progress) -> Result<ImportedR
         });
     }
     let map = spec.role_map()?;
-    let mut idx = Vec::with_capacity(map.len());
-    for role in map.roles() {
-        let col = &spec
-            .columns
-            .iter()
-            .find(|c| c.0 == role)
-            .ok_or_else(|| LogsError::Usage(format!("role {role} has no column")))?
-            .1;
-        let j = header
+    let find = |col: &str, role: Role| {
+        header
             .iter()
             .position(|h| h == col)
             .ok_or_else(|| LogsError::MissingColumn {
                 path: p.clone(),
-                column: col.clone(),
+                column: col.to_string(),
                 role,
                 header: header.join(", "),
-            })?;
-        idx.push(j);
+            })
+    };
+    let mut notes = Vec::new();
+    let state = match &spec.state {
+        Some(st) => Some(state_columns(st, spec, &header, &p, &mut notes)?),
+        None => None,
+    };
+    let templated = spec.columns.iter().any(|c| c.1.contains(JOINT));
+    let joints: Vec<String> = if spec.all_joints {
+        let Some((layout, _)) = &state else {
+            return Err(LogsError::Usage(
+                "all joints: the whole-body state (--positions) is needed".into(),
+            ));
+        };
+        // Every state joint with every mapped column.
+        let mut lacking = Vec::new();
+        let v: Vec<String> = layout
+            .names
+            .iter()
+            .filter(|j| {
+                let ok = spec
+                    .columns
+                    .iter()
+                    .all(|c| header.iter().any(|h| *h == c.1.replace(JOINT, j)));
+                if !ok {
+                    lacking.push(j.as_str());
+                }
+                ok
+            })
+            .cloned()
+            .collect();
+        if !lacking.is_empty() {
+            notes.push(format!(
+                "not labelled (a mapped column is missing): {}",
+                lacking.join(", ")
+            ));
+        }
+        if v.is_empty() {
+            return Err(LogsError::Format {
+                path: p.clone(),
+                msg: format!(
+                    "no joint of the state has every mapped column ({}); the header has: {}",
+                    spec.columns
+                        .iter()
+                        .map(|c| c.1.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                    header.join(", ")
+                ),
+            });
+        }
+        v
+    } else if spec.joints.is_empty() {
+        if templated {
+            return Err(LogsError::Usage(format!(
+                "a --column holds {JOINT} but no joint is named to replace it"
+            )));
+        }
+        vec![String::new()]
+    } else {
+        spec.joints.clone()
+    };
+    let mut idx = Vec::new();
+    let column_of = |role: Role| -> Result<&String, LogsError> {
+        Ok(&spec
+            .columns
+            .iter()
+            .find(|c| c.0 == role)
+            .ok_or_else(|| LogsError::Usage(format!("role {role} has no column")))?
+            .1)
+    };
+    let time_col = column_of(Role::Time)?;
+    if time_col.contains(JOINT) {
+        return Err(LogsError::Usage(format!(
+            "--column time={time_col}: the time column is shared by every joint, it cannot hold {JOINT}"
+        )));
     }
-    let mut b = RunBuilder::new(map, &p, "csv");
+    idx.push(find(time_col, Role::Time)?);
+    for j in &joints {
+        for role in map.roles().skip(1) {
+            idx.push(find(&column_of(role)?.replace(JOINT, j), role)?);
+        }
+    }
+    let layout = state.map(|(layout, state_idx)| {
+        idx.extend(state_idx);
+        layout
+    });
+    let mut b = RunBuilder::with_joints(map, joints, layout, &p, "csv");
     for (role, col) in &spec.columns {
         b.report_mut()
             .sources
             .insert(role.name().to_string(), format!("column `{col}`"));
     }
+    b.report_mut().notes.extend(notes);
     let mut rec = csv::ByteRecord::new();
     let mut line: u64 = 1;
     let mut rows = 0u64;

@@ -4,10 +4,11 @@
 //! produces), `frictionless-dataset` and `frictionless` (its [`frictionless::regular_file`] opens);
 //! used by `frictl import csv|mat|mcap`.
 //!
-//! What this crate **is**: readers that turn one joint of a robot's log into one in-memory time series
-//! per signal per run ([`ImportedRun`]: time [s], s, ṡ, s̈, θ, ω, current, τ_joint, τ_motor, τ_F,
-//! temperature, each optional), in SI units and the project's signs, with a record of every
-//! conversion ([`RunReport`]):
+//! What this crate **is**: readers that turn the labelled joints of a robot's log into one in-memory
+//! time series per signal per joint per run ([`ImportedRun`]: time [s], s, ṡ, s̈, θ, ω, current,
+//! τ_joint, τ_motor, τ_F, temperature, each optional), plus, for the whole-body τ_ID, the positions of
+//! every joint the log has ([`JointStates`], matched to the URDF's names), in SI units and the
+//! project's signs, with a record of every conversion ([`RunReport`]):
 //! - [`csv_log`]: any CSV with a column → [`Role`] mapping and per-role [`Unit`]s, streamed row by row;
 //! - [`mcap_log`]: ROS 2 MCAP bags of `sensor_msgs/msg/JointState` (CDR), streamed record by record;
 //! - `mat_log` (cargo feature `mat`, needs the system HDF5 library): the YARP robot logger's MATLAB
@@ -15,7 +16,7 @@
 //!
 //! Every reader counts and drops rows with a non-finite value (per column) and rows whose time goes
 //! back (an error above 1 % of the rows), refuses a path that is not a regular file (a FIFO or a
-//! device), and never holds more than the one joint's signals in memory.
+//! device), and never holds more than the labelled joints' signals and the joint positions in memory.
 //!
 //! What it is **not**: a resampler, filter or labeller. The uniform grid, the chunk split, the
 //! Butterworth, the Kalman smoother and the friction label are `frictionless-ident`'s
@@ -31,9 +32,9 @@ pub mod mcap_log;
 mod roles;
 mod run;
 
-pub use frictionless_ident::preprocess::RunSignals;
+pub use frictionless_ident::preprocess::{JointStates, RunSignals};
 pub use roles::{Role, Unit};
-pub use run::{ImportedRun, RoleMap, RunReport, label_sign_warning, unique_run_names};
+pub use run::{ImportedRun, RoleMap, RunReport, StateLayout, label_sign_warning, unique_run_names};
 
 use std::fs::File;
 use std::path::Path;

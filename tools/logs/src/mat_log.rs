@@ -28,8 +28,13 @@ use crate::{ImportedRun, LogsError, Progress, Role, RoleMap, open_regular};
 /// How to read a `.mat` log.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MatSpec {
-    /// Joint name (default: the one named in the desired-current channel).
-    pub joint: Option<String>,
+    /// Labelled joint names (empty: the one named in the desired-current channel).
+    pub joints: Vec<String>,
+    /// Label every joint of the whole-body state instead (needs `state_joints`).
+    pub all_joints: bool,
+    /// Read the whole-body state: every joint of `joints_state/positions` whose name is in this
+    /// list (the URDF's joints); the others are listed in the report.
+    pub state_joints: Option<Vec<String>>,
     /// Roles to negate.
     pub negate: Vec<Role>,
     /// A gap of the desired-current stream larger than this closes a chunk [s].
@@ -50,10 +55,10 @@ const MAX_RATIO: u64 = 1032;
 /// Small datasets pass [`check_stored`] whatever their storage (headers, fill-value defaults).
 const STORED_SLACK: u64 = 1 << 20;
 
-/// One channel: its `data` dataset, sample count and the joint's column.
+/// One channel: its `data` dataset and the labelled joints' columns.
 struct Channel {
     data: h5::Dataset,
-    col: usize,
+    cols: Vec<usize>,
 }
 
 fn h5err(path: &Path, what: &str, e: impl std::fmt::Display) -> LogsError {
@@ -117,13 +122,13 @@ fn cellstr(file: &h5::File, ds: &h5::Dataset) -> Result<Vec<String>, h5::Error> 
         .collect()
 }
 
-/// Opens a channel group and finds `joint` in it; `Ok(None)` when the channel is absent.
+/// Opens a channel group and finds `joints` in it; `Ok(None)` when the channel is absent.
 fn channel(
     path: &Path,
     file: &h5::File,
     root: &h5::Group,
     name: &str,
-    joint: &str,
+    joints: &[String],
 ) -> Result<Option<(Channel, Vec<String>, usize)>, LogsError> {
     if !root.link_exists(name.split('/').next().unwrap_or(name)) {
         return Ok(None);
@@ -153,14 +158,18 @@ fn channel(
     }
     check_stored(path, &format!("{name}/data"), &data)?;
     let n = shape[0];
-    let Some(col) = names.iter().position(|x| x == joint) else {
-        return Err(LogsError::JointNotFound {
-            path: path.display().to_string(),
-            joint: joint.to_string(),
-            available: format!("({name}) {}", names.join(", ")),
-        });
-    };
-    Ok(Some((Channel { data, col }, names, n)))
+    let mut cols = Vec::with_capacity(joints.len());
+    for joint in joints {
+        let Some(col) = names.iter().position(|x| x == joint) else {
+            return Err(LogsError::JointNotFound {
+                path: path.display().to_string(),
+                joint: joint.to_string(),
+                available: format!("({name}) {}", names.join(", ")),
+            });
+        };
+        cols.push(col);
+    }
+    Ok(Some((Channel { data, cols }, names, n)))
 }
 
 fn timestamps(
@@ -235,15 +244,34 @@ pub fn read(path: &Path, spec: &MatSpec, progress: Progress) -> Result<ImportedR
             .next(),
         Err(_) => None,
     };
-    let joint = match (&spec.joint, &desired_joint) {
-        (Some(j), _) => j.clone(),
-        (None, Some(j)) => j.clone(),
-        (None, None) => {
+    let joints: Vec<String> = match (spec.joints.is_empty(), &desired_joint) {
+        _ if spec.all_joints => {
+            let urdf = spec.state_joints.as_ref().ok_or_else(|| {
+                LogsError::Usage(
+                    "all joints: the whole-body state (the URDF's joint names) is needed".into(),
+                )
+            })?;
+            let g = root
+                .group("joints_state/positions")
+                .and_then(|g| g.dataset("elements_names"))
+                .map_err(|e| h5err(path, "joints_state/positions/elements_names", e))?;
+            let mut v: Vec<String> = cellstr(&file, &g)
+                .map_err(|e| h5err(path, "joints_state/positions/elements_names", e))?
+                .into_iter()
+                .filter(|n| urdf.contains(n))
+                .collect();
+            v.dedup();
+            v
+        }
+        (false, _) => spec.joints.clone(),
+        (true, Some(j)) => vec![j.clone()],
+        (true, None) => {
             return Err(LogsError::Usage(format!(
                 "{p}: no --joint and no `{DESIRED}` channel naming the moving joint"
             )));
         }
     };
+    let joint = joints.join(", ");
     let wanted: [(Role, &str); 5] = [
         (Role::S, "joints_state/positions"),
         (Role::Theta, "motors_state/positions"),
@@ -255,9 +283,38 @@ pub fn read(path: &Path, spec: &MatSpec, progress: Progress) -> Result<ImportedR
     let mut n_ticks = None;
     let mut notes = Vec::new();
     let mut sources = Vec::new();
+    let mut state: Option<(crate::StateLayout, Vec<usize>)> = None;
     for (role, name) in wanted {
-        match channel(path, &file, &root, name, &joint)? {
-            Some((ch, _, n)) => {
+        match channel(path, &file, &root, name, &joints)? {
+            Some((ch, names, n)) => {
+                if role == Role::S
+                    && let Some(urdf) = &spec.state_joints
+                {
+                    let mut st_names = Vec::new();
+                    let mut st_cols = Vec::new();
+                    let mut unknown = Vec::new();
+                    for (k, nm) in names.iter().enumerate() {
+                        if urdf.contains(nm) {
+                            if !st_names.contains(nm) {
+                                st_names.push(nm.clone());
+                                st_cols.push(k);
+                            }
+                        } else {
+                            unknown.push(nm.as_str());
+                        }
+                    }
+                    notes.push(format!(
+                        "whole-body state: {} joints of {name}",
+                        st_names.len()
+                    ));
+                    if !unknown.is_empty() {
+                        notes.push(format!(
+                            "joints of {name} that the URDF lacks (not used): {}",
+                            unknown.join(", ")
+                        ));
+                    }
+                    state = Some((crate::StateLayout::positions(st_names), st_cols));
+                }
                 match n_ticks {
                     None => n_ticks = Some(n),
                     Some(m) if m != n => {
@@ -268,7 +325,17 @@ pub fn read(path: &Path, spec: &MatSpec, progress: Progress) -> Result<ImportedR
                     }
                     _ => {}
                 }
-                sources.push((role, format!("{name} (element {})", ch.col)));
+                sources.push((
+                    role,
+                    format!(
+                        "{name} (element {})",
+                        ch.cols
+                            .iter()
+                            .map(usize::to_string)
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                ));
                 chans.push((role, ch));
             }
             None if role == Role::S => {
@@ -324,7 +391,9 @@ pub fn read(path: &Path, spec: &MatSpec, progress: Progress) -> Result<ImportedR
         map.negate(r)?;
     }
     // Map order is time then `roles` in order: the same as `chans`.
-    let mut b = RunBuilder::new(map, &p, "mat");
+    let state_cols = state.as_ref().map(|s| s.1.clone()).unwrap_or_default();
+    let positions = chans.first().map(|c| c.1.data.clone());
+    let mut b = RunBuilder::with_joints(map, joints.clone(), state.map(|s| s.0), &p, "mat");
     {
         let rep = b.report_mut();
         rep.sources.insert("joint".into(), joint.clone());
@@ -343,13 +412,24 @@ pub fn read(path: &Path, spec: &MatSpec, progress: Progress) -> Result<ImportedR
     while a < n {
         let e = (a + BLOCK).min(n);
         let t = read_ts(path, &ts, a, e)?;
-        let mut cols = Vec::with_capacity(chans.len());
-        for (role, ch) in &chans {
-            let v: ndarray::Array1<f64> = ch
-                .data
-                .read_slice_1d(ndarray::s![a..e, 0, ch.col])
-                .map_err(|x| h5err(path, &format!("{role} data"), x))?;
-            cols.push(v);
+        // Joint-major: every role of the first joint, then the next joint's (the row order).
+        let mut cols = Vec::with_capacity(chans.len() * joints.len() + state_cols.len());
+        for j in 0..joints.len() {
+            for (role, ch) in &chans {
+                let v: ndarray::Array1<f64> = ch
+                    .data
+                    .read_slice_1d(ndarray::s![a..e, 0, ch.cols[j]])
+                    .map_err(|x| h5err(path, &format!("{role} data"), x))?;
+                cols.push(v);
+            }
+        }
+        if let (Some(pos), false) = (&positions, state_cols.is_empty()) {
+            let all: ndarray::Array2<f64> = pos
+                .read_slice_2d(ndarray::s![a..e, 0, ..])
+                .map_err(|x| h5err(path, "joints_state/positions data", x))?;
+            for &c in &state_cols {
+                cols.push(all.column(c).to_owned());
+            }
         }
         for (k, &tk) in t.iter().enumerate() {
             let mut chunk = 0u32;

@@ -29,8 +29,13 @@ use crate::{ImportedRun, LogsError, Progress, Role, RoleMap, open_regular};
 pub struct McapSpec {
     /// Topic of the `JointState` messages.
     pub topic: String,
-    /// Joint name.
-    pub joint: String,
+    /// Names of the labelled joints (one or more), matched in every message.
+    pub joints: Vec<String>,
+    /// Label every joint of the whole-body state instead of `joints` (needs `state_joints`).
+    pub all_joints: bool,
+    /// Read the whole-body state: every name of the first message's `name` array that is in this
+    /// list (the URDF's joints), with `position` and, when every message has it, `velocity`.
+    pub state_joints: Option<Vec<String>>,
     /// Role of the `effort` field (`None`: ignore it); one of [`EFFORT_ROLES`] ([`read`] refuses
     /// another).
     pub effort_role: Option<Role>,
@@ -343,6 +348,15 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
     let mut wanted: Vec<u16> = Vec::new();
     let mut topics: BTreeMap<String, String> = BTreeMap::new();
     let mut names_seen: Vec<String> = Vec::new();
+    if spec.all_joints && spec.state_joints.is_none() {
+        return Err(LogsError::Usage(
+            "all joints: the whole-body state (the URDF's joint names) is needed".into(),
+        ));
+    }
+    if spec.joints.is_empty() && !spec.all_joints {
+        return Err(LogsError::Usage("no joint named to read".into()));
+    }
+    let mut joints: Vec<String> = spec.joints.clone();
     let mut roles = vec![Role::S, Role::Sdot];
     if let Some(r) = spec.effort_role {
         roles.push(r);
@@ -351,17 +365,12 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
     for &r in &spec.negate {
         map.negate(r)?;
     }
-    let mut b = RunBuilder::new(map, &p, "mcap");
-    {
-        let rep = b.report_mut();
-        rep.sources
-            .insert("time".into(), "header.stamp - first stamp".into());
-        rep.sources.insert("s".into(), "position".into());
-        rep.sources.insert("sdot".into(), "velocity".into());
-        if let Some(r) = spec.effort_role {
-            rep.sources.insert(r.name().into(), "effort".into());
-        }
-    }
+    // Created at the first message on the topic (its names give the whole-body state's joints).
+    let mut builder: Option<RunBuilder> = None;
+    let mut state_names: Vec<String> = Vec::new();
+    let mut not_in_urdf: Vec<String> = Vec::new();
+    let mut state_vel_empty = 0u64;
+    let mut state_qdot = false;
     let mut done: u64 = 8;
     let mut msg_no: u64 = 0;
     let mut t0: Option<f64> = None;
@@ -416,19 +425,69 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
                 msg_no += 1;
                 let js = decode_joint_state(&data)
                     .map_err(|e| fmt(format!("message {msg_no} on {}: {e}", spec.topic)))?;
-                let Some(j) = js.name.iter().position(|n| n == &spec.joint) else {
-                    for n in js.name {
-                        if !names_seen.contains(&n) && names_seen.len() < 256 {
-                            names_seen.push(n);
+                let b = builder.get_or_insert_with(|| {
+                    {
+                        let layout = spec.state_joints.as_ref().map(|urdf| {
+                            for n in &js.name {
+                                if urdf.contains(n) {
+                                    if !state_names.contains(n) {
+                                        state_names.push(n.clone());
+                                    }
+                                } else if !not_in_urdf.contains(n) {
+                                    not_in_urdf.push(n.clone());
+                                }
+                            }
+                            let mut l = crate::StateLayout::positions(state_names.clone());
+                            if !js.velocity.is_empty() {
+                                l.qdot = vec![true; state_names.len()];
+                                state_qdot = true;
+                            }
+                            l
+                        });
+                        if spec.all_joints {
+                            joints = state_names.clone();
+                        }
+                        let mut nb = RunBuilder::with_joints(
+                            map.clone(),
+                            joints.clone(),
+                            layout,
+                            &p,
+                            "mcap",
+                        );
+                        let rep = nb.report_mut();
+                        rep.sources
+                            .insert("time".into(), "header.stamp - first stamp".into());
+                        rep.sources.insert("s".into(), "position".into());
+                        rep.sources.insert("sdot".into(), "velocity".into());
+                        if let Some(r) = spec.effort_role {
+                            rep.sources.insert(r.name().into(), "effort".into());
+                        }
+                        nb
+                    }
+                });
+                let mut idx = Vec::with_capacity(joints.len());
+                for joint in &joints {
+                    match js.name.iter().position(|n| n == joint) {
+                        Some(j) => idx.push(j),
+                        None => {
+                            for n in &js.name {
+                                if !names_seen.contains(n) && names_seen.len() < 256 {
+                                    names_seen.push(n.clone());
+                                }
+                            }
+                            if joints.len() == 1 {
+                                b.skip("joint not in message");
+                            } else {
+                                b.skip(&format!("joint {joint} not in message"));
+                            }
+                            return Ok(());
                         }
                     }
-                    b.skip("joint not in message");
-                    return Ok(());
-                };
+                }
                 // An empty array is "not measured": a placeholder 0 now, and the whole
                 // signal is dropped at the end if any message lacked it. A wrong length
                 // is a broken message: NaN, counted and dropped.
-                let pick = |v: &[f64], k: usize, empty: &mut [u64; 3]| {
+                let pick = |v: &[f64], j: usize, k: usize, empty: &mut [u64; 3]| {
                     if v.is_empty() {
                         empty[k] += 1;
                         0.0
@@ -439,16 +498,42 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
                     }
                 };
                 let t = js.stamp_s - *t0.get_or_insert(js.stamp_s);
-                let pos = pick(&js.position, 0, &mut empty);
-                let vel = pick(&js.velocity, 1, &mut empty);
-                let eff = pick(&js.effort, 2, &mut empty);
-                let row = b.row_mut();
-                row[0] = t;
-                row[1] = pos;
-                row[2] = vel;
-                if spec.effort_role.is_some() {
-                    row[3] = eff;
+                let per_joint = roles.len();
+                let mut vals = Vec::with_capacity(1 + per_joint * idx.len());
+                vals.push(t);
+                for (n, &j) in idx.iter().enumerate() {
+                    // Count an empty array once per message, not once per joint.
+                    let mut e = [0u64; 3];
+                    let pos = pick(&js.position, j, 0, &mut e);
+                    let vel = pick(&js.velocity, j, 1, &mut e);
+                    let eff = pick(&js.effort, j, 2, &mut e);
+                    if n == 0 {
+                        for (k, x) in e.iter().enumerate() {
+                            empty[k] += x;
+                        }
+                    }
+                    vals.extend([pos, vel]);
+                    if spec.effort_role.is_some() {
+                        vals.push(eff);
+                    }
                 }
+                let state_vel = state_qdot;
+                if state_qdot && js.velocity.is_empty() {
+                    state_vel_empty += 1;
+                }
+                for name in &state_names {
+                    let k = js.name.iter().position(|n| n == name);
+                    let at = |v: &[f64]| match k {
+                        Some(k) if v.len() == js.name.len() => v[k],
+                        _ => f64::NAN,
+                    };
+                    vals.push(at(&js.position));
+                    if state_vel {
+                        vals.push(if js.velocity.is_empty() { 0.0 } else { at(&js.velocity) });
+                    }
+                }
+                let row = b.row_mut();
+                row[..vals.len()].copy_from_slice(&vals);
                 b.push(|| format!("message {msg_no}"), 0);
             }
             _ => {}
@@ -503,11 +588,36 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
     if msg_no > 0 && t0.is_none() {
         return Err(LogsError::JointNotFound {
             path: p,
-            joint: spec.joint.clone(),
+            joint: joints.join(", "),
             available: names_seen.join(", "),
         });
     }
+    let Some(mut b) = builder else {
+        return Err(LogsError::Empty {
+            path: p,
+            what: format!("no message on {}", spec.topic),
+        });
+    };
     let rep = b.report_mut();
+    if spec.state_joints.is_some() {
+        rep.notes.push(format!(
+            "whole-body state: {} joints of the first message's names{}",
+            state_names.len(),
+            if state_vel_empty > 0 {
+                format!(
+                    "; velocity empty in {state_vel_empty} messages: the state's velocities are not used"
+                )
+            } else {
+                String::new()
+            }
+        ));
+        if !not_in_urdf.is_empty() {
+            rep.notes.push(format!(
+                "names in the messages that the URDF lacks (not used): {}",
+                not_in_urdf.join(", ")
+            ));
+        }
+    }
     if let Some(t0) = t0 {
         rep.notes.push(format!(
             "time origin: first header.stamp = {t0:.9} s since the epoch"
@@ -525,23 +635,30 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
         .file_stem()
         .map_or_else(|| "run".to_string(), |s| s.to_string_lossy().into_owned());
     let mut run = b.finish(&p, name)?;
-    if empty[0] > 0 {
-        run.signals.s_rad = None;
+    for sig in std::iter::once(&mut run.signals).chain(&mut run.other_joints) {
+        if empty[0] > 0 {
+            sig.s_rad = None;
+        }
+        if empty[1] > 0 {
+            sig.sdot_rad_s = None;
+        }
+        if empty[2] > 0 {
+            sig.tau_joint_nm = None;
+            sig.tau_motor_nm = None;
+            sig.tau_f_nm = None;
+            sig.current_a = None;
+        }
+        if sig.s_rad.is_none() && sig.sdot_rad_s.is_none() {
+            return Err(fmt(format!(
+                "joint {}: neither position nor velocity is in every message",
+                joints.join(", ")
+            )));
+        }
     }
-    if empty[1] > 0 {
-        run.signals.sdot_rad_s = None;
-    }
-    if empty[2] > 0 {
-        run.signals.tau_joint_nm = None;
-        run.signals.tau_motor_nm = None;
-        run.signals.tau_f_nm = None;
-        run.signals.current_a = None;
-    }
-    if run.signals.s_rad.is_none() && run.signals.sdot_rad_s.is_none() {
-        return Err(fmt(format!(
-            "joint {}: neither position nor velocity is in every message",
-            spec.joint
-        )));
+    if state_vel_empty > 0
+        && let Some(st) = &mut run.state
+    {
+        st.qdot.iter_mut().for_each(|v| *v = None);
     }
     Ok(run)
 }

@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
-use crate::{LogsError, Role, RunSignals, Unit};
+use crate::{JointStates, LogsError, Role, RunSignals, Unit};
 
 /// The roles a reader fills, each with its source unit and sign. `time` is always present.
 #[derive(Clone, Debug, PartialEq)]
@@ -122,15 +122,92 @@ pub struct RunReport {
 pub struct ImportedRun {
     /// Run name (the file stem; made unique by [`unique_run_names`]).
     pub name: String,
-    /// The signals, SI units, project signs.
+    /// The labelled joints' names, `signals`' first (empty names when the spec named none).
+    pub joints: Vec<String>,
+    /// The (first) labelled joint's signals, SI units, project signs.
     pub signals: RunSignals,
+    /// Further labelled joints' signals, on the same clock as `signals` (empty for one joint).
+    pub other_joints: Vec<RunSignals>,
+    /// The positions of every joint read for the whole-body τ_ID, on the same clock (`None` when
+    /// not asked for).
+    pub state: Option<JointStates>,
     /// How they were read.
     pub report: RunReport,
+}
+
+impl ImportedRun {
+    /// Every labelled joint's signals, `signals` first.
+    pub fn joint_signals(&self) -> impl Iterator<Item = &RunSignals> {
+        std::iter::once(&self.signals).chain(&self.other_joints)
+    }
+}
+
+/// The whole-body state a reader fills: joints by name, which have logged velocities and
+/// accelerations, the source units of each, and whether a base quaternion `[x, y, z, w]` is read.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StateLayout {
+    /// Joint names (the log's, matched to the URDF by name).
+    pub names: Vec<String>,
+    /// Per joint: a velocity is read.
+    pub qdot: Vec<bool>,
+    /// Per joint: an acceleration is read.
+    pub qddot: Vec<bool>,
+    /// Multiply q, q̇, q̈ by these for SI units (the `s`, `sdot`, `sddot` roles' units).
+    pub factors: [f64; 3],
+    /// Four more columns: the root link's orientation quaternion `[x, y, z, w]`.
+    pub base_quat: bool,
+}
+
+impl StateLayout {
+    /// Positions only, in SI units.
+    pub fn positions(names: Vec<String>) -> Self {
+        let n = names.len();
+        Self {
+            names,
+            qdot: vec![false; n],
+            qddot: vec![false; n],
+            factors: [1.0; 3],
+            base_quat: false,
+        }
+    }
+
+    /// Values per row: per joint q, then q̇ and q̈ when read; then the quaternion.
+    pub fn width(&self) -> usize {
+        self.names.len()
+            + self.qdot.iter().filter(|x| **x).count()
+            + self.qddot.iter().filter(|x| **x).count()
+            + if self.base_quat { 4 } else { 0 }
+    }
+
+    /// `(what, factor)` of each value of a row, in row order (`q:NAME`, `qdot:NAME`, …).
+    fn columns(&self) -> Vec<(String, f64)> {
+        let mut out = Vec::with_capacity(self.width());
+        for (k, n) in self.names.iter().enumerate() {
+            out.push((format!("q:{n}"), self.factors[0]));
+            if self.qdot[k] {
+                out.push((format!("qdot:{n}"), self.factors[1]));
+            }
+            if self.qddot[k] {
+                out.push((format!("qddot:{n}"), self.factors[2]));
+            }
+        }
+        if self.base_quat {
+            for c in ["x", "y", "z", "w"] {
+                out.push((format!("base_quat_{c}"), 1.0));
+            }
+        }
+        out
+    }
 }
 
 /// Accumulates rows of raw values in the map's role order, converts them and counts the rejects.
 pub(crate) struct RunBuilder {
     map: RoleMap,
+    /// Labelled joints: the row holds time, then each joint's roles (all but time) in map order.
+    joints: Vec<String>,
+    state: Option<StateLayout>,
+    /// `(what, factor)` of the state's values, after the joints' (see [`StateLayout::columns`]).
+    state_cols: Vec<(String, f64)>,
     cols: Vec<Vec<f64>>,
     chunk: Vec<u32>,
     report: RunReport,
@@ -141,15 +218,44 @@ pub(crate) struct RunBuilder {
 
 impl RunBuilder {
     pub(crate) fn new(map: RoleMap, source: &str, format: &str) -> Self {
-        let n = map.len();
+        Self::with_joints(map, vec![String::new()], None, source, format)
+    }
+
+    /// A builder for labelled `joints` (at least one) with the same roles, and a whole-body state.
+    pub(crate) fn with_joints(
+        map: RoleMap,
+        mut joints: Vec<String>,
+        state: Option<StateLayout>,
+        source: &str,
+        format: &str,
+    ) -> Self {
+        if joints.is_empty() {
+            joints.push(String::new());
+        }
+        let n_joints = joints.len();
+        let state_cols = state.as_ref().map(StateLayout::columns).unwrap_or_default();
+        let n = 1 + (map.len() - 1) * n_joints + state_cols.len();
+        let mut conversions = map.conversions();
+        if let Some(st) = &state {
+            conversions.push(format!(
+                "whole-body state of {} joints: q x {}, qdot x {}, qddot x {} (the s, sdot, sddot units)",
+                st.names.len(),
+                st.factors[0],
+                st.factors[1],
+                st.factors[2]
+            ));
+        }
         let report = RunReport {
             source: source.to_string(),
             format: format.to_string(),
-            conversions: map.conversions(),
+            conversions,
             ..RunReport::default()
         };
         Self {
             map,
+            joints,
+            state,
+            state_cols,
             cols: vec![Vec::new(); n],
             chunk: Vec::new(),
             report,
@@ -179,16 +285,25 @@ impl RunBuilder {
     pub(crate) fn push(&mut self, where_: impl FnOnce() -> String, chunk: u32) {
         self.report.rows_read += 1;
         let mut ok = true;
-        for (k, &(role, unit, neg)) in self.map.entries.iter().enumerate() {
-            let v = self.row[k] * unit.factor * if neg { -1.0 } else { 1.0 };
+        let per_joint = self.map.entries.len() - 1;
+        let n_role_values = 1 + per_joint * self.joints.len();
+        for k in 0..self.row.len() {
+            let (factor, what): (f64, &str) = if k < n_role_values {
+                let e = if k == 0 {
+                    &self.map.entries[0]
+                } else {
+                    &self.map.entries[1 + (k - 1) % per_joint]
+                };
+                (e.1.factor * if e.2 { -1.0 } else { 1.0 }, e.0.name())
+            } else {
+                let c = &self.state_cols[k - n_role_values];
+                (c.1, &c.0)
+            };
+            let v = self.row[k] * factor;
             self.row[k] = v;
             if !v.is_finite() {
                 ok = false;
-                *self
-                    .report
-                    .non_finite
-                    .entry(role.name().to_string())
-                    .or_insert(0) += 1;
+                *self.report.non_finite.entry(what.to_string()).or_insert(0) += 1;
             }
         }
         if !ok {
@@ -246,35 +361,68 @@ impl RunBuilder {
                 ),
             });
         }
-        let mut sig = RunSignals {
-            chunk: self.chunk,
-            ..RunSignals::default()
-        };
-        for (role, col) in self.map.roles().zip(self.cols) {
-            let slot = match role {
-                Role::Time => {
-                    sig.time_s = col;
-                    continue;
-                }
-                Role::S => &mut sig.s_rad,
-                Role::Sdot => &mut sig.sdot_rad_s,
-                Role::Sddot => &mut sig.sddot_rad_s2,
-                Role::Theta => &mut sig.theta_motor_rad,
-                Role::Omega => &mut sig.omega_motor_rad_s,
-                Role::Current => &mut sig.current_a,
-                Role::TauJoint => &mut sig.tau_joint_nm,
-                Role::TauMotor => &mut sig.tau_motor_nm,
-                Role::TauF => &mut sig.tau_f_nm,
-                Role::Temperature => &mut sig.temperature_c,
+        let per_joint = self.map.len() - 1;
+        let mut cols = self.cols.into_iter();
+        let time = cols.next().unwrap_or_default();
+        let roles: Vec<Role> = self.map.roles().skip(1).collect();
+        let mut joints = Vec::with_capacity(self.joints.len());
+        for _ in 0..self.joints.len() {
+            let mut sig = RunSignals {
+                time_s: time.clone(),
+                chunk: self.chunk.clone(),
+                ..RunSignals::default()
             };
-            *slot = Some(col);
+            for (&role, col) in roles.iter().zip(cols.by_ref().take(per_joint)) {
+                set_role(&mut sig, role, col);
+            }
+            joints.push(sig);
         }
+        let state = self.state.map(|layout| {
+            let mut st = JointStates {
+                names: layout.names.clone(),
+                ..JointStates::default()
+            };
+            for k in 0..layout.names.len() {
+                st.q.push(cols.next().unwrap_or_default());
+                st.qdot.push(layout.qdot[k].then(|| cols.next().unwrap_or_default()));
+                st.qddot.push(layout.qddot[k].then(|| cols.next().unwrap_or_default()));
+            }
+            if layout.base_quat {
+                st.base_quat_xyzw = Some(std::array::from_fn(|_| cols.next().unwrap_or_default()));
+            }
+            st
+        });
+        let mut joints = joints.into_iter();
         Ok(ImportedRun {
             name,
-            signals: sig,
+            joints: self.joints,
+            signals: joints.next().unwrap_or_default(),
+            other_joints: joints.collect(),
+            state,
             report: self.report,
         })
     }
+}
+
+/// Puts a role's column into its slot of `sig`.
+fn set_role(sig: &mut RunSignals, role: Role, col: Vec<f64>) {
+    let slot = match role {
+        Role::Time => {
+            sig.time_s = col;
+            return;
+        }
+        Role::S => &mut sig.s_rad,
+        Role::Sdot => &mut sig.sdot_rad_s,
+        Role::Sddot => &mut sig.sddot_rad_s2,
+        Role::Theta => &mut sig.theta_motor_rad,
+        Role::Omega => &mut sig.omega_motor_rad_s,
+        Role::Current => &mut sig.current_a,
+        Role::TauJoint => &mut sig.tau_joint_nm,
+        Role::TauMotor => &mut sig.tau_motor_nm,
+        Role::TauF => &mut sig.tau_f_nm,
+        Role::Temperature => &mut sig.temperature_c,
+    };
+    *slot = Some(col);
 }
 
 /// Makes run names unique in place (`a`, `a` → `a`, `a_2`).

@@ -222,7 +222,9 @@ fn a_2gb_sparse_file_and_a_fifo_are_refused_quickly() {
     assert!(e.to_string().contains("NUL"), "{e}");
     let mspec = McapSpec {
         topic: "/joint_states".into(),
-        joint: "j".into(),
+        joints: vec!["j".into()],
+        all_joints: false,
+        state_joints: None,
         effort_role: None,
         negate: vec![],
     };
@@ -231,7 +233,9 @@ fn a_2gb_sparse_file_and_a_fifo_are_refused_quickly() {
     #[cfg(feature = "mat")]
     {
         let ms = frictionless_logs::mat_log::MatSpec {
-            joint: Some("j".into()),
+            joints: vec!["j".into()],
+            all_joints: false,
+            state_joints: None,
             negate: vec![],
             desired_gap_s: 1.0,
         };
@@ -304,7 +308,9 @@ fn mcap_effort_read_as_time_or_a_position_is_refused_not_a_panic() {
     let path = seed_bag();
     let sp = |effort_role| McapSpec {
         topic: "/joint_states".into(),
-        joint: "wrist".into(),
+        joints: vec!["wrist".into()],
+        all_joints: false,
+        state_joints: None,
         effort_role,
         negate: vec![],
     };
@@ -376,7 +382,9 @@ fn mcap_length_fields_beyond_the_record_are_errors_not_allocations() {
     // in a file of a few dozen bytes.
     let sp = McapSpec {
         topic: "/joint_states".into(),
-        joint: "wrist".into(),
+        joints: vec!["wrist".into()],
+        all_joints: false,
+        state_joints: None,
         effort_role: None,
         negate: vec![],
     };
@@ -473,7 +481,9 @@ fn mcap_joint_state_bag_from_python_mcap() {
     let path = fixture("mcap", "bag.mcap");
     let sp = McapSpec {
         topic: "/joint_states".into(),
-        joint: "wrist".into(),
+        joints: vec!["wrist".into()],
+        all_joints: false,
+        state_joints: None,
         effort_role: Some(Role::TauF),
         negate: vec![],
     };
@@ -519,7 +529,9 @@ fn mcap_joint_state_bag_from_python_mcap() {
     let e = mcap_log::read(
         &path,
         &McapSpec {
-            joint: "elbow".into(),
+            joints: vec!["elbow".into()],
+            all_joints: false,
+            state_joints: None,
             ..sp.clone()
         },
         &mut no_progress(),
@@ -553,7 +565,9 @@ fn yarp_mat_file_from_h5py() {
     use frictionless_logs::mat_log::{MatSpec, read};
     let path = fixture("mat", "robot_logger_device_2024_01_01_00_00_00.mat");
     let sp = MatSpec {
-        joint: None,
+        joints: vec![],
+        all_joints: false,
+        state_joints: None,
         negate: vec![],
         desired_gap_s: 1.0,
     };
@@ -594,7 +608,9 @@ fn yarp_mat_file_from_h5py() {
     let e = read(
         &path,
         &MatSpec {
-            joint: Some("r_elbow".into()),
+            joints: vec!["r_elbow".into()],
+            all_joints: false,
+            state_joints: None,
             ..sp
         },
         &mut no_progress(),
@@ -617,7 +633,9 @@ fn mat_dataset_declaring_more_than_it_stores_is_refused() {
     let path = fixture("mat-hollow", "hollow.mat");
     assert!(std::fs::metadata(&path).unwrap().len() < 4 << 20);
     let sp = MatSpec {
-        joint: None,
+        joints: vec![],
+        all_joints: false,
+        state_joints: None,
         negate: vec![],
         desired_gap_s: 1.0,
     };

@@ -3,21 +3,25 @@
 //!
 //! The files are read by `frictionless-logs` (one run per file, SI units, every conversion recorded),
 //! then resampled, chunked, filtered and labelled by `frictionless-ident`'s one pipeline
-//! (`preprocess_signals`). Formats, roles, units and the minimal columns per label source:
-//! `docs/robot-logs.md`.
+//! (`preprocess_joints`). The `current` label's τ_ID is the whole-body RNEA on every joint the log
+//! has (`.mat`, MCAP; CSV with `--positions`), else the single-joint view of the URDF. Several joints
+//! of one log are labelled in one pass, one dataset each. Formats, roles, units and the minimal
+//! columns per label source: `docs/robot-logs.md`.
 
+use std::collections::BTreeMap;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use frictionless_dataset::{ColumnDocOwned, DatasetSidecar, LabelSource, RunInfo};
 use frictionless_ident::preprocess::{
-    PreprocessConfig, SignalsLabel, preprocess_signals, required_signals,
+    Dynamics, JointLabel, PreprocessConfig, RunJoints, SignalsLabel, WholeBody, preprocess_joints,
+    required_signals,
 };
 use frictionless_logs::{ImportedRun, Role, csv_log, mcap_log};
 use sha2::Digest;
 
-use super::preprocess::{PipelineArgs, urdf_link};
+use super::preprocess::{PipelineArgs, urdf_link, urdf_whole_body};
 
 /// Label source on the command line.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -43,20 +47,27 @@ impl From<LabelArg> for LabelSource {
 /// Options every log format shares.
 #[derive(clap::Args, Debug)]
 pub struct CommonArgs {
-    /// Output dataset CSV (its sidecar is written next to it with `.json`).
+    /// Output dataset CSV (its sidecar is written next to it with `.json`); with several joints it
+    /// must hold `{joint}`, replaced by each joint's name (e.g. `-o ds_{joint}.csv`).
     #[arg(short = 'o', long = "out")]
     pub out: PathBuf,
+    /// Label every joint the log has (`all`; the whole-body state and the URDF name them) instead
+    /// of the `--joint` list.
+    #[arg(long = "joints", value_name = "all", value_parser = ["all"])]
+    pub joints_all: Option<String>,
     /// Label source (default: `given` if tau_f is read, else `torque-sensor` if tau_joint is, else
     /// `current`).
     #[arg(long, value_enum)]
     pub label: Option<LabelArg>,
-    /// Signed gear ratio r (motor angle per joint angle) for r·k_t·i and Δθ = r·s − θ; recorded in the
-    /// sidecar (1 when not given and not needed, marked as a placeholder).
-    #[arg(long, allow_hyphen_values = true)]
-    pub gear_ratio: Option<f64>,
-    /// Torque constant k_t [Nm/A] for r·k_t·i (1 when not given and not needed, as above).
-    #[arg(long)]
-    pub kt: Option<f64>,
+    /// Signed gear ratio r (motor angle per joint angle) for r·k_t·i and Δθ = r·s − θ: `R` for every
+    /// joint or `NAME=R` for one (repeatable); recorded in the sidecar (1 when not given and not
+    /// needed, marked as a placeholder).
+    #[arg(long, allow_hyphen_values = true, value_name = "R|NAME=R")]
+    pub gear_ratio: Vec<String>,
+    /// Torque constant k_t [Nm/A] for r·k_t·i: `KT` or `NAME=KT` (repeatable; 1 when not given and
+    /// not needed, as above).
+    #[arg(long, value_name = "KT|NAME=KT")]
+    pub kt: Vec<String>,
     /// A time gap larger than this starts a new chunk [s] (default 0.1; `.mat`: gaps of the desired
     /// current stream > 1 s).
     #[arg(long)]
@@ -67,11 +78,12 @@ pub struct CommonArgs {
     /// URDF for τ_ID of the current label (default `virtual_leg`).
     #[arg(long)]
     pub urdf: Option<String>,
-    /// The joint's name in the URDF when it differs from the log's (default: the log's joint name).
+    /// The joint's name in the URDF when it differs from the log's (single-joint view only).
     #[arg(long)]
     pub urdf_joint: Option<String>,
-    /// Position of another URDF joint, held fixed [rad] (repeatable; absent joints are 0).
-    #[arg(long = "fixed-joint", value_name = "NAME=RAD")]
+    /// Position of a URDF joint held fixed [rad] (repeatable); wins over the log's value. Joints
+    /// neither logged nor given are held at 0 (warned).
+    #[arg(long = "fixed-joint", value_name = "NAME=RAD", allow_hyphen_values = true)]
     pub fixed_joints: Vec<String>,
     /// Resampling, filter, smoother and sample-limit settings.
     #[command(flatten)]
@@ -84,17 +96,33 @@ pub struct CsvArgs {
     /// CSV logs; each becomes one run.
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
-    /// Joint name (the dataset's and the URDF's).
-    #[arg(long)]
-    pub joint: String,
+    /// Joint name, the dataset's and the URDF's (repeatable: one dataset per joint; `{joint}` in a
+    /// `--column` is replaced by each).
+    #[arg(long, required_unless_present = "joints_all")]
+    pub joint: Vec<String>,
     /// `ROLE=COLUMN` (repeatable). Roles: time, s, sdot, sddot, theta, omega, current, tau_joint,
-    /// tau_motor, tau_f, temperature.
+    /// tau_motor, tau_f, temperature. A column may hold `{joint}` (e.g. `current=i_{joint}`).
     #[arg(long = "column", value_name = "ROLE=COLUMN", required = true)]
     pub columns: Vec<String>,
     /// `ROLE=UNIT` (repeatable; default SI): time s|ms|us, angles rad|deg, velocities
     /// rad/s|deg/s|rpm, accelerations rad/s^2|deg/s^2, current A|mA, torques Nm|mNm, temperature C.
+    /// The s, sdot and sddot units also apply to `--positions`, `--velocities`, `--accelerations`.
     #[arg(long = "unit", value_name = "ROLE=UNIT")]
     pub units: Vec<String>,
+    /// Positions of every URDF joint the log has, for the whole-body τ_ID: a column template with
+    /// `{joint}` replaced by each URDF joint name (e.g. `q_{joint}`).
+    #[arg(long, value_name = "TEMPLATE")]
+    pub positions: Option<String>,
+    /// Velocity column template (joints without one go through the Kalman smoother).
+    #[arg(long, value_name = "TEMPLATE", requires = "positions")]
+    pub velocities: Option<String>,
+    /// Acceleration column template.
+    #[arg(long, value_name = "TEMPLATE", requires = "positions")]
+    pub accelerations: Option<String>,
+    /// Columns `X,Y,Z,W` of the root link's orientation quaternion in the world (a robot on a
+    /// tilted pole; default: the root link at the identity pose).
+    #[arg(long, value_name = "X,Y,Z,W", requires = "positions")]
+    pub base_quat: Option<String>,
     /// Field delimiter (one character).
     #[arg(long, default_value = ",")]
     pub delimiter: char,
@@ -109,13 +137,14 @@ pub struct McapArgs {
     /// MCAP bags; each becomes one run.
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
-    /// Joint name, matched in every message.
-    #[arg(long)]
-    pub joint: String,
+    /// Joint name, matched in every message (repeatable: one dataset per joint).
+    #[arg(long, required_unless_present = "joints_all")]
+    pub joint: Vec<String>,
     /// Topic of the sensor_msgs/msg/JointState messages.
     #[arg(long, default_value = "/joint_states")]
     pub topic: String,
-    /// Role of the `effort` field: tau_joint (a joint torque sensor), tau_motor, tau_f, or none.
+    /// Role of the `effort` field: tau_joint (a joint torque sensor), tau_motor, tau_f, current, or
+    /// none.
     #[arg(long, default_value = "tau_joint")]
     pub effort: String,
     /// Options every format shares.
@@ -129,9 +158,10 @@ pub struct MatArgs {
     /// YARP robot logger `.mat` files; each becomes one run.
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
-    /// Joint name in `elements_names` (default: the one in the desired-current channel).
+    /// Joint name in `elements_names` (repeatable; default: the one in the desired-current
+    /// channel).
     #[arg(long)]
-    pub joint: Option<String>,
+    pub joint: Vec<String>,
     /// Options every format shares.
     #[command(flatten)]
     pub common: CommonArgs,
@@ -173,6 +203,27 @@ fn read_all(
     Ok(runs)
 }
 
+/// The whole-body model when the current label may be asked for (`label` is `current`, or not
+/// given and `default_current`), else `None`.
+fn whole_body_for(
+    common: &CommonArgs,
+    default_current: bool,
+) -> anyhow::Result<Option<WholeBody>> {
+    let current = match common.label {
+        Some(l) => l == LabelArg::Current,
+        None => default_current,
+    };
+    if !current {
+        return Ok(None);
+    }
+    urdf_whole_body(common.urdf.as_deref(), &common.fixed_joints).map(Some)
+}
+
+fn urdf_names(body: &Option<WholeBody>) -> Option<Vec<String>> {
+    body.as_ref()
+        .map(|b| b.robot().joint_names().map(str::to_string).collect())
+}
+
 /// Runs `frictl import csv`.
 pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
     let mut spec = csv_log::CsvSpec::parse(&args.columns, &args.units, &args.common.negate)?;
@@ -182,9 +233,44 @@ pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
         args.delimiter
     );
     spec.delimiter = args.delimiter as u8;
+    spec.joints = args.joint.clone();
+    spec.all_joints = args.common.joints_all.is_some();
     check(&args.files, &args.common)?;
+    let body = match &args.positions {
+        Some(_) => {
+            let reads = |r: Role| spec.columns.iter().any(|c| c.0 == r);
+            whole_body_for(
+                &args.common,
+                !reads(Role::TauF) && !reads(Role::TauJoint),
+            )?
+        }
+        None => None,
+    };
+    if let (Some(positions), Some(names)) = (&args.positions, urdf_names(&body)) {
+        let base_quat = match &args.base_quat {
+            None => None,
+            Some(t) => {
+                let v: Vec<String> = t.split(',').map(|c| c.trim().to_string()).collect();
+                let q: [String; 4] = v.try_into().map_err(|v: Vec<String>| {
+                    anyhow::anyhow!("--base-quat {t:?}: expected 4 columns X,Y,Z,W, got {}", v.len())
+                })?;
+                Some(q)
+            }
+        };
+        spec.state = Some(csv_log::CsvState {
+            positions: positions.clone(),
+            velocities: args.velocities.clone(),
+            accelerations: args.accelerations.clone(),
+            joints: names,
+            base_quat,
+        });
+    }
+    anyhow::ensure!(
+        !spec.all_joints || spec.state.is_some(),
+        "--joints all labels the joints of --positions with the current label: pass --positions TEMPLATE"
+    );
     let runs = read_all(&args.files, |p, pr| csv_log::read(p, &spec, pr))?;
-    finish(runs, &args.files, &args.joint, "csv", 0.1, args.common)
+    finish(runs, &args.files, "csv", 0.1, args.common, body)
 }
 
 /// Runs `frictl import mcap`.
@@ -197,15 +283,25 @@ pub fn run_mcap(args: McapArgs) -> anyhow::Result<()> {
         .iter()
         .map(|n| Role::parse(n))
         .collect::<Result<Vec<_>, _>>()?;
+    check(&args.files, &args.common)?;
+    let body = whole_body_for(
+        &args.common,
+        !matches!(effort_role, Some(Role::TauF | Role::TauJoint)),
+    )?;
     let spec = mcap_log::McapSpec {
         topic: args.topic.clone(),
-        joint: args.joint.clone(),
+        joints: args.joint.clone(),
+        all_joints: args.common.joints_all.is_some(),
+        state_joints: urdf_names(&body),
         effort_role,
         negate,
     };
-    check(&args.files, &args.common)?;
+    anyhow::ensure!(
+        !spec.all_joints || spec.state_joints.is_some(),
+        "--joints all labels the joints of the whole-body state, which only the current label reads"
+    );
     let runs = read_all(&args.files, |p, pr| mcap_log::read(p, &spec, pr))?;
-    finish(runs, &args.files, &args.joint, "mcap", 0.1, args.common)
+    finish(runs, &args.files, "mcap", 0.1, args.common, body)
 }
 
 /// Runs `frictl import mat`.
@@ -218,21 +314,21 @@ pub fn run_mat(args: MatArgs) -> anyhow::Result<()> {
         .iter()
         .map(|n| Role::parse(n))
         .collect::<Result<Vec<_>, _>>()?;
+    check(&args.files, &args.common)?;
+    let body = whole_body_for(&args.common, true)?;
     let spec = mat_log::MatSpec {
-        joint: args.joint.clone(),
+        joints: args.joint.clone(),
+        all_joints: args.common.joints_all.is_some(),
+        state_joints: urdf_names(&body),
         negate,
         desired_gap_s: args.common.gap_s.unwrap_or(1.0),
     };
-    check(&args.files, &args.common)?;
+    anyhow::ensure!(
+        !spec.all_joints || spec.state_joints.is_some(),
+        "--joints all labels the joints of the whole-body state, which only the current label reads"
+    );
     let runs = read_all(&args.files, |p, pr| mat_log::read(p, &spec, pr))?;
-    let joint = match &args.joint {
-        Some(j) => j.clone(),
-        None => runs
-            .first()
-            .and_then(|r| r.report.sources.get("joint").cloned())
-            .unwrap_or_default(),
-    };
-    finish(runs, &args.files, &joint, "mat", 1.0, args.common)
+    finish(runs, &args.files, "mat", 1.0, args.common, body)
 }
 
 /// Runs `frictl import mat` (built without the `mat` feature: explains how to get it).
@@ -246,21 +342,70 @@ pub fn run_mat(args: MatArgs) -> anyhow::Result<()> {
     )
 }
 
+/// `{joint}` in the output path, replaced for one joint.
+const JOINT: &str = "{joint}";
+
+fn out_path(out: &Path, joint: &str) -> PathBuf {
+    PathBuf::from(out.to_string_lossy().replace(JOINT, joint))
+}
+
 fn check(files: &[PathBuf], common: &CommonArgs) -> anyhow::Result<()> {
     let inputs: Vec<&Path> = files.iter().map(PathBuf::as_path).collect();
-    let side = common.out.with_extension("json");
-    super::check_outputs(&inputs, &[&common.out, &side])
+    // The joints of `--joints all` are known after reading: the directory is checked here, each
+    // output again before it is written.
+    let out = out_path(&common.out, "x");
+    let side = out.with_extension("json");
+    super::check_outputs(&inputs, &[&out, &side])
+}
+
+/// A per-joint value of `R` / `NAME=R` options: the joint's own, else the one for all.
+fn per_joint(values: &[String], joint: &str, flag: &str) -> anyhow::Result<Option<f64>> {
+    let mut all = None;
+    let mut mine = None;
+    for v in values {
+        let (name, x) = match v.split_once('=') {
+            Some((n, x)) => (Some(n.trim()), x),
+            None => (None, v.as_str()),
+        };
+        let x: f64 = x
+            .trim()
+            .parse()
+            .with_context(|| format!("{flag} {v:?}: {x:?} is not a number"))?;
+        match name {
+            Some(n) if n == joint => mine = Some(x),
+            Some(_) => {}
+            None => all = Some(x),
+        }
+    }
+    Ok(mine.or(all))
 }
 
 fn finish(
     mut runs: Vec<ImportedRun>,
     files: &[PathBuf],
-    joint: &str,
     format: &str,
     default_gap_s: f64,
     common: CommonArgs,
+    body: Option<WholeBody>,
 ) -> anyhow::Result<()> {
     let started = std::time::Instant::now();
+    let joints: Vec<String> = runs[0].joints.clone();
+    for r in &runs[1..] {
+        anyhow::ensure!(
+            r.joints == joints,
+            "{}: labels joints [{}], {} labels [{}]: every file of one import must have the same joints",
+            r.report.source,
+            r.joints.join(", "),
+            runs[0].report.source,
+            joints.join(", ")
+        );
+    }
+    anyhow::ensure!(
+        joints.len() == 1 || common.out.to_string_lossy().contains(JOINT),
+        "{} joints are labelled ({}): -o must hold {JOINT} to name one dataset per joint (e.g. -o ds_{JOINT}.csv)",
+        joints.len(),
+        joints.join(", ")
+    );
     let first = &runs[0].signals;
     let label: LabelSource = match common.label {
         Some(l) => l.into(),
@@ -290,39 +435,103 @@ fn finish(
             lacking.join(", ")
         );
     }
-    let (link_model, dynamics) = if label == LabelSource::Current {
-        let urdf_joint = common.urdf_joint.as_deref().unwrap_or(joint);
-        let (m, d) = urdf_link(common.urdf.as_deref(), urdf_joint, &common.fixed_joints)?;
-        (Some(m), d)
-    } else {
-        (
+    let mut warnings = Vec::new();
+    let whole = label == LabelSource::Current && runs.iter().all(|r| r.state.is_some());
+    let body = body.filter(|_| whole);
+    // The single-joint view, when the log gives no whole-body state.
+    let (link_model, mut dynamics) = match (&body, label) {
+        (None, LabelSource::Current) => {
+            anyhow::ensure!(
+                joints.len() == 1,
+                "labelling several joints with the current label needs the positions of every joint (--positions for CSV)"
+            );
+            let urdf_joint = common.urdf_joint.as_deref().unwrap_or(&joints[0]);
+            let (m, d) = urdf_link(common.urdf.as_deref(), urdf_joint, &common.fixed_joints)?;
+            (Some(m), format!("single-joint view: {d}"))
+        }
+        (Some(_), _) => (None, String::new()),
+        (None, _) => (
             None,
             "none (the label does not use inverse dynamics)".to_string(),
-        )
+        ),
     };
+    let mut plan_json = serde_json::Value::Null;
+    if let Some(b) = &body {
+        let log_names: Vec<String> = runs
+            .iter()
+            .flat_map(|r| r.state.as_ref().map(|s| s.names.clone()).unwrap_or_default())
+            .collect();
+        let base = runs
+            .iter()
+            .any(|r| r.state.as_ref().is_some_and(|s| s.base_quat_xyzw.is_some()));
+        let plan = b.plan(&log_names, &joints, base);
+        for j in &joints {
+            anyhow::ensure!(
+                b.robot().joint_index(j).is_ok(),
+                "joint `{j}` is not a movable joint of the URDF {} (the whole-body label matches by name)",
+                b.robot().source
+            );
+        }
+        if !plan.held_at_zero.is_empty() {
+            warnings.push(format!(
+                "URDF joints neither in the log nor given with --fixed-joint, held at 0 rad: {}",
+                plan.held_at_zero.join(", ")
+            ));
+        }
+        if !plan.not_in_urdf.is_empty() {
+            warnings.push(format!(
+                "log joints the URDF lacks (not used): {}",
+                plan.not_in_urdf.join(", ")
+            ));
+        }
+        dynamics = format!(
+            "whole-body RNEA on URDF {} ({} joints): {} from the log, {} held at given values, {} held at 0; base {}; g = 9.80665 (settings.import.whole_body)",
+            b.robot().source,
+            b.robot().dof(),
+            plan.from_log.len(),
+            plan.held.len(),
+            plan.held_at_zero.len(),
+            plan.base
+        );
+        plan_json = serde_json::to_value(&plan)?;
+    }
     let link = link_model
         .as_ref()
         .map(frictionless_sim::link::link_from_model)
         .transpose()?;
-    let mut cfg = PreprocessConfig::for_joint(joint);
-    cfg.gap_s = common.gap_s.unwrap_or(default_gap_s);
-    if format == "mat" {
-        // The .mat reader already cut chunks on the desired-current gaps; robot ticks are dense.
-        cfg.gap_s = cfg.gap_s.max(1.0);
+    let mut labels = Vec::with_capacity(joints.len());
+    for j in &joints {
+        let mut cfg = PreprocessConfig::for_joint(j);
+        cfg.gap_s = common.gap_s.unwrap_or(default_gap_s);
+        if format == "mat" {
+            // The .mat reader already cut chunks on the desired-current gaps; robot ticks are dense.
+            cfg.gap_s = cfg.gap_s.max(1.0);
+        }
+        common.pipeline.apply(&mut cfg);
+        labels.push(JointLabel {
+            joint: j.clone(),
+            label: SignalsLabel {
+                source: label,
+                gear_ratio_signed: per_joint(&common.gear_ratio, j, "--gear-ratio")?,
+                kt_nm_per_a: per_joint(&common.kt, j, "--kt")?,
+            },
+            cfg,
+        });
     }
-    common.pipeline.apply(&mut cfg);
-    // Moved out, not copied: memory stays one copy of the joint's signals plus the dataset.
-    let signals: Vec<_> = runs
-        .iter_mut()
-        .map(|r| std::mem::take(&mut r.signals))
-        .collect();
-    let lab = SignalsLabel {
-        source: label,
-        gear_ratio_signed: common.gear_ratio,
-        kt_nm_per_a: common.kt,
+    let dyn_ = match (&body, &link) {
+        (Some(b), _) => Dynamics::WholeBody(b),
+        (None, Some(l)) => Dynamics::Link(l.as_ref()),
+        (None, None) => Dynamics::None,
     };
-    let (ds, sum) =
-        preprocess_signals(&signals, &lab, link.as_deref(), &cfg).with_context(|| {
+    let results = {
+        let run_joints: Vec<RunJoints<'_>> = runs
+            .iter()
+            .map(|r| RunJoints {
+                signals: r.joint_signals().collect(),
+                state: r.state.as_ref(),
+            })
+            .collect();
+        preprocess_joints(&run_joints, &labels, dyn_).with_context(|| {
             format!(
                 "labelling {} ({label:?} label needs: {})",
                 files
@@ -332,13 +541,13 @@ fn finish(
                     .join(", "),
                 required_signals(label).join(", ")
             )
-        })?;
-    drop(signals);
-    let mut warnings = Vec::new();
-    if label == LabelSource::Given
-        && let Some(w) = frictionless_logs::label_sign_warning(&ds)
-    {
-        warnings.push(w);
+        })?
+    };
+    // The signals are no longer needed: memory is the datasets from here on.
+    for r in &mut runs {
+        r.signals = Default::default();
+        r.other_joints.clear();
+        r.state = None;
     }
     for r in &runs {
         let nf: u64 = r.report.non_finite.values().sum();
@@ -361,8 +570,6 @@ fn finish(
             ));
         }
     }
-    let placeholder = |v: Option<f64>| v.unwrap_or(1.0);
-    ds.write_csv(&common.out)?;
     let mut hashes = Vec::new();
     for f in files {
         hashes.push(
@@ -375,92 +582,119 @@ fn finish(
     } else {
         format!("{:x}", sha2::Sha256::digest(hashes.join("\n").as_bytes()))
     };
-    let valid = ds.valid.iter().filter(|v| **v).count();
-    let run_infos: Vec<RunInfo> = runs
-        .iter()
-        .zip(&sum.run_chunks)
-        .map(|(r, c)| RunInfo {
-            name: r.name.clone(),
-            source: r.report.source.clone(),
-            chunks: c.clone(),
-        })
-        .collect();
     let reports: Vec<_> = runs
         .iter()
         .zip(&hashes)
         .map(|(r, h)| serde_json::json!({ "run": r.name, "sha256": h, "report": r.report }))
         .collect();
-    let settings = serde_json::json!({
-        "pipeline": cfg,
-        "import": {
-            "format": format,
-            "label": label,
-            "gear_ratio_signed": common.gear_ratio.map_or("not given (1 written as a placeholder)".to_string(), |r| r.to_string()),
-            "kt_nm_per_a": common.kt.map_or("not given (1 written as a placeholder)".to_string(), |k| k.to_string()),
-            "derivations": sum.derivations,
-            "dropped_single_sample_chunks": sum.dropped_single_sample_chunks,
-            "delta_theta_offsets_motor_rad": sum.delta_theta_offsets_motor_rad.iter().map(|v| if v.is_finite() { serde_json::json!(v) } else { serde_json::Value::Null }).collect::<Vec<_>>(),
-            "runs": reports,
-            "warnings": warnings,
+    let inputs: Vec<&Path> = files.iter().map(PathBuf::as_path).collect();
+    let mut empty = Vec::new();
+    let mut written: BTreeMap<String, PathBuf> = BTreeMap::new();
+    for (jl, (ds, sum)) in labels.iter().zip(results) {
+        let joint = jl.joint.as_str();
+        let out = out_path(&common.out, joint);
+        let side_path = out.with_extension("json");
+        super::check_outputs(&inputs, &[&out, &side_path])?;
+        let mut joint_warnings = warnings.clone();
+        if label == LabelSource::Given
+            && let Some(w) = frictionless_logs::label_sign_warning(&ds)
+        {
+            joint_warnings.push(w);
         }
-    });
-    let side = DatasetSidecar {
-        format: "frictionless-dataset-v1".into(),
-        producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
-        input_log: files
+        let (r, kt) = (jl.label.gear_ratio_signed, jl.label.kt_nm_per_a);
+        let placeholder = |v: Option<f64>| v.unwrap_or(1.0);
+        ds.write_csv(&out)?;
+        let valid = ds.valid.iter().filter(|v| **v).count();
+        let run_infos: Vec<RunInfo> = runs
             .iter()
-            .map(|f| f.display().to_string())
-            .collect::<Vec<_>>()
-            .join(", "),
-        input_sha256,
-        joint: joint.to_string(),
-        gear_ratio_signed: placeholder(common.gear_ratio),
-        kt_nm_per_a: placeholder(common.kt),
-        fs_hz: cfg.fs_hz,
-        settings,
-        dynamics,
-        delta_theta_offset_motor_rad: sum
-            .delta_theta_offsets_motor_rad
-            .first()
-            .copied()
-            .filter(|v| v.is_finite())
-            .unwrap_or(0.0),
-        samples: ds.len(),
-        valid_samples: valid,
-        chunks: sum.run_chunks.iter().map(Vec::len).sum(),
-        short_chunks: sum.short_chunks,
-        columns: ds.columns().iter().map(ColumnDocOwned::from).collect(),
-        label,
-        runs: run_infos,
-        absent_columns: sum.absent_columns.iter().map(|s| s.to_string()).collect(),
-    };
-    let side_path = common.out.with_extension("json");
-    std::fs::write(&side_path, serde_json::to_string_pretty(&side)?)
-        .with_context(|| format!("cannot write {}", side_path.display()))?;
+            .zip(&sum.run_chunks)
+            .map(|(r, c)| RunInfo {
+                name: r.name.clone(),
+                source: r.report.source.clone(),
+                chunks: c.clone(),
+            })
+            .collect();
+        let settings = serde_json::json!({
+            "pipeline": jl.cfg,
+            "import": {
+                "format": format,
+                "label": label,
+                "joints_of_this_pass": joints,
+                "gear_ratio_signed": r.map_or("not given (1 written as a placeholder)".to_string(), |r| r.to_string()),
+                "kt_nm_per_a": kt.map_or("not given (1 written as a placeholder)".to_string(), |k| k.to_string()),
+                "derivations": sum.derivations,
+                "whole_body": plan_json,
+                "dropped_single_sample_chunks": sum.dropped_single_sample_chunks,
+                "delta_theta_offsets_motor_rad": sum.delta_theta_offsets_motor_rad.iter().map(|v| if v.is_finite() { serde_json::json!(v) } else { serde_json::Value::Null }).collect::<Vec<_>>(),
+                "runs": reports,
+                "warnings": joint_warnings,
+            }
+        });
+        let side = DatasetSidecar {
+            format: "frictionless-dataset-v1".into(),
+            producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
+            input_log: files
+                .iter()
+                .map(|f| f.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", "),
+            input_sha256: input_sha256.clone(),
+            joint: joint.to_string(),
+            gear_ratio_signed: placeholder(r),
+            kt_nm_per_a: placeholder(kt),
+            fs_hz: jl.cfg.fs_hz,
+            settings,
+            dynamics: dynamics.clone(),
+            delta_theta_offset_motor_rad: sum
+                .delta_theta_offsets_motor_rad
+                .first()
+                .copied()
+                .filter(|v| v.is_finite())
+                .unwrap_or(0.0),
+            samples: ds.len(),
+            valid_samples: valid,
+            chunks: sum.run_chunks.iter().map(Vec::len).sum(),
+            short_chunks: sum.short_chunks,
+            columns: ds.columns().iter().map(ColumnDocOwned::from).collect(),
+            label,
+            runs: run_infos,
+            absent_columns: sum.absent_columns.iter().map(|s| s.to_string()).collect(),
+        };
+        std::fs::write(&side_path, serde_json::to_string_pretty(&side)?)
+            .with_context(|| format!("cannot write {}", side_path.display()))?;
+        for w in &joint_warnings[warnings.len()..] {
+            eprintln!("warning: {joint}: {w}");
+        }
+        if ds.is_empty() {
+            empty.push(joint.to_string());
+        }
+        eprintln!(
+            "frictl import {format}: {joint}: {} samples ({valid} valid, {} chunks, {} too short), label {label:?}, absent columns [{}] -> {}",
+            ds.len(),
+            side.chunks,
+            sum.short_chunks,
+            side.absent_columns.join(", "),
+            out.display()
+        );
+        written.insert(joint.to_string(), out);
+    }
     for w in &warnings {
         eprintln!("warning: {w}");
     }
-    for (r, c) in runs.iter().zip(&sum.run_chunks) {
+    for r in &runs {
         eprintln!(
-            "  run {}: {} of {} rows used, {} chunks",
-            r.name,
-            r.report.rows_used,
-            r.report.rows_read,
-            c.len()
+            "  run {}: {} of {} rows used",
+            r.name, r.report.rows_used, r.report.rows_read,
         );
     }
-    if ds.is_empty() {
-        bail!("no samples");
+    if !empty.is_empty() {
+        bail!("no samples for {}", empty.join(", "));
     }
     eprintln!(
-        "frictl import {format}: {} runs, {} samples ({valid} valid, {} chunks, {} too short), label {label:?}, absent columns [{}] in {:.2} s -> {}",
+        "frictl import {format}: {} runs, {} joint(s), {dynamics}, in {:.2} s",
         runs.len(),
-        ds.len(),
-        side.chunks,
-        sum.short_chunks,
-        side.absent_columns.join(", "),
+        written.len(),
         started.elapsed().as_secs_f64(),
-        common.out.display()
     );
     Ok(())
 }

@@ -85,14 +85,8 @@ impl PipelineArgs {
     }
 }
 
-/// The URDF link model of `joint` (URDF default `virtual_leg`) with other joints held at the
-/// `NAME=RAD` positions, and its description for the sidecar.
-pub fn urdf_link(
-    urdf: Option<&str>,
-    joint: &str,
-    fixed_joints: &[String],
-) -> anyhow::Result<(LinkModel, String)> {
-    anyhow::ensure!(!joint.is_empty(), "no joint name: pass --joint");
+/// The `--fixed-joint NAME=RAD` values by name.
+pub fn parse_fixed_joints(fixed_joints: &[String]) -> anyhow::Result<BTreeMap<String, f64>> {
     let mut other = BTreeMap::new();
     for s in fixed_joints {
         let (n, v) = s
@@ -102,8 +96,35 @@ pub fn urdf_link(
             .trim()
             .parse()
             .with_context(|| format!("--fixed-joint {s:?}: {v:?} is not a number"))?;
+        anyhow::ensure!(v.is_finite(), "--fixed-joint {s:?}: not finite");
         other.insert(n.trim().to_owned(), v);
     }
+    Ok(other)
+}
+
+/// The whole-body model for τ_ID: the URDF (default `virtual_leg`) with the `--fixed-joint` values.
+pub fn urdf_whole_body(
+    urdf: Option<&str>,
+    fixed_joints: &[String],
+) -> anyhow::Result<frictionless_ident::preprocess::WholeBody> {
+    let held = parse_fixed_joints(fixed_joints)?;
+    let robot = match urdf.unwrap_or("virtual_leg") {
+        "virtual_leg" => frictionless_dynamics::virtual_leg()?,
+        path => frictionless_dynamics::Robot::from_urdf_file(path)?,
+    };
+    frictionless_ident::preprocess::WholeBody::new(robot, held)
+        .map_err(|e| anyhow::anyhow!("--fixed-joint: {e}"))
+}
+
+/// The URDF link model of `joint` (URDF default `virtual_leg`) with other joints held at the
+/// `NAME=RAD` positions, and its description for the sidecar.
+pub fn urdf_link(
+    urdf: Option<&str>,
+    joint: &str,
+    fixed_joints: &[String],
+) -> anyhow::Result<(LinkModel, String)> {
+    anyhow::ensure!(!joint.is_empty(), "no joint name: pass --joint");
+    let other = parse_fixed_joints(fixed_joints)?;
     let urdf = urdf.unwrap_or("virtual_leg").to_string();
     let d = format!("URDF {urdf} joint {joint}, other joints {other:?}, fixed base, g = 9.80665");
     Ok((
@@ -141,6 +162,17 @@ pub struct Args {
     /// Position of another URDF joint, held fixed [rad] (repeatable; absent joints are 0).
     #[arg(long = "fixed-joint", value_name = "NAME=RAD")]
     pub fixed_joints: Vec<String>,
+    /// Whole-body τ_ID: the log's columns of the other joints' positions, a template with `{joint}`
+    /// replaced by each URDF joint name (e.g. `q_{joint}`); the log's own joint comes from `s_rad`.
+    /// Implies the URDF (`--urdf`, `--fixed-joint`; joints neither logged nor fixed are held at 0).
+    #[arg(long, value_name = "TEMPLATE")]
+    pub positions: Option<String>,
+    /// Velocity column template for `--positions` (absent: the Kalman smoother).
+    #[arg(long, value_name = "TEMPLATE", requires = "positions")]
+    pub velocities: Option<String>,
+    /// Acceleration column template for `--positions`.
+    #[arg(long, value_name = "TEMPLATE", requires = "positions")]
+    pub accelerations: Option<String>,
     /// Same as `--link sidecar` (kept for existing scripts).
     #[arg(long)]
     pub link_from_sidecar: bool,
@@ -166,6 +198,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let sha = frictionless_dataset::file_sha256_hex(&args.log)
         .with_context(|| format!("cannot read {}", args.log.display()))?;
 
+    if let Some(positions) = &args.positions {
+        return run_whole_body(&args, positions, &meta, &log, sha, started);
+    }
     let use_sidecar = match (args.link_from_sidecar, args.link) {
         (true, _) | (_, LinkSource::Sidecar) => true,
         (false, LinkSource::Urdf) => false,
@@ -186,6 +221,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let link = frictionless_sim::link::link_from_model(&link_model)?;
 
+    let cfg = pipeline_config(&args, &meta)?;
+    let (ds, summary) = preprocess(&log, &meta, link.as_ref(), &cfg)?;
+    write(&args, &meta, sha, &cfg, dynamics, ds, summary, started)
+}
+
+/// The pipeline settings of `args` for the log's joint.
+fn pipeline_config(args: &Args, meta: &LogMeta) -> anyhow::Result<PreprocessConfig> {
     let mut cfg = PreprocessConfig::for_joint(&meta.joint);
     args.pipeline.apply(&mut cfg);
     cfg.gap_s = args.gap_s;
@@ -199,7 +241,115 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .with_context(|| format!("--subtract-reflected-inertia {j:?} is not a number"))?
         };
     }
-    let (ds, summary) = preprocess(&log, &meta, link.as_ref(), &cfg)?;
+    Ok(cfg)
+}
+
+/// `frictl preprocess --positions TEMPLATE`: τ_ID from the whole body, every URDF joint whose
+/// column the template names.
+fn run_whole_body(
+    args: &Args,
+    positions: &str,
+    meta: &LogMeta,
+    log: &RawLog,
+    sha: String,
+    started: std::time::Instant,
+) -> anyhow::Result<()> {
+    const JOINT: &str = "{joint}";
+    for (flag, t) in [
+        ("--positions", Some(positions)),
+        ("--velocities", args.velocities.as_deref()),
+        ("--accelerations", args.accelerations.as_deref()),
+    ] {
+        if let Some(t) = t {
+            anyhow::ensure!(
+                t.contains(JOINT),
+                "{flag} {t:?}: the template must hold {JOINT} (e.g. `q_{JOINT}`)"
+            );
+        }
+    }
+    let body = urdf_whole_body(args.urdf.as_deref(), &args.fixed_joints)?;
+    let mut cols = frictionless_dataset::read_columns(&args.log)?;
+    let mut names = Vec::new();
+    let (mut q, mut qd, mut qdd) = (Vec::new(), Vec::new(), Vec::new());
+    for j in body.robot().joint_names() {
+        if let Some(v) = cols.remove(&positions.replace(JOINT, j)) {
+            names.push(j.to_string());
+            q.push(v);
+            let mut take = |t: &Option<String>| t.as_ref().and_then(|t| cols.remove(&t.replace(JOINT, j)));
+            qd.push(take(&args.velocities));
+            qdd.push(take(&args.accelerations));
+        }
+    }
+    anyhow::ensure!(
+        !names.is_empty() || body.robot().joint_index(&meta.joint).is_ok(),
+        "{}: --positions {positions:?} matches no column for any URDF joint",
+        args.log.display()
+    );
+    if names.is_empty() {
+        eprintln!(
+            "warning: --positions {positions:?} matches no column of {}: only the log's own joint moves",
+            args.log.display()
+        );
+    }
+    let state = frictionless_ident::preprocess::JointStates {
+        names,
+        q,
+        qdot: qd,
+        qddot: qdd,
+        base_quat_xyzw: None,
+    };
+    let plan = body.plan(&state.names, std::slice::from_ref(&meta.joint), false);
+    if !plan.held_at_zero.is_empty() {
+        eprintln!(
+            "warning: URDF joints neither in the log nor given with --fixed-joint, held at 0 rad: {}",
+            plan.held_at_zero.join(", ")
+        );
+    }
+    let cfg = pipeline_config(args, meta)?;
+    let (ds, summary) =
+        frictionless_ident::preprocess::preprocess_whole_body(log, meta, &body, &state, &cfg)?;
+    let dynamics = format!(
+        "whole-body RNEA on URDF {} ({} joints): {} from the log, {} held at given values, {} held at 0; base {}; g = 9.80665 (settings.whole_body)",
+        body.robot().source,
+        body.robot().dof(),
+        plan.from_log.len(),
+        plan.held.len(),
+        plan.held_at_zero.len(),
+        plan.base
+    );
+    let mut settings = serde_json::to_value(&cfg)?;
+    settings["whole_body"] = serde_json::to_value(&plan)?;
+    write_settings(args, meta, sha, settings, &cfg, dynamics, ds, summary, started)
+}
+
+/// Writes the dataset and its sidecar, and prints the summary.
+#[allow(clippy::too_many_arguments)]
+fn write(
+    args: &Args,
+    meta: &LogMeta,
+    sha: String,
+    cfg: &PreprocessConfig,
+    dynamics: String,
+    ds: frictionless_dataset::Dataset,
+    summary: frictionless_ident::preprocess::PreprocessSummary,
+    started: std::time::Instant,
+) -> anyhow::Result<()> {
+    let settings = serde_json::to_value(cfg)?;
+    write_settings(args, meta, sha, settings, cfg, dynamics, ds, summary, started)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn write_settings(
+    args: &Args,
+    meta: &LogMeta,
+    sha: String,
+    settings: serde_json::Value,
+    cfg: &PreprocessConfig,
+    dynamics: String,
+    ds: frictionless_dataset::Dataset,
+    summary: frictionless_ident::preprocess::PreprocessSummary,
+    started: std::time::Instant,
+) -> anyhow::Result<()> {
     ds.write_csv(&args.out)?;
     let valid = ds.valid.iter().filter(|v| **v).count();
     let side = DatasetSidecar {
@@ -211,7 +361,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         gear_ratio_signed: meta.gear_ratio_signed,
         kt_nm_per_a: meta.kt_nm_per_a,
         fs_hz: cfg.fs_hz,
-        settings: serde_json::to_value(&cfg)?,
+        settings,
         dynamics,
         delta_theta_offset_motor_rad: summary.delta_theta_offset_motor_rad,
         samples: ds.len(),

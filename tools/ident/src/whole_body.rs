@@ -1,0 +1,329 @@
+//! Whole-body τ_ID for the `current` label: τ_ID = RNEA(q, q̇, q̈) on the whole URDF at every grid
+//! sample, with q of every joint the log has ([`JointStates`]), the joints it lacks held at given
+//! positions (0 when not given), a fixed base at the identity pose or one oriented by a logged
+//! quaternion (a robot on a tilted pole).
+//!
+//! Each logged joint goes through the same resampler and Kalman smoother as the labelled joint (its
+//! q̇, q̈ as given when the log has them), so the label of every joint sees the same estimates.
+//! One RNEA per sample gives τ_ID of every labelled joint ([`super::preprocess::preprocess_joints`]).
+//!
+//! What it is **not**: a contact or floating-base estimator (no base velocity or acceleration, no
+//! external wrenches: a robot standing on its feet needs the measured foot wrenches, which this
+//! module does not take), or a reader of logs (`frictionless-logs` fills [`JointStates`]).
+
+use std::collections::BTreeMap;
+
+use frictionless_dynamics::{BaseState, Motion, Robot, Workspace};
+use serde::Serialize;
+
+use super::kalman::{self, KalmanConfig};
+use super::preprocess::{JointLabel, PreprocessError, RunSignals, interp};
+
+/// Positions (and, when logged, velocities and accelerations) of every robot joint a log has, on one
+/// run's clock (one value per sample of the run's `time_s`), SI units.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct JointStates {
+    /// Joint names as the log spells them (matched to the URDF by name).
+    pub names: Vec<String>,
+    /// Position per joint [rad or m].
+    pub q: Vec<Vec<f64>>,
+    /// Velocity per joint when logged [rad/s or m/s] (absent: from q through the Kalman smoother).
+    pub qdot: Vec<Option<Vec<f64>>>,
+    /// Acceleration per joint when logged [rad/s² or m/s²] (absent: from the smoother).
+    pub qddot: Vec<Option<Vec<f64>>>,
+    /// Orientation of the root link in the world, unit quaternion `[x, y, z, w]` per sample (absent:
+    /// the root link is welded to the world at the identity pose).
+    pub base_quat_xyzw: Option<[Vec<f64>; 4]>,
+}
+
+impl JointStates {
+    /// An empty state for `names`, every series with room for `capacity` samples.
+    pub fn with_names(names: Vec<String>, qdot: &[bool], qddot: &[bool], capacity: usize) -> Self {
+        let n = names.len();
+        let v = |has: bool| has.then(|| Vec::with_capacity(capacity));
+        Self {
+            q: (0..n).map(|_| Vec::with_capacity(capacity)).collect(),
+            qdot: (0..n).map(|k| v(qdot.get(k).copied().unwrap_or(false))).collect(),
+            qddot: (0..n)
+                .map(|k| v(qddot.get(k).copied().unwrap_or(false)))
+                .collect(),
+            names,
+            base_quat_xyzw: None,
+        }
+    }
+
+    /// Checks that every series has `n` samples; the message names the joint.
+    pub fn check(&self, n: usize) -> Result<(), String> {
+        if self.q.len() != self.names.len()
+            || self.qdot.len() != self.names.len()
+            || self.qddot.len() != self.names.len()
+        {
+            return Err("the joint state has a different number of names and series".into());
+        }
+        for (k, name) in self.names.iter().enumerate() {
+            let lens = [
+                Some(self.q[k].len()),
+                self.qdot[k].as_ref().map(Vec::len),
+                self.qddot[k].as_ref().map(Vec::len),
+            ];
+            if let Some(m) = lens.into_iter().flatten().find(|&m| m != n) {
+                return Err(format!(
+                    "joint `{name}` has {m} samples, the run has {n}: mismatched time bases"
+                ));
+            }
+        }
+        if let Some(b) = &self.base_quat_xyzw
+            && let Some(m) = b.iter().map(Vec::len).find(|&m| m != n)
+        {
+            return Err(format!(
+                "the base quaternion has {m} samples, the run has {n}: mismatched time bases"
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Where each URDF joint's position comes from, for the dataset sidecar.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct StatePlan {
+    /// URDF joints whose q comes from the log.
+    pub from_log: Vec<String>,
+    /// URDF joints held at a given position (`--fixed-joint`; wins over the log) [rad or m].
+    pub held: BTreeMap<String, f64>,
+    /// URDF joints neither in the log nor given: held at 0.
+    pub held_at_zero: Vec<String>,
+    /// Names in the log that are not movable joints of the URDF (not used).
+    pub not_in_urdf: Vec<String>,
+    /// The base: `fixed` (identity) or `orientation from the log`.
+    pub base: String,
+}
+
+/// The robot and the held joint positions of the whole-body τ_ID.
+#[derive(Clone, Debug)]
+pub struct WholeBody {
+    robot: Robot,
+    held: BTreeMap<String, f64>,
+    q_held: Vec<f64>,
+}
+
+/// One joint whose q comes from the log (or from a labelled joint's own signals).
+pub(crate) struct Track<'a> {
+    index: usize,
+    q: &'a [f64],
+    qd: Option<&'a [f64]>,
+    qdd: Option<&'a [f64]>,
+}
+
+/// A labelled joint's own series (used when the state lacks it).
+pub(crate) struct Labelled<'a> {
+    pub(crate) joint: String,
+    pub(crate) q: Option<&'a [f64]>,
+    pub(crate) qd: Option<&'a [f64]>,
+    pub(crate) qdd: Option<&'a [f64]>,
+}
+
+/// The logged joints of one run, by robot index.
+pub(crate) struct Tracks<'a> {
+    joints: Vec<Track<'a>>,
+    base: Option<&'a [Vec<f64>; 4]>,
+}
+
+fn bad(msg: String) -> PreprocessError {
+    PreprocessError::Sidecar {
+        path: "imported signals".into(),
+        msg,
+    }
+}
+
+impl WholeBody {
+    /// `held`: positions of joints held fixed [rad or m] (each must be a movable joint of `robot`,
+    /// finite).
+    pub fn new(robot: Robot, held: BTreeMap<String, f64>) -> Result<Self, PreprocessError> {
+        let mut q_held = vec![0.0; robot.dof()];
+        for (name, &v) in &held {
+            let k = robot.joint_index(name).map_err(|e| bad(e.to_string()))?;
+            if !v.is_finite() {
+                return Err(bad(format!("held joint `{name}` = {v}: must be finite")));
+            }
+            q_held[k] = v;
+        }
+        Ok(Self {
+            robot,
+            held,
+            q_held,
+        })
+    }
+
+    /// The robot.
+    pub fn robot(&self) -> &Robot {
+        &self.robot
+    }
+
+    /// Which URDF joints come from a log holding `log_names` (plus the `labelled` joints, whose own
+    /// positions count as logged).
+    pub fn plan(&self, log_names: &[String], labelled: &[String], base_logged: bool) -> StatePlan {
+        let mut p = StatePlan {
+            base: if base_logged {
+                "root-link orientation from the log (at rest)".into()
+            } else {
+                "fixed at the identity pose".into()
+            },
+            ..StatePlan::default()
+        };
+        for name in self.robot.joint_names() {
+            if let Some(&v) = self.held.get(name) {
+                p.held.insert(name.to_string(), v);
+            } else if log_names.iter().chain(labelled).any(|n| n == name) {
+                p.from_log.push(name.to_string());
+            } else {
+                p.held_at_zero.push(name.to_string());
+            }
+        }
+        for n in log_names {
+            if self.robot.joint_index(n).is_err() && !p.not_in_urdf.contains(n) {
+                p.not_in_urdf.push(n.clone());
+            }
+        }
+        p
+    }
+
+    /// The logged joints of one run: every state joint the URDF has (not held), then every labelled
+    /// joint the state lacks, from its own signals.
+    pub(crate) fn tracks<'a>(
+        &self,
+        st: &'a JointStates,
+        joints: &[JointLabel],
+        signals: &[&'a RunSignals],
+    ) -> Result<Tracks<'a>, PreprocessError> {
+        let labelled: Vec<Labelled<'a>> = joints
+            .iter()
+            .zip(signals)
+            .map(|(jl, sig)| Labelled {
+                joint: jl.joint.clone(),
+                q: sig.s_rad.as_deref(),
+                qd: sig.sdot_rad_s.as_deref(),
+                qdd: sig.sddot_rad_s2.as_deref(),
+            })
+            .collect();
+        self.tracks_of(st, &labelled)
+    }
+
+    /// [`Self::tracks`] with the labelled joints' own series given directly.
+    pub(crate) fn tracks_of<'a>(
+        &self,
+        st: &'a JointStates,
+        labelled: &[Labelled<'a>],
+    ) -> Result<Tracks<'a>, PreprocessError> {
+        let mut out: Vec<Track<'a>> = Vec::new();
+        for (k, name) in st.names.iter().enumerate() {
+            let Ok(index) = self.robot.joint_index(name) else {
+                continue;
+            };
+            if self.held.contains_key(name) || out.iter().any(|t| t.index == index) {
+                continue;
+            }
+            out.push(Track {
+                index,
+                q: &st.q[k],
+                qd: st.qdot[k].as_deref(),
+                qdd: st.qddot[k].as_deref(),
+            });
+        }
+        for l in labelled {
+            let Ok(index) = self.robot.joint_index(&l.joint) else {
+                continue;
+            };
+            if self.held.contains_key(&l.joint) || out.iter().any(|t| t.index == index) {
+                continue;
+            }
+            let Some(q) = l.q else {
+                return Err(bad(format!(
+                    "joint `{}`: the whole-body label needs its position",
+                    l.joint
+                )));
+            };
+            out.push(Track {
+                index,
+                q,
+                qd: l.qd,
+                qdd: l.qdd,
+            });
+        }
+        Ok(Tracks {
+            joints: out,
+            base: st.base_quat_xyzw.as_ref(),
+        })
+    }
+
+    /// τ_ID of the robot joints `wanted` (indices) on the grid `tq` of samples `a..b` of a run with
+    /// time `time_s`: one column per wanted joint.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn chunk_tau(
+        &self,
+        ws: &mut Workspace,
+        tracks: &Tracks<'_>,
+        time_s: &[f64],
+        a: usize,
+        b: usize,
+        tq: &[f64],
+        kalman_cfg: &KalmanConfig,
+        dt_s: f64,
+        wanted: &[usize],
+    ) -> Result<Vec<Vec<f64>>, PreprocessError> {
+        let t = &time_s[a..b];
+        let n = tq.len();
+        let li = |y: &[f64]| interp(t, &y[a..b], tq);
+        // q, q̇, q̈ of every logged joint on the grid (the labelled joint's own derivation rules).
+        let mut grid: Vec<(usize, Vec<f64>, Vec<f64>, Vec<f64>)> =
+            Vec::with_capacity(tracks.joints.len());
+        for tr in &tracks.joints {
+            let q = li(tr.q);
+            let (qd, qdd) = match (tr.qd, tr.qdd) {
+                (Some(v), Some(acc)) => (li(v), li(acc)),
+                (Some(v), None) => {
+                    let v = li(v);
+                    let acc = kalman::smooth(kalman_cfg, dt_s, &v)?.vel_rad_s;
+                    (v, acc)
+                }
+                (None, acc) => {
+                    let e = kalman::smooth(kalman_cfg, dt_s, &q)?;
+                    (e.vel_rad_s, acc.map_or(e.acc_rad_s2, li))
+                }
+            };
+            grid.push((tr.index, q, qd, qdd));
+        }
+        let base = tracks.base.map(|b| [li(&b[0]), li(&b[1]), li(&b[2]), li(&b[3])]);
+        let dof = self.robot.dof();
+        let mut q = self.q_held.clone();
+        let (mut qd, mut qdd, mut tau) = (vec![0.0; dof], vec![0.0; dof], vec![0.0; dof]);
+        let mut out: Vec<Vec<f64>> = wanted.iter().map(|_| Vec::with_capacity(n)).collect();
+        let err = |e: frictionless_dynamics::DynamicsError| bad(e.to_string());
+        for k in 0..n {
+            for (i, gq, gqd, gqdd) in &grid {
+                q[*i] = gq[k];
+                qd[*i] = gqd[k];
+                qdd[*i] = gqdd[k];
+            }
+            match &base {
+                None => self.robot.rnea(ws, &q, &qd, &qdd, &mut tau).map_err(err)?,
+                Some(bq) => {
+                    let quat = [bq[0][k], bq[1][k], bq[2][k], bq[3][k]];
+                    match BaseState::from_arrays([0.0; 3], quat, [0.0; 6], [0.0; 6]) {
+                        Ok(mut bs) => {
+                            bs.vel = Motion::ZERO;
+                            self.robot
+                                .rnea_floating(ws, &bs, &q, &qd, &qdd, &[], &mut tau)
+                                .map_err(err)?;
+                        }
+                        // A zero or non-finite quaternion: no τ_ID for this sample (invalid).
+                        Err(_) => tau.iter_mut().for_each(|x| *x = f64::NAN),
+                    }
+                }
+            }
+            for (o, &w) in out.iter_mut().zip(wanted) {
+                o.push(tau[w]);
+            }
+        }
+        Ok(out)
+    }
+}
