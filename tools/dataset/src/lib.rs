@@ -593,15 +593,31 @@ impl Dataset {
         DATASET_COLUMNS.iter().chain(truth).copied().collect()
     }
 
-    /// Writes the CSV (header + one line per sample, shortest round-trip float text).
+    /// Writes the CSV (header + one line per sample, shortest round-trip float text) through
+    /// [`frictionless::output_file`]: replaced atomically, never over a device or through a symlink.
     pub fn write_csv(&self, path: &Path) -> Result<(), DatasetError> {
+        let io = |e: &dyn std::fmt::Display| DatasetError::Io {
+            path: path.display().to_string(),
+            msg: e.to_string(),
+        };
+        let mut f = frictionless::output_file::AtomicFile::create(path).map_err(|e| io(&e))?;
+        self.write_csv_to(&mut f, path)?;
+        f.commit().map_err(|e| io(&e))
+    }
+
+    /// Writes the CSV to `out` (see [`Dataset::write_csv`]); `path` names it in errors. The caller
+    /// commits the file (e.g. together with its sidecar).
+    pub fn write_csv_to(
+        &self,
+        out: &mut frictionless::output_file::AtomicFile,
+        path: &Path,
+    ) -> Result<(), DatasetError> {
         let p = path.display().to_string();
         let io = |e: &dyn std::fmt::Display| DatasetError::Io {
             path: p.clone(),
             msg: e.to_string(),
         };
-        let file = std::fs::File::create(path).map_err(|e| io(&e))?;
-        let mut w = csv::Writer::from_writer(std::io::BufWriter::with_capacity(1 << 20, file));
+        let mut w = csv::Writer::from_writer(out);
         w.write_record(self.columns().iter().map(|c| c.name))
             .map_err(|e| io(&e))?;
         let mut buf = ryu_like::Buf::default();

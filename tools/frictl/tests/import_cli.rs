@@ -369,3 +369,102 @@ fn mat_file_imports_with_the_current_label_and_two_chunks() {
     );
     assert!(e.contains("r_elbow") && e.contains("l_knee"), "{e}");
 }
+
+/// `import csv` of `log` into `out` (a wrist joint with a given friction column).
+fn import_args<'a>(log: &'a Path, out: &'a Path) -> Vec<&'a str> {
+    vec![
+        "import",
+        "csv",
+        s(log),
+        "--joint",
+        "wrist",
+        "--column",
+        "time=time",
+        "--column",
+        "s=q_deg",
+        "--column",
+        "tau_f=friction_nm",
+        "--unit",
+        "s=deg",
+        "-o",
+        s(out),
+    ]
+}
+
+#[test]
+fn import_over_a_device_a_fifo_or_a_symlink_is_refused_and_leaves_it() {
+    use std::os::unix::fs::FileTypeExt;
+    let d = dir().join("occupied");
+    std::fs::create_dir_all(&d).unwrap();
+    let log = d.join("log.csv");
+    write_log(&log, 2.0, 5);
+    let e = err_text(
+        frictl(&import_args(&log, Path::new("/dev/null"))),
+        "import to /dev/null",
+    );
+    assert!(
+        e.contains("/dev/null") && e.contains("character device"),
+        "{e}"
+    );
+    assert!(
+        std::fs::metadata("/dev/null")
+            .unwrap()
+            .file_type()
+            .is_char_device()
+    );
+    // A FIFO: the old importer blocked in its open; the hang is caught by the process ending at all
+    // (the refusal happens before any read of the log).
+    let fifo = d.join("ds.fifo");
+    let _ = std::fs::remove_file(&fifo);
+    let c = std::ffi::CString::new(fifo.as_os_str().as_encoded_bytes()).unwrap();
+    // SAFETY: a valid NUL-terminated path.
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_frictl"))
+        .args(import_args(&log, &fifo))
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t0 = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if t0.elapsed() > std::time::Duration::from_secs(120) {
+            child.kill().unwrap();
+            let _ = child.wait();
+            panic!("import csv -o FIFO hung");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let e = err_text(child.wait_with_output().unwrap(), "import to a FIFO");
+    assert!(e.contains(s(&fifo)) && e.contains("FIFO"), "{e}");
+    assert!(
+        std::fs::symlink_metadata(&fifo)
+            .unwrap()
+            .file_type()
+            .is_fifo()
+    );
+    // A symlink `current.csv -> v1.csv`: refused, the link and v1 kept.
+    let v1 = d.join("v1.csv");
+    std::fs::write(&v1, "the previous dataset\n").unwrap();
+    let link = d.join("current.csv");
+    let _ = std::fs::remove_file(&link);
+    std::os::unix::fs::symlink("v1.csv", &link).unwrap();
+    let e = err_text(
+        frictl(&import_args(&log, &link)),
+        "import through a symlink",
+    );
+    assert!(
+        e.contains(s(&link)) && e.contains("symbolic link to v1.csv"),
+        "{e}"
+    );
+    assert!(
+        std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    );
+    assert_eq!(
+        std::fs::read_to_string(&v1).unwrap(),
+        "the previous dataset\n"
+    );
+    assert!(!d.join("current.json").exists());
+}

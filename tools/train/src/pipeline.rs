@@ -1038,7 +1038,7 @@ pub fn write_outputs(
     trained.report.model = model_path.display().to_string();
     let json = serde_json::to_string_pretty(&trained.report)
         .map_err(|e| file_err(report_path, format!("cannot encode the report: {e}")))?;
-    std::fs::write(report_path, json)
+    frictionless::output_file::write(report_path, json)
         .map_err(|e| file_err(report_path, format!("cannot write: {e}")))?;
     Ok(())
 }

@@ -172,6 +172,11 @@ fn pinn_names(paths: &[PathBuf]) -> Vec<String> {
 /// Runs `frictl eval`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let started = std::time::Instant::now();
+    if let Some(json) = &args.json {
+        let mut inputs: Vec<&std::path::Path> = args.datasets.iter().map(|p| p.as_path()).collect();
+        inputs.extend(args.pinns.iter().map(|p| p.as_path()));
+        super::check_outputs(&inputs, &[json])?;
+    }
     let opts = EvalOptions {
         v_sliding_rad_s: args.v_sliding,
         warmup: match args.warmup {
@@ -357,7 +362,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if let (Some(d), Some(m)) = (&drift_report, v.as_object_mut()) {
             m.insert("drift".into(), serde_json::to_value(d)?);
         }
-        std::fs::write(p, serde_json::to_string_pretty(&v)?)
+        frictionless::output_file::write(p, serde_json::to_string_pretty(&v)?)
             .with_context(|| format!("cannot write {}", p.display()))?;
     }
 

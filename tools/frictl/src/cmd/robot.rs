@@ -878,7 +878,7 @@ fn run_robot(a: RunArgs) -> anyhow::Result<()> {
             cfg_path.display()
         )
     })?;
-    std::fs::write(&cfg_path, &text)
+    frictionless::output_file::write(&cfg_path, &text)
         .with_context(|| format!("cannot write {}", cfg_path.display()))?;
     let total = started.elapsed().as_secs_f64();
     let report = serde_json::json!({
@@ -890,13 +890,14 @@ fn run_robot(a: RunArgs) -> anyhow::Result<()> {
         "joints": reports,
         "total_seconds": total,
     });
-    std::fs::write(
+    frictionless::output_file::write(
         out.join("report.json"),
         serde_json::to_string_pretty(&report)?,
     )
     .context("cannot write report.json")?;
     let md = report_md(&robot, &reports, total);
-    std::fs::write(out.join("report.md"), &md).context("cannot write report.md")?;
+    frictionless::output_file::write(out.join("report.md"), &md)
+        .context("cannot write report.md")?;
     println!("{md}");
     eprintln!(
         "frictl robot run: done in {total:.0} s → {} (frictiond.toml, report.md, report.json)",
