@@ -110,6 +110,21 @@ pub enum DatasetError {
         /// Raw text.
         value: String,
     },
+    /// The CSV holds another number of rows than its sidecar records: a file cut short (a write
+    /// stopped by a signal or a full disk) or a CSV and sidecar from different imports.
+    #[error(
+        "{path}: {rows} data rows, but its sidecar {sidecar} records {samples} samples (a file cut short, or a CSV and sidecar of different imports): import the dataset again"
+    )]
+    RowCount {
+        /// Dataset CSV.
+        path: String,
+        /// Rows read.
+        rows: usize,
+        /// Sidecar path.
+        sidecar: String,
+        /// Samples the sidecar records.
+        samples: u64,
+    },
 }
 
 const fn col(name: &'static str, unit: &'static str, doc: &'static str) -> ColumnDoc {
@@ -659,7 +674,29 @@ impl Dataset {
     }
 
     /// Reads a dataset CSV by column name (column order is free; the truth columns are optional).
+    /// When its sidecar (`PATH.json`) exists and records `samples`, the number of rows must match
+    /// ([`DatasetError::RowCount`]): a CSV cut at a line boundary is refused, not read as a shorter
+    /// dataset.
     pub fn read_csv(path: &Path) -> Result<Self, DatasetError> {
+        let ds = Self::read_csv_columns(path)?;
+        let side = path.with_extension("json");
+        if let Some(samples) = frictionless::regular_file::read_text(&side)
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            .and_then(|v| v.get("samples").and_then(serde_json::Value::as_u64))
+            && samples != ds.len() as u64
+        {
+            return Err(DatasetError::RowCount {
+                path: path.display().to_string(),
+                rows: ds.len(),
+                sidecar: side.display().to_string(),
+                samples,
+            });
+        }
+        Ok(ds)
+    }
+
+    fn read_csv_columns(path: &Path) -> Result<Self, DatasetError> {
         let p = path.display().to_string();
         let mut cols = read_columns(path)?;
         let mut take = |name: &'static str| -> Result<Vec<f64>, DatasetError> {

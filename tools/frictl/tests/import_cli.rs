@@ -468,3 +468,73 @@ fn import_over_a_device_a_fifo_or_a_symlink_is_refused_and_leaves_it() {
     );
     assert!(!d.join("current.json").exists());
 }
+
+#[test]
+fn an_import_stopped_mid_write_keeps_the_previous_dataset_and_sidecar() {
+    use std::os::unix::process::CommandExt;
+    let d = dir().join("stopped");
+    std::fs::create_dir_all(&d).unwrap();
+    let log = d.join("log.csv");
+    write_log(&log, 2.0, 7);
+    let ds = d.join("ds.csv");
+    ok(frictl(&import_args(&log, &ds)), "first import");
+    let csv_before = std::fs::read(&ds).unwrap();
+    let side_before = std::fs::read(ds.with_extension("json")).unwrap();
+    // Another log, imported again over the same dataset by a process that dies once it has written
+    // half the old dataset's bytes into any one file (RLIMIT_FSIZE: SIGXFSZ, as a full disk or a
+    // kill would stop it mid-write).
+    let log2 = d.join("log2.csv");
+    write_log(&log2, 3.0, 8);
+    let limit = (csv_before.len() / 2) as libc::rlim_t;
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_frictl"));
+    cmd.args(import_args(&log2, &ds));
+    // SAFETY: setrlimit is async-signal-safe; nothing else runs between fork and exec.
+    unsafe {
+        cmd.pre_exec(move || {
+            let r = libc::rlimit {
+                rlim_cur: limit,
+                rlim_max: limit,
+            };
+            if libc::setrlimit(libc::RLIMIT_FSIZE, &r) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+    let out = cmd.output().unwrap();
+    assert!(!out.status.success(), "the limited import should die");
+    assert_eq!(
+        std::fs::read(&ds).unwrap(),
+        csv_before,
+        "the dataset CSV was cut"
+    );
+    assert_eq!(
+        std::fs::read(ds.with_extension("json")).unwrap(),
+        side_before
+    );
+    ok(frictl(&["fit", "cv", s(&ds)]), "fit cv on the kept dataset");
+}
+
+#[test]
+fn a_dataset_cut_at_a_line_boundary_is_refused_with_both_counts() {
+    let d = dir().join("cut");
+    std::fs::create_dir_all(&d).unwrap();
+    let log = d.join("log.csv");
+    write_log(&log, 2.0, 9);
+    let ds = d.join("ds.csv");
+    ok(frictl(&import_args(&log, &ds)), "import");
+    let side: frictionless_dataset::DatasetSidecar =
+        serde_json::from_str(&std::fs::read_to_string(ds.with_extension("json")).unwrap()).unwrap();
+    let text = std::fs::read_to_string(&ds).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len() - 1, side.samples);
+    let keep = 1 + side.samples / 2;
+    std::fs::write(&ds, lines[..keep].join("\n") + "\n").unwrap();
+    let e = err_text(frictl(&["fit", "cv", s(&ds)]), "fit cv on a cut dataset");
+    assert!(
+        e.contains(s(&ds))
+            && e.contains(&format!("{} data rows", keep - 1))
+            && e.contains(&format!("records {} samples", side.samples)),
+        "{e}"
+    );
+}

@@ -6,7 +6,7 @@
 //! (`preprocess_signals`). Formats, roles, units and the minimal columns per label source:
 //! `docs/robot-logs.md`.
 
-use std::io::IsTerminal;
+use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
@@ -362,7 +362,11 @@ fn finish(
         }
     }
     let placeholder = |v: Option<f64>| v.unwrap_or(1.0);
-    ds.write_csv(&common.out)?;
+    // The CSV is written to a temporary file now and replaces the old dataset only together with its
+    // sidecar, below (the sidecar last): a stopped import leaves the previous pair or no sidecar.
+    let mut csv_out = frictionless::output_file::AtomicFile::create(&common.out)
+        .with_context(|| format!("cannot write {}", common.out.display()))?;
+    ds.write_csv_to(&mut csv_out, &common.out)?;
     let mut hashes = Vec::new();
     for f in files {
         hashes.push(
@@ -435,8 +439,18 @@ fn finish(
         absent_columns: sum.absent_columns.iter().map(|s| s.to_string()).collect(),
     };
     let side_path = common.out.with_extension("json");
-    std::fs::write(&side_path, serde_json::to_string_pretty(&side)?)
+    let mut side_out = frictionless::output_file::AtomicFile::create(&side_path)
         .with_context(|| format!("cannot write {}", side_path.display()))?;
+    side_out
+        .write_all(serde_json::to_string_pretty(&side)?.as_bytes())
+        .with_context(|| format!("cannot write {}", side_path.display()))?;
+    frictionless::output_file::commit_with_marker(vec![csv_out], side_out).with_context(|| {
+        format!(
+            "cannot write {} and {}",
+            common.out.display(),
+            side_path.display()
+        )
+    })?;
     for w in &warnings {
         eprintln!("warning: {w}");
     }
