@@ -338,6 +338,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         evals.push((ev, ds, joint.clone()));
         evaluated_loaded.push(p.clone());
     }
+    let scored: usize = evals
+        .iter()
+        .map(|(ev, _, _)| ev.mask.iter().filter(|m| **m).count())
+        .sum();
+    if scored == 0 {
+        let per: Vec<String> = loaded
+            .iter()
+            .map(|(p, ds, _, _)| {
+                format!(
+                    "{}: {} rows, {} valid",
+                    p.display(),
+                    ds.len(),
+                    ds.valid.iter().filter(|v| **v).count()
+                )
+            })
+            .collect();
+        anyhow::bail!(
+            "0 rows scored, nothing evaluated ({}); a row is scored when it is valid, in a scored run or chunk, every PINN's history is ready and every output is finite",
+            per.join("; ")
+        );
+    }
     let mut report = eval::build_report(&models, &evals, &opts, args.test_only);
     eval::add_breakdown(
         &mut report,
@@ -364,6 +385,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         frictionless::output_file::write(p, serde_json::to_string_pretty(&v)?)
             .with_context(|| format!("cannot write {}", p.display()))?;
+    }
+    if let Some(d) = drift_report.as_ref().filter(|d| d.verdict == "unchecked") {
+        let why: Vec<String> = d
+            .models
+            .iter()
+            .filter(|m| m.verdict == "unchecked")
+            .flat_map(|m| m.reasons.iter().map(move |r| format!("{}: {r}", m.model)))
+            .collect();
+        anyhow::bail!(
+            "--drift: nothing was checked, no verdict ({}); lower --drift-min-samples or score more rows",
+            why.join("; ")
+        );
     }
 
     if let Some(dir) = &args.out {
