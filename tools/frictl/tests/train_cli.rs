@@ -907,3 +907,98 @@ fn outputs_over_a_device_a_fifo_or_a_symlink_are_refused_and_left_untouched() {
         .collect();
     assert!(left.is_empty(), "temporary files left: {left:?}");
 }
+
+/// A copy of the fixture's dataset (and sidecar) with every row marked invalid.
+fn all_invalid_dataset(name: &str) -> PathBuf {
+    let f = fixture();
+    let out = f.dir.join(format!("{name}.csv"));
+    std::fs::copy(f.ds.with_extension("json"), out.with_extension("json")).unwrap();
+    let text = std::fs::read_to_string(&f.ds).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap();
+    let col = header.split(',').position(|c| c == "valid").unwrap();
+    let mut o = String::from(header) + "\n";
+    for l in lines {
+        let mut fields: Vec<&str> = l.split(',').collect();
+        fields[col] = "0";
+        o += &fields.join(",");
+        o.push('\n');
+    }
+    std::fs::write(&out, o).unwrap();
+    out
+}
+
+#[test]
+fn zero_epochs_and_zero_valid_rows_are_refused_for_what_they_are() {
+    let f = fixture();
+    let out = f.dir.join("zero_epochs.fwt");
+    let e = err_text(train(&out, &["--epochs", "0"]), "--epochs 0");
+    assert!(e.contains("--epochs 0") && e.contains("at least 1"), "{e}");
+    assert!(!out.exists(), "an untrained network was written");
+
+    let ds = all_invalid_dataset("invalid_train");
+    let out = f.dir.join("zero_valid.fwt");
+    let e = err_text(
+        train(&out, &["--dataset", s(&ds), "--epochs", "1"]),
+        "train on 0 valid rows",
+    );
+    assert!(
+        e.contains("0 valid rows") && e.contains(s(&ds)) && !e.contains("--val-frac"),
+        "{e}"
+    );
+    assert!(!out.exists());
+}
+
+#[test]
+fn convert_refuses_a_dataset_of_another_gear_ratio_or_without_rows() {
+    let f = fixture();
+    // The ankle roll dataset has r = -160; this model was trained for r = -100.
+    let model = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../config/models/stress32_paper_f16_r-100.fwt"
+    );
+    let out = f.dir.join("converted.fwt");
+    let e = err_text(
+        frictl(&[
+            "convert",
+            model,
+            "-o",
+            s(&out),
+            "--dtype",
+            "f16",
+            "--dataset",
+            s(&f.ds),
+        ]),
+        "convert --dataset of another gear ratio",
+    );
+    assert!(
+        e.contains("gear ratio -100")
+            && e.contains("gear_ratio_signed = -160")
+            && e.contains(s(&f.ds)),
+        "{e}"
+    );
+    assert!(!out.exists());
+    let model = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../config/models/stress32_paper_f16_r-160.fwt"
+    );
+    let ds = all_invalid_dataset("invalid_convert");
+    let e = err_text(
+        frictl(&[
+            "convert",
+            model,
+            "-o",
+            s(&out),
+            "--dtype",
+            "f16",
+            "--dataset",
+            s(&ds),
+        ]),
+        "convert --dataset without valid rows",
+    );
+    assert!(
+        e.contains("contributes 0 input rows") && e.contains(s(&ds)),
+        "{e}"
+    );
+    assert!(!out.exists());
+}
