@@ -94,6 +94,7 @@ pub mod kernel;
 pub mod law;
 pub mod mlp;
 pub mod model;
+pub mod output_file;
 #[cfg(feature = "random")]
 pub mod random;
 pub mod regular_file;

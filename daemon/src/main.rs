@@ -372,10 +372,11 @@ fn shut_down(
         let text = format!(
             "rt_allocations={counted}\nrt_exempt_allocations={exempt}\nrt_counted_ticks={ticks}\n"
         );
-        std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
+        frictionless::output_file::write(&path, text)
+            .with_context(|| format!("writing {}", path.display()))?;
     }
     if let (Some(path), Some(summary)) = (latency_report, &summary) {
-        std::fs::write(&path, summary.report())
+        frictionless::output_file::write(&path, summary.report())
             .with_context(|| format!("writing {}", path.display()))?;
     }
     tracing::info!(

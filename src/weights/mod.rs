@@ -13,7 +13,7 @@ mod codec;
 mod inspect;
 pub mod layout;
 
-use std::io::{self, Write};
+use std::io;
 use std::path::{Path, PathBuf};
 
 use thiserror::Error;
@@ -411,50 +411,19 @@ pub fn read_regular_bounded(path: &Path) -> Result<Vec<u8>, WeightError> {
     })
 }
 
-/// Writes a `.fwt` file atomically: a temporary file in the same directory is written, synced and
-/// renamed over `path`, so readers see either the old or the new file, never a partial one. Every
-/// error names `path` (the temporary file is an implementation detail the caller never chose).
+/// Writes a `.fwt` file through [`crate::output_file`]: a temporary file in the same directory is
+/// written, synced and renamed over `path`, so readers see either the old or the new file, never a
+/// partial one; a device, FIFO, directory or symlink at `path` is refused. Every error names `path`
+/// (the temporary file is an implementation detail the caller never chose).
 pub fn write_file(path: &Path, file: &ModelFile) -> Result<(), WeightError> {
     let bytes = to_bytes(file).map_err(|e| WeightError::InFile {
         path: path.to_owned(),
         source: Box::new(e),
     })?;
-    let io_err = |_: &Path| {
-        let p = path.to_owned();
-        move |source: io::Error| WeightError::Io {
-            path: p,
-            source: io::Error::new(
-                source.kind(),
-                format!("writing through a temporary file in its directory: {source}"),
-            ),
-        }
-    };
-    let name = path.file_name().ok_or_else(|| WeightError::Io {
+    crate::output_file::write(path, &bytes).map_err(|source| WeightError::Io {
         path: path.to_owned(),
-        source: io::Error::new(io::ErrorKind::InvalidInput, "path has no file name"),
-    })?;
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(name);
-    tmp_name.push(format!(".tmp-{}", std::process::id()));
-    let tmp = path.with_file_name(tmp_name);
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp).map_err(io_err(&tmp))?;
-        f.write_all(&bytes).map_err(io_err(&tmp))?;
-        f.sync_all().map_err(io_err(&tmp))?;
-        drop(f);
-        std::fs::rename(&tmp, path).map_err(io_err(path))
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-        return result;
-    }
-    // Make the rename durable; failure to sync the directory is not fatal for the data itself.
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
-        && let Ok(d) = std::fs::File::open(dir)
-    {
-        let _ = d.sync_all();
-    }
-    Ok(())
+        source,
+    })
 }
 
 /// A header view for diagnostics (`frictl inspect`): works even when the CRC is wrong, the payload

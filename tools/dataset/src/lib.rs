@@ -110,6 +110,21 @@ pub enum DatasetError {
         /// Raw text.
         value: String,
     },
+    /// The CSV holds another number of rows than its sidecar records: a file cut short (a write
+    /// stopped by a signal or a full disk) or a CSV and sidecar from different imports.
+    #[error(
+        "{path}: {rows} data rows, but its sidecar {sidecar} records {samples} samples (a file cut short, or a CSV and sidecar of different imports): import the dataset again"
+    )]
+    RowCount {
+        /// Dataset CSV.
+        path: String,
+        /// Rows read.
+        rows: usize,
+        /// Sidecar path.
+        sidecar: String,
+        /// Samples the sidecar records.
+        samples: u64,
+    },
 }
 
 const fn col(name: &'static str, unit: &'static str, doc: &'static str) -> ColumnDoc {
@@ -593,15 +608,31 @@ impl Dataset {
         DATASET_COLUMNS.iter().chain(truth).copied().collect()
     }
 
-    /// Writes the CSV (header + one line per sample, shortest round-trip float text).
+    /// Writes the CSV (header + one line per sample, shortest round-trip float text) through
+    /// [`frictionless::output_file`]: replaced atomically, never over a device or through a symlink.
     pub fn write_csv(&self, path: &Path) -> Result<(), DatasetError> {
+        let io = |e: &dyn std::fmt::Display| DatasetError::Io {
+            path: path.display().to_string(),
+            msg: e.to_string(),
+        };
+        let mut f = frictionless::output_file::AtomicFile::create(path).map_err(|e| io(&e))?;
+        self.write_csv_to(&mut f, path)?;
+        f.commit().map_err(|e| io(&e))
+    }
+
+    /// Writes the CSV to `out` (see [`Dataset::write_csv`]); `path` names it in errors. The caller
+    /// commits the file (e.g. together with its sidecar).
+    pub fn write_csv_to(
+        &self,
+        out: &mut frictionless::output_file::AtomicFile,
+        path: &Path,
+    ) -> Result<(), DatasetError> {
         let p = path.display().to_string();
         let io = |e: &dyn std::fmt::Display| DatasetError::Io {
             path: p.clone(),
             msg: e.to_string(),
         };
-        let file = std::fs::File::create(path).map_err(|e| io(&e))?;
-        let mut w = csv::Writer::from_writer(std::io::BufWriter::with_capacity(1 << 20, file));
+        let mut w = csv::Writer::from_writer(out);
         w.write_record(self.columns().iter().map(|c| c.name))
             .map_err(|e| io(&e))?;
         let mut buf = ryu_like::Buf::default();
@@ -643,7 +674,29 @@ impl Dataset {
     }
 
     /// Reads a dataset CSV by column name (column order is free; the truth columns are optional).
+    /// When its sidecar (`PATH.json`) exists and records `samples`, the number of rows must match
+    /// ([`DatasetError::RowCount`]): a CSV cut at a line boundary is refused, not read as a shorter
+    /// dataset.
     pub fn read_csv(path: &Path) -> Result<Self, DatasetError> {
+        let ds = Self::read_csv_columns(path)?;
+        let side = path.with_extension("json");
+        if let Some(samples) = frictionless::regular_file::read_text(&side)
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            .and_then(|v| v.get("samples").and_then(serde_json::Value::as_u64))
+            && samples != ds.len() as u64
+        {
+            return Err(DatasetError::RowCount {
+                path: path.display().to_string(),
+                rows: ds.len(),
+                sidecar: side.display().to_string(),
+                samples,
+            });
+        }
+        Ok(ds)
+    }
+
+    fn read_csv_columns(path: &Path) -> Result<Self, DatasetError> {
         let p = path.display().to_string();
         let mut cols = read_columns(path)?;
         let mut take = |name: &'static str| -> Result<Vec<f64>, DatasetError> {

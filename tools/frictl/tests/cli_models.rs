@@ -130,7 +130,13 @@ fn corrupt_file_fails_naming_the_file() {
     std::fs::write(&bad, &bytes).unwrap();
     for args in [
         vec!["inspect", s(&bad)],
-        vec!["export", "onnx", s(&bad), "-o", "/dev/null"],
+        vec![
+            "export",
+            "onnx",
+            s(&bad),
+            "-o",
+            s(&dir.join("flipped.onnx")),
+        ],
     ] {
         let o = frictl(&args);
         assert!(!o.status.success(), "{args:?} should fail");

@@ -299,3 +299,72 @@ fn drift_writes_its_figure_and_refuses_bad_thresholds() {
         assert!(e.contains(flag), "{flag}: {e}");
     }
 }
+
+/// A copy of `ds` (and its sidecar) with every row marked invalid.
+fn all_invalid(ds: &Path, name: &str) -> PathBuf {
+    let f = fixture();
+    let out = f.dir.join(format!("{name}.csv"));
+    std::fs::copy(ds.with_extension("json"), out.with_extension("json")).unwrap();
+    let text = std::fs::read_to_string(ds).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap();
+    let col = header.split(',').position(|c| c == "valid").unwrap();
+    let mut o = String::from(header) + "\n";
+    for l in lines {
+        let mut fields: Vec<&str> = l.split(',').collect();
+        fields[col] = "0";
+        o += &fields.join(",");
+        o.push('\n');
+    }
+    std::fs::write(&out, o).unwrap();
+    out
+}
+
+#[test]
+fn nothing_scored_or_nothing_checked_fails_instead_of_saying_ok() {
+    let f = fixture();
+    let zero = all_invalid(&f.same_ds, "zero_valid");
+    for extra in [&[][..], &["--drift", "--reference", s(&f.train_ds)]] {
+        let mut args = vec!["eval", "--dataset", s(&zero), "--scv", s(&f.scv)];
+        args.extend_from_slice(extra);
+        let out = frictl(&args);
+        let e = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success(),
+            "eval {extra:?} on 0 valid rows succeeded: {e}"
+        );
+        assert!(
+            e.contains("0 rows scored") && e.contains("0 valid") && e.contains(s(&zero)),
+            "{e}"
+        );
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(!text.contains("verdict ok"), "{text}");
+    }
+    // Rows scored, but fewer than --drift-min-samples in every set: no check made, no `ok`.
+    let out = frictl(&[
+        "eval",
+        "--dataset",
+        s(&f.same_ds),
+        "--scv",
+        s(&f.scv),
+        "--drift",
+        "--reference",
+        s(&f.train_ds),
+        "--drift-min-samples",
+        "100000000",
+    ]);
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success(),
+        "eval --drift with nothing checked succeeded: {e}"
+    );
+    assert!(
+        e.contains("nothing was checked") && e.contains("scv: nothing checked"),
+        "{e}"
+    );
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains("verdict unchecked"),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+}

@@ -800,3 +800,172 @@ fn preprocess_reads_the_other_joints_positions_the_same_way() {
     );
     assert!(e.contains("{joint}"), "{e}");
 }
+
+/// `import csv` of `log` into `out` (a wrist joint with a given friction column).
+fn import_args<'a>(log: &'a Path, out: &'a Path) -> Vec<&'a str> {
+    vec![
+        "import",
+        "csv",
+        s(log),
+        "--joint",
+        "wrist",
+        "--column",
+        "time=time",
+        "--column",
+        "s=q_deg",
+        "--column",
+        "tau_f=friction_nm",
+        "--unit",
+        "s=deg",
+        "-o",
+        s(out),
+    ]
+}
+
+#[test]
+fn import_over_a_device_a_fifo_or_a_symlink_is_refused_and_leaves_it() {
+    use std::os::unix::fs::FileTypeExt;
+    let d = dir().join("occupied");
+    std::fs::create_dir_all(&d).unwrap();
+    let log = d.join("log.csv");
+    write_log(&log, 2.0, 5);
+    let e = err_text(
+        frictl(&import_args(&log, Path::new("/dev/null"))),
+        "import to /dev/null",
+    );
+    assert!(
+        e.contains("/dev/null") && e.contains("character device"),
+        "{e}"
+    );
+    assert!(
+        std::fs::metadata("/dev/null")
+            .unwrap()
+            .file_type()
+            .is_char_device()
+    );
+    // A FIFO: the old importer blocked in its open; the hang is caught by the process ending at all
+    // (the refusal happens before any read of the log).
+    let fifo = d.join("ds.fifo");
+    let _ = std::fs::remove_file(&fifo);
+    let c = std::ffi::CString::new(fifo.as_os_str().as_encoded_bytes()).unwrap();
+    // SAFETY: a valid NUL-terminated path.
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_frictl"))
+        .args(import_args(&log, &fifo))
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t0 = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if t0.elapsed() > std::time::Duration::from_secs(120) {
+            child.kill().unwrap();
+            let _ = child.wait();
+            panic!("import csv -o FIFO hung");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let e = err_text(child.wait_with_output().unwrap(), "import to a FIFO");
+    assert!(e.contains(s(&fifo)) && e.contains("FIFO"), "{e}");
+    assert!(
+        std::fs::symlink_metadata(&fifo)
+            .unwrap()
+            .file_type()
+            .is_fifo()
+    );
+    // A symlink `current.csv -> v1.csv`: refused, the link and v1 kept.
+    let v1 = d.join("v1.csv");
+    std::fs::write(&v1, "the previous dataset\n").unwrap();
+    let link = d.join("current.csv");
+    let _ = std::fs::remove_file(&link);
+    std::os::unix::fs::symlink("v1.csv", &link).unwrap();
+    let e = err_text(
+        frictl(&import_args(&log, &link)),
+        "import through a symlink",
+    );
+    assert!(
+        e.contains(s(&link)) && e.contains("symbolic link to v1.csv"),
+        "{e}"
+    );
+    assert!(
+        std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    );
+    assert_eq!(
+        std::fs::read_to_string(&v1).unwrap(),
+        "the previous dataset\n"
+    );
+    assert!(!d.join("current.json").exists());
+}
+
+#[test]
+fn an_import_stopped_mid_write_keeps_the_previous_dataset_and_sidecar() {
+    use std::os::unix::process::CommandExt;
+    let d = dir().join("stopped");
+    std::fs::create_dir_all(&d).unwrap();
+    let log = d.join("log.csv");
+    write_log(&log, 2.0, 7);
+    let ds = d.join("ds.csv");
+    ok(frictl(&import_args(&log, &ds)), "first import");
+    let csv_before = std::fs::read(&ds).unwrap();
+    let side_before = std::fs::read(ds.with_extension("json")).unwrap();
+    // Another log, imported again over the same dataset by a process that dies once it has written
+    // half the old dataset's bytes into any one file (RLIMIT_FSIZE: SIGXFSZ, as a full disk or a
+    // kill would stop it mid-write).
+    let log2 = d.join("log2.csv");
+    write_log(&log2, 3.0, 8);
+    let limit = (csv_before.len() / 2) as libc::rlim_t;
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_frictl"));
+    cmd.args(import_args(&log2, &ds));
+    // SAFETY: setrlimit is async-signal-safe; nothing else runs between fork and exec.
+    unsafe {
+        cmd.pre_exec(move || {
+            let r = libc::rlimit {
+                rlim_cur: limit,
+                rlim_max: limit,
+            };
+            if libc::setrlimit(libc::RLIMIT_FSIZE, &r) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+    let out = cmd.output().unwrap();
+    assert!(!out.status.success(), "the limited import should die");
+    assert_eq!(
+        std::fs::read(&ds).unwrap(),
+        csv_before,
+        "the dataset CSV was cut"
+    );
+    assert_eq!(
+        std::fs::read(ds.with_extension("json")).unwrap(),
+        side_before
+    );
+    ok(frictl(&["fit", "cv", s(&ds)]), "fit cv on the kept dataset");
+}
+
+#[test]
+fn a_dataset_cut_at_a_line_boundary_is_refused_with_both_counts() {
+    let d = dir().join("cut");
+    std::fs::create_dir_all(&d).unwrap();
+    let log = d.join("log.csv");
+    write_log(&log, 2.0, 9);
+    let ds = d.join("ds.csv");
+    ok(frictl(&import_args(&log, &ds)), "import");
+    let side: frictionless_dataset::DatasetSidecar =
+        serde_json::from_str(&std::fs::read_to_string(ds.with_extension("json")).unwrap()).unwrap();
+    let text = std::fs::read_to_string(&ds).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len() - 1, side.samples);
+    let keep = 1 + side.samples / 2;
+    std::fs::write(&ds, lines[..keep].join("\n") + "\n").unwrap();
+    let e = err_text(frictl(&["fit", "cv", s(&ds)]), "fit cv on a cut dataset");
+    assert!(
+        e.contains(s(&ds))
+            && e.contains(&format!("{} data rows", keep - 1))
+            && e.contains(&format!("records {} samples", side.samples)),
+        "{e}"
+    );
+}

@@ -722,3 +722,283 @@ fn fit_names_the_csv_line_of_a_non_finite_sample() {
     );
     assert!(e.contains(s(&ds)), "names the file: {e}");
 }
+
+/// What sits at an output path before a command runs, and whether it is still there, untouched,
+/// afterwards.
+enum Occupant {
+    Device,
+    Fifo(PathBuf),
+    Symlink { link: PathBuf, target: PathBuf },
+}
+
+impl Occupant {
+    fn all(dir: &Path, name: &str) -> Vec<Occupant> {
+        let fifo = dir.join(format!("{name}.fifo"));
+        let _ = std::fs::remove_file(&fifo);
+        let c = std::ffi::CString::new(fifo.as_os_str().as_encoded_bytes()).unwrap();
+        // SAFETY: a valid NUL-terminated path.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+        let target = dir.join(format!("{name}.v1"));
+        std::fs::write(&target, b"the previous version").unwrap();
+        let link = dir.join(format!("{name}.current"));
+        let _ = std::fs::remove_file(&link);
+        std::os::unix::fs::symlink(target.file_name().unwrap(), &link).unwrap();
+        vec![
+            Occupant::Device,
+            Occupant::Fifo(fifo),
+            Occupant::Symlink { link, target },
+        ]
+    }
+
+    fn path(&self) -> &Path {
+        match self {
+            Occupant::Device => Path::new("/dev/null"),
+            Occupant::Fifo(p) => p,
+            Occupant::Symlink { link, .. } => link,
+        }
+    }
+
+    /// The words the refusal must hold besides the path.
+    fn what(&self) -> &'static str {
+        match self {
+            Occupant::Device => "character device",
+            Occupant::Fifo(_) => "FIFO",
+            Occupant::Symlink { .. } => "symbolic link",
+        }
+    }
+
+    fn assert_untouched(&self, cmd: &str) {
+        use std::os::unix::fs::FileTypeExt;
+        let t = std::fs::symlink_metadata(self.path()).unwrap().file_type();
+        match self {
+            Occupant::Device => assert!(t.is_char_device(), "{cmd}: /dev/null was replaced"),
+            Occupant::Fifo(p) => assert!(t.is_fifo(), "{cmd}: {} was replaced", p.display()),
+            Occupant::Symlink { link, target } => {
+                assert!(t.is_symlink(), "{cmd}: {} was replaced", link.display());
+                assert_eq!(
+                    std::fs::read(target).unwrap(),
+                    b"the previous version",
+                    "{cmd}: written through the symlink"
+                );
+            }
+        }
+    }
+}
+
+/// Runs `frictl args…` with a hang detector (a FIFO opened for writing blocks until a reader comes):
+/// fails the test after two minutes. Returns the output.
+fn frictl_unblocked(args: &[&str]) -> Output {
+    use std::io::Read;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_frictl"))
+        .args(args)
+        .env("SOURCE_DATE_EPOCH", EPOCH)
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stderr = child.stderr.take().unwrap();
+    let reader = std::thread::spawn(move || {
+        let mut s = Vec::new();
+        let _ = stderr.read_to_end(&mut s);
+        s
+    });
+    let t0 = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if t0.elapsed() > std::time::Duration::from_secs(120) {
+            child.kill().unwrap();
+            let _ = child.wait();
+            panic!("frictl {} hung on its output", args.join(" "));
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let mut out = child.wait_with_output().unwrap();
+    out.stderr = reader.join().unwrap();
+    out
+}
+
+#[test]
+fn outputs_over_a_device_a_fifo_or_a_symlink_are_refused_and_left_untouched() {
+    let f = fixture();
+    let dir = f.dir.join("occupied");
+    std::fs::create_dir_all(&dir).unwrap();
+    let model = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../config/models/stress32_paper_f16_r-160.fwt"
+    );
+    let commands: [(&str, &dyn Fn(&str) -> Vec<String>); 5] = [
+        ("convert", &|o| {
+            ["convert", model, "-o", o, "--dtype", "f16"]
+                .map(String::from)
+                .to_vec()
+        }),
+        ("export onnx", &|o| {
+            ["export", "onnx", model, "-o", o]
+                .map(String::from)
+                .to_vec()
+        }),
+        ("fit --json", &|o| {
+            ["fit", "scv", s(&f.ds), "--json", o]
+                .map(String::from)
+                .to_vec()
+        }),
+        ("eval --json", &|o| {
+            [
+                "eval",
+                "--dataset",
+                s(&f.ds),
+                "--scv",
+                s(&f.scv),
+                "--json",
+                o,
+            ]
+            .map(String::from)
+            .to_vec()
+        }),
+        ("train --out", &|o| {
+            let mut a: Vec<String> = [
+                "train",
+                "--quiet",
+                "--dataset",
+                s(&f.ds),
+                "--scv",
+                s(&f.scv),
+            ]
+            .map(String::from)
+            .to_vec();
+            a.extend(
+                [
+                    "--out",
+                    o,
+                    "--history",
+                    "5",
+                    "--hidden",
+                    "8",
+                    "--epochs",
+                    "1",
+                    "--threads",
+                    "2",
+                ]
+                .map(String::from),
+            );
+            a
+        }),
+    ];
+    for (i, (name, args)) in commands.iter().enumerate() {
+        for occ in Occupant::all(&dir, &format!("out{i}")) {
+            let p = s(occ.path());
+            let a = args(p);
+            let a: Vec<&str> = a.iter().map(String::as_str).collect();
+            let out = frictl_unblocked(&a);
+            let e = String::from_utf8_lossy(&out.stderr);
+            assert!(!out.status.success(), "{name} -o {p}: succeeded: {e}");
+            assert!(
+                e.contains(p) && e.contains(occ.what()),
+                "{name} -o {p}: the error names neither the path nor what it is: {e}"
+            );
+            occ.assert_untouched(name);
+        }
+    }
+    // No temporary file left behind by a refusal.
+    let left: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.'))
+        .collect();
+    assert!(left.is_empty(), "temporary files left: {left:?}");
+}
+
+/// A copy of the fixture's dataset (and sidecar) with every row marked invalid.
+fn all_invalid_dataset(name: &str) -> PathBuf {
+    let f = fixture();
+    let out = f.dir.join(format!("{name}.csv"));
+    std::fs::copy(f.ds.with_extension("json"), out.with_extension("json")).unwrap();
+    let text = std::fs::read_to_string(&f.ds).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap();
+    let col = header.split(',').position(|c| c == "valid").unwrap();
+    let mut o = String::from(header) + "\n";
+    for l in lines {
+        let mut fields: Vec<&str> = l.split(',').collect();
+        fields[col] = "0";
+        o += &fields.join(",");
+        o.push('\n');
+    }
+    std::fs::write(&out, o).unwrap();
+    out
+}
+
+#[test]
+fn zero_epochs_and_zero_valid_rows_are_refused_for_what_they_are() {
+    let f = fixture();
+    let out = f.dir.join("zero_epochs.fwt");
+    let e = err_text(train(&out, &["--epochs", "0"]), "--epochs 0");
+    assert!(e.contains("--epochs 0") && e.contains("at least 1"), "{e}");
+    assert!(!out.exists(), "an untrained network was written");
+
+    let ds = all_invalid_dataset("invalid_train");
+    let out = f.dir.join("zero_valid.fwt");
+    let e = err_text(
+        train(&out, &["--dataset", s(&ds), "--epochs", "1"]),
+        "train on 0 valid rows",
+    );
+    assert!(
+        e.contains("0 valid rows") && e.contains(s(&ds)) && !e.contains("--val-frac"),
+        "{e}"
+    );
+    assert!(!out.exists());
+}
+
+#[test]
+fn convert_refuses_a_dataset_of_another_gear_ratio_or_without_rows() {
+    let f = fixture();
+    // The ankle roll dataset has r = -160; this model was trained for r = -100.
+    let model = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../config/models/stress32_paper_f16_r-100.fwt"
+    );
+    let out = f.dir.join("converted.fwt");
+    let e = err_text(
+        frictl(&[
+            "convert",
+            model,
+            "-o",
+            s(&out),
+            "--dtype",
+            "f16",
+            "--dataset",
+            s(&f.ds),
+        ]),
+        "convert --dataset of another gear ratio",
+    );
+    assert!(
+        e.contains("gear ratio -100")
+            && e.contains("gear_ratio_signed = -160")
+            && e.contains(s(&f.ds)),
+        "{e}"
+    );
+    assert!(!out.exists());
+    let model = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../config/models/stress32_paper_f16_r-160.fwt"
+    );
+    let ds = all_invalid_dataset("invalid_convert");
+    let e = err_text(
+        frictl(&[
+            "convert",
+            model,
+            "-o",
+            s(&out),
+            "--dtype",
+            "f16",
+            "--dataset",
+            s(&ds),
+        ]),
+        "convert --dataset without valid rows",
+    );
+    assert!(
+        e.contains("contributes 0 input rows") && e.contains(s(&ds)),
+        "{e}"
+    );
+    assert!(!out.exists());
+}

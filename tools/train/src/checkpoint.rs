@@ -136,14 +136,10 @@ impl Trainer {
         let json = serde_json::to_string(&state).map_err(|e| err(path, e))?;
         let meta = HashMap::from([(STATE_KEY.to_string(), json)]);
         let bytes = safetensors::serialize(views, Some(meta)).map_err(|e| err(path, e))?;
-        let mut tmp = path.as_os_str().to_owned();
-        tmp.push(".tmp");
-        // Errors name `path`, never the temporary file beside it.
-        let written = std::fs::write(&tmp, &bytes).and_then(|()| std::fs::rename(&tmp, path));
-        written.map_err(|e| {
-            let _ = std::fs::remove_file(&tmp);
-            err(path, format!("cannot write: {e}"))
-        })
+        // Atomic, never over a device or through a symlink; errors name `path`, never the
+        // temporary file beside it.
+        frictionless::output_file::write(path, &bytes)
+            .map_err(|e| err(path, format!("cannot write: {e}")))
     }
 
     /// Restores a run saved by [`Trainer::save_checkpoint`]. `train` and `val` must be the same data

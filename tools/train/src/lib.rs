@@ -383,6 +383,9 @@ fn check_config(cfg: &TrainConfig) -> Result<(), TrainError> {
     if cfg.batch_size == 0 {
         return bad("batch_size = 0".into());
     }
+    if cfg.epochs == 0 {
+        return bad("epochs = 0: at least one epoch (an untrained network is not a model)".into());
+    }
     if cfg.threads == 0 {
         return bad("threads = 0".into());
     }

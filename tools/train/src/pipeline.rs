@@ -395,7 +395,27 @@ pub fn split_for(sources: &Sources, spec: &SplitSpec) -> Result<Split, PipelineE
             reason: format!("there are only {} datasets", sources.list.len()),
         }));
     }
-    data::split_chunks(&chunks_with_valid_rows(sources), &spec).map_err(PipelineError::Split)
+    let chunks = chunks_with_valid_rows(sources);
+    if chunks.is_empty() {
+        // Not a split problem: there is nothing to split (blaming --val-frac would mislead).
+        let per: Vec<String> = sources
+            .list
+            .iter()
+            .map(|s| format!("{}: {} rows, 0 valid", s.path.display(), s.data.len()))
+            .collect();
+        return Err(PipelineError::File {
+            path: sources
+                .list
+                .first()
+                .map(|s| s.path.clone())
+                .unwrap_or_default(),
+            detail: format!(
+                "0 valid rows in every dataset, nothing to train on ({}); a row is invalid when it is outside a chunk long enough to filter, at rest, or has a non-finite value (see the sidecar's import report)",
+                per.join("; ")
+            ),
+        });
+    }
+    data::split_chunks(&chunks, &spec).map_err(PipelineError::Split)
 }
 
 /// The chunks (with valid rows) of whole runs held out as the test set: every run named in `test_runs`
@@ -1038,7 +1058,7 @@ pub fn write_outputs(
     trained.report.model = model_path.display().to_string();
     let json = serde_json::to_string_pretty(&trained.report)
         .map_err(|e| file_err(report_path, format!("cannot encode the report: {e}")))?;
-    std::fs::write(report_path, json)
+    frictionless::output_file::write(report_path, json)
         .map_err(|e| file_err(report_path, format!("cannot write: {e}")))?;
     Ok(())
 }

@@ -305,9 +305,13 @@ fn opt(v: Option<f64>) -> String {
 fn write_tables(dir: &Path, ranked: &[TrialResult]) -> Result<(), SearchError> {
     let jp = dir.join("results.json");
     let json = serde_json::to_string_pretty(ranked).map_err(|e| ferr(&jp, e))?;
-    std::fs::write(&jp, json).map_err(|e| ferr(&jp, format!("cannot write: {e}")))?;
+    frictionless::output_file::write(&jp, json)
+        .map_err(|e| ferr(&jp, format!("cannot write: {e}")))?;
     let cp = dir.join("results.csv");
-    let mut w = csv::Writer::from_path(&cp).map_err(|e| ferr(&cp, e))?;
+    let mut w = csv::Writer::from_writer(
+        frictionless::output_file::AtomicFile::create(&cp)
+            .map_err(|e| ferr(&cp, format!("cannot write: {e}")))?,
+    );
     let io = |e: csv::Error| ferr(&cp, e);
     w.write_record([
         "rank",
@@ -356,8 +360,19 @@ fn write_tables(dir: &Path, ranked: &[TrialResult]) -> Result<(), SearchError> {
         ])
         .map_err(io)?;
     }
-    w.flush().map_err(|e| ferr(&cp, e))?;
-    Ok(())
+    w.into_inner()
+        .map_err(|e| ferr(&cp, format!("cannot write: {}", e.error())))?
+        .commit()
+        .map_err(|e| ferr(&cp, format!("cannot write: {e}")))
+}
+
+/// Copies `src` to `dst` through [`frictionless::output_file`] (atomic; never over a device or
+/// through a symlink).
+fn copy_file(src: &Path, dst: &Path) -> Result<(), SearchError> {
+    let bytes = frictionless::regular_file::read(src, u64::MAX)
+        .map_err(|e| ferr(src, format!("cannot read: {e}")))?;
+    frictionless::output_file::write(dst, bytes)
+        .map_err(|e| ferr(dst, format!("cannot write: {e}")))
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -500,17 +515,14 @@ pub fn run_search(
         Vec::new()
     };
     let json = serde_json::to_string_pretty(settings).map_err(|e| ferr(&settings_path, e))?;
-    std::fs::write(&settings_path, json)
+    frictionless::output_file::write(&settings_path, json)
         .map_err(|e| ferr(&settings_path, format!("cannot write: {e}")))?;
     let split = pipeline::split_for(sources, &settings.split)?;
     let pending: Vec<TrialParams> = (0..run.trials)
         .filter(|k| !done.iter().any(|r| r.params.trial == *k))
         .map(|k| draw(&settings.space, settings.seed, k))
         .collect();
-    let file = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(&results_path)
+    let file = frictionless::output_file::open_append(&results_path)
         .map_err(|e| ferr(&results_path, format!("cannot open: {e}")))?;
     let sink = Mutex::new((file, None::<SearchError>));
     let next = AtomicUsize::new(0);
@@ -574,12 +586,10 @@ fn publish(dir: &Path, all: Vec<TrialResult>) -> Result<Vec<TrialResult>, Search
     {
         let src = dir.join(m);
         let dst = dir.join("best.fwt");
-        std::fs::copy(&src, &dst)
-            .map_err(|e| ferr(&dst, format!("cannot copy {}: {e}", src.display())))?;
+        copy_file(&src, &dst)?;
         let rsrc = pipeline::default_report_path(&src);
         let rdst = dir.join("best.train.json");
-        std::fs::copy(&rsrc, &rdst)
-            .map_err(|e| ferr(&rdst, format!("cannot copy {}: {e}", rsrc.display())))?;
+        copy_file(&rsrc, &rdst)?;
     }
     Ok(all)
 }
@@ -618,10 +628,7 @@ fn claim_settings(dir: &Path, settings: &SearchSettings) -> Result<(), SearchErr
 /// one `write(2)`, so lines of concurrent writers on one file system never interleave.
 pub fn append_result(path: &Path, r: &TrialResult) -> Result<(), SearchError> {
     let line = serde_json::to_string(r).map_err(|e| ferr(path, e))? + "\n";
-    let mut f = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(path)
+    let mut f = frictionless::output_file::open_append(path)
         .map_err(|e| ferr(path, format!("cannot open: {e}")))?;
     match f.write(line.as_bytes()) {
         Ok(n) if n == line.len() => Ok(()),

@@ -130,9 +130,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.log_period_ms,
         period_s * 1e3
     );
-    let file = std::fs::File::create(&csv_path)
+    let writer = frictionless::output_file::AtomicFile::create(&csv_path)
         .with_context(|| format!("cannot create {}", csv_path.display()))?;
-    let writer = std::io::BufWriter::with_capacity(1 << 20, file);
     let mut log = if torque {
         Log::Arm(Box::new(ArmLog::new(
             writer,
@@ -208,9 +207,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     bar.finish_and_clear();
     let rows = log.rows(summary.samples);
-    log.finish()?
-        .into_inner()
-        .map_err(|e| anyhow::anyhow!("cannot flush {}: {}", csv_path.display(), e.error()))?;
+    // Committed with its sidecar, the sidecar last (below).
+    let csv_out = log.finish()?;
     let elapsed = started.elapsed().as_secs_f64();
 
     let csv_name = csv_path
@@ -246,8 +244,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         summary: &summary,
     };
     let json = serde_json::to_string_pretty(&sidecar)?;
-    std::fs::write(&json_path, json)
+    let mut side_out = frictionless::output_file::AtomicFile::create(&json_path)
         .with_context(|| format!("cannot write {}", json_path.display()))?;
+    std::io::Write::write_all(&mut side_out, json.as_bytes())
+        .with_context(|| format!("cannot write {}", json_path.display()))?;
+    frictionless::output_file::commit_with_marker(vec![csv_out], side_out).with_context(|| {
+        format!(
+            "cannot write {} and {}",
+            csv_path.display(),
+            json_path.display()
+        )
+    })?;
     eprintln!(
         "frictl acquire: {} samples{} ({:.1} simulated min, {} chunks, {} active, {} guard holds) in {:.2} s -> {}",
         summary.samples,

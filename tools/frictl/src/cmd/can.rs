@@ -4,7 +4,6 @@
 //! file) and `frictl can replay FILE [--iface IFACE] [--loop] [--speed X]`. The format and pacing
 //! live in [`frictionless_canlog`]. Not a bus analyser: no decoding, no filters.
 
-use std::io::BufWriter;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
@@ -78,12 +77,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 libc::signal(libc::SIGINT, h);
                 libc::signal(libc::SIGTERM, h);
             }
-            let f = std::fs::File::create(&file)
+            let mut w = frictionless::output_file::AtomicFile::create(&file)
                 .with_context(|| format!("creating {}", file.display()))?;
-            let mut w = BufWriter::new(f);
             let n = canlog::record(&iface, &mut w, count, duration, &|| {
                 STOP.load(Ordering::Relaxed)
             })?;
+            w.commit()
+                .with_context(|| format!("cannot write {}", file.display()))?;
             eprintln!("recorded {n} frames from {iface} to {}", file.display());
             Ok(())
         }

@@ -120,9 +120,23 @@ pub fn probe_inputs(file: &ModelFile, count: usize, seed: u64) -> Vec<Vec<f32>> 
         .collect()
 }
 
-/// The input rows the model's feature set builds from a dataset CSV.
-fn dataset_inputs(file: &ModelFile, path: &std::path::Path) -> anyhow::Result<Vec<Vec<f32>>> {
+/// The input rows the model's feature set builds from a dataset CSV. The dataset must suit the
+/// model as `frictl eval` requires ([`super::eval::check_pinn_on_dataset`]: its gear ratio, its
+/// columns) and contribute at least one row.
+fn dataset_inputs(
+    model_path: &std::path::Path,
+    file: &ModelFile,
+    path: &std::path::Path,
+) -> anyhow::Result<Vec<Vec<f32>>> {
     let ds = Dataset::read_csv(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let side: Option<frictionless_dataset::DatasetSidecar> =
+        frictionless::regular_file::read_text(&path.with_extension("json"))
+            .ok()
+            .and_then(|t| serde_json::from_str(&t).ok());
+    if let Some(w) = super::eval::check_pinn_on_dataset(model_path, file, path, &ds, side.as_ref())?
+    {
+        eprintln!("frictl convert: warning: {w}");
+    }
     let w = build_inputs(
         &ds,
         &file.meta.features,
@@ -131,6 +145,14 @@ fn dataset_inputs(file: &ModelFile, path: &std::path::Path) -> anyhow::Result<Ve
         DeltaThetaOffset::Run,
     )
     .with_context(|| format!("{}: cannot build the model's inputs", path.display()))?;
+    anyhow::ensure!(
+        !w.is_empty(),
+        "--dataset {}: contributes 0 input rows ({} rows, {} valid; a row needs to be valid with a full history of {}): nothing to check the conversion on",
+        path.display(),
+        ds.len(),
+        ds.valid.iter().filter(|v| **v).count(),
+        file.meta.features.history
+    );
     Ok((0..w.len()).map(|i| w.input(i).to_vec()).collect())
 }
 
@@ -181,7 +203,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut inputs = probe_inputs(&file, args.samples, args.seed);
     let n_random = inputs.len();
     if let Some(ds) = &args.dataset {
-        inputs.extend(dataset_inputs(&file, ds)?);
+        inputs.extend(dataset_inputs(&args.input, &file, ds)?);
     }
     if inputs.is_empty() {
         bail!("no probe inputs: use --samples > 0 or --dataset");

@@ -157,7 +157,7 @@ impl Runner {
             self.n,
             name.replace([' ', '/'], "_")
         ));
-        let f = std::fs::File::create(&log)
+        let f = frictionless::output_file::create_log(&log)
             .with_context(|| format!("cannot create {}", log.display()))?;
         let t0 = Instant::now();
         let mut cmd = Command::new(&self.exe);
@@ -610,7 +610,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         stages: &r.stages,
         total_seconds: total,
     };
-    std::fs::write(
+    frictionless::output_file::write(
         out.join("report.json"),
         serde_json::to_string_pretty(&report)?,
     )?;
@@ -618,7 +618,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !onpolicy.is_empty() {
         md += &onpolicy_md(&onpolicy, &per_joint);
     }
-    std::fs::write(out.join("report.md"), &md)?;
+    frictionless::output_file::write(out.join("report.md"), &md)?;
     println!("{md}");
     eprintln!(
         "frictl demo: done in {total:.0} s → {}/report.md",

@@ -176,11 +176,17 @@ fn rnea(a: RneaArgs) -> anyhow::Result<()> {
             .with_context(|| format!("cannot open cases file {}", a.cases.display()))?;
         Box::new(std::io::BufReader::new(f))
     };
-    let mut out: Box<dyn Write> = match &a.out {
-        Some(p) => Box::new(BufWriter::new(
-            std::fs::File::create(p).with_context(|| format!("cannot create {}", p.display()))?,
-        )),
-        None => Box::new(BufWriter::new(std::io::stdout().lock())),
+    let mut file = match &a.out {
+        Some(p) => Some(
+            frictionless::output_file::AtomicFile::create(p)
+                .with_context(|| format!("cannot create {}", p.display()))?,
+        ),
+        None => None,
+    };
+    let mut stdout = BufWriter::new(std::io::stdout().lock());
+    let out: &mut dyn Write = match &mut file {
+        Some(f) => f,
+        None => &mut stdout,
     };
     let mut ws = Workspace::new(&robot);
     let mut tau = vec![0.0; robot.dof()];
@@ -229,10 +235,14 @@ fn rnea(a: RneaArgs) -> anyhow::Result<()> {
             robot.rnea_with_wrenches(&mut ws, &q, &qd, &qdd, &ext, &mut tau)?;
             obj.insert("tau".into(), tau_json(&robot, &tau));
         }
-        serde_json::to_writer(&mut out, &obj)?;
+        serde_json::to_writer(&mut *out, &obj)?;
         out.write_all(b"\n")?;
     }
     out.flush()?;
+    if let (Some(f), Some(p)) = (file, &a.out) {
+        f.commit()
+            .with_context(|| format!("cannot write {}", p.display()))?;
+    }
     Ok(())
 }
 

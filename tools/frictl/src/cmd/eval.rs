@@ -172,6 +172,11 @@ fn pinn_names(paths: &[PathBuf]) -> Vec<String> {
 /// Runs `frictl eval`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let started = std::time::Instant::now();
+    if let Some(json) = &args.json {
+        let mut inputs: Vec<&std::path::Path> = args.datasets.iter().map(|p| p.as_path()).collect();
+        inputs.extend(args.pinns.iter().map(|p| p.as_path()));
+        super::check_outputs(&inputs, &[json])?;
+    }
     let opts = EvalOptions {
         v_sliding_rad_s: args.v_sliding,
         warmup: match args.warmup {
@@ -224,33 +229,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let joint = side.as_ref().map(|s| s.joint.clone()).unwrap_or_default();
         // A PINN whose inputs read a column this dataset lacks is refused by name (a torque-sensed
         // dataset has no motor angle: fine for joint-vel, not for delta-theta-joint-vel).
-        let absent = side.as_ref().map_or(&[][..], |s| &s.absent_columns[..]);
         for (fp, f) in &pinn_files {
-            ds.check_inputs(&f.meta.features, absent)
-                .with_context(|| format!("PINN {} on dataset {}", fp.display(), p.display()))?;
-        }
-        if let Some(s) = &side {
-            for (fp, f) in &pinn_files {
-                let r = f.meta.gear_ratio.get();
-                anyhow::ensure!(
-                    (r - s.gear_ratio_signed).abs() <= 1e-9 * r.abs(),
-                    "PINN {} was trained with gear ratio {r} but dataset {} has gear_ratio_signed = {} (Δθ would be wrong)",
-                    fp.display(),
-                    p.display(),
-                    s.gear_ratio_signed
-                );
-                if !f.meta.joint_name.is_empty()
-                    && !s.joint.is_empty()
-                    && f.meta.joint_name != s.joint
-                {
-                    eprintln!(
-                        "frictl eval: warning: PINN {} is for joint {:?}, dataset {} is {:?}",
-                        fp.display(),
-                        f.meta.joint_name,
-                        p.display(),
-                        s.joint
-                    );
-                }
+            if let Some(w) = check_pinn_on_dataset(fp, f, p, &ds, side.as_ref())? {
+                eprintln!("frictl eval: warning: {w}");
             }
         }
         let runs = dataset_runs(p, side.as_ref(), &ds);
@@ -333,6 +314,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         evals.push((ev, ds, joint.clone()));
         evaluated_loaded.push(p.clone());
     }
+    let scored: usize = evals
+        .iter()
+        .map(|(ev, _, _)| ev.mask.iter().filter(|m| **m).count())
+        .sum();
+    if scored == 0 {
+        let per: Vec<String> = loaded
+            .iter()
+            .map(|(p, ds, _, _)| {
+                format!(
+                    "{}: {} rows, {} valid",
+                    p.display(),
+                    ds.len(),
+                    ds.valid.iter().filter(|v| **v).count()
+                )
+            })
+            .collect();
+        anyhow::bail!(
+            "0 rows scored, nothing evaluated ({}); a row is scored when it is valid, in a scored run or chunk, every PINN's history is ready and every output is finite",
+            per.join("; ")
+        );
+    }
     let mut report = eval::build_report(&models, &evals, &opts, args.test_only);
     eval::add_breakdown(
         &mut report,
@@ -357,8 +359,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if let (Some(d), Some(m)) = (&drift_report, v.as_object_mut()) {
             m.insert("drift".into(), serde_json::to_value(d)?);
         }
-        std::fs::write(p, serde_json::to_string_pretty(&v)?)
+        frictionless::output_file::write(p, serde_json::to_string_pretty(&v)?)
             .with_context(|| format!("cannot write {}", p.display()))?;
+    }
+    if let Some(d) = drift_report.as_ref().filter(|d| d.verdict == "unchecked") {
+        let why: Vec<String> = d
+            .models
+            .iter()
+            .filter(|m| m.verdict == "unchecked")
+            .flat_map(|m| m.reasons.iter().map(move |r| format!("{}: {r}", m.model)))
+            .collect();
+        anyhow::bail!(
+            "--drift: nothing was checked, no verdict ({}); lower --drift-min-samples or score more rows",
+            why.join("; ")
+        );
     }
 
     if let Some(dir) = &args.out {
@@ -430,6 +444,51 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         started.elapsed().as_secs_f64()
     );
     Ok(())
+}
+
+/// Refuses a dataset the PINN `file` (from `model_path`) cannot be run on: a column its inputs read
+/// is absent from the dataset (sidecar's `absent_columns`), or the dataset's sidecar records another
+/// gear ratio (Δθ would be wrong). Returns a warning when the joint names differ. The one check of
+/// `frictl eval` and `frictl convert --dataset`.
+pub fn check_pinn_on_dataset(
+    model_path: &std::path::Path,
+    file: &frictionless::weights::ModelFile,
+    ds_path: &std::path::Path,
+    ds: &Dataset,
+    side: Option<&DatasetSidecar>,
+) -> anyhow::Result<Option<String>> {
+    let absent = side.map_or(&[][..], |s| &s.absent_columns[..]);
+    ds.check_inputs(&file.meta.features, absent)
+        .with_context(|| {
+            format!(
+                "PINN {} on dataset {}",
+                model_path.display(),
+                ds_path.display()
+            )
+        })?;
+    let Some(s) = side else { return Ok(None) };
+    let r = file.meta.gear_ratio.get();
+    anyhow::ensure!(
+        (r - s.gear_ratio_signed).abs() <= 1e-9 * r.abs(),
+        "PINN {} was trained with gear ratio {r} but dataset {} has gear_ratio_signed = {} (Δθ would be wrong)",
+        model_path.display(),
+        ds_path.display(),
+        s.gear_ratio_signed
+    );
+    Ok(
+        (!file.meta.joint_name.is_empty()
+            && !s.joint.is_empty()
+            && file.meta.joint_name != s.joint)
+            .then(|| {
+                format!(
+                    "PINN {} is for joint {:?}, dataset {} is {:?}",
+                    model_path.display(),
+                    file.meta.joint_name,
+                    ds_path.display(),
+                    s.joint
+                )
+            }),
+    )
 }
 
 /// `--drift`: every model but `none` on the scored rows against its reference (see

@@ -478,7 +478,7 @@ fn record(args: &Args, suite: &Suite, kp: [Option<f64>; 2]) -> anyhow::Result<()
         );
     }
     let path = args.out.join("record.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&summary)?)
+    frictionless::output_file::write(&path, serde_json::to_string_pretty(&summary)?)
         .with_context(|| format!("cannot write {}", path.display()))?;
     Ok(())
 }
@@ -840,11 +840,12 @@ fn write_outputs(
     }
     let md = report.markdown();
     println!("{md}");
-    std::fs::write(args.out.join("tables.md"), &md)?;
+    frictionless::output_file::write(args.out.join("tables.md"), &md)?;
     let json = serde_json::to_string_pretty(report)?;
-    std::fs::write(args.out.join("report.json"), &json)?;
+    frictionless::output_file::write(args.out.join("report.json"), &json)?;
     if let Some(p) = &args.json {
-        std::fs::write(p, &json).with_context(|| format!("cannot write {}", p.display()))?;
+        frictionless::output_file::write(p, &json)
+            .with_context(|| format!("cannot write {}", p.display()))?;
     }
     eprintln!(
         "frictl experiment: {} trials in {:.1} s; tables, report.json and traces in {}",

@@ -68,7 +68,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Format::Safetensors => safetensors::export_bytes(&file.mlp, &meta)
             .with_context(|| format!("exporting {}", args.input.display()))?,
     };
-    std::fs::write(&args.output, &bytes)
+    frictionless::output_file::write(&args.output, &bytes)
         .with_context(|| format!("cannot write {}", args.output.display()))?;
     let sizes: Vec<String> = file.mlp.sizes().iter().map(|s| s.to_string()).collect();
     println!(

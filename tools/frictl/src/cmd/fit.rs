@@ -92,6 +92,12 @@ pub struct Args {
 
 /// Runs `frictl fit`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let outputs: Vec<&std::path::Path> = [&args.toml, &args.json]
+        .into_iter()
+        .flatten()
+        .map(|p| p.as_path())
+        .collect();
+    super::check_outputs(&[&args.dataset], &outputs)?;
     let ds = Dataset::read_csv(&args.dataset)?;
     let target = if args.truth {
         ds.tau_f_true_nm
@@ -206,10 +212,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     println!("{toml}");
     if let Some(p) = &args.toml {
-        std::fs::write(p, &toml).with_context(|| format!("cannot write {}", p.display()))?;
+        frictionless::output_file::write(p, &toml)
+            .with_context(|| format!("cannot write {}", p.display()))?;
     }
     if let Some(p) = &args.json {
-        std::fs::write(p, serde_json::to_string_pretty(&json)?)
+        frictionless::output_file::write(p, serde_json::to_string_pretty(&json)?)
             .with_context(|| format!("cannot write {}", p.display()))?;
     }
     Ok(())

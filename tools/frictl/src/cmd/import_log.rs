@@ -9,7 +9,7 @@
 //! columns per label source: `docs/robot-logs.md`.
 
 use std::collections::BTreeMap;
-use std::io::IsTerminal;
+use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
@@ -603,7 +603,12 @@ fn finish(
         }
         let (r, kt) = (jl.label.gear_ratio_signed, jl.label.kt_nm_per_a);
         let placeholder = |v: Option<f64>| v.unwrap_or(1.0);
-        ds.write_csv(&out)?;
+        // The CSV is written to a temporary file now and replaces the old dataset only together
+        // with its sidecar, below (the sidecar last): a stopped import leaves the previous pair or
+        // no sidecar.
+        let mut csv_out = frictionless::output_file::AtomicFile::create(&out)
+            .with_context(|| format!("cannot write {}", out.display()))?;
+        ds.write_csv_to(&mut csv_out, &out)?;
         let valid = ds.valid.iter().filter(|v| **v).count();
         let run_infos: Vec<RunInfo> = runs
             .iter()
@@ -660,8 +665,14 @@ fn finish(
             runs: run_infos,
             absent_columns: sum.absent_columns.iter().map(|s| s.to_string()).collect(),
         };
-        std::fs::write(&side_path, serde_json::to_string_pretty(&side)?)
+        let mut side_out = frictionless::output_file::AtomicFile::create(&side_path)
             .with_context(|| format!("cannot write {}", side_path.display()))?;
+        side_out
+            .write_all(serde_json::to_string_pretty(&side)?.as_bytes())
+            .with_context(|| format!("cannot write {}", side_path.display()))?;
+        frictionless::output_file::commit_with_marker(vec![csv_out], side_out).with_context(
+            || format!("cannot write {} and {}", out.display(), side_path.display()),
+        )?;
         for w in &joint_warnings[warnings.len()..] {
             eprintln!("warning: {joint}: {w}");
         }

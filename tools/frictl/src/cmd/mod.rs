@@ -22,7 +22,9 @@ pub mod sim;
 pub mod train;
 
 /// Refuses, before any work, an output that would overwrite one of the command's inputs (the same file
-/// by device and inode, whatever the spelling of the path) or whose directory does not exist. Every
+/// by device and inode, whatever the spelling of the path), whose directory does not exist, or that
+/// exists and is not a regular file or is a symlink ([`frictionless::output_file::check`]: the
+/// file is written through that module, which checks again). Every
 /// command that reads files and writes others calls it first, so a mistake such as
 /// `frictl preprocess log.csv -o log.csv` loses nothing and a long run does not fail at its end.
 pub fn check_outputs(
@@ -42,6 +44,8 @@ pub fn check_outputs(
             out.display(),
             dir.display()
         );
+        frictionless::output_file::check(out)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
         let Some(out_id) = id(out) else { continue };
         if let Some(input) = inputs.iter().find(|i| id(i) == Some(out_id)) {
             anyhow::bail!(

@@ -350,7 +350,10 @@ fn write_settings(
     summary: frictionless_ident::preprocess::PreprocessSummary,
     started: std::time::Instant,
 ) -> anyhow::Result<()> {
-    ds.write_csv(&args.out)?;
+    // Replaced together with its sidecar, the sidecar last (below).
+    let mut csv_out = frictionless::output_file::AtomicFile::create(&args.out)
+        .with_context(|| format!("cannot write {}", args.out.display()))?;
+    ds.write_csv_to(&mut csv_out, &args.out)?;
     let valid = ds.valid.iter().filter(|v| **v).count();
     let side = DatasetSidecar {
         format: "frictionless-dataset-v1".into(),
@@ -374,8 +377,20 @@ fn write_settings(
         absent_columns: Vec::new(),
     };
     let side_path = args.out.with_extension("json");
-    std::fs::write(&side_path, serde_json::to_string_pretty(&side)?)
+    let mut side_out = frictionless::output_file::AtomicFile::create(&side_path)
         .with_context(|| format!("cannot write {}", side_path.display()))?;
+    std::io::Write::write_all(
+        &mut side_out,
+        serde_json::to_string_pretty(&side)?.as_bytes(),
+    )
+    .with_context(|| format!("cannot write {}", side_path.display()))?;
+    frictionless::output_file::commit_with_marker(vec![csv_out], side_out).with_context(|| {
+        format!(
+            "cannot write {} and {}",
+            args.out.display(),
+            side_path.display()
+        )
+    })?;
     let mut msg = format!(
         "frictl preprocess: {} samples ({valid} valid, {} chunks, {} too short) in {:.2} s -> {}",
         ds.len(),

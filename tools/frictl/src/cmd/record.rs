@@ -113,8 +113,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let states = ipc.joint_states()?.inbox()?;
     let request = ipc.torque_request()?.inbox()?;
     let cmds = ipc.motor_current_command()?.inbox()?;
-    let mut w = csv::Writer::from_path(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
+    let mut w = csv::Writer::from_writer(
+        frictionless::output_file::AtomicFile::create(&args.out)
+            .with_context(|| format!("creating {}", args.out.display()))?,
+    );
     w.write_record(header(args.joints))?;
     let mut s = JointStates::zeroed();
     let mut r = TorqueRequest::zeroed();
@@ -145,7 +147,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             rows += 1;
         }
     }
-    w.flush()?;
+    w.into_inner()
+        .map_err(|e| anyhow::anyhow!("cannot flush {}: {}", args.out.display(), e.error()))?
+        .commit()
+        .with_context(|| format!("cannot write {}", args.out.display()))?;
     eprintln!("frictl record: {rows} rows → {}", args.out.display());
     Ok(())
 }

@@ -6,9 +6,11 @@
 //! writes ONE frictiond config, `DIR/frictiond.toml` (through `frictiond-config`'s types, every joint
 //! with its trained PINN), and the per-joint report `DIR/report.json` + `DIR/report.md`.
 //!
-//! Resumable: a stage whose outputs exist and whose stamp (`DIR/joints/J/stamps/STAGE.sha256`, the
-//! SHA-256 of its arguments with every input file replaced by the SHA-256 of its content) matches is
-//! skipped. Stamps name no absolute path, so a joint directory made on another machine (a Ray
+//! Resumable: a stage is skipped when its stamp (`DIR/joints/J/stamps/STAGE.sha256`: the SHA-256 of
+//! its arguments with every input file replaced by the SHA-256 of its content, then the SHA-256 of
+//! every output as the stage wrote it) matches: the same inputs, and every output still the file the
+//! stage wrote. An output missing or changed since (a damaged file) makes the stage run again, with a
+//! line naming the file, so a later stage never runs on it. Stamps name no absolute path, so a joint directory made on another machine (a Ray
 //! worker) is recognised. The search stage always passes `--resume`: trials run elsewhere into
 //! `DIR/joints/J/search` (`frictl search --only-trials`) are kept and only the missing ones run; a
 //! search whose settings changed in the robot file is refused there (remove `DIR/joints/J/search` to
@@ -471,7 +473,42 @@ fn stamp(out: &Path, st: &Stage) -> anyhow::Result<String> {
     Ok(hex(&h.finalize()))
 }
 
-/// Runs one stage unless its outputs exist and its stamp matches; returns (seconds, skipped).
+/// The stamp file's text: the input stamp ([`stamp`]), then one `SHA256  PATH` line per output as
+/// the stage wrote it.
+fn stamp_text(out: &Path, st: &Stage, inputs: &str) -> anyhow::Result<String> {
+    let mut t = format!("{inputs}\n");
+    for o in &st.outputs {
+        t += &format!("{}  {o}\n", file_sha256(&out.join(o))?);
+    }
+    Ok(t)
+}
+
+/// Why a stage whose input stamp matches must run again: an output missing, not recorded, or not
+/// the file the stage wrote (damaged or edited since). None when every output is as written.
+fn outputs_changed(out: &Path, st: &Stage, stamp_lines: &[&str]) -> Option<String> {
+    let recorded: BTreeMap<&str, &str> = stamp_lines
+        .iter()
+        .filter_map(|l| l.split_once("  "))
+        .map(|(h, p)| (p, h))
+        .collect();
+    st.outputs.iter().find_map(|o| {
+        let p = out.join(o);
+        match recorded.get(o.as_str()) {
+            _ if !p.is_file() => Some(format!("{o} is missing")),
+            None => Some(format!("{o} has no recorded hash")),
+            Some(h) => match frictionless_dataset::file_sha256_hex(&p) {
+                Ok(x) if x == *h => None,
+                Ok(_) => Some(format!(
+                    "{o} is not the file the stage wrote (changed since)"
+                )),
+                Err(e) => Some(format!("{o} cannot be read ({e})")),
+            },
+        }
+    })
+}
+
+/// Runs one stage unless its stamp matches: the same inputs, and every output the file it wrote
+/// (hashes in the stamp). Returns (seconds, skipped).
 fn run_stage(exe: &Path, out: &Path, joint_dir: &str, st: &Stage) -> anyhow::Result<(f64, bool)> {
     let stamps = out.join(joint_dir).join("stamps");
     std::fs::create_dir_all(&stamps)
@@ -484,16 +521,25 @@ fn run_stage(exe: &Path, out: &Path, joint_dir: &str, st: &Stage) -> anyhow::Res
     }
     let want = stamp(out, st)?;
     let have = std::fs::read_to_string(&stamp_path).unwrap_or_default();
-    if have.trim() == want && st.outputs.iter().all(|o| out.join(o).is_file()) {
-        eprintln!("     {joint_dir}: {} up to date", st.id);
-        return Ok((0.0, true));
+    let have: Vec<&str> = have.lines().collect();
+    if have.first().map(|l| l.trim()) == Some(want.as_str()) {
+        match outputs_changed(out, st, &have[1..]) {
+            None => {
+                eprintln!("     {joint_dir}: {} up to date", st.id);
+                return Ok((0.0, true));
+            }
+            Some(why) => eprintln!(
+                "     {joint_dir}: {}: {why}; running the stage again",
+                st.id
+            ),
+        }
     }
     let _ = std::fs::remove_file(&stamp_path);
     let logs = out.join("logs");
     std::fs::create_dir_all(&logs).with_context(|| format!("cannot create {}", logs.display()))?;
     let log = logs.join(format!("{}_{}.log", joint_dir.replace('/', "_"), st.id));
-    let f =
-        std::fs::File::create(&log).with_context(|| format!("cannot create {}", log.display()))?;
+    let f = frictionless::output_file::create_log(&log)
+        .with_context(|| format!("cannot create {}", log.display()))?;
     eprintln!("     {joint_dir}: {} …", st.id);
     let t0 = Instant::now();
     let status = Command::new(exe)
@@ -521,7 +567,7 @@ fn run_stage(exe: &Path, out: &Path, joint_dir: &str, st: &Stage) -> anyhow::Res
             bail!("{joint_dir}: stage {} wrote no {o}", st.id);
         }
     }
-    std::fs::write(&stamp_path, &want)
+    frictionless::output_file::write(&stamp_path, stamp_text(out, st, &want)?)
         .with_context(|| format!("cannot write {}", stamp_path.display()))?;
     eprintln!("       done in {secs:.1} s");
     Ok((secs, false))
@@ -878,7 +924,7 @@ fn run_robot(a: RunArgs) -> anyhow::Result<()> {
             cfg_path.display()
         )
     })?;
-    std::fs::write(&cfg_path, &text)
+    frictionless::output_file::write(&cfg_path, &text)
         .with_context(|| format!("cannot write {}", cfg_path.display()))?;
     let total = started.elapsed().as_secs_f64();
     let report = serde_json::json!({
@@ -890,13 +936,14 @@ fn run_robot(a: RunArgs) -> anyhow::Result<()> {
         "joints": reports,
         "total_seconds": total,
     });
-    std::fs::write(
+    frictionless::output_file::write(
         out.join("report.json"),
         serde_json::to_string_pretty(&report)?,
     )
     .context("cannot write report.json")?;
     let md = report_md(&robot, &reports, total);
-    std::fs::write(out.join("report.md"), &md).context("cannot write report.md")?;
+    frictionless::output_file::write(out.join("report.md"), &md)
+        .context("cannot write report.md")?;
     println!("{md}");
     eprintln!(
         "frictl robot run: done in {total:.0} s → {} (frictiond.toml, report.md, report.json)",

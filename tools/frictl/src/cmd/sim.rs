@@ -191,9 +191,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let period_s = p.sample_period_s();
             let profile = CurrentProfile::parse(&current_profile, period_s)?;
             let mut plant = Plant::from_params(p, seed)?;
-            let file = std::fs::File::create(&out)
+            let file = frictionless::output_file::AtomicFile::create(&out)
                 .with_context(|| format!("cannot create {}", out.display()))?;
-            let mut log = CsvLog::new(std::io::BufWriter::with_capacity(1 << 20, file), true)?;
+            let mut log = CsvLog::new(file, true)?;
             let n = (duration_s / period_s).round() as u64;
             let bar = if std::io::stderr().is_terminal() {
                 indicatif::ProgressBar::new(n)
@@ -218,8 +218,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
             bar.finish_and_clear();
             log.finish()?
-                .into_inner()
-                .map_err(|e| anyhow::anyhow!("cannot flush {}: {}", out.display(), e.error()))?;
+                .commit()
+                .with_context(|| format!("cannot write {}", out.display()))?;
             eprintln!("frictl sim run: {n} samples -> {}", out.display());
             Ok(())
         }

@@ -284,6 +284,11 @@ fn init_weights(
 
 /// Runs `frictl train`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        args.epochs >= 1,
+        "--epochs {}: must be at least 1 (0 epochs would write an untrained network)",
+        args.epochs
+    );
     let report_path = args
         .report
         .clone()

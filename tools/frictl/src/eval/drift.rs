@@ -27,7 +27,8 @@
 //! `RMSE_new > rmse_ratio · RMSE_ref + floor_nm`, or when the mean residual or the mean residual along
 //! the motion (residual·sign(ṡ): a Coulomb or viscous change cancels in the plain mean over both
 //! directions, not in this one) moved by more than `mean_ratio · RMSE_ref + floor_nm`. The verdict is `retrain` if any check
-//! fires, `ok` if none does, `no_reference` without a reference; `extrapolating` is set when more than
+//! fires, `ok` if none does, `unchecked` if no check had enough rows (`frictl eval --drift` then
+//! fails: nothing was checked), `no_reference` without a reference; `extrapolating` is set when more than
 //! `max_out_of_range` of the scored rows are out of the PINN's input range.
 //!
 //! Online, frictiond cannot know the true friction (no label), so the residual part is offline only;
@@ -138,7 +139,7 @@ pub struct ModelDrift {
     pub checks: Vec<Check>,
     /// Bands with enough new rows that could not be compared (the reference's band too thin).
     pub unchecked: Vec<String>,
-    /// `retrain`, `ok` or `no_reference`.
+    /// `retrain`, `ok`, `unchecked` (a reference, but no check had enough rows) or `no_reference`.
     pub verdict: String,
     /// More than `max_out_of_range` of the rows outside the input range.
     pub extrapolating: bool,
@@ -153,7 +154,8 @@ pub struct DriftReport {
     pub rule: String,
     /// The thresholds.
     pub options: DriftOptions,
-    /// `retrain` if any model's verdict is `retrain`, else `ok` if any is `ok`, else `no_reference`.
+    /// `retrain` if any model's verdict is `retrain`, else `unchecked` if any model had nothing
+    /// checked, else `ok` if any is `ok`, else `no_reference`.
     pub verdict: String,
     /// Whether any model is extrapolating.
     pub extrapolating: bool,
@@ -378,6 +380,13 @@ pub fn model_drift(
         "no_reference"
     } else if checks.iter().any(|c| c.fired) {
         "retrain"
+    } else if checks.is_empty() {
+        // Nothing was compared: "ok" would claim a check that was never made.
+        reasons.push(format!(
+            "nothing checked: the new log has {} scored rows (all-rows check needs >= {}), and no |sdot| band or temperature bin has >= {} rows with a reference to compare",
+            new.all.n, o.min_samples, o.min_samples
+        ));
+        "unchecked"
     } else {
         "ok"
     };
@@ -416,6 +425,8 @@ pub fn rule_text(o: &DriftOptions) -> String {
 pub fn report(models: Vec<ModelDrift>, o: &DriftOptions) -> DriftReport {
     let verdict = if models.iter().any(|m| m.verdict == "retrain") {
         "retrain"
+    } else if models.iter().any(|m| m.verdict == "unchecked") {
+        "unchecked"
     } else if models.iter().any(|m| m.verdict == "ok") {
         "ok"
     } else {

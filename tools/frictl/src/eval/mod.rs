@@ -45,7 +45,7 @@
 //! per_band[]         {lo_rad_s, hi_rad_s | null, n, models {NAME: {rmse, rmse_true}}}, all runs pooled
 //! drift              only with --drift (a [`drift::DriftReport`], added next to [`Report`]'s keys):
 //!                     {rule, options {temperature_bin_c, min_samples, rmse_ratio, mean_ratio,
-//!                     floor_nm, max_out_of_range, range_margin}, verdict ("retrain" | "ok" |
+//!                     floor_nm, max_out_of_range, range_margin}, verdict ("retrain" | "ok" | "unchecked" |
 //!                     "no_reference"), extrapolating, models[] {model, new PROFILE, reference_source
 //!                     ("reference_datasets" | "train_report:val|train" | "fwt:val_rmse_nm|test_rmse_nm"
 //!                     | null), reference PROFILE | null, coverage {rows, out_of_range,

@@ -193,8 +193,9 @@ pub fn friction_vs_velocity(
     let pts = subsample(&idx, MAX_POINTS);
     let xr = range(pts.iter().map(|&k| ds.sdot_rad_s[k]));
     let yr = range(pts.iter().map(|&k| ds.tau_f_label_nm[k]));
-    let draw = || -> Result<(), String> {
-        let root = BitMapBackend::new(path, SIZE).into_drawing_area();
+    // Drawn to a temporary file beside `path` and renamed over it (frictionless::output_file).
+    let draw = |tmp: &Path| -> Result<(), String> {
+        let root = BitMapBackend::new(tmp, SIZE).into_drawing_area();
         root.fill(&WHITE).map_err(|e| e.to_string())?;
         let mut c = chart(
             &root,
@@ -273,7 +274,7 @@ pub fn friction_vs_velocity(
         legend(&mut c)?;
         root.present().map_err(|e| e.to_string())
     };
-    draw().map_err(|e| perr(path, e))
+    frictionless::output_file::write_by_path(path, draw).map_err(|e| perr(path, e))
 }
 
 /// The drift figure of one model: per |ṡ| band, RMSE (top panel) and mean residual along the motion
@@ -293,8 +294,9 @@ pub fn drift_bands(path: &Path, m: &super::drift::ModelDrift) -> Result<(), Plot
         let what = format!("band [{}, {hi}) rad/s", b.lo_rad_s);
         m.checks.iter().any(|c| c.fired && c.what == what)
     };
-    let draw = || -> Result<(), String> {
-        let root = BitMapBackend::new(path, SIZE).into_drawing_area();
+    // Drawn to a temporary file beside `path` and renamed over it (frictionless::output_file).
+    let draw = |tmp: &Path| -> Result<(), String> {
+        let root = BitMapBackend::new(tmp, SIZE).into_drawing_area();
         root.fill(&WHITE).map_err(|e| e.to_string())?;
         let (top, bottom) = root.split_vertically(SIZE.1 / 2);
         type Pick = fn(&frictionless_dataset::bands::ResidualStats) -> Option<f64>;
@@ -365,7 +367,7 @@ pub fn drift_bands(path: &Path, m: &super::drift::ModelDrift) -> Result<(), Plot
         }
         root.present().map_err(|e| e.to_string())
     };
-    draw().map_err(|e| perr(path, e))
+    frictionless::output_file::write_by_path(path, draw).map_err(|e| perr(path, e))
 }
 
 /// The chunk to show: `requested` if it exists in the dataset, else the one with the most evaluated
@@ -415,8 +417,9 @@ pub fn timeseries(
     }
     let yr = range(ys.into_iter());
     let xr = (0.0, (ds.time_s[b - 1] - t0).max(1e-3));
-    let draw = || -> Result<(), String> {
-        let root = BitMapBackend::new(path, SIZE).into_drawing_area();
+    // Drawn to a temporary file beside `path` and renamed over it (frictionless::output_file).
+    let draw = |tmp: &Path| -> Result<(), String> {
+        let root = BitMapBackend::new(tmp, SIZE).into_drawing_area();
         root.fill(&WHITE).map_err(|e| e.to_string())?;
         let mut c = chart(
             &root,
@@ -492,7 +495,7 @@ pub fn timeseries(
         legend(&mut c)?;
         root.present().map_err(|e| e.to_string())
     };
-    draw().map_err(|e| perr(path, e))
+    frictionless::output_file::write_by_path(path, draw).map_err(|e| perr(path, e))
 }
 
 /// Δθ–τ_F hysteresis over one chunk (Δθ latched at the chunk start).
@@ -505,8 +508,9 @@ pub fn hysteresis(path: &Path, ds: &Dataset, (a, b): (usize, usize)) -> Result<(
         ys.extend_from_slice(&t[a..b]);
     }
     let yr = range(ys.into_iter());
-    let draw = || -> Result<(), String> {
-        let root = BitMapBackend::new(path, SIZE).into_drawing_area();
+    // Drawn to a temporary file beside `path` and renamed over it (frictionless::output_file).
+    let draw = |tmp: &Path| -> Result<(), String> {
+        let root = BitMapBackend::new(tmp, SIZE).into_drawing_area();
         root.fill(&WHITE).map_err(|e| e.to_string())?;
         let mut c = chart(
             &root,
@@ -539,7 +543,7 @@ pub fn hysteresis(path: &Path, ds: &Dataset, (a, b): (usize, usize)) -> Result<(
         legend(&mut c)?;
         root.present().map_err(|e| e.to_string())
     };
-    draw().map_err(|e| perr(path, e))
+    frictionless::output_file::write_by_path(path, draw).map_err(|e| perr(path, e))
 }
 
 /// Per-epoch numeric series of a train report: every numeric key of `epochs[]` except `epoch`,
@@ -593,8 +597,9 @@ pub fn training_curves(path: &Path, report: &serde_json::Value) -> Result<(), Pl
         x1 = x0 + 1.0;
     }
     let log = y0 > 0.0;
-    let draw = || -> Result<(), String> {
-        let root = BitMapBackend::new(path, SIZE).into_drawing_area();
+    // Drawn to a temporary file beside `path` and renamed over it (frictionless::output_file).
+    let draw = |tmp: &Path| -> Result<(), String> {
+        let root = BitMapBackend::new(tmp, SIZE).into_drawing_area();
         root.fill(&WHITE).map_err(|e| e.to_string())?;
         // A log axis is drawn as log10 of the values on a linear axis (keeps one chart type).
         let tf = |y: f64| if log { y.log10() } else { y };
@@ -625,7 +630,7 @@ pub fn training_curves(path: &Path, report: &serde_json::Value) -> Result<(), Pl
         legend(&mut c)?;
         root.present().map_err(|e| e.to_string())
     };
-    draw().map_err(|e| perr(path, e))
+    frictionless::output_file::write_by_path(path, draw).map_err(|e| perr(path, e))
 }
 
 #[cfg(test)]

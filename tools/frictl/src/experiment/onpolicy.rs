@@ -168,12 +168,12 @@ pub fn write_raw_log(
     sidecar_extra: serde_json::Value,
 ) -> Result<usize, ExperimentError> {
     let create = |p: &Path| {
-        std::fs::File::create(p).map_err(|source| ExperimentError::Create {
+        frictionless::output_file::AtomicFile::create(p).map_err(|source| ExperimentError::Create {
             path: p.to_owned(),
             source,
         })
     };
-    let mut w = std::io::BufWriter::new(create(csv)?);
+    let mut w = create(csv)?;
     // The truth the plant publishes (SimTruth); the rest of SIM_COLUMNS it does not.
     let truth_cols: Vec<_> = SIM_COLUMNS
         .iter()
@@ -224,7 +224,6 @@ pub fn write_raw_log(
         }
         t0 += tr.t_s.last().copied().unwrap_or(0.0) + RUN_GAP_S;
     }
-    w.flush()?;
     let mut columns: Vec<_> = COLUMNS.to_vec();
     columns.extend(truth_cols);
     let mut side = serde_json::json!({
@@ -249,7 +248,10 @@ pub fn write_raw_log(
     }
     let json_path = csv.with_extension("json");
     let text = serde_json::to_string_pretty(&side).map_err(std::io::Error::other)?;
-    create(&json_path)?.write_all(text.as_bytes())?;
+    let mut side_out = create(&json_path)?;
+    side_out.write_all(text.as_bytes())?;
+    // The CSV and its sidecar replace the old pair together, the sidecar last.
+    frictionless::output_file::commit_with_marker(vec![w], side_out)?;
     Ok(rows)
 }
 

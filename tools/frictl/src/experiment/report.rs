@@ -293,11 +293,12 @@ impl SuiteReport {
 
 /// Writes a trace as CSV (`t_s,s_des_rad,s_rad,s_true_rad,tau_des_nm,tau_f_hat_nm,tau_f_true_nm,i_applied_a,tau_ext_nm,flags,sdot_rad_s,sdot_true_rad_s,theta_motor_rad,omega_motor_rad_s`).
 pub fn write_trace_csv(path: &Path, tr: &JointTrace) -> Result<(), ExperimentError> {
-    let f = std::fs::File::create(path).map_err(|source| ExperimentError::Create {
-        path: path.to_owned(),
-        source,
+    let mut w = frictionless::output_file::AtomicFile::create(path).map_err(|source| {
+        ExperimentError::Create {
+            path: path.to_owned(),
+            source,
+        }
     })?;
-    let mut w = std::io::BufWriter::new(f);
     writeln!(
         w,
         "t_s,s_des_rad,s_rad,s_true_rad,tau_des_nm,tau_f_hat_nm,tau_f_true_nm,i_applied_a,tau_ext_nm,flags,\
@@ -324,7 +325,7 @@ pub fn write_trace_csv(path: &Path, tr: &JointTrace) -> Result<(), ExperimentErr
             at(&tr.omega_motor_rad_s, i),
         )?;
     }
-    w.flush()?;
+    w.commit()?;
     Ok(())
 }
 
@@ -352,98 +353,103 @@ pub fn write_plots(out: &Path, traces: &[(String, JointTrace)]) -> Result<(), Ex
             path: path.clone(),
             reason: e.to_string(),
         };
-        let root = BitMapBackend::new(&path, (1200, 900)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| perr(&e))?;
-        let panels = root.split_evenly((3, 1));
-        let t0 = tr.t_s[0];
-        let t1 = *tr.t_s.last().expect("len ≥ 2");
-        // stride so at most ~4000 points per series
-        let stride = (tr.t_s.len() / 4000).max(1);
-        type Series<'a> = (&'a str, &'a [f64], RGBColor);
-        let f_hat_label = if tr.model == ORACLE_LABEL {
-            format!("kfc·τ_F,true added to τ_des (oracle, kfc {})", tr.kfc)
-        } else {
-            format!("τ̂_F (frictiond, {}, kfc {})", tr.model, tr.kfc)
-        };
-        let title0 = format!("{} — {} — K_p {} 1/s²", name, tr.name, sig3(tr.kp_per_s2));
-        let specs: [(String, &str, Vec<Series>); 3] = [
-            (
-                title0,
-                "s [rad]",
-                vec![
-                    ("s_d", &tr.s_des_rad[..], BLACK),
-                    ("s (measured)", &tr.s_rad[..], BLUE),
-                ],
-            ),
-            (
-                "friction".into(),
-                "torque [Nm]",
-                vec![
-                    ("τ_F true", &tr.tau_f_true_nm[..], RED),
-                    (f_hat_label.as_str(), &tr.tau_f_hat_nm[..], BLUE),
-                    ("τ_ext", &tr.tau_ext_nm[..], GREEN),
-                ],
-            ),
-            (
-                "desired torque".into(),
-                "τ_des [Nm]",
-                vec![("τ_des", &tr.tau_des_nm[..], MAGENTA)],
-            ),
-        ];
-        for (area, (title, ylabel, series)) in panels.iter().zip(specs.iter()) {
-            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-            for (_, ys, _) in series {
-                for y in ys.iter().filter(|y| y.is_finite()) {
-                    lo = lo.min(*y);
-                    hi = hi.max(*y);
-                }
-            }
-            if !lo.is_finite() {
-                continue;
-            }
-            let pad = ((hi - lo) * 0.05).max(1e-6);
-            let mut b = ChartBuilder::on(area);
-            b.margin(8).x_label_area_size(30).y_label_area_size(60);
-            if font {
-                b.caption(title.as_str(), ("sans-serif", 16));
-            }
-            let mut chart = b
-                .build_cartesian_2d(t0..t1, (lo - pad)..(hi + pad))
-                .map_err(|e| perr(&e))?;
-            let mut mesh = chart.configure_mesh();
-            if font {
-                mesh.x_desc("t [s]").y_desc(*ylabel);
+        // Drawn to a temporary file beside `path` and renamed over it (frictionless::output_file).
+        let draw = |tmp: &Path| -> Result<(), ExperimentError> {
+            let root = BitMapBackend::new(tmp, (1200, 900)).into_drawing_area();
+            root.fill(&WHITE).map_err(|e| perr(&e))?;
+            let panels = root.split_evenly((3, 1));
+            let t0 = tr.t_s[0];
+            let t1 = *tr.t_s.last().expect("len ≥ 2");
+            // stride so at most ~4000 points per series
+            let stride = (tr.t_s.len() / 4000).max(1);
+            type Series<'a> = (&'a str, &'a [f64], RGBColor);
+            let f_hat_label = if tr.model == ORACLE_LABEL {
+                format!("kfc·τ_F,true added to τ_des (oracle, kfc {})", tr.kfc)
             } else {
-                mesh.disable_x_axis().disable_y_axis();
-            }
-            mesh.draw().map_err(|e| perr(&e))?;
-            for (label, ys, color) in series {
-                let pts = tr
-                    .t_s
-                    .iter()
-                    .zip(ys.iter())
-                    .step_by(stride)
-                    .filter(|(_, y)| y.is_finite())
-                    .map(|(t, y)| (*t, *y));
-                let s = chart
-                    .draw_series(LineSeries::new(pts, color))
-                    .map_err(|e| perr(&e))?;
+                format!("τ̂_F (frictiond, {}, kfc {})", tr.model, tr.kfc)
+            };
+            let title0 = format!("{} — {} — K_p {} 1/s²", name, tr.name, sig3(tr.kp_per_s2));
+            let specs: [(String, &str, Vec<Series>); 3] = [
+                (
+                    title0,
+                    "s [rad]",
+                    vec![
+                        ("s_d", &tr.s_des_rad[..], BLACK),
+                        ("s (measured)", &tr.s_rad[..], BLUE),
+                    ],
+                ),
+                (
+                    "friction".into(),
+                    "torque [Nm]",
+                    vec![
+                        ("τ_F true", &tr.tau_f_true_nm[..], RED),
+                        (f_hat_label.as_str(), &tr.tau_f_hat_nm[..], BLUE),
+                        ("τ_ext", &tr.tau_ext_nm[..], GREEN),
+                    ],
+                ),
+                (
+                    "desired torque".into(),
+                    "τ_des [Nm]",
+                    vec![("τ_des", &tr.tau_des_nm[..], MAGENTA)],
+                ),
+            ];
+            for (area, (title, ylabel, series)) in panels.iter().zip(specs.iter()) {
+                let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+                for (_, ys, _) in series {
+                    for y in ys.iter().filter(|y| y.is_finite()) {
+                        lo = lo.min(*y);
+                        hi = hi.max(*y);
+                    }
+                }
+                if !lo.is_finite() {
+                    continue;
+                }
+                let pad = ((hi - lo) * 0.05).max(1e-6);
+                let mut b = ChartBuilder::on(area);
+                b.margin(8).x_label_area_size(30).y_label_area_size(60);
                 if font {
-                    let c = *color;
-                    s.label(*label)
-                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
+                    b.caption(title.as_str(), ("sans-serif", 16));
+                }
+                let mut chart = b
+                    .build_cartesian_2d(t0..t1, (lo - pad)..(hi + pad))
+                    .map_err(|e| perr(&e))?;
+                let mut mesh = chart.configure_mesh();
+                if font {
+                    mesh.x_desc("t [s]").y_desc(*ylabel);
+                } else {
+                    mesh.disable_x_axis().disable_y_axis();
+                }
+                mesh.draw().map_err(|e| perr(&e))?;
+                for (label, ys, color) in series {
+                    let pts = tr
+                        .t_s
+                        .iter()
+                        .zip(ys.iter())
+                        .step_by(stride)
+                        .filter(|(_, y)| y.is_finite())
+                        .map(|(t, y)| (*t, *y));
+                    let s = chart
+                        .draw_series(LineSeries::new(pts, color))
+                        .map_err(|e| perr(&e))?;
+                    if font {
+                        let c = *color;
+                        s.label(*label)
+                            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
+                    }
+                }
+                if font {
+                    chart
+                        .configure_series_labels()
+                        .background_style(WHITE.mix(0.85))
+                        .border_style(BLACK)
+                        .draw()
+                        .map_err(|e| perr(&e))?;
                 }
             }
-            if font {
-                chart
-                    .configure_series_labels()
-                    .background_style(WHITE.mix(0.85))
-                    .border_style(BLACK)
-                    .draw()
-                    .map_err(|e| perr(&e))?;
-            }
-        }
-        root.present().map_err(|e| perr(&e))?;
+            root.present().map_err(|e| perr(&e))?;
+            Ok(())
+        };
+        frictionless::output_file::write_by_path(&path, draw).map_err(|e| perr(&e))?;
     }
     Ok(())
 }

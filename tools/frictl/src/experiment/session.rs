@@ -471,7 +471,7 @@ pub fn write_daemon_config(
         "# Written by `frictl experiment` for one run.\n{}",
         toml::to_string(&cfg).map_err(ExperimentError::SerializeConfig)?
     );
-    std::fs::write(path, &s).map_err(|source| ExperimentError::Write {
+    frictionless::output_file::write(path, &s).map_err(|source| ExperimentError::Write {
         path: path.to_owned(),
         source,
     })?;
@@ -594,9 +594,11 @@ impl Session {
                 source,
             })?;
         let stderr = child.stderr.take().expect("piped");
-        let log_file = std::fs::File::create(&log).map_err(|source| ExperimentError::Create {
-            path: log.clone(),
-            source,
+        let log_file = frictionless::output_file::create_log(&log).map_err(|source| {
+            ExperimentError::Create {
+                path: log.clone(),
+                source,
+            }
         })?;
         let ready = Arc::new(AtomicBool::new(false));
         let ready2 = ready.clone();

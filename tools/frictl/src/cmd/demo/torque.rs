@@ -378,12 +378,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         stages: &r.stages,
         total_seconds: total,
     };
-    std::fs::write(
+    frictionless::output_file::write(
         out.join("report.json"),
         serde_json::to_string_pretty(&report)?,
     )?;
     let md = report_md(&report);
-    std::fs::write(out.join("report.md"), &md)?;
+    frictionless::output_file::write(out.join("report.md"), &md)?;
     println!("{md}");
     eprintln!(
         "frictl demo --sensor torque: done in {total:.0} s → {}/report.md",
