@@ -364,7 +364,7 @@ pub enum OodMode {
     Flag,
     /// Flagged and counted, and the estimate blends (over `ood_ramp_ms`) to the joint's static
     /// model (`kc`, `ka`, `kv` = CV; plus `ks`, `vs`, `alpha` = SCV) while out of range, and back
-    /// when in range. PINN joints only.
+    /// when in range. PINN joints only, with a model that stores its training input range.
     Static,
 }
 
@@ -757,10 +757,21 @@ pub fn check_model_file(path: &Path, joint: &JointConfig) -> Result<(), String> 
     check_model(path, joint).map(|_| ())
 }
 
-/// [`check_model_file`], returning the model's input features.
-fn check_model(path: &Path, joint: &JointConfig) -> Result<FeatureSpec, String> {
+/// What [`check_model`] learnt of a model file.
+struct CheckedModel {
+    /// The model's input features.
+    features: FeatureSpec,
+    /// Whether the file stores its training input range (the out-of-range check needs it).
+    has_input_range: bool,
+}
+
+/// [`check_model_file`], returning what the rest of the config check needs of the model.
+fn check_model(path: &Path, joint: &JointConfig) -> Result<CheckedModel, String> {
     let m = frictionless::weights::read_file(path).map_err(|e| e.to_string())?;
-    let features = m.meta.features;
+    let checked = CheckedModel {
+        features: m.meta.features,
+        has_input_range: m.meta.training.input_range.is_some(),
+    };
     let r = m.meta.gear_ratio.get();
     let gear_ratio = joint.gear_ratio;
     if (r - gear_ratio).abs() > 1e-9 * gear_ratio.abs() {
@@ -775,7 +786,7 @@ fn check_model(path: &Path, joint: &JointConfig) -> Result<FeatureSpec, String> 
                 "model is for joint {name:?}, config says model_for = {model_for:?}"
             ));
         }
-        return Ok(features);
+        return Ok(checked);
     }
     let kt = m.meta.kt_nm_per_a;
     // Both are finite: the file's k_t is validated by the reader, the config's before this call.
@@ -791,7 +802,7 @@ fn check_model(path: &Path, joint: &JointConfig) -> Result<FeatureSpec, String> 
             joint.name
         ));
     }
-    Ok(features)
+    Ok(checked)
 }
 
 /// Where the daemon's value of one [`JointStates`](frictionless_shm_types::JointStates) field comes
@@ -1662,12 +1673,23 @@ fn model_spec(
                 )
             })?;
             let path = base.join(rel);
-            let features = check_model(&path, j).map_err(|message| ConfigError::Model {
+            let checked = check_model(&path, j).map_err(|message| ConfigError::Model {
                 file: c.file.to_path_buf(),
                 key: key("model"),
                 path: path.clone(),
                 message,
             })?;
+            if fallback.is_some() && !checked.has_input_range {
+                return Err(c.fail(
+                    key("ood"),
+                    "\"static\"",
+                    &format!(
+                        "needs a model that stores its training input range, and {} stores none: the out-of-range check never fires, so the static fallback could never engage (use ood = \"flag\" or \"off\", or a model trained with a recorded input range)",
+                        path.display()
+                    ),
+                ));
+            }
+            let features = checked.features;
             Ok((
                 ModelSpec::Pinn {
                     path,
@@ -2241,20 +2263,48 @@ joints = [{ joint = "ankle", node_id = 3, command_unit = "joint_torque" }]
         )
     }
 
-    /// `ood = "static"` needs the joint's static model (CV, or SCV with all three Stribeck keys) and
-    /// a PINN; the margin and the ramp are range-checked; without `ood` a PINN joint flags only and
-    /// still refuses static-model keys.
+    /// `ood = "static"` needs the joint's static model (CV, or SCV with all three Stribeck keys), a
+    /// PINN and a model that stores its training input range; the margin and the ramp are
+    /// range-checked; without `ood` a PINN joint flags only and still refuses static-model keys.
     #[test]
     fn out_of_range_settings_are_typed_and_checked() {
-        let m = joint_model(
-            "knee",
-            -100.0,
-            0.157,
-            FeatureSpec {
-                set: frictionless::features::FeatureSet::DeltaThetaJointVel,
-                history: 3,
-                temperature: false,
-            },
+        let spec = FeatureSpec {
+            set: frictionless::features::FeatureSet::DeltaThetaJointVel,
+            history: 3,
+            temperature: false,
+        };
+        let m = joint_model_with_range("knee", -100.0, 0.157, spec, true);
+        // A model without a stored range (the shipped ones): the check never fires, so a static
+        // fallback could never engage; refused naming the key, the value and why. `flag` (the
+        // default) is accepted: it just never flags.
+        let unranged = joint_model("knee", -100.0, 0.157, spec);
+        let plain = format!(
+            "[backend]\nkind = \"shm\"\n{}",
+            pinn_joint("knee", 0.157, unranged.to_str().unwrap())
+        );
+        p(&plain).unwrap();
+        p(&format!("{plain}ood = \"flag\"\n")).unwrap();
+        let e = p(&format!(
+            "{plain}ood = \"static\"\nkc = 1.0\nka = 20.0\nkv = 0.5\n"
+        ))
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("joint[0].ood")
+                && e.contains("static")
+                && e.contains("input range")
+                && e.contains(unranged.to_str().unwrap()),
+            "{e}"
+        );
+        let e = p(&format!(
+            "[backend]\nkind = \"shm\"\n{}ood = \"static\"\nkc = 1.0\nka = 20.0\nkv = 0.5\n",
+            pinn_joint("stress32_r-100", 0.156977705, &shipped_model())
+        ))
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("joint[0].ood") && e.contains("input range"),
+            "{e}"
         );
         let base = format!(
             "[backend]\nkind = \"shm\"\n{}",
@@ -2379,12 +2429,43 @@ joints = [{ joint = "ankle", node_id = 3, command_unit = "joint_torque" }]
     /// A random `.fwt` for joint `name` (gear ratio `r`, k_t `kt`) with the given inputs, in a
     /// scratch dir.
     fn joint_model(name: &str, r: f64, kt: f64, spec: FeatureSpec) -> PathBuf {
+        joint_model_with_range(name, r, kt, spec, false)
+    }
+
+    /// A random model for `name`; with `range`, it stores a training input range.
+    fn joint_model_with_range(
+        name: &str,
+        r: f64,
+        kt: f64,
+        spec: FeatureSpec,
+        range: bool,
+    ) -> PathBuf {
         use frictionless::random::{RandomMlpSpec, seeded_mlp};
-        use frictionless::weights::{ModelFile, ModelMeta, TrainingMeta};
+        use frictionless::weights::{InputRange, ModelFile, ModelMeta, TrainingMeta};
         let dir =
             std::env::temp_dir().join(format!("frictiond_config_inputs_{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join(format!("{name}_{}_{}.fwt", spec.set, spec.temperature));
+        let path = dir.join(format!(
+            "{name}_{}_{}{}.fwt",
+            spec.set,
+            spec.temperature,
+            if range { "_ranged" } else { "" }
+        ));
+        let mut training = TrainingMeta::unknown("config test", 0);
+        if range {
+            let mut blocks = [[0.0; 2]; frictionless::weights::layout::RANGE_BLOCKS];
+            for b in blocks.iter_mut().take(spec.set.n_blocks()) {
+                *b = [-1.0, 1.0];
+            }
+            training.input_range = Some(InputRange {
+                blocks,
+                temperature: if spec.temperature {
+                    [20.0, 40.0]
+                } else {
+                    [0.0, 0.0]
+                },
+            });
+        }
         let file = ModelFile {
             meta: ModelMeta {
                 joint_name: name.into(),
@@ -2392,7 +2473,7 @@ joints = [{ joint = "ankle", node_id = 3, command_unit = "joint_torque" }]
                 kt_nm_per_a: kt,
                 features: spec,
                 scv: None,
-                training: TrainingMeta::unknown("config test", 0),
+                training,
             },
             dtype: frictionless::mlp::StorageDtype::F32,
             mlp: seeded_mlp(&RandomMlpSpec::new(&[spec.n_inputs(), 4, 1]), 1).unwrap(),
