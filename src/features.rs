@@ -633,6 +633,12 @@ impl DeltaThetaLatch {
     }
 }
 
+/// Whether `sample` can give a Δθ offset (s and θ finite).
+#[inline]
+fn latchable(sample: &JointSample) -> bool {
+    sample.s_rad.is_finite() && sample.theta_motor_rad.is_finite()
+}
+
 /// What a PINN estimator does while fewer than H samples have been pushed since the last reset.
 #[derive(
     Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
@@ -661,8 +667,10 @@ impl WarmupPolicy {
 
 /// Per-joint fixed-capacity history of the features of a [`FeatureSpec`].
 ///
-/// All storage is inline (`MAX_BLOCKS × MAX_HISTORY` f32, ~0.5 KiB): no heap, ever. [`History::push`]
-/// and [`History::fill`] are O(H) copies and never allocate or panic.
+/// All storage is inline (`MAX_BLOCKS × MAX_HISTORY` f32, ~0.5 KiB): no heap, ever. [`History::push`],
+/// [`History::push_or_hold`] and [`History::fill`] are O(H) copies and never allocate or panic. A
+/// real-time estimator pushes with `push_or_hold`, which keeps a sample with a non-finite input out
+/// of the window (the last finite sample is held in its place).
 ///
 /// Δθ uses the embedded [`DeltaThetaLatch`]; if it was never latched, the first pushed sample latches
 /// it (as the training pipeline does at the first sample of a file). [`History::reset`] clears and
@@ -750,10 +758,18 @@ impl History {
 
     /// Clears and latches the Δθ offset at `sample` (Δθ = 0 there) — unless the offset is fixed
     /// ([`Self::fix_delta_theta_offset`]), then it only clears. Does not push the sample.
+    ///
+    /// A sample whose s or θ is not finite cannot give an offset: the latch is then released and
+    /// taken again at the first pushed sample (with [`Self::push_or_hold`]: the first one whose s and
+    /// θ are finite), so one bad sample at an enable cannot leave Δθ NaN until the next one.
     pub fn reset(&mut self, sample: &JointSample) {
         self.clear();
         if !self.fixed_offset {
-            self.latch.latch(sample.s_rad, sample.theta_motor_rad);
+            if latchable(sample) {
+                self.latch.latch(sample.s_rad, sample.theta_motor_rad);
+            } else {
+                self.latch.latched = false;
+            }
         }
     }
 
@@ -789,22 +805,70 @@ impl History {
         }
     }
 
-    /// Appends one tick, dropping the oldest sample when full.
+    /// Appends one tick as it is (a non-finite value included: [`Self::fill`] then passes it on),
+    /// dropping the oldest sample when full. For offline windows that are skipped when an input is
+    /// not finite; a real-time estimator uses [`Self::push_or_hold`].
     #[inline]
     pub fn push(&mut self, sample: &JointSample) {
         if !self.latch.is_latched() {
             self.latch.latch(sample.s_rad, sample.theta_motor_rad);
         }
+        let mut values = [0f32; MAX_BLOCKS];
+        for (v, &feature) in values.iter_mut().zip(self.spec.set.blocks()) {
+            *v = self.feature_value(feature, sample) as f32;
+        }
+        self.append(&values, sample.temperature_c as f32);
+    }
+
+    /// Appends one tick if every value the spec reads from `sample` is finite (each feature as the
+    /// f32 the network sees, so a finite value beyond f32's range counts as ±∞, and the temperature
+    /// if the spec takes it) and returns `true`. Otherwise the sample never enters the history: the
+    /// newest held sample is repeated in its place (a zero-order hold for the missing tick, so the
+    /// window keeps one sample per tick and the warm-up advances as usual) and `false` comes back;
+    /// an empty history stays empty. The next finite sample is appended as usual, so a bad sample
+    /// costs the tick it arrived on, not the H ticks it would take to leave the window.
+    ///
+    /// Δθ is latched (if it is not) only from a sample whose s and θ are finite.
+    /// Allocation-free, cannot panic.
+    #[inline]
+    pub fn push_or_hold(&mut self, sample: &JointSample) -> bool {
+        if !self.latch.is_latched() && latchable(sample) {
+            self.latch.latch(sample.s_rad, sample.theta_motor_rad);
+        }
+        let mut values = [0f32; MAX_BLOCKS];
+        let mut finite = true;
+        for (v, &feature) in values.iter_mut().zip(self.spec.set.blocks()) {
+            *v = self.feature_value(feature, sample) as f32;
+            finite &= v.is_finite();
+        }
+        let temperature_c = sample.temperature_c as f32;
+        finite &= !self.spec.temperature || temperature_c.is_finite();
+        if finite {
+            self.append(&values, temperature_c);
+        } else if self.len > 0 {
+            let h = self.spec.history;
+            let newest = if self.head == 0 { h - 1 } else { self.head - 1 };
+            for (v, ring) in values.iter_mut().zip(&self.buf) {
+                *v = ring[newest];
+            }
+            self.append(&values, self.temperature_c);
+        }
+        finite
+    }
+
+    /// Writes one tick's feature values (block order) and temperature at the ring head.
+    #[inline]
+    fn append(&mut self, values: &[f32; MAX_BLOCKS], temperature_c: f32) {
         let head = self.head;
-        for (b, &feature) in self.spec.set.blocks().iter().enumerate() {
-            self.buf[b][head] = self.feature_value(feature, sample) as f32;
+        for (ring, &v) in self.buf.iter_mut().zip(values) {
+            ring[head] = v;
         }
         let h = self.spec.history;
         self.head = if head + 1 == h { 0 } else { head + 1 };
         if self.len < h {
             self.len += 1;
         }
-        self.temperature_c = sample.temperature_c as f32;
+        self.temperature_c = temperature_c;
     }
 
     /// Writes the input vector (layout in the module doc; zero-padded for missing old samples) into

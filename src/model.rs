@@ -8,8 +8,12 @@
 //! offset is latched at every `reset` (enable) unless fixed with
 //! [`PinnEstimator::fix_delta_theta_offset`] (a calibrated offset, kept across enables).
 //!
-//! What it is **not**: no clamping, gating, gain (`kfc`) or filtering of the estimate, and no NaN
-//! handling — those belong to the control law in the daemon, which must zero a non-finite estimate.
+//! A sample with a non-finite model input gives a NaN estimate on that tick and leaves no trace:
+//! a PINN holds its last finite sample in the history in its place
+//! ([`History::push_or_hold`]), so the next finite sample gives a finite estimate again.
+//!
+//! What it is **not**: no clamping, gating, gain (`kfc`) or filtering of the estimate — those
+//! belong to the control law, which zeroes a non-finite estimate (0 A on that tick).
 //! Construction allocates (a PINN copies its weights and metadata); `estimate` and `reset` never do.
 
 use std::fmt;
@@ -80,10 +84,13 @@ impl FromStr for ModelKind {
 pub trait FrictionModel {
     /// The model family.
     fn kind(&self) -> ModelKind;
-    /// Called on enable (bumpless): clears history, latches Δθ offset at this sample.
+    /// Called on enable (bumpless): clears history, latches Δθ offset at this sample (a sample
+    /// with a non-finite s or θ leaves it to the first finite one).
     fn reset(&mut self, sample: &JointSample);
     /// One tick: push the sample, return τ̂_F [Nm, joint side]. Never allocates, never panics.
-    /// Returns 0.0 while a HoldZero PINN warms up. May return NaN/Inf if inputs are (caller zeroes).
+    /// Returns 0.0 while a HoldZero PINN warms up. Returns NaN on a tick whose model inputs are not
+    /// all finite (the caller zeroes it); that sample does not reach later ticks (a PINN holds its
+    /// last finite sample in the history instead), so the next finite sample gives a finite estimate.
     fn estimate(&mut self, sample: &JointSample) -> f64;
     /// Whether the next `estimate` comes from the model rather than a warm-up 0. Static models: always.
     fn is_ready(&self) -> bool {
@@ -179,7 +186,9 @@ pub enum ModelError {
 /// The PINN friction estimator of one joint: feature history + MLP kernel + warm-up policy.
 ///
 /// Built once (allocates); [`FrictionModel::estimate`] pushes the sample into the history, builds the
-/// input vector into a preallocated buffer and runs one inference, without allocating.
+/// input vector into a preallocated buffer and runs one inference, without allocating. A sample with
+/// a non-finite input is held out of the history ([`History::push_or_hold`]) and its tick's estimate
+/// is NaN.
 #[derive(Clone, Debug)]
 pub struct PinnEstimator {
     mlp: Mlp,
@@ -302,7 +311,10 @@ impl FrictionModel for PinnEstimator {
 
     #[inline]
     fn estimate(&mut self, sample: &JointSample) -> f64 {
-        self.history.push(sample);
+        if !self.history.push_or_hold(sample) {
+            // Not in the history (the last finite sample was held in its place): this tick only.
+            return f64::NAN;
+        }
         if !self.history.is_ready(self.warmup) {
             return 0.0;
         }
@@ -559,6 +571,85 @@ mod tests {
         assert!(nonzero > 30, "a random network gives non-zero outputs");
         assert_eq!(est.meta().joint_name, f.meta.joint_name);
         assert_eq!(est.meta().features, spec);
+    }
+
+    /// A sample with a non-finite model input (NaN, ±∞, or a finite value beyond f32's range)
+    /// costs its own tick only: NaN on that tick, then the window holds the last finite sample in
+    /// its place and the next finite sample gives that window's (finite) estimate.
+    #[test]
+    fn a_non_finite_sample_costs_only_its_own_tick() {
+        let spec = FeatureSpec {
+            set: FeatureSet::DeltaThetaJointVel,
+            history: 6,
+            temperature: true,
+        };
+        let f = model_file(spec, -160.0, 4);
+        let bad: [(&str, fn(&mut JointSample)); 5] = [
+            ("NaN joint velocity", |s| s.sdot_rad_s = f64::NAN),
+            ("+inf motor angle", |s| s.theta_motor_rad = f64::INFINITY),
+            ("NaN joint angle", |s| s.s_rad = f64::NAN),
+            ("NaN temperature", |s| s.temperature_c = f64::NAN),
+            ("joint velocity beyond f32", |s| s.sdot_rad_s = 1e39),
+        ];
+        for (what, spoil) in bad {
+            let mut est = PinnEstimator::from_model_file(&f, WarmupPolicy::ZeroPad).unwrap();
+            let enable = sample(0);
+            est.reset(&enable);
+            let theta_off = enable.theta_motor_rad - (-160.0) * enable.s_rad;
+            // The window as a clean history sees it: the held sample repeats the one before.
+            let mut seen: Vec<JointSample> = Vec::new();
+            for k in 0..20 {
+                let mut s = sample(k * 37);
+                if k == 9 || k == 14 {
+                    spoil(&mut s);
+                    let y = est.estimate(&s);
+                    assert!(y.is_nan(), "{what}, tick {k}: {y} (the caller zeroes it)");
+                    seen.push(*seen.last().unwrap());
+                    continue;
+                }
+                seen.push(s);
+                let y = est.estimate(&s);
+                let window = &seen[seen.len().saturating_sub(6)..];
+                let x = hand_built(spec, -160.0, theta_off, window);
+                assert_eq!(est.last_input(), &x[..], "{what}, tick {k}: input vector");
+                let want = f64::from(f.mlp.forward_reference(&x)[0]);
+                assert!(
+                    y.is_finite() && close(y, want),
+                    "{what}, tick {k}: estimate {y}, reference {want}"
+                );
+            }
+        }
+    }
+
+    /// An enable on a sample with a non-finite s or θ cannot latch Δθ: the first finite sample
+    /// does, and the estimate from then on is finite (not NaN until the next enable).
+    #[test]
+    fn an_enable_on_a_non_finite_sample_latches_at_the_first_finite_one() {
+        let spec = FeatureSpec {
+            set: FeatureSet::DeltaThetaJointVel,
+            history: 3,
+            temperature: false,
+        };
+        let f = model_file(spec, -160.0, 6);
+        let mut est = PinnEstimator::from_model_file(&f, WarmupPolicy::ZeroPad).unwrap();
+        let mut enable = sample(5);
+        enable.theta_motor_rad = f64::NAN;
+        est.reset(&enable);
+        assert!(est.estimate(&enable).is_nan(), "the bad tick itself");
+        assert!(est.history().is_empty(), "nothing to hold yet: stays empty");
+        let first = sample(6);
+        let y = est.estimate(&first);
+        let theta_off = first.theta_motor_rad - (-160.0) * first.s_rad;
+        assert!(
+            (est.history().latch().offset_motor_rad() - theta_off).abs() < 1e-9,
+            "latched at the first finite sample"
+        );
+        let x = hand_built(spec, -160.0, theta_off, &[first]);
+        assert_eq!(est.last_input(), &x[..]);
+        assert!(y.is_finite() && close(y, f64::from(f.mlp.forward_reference(&x)[0])));
+        for k in 7..20 {
+            assert!(est.estimate(&sample(k)).is_finite(), "tick {k}");
+        }
     }
 
     #[test]

@@ -240,3 +240,105 @@ pub unsafe extern "C" fn fl_estimator_fix_delta_theta_offset(
         Ok(())
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{fl_model_free, fl_model_from_bytes};
+    use fl_core::features::{FeatureSet, FeatureSpec};
+    use fl_core::mlp::StorageDtype;
+    use fl_core::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
+    use fl_core::units::GearRatio;
+    use fl_core::weights::{ModelFile, ModelMeta, TrainingMeta};
+    use std::ptr;
+
+    fn model_bytes(spec: FeatureSpec) -> Vec<u8> {
+        let mlp = seeded_mlp(
+            &RandomMlpSpec {
+                sizes: vec![spec.n_inputs(), 12, 1],
+                weights: WeightInit::Uniform { amp: 0.5 },
+                bias: -0.2..0.2,
+                norm: NormInit::Identity,
+            },
+            9,
+        )
+        .unwrap();
+        fl_core::weights::to_bytes(&ModelFile {
+            meta: ModelMeta {
+                joint_name: "knee".into(),
+                gear_ratio: GearRatio::new(-100.0).unwrap(),
+                kt_nm_per_a: 0.157,
+                features: spec,
+                scv: None,
+                training: TrainingMeta::unknown("capi estimator test", 0),
+            },
+            dtype: StorageDtype::F32,
+            mlp,
+        })
+        .unwrap()
+    }
+
+    fn sample(k: usize) -> fl_joint_sample {
+        let t = k as f64 * 1e-3;
+        fl_joint_sample {
+            s_rad: 0.3 * (3.0 * t).sin(),
+            sdot_rad_s: 0.9 * (3.0 * t).cos(),
+            theta_motor_rad: -30.0 * (3.0 * t).sin() + 1.5 + 0.02 * (7.0 * t).sin(),
+            omega_motor_rad_s: -90.0 * (3.0 * t).cos(),
+            temperature_c: 40.0,
+        }
+    }
+
+    /// One sample with a NaN input gives a NaN estimate on that call only: the next call with a
+    /// finite sample is finite (the core holds the last finite sample in the history), for each
+    /// input the model reads, under both warm-up policies.
+    #[test]
+    fn the_estimate_after_a_nan_sample_is_finite_on_the_next_call() {
+        let spec = FeatureSpec {
+            set: FeatureSet::DeltaThetaJointVel,
+            history: 20,
+            temperature: true,
+        };
+        let bytes = model_bytes(spec);
+        let spoilers: [fn(&mut fl_joint_sample); 4] = [
+            |s| s.sdot_rad_s = f64::NAN,
+            |s| s.theta_motor_rad = f64::NAN,
+            |s| s.s_rad = f64::INFINITY,
+            |s| s.temperature_c = f64::NAN,
+        ];
+        // SAFETY (whole test): every pointer is to a live local or a live handle made here, each
+        // freed once at the end.
+        unsafe {
+            let mut m = ptr::null_mut();
+            assert_eq!(
+                fl_model_from_bytes(bytes.as_ptr(), bytes.len(), &mut m),
+                fl_status::Ok
+            );
+            for warmup in [FL_WARMUP_HOLD_ZERO, FL_WARMUP_ZERO_PAD] {
+                for (n, spoil) in spoilers.iter().enumerate() {
+                    let mut e = ptr::null_mut();
+                    assert_eq!(fl_estimator_create(m, warmup, &mut e), fl_status::Ok);
+                    assert_eq!(fl_estimator_reset(e, &sample(0)), fl_status::Ok);
+                    let mut y = f64::NAN;
+                    for k in 0..60 {
+                        let mut s = sample(k);
+                        if k == 30 {
+                            spoil(&mut s);
+                        }
+                        assert_eq!(fl_estimator_estimate(e, &s, &mut y), fl_status::Ok);
+                        if k == 30 {
+                            assert!(
+                                y.is_nan(),
+                                "warmup {warmup} spoiler {n}: {y} on the bad call"
+                            );
+                        } else {
+                            assert!(y.is_finite(), "warmup {warmup} spoiler {n} call {k}: {y}");
+                        }
+                    }
+                    fl_estimator_free(e);
+                }
+            }
+            fl_model_free(m);
+        }
+    }
+}

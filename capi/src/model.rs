@@ -342,10 +342,19 @@ pub unsafe extern "C" fn fl_model_predict(
         if out.is_null() {
             return Err(Fail::null("fl_model_predict: `out` is NULL"));
         }
-        let total = n_rows.checked_mul(n_inputs).ok_or(Fail::fixed(
-            fl_status::InvalidArgument,
-            "fl_model_predict: `n_rows` · `n_inputs` overflows",
-        ))?;
+        // A slice may span at most isize::MAX bytes: check the input buffer's size in bytes (the
+        // output's, n_rows floats, is no larger since n_inputs ≥ 1).
+        let total = n_rows
+            .checked_mul(n_inputs)
+            .filter(|&n| n <= isize::MAX as usize / size_of::<f32>())
+            .ok_or_else(|| {
+                Fail::owned(
+                    fl_status::InvalidArgument,
+                    format!(
+                        "fl_model_predict: `n_rows` = {n_rows} · `n_inputs` = {n_inputs} floats exceed the address space"
+                    ),
+                )
+            })?;
         // SAFETY: non-null, sizes per the caller contract.
         let x = unsafe { std::slice::from_raw_parts(x, total) };
         // SAFETY: as above.
@@ -356,4 +365,77 @@ pub unsafe extern "C" fn fl_model_predict(
         }
         Ok(())
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fl_core::features::{FeatureSet, FeatureSpec};
+    use fl_core::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
+    use fl_core::units::GearRatio;
+    use fl_core::weights::{ModelMeta, TrainingMeta};
+    use std::ptr;
+
+    /// A row count whose input buffer fits `usize` in elements but not the address space in bytes
+    /// (n_rows · n_inputs · 4 > isize::MAX) is refused before any buffer is touched.
+    #[test]
+    fn predict_refuses_a_row_count_whose_bytes_overflow() {
+        let spec = FeatureSpec {
+            set: FeatureSet::JointVel,
+            history: 5,
+            temperature: false,
+        };
+        let mlp = seeded_mlp(
+            &RandomMlpSpec {
+                sizes: vec![spec.n_inputs(), 4, 1],
+                weights: WeightInit::Uniform { amp: 0.5 },
+                bias: -0.2..0.2,
+                norm: NormInit::Identity,
+            },
+            3,
+        )
+        .unwrap();
+        let bytes = fl_core::weights::to_bytes(&ModelFile {
+            meta: ModelMeta {
+                joint_name: "knee".into(),
+                gear_ratio: GearRatio::new(100.0).unwrap(),
+                kt_nm_per_a: 0.1,
+                features: spec,
+                scv: None,
+                training: TrainingMeta::unknown("capi predict test", 0),
+            },
+            dtype: StorageDtype::F32,
+            mlp,
+        })
+        .unwrap();
+        let n_in = spec.n_inputs();
+        let x = vec![0.25f32; 2 * n_in];
+        let mut out = [0f32; 2];
+        // SAFETY (whole test): pointers to live locals and a handle made and freed here; the huge
+        // row counts are refused before the buffers are read.
+        unsafe {
+            let mut m = ptr::null_mut();
+            assert_eq!(
+                fl_model_from_bytes(bytes.as_ptr(), bytes.len(), &mut m),
+                fl_status::Ok
+            );
+            for n_rows in [
+                usize::MAX / 4 / n_in,
+                usize::MAX / n_in,
+                isize::MAX as usize / 4 / n_in + 1,
+            ] {
+                let st = fl_model_predict(m, x.as_ptr(), n_rows, n_in, out.as_mut_ptr());
+                assert_eq!(st, fl_status::InvalidArgument, "n_rows = {n_rows}");
+                let msg = CStr::from_ptr(crate::fl_last_error()).to_string_lossy();
+                assert!(msg.contains("n_rows"), "n_rows = {n_rows}: {msg}");
+            }
+            // A real batch still predicts.
+            assert_eq!(
+                fl_model_predict(m, x.as_ptr(), 2, n_in, out.as_mut_ptr()),
+                fl_status::Ok
+            );
+            assert!(out.iter().all(|v| v.is_finite()));
+            fl_model_free(m);
+        }
+    }
 }

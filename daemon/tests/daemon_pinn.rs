@@ -3,7 +3,7 @@
 //! the test sends), the test process as the plant. The expected current comes from the control
 //! law with τ̂_F from a `frictionless::model::PinnEstimator` fed the same samples in the test.
 //! Also: the warm-up flag (both policies), SIGHUP to a new `.fwt` (switch without a lost tick) and
-//! to a corrupt one (the running model stays).
+//! to a corrupt one (the running model stays), and one non-finite sample costing its own tick only.
 
 use std::path::Path;
 use std::time::Duration;
@@ -16,7 +16,8 @@ use frictionless::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
 use frictionless::units::GearRatio;
 use frictionless::weights::{ModelFile, ModelMeta, TrainingMeta};
 use frictionless_shm_types::{
-    FLAG_STALE, FLAG_WARMING_UP, JointStates, MotorCurrentCommand, TorqueRequest, model_kind,
+    FLAG_NON_FINITE, FLAG_STALE, FLAG_WARMING_UP, JointStates, MotorCurrentCommand, TorqueRequest,
+    model_kind,
 };
 
 const R: f64 = -100.0;
@@ -300,4 +301,71 @@ fn pinn_currents_warm_up_and_reload() {
         log.contains("reload rejected") && log.contains("c.fwt"),
         "the log names the bad file: {log}"
     );
+}
+
+/// One non-finite sample costs the tick it arrives on, not the H ticks it would take to leave the
+/// history: joint 0 (hold_zero) gets a NaN ṡ (an input of the model and of the law), joint 1
+/// (zero_pad) a NaN θ (an input of the model only, through Δθ), both at tick 30 after the warm-up.
+/// On that tick both command 0 A with `FLAG_NON_FINITE`; from the next tick on they command τ_des
+/// plus the friction of a history that held the last finite sample in place of the bad one, with
+/// no fault flag (the reference joints are fed that held sample, never a NaN).
+#[test]
+fn one_non_finite_sample_costs_only_its_own_tick_of_torque() {
+    const BAD: u64 = 30;
+    let env = TestEnv::new("pinnnan");
+    let a = env.dir.join("a.fwt");
+    frictionless::weights::write_file(&a, &model_file(1)).unwrap();
+    let cfg = env.write_config(&config("a.fwt", "a.fwt"));
+    let mut d = Daemon::start(&cfg, &[]);
+    let mut plant = Plant::open(&env.ipc, "plant");
+    plant.wait_for_daemon(T);
+    let mut j0 = RefJoint::new(&a, WarmupPolicy::HoldZero);
+    let mut j1 = RefJoint::new(&a, WarmupPolicy::ZeroPad);
+    let mut after = Vec::new();
+    for k in 0..BAD + 4 * H as u64 {
+        let (mut js, rq) = payloads(k);
+        if k == BAD {
+            js.sdot_rad_s[0] = f64::NAN;
+            js.theta_motor_rad[1] = f64::NAN;
+        }
+        let s = plant.publish_state(&js);
+        plant.publish_request(&rq, s);
+        let c = plant
+            .command_for(s, T)
+            .unwrap_or_else(|| panic!("no command for state {s}"));
+        // What a clean history holds on the bad tick: the sample before it.
+        let x = sample(if k == BAD { k - 1 } else { k });
+        let w0 = j0.step(&x, tau_des(k));
+        let w1 = j1.step(&x, tau_des(k));
+        if k == BAD {
+            for j in 0..2 {
+                assert_eq!(c.i_ref_a[j], 0.0, "bad tick, joint {j}: 0 A");
+                assert_ne!(c.flags[j] & FLAG_NON_FINITE, 0, "bad tick, joint {j}");
+            }
+            continue;
+        }
+        for j in 0..2 {
+            assert_eq!(
+                c.flags[j] & FLAG_NON_FINITE,
+                0,
+                "tick {k} joint {j}: a clean sample after the bad one is not a fault ({} A)",
+                c.i_ref_a[j]
+            );
+        }
+        check(&c, 0, w0, k);
+        check(&c, 1, w1, k);
+        if k > BAD {
+            after.push(c.i_ref_a);
+        }
+    }
+    // τ_des is back at once: the tick after the bad one commands a current, not 0 A.
+    assert!(
+        after[0].iter().take(2).all(|i| i.abs() > 1e-3),
+        "tick {}: {:?}",
+        BAD + 1,
+        after[0]
+    );
+    d.signal(libc::SIGTERM);
+    let (status, log) = d.wait_exit(T);
+    assert!(status.success(), "{log}");
 }

@@ -1,0 +1,356 @@
+//! Model resolution: a `[[joint]]`'s friction model from its keys ([`model_spec`]), the `.fwt`
+//! checks against the joint (gear ratio, joint name, k_t, stored input range), and whether the
+//! backend can supply a PINN's inputs.
+
+use std::path::Path;
+
+use frictionless::features::{FeatureSpec, Signal};
+
+use crate::schema::{
+    BackendKind, CanProtocol, FrictionModelName, JointConfig, ModelSpec, OodMode, RawConfig,
+    ResolvedBus, StaticFallback,
+};
+use crate::validate::{Checker, ConfigError};
+
+/// Relative tolerance of the k_t comparison between a `.fwt` header and `[[joint]] kt`.
+pub const KT_REL_TOLERANCE: f64 = 1e-6;
+
+/// Reads and checks a `.fwt` model against its `[[joint]]`. Error text names the problem and both
+/// values; the caller adds file and key.
+///
+/// The read accepts regular files only and runs the core's finite-output probe
+/// ([`frictionless::weights::read_file`]). Then the model must match the joint: always the gear
+/// ratio (sign and value, relative 1e-9: Δθ = r·s − θ), and the joint it was trained for: the file's
+/// joint name must be the `[[joint]]`'s `name` and its k_t the joint's `kt` (relative
+/// [`KT_REL_TOLERANCE`]: the labels were computed with it). A joint that deliberately runs another
+/// joint's network (a template, as in `config/stress32.toml`) says so with `model_for = "<name in the
+/// file>"`: the file's name is then compared with that, and k_t is not compared (the model's scale is
+/// the other joint's). A file with an empty joint name (provenance unknown, e.g. an ONNX import without
+/// `--joint`) is checked on the gear ratio and k_t only.
+pub fn check_model_file(path: &Path, joint: &JointConfig) -> Result<(), String> {
+    check_model(path, joint).map(|_| ())
+}
+
+/// What [`check_model`] learnt of a model file.
+pub(crate) struct CheckedModel {
+    /// The model's input features.
+    features: FeatureSpec,
+    /// Whether the file stores its training input range (the out-of-range check needs it).
+    has_input_range: bool,
+}
+
+/// [`check_model_file`], returning what the rest of the config check needs of the model.
+pub(crate) fn check_model(path: &Path, joint: &JointConfig) -> Result<CheckedModel, String> {
+    let m = frictionless::weights::read_file(path).map_err(|e| e.to_string())?;
+    let checked = CheckedModel {
+        features: m.meta.features,
+        has_input_range: m.meta.training.input_range.is_some(),
+    };
+    let r = m.meta.gear_ratio.get();
+    let gear_ratio = joint.gear_ratio;
+    if (r - gear_ratio).abs() > 1e-9 * gear_ratio.abs() {
+        return Err(format!(
+            "model was trained with gear_ratio {r}, config says {gear_ratio} (sign and value must match)"
+        ));
+    }
+    let name = &m.meta.joint_name;
+    if let Some(model_for) = &joint.model_for {
+        if name != model_for {
+            return Err(format!(
+                "model is for joint {name:?}, config says model_for = {model_for:?}"
+            ));
+        }
+        return Ok(checked);
+    }
+    let kt = m.meta.kt_nm_per_a;
+    // Both are finite: the file's k_t is validated by the reader, the config's before this call.
+    if (kt - joint.kt).abs() > KT_REL_TOLERANCE * joint.kt.abs() {
+        return Err(format!(
+            "model was trained with kt {kt} Nm/A, config says kt = {} Nm/A (the labels depend on it; must match within a relative {KT_REL_TOLERANCE:e}; a joint that runs another joint's model says so with model_for)",
+            joint.kt
+        ));
+    }
+    if !name.is_empty() && *name != joint.name {
+        return Err(format!(
+            "model is for joint {name:?}, config says name = {:?} (to run another joint's model, set model_for = {name:?})",
+            joint.name
+        ));
+    }
+    Ok(checked)
+}
+
+/// Where the daemon's value of one [`JointStates`](frictionless_shm_types::JointStates) field comes
+/// from, for a joint on a given backend.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SignalSupply {
+    /// Written by the shared-memory publisher (the robot's own software): whatever it measures; a
+    /// field it does not have is NaN there, which the config cannot know.
+    Publisher,
+    /// Measured by the drive and decoded from its feedback frames.
+    Measured,
+    /// Computed from another measured field of the same drive (s = θ/r, ṡ = ω/r with the signed
+    /// gear ratio r: the drive has only a motor-side encoder, so the transmission is taken as rigid).
+    DerivedFrom(Signal),
+    /// Not supplied: NaN in every tick.
+    Absent,
+}
+
+impl std::fmt::Display for SignalSupply {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SignalSupply::Publisher => f.write_str("written by the shared-memory publisher"),
+            SignalSupply::Measured => f.write_str("measured by the drive"),
+            SignalSupply::DerivedFrom(from) => {
+                write!(f, "derived from `{from}` (rigid transmission)")
+            }
+            SignalSupply::Absent => f.write_str("not supplied"),
+        }
+    }
+}
+
+/// What `backend` (and, for CAN, the bus's `protocol`) supplies for `signal`. Both CAN protocols
+/// report motor-side position and velocity only (MIT reply: p, v, i; ODrive Get_Encoder_Estimates:
+/// pos, vel in motor rev) and no temperature the daemon decodes.
+pub fn signal_supply(
+    backend: BackendKind,
+    protocol: Option<CanProtocol>,
+    signal: Signal,
+) -> SignalSupply {
+    match (backend, protocol) {
+        (BackendKind::Shm, _) | (BackendKind::Can, None) => SignalSupply::Publisher,
+        (BackendKind::Can, Some(CanProtocol::Mit | CanProtocol::Odrive)) => match signal {
+            Signal::MotorPosRad | Signal::MotorVelRadS => SignalSupply::Measured,
+            Signal::JointPosRad => SignalSupply::DerivedFrom(Signal::MotorPosRad),
+            Signal::JointVelRadS => SignalSupply::DerivedFrom(Signal::MotorVelRadS),
+            Signal::TemperatureC => SignalSupply::Absent,
+        },
+    }
+}
+
+/// Checks that the backend can supply every input of a PINN joint's model: each field the feature
+/// spec reads must be supplied, and Δθ = r·s − θ needs a joint position that is not derived from the
+/// motor encoder (derived, Δθ is the latched constant and carries no deflection). Returns the
+/// message naming joint, set and field.
+pub fn check_model_inputs(
+    joint: &str,
+    spec: &FeatureSpec,
+    backend: BackendKind,
+    protocol: Option<CanProtocol>,
+) -> Result<(), String> {
+    let where_ = match (backend, protocol) {
+        (BackendKind::Can, Some(CanProtocol::Mit)) => "the can backend (protocol = \"mit\")",
+        (BackendKind::Can, Some(CanProtocol::Odrive)) => "the can backend (protocol = \"odrive\")",
+        (BackendKind::Can, None) => "the can backend",
+        (BackendKind::Shm, _) => "the shm backend",
+    };
+    for signal in spec.required_signals() {
+        if signal_supply(backend, protocol, signal) == SignalSupply::Absent {
+            return Err(format!(
+                "joint {joint}: feature set `{}` ({spec}) needs `{signal}`, which {where_} does not supply",
+                spec.set
+            ));
+        }
+    }
+    if spec.set.uses_delta_theta()
+        && let SignalSupply::DerivedFrom(from) =
+            signal_supply(backend, protocol, Signal::JointPosRad)
+    {
+        return Err(format!(
+            "joint {joint}: feature set `{}` ({spec}) needs `s_rad` from a joint-side encoder for Δθ = r·s − θ, but {where_} derives `s_rad` from `{from}` (s = θ/r): Δθ would be constant; use a set without Δθ (e.g. motor-vel-joint-vel, joint-pos-joint-vel)",
+            spec.set
+        ));
+    }
+    Ok(())
+}
+
+/// The joint's resolved model, and for a PINN the model file's input features.
+pub(crate) fn model_spec(
+    c: &Checker,
+    base: &Path,
+    k: usize,
+    j: &JointConfig,
+) -> Result<(ModelSpec, Option<FeatureSpec>), ConfigError> {
+    use frictionless::friction::{CvParams, ScvParams, StaticFriction};
+    let key = |name: &str| format!("joint[{k}].{name}");
+    let need = |name: &str, v: Option<f64>| -> Result<f64, ConfigError> {
+        v.ok_or_else(|| {
+            c.fail(
+                key(name),
+                "<missing>",
+                &format!("required by friction_model = {:?}", j.friction_model),
+            )
+        })
+    };
+    let forbid = |names: &[(&str, bool)]| -> Result<(), ConfigError> {
+        for (n, present) in names {
+            if *present {
+                return Err(c.fail(
+                    key(n),
+                    "<set>",
+                    &format!("not used by friction_model = {:?}", j.friction_model),
+                ));
+            }
+        }
+        Ok(())
+    };
+    let param_err = |e: frictionless::friction::FrictionParamError| match e {
+        frictionless::friction::FrictionParamError::Invalid {
+            name,
+            value,
+            requirement,
+            ..
+        } => c.fail(key(name), value, requirement),
+        other => c.fail(key("friction_model"), "?", &other.to_string()),
+    };
+    match j.friction_model {
+        FrictionModelName::None => {
+            forbid(&[
+                ("kc", j.kc.is_some()),
+                ("kv", j.kv.is_some()),
+                ("ka", j.ka.is_some()),
+                ("ks", j.ks.is_some()),
+                ("vs", j.vs.is_some()),
+                ("alpha", j.alpha.is_some()),
+                ("model", j.model.is_some()),
+            ])?;
+            Ok((ModelSpec::None, None))
+        }
+        FrictionModelName::CoulombViscous => {
+            forbid(&[
+                ("ks", j.ks.is_some()),
+                ("vs", j.vs.is_some()),
+                ("alpha", j.alpha.is_some()),
+                ("model", j.model.is_some()),
+            ])?;
+            let p = CvParams {
+                kc: need("kc", j.kc)?,
+                ka: need("ka", j.ka)?,
+                kv: need("kv", j.kv)?,
+            };
+            p.validate().map_err(param_err)?;
+            Ok((ModelSpec::Cv(p), None))
+        }
+        FrictionModelName::CoulombViscousStribeck => {
+            forbid(&[("model", j.model.is_some())])?;
+            let p = ScvParams {
+                kc: need("kc", j.kc)?,
+                ka: need("ka", j.ka)?,
+                kv: need("kv", j.kv)?,
+                ks: need("ks", j.ks)?,
+                vs: need("vs", j.vs)?,
+                alpha: need("alpha", j.alpha)?,
+            };
+            p.validate().map_err(param_err)?;
+            Ok((ModelSpec::Scv(p), None))
+        }
+        FrictionModelName::Pinn => {
+            let fallback = if j.ood == OodMode::Static {
+                // The static model: kc, ka, kv (CV) and, if any of ks, vs, alpha is given, all
+                // three (SCV).
+                let need_static = |name: &str, v: Option<f64>| {
+                    v.ok_or_else(|| {
+                        c.fail(
+                            key(name),
+                            "<missing>",
+                            "required by ood = \"static\" (the static model of a PINN joint)",
+                        )
+                    })
+                };
+                let (kc, ka, kv) = (
+                    need_static("kc", j.kc)?,
+                    need_static("ka", j.ka)?,
+                    need_static("kv", j.kv)?,
+                );
+                Some(if j.ks.is_some() || j.vs.is_some() || j.alpha.is_some() {
+                    let p = ScvParams {
+                        kc,
+                        ka,
+                        kv,
+                        ks: need_static("ks", j.ks)?,
+                        vs: need_static("vs", j.vs)?,
+                        alpha: need_static("alpha", j.alpha)?,
+                    };
+                    p.validate().map_err(param_err)?;
+                    StaticFallback::Scv(p)
+                } else {
+                    let p = CvParams { kc, ka, kv };
+                    p.validate().map_err(param_err)?;
+                    StaticFallback::Cv(p)
+                })
+            } else {
+                forbid(&[
+                    ("kc", j.kc.is_some()),
+                    ("kv", j.kv.is_some()),
+                    ("ka", j.ka.is_some()),
+                    ("ks", j.ks.is_some()),
+                    ("vs", j.vs.is_some()),
+                    ("alpha", j.alpha.is_some()),
+                ])?;
+                None
+            };
+            let rel = j.model.as_ref().ok_or_else(|| {
+                c.fail(
+                    key("model"),
+                    "<missing>",
+                    "required by friction_model = \"pinn\"",
+                )
+            })?;
+            let path = base.join(rel);
+            let checked = check_model(&path, j).map_err(|message| ConfigError::Model {
+                file: c.file.to_path_buf(),
+                key: key("model"),
+                path: path.clone(),
+                message,
+            })?;
+            if fallback.is_some() && !checked.has_input_range {
+                return Err(c.fail(
+                    key("ood"),
+                    "\"static\"",
+                    &format!(
+                        "needs a model that stores its training input range, and {} stores none: the out-of-range check never fires, so the static fallback could never engage (use ood = \"flag\" or \"off\", or a model trained with a recorded input range)",
+                        path.display()
+                    ),
+                ));
+            }
+            let features = checked.features;
+            Ok((
+                ModelSpec::Pinn {
+                    path,
+                    warmup: j.warmup,
+                    fallback,
+                },
+                Some(features),
+            ))
+        }
+    }
+}
+
+/// Every PINN's inputs must be suppliable by its joint's backend (and, on CAN, its bus protocol):
+/// [`check_model_inputs`] per PINN joint, the error naming `joint[k].model`.
+pub(crate) fn check_pinn_inputs(
+    c: &Checker,
+    raw: &RawConfig,
+    models: &[ModelSpec],
+    pinn_features: &[Option<FeatureSpec>],
+    buses: &[ResolvedBus],
+) -> Result<(), ConfigError> {
+    for (k, (j, features)) in raw.joint.iter().zip(pinn_features).enumerate() {
+        let Some(spec) = features else { continue };
+        let protocol = buses
+            .iter()
+            .find(|b| b.joints.iter().any(|d| d.index == j.index))
+            .map(|b| b.protocol);
+        if let Err(message) = check_model_inputs(&j.name, spec, raw.backend.kind, protocol) {
+            let Some(ModelSpec::Pinn { path, .. }) = models.get(k) else {
+                continue;
+            };
+            return Err(ConfigError::Model {
+                file: c.file.to_path_buf(),
+                key: format!("joint[{k}].model"),
+                path: path.clone(),
+                message,
+            });
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,547 @@
+//! The schema: the file as written ([`RawConfig`] and its sections, serde with unknown keys
+//! refused, defaults) and the validated result ([`Config`], [`ModelSpec`], [`ResolvedBus`]).
+
+use std::path::PathBuf;
+
+use frictionless_shm_types::can::mit::MitRanges;
+use frictionless_shm_types::can::units::{CommandUnit, JointUnits};
+use serde::{Deserialize, Serialize};
+
+use crate::buses::BusLoad;
+
+/// `[loop]`.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct LoopConfig {
+    /// Loop period [µs] (1000 = 1 kHz).
+    #[serde(default = "default_period_us")]
+    pub period_us: u64,
+    /// CPU to pin the RT thread to (none = no pinning).
+    #[serde(default)]
+    pub cpu: Option<usize>,
+    /// SCHED_FIFO priority 1–99 for the RT thread (none = SCHED_OTHER).
+    #[serde(default)]
+    pub priority: Option<i32>,
+    /// mlockall(MCL_CURRENT | MCL_FUTURE) before the loop starts.
+    #[serde(default)]
+    pub lock_memory: bool,
+    /// PM QoS CPU wake-up latency bound [µs] written to `/dev/cpu_dma_latency` and held while the
+    /// daemon runs (none = leave the idle states alone). `0` keeps idle CPUs out of deep C-states
+    /// (in a VM: polling instead of HLT exits), as `cyclictest` does by default. Root only; a
+    /// refusal is warned (or fatal with `require_rt`).
+    #[serde(default)]
+    pub cpu_dma_latency_us: Option<u32>,
+    /// If true, refuse to start when SCHED_FIFO / mlockall / affinity are refused; else warn.
+    #[serde(default)]
+    pub require_rt: bool,
+    /// Publish DaemonStatus every this many ticks.
+    #[serde(default = "default_status_every")]
+    pub status_every_ticks: u64,
+    /// READY=1 is sent after this many ticks ran (and were not missed).
+    #[serde(default = "default_ready_after")]
+    pub ready_after_ticks: u64,
+    /// What starts a tick: the clock (absolute 1 kHz deadlines, the robot mode) or the inputs
+    /// (lockstep with a simulated plant, for fast deterministic closed-loop runs).
+    #[serde(default)]
+    pub trigger: Trigger,
+    /// Lockstep only: also wait for the [`TorqueRequest`](frictionless_shm_types::TorqueRequest)
+    /// whose `state_seq` answers the newest joint state before computing (true when a controller
+    /// takes part in the loop).
+    #[serde(default = "default_true")]
+    pub lockstep_wait_request: bool,
+    /// Lockstep only: how long one tick waits for its inputs before it runs anyway with what it
+    /// has (stale rules apply) [ms].
+    #[serde(default = "default_lockstep_timeout_ms")]
+    pub lockstep_timeout_ms: u64,
+    /// RT threads computing a tick: 1, or 2 (the joints are split once at load into two halves
+    /// balanced by network weight bytes; a helper thread computes the second half and the main RT
+    /// thread joins it before publishing).
+    #[serde(default = "default_rt_threads")]
+    pub rt_threads: u8,
+    /// With `rt_threads = 2`: CPU to pin the helper thread to (none = no pinning). Same rules as
+    /// `cpu`, and not the same CPU as `cpu`.
+    #[serde(default)]
+    pub helper_cpu: Option<usize>,
+    /// Cache warming of each RT thread's network weights in the idle part of the period.
+    #[serde(default)]
+    pub prefetch: Prefetch,
+    /// `prefetch = "lead"`: wake this long before each deadline to prefetch [µs] (< `period_us`).
+    #[serde(default = "default_prefetch_lead_us")]
+    pub prefetch_lead_us: u64,
+}
+
+/// When the RT threads walk their networks' weights into cache (`[loop] prefetch`).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Prefetch {
+    /// Never.
+    #[default]
+    Off,
+    /// Right after publishing a tick.
+    After,
+    /// `prefetch_lead_us` before the next deadline (clock trigger; under lockstep, as `after`).
+    Lead,
+}
+
+fn default_rt_threads() -> u8 {
+    1
+}
+fn default_prefetch_lead_us() -> u64 {
+    200
+}
+
+/// What starts a tick.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Trigger {
+    /// Absolute CLOCK_MONOTONIC deadlines every `period_us` (the real-time mode).
+    #[default]
+    Clock,
+    /// One tick per new joint state (and request, see `lockstep_wait_request`); no sleeping.
+    Lockstep,
+}
+
+fn default_true() -> bool {
+    true
+}
+fn default_lockstep_timeout_ms() -> u64 {
+    1000
+}
+
+fn default_period_us() -> u64 {
+    1000
+}
+fn default_status_every() -> u64 {
+    100
+}
+fn default_ready_after() -> u64 {
+    50
+}
+
+impl Default for LoopConfig {
+    fn default() -> Self {
+        Self {
+            period_us: default_period_us(),
+            cpu: None,
+            priority: None,
+            lock_memory: false,
+            cpu_dma_latency_us: None,
+            require_rt: false,
+            status_every_ticks: default_status_every(),
+            ready_after_ticks: default_ready_after(),
+            trigger: Trigger::Clock,
+            lockstep_wait_request: true,
+            lockstep_timeout_ms: default_lockstep_timeout_ms(),
+            rt_threads: default_rt_threads(),
+            helper_cpu: None,
+            prefetch: Prefetch::Off,
+            prefetch_lead_us: default_prefetch_lead_us(),
+        }
+    }
+}
+
+/// Which I/O backend the loop uses.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum BackendKind {
+    /// iceoryx2 shared memory (`frictionless-shm-types` services).
+    Shm,
+    /// SocketCAN drives (`[[bus]]` sections); requests, command mirror and status over shm.
+    Can,
+}
+
+/// `[backend]`.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BackendConfig {
+    /// Backend kind.
+    pub kind: BackendKind,
+    /// Service-name prefix (`<prefix>/joint_states`, …).
+    #[serde(default = "default_prefix")]
+    pub service_prefix: String,
+    /// iceoryx2 root path (relative paths are relative to the config file); none = iceoryx2 default.
+    #[serde(default)]
+    pub root_path: Option<PathBuf>,
+}
+
+fn default_prefix() -> String {
+    "frictionless".to_owned()
+}
+
+/// What to output for enabled joints when joint-state input is stale.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum OnStale {
+    /// 0 A on every joint.
+    Zero,
+    /// Drop the friction estimate and the torque feedback (they need fresh state) and convert the
+    /// last τ_des statically: i = τ_des/(kt·r), clamped. A stale *torque request* always gives 0 A.
+    StaticModel,
+}
+
+/// `[safety]`.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SafetyConfig {
+    /// Inputs older than this many periods (no new sample, or stamp too old) are stale.
+    #[serde(default = "default_stale")]
+    pub stale_after_ticks: u64,
+    /// Output while joint states are stale.
+    #[serde(default = "default_on_stale")]
+    pub on_stale: OnStale,
+}
+
+fn default_stale() -> u64 {
+    5
+}
+fn default_on_stale() -> OnStale {
+    OnStale::Zero
+}
+
+impl Default for SafetyConfig {
+    fn default() -> Self {
+        Self {
+            stale_after_ticks: default_stale(),
+            on_stale: default_on_stale(),
+        }
+    }
+}
+
+/// Butterworth low-pass on τ̂_F.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct LpfConfig {
+    /// Filter order 1–8.
+    pub order: usize,
+    /// Cut-off frequency [Hz], below Nyquist.
+    pub cutoff_hz: f64,
+}
+
+/// Friction model names (the ergoCub names and short forms).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+pub enum FrictionModelName {
+    /// No friction compensation.
+    #[serde(rename = "none")]
+    None,
+    /// Coulomb–viscous.
+    #[serde(rename = "coulomb_viscous", alias = "cv")]
+    CoulombViscous,
+    /// Stribeck–Coulomb–viscous.
+    #[serde(rename = "coulomb_viscous_stribeck", alias = "scv")]
+    CoulombViscousStribeck,
+    /// PINN from a `.fwt` file.
+    #[serde(rename = "pinn")]
+    Pinn,
+}
+
+/// PINN warm-up policy while the history is not yet full.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum WarmupName {
+    /// Infer on zero-padded history from the first tick.
+    ZeroPad,
+    /// Output 0 friction until the history is full (the safe default, as the BLF device).
+    #[default]
+    HoldZero,
+}
+
+/// What a joint does while its model's inputs are out of the model's training range.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum OodMode {
+    /// Not checked: never flagged, never counted.
+    Off,
+    /// Flagged (`FLAG_OUT_OF_RANGE`) and counted in `DaemonStatus::out_of_range_ticks`; the model's
+    /// estimate is used unchanged. A model without a stored range is never out of range.
+    #[default]
+    Flag,
+    /// Flagged and counted, and the estimate blends (over `ood_ramp_ms`) to the joint's static
+    /// model (`kc`, `ka`, `kv` = CV; plus `ks`, `vs`, `alpha` = SCV) while out of range, and back
+    /// when in range. PINN joints only, with a model that stores its training input range.
+    Static,
+}
+
+/// One `[[joint]]` as written.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct JointConfig {
+    /// Joint name (unique).
+    pub name: String,
+    /// Index into the payload arrays (0–63, unique).
+    pub index: usize,
+    /// Signed gear ratio r (motor angle per joint angle), non-zero.
+    pub gear_ratio: f64,
+    /// Torque constant kt [Nm/A], motor side, > 0 (the same calibration as used for training!).
+    pub kt: f64,
+    /// Current clamp ±max_curr [A], > 0.
+    pub max_curr: f64,
+    /// Friction compensation gain kfc (0 disables compensation), 0–2.
+    #[serde(default = "one")]
+    pub kfc: f64,
+    /// Proportional gain on the torque error [-] (0 = pure feed-forward).
+    #[serde(default)]
+    pub kp: f64,
+    /// Integral gain on the torque error [1/s].
+    #[serde(default)]
+    pub ki: f64,
+    /// Friction clip ±max_output_friction [Nm], applied only while |ṡ| > the threshold.
+    #[serde(default = "infinite")]
+    pub max_output_friction: f64,
+    /// The velocity gate of the friction clip [rad/s] (≥ 0).
+    #[serde(default)]
+    pub joint_velocity_threshold_rad_s: f64,
+    /// Butterworth LPF on τ̂_F (none = unfiltered).
+    #[serde(default)]
+    pub lpf: Option<LpfConfig>,
+    /// Friction model.
+    pub friction_model: FrictionModelName,
+    /// Coulomb level [Nm].
+    #[serde(default)]
+    pub kc: Option<f64>,
+    /// Viscous coefficient [Nm·s/rad].
+    #[serde(default)]
+    pub kv: Option<f64>,
+    /// Smooth-sign steepness [s/rad]; `inf` = sign().
+    #[serde(default)]
+    pub ka: Option<f64>,
+    /// Breakaway friction [Nm] (SCV).
+    #[serde(default)]
+    pub ks: Option<f64>,
+    /// Stribeck velocity [rad/s] (SCV).
+    #[serde(default)]
+    pub vs: Option<f64>,
+    /// Stribeck exponent (SCV).
+    #[serde(default)]
+    pub alpha: Option<f64>,
+    /// `.fwt` model file for `pinn`, relative to the config file.
+    #[serde(default)]
+    pub model: Option<PathBuf>,
+    /// The joint name recorded in `model` when this joint deliberately runs another joint's network
+    /// (a template): the model check then compares the file's name with this instead of `name`, and
+    /// does not compare k_t. Unset: the model must be this joint's own.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_for: Option<String>,
+    /// PINN warm-up policy.
+    #[serde(default)]
+    pub warmup: WarmupName,
+    /// PINN Δθ offset θ_off [motor rad] (Δθ = r·s − (θ − θ_off)): a fixed encoder calibration, kept
+    /// across enables. Absent: latched at every enable (Δθ = 0 there). Set it to the offset the
+    /// training logs were latched with (0 for the virtual joints).
+    #[serde(default)]
+    pub delta_theta_offset_motor_rad: Option<f64>,
+    /// Out-of-training-range handling (PINN joints): `off`, `flag` (default) or `static`.
+    #[serde(default)]
+    pub ood: OodMode,
+    /// Margin of the range check [fraction of each training range's width on either side, 0–10]:
+    /// 0.1 (default) accepts inputs up to 10 % of the range's width beyond its ends.
+    #[serde(default = "default_ood_margin")]
+    pub ood_margin: f64,
+    /// Duration of the blend between the PINN and the static model under `ood = "static"` [ms,
+    /// 0–1000; 0 = switch at once]. Default 20.
+    #[serde(default = "default_ood_ramp_ms")]
+    pub ood_ramp_ms: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}
+/// Default [`JointConfig::ood_margin`].
+pub fn default_ood_margin() -> f64 {
+    0.1
+}
+/// Default [`JointConfig::ood_ramp_ms`].
+pub fn default_ood_ramp_ms() -> f64 {
+    20.0
+}
+fn infinite() -> f64 {
+    f64::INFINITY
+}
+
+/// The whole file as written.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RawConfig {
+    /// `[loop]`.
+    #[serde(default, rename = "loop")]
+    pub loop_: LoopConfig,
+    /// `[backend]`.
+    pub backend: BackendConfig,
+    /// `[safety]`.
+    #[serde(default)]
+    pub safety: SafetyConfig,
+    /// `[[joint]]`.
+    #[serde(default)]
+    pub joint: Vec<JointConfig>,
+    /// `[[bus]]`: CAN buses (required, ≥ 1, with `[backend] kind = "can"`; forbidden otherwise).
+    #[serde(default)]
+    pub bus: Vec<BusConfig>,
+}
+
+/// Largest number of `[[bus]]` sections (sockets polled per tick).
+pub const MAX_BUSES: usize = 8;
+
+/// Motor-drive protocol of one bus.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum CanProtocol {
+    /// MIT mini-cheetah / CubeMars AK "MIT mode": one 8-byte command, one 6-byte reply per tick.
+    Mit,
+    /// ODrive CAN Simple: Set_Input_Torque per tick; cyclic Get_Encoder_Estimates, Get_Iq, Heartbeat.
+    Odrive,
+}
+
+/// One `[[bus]]`: a SocketCAN interface with the drives on it.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BusConfig {
+    /// SocketCAN interface name (`can0`, `vcan0`), or `fd:N`: an already open CAN socket inherited
+    /// as file descriptor N (kernel filters are then best effort; used by tests over a socketpair).
+    pub interface: String,
+    /// Nominal bitrate [bit/s], for the bus-load budget (the daemon does not configure the link).
+    pub bitrate: u64,
+    /// Protocol of every drive on this bus.
+    pub protocol: CanProtocol,
+    /// Largest allowed worst-case bus load (fraction, 0 < max_load ≤ 1).
+    #[serde(default = "default_max_load")]
+    pub max_load: f64,
+    /// A joint whose drive sent no feedback for more than this many ticks is stale (0 A, flagged).
+    #[serde(default = "default_feedback_timeout")]
+    pub feedback_timeout_ticks: u64,
+    /// MIT only: the standard id the drives reply on (the firmware's CAN master id; byte 0 of the
+    /// reply names the motor).
+    #[serde(default)]
+    pub host_id: u32,
+    /// The drives on this bus (`[[bus.joint]]`, or `joints = [...]`).
+    #[serde(alias = "joints")]
+    pub joint: Vec<BusJointConfig>,
+}
+
+fn default_max_load() -> f64 {
+    0.7
+}
+fn default_feedback_timeout() -> u64 {
+    5
+}
+
+/// One `[[bus.joint]]`: which `[[joint]]` a drive moves, its node id and units.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BusJointConfig {
+    /// Name of a `[[joint]]`.
+    pub joint: String,
+    /// Drive id: MIT motor id (standard id of its commands, 1–255, also byte 0 of its replies);
+    /// ODrive node id (0–63).
+    pub node_id: u32,
+    /// What the drive's command field carries: motor current, motor torque k_t·i or joint torque
+    /// r·k_t·i (signed r).
+    pub command_unit: CommandUnit,
+    /// MIT: position range ±p_max [motor rad].
+    #[serde(default)]
+    pub p_max: Option<f64>,
+    /// MIT: velocity range ±v_max [motor rad/s].
+    #[serde(default)]
+    pub v_max: Option<f64>,
+    /// MIT: feed-forward range ±t_max, in `command_unit` (A, or Nm motor/joint side).
+    #[serde(default)]
+    pub t_max: Option<f64>,
+    /// MIT: reply current-field range ±i_max, in `reply_unit`.
+    #[serde(default)]
+    pub i_max: Option<f64>,
+    /// MIT: position-gain range 0..kp_max [Nm/rad] (we always send kp = 0; default 500).
+    #[serde(default)]
+    pub kp_max: Option<f64>,
+    /// MIT: damping-gain range 0..kd_max [Nm·s/rad] (we always send kd = 0; default 5).
+    #[serde(default)]
+    pub kd_max: Option<f64>,
+    /// MIT: what the reply's third field carries (bgkatz: current; CubeMars AK: torque). Default
+    /// `current`.
+    #[serde(default)]
+    pub reply_unit: Option<CommandUnit>,
+}
+
+/// Validated friction model parameters of one joint.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ModelSpec {
+    /// No compensation.
+    None,
+    /// CV.
+    Cv(frictionless::friction::CvParams),
+    /// SCV (paper form).
+    Scv(frictionless::friction::ScvParams),
+    /// PINN loaded from a file (resolved path); the file was read and validated by [`load`].
+    Pinn {
+        /// Resolved path.
+        path: PathBuf,
+        /// Warm-up policy.
+        warmup: WarmupName,
+        /// The static model blended in while out of the training range (`ood = "static"`).
+        fallback: Option<StaticFallback>,
+    },
+}
+
+/// The static model a PINN joint falls back to under `ood = "static"`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum StaticFallback {
+    /// CV (`kc`, `ka`, `kv`).
+    Cv(frictionless::friction::CvParams),
+    /// SCV, paper form (`kc`, `ka`, `kv`, `ks`, `vs`, `alpha`).
+    Scv(frictionless::friction::ScvParams),
+}
+
+/// A validated configuration.
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// The config file it came from.
+    pub file: PathBuf,
+    /// As written (validated).
+    pub raw: RawConfig,
+    /// Resolved model per joint, same order as `raw.joint`.
+    pub models: Vec<ModelSpec>,
+    /// Resolved iceoryx2 root path.
+    pub root_path: Option<PathBuf>,
+    /// Resolved `[[bus]]` sections (empty unless `[backend] kind = "can"`).
+    pub buses: Vec<ResolvedBus>,
+}
+
+/// A validated `[[bus]]` with its drives resolved against the `[[joint]]` table.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ResolvedBus {
+    /// Interface name or `fd:N`.
+    pub interface: String,
+    /// Protocol.
+    pub protocol: CanProtocol,
+    /// MIT reply id.
+    pub host_id: u32,
+    /// Per-joint feedback timeout [ticks].
+    pub feedback_timeout_ticks: u64,
+    /// Drives, in config order.
+    pub joints: Vec<ResolvedDrive>,
+    /// The bus-load budget computed at load time.
+    pub load: BusLoad,
+}
+
+/// One drive on a bus.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ResolvedDrive {
+    /// Position of the joint in `raw.joint` (and `models`).
+    pub joint_pos: usize,
+    /// Payload index of the joint (`[[joint]] index`).
+    pub index: usize,
+    /// Motor id (MIT) or node id (ODrive).
+    pub node_id: u32,
+    /// Command mapping (current → what the drive wants) and feedback angle unit.
+    pub units: JointUnits,
+    /// MIT: how to read the reply's third field back as a current (ODrive: Iq is a current).
+    pub reply_units: JointUnits,
+    /// MIT fixed-point ranges (ODrive: `None`).
+    pub mit: Option<MitRanges>,
+    /// Current clamp of the joint [A] (`[[joint]] max_curr`).
+    pub max_curr_a: f64,
+}
+
+impl Config {
+    /// Loop period [ns].
+    pub fn period_ns(&self) -> u64 {
+        self.raw.loop_.period_us * 1000
+    }
+}

@@ -1,0 +1,394 @@
+//! Validation of the sections that stand on their own: `[loop]`, the tick counts, `[backend]` and
+//! each `[[joint]]`'s keys, with the error type and the [`Checker`] that names file, key and value.
+//! Models are resolved in `models`, buses in `buses`.
+
+use std::path::{Path, PathBuf};
+
+use frictionless::features::FeatureSpec;
+use frictionless_shm_types::MAX_JOINTS;
+
+use crate::models::model_spec;
+use crate::schema::{
+    FrictionModelName, JointConfig, LoopConfig, ModelSpec, OodMode, Prefetch, RawConfig,
+};
+
+/// Why a configuration is not acceptable. Every variant names the file; most name the key and value.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("{file}: cannot read: {source}")]
+    Read {
+        /// Config file.
+        file: PathBuf,
+        /// OS error.
+        source: std::io::Error,
+    },
+    /// TOML syntax, a wrong type or an unknown key.
+    #[error("{file}: {message}")]
+    Parse {
+        /// Config file.
+        file: PathBuf,
+        /// toml's message (names the key, line and column).
+        message: String,
+    },
+    /// A key holds a value outside its domain.
+    #[error("{file}: key `{key}` = {value}: {requirement}")]
+    Invalid {
+        /// Config file.
+        file: PathBuf,
+        /// Full key path, e.g. `joint[1].max_curr`.
+        key: String,
+        /// The offending value as written.
+        value: String,
+        /// What it must satisfy.
+        requirement: String,
+    },
+    /// A model file is missing or invalid.
+    #[error("{file}: key `{key}` = {path:?}: {message}")]
+    Model {
+        /// Config file.
+        file: PathBuf,
+        /// Key path, e.g. `joint[0].model`.
+        key: String,
+        /// Resolved model path.
+        path: PathBuf,
+        /// What is wrong with it.
+        message: String,
+    },
+}
+
+pub(crate) struct Checker<'a> {
+    pub(crate) file: &'a Path,
+}
+
+impl Checker<'_> {
+    pub(crate) fn fail(
+        &self,
+        key: String,
+        value: impl std::fmt::Display,
+        req: &str,
+    ) -> ConfigError {
+        ConfigError::Invalid {
+            file: self.file.to_path_buf(),
+            key,
+            value: value.to_string(),
+            requirement: req.to_owned(),
+        }
+    }
+    pub(crate) fn finite_pos(&self, key: String, v: f64) -> Result<(), ConfigError> {
+        if v.is_finite() && v > 0.0 {
+            Ok(())
+        } else {
+            Err(self.fail(key, v, "must be finite and > 0"))
+        }
+    }
+    pub(crate) fn nonneg(&self, key: String, v: f64) -> Result<(), ConfigError> {
+        if v.is_finite() && v >= 0.0 {
+            Ok(())
+        } else {
+            Err(self.fail(key, v, "must be finite and >= 0"))
+        }
+    }
+}
+
+/// The online CPUs as the kernel lists them in `/sys/devices/system/cpu/online` (none when the file
+/// cannot be read or parsed, e.g. without `/sys`).
+pub(crate) fn online_cpus() -> Option<Vec<std::ops::RangeInclusive<usize>>> {
+    parse_cpu_list(&std::fs::read_to_string("/sys/devices/system/cpu/online").ok()?)
+}
+
+/// Parses a kernel CPU list such as `0-3,6,8-9`.
+pub(crate) fn parse_cpu_list(text: &str) -> Option<Vec<std::ops::RangeInclusive<usize>>> {
+    let mut out = Vec::new();
+    for part in text.trim().split(',') {
+        let (a, b) = part.split_once('-').unwrap_or((part, part));
+        let (a, b) = (a.parse().ok()?, b.parse().ok()?);
+        if a > b {
+            return None;
+        }
+        out.push(a..=b);
+    }
+    Some(out)
+}
+
+/// Longest run of ticks `ready_after_ticks` and `stale_after_ticks` may span [s].
+pub const MAX_TICK_SPAN_S: u64 = 60;
+
+/// `cpu`-like keys: below `CPU_SETSIZE` and in the machine's online set.
+pub(crate) fn check_cpu(c: &Checker<'_>, key: &str, cpu: usize) -> Result<(), ConfigError> {
+    let setsize = libc::CPU_SETSIZE as usize;
+    if cpu >= setsize {
+        return Err(c.fail(
+            key.into(),
+            cpu,
+            &format!("must be below CPU_SETSIZE ({setsize}) and an online CPU"),
+        ));
+    }
+    if let Some(online) = online_cpus()
+        && !online.iter().any(|r| r.contains(&cpu))
+    {
+        let list: Vec<String> = online
+            .iter()
+            .map(|r| {
+                if r.start() == r.end() {
+                    r.start().to_string()
+                } else {
+                    format!("{}-{}", r.start(), r.end())
+                }
+            })
+            .collect();
+        return Err(c.fail(
+            key.into(),
+            cpu,
+            &format!(
+                "must be an online CPU (online: {}, /sys/devices/system/cpu/online)",
+                list.join(",")
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// `[loop]` on its own: period, priority, PM QoS, CPUs, RT threads, prefetch lead.
+pub(crate) fn check_loop(c: &Checker, l: &LoopConfig) -> Result<(), ConfigError> {
+    if !(20..=1_000_000).contains(&l.period_us) {
+        return Err(c.fail("loop.period_us".into(), l.period_us, "must be 20..=1000000"));
+    }
+    if let Some(p) = l.priority
+        && !(1..=99).contains(&p)
+    {
+        return Err(c.fail("loop.priority".into(), p, "must be 1..=99 (SCHED_FIFO)"));
+    }
+    if let Some(us) = l.cpu_dma_latency_us
+        && us > i32::MAX as u32
+    {
+        return Err(c.fail(
+            "loop.cpu_dma_latency_us".into(),
+            us,
+            "must fit the kernel's s32 PM QoS value (0..=2147483647)",
+        ));
+    }
+    if let Some(cpu) = l.cpu {
+        check_cpu(c, "loop.cpu", cpu)?;
+    }
+    if !(1..=2).contains(&l.rt_threads) {
+        return Err(c.fail(
+            "loop.rt_threads".into(),
+            l.rt_threads,
+            "must be 1 or 2 (RT threads computing a tick)",
+        ));
+    }
+    if let Some(cpu) = l.helper_cpu {
+        if l.rt_threads != 2 {
+            return Err(c.fail(
+                "loop.helper_cpu".into(),
+                cpu,
+                "only with rt_threads = 2 (there is no helper thread to pin)",
+            ));
+        }
+        check_cpu(c, "loop.helper_cpu", cpu)?;
+        if l.cpu == Some(cpu) {
+            return Err(c.fail(
+                "loop.helper_cpu".into(),
+                cpu,
+                "must differ from loop.cpu (the main RT thread waits for the helper; on one CPU at the same SCHED_FIFO priority it would never run)",
+            ));
+        }
+    }
+    if l.prefetch == Prefetch::Lead && !(1..l.period_us).contains(&l.prefetch_lead_us) {
+        return Err(c.fail(
+            "loop.prefetch_lead_us".into(),
+            l.prefetch_lead_us,
+            &format!(
+                "must be 1..{} (below period_us) with prefetch = \"lead\"",
+                l.period_us
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The tick counts of `[loop]` and `[safety]`: bounded in time ([`MAX_TICK_SPAN_S`]) and >= 1.
+pub(crate) fn check_tick_counts(c: &Checker, raw: &RawConfig) -> Result<(), ConfigError> {
+    let l = &raw.loop_;
+    let max_ticks = MAX_TICK_SPAN_S * 1_000_000 / l.period_us;
+    if l.ready_after_ticks > max_ticks {
+        return Err(c.fail(
+            "loop.ready_after_ticks".into(),
+            l.ready_after_ticks,
+            &format!(
+                "must be <= {max_ticks} ({MAX_TICK_SPAN_S} s at period_us = {})",
+                l.period_us
+            ),
+        ));
+    }
+    if raw.safety.stale_after_ticks > max_ticks {
+        return Err(c.fail(
+            "safety.stale_after_ticks".into(),
+            raw.safety.stale_after_ticks,
+            &format!(
+                "must be <= {max_ticks} ({MAX_TICK_SPAN_S} s at period_us = {})",
+                l.period_us
+            ),
+        ));
+    }
+    if l.status_every_ticks == 0 {
+        return Err(c.fail("loop.status_every_ticks".into(), 0, "must be >= 1"));
+    }
+    if raw.safety.stale_after_ticks == 0 {
+        return Err(c.fail("safety.stale_after_ticks".into(), 0, "must be >= 1"));
+    }
+    Ok(())
+}
+
+/// `[backend]`: the service prefix and the iceoryx2 root path (resolved against `base`).
+pub(crate) fn check_backend(c: &Checker, raw: &RawConfig, base: &Path) -> Result<(), ConfigError> {
+    if raw.backend.service_prefix.is_empty() || raw.backend.service_prefix.contains('\0') {
+        return Err(c.fail(
+            "backend.service_prefix".into(),
+            format!("{:?}", raw.backend.service_prefix),
+            "must be non-empty without NUL",
+        ));
+    }
+    let prefix = &raw.backend.service_prefix;
+    let max_prefix = frictionless_shm_types::MAX_SERVICE_PREFIX_BYTES;
+    if prefix.len() > max_prefix {
+        let head: String = prefix.chars().take(32).collect();
+        return Err(c.fail(
+            "backend.service_prefix".into(),
+            format!("{head:?}… ({} bytes)", prefix.len()),
+            &format!(
+                "must be at most {max_prefix} bytes (iceoryx2 service names are at most 255 bytes, and `/motor_current_command` is appended)"
+            ),
+        ));
+    }
+    if prefix.starts_with("iox2://") {
+        return Err(c.fail(
+            "backend.service_prefix".into(),
+            format!("{prefix:?}"),
+            "must not start with `iox2://` (reserved by iceoryx2)",
+        ));
+    }
+    if let Some(root) = &raw.backend.root_path {
+        let resolved = base.join(root);
+        if let Ok(m) = std::fs::metadata(&resolved)
+            && !m.is_dir()
+        {
+            return Err(c.fail(
+                "backend.root_path".into(),
+                resolved.display(),
+                "exists and is not a directory (iceoryx2 creates its files under it)",
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The `[[joint]]` table: its size, then per joint its keys ([`check_joint`]) and its model
+/// ([`model_spec`]). Returns each joint's model and, for a PINN, its input features.
+pub(crate) fn check_joints(
+    c: &Checker,
+    raw: &RawConfig,
+    base: &Path,
+) -> Result<(Vec<ModelSpec>, Vec<Option<FeatureSpec>>), ConfigError> {
+    if raw.joint.is_empty() {
+        return Err(c.fail("joint".into(), "[]", "at least one [[joint]] is required"));
+    }
+    if raw.joint.len() > MAX_JOINTS {
+        return Err(c.fail(
+            "joint".into(),
+            raw.joint.len(),
+            &format!("at most {MAX_JOINTS} joints"),
+        ));
+    }
+    let fs_hz = 1e6 / raw.loop_.period_us as f64;
+    let mut models = Vec::with_capacity(raw.joint.len());
+    let mut pinn_features = Vec::with_capacity(raw.joint.len());
+    for (k, j) in raw.joint.iter().enumerate() {
+        check_joint(c, raw, k, j, fs_hz)?;
+        let (model, features) = model_spec(c, base, k, j)?;
+        models.push(model);
+        pinn_features.push(features);
+    }
+    Ok((models, pinn_features))
+}
+
+/// The keys of `joint[k]` that do not depend on its model (name, index, gains, limits, filter,
+/// out-of-range settings); `fs_hz` is the loop rate.
+pub(crate) fn check_joint(
+    c: &Checker,
+    raw: &RawConfig,
+    k: usize,
+    j: &JointConfig,
+    fs_hz: f64,
+) -> Result<(), ConfigError> {
+    let key = |name: &str| format!("joint[{k}].{name}");
+    if j.name.is_empty() {
+        return Err(c.fail(key("name"), "\"\"", "must be non-empty"));
+    }
+    if raw.joint[..k].iter().any(|o| o.name == j.name) {
+        return Err(c.fail(key("name"), &j.name, "duplicate joint name"));
+    }
+    if j.index >= MAX_JOINTS {
+        return Err(c.fail(key("index"), j.index, &format!("must be < {MAX_JOINTS}")));
+    }
+    if raw.joint[..k].iter().any(|o| o.index == j.index) {
+        return Err(c.fail(key("index"), j.index, "duplicate joint index"));
+    }
+    if frictionless::units::GearRatio::new(j.gear_ratio).is_err() {
+        return Err(c.fail(
+            key("gear_ratio"),
+            j.gear_ratio,
+            "must be finite and non-zero",
+        ));
+    }
+    c.finite_pos(key("kt"), j.kt)?;
+    c.finite_pos(key("max_curr"), j.max_curr)?;
+    if !(j.kfc.is_finite() && (0.0..=2.0).contains(&j.kfc)) {
+        return Err(c.fail(key("kfc"), j.kfc, "must be in [0, 2]"));
+    }
+    c.nonneg(key("kp"), j.kp)?;
+    c.nonneg(key("ki"), j.ki)?;
+    if j.max_output_friction.is_nan() || j.max_output_friction <= 0.0 {
+        return Err(c.fail(
+            key("max_output_friction"),
+            j.max_output_friction,
+            "must be > 0",
+        ));
+    }
+    c.nonneg(
+        key("joint_velocity_threshold_rad_s"),
+        j.joint_velocity_threshold_rad_s,
+    )?;
+    if let Some(off) = j.delta_theta_offset_motor_rad
+        && !off.is_finite()
+    {
+        return Err(c.fail(key("delta_theta_offset_motor_rad"), off, "must be finite"));
+    }
+    if let Some(lpf) = j.lpf {
+        if !(1..=8).contains(&lpf.order) {
+            return Err(c.fail(key("lpf.order"), lpf.order, "must be 1..=8"));
+        }
+        if !(lpf.cutoff_hz.is_finite() && lpf.cutoff_hz > 0.0 && lpf.cutoff_hz < 0.5 * fs_hz) {
+            return Err(c.fail(
+                key("lpf.cutoff_hz"),
+                lpf.cutoff_hz,
+                &format!("must be > 0 and below Nyquist ({} Hz)", 0.5 * fs_hz),
+            ));
+        }
+    }
+    if !(j.ood_margin.is_finite() && (0.0..=10.0).contains(&j.ood_margin)) {
+        return Err(c.fail(key("ood_margin"), j.ood_margin, "must be in [0, 10]"));
+    }
+    if !(j.ood_ramp_ms.is_finite() && (0.0..=1000.0).contains(&j.ood_ramp_ms)) {
+        return Err(c.fail(key("ood_ramp_ms"), j.ood_ramp_ms, "must be in [0, 1000] ms"));
+    }
+    if j.ood == OodMode::Static && j.friction_model != FrictionModelName::Pinn {
+        return Err(c.fail(
+            key("ood"),
+            "\"static\"",
+            "only a PINN joint can fall back to a static model",
+        ));
+    }
+    Ok(())
+}
