@@ -18,7 +18,7 @@ use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
 use super::algorithms::{Workspace, check_len, gravity_world};
 use super::error::DynamicsError;
-use super::robot::Robot;
+use super::robot::{JointKind, Robot};
 use super::spatial::{Force, Motion, SpatialInertia, Transform, skew};
 
 /// A motion or force as a 6-vector in `(angular, linear)` order.
@@ -38,6 +38,29 @@ fn to_force(v: &Vector6<f64>) -> Force {
         Vector3::new(v[0], v[1], v[2]),
         Vector3::new(v[3], v[4], v[5]),
     )
+}
+
+/// [`SpatialInertia::to_parent`] with the skew products written as outer products
+/// (`[a]×[b]× = b·aᵀ − (a·b)·1`): two 3×3 products instead of five.
+#[inline]
+fn inertia_to_world(i: &SpatialInertia, x: &Transform) -> SpatialInertia {
+    let m = i.mass_kg;
+    let hr = x.rot * i.first_moment_kg_m;
+    let p = x.pos;
+    let i_rot = x.rot * i.rot_inertia_kg_m2 * x.rot.transpose();
+    // −([h]×[p]× + [p]×[h]×) − m·[p]×[p]× = −(p·hᵀ + h·pᵀ) + 2(h·p)·1 − m·(p·pᵀ − |p|²·1)
+    let hp = hr.dot(&p);
+    let pp = p.dot(&p);
+    let mut rot = i_rot - p * hr.transpose() - hr * p.transpose() - p * p.transpose() * m;
+    let diag = 2.0 * hp + m * pp;
+    rot[(0, 0)] += diag;
+    rot[(1, 1)] += diag;
+    rot[(2, 2)] += diag;
+    SpatialInertia {
+        mass_kg: m,
+        first_moment_kg_m: hr + p * m,
+        rot_inertia_kg_m2: rot,
+    }
 }
 
 /// The 6×6 matrix of a rigid-body inertia (see the module doc).
@@ -84,6 +107,39 @@ impl Robot {
         armature: Option<&[f64]>,
         qdd: &mut [f64],
     ) -> Result<(), DynamicsError> {
+        self.aba_core(ws, q, None, qd, tau, armature, qdd)
+    }
+
+    /// [`Robot::aba_with_armature`] for an integrator that tracks the sine and cosine of its joint
+    /// angles: `sin_cos_q[j]` = (sin q_j, cos q_j) places the revolute joints (no `sin_cos` per
+    /// joint and call); prismatic joints still read `q`. The caller keeps the pairs consistent with `q`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn aba_with_armature_sin_cos(
+        &self,
+        ws: &mut Workspace,
+        q: &[f64],
+        sin_cos_q: &[(f64, f64)],
+        qd: &[f64],
+        tau: &[f64],
+        armature: Option<&[f64]>,
+        qdd: &mut [f64],
+    ) -> Result<(), DynamicsError> {
+        check_len("sin_cos_q", self.dof(), sin_cos_q.len())?;
+        self.aba_core(ws, q, Some(sin_cos_q), qd, tau, armature, qdd)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn aba_core(
+        &self,
+        ws: &mut Workspace,
+        q: &[f64],
+        sin_cos_q: Option<&[(f64, f64)]>,
+        qd: &[f64],
+        tau: &[f64],
+        armature: Option<&[f64]>,
+        qdd: &mut [f64],
+    ) -> Result<(), DynamicsError> {
         let n = self.dof();
         check_len("q", n, q.len())?;
         check_len("qd", n, qd.len())?;
@@ -101,11 +157,15 @@ impl Robot {
         ws.x[0] = Transform::identity();
         for (j, jt) in self.joints.iter().enumerate() {
             let b = j + 1;
-            let x = ws.x[jt.parent_body].compose(&jt.placement(q[j]));
+            let xj = match (sin_cos_q, jt.kind) {
+                (Some(sc), JointKind::Revolute) => jt.placement_sin_cos(sc[j].0, sc[j].1),
+                _ => jt.placement(q[j]),
+            };
+            let x = ws.x[jt.parent_body].compose(&xj);
             let s = x.motion_to_parent(&self.joint_motion(j));
             let vj = Motion::new(s.ang * qd[j], s.lin * qd[j]);
             let v = ws.v[jt.parent_body] + vj;
-            let inertia = jt.inertia.to_parent(&x);
+            let inertia = inertia_to_world(&jt.inertia, &x);
             ws.a[b] = v.cross_motion(&vj);
             ws.f[b] = v.cross_force(&inertia.apply(&v));
             ws.ia[b] = inertia6(&inertia);
@@ -138,7 +198,14 @@ impl Robot {
                 continue;
             }
             let inv_d = 1.0 / d;
-            let ia_a = ia - u6 * (u6.transpose() * inv_d);
+            // I^a = I^A − U·Uᵀ/D, written out (a fixed-size outer product through gemm is slower)
+            let mut ia_a = ia;
+            for c in 0..6 {
+                let w = u6[c] * inv_d;
+                for r in 0..6 {
+                    ia_a[(r, c)] -= u6[r] * w;
+                }
+            }
             let pa = f6 + ia_a * motion6(&ws.a[b]) + u6 * (u * inv_d);
             ws.ia[p] += ia_a;
             ws.f[p] += to_force(&pa);
@@ -285,6 +352,50 @@ mod tests {
                 assert!((g - w).abs() <= 1e-9 * scale, "{g} vs {w}");
             }
         }
+    }
+
+    #[test]
+    fn inertia_to_world_is_to_parent() {
+        let robot = crate::virtual_leg().unwrap();
+        let q: Vec<f64> = (0..robot.dof()).map(|j| 0.3 * j as f64 - 1.0).collect();
+        let x = robot.body_placements(&q).unwrap();
+        for (j, jt) in robot.joints.iter().enumerate() {
+            let a = jt.inertia.to_parent(&x[j + 1]);
+            let b = inertia_to_world(&jt.inertia, &x[j + 1]);
+            assert!((a.rot_inertia_kg_m2 - b.rot_inertia_kg_m2).norm() < 1e-12);
+            assert!((a.first_moment_kg_m - b.first_moment_kg_m).norm() < 1e-14);
+        }
+    }
+
+    #[test]
+    fn aba_with_sin_cos_equals_aba() {
+        let robot = crate::virtual_leg().unwrap();
+        let n = robot.dof();
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let mut ws = Workspace::new(&robot);
+        let q: Vec<f64> = (0..n).map(|_| rng.random_range(-1.5..1.5)).collect();
+        let qd: Vec<f64> = (0..n).map(|_| rng.random_range(-2.0..2.0)).collect();
+        let tau: Vec<f64> = (0..n).map(|_| rng.random_range(-20.0..20.0)).collect();
+        let sc: Vec<(f64, f64)> = q.iter().map(|x| x.sin_cos()).collect();
+        let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
+        robot.aba(&mut ws, &q, &qd, &tau, &mut a).unwrap();
+        robot
+            .aba_with_armature_sin_cos(&mut ws, &q, &sc, &qd, &tau, None, &mut b)
+            .unwrap();
+        assert_eq!(a, b);
+        let err = robot
+            .aba_with_armature_sin_cos(&mut ws, &q, &sc[1..], &qd, &tau, None, &mut b)
+            .unwrap_err();
+        assert!(
+            matches!(
+                err,
+                DynamicsError::Dimension {
+                    what: "sin_cos_q",
+                    ..
+                }
+            ),
+            "{err}"
+        );
     }
 
     #[test]

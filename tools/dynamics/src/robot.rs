@@ -16,7 +16,7 @@ use std::path::Path;
 use nalgebra::{Matrix3, Vector3};
 
 use super::error::DynamicsError;
-use super::spatial::{SpatialInertia, Transform, axis_angle};
+use super::spatial::{SpatialInertia, Transform, axis_angle, axis_angle_sin_cos};
 
 /// Kind of a movable joint.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -51,6 +51,16 @@ pub struct Joint {
 }
 
 impl Joint {
+    /// Placement of a revolute joint's body in its parent body from (sin q, cos q) (what
+    /// [`Joint::placement`] computes with `q.sin_cos()`; for a prismatic joint use `placement`).
+    #[inline]
+    pub fn placement_sin_cos(&self, sin_q: f64, cos_q: f64) -> Transform {
+        Transform {
+            rot: self.tree.rot * axis_angle_sin_cos(&self.axis, sin_q, cos_q),
+            pos: self.tree.pos,
+        }
+    }
+
     /// Placement of the moved body in its parent body at joint position `q` [rad or m].
     #[inline]
     pub fn placement(&self, q: f64) -> Transform {

@@ -30,6 +30,12 @@ pub fn rpy_to_matrix(rpy: [f64; 3]) -> Matrix3<f64> {
 #[inline]
 pub fn axis_angle(axis: &Vector3<f64>, angle_rad: f64) -> Matrix3<f64> {
     let (s, c) = angle_rad.sin_cos();
+    axis_angle_sin_cos(axis, s, c)
+}
+
+/// [`axis_angle`] from the sine `s` and cosine `c` of the angle.
+#[inline]
+pub fn axis_angle_sin_cos(axis: &Vector3<f64>, s: f64, c: f64) -> Matrix3<f64> {
     let t = 1.0 - c;
     let (x, y, z) = (axis.x, axis.y, axis.z);
     Matrix3::new(

@@ -566,6 +566,8 @@ pub struct LegPlant {
     tau: Vec<f64>,
     tau_ext: Vec<f64>,
     qdd: Vec<f64>,
+    /// (sin q, cos q) per joint, robot order, from the drives' rotated pairs.
+    sin_cos: Vec<(f64, f64)>,
     armature: Vec<f64>,
     samples: u64,
     friction: bool,
@@ -623,6 +625,7 @@ impl LegPlant {
             tau: vec![0.0; n],
             tau_ext: vec![0.0; n],
             qdd: vec![0.0; n],
+            sin_cos: vec![(0.0, 1.0); n],
             armature,
             samples: 0,
             friction: true,
@@ -772,10 +775,18 @@ impl LegPlant {
             if last {
                 self.q_last.copy_from_slice(&self.q);
             }
-            if let Err(source) =
-                self.robot
-                    .aba(&mut self.ws, &self.q, &self.qd, &self.tau, &mut self.qdd)
-            {
+            for (sc, d) in self.sin_cos.iter_mut().zip(&self.drives) {
+                *sc = (d.sin_s, d.cos_s);
+            }
+            if let Err(source) = self.robot.aba_with_armature_sin_cos(
+                &mut self.ws,
+                &self.q,
+                &self.sin_cos,
+                &self.qd,
+                &self.tau,
+                None,
+                &mut self.qdd,
+            ) {
                 return Err(self.dyn_err(source));
             }
             for (j, d) in self.drives.iter_mut().enumerate() {
