@@ -826,7 +826,9 @@ fn outputs_over_a_device_a_fifo_or_a_symlink_are_refused_and_left_untouched() {
         env!("CARGO_MANIFEST_DIR"),
         "/../../config/models/stress32_paper_f16_r-160.fwt"
     );
-    let commands: [(&str, &dyn Fn(&str) -> Vec<String>); 5] = [
+    // (command, its arguments writing to the given output path)
+    type ArgsFor<'a> = &'a dyn Fn(&str) -> Vec<String>;
+    let commands: [(&str, ArgsFor); 5] = [
         ("convert", &|o| {
             ["convert", model, "-o", o, "--dtype", "f16"]
                 .map(String::from)
