@@ -217,10 +217,6 @@ pub(crate) struct RunBuilder {
 }
 
 impl RunBuilder {
-    pub(crate) fn new(map: RoleMap, source: &str, format: &str) -> Self {
-        Self::with_joints(map, vec![String::new()], None, source, format)
-    }
-
     /// A builder for labelled `joints` (at least one) with the same roles, and a whole-body state.
     pub(crate) fn with_joints(
         map: RoleMap,
@@ -384,8 +380,10 @@ impl RunBuilder {
             };
             for k in 0..layout.names.len() {
                 st.q.push(cols.next().unwrap_or_default());
-                st.qdot.push(layout.qdot[k].then(|| cols.next().unwrap_or_default()));
-                st.qddot.push(layout.qddot[k].then(|| cols.next().unwrap_or_default()));
+                st.qdot
+                    .push(layout.qdot[k].then(|| cols.next().unwrap_or_default()));
+                st.qddot
+                    .push(layout.qddot[k].then(|| cols.next().unwrap_or_default()));
             }
             if layout.base_quat {
                 st.base_quat_xyzw = Some(std::array::from_fn(|_| cols.next().unwrap_or_default()));

@@ -83,7 +83,11 @@ pub struct CommonArgs {
     pub urdf_joint: Option<String>,
     /// Position of a URDF joint held fixed [rad] (repeatable); wins over the log's value. Joints
     /// neither logged nor given are held at 0 (warned).
-    #[arg(long = "fixed-joint", value_name = "NAME=RAD", allow_hyphen_values = true)]
+    #[arg(
+        long = "fixed-joint",
+        value_name = "NAME=RAD",
+        allow_hyphen_values = true
+    )]
     pub fixed_joints: Vec<String>,
     /// Resampling, filter, smoother and sample-limit settings.
     #[command(flatten)]
@@ -205,10 +209,7 @@ fn read_all(
 
 /// The whole-body model when the current label may be asked for (`label` is `current`, or not
 /// given and `default_current`), else `None`.
-fn whole_body_for(
-    common: &CommonArgs,
-    default_current: bool,
-) -> anyhow::Result<Option<WholeBody>> {
+fn whole_body_for(common: &CommonArgs, default_current: bool) -> anyhow::Result<Option<WholeBody>> {
     let current = match common.label {
         Some(l) => l == LabelArg::Current,
         None => default_current,
@@ -239,10 +240,7 @@ pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
     let body = match &args.positions {
         Some(_) => {
             let reads = |r: Role| spec.columns.iter().any(|c| c.0 == r);
-            whole_body_for(
-                &args.common,
-                !reads(Role::TauF) && !reads(Role::TauJoint),
-            )?
+            whole_body_for(&args.common, !reads(Role::TauF) && !reads(Role::TauJoint))?
         }
         None => None,
     };
@@ -252,7 +250,10 @@ pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
             Some(t) => {
                 let v: Vec<String> = t.split(',').map(|c| c.trim().to_string()).collect();
                 let q: [String; 4] = v.try_into().map_err(|v: Vec<String>| {
-                    anyhow::anyhow!("--base-quat {t:?}: expected 4 columns X,Y,Z,W, got {}", v.len())
+                    anyhow::anyhow!(
+                        "--base-quat {t:?}: expected 4 columns X,Y,Z,W, got {}",
+                        v.len()
+                    )
                 })?;
                 Some(q)
             }
@@ -459,7 +460,12 @@ fn finish(
     if let Some(b) = &body {
         let log_names: Vec<String> = runs
             .iter()
-            .flat_map(|r| r.state.as_ref().map(|s| s.names.clone()).unwrap_or_default())
+            .flat_map(|r| {
+                r.state
+                    .as_ref()
+                    .map(|s| s.names.clone())
+                    .unwrap_or_default()
+            })
             .collect();
         let base = runs
             .iter()
