@@ -429,7 +429,7 @@ fn preprocess_impl(
     let mut truth_a = Vec::new();
     let mut summary = PreprocessSummary::default();
     let mut offset: Option<f64> = None;
-    let body = match (dynamics, state) {
+    let mut body = match (dynamics, state) {
         (Dynamics::WholeBody(b), Some(st)) => {
             st.check(log.time_s.len())
                 .map_err(|msg| PreprocessError::Sidecar {
@@ -458,7 +458,6 @@ fn preprocess_impl(
         }
         _ => None,
     };
-    let mut body = body;
     let link = match dynamics {
         Dynamics::Link(l) => Some(l),
         _ => None,
@@ -853,11 +852,10 @@ impl<'a> Labeller<'a> {
         if has_i {
             derive("i_filt_a: zero-phase Butterworth of the current");
         }
-        match label.source {
-            L::Current if link.is_none() => derive(
+        if label.source == L::Current && link.is_none() {
+            derive(
                 "tau_id_nm: whole-body RNEA(q, qdot, qddot) on the URDF, every joint of the log smoothed like s",
-            ),
-            _ => {}
+            );
         }
         match label.source {
             L::Current => derive("tau_f_label_nm: r*kt*i_filt - tau_id"),

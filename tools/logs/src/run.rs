@@ -283,7 +283,7 @@ impl RunBuilder {
         let mut ok = true;
         let per_joint = self.map.entries.len() - 1;
         let n_role_values = 1 + per_joint * self.joints.len();
-        for k in 0..self.row.len() {
+        for (k, slot) in self.row.iter_mut().enumerate() {
             let (factor, what): (f64, &str) = if k < n_role_values {
                 let e = if k == 0 {
                     &self.map.entries[0]
@@ -295,8 +295,8 @@ impl RunBuilder {
                 let c = &self.state_cols[k - n_role_values];
                 (c.1, &c.0)
             };
-            let v = self.row[k] * factor;
-            self.row[k] = v;
+            let v = *slot * factor;
+            *slot = v;
             if !v.is_finite() {
                 ok = false;
                 *self.report.non_finite.entry(what.to_string()).or_insert(0) += 1;
