@@ -468,7 +468,10 @@ fn csv_whole_body_label_matches_pinocchio_and_the_single_joint_view_does_not() {
     let (rms, n) = rms_vs(&ds, &ds.tau_id_nm, &tau_ref);
     eprintln!("whole body: knee tau_ID RMS {rms:.4} Nm on {n} samples");
     assert!(n > 10_000, "{n} valid samples");
-    assert!(rms < 0.15, "whole-body knee tau_ID RMS {rms} Nm vs Pinocchio");
+    assert!(
+        rms < 0.15,
+        "whole-body knee tau_ID RMS {rms} Nm vs Pinocchio"
+    );
     let (label_rms, _) = rms_vs(&ds, &ds.tau_f_label_nm, &f_ref);
     eprintln!("whole body: knee label RMS {label_rms:.4} Nm vs the true friction");
     assert!(label_rms < 0.3, "knee label RMS {label_rms}");
@@ -485,13 +488,19 @@ fn csv_whole_body_label_matches_pinocchio_and_the_single_joint_view_does_not() {
         assert!(from_log.contains(j), "{j} not in {from_log:?}");
     }
     let held0 = wb["held_at_zero"].to_string();
-    assert!(held0.contains("neck_pitch") && held0.contains("r_elbow"), "{held0}");
+    assert!(
+        held0.contains("neck_pitch") && held0.contains("r_elbow"),
+        "{held0}"
+    );
     assert!(
         err.contains("held at 0 rad") && err.contains("neck_pitch"),
         "{err}"
     );
     assert!(
-        side["dynamics"].as_str().unwrap().starts_with("whole-body RNEA"),
+        side["dynamics"]
+            .as_str()
+            .unwrap()
+            .starts_with("whole-body RNEA"),
         "{}",
         side["dynamics"]
     );
@@ -529,7 +538,10 @@ fn csv_whole_body_label_matches_pinocchio_and_the_single_joint_view_does_not() {
     );
     // Pinocchio's own single-joint view agrees with ours.
     let (rms_pin, _) = rms_vs(&ds1, &ds1.tau_id_nm, &leg_ref("tau_single_l_knee"));
-    assert!(rms_pin < 0.15, "single-joint view vs Pinocchio's: {rms_pin}");
+    assert!(
+        rms_pin < 0.15,
+        "single-joint view vs Pinocchio's: {rms_pin}"
+    );
 }
 
 #[test]
@@ -576,10 +588,13 @@ fn csv_joints_all_labels_every_leg_joint_in_one_pass() {
     }
     // Held joints have no current column: not labelled, and said so.
     assert!(!d.join("all_torso_pitch.csv").exists());
-    let notes = sidecar(&d.join("all_l_knee.csv"))["settings"]["import"]["runs"][0]["report"]
-        ["notes"]
-        .to_string();
-    assert!(notes.contains("not labelled") && notes.contains("torso_pitch"), "{notes}");
+    let notes =
+        sidecar(&d.join("all_l_knee.csv"))["settings"]["import"]["runs"][0]["report"]["notes"]
+            .to_string();
+    assert!(
+        notes.contains("not labelled") && notes.contains("torso_pitch"),
+        "{notes}"
+    );
 }
 
 #[test]
@@ -611,7 +626,10 @@ fn mcap_whole_body_labels_two_joints_from_every_name() {
         "import mcap",
     );
     let err = String::from_utf8_lossy(&run.stderr);
-    assert!(err.contains("l_foot_dummy"), "a name the URDF lacks is listed: {err}");
+    assert!(
+        err.contains("l_foot_dummy"),
+        "a name the URDF lacks is listed: {err}"
+    );
     for j in ["l_knee", "l_ankle_pitch"] {
         let ds = dataset(&d.join(format!("bag_{j}.csv")));
         let (rms, n) = rms_vs(&ds, &ds.tau_id_nm, &leg_ref(&format!("tau_id_{j}")));
@@ -786,7 +804,10 @@ fn preprocess_reads_the_other_joints_positions_the_same_way() {
         .sum::<f64>()
         / single.len() as f64)
         .sqrt();
-    assert!(rms > 0.1, "hip motion changes the knee's tau_ID by {rms} N·m RMS");
+    assert!(
+        rms > 0.1,
+        "hip motion changes the knee's tau_ID by {rms} N·m RMS"
+    );
     let e = err_text(
         frictl(&[
             "preprocess",

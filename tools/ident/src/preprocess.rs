@@ -420,7 +420,7 @@ fn preprocess_impl(
     let mut truth_a = Vec::new();
     let mut summary = PreprocessSummary::default();
     let mut offset: Option<f64> = None;
-    let body = match (dynamics, state) {
+    let mut body = match (dynamics, state) {
         (Dynamics::WholeBody(b), Some(st)) => {
             st.check(log.time_s.len())
                 .map_err(|msg| PreprocessError::Sidecar {
@@ -433,13 +433,13 @@ fn preprocess_impl(
                 qd: None,
                 qdd: None,
             }];
-            let index = b
-                .robot()
-                .joint_index(&meta.joint)
-                .map_err(|e| PreprocessError::Sidecar {
-                    path: "log sidecar".into(),
-                    msg: e.to_string(),
-                })?;
+            let index =
+                b.robot()
+                    .joint_index(&meta.joint)
+                    .map_err(|e| PreprocessError::Sidecar {
+                        path: "log sidecar".into(),
+                        msg: e.to_string(),
+                    })?;
             Some((
                 b,
                 b.tracks_of(st, &labelled)?,
@@ -449,7 +449,6 @@ fn preprocess_impl(
         }
         _ => None,
     };
-    let mut body = body;
     let link = match dynamics {
         Dynamics::Link(l) => Some(l),
         _ => None,
@@ -844,11 +843,10 @@ impl<'a> Labeller<'a> {
         if has_i {
             derive("i_filt_a: zero-phase Butterworth of the current");
         }
-        match label.source {
-            L::Current if link.is_none() => derive(
+        if label.source == L::Current && link.is_none() {
+            derive(
                 "tau_id_nm: whole-body RNEA(q, qdot, qddot) on the URDF, every joint of the log smoothed like s",
-            ),
-            _ => {}
+            );
         }
         match label.source {
             L::Current => derive("tau_f_label_nm: r*kt*i_filt - tau_id"),
@@ -1032,7 +1030,9 @@ impl<'a> Labeller<'a> {
         self.sum
             .delta_theta_offsets_motor_rad
             .push(self.offset.take().unwrap_or(f64::NAN));
-        self.sum.run_chunks.push(std::mem::take(&mut self.run_chunks));
+        self.sum
+            .run_chunks
+            .push(std::mem::take(&mut self.run_chunks));
     }
 
     fn finish(mut self) -> Result<(Dataset, SignalsSummary), PreprocessError> {
@@ -1120,7 +1120,8 @@ pub fn preprocess_joints(
     if link.is_some() && joints.len() > 1 {
         return Err(PreprocessError::Sidecar {
             path: "imported signals".into(),
-            msg: "the single-joint view labels one joint; several joints need the whole body".into(),
+            msg: "the single-joint view labels one joint; several joints need the whole body"
+                .into(),
         });
     }
     let has_id = !matches!(dynamics, Dynamics::None);
@@ -1216,17 +1217,9 @@ pub fn preprocess_joints(
             let n = ((t[t.len() - 1] - t[0]) / dt + 1e-9).floor() as usize + 1;
             let tq: Vec<f64> = (0..n).map(|k| t[0] + k as f64 * dt).collect();
             let taus = match (body, &tracks, ws.as_mut()) {
-                (Some(bd), Some(tr), Some(ws)) if !wanted.is_empty() => Some(bd.chunk_tau(
-                    ws,
-                    tr,
-                    &lead.time_s,
-                    a,
-                    b,
-                    &tq,
-                    &cfg.kalman,
-                    dt,
-                    &wanted,
-                )?),
+                (Some(bd), Some(tr), Some(ws)) if !wanted.is_empty() => {
+                    Some(bd.chunk_tau(ws, tr, &lead.time_s, a, b, &tq, &cfg.kalman, dt, &wanted)?)
+                }
                 _ => None,
             };
             let mut w = 0;
@@ -1394,7 +1387,13 @@ mod tests {
         let s: Vec<f64> = t.iter().map(|t| -0.8 + 0.3 * (w * t).sin()).collect();
         let hip: Vec<f64> = t
             .iter()
-            .map(|t| if hip_moves { 0.3 * (2.0 * w * t).sin() } else { 0.0 })
+            .map(|t| {
+                if hip_moves {
+                    0.3 * (2.0 * w * t).sin()
+                } else {
+                    0.0
+                }
+            })
             .collect();
         let run = RunSignals {
             chunk: vec![0; n],
@@ -1404,7 +1403,11 @@ mod tests {
             ..RunSignals::default()
         };
         let mut st = JointStates::with_names(
-            vec!["l_knee".into(), "l_hip_pitch".into(), "no_such_joint".into()],
+            vec![
+                "l_knee".into(),
+                "l_hip_pitch".into(),
+                "no_such_joint".into(),
+            ],
             &[],
             &[],
             n,
@@ -1417,8 +1420,11 @@ mod tests {
     fn whole_body_equals_the_single_joint_view_when_the_others_are_still() {
         use frictionless_sim::params::LinkModel;
         let (run, st) = knee_run(4.0, false);
-        let held: std::collections::BTreeMap<String, f64> =
-            [("torso_pitch".to_string(), 0.2), ("r_knee".to_string(), -0.4)].into();
+        let held: std::collections::BTreeMap<String, f64> = [
+            ("torso_pitch".to_string(), 0.2),
+            ("r_knee".to_string(), -0.4),
+        ]
+        .into();
         let label = SignalsLabel {
             source: frictionless_dataset::LabelSource::Current,
             gear_ratio_signed: Some(100.0),
@@ -1431,9 +1437,13 @@ mod tests {
             other_joints_rad: held.clone(),
         })
         .unwrap();
-        let (single, _) =
-            preprocess_signals(std::slice::from_ref(&run), &label, Some(link.as_ref()), &cfg)
-                .unwrap();
+        let (single, _) = preprocess_signals(
+            std::slice::from_ref(&run),
+            &label,
+            Some(link.as_ref()),
+            &cfg,
+        )
+        .unwrap();
         let body = WholeBody::new(frictionless_dynamics::virtual_leg().unwrap(), held).unwrap();
         let joints = [JointLabel {
             joint: "l_knee".into(),
@@ -1456,7 +1466,11 @@ mod tests {
                 single.tau_id_nm[k]
             );
         }
-        assert!(sum.derivations.iter().any(|d| d.contains("whole-body RNEA")));
+        assert!(
+            sum.derivations
+                .iter()
+                .any(|d| d.contains("whole-body RNEA"))
+        );
         // The plan names where each joint comes from.
         let plan = body.plan(&st.names, &["l_knee".to_string()], false);
         assert!(plan.from_log.contains(&"l_hip_pitch".to_string()));
@@ -1477,15 +1491,22 @@ mod tests {
             .map(|k| (moving.tau_id_nm[k] - single.tau_id_nm[k]).powi(2))
             .sum::<f64>()
             / moving.len() as f64;
-        assert!(d2.sqrt() > 0.1, "hip motion changes the knee's tau_ID: {}", d2.sqrt());
+        assert!(
+            d2.sqrt() > 0.1,
+            "hip motion changes the knee's tau_ID: {}",
+            d2.sqrt()
+        );
     }
 
     #[test]
     fn a_state_on_another_clock_is_an_error_naming_the_joint() {
         let (run, mut st) = knee_run(1.0, true);
         st.q[1].truncate(500);
-        let body = WholeBody::new(frictionless_dynamics::virtual_leg().unwrap(), Default::default())
-            .unwrap();
+        let body = WholeBody::new(
+            frictionless_dynamics::virtual_leg().unwrap(),
+            Default::default(),
+        )
+        .unwrap();
         let joints = [JointLabel {
             joint: "l_knee".into(),
             label: SignalsLabel {
@@ -1515,5 +1536,4 @@ mod tests {
         .to_string();
         assert!(e.contains("elbow"), "{e}");
     }
-
 }

@@ -43,7 +43,9 @@ impl JointStates {
         let v = |has: bool| has.then(|| Vec::with_capacity(capacity));
         Self {
             q: (0..n).map(|_| Vec::with_capacity(capacity)).collect(),
-            qdot: (0..n).map(|k| v(qdot.get(k).copied().unwrap_or(false))).collect(),
+            qdot: (0..n)
+                .map(|k| v(qdot.get(k).copied().unwrap_or(false)))
+                .collect(),
             qddot: (0..n)
                 .map(|k| v(qddot.get(k).copied().unwrap_or(false)))
                 .collect(),
@@ -292,7 +294,9 @@ impl WholeBody {
             };
             grid.push((tr.index, q, qd, qdd));
         }
-        let base = tracks.base.map(|b| [li(&b[0]), li(&b[1]), li(&b[2]), li(&b[3])]);
+        let base = tracks
+            .base
+            .map(|b| [li(&b[0]), li(&b[1]), li(&b[2]), li(&b[3])]);
         let dof = self.robot.dof();
         let mut q = self.q_held.clone();
         let (mut qd, mut qdd, mut tau) = (vec![0.0; dof], vec![0.0; dof], vec![0.0; dof]);

@@ -42,7 +42,8 @@ pub struct CsvState {
     pub velocities: Option<String>,
     /// Acceleration column template.
     pub accelerations: Option<String>,
-    /// The joint names to look for (the URDF's movable joints).
+    /// The joint names to look for (the URDF's movable joints); columns that fit the template for
+    /// other names are read too (the pipeline lists them as not in the URDF).
     pub joints: Vec<String>,
     /// Columns of the root link's orientation quaternion `[x, y, z, w]` (absent: fixed base).
     pub base_quat: Option<[String; 4]>,
@@ -230,7 +231,12 @@ fn state_columns(
         msg: format!(
             "{flag} {t:?} matches no column for any of the {} URDF joints ({}); the header has: {}",
             st.joints.len(),
-            st.joints.iter().take(8).cloned().collect::<Vec<_>>().join(", ")
+            st.joints
+                .iter()
+                .take(8)
+                .cloned()
+                .collect::<Vec<_>>()
+                .join(", ")
                 + if st.joints.len() > 8 { ", …" } else { "" },
             header.join(", ")
         ),
@@ -246,10 +252,15 @@ fn state_columns(
     if names.is_empty() {
         return Err(no_match("--positions", &st.positions));
     }
+    // Columns that fit the template for a name the URDF lacks: kept, and listed.
     let unknown: Vec<&str> = template_matches(&st.positions, header)
         .into_iter()
-        .map(|(j, _)| j)
-        .filter(|j| !st.joints.iter().any(|n| n == j))
+        .filter(|(j, _)| !st.joints.iter().any(|n| n == j))
+        .map(|(j, k)| {
+            names.push(j.to_string());
+            q_idx.push(k);
+            j
+        })
         .collect();
     if !unknown.is_empty() {
         notes.push(format!(
@@ -280,17 +291,14 @@ fn state_columns(
     }
     if let Some(cols) = &st.base_quat {
         for c in cols {
-            idx.push(
-                header
-                    .iter()
-                    .position(|h| h == c)
-                    .ok_or_else(|| LogsError::MissingColumn {
-                        path: p.to_string(),
-                        column: c.clone(),
-                        role: Role::S,
-                        header: header.join(", "),
-                    })?,
-            );
+            idx.push(header.iter().position(|h| h == c).ok_or_else(|| {
+                LogsError::MissingColumn {
+                    path: p.to_string(),
+                    column: c.clone(),
+                    role: Role::S,
+                    header: header.join(", "),
+                }
+            })?);
         }
     }
     notes.push(format!(
@@ -377,9 +385,15 @@ pub fn read(path: &Path, spec: &CsvSpec, progress: Progress) -> Result<ImportedR
         };
         // Every state joint with every mapped column.
         let mut lacking = Vec::new();
+        let urdf = spec
+            .state
+            .as_ref()
+            .map(|st| st.joints.as_slice())
+            .unwrap_or_default();
         let v: Vec<String> = layout
             .names
             .iter()
+            .filter(|j| urdf.contains(j))
             .filter(|j| {
                 let ok = spec
                     .columns

@@ -32,8 +32,8 @@ pub struct MatSpec {
     pub joints: Vec<String>,
     /// Label every joint of the whole-body state instead (needs `state_joints`).
     pub all_joints: bool,
-    /// Read the whole-body state: every joint of `joints_state/positions` whose name is in this
-    /// list (the URDF's joints); the others are listed in the report.
+    /// Read the whole-body state: every joint of `joints_state/positions`; the names not in this
+    /// list (the URDF's joints) are listed in the report.
     pub state_joints: Option<Vec<String>>,
     /// Roles to negate.
     pub negate: Vec<Role>,
@@ -293,14 +293,14 @@ pub fn read(path: &Path, spec: &MatSpec, progress: Progress) -> Result<ImportedR
                     let mut st_names = Vec::new();
                     let mut st_cols = Vec::new();
                     let mut unknown = Vec::new();
+                    // Every joint is kept (the pipeline lists the URDF's missing ones).
                     for (k, nm) in names.iter().enumerate() {
-                        if urdf.contains(nm) {
-                            if !st_names.contains(nm) {
-                                st_names.push(nm.clone());
-                                st_cols.push(k);
-                            }
-                        } else {
+                        if !urdf.contains(nm) {
                             unknown.push(nm.as_str());
+                        }
+                        if !st_names.contains(nm) {
+                            st_names.push(nm.clone());
+                            st_cols.push(k);
                         }
                     }
                     notes.push(format!(

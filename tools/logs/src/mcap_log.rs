@@ -33,8 +33,9 @@ pub struct McapSpec {
     pub joints: Vec<String>,
     /// Label every joint of the whole-body state instead of `joints` (needs `state_joints`).
     pub all_joints: bool,
-    /// Read the whole-body state: every name of the first message's `name` array that is in this
-    /// list (the URDF's joints), with `position` and, when every message has it, `velocity`.
+    /// Read the whole-body state: every name of the first message's `name` array, with `position`
+    /// and, when every message has it, `velocity`; the names not in this list (the URDF's joints)
+    /// are listed in the report.
     pub state_joints: Option<Vec<String>>,
     /// Role of the `effort` field (`None`: ignore it); one of [`EFFORT_ROLES`] ([`read`] refuses
     /// another).
@@ -428,13 +429,13 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
                 let b = builder.get_or_insert_with(|| {
                     {
                         let layout = spec.state_joints.as_ref().map(|urdf| {
+                            // Every name is kept (the pipeline lists the URDF's missing ones).
                             for n in &js.name {
-                                if urdf.contains(n) {
-                                    if !state_names.contains(n) {
-                                        state_names.push(n.clone());
-                                    }
-                                } else if !not_in_urdf.contains(n) {
+                                if !urdf.contains(n) && !not_in_urdf.contains(n) {
                                     not_in_urdf.push(n.clone());
+                                }
+                                if !state_names.contains(n) {
+                                    state_names.push(n.clone());
                                 }
                             }
                             let mut l = crate::StateLayout::positions(state_names.clone());
@@ -445,7 +446,11 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
                             l
                         });
                         if spec.all_joints {
-                            joints = state_names.clone();
+                            joints = state_names
+                                .iter()
+                                .filter(|n| !not_in_urdf.contains(n))
+                                .cloned()
+                                .collect();
                         }
                         let mut nb = RunBuilder::with_joints(
                             map.clone(),
@@ -529,7 +534,11 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
                     };
                     vals.push(at(&js.position));
                     if state_vel {
-                        vals.push(if js.velocity.is_empty() { 0.0 } else { at(&js.velocity) });
+                        vals.push(if js.velocity.is_empty() {
+                            0.0
+                        } else {
+                            at(&js.velocity)
+                        });
                     }
                 }
                 let row = b.row_mut();

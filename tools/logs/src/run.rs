@@ -217,10 +217,6 @@ pub(crate) struct RunBuilder {
 }
 
 impl RunBuilder {
-    pub(crate) fn new(map: RoleMap, source: &str, format: &str) -> Self {
-        Self::with_joints(map, vec![String::new()], None, source, format)
-    }
-
     /// A builder for labelled `joints` (at least one) with the same roles, and a whole-body state.
     pub(crate) fn with_joints(
         map: RoleMap,
@@ -287,7 +283,7 @@ impl RunBuilder {
         let mut ok = true;
         let per_joint = self.map.entries.len() - 1;
         let n_role_values = 1 + per_joint * self.joints.len();
-        for k in 0..self.row.len() {
+        for (k, slot) in self.row.iter_mut().enumerate() {
             let (factor, what): (f64, &str) = if k < n_role_values {
                 let e = if k == 0 {
                     &self.map.entries[0]
@@ -299,8 +295,8 @@ impl RunBuilder {
                 let c = &self.state_cols[k - n_role_values];
                 (c.1, &c.0)
             };
-            let v = self.row[k] * factor;
-            self.row[k] = v;
+            let v = *slot * factor;
+            *slot = v;
             if !v.is_finite() {
                 ok = false;
                 *self.report.non_finite.entry(what.to_string()).or_insert(0) += 1;
@@ -384,8 +380,10 @@ impl RunBuilder {
             };
             for k in 0..layout.names.len() {
                 st.q.push(cols.next().unwrap_or_default());
-                st.qdot.push(layout.qdot[k].then(|| cols.next().unwrap_or_default()));
-                st.qddot.push(layout.qddot[k].then(|| cols.next().unwrap_or_default()));
+                st.qdot
+                    .push(layout.qdot[k].then(|| cols.next().unwrap_or_default()));
+                st.qddot
+                    .push(layout.qddot[k].then(|| cols.next().unwrap_or_default()));
             }
             if layout.base_quat {
                 st.base_quat_xyzw = Some(std::array::from_fn(|_| cols.next().unwrap_or_default()));

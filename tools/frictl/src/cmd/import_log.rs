@@ -83,7 +83,11 @@ pub struct CommonArgs {
     pub urdf_joint: Option<String>,
     /// Position of a URDF joint held fixed [rad] (repeatable); wins over the log's value. Joints
     /// neither logged nor given are held at 0 (warned).
-    #[arg(long = "fixed-joint", value_name = "NAME=RAD", allow_hyphen_values = true)]
+    #[arg(
+        long = "fixed-joint",
+        value_name = "NAME=RAD",
+        allow_hyphen_values = true
+    )]
     pub fixed_joints: Vec<String>,
     /// Resampling, filter, smoother and sample-limit settings.
     #[command(flatten)]
@@ -205,10 +209,7 @@ fn read_all(
 
 /// The whole-body model when the current label may be asked for (`label` is `current`, or not
 /// given and `default_current`), else `None`.
-fn whole_body_for(
-    common: &CommonArgs,
-    default_current: bool,
-) -> anyhow::Result<Option<WholeBody>> {
+fn whole_body_for(common: &CommonArgs, default_current: bool) -> anyhow::Result<Option<WholeBody>> {
     let current = match common.label {
         Some(l) => l == LabelArg::Current,
         None => default_current,
@@ -239,10 +240,7 @@ pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
     let body = match &args.positions {
         Some(_) => {
             let reads = |r: Role| spec.columns.iter().any(|c| c.0 == r);
-            whole_body_for(
-                &args.common,
-                !reads(Role::TauF) && !reads(Role::TauJoint),
-            )?
+            whole_body_for(&args.common, !reads(Role::TauF) && !reads(Role::TauJoint))?
         }
         None => None,
     };
@@ -252,7 +250,10 @@ pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
             Some(t) => {
                 let v: Vec<String> = t.split(',').map(|c| c.trim().to_string()).collect();
                 let q: [String; 4] = v.try_into().map_err(|v: Vec<String>| {
-                    anyhow::anyhow!("--base-quat {t:?}: expected 4 columns X,Y,Z,W, got {}", v.len())
+                    anyhow::anyhow!(
+                        "--base-quat {t:?}: expected 4 columns X,Y,Z,W, got {}",
+                        v.len()
+                    )
                 })?;
                 Some(q)
             }
@@ -342,6 +343,10 @@ pub fn run_mat(args: MatArgs) -> anyhow::Result<()> {
     )
 }
 
+/// Most joints labelled in one pass: their datasets are held in memory until written (about 150
+/// bytes per joint and grid sample).
+const JOINTS_PER_PASS: usize = 4;
+
 /// `{joint}` in the output path, replaced for one joint.
 const JOINT: &str = "{joint}";
 
@@ -381,7 +386,7 @@ fn per_joint(values: &[String], joint: &str, flag: &str) -> anyhow::Result<Optio
 }
 
 fn finish(
-    mut runs: Vec<ImportedRun>,
+    runs: Vec<ImportedRun>,
     files: &[PathBuf],
     format: &str,
     default_gap_s: f64,
@@ -459,7 +464,12 @@ fn finish(
     if let Some(b) = &body {
         let log_names: Vec<String> = runs
             .iter()
-            .flat_map(|r| r.state.as_ref().map(|s| s.names.clone()).unwrap_or_default())
+            .flat_map(|r| {
+                r.state
+                    .as_ref()
+                    .map(|s| s.names.clone())
+                    .unwrap_or_default()
+            })
             .collect();
         let base = runs
             .iter()
@@ -523,32 +533,6 @@ fn finish(
         (None, Some(l)) => Dynamics::Link(l.as_ref()),
         (None, None) => Dynamics::None,
     };
-    let results = {
-        let run_joints: Vec<RunJoints<'_>> = runs
-            .iter()
-            .map(|r| RunJoints {
-                signals: r.joint_signals().collect(),
-                state: r.state.as_ref(),
-            })
-            .collect();
-        preprocess_joints(&run_joints, &labels, dyn_).with_context(|| {
-            format!(
-                "labelling {} ({label:?} label needs: {})",
-                files
-                    .iter()
-                    .map(|f| f.display().to_string())
-                    .collect::<Vec<_>>()
-                    .join(", "),
-                required_signals(label).join(", ")
-            )
-        })?
-    };
-    // The signals are no longer needed: memory is the datasets from here on.
-    for r in &mut runs {
-        r.signals = Default::default();
-        r.other_joints.clear();
-        r.state = None;
-    }
     for r in &runs {
         let nf: u64 = r.report.non_finite.values().sum();
         if nf > 0 {
@@ -590,104 +574,134 @@ fn finish(
     let inputs: Vec<&Path> = files.iter().map(PathBuf::as_path).collect();
     let mut empty = Vec::new();
     let mut written: BTreeMap<String, PathBuf> = BTreeMap::new();
-    for (jl, (ds, sum)) in labels.iter().zip(results) {
-        let joint = jl.joint.as_str();
-        let out = out_path(&common.out, joint);
-        let side_path = out.with_extension("json");
-        super::check_outputs(&inputs, &[&out, &side_path])?;
-        let mut joint_warnings = warnings.clone();
-        if label == LabelSource::Given
-            && let Some(w) = frictionless_logs::label_sign_warning(&ds)
-        {
-            joint_warnings.push(w);
-        }
-        let (r, kt) = (jl.label.gear_ratio_signed, jl.label.kt_nm_per_a);
-        let placeholder = |v: Option<f64>| v.unwrap_or(1.0);
-        // The CSV is written to a temporary file now and replaces the old dataset only together
-        // with its sidecar, below (the sidecar last): a stopped import leaves the previous pair or
-        // no sidecar.
-        let mut csv_out = frictionless::output_file::AtomicFile::create(&out)
-            .with_context(|| format!("cannot write {}", out.display()))?;
-        ds.write_csv_to(&mut csv_out, &out)?;
-        let valid = ds.valid.iter().filter(|v| **v).count();
-        let run_infos: Vec<RunInfo> = runs
+    // The datasets are held until written: joints are labelled in passes of at most
+    // JOINTS_PER_PASS (one RNEA per sample and pass), each pass written before the next.
+    let run_joints: Vec<RunJoints<'_>> = runs
+        .iter()
+        .map(|r| RunJoints {
+            signals: r.joint_signals().collect(),
+            state: r.state.as_ref(),
+        })
+        .collect();
+    for (pass, batch) in labels.chunks(JOINTS_PER_PASS).enumerate() {
+        let first = pass * JOINTS_PER_PASS;
+        let subset: Vec<RunJoints<'_>> = run_joints
             .iter()
-            .zip(&sum.run_chunks)
-            .map(|(r, c)| RunInfo {
-                name: r.name.clone(),
-                source: r.report.source.clone(),
-                chunks: c.clone(),
+            .map(|r| RunJoints {
+                signals: r.signals[first..first + batch.len()].to_vec(),
+                state: r.state,
             })
             .collect();
-        let settings = serde_json::json!({
-            "pipeline": jl.cfg,
-            "import": {
-                "format": format,
-                "label": label,
-                "joints_of_this_pass": joints,
-                "gear_ratio_signed": r.map_or("not given (1 written as a placeholder)".to_string(), |r| r.to_string()),
-                "kt_nm_per_a": kt.map_or("not given (1 written as a placeholder)".to_string(), |k| k.to_string()),
-                "derivations": sum.derivations,
-                "whole_body": plan_json,
-                "dropped_single_sample_chunks": sum.dropped_single_sample_chunks,
-                "delta_theta_offsets_motor_rad": sum.delta_theta_offsets_motor_rad.iter().map(|v| if v.is_finite() { serde_json::json!(v) } else { serde_json::Value::Null }).collect::<Vec<_>>(),
-                "runs": reports,
-                "warnings": joint_warnings,
+        let results = preprocess_joints(&subset, batch, dyn_).with_context(|| {
+            format!(
+                "labelling {} ({label:?} label needs: {})",
+                files
+                    .iter()
+                    .map(|f| f.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                required_signals(label).join(", ")
+            )
+        })?;
+        for (jl, (ds, sum)) in batch.iter().zip(results) {
+            let joint = jl.joint.as_str();
+            let out = out_path(&common.out, joint);
+            let side_path = out.with_extension("json");
+            super::check_outputs(&inputs, &[&out, &side_path])?;
+            let mut joint_warnings = warnings.clone();
+            if label == LabelSource::Given
+                && let Some(w) = frictionless_logs::label_sign_warning(&ds)
+            {
+                joint_warnings.push(w);
             }
-        });
-        let side = DatasetSidecar {
-            format: "frictionless-dataset-v1".into(),
-            producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
-            input_log: files
+            let (r, kt) = (jl.label.gear_ratio_signed, jl.label.kt_nm_per_a);
+            let placeholder = |v: Option<f64>| v.unwrap_or(1.0);
+            // The CSV is written to a temporary file now and replaces the old dataset only
+            // together with its sidecar, below (the sidecar last): a stopped import leaves the
+            // previous pair or no sidecar.
+            let mut csv_out = frictionless::output_file::AtomicFile::create(&out)
+                .with_context(|| format!("cannot write {}", out.display()))?;
+            ds.write_csv_to(&mut csv_out, &out)?;
+            let valid = ds.valid.iter().filter(|v| **v).count();
+            let run_infos: Vec<RunInfo> = runs
                 .iter()
-                .map(|f| f.display().to_string())
-                .collect::<Vec<_>>()
-                .join(", "),
-            input_sha256: input_sha256.clone(),
-            joint: joint.to_string(),
-            gear_ratio_signed: placeholder(r),
-            kt_nm_per_a: placeholder(kt),
-            fs_hz: jl.cfg.fs_hz,
-            settings,
-            dynamics: dynamics.clone(),
-            delta_theta_offset_motor_rad: sum
-                .delta_theta_offsets_motor_rad
-                .first()
-                .copied()
-                .filter(|v| v.is_finite())
-                .unwrap_or(0.0),
-            samples: ds.len(),
-            valid_samples: valid,
-            chunks: sum.run_chunks.iter().map(Vec::len).sum(),
-            short_chunks: sum.short_chunks,
-            columns: ds.columns().iter().map(ColumnDocOwned::from).collect(),
-            label,
-            runs: run_infos,
-            absent_columns: sum.absent_columns.iter().map(|s| s.to_string()).collect(),
-        };
-        let mut side_out = frictionless::output_file::AtomicFile::create(&side_path)
-            .with_context(|| format!("cannot write {}", side_path.display()))?;
-        side_out
-            .write_all(serde_json::to_string_pretty(&side)?.as_bytes())
-            .with_context(|| format!("cannot write {}", side_path.display()))?;
-        frictionless::output_file::commit_with_marker(vec![csv_out], side_out).with_context(
-            || format!("cannot write {} and {}", out.display(), side_path.display()),
-        )?;
-        for w in &joint_warnings[warnings.len()..] {
-            eprintln!("warning: {joint}: {w}");
+                .zip(&sum.run_chunks)
+                .map(|(r, c)| RunInfo {
+                    name: r.name.clone(),
+                    source: r.report.source.clone(),
+                    chunks: c.clone(),
+                })
+                .collect();
+            let settings = serde_json::json!({
+                "pipeline": jl.cfg,
+                "import": {
+                    "format": format,
+                    "label": label,
+                    "joints_of_this_pass": joints,
+                    "gear_ratio_signed": r.map_or("not given (1 written as a placeholder)".to_string(), |r| r.to_string()),
+                    "kt_nm_per_a": kt.map_or("not given (1 written as a placeholder)".to_string(), |k| k.to_string()),
+                    "derivations": sum.derivations,
+                    "whole_body": plan_json,
+                    "dropped_single_sample_chunks": sum.dropped_single_sample_chunks,
+                    "delta_theta_offsets_motor_rad": sum.delta_theta_offsets_motor_rad.iter().map(|v| if v.is_finite() { serde_json::json!(v) } else { serde_json::Value::Null }).collect::<Vec<_>>(),
+                    "runs": reports,
+                    "warnings": joint_warnings,
+                }
+            });
+            let side = DatasetSidecar {
+                format: "frictionless-dataset-v1".into(),
+                producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
+                input_log: files
+                    .iter()
+                    .map(|f| f.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                input_sha256: input_sha256.clone(),
+                joint: joint.to_string(),
+                gear_ratio_signed: placeholder(r),
+                kt_nm_per_a: placeholder(kt),
+                fs_hz: jl.cfg.fs_hz,
+                settings,
+                dynamics: dynamics.clone(),
+                delta_theta_offset_motor_rad: sum
+                    .delta_theta_offsets_motor_rad
+                    .first()
+                    .copied()
+                    .filter(|v| v.is_finite())
+                    .unwrap_or(0.0),
+                samples: ds.len(),
+                valid_samples: valid,
+                chunks: sum.run_chunks.iter().map(Vec::len).sum(),
+                short_chunks: sum.short_chunks,
+                columns: ds.columns().iter().map(ColumnDocOwned::from).collect(),
+                label,
+                runs: run_infos,
+                absent_columns: sum.absent_columns.iter().map(|s| s.to_string()).collect(),
+            };
+            let mut side_out = frictionless::output_file::AtomicFile::create(&side_path)
+                .with_context(|| format!("cannot write {}", side_path.display()))?;
+            side_out
+                .write_all(serde_json::to_string_pretty(&side)?.as_bytes())
+                .with_context(|| format!("cannot write {}", side_path.display()))?;
+            frictionless::output_file::commit_with_marker(vec![csv_out], side_out).with_context(
+                || format!("cannot write {} and {}", out.display(), side_path.display()),
+            )?;
+            for w in &joint_warnings[warnings.len()..] {
+                eprintln!("warning: {joint}: {w}");
+            }
+            if ds.is_empty() {
+                empty.push(joint.to_string());
+            }
+            eprintln!(
+                "frictl import {format}: {joint}: {} samples ({valid} valid, {} chunks, {} too short), label {label:?}, absent columns [{}] -> {}",
+                ds.len(),
+                side.chunks,
+                sum.short_chunks,
+                side.absent_columns.join(", "),
+                out.display()
+            );
+            written.insert(joint.to_string(), out);
         }
-        if ds.is_empty() {
-            empty.push(joint.to_string());
-        }
-        eprintln!(
-            "frictl import {format}: {joint}: {} samples ({valid} valid, {} chunks, {} too short), label {label:?}, absent columns [{}] -> {}",
-            ds.len(),
-            side.chunks,
-            sum.short_chunks,
-            side.absent_columns.join(", "),
-            out.display()
-        );
-        written.insert(joint.to_string(), out);
     }
     for w in &warnings {
         eprintln!("warning: {w}");

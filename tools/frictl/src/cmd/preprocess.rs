@@ -275,7 +275,8 @@ fn run_whole_body(
         if let Some(v) = cols.remove(&positions.replace(JOINT, j)) {
             names.push(j.to_string());
             q.push(v);
-            let mut take = |t: &Option<String>| t.as_ref().and_then(|t| cols.remove(&t.replace(JOINT, j)));
+            let mut take =
+                |t: &Option<String>| t.as_ref().and_then(|t| cols.remove(&t.replace(JOINT, j)));
             qd.push(take(&args.velocities));
             qdd.push(take(&args.accelerations));
         }
@@ -319,7 +320,9 @@ fn run_whole_body(
     );
     let mut settings = serde_json::to_value(&cfg)?;
     settings["whole_body"] = serde_json::to_value(&plan)?;
-    write_settings(args, meta, sha, settings, &cfg, dynamics, ds, summary, started)
+    write_settings(
+        args, meta, sha, settings, &cfg, dynamics, ds, summary, started,
+    )
 }
 
 /// Writes the dataset and its sidecar, and prints the summary.
@@ -335,7 +338,9 @@ fn write(
     started: std::time::Instant,
 ) -> anyhow::Result<()> {
     let settings = serde_json::to_value(cfg)?;
-    write_settings(args, meta, sha, settings, cfg, dynamics, ds, summary, started)
+    write_settings(
+        args, meta, sha, settings, cfg, dynamics, ds, summary, started,
+    )
 }
 
 #[allow(clippy::too_many_arguments)]
