@@ -181,6 +181,21 @@ pub fn read(path: &Path, spec: &CsvSpec, progress: Progress) -> Result<ImportedR
                 role,
                 header: header.join(", "),
             })?;
+        let same: Vec<String> = (0..header.len())
+            .filter(|&k| header[k] == *col)
+            .map(|k| (k + 1).to_string())
+            .collect();
+        if same.len() > 1 {
+            return Err(LogsError::Format {
+                path: p,
+                msg: format!(
+                    "column `{col}` (role {role}) is in the header {} times (columns {}): which \
+                     one holds it is ambiguous; rename the others",
+                    same.len(),
+                    same.join(", ")
+                ),
+            });
+        }
         idx.push(j);
     }
     let mut b = RunBuilder::new(map, &p, "csv");

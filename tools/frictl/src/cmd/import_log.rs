@@ -52,19 +52,19 @@ pub struct CommonArgs {
     pub label: Option<LabelArg>,
     /// Signed gear ratio r (motor angle per joint angle) for r·k_t·i and Δθ = r·s − θ; recorded in the
     /// sidecar (1 when not given and not needed, marked as a placeholder).
-    #[arg(long, allow_hyphen_values = true)]
+    #[arg(long, allow_negative_numbers = true)]
     pub gear_ratio: Option<f64>,
     /// Torque constant k_t [Nm/A] for r·k_t·i (1 when not given and not needed, as above).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub kt: Option<f64>,
     /// A time gap larger than this starts a new chunk [s] (default 0.1; `.mat`: gaps of the desired
     /// current stream > 1 s).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub gap_s: Option<f64>,
     /// Flip the sign of a role (sign conventions; repeatable), e.g. `--negate tau_f`.
     #[arg(long = "negate", value_name = "ROLE")]
     pub negate: Vec<String>,
-    /// URDF for τ_ID of the current label (default `virtual_leg`).
+    /// URDF for τ_ID of the current label (required by it: a robot log has no default robot).
     #[arg(long)]
     pub urdf: Option<String>,
     /// The joint's name in the URDF when it differs from the log's (default: the log's joint name).
@@ -184,7 +184,16 @@ pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
     spec.delimiter = args.delimiter as u8;
     check(&args.files, &args.common)?;
     let runs = read_all(&args.files, |p, pr| csv_log::read(p, &spec, pr))?;
-    finish(runs, &args.files, &args.joint, "csv", 0.1, args.common)
+    let units = spec.units.clone();
+    finish(
+        runs,
+        &args.files,
+        &args.joint,
+        "csv",
+        0.1,
+        Some(&units),
+        args.common,
+    )
 }
 
 /// Runs `frictl import mcap`.
@@ -205,7 +214,15 @@ pub fn run_mcap(args: McapArgs) -> anyhow::Result<()> {
     };
     check(&args.files, &args.common)?;
     let runs = read_all(&args.files, |p, pr| mcap_log::read(p, &spec, pr))?;
-    finish(runs, &args.files, &args.joint, "mcap", 0.1, args.common)
+    finish(
+        runs,
+        &args.files,
+        &args.joint,
+        "mcap",
+        0.1,
+        None,
+        args.common,
+    )
 }
 
 /// Runs `frictl import mat`.
@@ -232,7 +249,7 @@ pub fn run_mat(args: MatArgs) -> anyhow::Result<()> {
             .and_then(|r| r.report.sources.get("joint").cloned())
             .unwrap_or_default(),
     };
-    finish(runs, &args.files, &joint, "mat", 1.0, args.common)
+    finish(runs, &args.files, &joint, "mat", 1.0, None, args.common)
 }
 
 /// Runs `frictl import mat` (built without the `mat` feature: explains how to get it).
@@ -247,6 +264,26 @@ pub fn run_mat(args: MatArgs) -> anyhow::Result<()> {
 }
 
 fn check(files: &[PathBuf], common: &CommonArgs) -> anyhow::Result<()> {
+    // Every number is checked, needed or not: each goes into the sidecar.
+    if let Some(r) = common.gear_ratio {
+        anyhow::ensure!(
+            r.is_finite() && r != 0.0,
+            "--gear-ratio {r}: must be finite and non-zero (signed)"
+        );
+    }
+    if let Some(k) = common.kt {
+        anyhow::ensure!(
+            k.is_finite() && k > 0.0,
+            "--kt {k}: must be finite and > 0 [Nm/A] (a current of the other sign convention: \
+             --negate current)"
+        );
+    }
+    if let Some(g) = common.gap_s {
+        anyhow::ensure!(
+            g.is_finite() && g > 0.0,
+            "--gap-s {g}: must be finite and > 0 [s]"
+        );
+    }
     let inputs: Vec<&Path> = files.iter().map(PathBuf::as_path).collect();
     let side = common.out.with_extension("json");
     super::check_outputs(&inputs, &[&common.out, &side])
@@ -258,6 +295,7 @@ fn finish(
     joint: &str,
     format: &str,
     default_gap_s: f64,
+    units: Option<&[(Role, frictionless_logs::Unit)]>,
     common: CommonArgs,
 ) -> anyhow::Result<()> {
     let started = std::time::Instant::now();
@@ -284,13 +322,31 @@ fn finish(
         .filter(|group| !group.split('|').any(has))
         .collect();
     if !lacking.is_empty() {
+        let why: Vec<&str> = runs
+            .iter()
+            .flat_map(|r| &r.report.warnings)
+            .map(String::as_str)
+            .collect();
         bail!(
-            "the {label:?} label needs {} but the log gives none of: {} (pick another --label or map the column)",
+            "the {label:?} label needs {} but the log gives none of: {} (pick another --label or map the column){}",
             required_signals(label).join(", "),
-            lacking.join(", ")
+            lacking.join(", "),
+            if why.is_empty() {
+                String::new()
+            } else {
+                format!("; the reader says: {}", why.join("; "))
+            }
         );
     }
     let (link_model, dynamics) = if label == LabelSource::Current {
+        // The simulator's virtual leg is the default of `frictl preprocess` (the simulator's own
+        // logs) only: a real robot's log labelled with another robot's dynamics would look fine.
+        anyhow::ensure!(
+            common.urdf.is_some(),
+            "the current label needs the robot's link dynamics (τ_ID): pass --urdf ROBOT.urdf (and \
+             --urdf-joint if the joint is named differently there); a robot log is never labelled \
+             with the simulator's virtual leg"
+        );
         let urdf_joint = common.urdf_joint.as_deref().unwrap_or(joint);
         let (m, d) = urdf_link(common.urdf.as_deref(), urdf_joint, &common.fixed_joints)?;
         (Some(m), d)
@@ -311,6 +367,17 @@ fn finish(
         cfg.gap_s = cfg.gap_s.max(1.0);
     }
     common.pipeline.apply(&mut cfg);
+    // Units and rates: what a wrong declaration leaves in the numbers, before any work.
+    let findings = frictionless_logs::plausibility::check(&runs, cfg.gap_s, units);
+    let refused: Vec<&str> = findings
+        .iter()
+        .filter(|f| f.refuse)
+        .map(|f| f.message.as_str())
+        .collect();
+    if !refused.is_empty() {
+        bail!("{}", refused.join("\n"));
+    }
+    let suspicious: Vec<String> = findings.into_iter().map(|f| f.message).collect();
     // Moved out, not copied: memory stays one copy of the joint's signals plus the dataset.
     let signals: Vec<_> = runs
         .iter_mut()
@@ -341,6 +408,12 @@ fn finish(
         warnings.push(w);
     }
     for r in &runs {
+        warnings.extend(
+            r.report
+                .warnings
+                .iter()
+                .map(|w| format!("{}: {w}", r.report.source)),
+        );
         let nf: u64 = r.report.non_finite.values().sum();
         if nf > 0 {
             warnings.push(format!(
@@ -361,6 +434,36 @@ fn finish(
             ));
         }
     }
+    warnings.extend(suspicious.iter().cloned());
+    let valid = ds.valid.iter().filter(|v| **v).count();
+    let empty_runs: Vec<String> = runs
+        .iter()
+        .zip(&sum.run_chunks)
+        .filter(|(_, c)| c.is_empty())
+        .map(|(r, _)| {
+            format!(
+                "run {}: {} of {} rows read, 0 chunks",
+                r.name, r.report.rows_used, r.report.rows_read
+            )
+        })
+        .collect();
+    if valid == 0 || !empty_runs.is_empty() {
+        bail!(
+            "{} valid samples of {}{}{}",
+            valid,
+            ds.len(),
+            if empty_runs.is_empty() {
+                String::new()
+            } else {
+                format!("; nothing of {}", empty_runs.join(", "))
+            },
+            if suspicious.is_empty() {
+                "; check the units and --gap-s".to_string()
+            } else {
+                format!("; likely why: {}", suspicious.join("; "))
+            }
+        );
+    }
     let placeholder = |v: Option<f64>| v.unwrap_or(1.0);
     ds.write_csv(&common.out)?;
     let mut hashes = Vec::new();
@@ -375,7 +478,6 @@ fn finish(
     } else {
         format!("{:x}", sha2::Sha256::digest(hashes.join("\n").as_bytes()))
     };
-    let valid = ds.valid.iter().filter(|v| **v).count();
     let run_infos: Vec<RunInfo> = runs
         .iter()
         .zip(&sum.run_chunks)
