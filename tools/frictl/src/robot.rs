@@ -21,10 +21,13 @@
 //! gear_ratio = -100.0           # signed
 //! kt_nm_per_a = 0.157
 //! max_curr_a = 5.0
+//! features = "delta-theta-joint-vel"  # any of the core's feature sets (default the paper's)
+//! temperature = false           # the motor temperature as one more input
 //! ```
 
 use std::path::{Path, PathBuf};
 
+use frictionless::features::FeatureSet;
 use serde::{Deserialize, Serialize};
 
 /// Why a robot file is refused.
@@ -265,28 +268,8 @@ impl Default for TrainSection {
     }
 }
 
-/// Input feature set (the `--features` names of `frictl train`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum FeatureName {
-    /// Δθ and joint velocity (the paper's).
-    #[default]
-    DeltaThetaJointVel,
-    /// Motor and joint velocity.
-    MotorVelJointVel,
-    /// Joint and motor position.
-    JointPosMotorPos,
-}
-
-impl FeatureName {
-    /// The `frictl train/search --features` value.
-    pub fn cli(self) -> &'static str {
-        match self {
-            Self::DeltaThetaJointVel => "delta-theta-joint-vel",
-            Self::MotorVelJointVel => "motor-vel-joint-vel",
-            Self::JointPosMotorPos => "joint-pos-motor-pos",
-        }
-    }
+fn default_features() -> FeatureSet {
+    FeatureSet::DeltaThetaJointVel
 }
 
 /// frictiond's τ̂_F low-pass of one joint.
@@ -324,9 +307,15 @@ pub struct JointSection {
     pub gear_ratio: f64,
     /// Torque constant k_t [Nm/A] of the labels; checked against the data.
     pub kt_nm_per_a: f64,
-    /// Input feature set.
+    /// Input feature set: any of the core's [`FeatureSet`]s by its name (`frictl train --features`;
+    /// default the paper's `delta-theta-joint-vel`). A joint without a motor encoder (a torque-sensed
+    /// arm) takes `joint-pos-joint-vel` or `joint-vel`.
+    #[serde(default = "default_features")]
+    pub features: FeatureSet,
+    /// Append the motor temperature [°C] as one more input (`frictl train --temperature`; the data
+    /// must have a temperature column).
     #[serde(default)]
-    pub features: FeatureName,
+    pub temperature: bool,
     /// frictiond's current clamp [A].
     pub max_curr_a: f64,
     /// frictiond's friction compensation gain.
@@ -371,14 +360,20 @@ impl JointSection {
     }
 }
 
-/// Reads and checks a robot file; relative paths in it are made relative to its directory.
+/// Reads and checks a robot file; relative paths in it are made absolute, relative to its
+/// directory (the current directory for a bare file name such as `robot.toml`): the stages run in
+/// the output directory, so a path left relative would be looked up there.
 pub fn load(path: &Path) -> Result<RobotFile, RobotError> {
     let text = frictionless::regular_file::read_text(path).map_err(|source| RobotError::Read {
         path: path.to_owned(),
         source,
     })?;
     let mut file = parse(path, &text)?;
-    let base = path.parent().unwrap_or(Path::new(""));
+    let absolute = std::path::absolute(path).map_err(|source| RobotError::Read {
+        path: path.to_owned(),
+        source,
+    })?;
+    let base = absolute.parent().unwrap_or(Path::new("/")).to_owned();
     let rebase = |p: &mut PathBuf| {
         if p.is_relative() {
             *p = base.join(&*p);
@@ -562,7 +557,8 @@ features = "motor-vel-joint-vel"
         assert_eq!(f.search.batch, None);
         assert_eq!(f.joint[0].source(), DataSource::Preset);
         assert_eq!(f.joint[1].source(), DataSource::Datasets);
-        assert_eq!(f.joint[1].features, FeatureName::MotorVelJointVel);
+        assert_eq!(f.joint[1].features, FeatureSet::MotorVelJointVel);
+        assert!(!f.joint[1].temperature);
         assert_eq!(f.joint[0].kfc, 1.0);
         assert_eq!(f.robot.seed, 0);
     }

@@ -321,6 +321,8 @@ fn mat_file_imports_with_the_current_label_and_two_chunks() {
             "-100",
             "--kt",
             "0.11",
+            "--urdf",
+            "virtual_leg",
             "-o",
             s(&ds),
         ]),
@@ -988,5 +990,134 @@ fn a_dataset_cut_at_a_line_boundary_is_refused_with_both_counts() {
             && e.contains(&format!("{} data rows", keep - 1))
             && e.contains(&format!("records {} samples", side.samples)),
         "{e}"
+    );
+}
+
+#[test]
+fn the_current_label_of_a_robot_log_needs_its_urdf() {
+    // `l_knee` is a joint of the simulator's virtual leg too: without --urdf the label was computed
+    // with the wrong robot's dynamics and the import succeeded.
+    let d = dir();
+    let log = d.join("knee_current.csv");
+    let mut text = String::from("t,q,i\n");
+    for k in 0..3000 {
+        let t = k as f64 * 1e-3;
+        text += &format!("{t},{},{}\n", 0.3 * (2.0 * t).sin(), 0.5 * (2.0 * t).cos());
+    }
+    std::fs::write(&log, text).unwrap();
+    let out = d.join("knee_current_ds.csv");
+    let args = [
+        "import",
+        "csv",
+        s(&log),
+        "--joint",
+        "l_knee",
+        "--column",
+        "time=t",
+        "--column",
+        "s=q",
+        "--column",
+        "current=i",
+        "--label",
+        "current",
+        "--gear-ratio",
+        "-100",
+        "--kt",
+        "0.1",
+        "-o",
+        s(&out),
+    ];
+    let e = err_text(frictl(&args), "current label without --urdf");
+    assert!(e.contains("--urdf"), "{e}");
+    assert!(!out.exists(), "nothing written on error");
+    // Named explicitly, the virtual leg is a URDF like any other.
+    let mut with = args.to_vec();
+    with.extend(["--urdf", "virtual_leg"]);
+    ok(frictl(&with), "current label with --urdf");
+    assert!(out.is_file());
+}
+
+/// A 1 kHz log `t,q,qd,f` of `rows` rows, time written as `t·t_scale`.
+fn plain_log(path: &Path, rows: usize, dt: f64, t_scale: f64) {
+    let mut text = String::from("t,q,qd,f\n");
+    for k in 0..rows {
+        let t = k as f64 * dt;
+        text += &format!(
+            "{},{},{},{}\n",
+            t * t_scale,
+            0.3 * (2.0 * t).sin(),
+            0.6 * (2.0 * t).cos(),
+            0.3 * (2.0 * t).cos()
+        );
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+const COLUMNS: [&str; 10] = [
+    "--joint", "wrist", "--column", "time=t", "--column", "s=q", "--column", "sdot=qd", "--column",
+    "tau_f=f",
+];
+
+#[test]
+fn import_numbers_parse_alike_and_are_checked() {
+    let d = dir();
+    let log = d.join("numbers.csv");
+    plain_log(&log, 2000, 1e-3, 1.0);
+    let out = d.join("numbers_ds.csv");
+    let run = |extra: &[&str]| {
+        let mut a = vec!["import", "csv", s(&log), "-o", s(&out)];
+        a.extend(COLUMNS);
+        a.extend(extra);
+        frictl(&a)
+    };
+    // `--kt -0.1` reaches the check (not refused by the parser as an unknown option).
+    let e = err_text(run(&["--kt", "-0.1"]), "--kt -0.1");
+    assert!(e.contains("--kt -0.1: must be finite and > 0"), "{e}");
+    let e = err_text(run(&["--gear-ratio", "nan"]), "--gear-ratio nan");
+    assert!(e.contains("--gear-ratio NaN: must be finite"), "{e}");
+    let e = err_text(
+        run(&["--negate", "tau_f", "--negate", "tau_f"]),
+        "negate twice",
+    );
+    assert!(e.contains("--negate tau_f is given twice"), "{e}");
+    assert!(!out.exists(), "nothing written on error");
+    ok(
+        run(&["--gear-ratio", "-100", "--kt", "0.1"]),
+        "negative gear ratio",
+    );
+}
+
+#[test]
+fn an_import_that_would_be_empty_is_refused_with_the_likely_unit() {
+    let d = dir();
+    let out = d.join("empty_ds.csv");
+    let run = |log: &Path, extra: &[&str]| {
+        let mut a = vec!["import", "csv", s(log), "-o", s(&out)];
+        a.extend(COLUMNS);
+        a.extend(extra);
+        frictl(&a)
+    };
+    // Seconds declared ms: 5 000 rows would collapse into 5 ms.
+    let log = d.join("seconds.csv");
+    plain_log(&log, 5000, 1e-3, 1.0);
+    let e = err_text(run(&log, &["--unit", "time=ms"]), "s declared ms");
+    assert!(e.contains("--unit time=s"), "{e}");
+    // Milliseconds declared s.
+    let log = d.join("millis.csv");
+    plain_log(&log, 5000, 1e-3, 1e3);
+    let e = err_text(run(&log, &[]), "ms declared s");
+    assert!(e.contains("--unit time=ms"), "{e}");
+    // 80 rows 0.2 s apart with --gap-s 0.1: no chunk would be left.
+    let log = d.join("slow.csv");
+    plain_log(&log, 80, 0.2, 1.0);
+    let e = err_text(run(&log, &[]), "slower than --gap-s");
+    assert!(
+        e.contains("longer than --gap-s 0.1") && e.contains("--gap-s 0.600"),
+        "{e}"
+    );
+    assert!(!out.exists(), "nothing written on error");
+    ok(
+        run(&log, &["--gap-s", "0.6"]),
+        "the slow log with a wide gap",
     );
 }

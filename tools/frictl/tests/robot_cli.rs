@@ -244,3 +244,250 @@ fn only_trials_from_two_processes_then_finish_equal_one_search() {
     assert!(String::from_utf8_lossy(&other.stderr).contains("dtype"));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A joint's dataset: `frictl import csv` of a log with time, s, ṡ, a given friction column and the
+/// motor temperature (with `motor`: also the motor position θ = r·s − 0.002·τ_F), 1 kHz, eight 1 s
+/// segments, written as `dir/rel`. Without `motor` it is a torque-sensed joint's (no motor encoder).
+fn torque_sensed_dataset(dir: &Path, rel: &str) {
+    joint_dataset(dir, rel, false)
+}
+
+fn joint_dataset(dir: &Path, rel: &str, motor: bool) {
+    let log = dir.join("log.csv");
+    let mut text = String::from("t,q,qd,friction,temp,theta\n");
+    for k in 0..8000 {
+        // Eight 1 s segments, 0.3 s apart: eight chunks for the train/validation/test split.
+        let t = k as f64 * 1e-3 + 0.3 * (k / 1000) as f64;
+        let (q, v) = (0.4 * (2.0 * t).sin(), 0.8 * (2.0 * t).cos());
+        let f = 0.3 * (50.0 * v).tanh() + 0.2 * v;
+        text += &format!("{t},{q},{v},{f},{},{}\n", 30.0 + t, 100.0 * q - 0.002 * f);
+    }
+    std::fs::write(&log, text).unwrap();
+    let out = dir.join(rel);
+    std::fs::create_dir_all(out.parent().unwrap()).unwrap();
+    let theta: &[&str] = if motor {
+        &["--column", "theta=theta"]
+    } else {
+        &[]
+    };
+    let args: Vec<&str> = [
+        "import",
+        "csv",
+        s(&log),
+        "--joint",
+        "r_wrist",
+        "--column",
+        "time=t",
+        "--column",
+        "s=q",
+        "--column",
+        "sdot=qd",
+        "--column",
+        "tau_f=friction",
+        "--column",
+        "temperature=temp",
+        "--gear-ratio",
+        "100",
+        "--kt",
+        "0.1",
+        "-o",
+        s(&out),
+    ]
+    .iter()
+    .chain(theta)
+    .copied()
+    .collect();
+    ok_in(dir, &args);
+}
+
+/// A one-joint robot file of the dataset `data/ds.csv` (relative) with `extra` lines in the joint.
+fn torque_sensed_robot(dir: &Path, search: &str, extra: &str) {
+    std::fs::write(
+        dir.join("robot.toml"),
+        format!(
+            "{search}\n[[joint]]\nname = \"r_wrist\"\ndatasets = [\"data/ds.csv\"]\ngear_ratio = 100.0\nkt_nm_per_a = 0.1\nmax_curr_a = 3.0\n{extra}\n"
+        ),
+    )
+    .unwrap();
+}
+
+#[test]
+fn a_relative_robot_file_finds_its_relative_datasets() {
+    // The README's form: `frictl robot run robot.toml` in the robot file's directory, datasets
+    // relative to it, a relative --out.
+    let dir = tmp("robot-relative");
+    torque_sensed_dataset(&dir, "data/ds.csv");
+    torque_sensed_robot(&dir, "[search]\ntrials = 0", "");
+    ok_in(
+        &dir,
+        &["robot", "run", "robot.toml", "--out", "o", "--until", "fit"],
+    );
+    assert!(dir.join("o/joints/r_wrist/cv.json").is_file());
+    assert!(dir.join("o/joints/r_wrist/scv.json").is_file());
+    // The plan names the datasets by absolute path (a Ray worker runs elsewhere).
+    let plan: serde_json::Value =
+        serde_json::from_slice(&ok_in(&dir, &["robot", "plan", "robot.toml", "--out", "o"]).stdout)
+            .unwrap();
+    let train = plan["joints"][0]["train"][0].as_str().unwrap();
+    assert_eq!(Path::new(train), dir.join("data/ds.csv"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The PIDs whose parent is `pid` (from `/proc/*/stat`).
+fn children_of(pid: u32) -> Vec<u32> {
+    let mut out = vec![];
+    for e in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Some(child) = e.file_name().to_str().and_then(|n| n.parse::<u32>().ok()) else {
+            continue;
+        };
+        let Ok(stat) = std::fs::read_to_string(e.path().join("stat")) else {
+            continue;
+        };
+        // `pid (comm) state ppid …`: comm may hold spaces, so split after the last ')'.
+        let rest = &stat[stat.rfind(')').map_or(0, |k| k + 1)..];
+        let ppid = rest.split_whitespace().nth(1).and_then(|p| p.parse().ok());
+        if ppid == Some(pid) {
+            out.push(child);
+        }
+    }
+    out
+}
+
+/// Whether `pid` is a live process (not absent, not a zombie).
+fn alive(pid: u32) -> bool {
+    std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|stat| {
+        let rest = &stat[stat.rfind(')').map_or(0, |k| k + 1)..];
+        rest.split_whitespace().next() != Some("Z")
+    })
+}
+
+/// Polls `cond` every 50 ms; panics with `what` after 10 minutes (a hung test, not a timing assert).
+fn wait_for<T>(what: &str, mut cond: impl FnMut() -> Option<T>) -> T {
+    let t0 = std::time::Instant::now();
+    loop {
+        if let Some(v) = cond() {
+            return v;
+        }
+        assert!(t0.elapsed().as_secs() < 600, "gave up waiting for {what}");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
+/// A robot whose search runs for minutes (100 trials × 350 epochs), started in `dir` on `--out o`;
+/// returns it once its `frictl search` child runs, with that child's PID.
+fn long_search(dir: &Path) -> (std::process::Child, u32) {
+    joint_dataset(dir, "data/ds.csv", true);
+    torque_sensed_robot(dir, "[search]\ntrials = 100\nepochs = 350", "");
+    let robot = dir.join("robot.toml");
+    let mut parent = Command::new(env!("CARGO_BIN_EXE_frictl"))
+        .args(["robot", "run", s(&robot), "--out", "o"])
+        .current_dir(dir)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let pid = parent.id();
+    let search = wait_for("the search child", || {
+        if let Some(st) = parent.try_wait().unwrap() {
+            panic!("robot run ended ({st}) before its search started");
+        }
+        children_of(pid).into_iter().find(|c| {
+            std::fs::read(format!("/proc/{c}/cmdline"))
+                .is_ok_and(|cmd| String::from_utf8_lossy(&cmd).contains("search\0"))
+        })
+    });
+    (parent, search)
+}
+
+#[test]
+fn a_second_robot_run_on_one_output_directory_is_refused_naming_the_first() {
+    let dir = tmp("robot-lock");
+    let (mut first, search) = long_search(&dir);
+    let robot = dir.join("robot.toml");
+    let second = frictl_in(
+        &dir,
+        &["robot", "run", s(&robot), "--out", "o", "--until", "fit"],
+    );
+    let err = String::from_utf8_lossy(&second.stderr).into_owned();
+    // Ends the first before asserting (SIGKILL: the lock goes with the process).
+    let _ = first.kill();
+    let _ = first.wait();
+    let _ = nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(search as i32),
+        nix::sys::signal::Signal::SIGKILL,
+    );
+    assert!(
+        !second.status.success(),
+        "the second run was not refused:\n{err}"
+    );
+    assert!(
+        err.contains(&format!("pid {}", first.id())) && err.contains(".robot-run.lock"),
+        "{err}"
+    );
+    // The lock went with the first: a new run on the directory proceeds.
+    ok_in(
+        &dir,
+        &["robot", "run", s(&robot), "--out", "o", "--until", "fit"],
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn sigterm_to_robot_run_ends_and_reaps_its_search_child() {
+    let dir = tmp("robot-sigterm");
+    let (mut parent, search) = long_search(&dir);
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(parent.id() as i32),
+        nix::sys::signal::Signal::SIGTERM,
+    )
+    .unwrap();
+    let status = parent.wait().unwrap();
+    let orphan = alive(search);
+    if orphan {
+        let _ = nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(search as i32),
+            nix::sys::signal::Signal::SIGKILL,
+        );
+    }
+    assert!(!status.success());
+    assert!(!orphan, "the search child {search} outlived robot run");
+    assert!(!dir.join("o/joints/r_wrist/search/best.fwt").exists());
+    assert!(!dir.join("o/joints/r_wrist/stamps/search.sha256").exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_torque_sensed_joint_trains_on_joint_pos_joint_vel_with_temperature() {
+    // No motor encoder: the dataset has s, ṡ and the temperature but no θ or ω.
+    let dir = tmp("robot-torque-sensed");
+    torque_sensed_dataset(&dir, "data/ds.csv");
+    torque_sensed_robot(
+        &dir,
+        "[search]\ntrials = 0\n[train]\nhidden = [8]\nhistory = 4\nepochs = 2\nbatch = 256",
+        "features = \"joint-pos-joint-vel\"\ntemperature = true",
+    );
+    ok_in(&dir, &["robot", "run", "robot.toml", "--out", "o"]);
+    let model = frictionless::weights::read_file(&dir.join("o/joints/r_wrist/pinn.fwt")).unwrap();
+    assert_eq!(
+        model.meta.features.set,
+        frictionless::features::FeatureSet::JointPosJointVel
+    );
+    assert!(model.meta.features.temperature);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("o/report.json")).unwrap()).unwrap();
+    assert_eq!(
+        report["joints"]["r_wrist"]["features"],
+        "joint-pos-joint-vel"
+    );
+    assert_eq!(report["joints"]["r_wrist"]["temperature"], true);
+    // Every feature set of the core is accepted by name (one list: the core's).
+    for set in frictionless::features::FeatureSet::ALL {
+        torque_sensed_robot(&dir, "", &format!("features = \"{set}\""));
+        let plan = ok_in(&dir, &["robot", "plan", "robot.toml"]);
+        assert!(
+            String::from_utf8_lossy(&plan.stdout).contains(&format!("\"{set}\"")),
+            "{set}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

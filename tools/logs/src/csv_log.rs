@@ -361,7 +361,7 @@ pub fn read(path: &Path, spec: &CsvSpec, progress: Progress) -> Result<ImportedR
     }
     let map = spec.role_map()?;
     let find = |col: &str, role: Role| {
-        header
+        let k = header
             .iter()
             .position(|h| h == col)
             .ok_or_else(|| LogsError::MissingColumn {
@@ -369,7 +369,23 @@ pub fn read(path: &Path, spec: &CsvSpec, progress: Progress) -> Result<ImportedR
                 column: col.to_string(),
                 role,
                 header: header.join(", "),
-            })
+            })?;
+        let same: Vec<String> = (0..header.len())
+            .filter(|&k| header[k] == *col)
+            .map(|k| (k + 1).to_string())
+            .collect();
+        if same.len() > 1 {
+            return Err(LogsError::Format {
+                path: p.clone(),
+                msg: format!(
+                    "column `{col}` (role {role}) is in the header {} times (columns {}): which \
+                     one holds it is ambiguous; rename the others",
+                    same.len(),
+                    same.join(", ")
+                ),
+            });
+        }
+        Ok(k)
     };
     let mut notes = Vec::new();
     let state = match &spec.state {

@@ -29,6 +29,7 @@ pub mod csv_log;
 #[cfg(feature = "mat")]
 pub mod mat_log;
 pub mod mcap_log;
+pub mod plausibility;
 mod roles;
 mod run;
 

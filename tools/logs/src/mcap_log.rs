@@ -220,7 +220,8 @@ impl Prefixes<'_> {
 }
 
 /// The records of a chunk record's `data`: its header checked, its records decompressed (none,
-/// zstd, lz4) as a stream to exactly the size the header gives (at most [`MAX_RECORD`]). The chunk
+/// zstd, lz4) as a stream to exactly the size the header gives (at most [`MAX_RECORD`]) and checked
+/// against the header's CRC-32 of the uncompressed records (0: not computed, per the MCAP spec). The chunk
 /// is handled here, not by the `mcap` crate's reader (which underflows a counter when a record
 /// claims more than its chunk holds).
 fn chunk_records(data: &[u8]) -> Result<std::borrow::Cow<'_, [u8]>, String> {
@@ -233,7 +234,11 @@ fn chunk_records(data: &[u8]) -> Result<std::borrow::Cow<'_, [u8]>, String> {
     let mut c = Prefixes { data, pos: 0 };
     c.fixed(16).ok_or_else(bad)?; // message start and end time
     let uncompressed = u64_at(c.pos)?;
-    c.fixed(8 + 4).ok_or_else(bad)?; // uncompressed size, CRC
+    c.fixed(8).ok_or_else(bad)?; // uncompressed size
+    let mut crc = [0u8; 4];
+    crc.copy_from_slice(data.get(c.pos..c.pos + 4).ok_or_else(bad)?);
+    let crc = u32::from_le_bytes(crc);
+    c.fixed(4).ok_or_else(bad)?; // uncompressed CRC (0: not computed)
     let name = c.sized().ok_or_else(bad)?;
     let compression = &data[name..c.pos];
     let compressed = u64_at(c.pos)?;
@@ -276,6 +281,12 @@ fn chunk_records(data: &[u8]) -> Result<std::borrow::Cow<'_, [u8]>, String> {
         return Err(format!(
             "malformed chunk: its records are {} bytes, its header says {n}",
             records.len()
+        ));
+    }
+    let computed = crc32fast::hash(&records);
+    if crc != 0 && computed != crc {
+        return Err(format!(
+            "CRC of its records is {computed:08X}, its header says {crc:08X}: the file is damaged"
         ));
     }
     Ok(records)
@@ -339,12 +350,16 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
     if got < 8 || magic != *mcap::MAGIC {
         return Err(fmt("not an MCAP file (no MCAP magic at the start)".into()));
     }
+    // The magic goes through the reader too: the data section's CRC covers it.
     let mut reader = LinearReader::new_with_options(
         LinearReaderOptions::default()
-            .with_skip_start_magic(true)
             .with_emit_chunks(true)
+            .with_validate_data_section_crc(true)
+            .with_validate_summary_section_crc(true)
             .with_record_length_limit(MAX_RECORD),
     );
+    reader.insert(magic.len()).copy_from_slice(&magic);
+    reader.notify_read(magic.len());
     let mut schemas: BTreeMap<u16, (String, String)> = BTreeMap::new();
     let mut wanted: Vec<u16> = Vec::new();
     let mut topics: BTreeMap<String, String> = BTreeMap::new();
@@ -376,6 +391,11 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
     let mut msg_no: u64 = 0;
     let mut t0: Option<f64> = None;
     let mut empty = [0u64; 3];
+    let mut first_empty: [Option<u64>; 3] = [None; 3];
+    // Offset of the next record in the file (after the 8-byte magic).
+    let mut offset: u64 = 8;
+    let mut footer = false;
+    let mut unclosed: Option<u64> = None;
     // One record (top level or inside a chunk).
     let mut handle = |opcode: u8, data: &[u8]| -> Result<(), LogsError> {
         // Only schemas, channels and messages are used; the rest is never parsed.
@@ -472,6 +492,14 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
                 });
                 let mut idx = Vec::with_capacity(joints.len());
                 for joint in &joints {
+                    if js.name.iter().filter(|n| *n == joint).count() > 1 {
+                        return Err(fmt(format!(
+                            "message {msg_no} on {}: joint `{joint}` is named more than once in \
+                             `name` ({}): which entry holds it is ambiguous",
+                            spec.topic,
+                            js.name.join(", ")
+                        )));
+                    }
                     match js.name.iter().position(|n| n == joint) {
                         Some(j) => idx.push(j),
                         None => {
@@ -492,9 +520,11 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
                 // An empty array is "not measured": a placeholder 0 now, and the whole
                 // signal is dropped at the end if any message lacked it. A wrong length
                 // is a broken message: NaN, counted and dropped.
-                let pick = |v: &[f64], j: usize, k: usize, empty: &mut [u64; 3]| {
+                let msg = msg_no;
+                let mut pick = |v: &[f64], j: usize, k: usize, empty: &mut [u64; 3]| {
                     if v.is_empty() {
                         empty[k] += 1;
+                        first_empty[k].get_or_insert(msg);
                         0.0
                     } else if v.len() == js.name.len() {
                         v[j]
@@ -550,7 +580,27 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
         Ok(())
     };
     while let Some(ev) = reader.next_event() {
-        match ev.map_err(|e| fmt(e.to_string()))? {
+        let ev = match ev {
+            Ok(ev) => ev,
+            // A recording killed before it was closed: no footer; what is whole is read.
+            Err(mcap::McapError::UnexpectedEof) if !footer => {
+                unclosed = Some(offset);
+                break;
+            }
+            Err(mcap::McapError::BadDataCrc { saved, calculated }) => {
+                return Err(fmt(format!(
+                    "the CRC of the data section (byte 0 to {offset}) is {calculated:08X}, its \
+                     data end record says {saved:08X}: the file is damaged"
+                )));
+            }
+            Err(e) => return Err(fmt(format!("at byte {offset}: {e}"))),
+        };
+        if let LinearReadEvent::Record { data, opcode } = &ev {
+            footer |= *opcode == op::FOOTER;
+            offset += 9 + data.len() as u64;
+        }
+        let at = offset;
+        match ev {
             LinearReadEvent::ReadRequest(need) => {
                 let n = file
                     .read(reader.insert(need.min(READ_STEP)))
@@ -560,7 +610,9 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
                 progress(done, total);
             }
             LinearReadEvent::Record { data, opcode } if opcode == op::CHUNK => {
-                let records = chunk_records(data).map_err(fmt)?;
+                let start = at - 9 - data.len() as u64;
+                let records = chunk_records(data)
+                    .map_err(|e| fmt(format!("chunk at byte offset {start}: {e}")))?;
                 let mut pos = 0usize;
                 while pos < records.len() {
                     let head = records.get(pos..pos + 9).ok_or_else(|| {
@@ -632,11 +684,31 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
             "time origin: first header.stamp = {t0:.9} s since the epoch"
         ));
     }
+    if let Some(at) = unclosed {
+        rep.warnings.push(format!(
+            "no footer: the recording was not closed (killed?); the {msg_no} messages on {} in \
+             the whole records before byte {at} were read, the last {} bytes (an unfinished \
+             record) were not",
+            spec.topic,
+            total.saturating_sub(at)
+        ));
+    }
     for (k, f) in ["position", "velocity", "effort"].iter().enumerate() {
         if empty[k] > 0 {
-            rep.notes.push(format!(
-                "field `{f}` is empty in {} of {msg_no} messages: not used",
-                empty[k]
+            let what = if k == 2 {
+                spec.effort_role
+                    .map_or("-".into(), |r| r.name().to_string())
+            } else {
+                ["s", "sdot"][k].to_string()
+            };
+            if k == 2 && spec.effort_role.is_none() {
+                continue;
+            }
+            rep.warnings.push(format!(
+                "field `{f}` is empty (not measured) in {} of {msg_no} messages (first: message \
+                 {}): {what} is not used for the whole bag",
+                empty[k],
+                first_empty[k].unwrap_or(0)
             ));
         }
     }

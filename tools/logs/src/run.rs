@@ -33,10 +33,16 @@ impl RoleMap {
         Ok(())
     }
 
-    /// Negates a role (sign convention; an error if the role is not mapped).
+    /// Negates a role (sign convention; an error if the role is not mapped or already negated: two
+    /// `--negate` of one role would cancel silently).
     pub fn negate(&mut self, role: Role) -> Result<(), LogsError> {
         let e = self.entry(role, "--negate")?;
-        e.2 = !e.2;
+        if e.2 {
+            return Err(LogsError::Usage(format!(
+                "--negate {role} is given twice (it would cancel itself)"
+            )));
+        }
+        e.2 = true;
         Ok(())
     }
 
@@ -115,6 +121,9 @@ pub struct RunReport {
     pub conversions: Vec<String>,
     /// Anything else the reader did (time origin, chunking rule, …).
     pub notes: Vec<String>,
+    /// What the user must know (a signal not used for the whole run and why, a recording that was
+    /// not closed); `frictl import` prints them.
+    pub warnings: Vec<String>,
 }
 
 /// One imported run: the signals for the pipeline and the report of how they were read.
@@ -214,6 +223,8 @@ pub(crate) struct RunBuilder {
     row: Vec<f64>,
     last_t: f64,
     first_backwards: Option<String>,
+    /// Rows whose time equals the previous used row's (a subset of `time_not_increasing`).
+    time_repeated: u64,
 }
 
 impl RunBuilder {
@@ -258,6 +269,7 @@ impl RunBuilder {
             row: vec![0.0; n],
             last_t: f64::NEG_INFINITY,
             first_backwards: None,
+            time_repeated: 0,
         }
     }
 
@@ -308,6 +320,9 @@ impl RunBuilder {
         let t = self.row[0];
         if t <= self.last_t {
             self.report.time_not_increasing += 1;
+            if t == self.last_t {
+                self.time_repeated += 1;
+            }
             if self.first_backwards.is_none() {
                 self.first_backwards = Some(where_());
             }
@@ -328,6 +343,18 @@ impl RunBuilder {
             return Err(LogsError::Empty {
                 path: path.to_string(),
                 what: "no data rows".into(),
+            });
+        }
+        if r.time_not_increasing * 100 > r.rows_read && self.time_repeated * 2 > r.rows_read {
+            return Err(LogsError::Format {
+                path: path.to_string(),
+                msg: format!(
+                    "the time does not advance: {} of {} rows have the time of the row before \
+                     (first at {}); a constant column is not a time: check --column time=…",
+                    self.time_repeated,
+                    r.rows_read,
+                    self.first_backwards.take().unwrap_or_default()
+                ),
             });
         }
         if r.time_not_increasing * 100 > r.rows_read {

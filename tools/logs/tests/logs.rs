@@ -649,3 +649,243 @@ fn mat_dataset_declaring_more_than_it_stores_is_refused() {
         "{e}"
     );
 }
+
+/// The top-level records of an MCAP file as `(offset, opcode, data range)`, after the magic.
+fn mcap_records(file: &[u8]) -> Vec<(usize, u8, std::ops::Range<usize>)> {
+    let mut out = vec![];
+    let mut pos = 8;
+    while pos + 9 <= file.len() {
+        let op = file[pos];
+        let len = u64::from_le_bytes(file[pos + 1..pos + 9].try_into().unwrap()) as usize;
+        if pos + 9 + len > file.len() {
+            break;
+        }
+        out.push((pos, op, pos + 9..pos + 9 + len));
+        pos += 9 + len;
+    }
+    out
+}
+
+fn wrist(effort_role: Option<Role>) -> McapSpec {
+    McapSpec {
+        topic: "/joint_states".into(),
+        joint: "wrist".into(),
+        effort_role,
+        negate: vec![],
+    }
+}
+
+#[test]
+fn mcap_chunk_crcs_are_checked() {
+    // The uncompressed seed bag (Python `mcap`: every chunk has its CRC). One byte flipped inside a
+    // chunk's records: a position changed, the structure intact.
+    let path = seed_bag();
+    let good = std::fs::read(&path).unwrap();
+    let (at, _, data) = mcap_records(&good)
+        .into_iter()
+        .find(|r| r.1 == 0x06)
+        .expect("a chunk");
+    let mut bad = good.clone();
+    bad[data.end - 20] ^= 0x10;
+    let flipped = tmp("flipped.mcap");
+    std::fs::write(&flipped, &bad).unwrap();
+    let e = mcap_log::read(&flipped, &wrist(None), &mut no_progress())
+        .map(|r| format!("imported {} rows", r.report.rows_used))
+        .unwrap_or_else(|e| e.to_string());
+    assert!(
+        e.contains("flipped.mcap")
+            && e.contains(&format!("chunk at byte offset {at}"))
+            && e.contains("CRC")
+            && e.contains("damaged"),
+        "{e}"
+    );
+    // Every chunk's CRC wrong (its stored value changed): refused as well.
+    let mut wrong = good.clone();
+    for (_, op, data) in mcap_records(&good) {
+        if op == 0x06 {
+            wrong[data.start + 24] ^= 0xFF;
+        }
+    }
+    std::fs::write(&flipped, &wrong).unwrap();
+    let e = mcap_log::read(&flipped, &wrist(None), &mut no_progress()).unwrap_err();
+    assert!(e.to_string().contains("CRC"), "{e}");
+    // A CRC of 0 is "not computed" (MCAP spec): the chunk is read.
+    let mut zero = good.clone();
+    zero[data.start + 24..data.start + 28].fill(0);
+    std::fs::write(&flipped, &zero).unwrap();
+    let run = mcap_log::read(&flipped, &wrist(None), &mut no_progress()).unwrap();
+    assert_eq!(run.report.rows_used, 24);
+    // The compressed seed still reads.
+    let run = mcap_log::read(
+        &seed_bag_named("mcap_zstd"),
+        &wrist(None),
+        &mut no_progress(),
+    )
+    .unwrap();
+    assert_eq!(run.report.rows_used, 24);
+}
+
+#[test]
+fn an_mcap_recording_without_a_footer_imports_its_whole_chunks_with_a_warning() {
+    // A recorder killed in its third chunk: no data end, summary or footer.
+    let good = std::fs::read(seed_bag()).unwrap();
+    let chunks: Vec<_> = mcap_records(&good)
+        .into_iter()
+        .filter(|r| r.1 == 0x06)
+        .collect();
+    let cut = chunks[2].2.start + 40;
+    let path = tmp("killed.mcap");
+    std::fs::write(&path, &good[..cut]).unwrap();
+    let run = mcap_log::read(&path, &wrist(None), &mut no_progress()).unwrap();
+    assert!(
+        run.report.rows_used > 0 && run.report.rows_used < 24,
+        "{}",
+        run.report.rows_used
+    );
+    let w = run.report.warnings.join("\n");
+    assert!(
+        w.contains("no footer")
+            && w.contains("not closed")
+            && w.contains(&format!("before byte {}", chunks[2].0)),
+        "{w}"
+    );
+}
+
+#[test]
+fn negating_a_role_twice_and_a_duplicated_csv_column_are_refused() {
+    let c: Vec<String> = ["time=t", "s=q"].iter().map(|s| s.to_string()).collect();
+    let n: Vec<String> = ["s", "s"].iter().map(|s| s.to_string()).collect();
+    let e = CsvSpec::parse(&c, &[], &n)
+        .and_then(|sp| sp.role_map())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("--negate s is given twice"), "{e}");
+    let path = tmp("dup_header.csv");
+    std::fs::write(&path, "t,q,q\n0,1,2\n0.001,1,2\n0.002,1,2\n").unwrap();
+    let e = csv_log::read(&path, &spec(&["time=t", "s=q"], &[]), &mut no_progress())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("dup_header.csv") && e.contains("`q`") && e.contains("columns 2, 3"),
+        "{e}"
+    );
+}
+
+/// The fixture `kind` of `make_fixtures.py` (needs `FRICTIONLESS_PY`; fails without it).
+fn py_fixture(kind: &str, name: &str) -> PathBuf {
+    assert!(
+        std::env::var_os("FRICTIONLESS_PY").is_some(),
+        "FRICTIONLESS_PY is unset (tests/run.sh sets it)"
+    );
+    fixture(kind, name).unwrap()
+}
+
+#[test]
+#[ignore = "needs FRICTIONLESS_PY (tests/run.sh)"]
+fn mcap_empty_effort_and_duplicate_joint_names_are_explained() {
+    let path = py_fixture("mcap-empty-effort", "empty_effort.mcap");
+    let run = mcap_log::read(&path, &wrist(Some(Role::TauF)), &mut no_progress()).unwrap();
+    assert!(run.signals.tau_f_nm.is_none());
+    let w = run.report.warnings.join("\n");
+    assert!(
+        w.contains("`effort` is empty")
+            && w.contains("1 of 100 messages")
+            && w.contains("message 38")
+            && w.contains("tau_f"),
+        "{w}"
+    );
+    let path = py_fixture("mcap-dup-name", "dup_name.mcap");
+    let e = mcap_log::read(&path, &wrist(None), &mut no_progress())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("message 21") && e.contains("`wrist` is named more than once"),
+        "{e}"
+    );
+}
+
+/// A CSV log `t,q,qd,f` of `rows` rows every `dt` (in the file's own time unit, `t_scale` per
+/// second) with q = `amp`·sin(2t) in whatever unit `amp` is.
+fn unit_log(name: &str, rows: usize, dt: f64, t_scale: f64, amp: f64) -> PathBuf {
+    let path = tmp(name);
+    let mut text = String::from("t,q,qd,f\n");
+    for k in 0..rows {
+        let t = k as f64 * dt;
+        text += &format!(
+            "{},{},{},{}\n",
+            t * t_scale,
+            amp * (2.0 * t).sin(),
+            0.6 * (2.0 * t).cos(),
+            0.3 * (2.0 * t).cos()
+        );
+    }
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn findings(
+    path: &Path,
+    units: &[&str],
+    gap_s: f64,
+) -> Vec<frictionless_logs::plausibility::Finding> {
+    let sp = spec(&["time=t", "s=q", "sdot=qd", "tau_f=f"], units);
+    let run = csv_log::read(path, &sp, &mut no_progress()).unwrap();
+    frictionless_logs::plausibility::check(&[run], gap_s, Some(&sp.units))
+}
+
+#[test]
+fn plausibility_names_the_wrong_unit_or_gap_with_the_numbers() {
+    // Seconds declared ms: 5 000 rows at 1 kHz would be 5 ms.
+    let f = findings(
+        &unit_log("s_as_ms.csv", 5000, 1e-3, 1.0, 0.3),
+        &["time=ms"],
+        0.1,
+    );
+    assert!(f[0].refuse, "{f:?}");
+    assert!(
+        f[0].message
+            .contains("looks like s, declared ms: --unit time=s"),
+        "{f:?}"
+    );
+    // Milliseconds declared s: one sample a second, more than --gap-s.
+    let f = findings(&unit_log("ms_as_s.csv", 2000, 1e-3, 1e3, 0.3), &[], 0.1);
+    assert!(f[0].refuse, "{f:?}");
+    assert!(
+        f[0].message
+            .contains("looks like ms, declared s: --unit time=ms")
+            && f[0].message.contains("--gap-s 0.1"),
+        "{f:?}"
+    );
+    // A run sampled every 0.2 s in seconds: slower than --gap-s 0.1, no unit fits better.
+    let f = findings(&unit_log("slow.csv", 80, 0.2, 1.0, 0.3), &[], 0.1);
+    assert!(f[0].refuse, "{f:?}");
+    assert!(
+        f[0].message.contains("0.2000 s, longer than --gap-s 0.1")
+            && f[0].message.contains("--gap-s 0.600"),
+        "{f:?}"
+    );
+    // Degrees declared rad: a warning naming the span and the fix.
+    let f = findings(&unit_log("deg_as_rad.csv", 4000, 1e-3, 1.0, 40.0), &[], 0.1);
+    assert_eq!(f.len(), 1, "{f:?}");
+    assert!(!f[0].refuse);
+    assert!(
+        f[0].message.contains("spans 80.0 rad") && f[0].message.contains("--unit s=deg"),
+        "{f:?}"
+    );
+    // A plausible log: nothing.
+    assert!(findings(&unit_log("fine.csv", 4000, 1e-3, 1.0, 0.3), &[], 0.1).is_empty());
+    // A constant time column is not "time goes back".
+    let path = tmp("const_time.csv");
+    let mut text = String::from("t,q\n");
+    for k in 0..100 {
+        text += &format!("5,{}\n", k as f64 * 1e-3);
+    }
+    std::fs::write(&path, text).unwrap();
+    let e = csv_log::read(&path, &spec(&["time=t", "s=q"], &[]), &mut no_progress())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("time does not advance") && e.contains("99 of 100") && !e.contains("goes back"),
+        "{e}"
+    );
+}

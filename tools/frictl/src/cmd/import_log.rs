@@ -66,16 +66,16 @@ pub struct CommonArgs {
     pub gear_ratio: Vec<String>,
     /// Torque constant k_t [Nm/A] for r·k_t·i: `KT` or `NAME=KT` (repeatable; 1 when not given and
     /// not needed, as above).
-    #[arg(long, value_name = "KT|NAME=KT")]
+    #[arg(long, allow_hyphen_values = true, value_name = "KT|NAME=KT")]
     pub kt: Vec<String>,
     /// A time gap larger than this starts a new chunk [s] (default 0.1; `.mat`: gaps of the desired
     /// current stream > 1 s).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub gap_s: Option<f64>,
     /// Flip the sign of a role (sign conventions; repeatable), e.g. `--negate tau_f`.
     #[arg(long = "negate", value_name = "ROLE")]
     pub negate: Vec<String>,
-    /// URDF for τ_ID of the current label (default `virtual_leg`).
+    /// URDF for τ_ID of the current label (required by it: a robot log has no default robot).
     #[arg(long)]
     pub urdf: Option<String>,
     /// The joint's name in the URDF when it differs from the log's (single-joint view only).
@@ -271,7 +271,8 @@ pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
         "--joints all labels the joints of --positions with the current label: pass --positions TEMPLATE"
     );
     let runs = read_all(&args.files, |p, pr| csv_log::read(p, &spec, pr))?;
-    finish(runs, &args.files, "csv", 0.1, args.common, body)
+    let units = spec.units.clone();
+    finish(runs, &args.files, "csv", 0.1, Some(&units), args.common, body)
 }
 
 /// Runs `frictl import mcap`.
@@ -302,7 +303,7 @@ pub fn run_mcap(args: McapArgs) -> anyhow::Result<()> {
         "--joints all labels the joints of the whole-body state, which only the current label reads"
     );
     let runs = read_all(&args.files, |p, pr| mcap_log::read(p, &spec, pr))?;
-    finish(runs, &args.files, "mcap", 0.1, args.common, body)
+    finish(runs, &args.files, "mcap", 0.1, None, args.common, body)
 }
 
 /// Runs `frictl import mat`.
@@ -329,7 +330,7 @@ pub fn run_mat(args: MatArgs) -> anyhow::Result<()> {
         "--joints all labels the joints of the whole-body state, which only the current label reads"
     );
     let runs = read_all(&args.files, |p, pr| mat_log::read(p, &spec, pr))?;
-    finish(runs, &args.files, "mat", 1.0, args.common, body)
+    finish(runs, &args.files, "mat", 1.0, None, args.common, body)
 }
 
 /// Runs `frictl import mat` (built without the `mat` feature: explains how to get it).
@@ -355,6 +356,26 @@ fn out_path(out: &Path, joint: &str) -> PathBuf {
 }
 
 fn check(files: &[PathBuf], common: &CommonArgs) -> anyhow::Result<()> {
+    // Every number is checked, needed or not: each goes into the sidecar.
+    for (v, r) in per_joint_values(&common.gear_ratio, "--gear-ratio")? {
+        anyhow::ensure!(
+            r.is_finite() && r != 0.0,
+            "--gear-ratio {v}: must be finite and non-zero (signed)"
+        );
+    }
+    for (v, k) in per_joint_values(&common.kt, "--kt")? {
+        anyhow::ensure!(
+            k.is_finite() && k > 0.0,
+            "--kt {v}: must be finite and > 0 [Nm/A] (a current of the other sign convention: \
+             --negate current)"
+        );
+    }
+    if let Some(g) = common.gap_s {
+        anyhow::ensure!(
+            g.is_finite() && g > 0.0,
+            "--gap-s {g}: must be finite and > 0 [s]"
+        );
+    }
     let inputs: Vec<&Path> = files.iter().map(PathBuf::as_path).collect();
     // The joints of `--joints all` are known after reading: the directory is checked here, each
     // output again before it is written.
@@ -363,20 +384,27 @@ fn check(files: &[PathBuf], common: &CommonArgs) -> anyhow::Result<()> {
     super::check_outputs(&inputs, &[&out, &side])
 }
 
+/// Every value of `R` / `NAME=R` options, parsed: (the option's text, the number).
+fn per_joint_values<'a>(values: &'a [String], flag: &str) -> anyhow::Result<Vec<(&'a str, f64)>> {
+    values
+        .iter()
+        .map(|v| {
+            let x = v.split_once('=').map_or(v.as_str(), |(_, x)| x);
+            let n: f64 = x
+                .trim()
+                .parse()
+                .with_context(|| format!("{flag} {v:?}: {x:?} is not a number"))?;
+            Ok((v.as_str(), n))
+        })
+        .collect()
+}
+
 /// A per-joint value of `R` / `NAME=R` options: the joint's own, else the one for all.
 fn per_joint(values: &[String], joint: &str, flag: &str) -> anyhow::Result<Option<f64>> {
     let mut all = None;
     let mut mine = None;
-    for v in values {
-        let (name, x) = match v.split_once('=') {
-            Some((n, x)) => (Some(n.trim()), x),
-            None => (None, v.as_str()),
-        };
-        let x: f64 = x
-            .trim()
-            .parse()
-            .with_context(|| format!("{flag} {v:?}: {x:?} is not a number"))?;
-        match name {
+    for (v, x) in per_joint_values(values, flag)? {
+        match v.split_once('=').map(|(n, _)| n.trim()) {
             Some(n) if n == joint => mine = Some(x),
             Some(_) => {}
             None => all = Some(x),
@@ -390,6 +418,7 @@ fn finish(
     files: &[PathBuf],
     format: &str,
     default_gap_s: f64,
+    units: Option<&[(Role, frictionless_logs::Unit)]>,
     common: CommonArgs,
     body: Option<WholeBody>,
 ) -> anyhow::Result<()> {
@@ -434,12 +463,30 @@ fn finish(
         .filter(|group| !group.split('|').any(has))
         .collect();
     if !lacking.is_empty() {
+        let why: Vec<&str> = runs
+            .iter()
+            .flat_map(|r| &r.report.warnings)
+            .map(String::as_str)
+            .collect();
         bail!(
-            "the {label:?} label needs {} but the log gives none of: {} (pick another --label or map the column)",
+            "the {label:?} label needs {} but the log gives none of: {} (pick another --label or map the column){}",
             required_signals(label).join(", "),
-            lacking.join(", ")
+            lacking.join(", "),
+            if why.is_empty() {
+                String::new()
+            } else {
+                format!("; the reader says: {}", why.join("; "))
+            }
         );
     }
+    // The simulator's virtual leg is the default of `frictl preprocess` (the simulator's own logs)
+    // only: a real robot's log labelled with another robot's dynamics would look fine.
+    anyhow::ensure!(
+        label != LabelSource::Current || common.urdf.is_some(),
+        "the current label needs the robot's link dynamics (τ_ID): pass --urdf ROBOT.urdf (and \
+         --urdf-joint if the joint is named differently there); a robot log is never labelled \
+         with the simulator's virtual leg"
+    );
     let mut warnings = Vec::new();
     let whole = label == LabelSource::Current && runs.iter().all(|r| r.state.is_some());
     let body = body.filter(|_| whole);
@@ -534,6 +581,12 @@ fn finish(
         (None, None) => Dynamics::None,
     };
     for r in &runs {
+        warnings.extend(
+            r.report
+                .warnings
+                .iter()
+                .map(|w| format!("{}: {w}", r.report.source)),
+        );
         let nf: u64 = r.report.non_finite.values().sum();
         if nf > 0 {
             warnings.push(format!(
@@ -554,6 +607,18 @@ fn finish(
             ));
         }
     }
+    // Units and rates: what a wrong declaration leaves in the numbers, before any work.
+    let findings = frictionless_logs::plausibility::check(&runs, labels[0].cfg.gap_s, units);
+    let refused: Vec<&str> = findings
+        .iter()
+        .filter(|f| f.refuse)
+        .map(|f| f.message.as_str())
+        .collect();
+    if !refused.is_empty() {
+        bail!("{}", refused.join("\n"));
+    }
+    let suspicious: Vec<String> = findings.into_iter().map(|f| f.message).collect();
+    warnings.extend(suspicious.iter().cloned());
     let mut hashes = Vec::new();
     for f in files {
         hashes.push(
@@ -616,6 +681,36 @@ fn finish(
             }
             let (r, kt) = (jl.label.gear_ratio_signed, jl.label.kt_nm_per_a);
             let placeholder = |v: Option<f64>| v.unwrap_or(1.0);
+            // An import that keeps nothing is refused before it replaces anything, with the
+            // plausibility findings as the likely cause.
+            let n_valid = ds.valid.iter().filter(|v| **v).count();
+            let empty_runs: Vec<String> = runs
+                .iter()
+                .zip(&sum.run_chunks)
+                .filter(|(_, c)| c.is_empty())
+                .map(|(r, _)| {
+                    format!(
+                        "run {}: {} of {} rows read, 0 chunks",
+                        r.name, r.report.rows_used, r.report.rows_read
+                    )
+                })
+                .collect();
+            if n_valid == 0 || !empty_runs.is_empty() {
+                bail!(
+                    "{joint}: {n_valid} valid samples of {}{}{}",
+                    ds.len(),
+                    if empty_runs.is_empty() {
+                        String::new()
+                    } else {
+                        format!("; nothing of {}", empty_runs.join(", "))
+                    },
+                    if suspicious.is_empty() {
+                        "; check the units and --gap-s".to_string()
+                    } else {
+                        format!("; likely why: {}", suspicious.join("; "))
+                    }
+                );
+            }
             // The CSV is written to a temporary file now and replaces the old dataset only
             // together with its sidecar, below (the sidecar last): a stopped import leaves the
             // previous pair or no sidecar.

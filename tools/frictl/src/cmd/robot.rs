@@ -22,7 +22,9 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::time::Instant;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use frictiond_config::{
@@ -283,12 +285,15 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> JointPlan {
         "--epochs".into(),
         sr.epochs.to_string(),
         "--features".into(),
-        j.features.cli().into(),
+        j.features.name().into(),
         "--val-frac".into(),
         sr.val_frac.to_string(),
         "--test-frac".into(),
         sr.test_frac.to_string(),
     ]);
+    if j.temperature {
+        search_args.push("--temperature".into());
+    }
     if let Some(p) = sr.patience {
         search_args.extend(["--max-epochs-without-improvement".into(), p.to_string()]);
     }
@@ -342,7 +347,7 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> JointPlan {
             "--report".into(),
             r.clone(),
             "--features".into(),
-            j.features.cli().into(),
+            j.features.name().into(),
             "--hidden".into(),
             t.hidden
                 .iter()
@@ -370,6 +375,9 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> JointPlan {
             "--test-frac".into(),
             sr.test_frac.to_string(),
         ]);
+        if j.temperature {
+            args.push("--temperature".into());
+        }
         stages.push(Stage {
             id: "train".into(),
             phase: Until::Search,
@@ -507,9 +515,113 @@ fn outputs_changed(out: &Path, st: &Stage, stamp_lines: &[&str]) -> Option<Strin
     })
 }
 
+/// Name of the lock file in the output directory (its content: the holder's PID).
+const LOCK_FILE: &str = ".robot-run.lock";
+
+/// Takes the output directory's lock (an exclusive `flock` on `DIR/.robot-run.lock`, held until the
+/// returned file is dropped or the process ends, also by SIGKILL): a second `frictl robot run` on
+/// the same directory is refused, naming the holder's PID, before it reads or writes anything there.
+fn lock_out(out: &Path) -> anyhow::Result<std::fs::File> {
+    use std::io::{Seek, Write};
+    use std::os::unix::fs::OpenOptionsExt;
+    let path = out.join(LOCK_FILE);
+    let mut f = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .custom_flags(libc::O_NOFOLLOW)
+        .open(&path)
+        .with_context(|| format!("cannot open the lock file {}", path.display()))?;
+    match f.try_lock() {
+        Ok(()) => {}
+        Err(std::fs::TryLockError::WouldBlock) => {
+            let holder = std::fs::read_to_string(&path).unwrap_or_default();
+            let holder = holder.trim();
+            bail!(
+                "{}: another `frictl robot run` (pid {}) is running on this output directory (it \
+                 holds {}); wait for it to end or pass another --out",
+                out.display(),
+                if holder.is_empty() { "unknown" } else { holder },
+                path.display()
+            );
+        }
+        Err(std::fs::TryLockError::Error(e)) => {
+            return Err(e).with_context(|| format!("cannot lock {}", path.display()));
+        }
+    }
+    f.set_len(0)
+        .and_then(|()| f.rewind())
+        .and_then(|()| writeln!(f, "{}", std::process::id()))
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(f)
+}
+
+/// SIGINT, SIGTERM and SIGHUP (a terminal, Slurm and systemd stop a job with them): the number of the
+/// last one received, 0 while none.
+fn stop_signal() -> anyhow::Result<Arc<AtomicUsize>> {
+    let flag = Arc::new(AtomicUsize::new(0));
+    for sig in [
+        signal_hook::consts::SIGINT,
+        signal_hook::consts::SIGTERM,
+        signal_hook::consts::SIGHUP,
+    ] {
+        signal_hook::flag::register_usize(sig, flag.clone(), sig as usize)
+            .context("cannot install the signal handlers")?;
+    }
+    Ok(flag)
+}
+
+/// The error of a run stopped by signal `sig`.
+fn stopped(sig: usize, what: &str) -> anyhow::Error {
+    let name = nix::sys::signal::Signal::try_from(sig as i32).map_or("a signal", |s| s.as_str());
+    anyhow::anyhow!(
+        "stopped by {name} {what}; the stage's outputs are not stamped: `frictl robot run` again \
+         resumes there"
+    )
+}
+
+/// Waits for a stage's child; on a stop signal forwards it, waits up to 5 s, then kills, and always
+/// reaps the child before returning (no stage outlives `frictl robot run`).
+fn wait_child(
+    child: &mut std::process::Child,
+    stop: &AtomicUsize,
+) -> anyhow::Result<Result<std::process::ExitStatus, usize>> {
+    let poll = Duration::from_millis(50);
+    loop {
+        if let Some(st) = child.try_wait()? {
+            return Ok(Ok(st));
+        }
+        let sig = stop.load(Ordering::SeqCst);
+        if sig != 0 {
+            let pid = nix::unistd::Pid::from_raw(child.id() as i32);
+            let forward = nix::sys::signal::Signal::try_from(sig as i32)
+                .unwrap_or(nix::sys::signal::Signal::SIGTERM);
+            let _ = nix::sys::signal::kill(pid, forward);
+            let grace = Instant::now();
+            while child.try_wait()?.is_none() {
+                if grace.elapsed() > Duration::from_secs(5) {
+                    let _ = child.kill();
+                    break;
+                }
+                std::thread::sleep(poll);
+            }
+            child.wait()?;
+            return Ok(Err(sig));
+        }
+        std::thread::sleep(poll);
+    }
+}
+
 /// Runs one stage unless its stamp matches: the same inputs, and every output the file it wrote
 /// (hashes in the stamp). Returns (seconds, skipped).
-fn run_stage(exe: &Path, out: &Path, joint_dir: &str, st: &Stage) -> anyhow::Result<(f64, bool)> {
+fn run_stage(
+    exe: &Path,
+    out: &Path,
+    joint_dir: &str,
+    st: &Stage,
+    stop: &AtomicUsize,
+) -> anyhow::Result<(f64, bool)> {
     let stamps = out.join(joint_dir).join("stamps");
     std::fs::create_dir_all(&stamps)
         .with_context(|| format!("cannot create {}", stamps.display()))?;
@@ -542,14 +654,31 @@ fn run_stage(exe: &Path, out: &Path, joint_dir: &str, st: &Stage) -> anyhow::Res
         .with_context(|| format!("cannot create {}", log.display()))?;
     eprintln!("     {joint_dir}: {} …", st.id);
     let t0 = Instant::now();
-    let status = Command::new(exe)
+    let sig = stop.load(Ordering::SeqCst);
+    if sig != 0 {
+        return Err(stopped(sig, &format!("before {joint_dir}: {}", st.id)));
+    }
+    let mut child = Command::new(exe)
         .args(&st.args)
         .current_dir(out)
         .stdin(Stdio::null())
         .stdout(f.try_clone()?)
         .stderr(f)
-        .status()
+        .spawn()
         .with_context(|| format!("cannot start {}", exe.display()))?;
+    let status = match wait_child(&mut child, stop)? {
+        Ok(status) => status,
+        Err(sig) => {
+            return Err(stopped(
+                sig,
+                &format!(
+                    "during {joint_dir}: {} (its frictl, pid {}, was ended and reaped)",
+                    st.id,
+                    child.id()
+                ),
+            ));
+        }
+    };
     let secs = t0.elapsed().as_secs_f64();
     if !status.success() {
         let text = std::fs::read_to_string(&log).unwrap_or_default();
@@ -696,6 +825,8 @@ struct JointReport {
     gear_ratio: f64,
     kt_nm_per_a: f64,
     features: &'static str,
+    /// Whether the motor temperature is an input.
+    temperature: bool,
     model: String,
     onnx: String,
     /// CV and SCV fit RMSE on the training data [Nm] (the fit JSON's `rmse_fitted_nm`).
@@ -774,7 +905,8 @@ fn joint_report(
         },
         gear_ratio: j.gear_ratio,
         kt_nm_per_a: j.kt_nm_per_a,
-        features: j.features.cli(),
+        features: j.features.name(),
+        temperature: j.temperature,
         model: p.model.clone(),
         onnx: format!("{}/{}.onnx", p.dir, j.name),
         fit_rmse_nm,
@@ -870,6 +1002,8 @@ fn run_robot(a: RunArgs) -> anyhow::Result<()> {
     }
     let out = &a.out;
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let _lock = lock_out(out)?;
+    let stop = stop_signal()?;
     // Children run in `out`: every path they get is relative to it or absolute.
     let exe = std::env::current_exe().context("cannot find the running executable")?;
     let until = a.until.unwrap_or(Until::Export);
@@ -889,7 +1023,7 @@ fn run_robot(a: RunArgs) -> anyhow::Result<()> {
                 check_data(&a.robot, out, i, j, p)?;
                 checked = true;
             }
-            let (seconds, skipped) = run_stage(&exe, out, &p.dir, st)?;
+            let (seconds, skipped) = run_stage(&exe, out, &p.dir, st, &stop)?;
             records.push(StageRecord {
                 id: st.id.clone(),
                 seconds,
