@@ -756,7 +756,12 @@ fn distill_gates_on_held_out_data_inherits_meta_and_records_the_teacher() {
         frictl(&args)
     };
     let out = ok(
-        distill(&student_path, &["--hidden", "16", "--epochs", "12"]),
+        distill(
+            &student_path,
+            &[
+                "--hidden", "16,16", "--epochs", "30", "--batch", "256", "--lr", "3e-3",
+            ],
+        ),
         "distill",
     );
     let text = String::from_utf8_lossy(&out.stdout).into_owned();
@@ -773,7 +778,7 @@ fn distill_gates_on_held_out_data_inherits_meta_and_records_the_teacher() {
     assert_eq!(sm.training.dataset_sha256, tm.training.dataset_sha256);
     assert_eq!(student.mlp.norm, teacher.mlp.norm);
     let sizes: Vec<usize> = student.mlp.layers.iter().map(|l| l.n_out).collect();
-    assert_eq!(sizes, [16, 1]);
+    assert_eq!(sizes, [16, 16, 1]);
     let teacher_sha: [u8; 32] = Sha256::digest(std::fs::read(&teacher_path).unwrap()).into();
     assert_eq!(sm.training.teacher_sha256, Some(teacher_sha));
     assert_eq!(tm.training.teacher_sha256, None);

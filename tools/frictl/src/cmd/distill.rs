@@ -272,6 +272,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ControlFlow::Continue(())
     })?;
     print!("{}", out.gate.table());
+    let us = |f: &frictionless::weights::ModelFile| {
+        frictionless_train::search::inference_us(f).map_or("-".into(), |(hot, cold)| {
+            format!("hot {hot:.3} µs, cold {cold:.2} µs")
+        })
+    };
+    println!(
+        "inference on this CPU (kernel, stored dtype): teacher {}; student {}",
+        us(&teacher),
+        us(&out.model)
+    );
     if !out.gate.passed() {
         bail!(
             "the student (hidden {:?}) is not within {}× the teacher's held-out RMSE (rows marked \
