@@ -77,6 +77,7 @@ fn model(sizes: &[usize], dtype: StorageDtype, seed: u64) -> ModelFile {
                 filtering: SignalFiltering::Causal,
                 input_range: None,
                 quant_max_error_nm: None,
+                teacher_sha256: None,
             },
         },
         dtype,
@@ -169,7 +170,11 @@ fn round_trip_int16_per_channel() {
     let payload = (2 * 40 * 268 + 8 * 268) + (2 * 268 * 215 + 8 * 215) + 4 * (215 + 1);
     assert_eq!(bytes.len(), 704 + payload);
     assert_eq!(bytes[53], 5, "dtype code");
-    assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 4, "minor 4");
+    assert_eq!(
+        u16::from_le_bytes([bytes[10], bytes[11]]),
+        VERSION_MINOR,
+        "written minor"
+    );
     let back = from_bytes(&bytes).unwrap();
     assert_eq!(back.dtype, StorageDtype::Int16);
     let n = m.mlp.layers.len();
@@ -475,6 +480,85 @@ fn wrong_magic_and_version() {
     assert!(matches!(
         from_bytes(&c),
         Err(WeightError::UnsupportedVersion { major: 0, .. })
+    ));
+}
+
+/// The teacher record (format 1.5): a distilled model's teacher SHA-256 round-trips, lengthens the
+/// header by 32 bytes (the payload moving to the next 64-byte step when it must), and shows in
+/// `inspect`; a file without a teacher keeps the 1.4 layout; byte 67 (`teacher_present`) is refused
+/// as non-zero reserved in a 1.4 file, and as an unknown flag value other than 0 or 1.
+#[test]
+fn teacher_record_round_trips_and_old_layout_stays() {
+    let (m, plain) = small(StorageDtype::F32);
+    assert_eq!(
+        plain.len(),
+        spec_file_len(&[4, 3, 1], 4),
+        "no teacher: 1.4 layout"
+    );
+    assert_eq!(
+        from_bytes(&plain).unwrap().meta.training.teacher_sha256,
+        None
+    );
+    let mut t = m.clone();
+    t.meta.training.teacher_sha256 = Some([0x5a; 32]);
+    let bytes = to_bytes(&t).unwrap();
+    assert_eq!(bytes[67], 1, "teacher_present");
+    let header_len = FIXED + ENTRY * 2 + 8 * 4 + 32;
+    assert_eq!(
+        u32::from_le_bytes(bytes[16..20].try_into().unwrap()) as usize,
+        header_len
+    );
+    assert_eq!(&bytes[header_len - 32..header_len], &[0x5a; 32]);
+    assert_eq!(
+        bytes.len(),
+        align64(header_len) + (4 * 3 + 3 + 3 + 1) * 4,
+        "the record counts in header_len"
+    );
+    let back = from_bytes(&bytes).unwrap();
+    assert_eq!(back.meta.training.teacher_sha256, Some([0x5a; 32]));
+    assert_eq!(back.mlp, t.mlp);
+    assert_eq!(to_bytes(&back).unwrap(), bytes);
+    let seen = inspect(&bytes).unwrap();
+    assert_eq!(
+        seen.teacher_sha256.as_deref(),
+        Some("5a".repeat(32).as_str())
+    );
+    assert!(seen.to_string().contains("teacher sha256"));
+    // Larger model: the record pushes the payload offset to the next 64-byte step.
+    let mut big = model(&[40, 16, 1], StorageDtype::Int16, 3);
+    big.meta.training.teacher_sha256 = Some([7; 32]);
+    let bb = to_bytes(&big).unwrap();
+    assert_eq!(
+        from_bytes(&bb).unwrap().meta.training.teacher_sha256,
+        Some([7; 32])
+    );
+    // A 1.4 file: byte 67 is reserved.
+    let mut old = plain.clone();
+    old[10..12].copy_from_slice(&4u16.to_le_bytes());
+    fix_crc(&mut old);
+    assert!(
+        from_bytes(&old).is_ok(),
+        "a 1.4 file without a teacher reads"
+    );
+    old[67] = 1;
+    fix_crc(&mut old);
+    assert!(matches!(
+        from_bytes(&old),
+        Err(WeightError::NonZeroReserved { offset: 67, .. })
+    ));
+    // A flag of 1 without the 32 bytes, or a flag of 2, is refused.
+    let mut c = plain.clone();
+    c[67] = 1;
+    fix_crc(&mut c);
+    assert!(from_bytes(&c).is_err(), "flag set without the record");
+    c[67] = 2;
+    fix_crc(&mut c);
+    assert!(matches!(
+        from_bytes(&c),
+        Err(WeightError::UnknownCode {
+            field: "teacher_present",
+            ..
+        })
     ));
 }
 

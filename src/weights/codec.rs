@@ -108,6 +108,7 @@ pub(super) struct Header {
     pub tool_version: String,
     pub input_range: Option<super::InputRange>,
     pub quant_max_error_nm: Option<f32>,
+    pub teacher_sha256: Option<[u8; 32]>,
 }
 
 fn unknown(field: &'static str, value: impl Into<u64>) -> WeightError {
@@ -190,12 +191,25 @@ pub(super) fn parse_header(b: &[u8]) -> Result<Header, WeightError> {
     let filtering =
         layout::filtering_from_code(f_code).ok_or_else(|| unknown("filtering", f_code))?;
 
-    let (layers, _) = parse_layer_table(b, n_inputs)?;
+    // Before minor 5 this byte is reserved (checked to be zero by `decode`, ignored here).
+    let teacher_present =
+        version_minor >= layout::MINOR_TEACHER && flag(b, off::TEACHER_PRESENT, "teacher_present")?;
+    let extra = if teacher_present {
+        layout::TEACHER_LEN as u64
+    } else {
+        0
+    };
+    let (layers, _) = parse_layer_table(b, n_inputs, extra)?;
     let dims: Vec<(u64, u64)> = layers
         .iter()
         .map(|l| (l.n_in as u64, l.n_out as u64))
         .collect();
-    let layout = Layout::for_layers(n_inputs as u64, dtype, &dims);
+    let layout = Layout::for_layers(n_inputs as u64, dtype, &dims).with_extra_header(extra);
+    // parse_layer_table checked that the whole header, teacher record included, is present.
+    let teacher_sha256 = teacher_present.then(|| {
+        let at = layout.header_len as usize - layout::TEACHER_LEN;
+        rd::<32>(b, at)
+    });
     inconsistent(
         "payload_offset",
         rd_u32(b, off::PAYLOAD_OFFSET).into(),
@@ -258,6 +272,7 @@ pub(super) fn parse_header(b: &[u8]) -> Result<Header, WeightError> {
     Ok(Header {
         input_range,
         quant_max_error_nm,
+        teacher_sha256,
         version_minor,
         crc_stored,
         layout,
@@ -389,7 +404,11 @@ fn parse_units(b: &[u8], features: &FeatureSpec) -> Result<Vec<Unit>, WeightErro
 /// Reads the layer table: the count first (against the depth limit), then the header length and the
 /// bytes present, then each entry (width limits, chaining, activations). Nothing is allocated before
 /// the count and the bytes are checked. Returns the layers and the parameter count.
-fn parse_layer_table(b: &[u8], n_inputs: usize) -> Result<(Vec<LayerInfo>, u64), WeightError> {
+fn parse_layer_table(
+    b: &[u8],
+    n_inputs: usize,
+    extra_header: u64,
+) -> Result<(Vec<LayerInfo>, u64), WeightError> {
     let n_layers = usize::from(rd_u8(b, off::N_LAYERS));
     if n_layers == 0 {
         return Err(MlpShapeError::Empty.into());
@@ -397,7 +416,8 @@ fn parse_layer_table(b: &[u8], n_inputs: usize) -> Result<(Vec<LayerInfo>, u64),
     if n_layers - 1 > limits::MAX_HIDDEN_LAYERS {
         return Err(MlpShapeError::TooDeep(n_layers - 1).into());
     }
-    let layout = Layout::new(n_inputs as u64, n_layers as u64, 0, 0);
+    let layout =
+        Layout::new(n_inputs as u64, n_layers as u64, 0, 0).with_extra_header(extra_header);
     inconsistent(
         "header_len",
         rd_u32(b, off::HEADER_LEN).into(),
@@ -461,7 +481,7 @@ fn reserved_ranges(h: &Header) -> Vec<std::ops::Range<usize>> {
     let mut r = Vec::with_capacity(8 + h.layers.len());
     if h.version_minor < layout::MINOR_INT8 {
         r.push(off::RESERVED_A..off::QUANT_MAX_ERROR + 4);
-    } else {
+    } else if h.version_minor < layout::MINOR_TEACHER {
         r.push(off::RESERVED_A..off::QUANT_MAX_ERROR);
     }
     if h.version_minor < layout::MINOR_INPUT_RANGE {
@@ -714,6 +734,7 @@ pub(super) fn decode(b: &[u8]) -> Result<ModelFile, WeightError> {
                 filtering: h.filtering,
                 input_range: h.input_range,
                 quant_max_error_nm: h.quant_max_error_nm,
+                teacher_sha256: h.teacher_sha256,
             },
         },
         dtype: h.dtype,
@@ -793,7 +814,8 @@ pub fn round_to_dtype(mlp: &MlpWeights, dtype: StorageDtype) -> MlpWeights {
     out
 }
 
-/// The sizes of the file [`super::to_bytes`] writes for `mlp` stored as `dtype`.
+/// The sizes of the file [`super::to_bytes`] writes for `mlp` stored as `dtype` without a teacher
+/// record (with one, [`Layout::with_extra_header`] of [`layout::TEACHER_LEN`]).
 pub fn encoded_layout(mlp: &MlpWeights, dtype: StorageDtype) -> Layout {
     let dims: Vec<(u64, u64)> = mlp
         .layers
@@ -931,7 +953,12 @@ pub(super) fn encode(f: &ModelFile) -> Result<Vec<u8>, WeightError> {
     probe_output(f)?;
     let mlp = &f.mlp;
     let m = &f.meta;
-    let lay = encoded_layout(mlp, f.dtype);
+    let teacher_len = if m.training.teacher_sha256.is_some() {
+        layout::TEACHER_LEN as u64
+    } else {
+        0
+    };
+    let lay = encoded_layout(mlp, f.dtype).with_extra_header(teacher_len);
     // Sizes are within limits (validated), so the layout fits the header's fields and memory.
     let mut b = vec![0u8; lay.file_len as usize];
     put(&mut b, off::MAGIC, &layout::MAGIC);
@@ -1008,6 +1035,9 @@ pub(super) fn encode(f: &ModelFile) -> Result<Vec<u8>, WeightError> {
         }
     }
     put(&mut b, off::DATASET_SHA256, &m.training.dataset_sha256);
+    if m.training.teacher_sha256.is_some() {
+        b[off::TEACHER_PRESENT] = 1;
+    }
     put(&mut b, off::VAL_RMSE, &m.training.val_rmse_nm.to_le_bytes());
     put(
         &mut b,
@@ -1044,6 +1074,10 @@ pub(super) fn encode(f: &ModelFile) -> Result<Vec<u8>, WeightError> {
     for v in mlp.norm.mean.iter().chain(&mlp.norm.scale) {
         put(&mut b, at, &v.to_le_bytes());
         at += 4;
+    }
+    if let Some(t) = &m.training.teacher_sha256 {
+        put(&mut b, at, t);
+        at += layout::TEACHER_LEN;
     }
     debug_assert_eq!(at as u64, lay.header_len);
     at = lay.payload_offset as usize;

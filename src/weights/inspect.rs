@@ -77,6 +77,8 @@ pub struct Inspection {
     pub input_range: Option<super::InputRange>,
     /// Max |Δτ̂_F| \[Nm\] against the f32 original measured by `frictl convert` (format ≥ 1.3), if any.
     pub quant_max_error_nm: Option<f32>,
+    /// SHA-256 (lowercase hex) of the teacher `.fwt` of a distilled model (format ≥ 1.5), if any.
+    pub teacher_sha256: Option<String>,
     /// Header length in bytes (unpadded).
     pub header_len: u64,
     /// Payload offset in bytes (64-aligned).
@@ -148,6 +150,9 @@ pub(super) fn inspect(bytes: &[u8]) -> Result<Inspection, WeightError> {
         filtering: h.filtering,
         input_range: h.input_range,
         quant_max_error_nm: h.quant_max_error_nm,
+        teacher_sha256: h
+            .teacher_sha256
+            .map(|t| t.iter().map(|b| format!("{b:02x}")).collect()),
         header_len: h.layout.header_len,
         payload_offset: h.layout.payload_offset,
         payload_len: h.layout.payload_len,
@@ -223,6 +228,9 @@ impl fmt::Display for Inspection {
             None => writeln!(f, "scv            none")?,
         }
         writeln!(f, "dataset sha256 {}", self.dataset_sha256)?;
+        if let Some(t) = &self.teacher_sha256 {
+            writeln!(f, "teacher sha256 {t} (distilled)")?;
+        }
         writeln!(
             f,
             "rmse val/test  {} / {} Nm",

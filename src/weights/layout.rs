@@ -17,8 +17,9 @@ pub const VERSION_MAJOR: u16 = 1;
 /// blocks (`block_features`); a minor-0 file has zeros there and its blocks follow from its set code.
 /// Minor 2 adds the optional training input range (`range_present`, `input_range`). Minor 3 adds the
 /// int8 storage dtype (code 4) and the measured conversion error (`quant_max_error_nm`). Minor 4 adds
-/// the int16 storage dtype (code 5).
-pub const VERSION_MINOR: u16 = 4;
+/// the int16 storage dtype (code 5). Minor 5 adds the optional teacher record (`teacher_present`, a
+/// SHA-256 after the normalisation) of a distilled model.
+pub const VERSION_MINOR: u16 = 5;
 /// The first minor version whose header holds `block_features`.
 pub const MINOR_BLOCK_FEATURES: u16 = 1;
 /// The first minor version whose header may hold the training input range.
@@ -27,6 +28,11 @@ pub const MINOR_INPUT_RANGE: u16 = 2;
 pub const MINOR_INT8: u16 = 3;
 /// The first minor version with the int16 dtype.
 pub const MINOR_INT16: u16 = 4;
+/// The first minor version that may hold the teacher record.
+pub const MINOR_TEACHER: u16 = 5;
+/// Length of the teacher record in bytes (the teacher file's SHA-256), between the normalisation and
+/// the payload padding when `teacher_present` is 1.
+pub const TEACHER_LEN: usize = 32;
 /// Feature-block slots of the input range (no feature set has more blocks); the temperature range
 /// follows them.
 pub const RANGE_BLOCKS: usize = 3;
@@ -42,7 +48,7 @@ pub const PAYLOAD_ALIGN: usize = 64;
 pub const MAX_FILE_LEN: u64 = {
     use crate::mlp::limits::{MAX_HIDDEN_LAYERS, MAX_INPUTS, MAX_OUTPUTS, MAX_WIDTH};
     let layers = MAX_HIDDEN_LAYERS + 1;
-    let header = FIXED_HEADER_LEN + LAYER_ENTRY_LEN * layers + 8 * MAX_INPUTS;
+    let header = FIXED_HEADER_LEN + LAYER_ENTRY_LEN * layers + 8 * MAX_INPUTS + TEACHER_LEN;
     let weights = MAX_INPUTS * MAX_WIDTH
         + (MAX_HIDDEN_LAYERS - 1) * MAX_WIDTH * MAX_WIDTH
         + MAX_WIDTH * MAX_OUTPUTS;
@@ -100,8 +106,12 @@ pub mod off {
     pub const SCV_PRESENT: usize = 65;
     /// `u8` training-input-range presence flag (0 or 1; minor ≥ 2, reserved zero before).
     pub const RANGE_PRESENT: usize = 66;
-    /// Reserved, zero: `u8` (minor ≥ 3), `[u8; 5]` up to and including `QUANT_MAX_ERROR` before.
+    /// Reserved, zero: `u8` (minor 3 and 4), `[u8; 5]` up to and including `QUANT_MAX_ERROR` before
+    /// minor 3; from minor 5 on this byte is [`TEACHER_PRESENT`].
     pub const RESERVED_A: usize = 67;
+    /// `u8` teacher-record presence flag (0 or 1; minor ≥ 5): the header then ends with the
+    /// [`super::TEACHER_LEN`]-byte SHA-256 of the teacher `.fwt` after the normalisation.
+    pub const TEACHER_PRESENT: usize = 67;
     /// `f32` max |Δτ̂_F| \[Nm\] of this reduced-precision file against its f32 original, as measured
     /// by `frictl convert` (minor ≥ 3; NaN = not measured; reserved zero before).
     pub const QUANT_MAX_ERROR: usize = 68;
@@ -304,7 +314,7 @@ pub fn filtering_from_code(code: u8) -> Option<SignalFiltering> {
 /// Sizes of the parts of a file, all in bytes, as the spec's formula gives them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub struct Layout {
-    /// Fixed header + layer table + normalisation (unpadded).
+    /// Fixed header + layer table + normalisation (+ teacher record, minor ≥ 5), unpadded.
     pub header_len: u64,
     /// `header_len` rounded up to a multiple of 64.
     pub payload_offset: u64,
@@ -328,6 +338,20 @@ impl Layout {
             payload_offset,
             payload_len,
             file_len: payload_offset + payload_len,
+        }
+    }
+
+    /// The same layout with `extra` more header bytes (the teacher record): header length, payload
+    /// offset and file length move, the payload length stays.
+    pub fn with_extra_header(self, extra: u64) -> Self {
+        let header_len = self.header_len + extra;
+        let align = PAYLOAD_ALIGN as u64;
+        let payload_offset = header_len.div_ceil(align) * align;
+        Self {
+            header_len,
+            payload_offset,
+            payload_len: self.payload_len,
+            file_len: payload_offset + self.payload_len,
         }
     }
 

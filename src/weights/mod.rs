@@ -61,6 +61,9 @@ pub struct TrainingMeta {
     /// the conversion accuracy gate (`frictl convert`); `None` if not measured (f32 models, files
     /// before format 1.3). Stored as NaN when `None`; when present finite and ≥ 0.
     pub quant_max_error_nm: Option<f32>,
+    /// SHA-256 of the teacher `.fwt` file this model was distilled from (`frictl distill`); `None`
+    /// for a model trained on labels only, and in files before format 1.5.
+    pub teacher_sha256: Option<[u8; 32]>,
 }
 
 /// The range `[min, max]` the training rows covered, per feature block (the H samples of one signal
@@ -146,6 +149,7 @@ impl TrainingMeta {
             filtering: SignalFiltering::Unknown,
             input_range: None,
             quant_max_error_nm: None,
+            teacher_sha256: None,
         }
     }
 }

@@ -48,6 +48,8 @@ enum Command {
     Fit(cmd::fit::Args),
     /// Train the physics-informed network.
     Train(cmd::train::Args),
+    /// Distil a model into a smaller student, gated on held-out accuracy against the data.
+    Distill(cmd::distill::Args),
     /// Random hyper-parameter search over the paper's ranges.
     Search(cmd::search::Cli),
     /// A whole robot from one TOML file: every joint's pipeline, one frictiond config, a report.
@@ -94,6 +96,7 @@ fn main() -> std::process::ExitCode {
         Command::Preprocess(a) => cmd::preprocess::run(a),
         Command::Fit(a) => cmd::fit::run(a),
         Command::Train(a) => cmd::train::run(a),
+        Command::Distill(a) => cmd::distill::run(a),
         Command::Search(a) => cmd::search::run_cli(a),
         Command::Robot(a) => cmd::robot::run(a),
         Command::Eval(a) => cmd::eval::run(a),

@@ -145,6 +145,20 @@ fn three_tiny_trials_then_resume() {
     assert_eq!(m.meta.features.history, best.params.history);
     assert!((m.meta.training.val_rmse_nm as f64 - vals[0]).abs() < 1e-4 * vals[0].max(1.0));
 
+    // Every trial is timed on this CPU, and pick.fwt is the fastest trial within 1.05× the best
+    // validation RMSE (the default --max-rmse-ratio).
+    assert!(
+        ranked
+            .iter()
+            .all(|t| t.hot_us.is_some_and(|v| v > 0.0) && t.cold_us.is_some_and(|v| v > 0.0))
+    );
+    let pick = frictionless_train::search::cheapest_within(&ranked, 1.05).unwrap();
+    assert!(pick.val_rmse_nm.unwrap() <= 1.05 * vals[0]);
+    assert!(
+        std::fs::read(out.join("pick.fwt")).unwrap()
+            == std::fs::read(out.join(pick.model.as_ref().unwrap())).unwrap()
+    );
+
     // Without --resume the directory is refused; with it only trial 3 runs.
     let again = search("3", false);
     assert!(!again.status.success());

@@ -1004,3 +1004,94 @@ fn convert_refuses_a_dataset_of_another_gear_ratio_or_without_rows() {
     );
     assert!(!out.exists());
 }
+
+/// `frictl distill`: a student of a trained teacher passes the held-out accuracy gate, keeps the
+/// teacher's inputs, normalisation and metadata, records the teacher's SHA-256 and is smaller; a
+/// student forced too small (one unit, one epoch) fails the gate, says so with the numbers and writes
+/// nothing.
+#[test]
+fn distill_gates_on_held_out_data_inherits_meta_and_records_the_teacher() {
+    let f = fixture();
+    let teacher_path = f.dir.join("teacher.fwt");
+    ok(
+        train(
+            &teacher_path,
+            &["--hidden", "32,32", "--epochs", "6", "--seed", "3"],
+        ),
+        "train teacher",
+    );
+    let teacher = read_file(&teacher_path).unwrap();
+    let student_path = f.dir.join("student.fwt");
+    let distill = |out: &Path, extra: &[&str]| -> Output {
+        let mut args = vec![
+            "distill",
+            s(&teacher_path),
+            "--dataset",
+            s(&f.ds),
+            "-o",
+            s(out),
+            "--threads",
+            "2",
+            "--quiet",
+        ];
+        args.extend_from_slice(extra);
+        frictl(&args)
+    };
+    let out = ok(
+        distill(
+            &student_path,
+            &[
+                "--hidden", "16,16", "--epochs", "30", "--batch", "256", "--lr", "3e-3",
+            ],
+        ),
+        "distill",
+    );
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(text.contains("all") && text.contains("ok"), "{text}");
+    let student = read_file(&student_path).unwrap();
+    let (tm, sm) = (&teacher.meta, &student.meta);
+    assert_eq!(sm.features, tm.features);
+    assert_eq!(sm.joint_name, tm.joint_name);
+    assert_eq!(sm.gear_ratio, tm.gear_ratio);
+    assert_eq!(sm.kt_nm_per_a, tm.kt_nm_per_a);
+    assert_eq!(sm.scv, tm.scv);
+    assert_eq!(sm.training.filtering, tm.training.filtering);
+    assert_eq!(sm.training.input_range, tm.training.input_range);
+    assert_eq!(sm.training.dataset_sha256, tm.training.dataset_sha256);
+    assert_eq!(student.mlp.norm, teacher.mlp.norm);
+    let sizes: Vec<usize> = student.mlp.layers.iter().map(|l| l.n_out).collect();
+    assert_eq!(sizes, [16, 16, 1]);
+    let teacher_sha: [u8; 32] = Sha256::digest(std::fs::read(&teacher_path).unwrap()).into();
+    assert_eq!(sm.training.teacher_sha256, Some(teacher_sha));
+    assert_eq!(tm.training.teacher_sha256, None);
+    // The gate's test RMSE is stored, and it is within 1.05× the teacher's (same held-out chunks:
+    // the split of the teacher's report).
+    let (st, tt) = (sm.training.test_rmse_nm, tm.training.test_rmse_nm);
+    assert!(
+        st.is_finite() && st <= 1.05 * tt + 1e-6,
+        "student {st} teacher {tt}"
+    );
+    let shown =
+        String::from_utf8_lossy(&ok(frictl(&["inspect", s(&student_path)]), "inspect").stdout)
+            .into_owned();
+    assert!(
+        shown.contains(
+            &teacher_sha
+                .iter()
+                .map(|b| format!("{b:02x}"))
+                .collect::<String>()
+        ),
+        "{shown}"
+    );
+
+    let tiny = f.dir.join("tiny.fwt");
+    let e = err_text(
+        distill(&tiny, &["--hidden", "1", "--epochs", "1"]),
+        "distill into one unit",
+    );
+    assert!(
+        e.contains("not within 1.05") && e.contains("not written"),
+        "{e}"
+    );
+    assert!(!tiny.exists(), "a failed student must not be written");
+}

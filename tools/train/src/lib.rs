@@ -66,6 +66,7 @@
 
 mod checkpoint;
 pub mod data;
+pub mod distill;
 mod eval;
 mod net;
 mod norm;
@@ -443,6 +444,50 @@ impl Trainer {
     ) -> Result<Self, TrainError> {
         check_inputs(&cfg, train, val)?;
         let norm = fit_normalisation(train.x, train.n_inputs);
+        let mut sizes = vec![train.n_inputs];
+        sizes.extend(&cfg.hidden);
+        sizes.push(1);
+        let layout = Layout::new(&sizes);
+        let params = init_params(&layout, cfg.seed);
+        let n = layout.n_params;
+        Self::assemble(
+            cfg,
+            layout,
+            norm,
+            train,
+            val,
+            params,
+            Adam {
+                m: vec![0.0; n],
+                v: vec![0.0; n],
+                t: 0,
+            },
+        )
+    }
+
+    /// Starts a fresh run (weights initialised from `cfg.seed`) with the given input normalisation
+    /// instead of one fitted on `train` (distillation: the student keeps its teacher's). Refuses a
+    /// normalisation of the wrong length or with a non-finite or zero value.
+    pub fn with_normalisation(
+        cfg: TrainConfig,
+        norm: Normalisation,
+        train: &Dataset<'_>,
+        val: Option<&Dataset<'_>>,
+    ) -> Result<Self, TrainError> {
+        check_inputs(&cfg, train, val)?;
+        let ok = norm.mean.len() == train.n_inputs
+            && norm.scale.len() == train.n_inputs
+            && norm.mean.iter().all(|v| v.is_finite())
+            && norm.scale.iter().all(|v| v.is_finite() && *v != 0.0);
+        if !ok {
+            return Err(TrainError::Config(format!(
+                "the given normalisation has {} means and {} scales (finite, scales non-zero \
+                 required) for {} inputs",
+                norm.mean.len(),
+                norm.scale.len(),
+                train.n_inputs
+            )));
+        }
         let mut sizes = vec![train.n_inputs];
         sizes.extend(&cfg.hidden);
         sizes.push(1);

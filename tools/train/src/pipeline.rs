@@ -966,6 +966,7 @@ pub fn train_model(
                         .chunks_exact(prepared.train.n_inputs.max(1)),
                 ),
                 quant_max_error_nm: None,
+                teacher_sha256: None,
             },
         },
         dtype: job.dtype,

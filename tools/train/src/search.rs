@@ -138,6 +138,96 @@ pub struct TrialResult {
     pub seconds: f64,
     /// Model file, relative to the search directory.
     pub model: Option<String>,
+    /// Inference time of the stored model on this CPU, hot (the same input over and over, caches
+    /// warm) \[µs per call\], on the kernel frictiond runs; absent in older results.
+    #[serde(default)]
+    pub hot_us: Option<f64>,
+    /// Inference time after evicting the caches (a large buffer touched before each call) \[µs\].
+    #[serde(default)]
+    pub cold_us: Option<f64>,
+}
+
+/// Hot and cold inference time \[µs per call\] of `file` on the kernel frictiond runs
+/// ([`frictionless::kernel::Mlp`], its stored dtype, the fastest path of this CPU). Hot: the median
+/// over 7 rounds of the mean of 2 000 calls on one input; cold: the median of 31 single calls, each
+/// after writing a 16 MiB buffer (larger than the caches of the machines this targets). `None` if
+/// the model cannot run on the kernel. Informative: other processes on the machine add noise.
+pub fn inference_us(file: &frictionless::weights::ModelFile) -> Option<(f64, f64)> {
+    use std::hint::black_box;
+    let mut mlp = frictionless::kernel::Mlp::new(&file.mlp, file.dtype).ok()?;
+    let x = file.mlp.norm.mean.clone();
+    for _ in 0..200 {
+        black_box(mlp.forward(black_box(&x)));
+    }
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    const CALLS: usize = 2000;
+    let hot = median(
+        (0..7)
+            .map(|_| {
+                let t = Instant::now();
+                for _ in 0..CALLS {
+                    black_box(mlp.forward(black_box(&x)));
+                }
+                t.elapsed().as_secs_f64() * 1e6 / CALLS as f64
+            })
+            .collect(),
+    );
+    let mut evict = vec![0u8; 16 << 20];
+    let cold = median(
+        (0..31u8)
+            .map(|k| {
+                for line in evict.chunks_mut(64) {
+                    line[0] = line[0].wrapping_add(k);
+                }
+                black_box(&evict);
+                let t = Instant::now();
+                black_box(mlp.forward(black_box(&x)));
+                t.elapsed().as_secs_f64() * 1e6
+            })
+            .collect(),
+    );
+    Some((hot, cold))
+}
+
+/// The ok trials with a finite validation RMSE and hot time that no other such trial dominates (at
+/// most as slow and at most as inaccurate, better in one), fastest first.
+pub fn pareto_front(results: &[TrialResult]) -> Vec<&TrialResult> {
+    let point = |r: &TrialResult| match (r.status.as_str(), r.val_rmse_nm, r.hot_us) {
+        ("ok", Some(e), Some(t)) if e.is_finite() && t.is_finite() => Some((e, t)),
+        _ => None,
+    };
+    let pts: Vec<(&TrialResult, (f64, f64))> = results
+        .iter()
+        .filter_map(|r| point(r).map(|p| (r, p)))
+        .collect();
+    let mut front: Vec<(&TrialResult, (f64, f64))> = pts
+        .iter()
+        .filter(|(_, (e, t))| {
+            !pts.iter()
+                .any(|(_, (e2, t2))| e2 <= e && t2 <= t && (e2 < e || t2 < t))
+        })
+        .copied()
+        .collect();
+    front.sort_by(|a, b| a.1.1.total_cmp(&b.1.1).then(a.1.0.total_cmp(&b.1.0)));
+    front.into_iter().map(|(r, _)| r).collect()
+}
+
+/// The cheapest trial (lowest hot time, then lowest validation RMSE) whose validation RMSE is at most
+/// `max_rmse_ratio` × the best validation RMSE of the timed ok trials; `None` without such trials.
+pub fn cheapest_within(results: &[TrialResult], max_rmse_ratio: f64) -> Option<&TrialResult> {
+    let front = pareto_front(results);
+    let best = front
+        .iter()
+        .filter_map(|r| r.val_rmse_nm)
+        .min_by(f64::total_cmp)?;
+    // The front is sorted fastest first; its first member within the bound is the cheapest of all
+    // trials within it (a dominated trial is never cheaper at equal or better accuracy).
+    front
+        .into_iter()
+        .find(|r| r.val_rmse_nm.is_some_and(|e| e <= max_rmse_ratio * best))
 }
 
 /// Searches saved before the Δθ-offset option latched at every chunk start.
@@ -333,6 +423,8 @@ fn write_tables(dir: &Path, ranked: &[TrialResult]) -> Result<(), SearchError> {
         "seconds",
         "model",
         "error",
+        "hot_us",
+        "cold_us",
     ])
     .map_err(io)?;
     for (i, r) in ranked.iter().enumerate() {
@@ -357,6 +449,8 @@ fn write_tables(dir: &Path, ranked: &[TrialResult]) -> Result<(), SearchError> {
             format!("{:.3}", r.seconds),
             r.model.clone().unwrap_or_default(),
             r.error.clone().unwrap_or_default(),
+            opt(r.hot_us),
+            opt(r.cold_us),
         ])
         .map_err(io)?;
     }
@@ -441,18 +535,23 @@ fn run_trial(
         Ok(trained)
     })();
     match result {
-        Ok(t) => TrialResult {
-            params: params.clone(),
-            status: "ok".into(),
-            error: None,
-            val_rmse_nm: t.report.rmse_nm.val,
-            test_rmse_nm: t.report.rmse_nm.test,
-            train_rmse_nm: t.report.rmse_nm.train,
-            best_epoch: Some(t.report.best_epoch),
-            epochs_run: t.report.epochs.len(),
-            seconds: started.elapsed().as_secs_f64(),
-            model: Some(rel),
-        },
+        Ok(t) => {
+            let (hot_us, cold_us) = inference_us(&t.model).unzip();
+            TrialResult {
+                params: params.clone(),
+                status: "ok".into(),
+                error: None,
+                val_rmse_nm: t.report.rmse_nm.val,
+                test_rmse_nm: t.report.rmse_nm.test,
+                train_rmse_nm: t.report.rmse_nm.train,
+                best_epoch: Some(t.report.best_epoch),
+                epochs_run: t.report.epochs.len(),
+                seconds: started.elapsed().as_secs_f64(),
+                model: Some(rel),
+                hot_us,
+                cold_us,
+            }
+        }
         Err(e) => TrialResult {
             params: params.clone(),
             status: "failed".into(),
@@ -464,6 +563,8 @@ fn run_trial(
             epochs_run: 0,
             seconds: started.elapsed().as_secs_f64(),
             model: None,
+            hot_us: None,
+            cold_us: None,
         },
     }
 }
@@ -594,6 +695,37 @@ fn publish(dir: &Path, all: Vec<TrialResult>) -> Result<Vec<TrialResult>, Search
     Ok(all)
 }
 
+/// Copies the trial [`cheapest_within`] picks to `DIR/pick.fwt` (+ `DIR/pick.train.json`) and
+/// returns it; `None` (nothing written) when no ok trial was timed.
+pub fn publish_pick(
+    dir: &Path,
+    all: &[TrialResult],
+    max_rmse_ratio: f64,
+) -> Result<Option<TrialResult>, SearchError> {
+    if !(max_rmse_ratio.is_finite() && max_rmse_ratio >= 1.0) {
+        return Err(SearchError::Usage(format!(
+            "--max-rmse-ratio {max_rmse_ratio}: must be finite and ≥ 1"
+        )));
+    }
+    let Some(pick) = cheapest_within(all, max_rmse_ratio) else {
+        return Ok(None);
+    };
+    if let Some(m) = &pick.model {
+        let src = dir.join(m);
+        for (from, to) in [
+            (src.clone(), dir.join("pick.fwt")),
+            (
+                pipeline::default_report_path(&src),
+                dir.join("pick.train.json"),
+            ),
+        ] {
+            std::fs::copy(&from, &to)
+                .map_err(|e| ferr(&to, format!("cannot copy {}: {e}", from.display())))?;
+        }
+    }
+    Ok(Some(pick.clone()))
+}
+
 /// `DIR/search.json`: written when absent (exclusive create, so concurrent starters agree on one),
 /// else compared with `settings` (paths may differ where the hashes match).
 fn claim_settings(dir: &Path, settings: &SearchSettings) -> Result<(), SearchError> {
@@ -720,6 +852,58 @@ mod tests {
         assert_ne!(draw(&sp, 11, 0), draw(&sp, 12, 0));
     }
 
+    fn timed(trial: usize, status: &str, rmse: f64, us: f64) -> TrialResult {
+        TrialResult {
+            params: draw(&SearchSpace::default(), 0, trial),
+            status: status.into(),
+            error: None,
+            val_rmse_nm: Some(rmse),
+            test_rmse_nm: None,
+            train_rmse_nm: None,
+            best_epoch: None,
+            epochs_run: 1,
+            seconds: 0.0,
+            model: None,
+            hot_us: Some(us),
+            cold_us: None,
+        }
+    }
+
+    #[test]
+    fn pareto_front_keeps_only_non_dominated_trials_fastest_first() {
+        let r = vec![
+            timed(0, "ok", 0.10, 3.0),      // most accurate, slowest
+            timed(1, "ok", 0.12, 1.0),      // front
+            timed(2, "ok", 0.12, 1.5),      // dominated by 1 (same RMSE, slower)
+            timed(3, "ok", 0.20, 0.3),      // fastest
+            timed(4, "ok", 0.25, 0.5),      // dominated by 3
+            timed(5, "failed", 0.01, 0.01), // failed: never on the front
+            timed(6, "ok", f64::NAN, 0.1),
+        ];
+        let front: Vec<usize> = pareto_front(&r).iter().map(|t| t.params.trial).collect();
+        assert_eq!(front, vec![3, 1, 0]);
+        // Equal points do not dominate each other.
+        let tie = vec![timed(0, "ok", 0.1, 1.0), timed(1, "ok", 0.1, 1.0)];
+        assert_eq!(pareto_front(&tie).len(), 2);
+    }
+
+    #[test]
+    fn cheapest_within_picks_the_fastest_trial_inside_the_ratio() {
+        let r = vec![
+            timed(0, "ok", 0.100, 3.0),
+            timed(1, "ok", 0.104, 1.0),
+            timed(2, "ok", 0.104, 1.2),
+            timed(3, "ok", 0.110, 0.3),
+        ];
+        assert_eq!(cheapest_within(&r, 1.05).unwrap().params.trial, 1);
+        assert_eq!(cheapest_within(&r, 1.0).unwrap().params.trial, 0);
+        assert_eq!(cheapest_within(&r, 1.2).unwrap().params.trial, 3);
+        assert!(cheapest_within(&[], 1.05).is_none());
+        let mut untimed = r.clone();
+        untimed.iter_mut().for_each(|t| t.hot_us = None);
+        assert!(cheapest_within(&untimed, 1.05).is_none());
+    }
+
     #[test]
     fn rank_puts_best_validation_first_and_failures_last() {
         let mk = |trial, status: &str, v: Option<f64>| TrialResult {
@@ -733,6 +917,8 @@ mod tests {
             epochs_run: 0,
             seconds: 0.0,
             model: None,
+            hot_us: None,
+            cold_us: None,
         };
         let mut r = vec![
             mk(0, "failed", None),
@@ -812,6 +998,8 @@ mod tests {
             epochs_run: 0,
             seconds: 0.0,
             model: None,
+            hot_us: None,
+            cold_us: None,
         };
         let d = dedup(vec![
             mk(1, "ok", Some(0.5)),

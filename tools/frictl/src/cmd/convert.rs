@@ -83,42 +83,7 @@ pub struct PathError {
     pub p99_nm: f32,
 }
 
-/// Random probe inputs inside the training range of `file` (or mean ± 3·scale without one).
-pub fn probe_inputs(file: &ModelFile, count: usize, seed: u64) -> Vec<Vec<f32>> {
-    // SplitMix64: uniform in [0, 1) from the top 24 bits.
-    let mut state = seed;
-    let mut uniform = move || {
-        state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = state;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
-    };
-    let norm = &file.mlp.norm;
-    let spec = &file.meta.features;
-    let n = file.mlp.n_inputs();
-    let h = spec.history;
-    let n_blocks = spec.set.n_blocks();
-    let range_of = |i: usize| -> [f32; 2] {
-        match &file.meta.training.input_range {
-            Some(r) if i < n_blocks * h => r.blocks[(i / h).min(r.blocks.len() - 1)],
-            Some(r) if spec.temperature => r.temperature,
-            _ => [
-                norm.mean[i] - 3.0 * norm.scale[i].abs(),
-                norm.mean[i] + 3.0 * norm.scale[i].abs(),
-            ],
-        }
-    };
-    let ranges: Vec<[f32; 2]> = (0..n).map(range_of).collect();
-    (0..count)
-        .map(|_| {
-            ranges
-                .iter()
-                .map(|r| r[0] + (r[1] - r[0]) * uniform())
-                .collect()
-        })
-        .collect()
-}
+pub use frictionless_train::distill::probe_inputs;
 
 /// The input rows the model's feature set builds from a dataset CSV. The dataset must suit the
 /// model as `frictl eval` requires ([`super::eval::check_pinn_on_dataset`]: its gear ratio, its

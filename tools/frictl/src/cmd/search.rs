@@ -14,7 +14,8 @@ use frictionless::features::WarmupPolicy;
 use frictionless_train::data::{DeltaThetaOffset, SplitSpec};
 use frictionless_train::pipeline;
 use frictionless_train::search::{
-    SearchRun, SearchSettings, SearchSpace, TrialResult, finish, run_search, run_trials,
+    SearchRun, SearchSettings, SearchSpace, TrialResult, finish, pareto_front, publish_pick,
+    run_search, run_trials,
 };
 use sha2::Digest;
 
@@ -35,7 +36,14 @@ pub struct Cli {
 /// Runs `frictl search` or its subcommand.
 pub fn run_cli(cli: Cli) -> anyhow::Result<()> {
     match (cli.action, cli.search) {
-        (Some(Action::Finish { dir, trials }), _) => {
+        (
+            Some(Action::Finish {
+                dir,
+                trials,
+                max_rmse_ratio,
+            }),
+            _,
+        ) => {
             let all = finish(&dir, trials)?;
             println!(
                 "frictl search finish: {} trial(s), {} ok; results in {} (results.csv, results.json)",
@@ -44,7 +52,7 @@ pub fn run_cli(cli: Cli) -> anyhow::Result<()> {
                 dir.display()
             );
             print_best(&all, &dir);
-            Ok(())
+            print_pick(&all, &dir, max_rmse_ratio)
         }
         (None, Some(args)) => run(args),
         (None, None) => anyhow::bail!("frictl search: no arguments (see --help)"),
@@ -143,6 +151,10 @@ pub struct Args {
     /// Search range of the dropout, MIN,MAX (default 0.01,0.1).
     #[arg(long, value_delimiter = ',', value_name = "MIN,MAX")]
     pub dropout_range: Option<Vec<f32>>,
+    /// Pick (DIR/pick.fwt) the fastest trial (hot µs on this CPU) whose validation RMSE is within
+    /// this × the best.
+    #[arg(long, default_value_t = 1.05)]
+    pub max_rmse_ratio: f64,
 }
 
 /// `frictl search` subcommands.
@@ -155,6 +167,9 @@ pub enum Action {
         /// Only trials 0..N (default: every trial recorded).
         #[arg(long)]
         trials: Option<usize>,
+        /// Pick (pick.fwt) the fastest trial within this × the best validation RMSE.
+        #[arg(long, default_value_t = 1.05)]
+        max_rmse_ratio: f64,
     },
 }
 
@@ -214,6 +229,44 @@ fn print_best(all: &[TrialResult], dir: &std::path::Path) {
             dir.join("best.fwt").display()
         );
     }
+}
+
+/// Prints the Pareto front (validation RMSE vs hot µs) and writes the pick (`DIR/pick.fwt`).
+fn print_pick(all: &[TrialResult], dir: &std::path::Path, ratio: f64) -> anyhow::Result<()> {
+    let front = pareto_front(all);
+    if front.is_empty() {
+        println!("no timed trial: no Pareto front, no pick");
+        return Ok(());
+    }
+    println!("Pareto front (validation RMSE vs inference time on this CPU, fastest first):");
+    println!(
+        "{:>6} {:>12} {:>9} {:>9} {:>14} {:>3}",
+        "trial", "val RMSE Nm", "hot µs", "cold µs", "hidden", "H"
+    );
+    for r in &front {
+        println!(
+            "{:>6} {:>12.5} {:>9.3} {:>9.2} {:>14} {:>3}",
+            r.params.trial,
+            r.val_rmse_nm.unwrap_or(f64::NAN),
+            r.hot_us.unwrap_or(f64::NAN),
+            r.cold_us.unwrap_or(f64::NAN),
+            format!("{:?}", r.params.hidden),
+            r.params.history
+        );
+    }
+    if let Some(p) = publish_pick(dir, all, ratio)? {
+        println!(
+            "pick (fastest within {ratio}× the best validation RMSE): trial {} val RMSE {:.5} Nm, \
+             hot {:.3} µs, hidden {:?}, H {} -> {}",
+            p.params.trial,
+            p.val_rmse_nm.unwrap_or(f64::NAN),
+            p.hot_us.unwrap_or(f64::NAN),
+            p.params.hidden,
+            p.params.history,
+            dir.join("pick.fwt").display()
+        );
+    }
+    Ok(())
 }
 
 /// Runs `frictl search`.
@@ -316,5 +369,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
         print_best(&all, &args.out);
     }
-    Ok(())
+    if quiet {
+        publish_pick(&args.out, &all, args.max_rmse_ratio)?;
+        Ok(())
+    } else {
+        print_pick(&all, &args.out, args.max_rmse_ratio)
+    }
 }

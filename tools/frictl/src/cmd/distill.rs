@@ -1,0 +1,306 @@
+//! `frictl distill TEACHER.fwt --dataset DS.csv … -o STUDENT.fwt [--hidden 32,32] [--dtype …]`:
+//! train a small student on a teacher's outputs (training windows of the datasets plus probes inside
+//! the teacher's stored input range, with the label and SCV terms of the datasets), and write it only
+//! if its RMSE against the data on held-out runs is within `--max-rmse-ratio` of the teacher's,
+//! overall and per |ṡ| band. The method is `frictionless_train::distill`; the student inherits the
+//! teacher's inputs, normalisation and metadata and records the teacher's SHA-256.
+//!
+//! The held-out set: `--test-run`/`--test-chunks`/`--test-dataset`/`--test-frac` as in `frictl train`;
+//! without any of them, the split of the teacher's training report (`TEACHER.train.json`) when its
+//! datasets are these (same SHA-256, same order), so the gate is on data the teacher never saw.
+//! The warm-up policy and the Δθ latch also default to the teacher report's.
+
+use std::ops::ControlFlow;
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use frictionless::features::WarmupPolicy;
+use frictionless::mlp::StorageDtype;
+use frictionless_train::TrainConfig;
+use frictionless_train::data::{DeltaThetaOffset, SplitSpec};
+use frictionless_train::distill::{self, DistillConfig};
+use frictionless_train::pipeline::{self, TrainReport};
+
+use super::train::{HeldOut, Warmup, cores};
+
+/// Storage dtype of the student.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum StudentDtype {
+    /// IEEE binary32.
+    F32,
+    /// IEEE binary16.
+    F16,
+    /// bfloat16.
+    Bf16,
+    /// int8 hidden-layer weights per output channel (output layer f32).
+    Int8,
+    /// 14-bit fixed-point hidden-layer weights in int16 (output layer f32).
+    Int16,
+}
+
+impl From<StudentDtype> for StorageDtype {
+    fn from(d: StudentDtype) -> Self {
+        match d {
+            StudentDtype::F32 => StorageDtype::F32,
+            StudentDtype::F16 => StorageDtype::F16,
+            StudentDtype::Bf16 => StorageDtype::Bf16,
+            StudentDtype::Int8 => StorageDtype::Int8,
+            StudentDtype::Int16 => StorageDtype::Int16,
+        }
+    }
+}
+
+/// Arguments of `frictl distill`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The teacher model (.fwt).
+    pub teacher: PathBuf,
+    /// Preprocessed dataset CSV (repeatable; its `.json` sidecar must exist).
+    #[arg(long = "dataset", required = true)]
+    pub datasets: Vec<PathBuf>,
+    /// The student model to write (.fwt); nothing is written when the gate fails.
+    #[arg(short = 'o', long)]
+    pub out: PathBuf,
+    /// The student's hidden layer widths, comma separated.
+    #[arg(long, value_delimiter = ',', default_values_t = [32usize, 32])]
+    pub hidden: Vec<usize>,
+    /// Storage dtype of the student.
+    #[arg(long, value_enum, default_value_t = StudentDtype::F32)]
+    pub dtype: StudentDtype,
+    /// Epochs.
+    #[arg(long, default_value_t = 30)]
+    pub epochs: usize,
+    /// Batch size.
+    #[arg(long, default_value_t = 512)]
+    pub batch: usize,
+    /// Adam learning rate.
+    #[arg(long, default_value_t = 2e-3)]
+    pub lr: f32,
+    /// Weight λ of the SCV term of the loss (0 when the teacher has no SCV prior).
+    #[arg(long, default_value_t = 0.01)]
+    pub lambda: f32,
+    /// Weight of the teacher's output in the target of the dataset rows, in [0, 1] (the label gets
+    /// 1 minus it).
+    #[arg(long, default_value_t = 0.5)]
+    pub teacher_weight: f32,
+    /// Probe inputs drawn inside the teacher's input range (default: a quarter of the training rows).
+    #[arg(long)]
+    pub probes: Option<usize>,
+    /// Seed of the initialisation, shuffles and probes (and of the split with --test-frac).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// The gate: the student's held-out RMSE, overall and per |ṡ| band, must be ≤ this × the teacher's.
+    #[arg(long, default_value_t = 1.05)]
+    pub max_rmse_ratio: f64,
+    /// |ṡ| bands with fewer held-out rows are reported but not gated.
+    #[arg(long, default_value_t = 100)]
+    pub min_band_samples: usize,
+    /// Fraction of chunks for validation (default: the teacher report's, else 0.15).
+    #[arg(long)]
+    pub val_frac: Option<f64>,
+    /// Fraction of chunks held out for the gate (default: the teacher report's, else 0.15).
+    #[arg(long)]
+    pub test_frac: Option<f64>,
+    /// Explicit test chunks, comma separated: CHUNK (first dataset) or DATASET:CHUNK.
+    #[arg(long, value_delimiter = ',')]
+    pub test_chunks: Option<Vec<String>>,
+    #[command(flatten)]
+    pub held_out: HeldOut,
+    /// The teacher's training report (default: TEACHER with extension `.train.json`, if present).
+    #[arg(long)]
+    pub teacher_report: Option<PathBuf>,
+    /// Warm-up policy (default: the teacher report's, else hold-zero).
+    #[arg(long, value_enum)]
+    pub warmup: Option<Warmup>,
+    /// Where the Δθ offset is latched: `run`, `chunk` or a fixed θ_off (default: the teacher
+    /// report's, else `run`).
+    #[arg(long, allow_hyphen_values = true)]
+    pub delta_theta_offset: Option<DeltaThetaOffset>,
+    /// Trainer threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// No per-epoch lines.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// The teacher's training report, if one is given or sits next to the teacher.
+fn teacher_report(args: &Args) -> anyhow::Result<Option<TrainReport>> {
+    let (path, given) = match &args.teacher_report {
+        Some(p) => (p.clone(), true),
+        None => (pipeline::default_report_path(&args.teacher), false),
+    };
+    if !given && !path.exists() {
+        return Ok(None);
+    }
+    let text = frictionless::regular_file::read_text(&path)
+        .with_context(|| format!("--teacher-report {}: cannot read", path.display()))?;
+    let report: TrainReport = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not a `frictl train` report", path.display()))?;
+    Ok(Some(report))
+}
+
+/// Runs `frictl distill`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let datasets = args.held_out.all_datasets(&args.datasets);
+    let sidecars: Vec<PathBuf> = datasets.iter().map(|d| d.with_extension("json")).collect();
+    let mut inputs: Vec<&std::path::Path> = datasets.iter().map(PathBuf::as_path).collect();
+    inputs.extend(sidecars.iter().map(PathBuf::as_path));
+    inputs.push(&args.teacher);
+    super::check_outputs(&inputs, &[&args.out])?;
+    let teacher = frictionless::weights::read_file(&args.teacher)
+        .with_context(|| format!("teacher {}", args.teacher.display()))?;
+    let teacher_sha256 = frictionless_dataset::file_sha256(&args.teacher)
+        .with_context(|| format!("teacher {}: cannot read", args.teacher.display()))?;
+    let report = teacher_report(&args)?;
+    let sources = pipeline::load_sources(&datasets)?;
+    if sources.joint != teacher.meta.joint_name {
+        bail!(
+            "the datasets are of joint `{}`, the teacher {} of `{}`",
+            sources.joint,
+            args.teacher.display(),
+            teacher.meta.joint_name
+        );
+    }
+    let explicit_split = args.val_frac.is_some()
+        || args.test_frac.is_some()
+        || args.test_chunks.is_some()
+        || !args.held_out.test_runs.is_empty()
+        || !args.held_out.test_datasets.is_empty();
+    // The teacher's own split when it was trained on exactly these files.
+    let same_data = report.as_ref().filter(|r| {
+        r.datasets.len() == sources.list.len()
+            && r.datasets.iter().zip(&sources.list).all(|(d, s)| {
+                d.sha256
+                    == s.sha256
+                        .iter()
+                        .map(|b| format!("{b:02x}"))
+                        .collect::<String>()
+            })
+    });
+    let split_spec = match same_data {
+        Some(r) if !explicit_split => r.split.spec.clone(),
+        _ => SplitSpec {
+            val_frac: args.val_frac.unwrap_or(0.15),
+            test_frac: args.test_frac.unwrap_or(0.15),
+            seed: args.seed,
+            test_chunks: args.held_out.test_chunks(
+                &sources,
+                &args.test_chunks,
+                args.datasets.len(),
+            )?,
+        },
+    };
+    let split = pipeline::split_for(&sources, &split_spec)?;
+    let warmup: WarmupPolicy = match (args.warmup, &report) {
+        (Some(w), _) => w.into(),
+        (None, Some(r)) => r.warmup,
+        (None, None) => WarmupPolicy::HoldZero,
+    };
+    let delta_theta_offset = match (args.delta_theta_offset, &report) {
+        (Some(d), _) => d,
+        (None, Some(r)) => r.delta_theta_offset,
+        (None, None) => DeltaThetaOffset::Run,
+    };
+    let threads = args.threads.unwrap_or_else(cores).max(1);
+    // Probes default to a quarter of the training rows (counted after preparing; estimated here
+    // from the valid rows of the training chunks).
+    let probes = args.probes.unwrap_or_else(|| {
+        let train_rows: usize = split
+            .train
+            .iter()
+            .map(|k| {
+                let d = &sources.list[k.dataset as usize].data;
+                d.chunk
+                    .iter()
+                    .zip(&d.valid)
+                    .filter(|(c, v)| **c == k.chunk && **v)
+                    .count()
+            })
+            .sum();
+        train_rows / 4
+    });
+    let cfg = DistillConfig {
+        train: TrainConfig {
+            hidden: args.hidden.clone(),
+            dropout: 0.0,
+            lambda: args.lambda,
+            lr: args.lr,
+            batch_size: args.batch,
+            epochs: args.epochs,
+            seed: args.seed,
+            threads,
+            patience: None,
+            abort_loss: Some(1000.0),
+        },
+        dtype: args.dtype.into(),
+        teacher_weight: args.teacher_weight,
+        probes,
+        max_rmse_ratio: args.max_rmse_ratio,
+        min_band_samples: args.min_band_samples,
+        warmup,
+        delta_theta_offset,
+    };
+    if !args.quiet {
+        eprintln!(
+            "frictl distill: {} [{}] {} → hidden {:?} ({}), {} probes; chunks train {} / val {} / test {}",
+            sources.joint,
+            teacher.meta.features,
+            args.teacher.display(),
+            args.hidden,
+            StorageDtype::from(args.dtype).name(),
+            probes,
+            split.train.len(),
+            split.val.len(),
+            split.test.len()
+        );
+    }
+    let quiet = args.quiet;
+    let out = distill::distill(&teacher, teacher_sha256, &sources, &split, &cfg, |r| {
+        if !quiet {
+            let val = r
+                .val_rmse_nm
+                .map_or(String::new(), |v| format!(" val rmse {v:.4} Nm"));
+            eprintln!(
+                "epoch {}/{} train loss {:.5}{val}{}",
+                r.epoch,
+                args.epochs,
+                r.train_loss,
+                if r.is_best { " *" } else { "" }
+            );
+        }
+        ControlFlow::Continue(())
+    })?;
+    print!("{}", out.gate.table());
+    let us = |f: &frictionless::weights::ModelFile| {
+        frictionless_train::search::inference_us(f).map_or("-".into(), |(hot, cold)| {
+            format!("hot {hot:.3} µs, cold {cold:.2} µs")
+        })
+    };
+    println!(
+        "inference on this CPU (kernel, stored dtype): teacher {}; student {}",
+        us(&teacher),
+        us(&out.model)
+    );
+    if !out.gate.passed() {
+        bail!(
+            "the student (hidden {:?}) is not within {}× the teacher's held-out RMSE (rows marked \
+             FAIL above); {} not written",
+            args.hidden,
+            args.max_rmse_ratio,
+            args.out.display()
+        );
+    }
+    frictionless::weights::write_file(&args.out, &out.model)?;
+    println!(
+        "wrote {}: hidden {:?} {}, best epoch {}, val RMSE {} Nm, test RMSE {:.5} Nm (teacher {:.5} Nm)",
+        args.out.display(),
+        args.hidden,
+        out.model.dtype.name(),
+        out.best_epoch,
+        out.val_rmse_nm.map_or("-".into(), |v| format!("{v:.5}")),
+        out.model.meta.training.test_rmse_nm,
+        out.gate.rows[0].teacher_rmse_nm
+    );
+    Ok(())
+}

@@ -1,0 +1,441 @@
+//! Distillation behind `frictl distill`: a smaller (or differently stored) student learns a trained
+//! teacher, and is accepted only if it is as accurate **against the data** on a held-out set.
+//!
+//! What it **is**:
+//! - [`probe_inputs`]: random input rows drawn uniformly inside a model's stored training input range
+//!   (the probe set of `frictl convert`'s gate and of distillation);
+//! - [`distill`]: builds the student's training rows — every training window of the datasets with the
+//!   target `w·τ̂_teacher + (1 − w)·τ_F label` and the SCV prior term (the trainer's loss
+//!   `(1 − λ)·MSE(target) + λ·MSE(SCV)` is unchanged), plus probe rows whose target is the teacher's
+//!   output alone (the SCV term then also pulls towards the teacher) — and runs the ordinary
+//!   [`super::Trainer`] with the teacher's input normalisation; the weights kept are the best on the
+//!   validation set **against the label**;
+//! - [`Gate`]: the student's and the teacher's RMSE against the label on the test set (whole held-out
+//!   runs), overall and per |ṡ| band ([`DEFAULT_BAND_EDGES_RAD_S`]), both run on the kernel frictiond
+//!   uses ([`frictionless::kernel::Mlp`], stored dtype); it passes when every figure of the student is
+//!   ≤ `max_rmse_ratio` × the teacher's (bands with fewer than `min_band_samples` rows are reported but
+//!   not gated).
+//!
+//! The student inherits the teacher's features, history, normalisation, joint, gear ratio, k_t, SCV
+//! prior, filtering and stored input range; its header records the teacher file's SHA-256
+//! (`teacher_sha256`, `.fwt` ≥ 1.5), the datasets' hash and its own validation/test RMSE.
+//!
+//! What it is **not**: no second trainer (the loss, optimiser and data pipeline are the ones of
+//! `frictl train`), no file writing (the command writes the student only when the gate passes).
+
+use std::ops::ControlFlow;
+
+use frictionless::friction::ScvParams;
+use frictionless::kernel::Mlp;
+use frictionless::mlp::StorageDtype;
+use frictionless::weights::{ModelFile, ModelMeta, TrainingMeta, round_to_dtype};
+use frictionless_dataset::bands::{DEFAULT_BAND_EDGES_RAD_S, ResidualProfile};
+use serde::{Deserialize, Serialize};
+
+use super::data::{DeltaThetaOffset, SetData, Split};
+use super::pipeline::{self, PipelineError, ScvPrior, Sources};
+use super::{Dataset, EpochReport, Predictor, TrainConfig, Trainer};
+use frictionless::features::WarmupPolicy;
+
+/// Random input rows inside the training input range of `file` (each of a block's H samples drawn
+/// independently inside that block's range, the temperature inside its range), or inside
+/// mean ± 3·scale of the normalisation for a file without a stored range. Deterministic in `seed`.
+pub fn probe_inputs(file: &ModelFile, count: usize, seed: u64) -> Vec<Vec<f32>> {
+    // SplitMix64: uniform in [0, 1) from the top 24 bits.
+    let mut state = seed;
+    let mut uniform = move || {
+        state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let norm = &file.mlp.norm;
+    let spec = &file.meta.features;
+    let n = file.mlp.n_inputs();
+    let h = spec.history;
+    let n_blocks = spec.set.n_blocks();
+    let range_of = |i: usize| -> [f32; 2] {
+        match &file.meta.training.input_range {
+            Some(r) if i < n_blocks * h => r.blocks[(i / h).min(r.blocks.len() - 1)],
+            Some(r) if spec.temperature => r.temperature,
+            _ => [
+                norm.mean[i] - 3.0 * norm.scale[i].abs(),
+                norm.mean[i] + 3.0 * norm.scale[i].abs(),
+            ],
+        }
+    };
+    let ranges: Vec<[f32; 2]> = (0..n).map(range_of).collect();
+    (0..count)
+        .map(|_| {
+            ranges
+                .iter()
+                .map(|r| r[0] + (r[1] - r[0]) * uniform())
+                .collect()
+        })
+        .collect()
+}
+
+/// How to distil.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DistillConfig {
+    /// The student's hyper-parameters (hidden widths, epochs, seed, …; `lambda` weighs the SCV term).
+    pub train: TrainConfig,
+    /// Storage dtype of the student.
+    pub dtype: StorageDtype,
+    /// Weight w of the teacher's output in the target of the dataset rows, in [0, 1] (1: the
+    /// teacher only; 0: the label only, i.e. plain training plus probes).
+    pub teacher_weight: f32,
+    /// Probe rows drawn inside the teacher's input range (targets: the teacher's output).
+    pub probes: usize,
+    /// The gate: every student RMSE must be ≤ this × the teacher's (e.g. 1.05).
+    pub max_rmse_ratio: f64,
+    /// |ṡ| bands with fewer test rows are reported but not gated.
+    pub min_band_samples: usize,
+    /// Warm-up policy the inputs are built with (the teacher's).
+    pub warmup: WarmupPolicy,
+    /// Where Δθ is latched (the teacher's).
+    pub delta_theta_offset: DeltaThetaOffset,
+}
+
+/// One gated figure: teacher and student RMSE against the label on the test set.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GateRow {
+    /// `"all"` or the band, e.g. `"0.1 ≤ |ṡ| < 0.5 rad/s"`.
+    pub what: String,
+    /// Test rows in it.
+    pub n: usize,
+    /// Teacher RMSE \[Nm\].
+    pub teacher_rmse_nm: f64,
+    /// Student RMSE \[Nm\].
+    pub student_rmse_nm: f64,
+    /// Whether this row is gated (enough rows).
+    pub gated: bool,
+    /// Whether it passes (always true when not gated).
+    pub passed: bool,
+}
+
+/// The accuracy gate: the student against the teacher, both against the data.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Gate {
+    /// The bound on student / teacher RMSE.
+    pub max_rmse_ratio: f64,
+    /// Overall, then per |ṡ| band.
+    pub rows: Vec<GateRow>,
+}
+
+impl Gate {
+    /// Whether every gated row passes.
+    pub fn passed(&self) -> bool {
+        self.rows.iter().all(|r| r.passed)
+    }
+
+    /// One line per row: `what n teacher student ratio verdict`.
+    pub fn table(&self) -> String {
+        let mut s = format!(
+            "{:<26} {:>7} {:>12} {:>12} {:>7}\n",
+            "test set (held out)", "rows", "teacher [Nm]", "student [Nm]", "ratio"
+        );
+        for r in &self.rows {
+            let verdict = match (r.gated, r.passed) {
+                (false, _) => "not gated (few rows)",
+                (true, true) => "ok",
+                (true, false) => "FAIL",
+            };
+            s.push_str(&format!(
+                "{:<26} {:>7} {:>12.5} {:>12.5} {:>7.3} {verdict}\n",
+                r.what,
+                r.n,
+                r.teacher_rmse_nm,
+                r.student_rmse_nm,
+                r.student_rmse_nm / r.teacher_rmse_nm
+            ));
+        }
+        s
+    }
+}
+
+/// The result of [`distill`]: the student (not yet written) and its gate.
+#[derive(Clone, Debug)]
+pub struct Distilled {
+    /// The student model, metadata inherited from the teacher, `teacher_sha256` set.
+    pub model: ModelFile,
+    /// The accuracy gate on the test set.
+    pub gate: Gate,
+    /// Training rows from the datasets, and probe rows.
+    pub rows: (usize, usize),
+    /// 1-based epoch of the kept (best-on-validation) weights.
+    pub best_epoch: usize,
+    /// Student RMSE on the validation set \[Nm\] (`None` without one).
+    pub val_rmse_nm: Option<f64>,
+}
+
+fn usage(m: impl Into<String>) -> PipelineError {
+    PipelineError::Usage(m.into())
+}
+
+/// The SCV prior of the teacher (a neutral zero prior with λ forced to 0 when the teacher has none).
+fn teacher_prior(teacher: &ModelFile) -> ScvPrior {
+    let params = teacher.meta.scv.unwrap_or(ScvParams {
+        kc: 0.0,
+        ka: 1.0,
+        kv: 0.0,
+        ks: 0.0,
+        vs: 1.0,
+        alpha: 2.0,
+    });
+    ScvPrior {
+        path: "teacher".into(),
+        model: "teacher".into(),
+        params,
+    }
+}
+
+/// Outputs of `file` on the kernel frictiond runs (stored dtype, fastest path), one per row.
+fn kernel_outputs(file: &ModelFile, x: &[f32]) -> Result<Vec<f32>, PipelineError> {
+    let mut mlp = Mlp::new(&file.mlp, file.dtype)
+        .map_err(|e| usage(format!("the model cannot run on the kernel: {e}")))?;
+    let n = file.mlp.n_inputs().max(1);
+    Ok(x.chunks_exact(n).map(|row| mlp.forward(row)).collect())
+}
+
+fn band_name(lo: f64, hi: Option<f64>) -> String {
+    match hi {
+        Some(h) => format!("{lo} ≤ |ṡ| < {h} rad/s"),
+        None => format!("|ṡ| ≥ {lo} rad/s"),
+    }
+}
+
+/// The gate of `student` against `teacher` on `set` (rows mapped back to `sources` for ṡ).
+pub fn gate(
+    teacher: &ModelFile,
+    student: &ModelFile,
+    sources: &Sources,
+    set: &SetData,
+    max_rmse_ratio: f64,
+    min_band_samples: usize,
+) -> Result<Gate, PipelineError> {
+    let profile = |file: &ModelFile| -> Result<ResidualProfile, PipelineError> {
+        let y = kernel_outputs(file, &set.x)?;
+        let rows = set
+            .rows
+            .iter()
+            .zip(&y)
+            .zip(&set.y_label_nm)
+            .map(|((&(d, k), &p), &l)| {
+                let ds = &sources.list[d as usize].data;
+                (ds.sdot_rad_s[k], f64::NAN, f64::from(l) - f64::from(p))
+            });
+        Ok(ResidualProfile::from_rows(
+            rows,
+            &DEFAULT_BAND_EDGES_RAD_S,
+            1.0,
+        ))
+    };
+    let (t, s) = (profile(teacher)?, profile(student)?);
+    let row = |what: String, n: usize, tr: Option<f64>, sr: Option<f64>, gated: bool| {
+        let (tr, sr) = (tr.unwrap_or(f64::NAN), sr.unwrap_or(f64::NAN));
+        let gated = gated && tr.is_finite();
+        GateRow {
+            what,
+            n,
+            teacher_rmse_nm: tr,
+            student_rmse_nm: sr,
+            gated,
+            // A NaN student RMSE fails the comparison.
+            passed: !gated || sr <= max_rmse_ratio * tr,
+        }
+    };
+    let mut rows = vec![row(
+        "all".into(),
+        t.all.n,
+        t.all.rmse_nm,
+        s.all.rmse_nm,
+        true,
+    )];
+    for (tb, sb) in t.bands.iter().zip(&s.bands) {
+        if tb.stats.n == 0 {
+            continue;
+        }
+        rows.push(row(
+            band_name(tb.lo_rad_s, tb.hi_rad_s),
+            tb.stats.n,
+            tb.stats.rmse_nm,
+            sb.stats.rmse_nm,
+            tb.stats.n >= min_band_samples,
+        ));
+    }
+    Ok(Gate {
+        max_rmse_ratio,
+        rows,
+    })
+}
+
+/// Distils `teacher` (its file's SHA-256 `teacher_sha256`) on `sources` split by `split` into a
+/// student of `cfg.train.hidden`, and gates it on the test set. Errors when the datasets do not
+/// match the teacher (gear ratio, k_t), when there is no test set, or when training fails;
+/// a student that fails the gate is returned with `gate.passed() == false` (the caller writes
+/// nothing then).
+pub fn distill(
+    teacher: &ModelFile,
+    teacher_sha256: [u8; 32],
+    sources: &Sources,
+    split: &Split,
+    cfg: &DistillConfig,
+    on_epoch: impl FnMut(&EpochReport) -> ControlFlow<()>,
+) -> Result<Distilled, PipelineError> {
+    let meta = &teacher.meta;
+    if sources.gear_ratio.get() != meta.gear_ratio.get() {
+        return Err(usage(format!(
+            "the datasets' signed gear ratio {} differs from the teacher's {}",
+            sources.gear_ratio.get(),
+            meta.gear_ratio.get()
+        )));
+    }
+    if sources.kt_nm_per_a != meta.kt_nm_per_a {
+        return Err(usage(format!(
+            "the datasets' k_t {} Nm/A differs from the teacher's {} Nm/A",
+            sources.kt_nm_per_a, meta.kt_nm_per_a
+        )));
+    }
+    if !(0.0..=1.0).contains(&cfg.teacher_weight) {
+        return Err(usage(format!(
+            "--teacher-weight {}: must be in [0, 1]",
+            cfg.teacher_weight
+        )));
+    }
+    if !(cfg.max_rmse_ratio.is_finite() && cfg.max_rmse_ratio > 0.0) {
+        return Err(usage(format!(
+            "--max-rmse-ratio {}: must be finite and positive",
+            cfg.max_rmse_ratio
+        )));
+    }
+    if split.test.is_empty() {
+        return Err(usage(
+            "distillation is gated on held-out data: give --test-run NAME (or --test-frac > 0, \
+             --test-chunks, --test-dataset)",
+        ));
+    }
+    let scv = teacher_prior(teacher);
+    let prepared = pipeline::prepare(
+        sources,
+        &scv,
+        split,
+        &meta.features,
+        cfg.warmup,
+        cfg.delta_theta_offset,
+    )?;
+    let n_in = meta.features.n_inputs();
+    let threads = cfg.train.threads.max(1);
+    // Teacher targets through the batched trainer path (the teacher's stored weights, f32 math).
+    let mut teacher_pred = Predictor::new(&teacher.mlp, threads)?;
+    let train = &prepared.train;
+    let y_teacher = teacher_pred.predict(&train.x)?;
+    let w = cfg.teacher_weight;
+    let mut x = train.x.clone();
+    let mut y: Vec<f32> = y_teacher
+        .iter()
+        .zip(&train.y_label_nm)
+        .map(|(&t, &l)| w * t + (1.0 - w) * l)
+        .collect();
+    let mut s = train.y_scv_nm.clone();
+    let probes: Vec<f32> = probe_inputs(teacher, cfg.probes, cfg.train.seed ^ 0x9E37_79B9)
+        .into_iter()
+        .flatten()
+        .collect();
+    let y_probe = teacher_pred.predict(&probes)?;
+    x.extend_from_slice(&probes);
+    y.extend_from_slice(&y_probe);
+    s.extend_from_slice(&y_probe);
+    let mut tcfg = cfg.train.clone();
+    if meta.scv.is_none() {
+        tcfg.lambda = 0.0;
+    }
+    let data = Dataset {
+        x: &x,
+        y_label_nm: &y,
+        y_scv_nm: &s,
+        n_inputs: n_in,
+    };
+    let val_view = prepared.val.view();
+    let val = (!prepared.val.is_empty()).then_some(&val_view);
+    let mut trainer = Trainer::with_normalisation(tcfg, teacher.mlp.norm.clone(), &data, val)?;
+    let outcome = trainer.train(on_epoch)?;
+    let weights = round_to_dtype(&outcome.weights, cfg.dtype);
+    let mut student = ModelFile {
+        meta: ModelMeta {
+            training: TrainingMeta {
+                dataset_sha256: sources.dataset_sha256,
+                val_rmse_nm: f32::NAN,
+                test_rmse_nm: f32::NAN,
+                created_unix_s: pipeline::created_unix_s(),
+                tool_version: format!("frictl {}", env!("CARGO_PKG_VERSION")),
+                filtering: meta.training.filtering,
+                input_range: meta.training.input_range,
+                quant_max_error_nm: None,
+                teacher_sha256: Some(teacher_sha256),
+            },
+            ..meta.clone()
+        },
+        dtype: cfg.dtype,
+        mlp: weights,
+    };
+    let rmse_on = |set: &SetData| -> Result<Option<f64>, PipelineError> {
+        if set.is_empty() {
+            return Ok(None);
+        }
+        let y = kernel_outputs(&student, &set.x)?;
+        Ok(Some(super::rmse(&y, &set.y_label_nm)))
+    };
+    let val_rmse = rmse_on(&prepared.val)?;
+    let test_rmse = rmse_on(&prepared.test)?;
+    student.meta.training.val_rmse_nm = val_rmse.map_or(f32::NAN, |v| v as f32);
+    student.meta.training.test_rmse_nm = test_rmse.map_or(f32::NAN, |v| v as f32);
+    let gate = gate(
+        teacher,
+        &student,
+        sources,
+        &prepared.test,
+        cfg.max_rmse_ratio,
+        cfg.min_band_samples,
+    )?;
+    Ok(Distilled {
+        model: student,
+        gate,
+        rows: (train.len(), cfg.probes),
+        best_epoch: outcome.best_epoch,
+        val_rmse_nm: val_rmse,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(t: f64, s: f64, gated: bool, r: f64) -> GateRow {
+        GateRow {
+            what: "x".into(),
+            n: 10,
+            teacher_rmse_nm: t,
+            student_rmse_nm: s,
+            gated,
+            passed: !gated || s <= r * t,
+        }
+    }
+
+    #[test]
+    fn gate_passes_only_when_every_gated_row_does() {
+        let g = Gate {
+            max_rmse_ratio: 1.05,
+            rows: vec![row(1.0, 1.04, true, 1.05), row(1.0, 3.0, false, 1.05)],
+        };
+        assert!(g.passed());
+        let g = Gate {
+            max_rmse_ratio: 1.05,
+            rows: vec![row(1.0, 1.04, true, 1.05), row(1.0, 1.06, true, 1.05)],
+        };
+        assert!(!g.passed());
+        assert!(g.table().contains("FAIL"));
+        assert!(!row(1.0, f64::NAN, true, 1.05).passed, "NaN fails");
+    }
+}
