@@ -584,7 +584,8 @@ mod tests {
             temperature: true,
         };
         let f = model_file(spec, -160.0, 4);
-        let bad: [(&str, fn(&mut JointSample)); 5] = [
+        type Corrupt = (&'static str, fn(&mut JointSample));
+        let bad: [Corrupt; 5] = [
             ("NaN joint velocity", |s| s.sdot_rad_s = f64::NAN),
             ("+inf motor angle", |s| s.theta_motor_rad = f64::INFINITY),
             ("NaN joint angle", |s| s.s_rad = f64::NAN),

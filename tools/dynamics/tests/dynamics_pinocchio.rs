@@ -41,8 +41,9 @@ struct Case {
 /// The Pinocchio reference file; the tests that read it are `#[ignore]`d unless run by
 /// `tests/run.sh` (`--include-ignored`), which sets `FRICTIONLESS_REFS`.
 fn refs_file() -> PathBuf {
-    let dir = std::env::var_os("FRICTIONLESS_REFS")
-        .expect("FRICTIONLESS_REFS is unset: run bash tests/run.sh (it writes the Pinocchio references)");
+    let dir = std::env::var_os("FRICTIONLESS_REFS").expect(
+        "FRICTIONLESS_REFS is unset: run bash tests/run.sh (it writes the Pinocchio references)",
+    );
     PathBuf::from(dir).join("pinocchio_rnea.jsonl")
 }
 

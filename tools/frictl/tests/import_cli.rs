@@ -258,8 +258,9 @@ fn import_mat_without_the_feature_says_how_to_build_it() {
 #[test]
 #[ignore = "needs FRICTIONLESS_PY: bash tests/run.sh"]
 fn mcap_bag_imports_with_the_effort_as_given_friction() {
-    let py = std::env::var_os("FRICTIONLESS_PY")
-        .expect("FRICTIONLESS_PY is unset: run bash tests/run.sh (python with mcap, mcap-ros2-support)");
+    let py = std::env::var_os("FRICTIONLESS_PY").expect(
+        "FRICTIONLESS_PY is unset: run bash tests/run.sh (python with mcap, mcap-ros2-support)",
+    );
     let d = dir();
     let bag = d.join("bag.mcap");
     let script =
@@ -419,10 +420,10 @@ fn leg_ref(column: &str) -> Vec<f64> {
 /// sample time (both 1 kHz grids from the log's first sample).
 fn rms_vs(ds: &frictionless_dataset::Dataset, got: &[f64], reference: &[f64]) -> (f64, usize) {
     let (mut e2, mut n) = (0.0, 0usize);
-    for k in 0..ds.len() {
-        let i = (ds.time_s[k] * 1000.0).round() as usize;
-        if ds.valid[k] && i < reference.len() {
-            e2 += (got[k] - reference[i]).powi(2);
+    for ((t, valid), g) in ds.time_s.iter().zip(&ds.valid).zip(got) {
+        let i = (t * 1000.0).round() as usize;
+        if *valid && i < reference.len() {
+            e2 += (g - reference[i]).powi(2);
             n += 1;
         }
     }

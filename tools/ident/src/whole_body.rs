@@ -137,6 +137,9 @@ fn bad(msg: String) -> PreprocessError {
     }
 }
 
+/// One logged joint on the label grid: (URDF index, q [rad], q̇ [rad/s], q̈ [rad/s²]).
+type GridTrack = (usize, Vec<f64>, Vec<f64>, Vec<f64>);
+
 impl WholeBody {
     /// `held`: positions of joints held fixed [rad or m] (each must be a movable joint of `robot`,
     /// finite).
@@ -276,8 +279,7 @@ impl WholeBody {
         let n = tq.len();
         let li = |y: &[f64]| interp(t, &y[a..b], tq);
         // q, q̇, q̈ of every logged joint on the grid (the labelled joint's own derivation rules).
-        let mut grid: Vec<(usize, Vec<f64>, Vec<f64>, Vec<f64>)> =
-            Vec::with_capacity(tracks.joints.len());
+        let mut grid: Vec<GridTrack> = Vec::with_capacity(tracks.joints.len());
         for tr in &tracks.joints {
             let q = li(tr.q);
             let (qd, qdd) = match (tr.qd, tr.qdd) {

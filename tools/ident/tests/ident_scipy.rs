@@ -25,8 +25,9 @@ struct Refs {
 }
 
 fn load() -> Refs {
-    let dir = std::env::var_os("FRICTIONLESS_REFS")
-        .expect("FRICTIONLESS_REFS is unset: run bash tests/run.sh (it writes the SciPy references)");
+    let dir = std::env::var_os("FRICTIONLESS_REFS").expect(
+        "FRICTIONLESS_REFS is unset: run bash tests/run.sh (it writes the SciPy references)",
+    );
     let path = std::path::Path::new(&dir).join("scipy_filters.json");
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| {
         panic!(

@@ -669,7 +669,9 @@ fn mcap_records(file: &[u8]) -> Vec<(usize, u8, std::ops::Range<usize>)> {
 fn wrist(effort_role: Option<Role>) -> McapSpec {
     McapSpec {
         topic: "/joint_states".into(),
-        joint: "wrist".into(),
+        joints: vec!["wrist".into()],
+        all_joints: false,
+        state_joints: None,
         effort_role,
         negate: vec![],
     }
@@ -777,7 +779,7 @@ fn py_fixture(kind: &str, name: &str) -> PathBuf {
         std::env::var_os("FRICTIONLESS_PY").is_some(),
         "FRICTIONLESS_PY is unset (tests/run.sh sets it)"
     );
-    fixture(kind, name).unwrap()
+    fixture(kind, name)
 }
 
 #[test]

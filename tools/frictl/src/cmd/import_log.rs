@@ -272,7 +272,15 @@ pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
     );
     let runs = read_all(&args.files, |p, pr| csv_log::read(p, &spec, pr))?;
     let units = spec.units.clone();
-    finish(runs, &args.files, "csv", 0.1, Some(&units), args.common, body)
+    finish(
+        runs,
+        &args.files,
+        "csv",
+        0.1,
+        Some(&units),
+        args.common,
+        body,
+    )
 }
 
 /// Runs `frictl import mcap`.
