@@ -1075,7 +1075,7 @@ fn import_numbers_parse_alike_and_are_checked() {
     let e = err_text(run(&["--kt", "-0.1"]), "--kt -0.1");
     assert!(e.contains("--kt -0.1: must be finite and > 0"), "{e}");
     let e = err_text(run(&["--gear-ratio", "nan"]), "--gear-ratio nan");
-    assert!(e.contains("--gear-ratio NaN: must be finite"), "{e}");
+    assert!(e.contains("--gear-ratio nan: must be finite"), "{e}");
     let e = err_text(
         run(&["--negate", "tau_f", "--negate", "tau_f"]),
         "negate twice",
