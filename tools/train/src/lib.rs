@@ -444,25 +444,7 @@ impl Trainer {
     ) -> Result<Self, TrainError> {
         check_inputs(&cfg, train, val)?;
         let norm = fit_normalisation(train.x, train.n_inputs);
-        let mut sizes = vec![train.n_inputs];
-        sizes.extend(&cfg.hidden);
-        sizes.push(1);
-        let layout = Layout::new(&sizes);
-        let params = init_params(&layout, cfg.seed);
-        let n = layout.n_params;
-        Self::assemble(
-            cfg,
-            layout,
-            norm,
-            train,
-            val,
-            params,
-            Adam {
-                m: vec![0.0; n],
-                v: vec![0.0; n],
-                t: 0,
-            },
-        )
+        Self::fresh(cfg, norm, train, val)
     }
 
     /// Starts a fresh run (weights initialised from `cfg.seed`) with the given input normalisation
@@ -488,6 +470,17 @@ impl Trainer {
                 train.n_inputs
             )));
         }
+        Self::fresh(cfg, norm, train, val)
+    }
+
+    /// A fresh run with input normalisation `norm`: weights initialised from `cfg.seed`, Adam
+    /// state zero.
+    fn fresh(
+        cfg: TrainConfig,
+        norm: Normalisation,
+        train: &Dataset<'_>,
+        val: Option<&Dataset<'_>>,
+    ) -> Result<Self, TrainError> {
         let mut sizes = vec![train.n_inputs];
         sizes.extend(&cfg.hidden);
         sizes.push(1);
