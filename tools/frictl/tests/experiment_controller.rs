@@ -2,10 +2,10 @@
 //! paper's sinusoid, with and without exact friction compensation, through the same torque-to-current
 //! law as frictiond (i = (τ_des + τ̂_F)/(k_t·r), clamped).
 
+use frictionless_experiment::controller::{ComputedTorque, Reference};
+use frictionless_experiment::metrics::{self, TrackCriterion};
+use frictionless_experiment::run::{JointSetup, JointTrace};
 use frictionless_sim::Plant;
-use frictl::experiment::controller::{ComputedTorque, Reference};
-use frictl::experiment::metrics::{self, TrackCriterion};
-use frictl::experiment::run::{JointSetup, JointTrace};
 
 /// Runs `periods` of `reference` at `kp`; `compensate` adds the true friction of the previous
 /// sample (an oracle model) to τ_des.

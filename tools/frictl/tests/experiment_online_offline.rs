@@ -18,9 +18,9 @@ use frictionless::model::{FrictionModel, PinnEstimator};
 use frictionless::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
 use frictionless::units::GearRatio;
 use frictionless::weights::{ModelFile, ModelMeta, TrainingMeta};
-use frictl::experiment::controller::Reference;
-use frictl::experiment::run::{JointPlan, JointSetup, JointTrace, TrialSpec, run_trial};
-use frictl::experiment::session::{Binaries, FrictionModel as Fm, Mode};
+use frictionless_experiment::controller::Reference;
+use frictionless_experiment::run::{JointPlan, JointSetup, JointTrace, TrialSpec, run_trial};
+use frictionless_experiment::session::{Binaries, FrictionModel as Fm, Mode};
 
 /// A small ReLU network whose normalisation is sized to the joint's signals (so the output moves
 /// with Δθ and ṡ instead of sitting in one ReLU region).

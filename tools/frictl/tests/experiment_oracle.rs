@@ -13,11 +13,13 @@
 use std::path::PathBuf;
 
 use frictionless::filter::Butterworth;
-use frictl::experiment::controller::ComputedTorque;
-use frictl::experiment::metrics;
-use frictl::experiment::run::{JointPlan, JointSetup, JointTrace, TrialOptions, run_trial_with};
-use frictl::experiment::session::{Binaries, FrictionModel, LawSettings, Lpf, Mode};
-use frictl::experiment::suite::sine;
+use frictionless_experiment::controller::ComputedTorque;
+use frictionless_experiment::metrics;
+use frictionless_experiment::run::{
+    JointPlan, JointSetup, JointTrace, TrialOptions, run_trial_with,
+};
+use frictionless_experiment::session::{Binaries, FrictionModel, LawSettings, Lpf, Mode};
+use frictionless_experiment::suite::sine;
 
 const ANKLE: usize = 1;
 const KP: f64 = 3000.0;
@@ -26,7 +28,7 @@ fn run(model: FrictionModel, lpf: Lpf, duration_s: f64) -> (JointTrace, [JointSe
     let bins = Binaries::with_frictl(PathBuf::from(env!("CARGO_BIN_EXE_frictl")))
         .expect("frictiond next to frictl (cargo build --workspace --bins)");
     let setups = JointSetup::both(&[]).unwrap();
-    let spec = frictl::experiment::run::TrialSpec {
+    let spec = frictionless_experiment::run::TrialSpec {
         mode: Mode::Lockstep,
         duration_s,
         joints: vec![JointPlan {

@@ -9,8 +9,8 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use frictionless_experiment::session::Binaries;
 use frictionless_train::search::{TrialResult, read_results};
-use frictl::experiment::session::Binaries;
 
 const ROBOT: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),

@@ -48,11 +48,11 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
+use frictionless_eval::{Metrics, Report as EvalReport};
+use frictionless_experiment::report::{Cell, SuiteReport};
+use frictionless_experiment::search::MinKp;
+use frictionless_experiment::session::{Binaries, ORACLE_LABEL, install_signal_flag, interrupted};
 use frictionless_train::pipeline::TrainReport;
-use frictl::eval::{Metrics, Report as EvalReport};
-use frictl::experiment::report::{Cell, SuiteReport};
-use frictl::experiment::search::MinKp;
-use frictl::experiment::session::{Binaries, ORACLE_LABEL, install_signal_flag, interrupted};
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `frictl demo`.
@@ -1257,7 +1257,9 @@ fn onpolicy_md(rounds: &[RoundEntry], per_joint: &BTreeMap<String, JointEntry>) 
                 continue;
             };
             let kp = match j.min_kp {
-                Some(MinKp::Found { kp, .. }) => frictl::experiment::search::sig3(kp).to_string(),
+                Some(MinKp::Found { kp, .. }) => {
+                    frictionless_experiment::search::sig3(kp).to_string()
+                }
                 Some(other) => format!("{other:?}"),
                 None => "–".into(),
             };

@@ -1,6 +1,6 @@
 //! `frictl eval` — RMSE of none / CV / SCV / PINN models on held-out datasets, a printed table, a JSON
-//! report and PNG figures; with `--drift`, the drift monitor on a new log (`frictl::eval::drift`). See
-//! `frictl::eval` for the method, the rows evaluated and the JSON schema.
+//! report and PNG figures; with `--drift`, the drift monitor on a new log (`frictionless_eval::drift`). See
+//! `frictionless_eval` for the method, the rows evaluated and the JSON schema.
 
 use std::collections::BTreeSet;
 use std::path::PathBuf;
@@ -9,9 +9,9 @@ use anyhow::Context;
 use frictionless::features::WarmupPolicy;
 use frictionless_dataset::bands::ResidualProfile;
 use frictionless_dataset::{Dataset, DatasetSidecar, MotionRange, RunInfo, dataset_runs};
+use frictionless_eval::drift::{self, Coverage, DriftOptions, DriftReport};
+use frictionless_eval::{self as eval, DatasetEval, EvalOptions, ModelSpec, TrainingRange, plot};
 use frictionless_train::data::DeltaThetaOffset;
-use frictl::eval::drift::{self, Coverage, DriftOptions, DriftReport};
-use frictl::eval::{self, DatasetEval, EvalOptions, ModelSpec, TrainingRange, plot};
 
 /// PINN warm-up policy (as the daemon is configured).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -79,7 +79,7 @@ pub struct Args {
     /// Drift monitor: each model's residual (label − τ̂_F) on the scored rows per |ṡ| band
     /// (--band-edges) and temperature bin against its reference (--reference, else the train report's
     /// `residual_reference`, else the `.fwt`'s validation RMSE), the PINN's input-range coverage, and a
-    /// `retrain` / `ok` verdict (rule: `frictl::eval::drift`; JSON key `drift`; figure
+    /// `retrain` / `ok` verdict (rule: `frictionless_eval::drift`; JSON key `drift`; figure
     /// `drift_<model>.png`).
     #[arg(long)]
     pub drift: bool,
@@ -492,7 +492,7 @@ pub fn check_pinn_on_dataset(
 }
 
 /// `--drift`: every model but `none` on the scored rows against its reference (see
-/// `frictl::eval::drift` for the reference order and the rule).
+/// `frictionless_eval::drift` for the reference order and the rule).
 fn drift_monitor(
     args: &Args,
     o: &DriftOptions,

@@ -1,22 +1,22 @@
 //! `frictl experiment track|min-kp|disturbance|all|record` — the paper's closed-loop experiments on
 //! the virtual joints, through real processes: the plant (`frictl sim serve`) and `frictiond` as
-//! child processes, the computed-torque controller in this process (see `frictl::experiment`).
+//! child processes, the computed-torque controller in this process (see `frictionless_experiment`).
 //! `record` runs varied closed-loop runs with a model compensating and writes them as acquisition
-//! logs for `frictl preprocess` (on-policy data, see `frictl::experiment::onpolicy`).
+//! logs for `frictl preprocess` (on-policy data, see `frictionless_experiment::onpolicy`).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use frictionless::friction::{CvParams, ScvParams};
 use frictionless_dataset::fit_file::FittedModel;
-use frictl::experiment::controller::PAPER_KD_PER_S;
-use frictl::experiment::metrics::TrackCriterion;
-use frictl::experiment::report::{SuiteReport, slug, write_trace_csv};
-use frictl::experiment::run::{JointSetup, JointTrace, Pulse};
-use frictl::experiment::session::{
+use frictionless_experiment::controller::PAPER_KD_PER_S;
+use frictionless_experiment::metrics::TrackCriterion;
+use frictionless_experiment::report::{SuiteReport, slug, write_trace_csv};
+use frictionless_experiment::run::{JointSetup, JointTrace, Pulse};
+use frictionless_experiment::session::{
     Binaries, FrictionModel, LawSettings, Lpf, Mode, install_signal_flag,
 };
-use frictl::experiment::suite::{self, SuiteConfig, Task};
+use frictionless_experiment::suite::{self, SuiteConfig, Task};
 
 /// Which experiment.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -32,7 +32,7 @@ pub enum Kind {
     All,
     /// On-policy recording (DAgger): varied sine-tracking and disturbance runs around `--kp` with
     /// one model per joint compensating, written as acquisition logs `--out/<joint>_onpolicy.csv`
-    /// (+ `.json`) for `frictl preprocess` (see `frictl::experiment::onpolicy`), and
+    /// (+ `.json`) for `frictl preprocess` (see `frictionless_experiment::onpolicy`), and
     /// `--out/record.json` with each run's τ̂_F/kfc error against the true friction.
     Record,
 }
@@ -413,8 +413,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// `frictl experiment record`: the on-policy runs of every selected joint, their logs and
 /// `record.json`.
 fn record(args: &Args, suite: &Suite, kp: [Option<f64>; 2]) -> anyhow::Result<()> {
-    use frictl::experiment::metrics;
-    use frictl::experiment::onpolicy;
+    use frictionless_experiment::metrics;
+    use frictionless_experiment::onpolicy;
     for &j in &suite.joints {
         let n = suite.models.iter().filter(|(i, _)| *i == j).count();
         anyhow::ensure!(
@@ -664,7 +664,7 @@ impl Suite {
     fn describe_setup(&mut self) -> anyhow::Result<()> {
         for &j in &self.joints {
             let desc = match suite::sine(j) {
-                frictl::experiment::controller::Reference::Sine {
+                frictionless_experiment::controller::Reference::Sine {
                     centre_rad,
                     amplitude_rad,
                     freq_hz,
@@ -816,7 +816,7 @@ impl Suite {
             low[j] = kp;
             self.report.low_kp_source.insert(
                 self.names[j].clone(),
-                format!("{src}, K_p {}", frictl::experiment::search::sig3(kp)),
+                format!("{src}, K_p {}", frictionless_experiment::search::sig3(kp)),
             );
         }
         Ok(low)
@@ -836,7 +836,7 @@ fn write_outputs(
         )?;
     }
     if !args.no_plots {
-        frictl::experiment::report::write_plots(&args.out, traces)?;
+        frictionless_experiment::report::write_plots(&args.out, traces)?;
     }
     let md = report.markdown();
     println!("{md}");

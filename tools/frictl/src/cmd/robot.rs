@@ -31,9 +31,9 @@ use frictiond_config::{
     BackendConfig, BackendKind, FrictionModelName, JointConfig, LoopConfig, LpfConfig, OodMode,
     RawConfig, SafetyConfig, WarmupName, default_ood_margin, default_ood_ramp_ms,
 };
+use frictionless_eval::Report as EvalReport;
 use frictionless_train::pipeline::{self, TrainReport};
 use frictionless_train::search::{TrialResult, read_results};
-use frictl::eval::Report as EvalReport;
 use frictl::robot::{DataSource, JointSection, RobotFile};
 use sha2::{Digest, Sha256};
 

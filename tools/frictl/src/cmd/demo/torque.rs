@@ -29,8 +29,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
-use frictl::eval::Report as EvalReport;
-use frictl::eval::runs::RunMetrics;
+use frictionless_eval::Report as EvalReport;
+use frictionless_eval::runs::RunMetrics;
 
 use super::{Args, Runner, Stage, read_json, read_typed, s, settings_name};
 

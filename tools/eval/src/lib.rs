@@ -1,4 +1,8 @@
-//! # Evaluation of friction models on held-out datasets (`frictl eval`)
+//! # `frictionless-eval`: evaluation of friction models on held-out datasets (`frictl eval`)
+//!
+//! Crate table: `tools/eval`; depends on `frictionless-dataset`, `frictionless-train` (the Δθ offset
+//! policy of training) and `frictiond-config` (model files as the daemon reads them); used by `frictl`
+//! (`eval`, `convert`, `demo`, `robot run`) and `frictionless-experiment`.
 //!
 //! What it is:
 //! - [`ModelSpec`]: the models to compare — none (τ̂ = 0), CV and SCV from the JSON of
@@ -65,6 +69,8 @@
 //!
 //! What it is not: training, fitting or closed-loop testing (see `frictl train`, `frictl fit`,
 //! `frictl experiment`). It never changes a model: the PINN is run exactly as stored.
+
+#![warn(missing_docs)]
 
 pub mod drift;
 pub mod plot;

@@ -30,7 +30,7 @@ use super::ExperimentError;
 
 /// Shipped daemon config whose per-joint `kfc`, `max_curr`, `max_output_friction` and `lpf` the
 /// experiments use.
-pub const ANKLE_KNEE_TOML: &str = include_str!("../../../../config/ankle_knee.toml");
+pub const ANKLE_KNEE_TOML: &str = include_str!("../../../config/ankle_knee.toml");
 
 /// The plant presets of every experiment, in payload-index order (knee = 0, ankle_roll = 1).
 pub const PRESETS: [&str; 2] = ["knee", "ankle_roll"];

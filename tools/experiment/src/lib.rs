@@ -1,6 +1,10 @@
-//! # The paper's closed-loop experiments on the virtual joints
+//! # `frictionless-experiment`: the paper's closed-loop experiments on the virtual joints
 //!
-//! What this module **is**: the high-level computed-torque controller ([`controller`]) as a real
+//! Crate table: `tools/experiment`; depends on `frictionless-sim` (plant presets),
+//! `frictionless-acquire`, `frictionless-eval` (figure fonts) and `frictiond-config` (the daemon's
+//! config schema, to write frictiond's config); used by `frictl` (`experiment`, `demo`, `robot run`).
+//!
+//! What this crate **is**: the high-level computed-torque controller ([`controller`]) as a real
 //! process role — it reads `JointStates` over shared memory and publishes `TorqueRequest` (and
 //! `SimDisturbance`) in lockstep with the virtual plant (`frictl sim serve`) and `frictiond`, both
 //! started as child processes per trial ([`session`], [`run`]); metrics ([`metrics`]), the
@@ -10,6 +14,43 @@
 //!
 //! What it is **not**: no physics (that is [`frictionless_sim`] in the plant process), no friction model
 //! evaluation (that is `frictiond`); this process only controls, disturbs and measures.
+//!
+//! ## Example: the frictiond config of one experiment run, through the daemon's schema
+//! ```
+//! use std::path::Path;
+//! use frictionless::friction::CvParams;
+//! use frictionless_shm_types::IpcConfig;
+//! use frictionless_experiment::session::{DaemonJoint, FrictionModel, Mode, daemon_config, shipped_kfc};
+//!
+//! // The virtual knee (gear ratio and k_t from its plant preset) compensated by a fitted CV model.
+//! let knee = DaemonJoint {
+//!     name: "l_knee".into(),
+//!     index: 0,
+//!     gear_ratio: -100.0,
+//!     kt_nm_per_a: 0.157,
+//!     model: FrictionModel::Cv(CvParams { kc: 8.1, ka: 50.84, kv: 5.55 }),
+//!     delta_theta_offset_motor_rad: None,
+//!     kfc: None, // the shipped config/ankle_knee.toml value
+//!     lpf: None,
+//! };
+//! let ipc = IpcConfig::new(Some(Path::new("/tmp/frictl-run")), "run0");
+//! // Pure: builds frictiond-config's typed `RawConfig`, starts nothing.
+//! let raw = daemon_config(&ipc, Mode::Lockstep, &[knee], false)?;
+//!
+//! // What `frictl experiment` writes for frictiond is `toml::to_string` of it, and frictiond's
+//! // own validation accepts it.
+//! let text = toml::to_string(&raw)?;
+//! let cfg = frictiond_config::parse(Path::new("/tmp/frictl-run/frictiond.toml"), &text)?;
+//! let j = &cfg.raw.joint[0];
+//! assert_eq!(j.kfc, shipped_kfc("l_knee"));
+//! assert_eq!(j.kfc, 0.85);
+//! assert_eq!(j.friction_model, frictiond_config::FrictionModelName::CoulombViscous);
+//! assert_eq!(cfg.raw.loop_.trigger, frictiond_config::Trigger::Lockstep);
+//! assert!(matches!(cfg.models[0], frictiond_config::ModelSpec::Cv(p) if p.kc == 8.1));
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+#![warn(missing_docs)]
 
 pub mod controller;
 pub mod metrics;

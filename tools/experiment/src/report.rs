@@ -331,7 +331,7 @@ pub fn write_trace_csv(path: &Path, tr: &JointTrace) -> Result<(), ExperimentErr
 
 /// Writes one PNG per trace to `out/plots/<name>.png`: three stacked panels over time — position
 /// (s_d and s), friction (τ̂_F as applied by frictiond, and the true τ_F; τ_ext when a disturbance
-/// acted) and τ_des. Text needs a font (see `crate::eval::plot::init_font`); without one the
+/// acted) and τ_des. Text needs a font (see `frictionless_eval::plot::init_font`); without one the
 /// curves are drawn without labels.
 pub fn write_plots(out: &Path, traces: &[(String, JointTrace)]) -> Result<(), ExperimentError> {
     use plotters::prelude::*;
@@ -343,7 +343,7 @@ pub fn write_plots(out: &Path, traces: &[(String, JointTrace)]) -> Result<(), Ex
         path: dir.clone(),
         source,
     })?;
-    let font = crate::eval::plot::init_font().is_some();
+    let font = frictionless_eval::plot::init_font().is_some();
     for (name, tr) in traces {
         if tr.t_s.len() < 2 {
             continue;
