@@ -1,20 +1,14 @@
 //! End-to-end tests of the model subcommands of the real `frictl` binary: import, inspect,
 //! predict, export, convert, and their error messages.
 
-use crate::interop_common;
+use frictionless_test_support::onnx as interop_common;
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
+use crate::util::{frictl, s};
 use interop_common::*;
 use onnx_protobuf::Message;
-
-fn frictl(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_frictl"))
-        .args(args)
-        .output()
-        .expect("run frictl")
-}
 
 fn stdout(o: &Output) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()
@@ -30,10 +24,6 @@ fn scratch(test: &str) -> PathBuf {
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
 }
 
 fn import_anchor(dir: &Path) -> PathBuf {

@@ -1,14 +1,10 @@
 //! `frictl dynamics rnea|info` end to end: JSON lines in, JSON lines out, checked against the library.
 
 use std::io::Write;
-use std::process::Command;
 
+use crate::util::frictl_cmd as frictl;
 use frictionless_dynamics::{BaseState, ExternalWrench, Force, Workspace, virtual_leg};
 use nalgebra::Vector3;
-
-fn frictl() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_frictl"))
-}
 
 fn temp_file(name: &str, text: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("frictl-dynamics-cli-{}", std::process::id()));

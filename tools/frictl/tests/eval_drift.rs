@@ -9,30 +9,9 @@
 //! (≈ +1.8 Nm for SCV), that the PINN's input-range coverage is reported, that the JSON `drift` key and
 //! the figure are written, and that bad thresholds are refused by name.
 
+use crate::util::{frictl, ok, s, small_acquire_args};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 use std::sync::OnceLock;
-
-fn frictl(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_frictl"))
-        .args(args)
-        .env("SOURCE_DATE_EPOCH", "1700000000")
-        .output()
-        .expect("frictl runs")
-}
-
-fn ok(out: Output, what: &str) -> Output {
-    assert!(
-        out.status.success(),
-        "{what} failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 temp path")
-}
 
 struct Fixture {
     dir: PathBuf,
@@ -46,31 +25,13 @@ struct Fixture {
 
 /// Records and labels one log of the tiny ankle-roll protocol (T₀ fixed at 30 °C) into `<name>_ds.csv`.
 fn dataset(dir: &Path, name: &str, seed: &str, extra: &[&str]) -> PathBuf {
-    let mut args = vec![
-        "acquire",
-        "--preset",
-        "ankle_roll",
-        "--seed",
-        seed,
-        "--name",
-        name,
-        "--out",
-        s(dir),
-    ];
-    for set in [
-        "protocol.n_starts=1",
+    let fixed_t0 = [
         "protocol.sines.amplitude_to_a=0.4",
-        "protocol.sines.frequencies_hz=[0.8]",
-        "protocol.ramps.slopes_a_per_s=[0.39]",
-        "protocol.steps.levels_a=[0.3]",
-        "protocol.tracking.train.amplitudes_rad=[0.1]",
-        "protocol.tracking.train.frequencies_hz=[1.0]",
         "plant.t0_min_c=30",
         "plant.t0_max_c=30",
-    ]
-    .iter()
-    .chain(extra)
-    {
+    ];
+    let mut args = small_acquire_args("ankle_roll", seed, dir, name, &fixed_t0);
+    for set in extra {
         args.extend_from_slice(&["--set", set]);
     }
     ok(frictl(&args), "acquire");

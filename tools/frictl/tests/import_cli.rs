@@ -4,34 +4,9 @@
 //! and conversions; errors naming the column and header; `import mcap` on a bag written by the Python
 //! `mcap` packages (`#[ignore]`d: needs `FRICTIONLESS_PY`, set by `tests/run.sh`); `import mat` without the `mat` feature.
 
+use crate::util::{err_text, frictl, ok, s};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn frictl(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_frictl"))
-        .args(args)
-        .env("SOURCE_DATE_EPOCH", "1700000000")
-        .output()
-        .expect("frictl runs")
-}
-
-fn ok(out: Output, what: &str) -> Output {
-    assert!(
-        out.status.success(),
-        "{what} failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
-
-fn err_text(out: Output, what: &str) -> String {
-    assert!(!out.status.success(), "{what} should fail");
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 temp path")
-}
+use std::process::Command;
 
 fn dir() -> PathBuf {
     let d = std::env::temp_dir().join(format!("frictl-import-cli-{}", std::process::id()));

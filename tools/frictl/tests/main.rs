@@ -15,14 +15,11 @@ mod experiment_oracle;
 mod files_cli;
 mod import_cli;
 mod onpolicy_cli;
-// The ONNX graph builder and ergoCub anchor helpers of the interop tests (one copy, owned by
-// `frictionless-interop`).
-#[path = "../../interop/tests/interop_common/mod.rs"]
-mod interop_common;
 mod plant_common;
 mod robot_cli;
 mod search_cli;
 mod sim_serve_shm;
 mod train_cli;
 mod train_split;
+mod util;
 mod vcan_sim_serve;

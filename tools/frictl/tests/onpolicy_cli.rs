@@ -6,28 +6,8 @@
 //! own data, the union with the on-policy dataset trains) and refuses another architecture, naming
 //! both. Needs `frictiond` built next to `frictl` (`cargo build --workspace --bins`).
 
+use crate::util::{frictl, ok, s, small_acquire_args};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn frictl(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_frictl"))
-        .args(args)
-        .output()
-        .expect("frictl runs")
-}
-
-fn ok(out: Output, what: &str) -> Output {
-    assert!(
-        out.status.success(),
-        "{what} failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 temp path")
-}
 
 fn json(p: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(p).expect("read JSON")).expect("parse JSON")
@@ -67,29 +47,7 @@ fn closed_loop_recording_labels_and_training_continues_from_the_model() {
     std::fs::create_dir_all(&dir).unwrap();
     // A short open-loop protocol on the ankle roll, labelled, SCV fitted, a tiny PINN trained.
     ok(
-        frictl(&[
-            "acquire",
-            "--preset",
-            "ankle_roll",
-            "--seed",
-            "1",
-            "--name",
-            "run",
-            "--out",
-            s(&dir),
-            "--set",
-            "protocol.n_starts=1",
-            "--set",
-            "protocol.sines.frequencies_hz=[0.8]",
-            "--set",
-            "protocol.ramps.slopes_a_per_s=[0.39]",
-            "--set",
-            "protocol.steps.levels_a=[0.3]",
-            "--set",
-            "protocol.tracking.train.amplitudes_rad=[0.1]",
-            "--set",
-            "protocol.tracking.train.frequencies_hz=[1.0]",
-        ]),
+        frictl(&small_acquire_args("ankle_roll", "1", &dir, "run", &[])),
         "acquire",
     );
     let ds = dir.join("ds.csv");

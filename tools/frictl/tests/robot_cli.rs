@@ -9,6 +9,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use crate::util::s;
 use frictionless_experiment::session::Binaries;
 use frictionless_train::search::{TrialResult, read_results};
 
@@ -33,10 +34,6 @@ fn ok_in(dir: &Path, args: &[&str]) -> Output {
         String::from_utf8_lossy(&out.stderr)
     );
     out
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 temp path")
 }
 
 fn tmp(name: &str) -> PathBuf {

@@ -3,56 +3,12 @@
 //! the hyper-parameters are in the paper's ranges, and a resumed search runs only the missing trials.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
+use crate::util::{frictl, frictl_ok as ok, s, small_acquire_args};
 use frictionless_train::search::{SearchSpace, TrialResult, draw, read_results};
 
-fn frictl(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_frictl"))
-        .args(args)
-        .env("SOURCE_DATE_EPOCH", "1700000000")
-        .output()
-        .expect("frictl runs")
-}
-
-fn ok(args: &[&str]) -> Output {
-    let out = frictl(args);
-    assert!(
-        out.status.success(),
-        "frictl {args:?} failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 temp path")
-}
-
 fn dataset(dir: &Path) -> (PathBuf, PathBuf) {
-    ok(&[
-        "acquire",
-        "--preset",
-        "ankle_roll",
-        "--seed",
-        "2",
-        "--name",
-        "run",
-        "--out",
-        s(dir),
-        "--set",
-        "protocol.n_starts=1",
-        "--set",
-        "protocol.sines.frequencies_hz=[0.8]",
-        "--set",
-        "protocol.ramps.slopes_a_per_s=[0.39]",
-        "--set",
-        "protocol.steps.levels_a=[0.3]",
-        "--set",
-        "protocol.tracking.train.amplitudes_rad=[0.1]",
-        "--set",
-        "protocol.tracking.train.frequencies_hz=[1.0]",
-    ]);
+    ok(&small_acquire_args("ankle_roll", "2", dir, "run", &[]));
     let ds = dir.join("ds.csv");
     ok(&[
         "preprocess",

@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
 
+use crate::util::{EPOCH, err_text, frictl, ok, s, small_acquire_args};
 use frictionless::features::{FeatureSet, FeatureSpec, JointSample, WarmupPolicy};
 use frictionless::model::{FrictionModel, PinnEstimator};
 use frictionless::weights::read_file;
@@ -19,34 +20,6 @@ use frictionless_dataset::Dataset;
 use frictionless_train::Predictor;
 use frictionless_train::data::{DeltaThetaOffset, build_inputs};
 use sha2::{Digest, Sha256};
-
-const EPOCH: &str = "1700000000";
-
-fn frictl(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_frictl"))
-        .args(args)
-        .env("SOURCE_DATE_EPOCH", EPOCH)
-        .output()
-        .expect("frictl runs")
-}
-
-fn ok(out: Output, what: &str) -> Output {
-    assert!(
-        out.status.success(),
-        "{what} failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
-
-fn err_text(out: Output, what: &str) -> String {
-    assert!(!out.status.success(), "{what} should fail");
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 temp path")
-}
 
 /// The shared fixture: a preprocessed ankle-roll dataset (6 chunks) and its SCV fit.
 struct Fixture {
@@ -61,31 +34,13 @@ fn fixture() -> &'static Fixture {
         let dir = std::env::temp_dir().join(format!("frictl-train-cli-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         ok(
-            frictl(&[
-                "acquire",
-                "--preset",
+            frictl(&small_acquire_args(
                 "ankle_roll",
-                "--seed",
                 "1",
-                "--name",
+                &dir,
                 "run",
-                "--out",
-                s(&dir),
-                "--set",
-                "protocol.n_starts=1",
-                "--set",
-                "protocol.sines.amplitude_to_a=0.4",
-                "--set",
-                "protocol.sines.frequencies_hz=[0.8]",
-                "--set",
-                "protocol.ramps.slopes_a_per_s=[0.39]",
-                "--set",
-                "protocol.steps.levels_a=[0.3]",
-                "--set",
-                "protocol.tracking.train.amplitudes_rad=[0.1]",
-                "--set",
-                "protocol.tracking.train.frequencies_hz=[1.0]",
-            ]),
+                &["protocol.sines.amplitude_to_a=0.4"],
+            )),
             "acquire",
         );
         let ds = dir.join("ds.csv");

@@ -3,30 +3,14 @@
 //! and no input window reaches into another chunk (hold-zero: full windows inside the chunk;
 //! zero-pad: the slots before the chunk start are 0). The split is seeded and recorded in the report.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::PathBuf;
+use std::process::Command;
 use std::sync::OnceLock;
 
+use crate::util::{frictl_ok as frictl, s, small_acquire_args};
 use frictionless::features::{FeatureSet, FeatureSpec, WarmupPolicy};
 use frictionless_train::data::{ChunkKey, DeltaThetaOffset, SplitSpec};
 use frictionless_train::pipeline::{self, Sources};
-
-fn frictl(args: &[&str]) -> Output {
-    let out = Command::new(env!("CARGO_BIN_EXE_frictl"))
-        .args(args)
-        .output()
-        .expect("frictl runs");
-    assert!(
-        out.status.success(),
-        "frictl {args:?} failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 temp path")
-}
 
 struct Fixture {
     dir: PathBuf,
@@ -43,29 +27,7 @@ fn fixture() -> &'static Fixture {
         let mut datasets = Vec::new();
         for seed in ["4", "5"] {
             let name = format!("run{seed}");
-            frictl(&[
-                "acquire",
-                "--preset",
-                "ankle_roll",
-                "--seed",
-                seed,
-                "--name",
-                &name,
-                "--out",
-                s(&dir),
-                "--set",
-                "protocol.n_starts=1",
-                "--set",
-                "protocol.sines.frequencies_hz=[0.8]",
-                "--set",
-                "protocol.ramps.slopes_a_per_s=[0.39]",
-                "--set",
-                "protocol.steps.levels_a=[0.3]",
-                "--set",
-                "protocol.tracking.train.amplitudes_rad=[0.1]",
-                "--set",
-                "protocol.tracking.train.frequencies_hz=[1.0]",
-            ]);
+            frictl(&small_acquire_args("ankle_roll", seed, &dir, &name, &[]));
             let ds = dir.join(format!("ds{seed}.csv"));
             frictl(&[
                 "preprocess",

@@ -1,7 +1,7 @@
 //! ONNX import/export: the real ergoCub model against its ONNX Runtime reference I/O, synthetic
 //! graphs in every supported form, error cases, and export → import round trips.
 
-use crate::interop_common;
+use frictionless_test_support::onnx as interop_common;
 
 use frictionless::kernel::{KernelPath, Mlp};
 use frictionless::mlp::{Activation, MlpWeights, Normalisation, StorageDtype};

@@ -5,7 +5,7 @@
 //! `cargo test` reports them as ignored; `tests/run.sh` runs them with `--include-ignored`, and there an
 //! unset variable or a missing file fails.
 
-use crate::interop_common;
+use frictionless_test_support::onnx as interop_common;
 
 use std::path::PathBuf;
 

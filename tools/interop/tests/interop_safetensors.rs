@@ -1,7 +1,7 @@
 //! safetensors import/export: PyTorch `nn.Sequential` state dicts in both index spacings, prefixes,
 //! reduced-precision tensors, normalisation sources and error cases.
 
-use crate::interop_common;
+use frictionless_test_support::onnx as interop_common;
 
 use std::collections::HashMap;
 

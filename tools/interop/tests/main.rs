@@ -2,7 +2,6 @@
 //!
 //! One test binary for the crate (one link step); each module tests one area.
 
-mod interop_common;
 mod interop_onnx;
 mod interop_refs;
 mod interop_safetensors;

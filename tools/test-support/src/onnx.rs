@@ -1,7 +1,5 @@
-//! Shared helpers for the interop tests: the ergoCub anchor fixture, a tiny ONNX graph builder
-//! (onnx-protobuf messages, independent of the exporter under test) and tolerance checks.
-
-#![allow(dead_code)]
+//! The ergoCub anchor fixture, a tiny ONNX graph builder (onnx-protobuf messages, independent of
+//! the exporter under test) and tolerance checks, for the interop and frictl tests.
 
 use std::path::PathBuf;
 
