@@ -465,15 +465,14 @@ fn load_for_reload(
     generation: u64,
 ) -> ReloadResult {
     let mut new = config::load(path).map_err(|e| e.to_string())?;
-    if running.raw.backend.kind == config::BackendKind::Can {
-        let fixed = frictiond::backend::can::reload_conflicts(running, &new);
-        if !fixed.is_empty() {
-            return Err(format!(
-                "{} needs a restart: the CAN backend fixed these when it opened ({}); nothing applied",
-                path.display(),
-                fixed.join("; ")
-            ));
-        }
+    let fixed = frictiond::backend::AnyBackend::reload_conflicts(running, &new);
+    if !fixed.is_empty() {
+        return Err(format!(
+            "{} needs a restart: the {} backend fixed these when it opened ({}); nothing applied",
+            path.display(),
+            running.raw.backend.kind.label(),
+            fixed.join("; ")
+        ));
     }
     let restart = needs_restart(running, &new);
     if !restart.is_empty() {

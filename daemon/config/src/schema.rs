@@ -150,6 +150,16 @@ pub enum BackendKind {
     Can,
 }
 
+impl BackendKind {
+    /// The name a person reads in messages (`shared-memory`, `CAN`).
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Shm => "shared-memory",
+            Self::Can => "CAN",
+        }
+    }
+}
+
 /// `[backend]`.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]

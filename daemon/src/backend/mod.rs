@@ -118,6 +118,18 @@ impl AnyBackend {
             BackendKind::Can => Ok(Self::Can(can::CanBackend::open(cfg)?)),
         }
     }
+
+    /// What a reload from `running` to `new` would change that the running backend fixed when it
+    /// opened (each entry names the bus or joint with the old and new value); empty when a reload
+    /// may apply `new`. The shared-memory backend fixes nothing beyond `[backend]` itself (which a
+    /// reload never applies); the CAN backend fixes its buses and drives
+    /// ([`can::reload_conflicts`]). Reload time, not the RT thread.
+    pub fn reload_conflicts(running: &Config, new: &Config) -> Vec<String> {
+        match running.raw.backend.kind {
+            BackendKind::Shm => Vec::new(),
+            BackendKind::Can => can::reload_conflicts(running, new),
+        }
+    }
 }
 
 impl Backend for AnyBackend {
