@@ -164,6 +164,15 @@ impl LegLinks {
     }
 }
 
+/// One joint's sample of a leg run: the log row and the controller's velocity estimate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LegRow {
+    /// The row (measurement, current reference, chunk, mode, truth).
+    pub row: LogRow,
+    /// The controller's filtered encoder-difference velocity [rad/s].
+    pub sdot_rad_s: f64,
+}
+
 /// Plays every joint's protocol (`protocols`, the leg's order, e.g. from [`leg_protocols`]) at
 /// once on a new [`LegPlant`] from `leg` and `seed`, until every joint has played its last block
 /// (a joint done early holds its position, rows inactive). Each sample, `sink` gets one row per
@@ -173,6 +182,21 @@ pub fn run_leg_offline(
     protocols: &[ProtocolConfig],
     seed: u64,
     sink: &mut dyn FnMut(&[LogRow]) -> Result<(), AcquireError>,
+) -> Result<Vec<RunSummary>, LegAcquireError> {
+    let mut rows = Vec::with_capacity(leg.joints.len());
+    run_leg_offline_with_velocity(leg, protocols, seed, &mut |r| {
+        rows.clear();
+        rows.extend(r.iter().map(|x| x.row));
+        sink(&rows)
+    })
+}
+
+/// [`run_leg_offline`] with each joint's velocity estimate in the rows.
+pub fn run_leg_offline_with_velocity(
+    leg: &LegParams,
+    protocols: &[ProtocolConfig],
+    seed: u64,
+    sink: &mut dyn FnMut(&[LegRow]) -> Result<(), AcquireError>,
 ) -> Result<Vec<RunSummary>, LegAcquireError> {
     let n = leg.joints.len();
     if protocols.len() != n {
@@ -201,7 +225,7 @@ pub fn run_leg_offline(
         .zip(&q0)
         .map(|(((m, c), b), &s0)| JointRunner::new(m, c, b, s0))
         .collect();
-    let mut rows: Vec<LogRow> = Vec::with_capacity(n);
+    let mut rows: Vec<LegRow> = Vec::with_capacity(n);
     let mut i_ref = vec![0.0; n];
     let tau_ext = vec![0.0; n];
     while runners.iter().any(|r| !r.finished()) {
@@ -211,7 +235,10 @@ pub fn run_leg_offline(
             let s = plant.samples()[k];
             let row = r.next(s.meas, Some(s.truth));
             i_ref[k] = row.i_ref_a;
-            rows.push(row);
+            rows.push(LegRow {
+                row,
+                sdot_rad_s: r.velocity_rad_s(),
+            });
         }
         sink(&rows)?;
         plant.step(&i_ref, &tau_ext)?;

@@ -464,6 +464,11 @@ impl<'m, 'a> JointRunner<'m, 'a> {
         }
     }
 
+    /// The controller's joint velocity estimate after the latest [`JointRunner::next`] [rad/s].
+    pub fn velocity_rad_s(&self) -> f64 {
+        self.vel.velocity_rad_s()
+    }
+
     /// Whether every block has been played.
     pub fn finished(&self) -> bool {
         self.block >= self.blocks.len()
