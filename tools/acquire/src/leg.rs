@@ -16,7 +16,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 use frictionless_dynamics::{Robot, Workspace};
 use frictionless_sim::link::LinkDynamics;
 use frictionless_sim::params::{ParamError, load_table};
-use frictionless_sim::{LegError, LegParams, LegPlant, PlantParams};
+use frictionless_sim::{LegError, LegParams, LegPlant, Measurement, PlantParams, Truth};
 
 use crate::config::ProtocolConfig;
 use crate::protocol::{AcquireError, ControllerModel, JointRunner, LogRow, RunSummary, schedule};
@@ -164,6 +164,42 @@ impl LegLinks {
     }
 }
 
+/// Every joint of a multi-joint plant for one control period: the seam between the simultaneous
+/// protocol and a plant (the offline [`LegPlant`] here, a live plant over shared memory in `frictl`).
+pub trait LegIo {
+    /// The latest measurement of joint `k` (before any command: the initial one).
+    fn measurement(&self, k: usize) -> Measurement;
+    /// The truth behind joint `k`'s latest measurement, if the plant is simulated.
+    fn truth(&self, k: usize) -> Option<Truth>;
+    /// Applies every joint's current `i_ref_a[k]` (robot convention) for one control period.
+    fn exchange(&mut self, i_ref_a: &[f64]) -> Result<(), AcquireError>;
+}
+
+/// The offline leg as a [`LegIo`] (no external torque).
+struct SimLeg {
+    plant: LegPlant,
+    tau_ext_nm: Vec<f64>,
+}
+
+impl LegIo for SimLeg {
+    fn measurement(&self, k: usize) -> Measurement {
+        self.plant.samples()[k].meas
+    }
+    fn truth(&self, k: usize) -> Option<Truth> {
+        Some(self.plant.samples()[k].truth)
+    }
+    fn exchange(&mut self, i_ref_a: &[f64]) -> Result<(), AcquireError> {
+        let t = self.plant.time_s();
+        self.plant
+            .step(i_ref_a, &self.tau_ext_nm)
+            .map(|_| ())
+            .map_err(|e| AcquireError::Io {
+                time_s: t,
+                why: e.to_string(),
+            })
+    }
+}
+
 /// One joint's sample of a leg run: the log row and the controller's velocity estimate.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LegRow {
@@ -207,10 +243,36 @@ pub fn run_leg_offline_with_velocity(
         }
         .into());
     }
-    let mut plant = LegPlant::new(leg.clone(), seed)?;
+    let plant = LegPlant::new(leg.clone(), seed)?;
+    let mut io = SimLeg {
+        plant,
+        tau_ext_nm: vec![0.0; n],
+    };
+    run_leg(&mut io, leg, protocols, sink)
+}
+
+/// Plays every joint's protocol at once on `io` (joint k of `io` = joint k of `leg`, whose
+/// nominal model the controllers use), until every joint has played its last block. Each sample,
+/// `sink` gets one row per joint. Returns each joint's summary.
+pub fn run_leg(
+    io: &mut dyn LegIo,
+    leg: &LegParams,
+    protocols: &[ProtocolConfig],
+    sink: &mut dyn FnMut(&[LegRow]) -> Result<(), AcquireError>,
+) -> Result<Vec<RunSummary>, LegAcquireError> {
+    let n = leg.joints.len();
+    if protocols.len() != n {
+        return Err(LegError::Dimension {
+            what: "protocols",
+            expected: n,
+            got: protocols.len(),
+        }
+        .into());
+    }
+    let nominal = leg.nominal_robot()?;
     let names: Vec<&str> = leg.joints.iter().map(|p| p.joint.as_str()).collect();
-    let q0: Vec<f64> = plant.samples().iter().map(|s| s.meas.s_rad).collect();
-    let links = LegLinks::new(plant.nominal_robot(), &names, &q0)?;
+    let q0: Vec<f64> = (0..n).map(|k| io.measurement(k).s_rad).collect();
+    let links = LegLinks::new(&nominal, &names, &q0)?;
     let models: Vec<ControllerModel<'_>> = leg
         .joints
         .iter()
@@ -227,13 +289,11 @@ pub fn run_leg_offline_with_velocity(
         .collect();
     let mut rows: Vec<LegRow> = Vec::with_capacity(n);
     let mut i_ref = vec![0.0; n];
-    let tau_ext = vec![0.0; n];
     while runners.iter().any(|r| !r.finished()) {
-        links.set_positions(plant.samples().iter().map(|s| s.meas.s_rad));
+        links.set_positions((0..n).map(|k| io.measurement(k).s_rad));
         rows.clear();
         for (k, r) in runners.iter_mut().enumerate() {
-            let s = plant.samples()[k];
-            let row = r.next(s.meas, Some(s.truth));
+            let row = r.next(io.measurement(k), io.truth(k));
             i_ref[k] = row.i_ref_a;
             rows.push(LegRow {
                 row,
@@ -241,7 +301,7 @@ pub fn run_leg_offline_with_velocity(
             });
         }
         sink(&rows)?;
-        plant.step(&i_ref, &tau_ext)?;
+        io.exchange(&i_ref)?;
     }
     Ok(runners.into_iter().map(JointRunner::into_summary).collect())
 }

@@ -39,9 +39,10 @@ pub enum Sensor {
 pub struct Args {
     /// Built-in preset (`knee`, `ankle_roll`) or a preset TOML file (tables `plant` and `protocol`);
     /// or `leg`: every joint of the coupled ergoCub left leg excited at once, each with the knee's
-    /// protocol scaled to the joint (offline only; `--set protocol.KEY=VALUE` changes the protocol
-    /// of every joint, `--set l_knee:plant.KEY=VALUE` one joint's drive), one log with every
-    /// joint's columns.
+    /// protocol scaled to the joint (`--set protocol.KEY=VALUE` changes the protocol of every
+    /// joint, `--set l_knee:plant.KEY=VALUE` one joint's drive), one log with every joint's
+    /// columns; with `--live-shm` every joint of a `frictl sim serve --preset leg` plant is driven
+    /// at once (all bits valid in each command).
     #[arg(long)]
     pub preset: String,
     /// TOML file deep-merged over the preset (same layout).
@@ -359,7 +360,9 @@ struct LegSidecar<'a> {
     producer: String,
     preset: &'static str,
     source: &'static str,
-    seed: u64,
+    /// Live runs: the connection facts (`joint_index` 0: every joint from 0 is driven).
+    live: Option<LiveInfo>,
+    seed: Option<u64>,
     sample_period_s: f64,
     csv: String,
     /// The leg's joints in column order, with the constants a label needs.
@@ -384,10 +387,6 @@ struct LegSidecarJoint<'a> {
 /// joint's columns and a JSON sidecar.
 fn run_leg(args: &Args) -> anyhow::Result<()> {
     anyhow::ensure!(
-        !args.live_shm,
-        "--preset leg: --live-shm drives one joint; the leg is acquired offline"
-    );
-    anyhow::ensure!(
         args.sensor == Sensor::MotorEncoder,
         "--preset leg: --sensor torque is a single-joint log"
     );
@@ -406,10 +405,18 @@ fn run_leg(args: &Args) -> anyhow::Result<()> {
         &plant_sets,
     )?;
     let protocols = frictionless_acquire::leg::leg_protocols(&leg, &protocol_sets)?;
-    let name = args
-        .name
-        .clone()
-        .unwrap_or_else(|| format!("leg_seed{}", args.seed));
+    let name = args.name.clone().unwrap_or_else(|| {
+        if args.live_shm {
+            "leg_live".to_owned()
+        } else {
+            format!("leg_seed{}", args.seed)
+        }
+    });
+    // Live: no truth column (the process only sees what a robot reports).
+    let columns: Vec<&(&str, &str, &str)> = LEG_COLUMNS
+        .iter()
+        .filter(|c| !(args.live_shm && c.0.starts_with("tau_f_true")))
+        .collect();
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output directory {}", args.out.display()))?;
     let csv_path = args.out.join(format!("{name}.csv"));
@@ -421,7 +428,7 @@ fn run_leg(args: &Args) -> anyhow::Result<()> {
             .with_context(|| format!("cannot create {}", csv_path.display()))?,
     );
     let mut header = String::from("time_s");
-    for (col, _, _) in LEG_COLUMNS {
+    for (col, _, _) in &columns {
         for j in &names {
             header.push(',');
             header.push_str(&col.replace("{joint}", j));
@@ -433,44 +440,85 @@ fn run_leg(args: &Args) -> anyhow::Result<()> {
     let started = std::time::Instant::now();
     let mut line = String::new();
     let mut samples = 0u64;
-    let summaries = frictionless_acquire::leg::run_leg_offline_with_velocity(
-        &leg,
-        &protocols,
-        args.seed,
-        &mut |rows| {
-            use std::fmt::Write as _;
-            line.clear();
-            let num = |line: &mut String, v: f64| {
-                let _ = write!(line, ",{}", frictionless_acquire::log::round_significant(v));
-            };
-            let _ = write!(
-                line,
-                "{}",
-                frictionless_acquire::log::round_significant(rows[0].row.meas.time_s)
-            );
-            let fields: [fn(&frictionless_acquire::leg::LegRow) -> f64; 10] = [
-                |r| r.row.meas.s_rad,
-                |r| r.sdot_rad_s,
-                |r| r.row.meas.theta_motor_rad,
-                |r| r.row.meas.omega_motor_rad_s,
-                |r| r.row.i_ref_a,
-                |r| r.row.meas.i_meas_a,
-                |r| r.row.meas.temperature_c,
-                |r| f64::from(r.row.chunk),
-                |r| f64::from(u8::from(r.row.active)),
-                |r| r.row.truth.map_or(f64::NAN, |t| t.tau_f_nm),
-            ];
-            for f in fields {
-                for r in rows {
-                    num(&mut line, f(r));
-                }
+    let n_fields = columns.len();
+    let mut sink = |rows: &[frictionless_acquire::leg::LegRow]| -> Result<(), AcquireError> {
+        use std::fmt::Write as _;
+        line.clear();
+        let num = |line: &mut String, v: f64| {
+            let _ = write!(line, ",{}", frictionless_acquire::log::round_significant(v));
+        };
+        let _ = write!(
+            line,
+            "{}",
+            frictionless_acquire::log::round_significant(rows[0].row.meas.time_s)
+        );
+        let fields: [fn(&frictionless_acquire::leg::LegRow) -> f64; 10] = [
+            |r| r.row.meas.s_rad,
+            |r| r.sdot_rad_s,
+            |r| r.row.meas.theta_motor_rad,
+            |r| r.row.meas.omega_motor_rad_s,
+            |r| r.row.i_ref_a,
+            |r| r.row.meas.i_meas_a,
+            |r| r.row.meas.temperature_c,
+            |r| f64::from(r.row.chunk),
+            |r| f64::from(u8::from(r.row.active)),
+            |r| r.row.truth.map_or(f64::NAN, |t| t.tau_f_nm),
+        ];
+        for f in &fields[..n_fields] {
+            for r in rows {
+                num(&mut line, f(r));
             }
-            line.push('\n');
-            samples += 1;
-            std::io::Write::write_all(&mut out, line.as_bytes())
-                .map_err(|e| AcquireError::Sink(e.to_string()))
-        },
-    )?;
+        }
+        line.push('\n');
+        samples += 1;
+        std::io::Write::write_all(&mut out, line.as_bytes())
+            .map_err(|e| AcquireError::Sink(e.to_string()))
+    };
+    let mut live_info = None;
+    let summaries = if args.live_shm {
+        let stop = frictl::serve::install_stop_flag()?;
+        anyhow::ensure!(
+            args.connect_timeout_s.is_finite() && args.connect_timeout_s > 0.0,
+            "--connect-timeout-s must be > 0, got {}",
+            args.connect_timeout_s
+        );
+        let cfg = frictionless_shm_types::IpcConfig::new(args.root_path.as_deref(), &args.prefix);
+        let mut robot = frictl::serve::shm::LiveJoint::connect(
+            &cfg,
+            0,
+            leg.joints[0].sample_period_s(),
+            Duration::from_secs_f64(args.connect_timeout_s),
+            Duration::from_millis(args.state_timeout_ms),
+            stop,
+        )?;
+        anyhow::ensure!(
+            robot.n_joints() == names.len(),
+            "--preset leg --live-shm: the plant on `{}` publishes {} joint(s), the leg has {} \
+             (serve it with `frictl sim serve --preset leg`)",
+            args.prefix,
+            robot.n_joints(),
+            names.len()
+        );
+        let result = frictionless_acquire::leg::run_leg(&mut robot, &leg, &protocols, &mut sink);
+        // Leave every joint at 0 A whatever happened (the plant also zeroes after its timeout).
+        let released = robot.release_all(names.len());
+        live_info = Some(LiveInfo {
+            prefix: args.prefix.clone(),
+            root_path: args.root_path.as_ref().map(|p| p.display().to_string()),
+            joint_index: 0,
+            first_seq: robot.first_seq(),
+            states_received: robot.states_received,
+            states_skipped: robot.states_skipped,
+            plant_publishes_sim_truth: robot.plant_publishes_sim_truth,
+        });
+        let summaries = result?;
+        released?;
+        summaries
+    } else {
+        frictionless_acquire::leg::run_leg_offline_with_velocity(
+            &leg, &protocols, args.seed, &mut sink,
+        )?
+    };
     let csv_out = out
         .into_inner()
         .map_err(|e| anyhow::anyhow!("cannot write {}: {}", csv_path.display(), e.error()))?;
@@ -495,8 +543,13 @@ fn run_leg(args: &Args) -> anyhow::Result<()> {
         format: "frictionless-acquire-leg-v1",
         producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
         preset: frictl::serve::LEG_PRESET,
-        source: SOURCE_OFFLINE_SIM,
-        seed: args.seed,
+        source: if args.live_shm {
+            SOURCE_LIVE_SHM
+        } else {
+            SOURCE_OFFLINE_SIM
+        },
+        live: live_info,
+        seed: (!args.live_shm).then_some(args.seed),
         sample_period_s: period_s,
         csv: format!("{name}.csv"),
         joints: leg
@@ -516,7 +569,7 @@ fn run_leg(args: &Args) -> anyhow::Result<()> {
         columns: std::iter::once(serde_json::json!({"name": "time_s", "unit": "s",
             "description": "simulated time"}))
         .chain(
-            LEG_COLUMNS
+            columns
                 .iter()
                 .map(|(n, u, d)| serde_json::json!({"name": n, "unit": u, "description": d})),
         )

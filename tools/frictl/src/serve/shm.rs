@@ -42,6 +42,7 @@ use frictionless_shm_types::{
 };
 
 use super::{ServeError, ServedRobot};
+use frictionless_acquire::leg::LegIo;
 use frictionless_acquire::protocol::{AcquireError, JointIo, VelocityEstimator};
 use frictionless_sim::{Measurement, Truth};
 
@@ -715,6 +716,44 @@ impl<'a> LiveJoint<'a> {
             })
     }
 
+    /// Publishes a command answering the newest state with `i_ref_a[k]` for joints 0, 1, … (each
+    /// bit valid): the whole robot driven by this process.
+    fn send_all(&mut self, i_ref_a: &[f64]) -> Result<(), LiveError> {
+        self.cmd_seq += 1;
+        let last = &self.last;
+        let seq = self.cmd_seq;
+        self.commands
+            .publish_with(|c: &mut MotorCurrentCommand| {
+                c.seq = seq;
+                c.stamp_ns = monotonic_ns();
+                c.state_stamp_ns = last.stamp_ns;
+                c.state_seq = last.seq;
+                c.valid_mask = 0;
+                c.n_joints = last.n_joints;
+                for (j, &i) in i_ref_a.iter().enumerate().take(MAX_JOINTS) {
+                    c.valid_mask |= 1u64 << j;
+                    c.i_ref_a[j] = i;
+                }
+            })
+            .map_err(|e| LiveError::Io {
+                what: "publish",
+                service: self.commands.name().to_owned(),
+                why: e.to_string(),
+            })
+    }
+
+    /// Sends 0 A to the first `n` joints (answering the newest state): call when a whole-robot
+    /// run is done or aborting.
+    pub fn release_all(&mut self, n: usize) -> Result<(), ServeError> {
+        self.send_all(&vec![0.0; n.min(MAX_JOINTS)])?;
+        Ok(())
+    }
+
+    /// Joints in the newest state.
+    pub fn n_joints(&self) -> usize {
+        self.last.n_joints as usize
+    }
+
     /// Sends 0 A for this joint (answering the newest state): call when done or aborting.
     pub fn release(&mut self) -> Result<(), ServeError> {
         self.send(0.0)?;
@@ -753,5 +792,41 @@ impl JointIo for LiveJoint<'_> {
 
     fn truth(&self) -> Option<Truth> {
         None
+    }
+}
+
+/// The whole robot of the plant, driven by this process: joint k of every payload (`frictl
+/// acquire --preset leg --live-shm`). [`LegIo::exchange`] publishes one command with every
+/// joint's current (all bits valid) answering the newest state and waits for the next state; the
+/// measurements' time is that of [`LiveJoint`].
+impl LegIo for LiveJoint<'_> {
+    fn measurement(&self, k: usize) -> Measurement {
+        let s = &self.last;
+        Measurement {
+            time_s: self.meas.time_s,
+            s_rad: s.s_rad[k],
+            theta_motor_rad: s.theta_motor_rad[k],
+            omega_motor_rad_s: s.omega_motor_rad_s[k],
+            i_meas_a: s.current_a[k],
+            temperature_c: s.temperature_c[k],
+        }
+    }
+
+    fn truth(&self, _k: usize) -> Option<Truth> {
+        None
+    }
+
+    fn exchange(&mut self, i_ref_a: &[f64]) -> Result<(), AcquireError> {
+        let t = self.meas.time_s;
+        let fail = |e: LiveError| AcquireError::Io {
+            time_s: t,
+            why: e.to_string(),
+        };
+        self.send_all(i_ref_a).map_err(fail)?;
+        let s = self
+            .next_state(self.last.seq, self.state_timeout)
+            .map_err(fail)?;
+        self.accept(s);
+        Ok(())
     }
 }
