@@ -13,6 +13,7 @@
 //! - [`log`]: CSV columns, units and the sidecar;
 //! - [`arm_log`]: the log of a torque-sensed arm (joint torque sensor, no motor encoder, optional
 //!   lower rate and jittered timestamps) for `frictl import csv`;
+//! - [`leg`]: every joint of the coupled leg excited at once, each with its own protocol;
 //! - [`offline`]: the protocol on a fresh simulated plant ([`offline::run_offline`]) and its rows as
 //!   the label pipeline's input.
 //!
@@ -70,10 +71,13 @@
 
 pub mod arm_log;
 pub mod config;
+pub mod leg;
 pub mod log;
 pub mod offline;
 pub mod protocol;
 
 pub use config::ProtocolConfig;
 pub use offline::{OfflineError, OfflineRun, log_meta, raw_log, run_offline};
-pub use protocol::{Block, BlockKind, JointIo, LogRow, Mode, RunSummary, SimJoint, run, schedule};
+pub use protocol::{
+    Block, BlockKind, JointIo, JointRunner, LogRow, Mode, RunSummary, SimJoint, run, schedule,
+};

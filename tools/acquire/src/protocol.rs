@@ -385,122 +385,229 @@ pub fn run(
     blocks: &[Block],
     sink: &mut dyn FnMut(&LogRow) -> Result<(), AcquireError>,
 ) -> Result<RunSummary, AcquireError> {
-    let ts = model.period_s;
-    let mut meas = io.measurement();
-    let mut vel = VelocityEstimator::new(cfg.velocity_filter_hz, ts, meas.s_rad);
-    let margin = cfg.limit_margin_deg.to_radians();
-    let (lim_lo, lim_hi) = (cfg.range_lo_rad + margin, cfg.range_hi_rad - margin);
-    let mut summary = RunSummary::default();
-    let position_current = |s: f64, v: f64, tgt: f64| {
-        let acc = cfg.position_kp_per_s2 * (tgt - s) - cfg.position_kd_per_s * v;
-        model.current_for_accel(s, acc)
-    };
+    let mut runner = JointRunner::new(model, cfg, blocks, io.measurement().s_rad);
+    while !runner.finished() {
+        let row = runner.next(io.measurement(), io.truth());
+        sink(&row)?;
+        io.exchange(row.i_ref_a)?;
+    }
+    Ok(runner.into_summary())
+}
 
-    for block in blocks {
-        summary.chunks += 1;
-        let n_rec = (block.recentre_s / ts).round() as u64;
-        let n_exc = (block.excitation_s() / ts).round() as u64;
-        let mut i0 = 0.0;
-        let mut centre = block.start_rad;
-        let mut hold_at: Option<f64> = None;
-        for k in 0..n_rec + n_exc {
-            let v = vel.update(meas.s_rad);
-            let s = meas.s_rad;
-            let (mode, i_ref) = if k < n_rec {
-                (Mode::Recentre, position_current(s, v, block.start_rad))
-            } else {
-                if k == n_rec {
-                    centre = s;
-                    i0 = match cfg.holding_current {
-                        HoldingCurrent::Gravity => {
-                            model.current_for_torque(model.link.gravity_nm(s))
-                        }
-                        HoldingCurrent::Zero => 0.0,
-                    };
-                }
-                if hold_at.is_none() {
-                    let reason = if s <= lim_lo || s >= lim_hi {
-                        Some(LatchReason::PositionLimit)
-                    } else if meas.i_meas_a.abs() >= cfg.max_safety_current_a {
-                        Some(LatchReason::Current)
-                    } else {
-                        None
-                    };
-                    if let Some(reason) = reason {
-                        hold_at = Some(s);
-                        summary.latches.push(Latch {
-                            chunk: block.chunk,
-                            time_s: meas.time_s,
-                            reason,
-                            s_rad: s,
-                        });
-                    }
-                }
-                let t = (k - n_rec) as f64 * ts;
-                match (hold_at, &block.kind) {
-                    (Some(h), _) => (Mode::Hold, position_current(s, v, h)),
-                    (
-                        None,
-                        BlockKind::Sine {
-                            amplitude_a,
-                            frequency_hz,
-                            ..
-                        },
-                    ) => (
-                        Mode::Current,
-                        i0 + amplitude_a * (std::f64::consts::TAU * frequency_hz * t).sin(),
-                    ),
-                    (
-                        None,
-                        BlockKind::Ramp {
-                            slope_a_per_s,
-                            max_increment_a,
-                        },
-                    ) => (
-                        Mode::Current,
-                        i0 + (slope_a_per_s * t).clamp(-max_increment_a, *max_increment_a),
-                    ),
-                    (
-                        None,
-                        BlockKind::Step {
-                            level_a, hold_s, ..
-                        },
-                    ) => (Mode::Current, if t < *hold_s { i0 + level_a } else { i0 }),
-                    (
-                        None,
-                        BlockKind::Tracking {
-                            amplitude_rad,
-                            frequency_hz,
-                            kp_per_s2,
-                            ..
-                        },
-                    ) => {
-                        // Centred on the position reached by the re-centring (stiction can leave
-                        // it short of the target): no error step, hence no current kick, at t = 0.
-                        let s_d = centre
-                            + amplitude_rad * (std::f64::consts::TAU * frequency_hz * t).sin();
-                        let acc = kp_per_s2 * (s_d - s) - 2.0 * kp_per_s2.sqrt() * v;
-                        (Mode::Tracking, model.current_for_accel(s, acc))
-                    }
-                }
-            };
-            let i_ref = i_ref.clamp(-model.i_max_a, model.i_max_a);
-            let row = LogRow {
-                chunk: block.chunk,
-                active: matches!(mode, Mode::Current | Mode::Tracking),
-                mode,
-                meas,
-                i_ref_a: i_ref,
-                truth: io.truth(),
-            };
-            sink(&row)?;
-            summary.samples += 1;
-            summary.active_samples += u64::from(row.active);
-            meas = io.exchange(i_ref)?;
+/// The protocol of one joint as a sample-by-sample state machine: [`run`] drives one joint with
+/// it; a multi-joint plant drives one runner per joint, all stepped together (every joint excited
+/// at once, each with its own schedule, guards and controller).
+pub struct JointRunner<'m, 'a> {
+    model: &'m ControllerModel<'a>,
+    cfg: &'m ProtocolConfig,
+    blocks: &'m [Block],
+    vel: VelocityEstimator,
+    lim_lo: f64,
+    lim_hi: f64,
+    block: usize,
+    k: u64,
+    n_rec: u64,
+    n_exc: u64,
+    i0: f64,
+    centre: f64,
+    hold_at: Option<f64>,
+    /// After the last block: the position held [rad].
+    park_at: Option<f64>,
+    summary: RunSummary,
+}
+
+impl<'m, 'a> JointRunner<'m, 'a> {
+    /// A runner at the start of `blocks`, the joint at rest at `s0_rad`.
+    pub fn new(
+        model: &'m ControllerModel<'a>,
+        cfg: &'m ProtocolConfig,
+        blocks: &'m [Block],
+        s0_rad: f64,
+    ) -> Self {
+        let margin = cfg.limit_margin_deg.to_radians();
+        let mut me = Self {
+            model,
+            cfg,
+            blocks,
+            vel: VelocityEstimator::new(cfg.velocity_filter_hz, model.period_s, s0_rad),
+            lim_lo: cfg.range_lo_rad + margin,
+            lim_hi: cfg.range_hi_rad - margin,
+            block: 0,
+            k: 0,
+            n_rec: 0,
+            n_exc: 0,
+            i0: 0.0,
+            centre: 0.0,
+            hold_at: None,
+            park_at: None,
+            summary: RunSummary::default(),
+        };
+        me.enter_block();
+        me
+    }
+
+    /// Starts block `self.block` (blocks without samples are counted and skipped).
+    fn enter_block(&mut self) {
+        let ts = self.model.period_s;
+        while let Some(b) = self.blocks.get(self.block) {
+            self.summary.chunks += 1;
+            self.n_rec = (b.recentre_s / ts).round() as u64;
+            self.n_exc = (b.excitation_s() / ts).round() as u64;
+            self.i0 = 0.0;
+            self.centre = b.start_rad;
+            self.hold_at = None;
+            self.k = 0;
+            if self.n_rec + self.n_exc > 0 {
+                return;
+            }
+            self.block += 1;
         }
     }
-    summary.duration_s = summary.samples as f64 * ts;
-    Ok(summary)
+
+    /// The controller's joint velocity estimate after the latest [`JointRunner::next`] [rad/s].
+    pub fn velocity_rad_s(&self) -> f64 {
+        self.vel.velocity_rad_s()
+    }
+
+    /// Whether every block has been played.
+    pub fn finished(&self) -> bool {
+        self.block >= self.blocks.len()
+    }
+
+    /// What has been played so far ([`RunSummary::duration_s`] filled in).
+    pub fn summary(&self) -> RunSummary {
+        let mut s = self.summary.clone();
+        s.duration_s = s.samples as f64 * self.model.period_s;
+        s
+    }
+
+    /// The summary of the whole run.
+    pub fn into_summary(self) -> RunSummary {
+        self.summary()
+    }
+
+    fn position_current(&self, s: f64, v: f64, tgt: f64) -> f64 {
+        let acc = self.cfg.position_kp_per_s2 * (tgt - s) - self.cfg.position_kd_per_s * v;
+        self.model.current_for_accel(s, acc)
+    }
+
+    /// The sample at `meas`: the controller's current for the next period and the log row. After
+    /// the last block the joint holds its last position (rows inactive, [`Mode::Hold`], the last
+    /// chunk), not counted in the summary.
+    pub fn next(&mut self, meas: Measurement, truth: Option<Truth>) -> LogRow {
+        let v = self.vel.update(meas.s_rad);
+        let s = meas.s_rad;
+        let Some(block) = self.blocks.get(self.block) else {
+            let park = *self.park_at.get_or_insert(s);
+            let i_ref = self
+                .position_current(s, v, park)
+                .clamp(-self.model.i_max_a, self.model.i_max_a);
+            return LogRow {
+                chunk: self.blocks.last().map_or(0, |b| b.chunk),
+                active: false,
+                mode: Mode::Hold,
+                meas,
+                i_ref_a: i_ref,
+                truth,
+            };
+        };
+        let (cfg, model) = (self.cfg, self.model);
+        let (k, n_rec) = (self.k, self.n_rec);
+        let (mode, i_ref) = if k < n_rec {
+            (Mode::Recentre, self.position_current(s, v, block.start_rad))
+        } else {
+            if k == n_rec {
+                self.centre = s;
+                self.i0 = match cfg.holding_current {
+                    HoldingCurrent::Gravity => model.current_for_torque(model.link.gravity_nm(s)),
+                    HoldingCurrent::Zero => 0.0,
+                };
+            }
+            if self.hold_at.is_none() {
+                let reason = if s <= self.lim_lo || s >= self.lim_hi {
+                    Some(LatchReason::PositionLimit)
+                } else if meas.i_meas_a.abs() >= cfg.max_safety_current_a {
+                    Some(LatchReason::Current)
+                } else {
+                    None
+                };
+                if let Some(reason) = reason {
+                    self.hold_at = Some(s);
+                    self.summary.latches.push(Latch {
+                        chunk: block.chunk,
+                        time_s: meas.time_s,
+                        reason,
+                        s_rad: s,
+                    });
+                }
+            }
+            let t = (k - n_rec) as f64 * model.period_s;
+            let i0 = self.i0;
+            match (self.hold_at, &block.kind) {
+                (Some(h), _) => (Mode::Hold, self.position_current(s, v, h)),
+                (
+                    None,
+                    BlockKind::Sine {
+                        amplitude_a,
+                        frequency_hz,
+                        ..
+                    },
+                ) => (
+                    Mode::Current,
+                    i0 + amplitude_a * (std::f64::consts::TAU * frequency_hz * t).sin(),
+                ),
+                (
+                    None,
+                    BlockKind::Ramp {
+                        slope_a_per_s,
+                        max_increment_a,
+                    },
+                ) => (
+                    Mode::Current,
+                    i0 + (slope_a_per_s * t).clamp(-max_increment_a, *max_increment_a),
+                ),
+                (
+                    None,
+                    BlockKind::Step {
+                        level_a, hold_s, ..
+                    },
+                ) => (Mode::Current, if t < *hold_s { i0 + level_a } else { i0 }),
+                (
+                    None,
+                    BlockKind::Tracking {
+                        amplitude_rad,
+                        frequency_hz,
+                        kp_per_s2,
+                        ..
+                    },
+                ) => {
+                    // Centred on the position reached by the re-centring (stiction can leave
+                    // it short of the target): no error step, hence no current kick, at t = 0.
+                    let s_d = self.centre
+                        + amplitude_rad * (std::f64::consts::TAU * frequency_hz * t).sin();
+                    let acc = kp_per_s2 * (s_d - s) - 2.0 * kp_per_s2.sqrt() * v;
+                    (Mode::Tracking, model.current_for_accel(s, acc))
+                }
+            }
+        };
+        let i_ref = i_ref.clamp(-model.i_max_a, model.i_max_a);
+        let row = LogRow {
+            chunk: block.chunk,
+            active: matches!(mode, Mode::Current | Mode::Tracking),
+            mode,
+            meas,
+            i_ref_a: i_ref,
+            truth,
+        };
+        self.summary.samples += 1;
+        self.summary.active_samples += u64::from(row.active);
+        self.k += 1;
+        if self.k >= self.n_rec + self.n_exc {
+            self.block += 1;
+            self.enter_block();
+        }
+        row
+    }
 }
 
 #[cfg(test)]

@@ -3,3 +3,4 @@
 //! One test binary for the crate (one link step); each module tests one area.
 
 mod ident_label;
+mod leg_label;

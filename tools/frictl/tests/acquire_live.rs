@@ -240,3 +240,98 @@ fn live_acquisition_without_a_plant_fails_naming_the_service() {
         "error names the service: {err}"
     );
 }
+
+/// `frictl acquire --preset leg --live-shm` against `frictl sim serve --preset leg --lockstep`:
+/// every joint driven at once over shared memory gives, row for row, the offline leg acquisition
+/// with the same seed (the truth columns, offline only, aside); every joint moves.
+#[test]
+fn live_lockstep_leg_acquisition_equals_offline_row_for_row() {
+    let s = Scratch::new("legls");
+    let seed = 2;
+    let tiny = [
+        "--set",
+        "protocol.n_starts=1",
+        "--set",
+        "protocol.recentre_s=0.3",
+        "--set",
+        "protocol.sines.amplitude_to_a=0.7",
+        "--set",
+        "protocol.sines.frequencies_hz=[2.0]",
+        "--set",
+        "protocol.sines.cycles=2",
+        "--set",
+        "protocol.ramps.enabled=false",
+        "--set",
+        "protocol.steps.levels_a=[0.8]",
+        "--set",
+        "protocol.steps.hold_s=0.3",
+        "--set",
+        "protocol.steps.rest_s=0.2",
+    ];
+    let run = |name: &str, live: bool| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_frictl"));
+        c.args(["acquire", "--preset", "leg", "--seed", &seed.to_string()])
+            .args(tiny)
+            .arg("--out")
+            .arg(s.out())
+            .args(["--name", name]);
+        if live {
+            c.args(["--live-shm", "--prefix", &s.prefix])
+                .arg("--root-path")
+                .arg(s.root());
+        }
+        let out = c.output().expect("run frictl acquire");
+        assert!(
+            out.status.success(),
+            "acquire --preset leg failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    let plant = Plant::spawn(
+        &s,
+        &["--preset", "leg", "--lockstep", "--seed", &seed.to_string()],
+    );
+    run("live", true);
+    let (ok, lines) = plant.terminate();
+    assert!(ok, "plant exits cleanly: {lines:?}");
+    run("offline", false);
+
+    let (h_live, live) = read_csv(&s.out().join("live.csv"));
+    let (h_off, off) = read_csv(&s.out().join("offline.csv"));
+    assert!(
+        !h_live.iter().any(|h| h.starts_with("tau_f_true")),
+        "no truth live"
+    );
+    assert_eq!(h_off.len(), h_live.len() + 6, "six truth columns offline");
+    assert_eq!(h_live[..], h_off[..h_live.len()], "same leading columns");
+    assert_eq!(live.len(), off.len(), "same number of samples");
+    assert!(live.len() > 1000, "{} rows", live.len());
+    for (k, (a, b)) in live.iter().zip(&off).enumerate() {
+        assert_eq!(a[..], b[..a.len()], "row {k}");
+    }
+    for j in [
+        "l_hip_pitch",
+        "l_hip_roll",
+        "l_hip_yaw",
+        "l_knee",
+        "l_ankle_pitch",
+        "l_ankle_roll",
+    ] {
+        let c = h_live.iter().position(|h| *h == format!("q_{j}")).unwrap();
+        let q: Vec<f64> = live.iter().map(|r| r[c].parse().unwrap()).collect();
+        let range =
+            q.iter().cloned().fold(f64::MIN, f64::max) - q.iter().cloned().fold(f64::MAX, f64::min);
+        assert!(range > 0.01, "{j} moved {range} rad");
+    }
+    let j = sidecar(&s.out().join("live.json"));
+    assert_eq!(j["source"], "live-shm");
+    assert!(j["seed"].is_null());
+    assert_eq!(j["live"]["states_skipped"], 0);
+    let off_j = sidecar(&s.out().join("offline.json"));
+    for k in 0..6 {
+        assert_eq!(
+            off_j["joints"][k]["summary"], j["joints"][k]["summary"],
+            "joint {k}: same guard events and counts"
+        );
+    }
+}

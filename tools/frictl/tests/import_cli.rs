@@ -1097,3 +1097,145 @@ fn an_import_that_would_be_empty_is_refused_with_the_likely_unit() {
         "the slow log with a wide gap",
     );
 }
+
+/// `frictl acquire --preset leg` excites every leg joint at once and writes one log with every
+/// joint's columns; `frictl import csv --joints all --positions 'q_{joint}'` turns it into six
+/// datasets labelled from the whole leg's state. Against the log's truth τ_F per joint (valid,
+/// active, sliding rows), the whole-state label is printed next to the single-joint view's (the
+/// other joints held at their mean positions); on the knee it must be far smaller.
+#[test]
+fn leg_acquisition_imports_per_joint_and_the_whole_state_label_beats_the_single_joint_view() {
+    let d = dir().join("legacq");
+    let _ = std::fs::remove_dir_all(&d);
+    let run = ok(
+        frictl(&[
+            "acquire",
+            "--preset",
+            "leg",
+            "--seed",
+            "5",
+            "--out",
+            s(&d),
+            "--set",
+            "protocol.n_starts=1",
+            "--set",
+            "protocol.current_scale=0.4",
+            "--set",
+            "protocol.sines.amplitude_to_a=0.7",
+            "--set",
+            "protocol.sines.frequencies_hz=[0.7]",
+            "--set",
+            "protocol.ramps.slopes_a_per_s=[0.39]",
+            "--set",
+            "protocol.steps.levels_a=[0.8, -0.8]",
+        ]),
+        "acquire --preset leg",
+    );
+    assert!(
+        String::from_utf8_lossy(&run.stderr).contains("6 joints excited at once"),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let log = d.join("leg_seed5.csv");
+    let cols = frictionless_dataset::read_columns(&log).unwrap();
+    let leg = frictionless_sim::LegParams::preset().unwrap();
+    let urdf = ergocub_urdf();
+    let mut constants = Vec::new();
+    for p in &leg.joints {
+        for c in ["q", "qd", "i", "i_ref", "theta", "tau_f_true", "active"] {
+            assert!(
+                cols.contains_key(&format!("{c}_{}", p.joint)),
+                "{c}_{}",
+                p.joint
+            );
+        }
+        constants.push(format!("--gear-ratio={}={}", p.joint, p.gear_ratio_signed));
+        constants.push(format!("--kt={}={}", p.joint, p.kt_nm_per_a));
+    }
+    let base = [
+        "import",
+        "csv",
+        s(&log),
+        "--label",
+        "current",
+        "--column",
+        "time=time_s",
+        "--column",
+        "s=q_{joint}",
+        "--column",
+        "current=i_{joint}",
+        "--column",
+        "theta=theta_{joint}",
+        "--column",
+        "omega=omega_{joint}",
+        "--urdf",
+        s(&urdf),
+    ];
+    // whole state: every joint in one pass
+    let mut args: Vec<&str> = base.to_vec();
+    args.extend(constants.iter().map(String::as_str));
+    let whole_out = d.join("ds_{joint}.csv");
+    args.extend([
+        "--joints",
+        "all",
+        "--positions",
+        "q_{joint}",
+        "-o",
+        s(&whole_out),
+    ]);
+    let run = ok(frictl(&args), "import csv --joints all (leg)");
+    assert!(
+        String::from_utf8_lossy(&run.stderr).contains("6 joint(s)"),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    // single-joint view of the knee: the other leg joints at their mean logged positions
+    let mut fixed = Vec::new();
+    for p in &leg.joints {
+        if p.joint != "l_knee" {
+            let q = &cols[&format!("q_{}", p.joint)];
+            fixed.push(format!(
+                "--fixed-joint={}={}",
+                p.joint,
+                q.iter().sum::<f64>() / q.len() as f64
+            ));
+        }
+    }
+    let mut args: Vec<&str> = base.to_vec();
+    args.extend(constants.iter().map(String::as_str));
+    args.extend(fixed.iter().map(String::as_str));
+    let single_out = d.join("single_l_knee.csv");
+    args.extend(["--joint", "l_knee", "-o", s(&single_out)]);
+    ok(frictl(&args), "import csv (knee, single-joint view)");
+
+    // label − truth on valid, active, sliding rows (the log's 1 kHz grid, indexed by time)
+    let label_error = |ds: &frictionless_dataset::Dataset, joint: &str| {
+        let truth = &cols[&format!("tau_f_true_{joint}")];
+        let active = &cols[&format!("active_{joint}")];
+        let (mut e2, mut n) = (0.0, 0usize);
+        for k in 0..ds.len() {
+            let i = (ds.time_s[k] * 1000.0).round() as usize;
+            if ds.valid[k] && active[i] == 1.0 && ds.sdot_rad_s[k].abs() > 0.03 {
+                e2 += (ds.tau_f_label_nm[k] - truth[i]).powi(2);
+                n += 1;
+            }
+        }
+        ((e2 / n.max(1) as f64).sqrt(), n)
+    };
+    for p in &leg.joints {
+        let ds = dataset(&d.join(format!("ds_{}.csv", p.joint)));
+        let (e, n) = label_error(&ds, &p.joint);
+        eprintln!(
+            "{:14} whole-state label − truth RMS {e:.3} Nm ({n} rows)",
+            p.joint
+        );
+        assert!(n > 100, "{}: {n} sliding rows", p.joint);
+    }
+    let (ew, _) = label_error(&dataset(&d.join("ds_l_knee.csv")), "l_knee");
+    let (es, n) = label_error(&dataset(&single_out), "l_knee");
+    eprintln!("l_knee single-joint view label − truth RMS {es:.3} Nm ({n} rows)");
+    assert!(
+        ew < 0.2 * es,
+        "knee: whole state {ew} Nm vs single-joint view {es} Nm"
+    );
+}

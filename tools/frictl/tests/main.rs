@@ -14,6 +14,7 @@ mod experiment_online_offline;
 mod experiment_oracle;
 mod files_cli;
 mod import_cli;
+mod leg_frictiond;
 mod onpolicy_cli;
 mod plant_common;
 mod robot_cli;

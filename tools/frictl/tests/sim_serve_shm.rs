@@ -1,6 +1,7 @@
 //! `frictl sim serve --backend shm` as a real process over real iceoryx2, talking to a minimal
 //! client in the test process: lockstep sign conventions, SimTruth/JointStates pairing,
-//! determinism, real-time rate and command timeout, disturbances, SIGTERM.
+//! determinism, real-time rate and command timeout, disturbances, SIGTERM; the coupled leg
+//! (`--preset leg`) on the same payloads.
 //!
 //! Every test uses its own iceoryx2 root directory and prefix and removes the directory at the end.
 
@@ -8,8 +9,8 @@ use std::time::{Duration, Instant};
 
 use frictionless_shm_types::sim::{SimDisturbance, SimTruth};
 use frictionless_shm_types::{Inbox, Ipc, JointStates, MotorCurrentCommand, Outbox, monotonic_ns};
-use frictionless_sim::PlantParams;
 use frictionless_sim::params::load_table;
+use frictionless_sim::{LegParams, LegPlant, PlantParams};
 
 use crate::plant_common;
 use plant_common::{Plant, Scratch};
@@ -101,12 +102,24 @@ fn lockstep_run(
     current: impl Fn(u64) -> Vec<f64>,
     tau_ext: impl Fn(u64) -> Option<Vec<f64>>,
 ) -> Vec<(JointStates, SimTruth)> {
+    lockstep_run_of("knee,ankle_roll", tag, seed, ticks, current, tau_ext)
+}
+
+/// [`lockstep_run`] of the given `--preset` value.
+fn lockstep_run_of(
+    presets: &str,
+    tag: &str,
+    seed: u64,
+    ticks: u64,
+    current: impl Fn(u64) -> Vec<f64>,
+    tau_ext: impl Fn(u64) -> Option<Vec<f64>>,
+) -> Vec<(JointStates, SimTruth)> {
     let s = Scratch::new(tag);
     let mut plant = Plant::spawn(
         &s,
         &[
             "--preset",
-            "knee,ankle_roll",
+            presets,
             "--lockstep",
             "--seed",
             &seed.to_string(),
@@ -402,4 +415,88 @@ fn lockstep_timeout_without_answers_holds_then_zeroes_and_keeps_going() {
         let expected = if tick < 3 { 1.0 } else { 0.0 };
         assert_eq!(i, expected, "tick {tick} (truth {seq}): {applied:?}");
     }
+}
+
+/// Leg test inputs answering state `k`: each joint its own sine around a constant current.
+fn leg_current(k: u64) -> Vec<f64> {
+    let t = k as f64 * 1e-3;
+    let amp = [1.5, -1.0, 0.6, 2.0, -0.5, 0.4];
+    let bias = [2.0, 1.0, 0.0, -1.0, 0.3, 0.0];
+    (0..6)
+        .map(|j| bias[j] + amp[j] * (std::f64::consts::TAU * (1.0 + j as f64) * t).sin())
+        .collect()
+}
+
+#[test]
+fn lockstep_leg_serves_six_coupled_joints_equal_to_the_leg_plant() {
+    let ticks = 400;
+    let tau_ext = [0.0, 0.0, 0.0, 0.0, 0.0, 1.5];
+    let run = lockstep_run_of("leg", "leg", 4, ticks, leg_current, |k| {
+        (k == 1).then(|| tau_ext.to_vec())
+    });
+    // The same leg in this process, stepped with the same inputs.
+    let mut leg = LegPlant::new(LegParams::preset().unwrap(), 4).unwrap();
+    let names: Vec<String> = leg.joint_names().map(str::to_owned).collect();
+    let mut moved = [0.0f64; 6];
+    for (k, (st, tr)) in run.iter().enumerate() {
+        assert_eq!(st.n_joints, 6, "six joints on the payload");
+        assert_eq!(tr.n_joints, 6);
+        assert_eq!(tr.seq, st.seq);
+        for (j, smp) in leg.samples().iter().enumerate() {
+            let m = smp.meas;
+            let pairs = [
+                ("s_rad", st.s_rad[j], m.s_rad),
+                ("theta_motor_rad", st.theta_motor_rad[j], m.theta_motor_rad),
+                ("current_a", st.current_a[j], m.i_meas_a),
+                ("tau_f_true_nm", tr.tau_f_true_nm[j], smp.truth.tau_f_nm),
+                (
+                    "sdot_true_rad_s",
+                    tr.sdot_true_rad_s[j],
+                    smp.truth.state.s_dot_rad_s,
+                ),
+            ];
+            for (what, served, own) in pairs {
+                assert!(
+                    served.to_bits() == own.to_bits(),
+                    "state {} joint {} {what}: served {served} vs leg {own}",
+                    k + 1,
+                    names[j]
+                );
+            }
+            assert_eq!(
+                st.temperature_c[j].is_nan(),
+                m.temperature_c.is_nan(),
+                "joint {}",
+                names[j]
+            );
+            moved[j] = moved[j].max((st.s_rad[j] - run[0].0.s_rad[j]).abs());
+        }
+        if (k as u64) < ticks {
+            let i = leg_current(k as u64 + 1);
+            let i_max: Vec<f64> = leg.params().joints.iter().map(|p| p.i_max_a).collect();
+            let applied: Vec<f64> = i.iter().zip(&i_max).map(|(i, m)| i.clamp(-m, *m)).collect();
+            if let Some((_, next)) = run.get(k + 1) {
+                assert_eq!(&next.i_applied_a[..6], &applied[..], "state {}", k + 2);
+            }
+            leg.step(&applied, &tau_ext).unwrap();
+        }
+    }
+    // Every joint moves: each got its own command.
+    for (j, d) in moved.iter().enumerate() {
+        assert!(*d > 1e-3, "joint {} moved only {d} rad", names[j]);
+    }
+}
+
+#[test]
+fn the_leg_preset_is_not_mixed_with_single_joints() {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_frictl"))
+        .args(["sim", "serve", "--preset", "knee,leg", "--lockstep"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("knee,leg") && err.contains("cannot be combined"),
+        "{err}"
+    );
 }

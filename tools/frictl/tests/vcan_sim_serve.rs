@@ -22,7 +22,7 @@ use frictionless_shm_types::can::WireFrame;
 use frictionless_shm_types::can::mit::{self, MitCommand, MitRanges, MitSpecial};
 use frictionless_shm_types::can::odrive::{self, OdriveMsg};
 use frictionless_sim::PlantParams;
-use frictl::serve::build_joints;
+use frictl::serve::build_robot;
 use frictl::serve::can::{
     AXIS_ERROR_WATCHDOG_TIMER_EXPIRED, CanServeOptions, CanServeStats, MIT_HOST_ID, Protocol,
     mit_ranges, run_with_stats, serve_socket,
@@ -90,7 +90,7 @@ fn start(
     node_ids: &[u8],
     command_timeout_ms: u64,
 ) -> (CanSocket, Emulator) {
-    let mut joints = build_joints(presets, None, &[], 7).unwrap();
+    let mut joints = build_robot(presets, None, &[], 7).unwrap();
     let opts = CanServeOptions {
         bus: match link {
             Link::Pair => "socketpair".into(),
@@ -797,9 +797,47 @@ fn vcan_bench_can_io() {
     }
 }
 
+/// The coupled leg (`--preset leg`) as six MIT drives on nodes 1–6: each node answers its own
+/// torque commands, reports the current τ/k_t of its joint and its motor turns (every joint is
+/// stepped together through the one leg each tick).
+#[test]
+fn socketpair_mit_leg_six_nodes_answer_and_move() {
+    let nodes = [1u8, 2, 3, 4, 5, 6];
+    let leg = frictionless_sim::LegParams::preset().unwrap();
+    let ranges: Vec<MitRanges> = leg.joints.iter().map(mit_ranges).collect();
+    let torques: Vec<f64> = leg
+        .joints
+        .iter()
+        .enumerate()
+        .map(|(k, p)| if k % 2 == 0 { 0.4 } else { -0.4 } * p.kt_nm_per_a * p.i_max_a)
+        .collect();
+    let (host, emu) = start(Link::Pair, "leg", Protocol::Mit, &nodes, 500);
+    mit_enter(&host, &nodes);
+    let replies = mit_session(&host, &nodes, &ranges, &torques, 200);
+    let stats = emu.finish();
+    for (k, (rep, p)) in replies.iter().zip(&leg.joints).enumerate() {
+        assert!(
+            rep.len() >= 150,
+            "{}: {} replies to 200 commands",
+            p.joint,
+            rep.len()
+        );
+        let dp = rep.last().unwrap().p_rad - rep[0].p_rad;
+        let i_end = mean(rep[rep.len() - 20..].iter().map(|r| r.i_a));
+        let i_want = torques[k] / p.kt_nm_per_a;
+        assert!(dp.abs() > 0.05, "{}: motor moved {dp} rad", p.joint);
+        assert!(
+            (i_end - i_want).abs() < 0.05 * p.i_max_a,
+            "{}: current {i_end} A, want {i_want} A",
+            p.joint
+        );
+    }
+    assert_eq!(stats.rx_decode_errors, 0);
+}
+
 #[test]
 fn bad_options_are_refused_with_the_offending_value() {
-    let mut joints = build_joints("knee,ankle_roll", None, &[], 1).unwrap();
+    let mut joints = build_robot("knee,ankle_roll", None, &[], 1).unwrap();
     let stop = AtomicBool::new(false);
     let mut opts = CanServeOptions {
         bus: "nosuchcan7".into(),
@@ -827,7 +865,7 @@ fn bad_options_are_refused_with_the_offending_value() {
 
 #[test]
 fn socketpair_serve_stops_after_the_duration_and_ignores_foreign_ids() {
-    let mut joints = build_joints("knee", None, &[], 1).unwrap();
+    let mut joints = build_robot("knee", None, &[], 1).unwrap();
     let opts = CanServeOptions {
         bus: "socketpair".into(),
         protocol: Protocol::Mit,
@@ -849,5 +887,5 @@ fn socketpair_serve_stops_after_the_duration_and_ignores_foreign_ids() {
     assert_eq!(st.rx_decode_errors, 1);
     assert_eq!(st.tx_frames, 0);
     // The plant advanced 200 ms.
-    assert!((joints[0].plant.measurement().time_s - 0.2).abs() < 1e-9);
+    assert!((joints.measurement(0).time_s - 0.2).abs() < 1e-9);
 }

@@ -29,7 +29,6 @@
 
 use std::collections::BTreeMap;
 
-use frictionless::fastmath;
 use frictionless_dynamics::{DynamicsError, Reduction, Robot, SpatialInertia, Workspace};
 use nalgebra::{DMatrix, Vector3};
 use rand::{Rng, SeedableRng};
@@ -38,8 +37,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::params::{ParamError, PlantParams, apply_set, builtin_preset, merge_tables};
 use crate::plant::{
-    Measurement, PlantState, Sensors, ThermalCoeffs, Truth, rotate, spring_deflection_rad,
-    spring_nm,
+    FrictionConsts, Measurement, PlantState, Sensors, ThermalCoeffs, Truth, rotate,
+    spring_deflection_rad, spring_nm,
 };
 use crate::stribeck::StribeckTable;
 
@@ -319,16 +318,10 @@ struct Drive {
     two_r: f64,
     j_eq: f64,
     current_gain: f64,
-    cos_p2: f64,
-    sin_p2: f64,
     stribeck: Option<StribeckTable>,
     // reciprocals and products of the step (as the single-joint fast path)
-    inv_eps_m: f64,
-    inv_v_s: f64,
-    sigma1_per_dt0: f64,
+    fk: FrictionConsts,
     inv_j_eq: f64,
-    inv_sigma0: f64,
-    sigma0_dt: f64,
     dt_per_c_th: f64,
     inv_r_th: f64,
     drive_nm_per_a: f64,
@@ -366,19 +359,13 @@ impl Drive {
             two_r: 2.0 * p.gear_ratio_signed.abs(),
             j_eq,
             current_gain: 1.0 - (-dt / p.tau_current_s).exp(),
-            cos_p2: p.p2_rad.cos(),
-            sin_p2: p.p2_rad.sin(),
             stribeck: if p.stribeck_exponent == 1.0 {
                 None
             } else {
                 StribeckTable::new(p.stribeck_exponent)
             },
-            inv_eps_m: 1.0 / p.eps_m_rad_s,
-            inv_v_s: 1.0 / p.v_s_rad_s,
-            sigma1_per_dt0: p.sigma1_nms_per_rad / dt,
+            fk: FrictionConsts::new(&p, dt),
             inv_j_eq: 1.0 / j_eq,
-            inv_sigma0: 1.0 / p.sigma0_nm_per_rad,
-            sigma0_dt: p.sigma0_nm_per_rad * dt,
             dt_per_c_th: dt / c_th,
             inv_r_th: 1.0 / p.r_th_k_per_w,
             drive_nm_per_a: p.gear_ratio_signed * p.kt_nm_per_a,
@@ -423,7 +410,6 @@ impl Drive {
     fn forces(&mut self, friction: bool) {
         let p = &self.p;
         let tc = &self.tc;
-        let dt = p.dt_physics_s;
         let PlantState {
             s_rad: s,
             s_dot_rad_s: sd,
@@ -435,53 +421,17 @@ impl Drive {
         } = self.st;
         let tau_t = spring_nm(p, phi - s) + p.d_t_nms_per_rad * (phid - sd);
         let (tau_fm, tau_fj, z_new, g_ss) = if friction {
-            let tau_fm = p.f_cm_nm * fastmath::tanh(phid * self.inv_eps_m) + tc.sigma2m * phid;
-            let dfc = tc.delta_f_c * fastmath::tanh(sd * 1e3);
-            let x = sd.abs() * self.inv_v_s;
-            let strib = if p.stribeck_exponent == 1.0 {
-                if x < 40.0 {
-                    fastmath::exp_in_range(-x)
-                } else {
-                    0.0
-                }
-            } else if let Some(table) = &self.stribeck {
-                table.shape(x)
-            } else {
-                let xd = fastmath::powf(x, p.stribeck_exponent);
-                if xd < 40.0 {
-                    fastmath::exp_in_range(-xd)
-                } else {
-                    0.0
-                }
-            };
-            let mut ripple = 1.0;
-            if p.e1 != 0.0 {
-                ripple += p.e1 * self.sin_m;
-            }
-            if p.e2 != 0.0 {
-                ripple += p.e2 * (self.sin_s * self.cos_p2 + self.cos_s * self.sin_p2);
-            }
-            let f_s_minus_c0 = tc.f_s - tc.f_c0;
-            let level = (f_s_minus_c0 - dfc).mul_add(strib, tc.f_c0 + dfc);
-            let g_ss = level.mul_add(ripple, p.mu_load * tau_t.abs());
-            let a_dt = self.sigma0_dt * sd.abs() / g_ss;
-            let z_new = if a_dt < 1e-12 {
-                z + sd * dt
-            } else {
-                let z_ss = (g_ss * self.inv_sigma0).copysign(sd);
-                (z - z_ss).mul_add(fastmath::exp(-a_dt), z_ss)
-            };
-            let sv2 = x * x;
-            let sigma1_per_dt = if sv2 < 40.0 {
-                self.sigma1_per_dt0 * fastmath::exp_in_range(-sv2)
-            } else {
-                0.0
-            };
-            let tau_fj = sigma1_per_dt.mul_add(
-                z_new - z,
-                p.sigma0_nm_per_rad.mul_add(z_new, tc.sigma2j * sd),
-            );
-            (tau_fm, tau_fj, z_new, g_ss)
+            self.fk.forces(
+                p,
+                tc,
+                self.stribeck.as_ref(),
+                sd,
+                phid,
+                z,
+                tau_t,
+                self.sin_m,
+                (self.sin_s, self.cos_s),
+            )
         } else {
             (0.0, 0.0, z, 0.0)
         };

@@ -188,6 +188,115 @@ pub(crate) struct ThermalCoeffs {
     pub(crate) sigma2j: f64,
 }
 
+/// Per-drive constants of the friction forces of one physics step (reciprocals and products: the
+/// step is one long dependency chain, so a division on it costs its full latency).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct FrictionConsts {
+    inv_eps_m: f64,
+    inv_v_s: f64,
+    sigma1_per_dt0: f64,
+    inv_sigma0: f64,
+    sigma0_dt: f64,
+    cos_p2: f64,
+    sin_p2: f64,
+    dt: f64,
+}
+
+impl FrictionConsts {
+    /// The constants of `p` at physics step `dt` [s].
+    pub(crate) fn new(p: &PlantParams, dt: f64) -> Self {
+        Self {
+            inv_eps_m: 1.0 / p.eps_m_rad_s,
+            inv_v_s: 1.0 / p.v_s_rad_s,
+            sigma1_per_dt0: p.sigma1_nms_per_rad / dt,
+            inv_sigma0: 1.0 / p.sigma0_nm_per_rad,
+            sigma0_dt: p.sigma0_nm_per_rad * dt,
+            cos_p2: p.p2_rad.cos(),
+            sin_p2: p.p2_rad.sin(),
+            dt,
+        }
+    }
+
+    /// The friction of one drive at the start of a physics step, the fast path's expressions shared
+    /// by [`Plant`] and the leg's drives: motor-side τ_Fm, the LuGre level g_ss (Stribeck, thermal
+    /// coefficients `tc`, ripple from `sin_m` = sin(2|r|φ + p1) and (sin s, cos s), load term), the
+    /// exact exponential bristle update z → z_new for frozen ṡ and the output-side τ_Fj.
+    /// Returns (τ_Fm, τ_Fj, z_new, g_ss).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    pub(crate) fn forces(
+        &self,
+        p: &PlantParams,
+        tc: &ThermalCoeffs,
+        stribeck: Option<&StribeckTable>,
+        sd: f64,
+        phid: f64,
+        z: f64,
+        tau_t: f64,
+        sin_m: f64,
+        (sin_s, cos_s): (f64, f64),
+    ) -> (f64, f64, f64, f64) {
+        let dt = self.dt;
+        // motor-side friction (joint side)
+        let tau_fm = p.f_cm_nm * fastmath::tanh(phid * self.inv_eps_m) + tc.sigma2m * phid;
+        // output-side LuGre level g_ss (same expression as `g_ss_with`)
+        let dfc = tc.delta_f_c * fastmath::tanh(sd * 1e3);
+        let x = sd.abs() * self.inv_v_s;
+        // exp(−x^δ) < 4.3e-18 once x^δ > 40: the Stribeck term is then dropped (error below
+        // 4.3e-18·(F_s − F_c) Nm, far under one ulp of g_ss), which skips ln and exp at speed
+        let strib = if p.stribeck_exponent == 1.0 {
+            if x < 40.0 {
+                fastmath::exp_in_range(-x)
+            } else {
+                0.0
+            }
+        } else if let Some(table) = stribeck {
+            // one load + a cubic instead of ln → exp → exp (≤ 1e-12 absolute, see `stribeck`)
+            table.shape(x)
+        } else {
+            let xd = fastmath::powf(x, p.stribeck_exponent);
+            if xd < 40.0 {
+                fastmath::exp_in_range(-xd)
+            } else {
+                0.0
+            }
+        };
+        let mut ripple = 1.0;
+        if p.e1 != 0.0 {
+            ripple += p.e1 * sin_m;
+        }
+        if p.e2 != 0.0 {
+            // sin(s + p2)
+            ripple += p.e2 * (sin_s * self.cos_p2 + cos_s * self.sin_p2);
+        }
+        // fc + (f_s − fc)·strib with fc = f_c0 + dfc
+        let f_s_minus_c0 = tc.f_s - tc.f_c0;
+        let level = (f_s_minus_c0 - dfc).mul_add(strib, tc.f_c0 + dfc);
+        let g_ss = level.mul_add(ripple, p.mu_load * tau_t.abs());
+        // exact exponential LuGre update for frozen ṡ
+        let a_dt = self.sigma0_dt * sd.abs() / g_ss;
+        let z_new = if a_dt < 1e-12 {
+            z + sd * dt
+        } else {
+            let z_ss = (g_ss * self.inv_sigma0).copysign(sd);
+            (z - z_ss).mul_add(fastmath::exp(-a_dt), z_ss)
+        };
+        let sv2 = x * x;
+        // exp(−40) = 4e-18: below that the damping term is far under one ulp of τ_Fj
+        let sigma1_per_dt = if sv2 < 40.0 {
+            self.sigma1_per_dt0 * fastmath::exp_in_range(-sv2)
+        } else {
+            0.0
+        };
+        // σ0·z + σ1·ż + σ2j·ṡ with ż = (z_new − z)/dt, grouped so that z_new → τ_Fj is two FMAs
+        let tau_fj = sigma1_per_dt.mul_add(
+            z_new - z,
+            p.sigma0_nm_per_rad.mul_add(z_new, tc.sigma2j * sd),
+        );
+        (tau_fm, tau_fj, z_new, g_ss)
+    }
+}
+
 impl ThermalCoeffs {
     /// The coefficients of `p` at winding temperature `temperature_c` [°C].
     pub(crate) fn at(p: &PlantParams, temperature_c: f64) -> Self {
@@ -619,7 +728,6 @@ impl<L: LinkDynamics> Plant<L> {
         let mut st = self.st;
         let two_r = 2.0 * self.r_abs;
         let ripple_m = p.e1 != 0.0;
-        let ripple_s = p.e2 != 0.0;
         let (mut sin_s, mut cos_s) = st.s_rad.sin_cos();
         let (mut sin_m, mut cos_m) = if ripple_m {
             (two_r * st.phi_rad + p.p1_rad).sin_cos()
@@ -629,18 +737,15 @@ impl<L: LinkDynamics> Plant<L> {
         let drive_nm_per_a = self.r_signed * p.kt_nm_per_a;
         // Reciprocals: the step is one long dependency chain (ṡ → g_ss → exp → z → τ_Fj → s̈ → ṡ),
         // so every division on it costs its full latency; a multiply costs a quarter of that.
-        let inv_eps_m = 1.0 / p.eps_m_rad_s;
-        let inv_v_s = 1.0 / p.v_s_rad_s;
-        let sigma1_per_dt0 = p.sigma1_nms_per_rad / dt;
         let inv_j_eq = 1.0 / self.j_eq;
-        let inv_sigma0 = 1.0 / p.sigma0_nm_per_rad;
-        let sigma0_dt = p.sigma0_nm_per_rad * dt;
         let dt_per_c_th = dt / self.c_th;
         let inv_r_th = 1.0 / p.r_th_k_per_w;
-        let delta = p.stribeck_exponent;
-        let linear_stribeck = delta == 1.0;
+        let fk = FrictionConsts {
+            cos_p2: self.cos_p2,
+            sin_p2: self.sin_p2,
+            ..FrictionConsts::new(p, dt)
+        };
         let stribeck_table = self.stribeck.as_ref();
-        let f_s_minus_c0 = tc.f_s - tc.f_c0;
         let n = p.substeps_per_sample;
         let mut truth = Truth::default();
         for k in 0..n {
@@ -655,60 +760,17 @@ impl<L: LinkDynamics> Plant<L> {
             } = st;
             // flexspline
             let tau_t = self.spring_nm(phi - s) + p.d_t_nms_per_rad * (phid - sd);
-            // motor-side friction (joint side)
-            let tau_fm = p.f_cm_nm * fastmath::tanh(phid * inv_eps_m) + tc.sigma2m * phid;
-            // output-side LuGre level g_ss (same expression as `g_ss_with`)
-            let dfc = tc.delta_f_c * fastmath::tanh(sd * 1e3);
-            let x = sd.abs() * inv_v_s;
-            // exp(−x^δ) < 4.3e-18 once x^δ > 40: the Stribeck term is then dropped (error below
-            // 4.3e-18·(F_s − F_c) Nm, far under one ulp of g_ss), which skips ln and exp at speed
-            let strib = if linear_stribeck {
-                if x < 40.0 {
-                    fastmath::exp_in_range(-x)
-                } else {
-                    0.0
-                }
-            } else if let Some(table) = stribeck_table {
-                // one load + a cubic instead of ln → exp → exp (≤ 1e-12 absolute, see `stribeck`)
-                table.shape(x)
-            } else {
-                let xd = fastmath::powf(x, delta);
-                if xd < 40.0 {
-                    fastmath::exp_in_range(-xd)
-                } else {
-                    0.0
-                }
-            };
-            let mut ripple = 1.0;
-            if ripple_m {
-                ripple += p.e1 * sin_m;
-            }
-            if ripple_s {
-                // sin(s + p2)
-                ripple += p.e2 * (sin_s * self.cos_p2 + cos_s * self.sin_p2);
-            }
-            // fc + (f_s − fc)·strib with fc = f_c0 + dfc
-            let level = (f_s_minus_c0 - dfc).mul_add(strib, tc.f_c0 + dfc);
-            let g_ss = level.mul_add(ripple, p.mu_load * tau_t.abs());
-            // exact exponential LuGre update for frozen ṡ
-            let a_dt = sigma0_dt * sd.abs() / g_ss;
-            let z_new = if a_dt < 1e-12 {
-                z + sd * dt
-            } else {
-                let z_ss = (g_ss * inv_sigma0).copysign(sd);
-                (z - z_ss).mul_add(fastmath::exp(-a_dt), z_ss)
-            };
-            let sv2 = x * x;
-            // exp(−40) = 4e-18: below that the damping term is far under one ulp of τ_Fj
-            let sigma1_per_dt = if sv2 < 40.0 {
-                sigma1_per_dt0 * fastmath::exp_in_range(-sv2)
-            } else {
-                0.0
-            };
-            // σ0·z + σ1·ż + σ2j·ṡ with ż = (z_new − z)/dt, grouped so that z_new → τ_Fj is two FMAs
-            let tau_fj = sigma1_per_dt.mul_add(
-                z_new - z,
-                p.sigma0_nm_per_rad.mul_add(z_new, tc.sigma2j * sd),
+            // motor-side friction, LuGre level, bristles, output-side friction
+            let (tau_fm, tau_fj, z_new, g_ss) = fk.forces(
+                p,
+                tc,
+                stribeck_table,
+                sd,
+                phid,
+                z,
+                tau_t,
+                sin_m,
+                (sin_s, cos_s),
             );
             // link
             let (g, inv_il, c) = link(s, sd, sin_s, cos_s);

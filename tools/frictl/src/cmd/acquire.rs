@@ -37,7 +37,12 @@ pub enum Sensor {
 /// Arguments of `frictl acquire`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Built-in preset (`knee`, `ankle_roll`) or a preset TOML file (tables `plant` and `protocol`).
+    /// Built-in preset (`knee`, `ankle_roll`) or a preset TOML file (tables `plant` and `protocol`);
+    /// or `leg`: every joint of the coupled ergoCub left leg excited at once, each with the knee's
+    /// protocol scaled to the joint (`--set protocol.KEY=VALUE` changes the protocol of every
+    /// joint, `--set l_knee:plant.KEY=VALUE` one joint's drive), one log with every joint's
+    /// columns; with `--live-shm` every joint of a `frictl sim serve --preset leg` plant is driven
+    /// at once (all bits valid in each command).
     #[arg(long)]
     pub preset: String,
     /// TOML file deep-merged over the preset (same layout).
@@ -93,6 +98,9 @@ pub struct Args {
 
 /// Runs `frictl acquire`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.preset == frictl::serve::LEG_PRESET {
+        return run_leg(&args);
+    }
     frictionless_sim::params::check_set_joints(&args.sets, &[args.preset.as_str()])?;
     let table = load_table(&args.preset, args.params.as_deref(), &args.sets)?;
     let plant_params = PlantParams::from_table(&table)?;
@@ -301,4 +309,292 @@ impl<W: std::io::Write> Log<W> {
             Log::Arm(l) => l.finish(),
         }
     }
+}
+
+/// Per-joint columns of the leg log: (name template with `{joint}`, unit, description).
+const LEG_COLUMNS: &[(&str, &str, &str)] = &[
+    (
+        "q_{joint}",
+        "rad",
+        "joint position (joint encoder, quantised)",
+    ),
+    (
+        "qd_{joint}",
+        "rad/s",
+        "controller's filtered encoder-difference joint velocity",
+    ),
+    (
+        "theta_{joint}",
+        "rad",
+        "motor position (motor encoder, motor side)",
+    ),
+    ("omega_{joint}", "rad/s", "motor velocity (motor side)"),
+    (
+        "i_ref_{joint}",
+        "A",
+        "current reference applied during the next period",
+    ),
+    ("i_{joint}", "A", "measured motor current"),
+    (
+        "temperature_{joint}",
+        "degC",
+        "motor temperature (NaN: no sensor)",
+    ),
+    ("chunk_{joint}", "-", "the joint's protocol block"),
+    (
+        "active_{joint}",
+        "-",
+        "1 = excitation sample of the joint's block",
+    ),
+    (
+        "tau_f_true_{joint}",
+        "Nm",
+        "simulator truth: total joint friction (motor side + LuGre)",
+    ),
+];
+
+/// The leg log's sidecar (`<name>.json`).
+#[derive(serde::Serialize)]
+struct LegSidecar<'a> {
+    format: &'static str,
+    producer: String,
+    preset: &'static str,
+    source: &'static str,
+    /// Live runs: the connection facts (`joint_index` 0: every joint from 0 is driven).
+    live: Option<LiveInfo>,
+    seed: Option<u64>,
+    sample_period_s: f64,
+    csv: String,
+    /// The leg's joints in column order, with the constants a label needs.
+    joints: Vec<LegSidecarJoint<'a>>,
+    /// Per-joint columns (`{joint}` replaced by each joint name) after `time_s`.
+    columns: Vec<serde_json::Value>,
+    /// How to label every joint from the whole leg's state.
+    import_example: String,
+}
+
+#[derive(serde::Serialize)]
+struct LegSidecarJoint<'a> {
+    joint: &'a str,
+    gear_ratio_signed: f64,
+    kt_nm_per_a: f64,
+    j_eq_kgm2: f64,
+    protocol: &'a ProtocolConfig,
+    summary: &'a frictionless_acquire::RunSummary,
+}
+
+/// `frictl acquire --preset leg`: every leg joint excited at once (offline), one CSV with every
+/// joint's columns and a JSON sidecar.
+fn run_leg(args: &Args) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        args.sensor == Sensor::MotorEncoder,
+        "--preset leg: --sensor torque is a single-joint log"
+    );
+    anyhow::ensure!(
+        args.params.is_none(),
+        "--preset leg: --params applies to single-joint presets; use --set JOINT:plant.KEY=VALUE"
+    );
+    let (protocol_sets, plant_sets): (Vec<String>, Vec<String>) = args
+        .sets
+        .iter()
+        .cloned()
+        .partition(|s| s.starts_with("protocol."));
+    let leg = frictionless_sim::LegParams::from_toml_str(
+        frictionless_sim::leg::LEG_PRESET_TOML,
+        "<preset leg>",
+        &plant_sets,
+    )?;
+    let protocols = frictionless_acquire::leg::leg_protocols(&leg, &protocol_sets)?;
+    let name = args.name.clone().unwrap_or_else(|| {
+        if args.live_shm {
+            "leg_live".to_owned()
+        } else {
+            format!("leg_seed{}", args.seed)
+        }
+    });
+    // Live: no truth column (the process only sees what a robot reports).
+    let columns: Vec<&(&str, &str, &str)> = LEG_COLUMNS
+        .iter()
+        .filter(|c| !(args.live_shm && c.0.starts_with("tau_f_true")))
+        .collect();
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create output directory {}", args.out.display()))?;
+    let csv_path = args.out.join(format!("{name}.csv"));
+    let json_path = args.out.join(format!("{name}.json"));
+    let names: Vec<&str> = leg.joints.iter().map(|p| p.joint.as_str()).collect();
+    let mut out = std::io::BufWriter::with_capacity(
+        1 << 20,
+        frictionless::output_file::AtomicFile::create(&csv_path)
+            .with_context(|| format!("cannot create {}", csv_path.display()))?,
+    );
+    let mut header = String::from("time_s");
+    for (col, _, _) in &columns {
+        for j in &names {
+            header.push(',');
+            header.push_str(&col.replace("{joint}", j));
+        }
+    }
+    header.push('\n');
+    std::io::Write::write_all(&mut out, header.as_bytes())
+        .with_context(|| format!("cannot write {}", csv_path.display()))?;
+    let started = std::time::Instant::now();
+    let mut line = String::new();
+    let mut samples = 0u64;
+    let n_fields = columns.len();
+    let mut sink = |rows: &[frictionless_acquire::leg::LegRow]| -> Result<(), AcquireError> {
+        use std::fmt::Write as _;
+        line.clear();
+        let num = |line: &mut String, v: f64| {
+            let _ = write!(line, ",{}", frictionless_acquire::log::round_significant(v));
+        };
+        let _ = write!(
+            line,
+            "{}",
+            frictionless_acquire::log::round_significant(rows[0].row.meas.time_s)
+        );
+        let fields: [fn(&frictionless_acquire::leg::LegRow) -> f64; 10] = [
+            |r| r.row.meas.s_rad,
+            |r| r.sdot_rad_s,
+            |r| r.row.meas.theta_motor_rad,
+            |r| r.row.meas.omega_motor_rad_s,
+            |r| r.row.i_ref_a,
+            |r| r.row.meas.i_meas_a,
+            |r| r.row.meas.temperature_c,
+            |r| f64::from(r.row.chunk),
+            |r| f64::from(u8::from(r.row.active)),
+            |r| r.row.truth.map_or(f64::NAN, |t| t.tau_f_nm),
+        ];
+        for f in &fields[..n_fields] {
+            for r in rows {
+                num(&mut line, f(r));
+            }
+        }
+        line.push('\n');
+        samples += 1;
+        std::io::Write::write_all(&mut out, line.as_bytes())
+            .map_err(|e| AcquireError::Sink(e.to_string()))
+    };
+    let mut live_info = None;
+    let summaries = if args.live_shm {
+        let stop = frictl::serve::install_stop_flag()?;
+        anyhow::ensure!(
+            args.connect_timeout_s.is_finite() && args.connect_timeout_s > 0.0,
+            "--connect-timeout-s must be > 0, got {}",
+            args.connect_timeout_s
+        );
+        let cfg = frictionless_shm_types::IpcConfig::new(args.root_path.as_deref(), &args.prefix);
+        let mut robot = frictl::serve::shm::LiveJoint::connect(
+            &cfg,
+            0,
+            leg.joints[0].sample_period_s(),
+            Duration::from_secs_f64(args.connect_timeout_s),
+            Duration::from_millis(args.state_timeout_ms),
+            stop,
+        )?;
+        anyhow::ensure!(
+            robot.n_joints() == names.len(),
+            "--preset leg --live-shm: the plant on `{}` publishes {} joint(s), the leg has {} \
+             (serve it with `frictl sim serve --preset leg`)",
+            args.prefix,
+            robot.n_joints(),
+            names.len()
+        );
+        let result = frictionless_acquire::leg::run_leg(&mut robot, &leg, &protocols, &mut sink);
+        // Leave every joint at 0 A whatever happened (the plant also zeroes after its timeout).
+        let released = robot.release_all(names.len());
+        live_info = Some(LiveInfo {
+            prefix: args.prefix.clone(),
+            root_path: args.root_path.as_ref().map(|p| p.display().to_string()),
+            joint_index: 0,
+            first_seq: robot.first_seq(),
+            states_received: robot.states_received,
+            states_skipped: robot.states_skipped,
+            plant_publishes_sim_truth: robot.plant_publishes_sim_truth,
+        });
+        let summaries = result?;
+        released?;
+        summaries
+    } else {
+        frictionless_acquire::leg::run_leg_offline_with_velocity(
+            &leg, &protocols, args.seed, &mut sink,
+        )?
+    };
+    let csv_out = out
+        .into_inner()
+        .map_err(|e| anyhow::anyhow!("cannot write {}: {}", csv_path.display(), e.error()))?;
+    let period_s = leg.joints[0].sample_period_s();
+    let urdf = frictionless_sim::leg::ERGOCUB_URDF_PATH;
+    let mut example = format!(
+        "frictl import csv {name}.csv --joints all --label current --column time=time_s \
+         --column s=q_{{joint}} --column current=i_{{joint}} --column theta=theta_{{joint}} \
+         --column omega=omega_{{joint}} --positions 'q_{{joint}}' --urdf {urdf}"
+    );
+    for p in &leg.joints {
+        let _ = std::fmt::Write::write_fmt(
+            &mut example,
+            format_args!(
+                " --gear-ratio {}={} --kt {}={}",
+                p.joint, p.gear_ratio_signed, p.joint, p.kt_nm_per_a
+            ),
+        );
+    }
+    example.push_str(" -o 'ds_{joint}.csv'");
+    let sidecar = LegSidecar {
+        format: "frictionless-acquire-leg-v1",
+        producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
+        preset: frictl::serve::LEG_PRESET,
+        source: if args.live_shm {
+            SOURCE_LIVE_SHM
+        } else {
+            SOURCE_OFFLINE_SIM
+        },
+        live: live_info,
+        seed: (!args.live_shm).then_some(args.seed),
+        sample_period_s: period_s,
+        csv: format!("{name}.csv"),
+        joints: leg
+            .joints
+            .iter()
+            .zip(&protocols)
+            .zip(&summaries)
+            .map(|((p, c), s)| LegSidecarJoint {
+                joint: &p.joint,
+                gear_ratio_signed: p.gear_ratio_signed,
+                kt_nm_per_a: p.kt_nm_per_a,
+                j_eq_kgm2: p.j_eq_kgm2(),
+                protocol: c,
+                summary: s,
+            })
+            .collect(),
+        columns: std::iter::once(serde_json::json!({"name": "time_s", "unit": "s",
+            "description": "simulated time"}))
+        .chain(
+            columns
+                .iter()
+                .map(|(n, u, d)| serde_json::json!({"name": n, "unit": u, "description": d})),
+        )
+        .collect(),
+        import_example: example,
+    };
+    let json = serde_json::to_string_pretty(&sidecar)?;
+    let mut side_out = frictionless::output_file::AtomicFile::create(&json_path)
+        .with_context(|| format!("cannot write {}", json_path.display()))?;
+    std::io::Write::write_all(&mut side_out, json.as_bytes())
+        .with_context(|| format!("cannot write {}", json_path.display()))?;
+    frictionless::output_file::commit_with_marker(vec![csv_out], side_out).with_context(|| {
+        format!(
+            "cannot write {} and {}",
+            csv_path.display(),
+            json_path.display()
+        )
+    })?;
+    eprintln!(
+        "frictl acquire: leg, {} joints excited at once, {samples} samples ({:.1} simulated min, {} guard holds) in {:.2} s -> {}",
+        names.len(),
+        samples as f64 * period_s / 60.0,
+        summaries.iter().map(|s| s.latches.len()).sum::<usize>(),
+        started.elapsed().as_secs_f64(),
+        csv_path.display()
+    );
+    Ok(())
 }

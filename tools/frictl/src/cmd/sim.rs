@@ -107,7 +107,9 @@ pub enum Backend {
 #[derive(clap::Args, Debug)]
 pub struct ServeArgs {
     /// Comma-separated presets or preset files, one joint each: joint j = the j-th name
-    /// (e.g. `knee,ankle_roll`: knee = 0, ankle_roll = 1).
+    /// (e.g. `knee,ankle_roll`: knee = 0, ankle_roll = 1); or `leg` alone: the six joints of the
+    /// ergoCub left leg coupled through one rigid-body model (config/presets/leg.toml), joint j =
+    /// the leg's j-th joint (l_hip_pitch … l_ankle_roll), `--set l_knee:plant.KEY=VALUE`.
     #[arg(long, default_value = "knee,ankle_roll")]
     pub preset: String,
     /// TOML file deep-merged over every preset (same layout).
@@ -229,16 +231,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// `frictl sim serve`.
 fn serve(a: ServeArgs) -> anyhow::Result<()> {
     let stop = frictl::serve::install_stop_flag()?;
-    let mut joints = frictl::serve::build_joints(&a.preset, a.params.as_deref(), &a.sets, a.seed)?;
+    let mut robot = frictl::serve::build_robot(&a.preset, a.params.as_deref(), &a.sets, a.seed)?;
     match a.backend {
         Backend::Shm => {
-            // The reported velocity uses each preset's protocol.velocity_filter_hz, like acquire.
-            let mut velocity_filter_hz = Vec::with_capacity(joints.len());
-            for j in &joints {
-                let table = load_table(&j.name, a.params.as_deref(), &a.sets)?;
-                velocity_filter_hz.push(
-                    frictionless_acquire::ProtocolConfig::from_table(&table)?.velocity_filter_hz,
-                );
+            // The reported velocity uses each preset's protocol.velocity_filter_hz, like acquire
+            // (the leg's joints: the presets' common default).
+            let mut velocity_filter_hz = Vec::with_capacity(robot.len());
+            for k in 0..robot.len() {
+                velocity_filter_hz.push(if robot.is_leg() {
+                    frictl::serve::shm::DEFAULT_VELOCITY_FILTER_HZ
+                } else {
+                    let table = load_table(robot.name(k), a.params.as_deref(), &a.sets)?;
+                    frictionless_acquire::ProtocolConfig::from_table(&table)?.velocity_filter_hz
+                });
             }
             let opts = frictl::serve::shm::ShmServeOptions {
                 ipc: frictionless_shm_types::IpcConfig::new(a.root_path.as_deref(), &a.prefix),
@@ -250,7 +255,7 @@ fn serve(a: ServeArgs) -> anyhow::Result<()> {
                 initial_pose_rad: a.initial_pose_rad,
                 velocity_filter_hz,
             };
-            frictl::serve::shm::run(&mut joints, &opts, stop)?;
+            frictl::serve::shm::run(&mut robot, &opts, stop)?;
             Ok(())
         }
         Backend::Can => {
@@ -258,24 +263,17 @@ fn serve(a: ServeArgs) -> anyhow::Result<()> {
                 !a.lockstep,
                 "--lockstep is a shared-memory mode; --backend can runs in real time"
             );
-            anyhow::ensure!(
-                a.initial_pose_rad.is_empty() || a.initial_pose_rad.len() == joints.len(),
-                "--initial-pose-rad has {} values for {} joints",
-                a.initial_pose_rad.len(),
-                joints.len()
-            );
-            for (j, &s0) in joints.iter_mut().zip(&a.initial_pose_rad) {
-                anyhow::ensure!(s0.is_finite(), "--initial-pose-rad: {s0} is not finite");
-                j.plant.reset_at_rest(s0);
+            if !a.initial_pose_rad.is_empty() {
+                robot.reset_at_rest(&a.initial_pose_rad)?;
             }
-            serve_can(&mut joints, &a, stop)
+            serve_can(&mut robot, &a, stop)
         }
     }
 }
 
 /// `frictl sim serve --backend can`: [`frictl::serve::can::run`].
 fn serve_can(
-    joints: &mut [frictl::serve::ServedJoint],
+    robot: &mut frictl::serve::ServedRobot,
     a: &ServeArgs,
     stop: &std::sync::atomic::AtomicBool,
 ) -> anyhow::Result<()> {
@@ -286,5 +284,5 @@ fn serve_can(
         command_timeout_ms: a.command_timeout_ms,
         duration_s: a.duration_s,
     };
-    Ok(frictl::serve::can::run(joints, &opts, stop)?)
+    Ok(frictl::serve::can::run(robot, &opts, stop)?)
 }

@@ -45,7 +45,7 @@ use frictionless_shm_types::can::mit::{self, MitCommand, MitRanges, MitReply, Mi
 use frictionless_shm_types::can::odrive::{self, OdriveMsg};
 use socketcan::{CanFilter, CanFrame, CanSocket, Socket, SocketOptions};
 
-use super::{ServeError, ServedJoint};
+use super::{ServeError, ServedRobot};
 use frictionless_sim::{Measurement, PlantParams};
 
 /// Tick period [ns] (1 kHz).
@@ -492,24 +492,21 @@ impl Drive {
 
 /// Builds one drive per joint with node ids `opts.node_ids` (default 1, 2, …), checking they are
 /// unique and that there is one per joint.
-pub fn build_drives(
-    joints: &[ServedJoint],
-    opts: &CanServeOptions,
-) -> Result<Vec<Drive>, ServeError> {
-    if joints.is_empty() {
+pub fn build_drives(robot: &ServedRobot, opts: &CanServeOptions) -> Result<Vec<Drive>, ServeError> {
+    if robot.is_empty() {
         return Err(ServeError::NoJoints);
     }
     let ids: Vec<u8> = if opts.node_ids.is_empty() {
-        (1..=joints.len())
+        (1..=robot.len())
             .map(|k| u8::try_from(k).map_err(ServeError::TooManyCanJoints))
             .collect::<Result<_, _>>()?
     } else {
         opts.node_ids.clone()
     };
-    if ids.len() != joints.len() {
+    if ids.len() != robot.len() {
         return Err(ServeError::NodeIdCount {
             ids: ids.len(),
-            joints: joints.len(),
+            joints: robot.len(),
         });
     }
     for (k, id) in ids.iter().enumerate() {
@@ -517,13 +514,12 @@ pub fn build_drives(
             return Err(ServeError::DuplicateNodeId(*id));
         }
     }
-    joints
-        .iter()
-        .zip(&ids)
-        .map(|(j, &id)| {
-            Drive::new(opts.protocol, id, j.plant.params(), opts.command_timeout_ms).map_err(|e| {
+    ids.iter()
+        .enumerate()
+        .map(|(k, &id)| {
+            Drive::new(opts.protocol, id, robot.params(k), opts.command_timeout_ms).map_err(|e| {
                 ServeError::Joint {
-                    joint: j.name.clone(),
+                    joint: robot.name(k).to_owned(),
                     source: Box::new(e),
                 }
             })
@@ -531,14 +527,14 @@ pub fn build_drives(
         .collect()
 }
 
-/// Serves `joints` as drives on interface `opts.bus` until `stop` is set or `opts.duration_s` has
+/// Serves `robot`'s joints as drives on interface `opts.bus` until `stop` is set or `opts.duration_s` has
 /// passed (see the module doc).
 pub fn run(
-    joints: &mut [ServedJoint],
+    robot: &mut ServedRobot,
     opts: &CanServeOptions,
     stop: &AtomicBool,
 ) -> Result<(), ServeError> {
-    let st = run_with_stats(joints, opts, stop)?;
+    let st = run_with_stats(robot, opts, stop)?;
     tracing::info!(
         "sim serve can: {} ticks ({} late, {} skipped), rx {} (+{} other ids, {} rejected, {} error frames), tx {} ({} dropped, {} errors), {} command timeouts",
         st.ticks,
@@ -558,11 +554,11 @@ pub fn run(
 
 /// [`run`], returning the counters.
 pub fn run_with_stats(
-    joints: &mut [ServedJoint],
+    robot: &mut ServedRobot,
     opts: &CanServeOptions,
     stop: &AtomicBool,
 ) -> Result<CanServeStats, ServeError> {
-    let drives = build_drives(joints, opts)?;
+    let drives = build_drives(robot, opts)?;
     let sock = CanSocket::open(&opts.bus).map_err(|source| ServeError::OpenBus {
         bus: opts.bus.clone(),
         source,
@@ -575,19 +571,19 @@ pub fn run_with_stats(
         })?;
     // A larger receive buffer (needs CAP_NET_ADMIN; harmless to fail).
     let _ = sock.set_socket_option_int(libc::SOL_SOCKET, libc::SO_RCVBUFFORCE, 1 << 20);
-    serve_drives(joints, drives, opts, &sock, stop)
+    serve_drives(robot, drives, opts, &sock, stop)
 }
 
-/// Serves `joints` on an already opened socket (e.g. one end of a socketpair in tests; no kernel
+/// Serves `robot`'s joints on an already opened socket (e.g. one end of a socketpair in tests; no kernel
 /// filters are set here, frames for other ids are ignored in software).
 pub fn serve_socket(
-    joints: &mut [ServedJoint],
+    robot: &mut ServedRobot,
     opts: &CanServeOptions,
     sock: &CanSocket,
     stop: &AtomicBool,
 ) -> Result<CanServeStats, ServeError> {
-    let drives = build_drives(joints, opts)?;
-    serve_drives(joints, drives, opts, sock, stop)
+    let drives = build_drives(robot, opts)?;
+    serve_drives(robot, drives, opts, sock, stop)
 }
 
 /// Waits until `fd` is readable or `timeout` passed (ns resolution; `EINTR` counts as a wake-up).
@@ -724,7 +720,7 @@ fn drain_rx(
 }
 
 fn serve_drives(
-    joints: &mut [ServedJoint],
+    robot: &mut ServedRobot,
     mut drives: Vec<Drive>,
     opts: &CanServeOptions,
     sock: &CanSocket,
@@ -735,20 +731,20 @@ fn serve_drives(
             what: "setting the CAN socket non-blocking",
             source,
         })?;
-    for (j, d) in joints.iter().zip(&drives) {
+    for (k, d) in drives.iter().enumerate() {
         let r = d.ranges();
         tracing::info!(
             "joint `{}` ({}): {:?} node {} — MIT ranges p ±{} rad, v ±{} rad/s, t ±{:.4} Nm, i ±{} A, kt {} Nm/A, r {}",
-            j.name,
-            j.index,
+            robot.name(k),
+            k,
             opts.protocol,
             d.node(),
             r.p_max_rad,
             r.v_max_rad_s,
             r.t_max_nm,
             r.i_max_a,
-            j.plant.params().kt_nm_per_a,
-            j.plant.params().gear_ratio_signed
+            robot.params(k).kt_nm_per_a,
+            robot.params(k).gear_ratio_signed
         );
     }
     let end_tick = match opts.duration_s {
@@ -761,7 +757,10 @@ fn serve_drives(
     let mut tx = Tx {
         queue: VecDeque::with_capacity(TX_QUEUE_CAP),
     };
-    let mut meas: Vec<Measurement> = joints.iter().map(|j| j.plant.measurement()).collect();
+    let mut meas: Vec<Measurement> = (0..robot.len()).map(|k| robot.measurement(k)).collect();
+    // The step's inputs, one per joint (no external torque on the CAN plant).
+    let mut i_ref_a = vec![0.0; robot.len()];
+    let tau_ext_nm = vec![0.0; robot.len()];
     let mut epoch = Instant::now();
     let mut epoch_tick = 0u64;
     let mut tick = 0u64;
@@ -786,24 +785,23 @@ fn serve_drives(
                 source,
             })?;
         }
-        // One 1 ms step of every joint with its drive's current.
-        for ((j, d), m) in joints
-            .iter_mut()
-            .zip(drives.iter_mut())
-            .zip(meas.iter_mut())
-        {
+        // One 1 ms step of every joint at once, each with its drive's current.
+        for (k, (d, m)) in drives.iter_mut().zip(&meas).enumerate() {
             let was_enabled = d.enabled();
-            let i = d.current_a(m, tick);
+            i_ref_a[k] = d.current_a(m, tick);
             if was_enabled && !d.enabled() {
                 st.command_timeouts += 1;
                 tracing::warn!(
                     "joint `{}` node {}: no command for {} ms, drive idles",
-                    j.name,
+                    robot.name(k),
                     d.node(),
                     opts.command_timeout_ms
                 );
             }
-            *m = j.plant.step(i, 0.0).meas;
+        }
+        robot.step(&i_ref_a, &tau_ext_nm)?;
+        for (k, m) in meas.iter_mut().enumerate() {
+            *m = robot.measurement(k);
         }
         tick += 1;
         for (d, m) in drives.iter().zip(&meas) {

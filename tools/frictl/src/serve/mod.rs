@@ -1,7 +1,8 @@
 //! `frictl sim serve`: the virtual joints as a plant process that speaks the robot's interfaces.
 //!
-//! What this module **is**: the set of served joints ([`ServedJoint`], built by [`build_joints`]
-//! from presets) and two transports over it — [`shm`] (iceoryx2 `JointStates` out,
+//! What this module **is**: the served robot ([`ServedRobot`], built by [`build_robot`] from
+//! presets: N independent single-joint plants, or the coupled leg of `--preset leg` whose joints
+//! are stepped together through one [`LegPlant`]) and two transports over it — [`shm`] (iceoryx2 `JointStates` out,
 //! `MotorCurrentCommand` in, plus the simulator-only `SimTruth` / `SimDisturbance`; real time at
 //! 1 kHz or `--lockstep`) and [`can`] (the joints answer as motor drives on a SocketCAN bus, MIT or
 //! ODrive protocol).
@@ -18,7 +19,10 @@ pub mod shm;
 use frictionless_shm_types::can::CanCodecError;
 use frictionless_shm_types::{IoError, ShmError};
 use frictionless_sim::params::{ParamError, load_table};
-use frictionless_sim::{Plant, PlantParams};
+use frictionless_sim::{LegError, LegParams, LegPlant, Measurement, Plant, PlantParams, Truth};
+
+/// The `--preset` name of the coupled leg (`config/presets/leg.toml`).
+pub const LEG_PRESET: &str = "leg";
 
 /// Why building, opening or serving the virtual joints failed. Messages name the option, joint,
 /// interface or service and the cause.
@@ -160,6 +164,26 @@ pub enum ServeError {
     /// A node id given twice.
     #[error("--node-ids: node id {0} appears twice")]
     DuplicateNodeId(u8),
+    /// The leg preset listed together with other presets.
+    #[error(
+        "--preset `{presets}`: `leg` is a whole coupled robot and cannot be combined with other presets"
+    )]
+    LegMixed {
+        /// The `--preset` value.
+        presets: String,
+    },
+    /// `--params` given with the leg preset.
+    #[error(
+        "--params {path}: a parameter file applies to single-joint presets; change the leg's joints \
+         with --set JOINT:key=value (e.g. --set l_knee:plant.f_c0_nm=3)"
+    )]
+    LegParamsFile {
+        /// The `--params` file.
+        path: String,
+    },
+    /// Building or stepping the coupled leg failed.
+    #[error(transparent)]
+    Leg(#[from] LegError),
     /// Building one joint's drive failed.
     #[error("joint `{joint}`")]
     Joint {
@@ -198,25 +222,162 @@ pub enum ServeError {
     },
 }
 
-/// One virtual joint on a payload index / bus node.
-pub struct ServedJoint {
-    /// Preset name or file it was built from (`knee`, `ankle_roll`, …).
-    pub name: String,
-    /// Index into the shared-memory payload arrays (0-based, in `--preset` order).
-    pub index: usize,
-    /// The simulated joint.
-    pub plant: Plant,
+/// The served plants behind the payload indices.
+enum Body {
+    /// One independent single-joint plant per index.
+    Joints(Vec<Plant>),
+    /// One coupled leg; index k is the leg's joint k.
+    Leg(Box<LegPlant>),
 }
 
-/// Builds one plant per comma-separated preset (`knee,ankle_roll`), indices 0, 1, … in that order.
-/// `params_file` and `sets` apply to every preset; each plant gets seed `seed + index`.
-pub fn build_joints(
+/// The simulated robot a transport serves: joints on payload indices / bus nodes 0, 1, …, stepped
+/// together once per 1 ms tick with every joint's current reference. Independent single-joint
+/// plants and the coupled leg look the same from here (and from the wire): per joint its
+/// parameters, its emulated sensors and its truth.
+pub struct ServedRobot {
+    names: Vec<String>,
+    params: Vec<PlantParams>,
+    body: Body,
+}
+
+impl ServedRobot {
+    /// Independent single-joint plants, named by their presets, on indices 0, 1, … in order.
+    pub fn independent(plants: Vec<(String, Plant)>) -> Self {
+        let (names, plants): (Vec<String>, Vec<Plant>) = plants.into_iter().unzip();
+        let params = plants.iter().map(|p| p.params().clone()).collect();
+        Self {
+            names,
+            params,
+            body: Body::Joints(plants),
+        }
+    }
+
+    /// The coupled leg; the served joints are the leg's joints in its parameters' order, named by
+    /// their URDF joints.
+    pub fn leg(leg: LegPlant) -> Self {
+        let params = leg.params().joints.clone();
+        Self {
+            names: params.iter().map(|p| p.joint.clone()).collect(),
+            params,
+            body: Body::Leg(Box::new(leg)),
+        }
+    }
+
+    /// Number of served joints.
+    pub fn len(&self) -> usize {
+        self.names.len()
+    }
+
+    /// Whether nothing is served.
+    pub fn is_empty(&self) -> bool {
+        self.names.is_empty()
+    }
+
+    /// Whether the joints are coupled through one leg.
+    pub fn is_leg(&self) -> bool {
+        matches!(self.body, Body::Leg(_))
+    }
+
+    /// Name of joint `k` (preset name, or the leg's URDF joint).
+    pub fn name(&self, k: usize) -> &str {
+        &self.names[k]
+    }
+
+    /// Drive parameters of joint `k`.
+    pub fn params(&self, k: usize) -> &PlantParams {
+        &self.params[k]
+    }
+
+    /// The newest emulated sensors of joint `k` (the initial ones before the first step).
+    pub fn measurement(&self, k: usize) -> Measurement {
+        match &self.body {
+            Body::Joints(p) => p[k].measurement(),
+            Body::Leg(leg) => leg.samples()[k].meas,
+        }
+    }
+
+    /// The newest truth of joint `k`.
+    pub fn truth(&self, k: usize) -> Truth {
+        match &self.body {
+            Body::Joints(p) => p[k].truth(),
+            Body::Leg(leg) => leg.samples()[k].truth,
+        }
+    }
+
+    /// Puts every joint at rest at `q0_rad` (one finite value per joint, gravity held by the
+    /// flexsplines).
+    pub fn reset_at_rest(&mut self, q0_rad: &[f64]) -> Result<(), ServeError> {
+        if q0_rad.len() != self.len() {
+            return Err(ServeError::InitialPoseCount {
+                values: q0_rad.len(),
+                joints: self.len(),
+            });
+        }
+        if let Some((k, &value)) = q0_rad.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            return Err(ServeError::InitialPoseValue { k, value });
+        }
+        match &mut self.body {
+            Body::Joints(p) => {
+                for (plant, &q) in p.iter_mut().zip(q0_rad) {
+                    plant.reset_at_rest(q);
+                }
+            }
+            Body::Leg(leg) => leg.reset_at_rest(q0_rad)?,
+        }
+        Ok(())
+    }
+
+    /// Advances every joint one control sample with its current reference `i_ref_a[k]` [A]
+    /// (saturated at the joint's ±i_max, NaN → 0) and external joint torque `tau_ext_nm[k]` [Nm];
+    /// one value per joint. Allocation-free.
+    pub fn step(&mut self, i_ref_a: &[f64], tau_ext_nm: &[f64]) -> Result<(), ServeError> {
+        match &mut self.body {
+            Body::Joints(p) => {
+                for ((plant, &i), &t) in p.iter_mut().zip(i_ref_a).zip(tau_ext_nm) {
+                    plant.step(i, t);
+                }
+            }
+            Body::Leg(leg) => {
+                leg.step(i_ref_a, tau_ext_nm)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Builds the served robot from a comma-separated preset list: one independent plant per preset
+/// (`knee,ankle_roll`: indices 0, 1 in that order; `params_file` and `sets` apply to every preset;
+/// each plant gets seed `seed + index`), or `leg` alone: the coupled ergoCub left leg
+/// (`config/presets/leg.toml`, six joints; `sets` as `JOINT:key=value` on the leg's joints, seed
+/// `seed`).
+pub fn build_robot(
     presets: &str,
     params_file: Option<&std::path::Path>,
     sets: &[String],
     seed: u64,
-) -> Result<Vec<ServedJoint>, ServeError> {
+) -> Result<ServedRobot, ServeError> {
     let names: Vec<&str> = presets.split(',').map(str::trim).collect();
+    if names.contains(&LEG_PRESET) {
+        if names.len() > 1 {
+            return Err(ServeError::LegMixed {
+                presets: presets.to_owned(),
+            });
+        }
+        if let Some(path) = params_file {
+            return Err(ServeError::LegParamsFile {
+                path: path.display().to_string(),
+            });
+        }
+        let params =
+            LegParams::from_toml_str(frictionless_sim::leg::LEG_PRESET_TOML, "<preset leg>", sets)?;
+        if params.joints.len() > frictionless_shm_types::MAX_JOINTS {
+            return Err(ServeError::TooManyPresets {
+                presets: presets.to_owned(),
+                max: frictionless_shm_types::MAX_JOINTS,
+            });
+        }
+        return Ok(ServedRobot::leg(LegPlant::new(params, seed)?));
+    }
     frictionless_sim::params::check_set_joints(sets, &names)?;
     let mut out = Vec::new();
     for (index, name) in names.iter().copied().enumerate() {
@@ -234,13 +395,9 @@ pub fn build_joints(
         let table = load_table(name, params_file, sets)?;
         let p = PlantParams::from_table(&table)?;
         let plant = Plant::from_params(p, seed.wrapping_add(index as u64))?;
-        out.push(ServedJoint {
-            name: name.to_owned(),
-            index,
-            plant,
-        });
+        out.push((name.to_owned(), plant));
     }
-    Ok(out)
+    Ok(ServedRobot::independent(out))
 }
 
 static STOP: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);

@@ -41,7 +41,8 @@ use frictionless_shm_types::{
     monotonic_ns,
 };
 
-use super::{ServeError, ServedJoint};
+use super::{ServeError, ServedRobot};
+use frictionless_acquire::leg::LegIo;
 use frictionless_acquire::protocol::{AcquireError, JointIo, VelocityEstimator};
 use frictionless_sim::{Measurement, Truth};
 
@@ -161,8 +162,7 @@ struct PlantPorts {
 }
 
 /// Per-joint loop state.
-struct JointLoop<'a> {
-    joint: &'a mut ServedJoint,
+struct JointLoop {
     vel: VelocityEstimator,
     meas: Measurement,
     truth: Truth,
@@ -173,23 +173,17 @@ struct JointLoop<'a> {
 /// Runs the plant over shared memory until `stop` is set or `opts.duration_s` of simulated time
 /// has passed. Prints "ready" to stderr once the services are open and a one-line summary at exit.
 pub fn run(
-    joints: &mut [ServedJoint],
+    robot: &mut ServedRobot,
     opts: &ShmServeOptions,
     stop: &AtomicBool,
 ) -> Result<ServeSummary, ServeError> {
-    if joints.is_empty() {
+    if robot.is_empty() {
         return Err(ServeError::NoJoints);
     }
-    if joints.len() > MAX_JOINTS {
+    if robot.len() > MAX_JOINTS {
         return Err(ServeError::TooManyJoints {
-            n: joints.len(),
+            n: robot.len(),
             max: MAX_JOINTS,
-        });
-    }
-    if !(opts.initial_pose_rad.is_empty() || opts.initial_pose_rad.len() == joints.len()) {
-        return Err(ServeError::InitialPoseCount {
-            values: opts.initial_pose_rad.len(),
-            joints: joints.len(),
         });
     }
     if let Some(d) = opts.duration_s
@@ -197,21 +191,18 @@ pub fn run(
     {
         return Err(ServeError::ShmDuration(d));
     }
-    for j in joints.iter() {
-        let p = j.plant.params().sample_period_s();
+    for index in 0..robot.len() {
+        let p = robot.params(index).sample_period_s();
         if (p - PERIOD_S).abs() >= 1e-12 || p.is_nan() {
             return Err(ServeError::SamplePeriod {
-                index: j.index,
-                joint: j.name.clone(),
+                index,
+                joint: robot.name(index).to_owned(),
                 period_s: p,
             });
         }
     }
-    for (k, &s0) in opts.initial_pose_rad.iter().enumerate() {
-        if !s0.is_finite() {
-            return Err(ServeError::InitialPoseValue { k, value: s0 });
-        }
-        joints[k].plant.reset_at_rest(s0);
+    if !opts.initial_pose_rad.is_empty() {
+        robot.reset_at_rest(&opts.initial_pose_rad)?;
     }
 
     // Clean up what crashed processes left under this root, then open our node and ports. The
@@ -237,8 +228,13 @@ pub fn run(
         disturbance,
     };
     eprintln!(
-        "frictl sim serve: ready ({} joint(s) on `{}/…`, {})",
-        joints.len(),
+        "frictl sim serve: ready ({} joint(s){} on `{}/…`, {})",
+        robot.len(),
+        if robot.is_leg() {
+            " coupled through the leg"
+        } else {
+            ""
+        },
         opts.ipc.service_prefix,
         if opts.lockstep {
             "lockstep"
@@ -247,11 +243,9 @@ pub fn run(
         }
     );
 
-    let mut loops: Vec<JointLoop<'_>> = joints
-        .iter_mut()
-        .enumerate()
-        .map(|(k, joint)| {
-            let meas = joint.plant.measurement();
+    let mut loops: Vec<JointLoop> = (0..robot.len())
+        .map(|k| {
+            let meas = robot.measurement(k);
             let f_c = opts
                 .velocity_filter_hz
                 .get(k)
@@ -260,10 +254,9 @@ pub fn run(
             JointLoop {
                 vel: VelocityEstimator::new(f_c, PERIOD_S, meas.s_rad),
                 meas,
-                truth: joint.plant.truth(),
+                truth: robot.truth(k),
                 i_applied_a: 0.0,
                 tau_ext_nm: 0.0,
-                joint,
             }
         })
         .collect();
@@ -271,7 +264,7 @@ pub fn run(
     if opts.lockstep && !wait_for_peers(&ports, opts.lockstep_min_subscribers, stop) {
         return Ok(ServeSummary::default());
     }
-    let summary = serve_loop(&mut loops, &ports, opts, stop)?;
+    let summary = serve_loop(robot, &mut loops, &ports, opts, stop)?;
     eprintln!("frictl sim serve: {summary}");
     Ok(summary)
 }
@@ -312,12 +305,12 @@ fn io_err(what: &'static str, source: frictionless_shm_types::IoError) -> ServeE
 }
 
 fn serve_loop(
-    loops: &mut [JointLoop<'_>],
+    robot: &mut ServedRobot,
+    loops: &mut [JointLoop],
     ports: &PlantPorts,
     opts: &ShmServeOptions,
     stop: &AtomicBool,
 ) -> Result<ServeSummary, ServeError> {
-    let n = loops.len();
     let max_ticks = opts
         .duration_s
         .map(|d| (d / PERIOD_S).round() as u64)
@@ -327,6 +320,9 @@ fn serve_loop(
     let timeout_ns = opts.command_timeout_ms.saturating_mul(1_000_000);
     let lockstep_timeout = Duration::from_millis(opts.lockstep_timeout_ms);
     let mut seq = 1u64;
+    // The step's inputs, one per joint (allocated once, before the loop).
+    let mut i_ref_a = vec![0.0; loops.len()];
+    let mut tau_ext_nm = vec![0.0; loops.len()];
     let started = Instant::now();
     publish(loops, ports, seq)?;
     let mut deadline = monotonic_ns() + PERIOD_NS;
@@ -402,18 +398,22 @@ fn serve_loop(
                 l.tau_ext_nm = if tau.is_finite() { tau } else { 0.0 };
             }
         }
-        // 3. physics
-        for (j, l) in loops.iter_mut().enumerate().take(n) {
+        // 3. physics: every joint at once
+        for (j, l) in loops.iter_mut().enumerate() {
             let i_ref = match cmd {
                 Some(c) if c.is_valid(j) && c.i_ref_a[j].is_finite() => c.i_ref_a[j],
                 _ => 0.0,
             };
-            let i_max = l.joint.plant.params().i_max_a;
+            let i_max = robot.params(j).i_max_a;
             l.i_applied_a = i_ref.clamp(-i_max, i_max);
-            let sample = l.joint.plant.step(l.i_applied_a, l.tau_ext_nm);
-            l.meas = sample.meas;
-            l.truth = sample.truth;
-            l.vel.update(sample.meas.s_rad);
+            i_ref_a[j] = l.i_applied_a;
+            tau_ext_nm[j] = l.tau_ext_nm;
+        }
+        robot.step(&i_ref_a, &tau_ext_nm)?;
+        for (j, l) in loops.iter_mut().enumerate() {
+            l.meas = robot.measurement(j);
+            l.truth = robot.truth(j);
+            l.vel.update(l.meas.s_rad);
         }
         summary.ticks += 1;
         seq += 1;
@@ -469,7 +469,7 @@ fn wait_answer(
     }
 }
 
-fn publish(loops: &[JointLoop<'_>], ports: &PlantPorts, seq: u64) -> Result<(), ServeError> {
+fn publish(loops: &[JointLoop], ports: &PlantPorts, seq: u64) -> Result<(), ServeError> {
     let n = loops.len();
     let stamp = monotonic_ns();
     ports
@@ -716,6 +716,44 @@ impl<'a> LiveJoint<'a> {
             })
     }
 
+    /// Publishes a command answering the newest state with `i_ref_a[k]` for joints 0, 1, … (each
+    /// bit valid): the whole robot driven by this process.
+    fn send_all(&mut self, i_ref_a: &[f64]) -> Result<(), LiveError> {
+        self.cmd_seq += 1;
+        let last = &self.last;
+        let seq = self.cmd_seq;
+        self.commands
+            .publish_with(|c: &mut MotorCurrentCommand| {
+                c.seq = seq;
+                c.stamp_ns = monotonic_ns();
+                c.state_stamp_ns = last.stamp_ns;
+                c.state_seq = last.seq;
+                c.valid_mask = 0;
+                c.n_joints = last.n_joints;
+                for (j, &i) in i_ref_a.iter().enumerate().take(MAX_JOINTS) {
+                    c.valid_mask |= 1u64 << j;
+                    c.i_ref_a[j] = i;
+                }
+            })
+            .map_err(|e| LiveError::Io {
+                what: "publish",
+                service: self.commands.name().to_owned(),
+                why: e.to_string(),
+            })
+    }
+
+    /// Sends 0 A to the first `n` joints (answering the newest state): call when a whole-robot
+    /// run is done or aborting.
+    pub fn release_all(&mut self, n: usize) -> Result<(), ServeError> {
+        self.send_all(&vec![0.0; n.min(MAX_JOINTS)])?;
+        Ok(())
+    }
+
+    /// Joints in the newest state.
+    pub fn n_joints(&self) -> usize {
+        self.last.n_joints as usize
+    }
+
     /// Sends 0 A for this joint (answering the newest state): call when done or aborting.
     pub fn release(&mut self) -> Result<(), ServeError> {
         self.send(0.0)?;
@@ -754,5 +792,41 @@ impl JointIo for LiveJoint<'_> {
 
     fn truth(&self) -> Option<Truth> {
         None
+    }
+}
+
+/// The whole robot of the plant, driven by this process: joint k of every payload (`frictl
+/// acquire --preset leg --live-shm`). [`LegIo::exchange`] publishes one command with every
+/// joint's current (all bits valid) answering the newest state and waits for the next state; the
+/// measurements' time is that of [`LiveJoint`].
+impl LegIo for LiveJoint<'_> {
+    fn measurement(&self, k: usize) -> Measurement {
+        let s = &self.last;
+        Measurement {
+            time_s: self.meas.time_s,
+            s_rad: s.s_rad[k],
+            theta_motor_rad: s.theta_motor_rad[k],
+            omega_motor_rad_s: s.omega_motor_rad_s[k],
+            i_meas_a: s.current_a[k],
+            temperature_c: s.temperature_c[k],
+        }
+    }
+
+    fn truth(&self, _k: usize) -> Option<Truth> {
+        None
+    }
+
+    fn exchange(&mut self, i_ref_a: &[f64]) -> Result<(), AcquireError> {
+        let t = self.meas.time_s;
+        let fail = |e: LiveError| AcquireError::Io {
+            time_s: t,
+            why: e.to_string(),
+        };
+        self.send_all(i_ref_a).map_err(fail)?;
+        let s = self
+            .next_state(self.last.seq, self.state_timeout)
+            .map_err(fail)?;
+        self.accept(s);
+        Ok(())
     }
 }
