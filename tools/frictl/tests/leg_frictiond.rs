@@ -14,13 +14,13 @@ use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+use frictionless_experiment::session::Binaries;
 use frictionless_shm_types::sim::SimTruth;
 use frictionless_shm_types::{
     FLAG_CURRENT_SATURATED, Inbox, Ipc, JointStates, MotorCurrentCommand, Outbox, TorqueRequest,
     monotonic_ns,
 };
 use frictionless_sim::{LegParams, PlantParams};
-use frictl::experiment::session::Binaries;
 
 use crate::plant_common::{Plant, Scratch};
 
