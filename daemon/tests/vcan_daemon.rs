@@ -136,7 +136,7 @@ alpha = 0.6
 
 "#;
 
-/// The MIT bus of [`SIM_JOINTS`] (ranges of `frictl::serve::can::mit_ranges` for the presets).
+/// The MIT bus of [`SIM_JOINTS`] (ranges of `frictionless_plant::can::mit_ranges` for the presets).
 const SIM_MIT_BUS: &str = r#"
 [[bus]]
 interface = "vcan0"

@@ -6,10 +6,10 @@
 //! `frictionless-dataset` (file formats), `frictionless-ident` (label pipeline, CV/SCV fit),
 //! `frictionless-logs` (robot logs), `frictionless-train` (PINN trainer, random search, distillation),
 //! `frictionless-eval` (offline evaluation, drift, figures), `frictionless-experiment` (closed-loop
-//! experiments), `frictionless-interop` (ONNX, safetensors) and `frictionless-canlog` (candump logs).
+//! experiments), `frictionless-plant` (the virtual robot as a process, `sim serve`),
+//! `frictionless-interop` (ONNX, safetensors) and `frictionless-canlog` (candump logs).
 //!
 //! What this library **is**, on top of those:
-//! - [`serve`]: the virtual joints as a plant process (shared memory, SocketCAN);
 //! - [`robot`]: the robot-level pipeline description (`frictl robot run ROBOT.toml`).
 //!
 //! What it is **not**: the real-time daemon; it never depends on it (experiments start `frictiond` as a
@@ -18,4 +18,3 @@
 #![warn(missing_docs)]
 
 pub mod robot;
-pub mod serve;

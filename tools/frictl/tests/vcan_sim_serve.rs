@@ -1,4 +1,4 @@
-//! The virtual joints as CAN motor drives (`frictl::serve::can`), driven by a test-process "daemon"
+//! The virtual joints as CAN motor drives (`frictionless_plant::can`), driven by a test-process "daemon"
 //! on a raw CAN socket.
 //!
 //! - `socketpair_*` (host): the real serve loop over one end of a `socketpair(AF_UNIX, SOCK_SEQPACKET)`
@@ -18,15 +18,15 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use frictionless_plant::build_robot;
+use frictionless_plant::can::{
+    AXIS_ERROR_WATCHDOG_TIMER_EXPIRED, CanServeOptions, CanServeStats, MIT_HOST_ID, Protocol,
+    mit_ranges, run_with_stats, serve_socket,
+};
 use frictionless_shm_types::can::WireFrame;
 use frictionless_shm_types::can::mit::{self, MitCommand, MitRanges, MitSpecial};
 use frictionless_shm_types::can::odrive::{self, OdriveMsg};
 use frictionless_sim::PlantParams;
-use frictl::serve::build_robot;
-use frictl::serve::can::{
-    AXIS_ERROR_WATCHDOG_TIMER_EXPIRED, CanServeOptions, CanServeStats, MIT_HOST_ID, Protocol,
-    mit_ranges, run_with_stats, serve_socket,
-};
 use socketcan::{CanFilter, CanFrame, CanSocket, Socket, SocketOptions};
 
 /// Where the emulator runs.
@@ -40,7 +40,7 @@ enum Link {
 
 struct Emulator {
     stop: Arc<AtomicBool>,
-    handle: Option<JoinHandle<Result<CanServeStats, frictl::serve::ServeError>>>,
+    handle: Option<JoinHandle<Result<CanServeStats, frictionless_plant::ServeError>>>,
 }
 
 impl Emulator {

@@ -1,7 +1,7 @@
 //! `frictl acquire` — run the excitation protocol and log a dataset (CSV + JSON sidecar).
 //!
 //! Offline against the simulator (default: fast, truth columns included), or live against a plant
-//! over shared memory (`--live-shm`: [`frictl::serve::shm::LiveJoint`], e.g. `frictl sim serve`),
+//! over shared memory (`--live-shm`: [`frictionless_plant::shm::LiveJoint`], e.g. `frictl sim serve`),
 //! through the same `frictionless_acquire::JointIo` seam and the same controllers.
 //!
 //! `--sensor torque` (offline only) logs the joint as a torque-sensed arm would: joint position and
@@ -98,7 +98,7 @@ pub struct Args {
 
 /// Runs `frictl acquire`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if args.preset == frictl::serve::LEG_PRESET {
+    if args.preset == frictionless_plant::LEG_PRESET {
         return run_leg(&args);
     }
     frictionless_sim::params::check_set_joints(&args.sets, &[args.preset.as_str()])?;
@@ -177,14 +177,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut t0 = None;
     let mut live_info = None;
     let summary = if args.live_shm {
-        let stop = frictl::serve::install_stop_flag()?;
+        let stop = frictionless_plant::install_stop_flag()?;
         anyhow::ensure!(
             args.connect_timeout_s.is_finite() && args.connect_timeout_s > 0.0,
             "--connect-timeout-s must be > 0, got {}",
             args.connect_timeout_s
         );
         let cfg = frictionless_shm_types::IpcConfig::new(args.root_path.as_deref(), &args.prefix);
-        let mut joint = frictl::serve::shm::LiveJoint::connect(
+        let mut joint = frictionless_plant::shm::LiveJoint::connect(
             &cfg,
             args.joint_index,
             period_s,
@@ -476,14 +476,14 @@ fn run_leg(args: &Args) -> anyhow::Result<()> {
     };
     let mut live_info = None;
     let summaries = if args.live_shm {
-        let stop = frictl::serve::install_stop_flag()?;
+        let stop = frictionless_plant::install_stop_flag()?;
         anyhow::ensure!(
             args.connect_timeout_s.is_finite() && args.connect_timeout_s > 0.0,
             "--connect-timeout-s must be > 0, got {}",
             args.connect_timeout_s
         );
         let cfg = frictionless_shm_types::IpcConfig::new(args.root_path.as_deref(), &args.prefix);
-        let mut robot = frictl::serve::shm::LiveJoint::connect(
+        let mut robot = frictionless_plant::shm::LiveJoint::connect(
             &cfg,
             0,
             leg.joints[0].sample_period_s(),
@@ -542,7 +542,7 @@ fn run_leg(args: &Args) -> anyhow::Result<()> {
     let sidecar = LegSidecar {
         format: "frictionless-acquire-leg-v1",
         producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
-        preset: frictl::serve::LEG_PRESET,
+        preset: frictionless_plant::LEG_PRESET,
         source: if args.live_shm {
             SOURCE_LIVE_SHM
         } else {

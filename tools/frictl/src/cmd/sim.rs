@@ -3,8 +3,8 @@
 //! `frictl sim run`: an offline open-loop run of a preset with a current profile, logged as CSV (the
 //! same columns as `frictl acquire`, truth included). `frictl sim params`: print the merged parameters.
 //! `frictl sim serve`: the joints as a plant process — over iceoryx2 (`--backend shm`, real time or
-//! lockstep, [`frictl::serve::shm`]) or as motor drives on SocketCAN (`--backend can`,
-//! [`frictl::serve::can`]).
+//! lockstep, [`frictionless_plant::shm`]) or as motor drives on SocketCAN (`--backend can`,
+//! [`frictionless_plant::can`]).
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -154,8 +154,8 @@ pub struct ServeArgs {
     #[arg(long, default_value = "vcan0")]
     pub bus: String,
     /// can: motor protocol.
-    #[arg(long, value_enum, default_value_t = frictl::serve::can::Protocol::Mit)]
-    pub protocol: frictl::serve::can::Protocol,
+    #[arg(long, value_enum, default_value_t = frictionless_plant::can::Protocol::Mit)]
+    pub protocol: frictionless_plant::can::Protocol,
     /// can: node id per joint, comma-separated (default 1, 2, …).
     #[arg(long, value_delimiter = ',')]
     pub node_ids: Vec<u8>,
@@ -230,8 +230,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
 /// `frictl sim serve`.
 fn serve(a: ServeArgs) -> anyhow::Result<()> {
-    let stop = frictl::serve::install_stop_flag()?;
-    let mut robot = frictl::serve::build_robot(&a.preset, a.params.as_deref(), &a.sets, a.seed)?;
+    let stop = frictionless_plant::install_stop_flag()?;
+    let mut robot =
+        frictionless_plant::build_robot(&a.preset, a.params.as_deref(), &a.sets, a.seed)?;
     match a.backend {
         Backend::Shm => {
             // The reported velocity uses each preset's protocol.velocity_filter_hz, like acquire
@@ -239,13 +240,13 @@ fn serve(a: ServeArgs) -> anyhow::Result<()> {
             let mut velocity_filter_hz = Vec::with_capacity(robot.len());
             for k in 0..robot.len() {
                 velocity_filter_hz.push(if robot.is_leg() {
-                    frictl::serve::shm::DEFAULT_VELOCITY_FILTER_HZ
+                    frictionless_plant::shm::DEFAULT_VELOCITY_FILTER_HZ
                 } else {
                     let table = load_table(robot.name(k), a.params.as_deref(), &a.sets)?;
                     frictionless_acquire::ProtocolConfig::from_table(&table)?.velocity_filter_hz
                 });
             }
-            let opts = frictl::serve::shm::ShmServeOptions {
+            let opts = frictionless_plant::shm::ShmServeOptions {
                 ipc: frictionless_shm_types::IpcConfig::new(a.root_path.as_deref(), &a.prefix),
                 lockstep: a.lockstep,
                 lockstep_timeout_ms: a.lockstep_timeout_ms,
@@ -255,7 +256,7 @@ fn serve(a: ServeArgs) -> anyhow::Result<()> {
                 initial_pose_rad: a.initial_pose_rad,
                 velocity_filter_hz,
             };
-            frictl::serve::shm::run(&mut robot, &opts, stop)?;
+            frictionless_plant::shm::run(&mut robot, &opts, stop)?;
             Ok(())
         }
         Backend::Can => {
@@ -271,18 +272,18 @@ fn serve(a: ServeArgs) -> anyhow::Result<()> {
     }
 }
 
-/// `frictl sim serve --backend can`: [`frictl::serve::can::run`].
+/// `frictl sim serve --backend can`: [`frictionless_plant::can::run`].
 fn serve_can(
-    robot: &mut frictl::serve::ServedRobot,
+    robot: &mut frictionless_plant::ServedRobot,
     a: &ServeArgs,
     stop: &std::sync::atomic::AtomicBool,
 ) -> anyhow::Result<()> {
-    let opts = frictl::serve::can::CanServeOptions {
+    let opts = frictionless_plant::can::CanServeOptions {
         bus: a.bus.clone(),
         protocol: a.protocol,
         node_ids: a.node_ids.clone(),
         command_timeout_ms: a.command_timeout_ms,
         duration_s: a.duration_s,
     };
-    Ok(frictl::serve::can::run(robot, &opts, stop)?)
+    Ok(frictionless_plant::can::run(robot, &opts, stop)?)
 }

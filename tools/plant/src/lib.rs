@@ -1,6 +1,10 @@
-//! `frictl sim serve`: the virtual joints as a plant process that speaks the robot's interfaces.
+//! # `frictionless-plant`: the virtual robot as a process that speaks the robot's interfaces
 //!
-//! What this module **is**: the served robot ([`ServedRobot`], built by [`build_robot`] from
+//! Crate table: `tools/plant`; depends on `frictionless-sim` (the physics), `frictionless-shm-types`
+//! (payloads, CAN codecs) and `frictionless-acquire` (the `JointIo` seam of live acquisition); used by
+//! `frictl` (`sim serve`, `acquire --live-shm`) and the daemon's end-to-end tests.
+//!
+//! What this crate **is**: the served robot ([`ServedRobot`], built by [`build_robot`] from
 //! presets: N independent single-joint plants, or the coupled leg of `--preset leg` whose joints
 //! are stepped together through one [`LegPlant`]) and two transports over it — [`shm`] (iceoryx2 `JointStates` out,
 //! `MotorCurrentCommand` in, plus the simulator-only `SimTruth` / `SimDisturbance`; real time at
@@ -12,6 +16,8 @@
 //!
 //! What it is **not**: no physics (that is [`frictionless_sim`]), no control (the daemon and the
 //! experiment controller are separate processes).
+
+#![warn(missing_docs)]
 
 pub mod can;
 pub mod shm;
