@@ -13,18 +13,24 @@
 //!    after a full-cache eviction (a 64 MiB write), and the same for its first layer alone (the
 //!    second layer by difference); a 32-joint tick hot, after eviction, and after eviction followed
 //!    by a prefetch walk of every joint (and how long that walk takes);
-//! 2. p50 / p99 / p99.9 of the paced compute time for 1, 15 and 32 joints × the storage dtypes
+//! 2. the paced compute time for 1, 15 and 32 joints × the networks ([`MODELS`]: the paper-size
+//!    ones, and 32 distinct small students distilled from them in the setup) × the storage dtypes
 //!    ([`DTYPES`], one array) × 1 and 2 RT threads × prefetch off / after / lead, next to the hot
-//!    single-model floor and the hot back-to-back tick.
+//!    single-model floor and the hot back-to-back tick: p50 / p99 / max over the **steal-free**
+//!    ticks (those during which the bench thread's own run-queue delay, `/proc/thread-self/schedstat`,
+//!    did not grow: no other task of this machine ran on its CPU meanwhile), their fraction, and
+//!    p50 / p99 / p99.9 / max over all ticks.
 //!
 //! No asserts, no criterion for the paced part. Run: `cargo bench -p frictiond --bench tick_paced`
 //! (about 8 minutes: 90 cells × `TICKS` ticks at 1 kHz; `TICK_PACED_TICKS=n` changes the count,
 //! `TICK_PACED_DTYPES=int16,f16` measures only those dtypes, `TICK_PACED_JOINTS=32`,
-//! `TICK_PACED_THREADS=2` and `TICK_PACED_PREFETCH=lead` only those cells, and
+//! `TICK_PACED_THREADS=2`, `TICK_PACED_PREFETCH=lead` and `TICK_PACED_MODELS=student` only those
+//! cells, and
 //! `TICK_PACED_REPEAT=k` runs each paced cell k times, `TICK_PACED_ONLY_PACED=1` skips parts 0
 //! and 1).
 //! Each paced cell also reports the time the hypervisor stole from this VM's vCPUs meanwhile
-//! (`steal` in `/proc/stat`, all CPUs, ms): a cell with steal did not run on a quiet machine.
+//! (`steal` in `/proc/stat`, all CPUs, ms): the guest's run-queue delay cannot see that steal, so a
+//! cell with steal did not run on a quiet host even over its steal-free ticks.
 //! Runs as an ordinary thread (SCHED_OTHER) unless `TICK_PACED_PRIORITY=p` asks for SCHED_FIFO `p`
 //! for the bench thread and the helper (as frictiond's `[loop] priority`); timer slack 1 ns as in
 //! frictiond. On a shared machine the numbers include its load — note `uptime` next to them.
@@ -44,7 +50,8 @@ use frictionless_shm_types::{MAX_JOINTS, MotorCurrentCommand, monotonic_ns};
 
 #[path = "support/tick_params.rs"]
 mod tick_params;
-use tick_params::{H, inputs, paper_weights, params};
+use frictionless::weights::ModelFile;
+use tick_params::{H, inputs, paper_file, paper_weights, params, params_with, pinn_of};
 
 /// Storage dtypes measured (one array: a new `.fwt` dtype is one more entry).
 const DTYPES: [(&str, StorageDtype); 5] = [
@@ -86,6 +93,81 @@ fn steal_ms() -> u64 {
         })
         .map_or(0, |ticks| ticks * 10)
 }
+/// The calling thread's run-queue delay so far [ns]: the second field of
+/// `/proc/thread-self/schedstat` (time spent runnable but waiting for a CPU). Read from an open file
+/// with `pread` into a stack buffer (no allocation).
+struct RunDelay(Option<std::fs::File>);
+
+impl RunDelay {
+    /// Opens the calling thread's `schedstat` (read on this thread only); `None` inside when the
+    /// kernel has no schedstats.
+    fn open() -> Self {
+        Self(std::fs::File::open("/proc/thread-self/schedstat").ok())
+    }
+
+    /// The delay so far [ns], 0 without schedstats.
+    fn ns(&self) -> u64 {
+        use std::os::unix::fs::FileExt;
+        let Some(f) = &self.0 else { return 0 };
+        let mut buf = [0u8; 96];
+        let n = f.read_at(&mut buf, 0).unwrap_or(0);
+        std::str::from_utf8(&buf[..n])
+            .ok()
+            .and_then(|t| t.split_whitespace().nth(1)?.parse().ok())
+            .unwrap_or(0)
+    }
+}
+
+/// Which networks the paced joints run (`TICK_PACED_MODELS=paper,student` selects).
+#[derive(Clone, Copy, PartialEq)]
+enum Models {
+    /// The paper-size `[Δθ ×20, ṡ ×20]` → 268 → 215 → 1 networks (seeded random weights).
+    Paper,
+    /// Small students distilled (probe-only) from the paper-size networks, [`STUDENT_WIDTHS`].
+    Student,
+}
+const MODELS: [(&str, Models); 2] = [("paper", Models::Paper), ("student", Models::Student)];
+/// Hidden widths of the students: joint k gets `STUDENT_WIDTHS[k % 3]` (distinct seeds and teachers
+/// make every student's weights distinct).
+const STUDENT_WIDTHS: [[usize; 2]; 3] = [[32, 32], [24, 32], [32, 24]];
+
+/// 32 students, joint k distilled without data from joint k's paper-size network (probes inside
+/// mean ± 3·scale of its identity normalisation), f32; the gate bound is loose (the teachers are
+/// random functions: the students are here for their cost, not their accuracy).
+fn students() -> Vec<ModelFile> {
+    use frictionless_train::TrainConfig;
+    use frictionless_train::distill::{ProbeDistillConfig, distill_probes};
+    (0..32u64)
+        .map(|k| {
+            let teacher = paper_file(k, StorageDtype::F32);
+            let cfg = ProbeDistillConfig {
+                train: TrainConfig {
+                    hidden: STUDENT_WIDTHS[k as usize % 3].to_vec(),
+                    dropout: 0.0,
+                    lambda: 0.0,
+                    lr: 2e-3,
+                    batch_size: 256,
+                    epochs: 5,
+                    seed: k,
+                    threads: 1,
+                    patience: None,
+                    abort_loss: None,
+                },
+                dtype: StorageDtype::F32,
+                probes: 4000,
+                val_probes: 500,
+                test_probes: 500,
+                max_rmse_nm: f64::MAX,
+            };
+            distill_probes(&teacher, [0; 32], &cfg, |_| {
+                std::ops::ControlFlow::Continue(())
+            })
+            .expect("student distils")
+            .model
+        })
+        .collect()
+}
+
 /// Prefetch policies (`[loop] prefetch`).
 const PREFETCH: [(&str, Prefetch); 3] = [
     ("off", Prefetch::Off),
@@ -226,24 +308,41 @@ fn where_the_time_goes(evict_buf: &mut [u8]) {
     println!();
 }
 
-/// Paced ticks of `p` on one thread or with `crew`: compute time from wake [ns], sorted, and the
-/// helper's late ticks and the ticks whose helper half the bench thread ran itself (stolen).
+/// What [`paced`] measured.
+struct PacedRun {
+    /// Compute time from wake of every tick [ns], sorted.
+    all: Vec<u64>,
+    /// Of the ticks during which the bench thread's run-queue delay did not grow, sorted.
+    steal_free: Vec<u64>,
+    /// Helper late ticks.
+    late: u64,
+    /// Ticks whose helper half the bench thread ran itself.
+    stolen: u64,
+}
+
+/// Paced ticks of `p` on one thread or with `crew`. Around each tick (outside the timed region) the
+/// bench thread reads its own run-queue delay: a tick during which it did not grow was not
+/// preempted by another task of this machine ("steal-free"; the hypervisor's steal is invisible
+/// to the guest's scheduler and is reported per cell).
 fn paced(
     p: &mut Params,
     n: usize,
     mut crew: Option<&mut Crew>,
     plan: &CrewPlan,
     ticks: usize,
-) -> (Vec<u64>, u64, u64) {
+) -> PacedRun {
     let mut inp = inputs(n);
     let (mut cmd, mut tau_f, mut prev) = warm(p, &inp);
     let mut samples = Vec::with_capacity(ticks);
+    let mut steal_free = Vec::with_capacity(ticks);
+    let delay = RunDelay::open();
     let late0 = crew.as_ref().map_or(0, |c| c.late_ticks());
     let stolen0 = crew.as_ref().map_or(0, |c| c.stolen_ticks());
     for k in 0..ticks as u64 {
         inp.states.value.sdot_rad_s[n - 1] = 0.4 + (k % 100) as f64 * 1e-3;
         let deadline = (monotonic_ns() / PERIOD_NS + 1) * PERIOD_NS;
         sleep_to_deadline(deadline, plan.prefetch, plan.lead_ns, main_half(p));
+        let delay0 = delay.ns();
         let wake = monotonic_ns();
         match crew.as_deref_mut() {
             None => compute(p, &inp, FRESH, &mut prev, &mut cmd, &mut tau_f),
@@ -255,14 +354,21 @@ fn paced(
             }
         }
         let done = monotonic_ns();
+        if delay.ns() == delay0 {
+            steal_free.push(done - wake);
+        }
         black_box(&cmd);
         prefetch_after_publish(plan, main_half(p));
         samples.push(done - wake);
     }
     samples.sort_unstable();
-    let late = crew.as_ref().map_or(0, |c| c.late_ticks()) - late0;
-    let stolen = crew.as_ref().map_or(0, |c| c.stolen_ticks()) - stolen0;
-    (samples, late, stolen)
+    steal_free.sort_unstable();
+    PacedRun {
+        all: samples,
+        steal_free,
+        late: crew.as_ref().map_or(0, |c| c.late_ticks()) - late0,
+        stolen: crew.as_ref().map_or(0, |c| c.stolen_ticks()) - stolen0,
+    }
 }
 
 /// `TICK_PACED_PRIORITY=p`: run the bench thread and the helper SCHED_FIFO at `p`, as frictiond
@@ -394,60 +500,97 @@ fn main() {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(1);
+    let models = only("TICK_PACED_MODELS", &MODELS, |m| m.0.to_owned());
+    let students = if models.iter().any(|m| m.1 == Models::Student) {
+        let t = monotonic_ns();
+        let s = students();
+        let macs = |f: &ModelFile| f.mlp.macs();
+        println!(
+            "Students: {} distilled in {:.1} s, hidden {:?}, {}–{} MAC each (paper-size: {} MAC).\n",
+            s.len(),
+            (monotonic_ns() - t) as f64 / 1e9,
+            STUDENT_WIDTHS,
+            s.iter().map(macs).min().unwrap_or(0),
+            s.iter().map(macs).max().unwrap_or(0),
+            macs(&paper_file(0, StorageDtype::F32)),
+        );
+        s
+    } else {
+        Vec::new()
+    };
     println!(
-        "| joints | dtype | hot 1 net p50 | hot tick p50 | threads | prefetch | p50 | p99 | p99.9 | late | stolen | steal [ms] |"
+        "| joints | nets | dtype | hot 1 net p50 | hot tick p50 | threads | prefetch | steal-free p50 | steal-free p99 | steal-free max | all p50 | all p99 | all p99.9 | all max | steal-free ticks | late | stolen | steal [ms] |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for n in only("TICK_PACED_JOINTS", &JOINTS, |j| j.to_string()) {
-        for (name, dtype) in dtypes() {
-            let mut net = paper_net(&[40, 268, 215, 1], 1, dtype);
-            let (net_hot, _) = forward_hot_cold(&mut net, &mut evict_buf[..0]);
-            // Hot back-to-back tick of the same joints.
-            let mut p = params(n, Some(dtype), 1);
-            let mut inp = inputs(n);
-            let (mut cmd, mut tau_f, mut prev) = warm(&mut p, &inp);
-            let mut hot = Vec::with_capacity(1000);
-            for k in 0..1000u64 {
-                inp.states.value.sdot_rad_s[n - 1] = 0.4 + (k % 100) as f64 * 1e-3;
-                let t = monotonic_ns();
-                compute(&mut p, &inp, FRESH, &mut prev, &mut cmd, &mut tau_f);
-                hot.push(monotonic_ns() - t);
-            }
-            hot.sort_unstable();
-            for threads in only("TICK_PACED_THREADS", &[1u8, 2], |t| t.to_string()) {
-                for (pname, prefetch) in only("TICK_PACED_PREFETCH", &PREFETCH, |p| p.0.into()) {
-                    for _ in 0..repeat {
-                        let mut p = params(n, Some(dtype), threads);
-                        let plan = CrewPlan {
-                            period_ns: PERIOD_NS,
-                            budget_ns: PERIOD_NS / 4 * 3,
-                            release_ns: HELPER_RELEASE_GRACE_NS,
-                            prefetch,
-                            lead_ns: LEAD_NS,
-                            lockstep: false,
-                        };
-                        let steal0 = steal_ms();
-                        let (s, late, stolen) = if threads == 2 {
-                            let rt = ThreadRt {
-                                priority,
-                                ..ThreadRt::default()
+        for &(mname, kind) in &models {
+            for (name, dtype) in dtypes() {
+                let make = |threads: u8| match kind {
+                    Models::Paper => params(n, Some(dtype), threads),
+                    Models::Student => params_with(n, threads, |k| pinn_of(&students[k], dtype)),
+                };
+                let mut net = match kind {
+                    Models::Paper => paper_net(&[40, 268, 215, 1], 1, dtype),
+                    Models::Student => Mlp::new(&students[0].mlp, dtype).expect("valid layout"),
+                };
+                let (net_hot, _) = forward_hot_cold(&mut net, &mut evict_buf[..0]);
+                // Hot back-to-back tick of the same joints.
+                let mut p = make(1);
+                let mut inp = inputs(n);
+                let (mut cmd, mut tau_f, mut prev) = warm(&mut p, &inp);
+                let mut hot = Vec::with_capacity(1000);
+                for k in 0..1000u64 {
+                    inp.states.value.sdot_rad_s[n - 1] = 0.4 + (k % 100) as f64 * 1e-3;
+                    let t = monotonic_ns();
+                    compute(&mut p, &inp, FRESH, &mut prev, &mut cmd, &mut tau_f);
+                    hot.push(monotonic_ns() - t);
+                }
+                hot.sort_unstable();
+                for threads in only("TICK_PACED_THREADS", &[1u8, 2], |t| t.to_string()) {
+                    for (pname, prefetch) in only("TICK_PACED_PREFETCH", &PREFETCH, |p| p.0.into())
+                    {
+                        for _ in 0..repeat {
+                            let mut p = make(threads);
+                            let plan = CrewPlan {
+                                period_ns: PERIOD_NS,
+                                budget_ns: PERIOD_NS / 4 * 3,
+                                release_ns: HELPER_RELEASE_GRACE_NS,
+                                prefetch,
+                                lead_ns: LEAD_NS,
+                                lockstep: false,
                             };
-                            let (mut crew, _, _) = Crew::spawn(plan, rt).expect("helper thread");
-                            let r = paced(&mut p, n, Some(&mut crew), &plan, ticks);
-                            crew.stop();
-                            r
-                        } else {
-                            paced(&mut p, n, None, &plan, ticks)
-                        };
-                        println!(
-                            "| {n} | {name} | {} | {} | {threads} | {pname} | {} | {} | {} | {late} | {stolen} | {} |",
-                            us(net_hot),
-                            us(quantile(&hot, 0.5)),
-                            us(quantile(&s, 0.5)),
-                            us(quantile(&s, 0.99)),
-                            us(quantile(&s, 0.999)),
-                            steal_ms() - steal0,
-                        );
+                            let steal0 = steal_ms();
+                            let r = if threads == 2 {
+                                let rt = ThreadRt {
+                                    priority,
+                                    ..ThreadRt::default()
+                                };
+                                let (mut crew, _, _) =
+                                    Crew::spawn(plan, rt).expect("helper thread");
+                                let r = paced(&mut p, n, Some(&mut crew), &plan, ticks);
+                                crew.stop();
+                                r
+                            } else {
+                                paced(&mut p, n, None, &plan, ticks)
+                            };
+                            let (s, f) = (&r.all, &r.steal_free);
+                            println!(
+                                "| {n} | {mname} | {name} | {} | {} | {threads} | {pname} | {} | {} | {} | {} | {} | {} | {} | {:.1} % | {} | {} | {} |",
+                                us(net_hot),
+                                us(quantile(&hot, 0.5)),
+                                us(quantile(f, 0.5)),
+                                us(quantile(f, 0.99)),
+                                us(f.last().copied().unwrap_or(0)),
+                                us(quantile(s, 0.5)),
+                                us(quantile(s, 0.99)),
+                                us(quantile(s, 0.999)),
+                                us(s.last().copied().unwrap_or(0)),
+                                100.0 * f.len() as f64 / s.len().max(1) as f64,
+                                r.late,
+                                r.stolen,
+                                steal_ms() - steal0,
+                            );
+                        }
                     }
                 }
             }

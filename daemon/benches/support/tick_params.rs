@@ -32,7 +32,8 @@ pub fn paper_weights(seed: u64) -> frictionless::mlp::MlpWeights {
     seeded_mlp(&spec, seed).expect("valid bench net")
 }
 
-pub fn paper_pinn(seed: u64, dtype: StorageDtype) -> JointModel {
+/// Joint `seed`'s paper-size network as a model file stored as `dtype`.
+pub fn paper_file(seed: u64, dtype: StorageDtype) -> ModelFile {
     let features = FeatureSpec {
         set: FeatureSet::DeltaThetaJointVel,
         history: H,
@@ -40,7 +41,7 @@ pub fn paper_pinn(seed: u64, dtype: StorageDtype) -> JointModel {
     };
     let mlp = paper_weights(seed);
     debug_assert_eq!(mlp.n_inputs(), features.n_inputs());
-    let file = ModelFile {
+    ModelFile {
         meta: ModelMeta {
             joint_name: format!("j{seed}"),
             gear_ratio: GearRatio::new(R).unwrap(),
@@ -51,10 +52,22 @@ pub fn paper_pinn(seed: u64, dtype: StorageDtype) -> JointModel {
         },
         dtype,
         mlp,
+    }
+}
+
+/// A PINN estimator of `file`, stored as `dtype`.
+pub fn pinn_of(file: &ModelFile, dtype: StorageDtype) -> JointModel {
+    let file = ModelFile {
+        dtype,
+        ..file.clone()
     };
     JointModel::Pinn(Box::new(
         PinnEstimator::from_model_file(&file, WarmupPolicy::HoldZero).unwrap(),
     ))
+}
+
+pub fn paper_pinn(seed: u64, dtype: StorageDtype) -> JointModel {
+    pinn_of(&paper_file(seed, dtype), dtype)
 }
 
 pub fn scv() -> JointModel {
@@ -71,6 +84,14 @@ pub fn scv() -> JointModel {
 /// `n` joints with distinct models (PINNs stored as `dtype`, or SCV when `None`), the ergoCub law
 /// (clip, kfc, 2nd-order LPF, clamp), split for `rt_threads` RT threads.
 pub fn params(n: usize, pinn: Option<StorageDtype>, rt_threads: u8) -> Box<Params> {
+    params_with(n, rt_threads, |k| match pinn {
+        Some(dtype) => paper_pinn(k as u64, dtype),
+        None => scv(),
+    })
+}
+
+/// `n` joints whose models are `model(k)`, the ergoCub law, split for `rt_threads` RT threads.
+pub fn params_with(n: usize, rt_threads: u8, model: impl Fn(usize) -> JointModel) -> Box<Params> {
     let gains = Gains {
         kt_nm_per_a: 0.0665,
         gear_ratio: R,
@@ -85,10 +106,7 @@ pub fn params(n: usize, pinn: Option<StorageDtype>, rt_threads: u8) -> Box<Param
     let joints = (0..n)
         .map(|k| JointRt {
             index: k,
-            model: match pinn {
-                Some(dtype) => paper_pinn(k as u64, dtype),
-                None => scv(),
-            },
+            model: model(k),
             law: JointLaw::new(
                 gains,
                 Some(CausalButterworth::design(2, 30.0, 1000.0).unwrap()),

@@ -58,6 +58,7 @@ fn compensation_with_fitted_models_lowers_tracking_error_at_the_same_kp() {
         "demo",
         "--quick",
         "--no-experiments",
+        "--distill",
         "--seed",
         "3",
         "--out",
@@ -65,6 +66,39 @@ fn compensation_with_fitted_models_lowers_tracking_error_at_the_same_kp() {
     ]);
     let report = json(&demo.join("report.json"));
     assert_eq!(report["settings"], "quick");
+    // `--distill`: each joint's student beside its teacher, both on the unseen test run; a student
+    // the gate passed is written, one it refused is not.
+    for joint in ["l_knee", "l_ankle_roll"] {
+        let e = &report["joints"][joint]["models"]["pinn_distilled"];
+        let num = |k: &str| {
+            e[k].as_f64()
+                .unwrap_or_else(|| panic!("{joint}: pinn_distilled.{k} missing in {e}"))
+        };
+        for k in [
+            "teacher_test_rmse_nm",
+            "student_test_rmse_nm",
+            "teacher_hot_us",
+            "student_hot_us",
+        ] {
+            assert!(num(k).is_finite() && num(k) > 0.0, "{joint}: {k} in {e}");
+        }
+        assert!(num("student_mac") < num("teacher_mac"), "{e}");
+        let passed = e["gate_passed"].as_bool().unwrap();
+        let ratio = num("student_test_rmse_nm") / num("teacher_test_rmse_nm");
+        let bands_ok = e["gate"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|r| r["passed"].as_bool().unwrap());
+        assert_eq!(passed, ratio <= 1.05 && bands_ok, "{e}");
+        let student = demo.join("models").join(format!("{joint}_distilled.fwt"));
+        assert_eq!(
+            student.is_file(),
+            passed,
+            "{joint}: written iff passed ({e})"
+        );
+        assert_eq!(e["file"].is_string(), passed, "{e}");
+    }
     assert!(report["stages"].as_array().unwrap().len() >= 14, "{report}");
     let m = |name: &str| demo.join("models").join(name).display().to_string();
     for f in [

@@ -1050,3 +1050,154 @@ fn distill_gates_on_held_out_data_inherits_meta_and_records_the_teacher() {
     );
     assert!(!tiny.exists(), "a failed student must not be written");
 }
+
+/// `frictl distill --probes-only`: without any dataset, a student learns the teacher inside its
+/// stored input range and is written only when its output RMSE against the teacher on the gate
+/// probes is within `--max-rmse-nm`; the written student's stored test RMSE is that gate figure, and
+/// an independent draw of inputs inside the range (made here, on the kernel frictiond runs) agrees
+/// with it. A student that cannot fit (one unit, one epoch) fails the gate and writes nothing;
+/// `--dataset` with `--probes-only` is refused.
+#[test]
+fn distill_probes_only_gates_on_the_teacher_inside_its_input_range() {
+    let f = fixture();
+    let teacher_path = f.dir.join("probe_teacher.fwt");
+    ok(
+        train(
+            &teacher_path,
+            &["--hidden", "32,32", "--epochs", "4", "--seed", "5"],
+        ),
+        "train teacher",
+    );
+    let teacher = read_file(&teacher_path).unwrap();
+    let range = teacher
+        .meta
+        .training
+        .input_range
+        .expect("train stores the input range");
+    let distill = |out: &Path, extra: &[&str]| -> Output {
+        let mut args = vec![
+            "distill",
+            s(&teacher_path),
+            "-o",
+            s(out),
+            "--threads",
+            "2",
+            "--quiet",
+        ];
+        args.extend_from_slice(extra);
+        frictl(&args)
+    };
+    let student_path = f.dir.join("probe_student.fwt");
+    let bound_nm = 0.3f32;
+    let out = ok(
+        distill(
+            &student_path,
+            &[
+                "--probes-only",
+                "8000",
+                "--hidden",
+                "16,16",
+                "--epochs",
+                "60",
+                "--batch",
+                "256",
+                "--lr",
+                "3e-3",
+                "--max-rmse-nm",
+                &bound_nm.to_string(),
+            ],
+        ),
+        "distill --probes-only",
+    );
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        text.contains("RMSE vs teacher") && text.contains(": ok"),
+        "{text}"
+    );
+    let student = read_file(&student_path).unwrap();
+    let sm = &student.meta;
+    assert_eq!(sm.features, teacher.meta.features);
+    assert_eq!(student.mlp.norm, teacher.mlp.norm);
+    assert_eq!(sm.training.input_range, teacher.meta.training.input_range);
+    let teacher_sha: [u8; 32] = Sha256::digest(std::fs::read(&teacher_path).unwrap()).into();
+    assert_eq!(sm.training.teacher_sha256, Some(teacher_sha));
+    let gate_rmse = sm.training.test_rmse_nm;
+    assert!(gate_rmse <= bound_nm, "stored gate RMSE {gate_rmse}");
+    // An independent draw inside the stored range, on the kernel.
+    let spec = teacher.meta.features;
+    let (h, n) = (spec.history, spec.n_inputs());
+    let mut state = 0x1234_5678_9abc_def0u64;
+    let mut uniform = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let mut tk = frictionless::kernel::Mlp::new(&teacher.mlp, teacher.dtype).unwrap();
+    let mut sk = frictionless::kernel::Mlp::new(&student.mlp, student.dtype).unwrap();
+    let (mut sq, mut var_t, mut mean_t, count) = (0f64, 0f64, 0f64, 4000);
+    let mut ys = Vec::with_capacity(count);
+    for _ in 0..count {
+        let x: Vec<f32> = (0..n)
+            .map(|i| {
+                let [lo, hi] = if i < spec.set.n_blocks() * h {
+                    range.blocks[i / h]
+                } else {
+                    range.temperature
+                };
+                lo + (hi - lo) * uniform()
+            })
+            .collect();
+        let (t, st) = (tk.forward(&x), sk.forward(&x));
+        sq += f64::from(t - st).powi(2);
+        ys.push(f64::from(t));
+    }
+    for y in &ys {
+        mean_t += y / count as f64;
+    }
+    for y in &ys {
+        var_t += (y - mean_t).powi(2) / count as f64;
+    }
+    let rmse = (sq / count as f64).sqrt();
+    assert!(
+        rmse <= 1.3 * f64::from(gate_rmse),
+        "independent RMSE vs teacher {rmse} Nm (gate {gate_rmse} Nm)"
+    );
+    assert!(
+        var_t.sqrt() > 10.0 * rmse,
+        "the teacher varies ({} Nm std) far more than the student's error ({rmse} Nm)",
+        var_t.sqrt()
+    );
+
+    let tiny = f.dir.join("probe_tiny.fwt");
+    let e = err_text(
+        distill(
+            &tiny,
+            &[
+                "--probes-only",
+                "2000",
+                "--hidden",
+                "1",
+                "--epochs",
+                "1",
+                "--max-rmse-nm",
+                "1e-5",
+            ],
+        ),
+        "distill --probes-only into one unit",
+    );
+    assert!(
+        e.contains("not within 0.00001 Nm RMS") && e.contains("not written"),
+        "{e}"
+    );
+    assert!(!tiny.exists(), "a failed student must not be written");
+    let e = err_text(
+        distill(&tiny, &["--probes-only", "100", "--dataset", s(&f.ds)]),
+        "--probes-only with --dataset",
+    );
+    assert!(
+        e.contains("--dataset") && e.contains("--probes-only"),
+        "{e}"
+    );
+    assert!(!tiny.exists());
+}

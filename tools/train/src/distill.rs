@@ -10,6 +10,9 @@
 //!   output alone (the SCV term then also pulls towards the teacher) — and runs the ordinary
 //!   [`super::Trainer`] with the teacher's input normalisation; the weights kept are the best on the
 //!   validation set **against the label**;
+//! - [`distill_probes`]: distillation without data — training, validation and gate rows are all
+//!   probes inside the teacher's input range with the teacher's output as target; gated by
+//!   [`ProbeGate`] on the output RMSE against the teacher on probes never trained on;
 //! - [`Gate`]: the student's and the teacher's RMSE against the label on the test set (whole held-out
 //!   runs), overall and per |ṡ| band ([`DEFAULT_BAND_EDGES_RAD_S`]), both run on the kernel frictiond
 //!   uses ([`frictionless::kernel::Mlp`], stored dtype); it passes when every figure of the student is
@@ -405,6 +408,186 @@ pub fn distill(
         rows: (train.len(), cfg.probes),
         best_epoch: outcome.best_epoch,
         val_rmse_nm: val_rmse,
+    })
+}
+
+/// How to distil without data ([`distill_probes`]): every row is a probe inside the teacher's input
+/// range, the teacher's output its only target.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ProbeDistillConfig {
+    /// The student's hyper-parameters (hidden widths, epochs, seed, …; `lambda` is ignored: there is
+    /// no label, hence no SCV term).
+    pub train: TrainConfig,
+    /// Storage dtype of the student.
+    pub dtype: StorageDtype,
+    /// Training probes.
+    pub probes: usize,
+    /// Validation probes (a second draw; the weights kept are the best against the teacher on them).
+    pub val_probes: usize,
+    /// Gate probes (a third draw, never used in training or selection).
+    pub test_probes: usize,
+    /// The gate: the student's output RMSE against the teacher on the gate probes must be ≤ this \[Nm\].
+    pub max_rmse_nm: f64,
+}
+
+/// The gate of a probe-only distillation: student against teacher inside the teacher's input range,
+/// both on the kernel frictiond runs (stored dtype).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ProbeGate {
+    /// Gate probes.
+    pub n: usize,
+    /// RMS of student − teacher output \[Nm\].
+    pub rmse_vs_teacher_nm: f64,
+    /// Largest |student − teacher| \[Nm\].
+    pub max_abs_vs_teacher_nm: f64,
+    /// Standard deviation of the teacher's output on the probes \[Nm\] (the scale of the function).
+    pub teacher_std_nm: f64,
+    /// The bound on `rmse_vs_teacher_nm` \[Nm\].
+    pub max_rmse_nm: f64,
+}
+
+impl ProbeGate {
+    /// Whether the student is within the bound (a NaN RMSE fails).
+    pub fn passed(&self) -> bool {
+        self.rmse_vs_teacher_nm <= self.max_rmse_nm
+    }
+
+    /// One line: probes, RMSE, max |Δ|, the teacher's spread and the verdict.
+    pub fn line(&self) -> String {
+        format!(
+            "gate ({} probes in the input range): RMSE vs teacher {:.5} Nm (bound {} Nm), max |Δ| {:.5} Nm, teacher output std {:.5} Nm: {}",
+            self.n,
+            self.rmse_vs_teacher_nm,
+            self.max_rmse_nm,
+            self.max_abs_vs_teacher_nm,
+            self.teacher_std_nm,
+            if self.passed() { "ok" } else { "FAIL" }
+        )
+    }
+}
+
+/// The result of [`distill_probes`].
+#[derive(Clone, Debug)]
+pub struct ProbeDistilled {
+    /// The student model, metadata inherited from the teacher, `teacher_sha256` set; its
+    /// `val_rmse_nm` / `test_rmse_nm` are its RMSE against the teacher on the validation and gate
+    /// probes (there is no label).
+    pub model: ModelFile,
+    /// The gate.
+    pub gate: ProbeGate,
+    /// 1-based epoch of the kept weights.
+    pub best_epoch: usize,
+}
+
+/// Distils `teacher` without data: training, validation and gate rows are independent draws of
+/// [`probe_inputs`] (seeds derived from `cfg.train.seed`), targets the teacher's output. The student
+/// keeps the teacher's normalisation and metadata (as [`distill`]) and records `teacher_sha256`; it is
+/// returned whether or not the gate passes (the caller writes it only when it does).
+pub fn distill_probes(
+    teacher: &ModelFile,
+    teacher_sha256: [u8; 32],
+    cfg: &ProbeDistillConfig,
+    on_epoch: impl FnMut(&EpochReport) -> ControlFlow<()>,
+) -> Result<ProbeDistilled, PipelineError> {
+    if cfg.probes == 0 || cfg.val_probes == 0 || cfg.test_probes == 0 {
+        return Err(usage(format!(
+            "probe-only distillation needs training, validation and gate probes (got {}, {}, {})",
+            cfg.probes, cfg.val_probes, cfg.test_probes
+        )));
+    }
+    if !(cfg.max_rmse_nm.is_finite() && cfg.max_rmse_nm > 0.0) {
+        return Err(usage(format!(
+            "--max-rmse-nm {}: must be finite and positive",
+            cfg.max_rmse_nm
+        )));
+    }
+    let n_in = teacher.mlp.n_inputs();
+    let seed = cfg.train.seed;
+    let draw = |count: usize, salt: u64| -> Vec<f32> {
+        probe_inputs(teacher, count, seed ^ salt)
+            .into_iter()
+            .flatten()
+            .collect()
+    };
+    let (x, x_val, x_test) = (
+        draw(cfg.probes, 0x9E37_79B9),
+        draw(cfg.val_probes, 0x85EB_CA6B_0000),
+        draw(cfg.test_probes, 0xC2B2_AE35_0000_0000),
+    );
+    let mut teacher_pred = Predictor::new(&teacher.mlp, cfg.train.threads.max(1))?;
+    let y = teacher_pred.predict(&x)?;
+    let y_val = teacher_pred.predict(&x_val)?;
+    let data = Dataset {
+        x: &x,
+        y_label_nm: &y,
+        y_scv_nm: &y,
+        n_inputs: n_in,
+    };
+    let val = Dataset {
+        x: &x_val,
+        y_label_nm: &y_val,
+        y_scv_nm: &y_val,
+        n_inputs: n_in,
+    };
+    let tcfg = TrainConfig {
+        lambda: 0.0,
+        ..cfg.train.clone()
+    };
+    let mut trainer =
+        Trainer::with_normalisation(tcfg, teacher.mlp.norm.clone(), &data, Some(&val))?;
+    let outcome = trainer.train(on_epoch)?;
+    let meta = &teacher.meta;
+    let mut student = ModelFile {
+        meta: ModelMeta {
+            training: TrainingMeta {
+                dataset_sha256: [0; 32],
+                val_rmse_nm: f32::NAN,
+                test_rmse_nm: f32::NAN,
+                created_unix_s: pipeline::created_unix_s(),
+                tool_version: format!("frictl {}", env!("CARGO_PKG_VERSION")),
+                filtering: meta.training.filtering,
+                input_range: meta.training.input_range,
+                quant_max_error_nm: None,
+                teacher_sha256: Some(teacher_sha256),
+            },
+            ..meta.clone()
+        },
+        dtype: cfg.dtype,
+        mlp: round_to_dtype(&outcome.weights, cfg.dtype),
+    };
+    // Both on the kernel frictiond runs, stored dtypes.
+    let t_val = kernel_outputs(teacher, &x_val)?;
+    let s_val = kernel_outputs(&student, &x_val)?;
+    let t_test = kernel_outputs(teacher, &x_test)?;
+    let s_test = kernel_outputs(&student, &x_test)?;
+    let rmse_test = super::rmse(&s_test, &t_test);
+    student.meta.training.val_rmse_nm = super::rmse(&s_val, &t_val) as f32;
+    student.meta.training.test_rmse_nm = rmse_test as f32;
+    let max_abs = s_test
+        .iter()
+        .zip(&t_test)
+        .map(|(s, t)| f64::from((s - t).abs()))
+        .fold(
+            0.0,
+            |m: f64, d| if d.is_nan() { f64::NAN } else { m.max(d) },
+        );
+    let n = t_test.len() as f64;
+    let mean = t_test.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
+    let var = t_test
+        .iter()
+        .map(|&v| (f64::from(v) - mean).powi(2))
+        .sum::<f64>()
+        / n;
+    Ok(ProbeDistilled {
+        model: student,
+        gate: ProbeGate {
+            n: t_test.len(),
+            rmse_vs_teacher_nm: rmse_test,
+            max_abs_vs_teacher_nm: max_abs,
+            teacher_std_nm: var.sqrt(),
+            max_rmse_nm: cfg.max_rmse_nm,
+        },
+        best_epoch: outcome.best_epoch,
     })
 }
 

@@ -90,6 +90,12 @@ pub struct Args {
     /// the current model on the union of every dataset so far (`frictl train --init`).
     #[arg(long)]
     pub onpolicy_rounds: Option<u32>,
+    /// Distil each joint's final PINN into a small student ([`distill_pinn`]: hidden 16×16,
+    /// gated on the unseen test run at 1.05× the teacher's RMSE, overall and per |ṡ| band); the
+    /// report's `joints.JOINT.models.pinn_distilled` has both RMSEs and inference times. The
+    /// experiments keep using the teacher.
+    #[arg(long)]
+    pub distill: bool,
     /// `torque`: the chain on a torque-sensed joint instead (no motor encoder; import, training on two
     /// speed runs, evaluation on the held-out third; no closed-loop experiments), see `demo::torque`.
     #[arg(long, value_enum, default_value_t = DemoSensor::MotorEncoder)]
@@ -446,6 +452,105 @@ struct ModelEntry {
     eval: Option<Option<Metrics>>,
     #[serde(flatten)]
     closed_loop: Option<ClosedLoopEntry>,
+    #[serde(flatten)]
+    distilled: Option<DistilledEntry>,
+}
+
+/// `report.json` `joints.JOINT.models.pinn_distilled`: the student of the joint's PINN beside its
+/// teacher, both against the label of the unseen test run.
+#[derive(serde::Serialize, Debug)]
+struct DistilledEntry {
+    hidden: Vec<usize>,
+    /// The student passed the gate and was written to `file`.
+    gate_passed: bool,
+    max_rmse_ratio: f64,
+    /// The student file (absent when the gate refused it).
+    file: Option<String>,
+    teacher_test_rmse_nm: f64,
+    student_test_rmse_nm: f64,
+    /// The gate per |ṡ| band (overall first).
+    gate: Vec<frictionless_train::distill::GateRow>,
+    teacher_hot_us: Option<f64>,
+    teacher_cold_us: Option<f64>,
+    student_hot_us: Option<f64>,
+    student_cold_us: Option<f64>,
+    teacher_mac: usize,
+    student_mac: usize,
+}
+
+/// Options of [`distill_pinn`].
+#[derive(Clone, Debug)]
+pub struct DistillStage {
+    /// The student's hidden widths.
+    pub hidden: Vec<usize>,
+    /// Epochs.
+    pub epochs: usize,
+    /// Seed of the student's initialisation, shuffles and probes.
+    pub seed: u64,
+    /// The gate (student RMSE ≤ this × the teacher's, overall and per band).
+    pub max_rmse_ratio: f64,
+}
+
+/// The demo's distillation stage for one joint: `frictl distill` through its typed entry
+/// ([`super::distill::distill_file`]) on the joint's training dataset, gated on its unseen test
+/// dataset; the student goes next to the teacher as `JOINT_distilled.fwt` when it passes. A
+/// refused student is reported, not an error.
+fn distill_pinn(
+    opts: &DistillStage,
+    teacher: &Path,
+    train_ds: &Path,
+    test_ds: &Path,
+    out: &Path,
+) -> anyhow::Result<DistilledEntry> {
+    use super::distill::{Args as DistillArgs, StudentDtype, distill_file};
+    let args = DistillArgs {
+        teacher: teacher.to_path_buf(),
+        datasets: vec![train_ds.to_path_buf()],
+        probes_only: None,
+        max_rmse_nm: 0.02,
+        out: out.to_path_buf(),
+        hidden: opts.hidden.clone(),
+        dtype: StudentDtype::F32,
+        epochs: opts.epochs,
+        batch: 512,
+        lr: 2e-3,
+        lambda: 0.01,
+        teacher_weight: 0.5,
+        probes: None,
+        seed: opts.seed,
+        max_rmse_ratio: opts.max_rmse_ratio,
+        min_band_samples: 100,
+        val_frac: None,
+        test_frac: None,
+        test_chunks: None,
+        held_out: super::train::HeldOut {
+            test_runs: vec![],
+            test_datasets: vec![test_ds.to_path_buf()],
+        },
+        teacher_report: None,
+        warmup: None,
+        delta_theta_offset: None,
+        threads: None,
+        quiet: true,
+    };
+    let teacher_file = frictionless::weights::read_file(teacher)
+        .with_context(|| format!("teacher {}", teacher.display()))?;
+    let o = distill_file(&args)?;
+    Ok(DistilledEntry {
+        hidden: opts.hidden.clone(),
+        gate_passed: o.written,
+        max_rmse_ratio: opts.max_rmse_ratio,
+        file: o.written.then(|| s(out)),
+        teacher_test_rmse_nm: o.gate.rows[0].teacher_rmse_nm,
+        student_test_rmse_nm: o.gate.rows[0].student_rmse_nm,
+        gate: o.gate.rows,
+        teacher_hot_us: o.teacher_us.map(|t| t.0),
+        teacher_cold_us: o.teacher_us.map(|t| t.1),
+        student_hot_us: o.student_us.map(|t| t.0),
+        student_cold_us: o.student_us.map(|t| t.1),
+        teacher_mac: teacher_file.mlp.macs(),
+        student_mac: o.model.mlp.macs(),
+    })
 }
 
 /// The closed-loop part of a [`ModelEntry`], from the experiment suite's [`Cell`].
@@ -497,6 +602,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         anyhow::ensure!(
             !args.causal && !args.with_rotor_inertia,
             "--causal and --with-rotor-inertia are options of the motor-encoder demo's preprocess stage"
+        );
+        anyhow::ensure!(
+            !args.distill,
+            "--distill is an option of the motor-encoder demo (knee and ankle roll)"
         );
         return torque::run(&args);
     }
@@ -564,6 +673,41 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             k,
         )?);
     }
+    let mut distilled: BTreeMap<String, DistilledEntry> = BTreeMap::new();
+    if args.distill {
+        let opts = DistillStage {
+            hidden: vec![16, 16],
+            epochs: if args.quick { 5 } else { 20 },
+            seed: args.seed,
+            max_rmse_ratio: 1.05,
+        };
+        for ((_, joint), files) in JOINTS.into_iter().zip(&all_files) {
+            r.n += 1;
+            eprintln!("[{:>2}] distill {joint} (hidden {:?}) …", r.n, opts.hidden);
+            let t0 = Instant::now();
+            let out = dirs.models.join(format!("{joint}_distilled.fwt"));
+            let e = distill_pinn(&opts, &files.fwt, &files.train_ds, &files.test_ds, &out)
+                .with_context(|| format!("distilling the {joint} PINN"))?;
+            eprintln!(
+                "     student {:?}: test RMSE {:.4} Nm (teacher {:.4} Nm), hot {} µs (teacher {} µs): {}",
+                e.hidden,
+                e.student_test_rmse_nm,
+                e.teacher_test_rmse_nm,
+                e.student_hot_us.map_or("-".into(), |v| format!("{v:.3}")),
+                e.teacher_hot_us.map_or("-".into(), |v| format!("{v:.3}")),
+                if e.gate_passed {
+                    "written"
+                } else {
+                    "refused by the gate, not written"
+                }
+            );
+            r.stages.push(Stage {
+                name: format!("distill {joint}"),
+                seconds: t0.elapsed().as_secs_f64(),
+            });
+            distilled.insert(joint.to_owned(), e);
+        }
+    }
     for ((preset, joint), files) in JOINTS.into_iter().zip(&all_files) {
         let eval_result = evaluate(&mut r, &dirs, preset, joint, files);
         if let Err(e) = &eval_result {
@@ -581,7 +725,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if let Some(ev) = &ev {
             eval_md += &eval_table(joint, ev);
         }
-        per_joint.insert(joint.into(), joint_entry(ev.as_ref(), files));
+        let mut entry = joint_entry(ev.as_ref(), files);
+        if let Some(d) = distilled.remove(joint) {
+            entry.models.insert(
+                "pinn_distilled".into(),
+                ModelEntry {
+                    distilled: Some(d),
+                    ..ModelEntry::default()
+                },
+            );
+        }
+        per_joint.insert(joint.into(), entry);
     }
     let (exp_md, exp_temps) = if args.no_experiments {
         (String::new(), vec![])
@@ -890,7 +1044,7 @@ fn joint_entry(ev: Option<&EvalReport>, files: &JointFiles) -> JointEntry {
                 (*label).to_owned(),
                 ModelEntry {
                     eval: Some(metrics),
-                    closed_loop: None,
+                    ..ModelEntry::default()
                 },
             )
         })

@@ -9,6 +9,10 @@
 //! without any of them, the split of the teacher's training report (`TEACHER.train.json`) when its
 //! datasets are these (same SHA-256, same order), so the gate is on data the teacher never saw.
 //! The warm-up policy and the Δθ latch also default to the teacher report's.
+//!
+//! `--probes-only N` distils without data: N training probes inside the teacher's stored input range
+//! (plus N/4 validation and N/4 gate probes, independent draws), the teacher's output the only
+//! target; the gate is the output RMSE against the teacher on the gate probes, ≤ `--max-rmse-nm`.
 
 use std::ops::ControlFlow;
 use std::path::PathBuf;
@@ -56,8 +60,20 @@ pub struct Args {
     /// The teacher model (.fwt).
     pub teacher: PathBuf,
     /// Preprocessed dataset CSV (repeatable; its `.json` sidecar must exist).
-    #[arg(long = "dataset", required = true)]
+    #[arg(
+        long = "dataset",
+        required_unless_present = "probes_only",
+        conflicts_with = "probes_only"
+    )]
     pub datasets: Vec<PathBuf>,
+    /// Distil without data: this many training probes inside the teacher's stored input range (and a
+    /// quarter as many for validation and for the gate), gated by `--max-rmse-nm`.
+    #[arg(long, value_name = "N")]
+    pub probes_only: Option<usize>,
+    /// The gate of `--probes-only`: the student's output RMSE against the teacher on the gate probes
+    /// must be ≤ this [Nm].
+    #[arg(long, default_value_t = 0.02, requires = "probes_only")]
+    pub max_rmse_nm: f64,
     /// The student model to write (.fwt); nothing is written when the gate fails.
     #[arg(short = 'o', long)]
     pub out: PathBuf,
@@ -140,8 +156,169 @@ fn teacher_report(args: &Args) -> anyhow::Result<Option<TrainReport>> {
     Ok(Some(report))
 }
 
+/// `frictl distill --probes-only N`.
+fn run_probes_only(args: &Args, probes: usize) -> anyhow::Result<()> {
+    super::check_outputs(&[&args.teacher], &[&args.out])?;
+    let teacher = frictionless::weights::read_file(&args.teacher)
+        .with_context(|| format!("teacher {}", args.teacher.display()))?;
+    let teacher_sha256 = frictionless_dataset::file_sha256(&args.teacher)
+        .with_context(|| format!("teacher {}: cannot read", args.teacher.display()))?;
+    if teacher.meta.training.input_range.is_none() {
+        eprintln!(
+            "frictl distill: {} stores no input range; probes are drawn in mean ± 3·scale of its \
+             normalisation",
+            args.teacher.display()
+        );
+    }
+    let cfg = distill::ProbeDistillConfig {
+        train: TrainConfig {
+            hidden: args.hidden.clone(),
+            dropout: 0.0,
+            lambda: 0.0,
+            lr: args.lr,
+            batch_size: args.batch,
+            epochs: args.epochs,
+            seed: args.seed,
+            threads: args.threads.unwrap_or_else(cores).max(1),
+            patience: None,
+            abort_loss: Some(1000.0),
+        },
+        dtype: args.dtype.into(),
+        probes,
+        val_probes: (probes / 4).max(1),
+        test_probes: (probes / 4).max(1),
+        max_rmse_nm: args.max_rmse_nm,
+    };
+    if !args.quiet {
+        eprintln!(
+            "frictl distill: {} → hidden {:?} ({}), probes only: {} train / {} val / {} gate",
+            args.teacher.display(),
+            args.hidden,
+            StorageDtype::from(args.dtype).name(),
+            cfg.probes,
+            cfg.val_probes,
+            cfg.test_probes
+        );
+    }
+    let quiet = args.quiet;
+    let epochs = args.epochs;
+    let out = distill::distill_probes(&teacher, teacher_sha256, &cfg, |r| {
+        if !quiet {
+            let val = r
+                .val_rmse_nm
+                .map_or(String::new(), |v| format!(" val rmse vs teacher {v:.5} Nm"));
+            eprintln!(
+                "epoch {}/{epochs} train loss {:.6}{val}{}",
+                r.epoch,
+                r.train_loss,
+                if r.is_best { " *" } else { "" }
+            );
+        }
+        ControlFlow::Continue(())
+    })?;
+    println!("{}", out.gate.line());
+    print_inference(&teacher, &out.model);
+    if !out.gate.passed() {
+        bail!(
+            "the student (hidden {:?}) is not within {} Nm RMS of the teacher inside its input \
+             range; {} not written",
+            args.hidden,
+            args.max_rmse_nm,
+            args.out.display()
+        );
+    }
+    frictionless::weights::write_file(&args.out, &out.model)?;
+    println!(
+        "wrote {}: hidden {:?} {}, {} MAC (teacher {} MAC), best epoch {}",
+        args.out.display(),
+        args.hidden,
+        out.model.dtype.name(),
+        out.model.mlp.macs(),
+        teacher.mlp.macs(),
+        out.best_epoch
+    );
+    Ok(())
+}
+
+/// Prints the hot and cold inference time of teacher and student on this CPU.
+fn print_inference(
+    teacher: &frictionless::weights::ModelFile,
+    student: &frictionless::weights::ModelFile,
+) {
+    let us = |f: &frictionless::weights::ModelFile| {
+        frictionless_train::search::inference_us(f).map_or("-".into(), |(hot, cold)| {
+            format!("hot {hot:.3} µs, cold {cold:.2} µs")
+        })
+    };
+    println!(
+        "inference on this CPU (kernel, stored dtype): teacher {}; student {}",
+        us(teacher),
+        us(student)
+    );
+}
+
 /// Runs `frictl distill`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if let Some(probes) = args.probes_only {
+        return run_probes_only(&args, probes);
+    }
+    let out = distill_file(&args)?;
+    print!("{}", out.gate.table());
+    let us = |t: Option<(f64, f64)>| {
+        t.map_or("-".into(), |(hot, cold)| {
+            format!("hot {hot:.3} µs, cold {cold:.2} µs")
+        })
+    };
+    println!(
+        "inference on this CPU (kernel, stored dtype): teacher {}; student {}",
+        us(out.teacher_us),
+        us(out.student_us)
+    );
+    if !out.written {
+        bail!(
+            "the student (hidden {:?}) is not within {}× the teacher's held-out RMSE (rows marked \
+             FAIL above); {} not written",
+            args.hidden,
+            args.max_rmse_ratio,
+            args.out.display()
+        );
+    }
+    println!(
+        "wrote {}: hidden {:?} {}, best epoch {}, val RMSE {} Nm, test RMSE {:.5} Nm (teacher {:.5} Nm)",
+        args.out.display(),
+        args.hidden,
+        out.model.dtype.name(),
+        out.best_epoch,
+        out.val_rmse_nm.map_or("-".into(), |v| format!("{v:.5}")),
+        out.model.meta.training.test_rmse_nm,
+        out.gate.rows[0].teacher_rmse_nm
+    );
+    Ok(())
+}
+
+/// What [`distill_file`] did.
+#[derive(Debug)]
+pub struct Outcome {
+    /// The held-out gate (overall first, then per |ṡ| band).
+    pub gate: distill::Gate,
+    /// Whether the student passed and was written to `Args::out`.
+    pub written: bool,
+    /// The student (written only when `written`).
+    pub model: frictionless::weights::ModelFile,
+    /// 1-based epoch of the kept weights.
+    pub best_epoch: usize,
+    /// The student's validation RMSE \[Nm\].
+    pub val_rmse_nm: Option<f64>,
+    /// Hot and cold inference time of the teacher on this CPU \[µs\].
+    pub teacher_us: Option<(f64, f64)>,
+    /// Hot and cold inference time of the student \[µs\].
+    pub student_us: Option<(f64, f64)>,
+}
+
+/// Distils `args.teacher` on `args.datasets` (the typed entry of `frictl distill` and of the
+/// pipelines' distillation stage): writes the student to `args.out` only when the held-out gate
+/// passes and says which in [`Outcome::written`]; errors on bad input or a failed training.
+pub fn distill_file(args: &Args) -> anyhow::Result<Outcome> {
     let datasets = args.held_out.all_datasets(&args.datasets);
     let sidecars: Vec<PathBuf> = datasets.iter().map(|d| d.with_extension("json")).collect();
     let mut inputs: Vec<&std::path::Path> = datasets.iter().map(PathBuf::as_path).collect();
@@ -152,7 +329,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("teacher {}", args.teacher.display()))?;
     let teacher_sha256 = frictionless_dataset::file_sha256(&args.teacher)
         .with_context(|| format!("teacher {}: cannot read", args.teacher.display()))?;
-    let report = teacher_report(&args)?;
+    let report = teacher_report(args)?;
     let sources = pipeline::load_sources(&datasets)?;
     if sources.joint != teacher.meta.joint_name {
         bail!(
@@ -271,36 +448,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         ControlFlow::Continue(())
     })?;
-    print!("{}", out.gate.table());
-    let us = |f: &frictionless::weights::ModelFile| {
-        frictionless_train::search::inference_us(f).map_or("-".into(), |(hot, cold)| {
-            format!("hot {hot:.3} µs, cold {cold:.2} µs")
-        })
-    };
-    println!(
-        "inference on this CPU (kernel, stored dtype): teacher {}; student {}",
-        us(&teacher),
-        us(&out.model)
-    );
-    if !out.gate.passed() {
-        bail!(
-            "the student (hidden {:?}) is not within {}× the teacher's held-out RMSE (rows marked \
-             FAIL above); {} not written",
-            args.hidden,
-            args.max_rmse_ratio,
-            args.out.display()
-        );
+    let written = out.gate.passed();
+    if written {
+        frictionless::weights::write_file(&args.out, &out.model)?;
     }
-    frictionless::weights::write_file(&args.out, &out.model)?;
-    println!(
-        "wrote {}: hidden {:?} {}, best epoch {}, val RMSE {} Nm, test RMSE {:.5} Nm (teacher {:.5} Nm)",
-        args.out.display(),
-        args.hidden,
-        out.model.dtype.name(),
-        out.best_epoch,
-        out.val_rmse_nm.map_or("-".into(), |v| format!("{v:.5}")),
-        out.model.meta.training.test_rmse_nm,
-        out.gate.rows[0].teacher_rmse_nm
-    );
-    Ok(())
+    Ok(Outcome {
+        written,
+        teacher_us: frictionless_train::search::inference_us(&teacher),
+        student_us: frictionless_train::search::inference_us(&out.model),
+        gate: out.gate,
+        model: out.model,
+        best_epoch: out.best_epoch,
+        val_rmse_nm: out.val_rmse_nm,
+    })
 }
