@@ -12,7 +12,6 @@ use std::path::PathBuf;
 use frictionless::features::{JointSample, WarmupPolicy};
 use frictionless::model::{FrictionModel, JointModel, ModelError, NoFriction, PinnEstimator};
 use frictionless::weights::WeightError;
-use frictionless_shm_types::model_kind;
 
 use frictionless::filter::{CausalButterworth, FilterError};
 use frictionless::law::{Gains, JointLaw};
@@ -55,15 +54,9 @@ pub enum ParamsError {
 /// The model-file check `--check` runs, defined with the config schema.
 pub use crate::config::check_model_file;
 
-/// Status code of a model kind (`frictionless_shm_types::model_kind`).
+/// Status code of a joint's model (`DaemonStatus::model_kind`): its kind's ABI code.
 pub fn kind_code(m: &JointModel) -> u8 {
-    match m {
-        JointModel::None(_) => model_kind::NONE,
-        JointModel::Cv(_) => model_kind::CV,
-        JointModel::Scv(_) => model_kind::SCV,
-        JointModel::ScvCode(_) => model_kind::SCV_CODE,
-        JointModel::Pinn(_) => model_kind::PINN,
-    }
+    m.kind().code()
 }
 
 /// Everything the RT loop needs for one joint.

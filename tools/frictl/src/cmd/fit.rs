@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use frictiond_config::FrictionModelName;
+use frictiond_config::ModelKind;
 use frictionless::friction::{CvParams, ScvCodeParams, ScvParams};
 use frictionless_dataset::Dataset;
 use frictionless_dataset::fit_file::FittedModel;
@@ -15,15 +15,37 @@ use frictionless_ident::fit::{
 };
 use serde::{Deserialize, Serialize};
 
-/// Static model to fit.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum ModelKind {
-    /// Coulomb–viscous τ = kc·tanh(ka·v) + kv·v.
-    Cv,
-    /// Stribeck–Coulomb–viscous (paper form, kc, ka, kv, ks, vs, alpha).
-    Scv,
-    /// The authors' code form (sign(), α = 2): fc, fs, fv, vs.
-    ScvCode,
+/// Model to fit: a kind of the core's list that has a fit-file tag ([`ModelKind::fit_tag`]); the
+/// CLI choice is its [`ModelKind::name`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FitModel(pub ModelKind);
+
+/// The fittable kinds, in list order.
+const FIT_MODELS: [FitModel; 3] = {
+    let mut out = [FitModel(ModelKind::None); 3];
+    let mut n = 0;
+    let mut k = 0;
+    while k < ModelKind::ALL.len() {
+        if ModelKind::ALL[k].fit_tag().is_some() {
+            out[n] = FitModel(ModelKind::ALL[k]);
+            n += 1;
+        }
+        k += 1;
+    }
+    assert!(
+        n == out.len(),
+        "FIT_MODELS has one entry per kind with a fit tag"
+    );
+    out
+};
+
+impl clap::ValueEnum for FitModel {
+    fn value_variants<'a>() -> &'a [Self] {
+        &FIT_MODELS
+    }
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        Some(clap::builder::PossibleValue::new(self.0.name()).help(self.0.description()))
+    }
 }
 
 /// Arguments of `frictl fit`.
@@ -31,7 +53,7 @@ pub enum ModelKind {
 pub struct Args {
     /// Model.
     #[arg(value_enum)]
-    pub model: ModelKind,
+    pub model: FitModel,
     /// Dataset CSV from `frictl preprocess`.
     pub dataset: PathBuf,
     /// Solver.
@@ -181,7 +203,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..FitOptions::default()
     };
     let started = std::time::Instant::now();
-    let (toml, json) = match args.model {
+    let (toml, json) = match args.model.0 {
         ModelKind::Cv => report(
             fit::<CvParams>(&v, &t, &opts).map_err(at_line)?,
             |params| FittedModel::Cv { params },
@@ -203,6 +225,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             &target,
             &args,
         ),
+        kind @ (ModelKind::None | ModelKind::Pinn) => {
+            anyhow::bail!("frictl fit: {kind} is not a model `frictl fit` fits")
+        }
     }?;
     eprintln!(
         "frictl fit: {} of {} samples selected, fitted in {:.3} s",
@@ -267,10 +292,10 @@ fn report<M: Fittable>(
     );
     let fitted = tagged(r.model);
     // The serialised name is a quoted string, valid TOML.
-    let model_name = serde_json::to_value(daemon_friction_model(&fitted))?;
+    let model_name = serde_json::to_value(FitFile::daemon_name(&fitted))?;
     let mut s = format!(
-        "# frictl fit {:?} ({:?}) on {}: {} samples, RMSE {:.4} Nm on the fitted samples, {:.4} Nm on all valid samples\n[[joint]]\nfriction_model = {model_name}\n",
-        args.model,
+        "# frictl fit {} ({:?}) on {}: {} samples, RMSE {:.4} Nm on the fitted samples, {:.4} Nm on all valid samples\n[[joint]]\nfriction_model = {model_name}\n",
+        fitted.tag(),
         args.method,
         args.dataset.display(),
         r.n_samples,
@@ -284,7 +309,7 @@ fn report<M: Fittable>(
         fitted,
         method: args.method,
         param_names: M::PARAM_NAMES.iter().map(|n| (*n).to_owned()).collect(),
-        daemon_friction_model: daemon_friction_model(&fitted),
+        daemon_friction_model: fitted.kind().daemon_kind(),
         rmse_fitted_nm: r.rmse_nm,
         mae_fitted_nm: r.mae_nm,
         rmse_valid_nm: rmse_valid,
@@ -318,7 +343,8 @@ pub struct FitFile {
     /// Parameter names in the fitter's order.
     pub param_names: Vec<String>,
     /// The daemon's `friction_model` for the snippet.
-    pub daemon_friction_model: FrictionModelName,
+    #[serde(with = "frictiond_config::friction_model_name")]
+    pub daemon_friction_model: ModelKind,
     /// RMSE on the fitted (selected) samples [Nm].
     pub rmse_fitted_nm: f64,
     /// MAE on the fitted samples [Nm].
@@ -341,21 +367,23 @@ pub struct FitFile {
     pub dataset: String,
 }
 
-/// The daemon's `friction_model` for this model (the code form runs as SCV with ka = ∞, α = 2).
-fn daemon_friction_model(fitted: &FittedModel) -> FrictionModelName {
-    match fitted {
-        FittedModel::Cv { .. } => FrictionModelName::CoulombViscous,
-        FittedModel::Scv { .. } | FittedModel::ScvCode { .. } => {
-            FrictionModelName::CoulombViscousStribeck
-        }
+impl FitFile {
+    /// The daemon's `friction_model` value for `fitted` (the code form runs as SCV with ka = ∞,
+    /// α = 2), serialisable as the config writes it.
+    fn daemon_name(fitted: &FittedModel) -> DaemonName {
+        DaemonName(fitted.kind().daemon_kind())
     }
 }
+
+/// A `friction_model` value, serialised as the config writes it.
+#[derive(Serialize)]
+struct DaemonName(#[serde(with = "frictiond_config::friction_model_name")] ModelKind);
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// A file as `frictl fit scv --json` wrote it with `"model": format!("{:?}", ModelKind::Scv)`.
+    /// A file as `frictl fit scv --json` wrote it.
     const WRITTEN_BEFORE: &str = r#"{
   "model": "Scv",
   "method": "lm",
@@ -377,10 +405,7 @@ mod tests {
         let f: FitFile = serde_json::from_str(WRITTEN_BEFORE).unwrap();
         assert_eq!(f.fitted.tag(), "Scv");
         assert_eq!(f.method, Method::Lm);
-        assert_eq!(
-            f.daemon_friction_model,
-            FrictionModelName::CoulombViscousStribeck
-        );
+        assert_eq!(f.daemon_friction_model, ModelKind::Scv);
         assert_eq!(f.fitted.to_scv().alpha, 0.6);
         let again: FitFile = serde_json::from_str(&serde_json::to_string(&f).unwrap()).unwrap();
         assert_eq!(again, f);

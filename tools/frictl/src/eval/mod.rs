@@ -192,7 +192,7 @@ impl ModelSpec {
 }
 
 /// Reads a static model from the JSON of `frictl fit cv|scv|scv-code --json`
-/// ([`frictionless_dataset::fit_file::FittedModel`]: `model` = `Cv` | `Scv` | `ScvCode` and `params`).
+/// ([`frictionless_dataset::fit_file::FittedModel`]: a `model` tag and `params`).
 pub fn load_static_model(path: &Path) -> Result<JointModel, EvalError> {
     use frictionless_dataset::fit_file::{FitFileError, FittedModel};
     let p = path.display().to_string();
@@ -205,7 +205,8 @@ pub fn load_static_model(path: &Path) -> Result<JointModel, EvalError> {
         Err(FitFileError::Parse { message, .. }) => Err(EvalError::StaticModel {
             path: p,
             msg: format!(
-                "not a fit of `frictl fit --json` (keys `model` = \"Cv\" | \"Scv\" | \"ScvCode\" and `params`): {message}"
+                "not a fit of `frictl fit --json` (keys `model` = {} and `params`): {message}",
+                frictionless_dataset::fit_file::fit_tags()
             ),
         }),
     }
