@@ -1,4 +1,4 @@
-//! none / CV / SCV / PINN behind one trait.
+//! none / CV / SCV / PINN / LuGre behind one trait.
 //!
 //! What this module **is**: the per-joint friction estimator the daemon calls once per tick.
 //! [`FrictionModel`] is the common interface (`reset` at enable, `estimate` per tick); [`JointModel`]
@@ -22,6 +22,7 @@ use std::str::FromStr;
 use crate::features::{FeatureError, FeatureSpec, History, JointSample, WarmupPolicy};
 use crate::friction::{CvParams, ScvCodeParams, ScvParams, StaticFriction};
 use crate::kernel::Mlp;
+use crate::lugre::LugreEstimator;
 use crate::mlp::MlpShapeError;
 use crate::weights::{ModelFile, ModelMeta};
 
@@ -43,16 +44,19 @@ pub enum ModelKind {
     ScvCode = 3,
     /// Physics-informed neural network.
     Pinn = 4,
+    /// LuGre: the SCV Stribeck curve plus a bristle state (pre-sliding stiffness and damping).
+    Lugre = 5,
 }
 
 impl ModelKind {
     /// Every kind, in code order.
-    pub const ALL: [ModelKind; 5] = [
+    pub const ALL: [ModelKind; 6] = [
         ModelKind::None,
         ModelKind::Cv,
         ModelKind::Scv,
         ModelKind::ScvCode,
         ModelKind::Pinn,
+        ModelKind::Lugre,
     ];
 
     /// Short name (CLI choice, status display): `"none"`, `"cv"`, `"scv"`, `"scv-code"`, `"pinn"`.
@@ -63,6 +67,7 @@ impl ModelKind {
             ModelKind::Scv => "scv",
             ModelKind::ScvCode => "scv-code",
             ModelKind::Pinn => "pinn",
+            ModelKind::Lugre => "lugre",
         }
     }
 
@@ -74,7 +79,19 @@ impl ModelKind {
             ModelKind::Scv => "Stribeck–Coulomb–viscous (paper form, kc, ka, kv, ks, vs, alpha)",
             ModelKind::ScvCode => "the authors' code form (sign(), α = 2): fc, fs, fv, vs",
             ModelKind::Pinn => "physics-informed neural network (`.fwt`)",
+            ModelKind::Lugre => {
+                "LuGre: the SCV Stribeck curve (kc, kv, ks, vs, alpha) plus bristle sigma0, sigma1"
+            }
         }
+    }
+
+    /// Whether the model is a function of the current joint velocity alone (no history, no state),
+    /// so that its curve τ(ṡ) describes it.
+    pub const fn is_static(self) -> bool {
+        matches!(
+            self,
+            ModelKind::None | ModelKind::Cv | ModelKind::Scv | ModelKind::ScvCode
+        )
     }
 
     /// The status ABI code (`DaemonStatus::model_kind`).
@@ -87,13 +104,14 @@ impl ModelKind {
         ModelKind::ALL.into_iter().find(|k| k.code() == code)
     }
 
-    /// The `model` tag of a fit file (`frictl fit --json`): `"Cv"`, `"Scv"`, `"ScvCode"`; `None` for
+    /// The `model` tag of a fit file (`frictl fit --json`): `"Cv"`, `"Scv"`, `"ScvCode"`, `"Lugre"`; `None` for
     /// a kind `frictl fit` does not fit.
     pub const fn fit_tag(self) -> Option<&'static str> {
         match self {
             ModelKind::Cv => Some("Cv"),
             ModelKind::Scv => Some("Scv"),
             ModelKind::ScvCode => Some("ScvCode"),
+            ModelKind::Lugre => Some("Lugre"),
             ModelKind::None | ModelKind::Pinn => None,
         }
     }
@@ -114,6 +132,7 @@ impl ModelKind {
             ModelKind::Scv => Some("coulomb_viscous_stribeck"),
             ModelKind::ScvCode => None,
             ModelKind::Pinn => Some("pinn"),
+            ModelKind::Lugre => Some("lugre"),
         }
     }
 
@@ -412,6 +431,8 @@ pub enum JointModel {
     ScvCode(ScvCodeParams),
     /// PINN (boxed: it is large and holds the network).
     Pinn(Box<PinnEstimator>),
+    /// LuGre (bristle state reset at enable, integrated once per tick).
+    Lugre(LugreEstimator),
 }
 
 impl JointModel {
@@ -457,6 +478,25 @@ impl From<ScvCodeParams> for JointModel {
     }
 }
 
+impl From<LugreEstimator> for JointModel {
+    fn from(p: LugreEstimator) -> Self {
+        JointModel::Lugre(p)
+    }
+}
+
+impl FrictionModel for LugreEstimator {
+    fn kind(&self) -> ModelKind {
+        ModelKind::Lugre
+    }
+    fn reset(&mut self, _sample: &JointSample) {
+        self.reset_state();
+    }
+    #[inline]
+    fn estimate(&mut self, sample: &JointSample) -> f64 {
+        self.step(sample.sdot_rad_s)
+    }
+}
+
 impl From<PinnEstimator> for JointModel {
     fn from(p: PinnEstimator) -> Self {
         JointModel::Pinn(Box::new(p))
@@ -472,6 +512,7 @@ impl FrictionModel for JointModel {
             JointModel::Scv(m) => m.kind(),
             JointModel::ScvCode(m) => m.kind(),
             JointModel::Pinn(m) => m.kind(),
+            JointModel::Lugre(m) => m.kind(),
         }
     }
 
@@ -483,6 +524,7 @@ impl FrictionModel for JointModel {
             JointModel::Scv(m) => m.reset(sample),
             JointModel::ScvCode(m) => m.reset(sample),
             JointModel::Pinn(m) => m.reset(sample),
+            JointModel::Lugre(m) => m.reset(sample),
         }
     }
 
@@ -494,6 +536,7 @@ impl FrictionModel for JointModel {
             JointModel::Scv(m) => m.estimate(sample),
             JointModel::ScvCode(m) => m.estimate(sample),
             JointModel::Pinn(m) => m.estimate(sample),
+            JointModel::Lugre(m) => m.estimate(sample),
         }
     }
 
@@ -913,7 +956,7 @@ mod tests {
         }
         // The strings files and configs already use.
         let tags: Vec<_> = ModelKind::ALL.iter().filter_map(|k| k.fit_tag()).collect();
-        assert_eq!(tags, ["Cv", "Scv", "ScvCode"]);
+        assert_eq!(tags, ["Cv", "Scv", "ScvCode", "Lugre"]);
         assert_eq!(
             ModelKind::from_config_name("coulomb_viscous_stribeck"),
             Some(ModelKind::Scv)

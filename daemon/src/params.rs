@@ -41,6 +41,14 @@ pub enum ParamsError {
         /// Why the estimator could not be built (boxed: keeps `Result<_, ParamsError>` small).
         source: Box<ModelError>,
     },
+    /// A LuGre model cannot integrate at the loop period.
+    #[error("joint {joint}: {source}")]
+    Lugre {
+        /// Joint name.
+        joint: String,
+        /// The parameter (or period) at fault.
+        source: frictionless::lugre::LugreParamError,
+    },
     /// The τ̂_F low-pass cannot be designed.
     #[error("joint {joint}: lpf: {source}")]
     Lpf {
@@ -220,6 +228,15 @@ pub fn build(cfg: &Config, generation: u64) -> Result<Box<Params>, ParamsError> 
             ModelSpec::None => JointModel::None(NoFriction),
             ModelSpec::Cv(p) => JointModel::Cv(*p),
             ModelSpec::Scv(p) => JointModel::Scv(*p),
+            // The bristle state is integrated once per tick, at the loop period.
+            ModelSpec::Lugre(p) => {
+                JointModel::Lugre(frictionless::lugre::LugreEstimator::new(*p, dt_s).map_err(
+                    |source| ParamsError::Lugre {
+                        joint: j.name.clone(),
+                        source,
+                    },
+                )?)
+            }
             ModelSpec::Pinn {
                 path,
                 warmup,

@@ -222,6 +222,8 @@ pub(crate) fn model_spec(
                 ("vs", j.vs.is_some()),
                 ("alpha", j.alpha.is_some()),
                 ("model", j.model.is_some()),
+                ("sigma0", j.sigma0.is_some()),
+                ("sigma1", j.sigma1.is_some()),
             ])?;
             Ok((ModelSpec::None, None))
         }
@@ -231,6 +233,8 @@ pub(crate) fn model_spec(
                 ("vs", j.vs.is_some()),
                 ("alpha", j.alpha.is_some()),
                 ("model", j.model.is_some()),
+                ("sigma0", j.sigma0.is_some()),
+                ("sigma1", j.sigma1.is_some()),
             ])?;
             let p = CvParams {
                 kc: need("kc", j.kc)?,
@@ -241,7 +245,11 @@ pub(crate) fn model_spec(
             Ok((ModelSpec::Cv(p), None))
         }
         ModelKind::Scv => {
-            forbid(&[("model", j.model.is_some())])?;
+            forbid(&[
+                ("model", j.model.is_some()),
+                ("sigma0", j.sigma0.is_some()),
+                ("sigma1", j.sigma1.is_some()),
+            ])?;
             let p = ScvParams {
                 kc: need("kc", j.kc)?,
                 ka: need("ka", j.ka)?,
@@ -253,7 +261,26 @@ pub(crate) fn model_spec(
             p.validate().map_err(param_err)?;
             Ok((ModelSpec::Scv(p), None))
         }
+        ModelKind::Lugre => {
+            forbid(&[("model", j.model.is_some()), ("ka", j.ka.is_some())])?;
+            let p = frictionless::lugre::LugreParams {
+                kc: need("kc", j.kc)?,
+                kv: need("kv", j.kv)?,
+                ks: need("ks", j.ks)?,
+                vs: need("vs", j.vs)?,
+                alpha: need("alpha", j.alpha)?,
+                sigma0: need("sigma0", j.sigma0)?,
+                sigma1: need("sigma1", j.sigma1)?,
+            };
+            p.validate()
+                .map_err(|e| c.fail(key(e.name), e.value, e.requirement))?;
+            Ok((ModelSpec::Lugre(p), None))
+        }
         ModelKind::Pinn => {
+            forbid(&[
+                ("sigma0", j.sigma0.is_some()),
+                ("sigma1", j.sigma1.is_some()),
+            ])?;
             let fallback = if j.ood == OodMode::Static {
                 // The static model: kc, ka, kv (CV) and, if any of ks, vs, alpha is given, all
                 // three (SCV).

@@ -328,6 +328,12 @@ pub struct JointConfig {
     /// Stribeck exponent (SCV).
     #[serde(default)]
     pub alpha: Option<f64>,
+    /// Bristle stiffness σ0 [Nm/rad] (LuGre).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma0: Option<f64>,
+    /// Bristle damping σ1 [Nm·s/rad] (LuGre).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma1: Option<f64>,
     /// `.fwt` model file for `pinn`, relative to the config file.
     #[serde(default)]
     pub model: Option<PathBuf>,
@@ -483,6 +489,8 @@ pub enum ModelSpec {
     Cv(frictionless::friction::CvParams),
     /// SCV (paper form).
     Scv(frictionless::friction::ScvParams),
+    /// LuGre (`kc`, `kv`, `ks`, `vs`, `alpha`, `sigma0`, `sigma1`), integrated at the loop period.
+    Lugre(frictionless::lugre::LugreParams),
     /// PINN loaded from a file (resolved path); the file was read and validated by [`load`].
     Pinn {
         /// Resolved path.

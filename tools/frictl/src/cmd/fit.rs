@@ -1,12 +1,18 @@
-//! `frictl fit cv|scv|scv-code DATASET.csv` — fit a static friction model to a preprocessed dataset and
-//! print/write it as a `[[joint]]` TOML snippet in the daemon's config format, and as JSON
+//! `frictl fit cv|scv|scv-code|lugre DATASET.csv` — fit a friction model to a preprocessed dataset
+//! and print/write it as a `[[joint]]` TOML snippet in the daemon's config format, and as JSON
 //! ([`FitFile`]).
+//!
+//! LuGre's static parameters (kc, kv, ks, vs, alpha) are those of the SCV fit (its smooth-sign ka is
+//! dropped: the bristle state replaces it); the bristle stiffness σ0 and damping σ1 are given
+//! (`--sigma0`, default kc / 1 mrad: the Coulomb level is reached at 1 mrad of joint-side
+//! pre-sliding deflection; `--sigma1`, default 0).
 
 use std::path::PathBuf;
 
 use anyhow::Context;
 use frictiond_config::ModelKind;
 use frictionless::friction::{CvParams, ScvCodeParams, ScvParams};
+use frictionless::lugre::LugreParams;
 use frictionless_dataset::Dataset;
 use frictionless_dataset::fit_file::FittedModel;
 use frictionless_ident::fit::{
@@ -21,8 +27,8 @@ use serde::{Deserialize, Serialize};
 pub struct FitModel(pub ModelKind);
 
 /// The fittable kinds, in list order.
-const FIT_MODELS: [FitModel; 3] = {
-    let mut out = [FitModel(ModelKind::None); 3];
+const FIT_MODELS: [FitModel; 4] = {
+    let mut out = [FitModel(ModelKind::None); 4];
     let mut n = 0;
     let mut k = 0;
     while k < ModelKind::ALL.len() {
@@ -100,6 +106,12 @@ pub struct Args {
     /// Upper bound of ks/kc (fs/fc for the code form).
     #[arg(long, default_value_t = FitBounds::default().ks_max_ratio)]
     pub ks_max_ratio: f64,
+    /// LuGre bristle stiffness σ0 [Nm/rad] (default: kc / 1e-3 rad).
+    #[arg(long)]
+    pub sigma0: Option<f64>,
+    /// LuGre bristle damping σ1 [Nm·s/rad].
+    #[arg(long, default_value_t = 0.0)]
+    pub sigma1: f64,
     /// Write the TOML snippet here.
     #[arg(long)]
     pub toml: Option<PathBuf>,
@@ -120,6 +132,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .map(|p| p.as_path())
         .collect();
     super::check_outputs(&[&args.dataset], &outputs)?;
+    if let Some(s0) = args.sigma0 {
+        anyhow::ensure!(
+            s0.is_finite() && s0 > 0.0,
+            "--sigma0 {s0}: must be finite and > 0"
+        );
+    }
+    anyhow::ensure!(
+        args.sigma1.is_finite() && args.sigma1 >= 0.0,
+        "--sigma1 {}: must be finite and ≥ 0",
+        args.sigma1
+    );
     let ds = Dataset::read_csv(&args.dataset)?;
     let target = if args.truth {
         ds.tau_f_true_nm
@@ -225,6 +248,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             &target,
             &args,
         ),
+        ModelKind::Lugre => {
+            let (sigma0, sigma1) = (args.sigma0, args.sigma1);
+            report(
+                fit::<ScvParams>(&v, &t, &opts).map_err(at_line)?,
+                move |s: ScvParams| FittedModel::Lugre {
+                    params: LugreParams {
+                        kc: s.kc,
+                        kv: s.kv,
+                        ks: s.ks,
+                        vs: s.vs,
+                        alpha: s.alpha,
+                        sigma0: sigma0.unwrap_or(s.kc / 1e-3),
+                        sigma1,
+                    },
+                },
+                &ds,
+                &target,
+                &args,
+            )
+        }
         kind @ (ModelKind::None | ModelKind::Pinn) => {
             anyhow::bail!("frictl fit: {kind} is not a model `frictl fit` fits")
         }
@@ -249,6 +292,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
 /// Daemon `[[joint]]` keys for a fitted model (SCV code form = SCV with ka = inf, alpha = 2).
 fn daemon_keys(m: &FittedModel) -> Vec<(&'static str, f64)> {
+    if let FittedModel::Lugre { params: l } = m {
+        return vec![
+            ("kc", l.kc),
+            ("kv", l.kv),
+            ("ks", l.ks),
+            ("vs", l.vs),
+            ("alpha", l.alpha),
+            ("sigma0", l.sigma0),
+            ("sigma1", l.sigma1),
+        ];
+    }
     if let FittedModel::Cv { params: c } = m {
         vec![("kc", c.kc), ("kv", c.kv), ("ka", c.ka)]
     } else {
@@ -274,7 +328,7 @@ fn toml_f64(v: f64) -> String {
 
 fn report<M: Fittable>(
     r: FitResult<M>,
-    tagged: fn(M) -> FittedModel,
+    tagged: impl Fn(M) -> FittedModel,
     ds: &Dataset,
     target: &[f64],
     args: &Args,
@@ -291,6 +345,11 @@ fn report<M: Fittable>(
         &select(target, &ds.valid),
     );
     let fitted = tagged(r.model);
+    if let FittedModel::Lugre { params } = &fitted {
+        params
+            .validate()
+            .map_err(|e| anyhow::anyhow!("frictl fit lugre: fitted {e}"))?;
+    }
     // The serialised name is a quoted string, valid TOML.
     let model_name = serde_json::to_value(FitFile::daemon_name(&fitted))?;
     let mut s = format!(
@@ -308,7 +367,13 @@ fn report<M: Fittable>(
     let json = FitFile {
         fitted,
         method: args.method,
-        param_names: M::PARAM_NAMES.iter().map(|n| (*n).to_owned()).collect(),
+        param_names: match fitted {
+            FittedModel::Lugre { .. } => LugreParams::PARAM_NAMES.as_slice(),
+            _ => M::PARAM_NAMES,
+        }
+        .iter()
+        .map(|n| (*n).to_owned())
+        .collect(),
         daemon_friction_model: fitted.kind().daemon_kind(),
         rmse_fitted_nm: r.rmse_nm,
         mae_fitted_nm: r.mae_nm,

@@ -796,6 +796,8 @@ fn daemon_config(robot: &RobotFile, plans: &[JointPlan], out: &Path) -> anyhow::
             ks: None,
             vs: None,
             alpha: None,
+            sigma0: None,
+            sigma1: None,
             model: Some(PathBuf::from(&p.model)),
             model_for: None,
             warmup: WarmupName::HoldZero,

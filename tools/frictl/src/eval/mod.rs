@@ -163,7 +163,7 @@ impl ModelSpec {
         }
     }
 
-    /// A static model under `name`.
+    /// A model read from a fit file (static or LuGre) under `name`.
     pub fn static_model(name: &str, model: JointModel) -> Self {
         Self {
             name: name.into(),
@@ -185,9 +185,13 @@ impl ModelSpec {
         })
     }
 
-    /// Whether this is a static (history-free) model; static models are also drawn as curves.
+    /// Whether this is a static (history- and state-free) model ([`ModelKind::is_static`]); static
+    /// models are also drawn as curves.
+    ///
+    /// [`ModelKind::is_static`]: frictionless::model::ModelKind::is_static
     pub fn is_static(&self) -> bool {
-        self.pinn_history.is_none()
+        use frictionless::model::FrictionModel;
+        self.model.kind().is_static()
     }
 }
 
