@@ -92,6 +92,7 @@ pub mod filter;
 pub mod friction;
 pub mod kernel;
 pub mod law;
+pub mod lugre;
 pub mod mlp;
 pub mod model;
 pub mod output_file;

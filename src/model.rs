@@ -1,4 +1,4 @@
-//! none / CV / SCV / PINN behind one trait.
+//! none / CV / SCV / PINN / LuGre behind one trait.
 //!
 //! What this module **is**: the per-joint friction estimator the daemon calls once per tick.
 //! [`FrictionModel`] is the common interface (`reset` at enable, `estimate` per tick); [`JointModel`]
@@ -22,39 +22,134 @@ use std::str::FromStr;
 use crate::features::{FeatureError, FeatureSpec, History, JointSample, WarmupPolicy};
 use crate::friction::{CvParams, ScvCodeParams, ScvParams, StaticFriction};
 use crate::kernel::Mlp;
+use crate::lugre::LugreEstimator;
 use crate::mlp::MlpShapeError;
 use crate::weights::{ModelFile, ModelMeta};
 
-/// The family of a friction model.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
+/// Every kind of friction model, listed once: the CLI name, the daemon's `friction_model` name, the
+/// status ABI code and the fit-file tag all derive from this enum (adding a model starts here).
+///
+/// The discriminant is the code in `DaemonStatus::model_kind` (the shared-memory ABI): never reorder
+/// or reuse one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[repr(u8)]
 pub enum ModelKind {
     /// No compensation (τ̂_F = 0).
-    None,
+    None = 0,
     /// Coulomb–viscous.
-    Cv,
-    /// Stribeck–Coulomb–viscous (paper or code form).
-    Scv,
+    Cv = 1,
+    /// Stribeck–Coulomb–viscous, paper form.
+    Scv = 2,
+    /// Stribeck–Coulomb–viscous, the authors' code form (sign(), α = 2).
+    ScvCode = 3,
     /// Physics-informed neural network.
-    Pinn,
+    Pinn = 4,
+    /// LuGre: the SCV Stribeck curve plus a bristle state (pre-sliding stiffness and damping).
+    Lugre = 5,
 }
 
 impl ModelKind {
-    /// Every kind.
-    pub const ALL: [ModelKind; 4] = [
+    /// Every kind, in code order.
+    pub const ALL: [ModelKind; 6] = [
         ModelKind::None,
         ModelKind::Cv,
         ModelKind::Scv,
+        ModelKind::ScvCode,
         ModelKind::Pinn,
+        ModelKind::Lugre,
     ];
 
-    /// snake_case name as in serde: `"none"`, `"cv"`, `"scv"`, `"pinn"`.
-    pub fn name(self) -> &'static str {
+    /// Short name (CLI choice, status display): `"none"`, `"cv"`, `"scv"`, `"scv-code"`, `"pinn"`.
+    pub const fn name(self) -> &'static str {
         match self {
             ModelKind::None => "none",
             ModelKind::Cv => "cv",
             ModelKind::Scv => "scv",
+            ModelKind::ScvCode => "scv-code",
             ModelKind::Pinn => "pinn",
+            ModelKind::Lugre => "lugre",
+        }
+    }
+
+    /// One line describing the model (CLI help).
+    pub const fn description(self) -> &'static str {
+        match self {
+            ModelKind::None => "no compensation (0 Nm)",
+            ModelKind::Cv => "Coulomb–viscous τ = kc·tanh(ka·v) + kv·v",
+            ModelKind::Scv => "Stribeck–Coulomb–viscous (paper form, kc, ka, kv, ks, vs, alpha)",
+            ModelKind::ScvCode => "the authors' code form (sign(), α = 2): fc, fs, fv, vs",
+            ModelKind::Pinn => "physics-informed neural network (`.fwt`)",
+            ModelKind::Lugre => {
+                "LuGre: the SCV Stribeck curve (kc, kv, ks, vs, alpha) plus bristle sigma0, sigma1"
+            }
+        }
+    }
+
+    /// Whether the model is a function of the current joint velocity alone (no history, no state),
+    /// so that its curve τ(ṡ) describes it.
+    pub const fn is_static(self) -> bool {
+        matches!(
+            self,
+            ModelKind::None | ModelKind::Cv | ModelKind::Scv | ModelKind::ScvCode
+        )
+    }
+
+    /// The status ABI code (`DaemonStatus::model_kind`).
+    pub const fn code(self) -> u8 {
+        self as u8
+    }
+
+    /// The kind of a status ABI code; `None` for a code no kind has.
+    pub fn from_code(code: u8) -> Option<ModelKind> {
+        ModelKind::ALL.into_iter().find(|k| k.code() == code)
+    }
+
+    /// The `model` tag of a fit file (`frictl fit --json`): `"Cv"`, `"Scv"`, `"ScvCode"`, `"Lugre"`; `None` for
+    /// a kind `frictl fit` does not fit.
+    pub const fn fit_tag(self) -> Option<&'static str> {
+        match self {
+            ModelKind::Cv => Some("Cv"),
+            ModelKind::Scv => Some("Scv"),
+            ModelKind::ScvCode => Some("ScvCode"),
+            ModelKind::Lugre => Some("Lugre"),
+            ModelKind::None | ModelKind::Pinn => None,
+        }
+    }
+
+    /// The kind with fit-file tag `tag`.
+    pub fn from_fit_tag(tag: &str) -> Option<ModelKind> {
+        ModelKind::ALL
+            .into_iter()
+            .find(|k| k.fit_tag() == Some(tag))
+    }
+
+    /// The daemon config's `friction_model` name (the ergoCub names), `None` for a kind the daemon
+    /// runs under another kind's name (the SCV code form runs as SCV with ka = ∞, α = 2).
+    pub const fn config_name(self) -> Option<&'static str> {
+        match self {
+            ModelKind::None => Some("none"),
+            ModelKind::Cv => Some("coulomb_viscous"),
+            ModelKind::Scv => Some("coulomb_viscous_stribeck"),
+            ModelKind::ScvCode => None,
+            ModelKind::Pinn => Some("pinn"),
+            ModelKind::Lugre => Some("lugre"),
+        }
+    }
+
+    /// The kind a config's `friction_model` names: its [`ModelKind::config_name`] or, as a short
+    /// form, its [`ModelKind::name`].
+    pub fn from_config_name(s: &str) -> Option<ModelKind> {
+        ModelKind::ALL
+            .into_iter()
+            .filter(|k| k.config_name().is_some())
+            .find(|k| k.config_name() == Some(s) || k.name() == s)
+    }
+
+    /// The kind the daemon runs a model of this kind as (itself, or SCV for the SCV code form).
+    pub const fn daemon_kind(self) -> ModelKind {
+        match self {
+            ModelKind::ScvCode => ModelKind::Scv,
+            k => k,
         }
     }
 }
@@ -67,8 +162,12 @@ impl fmt::Display for ModelKind {
 
 /// An unknown model-kind name.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown friction model kind `{0}` (expected one of: none, cv, scv, pinn)")]
+#[error("unknown friction model kind `{0}` (expected one of: {names})", names = kind_names())]
 pub struct UnknownModelKind(pub String);
+
+fn kind_names() -> String {
+    ModelKind::ALL.map(ModelKind::name).join(", ")
+}
 
 impl FromStr for ModelKind {
     type Err = UnknownModelKind;
@@ -113,38 +212,27 @@ impl FrictionModel for NoFriction {
     }
 }
 
-impl FrictionModel for CvParams {
-    fn kind(&self) -> ModelKind {
-        ModelKind::Cv
-    }
-    fn reset(&mut self, _sample: &JointSample) {}
-    #[inline]
-    fn estimate(&mut self, sample: &JointSample) -> f64 {
-        self.torque_nm(sample.sdot_rad_s)
-    }
+/// The static models: τ̂_F = τ(ṡ) of their [`StaticFriction`] curve, no state.
+macro_rules! static_friction_model {
+    ($($ty:ty => $kind:expr),+ $(,)?) => {$(
+        impl FrictionModel for $ty {
+            fn kind(&self) -> ModelKind {
+                $kind
+            }
+            fn reset(&mut self, _sample: &JointSample) {}
+            #[inline]
+            fn estimate(&mut self, sample: &JointSample) -> f64 {
+                self.torque_nm(sample.sdot_rad_s)
+            }
+        }
+    )+};
 }
 
-impl FrictionModel for ScvParams {
-    fn kind(&self) -> ModelKind {
-        ModelKind::Scv
-    }
-    fn reset(&mut self, _sample: &JointSample) {}
-    #[inline]
-    fn estimate(&mut self, sample: &JointSample) -> f64 {
-        self.torque_nm(sample.sdot_rad_s)
-    }
-}
-
-impl FrictionModel for ScvCodeParams {
-    fn kind(&self) -> ModelKind {
-        ModelKind::Scv
-    }
-    fn reset(&mut self, _sample: &JointSample) {}
-    #[inline]
-    fn estimate(&mut self, sample: &JointSample) -> f64 {
-        self.torque_nm(sample.sdot_rad_s)
-    }
-}
+static_friction_model!(
+    CvParams => ModelKind::Cv,
+    ScvParams => ModelKind::Scv,
+    ScvCodeParams => ModelKind::ScvCode,
+);
 
 /// Why a PINN estimator cannot be built from a model file.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -343,6 +431,8 @@ pub enum JointModel {
     ScvCode(ScvCodeParams),
     /// PINN (boxed: it is large and holds the network).
     Pinn(Box<PinnEstimator>),
+    /// LuGre (bristle state reset at enable, integrated once per tick).
+    Lugre(LugreEstimator),
 }
 
 impl JointModel {
@@ -388,6 +478,25 @@ impl From<ScvCodeParams> for JointModel {
     }
 }
 
+impl From<LugreEstimator> for JointModel {
+    fn from(p: LugreEstimator) -> Self {
+        JointModel::Lugre(p)
+    }
+}
+
+impl FrictionModel for LugreEstimator {
+    fn kind(&self) -> ModelKind {
+        ModelKind::Lugre
+    }
+    fn reset(&mut self, _sample: &JointSample) {
+        self.reset_state();
+    }
+    #[inline]
+    fn estimate(&mut self, sample: &JointSample) -> f64 {
+        self.step(sample.sdot_rad_s)
+    }
+}
+
 impl From<PinnEstimator> for JointModel {
     fn from(p: PinnEstimator) -> Self {
         JointModel::Pinn(Box::new(p))
@@ -403,6 +512,7 @@ impl FrictionModel for JointModel {
             JointModel::Scv(m) => m.kind(),
             JointModel::ScvCode(m) => m.kind(),
             JointModel::Pinn(m) => m.kind(),
+            JointModel::Lugre(m) => m.kind(),
         }
     }
 
@@ -414,6 +524,7 @@ impl FrictionModel for JointModel {
             JointModel::Scv(m) => m.reset(sample),
             JointModel::ScvCode(m) => m.reset(sample),
             JointModel::Pinn(m) => m.reset(sample),
+            JointModel::Lugre(m) => m.reset(sample),
         }
     }
 
@@ -425,6 +536,7 @@ impl FrictionModel for JointModel {
             JointModel::Scv(m) => m.estimate(sample),
             JointModel::ScvCode(m) => m.estimate(sample),
             JointModel::Pinn(m) => m.estimate(sample),
+            JointModel::Lugre(m) => m.estimate(sample),
         }
     }
 
@@ -769,7 +881,7 @@ mod tests {
             [
                 ModelKind::Cv,
                 ModelKind::Scv,
-                ModelKind::Scv,
+                ModelKind::ScvCode,
                 ModelKind::None
             ]
         );
@@ -825,11 +937,32 @@ mod tests {
     }
 
     #[test]
-    fn model_kind_names() {
-        for k in ModelKind::ALL {
-            assert_eq!(serde_json::to_string(&k).unwrap(), format!("\"{k}\""));
+    fn model_kind_names_codes_and_tags() {
+        for (i, k) in ModelKind::ALL.into_iter().enumerate() {
             assert_eq!(k.to_string().parse::<ModelKind>().unwrap(), k);
+            assert_eq!(usize::from(k.code()), i, "codes in list order");
+            assert_eq!(ModelKind::from_code(k.code()), Some(k));
+            if let Some(tag) = k.fit_tag() {
+                assert_eq!(ModelKind::from_fit_tag(tag), Some(k));
+            }
+            if let Some(name) = k.config_name() {
+                assert_eq!(ModelKind::from_config_name(name), Some(k));
+                assert_eq!(ModelKind::from_config_name(k.name()), Some(k));
+            }
+            assert!(
+                k.daemon_kind().config_name().is_some(),
+                "{k} runs as a config kind"
+            );
         }
+        // The strings files and configs already use.
+        let tags: Vec<_> = ModelKind::ALL.iter().filter_map(|k| k.fit_tag()).collect();
+        assert_eq!(tags, ["Cv", "Scv", "ScvCode", "Lugre"]);
+        assert_eq!(
+            ModelKind::from_config_name("coulomb_viscous_stribeck"),
+            Some(ModelKind::Scv)
+        );
+        assert_eq!(ModelKind::from_config_name("scv-code"), None);
+        assert_eq!(ModelKind::from_code(200), None);
         assert!("stribeck".parse::<ModelKind>().is_err());
     }
 }

@@ -93,6 +93,10 @@ fn summary(cfg: &config::Config) -> String {
                 "scv kc={} ka={} kv={} ks={} vs={} alpha={}",
                 p.kc, p.ka, p.kv, p.ks, p.vs, p.alpha
             ),
+            config::ModelSpec::Lugre(p) => format!(
+                "lugre kc={} kv={} ks={} vs={} alpha={} sigma0={} sigma1={}",
+                p.kc, p.kv, p.ks, p.vs, p.alpha, p.sigma0, p.sigma1
+            ),
             config::ModelSpec::Pinn {
                 path,
                 warmup,

@@ -12,7 +12,6 @@ use std::path::PathBuf;
 use frictionless::features::{JointSample, WarmupPolicy};
 use frictionless::model::{FrictionModel, JointModel, ModelError, NoFriction, PinnEstimator};
 use frictionless::weights::WeightError;
-use frictionless_shm_types::model_kind;
 
 use frictionless::filter::{CausalButterworth, FilterError};
 use frictionless::law::{Gains, JointLaw};
@@ -42,6 +41,14 @@ pub enum ParamsError {
         /// Why the estimator could not be built (boxed: keeps `Result<_, ParamsError>` small).
         source: Box<ModelError>,
     },
+    /// A LuGre model cannot integrate at the loop period.
+    #[error("joint {joint}: {source}")]
+    Lugre {
+        /// Joint name.
+        joint: String,
+        /// The parameter (or period) at fault.
+        source: frictionless::lugre::LugreParamError,
+    },
     /// The τ̂_F low-pass cannot be designed.
     #[error("joint {joint}: lpf: {source}")]
     Lpf {
@@ -55,15 +62,9 @@ pub enum ParamsError {
 /// The model-file check `--check` runs, defined with the config schema.
 pub use crate::config::check_model_file;
 
-/// Status code of a model kind (`frictionless_shm_types::model_kind`).
+/// Status code of a joint's model (`DaemonStatus::model_kind`): its kind's ABI code.
 pub fn kind_code(m: &JointModel) -> u8 {
-    match m {
-        JointModel::None(_) => model_kind::NONE,
-        JointModel::Cv(_) => model_kind::CV,
-        JointModel::Scv(_) => model_kind::SCV,
-        JointModel::ScvCode(_) => model_kind::SCV_CODE,
-        JointModel::Pinn(_) => model_kind::PINN,
-    }
+    m.kind().code()
 }
 
 /// Everything the RT loop needs for one joint.
@@ -227,6 +228,15 @@ pub fn build(cfg: &Config, generation: u64) -> Result<Box<Params>, ParamsError> 
             ModelSpec::None => JointModel::None(NoFriction),
             ModelSpec::Cv(p) => JointModel::Cv(*p),
             ModelSpec::Scv(p) => JointModel::Scv(*p),
+            // The bristle state is integrated once per tick, at the loop period.
+            ModelSpec::Lugre(p) => {
+                JointModel::Lugre(frictionless::lugre::LugreEstimator::new(*p, dt_s).map_err(
+                    |source| ParamsError::Lugre {
+                        joint: j.name.clone(),
+                        source,
+                    },
+                )?)
+            }
             ModelSpec::Pinn {
                 path,
                 warmup,

@@ -6,7 +6,8 @@
 //! Scope: steady state. A new peer connecting (e.g. `frictl monitor` attaching) makes iceoryx2 set up
 //! connection state on the RT thread; that is not covered by this claim. Joint 2 is a small PINN
 //! whose stored training range its velocity leaves and re-enters, with `ood = "static"`: the range
-//! check, the counter and the blend run too.
+//! check, the counter and the blend run too. Joint 3 is a LuGre joint, re-enabled every 500 steps
+//! (its bristle state reset) and integrated every tick.
 
 use std::time::Duration;
 
@@ -118,6 +119,21 @@ kv = 0.3
 ks = 0.8
 vs = 0.1
 alpha = 1.0
+
+[[joint]]
+name = "wrist"
+index = 3
+gear_ratio = 100.0
+kt = 0.1
+max_curr = 5.0
+friction_model = "lugre"
+kc = 0.4
+kv = 0.2
+ks = 0.7
+vs = 0.1
+alpha = 1.0
+sigma0 = 2000.0
+sigma1 = 1.0
 "#
     ));
     let report = env.dir.join("alloc_report.txt");
@@ -131,10 +147,10 @@ alpha = 1.0
     );
     let mut plant = Plant::open(&env.ipc, "plant");
     let mut js = JointStates::zeroed();
-    js.n_joints = 3;
+    js.n_joints = 4;
     let mut rq = TorqueRequest::zeroed();
-    rq.n_joints = 3;
-    rq.enable_mask = 0b111;
+    rq.n_joints = 4;
+    rq.enable_mask = 0b1111;
     let mut k = 0u64;
     let t0 = std::time::Instant::now();
     // Peers must connect before counting starts: iceoryx2 sets up per-connection state (allocating)
@@ -148,10 +164,13 @@ alpha = 1.0
         js.sdot_rad_s[0] = x;
         js.sdot_rad_s[1] = -x;
         js.sdot_rad_s[2] = 2.0 * x; // out of the PINN's training range while |x| > 0.5
+        js.sdot_rad_s[3] = 0.5 * x; // LuGre: through zero (pre-sliding) and sliding
         rq.tau_des_nm[0] = 30.0 * x;
         rq.tau_des_nm[1] = 2.0 * x;
         rq.tau_des_nm[2] = x;
-        rq.enable_mask = if k % 500 < 450 { 0b111 } else { 0b101 };
+        rq.tau_des_nm[3] = 0.5 * x;
+        // The ankle and the LuGre wrist are re-enabled every 500 steps (their reset on enable).
+        rq.enable_mask = if k % 500 < 450 { 0b1111 } else { 0b0101 };
         plant.send(&js, &rq);
         std::thread::sleep(Duration::from_millis(1));
         if let Some(s) = plant.status.latest().unwrap() {

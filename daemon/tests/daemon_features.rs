@@ -6,6 +6,11 @@
 //! current on every tick must be the control law applied to that τ̂_F (1e-9 A, as `daemon_pinn`).
 //! The `frictl` binary is the one `tests/run.sh` builds next to `frictiond` (the test is
 //! `#[ignore]`d; `tests/run.sh` runs it with `--include-ignored`).
+//!
+//! A LuGre joint needs the joint velocity alone: on the same torque-sensed samples its current must be
+//! the law applied to the core's `LugreEstimator` run offline over those samples (what `frictl eval`'s
+//! `predict` does: reset at the enable edge, one estimate per sample), re-enabled midway (the
+//! bristle state restarts at 0).
 
 use std::io::Write;
 use std::path::Path;
@@ -108,12 +113,16 @@ fn tau_des(k: u64) -> f64 {
 }
 
 fn step(plant: &mut Plant, k: u64) -> MotorCurrentCommand {
+    step_masked(plant, k, 0b11)
+}
+
+fn step_masked(plant: &mut Plant, k: u64, enable_mask: u64) -> MotorCurrentCommand {
     let x = sample(k);
     let mut js = JointStates::zeroed();
     js.n_joints = 2;
     let mut rq = TorqueRequest::zeroed();
     rq.n_joints = 2;
-    rq.enable_mask = 0b11;
+    rq.enable_mask = enable_mask;
     for j in 0..2 {
         js.s_rad[j] = x.s_rad;
         js.sdot_rad_s[j] = x.sdot_rad_s;
@@ -251,6 +260,128 @@ fn joint_pos_joint_vel_and_joint_vel_models_equal_frictl_predict_without_motor_e
             beyond_feed_forward > 150,
             "{}: the network contributed on only {beyond_feed_forward} of {TICKS} ticks",
             spec.set
+        );
+    }
+}
+
+/// Two LuGre joints (stiff and soft bristles) in lockstep; joint 1 is disabled for ticks 80..100.
+#[test]
+fn lugre_joints_equal_the_offline_estimator_and_restart_at_enable() {
+    use frictionless::lugre::{LugreEstimator, LugreParams};
+    use frictionless::model::{FrictionModel, JointModel};
+    let params = [
+        LugreParams {
+            kc: 0.8,
+            kv: 0.3,
+            ks: 1.3,
+            vs: 0.08,
+            alpha: 1.2,
+            sigma0: 4.0e3,
+            sigma1: 2.0,
+        },
+        LugreParams {
+            kc: 0.5,
+            kv: 0.1,
+            ks: 0.9,
+            vs: 0.2,
+            alpha: 2.0,
+            sigma0: 50.0,
+            sigma1: 0.5,
+        },
+    ];
+    let env = TestEnv::new("lugre");
+    let mut c = String::from(
+        r#"
+[loop]
+period_us = 1000
+status_every_ticks = 5
+ready_after_ticks = 5
+trigger = "lockstep"
+lockstep_wait_request = true
+lockstep_timeout_ms = 10000
+
+[safety]
+stale_after_ticks = 20
+on_stale = "zero"
+"#,
+    );
+    for (k, p) in params.iter().enumerate() {
+        c.push_str(&format!(
+            r#"
+[[joint]]
+name = "lugre_{k}"
+index = {k}
+gear_ratio = {R:?}
+kt = {KT:?}
+max_curr = {MAX_I:?}
+kfc = {KFC:?}
+friction_model = "lugre"
+kc = {:?}
+kv = {:?}
+ks = {:?}
+vs = {:?}
+alpha = {:?}
+sigma0 = {:?}
+sigma1 = {:?}
+"#,
+            p.kc, p.kv, p.ks, p.vs, p.alpha, p.sigma0, p.sigma1
+        ));
+    }
+    let cfg = env.write_config(&c);
+    let mut d = Daemon::start(&cfg, &[]);
+    let mut plant = Plant::open(&env.ipc, "plant");
+    plant.wait_for_daemon(T);
+
+    const TICKS: u64 = 200;
+    let enabled = |j: usize, k: u64| j == 0 || !(80..100).contains(&k);
+    let mask = |k: u64| (0..2).fold(0u64, |m, j| m | u64::from(enabled(j, k)) << j);
+    let commands: Vec<MotorCurrentCommand> = (0..TICKS)
+        .map(|k| step_masked(&mut plant, k, mask(k)))
+        .collect();
+    d.signal(libc::SIGTERM);
+    let (status, log) = d.wait_exit(T);
+    assert!(status.success(), "{log}");
+
+    for (j, p) in params.iter().enumerate() {
+        // Offline, as `predict`: reset at each enable edge, one estimate per enabled sample.
+        let mut m = JointModel::from(LugreEstimator::new(*p, 1e-3).unwrap());
+        let mut was_enabled = false;
+        let mut beyond_feed_forward = 0;
+        for (k, c) in commands.iter().enumerate() {
+            let k = k as u64;
+            let x = sample(k);
+            if !enabled(j, k) {
+                was_enabled = false;
+                continue;
+            }
+            if !was_enabled {
+                m.reset(&x);
+                was_enabled = true;
+            }
+            let f = m.estimate(&x);
+            let want = current_ref(
+                tau_des(k),
+                f,
+                x.sdot_rad_s,
+                0.0,
+                f64::INFINITY,
+                KFC,
+                KT,
+                R,
+                MAX_I,
+            );
+            assert!(
+                (c.i_ref_a[j] - want).abs() <= 1e-9,
+                "joint {j} tick {k}: daemon {} A, offline LuGre gives {want} A",
+                c.i_ref_a[j]
+            );
+            assert_eq!(c.flags[j] & (FLAG_STALE | FLAG_NON_FINITE), 0, "tick {k}");
+            let ff = tau_des(k) / (KT * R);
+            beyond_feed_forward += usize::from((c.i_ref_a[j] - ff).abs() > 1e-4);
+        }
+        assert!(
+            beyond_feed_forward > 150,
+            "joint {j}: LuGre contributed on only {beyond_feed_forward} ticks"
         );
     }
 }

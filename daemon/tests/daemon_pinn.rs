@@ -17,7 +17,6 @@ use frictionless::units::GearRatio;
 use frictionless::weights::{ModelFile, ModelMeta, TrainingMeta};
 use frictionless_shm_types::{
     FLAG_NON_FINITE, FLAG_STALE, FLAG_WARMING_UP, JointStates, MotorCurrentCommand, TorqueRequest,
-    model_kind,
 };
 
 const R: f64 = -100.0;
@@ -233,8 +232,8 @@ fn pinn_currents_warm_up_and_reload() {
         "PINN contributed on only {beyond_feed_forward} of 200 ticks"
     );
     let s = plant.status_until(None, T, |_| true);
-    assert_eq!(s.model_kind[0], model_kind::PINN);
-    assert_eq!(s.model_kind[1], model_kind::PINN);
+    assert_eq!(s.model_kind[0], frictionless::model::ModelKind::Pinn.code());
+    assert_eq!(s.model_kind[1], frictionless::model::ModelKind::Pinn.code());
 
     // 2. SIGHUP with model B for joint 0: the switch is the tick where the warm-up flag comes
     //    back (every joint gets a bumpless reset on a parameter hand-over); until then model A.

@@ -102,14 +102,13 @@ fn native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     ] {
         m.add(name, bit)?;
     }
-    for (name, code) in [
-        ("MODEL_KIND_NONE", abi::model_kind::NONE),
-        ("MODEL_KIND_CV", abi::model_kind::CV),
-        ("MODEL_KIND_SCV", abi::model_kind::SCV),
-        ("MODEL_KIND_SCV_CODE", abi::model_kind::SCV_CODE),
-        ("MODEL_KIND_PINN", abi::model_kind::PINN),
-    ] {
-        m.add(name, code)?;
+    // MODEL_KIND_<NAME> for every kind of the core's list (`scv-code` → MODEL_KIND_SCV_CODE).
+    for kind in frictionless::model::ModelKind::ALL {
+        let name = format!(
+            "MODEL_KIND_{}",
+            kind.name().to_uppercase().replace('-', "_")
+        );
+        m.add(name.as_str(), kind.code())?;
     }
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

@@ -107,20 +107,6 @@ pub const STATUS_INPUT_STALE: u32 = 1 << 3;
 /// Daemon-wide flag: the daemon is stopping and publishes zero currents.
 pub const STATUS_STOPPING: u32 = 1 << 4;
 
-/// Model kind codes in [`DaemonStatus::model_kind`].
-pub mod model_kind {
-    /// No friction compensation.
-    pub const NONE: u8 = 0;
-    /// Coulomb–viscous.
-    pub const CV: u8 = 1;
-    /// Stribeck–Coulomb–viscous (paper form).
-    pub const SCV: u8 = 2;
-    /// Stribeck–Coulomb–viscous (authors' code form).
-    pub const SCV_CODE: u8 = 3;
-    /// Physics-informed neural network.
-    pub const PINN: u8 = 4;
-}
-
 /// Joint and motor state of every joint at one instant (plant → daemon, 1 kHz).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
@@ -407,7 +393,8 @@ pub struct DaemonStatus {
     pub i_ref_a: [f64; MAX_JOINTS],
     /// Per-joint flags of the last tick ([`FLAG_CURRENT_SATURATED`], …).
     pub joint_flags: [u32; MAX_JOINTS],
-    /// Model kind per joint ([`model_kind`]).
+    /// Model kind per joint: the code of the core's `frictionless::model::ModelKind`
+    /// (`ModelKind::code`, `ModelKind::from_code`; 0 = none).
     pub model_kind: [u8; MAX_JOINTS],
     /// Field-bus counters summed over every bus (all zero for the shared-memory backend).
     pub bus: BusCounters,
@@ -1041,14 +1028,14 @@ mod tests {
 
         let mut ds = DaemonStatus::zeroed();
         ds.lateness.record(12_345);
-        ds.model_kind[5] = model_kind::PINN;
+        ds.model_kind[5] = 4;
         ds.tau_f_hat_nm[5] = 0.5;
         ds.out_of_range_ticks[63] = 42;
         let got = round_trip(&cfg, Ipc::daemon_status, ds);
         assert_eq!(got.out_of_range_ticks[63], 42);
         assert_eq!(got.lateness.total, 1);
         assert_eq!(got.lateness.max_ns, 12_345);
-        assert_eq!(got.model_kind[5], model_kind::PINN);
+        assert_eq!(got.model_kind[5], 4);
         assert_eq!(got.tau_f_hat_nm[5], 0.5);
         let _ = std::fs::remove_dir_all(cfg.root_path.unwrap());
     }

@@ -6,9 +6,10 @@ use std::path::Path;
 
 use frictionless::features::{FeatureSpec, Signal};
 
+use crate::ModelKind;
 use crate::schema::{
-    BackendKind, CanProtocol, FrictionModelName, JointConfig, ModelSpec, OodMode, RawConfig,
-    ResolvedBus, StaticFallback,
+    BackendKind, CanProtocol, JointConfig, ModelSpec, OodMode, RawConfig, ResolvedBus,
+    StaticFallback,
 };
 use crate::validate::{Checker, ConfigError};
 
@@ -172,12 +173,16 @@ pub(crate) fn model_spec(
 ) -> Result<(ModelSpec, Option<FeatureSpec>), ConfigError> {
     use frictionless::friction::{CvParams, ScvParams, StaticFriction};
     let key = |name: &str| format!("joint[{k}].{name}");
+    let model_name = j
+        .friction_model
+        .config_name()
+        .unwrap_or(j.friction_model.name());
     let need = |name: &str, v: Option<f64>| -> Result<f64, ConfigError> {
         v.ok_or_else(|| {
             c.fail(
                 key(name),
                 "<missing>",
-                &format!("required by friction_model = {:?}", j.friction_model),
+                &format!("required by friction_model = {model_name:?}"),
             )
         })
     };
@@ -187,7 +192,7 @@ pub(crate) fn model_spec(
                 return Err(c.fail(
                     key(n),
                     "<set>",
-                    &format!("not used by friction_model = {:?}", j.friction_model),
+                    &format!("not used by friction_model = {model_name:?}"),
                 ));
             }
         }
@@ -203,7 +208,12 @@ pub(crate) fn model_spec(
         other => c.fail(key("friction_model"), "?", &other.to_string()),
     };
     match j.friction_model {
-        FrictionModelName::None => {
+        ModelKind::ScvCode => Err(c.fail(
+            key("friction_model"),
+            model_name,
+            "not a daemon model: the code form runs as coulomb_viscous_stribeck with ka = inf, alpha = 2",
+        )),
+        ModelKind::None => {
             forbid(&[
                 ("kc", j.kc.is_some()),
                 ("kv", j.kv.is_some()),
@@ -212,15 +222,19 @@ pub(crate) fn model_spec(
                 ("vs", j.vs.is_some()),
                 ("alpha", j.alpha.is_some()),
                 ("model", j.model.is_some()),
+                ("sigma0", j.sigma0.is_some()),
+                ("sigma1", j.sigma1.is_some()),
             ])?;
             Ok((ModelSpec::None, None))
         }
-        FrictionModelName::CoulombViscous => {
+        ModelKind::Cv => {
             forbid(&[
                 ("ks", j.ks.is_some()),
                 ("vs", j.vs.is_some()),
                 ("alpha", j.alpha.is_some()),
                 ("model", j.model.is_some()),
+                ("sigma0", j.sigma0.is_some()),
+                ("sigma1", j.sigma1.is_some()),
             ])?;
             let p = CvParams {
                 kc: need("kc", j.kc)?,
@@ -230,8 +244,12 @@ pub(crate) fn model_spec(
             p.validate().map_err(param_err)?;
             Ok((ModelSpec::Cv(p), None))
         }
-        FrictionModelName::CoulombViscousStribeck => {
-            forbid(&[("model", j.model.is_some())])?;
+        ModelKind::Scv => {
+            forbid(&[
+                ("model", j.model.is_some()),
+                ("sigma0", j.sigma0.is_some()),
+                ("sigma1", j.sigma1.is_some()),
+            ])?;
             let p = ScvParams {
                 kc: need("kc", j.kc)?,
                 ka: need("ka", j.ka)?,
@@ -243,7 +261,26 @@ pub(crate) fn model_spec(
             p.validate().map_err(param_err)?;
             Ok((ModelSpec::Scv(p), None))
         }
-        FrictionModelName::Pinn => {
+        ModelKind::Lugre => {
+            forbid(&[("model", j.model.is_some()), ("ka", j.ka.is_some())])?;
+            let p = frictionless::lugre::LugreParams {
+                kc: need("kc", j.kc)?,
+                kv: need("kv", j.kv)?,
+                ks: need("ks", j.ks)?,
+                vs: need("vs", j.vs)?,
+                alpha: need("alpha", j.alpha)?,
+                sigma0: need("sigma0", j.sigma0)?,
+                sigma1: need("sigma1", j.sigma1)?,
+            };
+            p.validate()
+                .map_err(|e| c.fail(key(e.name), e.value, e.requirement))?;
+            Ok((ModelSpec::Lugre(p), None))
+        }
+        ModelKind::Pinn => {
+            forbid(&[
+                ("sigma0", j.sigma0.is_some()),
+                ("sigma1", j.sigma1.is_some()),
+            ])?;
             let fallback = if j.ood == OodMode::Static {
                 // The static model: kc, ka, kv (CV) and, if any of ks, vs, alpha is given, all
                 // three (SCV).

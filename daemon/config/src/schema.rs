@@ -3,6 +3,7 @@
 
 use std::path::PathBuf;
 
+use frictionless::model::ModelKind;
 use frictionless_shm_types::can::mit::MitRanges;
 use frictionless_shm_types::can::units::{CommandUnit, JointUnits};
 use serde::{Deserialize, Serialize};
@@ -227,21 +228,34 @@ pub struct LpfConfig {
     pub cutoff_hz: f64,
 }
 
-/// Friction model names (the ergoCub names and short forms).
-#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
-pub enum FrictionModelName {
-    /// No friction compensation.
-    #[serde(rename = "none")]
-    None,
-    /// Coulomb–viscous.
-    #[serde(rename = "coulomb_viscous", alias = "cv")]
-    CoulombViscous,
-    /// Stribeck–Coulomb–viscous.
-    #[serde(rename = "coulomb_viscous_stribeck", alias = "scv")]
-    CoulombViscousStribeck,
-    /// PINN from a `.fwt` file.
-    #[serde(rename = "pinn")]
-    Pinn,
+/// Serde of a joint's `friction_model` (use with `#[serde(with = "friction_model_name")]`): the
+/// core's [`ModelKind`], written as its [`ModelKind::config_name`] (the ergoCub names:
+/// `coulomb_viscous`, `coulomb_viscous_stribeck`, …) and read from that or its short
+/// [`ModelKind::name`] (`cv`, `scv`, …). A kind without a config name (the SCV code form) is written
+/// as the kind the daemon runs it as.
+pub mod friction_model_name {
+    use frictionless::model::ModelKind;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    /// Writes `kind`'s config name.
+    pub fn serialize<S: Serializer>(kind: &ModelKind, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(kind.daemon_kind().config_name().unwrap_or("none"))
+    }
+
+    /// Reads a config name or short name; the error lists the accepted names.
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<ModelKind, D::Error> {
+        let name = String::deserialize(d)?;
+        ModelKind::from_config_name(&name).ok_or_else(|| {
+            let known: Vec<String> = ModelKind::ALL
+                .into_iter()
+                .filter_map(|k| k.config_name().map(|c| format!("{c} ({})", k.name())))
+                .collect();
+            serde::de::Error::custom(format!(
+                "unknown friction_model `{name}`, expected one of: {}",
+                known.join(", ")
+            ))
+        })
+    }
 }
 
 /// PINN warm-up policy while the history is not yet full.
@@ -303,8 +317,9 @@ pub struct JointConfig {
     /// Butterworth LPF on τ̂_F (none = unfiltered).
     #[serde(default)]
     pub lpf: Option<LpfConfig>,
-    /// Friction model.
-    pub friction_model: FrictionModelName,
+    /// Friction model ([`friction_model_name`]).
+    #[serde(with = "friction_model_name")]
+    pub friction_model: ModelKind,
     /// Coulomb level [Nm].
     #[serde(default)]
     pub kc: Option<f64>,
@@ -323,6 +338,12 @@ pub struct JointConfig {
     /// Stribeck exponent (SCV).
     #[serde(default)]
     pub alpha: Option<f64>,
+    /// Bristle stiffness σ0 [Nm/rad] (LuGre).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma0: Option<f64>,
+    /// Bristle damping σ1 [Nm·s/rad] (LuGre).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma1: Option<f64>,
     /// `.fwt` model file for `pinn`, relative to the config file.
     #[serde(default)]
     pub model: Option<PathBuf>,
@@ -478,6 +499,8 @@ pub enum ModelSpec {
     Cv(frictionless::friction::CvParams),
     /// SCV (paper form).
     Scv(frictionless::friction::ScvParams),
+    /// LuGre (`kc`, `kv`, `ks`, `vs`, `alpha`, `sigma0`, `sigma1`), integrated at the loop period.
+    Lugre(frictionless::lugre::LugreParams),
     /// PINN loaded from a file (resolved path); the file was read and validated by [`load`].
     Pinn {
         /// Resolved path.

@@ -7,10 +7,9 @@ use std::path::{Path, PathBuf};
 use frictionless::features::FeatureSpec;
 use frictionless_shm_types::MAX_JOINTS;
 
+use crate::ModelKind;
 use crate::models::model_spec;
-use crate::schema::{
-    FrictionModelName, JointConfig, LoopConfig, ModelSpec, OodMode, Prefetch, RawConfig,
-};
+use crate::schema::{JointConfig, LoopConfig, ModelSpec, OodMode, Prefetch, RawConfig};
 
 /// Why a configuration is not acceptable. Every variant names the file; most name the key and value.
 #[derive(Debug, thiserror::Error)]
@@ -383,7 +382,7 @@ pub(crate) fn check_joint(
     if !(j.ood_ramp_ms.is_finite() && (0.0..=1000.0).contains(&j.ood_ramp_ms)) {
         return Err(c.fail(key("ood_ramp_ms"), j.ood_ramp_ms, "must be in [0, 1000] ms"));
     }
-    if j.ood == OodMode::Static && j.friction_model != FrictionModelName::Pinn {
+    if j.ood == OodMode::Static && j.friction_model != ModelKind::Pinn {
         return Err(c.fail(
             key("ood"),
             "\"static\"",

@@ -66,7 +66,7 @@ kv = 0.5
     assert_eq!(again.raw.joint[0].lpf, None);
     assert_eq!(
         again.raw.joint[0].friction_model,
-        frictiond_config::FrictionModelName::CoulombViscous
+        frictiond_config::ModelKind::Cv
     );
     assert_eq!(again.raw, cfg.raw);
 }

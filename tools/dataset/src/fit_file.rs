@@ -3,9 +3,9 @@
 //! experiments and the demo read back; `frictl fit` writes it flattened into its report.
 //!
 //! What it is: the serde type, the reader ([`FittedModel::read`]) and the conversions the readers need
-//! (to a [`JointModel`], to an SCV prior). The tag values are
-//! `"Cv"`, `"Scv"` and `"ScvCode"`; a parameter stored as `null` reads as +∞ (serde_json writes
-//! non-finite numbers as `null`).
+//! (to a [`JointModel`], to an SCV prior). The tag values are the core's
+//! [`ModelKind::fit_tag`]s (`"Cv"`, `"Scv"`, `"ScvCode"`); a parameter stored as `null` reads as +∞
+//! (serde_json writes non-finite numbers as `null`).
 //!
 //! What it is not: the fitter (`frictionless-ident`) or the daemon's `[[joint]]` snippet `frictl fit`
 //! prints.
@@ -14,8 +14,9 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use frictionless::friction::{CvParams, ScvCodeParams, ScvParams, StaticFriction};
-use frictionless::model::JointModel;
-use serde::{Deserialize, Deserializer, Serialize};
+use frictionless::lugre::{DEFAULT_DT_S, LugreEstimator, LugreParams};
+use frictionless::model::{JointModel, ModelKind};
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 /// Why a fit file cannot be used.
 #[derive(Debug, thiserror::Error)]
@@ -30,7 +31,8 @@ pub enum FitFileError {
     },
     /// Not JSON, an unknown `model`, or `params` that do not fit it.
     #[error(
-        "{path}: not a fit of `frictl fit --json` (keys `model` = \"Cv\" | \"Scv\" | \"ScvCode\" and `params`): {message}"
+        "{path}: not a fit of `frictl fit --json` (keys `model` = {tags} and `params`): {message}",
+        tags = fit_tags()
     )]
     Parse {
         /// The file.
@@ -40,37 +42,51 @@ pub enum FitFileError {
     },
 }
 
-/// A fitted static model: the `model` tag and its `params` (validated when read).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "model")]
+/// The fit-file tags of the core's model list, quoted and `|`-separated (for messages).
+pub fn fit_tags() -> String {
+    ModelKind::ALL
+        .iter()
+        .filter_map(|k| k.fit_tag())
+        .map(|t| format!("\"{t}\""))
+        .collect::<Vec<_>>()
+        .join(" | ")
+}
+
+/// A fitted static model: the `model` tag ([`ModelKind::fit_tag`]) and its `params` (validated when
+/// read).
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum FittedModel {
     /// Coulomb–viscous.
     Cv {
         /// kc, ka, kv.
-        #[serde(deserialize_with = "params_or_inf")]
         params: CvParams,
     },
     /// Stribeck–Coulomb–viscous, paper form.
     Scv {
         /// kc, ka, kv, ks, vs, alpha.
-        #[serde(deserialize_with = "params_or_inf")]
         params: ScvParams,
     },
     /// Stribeck–Coulomb–viscous, the authors' code form.
     ScvCode {
         /// fc, fs, fv, vs.
-        #[serde(deserialize_with = "params_or_inf")]
         params: ScvCodeParams,
+    },
+    /// LuGre: the SCV curve's kc, kv, ks, vs, alpha and the bristle sigma0, sigma1.
+    Lugre {
+        /// kc, kv, ks, vs, alpha, sigma0, sigma1 (all finite).
+        params: LugreParams,
     },
 }
 
 /// `params` as an object of [`StaticFriction::PARAM_NAMES`] (each required, no others; `null` = +∞),
 /// validated by [`StaticFriction::from_params`].
-fn params_or_inf<'de, D: Deserializer<'de>, P: StaticFriction>(d: D) -> Result<P, D::Error> {
-    use serde::de::Error;
-    let map = BTreeMap::<String, Option<f64>>::deserialize(d)?;
+fn params_or_inf<P: StaticFriction, E: serde::de::Error>(
+    params: serde_json::Value,
+) -> Result<P, E> {
+    let map = BTreeMap::<String, Option<f64>>::deserialize(params)
+        .map_err(|e| E::custom(format!("params: {e}")))?;
     if let Some(k) = map.keys().find(|k| !P::PARAM_NAMES.contains(&k.as_str())) {
-        return Err(D::Error::custom(format!(
+        return Err(E::custom(format!(
             "params.{k}: not a parameter of {} (expected {:?})",
             P::NAME,
             P::PARAM_NAMES
@@ -80,10 +96,65 @@ fn params_or_inf<'de, D: Deserializer<'de>, P: StaticFriction>(d: D) -> Result<P
         .iter()
         .map(|n| match map.get(*n) {
             Some(v) => Ok(v.unwrap_or(f64::INFINITY)),
-            None => Err(D::Error::custom(format!("params.{n} missing"))),
+            None => Err(E::custom(format!("params.{n} missing"))),
         })
         .collect::<Result<Vec<f64>, _>>()?;
-    P::from_params(&values).map_err(|e| D::Error::custom(format!("params: {e}")))
+    P::from_params(&values).map_err(|e| E::custom(format!("params: {e}")))
+}
+
+impl Serialize for FittedModel {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let mut m = s.serialize_map(Some(2))?;
+        m.serialize_entry("model", self.tag())?;
+        match self {
+            Self::Cv { params } => m.serialize_entry("params", params)?,
+            Self::Scv { params } => m.serialize_entry("params", params)?,
+            Self::ScvCode { params } => m.serialize_entry("params", params)?,
+            Self::Lugre { params } => m.serialize_entry("params", params)?,
+        }
+        m.end()
+    }
+}
+
+/// The two keys a fit file is read by (other keys are ignored).
+#[derive(Deserialize)]
+struct Tagged {
+    model: String,
+    params: serde_json::Value,
+}
+
+impl<'de> Deserialize<'de> for FittedModel {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        let Tagged { model, params } = Tagged::deserialize(d)?;
+        let unknown = || {
+            D::Error::custom(format!(
+                "unknown model `{model}`, expected one of: {}",
+                fit_tags()
+            ))
+        };
+        match ModelKind::from_fit_tag(&model).ok_or_else(unknown)? {
+            ModelKind::Cv => Ok(Self::Cv {
+                params: params_or_inf::<_, D::Error>(params)?,
+            }),
+            ModelKind::Scv => Ok(Self::Scv {
+                params: params_or_inf::<_, D::Error>(params)?,
+            }),
+            ModelKind::ScvCode => Ok(Self::ScvCode {
+                params: params_or_inf::<_, D::Error>(params)?,
+            }),
+            ModelKind::Lugre => {
+                let params = LugreParams::deserialize(params)
+                    .map_err(|e| D::Error::custom(format!("params: {e}")))?;
+                params
+                    .validate()
+                    .map_err(|e| D::Error::custom(format!("params.{}: {e}", e.name)))?;
+                Ok(Self::Lugre { params })
+            }
+            ModelKind::None | ModelKind::Pinn => Err(unknown()),
+        }
+    }
 }
 
 impl FittedModel {
@@ -101,13 +172,19 @@ impl FittedModel {
         })
     }
 
-    /// The tag: `Cv`, `Scv` or `ScvCode`.
-    pub fn tag(&self) -> &'static str {
+    /// The model's kind in the core's list.
+    pub fn kind(&self) -> ModelKind {
         match self {
-            Self::Cv { .. } => "Cv",
-            Self::Scv { .. } => "Scv",
-            Self::ScvCode { .. } => "ScvCode",
+            Self::Cv { .. } => ModelKind::Cv,
+            Self::Scv { .. } => ModelKind::Scv,
+            Self::ScvCode { .. } => ModelKind::ScvCode,
+            Self::Lugre { .. } => ModelKind::Lugre,
         }
+    }
+
+    /// The file's `model` tag ([`ModelKind::fit_tag`]): `Cv`, `Scv` or `ScvCode`.
+    pub fn tag(&self) -> &'static str {
+        self.kind().fit_tag().unwrap_or("")
     }
 
     /// The model as an estimator.
@@ -116,11 +193,16 @@ impl FittedModel {
             Self::Cv { params } => JointModel::Cv(params),
             Self::Scv { params } => JointModel::Scv(params),
             Self::ScvCode { params } => JointModel::ScvCode(params),
+            // Integrated at the datasets' 1 kHz (the daemon's tick); the parameters were validated
+            // when read, so `new` cannot fail (no compensation if it ever did).
+            Self::Lugre { params } => LugreEstimator::new(params, DEFAULT_DT_S)
+                .map(JointModel::Lugre)
+                .unwrap_or_default(),
         }
     }
 
     /// The model in SCV paper form: CV with ks = kc (the Stribeck term vanishes; vs = α = 1), the code
-    /// form with ka = ∞ and α = 2.
+    /// form with ka = ∞ and α = 2, LuGre's steady state (ka = ∞).
     pub fn to_scv(&self) -> ScvParams {
         match *self {
             Self::Cv { params: c } => ScvParams {
@@ -133,6 +215,14 @@ impl FittedModel {
             },
             Self::Scv { params } => params,
             Self::ScvCode { params } => ScvParams::from(params),
+            Self::Lugre { params: l } => ScvParams {
+                kc: l.kc,
+                ka: f64::INFINITY,
+                kv: l.kv,
+                ks: l.ks,
+                vs: l.vs,
+                alpha: l.alpha,
+            },
         }
     }
 }
@@ -164,8 +254,17 @@ mod tests {
         .unwrap();
         assert_eq!(code.to_scv().alpha, 2.0);
         assert!(matches!(code.joint_model(), JointModel::ScvCode(_)));
+        let lugre: FittedModel = serde_json::from_str(
+            r#"{"model": "Lugre", "params": {"kc": 1.0, "kv": 0.2, "ks": 1.5, "vs": 0.05, "alpha": 1.0, "sigma0": 1000.0, "sigma1": 2.0}}"#,
+        )
+        .unwrap();
+        assert!(matches!(lugre.joint_model(), JointModel::Lugre(_)));
+        assert_eq!(lugre.to_scv().ka, f64::INFINITY);
+        let again: FittedModel =
+            serde_json::from_str(&serde_json::to_string(&lugre).unwrap()).unwrap();
+        assert_eq!(again, lugre);
         for (bad, needle) in [
-            (r#"{"model": "Lugre", "params": {}}"#, "Lugre"),
+            (r#"{"model": "Dahl", "params": {}}"#, "Dahl"),
             (
                 r#"{"model": "Cv", "params": {"kc": 1.0, "kv": 0.5}}"#,
                 "params.ka",
@@ -179,6 +278,10 @@ mod tests {
                 "kc",
             ),
             (r#"{"params": {"kc": 1.0, "ka": 1.0, "kv": 0.5}}"#, "model"),
+            (
+                r#"{"model": "Lugre", "params": {"kc": 1.0, "kv": 0.2, "ks": 1.5, "vs": 0.05, "alpha": 1.0, "sigma0": 0.0, "sigma1": 2.0}}"#,
+                "params.sigma0",
+            ),
         ] {
             let e = serde_json::from_str::<FittedModel>(bad)
                 .unwrap_err()

@@ -169,7 +169,7 @@ impl ModelSpec {
         }
     }
 
-    /// A static model under `name`.
+    /// A model read from a fit file (static or LuGre) under `name`.
     pub fn static_model(name: &str, model: JointModel) -> Self {
         Self {
             name: name.into(),
@@ -191,14 +191,18 @@ impl ModelSpec {
         })
     }
 
-    /// Whether this is a static (history-free) model; static models are also drawn as curves.
+    /// Whether this is a static (history- and state-free) model ([`ModelKind::is_static`]); static
+    /// models are also drawn as curves.
+    ///
+    /// [`ModelKind::is_static`]: frictionless::model::ModelKind::is_static
     pub fn is_static(&self) -> bool {
-        self.pinn_history.is_none()
+        use frictionless::model::FrictionModel;
+        self.model.kind().is_static()
     }
 }
 
 /// Reads a static model from the JSON of `frictl fit cv|scv|scv-code --json`
-/// ([`frictionless_dataset::fit_file::FittedModel`]: `model` = `Cv` | `Scv` | `ScvCode` and `params`).
+/// ([`frictionless_dataset::fit_file::FittedModel`]: a `model` tag and `params`).
 pub fn load_static_model(path: &Path) -> Result<JointModel, EvalError> {
     use frictionless_dataset::fit_file::{FitFileError, FittedModel};
     let p = path.display().to_string();
@@ -211,7 +215,8 @@ pub fn load_static_model(path: &Path) -> Result<JointModel, EvalError> {
         Err(FitFileError::Parse { message, .. }) => Err(EvalError::StaticModel {
             path: p,
             msg: format!(
-                "not a fit of `frictl fit --json` (keys `model` = \"Cv\" | \"Scv\" | \"ScvCode\" and `params`): {message}"
+                "not a fit of `frictl fit --json` (keys `model` = {} and `params`): {message}",
+                frictionless_dataset::fit_file::fit_tags()
             ),
         }),
     }

@@ -44,7 +44,7 @@
 //! let j = &cfg.raw.joint[0];
 //! assert_eq!(j.kfc, shipped_kfc("l_knee"));
 //! assert_eq!(j.kfc, 0.85);
-//! assert_eq!(j.friction_model, frictiond_config::FrictionModelName::CoulombViscous);
+//! assert_eq!(j.friction_model, frictiond_config::ModelKind::Cv);
 //! assert_eq!(cfg.raw.loop_.trigger, frictiond_config::Trigger::Lockstep);
 //! assert!(matches!(cfg.models[0], frictiond_config::ModelSpec::Cv(p) if p.kc == 8.1));
 //! # Ok::<(), Box<dyn std::error::Error>>(())

@@ -20,8 +20,8 @@ use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
 use frictiond_config::{
-    BackendConfig, BackendKind, FrictionModelName, JointConfig, LoopConfig, LpfConfig, OnStale,
-    OodMode, RawConfig, SafetyConfig, Trigger, WarmupName, default_ood_margin, default_ood_ramp_ms,
+    BackendConfig, BackendKind, JointConfig, LoopConfig, LpfConfig, ModelKind, OnStale, OodMode,
+    RawConfig, SafetyConfig, Trigger, WarmupName, default_ood_margin, default_ood_ramp_ms,
 };
 use frictionless::friction::{CvParams, ScvParams};
 use frictionless_shm_types::IpcConfig;
@@ -366,13 +366,15 @@ pub fn daemon_joint(j: &DaemonJoint, raw_friction: bool) -> Result<JointConfig, 
         max_output_friction: f64::INFINITY,
         joint_velocity_threshold_rad_s: 0.0,
         lpf: None,
-        friction_model: FrictionModelName::None,
+        friction_model: ModelKind::None,
         kc: None,
         kv: None,
         ka: None,
         ks: None,
         vs: None,
         alpha: None,
+        sigma0: None,
+        sigma1: None,
         model: None,
         warmup: WarmupName::default(),
         delta_theta_offset_motor_rad: None,
@@ -394,11 +396,11 @@ pub fn daemon_joint(j: &DaemonJoint, raw_friction: bool) -> Result<JointConfig, 
         // the oracle's compensation is added by the controller to τ_des
         FrictionModel::None | FrictionModel::Oracle => {}
         FrictionModel::Cv(p) => {
-            out.friction_model = FrictionModelName::CoulombViscous;
+            out.friction_model = ModelKind::Cv;
             (out.kc, out.ka, out.kv) = (Some(p.kc), Some(p.ka), Some(p.kv));
         }
         FrictionModel::Scv(p) => {
-            out.friction_model = FrictionModelName::CoulombViscousStribeck;
+            out.friction_model = ModelKind::Scv;
             (out.kc, out.ka, out.kv) = (Some(p.kc), Some(p.ka), Some(p.kv));
             (out.ks, out.vs, out.alpha) = (Some(p.ks), Some(p.vs), Some(p.alpha));
         }
@@ -407,7 +409,7 @@ pub fn daemon_joint(j: &DaemonJoint, raw_friction: bool) -> Result<JointConfig, 
                 path: file.clone(),
                 source,
             })?;
-            out.friction_model = FrictionModelName::Pinn;
+            out.friction_model = ModelKind::Pinn;
             out.model = Some(abs);
             out.warmup = WarmupName::ZeroPad;
             out.delta_theta_offset_motor_rad = j.delta_theta_offset_motor_rad;
@@ -837,7 +839,7 @@ mod tests {
         assert_eq!(ten.kfc, law.kfc);
         // the oracle's joint runs no model in frictiond
         let oracle = written(None, None, FrictionModel::Oracle);
-        assert_eq!(oracle.friction_model, FrictionModelName::None);
+        assert_eq!(oracle.friction_model, ModelKind::None);
         // LawSettings follows the same overrides
         let l = LawSettings::shipped("l_ankle_roll", Some(0.5), Some(Lpf::Off)).unwrap();
         assert_eq!((l.kfc, l.lpf), (0.5, Lpf::Off));
@@ -852,7 +854,7 @@ mod tests {
             kv: 0.3,
         };
         let j = written(Some(1.0), None, FrictionModel::Cv(cv));
-        assert_eq!(j.friction_model, FrictionModelName::CoulombViscous);
+        assert_eq!(j.friction_model, ModelKind::Cv);
         assert_eq!((j.kc, j.ka, j.kv), (Some(1.25), Some(40.0), Some(0.3)));
         assert_eq!(
             (j.ks, j.vs, j.alpha, j.model.as_ref()),
@@ -867,7 +869,7 @@ mod tests {
             alpha: 0.6,
         };
         let j = written(None, None, FrictionModel::Scv(scv));
-        assert_eq!(j.friction_model, FrictionModelName::CoulombViscousStribeck);
+        assert_eq!(j.friction_model, ModelKind::Scv);
         assert_eq!(
             (j.kc, j.ka, j.kv, j.ks, j.vs, j.alpha),
             (
@@ -889,7 +891,7 @@ mod tests {
         let back: RawConfig = toml::from_str(&text).unwrap();
         assert_eq!(back, cfg);
         let j = &back.joint[0];
-        assert_eq!(j.friction_model, FrictionModelName::Pinn);
+        assert_eq!(j.friction_model, ModelKind::Pinn);
         assert!(j.model.as_ref().unwrap().is_absolute());
         assert!(j.model.as_ref().unwrap().ends_with("rel/a.fwt"));
         assert_eq!(j.warmup, WarmupName::ZeroPad);

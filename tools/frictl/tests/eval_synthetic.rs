@@ -501,3 +501,80 @@ fn cli_holds_out_runs_and_reports_per_run_per_band_and_extrapolation() {
     assert!(!ok && text.contains("--band-edges"), "{text}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `frictl fit lugre` on a dataset labelled with LuGre's steady state (SCV with sign()) writes a
+/// `Lugre` fit (static part from the SCV fit, σ0 and σ1 as given) and its `[[joint]]` snippet, and
+/// `frictl eval --lugre` scores it far better than no model.
+#[test]
+fn fit_lugre_then_eval_scores_it() {
+    let dir = std::env::temp_dir().join(format!("eval_lugre_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let curve = ScvParams {
+        ka: f64::INFINITY,
+        ..scv()
+    };
+    let ds = dataset(&|v, _| curve.torque_nm(v), 5, DeltaThetaOffset::Run);
+    let csv = dir.join("ds.csv");
+    ds.write_csv(&csv).unwrap();
+    let fit_json = dir.join("lugre.json");
+    let fit_toml = dir.join("lugre.toml");
+    let out = Command::new(env!("CARGO_BIN_EXE_frictl"))
+        .args(["fit", "lugre"])
+        .arg(&csv)
+        .args(["--sigma0", "1e5", "--sigma1", "0.5", "--json"])
+        .arg(&fit_json)
+        .arg("--toml")
+        .arg(&fit_toml)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "frictl fit lugre: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let f: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&fit_json).unwrap()).unwrap();
+    assert_eq!(f["model"], "Lugre");
+    assert_eq!(f["daemon_friction_model"], "lugre");
+    let p = &f["params"];
+    let kc = p["kc"].as_f64().unwrap();
+    assert!(kc > 0.0, "kc {kc}");
+    assert_eq!(p["sigma0"], 1e5);
+    assert_eq!(p["sigma1"], 0.5);
+    assert_eq!(
+        f["param_names"],
+        serde_json::json!(["kc", "kv", "ks", "vs", "alpha", "sigma0", "sigma1"])
+    );
+    let toml = std::fs::read_to_string(&fit_toml).unwrap();
+    assert!(
+        toml.contains("friction_model = \"lugre\"") && toml.contains("sigma0 = "),
+        "{toml}"
+    );
+
+    let json = dir.join("eval.json");
+    let out = Command::new(env!("CARGO_BIN_EXE_frictl"))
+        .arg("eval")
+        .arg("--dataset")
+        .arg(&csv)
+        .arg("--lugre")
+        .arg(&fit_json)
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "frictl eval --lugre: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let rmse = |m: &str| v["models"][m]["rmse_all"].as_f64().unwrap();
+    assert!(
+        rmse("lugre") < 0.5 * rmse("none"),
+        "lugre {} none {}",
+        rmse("lugre"),
+        rmse("none")
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -57,7 +57,7 @@ fn a_two_joint_robot_gives_one_checked_frictiond_config_and_resumes_by_stamp() {
     let names: Vec<&str> = cfg.raw.joint.iter().map(|j| j.name.as_str()).collect();
     assert_eq!(names, ["l_knee", "l_ankle_roll"]);
     for (j, (r, kfc)) in cfg.raw.joint.iter().zip([(-100.0, 0.85), (-160.0, 0.7)]) {
-        assert_eq!(j.friction_model, frictiond_config::FrictionModelName::Pinn);
+        assert_eq!(j.friction_model, frictiond_config::ModelKind::Pinn);
         assert_eq!((j.gear_ratio, j.kfc), (r, kfc), "{}", j.name);
         let model = j.model.as_ref().unwrap();
         assert_eq!(

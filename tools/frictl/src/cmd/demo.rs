@@ -380,6 +380,7 @@ struct JointFiles {
     test_ds: PathBuf,
     cv: PathBuf,
     scv: PathBuf,
+    lugre: PathBuf,
     fwt: PathBuf,
     train_report: PathBuf,
     eval_json: PathBuf,
@@ -393,6 +394,7 @@ impl JointFiles {
             test_ds: d.data.join(format!("{joint}_test_ds.csv")),
             cv: d.models.join(format!("{joint}_cv.json")),
             scv: d.models.join(format!("{joint}_scv.json")),
+            lugre: d.models.join(format!("{joint}_lugre.json")),
             fwt: d.models.join(format!("{joint}.fwt")),
             train_report: d.models.join(format!("{joint}_train.json")),
             eval_json: d.eval.join(format!("{joint}.json")),
@@ -430,7 +432,7 @@ struct Network {
 /// `report.json` `joints.JOINT`.
 #[derive(serde::Serialize)]
 struct JointEntry {
-    /// Model label (`none`, `CV`, `SCV`, `PINN`, the oracle's) → results.
+    /// Model label (`none`, `CV`, `SCV`, `LuGre`, `PINN`, the oracle's) → results.
     models: BTreeMap<String, ModelEntry>,
     files: JointFilesEntry,
 }
@@ -440,6 +442,7 @@ struct JointEntry {
 struct JointFilesEntry {
     cv: String,
     scv: String,
+    lugre: String,
     pinn: String,
     eval: String,
 }
@@ -589,10 +592,11 @@ impl From<&Cell> for ClosedLoopEntry {
 }
 
 /// The evaluation's model keys and the demo's labels for them.
-const EVAL_MODELS: [(&str, &str); 4] = [
+const EVAL_MODELS: [(&str, &str); 5] = [
     ("none", "none"),
     ("cv", "CV"),
     ("scv", "SCV"),
+    ("lugre", "LuGre"),
     ("pinn", "PINN"),
 ];
 
@@ -860,9 +864,13 @@ fn label(
     Ok(())
 }
 
-/// Stage 3, fit: CV and SCV on the training dataset.
+/// Stage 3, fit: CV, SCV and LuGre on the training dataset.
 fn fit(r: &mut Runner, preset: &str, files: &JointFiles) -> anyhow::Result<()> {
-    for (m, f) in [("cv", &files.cv), ("scv", &files.scv)] {
+    for (m, f) in [
+        ("cv", &files.cv),
+        ("scv", &files.scv),
+        ("lugre", &files.lugre),
+    ] {
         r.frictl(
             &format!("fit {m} {preset}"),
             &[
@@ -983,6 +991,8 @@ fn evaluate(
             s(&files.cv),
             "--scv".into(),
             s(&files.scv),
+            "--lugre".into(),
+            s(&files.lugre),
             "--pinn".into(),
             s(&files.fwt),
             "--train-report".into(),
@@ -1054,6 +1064,7 @@ fn joint_entry(ev: Option<&EvalReport>, files: &JointFiles) -> JointEntry {
         files: JointFilesEntry {
             cv: s(&files.cv),
             scv: s(&files.scv),
+            lugre: s(&files.lugre),
             pinn: s(&files.fwt),
             eval: s(&files.eval_json),
         },
@@ -1561,10 +1572,16 @@ mod tests {
         let v = serde_json::to_value(&per_joint).unwrap();
         let entry = &v["l_knee"];
         assert_eq!(key_set(entry), ["files", "models"]);
-        assert_eq!(key_set(&entry["files"]), ["cv", "eval", "pinn", "scv"]);
+        assert_eq!(
+            key_set(&entry["files"]),
+            ["cv", "eval", "lugre", "pinn", "scv"]
+        );
         assert_eq!(entry["files"]["cv"], s(&files.cv));
         let models = &entry["models"];
-        assert_eq!(key_set(models), ["CV", "PINN", "SCV", "none", ORACLE_LABEL]);
+        assert_eq!(
+            key_set(models),
+            ["CV", "LuGre", "PINN", "SCV", "none", ORACLE_LABEL]
+        );
         let closed = [
             "closed_loop_tau_f_rmse_nm",
             "disturbance_rmse_low_kp_rad",

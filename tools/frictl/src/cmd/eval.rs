@@ -1,4 +1,4 @@
-//! `frictl eval` — RMSE of none / CV / SCV / PINN models on held-out datasets, a printed table, a JSON
+//! `frictl eval` — RMSE of none / CV / SCV / LuGre / PINN models on held-out datasets, a printed table, a JSON
 //! report and PNG figures; with `--drift`, the drift monitor on a new log (`frictionless_eval::drift`). See
 //! `frictionless_eval` for the method, the rows evaluated and the JSON schema.
 
@@ -47,6 +47,9 @@ pub struct Args {
     /// SCV model: the JSON of `frictl fit scv|scv-code --json`.
     #[arg(long)]
     pub scv: Option<PathBuf>,
+    /// LuGre model: the JSON of `frictl fit lugre --json`.
+    #[arg(long)]
+    pub lugre: Option<PathBuf>,
     /// PINN model file `.fwt` (repeatable).
     #[arg(long = "pinn")]
     pub pinns: Vec<PathBuf>,
@@ -191,6 +194,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if let Some(p) = &args.scv {
         models.push(ModelSpec::static_model("scv", eval::load_static_model(p)?));
+    }
+    if let Some(p) = &args.lugre {
+        models.push(ModelSpec::static_model(
+            "lugre",
+            eval::load_static_model(p)?,
+        ));
     }
     let mut pinn_files = Vec::new();
     for (p, name) in args.pinns.iter().zip(pinn_names(&args.pinns)) {

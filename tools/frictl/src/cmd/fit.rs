@@ -1,12 +1,18 @@
-//! `frictl fit cv|scv|scv-code DATASET.csv` — fit a static friction model to a preprocessed dataset and
-//! print/write it as a `[[joint]]` TOML snippet in the daemon's config format, and as JSON
+//! `frictl fit cv|scv|scv-code|lugre DATASET.csv` — fit a friction model to a preprocessed dataset
+//! and print/write it as a `[[joint]]` TOML snippet in the daemon's config format, and as JSON
 //! ([`FitFile`]).
+//!
+//! LuGre's static parameters (kc, kv, ks, vs, alpha) are those of the SCV fit (its smooth-sign ka is
+//! dropped: the bristle state replaces it); the bristle stiffness σ0 and damping σ1 are given
+//! (`--sigma0`, default kc / 1 mrad: the Coulomb level is reached at 1 mrad of joint-side
+//! pre-sliding deflection; `--sigma1`, default 0).
 
 use std::path::PathBuf;
 
 use anyhow::Context;
-use frictiond_config::FrictionModelName;
+use frictiond_config::ModelKind;
 use frictionless::friction::{CvParams, ScvCodeParams, ScvParams};
+use frictionless::lugre::LugreParams;
 use frictionless_dataset::Dataset;
 use frictionless_dataset::fit_file::FittedModel;
 use frictionless_ident::fit::{
@@ -15,15 +21,37 @@ use frictionless_ident::fit::{
 };
 use serde::{Deserialize, Serialize};
 
-/// Static model to fit.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum ModelKind {
-    /// Coulomb–viscous τ = kc·tanh(ka·v) + kv·v.
-    Cv,
-    /// Stribeck–Coulomb–viscous (paper form, kc, ka, kv, ks, vs, alpha).
-    Scv,
-    /// The authors' code form (sign(), α = 2): fc, fs, fv, vs.
-    ScvCode,
+/// Model to fit: a kind of the core's list that has a fit-file tag ([`ModelKind::fit_tag`]); the
+/// CLI choice is its [`ModelKind::name`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FitModel(pub ModelKind);
+
+/// The fittable kinds, in list order.
+const FIT_MODELS: [FitModel; 4] = {
+    let mut out = [FitModel(ModelKind::None); 4];
+    let mut n = 0;
+    let mut k = 0;
+    while k < ModelKind::ALL.len() {
+        if ModelKind::ALL[k].fit_tag().is_some() {
+            out[n] = FitModel(ModelKind::ALL[k]);
+            n += 1;
+        }
+        k += 1;
+    }
+    assert!(
+        n == out.len(),
+        "FIT_MODELS has one entry per kind with a fit tag"
+    );
+    out
+};
+
+impl clap::ValueEnum for FitModel {
+    fn value_variants<'a>() -> &'a [Self] {
+        &FIT_MODELS
+    }
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        Some(clap::builder::PossibleValue::new(self.0.name()).help(self.0.description()))
+    }
 }
 
 /// Arguments of `frictl fit`.
@@ -31,7 +59,7 @@ pub enum ModelKind {
 pub struct Args {
     /// Model.
     #[arg(value_enum)]
-    pub model: ModelKind,
+    pub model: FitModel,
     /// Dataset CSV from `frictl preprocess`.
     pub dataset: PathBuf,
     /// Solver.
@@ -78,6 +106,12 @@ pub struct Args {
     /// Upper bound of ks/kc (fs/fc for the code form).
     #[arg(long, default_value_t = FitBounds::default().ks_max_ratio)]
     pub ks_max_ratio: f64,
+    /// LuGre bristle stiffness σ0 [Nm/rad] (default: kc / 1e-3 rad).
+    #[arg(long)]
+    pub sigma0: Option<f64>,
+    /// LuGre bristle damping σ1 [Nm·s/rad].
+    #[arg(long, default_value_t = 0.0)]
+    pub sigma1: f64,
     /// Write the TOML snippet here.
     #[arg(long)]
     pub toml: Option<PathBuf>,
@@ -98,6 +132,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .map(|p| p.as_path())
         .collect();
     super::check_outputs(&[&args.dataset], &outputs)?;
+    if let Some(s0) = args.sigma0 {
+        anyhow::ensure!(
+            s0.is_finite() && s0 > 0.0,
+            "--sigma0 {s0}: must be finite and > 0"
+        );
+    }
+    anyhow::ensure!(
+        args.sigma1.is_finite() && args.sigma1 >= 0.0,
+        "--sigma1 {}: must be finite and ≥ 0",
+        args.sigma1
+    );
     let ds = Dataset::read_csv(&args.dataset)?;
     let target = if args.truth {
         ds.tau_f_true_nm
@@ -181,7 +226,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..FitOptions::default()
     };
     let started = std::time::Instant::now();
-    let (toml, json) = match args.model {
+    let (toml, json) = match args.model.0 {
         ModelKind::Cv => report(
             fit::<CvParams>(&v, &t, &opts).map_err(at_line)?,
             |params| FittedModel::Cv { params },
@@ -203,6 +248,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             &target,
             &args,
         ),
+        ModelKind::Lugre => {
+            let (sigma0, sigma1) = (args.sigma0, args.sigma1);
+            report(
+                fit::<ScvParams>(&v, &t, &opts).map_err(at_line)?,
+                move |s: ScvParams| FittedModel::Lugre {
+                    params: LugreParams {
+                        kc: s.kc,
+                        kv: s.kv,
+                        ks: s.ks,
+                        vs: s.vs,
+                        alpha: s.alpha,
+                        sigma0: sigma0.unwrap_or(s.kc / 1e-3),
+                        sigma1,
+                    },
+                },
+                &ds,
+                &target,
+                &args,
+            )
+        }
+        kind @ (ModelKind::None | ModelKind::Pinn) => {
+            anyhow::bail!("frictl fit: {kind} is not a model `frictl fit` fits")
+        }
     }?;
     eprintln!(
         "frictl fit: {} of {} samples selected, fitted in {:.3} s",
@@ -224,6 +292,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
 /// Daemon `[[joint]]` keys for a fitted model (SCV code form = SCV with ka = inf, alpha = 2).
 fn daemon_keys(m: &FittedModel) -> Vec<(&'static str, f64)> {
+    if let FittedModel::Lugre { params: l } = m {
+        return vec![
+            ("kc", l.kc),
+            ("kv", l.kv),
+            ("ks", l.ks),
+            ("vs", l.vs),
+            ("alpha", l.alpha),
+            ("sigma0", l.sigma0),
+            ("sigma1", l.sigma1),
+        ];
+    }
     if let FittedModel::Cv { params: c } = m {
         vec![("kc", c.kc), ("kv", c.kv), ("ka", c.ka)]
     } else {
@@ -249,7 +328,7 @@ fn toml_f64(v: f64) -> String {
 
 fn report<M: Fittable>(
     r: FitResult<M>,
-    tagged: fn(M) -> FittedModel,
+    tagged: impl Fn(M) -> FittedModel,
     ds: &Dataset,
     target: &[f64],
     args: &Args,
@@ -266,11 +345,16 @@ fn report<M: Fittable>(
         &select(target, &ds.valid),
     );
     let fitted = tagged(r.model);
+    if let FittedModel::Lugre { params } = &fitted {
+        params
+            .validate()
+            .map_err(|e| anyhow::anyhow!("frictl fit lugre: fitted {e}"))?;
+    }
     // The serialised name is a quoted string, valid TOML.
-    let model_name = serde_json::to_value(daemon_friction_model(&fitted))?;
+    let model_name = serde_json::to_value(FitFile::daemon_name(&fitted))?;
     let mut s = format!(
-        "# frictl fit {:?} ({:?}) on {}: {} samples, RMSE {:.4} Nm on the fitted samples, {:.4} Nm on all valid samples\n[[joint]]\nfriction_model = {model_name}\n",
-        args.model,
+        "# frictl fit {} ({:?}) on {}: {} samples, RMSE {:.4} Nm on the fitted samples, {:.4} Nm on all valid samples\n[[joint]]\nfriction_model = {model_name}\n",
+        fitted.tag(),
         args.method,
         args.dataset.display(),
         r.n_samples,
@@ -283,8 +367,14 @@ fn report<M: Fittable>(
     let json = FitFile {
         fitted,
         method: args.method,
-        param_names: M::PARAM_NAMES.iter().map(|n| (*n).to_owned()).collect(),
-        daemon_friction_model: daemon_friction_model(&fitted),
+        param_names: match fitted {
+            FittedModel::Lugre { .. } => LugreParams::PARAM_NAMES.as_slice(),
+            _ => M::PARAM_NAMES,
+        }
+        .iter()
+        .map(|n| (*n).to_owned())
+        .collect(),
+        daemon_friction_model: fitted.kind().daemon_kind(),
         rmse_fitted_nm: r.rmse_nm,
         mae_fitted_nm: r.mae_nm,
         rmse_valid_nm: rmse_valid,
@@ -318,7 +408,8 @@ pub struct FitFile {
     /// Parameter names in the fitter's order.
     pub param_names: Vec<String>,
     /// The daemon's `friction_model` for the snippet.
-    pub daemon_friction_model: FrictionModelName,
+    #[serde(with = "frictiond_config::friction_model_name")]
+    pub daemon_friction_model: ModelKind,
     /// RMSE on the fitted (selected) samples [Nm].
     pub rmse_fitted_nm: f64,
     /// MAE on the fitted samples [Nm].
@@ -341,21 +432,23 @@ pub struct FitFile {
     pub dataset: String,
 }
 
-/// The daemon's `friction_model` for this model (the code form runs as SCV with ka = ∞, α = 2).
-fn daemon_friction_model(fitted: &FittedModel) -> FrictionModelName {
-    match fitted {
-        FittedModel::Cv { .. } => FrictionModelName::CoulombViscous,
-        FittedModel::Scv { .. } | FittedModel::ScvCode { .. } => {
-            FrictionModelName::CoulombViscousStribeck
-        }
+impl FitFile {
+    /// The daemon's `friction_model` value for `fitted` (the code form runs as SCV with ka = ∞,
+    /// α = 2), serialisable as the config writes it.
+    fn daemon_name(fitted: &FittedModel) -> DaemonName {
+        DaemonName(fitted.kind().daemon_kind())
     }
 }
+
+/// A `friction_model` value, serialised as the config writes it.
+#[derive(Serialize)]
+struct DaemonName(#[serde(with = "frictiond_config::friction_model_name")] ModelKind);
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// A file as `frictl fit scv --json` wrote it with `"model": format!("{:?}", ModelKind::Scv)`.
+    /// A file as `frictl fit scv --json` wrote it.
     const WRITTEN_BEFORE: &str = r#"{
   "model": "Scv",
   "method": "lm",
@@ -377,10 +470,7 @@ mod tests {
         let f: FitFile = serde_json::from_str(WRITTEN_BEFORE).unwrap();
         assert_eq!(f.fitted.tag(), "Scv");
         assert_eq!(f.method, Method::Lm);
-        assert_eq!(
-            f.daemon_friction_model,
-            FrictionModelName::CoulombViscousStribeck
-        );
+        assert_eq!(f.daemon_friction_model, ModelKind::Scv);
         assert_eq!(f.fitted.to_scv().alpha, 0.6);
         let again: FitFile = serde_json::from_str(&serde_json::to_string(&f).unwrap()).unwrap();
         assert_eq!(again, f);

@@ -15,7 +15,7 @@ use frictionless_shm_types::{
     DaemonStatus, FLAG_CURRENT_SATURATED, FLAG_DISABLED, FLAG_FAULT, FLAG_FRICTION_CLIPPED,
     FLAG_NON_FINITE, FLAG_OUT_OF_RANGE, FLAG_STALE, FLAG_WARMING_UP, Histogram, Ipc, IpcConfig,
     STATUS_CPU_PINNED, STATUS_INPUT_STALE, STATUS_MEMORY_LOCKED, STATUS_SCHED_FIFO,
-    STATUS_STOPPING, model_kind,
+    STATUS_STOPPING,
 };
 
 /// Arguments of `frictl monitor`.
@@ -39,14 +39,7 @@ pub struct Args {
 }
 
 fn kind_name(k: u8) -> &'static str {
-    match k {
-        model_kind::NONE => "none",
-        model_kind::CV => "cv",
-        model_kind::SCV => "scv",
-        model_kind::SCV_CODE => "scv-code",
-        model_kind::PINN => "pinn",
-        _ => "?",
-    }
+    frictionless::model::ModelKind::from_code(k).map_or("?", |k| k.name())
 }
 
 fn flag_names(f: u32) -> String {
@@ -177,7 +170,7 @@ mod tests {
     fn render_shows_the_out_of_range_count_and_flag() {
         let mut s = DaemonStatus::zeroed();
         s.n_joints = 2;
-        s.model_kind[1] = model_kind::PINN;
+        s.model_kind[1] = frictionless::model::ModelKind::Pinn.code();
         s.out_of_range_ticks[1] = 1234;
         s.joint_flags[1] = FLAG_OUT_OF_RANGE;
         let text = render(&s);

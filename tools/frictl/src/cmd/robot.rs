@@ -28,8 +28,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use frictiond_config::{
-    BackendConfig, BackendKind, FrictionModelName, JointConfig, LoopConfig, LpfConfig, OodMode,
-    RawConfig, SafetyConfig, WarmupName, default_ood_margin, default_ood_ramp_ms,
+    BackendConfig, BackendKind, JointConfig, LoopConfig, LpfConfig, ModelKind, OodMode, RawConfig,
+    SafetyConfig, WarmupName, default_ood_margin, default_ood_ramp_ms,
 };
 use frictionless_eval::Report as EvalReport;
 use frictionless_train::pipeline::{self, TrainReport};
@@ -789,13 +789,15 @@ fn daemon_config(robot: &RobotFile, plans: &[JointPlan], out: &Path) -> anyhow::
                 order: l.order,
                 cutoff_hz: l.cutoff_hz,
             }),
-            friction_model: FrictionModelName::Pinn,
+            friction_model: ModelKind::Pinn,
             kc: None,
             kv: None,
             ka: None,
             ks: None,
             vs: None,
             alpha: None,
+            sigma0: None,
+            sigma1: None,
             model: Some(PathBuf::from(&p.model)),
             model_for: None,
             warmup: WarmupName::HoldZero,
