@@ -52,4 +52,5 @@
 pub mod fit;
 pub mod kalman;
 pub mod preprocess;
+mod signals;
 pub mod whole_body;
