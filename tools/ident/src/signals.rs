@@ -134,7 +134,7 @@ pub struct RunJoints<'a> {
 }
 
 /// The per-joint half of the pipeline: checks what a label needs, then labels chunk after chunk.
-struct Labeller<'a> {
+pub(crate) struct Labeller<'a> {
     label: SignalsLabel,
     cfg: PreprocessConfig,
     link: Option<&'a dyn LinkDynamics>,
@@ -146,11 +146,13 @@ struct Labeller<'a> {
     rkt: Option<f64>,
     r_dtheta: Option<f64>,
     bw: Butterworth,
-    ds: Dataset,
-    sum: SignalsSummary,
+    pub(crate) ds: Dataset,
+    pub(crate) sum: SignalsSummary,
     chunk_id: u32,
     offset: Option<f64>,
     run_chunks: Vec<u32>,
+    /// Rows labelled so far (the dataset may have been drained by a streaming run).
+    rows: usize,
 }
 
 fn missing(column: &'static str) -> PreprocessError {
@@ -162,7 +164,7 @@ fn missing(column: &'static str) -> PreprocessError {
 
 impl<'a> Labeller<'a> {
     /// `has_id`: τ_ID is available (a link or the whole body) for the `current` label.
-    fn new(
+    pub(crate) fn new(
         runs: &[&RunSignals],
         label: &SignalsLabel,
         link: Option<&'a dyn LinkDynamics>,
@@ -316,12 +318,15 @@ impl<'a> Labeller<'a> {
             chunk_id: 0,
             offset: None,
             run_chunks: Vec::new(),
+            rows: 0,
         })
     }
 
-    /// Labels samples `a..b` of `run` on the grid `tq`; `tau_id`: the whole-body τ_ID on `tq`.
+    /// Labels samples `a..b` of `run` on the grid `tq` and appends the rows `keep` of `tq` to the
+    /// dataset; `tau_id`: the whole-body τ_ID on `tq`. The chunk's id advances at
+    /// [`Self::end_chunk`] (a chunk may be labelled in several overlapping segments).
     #[allow(clippy::too_many_arguments)]
-    fn chunk(
+    pub(crate) fn chunk(
         &mut self,
         run: &RunSignals,
         chunk_col: &[u32],
@@ -329,6 +334,7 @@ impl<'a> Labeller<'a> {
         b: usize,
         tq: &[f64],
         tau_id_given: Option<&[f64]>,
+        keep: std::ops::Range<usize>,
     ) -> Result<(), PreprocessError> {
         use frictionless_dataset::LabelSource as L;
         let cfg = &self.cfg;
@@ -407,7 +413,9 @@ impl<'a> Labeller<'a> {
         };
         let l = &cfg.limits;
         let ds = &mut self.ds;
-        for k in 0..n {
+        debug_assert!(keep.end <= n);
+        self.rows += keep.len();
+        for k in keep {
             let sk = s.as_ref().map_or(f64::NAN, |s| s[k]);
             let (vk, ak) = (vel_nc[k], acc_nc[k]);
             let tau_id = match (self.label.source, tau_id_given, self.link) {
@@ -461,13 +469,17 @@ impl<'a> Labeller<'a> {
             ds.tau_f_label_nm.push(tau_f);
             ds.temperature_c.push(at(&temp));
         }
-        self.run_chunks.push(self.chunk_id);
-        self.chunk_id += 1;
         Ok(())
     }
 
+    /// Closes a chunk: the next rows belong to the next chunk id.
+    pub(crate) fn end_chunk(&mut self) {
+        self.run_chunks.push(self.chunk_id);
+        self.chunk_id += 1;
+    }
+
     /// Closes a run (its Δθ offset and chunk list).
-    fn end_run(&mut self) {
+    pub(crate) fn end_run(&mut self) {
         self.sum
             .delta_theta_offsets_motor_rad
             .push(self.offset.take().unwrap_or(f64::NAN));
@@ -476,9 +488,9 @@ impl<'a> Labeller<'a> {
             .push(std::mem::take(&mut self.run_chunks));
     }
 
-    fn finish(mut self) -> Result<(Dataset, SignalsSummary), PreprocessError> {
+    pub(crate) fn finish(mut self) -> Result<(Dataset, SignalsSummary), PreprocessError> {
         use frictionless_dataset::LabelSource as L;
-        if self.ds.is_empty() {
+        if self.rows == 0 {
             return Err(PreprocessError::Empty);
         }
         let mut absent = Vec::new();
@@ -672,7 +684,8 @@ pub fn preprocess_joints(
                 } else {
                     None
                 };
-                l.chunk(run.signals[j], &chunk_col, a, b, &tq, tau)?;
+                l.chunk(run.signals[j], &chunk_col, a, b, &tq, tau, 0..tq.len())?;
+                l.end_chunk();
             }
         }
         for l in &mut labellers {
