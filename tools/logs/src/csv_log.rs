@@ -327,6 +327,17 @@ fn state_columns(
 
 /// Reads one CSV log into a run named after the file stem.
 pub fn read(path: &Path, spec: &CsvSpec, progress: Progress) -> Result<ImportedRun, LogsError> {
+    read_streamed(path, spec, progress, None)
+}
+
+/// [`read`], handing the rows to `stream` in blocks as they are read instead of holding them
+/// (`None`: held; see [`crate::BlockSink`]): the returned run then has the report and no rows.
+pub fn read_streamed(
+    path: &Path,
+    spec: &CsvSpec,
+    progress: Progress,
+    stream: Option<crate::BlockSink<'_>>,
+) -> Result<ImportedRun, LogsError> {
     let p = path.display().to_string();
     let file = open_regular(path)?;
     let total = file.metadata().map(|m| m.len()).unwrap_or(0);
@@ -478,7 +489,7 @@ pub fn read(path: &Path, spec: &CsvSpec, progress: Progress) -> Result<ImportedR
         idx.extend(state_idx);
         layout
     });
-    let mut b = RunBuilder::with_joints(map, joints, layout, &p, "csv");
+    let mut b = RunBuilder::with_joints(map, joints, layout, &p, "csv").streaming(stream);
     for (role, col) in &spec.columns {
         b.report_mut()
             .sources
@@ -515,7 +526,7 @@ pub fn read(path: &Path, spec: &CsvSpec, progress: Progress) -> Result<ImportedR
                 }
             };
         }
-        b.push(|| format!("line {line}"), 0);
+        b.push(|| format!("line {line}"), 0)?;
         rows += 1;
         if rows.is_multiple_of(65536) {
             progress(r.get_ref().bytes, total);

@@ -130,6 +130,11 @@ pub struct CsvArgs {
     /// Field delimiter (one character).
     #[arg(long, default_value = ",")]
     pub delimiter: char,
+    /// Stream the log: read and label it in windows of this many grid samples (plus margins the
+    /// smoother and filter settings need), appending each joint's rows as they come; the log is
+    /// never held whole and the rows equal the whole-log import's.
+    #[arg(long, value_name = "N")]
+    pub window_samples: Option<usize>,
     /// Options every format shares.
     #[command(flatten)]
     pub common: CommonArgs,
@@ -270,6 +275,9 @@ pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
         !spec.all_joints || spec.state.is_some(),
         "--joints all labels the joints of --positions with the current label: pass --positions TEMPLATE"
     );
+    if let Some(w) = args.window_samples {
+        return super::import_stream::run_csv(&args.files, &spec, &args.common, body.as_ref(), w);
+    }
     let runs = read_all(&args.files, |p, pr| csv_log::read(p, &spec, pr))?;
     let units = spec.units.clone();
     finish(
@@ -359,7 +367,7 @@ const JOINTS_PER_PASS: usize = 4;
 /// `{joint}` in the output path, replaced for one joint.
 const JOINT: &str = "{joint}";
 
-fn out_path(out: &Path, joint: &str) -> PathBuf {
+pub(crate) fn out_path(out: &Path, joint: &str) -> PathBuf {
     PathBuf::from(out.to_string_lossy().replace(JOINT, joint))
 }
 
@@ -408,7 +416,7 @@ fn per_joint_values<'a>(values: &'a [String], flag: &str) -> anyhow::Result<Vec<
 }
 
 /// A per-joint value of `R` / `NAME=R` options: the joint's own, else the one for all.
-fn per_joint(values: &[String], joint: &str, flag: &str) -> anyhow::Result<Option<f64>> {
+pub(crate) fn per_joint(values: &[String], joint: &str, flag: &str) -> anyhow::Result<Option<f64>> {
     let mut all = None;
     let mut mine = None;
     for (v, x) in per_joint_values(values, flag)? {
