@@ -1237,3 +1237,86 @@ fn csv_streamed_import_equals_the_whole_log_and_holds_a_window() {
         assert_eq!(side["samples"].as_u64(), Some(w.len() as u64));
     }
 }
+
+#[test]
+#[ignore = "needs FRICTIONLESS_PY (tests/run.sh): Pinocchio writes the log with a foot wrench"]
+fn csv_measured_wrench_enters_the_label_like_pinocchio_rnea_with_fext() {
+    let py = std::env::var_os("FRICTIONLESS_PY")
+        .expect("FRICTIONLESS_PY must name a python with pinocchio (tests/run.sh)");
+    let d = dir().join("wrench");
+    let script =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../logs/tests/fixtures/make_fixtures.py");
+    let urdf = ergocub_urdf();
+    let st = Command::new(py)
+        .arg(script)
+        .arg("wrench")
+        .arg(&urdf)
+        .arg(&d)
+        .status()
+        .unwrap();
+    assert!(st.success(), "make_fixtures.py wrench failed");
+    let log = d.join("wrench.csv");
+    let cols = frictionless_dataset::read_columns(&log).unwrap();
+    let import = |out: &Path, wrench: bool| {
+        let mut args = vec![
+            "import",
+            "csv",
+            s(&log),
+            "--joint",
+            "l_knee",
+            "--joint",
+            "l_hip_pitch",
+            "--column",
+            "time=t",
+            "--column",
+            "s=q_{joint}",
+            "--column",
+            "current=i_{joint}",
+            "--positions",
+            "q_{joint}",
+            "--velocities",
+            "qd_{joint}",
+            "--accelerations",
+            "qdd_{joint}",
+            "--urdf",
+            s(&urdf),
+            "--gear-ratio",
+            "100",
+            "--kt",
+            "0.1",
+            "-o",
+            s(out),
+        ];
+        if wrench {
+            args.extend(["--wrench", "l_foot_rear=ft_{c}"]);
+        }
+        ok(frictl(&args), "import csv --wrench")
+    };
+    import(&d.join("with_{joint}.csv"), true);
+    import(&d.join("without_{joint}.csv"), false);
+    for j in ["l_knee", "l_hip_pitch"] {
+        let reference = &cols[&format!("tau_w_{j}")];
+        let with = dataset(&d.join(format!("with_{j}.csv")));
+        let without = dataset(&d.join(format!("without_{j}.csv")));
+        let (mut worst, mut n) = (0.0f64, 0);
+        for (t, tau) in with.time_s.iter().zip(&with.tau_id_nm) {
+            let i = (t * 1000.0).round() as usize;
+            worst = worst.max((tau - reference[i]).abs());
+            n += 1;
+        }
+        let (rms_without, _) = rms_vs(&without, &without.tau_id_nm, reference);
+        eprintln!(
+            "{j}: with the wrench max |error| {worst:.2e} Nm on {n}; without it RMS {rms_without:.2} Nm"
+        );
+        assert!(n > 2900 && worst < 1e-6, "{j}: {worst} on {n}");
+        assert!(
+            rms_without > 1.0,
+            "{j}: the wrench must matter: {rms_without}"
+        );
+        let side = sidecar(&d.join(format!("with_{j}.csv")));
+        assert_eq!(
+            side["settings"]["import"]["whole_body"]["wrenches"][0], "l_foot_rear",
+            "{side}"
+        );
+    }
+}

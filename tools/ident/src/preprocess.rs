@@ -44,7 +44,7 @@ pub use super::signals::{
     Dynamics, JointLabel, RunJoints, RunSignals, SignalsLabel, SignalsSummary, preprocess_joints,
     preprocess_signals, required_signals,
 };
-pub use super::whole_body::{JointStates, StatePlan, WholeBody};
+pub use super::whole_body::{FrameWrench, JointStates, StatePlan, WholeBody};
 
 /// Pipeline errors.
 #[derive(Debug, thiserror::Error)]

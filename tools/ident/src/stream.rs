@@ -157,6 +157,9 @@ fn state_series_mut(st: &mut JointStates) -> Vec<&mut Vec<f64>> {
     if let Some(b) = st.base_quat_xyzw.as_mut() {
         out.extend(b.iter_mut());
     }
+    for w in &mut st.wrenches {
+        out.extend(w.series.iter_mut());
+    }
     out
 }
 
@@ -167,6 +170,9 @@ fn state_series(st: &JointStates) -> Vec<&Vec<f64>> {
     out.extend(st.qddot.iter().flatten());
     if let Some(b) = st.base_quat_xyzw.as_ref() {
         out.extend(b.iter());
+    }
+    for w in &st.wrenches {
+        out.extend(w.series.iter());
     }
     out
 }
@@ -182,6 +188,7 @@ fn layout_of(block: &RunJoints<'_>) -> Vec<bool> {
         v.extend(st.qdot.iter().map(Option::is_some));
         v.extend(st.qddot.iter().map(Option::is_some));
         v.push(st.base_quat_xyzw.is_some());
+        v.extend(st.wrenches.iter().map(|_| true));
     }
     v
 }
@@ -339,6 +346,14 @@ impl<'a> StreamLabeller<'a> {
                     .map(|x| x.as_ref().map(|_| Vec::new()))
                     .collect(),
                 base_quat_xyzw: st.base_quat_xyzw.as_ref().map(|_| Default::default()),
+                wrenches: st
+                    .wrenches
+                    .iter()
+                    .map(|w| crate::whole_body::FrameWrench {
+                        frame: w.frame.clone(),
+                        series: Default::default(),
+                    })
+                    .collect(),
             });
         }
         for (d, s) in self.buf.iter_mut().zip(&block.signals) {

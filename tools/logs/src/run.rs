@@ -165,6 +165,9 @@ pub struct StateLayout {
     pub factors: [f64; 3],
     /// Four more columns: the root link's orientation quaternion `[x, y, z, w]`.
     pub base_quat: bool,
+    /// Six more columns per frame named: a measured wrench applied to the robot there, `[fx, fy,
+    /// fz]` [N] then `[mx, my, mz]` [N·m] in the frame's coordinates.
+    pub wrenches: Vec<String>,
 }
 
 impl StateLayout {
@@ -177,6 +180,7 @@ impl StateLayout {
             qddot: vec![false; n],
             factors: [1.0; 3],
             base_quat: false,
+            wrenches: Vec::new(),
         }
     }
 
@@ -186,6 +190,7 @@ impl StateLayout {
             + self.qdot.iter().filter(|x| **x).count()
             + self.qddot.iter().filter(|x| **x).count()
             + if self.base_quat { 4 } else { 0 }
+            + 6 * self.wrenches.len()
     }
 
     /// `(what, factor)` of each value of a row, in row order (`q:NAME`, `qdot:NAME`, …).
@@ -205,9 +210,17 @@ impl StateLayout {
                 out.push((format!("base_quat_{c}"), 1.0));
             }
         }
+        for f in &self.wrenches {
+            for c in WRENCH_COMPONENTS {
+                out.push((format!("wrench:{f}:{c}"), 1.0));
+            }
+        }
         out
     }
 }
+
+/// The components of a wrench, in column order (`{c}` of a wrench template).
+pub const WRENCH_COMPONENTS: [&str; 6] = ["fx", "fy", "fz", "mx", "my", "mz"];
 
 /// Where a streaming read hands its rows: blocks of `block_rows` rows (the last one shorter), each
 /// an [`ImportedRun`] of those rows only, with an empty report (the run's report comes with the
@@ -353,6 +366,13 @@ impl<'s> RunBuilder<'s> {
             }
             if layout.base_quat {
                 st.base_quat_xyzw = Some(std::array::from_fn(|_| cols.next().unwrap_or_default()));
+            }
+            for f in &layout.wrenches {
+                st.wrenches
+                    .push(frictionless_ident::preprocess::FrameWrench {
+                        frame: f.clone(),
+                        series: std::array::from_fn(|_| cols.next().unwrap_or_default()),
+                    });
             }
             st
         });

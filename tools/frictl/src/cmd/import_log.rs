@@ -127,6 +127,11 @@ pub struct CsvArgs {
     /// tilted pole; default: the root link at the identity pose).
     #[arg(long, value_name = "X,Y,Z,W", requires = "positions")]
     pub base_quat: Option<String>,
+    /// A measured wrench applied to the robot at a URDF frame, `FRAME=TEMPLATE` (repeatable): `{c}`
+    /// in the column template is replaced by fx, fy, fz [N] and mx, my, mz [N·m], in the frame's
+    /// coordinates about its origin (e.g. `--wrench l_foot=ft_l_foot_{c}`).
+    #[arg(long = "wrench", value_name = "FRAME=TEMPLATE", requires = "positions")]
+    pub wrenches: Vec<String>,
     /// Field delimiter (one character).
     #[arg(long, default_value = ",")]
     pub delimiter: char,
@@ -263,7 +268,20 @@ pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
                 Some(q)
             }
         };
+        let mut wrenches = Vec::new();
+        for w in &args.wrenches {
+            let Some((frame, template)) = w.split_once('=') else {
+                bail!("--wrench {w:?}: expected FRAME=TEMPLATE (e.g. l_foot=ft_l_foot_{{c}})");
+            };
+            if let Some(b) = &body {
+                b.robot()
+                    .frame_id(frame.trim())
+                    .map_err(|e| anyhow::anyhow!("--wrench {w:?}: {e}"))?;
+            }
+            wrenches.push((frame.trim().to_string(), template.trim().to_string()));
+        }
         spec.state = Some(csv_log::CsvState {
+            wrenches,
             positions: positions.clone(),
             velocities: args.velocities.clone(),
             accelerations: args.accelerations.clone(),
@@ -537,7 +555,12 @@ fn finish(
         let base = runs
             .iter()
             .any(|r| r.state.as_ref().is_some_and(|s| s.base_quat_xyzw.is_some()));
-        let plan = b.plan(&log_names, &joints, base);
+        let mut plan = b.plan(&log_names, &joints, base);
+        plan.wrenches = runs
+            .first()
+            .and_then(|r| r.state.as_ref())
+            .map(|s| s.wrenches.iter().map(|w| w.frame.clone()).collect())
+            .unwrap_or_default();
         for j in &joints {
             anyhow::ensure!(
                 b.robot().joint_index(j).is_ok(),
