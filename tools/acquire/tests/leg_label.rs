@@ -85,6 +85,7 @@ fn whole_state_labels_beat_the_single_joint_view_on_a_simultaneously_excited_leg
             qdot: vec![None; n],
             qddot: vec![None; n],
             base_quat_xyzw: None,
+            wrenches: Vec::new(),
         };
         let (ds_w, _) = preprocess_whole_body(&log, &meta, &whole, &state, &cfg).unwrap();
         // single-joint view: the others held at their mean positions
@@ -101,6 +102,7 @@ fn whole_state_labels_beat_the_single_joint_view_on_a_simultaneously_excited_leg
             qdot: vec![None],
             qddot: vec![None],
             base_quat_xyzw: None,
+            wrenches: Vec::new(),
         };
         let (ds_s, _) = preprocess_whole_body(&log, &meta, &single, &own, &cfg).unwrap();
         let (ew, nw) = label_rms(&ds_w);

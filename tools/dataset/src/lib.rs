@@ -627,14 +627,27 @@ impl Dataset {
         out: &mut frictionless::output_file::AtomicFile,
         path: &Path,
     ) -> Result<(), DatasetError> {
+        self.write_csv_part_to(out, path, true)
+    }
+
+    /// Appends the rows to `out`, after the header when `header` (a dataset written in parts, as
+    /// its rows come: the first part with the header, the next ones without).
+    pub fn write_csv_part_to(
+        &self,
+        out: &mut frictionless::output_file::AtomicFile,
+        path: &Path,
+        header: bool,
+    ) -> Result<(), DatasetError> {
         let p = path.display().to_string();
         let io = |e: &dyn std::fmt::Display| DatasetError::Io {
             path: p.clone(),
             msg: e.to_string(),
         };
         let mut w = csv::Writer::from_writer(out);
-        w.write_record(self.columns().iter().map(|c| c.name))
-            .map_err(|e| io(&e))?;
+        if header {
+            w.write_record(self.columns().iter().map(|c| c.name))
+                .map_err(|e| io(&e))?;
+        }
         let mut buf = ryu_like::Buf::default();
         for k in 0..self.len() {
             let b = |x: bool| if x { 1.0 } else { 0.0 };

@@ -1239,3 +1239,201 @@ fn leg_acquisition_imports_per_joint_and_the_whole_state_label_beats_the_single_
         "knee: whole state {ew} Nm vs single-joint view {es} Nm"
     );
 }
+
+/// A CSV log of three moving ergoCub leg joints (q, current; 1 kHz with jitter, a 0.5 s pause and
+/// a few rows of NaN) with `rows` rows.
+fn leg_csv(path: &Path, rows: usize) {
+    let mut text =
+        String::from("t,q_l_hip_pitch,q_l_knee,q_l_ankle_pitch,i_l_hip_pitch,i_l_knee\n");
+    let (mut t, mut k) = (0.0f64, 1u64);
+    for n in 0..rows {
+        if n == rows / 3 {
+            t += 0.5;
+        }
+        let w = std::f64::consts::TAU * 0.6;
+        let (hip, knee, ankle) = (
+            0.3 * (w * t).sin(),
+            -0.6 + 0.3 * (1.3 * w * t).sin(),
+            0.1 * (2.1 * w * t).cos(),
+        );
+        let (ih, ik) = (0.4 * (3.0 * t).sin(), 0.3 * (2.0 * t).cos());
+        if n % 4999 == 17 {
+            text += &format!("{t:.6},nan,{knee},{ankle},{ih},{ik}\n");
+        } else {
+            text += &format!("{t:.6},{hip},{knee},{ankle},{ih},{ik}\n");
+        }
+        k = k
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        t += 1e-3 * (0.9 + 0.2 * ((k >> 40) as f64 / f64::from(1u32 << 24)));
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+#[test]
+fn csv_streamed_import_equals_the_whole_log_and_holds_a_window() {
+    let d = dir().join("stream");
+    std::fs::create_dir_all(&d).unwrap();
+    let log = d.join("leg.csv");
+    leg_csv(&log, 14_000);
+    let urdf = ergocub_urdf();
+    let import = |out: &Path, window: Option<&str>| {
+        let mut args = vec![
+            "import",
+            "csv",
+            s(&log),
+            "--joint",
+            "l_knee",
+            "--joint",
+            "l_hip_pitch",
+            "--column",
+            "time=t",
+            "--column",
+            "s=q_{joint}",
+            "--column",
+            "current=i_{joint}",
+            "--positions",
+            "q_{joint}",
+            "--urdf",
+            s(&urdf),
+            "--gear-ratio",
+            "100",
+            "--kt",
+            "0.1",
+            "-o",
+            s(out),
+        ];
+        if let Some(w) = window {
+            args.extend(["--window-samples", w]);
+        }
+        ok(frictl(&args), "import csv")
+    };
+    import(&d.join("whole_{joint}.csv"), None);
+    import(&d.join("streamed_{joint}.csv"), Some("1000"));
+    for j in ["l_knee", "l_hip_pitch"] {
+        let w = dataset(&d.join(format!("whole_{j}.csv")));
+        let st = dataset(&d.join(format!("streamed_{j}.csv")));
+        assert!(w.len() > 13_000, "{}", w.len());
+        assert_eq!(w.len(), st.len(), "{j}: rows");
+        assert_eq!(w.chunk, st.chunk, "{j}: chunks");
+        assert_eq!(w.valid, st.valid, "{j}: valid");
+        for (name, a, b) in [
+            ("time_s", &w.time_s, &st.time_s),
+            ("sdot_rad_s", &w.sdot_rad_s, &st.sdot_rad_s),
+            ("sddot_rad_s2", &w.sddot_rad_s2, &st.sddot_rad_s2),
+            ("i_filt_a", &w.i_filt_a, &st.i_filt_a),
+            ("tau_id_nm", &w.tau_id_nm, &st.tau_id_nm),
+            ("tau_f_label_nm", &w.tau_f_label_nm, &st.tau_f_label_nm),
+        ] {
+            for (k, (x, y)) in a.iter().zip(b.iter()).enumerate() {
+                assert!(
+                    (x.is_nan() && y.is_nan()) || (x - y).abs() <= 1e-9,
+                    "{j} {name} row {k}: whole {x}, streamed {y}"
+                );
+            }
+        }
+        let side = sidecar(&d.join(format!("streamed_{j}.csv")));
+        let stream = &side["settings"]["import"]["stream"];
+        let n = |k: &str| {
+            stream[k]
+                .as_u64()
+                .unwrap_or_else(|| panic!("{k}: {stream}")) as usize
+        };
+        let bound = n("window_samples") + n("lead_margin_samples") + n("trail_margin_samples");
+        assert_eq!(n("window_samples"), 1000);
+        assert!(n("max_grid_samples_held") <= bound, "{stream}");
+        // Raw rows: one step's (rows every ≥ 0.9 ms on a 1 ms grid) plus the block being read.
+        assert!(
+            n("max_raw_samples_held") <= bound * 10 / 9 + 2 + 1000,
+            "{stream}"
+        );
+        assert!(
+            bound < w.len() / 4,
+            "the log is long against what is held: {stream}"
+        );
+        assert_eq!(side["samples"].as_u64(), Some(w.len() as u64));
+    }
+}
+
+#[test]
+#[ignore = "needs FRICTIONLESS_PY (tests/run.sh): Pinocchio writes the log with a foot wrench"]
+fn csv_measured_wrench_enters_the_label_like_pinocchio_rnea_with_fext() {
+    let py = std::env::var_os("FRICTIONLESS_PY")
+        .expect("FRICTIONLESS_PY must name a python with pinocchio (tests/run.sh)");
+    let d = dir().join("wrench");
+    let script =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../logs/tests/fixtures/make_fixtures.py");
+    let urdf = ergocub_urdf();
+    let st = Command::new(py)
+        .arg(script)
+        .arg("wrench")
+        .arg(&urdf)
+        .arg(&d)
+        .status()
+        .unwrap();
+    assert!(st.success(), "make_fixtures.py wrench failed");
+    let log = d.join("wrench.csv");
+    let cols = frictionless_dataset::read_columns(&log).unwrap();
+    let import = |out: &Path, wrench: bool| {
+        let mut args = vec![
+            "import",
+            "csv",
+            s(&log),
+            "--joint",
+            "l_knee",
+            "--joint",
+            "l_hip_pitch",
+            "--column",
+            "time=t",
+            "--column",
+            "s=q_{joint}",
+            "--column",
+            "current=i_{joint}",
+            "--positions",
+            "q_{joint}",
+            "--velocities",
+            "qd_{joint}",
+            "--accelerations",
+            "qdd_{joint}",
+            "--urdf",
+            s(&urdf),
+            "--gear-ratio",
+            "100",
+            "--kt",
+            "0.1",
+            "-o",
+            s(out),
+        ];
+        if wrench {
+            args.extend(["--wrench", "l_foot_rear=ft_{c}"]);
+        }
+        ok(frictl(&args), "import csv --wrench")
+    };
+    import(&d.join("with_{joint}.csv"), true);
+    import(&d.join("without_{joint}.csv"), false);
+    for j in ["l_knee", "l_hip_pitch"] {
+        let reference = &cols[&format!("tau_w_{j}")];
+        let with = dataset(&d.join(format!("with_{j}.csv")));
+        let without = dataset(&d.join(format!("without_{j}.csv")));
+        let (mut worst, mut n) = (0.0f64, 0);
+        for (t, tau) in with.time_s.iter().zip(&with.tau_id_nm) {
+            let i = (t * 1000.0).round() as usize;
+            worst = worst.max((tau - reference[i]).abs());
+            n += 1;
+        }
+        let (rms_without, _) = rms_vs(&without, &without.tau_id_nm, reference);
+        eprintln!(
+            "{j}: with the wrench max |error| {worst:.2e} Nm on {n}; without it RMS {rms_without:.2} Nm"
+        );
+        assert!(n > 2900 && worst < 1e-6, "{j}: {worst} on {n}");
+        assert!(
+            rms_without > 1.0,
+            "{j}: the wrench must matter: {rms_without}"
+        );
+        let side = sidecar(&d.join(format!("with_{j}.csv")));
+        assert_eq!(
+            side["settings"]["import"]["whole_body"]["wrenches"][0], "l_foot_rear",
+            "{side}"
+        );
+    }
+}

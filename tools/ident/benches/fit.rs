@@ -98,6 +98,40 @@ fn whole_body(c: &mut Criterion) {
     g.bench_function("10s_log_all_15_joints", |b| {
         b.iter(|| preprocess_joints(&runs, &joints, Dynamics::WholeBody(&body)).unwrap())
     });
+    // The same log streamed: pushed in blocks of 1 000 rows, labelled in windows of 1 000 grid
+    // samples plus the derived margins.
+    g.bench_function("10s_log_all_15_joints_streamed", |b| {
+        b.iter(|| {
+            use frictionless_ident::stream::StreamLabeller;
+            let mut sl = StreamLabeller::new(&joints, Dynamics::WholeBody(&body), 1000).unwrap();
+            let mut rows = 0;
+            for a in (0..n).step_by(1000) {
+                let e = (a + 1000).min(n);
+                let cut = |x: &Option<Vec<f64>>| x.as_ref().map(|x| x[a..e].to_vec());
+                let sig: Vec<RunSignals> = signals
+                    .iter()
+                    .map(|s| RunSignals {
+                        time_s: s.time_s[a..e].to_vec(),
+                        chunk: s.chunk[a..e].to_vec(),
+                        s_rad: cut(&s.s_rad),
+                        current_a: cut(&s.current_a),
+                        ..RunSignals::default()
+                    })
+                    .collect();
+                let mut st = state.clone();
+                st.q.iter_mut().for_each(|q| *q = q[a..e].to_vec());
+                sl.push(&RunJoints {
+                    signals: sig.iter().collect(),
+                    state: Some(&st),
+                })
+                .unwrap();
+                rows += sl.take_rows().iter().map(|d| d.len()).sum::<usize>();
+            }
+            sl.end_run().unwrap();
+            let (rest, _) = sl.finish().unwrap();
+            rows + rest.iter().map(|d| d.0.len()).sum::<usize>()
+        })
+    });
     g.finish();
 }
 

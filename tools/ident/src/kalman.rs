@@ -182,6 +182,85 @@ pub fn smooth(cfg: &KalmanConfig, dt_s: f64, y_rad: &[f64]) -> Result<Estimates,
     Ok(Estimates::from_states(&xs))
 }
 
+/// Smallest `m` with ‖Mᵐ‖∞ ≤ `tol` (at most `cap`; `None` if it does not decay that far).
+pub(crate) fn decay_len(m: &Matrix3<f64>, tol: f64, cap: usize) -> Option<usize> {
+    let norm = |x: &Matrix3<f64>| {
+        (0..3)
+            .map(|i| (0..3).map(|j| x[(i, j)].abs()).sum::<f64>())
+            .fold(0.0, f64::max)
+    };
+    let mut p = Matrix3::identity();
+    for k in 0..=cap {
+        if norm(&p) <= tol {
+            return Some(k);
+        }
+        p *= m;
+    }
+    None
+}
+
+/// How many samples the smoother needs to forget where its input starts and ends, to within `tol`
+/// (relative): `(lead, trail)`. Derived from the settings alone: `lead` is the number of steps after
+/// which the covariance from `P₀` equals the steady one to `tol`, plus the steps after which the
+/// steady closed-loop filter `(I − K·H)·A` has forgotten its initial state; `trail` the steps after
+/// which the steady RTS gain `C = P·Aᵀ·P⁻` has forgotten the end. Labelling a long signal in
+/// windows that overlap by these margins gives the whole signal's estimates (streaming import).
+pub fn settle_samples(
+    cfg: &KalmanConfig,
+    dt_s: f64,
+    tol: f64,
+) -> Result<(usize, usize), KalmanError> {
+    check(cfg, dt_s, &[])?;
+    const CAP: usize = 10_000_000;
+    let a = Matrix3::new(1.0, dt_s, 0.5 * dt_s * dt_s, 0.0, 1.0, dt_s, 0.0, 0.0, 1.0);
+    let q = Matrix3::from_diagonal(&Vector3::from(cfg.q));
+    let update = |pp: &Matrix3<f64>| {
+        let kg = pp.column(0) / (pp[(0, 0)] + cfg.r);
+        let mut ikh = Matrix3::identity();
+        ikh.set_column(0, &(Vector3::new(1.0, 0.0, 0.0) - kg));
+        (
+            ikh * pp * ikh.transpose() + kg * kg.transpose() * cfg.r,
+            ikh,
+        )
+    };
+    let predict = |p: &Matrix3<f64>| {
+        let pp = a * p * a.transpose() + q;
+        0.5 * (pp + pp.transpose())
+    };
+    let rel = |x: &Matrix3<f64>, y: &Matrix3<f64>| (x - y).abs().max() / y.abs().max();
+    // The steady covariance: the Riccati recursion from P₀ until it stops changing.
+    let p0 = Matrix3::from_diagonal(&Vector3::from(cfg.p0));
+    let mut p = update(&p0).0;
+    let mut steps = 0;
+    loop {
+        let next = update(&predict(&p)).0;
+        steps += 1;
+        if rel(&next, &p) <= f64::EPSILON || steps > CAP {
+            p = next;
+            break;
+        }
+        p = next;
+    }
+    let p_ss = p;
+    let mut p = update(&p0).0;
+    let mut m_p = 0;
+    while rel(&p, &p_ss) > tol && m_p < steps {
+        p = update(&predict(&p)).0;
+        m_p += 1;
+    }
+    let pp_ss = predict(&p_ss);
+    let (_, ikh) = update(&pp_ss);
+    let closed = ikh * a;
+    let gain = p_ss * a.transpose() * pp_ss.try_inverse().unwrap_or_else(Matrix3::zeros);
+    let fail = || KalmanError::Config {
+        name: "q",
+        value: cfg.q[0],
+    };
+    let m_x = decay_len(&closed, tol, CAP).ok_or_else(fail)?;
+    let m_c = decay_len(&gain, tol, CAP).ok_or_else(fail)?;
+    Ok((m_p + m_x, m_c))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -210,6 +289,31 @@ mod tests {
             .map(|(x, y)| (x - y).powi(2))
             .sum();
         (s / n as f64).sqrt()
+    }
+
+    #[test]
+    fn settle_margins_make_a_window_equal_the_whole_signal() {
+        let dt = 1e-3;
+        let (y, _, _) = sine(6000, dt);
+        let cfg = KalmanConfig::knee();
+        let (lead, trail) = settle_samples(&cfg, dt, 1e-13).unwrap();
+        assert!(
+            lead > 0 && trail > 0 && lead < 2000 && trail < 2000,
+            "{lead} {trail}"
+        );
+        let whole = smooth(&cfg, dt, &y).unwrap();
+        let (a, b) = (2500, 3500);
+        let part = smooth(&cfg, dt, &y[a - lead..b + trail]).unwrap();
+        for k in a..b {
+            let (w, p) = (whole.acc_rad_s2[k], part.acc_rad_s2[k - a + lead]);
+            assert!((w - p).abs() < 1e-9, "sample {k}: {w} vs {p}");
+        }
+        // Half the margins do not give the same estimates.
+        let part = smooth(&cfg, dt, &y[a - lead / 4..b + trail / 4]).unwrap();
+        let worst = (a..b)
+            .map(|k| (whole.acc_rad_s2[k] - part.acc_rad_s2[k - a + lead / 4]).abs())
+            .fold(0.0, f64::max);
+        assert!(worst > 1e-9, "{worst}");
     }
 
     #[test]

@@ -11,6 +11,8 @@
 //!   imported robot signals ([`preprocess::preprocess_signals`], `frictl import csv|mat|mcap`: optional
 //!   signals, current / torque-sensor / given labels; several joints in one pass with
 //!   [`preprocess::preprocess_joints`]);
+//! - [`stream`]: the same pipeline on a log read in blocks (windows with margins derived from the
+//!   smoother and filter settings; the rows equal the whole-log result);
 //! - [`whole_body`]: τ_ID = RNEA(q, q̇, q̈) on the whole URDF from every joint a log has, for the
 //!   `current` label;
 //! - [`fit`]: least-squares fits of the static CV and SCV friction models to a dataset (`frictl fit`).
@@ -52,4 +54,6 @@
 pub mod fit;
 pub mod kalman;
 pub mod preprocess;
+mod signals;
+pub mod stream;
 pub mod whole_body;

@@ -7,13 +7,15 @@
 //! q̇, q̈ as given when the log has them), so the label of every joint sees the same estimates.
 //! One RNEA per sample gives τ_ID of every labelled joint ([`super::preprocess::preprocess_joints`]).
 //!
-//! What it is **not**: a contact or floating-base estimator (no base velocity or acceleration, no
-//! external wrenches: a robot standing on its feet needs the measured foot wrenches, which this
-//! module does not take), or a reader of logs (`frictionless-logs` fills [`JointStates`]).
+//! Measured wrenches applied to the robot at named frames (a foot's force-torque sensor) enter the
+//! RNEA as external wrenches ([`FrameWrench`]: τ = M·q̈ + h − Jᵀ·f_ext).
+//!
+//! What it is **not**: a contact or floating-base estimator (no base velocity or acceleration), or
+//! a reader of logs (`frictionless-logs` fills [`JointStates`]).
 
 use std::collections::BTreeMap;
 
-use frictionless_dynamics::{BaseState, Motion, Robot, Workspace};
+use frictionless_dynamics::{BaseState, ExternalWrench, Force, FrameId, Motion, Robot, Workspace};
 use serde::Serialize;
 
 use super::kalman::{self, KalmanConfig};
@@ -34,6 +36,18 @@ pub struct JointStates {
     /// Orientation of the root link in the world, unit quaternion `[x, y, z, w]` per sample (absent:
     /// the root link is welded to the world at the identity pose).
     pub base_quat_xyzw: Option<[Vec<f64>; 4]>,
+    /// Measured wrenches applied to the robot at named frames, per sample.
+    pub wrenches: Vec<FrameWrench>,
+}
+
+/// A measured wrench applied **to** the robot at a named frame (link or joint frame of the URDF),
+/// in that frame's coordinates, about its origin, one value per sample.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FrameWrench {
+    /// Frame name (the URDF's).
+    pub frame: String,
+    /// `[fx, fy, fz]` [N] then `[mx, my, mz]` [N·m].
+    pub series: [Vec<f64>; 6],
 }
 
 impl JointStates {
@@ -51,6 +65,7 @@ impl JointStates {
                 .collect(),
             names,
             base_quat_xyzw: None,
+            wrenches: Vec::new(),
         }
     }
 
@@ -81,6 +96,14 @@ impl JointStates {
                 "the base quaternion has {m} samples, the run has {n}: mismatched time bases"
             ));
         }
+        for w in &self.wrenches {
+            if let Some(m) = w.series.iter().map(Vec::len).find(|&m| m != n) {
+                return Err(format!(
+                    "the wrench at `{}` has {m} samples, the run has {n}: mismatched time bases",
+                    w.frame
+                ));
+            }
+        }
         Ok(())
     }
 }
@@ -98,6 +121,8 @@ pub struct StatePlan {
     pub not_in_urdf: Vec<String>,
     /// The base: `fixed` (identity) or `orientation from the log`.
     pub base: String,
+    /// Frames with a measured external wrench from the log.
+    pub wrenches: Vec<String>,
 }
 
 /// The robot and the held joint positions of the whole-body τ_ID.
@@ -128,6 +153,7 @@ pub(crate) struct Labelled<'a> {
 pub(crate) struct Tracks<'a> {
     joints: Vec<Track<'a>>,
     base: Option<&'a [Vec<f64>; 4]>,
+    wrenches: Vec<(FrameId, &'a [Vec<f64>; 6])>,
 }
 
 fn bad(msg: String) -> PreprocessError {
@@ -254,9 +280,20 @@ impl WholeBody {
                 qdd: l.qdd,
             });
         }
+        let wrenches = st
+            .wrenches
+            .iter()
+            .map(|w| {
+                self.robot
+                    .frame_id(&w.frame)
+                    .map(|id| (id, &w.series))
+                    .map_err(|e| bad(format!("--wrench {}: {e}", w.frame)))
+            })
+            .collect::<Result<_, _>>()?;
         Ok(Tracks {
             joints: out,
             base: st.base_quat_xyzw.as_ref(),
+            wrenches,
         })
     }
 
@@ -299,6 +336,18 @@ impl WholeBody {
         let base = tracks
             .base
             .map(|b| [li(&b[0]), li(&b[1]), li(&b[2]), li(&b[3])]);
+        let wrenches: Vec<(FrameId, [Vec<f64>; 6])> = tracks
+            .wrenches
+            .iter()
+            .map(|(id, s)| (*id, std::array::from_fn(|c| li(&s[c]))))
+            .collect();
+        let mut ext: Vec<ExternalWrench> = wrenches
+            .iter()
+            .map(|(id, _)| ExternalWrench {
+                frame: *id,
+                wrench: Force::ZERO,
+            })
+            .collect();
         let dof = self.robot.dof();
         let mut q = self.q_held.clone();
         let (mut qd, mut qdd, mut tau) = (vec![0.0; dof], vec![0.0; dof], vec![0.0; dof]);
@@ -310,15 +359,25 @@ impl WholeBody {
                 qd[*i] = gqd[k];
                 qdd[*i] = gqdd[k];
             }
+            for (e, (_, s)) in ext.iter_mut().zip(&wrenches) {
+                e.wrench.lin = [s[0][k], s[1][k], s[2][k]].into();
+                e.wrench.ang = [s[3][k], s[4][k], s[5][k]].into();
+            }
             match &base {
-                None => self.robot.rnea(ws, &q, &qd, &qdd, &mut tau).map_err(err)?,
+                None if ext.is_empty() => {
+                    self.robot.rnea(ws, &q, &qd, &qdd, &mut tau).map_err(err)?
+                }
+                None => self
+                    .robot
+                    .rnea_with_wrenches(ws, &q, &qd, &qdd, &ext, &mut tau)
+                    .map_err(err)?,
                 Some(bq) => {
                     let quat = [bq[0][k], bq[1][k], bq[2][k], bq[3][k]];
                     match BaseState::from_arrays([0.0; 3], quat, [0.0; 6], [0.0; 6]) {
                         Ok(mut bs) => {
                             bs.vel = Motion::ZERO;
                             self.robot
-                                .rnea_floating(ws, &bs, &q, &qd, &qdd, &[], &mut tau)
+                                .rnea_floating(ws, &bs, &q, &qd, &qdd, &ext, &mut tau)
                                 .map_err(err)?;
                         }
                         // A zero or non-finite quaternion: no τ_ID for this sample (invalid).

@@ -47,6 +47,9 @@ pub struct CsvState {
     pub joints: Vec<String>,
     /// Columns of the root link's orientation quaternion `[x, y, z, w]` (absent: fixed base).
     pub base_quat: Option<[String; 4]>,
+    /// Measured wrenches applied to the robot: `(frame, column template)`, `{c}` in the template
+    /// replaced by `fx, fy, fz` [N] and `mx, my, mz` [N·m] (the frame's coordinates).
+    pub wrenches: Vec<(String, String)>,
 }
 
 const JOINT: &str = "{joint}";
@@ -301,6 +304,28 @@ fn state_columns(
             })?);
         }
     }
+    for (frame, template) in &st.wrenches {
+        if !template.contains("{c}") {
+            return Err(LogsError::Usage(format!(
+                "--wrench {frame}={template}: the column template must hold {{c}} (replaced by {})",
+                crate::WRENCH_COMPONENTS.join(", ")
+            )));
+        }
+        for c in crate::WRENCH_COMPONENTS {
+            let name = template.replace("{c}", c);
+            idx.push(header.iter().position(|h| *h == name).ok_or_else(|| {
+                LogsError::MissingColumn {
+                    path: p.to_string(),
+                    column: name.clone(),
+                    role: Role::TauJoint,
+                    header: header.join(", "),
+                }
+            })?);
+        }
+        notes.push(format!(
+            "external wrench at frame `{frame}` from columns {template:?} (N, N·m, frame coordinates)"
+        ));
+    }
     notes.push(format!(
         "whole-body state: {} joints from --positions {:?}{}",
         names.len(),
@@ -320,6 +345,7 @@ fn state_columns(
             spec.factor(Role::Sddot),
         ],
         base_quat: st.base_quat.is_some(),
+        wrenches: st.wrenches.iter().map(|w| w.0.clone()).collect(),
         names,
     };
     Ok((layout, idx))
@@ -327,6 +353,17 @@ fn state_columns(
 
 /// Reads one CSV log into a run named after the file stem.
 pub fn read(path: &Path, spec: &CsvSpec, progress: Progress) -> Result<ImportedRun, LogsError> {
+    read_streamed(path, spec, progress, None)
+}
+
+/// [`read`], handing the rows to `stream` in blocks as they are read instead of holding them
+/// (`None`: held; see [`crate::BlockSink`]): the returned run then has the report and no rows.
+pub fn read_streamed(
+    path: &Path,
+    spec: &CsvSpec,
+    progress: Progress,
+    stream: Option<crate::BlockSink<'_>>,
+) -> Result<ImportedRun, LogsError> {
     let p = path.display().to_string();
     let file = open_regular(path)?;
     let total = file.metadata().map(|m| m.len()).unwrap_or(0);
@@ -478,7 +515,7 @@ pub fn read(path: &Path, spec: &CsvSpec, progress: Progress) -> Result<ImportedR
         idx.extend(state_idx);
         layout
     });
-    let mut b = RunBuilder::with_joints(map, joints, layout, &p, "csv");
+    let mut b = RunBuilder::with_joints(map, joints, layout, &p, "csv").streaming(stream);
     for (role, col) in &spec.columns {
         b.report_mut()
             .sources
@@ -515,7 +552,7 @@ pub fn read(path: &Path, spec: &CsvSpec, progress: Progress) -> Result<ImportedR
                 }
             };
         }
-        b.push(|| format!("line {line}"), 0);
+        b.push(|| format!("line {line}"), 0)?;
         rows += 1;
         if rows.is_multiple_of(65536) {
             progress(r.get_ref().bytes, total);

@@ -35,7 +35,10 @@ mod run;
 
 pub use frictionless_ident::preprocess::{JointStates, RunSignals};
 pub use roles::{Role, Unit};
-pub use run::{ImportedRun, RoleMap, RunReport, StateLayout, label_sign_warning, unique_run_names};
+pub use run::{
+    BlockSink, ImportedRun, RoleMap, RunReport, StateLayout, WRENCH_COMPONENTS, label_sign_warning,
+    unique_run_names,
+};
 
 use std::fs::File;
 use std::path::Path;

@@ -449,7 +449,7 @@ pub fn read(path: &Path, spec: &MatSpec, progress: Progress) -> Result<ImportedR
             for (j, c) in cols.iter().enumerate() {
                 row[j + 1] = c[k];
             }
-            b.push(|| format!("tick {}", a + k), chunk);
+            b.push(|| format!("tick {}", a + k), chunk)?;
         }
         a = e;
         progress(a as u64, n as u64);

@@ -573,7 +573,7 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
                 }
                 let row = b.row_mut();
                 row[..vals.len()].copy_from_slice(&vals);
-                b.push(|| format!("message {msg_no}"), 0);
+                b.push(|| format!("message {msg_no}"), 0)?;
             }
             _ => {}
         }

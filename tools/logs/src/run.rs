@@ -165,6 +165,9 @@ pub struct StateLayout {
     pub factors: [f64; 3],
     /// Four more columns: the root link's orientation quaternion `[x, y, z, w]`.
     pub base_quat: bool,
+    /// Six more columns per frame named: a measured wrench applied to the robot there, `[fx, fy,
+    /// fz]` [N] then `[mx, my, mz]` [N·m] in the frame's coordinates.
+    pub wrenches: Vec<String>,
 }
 
 impl StateLayout {
@@ -177,6 +180,7 @@ impl StateLayout {
             qddot: vec![false; n],
             factors: [1.0; 3],
             base_quat: false,
+            wrenches: Vec::new(),
         }
     }
 
@@ -186,6 +190,7 @@ impl StateLayout {
             + self.qdot.iter().filter(|x| **x).count()
             + self.qddot.iter().filter(|x| **x).count()
             + if self.base_quat { 4 } else { 0 }
+            + 6 * self.wrenches.len()
     }
 
     /// `(what, factor)` of each value of a row, in row order (`q:NAME`, `qdot:NAME`, …).
@@ -205,12 +210,30 @@ impl StateLayout {
                 out.push((format!("base_quat_{c}"), 1.0));
             }
         }
+        for f in &self.wrenches {
+            for c in WRENCH_COMPONENTS {
+                out.push((format!("wrench:{f}:{c}"), 1.0));
+            }
+        }
         out
     }
 }
 
+/// The components of a wrench, in column order (`{c}` of a wrench template).
+pub const WRENCH_COMPONENTS: [&str; 6] = ["fx", "fy", "fz", "mx", "my", "mz"];
+
+/// Where a streaming read hands its rows: blocks of `block_rows` rows (the last one shorter), each
+/// an [`ImportedRun`] of those rows only, with an empty report (the run's report comes with the
+/// run at the end, whose signals are then empty). A sink's error stops the read.
+pub struct BlockSink<'a> {
+    /// Rows per block (at least 1).
+    pub block_rows: usize,
+    /// Takes each block.
+    pub sink: &'a mut dyn FnMut(ImportedRun) -> Result<(), String>,
+}
+
 /// Accumulates rows of raw values in the map's role order, converts them and counts the rejects.
-pub(crate) struct RunBuilder {
+pub(crate) struct RunBuilder<'s> {
     map: RoleMap,
     /// Labelled joints: the row holds time, then each joint's roles (all but time) in map order.
     joints: Vec<String>,
@@ -225,9 +248,11 @@ pub(crate) struct RunBuilder {
     first_backwards: Option<String>,
     /// Rows whose time equals the previous used row's (a subset of `time_not_increasing`).
     time_repeated: u64,
+    /// Streaming: the rows go to the sink in blocks instead of being held.
+    stream: Option<BlockSink<'s>>,
 }
 
-impl RunBuilder {
+impl<'s> RunBuilder<'s> {
     /// A builder for labelled `joints` (at least one) with the same roles, and a whole-body state.
     pub(crate) fn with_joints(
         map: RoleMap,
@@ -270,7 +295,88 @@ impl RunBuilder {
             last_t: f64::NEG_INFINITY,
             first_backwards: None,
             time_repeated: 0,
+            stream: None,
         }
+    }
+
+    /// Hands the rows to `stream` in blocks instead of holding them (see [`BlockSink`]).
+    pub(crate) fn streaming(mut self, stream: Option<BlockSink<'s>>) -> Self {
+        self.stream = stream;
+        self
+    }
+
+    /// Passes the rows held to the sink, if streaming.
+    fn flush(&mut self) -> Result<(), LogsError> {
+        let Some(s) = self.stream.take() else {
+            return Ok(());
+        };
+        let r = if self.chunk.is_empty() {
+            Ok(())
+        } else {
+            let (signals, state) = self.take_columns();
+            let mut joints = signals.into_iter();
+            let block = ImportedRun {
+                name: String::new(),
+                joints: self.joints.clone(),
+                signals: joints.next().unwrap_or_default(),
+                other_joints: joints.collect(),
+                state,
+                report: RunReport::default(),
+            };
+            (s.sink)(block).map_err(|msg| LogsError::Format {
+                path: self.report.source.clone(),
+                msg,
+            })
+        };
+        self.stream = Some(s);
+        r
+    }
+
+    /// The rows held, as each labelled joint's signals and the whole-body state; leaves the
+    /// builder with no rows.
+    fn take_columns(&mut self) -> (Vec<RunSignals>, Option<JointStates>) {
+        let per_joint = self.map.len() - 1;
+        let mut cols = self.cols.iter_mut().map(std::mem::take);
+        let time = cols.next().unwrap_or_default();
+        let chunk = std::mem::take(&mut self.chunk);
+        let roles: Vec<Role> = self.map.roles().skip(1).collect();
+        let mut joints = Vec::with_capacity(self.joints.len());
+        for _ in 0..self.joints.len() {
+            let mut sig = RunSignals {
+                time_s: time.clone(),
+                chunk: chunk.clone(),
+                ..RunSignals::default()
+            };
+            for (&role, col) in roles.iter().zip(cols.by_ref().take(per_joint)) {
+                set_role(&mut sig, role, col);
+            }
+            joints.push(sig);
+        }
+        let state = self.state.as_ref().map(|layout| {
+            let mut st = JointStates {
+                names: layout.names.clone(),
+                ..JointStates::default()
+            };
+            for k in 0..layout.names.len() {
+                st.q.push(cols.next().unwrap_or_default());
+                st.qdot
+                    .push(layout.qdot[k].then(|| cols.next().unwrap_or_default()));
+                st.qddot
+                    .push(layout.qddot[k].then(|| cols.next().unwrap_or_default()));
+            }
+            if layout.base_quat {
+                st.base_quat_xyzw = Some(std::array::from_fn(|_| cols.next().unwrap_or_default()));
+            }
+            for f in &layout.wrenches {
+                st.wrenches
+                    .push(frictionless_ident::preprocess::FrameWrench {
+                        frame: f.clone(),
+                        series: std::array::from_fn(|_| cols.next().unwrap_or_default()),
+                    });
+            }
+            st
+        });
+        (joints, state)
     }
 
     pub(crate) fn report_mut(&mut self) -> &mut RunReport {
@@ -289,8 +395,12 @@ impl RunBuilder {
     }
 
     /// Takes the row in [`Self::row_mut`] (raw units) at `where_` (e.g. `line 12`) with chunk id
-    /// `chunk`.
-    pub(crate) fn push(&mut self, where_: impl FnOnce() -> String, chunk: u32) {
+    /// `chunk`; streaming, a full block goes to the sink (its error is returned).
+    pub(crate) fn push(
+        &mut self,
+        where_: impl FnOnce() -> String,
+        chunk: u32,
+    ) -> Result<(), LogsError> {
         self.report.rows_read += 1;
         let mut ok = true;
         let per_joint = self.map.entries.len() - 1;
@@ -315,7 +425,7 @@ impl RunBuilder {
             }
         }
         if !ok {
-            return;
+            return Ok(());
         }
         let t = self.row[0];
         if t <= self.last_t {
@@ -326,7 +436,7 @@ impl RunBuilder {
             if self.first_backwards.is_none() {
                 self.first_backwards = Some(where_());
             }
-            return;
+            return Ok(());
         }
         self.last_t = t;
         for (c, v) in self.cols.iter_mut().zip(&self.row) {
@@ -334,10 +444,18 @@ impl RunBuilder {
         }
         self.chunk.push(chunk);
         self.report.rows_used += 1;
+        match &self.stream {
+            Some(s) if self.chunk.len() >= s.block_rows.max(1) => self.flush(),
+            _ => Ok(()),
+        }
     }
 
     /// The finished run; errors when nothing is usable or more than 1 % of the rows go back in time.
     pub(crate) fn finish(mut self, path: &str, name: String) -> Result<ImportedRun, LogsError> {
+        let r = &self.report;
+        if r.rows_read > 0 && r.time_not_increasing * 100 <= r.rows_read && r.rows_used >= 2 {
+            self.flush()?;
+        }
         let r = &self.report;
         if r.rows_read == 0 {
             return Err(LogsError::Empty {
@@ -384,39 +502,7 @@ impl RunBuilder {
                 ),
             });
         }
-        let per_joint = self.map.len() - 1;
-        let mut cols = self.cols.into_iter();
-        let time = cols.next().unwrap_or_default();
-        let roles: Vec<Role> = self.map.roles().skip(1).collect();
-        let mut joints = Vec::with_capacity(self.joints.len());
-        for _ in 0..self.joints.len() {
-            let mut sig = RunSignals {
-                time_s: time.clone(),
-                chunk: self.chunk.clone(),
-                ..RunSignals::default()
-            };
-            for (&role, col) in roles.iter().zip(cols.by_ref().take(per_joint)) {
-                set_role(&mut sig, role, col);
-            }
-            joints.push(sig);
-        }
-        let state = self.state.map(|layout| {
-            let mut st = JointStates {
-                names: layout.names.clone(),
-                ..JointStates::default()
-            };
-            for k in 0..layout.names.len() {
-                st.q.push(cols.next().unwrap_or_default());
-                st.qdot
-                    .push(layout.qdot[k].then(|| cols.next().unwrap_or_default()));
-                st.qddot
-                    .push(layout.qddot[k].then(|| cols.next().unwrap_or_default()));
-            }
-            if layout.base_quat {
-                st.base_quat_xyzw = Some(std::array::from_fn(|_| cols.next().unwrap_or_default()));
-            }
-            st
-        });
+        let (joints, state) = self.take_columns();
         let mut joints = joints.into_iter();
         Ok(ImportedRun {
             name,

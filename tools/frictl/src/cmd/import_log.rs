@@ -127,9 +127,19 @@ pub struct CsvArgs {
     /// tilted pole; default: the root link at the identity pose).
     #[arg(long, value_name = "X,Y,Z,W", requires = "positions")]
     pub base_quat: Option<String>,
+    /// A measured wrench applied to the robot at a URDF frame, `FRAME=TEMPLATE` (repeatable): `{c}`
+    /// in the column template is replaced by fx, fy, fz [N] and mx, my, mz [N·m], in the frame's
+    /// coordinates about its origin (e.g. `--wrench l_foot=ft_l_foot_{c}`).
+    #[arg(long = "wrench", value_name = "FRAME=TEMPLATE", requires = "positions")]
+    pub wrenches: Vec<String>,
     /// Field delimiter (one character).
     #[arg(long, default_value = ",")]
     pub delimiter: char,
+    /// Stream the log: read and label it in windows of this many grid samples (plus margins the
+    /// smoother and filter settings need), appending each joint's rows as they come; the log is
+    /// never held whole and the rows equal the whole-log import's.
+    #[arg(long, value_name = "N")]
+    pub window_samples: Option<usize>,
     /// Options every format shares.
     #[command(flatten)]
     pub common: CommonArgs,
@@ -258,7 +268,20 @@ pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
                 Some(q)
             }
         };
+        let mut wrenches = Vec::new();
+        for w in &args.wrenches {
+            let Some((frame, template)) = w.split_once('=') else {
+                bail!("--wrench {w:?}: expected FRAME=TEMPLATE (e.g. l_foot=ft_l_foot_{{c}})");
+            };
+            if let Some(b) = &body {
+                b.robot()
+                    .frame_id(frame.trim())
+                    .map_err(|e| anyhow::anyhow!("--wrench {w:?}: {e}"))?;
+            }
+            wrenches.push((frame.trim().to_string(), template.trim().to_string()));
+        }
         spec.state = Some(csv_log::CsvState {
+            wrenches,
             positions: positions.clone(),
             velocities: args.velocities.clone(),
             accelerations: args.accelerations.clone(),
@@ -270,6 +293,9 @@ pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
         !spec.all_joints || spec.state.is_some(),
         "--joints all labels the joints of --positions with the current label: pass --positions TEMPLATE"
     );
+    if let Some(w) = args.window_samples {
+        return super::import_stream::run_csv(&args.files, &spec, &args.common, body.as_ref(), w);
+    }
     let runs = read_all(&args.files, |p, pr| csv_log::read(p, &spec, pr))?;
     let units = spec.units.clone();
     finish(
@@ -359,7 +385,7 @@ const JOINTS_PER_PASS: usize = 4;
 /// `{joint}` in the output path, replaced for one joint.
 const JOINT: &str = "{joint}";
 
-fn out_path(out: &Path, joint: &str) -> PathBuf {
+pub(crate) fn out_path(out: &Path, joint: &str) -> PathBuf {
     PathBuf::from(out.to_string_lossy().replace(JOINT, joint))
 }
 
@@ -408,7 +434,7 @@ fn per_joint_values<'a>(values: &'a [String], flag: &str) -> anyhow::Result<Vec<
 }
 
 /// A per-joint value of `R` / `NAME=R` options: the joint's own, else the one for all.
-fn per_joint(values: &[String], joint: &str, flag: &str) -> anyhow::Result<Option<f64>> {
+pub(crate) fn per_joint(values: &[String], joint: &str, flag: &str) -> anyhow::Result<Option<f64>> {
     let mut all = None;
     let mut mine = None;
     for (v, x) in per_joint_values(values, flag)? {
@@ -529,7 +555,12 @@ fn finish(
         let base = runs
             .iter()
             .any(|r| r.state.as_ref().is_some_and(|s| s.base_quat_xyzw.is_some()));
-        let plan = b.plan(&log_names, &joints, base);
+        let mut plan = b.plan(&log_names, &joints, base);
+        plan.wrenches = runs
+            .first()
+            .and_then(|r| r.state.as_ref())
+            .map(|s| s.wrenches.iter().map(|w| w.frame.clone()).collect())
+            .unwrap_or_default();
         for j in &joints {
             anyhow::ensure!(
                 b.robot().joint_index(j).is_ok(),

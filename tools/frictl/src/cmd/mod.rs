@@ -12,6 +12,7 @@ pub mod export;
 pub mod fit;
 pub mod import;
 pub mod import_log;
+mod import_stream;
 pub mod inspect;
 pub mod monitor;
 pub mod predict;

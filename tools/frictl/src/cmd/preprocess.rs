@@ -298,6 +298,7 @@ fn run_whole_body(
         qdot: qd,
         qddot: qdd,
         base_quat_xyzw: None,
+        wrenches: Vec::new(),
     };
     let plan = body.plan(&state.names, std::slice::from_ref(&meta.joint), false);
     if !plan.held_at_zero.is_empty() {

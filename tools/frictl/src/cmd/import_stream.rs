@@ -1,0 +1,304 @@
+//! `frictl import csv … --window-samples N`: the import without holding the log. The reader hands
+//! its rows in blocks to `frictionless-ident`'s [`StreamLabeller`] (windows of N grid samples with
+//! margins derived from the smoother and filter settings, the rows equal to the whole-log import),
+//! whose rows are appended to each joint's dataset as they come. Every output is written through
+//! the atomic writer and appears, complete with its sidecar, only at the end.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use frictionless::output_file::AtomicFile;
+use frictionless_dataset::{ColumnDocOwned, Dataset, DatasetSidecar, LabelSource, RunInfo};
+use frictionless_ident::preprocess::{
+    Dynamics, JointLabel, PreprocessConfig, RunJoints, SignalsLabel, WholeBody,
+};
+use frictionless_ident::stream::{StreamLabeller, StreamStats};
+use frictionless_logs::{ImportedRun, Role, csv_log};
+
+use super::import_log::{CommonArgs, out_path, per_joint};
+
+/// One joint's output being written.
+struct Out {
+    path: PathBuf,
+    file: AtomicFile,
+    rows: usize,
+    valid: usize,
+}
+
+/// The state of a streamed import between blocks.
+struct Streamer<'a> {
+    common: &'a CommonArgs,
+    label: LabelSource,
+    dynamics: Dynamics<'a>,
+    window: usize,
+    joints: Vec<JointLabel>,
+    labeller: Option<StreamLabeller<'a>>,
+    outs: Vec<Out>,
+    state_names: Vec<String>,
+    base_logged: bool,
+}
+
+impl<'a> Streamer<'a> {
+    fn block(&mut self, block: ImportedRun) -> anyhow::Result<()> {
+        if self.labeller.is_none() {
+            for j in &block.joints {
+                let mut cfg = PreprocessConfig::for_joint(j);
+                cfg.gap_s = self.common.gap_s.unwrap_or(0.1);
+                self.common.pipeline.apply(&mut cfg);
+                self.joints.push(JointLabel {
+                    joint: j.clone(),
+                    label: SignalsLabel {
+                        source: self.label,
+                        gear_ratio_signed: per_joint(&self.common.gear_ratio, j, "--gear-ratio")?,
+                        kt_nm_per_a: per_joint(&self.common.kt, j, "--kt")?,
+                    },
+                    cfg,
+                });
+                let path = out_path(&self.common.out, j);
+                let file = AtomicFile::create(&path)
+                    .with_context(|| format!("cannot write {}", path.display()))?;
+                self.outs.push(Out {
+                    path,
+                    file,
+                    rows: 0,
+                    valid: 0,
+                });
+            }
+            if let Some(st) = &block.state {
+                self.state_names = st.names.clone();
+                self.base_logged = st.base_quat_xyzw.is_some();
+            }
+            self.labeller = Some(StreamLabeller::new(
+                &self.joints,
+                self.dynamics,
+                self.window,
+            )?);
+        }
+        let Some(l) = self.labeller.as_mut() else {
+            bail!("no labeller");
+        };
+        l.push(&RunJoints {
+            signals: block.joint_signals().collect(),
+            state: block.state.as_ref(),
+        })?;
+        let rows = l.take_rows();
+        self.write(rows)
+    }
+
+    fn write(&mut self, rows: Vec<Dataset>) -> anyhow::Result<()> {
+        for (o, ds) in self.outs.iter_mut().zip(rows) {
+            if ds.is_empty() {
+                continue;
+            }
+            ds.write_csv_part_to(&mut o.file, &o.path, o.rows == 0)?;
+            o.rows += ds.len();
+            o.valid += ds.valid.iter().filter(|v| **v).count();
+        }
+        Ok(())
+    }
+}
+
+/// Runs `frictl import csv` streamed: `spec` and `body` as `run_csv` made them.
+pub fn run_csv(
+    files: &[PathBuf],
+    spec: &csv_log::CsvSpec,
+    common: &CommonArgs,
+    body: Option<&WholeBody>,
+    window: usize,
+) -> anyhow::Result<()> {
+    let started = std::time::Instant::now();
+    anyhow::ensure!(window > 0, "--window-samples {window}: must be > 0");
+    let reads = |r: Role| spec.columns.iter().any(|c| c.0 == r);
+    let label: LabelSource = match common.label {
+        Some(l) => l.into(),
+        None if reads(Role::TauF) => LabelSource::Given,
+        None if reads(Role::TauJoint) => LabelSource::TorqueSensor,
+        None => LabelSource::Current,
+    };
+    let dynamics = match (label, body) {
+        (LabelSource::Current, Some(b)) => Dynamics::WholeBody(b),
+        (LabelSource::Current, None) => bail!(
+            "--window-samples with the current label needs the whole-body state: pass --urdf and \
+             --positions TEMPLATE"
+        ),
+        _ => Dynamics::None,
+    };
+    let mut st = Streamer {
+        common,
+        label,
+        dynamics,
+        window,
+        joints: Vec::new(),
+        labeller: None,
+        outs: Vec::new(),
+        state_names: Vec::new(),
+        base_logged: false,
+    };
+    let mut runs: Vec<ImportedRun> = Vec::new();
+    for f in files {
+        let mut failed: Option<anyhow::Error> = None;
+        let mut sink = |block: ImportedRun| {
+            st.block(block).map_err(|e| {
+                let msg = format!("{e:#}");
+                failed = Some(e);
+                msg
+            })
+        };
+        let stream = frictionless_logs::BlockSink {
+            block_rows: window,
+            sink: &mut sink,
+        };
+        let run = csv_log::read_streamed(f, spec, &mut |_, _| {}, Some(stream));
+        if let Some(e) = failed {
+            return Err(e.context(format!("labelling {}", f.display())));
+        }
+        let run = run?;
+        if let Some(l) = st.labeller.as_mut() {
+            l.end_run()?;
+        }
+        runs.push(run);
+    }
+    frictionless_logs::unique_run_names(&mut runs);
+    let Some(labeller) = st.labeller.take() else {
+        bail!("no usable rows in {}", files.len());
+    };
+    let (rest, stats) = labeller.finish()?;
+    let (rest, sums): (Vec<Dataset>, Vec<_>) = rest.into_iter().unzip();
+    st.write(rest)?;
+    let plan = body.map(|b| {
+        let names: Vec<String> = st.joints.iter().map(|j| j.joint.clone()).collect();
+        b.plan(&st.state_names, &names, st.base_logged)
+    });
+    let inputs: Vec<&Path> = files.iter().map(PathBuf::as_path).collect();
+    let mut hashes = Vec::new();
+    for f in files {
+        hashes.push(
+            frictionless_dataset::file_sha256_hex(f)
+                .with_context(|| format!("cannot read {}", f.display()))?,
+        );
+    }
+    let joint_names: Vec<String> = st.joints.iter().map(|j| j.joint.clone()).collect();
+    for ((jl, o), sum) in st.joints.iter().zip(st.outs).zip(sums) {
+        let side_path = o.path.with_extension("json");
+        super::check_outputs(&inputs, &[&o.path, &side_path])?;
+        anyhow::ensure!(
+            o.valid > 0,
+            "{}: 0 valid samples of {}; check the units and --gap-s",
+            jl.joint,
+            o.rows
+        );
+        let reports: Vec<_> = runs
+            .iter()
+            .zip(&hashes)
+            .map(|(r, h)| serde_json::json!({ "run": r.name, "sha256": h, "report": r.report }))
+            .collect();
+        let settings = serde_json::json!({
+            "pipeline": jl.cfg,
+            "import": {
+                "format": "csv",
+                "label": label,
+                "joints_of_this_pass": joint_names,
+                "derivations": sum.derivations,
+                "whole_body": plan,
+                "stream": stream_json(&stats),
+                "dropped_single_sample_chunks": sum.dropped_single_sample_chunks,
+                "runs": reports,
+            }
+        });
+        let side = DatasetSidecar {
+            format: "frictionless-dataset-v1".into(),
+            producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
+            input_log: files
+                .iter()
+                .map(|f| f.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", "),
+            input_sha256: hashes.join(","),
+            joint: jl.joint.clone(),
+            gear_ratio_signed: jl.label.gear_ratio_signed.unwrap_or(1.0),
+            kt_nm_per_a: jl.label.kt_nm_per_a.unwrap_or(1.0),
+            fs_hz: jl.cfg.fs_hz,
+            settings,
+            dynamics: match &plan {
+                Some(p) => format!(
+                    "whole-body RNEA ({} joints from the log, {} held, {} held at 0; base {}), streamed",
+                    p.from_log.len(),
+                    p.held.len(),
+                    p.held_at_zero.len(),
+                    p.base
+                ),
+                None => "none (the label does not use inverse dynamics)".into(),
+            },
+            delta_theta_offset_motor_rad: sum
+                .delta_theta_offsets_motor_rad
+                .first()
+                .copied()
+                .filter(|v| v.is_finite())
+                .unwrap_or(0.0),
+            samples: o.rows,
+            valid_samples: o.valid,
+            chunks: sum.run_chunks.iter().map(Vec::len).sum(),
+            short_chunks: sum.short_chunks,
+            columns: Dataset::default()
+                .columns()
+                .iter()
+                .map(ColumnDocOwned::from)
+                .collect(),
+            label,
+            runs: runs
+                .iter()
+                .zip(&sum.run_chunks)
+                .map(|(r, c)| RunInfo {
+                    name: r.name.clone(),
+                    source: r.report.source.clone(),
+                    chunks: c.clone(),
+                })
+                .collect(),
+            absent_columns: sum.absent_columns.iter().map(|s| s.to_string()).collect(),
+        };
+        let mut side_out = AtomicFile::create(&side_path)
+            .with_context(|| format!("cannot write {}", side_path.display()))?;
+        side_out
+            .write_all(serde_json::to_string_pretty(&side)?.as_bytes())
+            .with_context(|| format!("cannot write {}", side_path.display()))?;
+        frictionless::output_file::commit_with_marker(vec![o.file], side_out).with_context(
+            || {
+                format!(
+                    "cannot write {} and {}",
+                    o.path.display(),
+                    side_path.display()
+                )
+            },
+        )?;
+        eprintln!(
+            "frictl import csv: {}: {} samples ({} valid), streamed in windows of {} (+{} / +{} margin) -> {}",
+            jl.joint,
+            o.rows,
+            o.valid,
+            stats.window,
+            stats.lead,
+            stats.trail,
+            o.path.display()
+        );
+    }
+    eprintln!(
+        "frictl import csv: {} runs streamed, at most {} grid and {} raw samples held, in {:.2} s",
+        runs.len(),
+        stats.max_grid_samples,
+        stats.max_raw_samples,
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+fn stream_json(s: &StreamStats) -> serde_json::Value {
+    serde_json::json!({
+        "window_samples": s.window,
+        "lead_margin_samples": s.lead,
+        "trail_margin_samples": s.trail,
+        "max_grid_samples_held": s.max_grid_samples,
+        "max_raw_samples_held": s.max_raw_samples,
+        "steps": s.steps,
+    })
+}
