@@ -383,7 +383,7 @@ fn bad_inputs_give_errors_naming_file_key_and_value() {
 
     // An SCV JSON of an unknown model.
     let bad_scv = f.dir.join("bad_scv.json");
-    std::fs::write(&bad_scv, r#"{"model": "Lugre", "params": {}}"#).unwrap();
+    std::fs::write(&bad_scv, r#"{"model": "Dahl", "params": {}}"#).unwrap();
     let e = err_text(
         frictl(&[
             "train",
@@ -398,7 +398,7 @@ fn bad_inputs_give_errors_naming_file_key_and_value() {
         "bad scv",
     );
     assert!(
-        e.contains("bad_scv.json") && e.contains("`model`") && e.contains("Lugre"),
+        e.contains("bad_scv.json") && e.contains("`model`") && e.contains("Dahl"),
         "{e}"
     );
 

@@ -341,7 +341,8 @@ pub fn load_scv(path: &Path) -> Result<ScvPrior, PipelineError> {
         FitFileError::Parse { message, .. } => file_err(
             path,
             format!(
-                "not a fit of `frictl fit --json` (keys `model` = \"Cv\" | \"Scv\" | \"ScvCode\" and `params`): {message}"
+                "not a fit of `frictl fit --json` (keys `model` = {} and `params`): {message}",
+                frictionless_dataset::fit_file::fit_tags()
             ),
         ),
     })?;
