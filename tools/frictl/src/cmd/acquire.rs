@@ -251,18 +251,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         chunks: &blocks,
         summary: &summary,
     };
-    let json = serde_json::to_string_pretty(&sidecar)?;
-    let mut side_out = frictionless::output_file::AtomicFile::create(&json_path)
-        .with_context(|| format!("cannot write {}", json_path.display()))?;
-    std::io::Write::write_all(&mut side_out, json.as_bytes())
-        .with_context(|| format!("cannot write {}", json_path.display()))?;
-    frictionless::output_file::commit_with_marker(vec![csv_out], side_out).with_context(|| {
-        format!(
-            "cannot write {} and {}",
-            csv_path.display(),
-            json_path.display()
-        )
-    })?;
+    commit_log(csv_out, &csv_path, &json_path, &sidecar)?;
     eprintln!(
         "frictl acquire: {} samples{} ({:.1} simulated min, {} chunks, {} active, {} guard holds) in {:.2} s -> {}",
         summary.samples,
@@ -576,18 +565,7 @@ fn run_leg(args: &Args) -> anyhow::Result<()> {
         .collect(),
         import_example: example,
     };
-    let json = serde_json::to_string_pretty(&sidecar)?;
-    let mut side_out = frictionless::output_file::AtomicFile::create(&json_path)
-        .with_context(|| format!("cannot write {}", json_path.display()))?;
-    std::io::Write::write_all(&mut side_out, json.as_bytes())
-        .with_context(|| format!("cannot write {}", json_path.display()))?;
-    frictionless::output_file::commit_with_marker(vec![csv_out], side_out).with_context(|| {
-        format!(
-            "cannot write {} and {}",
-            csv_path.display(),
-            json_path.display()
-        )
-    })?;
+    commit_log(csv_out, &csv_path, &json_path, &sidecar)?;
     eprintln!(
         "frictl acquire: leg, {} joints excited at once, {samples} samples ({:.1} simulated min, {} guard holds) in {:.2} s -> {}",
         names.len(),
@@ -597,4 +575,26 @@ fn run_leg(args: &Args) -> anyhow::Result<()> {
         csv_path.display()
     );
     Ok(())
+}
+
+/// Writes the sidecar JSON and commits the CSV log and it as a pair (the sidecar last, so a log
+/// without its sidecar never looks complete).
+fn commit_log<T: serde::Serialize>(
+    csv_out: frictionless::output_file::AtomicFile,
+    csv_path: &std::path::Path,
+    json_path: &std::path::Path,
+    sidecar: &T,
+) -> anyhow::Result<()> {
+    let json = serde_json::to_string_pretty(sidecar)?;
+    let mut side_out = frictionless::output_file::AtomicFile::create(json_path)
+        .with_context(|| format!("cannot write {}", json_path.display()))?;
+    std::io::Write::write_all(&mut side_out, json.as_bytes())
+        .with_context(|| format!("cannot write {}", json_path.display()))?;
+    frictionless::output_file::commit_with_marker(vec![csv_out], side_out).with_context(|| {
+        format!(
+            "cannot write {} and {}",
+            csv_path.display(),
+            json_path.display()
+        )
+    })
 }
