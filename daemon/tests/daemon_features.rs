@@ -62,21 +62,7 @@ fn model_file(name: &str, set: FeatureSet, seed: u64) -> ModelFile {
 }
 
 fn config() -> String {
-    let mut c = String::from(
-        r#"
-[loop]
-period_us = 1000
-status_every_ticks = 5
-ready_after_ticks = 5
-trigger = "lockstep"
-lockstep_wait_request = true
-lockstep_timeout_ms = 10000
-
-[safety]
-stale_after_ticks = 20
-on_stale = "zero"
-"#,
-    );
+    let mut c = String::from(LOCKSTEP_LOOP_AND_SAFETY);
     for (k, (name, set)) in NAMES.iter().zip(SETS).enumerate() {
         c.push_str(&format!(
             r#"
@@ -290,21 +276,7 @@ fn lugre_joints_equal_the_offline_estimator_and_restart_at_enable() {
         },
     ];
     let env = TestEnv::new("lugre");
-    let mut c = String::from(
-        r#"
-[loop]
-period_us = 1000
-status_every_ticks = 5
-ready_after_ticks = 5
-trigger = "lockstep"
-lockstep_wait_request = true
-lockstep_timeout_ms = 10000
-
-[safety]
-stale_after_ticks = 20
-on_stale = "zero"
-"#,
-    );
+    let mut c = String::from(LOCKSTEP_LOOP_AND_SAFETY);
     for (k, p) in params.iter().enumerate() {
         c.push_str(&format!(
             r#"

@@ -485,3 +485,19 @@ pub fn inputs(tau: [f64; 3], v: [f64; 3]) -> (JointStates, TorqueRequest) {
 pub fn close(a: f64, b: f64) -> bool {
     (a - b).abs() <= 1e-9 * (1.0 + b.abs())
 }
+
+/// The `[loop]` and `[safety]` sections of a lockstep daemon at 1 kHz (ready after 5 ticks, stale
+/// after 20, zero current when stale) that the model tests start their configs with.
+pub const LOCKSTEP_LOOP_AND_SAFETY: &str = r#"
+[loop]
+period_us = 1000
+status_every_ticks = 5
+ready_after_ticks = 5
+trigger = "lockstep"
+lockstep_wait_request = true
+lockstep_timeout_ms = 10000
+
+[safety]
+stale_after_ticks = 20
+on_stale = "zero"
+"#;
