@@ -35,7 +35,7 @@ pub enum Sensor {
 }
 
 /// Arguments of `frictl acquire`.
-#[derive(clap::Args, Debug)]
+#[derive(clap::Args, Debug, serde::Serialize)]
 pub struct Args {
     /// Built-in preset (`knee`, `ankle_roll`) or a preset TOML file (tables `plant` and `protocol`);
     /// or `leg`: every joint of the coupled ergoCub left leg excited at once, each with the knee's
@@ -87,6 +87,7 @@ pub struct Args {
     pub state_timeout_ms: u64,
     /// The sensors logged (`torque`: offline only).
     #[arg(long, value_enum, default_value_t = Sensor::MotorEncoder, conflicts_with = "live_shm")]
+    #[serde(serialize_with = "super::stage::as_value_enum")]
     pub sensor: Sensor,
     /// `--sensor torque`: log period [ms], a whole number of plant samples (e.g. 2 for a 500 Hz log).
     #[arg(long, default_value_t = 1.0)]

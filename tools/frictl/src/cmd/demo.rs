@@ -158,6 +158,17 @@ struct Runner {
 
 impl Runner {
     /// Runs `frictl <args>` as a child, its stdout+stderr into `logs/<name>.log`; polls for Ctrl-C.
+    /// Runs one stage as a child `frictl` from its typed arguments ([`super::stage::argv`]).
+    fn stage<A: clap::Args + serde::Serialize>(
+        &mut self,
+        name: &str,
+        subcommand: &[&str],
+        args: &A,
+    ) -> anyhow::Result<f64> {
+        let argv = super::stage::argv(subcommand, args)?;
+        self.frictl(name, &argv)
+    }
+
     fn frictl(&mut self, name: &str, args: &[String]) -> anyhow::Result<f64> {
         self.n += 1;
         eprintln!("[{:>2}] {name} …", self.n);

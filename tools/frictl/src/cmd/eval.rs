@@ -23,7 +23,7 @@ pub enum Warmup {
 }
 
 /// Arguments of `frictl eval`.
-#[derive(clap::Args, Debug)]
+#[derive(clap::Args, Debug, serde::Serialize)]
 pub struct Args {
     /// Dataset CSV from `frictl preprocess` or `frictl import` (repeatable). Every row is scored, unless
     /// --test-run or --test-dataset name held-out runs: then only those are scored, and the other runs
@@ -71,10 +71,12 @@ pub struct Args {
     pub v_sliding: f64,
     /// PINN warm-up policy.
     #[arg(long, value_enum, default_value_t = Warmup::HoldZero)]
+    #[serde(serialize_with = "super::stage::as_value_enum")]
     pub warmup: Warmup,
     /// Where a PINN's Δθ offset is latched: `run` (once per dataset), `chunk` (every chunk start) or a
     /// fixed θ_off in motor rad — use the setting the PINN was trained with (its train report).
     #[arg(long, default_value = "run", allow_hyphen_values = true)]
+    #[serde(serialize_with = "super::stage::as_display")]
     pub delta_theta_offset: DeltaThetaOffset,
     /// Chunk shown in the time-series and hysteresis figures (default: most sliding rows).
     #[arg(long)]

@@ -55,18 +55,21 @@ impl clap::ValueEnum for FitModel {
 }
 
 /// Arguments of `frictl fit`.
-#[derive(clap::Args, Debug)]
+#[derive(clap::Args, Debug, serde::Serialize)]
 pub struct Args {
     /// Model.
     #[arg(value_enum)]
+    #[serde(serialize_with = "super::stage::as_value_enum")]
     pub model: FitModel,
     /// Dataset CSV from `frictl preprocess`.
     pub dataset: PathBuf,
     /// Solver.
     #[arg(long, value_enum, default_value_t = Method::Lm)]
+    #[serde(serialize_with = "super::stage::as_value_enum")]
     pub method: Method,
     /// Adam loss (`--method adam`).
     #[arg(long, value_enum, default_value_t = Loss::L1)]
+    #[serde(serialize_with = "super::stage::as_value_enum")]
     pub loss: Loss,
     /// Adam epochs.
     #[arg(long, default_value_t = 3000)]

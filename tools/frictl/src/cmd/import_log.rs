@@ -45,7 +45,7 @@ impl From<LabelArg> for LabelSource {
 }
 
 /// Options every log format shares.
-#[derive(clap::Args, Debug)]
+#[derive(clap::Args, Debug, serde::Serialize)]
 pub struct CommonArgs {
     /// Output dataset CSV (its sidecar is written next to it with `.json`); with several joints it
     /// must hold `{joint}`, replaced by each joint's name (e.g. `-o ds_{joint}.csv`).
@@ -58,6 +58,7 @@ pub struct CommonArgs {
     /// Label source (default: `given` if tau_f is read, else `torque-sensor` if tau_joint is, else
     /// `current`).
     #[arg(long, value_enum)]
+    #[serde(serialize_with = "super::stage::as_opt_value_enum")]
     pub label: Option<LabelArg>,
     /// Signed gear ratio r (motor angle per joint angle) for r·k_t·i and Δθ = r·s − θ: `R` for every
     /// joint or `NAME=R` for one (repeatable); recorded in the sidecar (1 when not given and not
@@ -91,11 +92,12 @@ pub struct CommonArgs {
     pub fixed_joints: Vec<String>,
     /// Resampling, filter, smoother and sample-limit settings.
     #[command(flatten)]
+    #[serde(flatten)]
     pub pipeline: PipelineArgs,
 }
 
 /// Arguments of `frictl import csv`.
-#[derive(clap::Args, Debug)]
+#[derive(clap::Args, Debug, serde::Serialize)]
 pub struct CsvArgs {
     /// CSV logs; each becomes one run.
     #[arg(required = true)]
@@ -142,11 +144,12 @@ pub struct CsvArgs {
     pub window_samples: Option<usize>,
     /// Options every format shares.
     #[command(flatten)]
+    #[serde(flatten)]
     pub common: CommonArgs,
 }
 
 /// Arguments of `frictl import mcap`.
-#[derive(clap::Args, Debug)]
+#[derive(clap::Args, Debug, serde::Serialize)]
 pub struct McapArgs {
     /// MCAP bags; each becomes one run.
     #[arg(required = true)]
@@ -163,11 +166,12 @@ pub struct McapArgs {
     pub effort: String,
     /// Options every format shares.
     #[command(flatten)]
+    #[serde(flatten)]
     pub common: CommonArgs,
 }
 
 /// Arguments of `frictl import mat`.
-#[derive(clap::Args, Debug)]
+#[derive(clap::Args, Debug, serde::Serialize)]
 pub struct MatArgs {
     /// YARP robot logger `.mat` files; each becomes one run.
     #[arg(required = true)]
@@ -178,6 +182,7 @@ pub struct MatArgs {
     pub joint: Vec<String>,
     /// Options every format shares.
     #[command(flatten)]
+    #[serde(flatten)]
     pub common: CommonArgs,
 }
 

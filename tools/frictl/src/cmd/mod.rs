@@ -21,6 +21,7 @@ pub mod record;
 pub mod robot;
 pub mod search;
 pub mod sim;
+pub mod stage;
 pub mod train;
 
 /// Refuses, before any work, an output that would overwrite one of the command's inputs (the same file

@@ -24,7 +24,7 @@ pub enum LinkSource {
 
 /// The label pipeline's settings shared by `frictl preprocess` and `frictl import csv|mat|mcap`
 /// (everything but the chunk gap, whose default differs).
-#[derive(clap::Args, Debug, Clone)]
+#[derive(clap::Args, Debug, Clone, serde::Serialize)]
 pub struct PipelineArgs {
     /// Causal ṡ/s̈ columns (forward Kalman filter, what the daemon sees) for training on causal
     /// signals; the label itself always uses the zero-phase current and the RTS smoother.

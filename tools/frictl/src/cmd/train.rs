@@ -105,7 +105,7 @@ impl From<Dtype> for StorageDtype {
 }
 
 /// Arguments of `frictl train`.
-#[derive(clap::Args, Debug)]
+#[derive(clap::Args, Debug, serde::Serialize)]
 pub struct Args {
     /// Preprocessed dataset CSV from `frictl preprocess` (repeatable; its `.json` sidecar must exist).
     #[arg(long = "dataset", required = true)]
@@ -118,6 +118,7 @@ pub struct Args {
     pub out: PathBuf,
     /// Input feature set.
     #[arg(long, value_enum, default_value_t = Features::DEFAULT)]
+    #[serde(serialize_with = "super::stage::as_value_enum")]
     pub features: Features,
     /// History length H (samples per feature block; paper: 20–22; 30 was clearly better on the
     /// virtual knee, see the module doc).
@@ -158,18 +159,22 @@ pub struct Args {
     #[arg(long, value_delimiter = ',')]
     pub test_chunks: Option<Vec<String>>,
     #[command(flatten)]
+    #[serde(flatten)]
     pub held_out: HeldOut,
     /// Warm-up policy.
     #[arg(long, value_enum, default_value_t = Warmup::HoldZero)]
+    #[serde(serialize_with = "super::stage::as_value_enum")]
     pub warmup: Warmup,
     /// Where the Δθ offset is latched: `run` (once, at the first row of each dataset: the authors'
     /// convention; Δθ keeps the stiction wind-up across chunks), `chunk` (at every chunk start, as a
     /// daemon that re-latches at each enable), or a fixed θ_off in motor rad. Configure the daemon's
     /// `delta_theta_offset_motor_rad` with the value the report lists per dataset.
     #[arg(long, default_value = "run", allow_hyphen_values = true)]
+    #[serde(serialize_with = "super::stage::as_display")]
     pub delta_theta_offset: DeltaThetaOffset,
     /// Storage dtype of the weights.
     #[arg(long, value_enum, default_value_t = Dtype::F32)]
+    #[serde(serialize_with = "super::stage::as_value_enum")]
     pub dtype: Dtype,
     /// Checkpoint file (complete run state), written every --checkpoint-every epochs and at the end.
     #[arg(long)]
@@ -202,7 +207,7 @@ pub struct Args {
 
 /// Whole runs held out as the test set (`frictl train` and `frictl search`); validation is then drawn
 /// from the remaining (training) runs only.
-#[derive(clap::Args, Debug, Default, Clone)]
+#[derive(clap::Args, Debug, Default, Clone, serde::Serialize)]
 pub struct HeldOut {
     /// Hold out a whole run as the test set (repeatable): a run name of a dataset's sidecar (`runs`),
     /// or the file stem of a dataset without runs. Adds to --test-chunks; --test-frac is then ignored.

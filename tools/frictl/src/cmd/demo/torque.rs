@@ -32,7 +32,12 @@ use anyhow::Context;
 use frictionless_eval::Report as EvalReport;
 use frictionless_eval::runs::RunMetrics;
 
+use frictionless::features::FeatureSet;
+use frictionless::model::ModelKind;
+
 use super::{Args, Runner, Stage, read_json, read_typed, s, settings_name};
+use crate::cmd::import_log::{self, LabelArg};
+use crate::cmd::{acquire, eval, fit, stage, train};
 
 /// The preset logged as a torque-sensed joint.
 const PRESET: &str = "knee";
@@ -45,7 +50,7 @@ const SPEEDS: [(&str, &str); 3] = [
 /// The run held out for testing: the middle speed (inside the range of the other two).
 const HELD_OUT: &str = "mid";
 /// The feature set: joint position and velocity history (no motor encoder on this joint).
-const FEATURES: &str = "joint-pos-joint-vel";
+const FEATURES: FeatureSet = FeatureSet::JointPosJointVel;
 
 /// Sizes of one flavour.
 struct Sizes {
@@ -158,9 +163,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let out = &args.out;
     let data = out.join("data");
     let models = out.join("models");
-    let eval = out.join("eval");
+    let eval_dir = out.join("eval");
     let logs = out.join("logs");
-    for d in [&data, &models, &eval, &logs] {
+    for d in [&data, &models, &eval_dir, &logs] {
         std::fs::create_dir_all(d).with_context(|| format!("cannot create {}", d.display()))?;
     }
     let mut r = Runner {
@@ -182,37 +187,33 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let mut runs = BTreeMap::new();
     for (k, (name, freqs)) in SPEEDS.iter().enumerate() {
         let seed = args.seed + k as u64;
-        r.frictl(
+        r.stage(
             &format!("acquire {PRESET} torque-sensed ({name}, seed {seed})"),
-            &[
-                "acquire".into(),
-                "--preset".into(),
-                PRESET.into(),
-                "--seed".into(),
-                seed.to_string(),
-                "--out".into(),
-                s(&data),
-                "--name".into(),
-                (*name).into(),
-                "--sensor".into(),
-                "torque".into(),
-                "--log-period-ms".into(),
-                "2".into(),
-                "--jitter-ms".into(),
-                "0.2".into(),
-                "--set=protocol.n_starts=1".into(),
-                // start at the tracking centre: no fast re-centring move in the log
-                "--set=plant.initial_s_rad=-0.8".into(),
-                "--set=protocol.sines.enabled=false".into(),
-                "--set=protocol.ramps.enabled=false".into(),
-                "--set=protocol.steps.enabled=false".into(),
-                format!(
-                    "--set=protocol.tracking.train.amplitudes_rad={}",
-                    sizes.amplitudes
-                ),
-                format!("--set=protocol.tracking.train.frequencies_hz={freqs}"),
-                format!("--set=protocol.tracking.train.cycles={}", sizes.cycles),
-            ],
+            &["acquire"],
+            &acquire::Args {
+                preset: PRESET.into(),
+                seed,
+                out: data.clone(),
+                name: Some((*name).into()),
+                sensor: acquire::Sensor::Torque,
+                log_period_ms: 2.0,
+                jitter_ms: 0.2,
+                sets: vec![
+                    "protocol.n_starts=1".into(),
+                    // start at the tracking centre: no fast re-centring move in the log
+                    "plant.initial_s_rad=-0.8".into(),
+                    "protocol.sines.enabled=false".into(),
+                    "protocol.ramps.enabled=false".into(),
+                    "protocol.steps.enabled=false".into(),
+                    format!(
+                        "protocol.tracking.train.amplitudes_rad={}",
+                        sizes.amplitudes
+                    ),
+                    format!("protocol.tracking.train.frequencies_hz={freqs}"),
+                    format!("protocol.tracking.train.cycles={}", sizes.cycles),
+                ],
+                ..stage::defaults()?
+            },
         )?;
         let csv = data.join(format!("{name}.csv"));
         runs.insert(
@@ -237,111 +238,98 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     // 2. Import: torque-sensor label, and the truth as a `given` label for scoring.
     let ds = data.join("arm.csv");
     let ds_truth = data.join("arm_truth.csv");
-    for (dst, label, extra) in [
-        (&ds, "torque-sensor", None),
-        (&ds_truth, "given", Some("--column=tau_f=tau_f_true_nm")),
+    for (dst, label, truth_column) in [
+        (&ds, LabelArg::TorqueSensor, None),
+        (&ds_truth, LabelArg::Given, Some("tau_f=tau_f_true_nm")),
     ] {
-        let mut a: Vec<String> = vec!["import".into(), "csv".into()];
-        a.extend(logs_csv.iter().map(|p| s(p)));
-        a.extend(
-            [
-                "--joint",
-                &joint,
-                "--column=time=time_s",
-                "--column=s=q_rad",
-                "--column=sdot=dq_rad_s",
-                "--column=current=current_a",
-                "--column=tau_joint=tau_joint_nm",
-                "--label",
-                label,
-                "--out",
-                &s(dst),
-            ]
-            .map(String::from),
-        );
-        a.push(format!("--gear-ratio={r_signed}"));
-        a.push(format!("--kt={kt}"));
-        a.extend(extra.map(String::from));
-        r.frictl(&format!("import csv ({label} label)"), &a)?;
+        let mut columns: Vec<String> = [
+            "time=time_s",
+            "s=q_rad",
+            "sdot=dq_rad_s",
+            "current=current_a",
+            "tau_joint=tau_joint_nm",
+        ]
+        .map(String::from)
+        .into();
+        columns.extend(truth_column.map(String::from));
+        let mut common: import_log::CommonArgs = stage::defaults()?;
+        common.out = dst.clone();
+        common.label = Some(label);
+        common.gear_ratio = vec![r_signed.to_string()];
+        common.kt = vec![kt.to_string()];
+        r.stage(
+            &format!("import csv ({} label)", stage::value_name(&label)),
+            &["import", "csv"],
+            &import_log::CsvArgs {
+                files: logs_csv.clone(),
+                joint: vec![joint.clone()],
+                columns,
+                common,
+                ..stage::defaults()?
+            },
+        )?;
     }
 
     // 3. Fit CV and SCV on the training runs.
     let cv = models.join("cv.json");
     let scv = models.join("scv.json");
-    for (m, f) in [("cv", &cv), ("scv", &scv)] {
-        r.frictl(
-            &format!("fit {m} (training runs)"),
-            &[
-                "fit".into(),
-                m.into(),
-                s(&ds),
-                "--test-run".into(),
-                HELD_OUT.into(),
-                "--json".into(),
-                s(f),
-            ],
+    for (m, f) in [(ModelKind::Cv, &cv), (ModelKind::Scv, &scv)] {
+        r.stage(
+            &format!("fit {} (training runs)", m.name()),
+            &["fit"],
+            &fit::Args {
+                model: fit::FitModel(m),
+                dataset: ds.clone(),
+                test_runs: vec![HELD_OUT.into()],
+                json: Some(f.clone()),
+                ..stage::defaults()?
+            },
         )?;
     }
 
     // 4. Train on slow + fast, the middle speed held out (validation would take a whole run: none).
     let fwt = models.join("pinn.fwt");
     let train_report = models.join("pinn_train.json");
-    r.frictl(
-        "train (held-out run: mid)",
-        &[
-            "train".into(),
-            "--dataset".into(),
-            s(&ds),
-            "--test-run".into(),
-            HELD_OUT.into(),
-            "--val-frac".into(),
-            "0".into(),
-            "--features".into(),
-            FEATURES.into(),
-            "--scv".into(),
-            s(&scv),
-            "--out".into(),
-            s(&fwt),
-            "--report".into(),
-            s(&train_report),
-            "--hidden".into(),
-            sizes.hidden.into(),
-            "--history".into(),
-            sizes.history.to_string(),
-            "--epochs".into(),
-            sizes.epochs.to_string(),
-            "--batch".into(),
-            sizes.batch.to_string(),
-            "--seed".into(),
-            args.seed.to_string(),
-        ],
-    )?;
+    let mut train_args = train::Args {
+        datasets: vec![ds.clone()],
+        val_frac: 0.0,
+        features: train::Features(FEATURES),
+        scv: scv.clone(),
+        out: fwt.clone(),
+        report: Some(train_report.clone()),
+        hidden: sizes
+            .hidden
+            .split(',')
+            .map(str::parse)
+            .collect::<Result<_, _>>()
+            .context("the demo's hidden widths")?,
+        history: sizes.history as usize,
+        epochs: sizes.epochs as usize,
+        batch: sizes.batch as usize,
+        seed: args.seed,
+        ..stage::defaults()?
+    };
+    train_args.held_out.test_runs = vec![HELD_OUT.into()];
+    r.stage("train (held-out run: mid)", &["train"], &train_args)?;
 
     // 5. Evaluate on the held-out run, against the label and against the truth.
     let mut held = Vec::new();
     for (d, tag) in [(&ds, "label"), (&ds_truth, "truth")] {
-        let json = eval.join(format!("{tag}.json"));
-        r.frictl(
+        let json = eval_dir.join(format!("{tag}.json"));
+        r.stage(
             &format!("eval held-out run (vs {tag})"),
-            &[
-                "eval".into(),
-                "--dataset".into(),
-                s(d),
-                "--test-run".into(),
-                HELD_OUT.into(),
-                "--cv".into(),
-                s(&cv),
-                "--scv".into(),
-                s(&scv),
-                "--pinn".into(),
-                s(&fwt),
-                "--train-report".into(),
-                s(&train_report),
-                "--out".into(),
-                s(&eval.join(tag)),
-                "--json".into(),
-                s(&json),
-            ],
+            &["eval"],
+            &eval::Args {
+                datasets: vec![d.clone()],
+                test_runs: vec![HELD_OUT.into()],
+                cv: Some(cv.clone()),
+                scv: Some(scv.clone()),
+                pinns: vec![fwt.clone()],
+                train_report: Some(train_report.clone()),
+                out: Some(eval_dir.join(tag)),
+                json: Some(json.clone()),
+                ..stage::defaults()?
+            },
         )?;
         let ev: EvalReport = read_typed(&json)?;
         held.push(held_out_models(&ev)?);
@@ -356,7 +344,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         settings: settings_name(args),
         seed: args.seed,
         joint,
-        features: FEATURES,
+        features: FEATURES.name(),
         held_out_run: HELD_OUT,
         training_runs: SPEEDS
             .iter()
