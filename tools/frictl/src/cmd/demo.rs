@@ -48,6 +48,8 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
+use frictionless::features::FeatureSet;
+use frictionless::model::ModelKind;
 use frictionless_eval::{Metrics, Report as EvalReport};
 use frictionless_experiment::report::{Cell, SuiteReport};
 use frictionless_experiment::search::MinKp;
@@ -114,6 +116,7 @@ pub enum DemoSensor {
 mod onpolicy;
 mod torque;
 
+use super::{acquire, eval, export, fit, preprocess, stage, train};
 use onpolicy::{RoundEntry, final_round, onpolicy_md, onpolicy_round};
 
 /// Sizes of one demo flavour.
@@ -125,14 +128,14 @@ struct Sizes {
     batch: u32,
     iterations: u32,
     periods: f64,
-    /// Further `frictl train` flags.
-    train_extra: &'static [&'static str],
+    /// Further `frictl train` settings.
+    train_tweak: fn(&mut train::Args),
     /// Default number of on-policy rounds.
     onpolicy_rounds: u32,
     /// Epochs of each on-policy round's continued training.
     onpolicy_epochs: u32,
-    /// Learning rate of each on-policy round's continued training (`None`: the one in `train_extra`).
-    onpolicy_lr: Option<&'static str>,
+    /// Learning rate of each on-policy round's continued training (`None`: the one of `train_tweak`).
+    onpolicy_lr: Option<f32>,
     /// On-policy runs per joint and round (`frictl experiment record --record-runs`).
     onpolicy_runs: u32,
 }
@@ -321,7 +324,11 @@ impl Sizes {
                 iterations: 8,
                 periods: 3.0,
                 // `frictl train`'s defaults are the demo's own (docs/decisions.md); the paper's values explicitly.
-                train_extra: &["--lr", "7.6e-4", "--lambda", "0.164", "--dropout", "0.07"],
+                train_tweak: |t| {
+                    t.lr = 7.6e-4;
+                    t.lambda = 0.164;
+                    t.dropout = 0.07;
+                },
                 onpolicy_rounds: 2,
                 onpolicy_epochs: 50,
                 onpolicy_lr: None,
@@ -336,10 +343,13 @@ impl Sizes {
                 batch: 4096,
                 iterations: 4,
                 periods: 2.0,
-                train_extra: &["--val-frac", "0", "--test-frac", "0"],
+                train_tweak: |t| {
+                    t.val_frac = 0.0;
+                    t.test_frac = 0.0;
+                },
                 onpolicy_rounds: 0,
                 onpolicy_epochs: 2,
-                onpolicy_lr: Some("3e-4"),
+                onpolicy_lr: Some(3e-4),
                 onpolicy_runs: 2,
             }
         } else {
@@ -355,12 +365,15 @@ impl Sizes {
                 batch: 512,
                 iterations: 6,
                 periods: 3.0,
-                train_extra: &["--val-frac", "0", "--test-frac", "0"],
+                train_tweak: |t| {
+                    t.val_frac = 0.0;
+                    t.test_frac = 0.0;
+                },
                 onpolicy_rounds: 1,
                 // Continued training at a lower rate for longer: knee closed-loop τ̂_F error at the
                 // min K_p 0.249 (5 epochs, lr 1e-3) → 0.225 Nm (20 epochs, 3e-4); oracle 0.192.
                 onpolicy_epochs: 20,
-                onpolicy_lr: Some("3e-4"),
+                onpolicy_lr: Some(3e-4),
                 onpolicy_runs: 6,
             }
         }
@@ -820,36 +833,29 @@ fn acquire(
     joint: &str,
 ) -> anyhow::Result<()> {
     let seed = args.seed;
-    r.frictl(
+    r.stage(
         &format!("acquire {preset} (train, seed {seed})"),
-        &[
-            "acquire".into(),
-            "--preset".into(),
-            preset.into(),
-            "--seed".into(),
-            seed.to_string(),
-            "--out".into(),
-            s(&dirs.data),
-            "--name".into(),
-            format!("{joint}_train"),
-            format!("--set=protocol.n_starts={}", sizes.n_starts),
-        ],
+        &["acquire"],
+        &acquire::Args {
+            preset: preset.into(),
+            seed,
+            out: dirs.data.clone(),
+            name: Some(format!("{joint}_train")),
+            sets: vec![format!("protocol.n_starts={}", sizes.n_starts)],
+            ..stage::defaults()?
+        },
     )?;
-    let mut test_args: Vec<String> = vec![
-        "acquire".into(),
-        "--preset".into(),
-        preset.into(),
-        "--seed".into(),
-        (seed + 100).to_string(),
-        "--out".into(),
-        s(&dirs.data),
-        "--name".into(),
-        format!("{joint}_test"),
-    ];
-    test_args.extend(UNSEEN_TEST_RUN.iter().map(|k| format!("--set={k}")));
-    r.frictl(
+    r.stage(
         &format!("acquire {preset} (test, seed {})", seed + 100),
-        &test_args,
+        &["acquire"],
+        &acquire::Args {
+            preset: preset.into(),
+            seed: seed + 100,
+            out: dirs.data.clone(),
+            name: Some(format!("{joint}_test")),
+            sets: UNSEEN_TEST_RUN.map(String::from).into(),
+            ..stage::defaults()?
+        },
     )?;
     Ok(())
 }
@@ -869,9 +875,10 @@ fn label(
         (&train_csv, &files.train_ds, "train"),
         (&test_csv, &files.test_ds, "test"),
     ] {
-        r.frictl(
+        r.stage(
             &format!("preprocess {preset} ({what})"),
-            &preprocess_args(args, src, dst),
+            &["preprocess"],
+            &preprocess_args(args, src, dst)?,
         )?;
         std::fs::remove_file(src).ok(); // the raw log is large; the dataset keeps every column used later
     }
@@ -881,21 +888,20 @@ fn label(
 /// Stage 3, fit: CV, SCV and LuGre on the training dataset.
 fn fit(r: &mut Runner, preset: &str, files: &JointFiles) -> anyhow::Result<()> {
     for (m, f) in [
-        ("cv", &files.cv),
-        ("scv", &files.scv),
-        ("lugre", &files.lugre),
+        (ModelKind::Cv, &files.cv),
+        (ModelKind::Scv, &files.scv),
+        (ModelKind::Lugre, &files.lugre),
     ] {
-        r.frictl(
-            &format!("fit {m} {preset}"),
-            &[
-                "fit".into(),
-                m.into(),
-                s(&files.train_ds),
-                "--json".into(),
-                s(f),
-                "--toml".into(),
-                s(&f.with_extension("toml")),
-            ],
+        r.stage(
+            &format!("fit {} {preset}", m.name()),
+            &["fit"],
+            &fit::Args {
+                model: fit::FitModel(m),
+                dataset: files.train_ds.clone(),
+                json: Some(f.clone()),
+                toml: Some(f.with_extension("toml")),
+                ..stage::defaults()?
+            },
         )?;
     }
     Ok(())
@@ -906,10 +912,10 @@ fn fit(r: &mut Runner, preset: &str, files: &JointFiles) -> anyhow::Result<()> {
 /// authors' input type 4 `[Δθ, s, ṡ]`, which is more accurate offline and in closed loop on the
 /// virtual knee (measured in docs/inputs.md §2.1). The ankle roll keeps `[Δθ, ṡ]` (type 4 gave no
 /// closed-loop gain there).
-fn feature_set(preset: &str) -> &'static str {
+fn feature_set(preset: &str) -> FeatureSet {
     match preset {
-        "knee" => "delta-theta-joint-pos-joint-vel",
-        _ => "delta-theta-joint-vel",
+        "knee" => FeatureSet::DeltaThetaJointPosJointVel,
+        _ => FeatureSet::DeltaThetaJointVel,
     }
 }
 
@@ -921,32 +927,30 @@ fn train(
     preset: &str,
     files: &JointFiles,
 ) -> anyhow::Result<()> {
-    let mut a = train_args(
+    let a = train_args(
         sizes,
         seed,
         preset,
         &[&files.train_ds],
         [&files.scv, &files.fwt, &files.train_report],
         sizes.epochs,
-    );
-    a.extend(sizes.train_extra.iter().map(|x| x.to_string()));
-    r.frictl(&format!("train {preset}"), &a)?;
+    )?;
+    r.stage(&format!("train {preset}"), &["train"], &a)?;
     Ok(())
 }
 
 /// `frictl preprocess SRC --out DST` with the demo's label choices (causal filter, reflected rotor
 /// inertia subtracted unless `--with-rotor-inertia`): one labelling for the protocol, the test run
 /// and the on-policy recordings.
-fn preprocess_args(args: &Args, src: &Path, dst: &Path) -> Vec<String> {
-    let mut a = vec!["preprocess".into(), s(src), "--out".into(), s(dst)];
-    if args.causal {
-        a.push("--causal".to_string());
-    }
-    if !args.with_rotor_inertia {
-        a.push("--subtract-reflected-inertia".into());
-        a.push("sidecar".into());
-    }
-    a
+fn preprocess_args(args: &Args, src: &Path, dst: &Path) -> anyhow::Result<preprocess::Args> {
+    let mut a = preprocess::Args {
+        log: src.to_owned(),
+        out: dst.to_owned(),
+        subtract_reflected_inertia: (!args.with_rotor_inertia).then(|| "sidecar".to_owned()),
+        ..stage::defaults()?
+    };
+    a.pipeline.causal = args.causal;
+    Ok(a)
 }
 
 /// `frictl train` with the demo's network, history, batch, seed and the joint's feature set: on
@@ -959,32 +963,31 @@ fn train_args(
     datasets: &[&Path],
     [scv, out, report]: [&Path; 3],
     epochs: u32,
-) -> Vec<String> {
-    let mut a: Vec<String> = vec!["train".into()];
-    for d in datasets {
-        a.extend(["--dataset".into(), s(d)]);
-    }
-    a.extend([
-        "--scv".into(),
-        s(scv),
-        "--out".into(),
-        s(out),
-        "--report".into(),
-        s(report),
-        "--hidden".into(),
-        sizes.hidden.into(),
-        "--history".into(),
-        sizes.history.to_string(),
-        "--epochs".into(),
-        epochs.to_string(),
-        "--batch".into(),
-        sizes.batch.to_string(),
-        "--seed".into(),
-        seed.to_string(),
-        "--features".into(),
-        feature_set(preset).into(),
-    ]);
-    a
+) -> anyhow::Result<train::Args> {
+    let mut a = train::Args {
+        datasets: datasets.iter().map(|d| d.to_path_buf()).collect(),
+        scv: scv.to_owned(),
+        out: out.to_owned(),
+        report: Some(report.to_owned()),
+        hidden: hidden_widths(sizes.hidden)?,
+        history: sizes.history as usize,
+        epochs: epochs as usize,
+        batch: sizes.batch as usize,
+        seed,
+        features: train::Features(feature_set(preset)),
+        ..stage::defaults()?
+    };
+    (sizes.train_tweak)(&mut a);
+    Ok(a)
+}
+
+/// The widths of a `"128,128"` network description.
+fn hidden_widths(hidden: &str) -> anyhow::Result<Vec<usize>> {
+    hidden
+        .split(',')
+        .map(str::parse)
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("the demo's hidden widths {hidden:?}"))
 }
 
 /// Stage 5, evaluate: every model on the unseen tracking run.
@@ -995,42 +998,35 @@ fn evaluate(
     joint: &str,
     files: &JointFiles,
 ) -> anyhow::Result<()> {
-    r.frictl(
+    r.stage(
         &format!("eval {preset}"),
-        &[
-            "eval".into(),
-            "--dataset".into(),
-            s(&files.test_ds),
-            "--cv".into(),
-            s(&files.cv),
-            "--scv".into(),
-            s(&files.scv),
-            "--lugre".into(),
-            s(&files.lugre),
-            "--pinn".into(),
-            s(&files.fwt),
-            "--train-report".into(),
-            s(&files.train_report),
-            "--out".into(),
-            s(&dirs.eval.join(joint)),
-            "--json".into(),
-            s(&files.eval_json),
-        ],
+        &["eval"],
+        &eval::Args {
+            datasets: vec![files.test_ds.clone()],
+            cv: Some(files.cv.clone()),
+            scv: Some(files.scv.clone()),
+            lugre: Some(files.lugre.clone()),
+            pinns: vec![files.fwt.clone()],
+            train_report: Some(files.train_report.clone()),
+            out: Some(dirs.eval.join(joint)),
+            json: Some(files.eval_json.clone()),
+            ..stage::defaults()?
+        },
     )?;
     Ok(())
 }
 
 /// Stage 6, export: the PINN to ONNX.
 fn export(r: &mut Runner, preset: &str, files: &JointFiles) -> anyhow::Result<()> {
-    r.frictl(
+    r.stage(
         &format!("export {preset} → ONNX"),
-        &[
-            "export".into(),
-            "onnx".into(),
-            s(&files.fwt),
-            "-o".into(),
-            s(&files.fwt.with_extension("onnx")),
-        ],
+        &["export"],
+        &export::Args {
+            format: export::Format::Onnx,
+            input: files.fwt.clone(),
+            output: files.fwt.with_extension("onnx"),
+            ..stage::defaults()?
+        },
     )?;
     Ok(())
 }

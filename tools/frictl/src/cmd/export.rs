@@ -30,9 +30,10 @@ pub enum Norm {
 }
 
 /// Arguments of `frictl export`.
-#[derive(clap::Args, Debug)]
+#[derive(clap::Args, Debug, serde::Serialize)]
 pub struct Args {
     /// Target format.
+    #[serde(serialize_with = "super::stage::as_value_enum")]
     pub format: Format,
     /// The `.fwt` weight file.
     pub input: PathBuf,
@@ -41,6 +42,7 @@ pub struct Args {
     pub output: PathBuf,
     /// ONNX only: how to write the normalisation.
     #[arg(long, value_enum, default_value = "sub-div")]
+    #[serde(serialize_with = "super::stage::as_value_enum")]
     pub norm: Norm,
 }
 

@@ -138,7 +138,7 @@ pub fn urdf_link(
 }
 
 /// Arguments of `frictl preprocess`.
-#[derive(clap::Args, Debug)]
+#[derive(clap::Args, Debug, serde::Serialize)]
 pub struct Args {
     /// Acquisition log CSV (its sidecar is the same path with `.json`).
     pub log: PathBuf,
@@ -147,11 +147,13 @@ pub struct Args {
     pub out: PathBuf,
     /// Resampling, filter, smoother and sample-limit settings.
     #[command(flatten)]
+    #[serde(flatten)]
     pub pipeline: PipelineArgs,
     /// Which link dynamics give τ_ID. `auto` (default): the simulator's own link model when the
     /// sidecar has one (`plant.link`, i.e. a simulated log) and no `--urdf` is given — the label is
     /// then computed with exactly the dynamics that produced the data — else the URDF.
     #[arg(long, value_enum, default_value_t = LinkSource::Auto)]
+    #[serde(serialize_with = "super::stage::as_value_enum")]
     pub link: LinkSource,
     /// URDF for inverse dynamics (default `virtual_leg` = the project's `config/urdf/virtual_leg.urdf`).
     #[arg(long)]

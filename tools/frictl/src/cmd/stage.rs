@@ -9,7 +9,8 @@
 //!
 //! Rules, from clap's metadata: a flag (`SetTrue`) is written when true; an `Option` that is `None`
 //! and a value equal to clap's default are left out (so a default never collides with a
-//! `conflicts_with`); a list is written once per element; positional arguments come last, after `--`.
+//! `conflicts_with`); a list is written once per element (grouped by the argument's number of values per occurrence
+//! if that is more than one, else joined by its delimiter if it has one); positional arguments come last, after `--`.
 //! Value enums serialise to clap's own value name ([`as_value_enum`]).
 
 use anyhow::Context;
@@ -84,8 +85,19 @@ pub fn argv<A: clap::Args + FromArgMatches + Serialize>(
                 if values.is_empty() || values == defaults || defaults_match(&values, &defaults) {
                     continue;
                 }
-                for v in values {
-                    out.push(format!("{long}={v}"));
+                let per_occurrence = arg.get_num_args().map_or(1, |r| r.max_values());
+                if per_occurrence > 1 {
+                    // e.g. `--kalman-q Q0 Q1 Q2`: one occurrence per group of values.
+                    for group in values.chunks(per_occurrence.min(values.len())) {
+                        out.push(long.clone());
+                        out.extend(group.iter().cloned());
+                    }
+                } else if let Some(d) = arg.get_value_delimiter() {
+                    out.push(format!("{long}={}", values.join(&d.to_string())));
+                } else {
+                    for v in values {
+                        out.push(format!("{long}={v}"));
+                    }
                 }
             }
             other => anyhow::bail!("stage argument `{id}`: action {other:?} is not supported"),
@@ -228,7 +240,7 @@ mod tests {
     use frictionless::model::ModelKind;
 
     use super::*;
-    use crate::cmd::{acquire, eval, fit, import_log, train};
+    use crate::cmd::{acquire, eval, export, fit, import_log, preprocess, train};
 
     /// `args` → [`argv`] → clap → the same serialised value; returns the words.
     fn assert_roundtrip<A: clap::Args + FromArgMatches + Serialize>(
@@ -325,6 +337,30 @@ mod tests {
                 pinns: vec![p("a.fwt"), p("b.fwt")],
                 warmup: eval::Warmup::ZeroPad,
                 ..defaults().unwrap()
+            },
+        );
+    }
+
+    #[test]
+    fn the_demo_s_other_stages_give_their_arguments_back() {
+        let mut pre = preprocess::Args {
+            log: "raw.csv".into(),
+            out: "ds.csv".into(),
+            subtract_reflected_inertia: Some("sidecar".into()),
+            link: preprocess::LinkSource::Urdf,
+            fixed_joints: vec!["l_hip_pitch=-0.2".into()],
+            ..defaults().unwrap()
+        };
+        pre.pipeline.causal = true;
+        pre.pipeline.kalman_q = vec![1e-6, 2e-3, 0.5];
+        assert_roundtrip(&["preprocess"], &pre);
+        assert_roundtrip(
+            &["export"],
+            &export::Args {
+                format: export::Format::Onnx,
+                input: "m.fwt".into(),
+                output: "m.onnx".into(),
+                norm: export::Norm::DiagonalGemm,
             },
         );
     }

@@ -79,17 +79,15 @@ pub(super) fn onpolicy_round(
         let eval_json = dirs
             .eval
             .join(format!("{joint}_onpolicy_round{}.json", k - 1));
-        r.frictl(
+        r.stage(
             &format!("on-policy round {k}: eval {preset} round-{} PINN", k - 1),
-            &[
-                "eval".into(),
-                "--dataset".into(),
-                s(&f.test_ds),
-                "--pinn".into(),
-                s(&f.fwt),
-                "--json".into(),
-                s(&eval_json),
-            ],
+            &["eval"],
+            &eval::Args {
+                datasets: vec![f.test_ds.clone()],
+                pinns: vec![f.fwt.clone()],
+                json: Some(eval_json.clone()),
+                ..stage::defaults()?
+            },
         )?;
         let ev: EvalReport = read_typed(&eval_json)?;
         let pinn = ev.models.get("pinn");
@@ -131,9 +129,10 @@ pub(super) fn onpolicy_round(
     for ((preset, joint), f) in JOINTS.iter().zip(files.iter_mut()) {
         let raw = rec_dir.join(format!("{joint}_onpolicy.csv"));
         let ds = dirs.data.join(format!("{joint}_onpolicy{k}_ds.csv"));
-        r.frictl(
+        r.stage(
             &format!("on-policy round {k}: preprocess {preset}"),
-            &preprocess_args(args, &raw, &ds),
+            &["preprocess"],
+            &preprocess_args(args, &raw, &ds)?,
         )?;
         std::fs::remove_file(&raw).ok();
         f.datasets.push(ds);
@@ -153,17 +152,19 @@ pub(super) fn onpolicy_round(
             &datasets,
             [&f.scv, &fwt, &report],
             sizes.onpolicy_epochs,
-        );
-        a.extend([
-            "--init".into(),
-            s(&f.fwt),
-            format!("--delta-theta-offset={offset}"),
-        ]);
+        )?;
+        a.init = Some(f.fwt.clone());
+        a.delta_theta_offset = offset.parse().map_err(|e| {
+            anyhow::anyhow!("Δθ offset {offset:?} of {}: {e}", f.train_report.display())
+        })?;
         if let Some(lr) = sizes.onpolicy_lr {
-            a.extend(["--lr".into(), lr.into()]);
+            a.lr = lr;
         }
-        a.extend(sizes.train_extra.iter().map(|x| x.to_string()));
-        r.frictl(&format!("on-policy round {k}: train {preset} (--init)"), &a)?;
+        r.stage(
+            &format!("on-policy round {k}: train {preset} (--init)"),
+            &["train"],
+            &a,
+        )?;
         f.fwt = fwt;
         f.train_report = report;
     }
