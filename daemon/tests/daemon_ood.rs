@@ -78,19 +78,7 @@ ood_ramp_ms = 20.0
         )
     };
     format!(
-        r#"
-[loop]
-period_us = 1000
-status_every_ticks = 5
-ready_after_ticks = 5
-trigger = "lockstep"
-lockstep_wait_request = true
-lockstep_timeout_ms = 10000
-
-[safety]
-stale_after_ticks = 20
-on_stale = "zero"
-{}{}"#,
+        "{LOCKSTEP_LOOP_AND_SAFETY}{}{}",
         joint(
             "knee",
             0,

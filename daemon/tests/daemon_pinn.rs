@@ -55,19 +55,7 @@ fn model_file(seed: u64) -> ModelFile {
 /// Joint 0: PINN `hold_zero`; joint 1: the same kind of model with `zero_pad`.
 fn config(model0: &str, model1: &str) -> String {
     format!(
-        r#"
-[loop]
-period_us = 1000
-status_every_ticks = 5
-ready_after_ticks = 5
-trigger = "lockstep"
-lockstep_wait_request = true
-lockstep_timeout_ms = 10000
-
-[safety]
-stale_after_ticks = 20
-on_stale = "zero"
-
+        r#"{LOCKSTEP_LOOP_AND_SAFETY}
 [[joint]]
 name = "knee"
 index = 0
