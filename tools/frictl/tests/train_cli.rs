@@ -1169,6 +1169,37 @@ fn distill_probes_only_gates_on_the_teacher_inside_its_input_range() {
         var_t.sqrt()
     );
 
+    // Trajectory probes: the gate says how its probes were drawn and reports the uniform figure
+    // beside it, ungated.
+    let traj_path = f.dir.join("probe_traj.fwt");
+    let out = ok(
+        distill(
+            &traj_path,
+            &[
+                "--probes-only",
+                "4000",
+                "--probe-kind",
+                "trajectory",
+                "--hidden",
+                "16,16",
+                "--epochs",
+                "30",
+                "--batch",
+                "256",
+                "--lr",
+                "3e-3",
+                "--max-rmse-nm",
+                &bound_nm.to_string(),
+            ],
+        ),
+        "distill --probes-only --probe-kind trajectory",
+    );
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        text.contains("trajectory probes") && text.contains("on uniform probes:"),
+        "{text}"
+    );
+
     let tiny = f.dir.join("probe_tiny.fwt");
     let e = err_text(
         distill(

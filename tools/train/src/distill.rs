@@ -40,10 +40,44 @@ use super::pipeline::{self, PipelineError, ScvPrior, Sources};
 use super::{Dataset, EpochReport, Predictor, TrainConfig, Trainer};
 use frictionless::features::WarmupPolicy;
 
+/// How probe rows are drawn inside a model's input range.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ProbeKind {
+    /// Every input drawn independently and uniformly inside its range: each of a block's H samples
+    /// alone, so most rows are histories no sensor gives (a value jumping across the whole range
+    /// from one sample to the next).
+    #[default]
+    Uniform,
+    /// Each feature block the history of a smooth signal inside its range, as the daemon feeds it:
+    /// a sinusoid of random centre, amplitude, phase and frequency up to
+    /// [`TRAJECTORY_MAX_RAD_PER_SAMPLE`], plus uniform noise of ±[`TRAJECTORY_NOISE_SHARE`] of the
+    /// range, clipped to the range; the blocks are independent of each other; the temperature is
+    /// uniform in its range.
+    Trajectory,
+}
+
+/// Highest angular frequency of a trajectory probe's signal [rad per history sample]: 20 Hz at the
+/// 1 kHz tick.
+pub const TRAJECTORY_MAX_RAD_PER_SAMPLE: f32 = 2.0 * std::f32::consts::PI * 20.0 / 1000.0;
+
+/// Half-width of a trajectory probe's uniform noise, as a share of the block's range.
+pub const TRAJECTORY_NOISE_SHARE: f32 = 0.01;
+
 /// Random input rows inside the training input range of `file` (each of a block's H samples drawn
 /// independently inside that block's range, the temperature inside its range), or inside
 /// mean ± 3·scale of the normalisation for a file without a stored range. Deterministic in `seed`.
 pub fn probe_inputs(file: &ModelFile, count: usize, seed: u64) -> Vec<Vec<f32>> {
+    probe_inputs_of_kind(file, count, seed, ProbeKind::Uniform)
+}
+
+/// [`probe_inputs`] drawn as `kind` says. Deterministic in `seed`.
+pub fn probe_inputs_of_kind(
+    file: &ModelFile,
+    count: usize,
+    seed: u64,
+    kind: ProbeKind,
+) -> Vec<Vec<f32>> {
     // SplitMix64: uniform in [0, 1) from the top 24 bits.
     let mut state = seed;
     let mut uniform = move || {
@@ -56,7 +90,7 @@ pub fn probe_inputs(file: &ModelFile, count: usize, seed: u64) -> Vec<Vec<f32>> 
     let norm = &file.mlp.norm;
     let spec = &file.meta.features;
     let n = file.mlp.n_inputs();
-    let h = spec.history;
+    let h = spec.history.max(1);
     let n_blocks = spec.set.n_blocks();
     let range_of = |i: usize| -> [f32; 2] {
         match &file.meta.training.input_range {
@@ -69,12 +103,36 @@ pub fn probe_inputs(file: &ModelFile, count: usize, seed: u64) -> Vec<Vec<f32>> 
         }
     };
     let ranges: Vec<[f32; 2]> = (0..n).map(range_of).collect();
+    let history_inputs = (n_blocks * h).min(n);
     (0..count)
-        .map(|_| {
-            ranges
+        .map(|_| match kind {
+            ProbeKind::Uniform => ranges
                 .iter()
                 .map(|r| r[0] + (r[1] - r[0]) * uniform())
-                .collect()
+                .collect(),
+            ProbeKind::Trajectory => {
+                let mut row = Vec::with_capacity(n);
+                for b in 0..history_inputs.div_ceil(h) {
+                    // The signal in units of the block's range: u ∈ [0, 1].
+                    let amp = 0.5 * uniform();
+                    let centre = amp + (1.0 - 2.0 * amp) * uniform();
+                    let omega = TRAJECTORY_MAX_RAD_PER_SAMPLE * uniform();
+                    let phase = 2.0 * std::f32::consts::PI * uniform();
+                    for k in 0..h.min(history_inputs - b * h) {
+                        let noise = TRAJECTORY_NOISE_SHARE * (2.0 * uniform() - 1.0);
+                        let u = (centre + amp * (omega * k as f32 + phase).sin() + noise)
+                            .clamp(0.0, 1.0);
+                        let r = ranges[b * h + k];
+                        row.push(r[0] + (r[1] - r[0]) * u);
+                    }
+                }
+                row.extend(
+                    ranges[history_inputs..]
+                        .iter()
+                        .map(|r| r[0] + (r[1] - r[0]) * uniform()),
+                );
+                row
+            }
         })
         .collect()
 }
@@ -91,6 +149,12 @@ pub struct DistillConfig {
     pub teacher_weight: f32,
     /// Probe rows drawn inside the teacher's input range (targets: the teacher's output).
     pub probes: usize,
+    /// How the probe rows are drawn.
+    #[serde(default)]
+    pub probe_kind: ProbeKind,
+    /// Cosine decay of the learning rate from `train.lr` to this over the epochs (`None`: constant).
+    #[serde(default)]
+    pub lr_final: Option<f32>,
     /// The gate: every student RMSE must be ≤ this × the teacher's (e.g. 1.05).
     pub max_rmse_ratio: f64,
     /// |ṡ| bands with fewer test rows are reported but not gated.
@@ -342,10 +406,15 @@ pub fn distill(
         .map(|(&t, &l)| w * t + (1.0 - w) * l)
         .collect();
     let mut s = train.y_scv_nm.clone();
-    let probes: Vec<f32> = probe_inputs(teacher, cfg.probes, cfg.train.seed ^ 0x9E37_79B9)
-        .into_iter()
-        .flatten()
-        .collect();
+    let probes: Vec<f32> = probe_inputs_of_kind(
+        teacher,
+        cfg.probes,
+        cfg.train.seed ^ 0x9E37_79B9,
+        cfg.probe_kind,
+    )
+    .into_iter()
+    .flatten()
+    .collect();
     let y_probe = teacher_pred.predict(&probes)?;
     x.extend_from_slice(&probes);
     y.extend_from_slice(&y_probe);
@@ -363,6 +432,9 @@ pub fn distill(
     let val_view = prepared.val.view();
     let val = (!prepared.val.is_empty()).then_some(&val_view);
     let mut trainer = Trainer::with_normalisation(tcfg, teacher.mlp.norm.clone(), &data, val)?;
+    if let Some(end) = cfg.lr_final {
+        trainer.set_cosine_decay(end)?;
+    }
     let outcome = trainer.train(on_epoch)?;
     let weights = round_to_dtype(&outcome.weights, cfg.dtype);
     let mut student = ModelFile {
@@ -428,6 +500,12 @@ pub struct ProbeDistillConfig {
     pub test_probes: usize,
     /// The gate: the student's output RMSE against the teacher on the gate probes must be ≤ this \[Nm\].
     pub max_rmse_nm: f64,
+    /// How every probe (training, validation, gate) is drawn.
+    #[serde(default)]
+    pub probe_kind: ProbeKind,
+    /// Cosine decay of the learning rate from `train.lr` to this over the epochs (`None`: constant).
+    #[serde(default)]
+    pub lr_final: Option<f32>,
 }
 
 /// The gate of a probe-only distillation: student against teacher inside the teacher's input range,
@@ -436,10 +514,16 @@ pub struct ProbeDistillConfig {
 pub struct ProbeGate {
     /// Gate probes.
     pub n: usize,
+    /// How they were drawn.
+    #[serde(default)]
+    pub probe_kind: ProbeKind,
     /// RMS of student − teacher output \[Nm\].
     pub rmse_vs_teacher_nm: f64,
     /// Largest |student − teacher| \[Nm\].
     pub max_abs_vs_teacher_nm: f64,
+    /// With trajectory probes: the RMSE on as many uniform probes (reported, not gated) \[Nm\].
+    #[serde(default)]
+    pub uniform_rmse_vs_teacher_nm: Option<f64>,
     /// Standard deviation of the teacher's output on the probes \[Nm\] (the scale of the function).
     pub teacher_std_nm: f64,
     /// The bound on `rmse_vs_teacher_nm` \[Nm\].
@@ -454,13 +538,22 @@ impl ProbeGate {
 
     /// One line: probes, RMSE, max |Δ|, the teacher's spread and the verdict.
     pub fn line(&self) -> String {
+        let uniform = self
+            .uniform_rmse_vs_teacher_nm
+            .map(|u| format!(" (on uniform probes: {u:.5} Nm, not gated)"))
+            .unwrap_or_default();
         format!(
-            "gate ({} probes in the input range): RMSE vs teacher {:.5} Nm (bound {} Nm), max |Δ| {:.5} Nm, teacher output std {:.5} Nm: {}",
+            "gate ({} {} probes in the input range): RMSE vs teacher {:.5} Nm (bound {} Nm), max |Δ| {:.5} Nm, teacher output std {:.5} Nm{}: {}",
             self.n,
+            match self.probe_kind {
+                ProbeKind::Uniform => "uniform",
+                ProbeKind::Trajectory => "trajectory",
+            },
             self.rmse_vs_teacher_nm,
             self.max_rmse_nm,
             self.max_abs_vs_teacher_nm,
             self.teacher_std_nm,
+            uniform,
             if self.passed() { "ok" } else { "FAIL" }
         )
     }
@@ -504,7 +597,7 @@ pub fn distill_probes(
     let n_in = teacher.mlp.n_inputs();
     let seed = cfg.train.seed;
     let draw = |count: usize, salt: u64| -> Vec<f32> {
-        probe_inputs(teacher, count, seed ^ salt)
+        probe_inputs_of_kind(teacher, count, seed ^ salt, cfg.probe_kind)
             .into_iter()
             .flatten()
             .collect()
@@ -535,6 +628,9 @@ pub fn distill_probes(
     };
     let mut trainer =
         Trainer::with_normalisation(tcfg, teacher.mlp.norm.clone(), &data, Some(&val))?;
+    if let Some(end) = cfg.lr_final {
+        trainer.set_cosine_decay(end)?;
+    }
     let outcome = trainer.train(on_epoch)?;
     let meta = &teacher.meta;
     let mut student = ModelFile {
@@ -571,6 +667,21 @@ pub fn distill_probes(
             0.0,
             |m: f64, d| if d.is_nan() { f64::NAN } else { m.max(d) },
         );
+    // The same student on uniform probes, reported beside a trajectory gate (not gated).
+    let uniform_rmse = match cfg.probe_kind {
+        ProbeKind::Uniform => None,
+        ProbeKind::Trajectory => {
+            let x_u: Vec<f32> =
+                probe_inputs(teacher, cfg.test_probes, seed ^ 0xD6E8_FEB8_6659_FD93)
+                    .into_iter()
+                    .flatten()
+                    .collect();
+            Some(super::rmse(
+                &kernel_outputs(&student, &x_u)?,
+                &kernel_outputs(teacher, &x_u)?,
+            ))
+        }
+    };
     let n = t_test.len() as f64;
     let mean = t_test.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
     let var = t_test
@@ -582,7 +693,9 @@ pub fn distill_probes(
         model: student,
         gate: ProbeGate {
             n: t_test.len(),
+            probe_kind: cfg.probe_kind,
             rmse_vs_teacher_nm: rmse_test,
+            uniform_rmse_vs_teacher_nm: uniform_rmse,
             max_abs_vs_teacher_nm: max_abs,
             teacher_std_nm: var.sqrt(),
             max_rmse_nm: cfg.max_rmse_nm,
@@ -594,6 +707,77 @@ pub fn distill_probes(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A random 2·10 + temperature → 8 → 1 network with stored input ranges.
+    fn ranged_model() -> ModelFile {
+        use frictionless::features::{FeatureSet, FeatureSpec};
+        use frictionless::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
+        use frictionless::units::GearRatio;
+        use frictionless::weights::{InputRange, ModelMeta, TrainingMeta, layout};
+        let features = FeatureSpec {
+            set: FeatureSet::DeltaThetaJointVel,
+            history: 10,
+            temperature: true,
+        };
+        let mut blocks = [[0.0f32; 2]; layout::RANGE_BLOCKS];
+        blocks[0] = [-0.05, 0.03];
+        blocks[1] = [-2.0, 4.0];
+        let mut training = TrainingMeta::unknown("probe test", 0);
+        training.input_range = Some(InputRange {
+            blocks,
+            temperature: [25.0, 60.0],
+        });
+        let spec = RandomMlpSpec {
+            sizes: vec![features.n_inputs(), 8, 1],
+            weights: WeightInit::Uniform { amp: 0.5 },
+            bias: -0.1..0.1,
+            norm: NormInit::Identity,
+        };
+        ModelFile {
+            meta: ModelMeta {
+                joint_name: "j".into(),
+                gear_ratio: GearRatio::new(-100.0).unwrap(),
+                kt_nm_per_a: 0.1,
+                features,
+                scv: None,
+                training,
+            },
+            dtype: StorageDtype::F32,
+            mlp: seeded_mlp(&spec, 1).unwrap(),
+        }
+    }
+
+    #[test]
+    fn trajectory_probes_are_smooth_histories_inside_the_range_and_uniform_ones_are_not() {
+        let file = ranged_model();
+        let ranges = [[-0.05f32, 0.03], [-2.0, 4.0]];
+        // The largest step between adjacent samples of a trajectory, as a share of the range.
+        let bound = 0.5 * TRAJECTORY_MAX_RAD_PER_SAMPLE + 2.0 * TRAJECTORY_NOISE_SHARE + 1e-5;
+        let steepest = |kind| {
+            let rows = probe_inputs_of_kind(&file, 2000, 7, kind);
+            let mut worst = 0.0f32;
+            for row in &rows {
+                assert_eq!(row.len(), 21);
+                for (b, r) in ranges.iter().enumerate() {
+                    let block = &row[b * 10..b * 10 + 10];
+                    assert!(block.iter().all(|v| (r[0]..=r[1]).contains(v)), "{block:?}");
+                    for w in block.windows(2) {
+                        worst = worst.max((w[1] - w[0]).abs() / (r[1] - r[0]));
+                    }
+                }
+                assert!((25.0..=60.0).contains(&row[20]), "temperature {}", row[20]);
+            }
+            worst
+        };
+        let traj = steepest(ProbeKind::Trajectory);
+        assert!(traj <= bound, "trajectory step {traj} > {bound}");
+        let uni = steepest(ProbeKind::Uniform);
+        assert!(uni > 0.9, "uniform probes jump across the range: {uni}");
+        // Deterministic in the seed, different across seeds.
+        let a = probe_inputs_of_kind(&file, 3, 1, ProbeKind::Trajectory);
+        assert_eq!(a, probe_inputs_of_kind(&file, 3, 1, ProbeKind::Trajectory));
+        assert_ne!(a, probe_inputs_of_kind(&file, 3, 2, ProbeKind::Trajectory));
+    }
 
     fn row(t: f64, s: f64, gated: bool, r: f64) -> GateRow {
         GateRow {

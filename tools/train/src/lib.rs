@@ -351,6 +351,10 @@ pub struct Trainer {
     ws: Workspace,
     perm: Vec<usize>,
     pool: std::sync::Arc<rayon::ThreadPool>,
+    /// Cosine decay of the learning rate to this value over the epochs (`None`: constant).
+    lr_final: Option<f32>,
+    /// The learning rate of the running epoch.
+    epoch_lr: f32,
 }
 
 fn check_config(cfg: &TrainConfig) -> Result<(), TrainError> {
@@ -616,7 +620,36 @@ impl Trainer {
             since_best: 0,
             history: Vec::new(),
             pool,
+            lr_final: None,
+            epoch_lr: f32::NAN,
         })
+    }
+
+    /// Decays the learning rate from the configured one to `lr_final` along a half cosine over the
+    /// run's epochs (epoch 1 at the configured rate, the last at `lr_final`). Not stored in
+    /// checkpoints: a resumed run is constant-rate unless this is called again.
+    pub fn set_cosine_decay(&mut self, lr_final: f32) -> Result<(), TrainError> {
+        if !(lr_final.is_finite() && lr_final > 0.0 && lr_final <= self.cfg.lr) {
+            return Err(TrainError::Config(format!(
+                "final learning rate {lr_final}: must be finite, positive and at most lr = {}",
+                self.cfg.lr
+            )));
+        }
+        self.lr_final = Some(lr_final);
+        Ok(())
+    }
+
+    /// The learning rate of 1-based `epoch` (the configured one, or its cosine decay).
+    pub fn lr_of_epoch(&self, epoch: usize) -> f32 {
+        match self.lr_final {
+            None => self.cfg.lr,
+            Some(end) => {
+                let span = self.cfg.epochs.saturating_sub(1).max(1) as f64;
+                let x = ((epoch.saturating_sub(1)) as f64 / span).min(1.0);
+                let c = 0.5 * (1.0 + (std::f64::consts::PI * x).cos());
+                (f64::from(end) + (f64::from(self.cfg.lr) - f64::from(end)) * c) as f32
+            }
+        }
     }
 
     /// The run's configuration.
@@ -765,7 +798,7 @@ impl Trainer {
         let t = self.adam.t as i32;
         let bc1 = 1.0 - (BETA1 as f64).powi(t);
         let bc2_sqrt = (1.0 - (BETA2 as f64).powi(t)).sqrt();
-        let step_size = (self.cfg.lr as f64 / bc1) as f32;
+        let step_size = (self.epoch_lr as f64 / bc1) as f32;
         let bc2_sqrt = bc2_sqrt as f32;
         for (((p, &g), m), v) in self
             .params
@@ -784,6 +817,7 @@ impl Trainer {
     pub fn run_epoch(&mut self) -> Result<EpochReport, TrainError> {
         let start = Instant::now();
         let epoch = self.epochs_done + 1;
+        self.epoch_lr = self.lr_of_epoch(epoch);
         // The permutation depends only on (seed, epoch): identity, then a seeded shuffle.
         for (i, p) in self.perm.iter_mut().enumerate() {
             *p = i;

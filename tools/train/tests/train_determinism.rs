@@ -120,3 +120,34 @@ fn checkpoint_resume_equals_uninterrupted_run() {
     ));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn cosine_decay_runs_from_lr_to_the_final_rate_and_changes_the_weights() {
+    let (tr, va) = data();
+    let mut t = Trainer::new(cfg(9, 2), &tr.dataset(), Some(&va.dataset())).unwrap();
+    assert!(
+        t.set_cosine_decay(2e-3).is_err(),
+        "a final rate above lr is refused"
+    );
+    assert!(t.set_cosine_decay(f32::NAN).is_err());
+    t.set_cosine_decay(1e-5).unwrap();
+    let lrs: Vec<f32> = (1..=6).map(|e| t.lr_of_epoch(e)).collect();
+    assert!(
+        (lrs[0] - 1e-3).abs() < 1e-9 && (lrs[5] - 1e-5).abs() < 1e-9,
+        "{lrs:?}"
+    );
+    assert!(lrs.windows(2).all(|w| w[1] < w[0]), "{lrs:?}");
+    t.train(|_| ControlFlow::Continue(())).unwrap();
+    let decayed = bits(t.params());
+    let mut c = Trainer::new(cfg(9, 2), &tr.dataset(), Some(&va.dataset())).unwrap();
+    assert!(
+        (c.lr_of_epoch(6) - 1e-3).abs() < 1e-12,
+        "constant without decay"
+    );
+    c.train(|_| ControlFlow::Continue(())).unwrap();
+    assert_ne!(
+        decayed,
+        bits(c.params()),
+        "the decay is applied to the steps"
+    );
+}

@@ -547,6 +547,8 @@ fn distill_pinn(
         lambda: 0.01,
         teacher_weight: 0.5,
         probes: None,
+        probe_kind: super::distill::ProbeKindArg::Uniform,
+        lr_final: None,
         seed: opts.seed,
         max_rmse_ratio: opts.max_rmse_ratio,
         min_band_samples: 100,

@@ -27,6 +27,24 @@ use frictionless_train::pipeline::{self, TrainReport};
 
 use super::train::{HeldOut, Warmup, cores};
 
+/// `--probe-kind`: how probes are drawn ([`distill::ProbeKind`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ProbeKindArg {
+    /// Every input alone, uniform inside its range.
+    Uniform,
+    /// Each feature block the history of a smooth signal inside its range.
+    Trajectory,
+}
+
+impl From<ProbeKindArg> for distill::ProbeKind {
+    fn from(k: ProbeKindArg) -> Self {
+        match k {
+            ProbeKindArg::Uniform => distill::ProbeKind::Uniform,
+            ProbeKindArg::Trajectory => distill::ProbeKind::Trajectory,
+        }
+    }
+}
+
 /// Storage dtype of the student.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum StudentDtype {
@@ -102,6 +120,15 @@ pub struct Args {
     /// Probe inputs drawn inside the teacher's input range (default: a quarter of the training rows).
     #[arg(long)]
     pub probes: Option<usize>,
+    /// How probes are drawn inside the teacher's input range: `uniform` (each input alone) or
+    /// `trajectory` (each feature block the history of a smooth signal, as the daemon feeds it;
+    /// a probe-only gate then also reports the uniform figure).
+    #[arg(long, value_enum, default_value_t = ProbeKindArg::Uniform)]
+    pub probe_kind: ProbeKindArg,
+    /// Decay the learning rate along a half cosine from --lr to this over the epochs (default:
+    /// constant --lr).
+    #[arg(long)]
+    pub lr_final: Option<f32>,
     /// Seed of the initialisation, shuffles and probes (and of the split with --test-frac).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -188,6 +215,8 @@ fn run_probes_only(args: &Args, probes: usize) -> anyhow::Result<()> {
         val_probes: (probes / 4).max(1),
         test_probes: (probes / 4).max(1),
         max_rmse_nm: args.max_rmse_nm,
+        probe_kind: args.probe_kind.into(),
+        lr_final: args.lr_final,
     };
     if !args.quiet {
         eprintln!(
@@ -410,6 +439,8 @@ pub fn distill_file(args: &Args) -> anyhow::Result<Outcome> {
             patience: None,
             abort_loss: Some(1000.0),
         },
+        probe_kind: args.probe_kind.into(),
+        lr_final: args.lr_final,
         dtype: args.dtype.into(),
         teacher_weight: args.teacher_weight,
         probes,
