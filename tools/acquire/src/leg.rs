@@ -18,6 +18,8 @@ use frictionless_sim::link::LinkDynamics;
 use frictionless_sim::params::{ParamError, load_table};
 use frictionless_sim::{LegError, LegParams, LegPlant, Measurement, PlantParams, Truth};
 
+use frictionless_ident::preprocess::PreprocessConfig;
+
 use crate::config::ProtocolConfig;
 use crate::protocol::{AcquireError, ControllerModel, JointRunner, LogRow, RunSummary, schedule};
 
@@ -33,6 +35,35 @@ pub enum LegAcquireError {
     /// The run failed (in practice: the sink).
     #[error(transparent)]
     Run(#[from] AcquireError),
+}
+
+/// Factor on the label smoother's acceleration process noise for a leg joint (1 = the knee's
+/// [`frictionless_ident::kalman::KalmanConfig::knee`]).
+///
+/// The hip yaw's drive (small reflected rotor inertia, CSD-20) rings in its torsional mode when
+/// the other joints whip the yaw axis; with the knee's smoother the label's s̈ and φ̂̈ miss that
+/// motion and the friction label misses the friction's sign changes. A 100× process noise lets the
+/// smoother follow it. The ankles are the end of the chain: their floor is the smoother's lag, which
+/// a 1000× process noise lowers. The hips' pitch and roll and the knee keep the knee's smoother.
+pub fn label_kalman_q_acc_factor(joint: &str) -> f64 {
+    if joint.contains("hip_yaw") {
+        100.0
+    } else if joint.contains("ankle") {
+        1000.0
+    } else {
+        1.0
+    }
+}
+
+/// The label settings of a leg joint's rows: [`PreprocessConfig::for_joint`] with the smoother of
+/// [`label_kalman_q_acc_factor`] and the reflected rotor inertia J_eq·φ̂̈ subtracted (the leg's
+/// plant keeps the rotor on the motor side of the flexspline, so the link-side τ_ID holds no
+/// armature).
+pub fn label_config(p: &PlantParams) -> PreprocessConfig {
+    let mut cfg = PreprocessConfig::for_joint(&p.joint);
+    cfg.kalman.q[2] *= label_kalman_q_acc_factor(&p.joint);
+    cfg.subtract_reflected_inertia_kgm2 = p.j_eq_kgm2();
+    cfg
 }
 
 /// Breakaway friction of a drive at 25 °C (motor side + LuGre static level) [Nm].
