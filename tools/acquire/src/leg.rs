@@ -18,6 +18,13 @@ use frictionless_sim::link::LinkDynamics;
 use frictionless_sim::params::{ParamError, load_table};
 use frictionless_sim::{LegError, LegParams, LegPlant, Measurement, PlantParams, Truth};
 
+use std::collections::BTreeMap;
+
+use frictionless_dataset::Dataset;
+use frictionless_ident::preprocess::{
+    JointStates, PreprocessConfig, PreprocessError, WholeBody, preprocess_whole_body,
+};
+
 use crate::config::ProtocolConfig;
 use crate::protocol::{AcquireError, ControllerModel, JointRunner, LogRow, RunSummary, schedule};
 
@@ -33,6 +40,130 @@ pub enum LegAcquireError {
     /// The run failed (in practice: the sink).
     #[error(transparent)]
     Run(#[from] AcquireError),
+}
+
+/// Factor on the label smoother's acceleration process noise for a leg joint (1 = the knee's
+/// [`frictionless_ident::kalman::KalmanConfig::knee`]).
+///
+/// The hip yaw's drive (small reflected rotor inertia, CSD-20) rings in its torsional mode when
+/// the other joints whip the yaw axis; with the knee's smoother the label's s̈ and φ̂̈ miss that
+/// motion and the friction label misses the friction's sign changes. A 100× process noise lets the
+/// smoother follow it. The ankles are the end of the chain: their floor is the smoother's lag, which
+/// a 1000× process noise lowers. The hips' pitch and roll and the knee keep the knee's smoother.
+pub fn label_kalman_q_acc_factor(joint: &str) -> f64 {
+    if joint.contains("hip_yaw") {
+        100.0
+    } else if joint.contains("ankle") {
+        1000.0
+    } else {
+        1.0
+    }
+}
+
+/// The label settings of a leg joint's rows: [`PreprocessConfig::for_joint`] with the smoother of
+/// [`label_kalman_q_acc_factor`] and the reflected rotor inertia J_eq·φ̂̈ subtracted (the leg's
+/// plant keeps the rotor on the motor side of the flexspline, so the link-side τ_ID holds no
+/// armature).
+pub fn label_config(p: &PlantParams) -> PreprocessConfig {
+    let mut cfg = PreprocessConfig::for_joint(&p.joint);
+    cfg.kalman.q[2] *= label_kalman_q_acc_factor(&p.joint);
+    cfg.subtract_reflected_inertia_kgm2 = p.j_eq_kgm2();
+    cfg
+}
+
+/// One leg joint's labels from a simultaneous acquisition (see [`label_leg`]).
+#[derive(Clone, Debug)]
+pub struct LegJointLabels {
+    /// The joint.
+    pub joint: String,
+    /// Its dataset labelled from the whole leg's state (every joint's logged position).
+    pub full_state: Dataset,
+    /// Its dataset labelled from the single-joint view (the other joints held at their mean
+    /// logged positions), the comparison.
+    pub single_joint_view: Dataset,
+    /// label − truth RMS of `full_state` on valid, active, sliding rows [Nm] (None without truth
+    /// or sliding rows).
+    pub error_full_state_nm: Option<f64>,
+    /// The same for `single_joint_view` [Nm].
+    pub error_single_joint_view_nm: Option<f64>,
+}
+
+/// label − truth RMS on valid, active rows sliding faster than 0.03 rad/s [Nm] (None without truth
+/// or without such rows).
+pub fn label_error_rms_nm(ds: &Dataset) -> Option<f64> {
+    let truth = ds.tau_f_true_nm.as_ref()?;
+    let (mut e2, mut n) = (0.0, 0usize);
+    for (k, t) in truth.iter().enumerate() {
+        if ds.valid[k] && ds.active[k] && ds.sdot_rad_s[k].abs() > 0.03 {
+            e2 += (ds.tau_f_label_nm[k] - t).powi(2);
+            n += 1;
+        }
+    }
+    (n > 0).then(|| (e2 / n as f64).sqrt())
+}
+
+/// Labels every joint of one simultaneous leg acquisition twice, in one pass over the joints: from
+/// the whole leg's state (every joint's logged position through `robot`, the URDF the label
+/// believes) and from the single-joint view, each with [`label_config`]. `rows[k]` are the logged
+/// rows of `leg.joints[k]`, all of one length.
+pub fn label_leg(
+    leg: &LegParams,
+    robot: &Robot,
+    rows: &[Vec<LogRow>],
+) -> Result<Vec<LegJointLabels>, PreprocessError> {
+    let names: Vec<String> = leg.joints.iter().map(|p| p.joint.clone()).collect();
+    let q: Vec<Vec<f64>> = rows
+        .iter()
+        .map(|r| r.iter().map(|x| x.meas.s_rad).collect())
+        .collect();
+    let n = names.len();
+    if rows.len() != n {
+        return Err(PreprocessError::Sidecar {
+            path: "leg log".into(),
+            msg: format!("{} joints' rows for a leg of {n} joints", rows.len()),
+        });
+    }
+    let whole = WholeBody::new(robot.clone(), BTreeMap::new())?;
+    let state = JointStates {
+        names: names.clone(),
+        q: q.clone(),
+        qdot: vec![None; n],
+        qddot: vec![None; n],
+        base_quat_xyzw: None,
+        wrenches: Vec::new(),
+    };
+    let mut out = Vec::with_capacity(n);
+    for (k, p) in leg.joints.iter().enumerate() {
+        let log = crate::raw_log(&rows[k], 1);
+        let mut meta = crate::log_meta(p);
+        meta.plant_link = None;
+        let cfg = label_config(p);
+        let (full_state, _) = preprocess_whole_body(&log, &meta, &whole, &state, &cfg)?;
+        let held: BTreeMap<String, f64> = names
+            .iter()
+            .zip(&q)
+            .filter(|(name, _)| **name != p.joint)
+            .map(|(name, v)| (name.clone(), v.iter().sum::<f64>() / v.len().max(1) as f64))
+            .collect();
+        let single = WholeBody::new(robot.clone(), held)?;
+        let own = JointStates {
+            names: vec![p.joint.clone()],
+            q: vec![q[k].clone()],
+            qdot: vec![None],
+            qddot: vec![None],
+            base_quat_xyzw: None,
+            wrenches: Vec::new(),
+        };
+        let (single_joint_view, _) = preprocess_whole_body(&log, &meta, &single, &own, &cfg)?;
+        out.push(LegJointLabels {
+            joint: p.joint.clone(),
+            error_full_state_nm: label_error_rms_nm(&full_state),
+            error_single_joint_view_nm: label_error_rms_nm(&single_joint_view),
+            full_state,
+            single_joint_view,
+        });
+    }
+    Ok(out)
 }
 
 /// Breakaway friction of a drive at 25 °C (motor side + LuGre static level) [Nm].
