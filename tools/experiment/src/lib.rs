@@ -53,6 +53,7 @@
 #![warn(missing_docs)]
 
 pub mod controller;
+pub mod leg;
 pub mod metrics;
 pub mod onpolicy;
 pub mod oracle;
@@ -121,9 +122,34 @@ pub enum ExperimentError {
          SimTruth of the state it answers)"
     )]
     OracleMode,
-    /// A joint index other than 0 (knee) or 1 (ankle_roll).
-    #[error("joint index {0} (0 = knee, 1 = ankle_roll)")]
+    /// A joint index that is not a joint of the plant (0 = knee, 1 = ankle_roll for the single
+    /// joints; 0–5 for the leg).
+    #[error(
+        "joint index {0} is not a joint of the plant (single joints: 0 = knee, 1 = ankle_roll)"
+    )]
     JointIndex(usize),
+    /// A leg trial that does not plan every joint exactly once.
+    #[error("a leg trial plans each of the leg's {0} joints exactly once")]
+    LegPlan(usize),
+    /// A tested joint name that is not a joint of the leg.
+    #[error("`{0}` is not a joint of the leg (config/presets/leg.toml)")]
+    LegJoint(String),
+    /// A leg model list of the wrong length.
+    #[error("leg model `{label}`: {got} models for {expected} leg joints")]
+    LegModels {
+        /// The model's label.
+        label: String,
+        /// Models given.
+        got: usize,
+        /// Joints of the leg.
+        expected: usize,
+    },
+    /// The leg's URDF or dynamics failed.
+    #[error(transparent)]
+    Leg(#[from] frictionless_sim::LegError),
+    /// The controller's rigid-body model failed.
+    #[error("whole-leg controller")]
+    Dynamics(#[from] frictionless_dynamics::DynamicsError),
     /// A child died during the run.
     #[error("after the run")]
     AfterRun(#[source] Box<ExperimentError>),
