@@ -92,7 +92,7 @@ pub struct LegTestJoint {
 
 impl LegTestJoint {
     /// The knee: the single-joint suite's reference (`−0.8 − 0.4·cos(2π·0.2·t)` rad), K_p in
-    /// [5, 5000], a 3 Nm pulse of 0.5 s at 1 s, disturbance at K_p = 100.
+    /// [5, 5000], a 15 Nm pulse of 1 s at 1 s (the single-joint suite's), disturbance at K_p = 1000.
     pub fn knee() -> Self {
         Self {
             name: "l_knee".into(),
@@ -100,26 +100,26 @@ impl LegTestJoint {
             kp_range: (5.0, 5000.0),
             pulse: Pulse {
                 start_s: 1.0,
-                duration_s: 0.5,
-                torque_nm: 3.0,
+                duration_s: 1.0,
+                torque_nm: 15.0,
             },
-            disturbance_kp_per_s2: 100.0,
+            disturbance_kp_per_s2: 1000.0,
         }
     }
 
-    /// The ankle roll: `0 − 0.15·cos(2π·0.25·t)` rad, K_p in [50, 50000], a 1 Nm pulse of 0.5 s at
-    /// 1 s, disturbance at K_p = 1000.
+    /// The ankle roll: `0 − 0.15·cos(2π·0.25·t)` rad, K_p in [50, 100000], a 5 Nm pulse of 1 s at
+    /// 1 s (the single-joint suite's), disturbance at K_p = 30000.
     pub fn ankle_roll() -> Self {
         Self {
             name: "l_ankle_roll".into(),
             sine: super::suite::sine(1),
-            kp_range: (50.0, 50000.0),
+            kp_range: (50.0, 100_000.0),
             pulse: Pulse {
                 start_s: 1.0,
-                duration_s: 0.5,
-                torque_nm: 1.0,
+                duration_s: 1.0,
+                torque_nm: 5.0,
             },
-            disturbance_kp_per_s2: 1000.0,
+            disturbance_kp_per_s2: 30_000.0,
         }
     }
 }
@@ -140,6 +140,46 @@ impl LegModel {
             label: model.label().to_owned(),
             per_joint: vec![model; n],
         }
+    }
+}
+
+impl LegModel {
+    /// The compensation a frictiond config describes (e.g. the one `frictl robot run` writes), by
+    /// joint name: each leg joint runs the config's model for the joint of the same name (CV, SCV,
+    /// PINN or none), and `none` if the config does not list it. A LuGre joint is an error (the
+    /// experiments compare none / CV / SCV / PINN).
+    pub fn from_daemon_config(
+        label: &str,
+        path: &std::path::Path,
+        leg: &LegSetup,
+    ) -> Result<Self, ExperimentError> {
+        use frictiond_config::ModelSpec;
+        let cfg = frictiond_config::load(path).map_err(|source| ExperimentError::DaemonConfig {
+            path: path.to_owned(),
+            source: Box::new(source),
+        })?;
+        let mut per_joint = vec![FrictionModel::None; leg.dof()];
+        for (raw, spec) in cfg.raw.joint.iter().zip(&cfg.models) {
+            let Ok(i) = leg.index(&raw.name) else {
+                continue;
+            };
+            per_joint[i] = match spec {
+                ModelSpec::None => FrictionModel::None,
+                ModelSpec::Cv(p) => FrictionModel::Cv(*p),
+                ModelSpec::Scv(p) => FrictionModel::Scv(*p),
+                ModelSpec::Pinn { path, .. } => FrictionModel::Pinn(path.clone()),
+                ModelSpec::Lugre(_) => {
+                    return Err(ExperimentError::LegModelKind {
+                        path: path.to_owned(),
+                        joint: raw.name.clone(),
+                    });
+                }
+            };
+        }
+        Ok(Self {
+            label: label.to_owned(),
+            per_joint,
+        })
     }
 }
 

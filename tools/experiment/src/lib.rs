@@ -10,7 +10,9 @@
 //! started as child processes per trial ([`session`], [`run`]); metrics ([`metrics`]), the
 //! minimum-K_p bisection ([`search`]), the three experiments of the paper (`track`, `min-kp`,
 //! `disturbance`, in [`suite`]) and their tables, JSON and plots ([`report`]); the `oracle`
-//! diagnostic ([`oracle`]: compensation with the plant's true friction — a bound, not a model).
+//! diagnostic ([`oracle`]: compensation with the plant's true friction — a bound, not a model); the
+//! same experiments on the coupled six-joint leg with the whole-leg computed-torque controller
+//! ([`leg`]: [`leg::run_leg_suite`], through the same run loop with [`run::Rig::Leg`]).
 //!
 //! What it is **not**: no physics (that is [`frictionless_sim`] in the plant process), no friction model
 //! evaluation (that is `frictiond`); this process only controls, disturbs and measures.
@@ -143,6 +145,23 @@ pub enum ExperimentError {
         got: usize,
         /// Joints of the leg.
         expected: usize,
+    },
+    /// A frictiond config given as a leg compensation does not load.
+    #[error("frictiond config {}", .path.display())]
+    DaemonConfig {
+        /// The config file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: Box<frictiond_config::ConfigError>,
+    },
+    /// A leg compensation config with a model the experiments do not compare.
+    #[error("frictiond config {}: joint `{joint}` runs LuGre; the leg experiments compare none, CV, SCV and PINN", .path.display())]
+    LegModelKind {
+        /// The config file.
+        path: PathBuf,
+        /// The joint.
+        joint: String,
     },
     /// The leg's URDF or dynamics failed.
     #[error(transparent)]

@@ -1,5 +1,9 @@
 //! One closed-loop trial over shared memory: the experiment controller's loop.
 //!
+//! The plant is a [`Rig`]: the two single-joint presets (each planned joint controlled by
+//! [`ComputedTorque`] on its own link model) or the coupled leg (all six joints controlled at once by
+//! [`LegComputedTorque`]); both run through the one loop of [`run_trial_on`].
+//!
 //! What this module **is**: [`JointSetup`] (a plant preset's link model, gear ratio and k_t — the
 //! controller's M and h come from exactly the link model the plant simulates), [`TrialSpec`] (which
 //! joints, gains, references, disturbance pulses and friction models) and [`run_trial`], which starts a

@@ -1,0 +1,124 @@
+//! The whole-leg closed loop through real processes: `frictionless_experiment::leg::run_leg_suite`
+//! runs, per tested joint (knee, ankle roll) and compensation, the minimum-K_p bisection and a
+//! disturbance trial, each trial a lockstep run of `frictl sim serve --preset leg`, `frictiond` with
+//! six joints and the whole-leg computed-torque controller (M(q), h(q, q̇) of the nominal URDF),
+//! while the other joints hold their pose.
+//!
+//! Checks: the report has every (joint, model) key with a finished search and finite disturbance
+//! metrics; on the knee and on the ankle roll, compensating with the plant's true friction (the
+//! oracle) and with the drives' nominal SCV each needs a lower minimum K_p than no compensation.
+//! Small sizes: 0.5 Hz sines, two periods, four halvings.
+//!
+//! Needs `frictiond` built next to `frictl` (`cargo build --workspace --bins`, as `tests/run.sh`).
+
+use std::path::PathBuf;
+
+use frictionless::friction::{CvParams, ScvParams};
+use frictionless_experiment::controller::Reference;
+use frictionless_experiment::leg::{
+    LegModel, LegSetup, LegSuiteConfig, LegSuiteReport, LegTestJoint, run_leg_suite,
+};
+use frictionless_experiment::session::{Binaries, FrictionModel, ORACLE_LABEL};
+use frictionless_sim::PlantParams;
+
+/// The nominal steady-state SCV of a drive (motor side + LuGre at 25 °C, no ripple, no load term).
+fn nominal_scv(p: &PlantParams) -> ScvParams {
+    ScvParams {
+        kc: p.f_c0_nm + p.f_cm_nm,
+        ka: 50.0,
+        kv: p.sigma2m_nms_per_rad + p.sigma2j_nms_per_rad,
+        ks: p.f_s0_nm + p.f_cm_nm,
+        vs: p.v_s_rad_s,
+        alpha: p.stribeck_exponent,
+    }
+}
+
+/// The same drive's CV (Coulomb and viscous terms of [`nominal_scv`]).
+fn nominal_cv(p: &PlantParams) -> CvParams {
+    let s = nominal_scv(p);
+    CvParams {
+        kc: s.kc,
+        ka: s.ka,
+        kv: s.kv,
+    }
+}
+
+fn kp(r: &LegSuiteReport, joint: &str, model: &str) -> f64 {
+    r.joints[joint].models[model].min_kp.kp_for_runs()
+}
+
+#[test]
+fn leg_oracle_and_scv_need_a_lower_min_kp_than_none_on_knee_and_ankle_roll() {
+    let bins = Binaries::with_frictl(PathBuf::from(env!("CARGO_BIN_EXE_frictl")))
+        .expect("frictiond next to frictl (cargo build --workspace --bins)");
+    let leg = LegSetup::load(&[]).unwrap();
+    let n = leg.dof();
+    let per = |f: &dyn Fn(&PlantParams) -> FrictionModel| -> Vec<FrictionModel> {
+        leg.params.joints.iter().map(f).collect()
+    };
+    let models = vec![
+        LegModel::uniform(FrictionModel::None, n),
+        LegModel {
+            label: "CV".into(),
+            per_joint: per(&|p| FrictionModel::Cv(nominal_cv(p))),
+        },
+        LegModel {
+            label: "SCV".into(),
+            per_joint: per(&|p| FrictionModel::Scv(nominal_scv(p))),
+        },
+        LegModel::uniform(FrictionModel::Oracle, n),
+    ];
+    let mut cfg = LegSuiteConfig::paper(bins, models);
+    cfg.joints = vec![
+        LegTestJoint {
+            sine: Reference::Sine {
+                centre_rad: -0.8,
+                amplitude_rad: 0.3,
+                freq_hz: 0.5,
+            },
+            kp_range: (10.0, 3000.0),
+            ..LegTestJoint::knee()
+        },
+        LegTestJoint {
+            sine: Reference::Sine {
+                centre_rad: 0.0,
+                amplitude_rad: 0.1,
+                freq_hz: 0.5,
+            },
+            kp_range: (300.0, 100_000.0),
+            ..LegTestJoint::ankle_roll()
+        },
+    ];
+    cfg.iterations = 4;
+    cfg.after_release_s = 1.0;
+    cfg.jobs = 2;
+    cfg.progress = true;
+    let report = run_leg_suite(&cfg).expect("leg suite");
+    eprintln!("{}", report.markdown());
+
+    // every (joint, model) key, a finished search, finite disturbance metrics
+    let json = serde_json::to_value(&report).unwrap();
+    for joint in ["l_knee", "l_ankle_roll"] {
+        for model in ["none", "CV", "SCV", ORACLE_LABEL] {
+            let cell = &json["joints"][joint]["models"][model];
+            assert!(
+                cell["min_kp"]["outcome"].is_string(),
+                "{joint}/{model}: {cell}"
+            );
+            let d = cell["disturbance"]["rmse_after_release_rad"].as_f64();
+            assert!(d.is_some_and(f64::is_finite), "{joint}/{model}: {cell}");
+            assert!(cell["disturbance"]["max_deflection_rad"].as_f64().unwrap() > 0.0);
+        }
+    }
+    for joint in ["l_knee", "l_ankle_roll"] {
+        let none = kp(&report, joint, "none");
+        for model in [ORACLE_LABEL, "SCV"] {
+            let m = kp(&report, joint, model);
+            assert!(
+                m < none,
+                "{joint}: {model} needs K_p {m}, no compensation {none}\n{}",
+                report.markdown()
+            );
+        }
+    }
+}
