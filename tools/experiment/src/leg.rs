@@ -218,7 +218,7 @@ pub struct LegSuiteConfig {
 }
 
 impl LegSuiteConfig {
-    /// The knee and the ankle roll, the rest holding at K_p = 400, the paper's criterion (RMSE ≤
+    /// The knee and the ankle roll, the rest holding at K_p = 5000, the paper's criterion (RMSE ≤
     /// 10 % of the amplitude after one period), 2 periods, 4 halvings, 1.5 s after the release.
     pub fn paper(bins: Binaries, models: Vec<LegModel>) -> Self {
         Self {
@@ -228,7 +228,7 @@ impl LegSuiteConfig {
             joints: vec![LegTestJoint::knee(), LegTestJoint::ankle_roll()],
             models,
             rest: RestMotion::Hold,
-            rest_kp_per_s2: 400.0,
+            rest_kp_per_s2: 5000.0,
             criterion: TrackCriterion {
                 frac_of_amplitude: 0.1,
                 skip_periods: 1.0,

@@ -6,7 +6,8 @@
 //!
 //! Checks: the report has every (joint, model) key with a finished search and finite disturbance
 //! metrics; on the knee and on the ankle roll, compensating with the plant's true friction (the
-//! oracle) and with the drives' nominal SCV each needs a lower minimum K_p than no compensation.
+//! oracle) and with the drives' nominal SCV each needs a lower minimum K_p than no compensation;
+//! with the rest of the leg moving on small sines, the oracle still needs a lower one than none.
 //! Small sizes: 0.5 Hz sines, two periods, four halvings.
 //!
 //! Needs `frictiond` built next to `frictl` (`cargo build --workspace --bins`, as `tests/run.sh`).
@@ -16,7 +17,7 @@ use std::path::PathBuf;
 use frictionless::friction::{CvParams, ScvParams};
 use frictionless_experiment::controller::Reference;
 use frictionless_experiment::leg::{
-    LegModel, LegSetup, LegSuiteConfig, LegSuiteReport, LegTestJoint, run_leg_suite,
+    LegModel, LegSetup, LegSuiteConfig, LegSuiteReport, LegTestJoint, RestMotion, run_leg_suite,
 };
 use frictionless_experiment::session::{Binaries, FrictionModel, ORACLE_LABEL};
 use frictionless_sim::PlantParams;
@@ -120,5 +121,25 @@ fn leg_oracle_and_scv_need_a_lower_min_kp_than_none_on_knee_and_ankle_roll() {
                 report.markdown()
             );
         }
+    }
+
+    // the variant where the rest of the leg moves on small sines: the oracle still needs less
+    cfg.rest = RestMotion::Sines {
+        amplitude_rad: 0.05,
+        freq_hz: 0.3,
+    };
+    cfg.models = vec![
+        LegModel::uniform(FrictionModel::None, n),
+        LegModel::uniform(FrictionModel::Oracle, n),
+    ];
+    let moving = run_leg_suite(&cfg).expect("leg suite, rest moving");
+    eprintln!("{}", moving.markdown());
+    for joint in ["l_knee", "l_ankle_roll"] {
+        let (none, oracle) = (kp(&moving, joint, "none"), kp(&moving, joint, ORACLE_LABEL));
+        assert!(
+            oracle < none,
+            "{joint}, rest moving: oracle K_p {oracle}, none {none}\n{}",
+            moving.markdown()
+        );
     }
 }

@@ -98,8 +98,9 @@ pub struct Args {
     /// instead of holding their pose.
     #[arg(long)]
     pub rest_sine_rad: Option<f64>,
-    /// `--robot leg`: K_p of the joints not under test [1/s²].
-    #[arg(long, default_value_t = 400.0)]
+    /// `--robot leg`: K_p of the joints not under test [1/s²] (with the paper's M = link inertia,
+    /// the distal joints need a high gain to hold while the tested joint is disturbed).
+    #[arg(long, default_value_t = 5000.0)]
     pub rest_kp: f64,
     /// Models, comma-separated (default: none plus every model whose file is given).
     #[arg(long, value_enum, value_delimiter = ',')]
