@@ -576,3 +576,87 @@ impl LegSuiteReport {
         s
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn joint(name: &str, index: usize, model: &str) -> String {
+        format!(
+            "[[joint]]\nname = \"{name}\"\nindex = {index}\ngear_ratio = 100.0\nkt = 0.1\n\
+             max_curr = 5.0\n{model}\n"
+        )
+    }
+
+    #[test]
+    fn a_daemon_config_gives_each_leg_joint_its_model_by_name() {
+        let leg = LegSetup::load(&[]).unwrap();
+        let dir = std::env::temp_dir().join(format!("legmodel_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let head = "[backend]\nkind = \"shm\"\nservice_prefix = \"t\"\n\n";
+        let scv = "friction_model = \"coulomb_viscous_stribeck\"\nkc = 1.0\nka = 50.0\nkv = 0.5\n\
+                   ks = 2.0\nvs = 0.1\nalpha = 1.0";
+        let cv = "friction_model = \"coulomb_viscous\"\nkc = 3.0\nka = 50.0\nkv = 0.25";
+        let text = format!(
+            "{head}{}{}{}",
+            joint("l_ankle_roll", 0, cv),
+            joint("l_knee", 1, scv),
+            joint("r_knee", 2, cv)
+        );
+        let path = dir.join("ok.toml");
+        std::fs::write(&path, text).unwrap();
+        let m = LegModel::from_daemon_config("mine", &path, &leg).unwrap();
+        assert_eq!(m.label, "mine");
+        assert_eq!(m.per_joint.len(), leg.dof());
+        let knee = leg.index("l_knee").unwrap();
+        let ankle = leg.index("l_ankle_roll").unwrap();
+        assert!(matches!(m.per_joint[knee], FrictionModel::Scv(p) if p.ks == 2.0));
+        assert!(matches!(m.per_joint[ankle], FrictionModel::Cv(p) if p.kc == 3.0));
+        for (i, f) in m.per_joint.iter().enumerate() {
+            if i != knee && i != ankle {
+                assert_eq!(*f, FrictionModel::None, "joint {i}");
+            }
+        }
+        // LuGre is refused, naming the file and the joint
+        let lugre = "friction_model = \"lugre\"\nkc = 1.0\nkv = 0.5\nks = 2.0\nvs = 0.1\n\
+                     alpha = 1.0\nsigma0 = 1e4\nsigma1 = 10.0";
+        let bad = dir.join("lugre.toml");
+        std::fs::write(&bad, format!("{head}{}", joint("l_hip_yaw", 0, lugre))).unwrap();
+        let e = LegModel::from_daemon_config("x", &bad, &leg).unwrap_err();
+        let msg = e.to_string();
+        assert!(
+            msg.contains("lugre.toml") && msg.contains("l_hip_yaw"),
+            "{msg}"
+        );
+        // a file that does not exist: an error naming it, no panic
+        let e = LegModel::from_daemon_config("x", &dir.join("none.toml"), &leg).unwrap_err();
+        assert!(e.to_string().contains("none.toml"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn unknown_tested_joints_and_short_model_lists_are_errors() {
+        let leg = LegSetup::load(&[]).unwrap();
+        assert!(matches!(
+            leg.index("r_knee"),
+            Err(ExperimentError::LegJoint(n)) if n == "r_knee"
+        ));
+        let bins = Binaries {
+            frictl: "/nonexistent/frictl".into(),
+            frictiond: "/nonexistent/frictiond".into(),
+        };
+        let cfg = LegSuiteConfig::paper(bins, vec![LegModel::uniform(FrictionModel::None, 2)]);
+        let e = run_leg_suite(&cfg).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                ExperimentError::LegModels {
+                    got: 2,
+                    expected: 6,
+                    ..
+                }
+            ),
+            "{e}"
+        );
+    }
+}
