@@ -143,3 +143,95 @@ fn leg_oracle_and_scv_need_a_lower_min_kp_than_none_on_knee_and_ankle_roll() {
         );
     }
 }
+
+/// A PINN on the leg's knee and ankle roll in frictiond's six-joint config: with the raw friction
+/// (kfc 1, no clip, no LPF), the daemon's τ̂_F of every recorded state equals offline inference of
+/// the same network on the same states (Δθ offset latched at enable), while the whole-leg
+/// controller tracks a sine on the knee and the rest holds.
+#[test]
+fn leg_pinn_joints_in_frictiond_equal_offline_inference() {
+    use crate::experiment_online_offline::{model_file, replay};
+    use frictionless_experiment::run::{JointPlan, Rig, TrialOptions, TrialSpec, run_trial_on};
+    use frictionless_experiment::session::Mode;
+
+    let bins = Binaries::with_frictl(PathBuf::from(env!("CARGO_BIN_EXE_frictl")))
+        .expect("frictiond next to frictl (cargo build --workspace --bins)");
+    let leg = LegSetup::load(&[]).unwrap();
+    let dir = std::env::temp_dir().join(format!("frictl_leg_pinn_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let knee = leg.index("l_knee").unwrap();
+    let ankle = leg.index("l_ankle_roll").unwrap();
+    let mut files = std::collections::BTreeMap::new();
+    for (i, seed) in [(knee, 21u64), (ankle, 22)] {
+        let p = &leg.params.joints[i];
+        let f = model_file(&p.joint, p.gear_ratio_signed, p.kt_nm_per_a, seed);
+        let path = dir.join(format!("{}.fwt", p.joint));
+        frictionless::weights::write_file(&path, &f).unwrap();
+        files.insert(i, (f, path));
+    }
+    let joints = (0..leg.dof())
+        .map(|i| JointPlan {
+            index: i,
+            kp_per_s2: if i == knee { 2000.0 } else { 5000.0 },
+            reference: if i == knee {
+                Reference::Sine {
+                    centre_rad: -0.8,
+                    amplitude_rad: 0.3,
+                    freq_hz: 0.5,
+                }
+            } else {
+                Reference::Hold {
+                    s_rad: leg.params.joints[i].initial_s_rad,
+                }
+            },
+            pulse: None,
+            model: files
+                .get(&i)
+                .map_or(FrictionModel::None, |(_, p)| FrictionModel::Pinn(p.clone())),
+        })
+        .collect();
+    let spec = TrialSpec {
+        mode: Mode::Lockstep,
+        duration_s: 1.5,
+        joints,
+        seed: 3,
+        sets: vec![],
+        pinn_delta_theta_offset_motor_rad: [None; 2],
+        raw_friction: true,
+        kfc: [None; 2],
+    };
+    let trace =
+        run_trial_on(&bins, &Rig::Leg(&leg), &spec, &TrialOptions::default()).expect("leg trial");
+    let _ = std::fs::remove_dir_all(&dir);
+    for (&i, (file, _)) in &files {
+        let tr = &trace.joints[i];
+        assert_eq!(tr.index, i);
+        assert_eq!(tr.model, "PINN");
+        let n = tr.t_s.len();
+        assert!(n > 1000, "{}: only {n} ticks", tr.name);
+        let (off, _) = replay(file, None, tr);
+        let mut worst = 0.0f64;
+        let mut spread = (f64::INFINITY, f64::NEG_INFINITY);
+        for k in 1..n {
+            let online = tr.tau_f_hat_nm[k];
+            assert!(online.is_finite(), "{} row {k}: no daemon output", tr.name);
+            worst = worst.max((online - off[k - 1]).abs());
+            spread = (spread.0.min(off[k - 1]), spread.1.max(off[k - 1]));
+        }
+        eprintln!(
+            "{}: max |online − offline| {worst:.3e} Nm, offline in [{:.3}, {:.3}]",
+            tr.name, spread.0, spread.1
+        );
+        assert!(
+            worst <= 1e-5 * (1.0 + spread.0.abs().max(spread.1.abs())),
+            "{}: daemon τ̂_F differs from offline inference by {worst:.3e} Nm",
+            tr.name
+        );
+    }
+    // the knee tracked its sine under the whole-leg controller
+    let k = &trace.joints[knee];
+    let err = (0..k.t_s.len())
+        .map(|r| (k.s_des_rad[r] - k.s_rad[r]).abs())
+        .fold(0.0, f64::max);
+    assert!(err < 0.1, "knee max tracking error {err} rad");
+}
