@@ -894,8 +894,9 @@ fn run_leg(args: &Args) -> anyhow::Result<()> {
     };
     anyhow::ensure!(
         args.kind == Kind::All,
-        "--robot leg runs `all` (min-K_p and disturbance), not `{:?}`",
-        args.kind
+        "--robot leg runs `all` (min-K_p and disturbance), not `{}`",
+        clap::ValueEnum::to_possible_value(&args.kind)
+            .map_or_else(String::new, |v| v.get_name().to_owned())
     );
     anyhow::ensure!(!args.realtime, "--robot leg runs in lockstep only");
     anyhow::ensure!(
