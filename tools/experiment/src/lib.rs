@@ -10,7 +10,9 @@
 //! started as child processes per trial ([`session`], [`run`]); metrics ([`metrics`]), the
 //! minimum-K_p bisection ([`search`]), the three experiments of the paper (`track`, `min-kp`,
 //! `disturbance`, in [`suite`]) and their tables, JSON and plots ([`report`]); the `oracle`
-//! diagnostic ([`oracle`]: compensation with the plant's true friction — a bound, not a model).
+//! diagnostic ([`oracle`]: compensation with the plant's true friction — a bound, not a model); the
+//! same experiments on the coupled six-joint leg with the whole-leg computed-torque controller
+//! ([`leg`]: [`leg::run_leg_suite`], through the same run loop with [`run::Rig::Leg`]).
 //!
 //! What it is **not**: no physics (that is [`frictionless_sim`] in the plant process), no friction model
 //! evaluation (that is `frictiond`); this process only controls, disturbs and measures.
@@ -53,6 +55,7 @@
 #![warn(missing_docs)]
 
 pub mod controller;
+pub mod leg;
 pub mod metrics;
 pub mod onpolicy;
 pub mod oracle;
@@ -121,9 +124,51 @@ pub enum ExperimentError {
          SimTruth of the state it answers)"
     )]
     OracleMode,
-    /// A joint index other than 0 (knee) or 1 (ankle_roll).
-    #[error("joint index {0} (0 = knee, 1 = ankle_roll)")]
+    /// A joint index that is not a joint of the plant (0 = knee, 1 = ankle_roll for the single
+    /// joints; 0–5 for the leg).
+    #[error(
+        "joint index {0} is not a joint of the plant (single joints: 0 = knee, 1 = ankle_roll)"
+    )]
     JointIndex(usize),
+    /// A leg trial that does not plan every joint exactly once.
+    #[error("a leg trial plans each of the leg's {0} joints exactly once")]
+    LegPlan(usize),
+    /// A tested joint name that is not a joint of the leg.
+    #[error("`{0}` is not a joint of the leg (config/presets/leg.toml)")]
+    LegJoint(String),
+    /// A leg model list of the wrong length.
+    #[error("leg model `{label}`: {got} models for {expected} leg joints")]
+    LegModels {
+        /// The model's label.
+        label: String,
+        /// Models given.
+        got: usize,
+        /// Joints of the leg.
+        expected: usize,
+    },
+    /// A frictiond config given as a leg compensation does not load.
+    #[error("frictiond config {}", .path.display())]
+    DaemonConfig {
+        /// The config file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: Box<frictiond_config::ConfigError>,
+    },
+    /// A leg compensation config with a model the experiments do not compare.
+    #[error("frictiond config {}: joint `{joint}` runs LuGre; the leg experiments compare none, CV, SCV and PINN", .path.display())]
+    LegModelKind {
+        /// The config file.
+        path: PathBuf,
+        /// The joint.
+        joint: String,
+    },
+    /// The leg's URDF or dynamics failed.
+    #[error(transparent)]
+    Leg(#[from] frictionless_sim::LegError),
+    /// The controller's rigid-body model failed.
+    #[error("whole-leg controller")]
+    Dynamics(#[from] frictionless_dynamics::DynamicsError),
     /// A child died during the run.
     #[error("after the run")]
     AfterRun(#[source] Box<ExperimentError>),

@@ -1,5 +1,9 @@
 //! One closed-loop trial over shared memory: the experiment controller's loop.
 //!
+//! The plant is a [`Rig`]: the two single-joint presets (each planned joint controlled by
+//! [`ComputedTorque`] on its own link model) or the coupled leg (all six joints controlled at once by
+//! [`LegComputedTorque`]); both run through the one loop of [`run_trial_on`].
+//!
 //! What this module **is**: [`JointSetup`] (a plant preset's link model, gear ratio and k_t — the
 //! controller's M and h come from exactly the link model the plant simulates), [`TrialSpec`] (which
 //! joints, gains, references, disturbance pulses and friction models) and [`run_trial`], which starts a
@@ -19,7 +23,8 @@ use frictionless_shm_types::{
 };
 
 use super::ExperimentError;
-use super::controller::{ComputedTorque, Reference};
+use super::controller::{ComputedTorque, LegComputedTorque, Reference, Setpoint};
+use super::leg::LegSetup;
 use super::oracle::OracleCompensation;
 use super::session::{
     Binaries, DaemonJoint, FrictionModel, LawSettings, Lpf, Mode, PRESETS, PlantSpec, Session,
@@ -56,6 +61,44 @@ impl JointSetup {
     pub fn both(sets: &[String]) -> Result<[JointSetup; 2], ExperimentError> {
         frictionless_sim::params::check_set_joints(sets, &PRESETS)?;
         Ok([Self::load(PRESETS[0], sets)?, Self::load(PRESETS[1], sets)?])
+    }
+}
+
+/// The plant a trial runs against, and with it the controller: each single-joint preset with its own
+/// link model, or the coupled leg with the whole-leg computed torque on its nominal URDF.
+#[derive(Clone, Copy)]
+pub enum Rig<'a> {
+    /// The two independent single-joint presets ([`PRESETS`]: knee = 0, ankle_roll = 1); each
+    /// planned joint gets [`ComputedTorque`] on its preset's link model.
+    Pair(&'a [JointSetup; 2]),
+    /// The six-joint leg (`--preset leg`); every joint must be planned (one trial controls the whole
+    /// leg with [`LegComputedTorque`]).
+    Leg(&'a LegSetup),
+}
+
+impl Rig<'_> {
+    /// Joints of the plant.
+    pub fn dof(&self) -> usize {
+        match self {
+            Rig::Pair(s) => s.len(),
+            Rig::Leg(l) => l.dof(),
+        }
+    }
+
+    /// Drive parameters of joint `i` (joint name, signed r, k_t, initial pose, J_eq).
+    pub fn params(&self, i: usize) -> &PlantParams {
+        match self {
+            Rig::Pair(s) => &s[i].params,
+            Rig::Leg(l) => &l.params.joints[i],
+        }
+    }
+
+    /// The plant server's `--preset` argument.
+    fn preset_arg(&self) -> String {
+        match self {
+            Rig::Pair(_) => PRESETS.join(","),
+            Rig::Leg(_) => "leg".to_owned(),
+        }
     }
 }
 
@@ -233,15 +276,28 @@ pub fn run_trial(
     run_trial_with(bins, setups, spec, &TrialOptions::default())
 }
 
-/// Runs one trial through real processes (see the module doc).
+/// Runs one trial against the single-joint presets through real processes (see the module doc).
 pub fn run_trial_with(
     bins: &Binaries,
     setups: &[JointSetup; 2],
     spec: &TrialSpec,
     opts: &TrialOptions,
 ) -> Result<TrialTrace, ExperimentError> {
+    run_trial_on(bins, &Rig::Pair(setups), spec, opts)
+}
+
+/// Runs one trial against `rig` through real processes (see the module doc). `spec` and `opts`
+/// per-joint arrays (`kfc`, `lpf`, PINN offset) apply to payload indices 0 and 1 only; the leg's
+/// other joints use the defaults.
+pub fn run_trial_on(
+    bins: &Binaries,
+    rig: &Rig,
+    spec: &TrialSpec,
+    opts: &TrialOptions,
+) -> Result<TrialTrace, ExperimentError> {
     let started = Instant::now();
-    check_spec(spec)?;
+    check_spec(rig, spec)?;
+    let n = rig.dof();
     let mut session = Session::new()?;
     if std::env::var_os("FRICTL_KEEP_RUN_DIR").is_some() {
         session.keep_dir(true);
@@ -258,7 +314,7 @@ pub fn run_trial_with(
     // also create the command service so the daemon and plant agree on it from the start
     let _cmd_ch = node.motor_current_command()?;
 
-    let (daemon_joints, initial) = daemon_joints(setups, spec, opts);
+    let (daemon_joints, initial) = daemon_joints(rig, spec, opts);
     session.start_daemon(bins, spec.mode, &daemon_joints, spec.raw_friction, || {
         req_ch.subscriber_count()
     })?;
@@ -267,24 +323,25 @@ pub fn run_trial_with(
         spec.mode,
         &PlantSpec {
             seed: spec.seed,
+            preset: rig.preset_arg(),
             initial_pose_rad: initial,
             sets: spec.sets.clone(),
         },
     )?;
 
-    let ctrls = controllers(setups, spec, opts);
+    let mut ctrl = Control::new(rig, spec, opts)?;
     let laws: Vec<LawSettings> = spec
         .joints
         .iter()
         .map(|p| {
             LawSettings::shipped(
-                &setups[p.index].params.joint,
-                spec.kfc[p.index],
-                opts.lpf[p.index],
+                &rig.params(p.index).joint,
+                spec.kfc.get(p.index).copied().flatten(),
+                opts.lpf.get(p.index).copied().flatten(),
             )
         })
         .collect::<Result<_, _>>()?;
-    let mut traces = empty_traces(setups, spec, &laws);
+    let mut traces = empty_traces(rig, spec, &laws);
     let mut oracles: Vec<Option<OracleCompensation>> = spec
         .joints
         .iter()
@@ -303,7 +360,10 @@ pub fn run_trial_with(
     let mut last_seq = 0u64;
     let mut truth_ok = true;
     let mut status: Option<DaemonStatus> = None;
-    let mut last_ext = [0.0f64; 2];
+    let mut last_ext = vec![0.0f64; n];
+    let mut ext = vec![0.0f64; n];
+    let mut sps = vec![Setpoint::default(); spec.joints.len()];
+    let mut taus = vec![0.0f64; spec.joints.len()];
     let mut req_seq = 0u64;
     let mut dist_seq = 0u64;
     let mut ticks = 0u64;
@@ -347,11 +407,15 @@ pub fn run_trial_with(
             status = Some(st);
         }
         let mut req = TorqueRequest::zeroed();
-        let mut ext = [0.0f64; 2];
+        ext.fill(0.0);
+        for (sp, p) in sps.iter_mut().zip(&spec.joints) {
+            *sp = p.reference.at(t);
+        }
+        ctrl.tau_des_nm(&js, &spec.joints, &sps, &mut taus)?;
         for (k, p) in spec.joints.iter().enumerate() {
             let j = p.index;
-            let sp = p.reference.at(t);
-            let mut tau = ctrls[k].tau_des_nm(js.s_rad[j], js.sdot_rad_s[j], &sp);
+            let sp = sps[k];
+            let mut tau = taus[k];
             let mut f_hat = status.map_or(f64::NAN, |x| x.tau_f_hat_nm[j]);
             if let Some(o) = &mut oracles[k] {
                 let tr = truth.ok_or(ExperimentError::OracleNoTruth)?;
@@ -381,15 +445,15 @@ pub fn run_trial_with(
         }
         if ext != last_ext {
             dist_seq += 1;
-            publish_disturbance(&dist_out, dist_seq, ext)?;
-            last_ext = ext;
+            publish_disturbance(&dist_out, dist_seq, &ext)?;
+            last_ext.copy_from_slice(&ext);
         }
         req_seq += 1;
         req.seq = req_seq;
         req.stamp_ns = monotonic_ns();
         req.state_seq = js.seq;
         req.enable_mask = enable_mask;
-        req.n_joints = 2;
+        req.n_joints = n as u32;
         req_out
             .publish(&req)
             .map_err(|source| ExperimentError::Publish {
@@ -411,10 +475,22 @@ pub fn run_trial_with(
     })
 }
 
-/// Joint indices are 0 or 1; the oracle only in lockstep with the shipped law.
-fn check_spec(spec: &TrialSpec) -> Result<(), ExperimentError> {
+/// Joint indices within the rig; the leg with every joint planned once; the oracle only in
+/// lockstep with the shipped law.
+fn check_spec(rig: &Rig, spec: &TrialSpec) -> Result<(), ExperimentError> {
+    if let Rig::Leg(_) = rig {
+        let mut seen = vec![false; rig.dof()];
+        for p in &spec.joints {
+            if let Some(s) = seen.get_mut(p.index) {
+                *s = true;
+            }
+        }
+        if spec.joints.len() != rig.dof() || seen.iter().any(|s| !s) {
+            return Err(ExperimentError::LegPlan(rig.dof()));
+        }
+    }
     for p in &spec.joints {
-        if p.index >= 2 {
+        if p.index >= rig.dof() {
             return Err(ExperimentError::JointIndex(p.index));
         }
         if p.model == FrictionModel::Oracle && (spec.mode != Mode::Lockstep || spec.raw_friction) {
@@ -426,61 +502,133 @@ fn check_spec(spec: &TrialSpec) -> Result<(), ExperimentError> {
 
 /// frictiond's joints (both presets; unplanned joints run no model) and the plant's initial pose
 /// (a planned joint starts at its reference, the others at their preset pose).
-fn daemon_joints(
-    setups: &[JointSetup; 2],
-    spec: &TrialSpec,
-    opts: &TrialOptions,
-) -> (Vec<DaemonJoint>, [f64; 2]) {
+fn daemon_joints(rig: &Rig, spec: &TrialSpec, opts: &TrialOptions) -> (Vec<DaemonJoint>, Vec<f64>) {
     let mut joints = vec![];
-    let mut initial = [0.0; 2];
-    for (i, s) in setups.iter().enumerate() {
+    let mut initial = vec![0.0; rig.dof()];
+    for (i, init) in initial.iter_mut().enumerate() {
+        let s = rig.params(i);
         let plan = spec.joints.iter().find(|p| p.index == i);
-        initial[i] = plan.map_or(s.params.initial_s_rad, |p| p.reference.start_rad());
+        *init = plan.map_or(s.initial_s_rad, |p| p.reference.start_rad());
         joints.push(DaemonJoint {
-            name: s.params.joint.clone(),
+            name: s.joint.clone(),
             index: i,
-            gear_ratio: s.params.gear_ratio_signed,
-            kt_nm_per_a: s.params.kt_nm_per_a,
+            gear_ratio: s.gear_ratio_signed,
+            kt_nm_per_a: s.kt_nm_per_a,
             model: plan.map_or(FrictionModel::None, |p| p.model.clone()),
-            delta_theta_offset_motor_rad: spec.pinn_delta_theta_offset_motor_rad[i],
-            kfc: spec.kfc[i],
-            lpf: opts.lpf[i],
+            delta_theta_offset_motor_rad: spec
+                .pinn_delta_theta_offset_motor_rad
+                .get(i)
+                .copied()
+                .flatten(),
+            kfc: spec.kfc.get(i).copied().flatten(),
+            lpf: opts.lpf.get(i).copied().flatten(),
         });
     }
     (joints, initial)
 }
 
-/// The paper's computed-torque controller per planned joint (with r²·J_m in M if asked).
-fn controllers<'a>(
-    setups: &'a [JointSetup; 2],
-    spec: &TrialSpec,
-    opts: &TrialOptions,
-) -> Vec<ComputedTorque<&'a dyn LinkDynamics>> {
-    spec.joints
-        .iter()
-        .map(|p| ComputedTorque {
-            extra_inertia_kgm2: if opts.rotor_inertia_in_m {
-                setups[p.index].params.j_eq_kgm2()
+/// The controller of a trial: the paper's computed torque per planned joint on its own link model,
+/// or the whole-leg computed torque (with r²·J_m in M if asked, either way).
+enum Control<'a> {
+    /// One [`ComputedTorque`] per plan.
+    Joints(Vec<ComputedTorque<&'a dyn LinkDynamics>>),
+    /// The leg: buffers in payload order.
+    Leg {
+        ctrl: Box<LegComputedTorque>,
+        s: Vec<f64>,
+        sdot: Vec<f64>,
+        sp: Vec<Setpoint>,
+        tau: Vec<f64>,
+    },
+}
+
+impl<'a> Control<'a> {
+    fn new(rig: &Rig<'a>, spec: &TrialSpec, opts: &TrialOptions) -> Result<Self, ExperimentError> {
+        let rotor = |i: usize| {
+            if opts.rotor_inertia_in_m {
+                rig.params(i).j_eq_kgm2()
             } else {
                 0.0
-            },
-            ..ComputedTorque::paper(setups[p.index].link.as_ref(), p.kp_per_s2)
-        })
-        .collect()
+            }
+        };
+        match *rig {
+            Rig::Pair(setups) => Ok(Control::Joints(
+                spec.joints
+                    .iter()
+                    .map(|p| ComputedTorque {
+                        extra_inertia_kgm2: rotor(p.index),
+                        ..ComputedTorque::paper(setups[p.index].link.as_ref(), p.kp_per_s2)
+                    })
+                    .collect(),
+            )),
+            Rig::Leg(leg) => {
+                let n = leg.dof();
+                let names: Vec<&str> = leg.params.joints.iter().map(|p| p.joint.as_str()).collect();
+                let mut kp = vec![0.0; n];
+                for p in &spec.joints {
+                    kp[p.index] = p.kp_per_s2;
+                }
+                let mut ctrl = LegComputedTorque::new(leg.robot.clone(), &names, kp)?;
+                for (i, x) in ctrl.extra_inertia_kgm2.iter_mut().enumerate() {
+                    *x = rotor(i);
+                }
+                Ok(Control::Leg {
+                    ctrl: Box::new(ctrl),
+                    s: vec![0.0; n],
+                    sdot: vec![0.0; n],
+                    sp: vec![Setpoint::default(); n],
+                    tau: vec![0.0; n],
+                })
+            }
+        }
+    }
+
+    /// τ_des [Nm] per plan into `out` (plan order) for state `js` and set-points `sps` (plan order).
+    fn tau_des_nm(
+        &mut self,
+        js: &JointStates,
+        plans: &[JointPlan],
+        sps: &[Setpoint],
+        out: &mut [f64],
+    ) -> Result<(), ExperimentError> {
+        match self {
+            Control::Joints(ctrls) => {
+                for (k, p) in plans.iter().enumerate() {
+                    let j = p.index;
+                    out[k] = ctrls[k].tau_des_nm(js.s_rad[j], js.sdot_rad_s[j], &sps[k]);
+                }
+            }
+            Control::Leg {
+                ctrl,
+                s,
+                sdot,
+                sp,
+                tau,
+            } => {
+                let n = s.len();
+                s.copy_from_slice(&js.s_rad[..n]);
+                sdot.copy_from_slice(&js.sdot_rad_s[..n]);
+                for (k, p) in plans.iter().enumerate() {
+                    sp[p.index] = sps[k];
+                }
+                ctrl.tau_des_nm(s, sdot, sp, tau)?;
+                for (k, p) in plans.iter().enumerate() {
+                    out[k] = tau[p.index];
+                }
+            }
+        }
+        Ok(())
+    }
 }
 
 /// One empty trace per planned joint, with the kfc its τ̂_F includes (0 without a model).
-fn empty_traces(
-    setups: &[JointSetup; 2],
-    spec: &TrialSpec,
-    laws: &[LawSettings],
-) -> Vec<JointTrace> {
+fn empty_traces(rig: &Rig, spec: &TrialSpec, laws: &[LawSettings]) -> Vec<JointTrace> {
     spec.joints
         .iter()
         .enumerate()
         .map(|(k, p)| JointTrace {
             index: p.index,
-            name: setups[p.index].params.joint.clone(),
+            name: rig.params(p.index).joint.clone(),
             kp_per_s2: p.kp_per_s2,
             model: p.model.label().to_owned(),
             kfc: if p.model == FrictionModel::None {
@@ -521,17 +669,17 @@ fn next_state(
     }
 }
 
-/// Publishes the external torques `ext_nm` (both joints) as `SimDisturbance` number `seq`.
+/// Publishes the external torques `ext_nm` (one per joint) as `SimDisturbance` number `seq`.
 fn publish_disturbance(
     out: &Outbox<SimDisturbance>,
     seq: u64,
-    ext_nm: [f64; 2],
+    ext_nm: &[f64],
 ) -> Result<(), ExperimentError> {
     let mut d = SimDisturbance::zeroed();
     d.seq = seq;
     d.stamp_ns = monotonic_ns();
-    d.n_joints = 2;
-    d.tau_ext_nm[..2].copy_from_slice(&ext_nm);
+    d.n_joints = ext_nm.len() as u32;
+    d.tau_ext_nm[..ext_nm.len()].copy_from_slice(ext_nm);
     out.publish(&d).map_err(|source| ExperimentError::Publish {
         payload: "SimDisturbance",
         source,

@@ -313,15 +313,40 @@ pub enum Mode {
 }
 
 /// The `[[joint]]` of `config/ankle_knee.toml` named `name`, typed by the daemon's schema (not
-/// validated: its model paths are relative to `config/`).
+/// validated: its model paths are relative to `config/`). A joint of the built-in leg
+/// (`config/presets/leg.toml`) that the shipped config does not list gets the law of the shipped
+/// joint of its drive preset (`knee` → `l_knee`, `ankle_roll` → `l_ankle_roll`) with its own name
+/// and its drive's current limit (`plant.i_max_a`) as `max_curr`.
 fn shipped_joint(name: &str) -> Result<JointConfig, ExperimentError> {
     let shipped: RawConfig =
         toml::from_str(ANKLE_KNEE_TOML).map_err(ExperimentError::ShippedConfig)?;
-    shipped
-        .joint
-        .into_iter()
-        .find(|j| j.name == name)
-        .ok_or_else(|| ExperimentError::ShippedJoint(name.to_owned()))
+    let find = |n: &str| shipped.joint.iter().find(|j| j.name == n).cloned();
+    if let Some(j) = find(name) {
+        return Ok(j);
+    }
+    let leg: Option<toml::Table> = frictionless_sim::leg::LEG_PRESET_TOML.parse().ok();
+    let leg_joint = leg
+        .as_ref()
+        .and_then(|t| t.get("joint"))
+        .and_then(|t| t.get(name));
+    let base = match leg_joint
+        .and_then(|t| t.get("preset"))
+        .and_then(|p| p.as_str())
+    {
+        Some("knee") => find("l_knee"),
+        Some("ankle_roll") => find("l_ankle_roll"),
+        _ => None,
+    };
+    let mut j = base.ok_or_else(|| ExperimentError::ShippedJoint(name.to_owned()))?;
+    j.name = name.to_owned();
+    if let Some(i_max) = leg_joint
+        .and_then(|t| t.get("plant"))
+        .and_then(|t| t.get("i_max_a"))
+        .and_then(|v| v.as_float())
+    {
+        j.max_curr = i_max;
+    }
+    Ok(j)
 }
 
 /// `kfc` of `name` in `config/ankle_knee.toml` (1.0 if absent, the daemon's default).
@@ -533,8 +558,10 @@ struct Proc {
 pub struct PlantSpec {
     /// Seed.
     pub seed: u64,
-    /// Initial joint angle per preset index [rad].
-    pub initial_pose_rad: [f64; 2],
+    /// The plant server's `--preset` (`knee,ankle_roll` or `leg`).
+    pub preset: String,
+    /// Initial joint angle per payload index [rad].
+    pub initial_pose_rad: Vec<f64>,
     /// `--set KEY=VALUE` overrides passed to every preset.
     pub sets: Vec<String>,
 }
@@ -668,7 +695,7 @@ impl Session {
         self.wait_until("frictiond", Duration::from_secs(20), || probe() >= 1)
     }
 
-    /// Starts the plant (`frictl sim serve --preset knee,ankle_roll --backend shm …`) and waits for
+    /// Starts the plant (`frictl sim serve --preset <spec.preset> --backend shm …`) and waits for
     /// its "ready" line.
     pub fn start_plant(
         &mut self,
@@ -677,26 +704,17 @@ impl Session {
         spec: &PlantSpec,
     ) -> Result<(), ExperimentError> {
         let mut cmd = Command::new(&bins.frictl);
-        cmd.args([
-            "sim",
-            "serve",
-            "--preset",
-            &PRESETS.join(","),
-            "--backend",
-            "shm",
-        ])
-        .arg("--prefix")
-        .arg(&self.ipc.service_prefix)
-        .arg("--root-path")
-        .arg(&self.dir)
-        .arg("--seed")
-        .arg(spec.seed.to_string())
-        // `=` form: the value starts with '-' for negative angles
-        .arg(format!(
-            "--initial-pose-rad={},{}",
-            spec.initial_pose_rad[0], spec.initial_pose_rad[1]
-        ))
-        .arg("--lockstep-subscribers=2");
+        let pose: Vec<String> = spec.initial_pose_rad.iter().map(f64::to_string).collect();
+        cmd.args(["sim", "serve", "--preset", &spec.preset, "--backend", "shm"])
+            .arg("--prefix")
+            .arg(&self.ipc.service_prefix)
+            .arg("--root-path")
+            .arg(&self.dir)
+            .arg("--seed")
+            .arg(spec.seed.to_string())
+            // `=` form: the value starts with '-' for negative angles
+            .arg(format!("--initial-pose-rad={}", pose.join(",")))
+            .arg("--lockstep-subscribers=2");
         if mode == Mode::Lockstep {
             cmd.arg("--lockstep");
         }

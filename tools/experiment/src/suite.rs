@@ -196,7 +196,7 @@ pub fn run_grouped(
 
 /// Runs `f` on every item with up to `jobs` threads, results in item order; after the first error
 /// no further item starts (those are `None`).
-fn run_parallel<T: Sync, R: Send>(
+pub(crate) fn run_parallel<T: Sync, R: Send>(
     jobs: usize,
     items: &[T],
     f: impl Fn(&T) -> Result<R, ExperimentError> + Sync,

@@ -24,7 +24,7 @@ use frictionless_experiment::session::{Binaries, FrictionModel as Fm, Mode};
 
 /// A small ReLU network whose normalisation is sized to the joint's signals (so the output moves
 /// with Δθ and ṡ instead of sitting in one ReLU region).
-fn model_file(joint: &str, ratio: f64, kt: f64, seed: u64) -> ModelFile {
+pub(crate) fn model_file(joint: &str, ratio: f64, kt: f64, seed: u64) -> ModelFile {
     let spec = FeatureSpec {
         set: FeatureSet::DeltaThetaJointVel,
         history: 8,
@@ -60,7 +60,7 @@ fn model_file(joint: &str, ratio: f64, kt: f64, seed: u64) -> ModelFile {
 }
 
 /// Offline replay of a trace: enable at row 0, one estimate per recorded state.
-fn replay(file: &ModelFile, offset: Option<f64>, tr: &JointTrace) -> (Vec<f64>, f32) {
+pub(crate) fn replay(file: &ModelFile, offset: Option<f64>, tr: &JointTrace) -> (Vec<f64>, f32) {
     let mut est = PinnEstimator::from_model_file(file, WarmupPolicy::ZeroPad).unwrap();
     est.fix_delta_theta_offset(offset);
     let mut out = Vec::with_capacity(tr.t_s.len());

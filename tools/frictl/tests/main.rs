@@ -10,6 +10,7 @@ mod dynamics_cli;
 mod eval_drift;
 mod eval_synthetic;
 mod experiment_controller;
+mod experiment_leg;
 mod experiment_online_offline;
 mod experiment_oracle;
 mod files_cli;

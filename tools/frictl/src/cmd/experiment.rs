@@ -37,6 +37,15 @@ pub enum Kind {
     Record,
 }
 
+/// Which plant.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum RobotSel {
+    /// The two independent single-joint presets (knee, ankle roll).
+    Joints,
+    /// The coupled six-joint ergoCub leg (`sim serve --preset leg`), whole-leg computed torque.
+    Leg,
+}
+
 /// Which joints.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum JointSel {
@@ -75,6 +84,24 @@ pub struct Args {
     /// Joints.
     #[arg(long, value_enum, default_value_t = JointSel::Both)]
     pub joint: JointSel,
+    /// Plant: the single joints, or the leg (`all` only: min-K_p and disturbance on the knee and
+    /// the ankle roll while the rest of the leg holds or moves; writes leg-tables.md and
+    /// leg-report.json).
+    #[arg(long, value_enum, default_value_t = RobotSel::Joints)]
+    pub robot: RobotSel,
+    /// `--robot leg`: a compensation per frictiond config, `LABEL=FILE`, comma-separated (each leg
+    /// joint runs the model of the config's joint of the same name, none if not listed; e.g. the
+    /// config `frictl robot run` writes). `none` always runs; `--model oracle` adds the oracle.
+    #[arg(long, value_delimiter = ',')]
+    pub leg_config: Vec<String>,
+    /// `--robot leg`: the joints not under test move on sines of this amplitude [rad] at 0.3 Hz
+    /// instead of holding their pose.
+    #[arg(long)]
+    pub rest_sine_rad: Option<f64>,
+    /// `--robot leg`: K_p of the joints not under test [1/s²] (with the paper's M = link inertia,
+    /// the distal joints need a high gain to hold while the tested joint is disturbed).
+    #[arg(long, default_value_t = 5000.0)]
+    pub rest_kp: f64,
     /// Models, comma-separated (default: none plus every model whose file is given).
     #[arg(long, value_enum, value_delimiter = ',')]
     pub model: Option<Vec<ModelSel>>,
@@ -321,6 +348,9 @@ pub fn load_scv(path: &Path) -> anyhow::Result<ScvParams> {
 /// Runs `frictl experiment`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     install_signal_flag()?;
+    if args.robot == RobotSel::Leg {
+        return run_leg(&args);
+    }
     let started = std::time::Instant::now();
     let joints: Vec<usize> = match args.joint {
         JointSel::Knee => vec![0],
@@ -849,6 +879,82 @@ fn write_outputs(
     }
     eprintln!(
         "frictl experiment: {} trials in {:.1} s; tables, report.json and traces in {}",
+        report.trials,
+        report.wall_s,
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// `frictl experiment all --robot leg`: parses the options into a [`LegSuiteConfig`], runs
+/// [`run_leg_suite`] and writes `leg-tables.md` and `leg-report.json`.
+fn run_leg(args: &Args) -> anyhow::Result<()> {
+    use frictionless_experiment::leg::{
+        LegModel, LegSetup, LegSuiteConfig, RestMotion, run_leg_suite,
+    };
+    anyhow::ensure!(
+        args.kind == Kind::All,
+        "--robot leg runs `all` (min-K_p and disturbance), not `{}`",
+        clap::ValueEnum::to_possible_value(&args.kind)
+            .map_or_else(String::new, |v| v.get_name().to_owned())
+    );
+    anyhow::ensure!(!args.realtime, "--robot leg runs in lockstep only");
+    anyhow::ensure!(
+        args.criterion_frac > 0.0 && args.periods > args.skip_periods && args.skip_periods >= 0.0,
+        "need --criterion-frac > 0 and --periods > --skip-periods ≥ 0"
+    );
+    let leg = LegSetup::load(&args.sets)?;
+    let n = leg.dof();
+    let mut models = vec![LegModel::uniform(FrictionModel::None, n)];
+    for item in &args.leg_config {
+        let (label, file) = item
+            .split_once('=')
+            .with_context(|| format!("--leg-config {item:?}: expected LABEL=FILE"))?;
+        models.push(LegModel::from_daemon_config(label, Path::new(file), &leg)?);
+    }
+    if args
+        .model
+        .as_ref()
+        .is_some_and(|m| m.contains(&ModelSel::Oracle))
+    {
+        models.push(LegModel::uniform(FrictionModel::Oracle, n));
+    }
+    let mut cfg = LegSuiteConfig::paper(Binaries::locate()?, models);
+    cfg.seed = args.seed;
+    cfg.sets = args.sets.clone();
+    cfg.criterion = TrackCriterion {
+        frac_of_amplitude: args.criterion_frac,
+        skip_periods: args.skip_periods,
+    };
+    cfg.periods = args.periods;
+    cfg.iterations = args.iterations;
+    cfg.after_release_s = args.after_release_s;
+    cfg.rest_kp_per_s2 = args.rest_kp;
+    if let Some(a) = args.rest_sine_rad {
+        cfg.rest = RestMotion::Sines {
+            amplitude_rad: a,
+            freq_hz: 0.3,
+        };
+    }
+    cfg.rotor_inertia_in_m = args.controller_inertia == ControllerInertia::LinkRotor;
+    cfg.jobs = args
+        .jobs
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    cfg.progress = !args.quiet;
+    let report = run_leg_suite(&cfg)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let md = report.markdown();
+    println!("{md}");
+    frictionless::output_file::write(args.out.join("leg-tables.md"), &md)?;
+    let json = serde_json::to_string_pretty(&report)?;
+    frictionless::output_file::write(args.out.join("leg-report.json"), &json)?;
+    if let Some(p) = &args.json {
+        frictionless::output_file::write(p, &json)
+            .with_context(|| format!("cannot write {}", p.display()))?;
+    }
+    eprintln!(
+        "frictl experiment --robot leg: {} trials in {:.1} s; leg-tables.md and leg-report.json in {}",
         report.trials,
         report.wall_s,
         args.out.display()
