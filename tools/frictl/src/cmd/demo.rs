@@ -116,6 +116,7 @@ pub enum DemoSensor {
 mod onpolicy;
 mod torque;
 
+use super::experiment::{self, ModelSel};
 use super::{acquire, eval, export, fit, preprocess, stage, train};
 use onpolicy::{RoundEntry, final_round, onpolicy_md, onpolicy_round};
 
@@ -1106,35 +1107,29 @@ fn experiments(
     let exp_json = exp_dir.join("report.json");
     let offsets = pinn_offsets_arg(files)?;
     let (plant_t0, exp_temps) = plant_t0_sets(dirs)?;
-    r.frictl(
+    let exp = experiment::Args {
+        kind: experiment::Kind::All,
+        no_plots: false,
+        iterations: sizes.iterations,
+        model: Some(vec![
+            ModelSel::None,
+            ModelSel::Cv,
+            ModelSel::Scv,
+            ModelSel::Pinn,
+            ModelSel::Oracle,
+        ]),
+        cv: Some(f("_cv.json")),
+        scv: Some(f("_scv.json")),
+        seed,
+        periods: sizes.periods,
+        out: exp_dir.clone(),
+        sets: plant_t0,
+        ..pinn_experiment(experiment::Kind::All, files, &offsets)?
+    };
+    r.stage(
         "experiment all (both joints; none, CV, SCV, PINN, oracle)",
-        &[
-            "experiment".into(),
-            "all".into(),
-            "--joint".into(),
-            "both".into(),
-            "--model".into(),
-            "none,cv,scv,pinn,oracle".into(),
-            "--cv".into(),
-            f("_cv.json"),
-            "--scv".into(),
-            f("_scv.json"),
-            "--pinn".into(),
-            pinn_arg(files),
-            "--pinn-delta-theta-offset".into(),
-            offsets,
-            "--seed".into(),
-            seed.to_string(),
-            "--iterations".into(),
-            sizes.iterations.to_string(),
-            "--periods".into(),
-            sizes.periods.to_string(),
-            "--out".into(),
-            s(exp_dir),
-        ]
-        .into_iter()
-        .chain(plant_t0)
-        .collect::<Vec<String>>(),
+        &["experiment"],
+        &exp,
     )?;
     let exp_md = std::fs::read_to_string(exp_dir.join("tables.md")).unwrap_or_default();
     let ex: SuiteReport = read_typed(&exp_json)?;
@@ -1162,25 +1157,20 @@ fn pinn_arg(files: &[JointFiles]) -> String {
 
 /// `frictl experiment KIND` on both joints with only the current PINNs (and the Δθ offsets they were
 /// trained with), no plots: the on-policy rounds' min-K_p search and recording.
-fn pinn_experiment(kind: &str, files: &[JointFiles], offsets: &str) -> Vec<String> {
-    [
-        "experiment",
+fn pinn_experiment(
+    kind: experiment::Kind,
+    files: &[JointFiles],
+    offsets: &str,
+) -> anyhow::Result<experiment::Args> {
+    Ok(experiment::Args {
         kind,
-        "--joint",
-        "both",
-        "--model",
-        "pinn",
-        "--no-plots",
-        "--pinn",
-    ]
-    .map(String::from)
-    .into_iter()
-    .chain([
-        pinn_arg(files),
-        "--pinn-delta-theta-offset".into(),
-        offsets.to_owned(),
-    ])
-    .collect()
+        joint: experiment::JointSel::Both,
+        model: Some(vec![ModelSel::Pinn]),
+        no_plots: true,
+        pinn: Some(pinn_arg(files)),
+        pinn_delta_theta_offset: offsets.to_owned(),
+        ..stage::defaults()?
+    })
 }
 
 /// `knee=V,ankle_roll=W`: the Δθ offset frictiond keeps for each current PINN (the one it was
@@ -1193,7 +1183,7 @@ fn pinn_offsets_arg(files: &[JointFiles]) -> anyhow::Result<String> {
     Ok(offsets.join(","))
 }
 
-/// `--set` overrides that start each joint's plant at the winding temperature of its training
+/// `frictl experiment --set` overrides that start each joint's plant at the winding temperature of its training
 /// recording, and their description. The models are compared in the conditions they were
 /// identified in (none of them reads temperature; a plant several °C hotter than its training data
 /// has less sliding friction than any model learnt, which matters as kfc approaches 1).
@@ -1209,7 +1199,7 @@ fn plant_t0_sets(dirs: &Dirs) -> anyhow::Result<(Vec<String>, Vec<String>)> {
             .with_context(|| format!("{}: no initial_temperature_c", sidecar.display()))?;
         exp_temps.push(format!("{key} {t0:.1} °C"));
         for bound in ["t0_min_c", "t0_max_c"] {
-            plant_t0.push(format!("--set={key}:plant.{bound}={t0}"));
+            plant_t0.push(format!("{key}:plant.{bound}={t0}"));
         }
     }
     Ok((plant_t0, exp_temps))

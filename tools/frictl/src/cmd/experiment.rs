@@ -76,18 +76,21 @@ pub enum ModelSel {
 }
 
 /// Arguments of `frictl experiment`.
-#[derive(clap::Args, Debug)]
+#[derive(clap::Args, Debug, serde::Serialize)]
 pub struct Args {
     /// Experiment.
     #[arg(value_enum)]
+    #[serde(serialize_with = "super::stage::as_value_enum")]
     pub kind: Kind,
     /// Joints.
     #[arg(long, value_enum, default_value_t = JointSel::Both)]
+    #[serde(serialize_with = "super::stage::as_value_enum")]
     pub joint: JointSel,
     /// Plant: the single joints, or the leg (`all` only: min-K_p and disturbance on the knee and
     /// the ankle roll while the rest of the leg holds or moves; writes leg-tables.md and
     /// leg-report.json).
     #[arg(long, value_enum, default_value_t = RobotSel::Joints)]
+    #[serde(serialize_with = "super::stage::as_value_enum")]
     pub robot: RobotSel,
     /// `--robot leg`: a compensation per frictiond config, `LABEL=FILE`, comma-separated (each leg
     /// joint runs the model of the config's joint of the same name, none if not listed; e.g. the
@@ -104,6 +107,7 @@ pub struct Args {
     pub rest_kp: f64,
     /// Models, comma-separated (default: none plus every model whose file is given).
     #[arg(long, value_enum, value_delimiter = ',')]
+    #[serde(serialize_with = "super::stage::as_opt_value_enums")]
     pub model: Option<Vec<ModelSel>>,
     /// CV fit JSON from `frictl fit cv --json`: `knee=F.json,ankle_roll=G.json` (or one file with
     /// one joint).
@@ -197,6 +201,7 @@ pub struct Args {
     /// reflected rotor inertia r²·J_m of the preset — a diagnostic: the loop then gets the K_p asked
     /// for and 25× more damping on the ankle roll).
     #[arg(long, value_enum, default_value_t = ControllerInertia::Link)]
+    #[serde(serialize_with = "super::stage::as_value_enum")]
     pub controller_inertia: ControllerInertia,
     /// Lockstep trials run at once, each with its own frictiond, plant and IPC namespace (the
     /// results do not change, only the wall time). Default: the CPUs available. Real-time trials

@@ -224,6 +224,24 @@ pub fn as_opt_value_enum<T: clap::ValueEnum, S: serde::Serializer>(
     }
 }
 
+/// [`as_value_enum`] for an optional list.
+pub fn as_opt_value_enums<T: clap::ValueEnum, S: serde::Serializer>(
+    v: &Option<Vec<T>>,
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    use serde::ser::SerializeSeq;
+    match v {
+        None => s.serialize_none(),
+        Some(items) => {
+            let mut seq = s.serialize_seq(Some(items.len()))?;
+            for item in items {
+                seq.serialize_element(&value_name(item))?;
+            }
+            seq.end()
+        }
+    }
+}
+
 /// `#[serde(serialize_with = "…")]` for a value clap parses with `FromStr`: its `Display` form.
 pub fn as_display<T: std::fmt::Display, S: serde::Serializer>(
     v: &T,
@@ -362,6 +380,31 @@ mod tests {
                 output: "m.onnx".into(),
                 norm: export::Norm::DiagonalGemm,
             },
+        );
+    }
+
+    #[test]
+    fn the_experiment_stage_gives_its_arguments_back() {
+        use crate::cmd::experiment::{self, ControllerInertia, Kind, ModelSel, RobotSel};
+        let words = assert_roundtrip(
+            &["experiment"],
+            &experiment::Args {
+                kind: Kind::MinKp,
+                robot: RobotSel::Leg,
+                model: Some(vec![ModelSel::None, ModelSel::Oracle]),
+                leg_config: vec!["SCV=a.toml".into(), "PINN=b.toml".into()],
+                rest_sine_rad: Some(0.05),
+                pinn_delta_theta_offset: "knee=-1.5,ankle_roll=enable".into(),
+                controller_inertia: ControllerInertia::LinkRotor,
+                no_plots: true,
+                sets: vec!["knee:plant.t0_min_c=31.5".into()],
+                ..defaults().unwrap()
+            },
+        );
+        assert_eq!(
+            words[words.len() - 2..],
+            ["--", "min-kp"],
+            "the kind is positional, last"
         );
     }
 

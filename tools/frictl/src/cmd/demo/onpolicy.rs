@@ -45,22 +45,17 @@ pub(super) fn onpolicy_round(
     let (plant_t0, _) = plant_t0_sets(dirs)?;
     let offsets = pinn_offsets_arg(files)?;
     let search_dir = dirs.experiments.join(format!("onpolicy_round{}", k - 1));
-    r.frictl(
+    r.stage(
         &format!("on-policy round {k}: min K_p of the round-{} PINN", k - 1),
-        &pinn_experiment("min-kp", files, &offsets)
-            .into_iter()
-            .chain([
-                "--seed".into(),
-                args.seed.to_string(),
-                "--iterations".into(),
-                sizes.iterations.to_string(),
-                "--periods".into(),
-                sizes.periods.to_string(),
-                "--out".into(),
-                s(&search_dir),
-            ])
-            .chain(plant_t0.iter().cloned())
-            .collect::<Vec<String>>(),
+        &["experiment"],
+        &experiment::Args {
+            seed: args.seed,
+            iterations: sizes.iterations,
+            periods: sizes.periods,
+            out: search_dir.clone(),
+            sets: plant_t0.clone(),
+            ..pinn_experiment(experiment::Kind::MinKp, files, &offsets)?
+        },
     )?;
     let ex: SuiteReport = read_typed(&search_dir.join("report.json"))?;
     let mut entry = RoundEntry {
@@ -107,24 +102,18 @@ pub(super) fn onpolicy_round(
         );
     }
     let rec_dir = dirs.data.join(format!("onpolicy{k}"));
-    r.frictl(
+    r.stage(
         &format!("on-policy round {k}: record (both joints, PINN compensating)"),
-        &pinn_experiment("record", files, &offsets)
-            .into_iter()
-            .chain([
-                "--kp".into(),
-                kp.join(","),
-                "--record-runs".into(),
-                sizes.onpolicy_runs.to_string(),
-                "--periods".into(),
-                sizes.periods.to_string(),
-                "--seed".into(),
-                (args.seed + 1000 * u64::from(k)).to_string(),
-                "--out".into(),
-                s(&rec_dir),
-            ])
-            .chain(plant_t0.iter().cloned())
-            .collect::<Vec<String>>(),
+        &["experiment"],
+        &experiment::Args {
+            kp: Some(kp.join(",")),
+            record_runs: sizes.onpolicy_runs as usize,
+            periods: sizes.periods,
+            seed: args.seed + 1000 * u64::from(k),
+            out: rec_dir.clone(),
+            sets: plant_t0,
+            ..pinn_experiment(experiment::Kind::Record, files, &offsets)?
+        },
     )?;
     for ((preset, joint), f) in JOINTS.iter().zip(files.iter_mut()) {
         let raw = rec_dir.join(format!("{joint}_onpolicy.csv"));
