@@ -31,11 +31,14 @@ use frictiond_config::{
     BackendConfig, BackendKind, JointConfig, LoopConfig, LpfConfig, ModelKind, OodMode, RawConfig,
     SafetyConfig, WarmupName, default_ood_margin, default_ood_ramp_ms,
 };
+use frictionless::features::FeatureSet;
 use frictionless_eval::Report as EvalReport;
 use frictionless_train::pipeline::{self, TrainReport};
 use frictionless_train::search::{TrialResult, read_results};
 use frictl::robot::{DataSource, JointSection, RobotFile};
 use sha2::{Digest, Sha256};
+
+use super::{acquire, eval, export, fit, preprocess, search, stage, train};
 
 /// Arguments of `frictl robot`.
 #[derive(clap::Args, Debug)]
@@ -110,6 +113,8 @@ struct Stage {
 struct JointPlan {
     name: String,
     dir: String,
+    /// The PINN's input feature set.
+    features: FeatureSet,
     /// Training datasets.
     train: Vec<String>,
     /// Held-out datasets (empty: the evaluation uses the split's test chunks).
@@ -137,7 +142,7 @@ fn s(p: &Path) -> String {
 }
 
 /// The stages of one joint.
-fn plan_joint(robot: &RobotFile, j: &JointSection) -> JointPlan {
+fn plan_joint(robot: &RobotFile, j: &JointSection) -> anyhow::Result<JointPlan> {
     let dir = format!("joints/{}", j.name);
     let f = |name: &str| format!("{dir}/{name}");
     let seed = robot.robot.seed;
@@ -146,35 +151,23 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> JointPlan {
     let (train, test) = match j.source() {
         DataSource::Preset => {
             let preset = j.preset.clone().unwrap_or_default();
-            let mut train_args: Vec<String> = vec![
-                "acquire".into(),
-                "--preset".into(),
-                preset.clone(),
-                "--seed".into(),
-                seed.to_string(),
-                "--out".into(),
-                dir.clone(),
-                "--name".into(),
-                "train".into(),
-            ];
-            train_args.extend(robot.acquire.set.iter().map(|k| format!("--set={k}")));
-            let mut test_args: Vec<String> = vec![
-                "acquire".into(),
-                "--preset".into(),
-                preset,
-                "--seed".into(),
-                (seed + 100).to_string(),
-                "--out".into(),
-                dir.clone(),
-                "--name".into(),
-                "test".into(),
-            ];
-            test_args.extend(
-                super::demo::UNSEEN_TEST_RUN
-                    .iter()
-                    .map(|k| format!("--set={k}")),
-            );
-            test_args.extend(robot.acquire.test_set.iter().map(|k| format!("--set={k}")));
+            let mut test_sets: Vec<String> = super::demo::UNSEEN_TEST_RUN.map(String::from).into();
+            test_sets.extend(robot.acquire.test_set.iter().cloned());
+            let acquire_args = |seed: u64, name: &str, sets: Vec<String>| {
+                stage::argv(
+                    &["acquire"],
+                    &acquire::Args {
+                        preset: preset.clone(),
+                        seed,
+                        out: PathBuf::from(&dir),
+                        name: Some(name.into()),
+                        sets,
+                        ..stage::defaults()?
+                    },
+                )
+            };
+            let train_args = acquire_args(seed, "train", robot.acquire.set.clone())?;
+            let test_args = acquire_args(seed + 100, "test", test_sets)?;
             for (what, args) in [("train", train_args), ("test", test_args)] {
                 stages.push(Stage {
                     id: format!("acquire_{what}"),
@@ -186,17 +179,15 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> JointPlan {
                 stages.push(Stage {
                     id: format!("preprocess_{what}"),
                     phase: Until::Data,
-                    args: vec![
-                        "preprocess".into(),
-                        f(&format!("{what}.csv")),
-                        "--out".into(),
-                        f(&format!("{what}_ds.csv")),
-                        "--subtract-reflected-inertia".into(),
-                        "sidecar".into(),
-                    ]
-                    .into_iter()
-                    .chain(j.preprocess_args.iter().cloned())
-                    .collect(),
+                    args: preprocess_argv(
+                        j,
+                        preprocess::Args {
+                            log: PathBuf::from(f(&format!("{what}.csv"))),
+                            out: PathBuf::from(f(&format!("{what}_ds.csv"))),
+                            subtract_reflected_inertia: Some("sidecar".into()),
+                            ..stage::defaults()?
+                        },
+                    )?,
                     inputs: vec![f(&format!("{what}.csv")), f(&format!("{what}.json"))],
                     outputs: vec![f(&format!("{what}_ds.csv")), f(&format!("{what}_ds.json"))],
                 });
@@ -208,12 +199,17 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> JointPlan {
             for (what, logs) in [("train", &j.logs), ("test", &j.test_logs)] {
                 for (i, log) in logs.iter().enumerate() {
                     let ds = f(&format!("{what}_{i}_ds.csv"));
-                    let mut args = vec!["preprocess".into(), s(log), "--out".into(), ds.clone()];
+                    let mut base = preprocess::Args {
+                        log: log.clone(),
+                        out: PathBuf::from(&ds),
+                        ..stage::defaults()?
+                    };
                     if let Some(u) = &robot.robot.urdf {
-                        args.extend(["--urdf".into(), s(u), "--joint".into(), j.name.clone()]);
+                        base.urdf = Some(s(u));
+                        base.joint = Some(j.name.clone());
                         external_inputs.push(s(u));
                     }
-                    args.extend(j.preprocess_args.iter().cloned());
+                    let args = preprocess_argv(j, base)?;
                     let sidecar = s(&log.with_extension("json"));
                     external_inputs.extend([s(log), sidecar.clone()]);
                     let mut inputs = vec![s(log), sidecar];
@@ -253,17 +249,19 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> JointPlan {
             .collect::<Vec<_>>()
     };
     let (cv, scv) = (f("cv.json"), f("scv.json"));
-    for (m, out) in [("cv", &cv), ("scv", &scv)] {
+    for (m, out) in [(ModelKind::Cv, &cv), (ModelKind::Scv, &scv)] {
         stages.push(Stage {
-            id: format!("fit_{m}"),
+            id: format!("fit_{}", m.name()),
             phase: Until::Fit,
-            args: vec![
-                "fit".into(),
-                m.into(),
-                train[0].clone(),
-                "--json".into(),
-                out.clone(),
-            ],
+            args: stage::argv(
+                &["fit"],
+                &fit::Args {
+                    model: fit::FitModel(m),
+                    dataset: PathBuf::from(&train[0]),
+                    json: Some(PathBuf::from(out)),
+                    ..stage::defaults()?
+                },
+            )?,
             inputs: with_sidecars(&train[..1]),
             outputs: vec![out.clone()],
         });
@@ -271,58 +269,42 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> JointPlan {
     let sr = &robot.search;
     let mut inputs = with_sidecars(&train);
     inputs.push(scv.clone());
-    let mut search_args: Vec<String> = vec!["search".into()];
-    for d in &train {
-        search_args.extend(["--dataset".into(), d.clone()]);
-    }
-    search_args.extend([
-        "--scv".into(),
-        scv.clone(),
-        "--trials".into(),
-        sr.trials.to_string(),
-        "--seed".into(),
-        seed.to_string(),
-        "--epochs".into(),
-        sr.epochs.to_string(),
-        "--features".into(),
-        j.features.name().into(),
-        "--val-frac".into(),
-        sr.val_frac.to_string(),
-        "--test-frac".into(),
-        sr.test_frac.to_string(),
-    ]);
-    if j.temperature {
-        search_args.push("--temperature".into());
-    }
-    if let Some(p) = sr.patience {
-        search_args.extend(["--max-epochs-without-improvement".into(), p.to_string()]);
-    }
-    let ranges: [(&str, Option<String>); 6] = [
-        ("batch", sr.batch.map(|r| format!("{},{}", r[0], r[1]))),
-        ("hidden", sr.hidden.map(|r| format!("{},{}", r[0], r[1]))),
-        ("lr", sr.lr.map(|r| format!("{:e},{:e}", r[0], r[1]))),
-        ("history", sr.history.map(|r| format!("{},{}", r[0], r[1]))),
-        ("lambda", sr.lambda.map(|r| format!("{},{}", r[0], r[1]))),
-        ("dropout", sr.dropout.map(|r| format!("{},{}", r[0], r[1]))),
-    ];
-    for (k, v) in ranges {
-        if let Some(v) = v {
-            search_args.push(format!("--{k}-range={v}"));
-        }
-    }
+    let pair = |r: Option<[usize; 2]>| r.map(|r| r.to_vec());
+    let search_base = search::Args {
+        datasets: train.iter().map(PathBuf::from).collect(),
+        scv: PathBuf::from(&scv),
+        trials: sr.trials,
+        seed,
+        epochs: sr.epochs,
+        features: train::Features(j.features),
+        val_frac: sr.val_frac,
+        test_frac: sr.test_frac,
+        temperature: j.temperature,
+        max_epochs_without_improvement: sr.patience,
+        batch_range: pair(sr.batch),
+        hidden_range: pair(sr.hidden),
+        lr_range: sr.lr.map(|r| r.to_vec()),
+        history_range: pair(sr.history),
+        lambda_range: sr.lambda.map(|r| r.to_vec()),
+        dropout_range: sr.dropout.map(|r| r.to_vec()),
+        ..stage::defaults()?
+    };
+    // Completed by its users (the search stage below, the Ray driver) with `--out` and the
+    // parallelism.
+    let search_args = stage::partial_argv(&["search"], &search_base, &["out"])?;
     let (model, model_report, search_dir) = if sr.trials > 0 {
         let sd = f("search");
-        let mut args = search_args.clone();
-        args.extend([
-            "--out".into(),
-            sd.clone(),
-            "--resume".into(),
-            "--parallel".into(),
-            sr.parallel.to_string(),
-            "--threads".into(),
-            (sr.parallel * sr.threads_per_trial).to_string(),
-            "--quiet".into(),
-        ]);
+        let args = stage::argv(
+            &["search"],
+            &search::Args {
+                out: PathBuf::from(&sd),
+                resume: true,
+                parallel: sr.parallel,
+                threads: Some(sr.parallel * sr.threads_per_trial),
+                quiet: true,
+                ..search_base
+            },
+        )?;
         let (m, r) = (format!("{sd}/best.fwt"), format!("{sd}/best.train.json"));
         stages.push(Stage {
             id: "search".into(),
@@ -335,49 +317,29 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> JointPlan {
     } else {
         let t = &robot.train;
         let (m, r) = (f("pinn.fwt"), f("pinn.train.json"));
-        let mut args: Vec<String> = vec!["train".into()];
-        for d in &train {
-            args.extend(["--dataset".into(), d.clone()]);
-        }
-        args.extend([
-            "--scv".into(),
-            scv.clone(),
-            "--out".into(),
-            m.clone(),
-            "--report".into(),
-            r.clone(),
-            "--features".into(),
-            j.features.name().into(),
-            "--hidden".into(),
-            t.hidden
-                .iter()
-                .map(|h| h.to_string())
-                .collect::<Vec<_>>()
-                .join(","),
-            "--history".into(),
-            t.history.to_string(),
-            "--epochs".into(),
-            t.epochs.to_string(),
-            "--batch".into(),
-            t.batch.to_string(),
-            "--lr".into(),
-            format!("{:e}", t.lr),
-            "--lambda".into(),
-            t.lambda.to_string(),
-            "--dropout".into(),
-            t.dropout.to_string(),
-            "--seed".into(),
-            seed.to_string(),
-            "--threads".into(),
-            sr.threads_per_trial.to_string(),
-            "--val-frac".into(),
-            sr.val_frac.to_string(),
-            "--test-frac".into(),
-            sr.test_frac.to_string(),
-        ]);
-        if j.temperature {
-            args.push("--temperature".into());
-        }
+        let args = stage::argv(
+            &["train"],
+            &train::Args {
+                datasets: train.iter().map(PathBuf::from).collect(),
+                scv: PathBuf::from(&scv),
+                out: PathBuf::from(&m),
+                report: Some(PathBuf::from(&r)),
+                features: train::Features(j.features),
+                hidden: t.hidden.clone(),
+                history: t.history,
+                epochs: t.epochs,
+                batch: t.batch,
+                lr: t.lr,
+                lambda: t.lambda,
+                dropout: t.dropout,
+                seed,
+                threads: Some(sr.threads_per_trial),
+                val_frac: sr.val_frac,
+                test_frac: sr.test_frac,
+                temperature: j.temperature,
+                ..stage::defaults()?
+            },
+        )?;
         stages.push(Stage {
             id: "train".into(),
             phase: Until::Search,
@@ -388,32 +350,25 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> JointPlan {
         (m, r, None)
     };
     let eval_json = f("eval.json");
-    let mut eval_args: Vec<String> = vec!["eval".into()];
     let (eval_sets, test_only) = if test.is_empty() {
         (&train, true)
     } else {
         (&test, false)
     };
-    for d in eval_sets {
-        eval_args.extend(["--dataset".into(), d.clone()]);
-    }
-    eval_args.extend([
-        "--cv".into(),
-        cv.clone(),
-        "--scv".into(),
-        scv.clone(),
-        "--pinn".into(),
-        model.clone(),
-        "--train-report".into(),
-        model_report.clone(),
-        "--out".into(),
-        f("eval"),
-        "--json".into(),
-        eval_json.clone(),
-    ]);
-    if test_only {
-        eval_args.push("--test-only".into());
-    }
+    let eval_args = stage::argv(
+        &["eval"],
+        &eval::Args {
+            datasets: eval_sets.iter().map(PathBuf::from).collect(),
+            cv: Some(PathBuf::from(&cv)),
+            scv: Some(PathBuf::from(&scv)),
+            pinns: vec![PathBuf::from(&model)],
+            train_report: Some(PathBuf::from(&model_report)),
+            out: Some(PathBuf::from(f("eval"))),
+            json: Some(PathBuf::from(&eval_json)),
+            test_only,
+            ..stage::defaults()?
+        },
+    )?;
     let mut eval_inputs = with_sidecars(eval_sets);
     eval_inputs.extend([cv.clone(), scv.clone(), model.clone(), model_report.clone()]);
     stages.push(Stage {
@@ -427,18 +382,21 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> JointPlan {
     stages.push(Stage {
         id: "export".into(),
         phase: Until::Export,
-        args: vec![
-            "export".into(),
-            "onnx".into(),
-            model.clone(),
-            "-o".into(),
-            onnx.clone(),
-        ],
+        args: stage::argv(
+            &["export"],
+            &export::Args {
+                format: export::Format::Onnx,
+                input: PathBuf::from(&model),
+                output: PathBuf::from(&onnx),
+                ..stage::defaults()?
+            },
+        )?,
         inputs: vec![model.clone()],
         outputs: vec![onnx],
     });
-    JointPlan {
+    Ok(JointPlan {
         name: j.name.clone(),
+        features: j.features,
         dir,
         train,
         test,
@@ -451,7 +409,22 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> JointPlan {
         search_args,
         external_inputs,
         stages,
+    })
+}
+
+/// `frictl preprocess` of a joint: `base`, then the robot file's `preprocess_args` for the joint,
+/// checked by clap here so a bad one is refused when the plan is made, naming the joint.
+fn preprocess_argv(j: &JointSection, base: preprocess::Args) -> anyhow::Result<Vec<String>> {
+    let mut words = stage::argv(&["preprocess"], &base)?;
+    if !j.preprocess_args.is_empty() {
+        // The extras go before the positional part (`-- LOG`).
+        let at = words.iter().position(|w| w == "--").unwrap_or(words.len());
+        words.splice(at..at, j.preprocess_args.iter().cloned());
+        stage::roundtrip::<preprocess::Args>(1, &words).with_context(|| {
+            format!("joint {}: preprocess_args {:?}", j.name, j.preprocess_args)
+        })?;
     }
+    Ok(words)
 }
 
 /// SHA-256 of a file's content (hex).
@@ -979,7 +952,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     match args.action {
         Action::Plan(a) => {
             let robot = frictl::robot::load(&a.robot)?;
-            let plans: Vec<JointPlan> = robot.joint.iter().map(|j| plan_joint(&robot, j)).collect();
+            let plans: Vec<JointPlan> = robot
+                .joint
+                .iter()
+                .map(|j| plan_joint(&robot, j))
+                .collect::<anyhow::Result<_>>()?;
             let v = serde_json::json!({
                 "format": "frictionless-robot-plan-v1",
                 "out": s(&a.out),
@@ -1009,7 +986,11 @@ fn run_robot(a: RunArgs) -> anyhow::Result<()> {
     // Children run in `out`: every path they get is relative to it or absolute.
     let exe = std::env::current_exe().context("cannot find the running executable")?;
     let until = a.until.unwrap_or(Until::Export);
-    let plans: Vec<JointPlan> = robot.joint.iter().map(|j| plan_joint(&robot, j)).collect();
+    let plans: Vec<JointPlan> = robot
+        .joint
+        .iter()
+        .map(|j| plan_joint(&robot, j))
+        .collect::<anyhow::Result<_>>()?;
     let mut reports = BTreeMap::new();
     for (i, (j, p)) in robot.joint.iter().zip(&plans).enumerate() {
         if !a.joints.is_empty() && !a.joints.contains(&j.name) {

@@ -60,7 +60,7 @@ pub fn run_cli(cli: Cli) -> anyhow::Result<()> {
 }
 
 /// Arguments of `frictl search`.
-#[derive(clap::Args, Debug)]
+#[derive(clap::Args, Debug, Clone, serde::Serialize)]
 pub struct Args {
     /// Preprocessed dataset CSV (repeatable; its `.json` sidecar must exist).
     #[arg(long = "dataset", required = true)]
@@ -91,6 +91,7 @@ pub struct Args {
     pub resume: bool,
     /// Input feature set.
     #[arg(long, value_enum, default_value_t = Features::DEFAULT)]
+    #[serde(serialize_with = "super::stage::as_value_enum")]
     pub features: Features,
     /// Append the motor temperature as one more input.
     #[arg(long)]
@@ -113,13 +114,16 @@ pub struct Args {
     pub test_datasets: Vec<PathBuf>,
     /// Warm-up policy.
     #[arg(long, value_enum, default_value_t = Warmup::HoldZero)]
+    #[serde(serialize_with = "super::stage::as_value_enum")]
     pub warmup: Warmup,
     /// Where the Δθ offset is latched: `run` (once per dataset), `chunk` (every chunk start) or a
     /// fixed θ_off in motor rad (see `frictl train --help`).
     #[arg(long, default_value = "run", allow_hyphen_values = true)]
+    #[serde(serialize_with = "super::stage::as_display")]
     pub delta_theta_offset: DeltaThetaOffset,
     /// Storage dtype of the models.
     #[arg(long, value_enum, default_value_t = Dtype::F32)]
+    #[serde(serialize_with = "super::stage::as_value_enum")]
     pub dtype: Dtype,
     /// Stop a trial after N epochs without a better validation RMSE.
     #[arg(long)]

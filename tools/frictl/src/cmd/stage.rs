@@ -23,6 +23,36 @@ pub fn argv<A: clap::Args + FromArgMatches + Serialize>(
     subcommand: &[&str],
     args: &A,
 ) -> anyhow::Result<Vec<String>> {
+    let out = words(subcommand, args, &[])?;
+    // Refused here, before a child starts, if clap would refuse it there.
+    roundtrip::<A>(subcommand.len(), &out)?;
+    Ok(out)
+}
+
+/// The first part of a stage's command line that its user completes: [`argv`] without the
+/// arguments named in `left_out` (clap ids, i.e. field names; the caller appends them, e.g. a
+/// search's `--out` chosen per worker). Not checked by clap: it is not complete.
+pub fn partial_argv<A: clap::Args + Serialize>(
+    subcommand: &[&str],
+    args: &A,
+    left_out: &[&str],
+) -> anyhow::Result<Vec<String>> {
+    let cmd = A::augment_args(clap::Command::new("stage"));
+    if let Some(id) = left_out
+        .iter()
+        .find(|id| !cmd.get_arguments().any(|a| a.get_id().as_str() == **id))
+    {
+        anyhow::bail!("stage argument `{id}` to leave out does not exist");
+    }
+    words(subcommand, args, left_out)
+}
+
+/// The words of [`argv`], leaving out the arguments `left_out`.
+fn words<A: clap::Args + Serialize>(
+    subcommand: &[&str],
+    args: &A,
+    left_out: &[&str],
+) -> anyhow::Result<Vec<String>> {
     let cmd = A::augment_args(clap::Command::new("stage"));
     let fields = match serde_json::to_value(args).context("stage arguments do not serialise")? {
         Value::Object(m) => m,
@@ -32,6 +62,9 @@ pub fn argv<A: clap::Args + FromArgMatches + Serialize>(
     let mut positionals: Vec<(usize, Vec<String>)> = Vec::new();
     for arg in cmd.get_arguments() {
         let id = arg.get_id().as_str();
+        if left_out.contains(&id) {
+            continue;
+        }
         let Some(value) = fields.get(id) else {
             anyhow::bail!(
                 "stage argument `{id}`: no field of that name in the serialised arguments"
@@ -109,8 +142,6 @@ pub fn argv<A: clap::Args + FromArgMatches + Serialize>(
         out.push("--".into());
         out.extend(rest);
     }
-    // Refused here, before a child starts, if clap would refuse it there.
-    roundtrip::<A>(subcommand.len(), &out)?;
     Ok(out)
 }
 
@@ -134,7 +165,7 @@ const UNSET: &str = "\u{0}";
 /// A stage's arguments with clap's defaults, and required arguments unset: the base a pipeline
 /// overrides field by field (`train::Args { dataset, out, ..stage::defaults()? }`). A required
 /// argument left unset is refused by [`argv`], naming it (a required value enum takes its first
-/// value instead).
+/// value, a required number 0, instead).
 pub fn defaults<A: clap::Args + FromArgMatches>() -> anyhow::Result<A> {
     let cmd = A::augment_args(clap::Command::new("stage").no_binary_name(true));
     // A value enum cannot hold the marker: a required one is given its first value (the caller
@@ -150,9 +181,23 @@ pub fn defaults<A: clap::Args + FromArgMatches>() -> anyhow::Result<A> {
             }
         }
     }
+    // A required number cannot hold the marker either: it is 0 in the base (the caller sets it).
+    // Whether an argument's parser takes the marker: parse it alone.
+    let takes_marker = |a: &clap::Arg| {
+        let word = match a.get_long() {
+            Some(long) if !a.is_positional() => format!("--{long}={UNSET}"),
+            _ => UNSET.to_owned(),
+        };
+        clap::Command::new("probe")
+            .no_binary_name(true)
+            .arg(a.clone().required(false))
+            .try_get_matches_from([word])
+            .is_ok()
+    };
     let cmd = cmd.mut_args(|a| {
         if a.is_required_set() && a.get_possible_values().is_empty() {
-            a.required(false).default_value(UNSET)
+            let marker = if takes_marker(&a) { UNSET } else { "0" };
+            a.required(false).default_value(marker)
         } else {
             a
         }
@@ -405,6 +450,26 @@ mod tests {
             words[words.len() - 2..],
             ["--", "min-kp"],
             "the kind is positional, last"
+        );
+    }
+
+    #[test]
+    fn the_search_stage_gives_its_arguments_back() {
+        use crate::cmd::search;
+        assert_roundtrip(
+            &["search"],
+            &search::Args {
+                datasets: vec!["a.csv".into()],
+                scv: "scv.json".into(),
+                out: "search".into(),
+                trials: 6,
+                threads: Some(4),
+                hidden_range: Some(vec![16, 64]),
+                lr_range: Some(vec![1e-4, 3e-3]),
+                temperature: true,
+                max_epochs_without_improvement: Some(5),
+                ..defaults().unwrap()
+            },
         );
     }
 
