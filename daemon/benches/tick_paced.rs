@@ -158,6 +158,8 @@ fn students() -> Vec<ModelFile> {
                 val_probes: 500,
                 test_probes: 500,
                 max_rmse_nm: f64::MAX,
+                probe_kind: Default::default(),
+                lr_final: None,
             };
             distill_probes(&teacher, [0; 32], &cfg, |_| {
                 std::ops::ControlFlow::Continue(())
