@@ -287,7 +287,7 @@ fn frictl_acquire(out: &Path, seed: u64) -> PathBuf {
 }
 
 fn tmpdir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("frictl-acquire-{tag}-{}", std::process::id()));
+    let d = crate::util::scratch(&format!("frictl-acquire-{tag}"));
     std::fs::create_dir_all(&d).unwrap();
     d
 }

@@ -50,7 +50,7 @@ fn run_dirs(pid: u32) -> Vec<String> {
 
 #[test]
 fn compensation_with_fitted_models_lowers_tracking_error_at_the_same_kp() {
-    let dir = std::env::temp_dir().join(format!("frictl_demo_chain_{}", std::process::id()));
+    let dir = crate::util::scratch("frictl_demo_chain");
     let _ = std::fs::remove_dir_all(&dir);
     let demo = dir.join("demo");
     let d = demo.to_str().unwrap();
@@ -171,7 +171,7 @@ fn compensation_with_fitted_models_lowers_tracking_error_at_the_same_kp() {
 /// model has numbers on it against the label and the truth, and the eval reports scored that run only.
 #[test]
 fn torque_sensed_demo_trains_on_two_speeds_and_tests_on_the_third() {
-    let dir = std::env::temp_dir().join(format!("frictl_demo_torque_{}", std::process::id()));
+    let dir = crate::util::scratch("frictl_demo_torque");
     let _ = std::fs::remove_dir_all(&dir);
     let d = dir.to_str().unwrap();
     frictl(&[

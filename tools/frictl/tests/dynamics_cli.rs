@@ -7,7 +7,7 @@ use frictionless_dynamics::{BaseState, ExternalWrench, Force, Workspace, virtual
 use nalgebra::Vector3;
 
 fn temp_file(name: &str, text: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("frictl-dynamics-cli-{}", std::process::id()));
+    let dir = crate::util::scratch("frictl-dynamics-cli");
     std::fs::create_dir_all(&dir).unwrap();
     let p = dir.join(name);
     std::fs::File::create(&p)

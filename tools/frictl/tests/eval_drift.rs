@@ -54,7 +54,7 @@ fn dataset(dir: &Path, name: &str, seed: &str, extra: &[&str]) -> PathBuf {
 fn fixture() -> &'static Fixture {
     static F: OnceLock<Fixture> = OnceLock::new();
     F.get_or_init(|| {
-        let dir = std::env::temp_dir().join(format!("frictl-eval-drift-{}", std::process::id()));
+        let dir = crate::util::scratch("frictl-eval-drift");
         std::fs::create_dir_all(&dir).unwrap();
         let train_ds = dataset(&dir, "train", "1", &[]);
         let same_ds = dataset(&dir, "same", "2", &[]);

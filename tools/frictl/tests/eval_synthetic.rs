@@ -226,7 +226,7 @@ fn png_size(path: &Path) -> (u32, u32) {
 
 #[test]
 fn cli_writes_report_and_figures_and_filters_test_chunks() {
-    let dir = std::env::temp_dir().join(format!("eval_cli_{}", std::process::id()));
+    let dir = crate::util::scratch("eval_cli");
     std::fs::create_dir_all(&dir).unwrap();
     let lin = |v: f64, d: f64| f64::from(C_NM_S) * v + f64::from(D_NM) * d;
     let ds = dataset(&lin, 3, DeltaThetaOffset::Run);
@@ -354,7 +354,7 @@ fn write_run_sidecar(csv: &Path, ds: &Dataset) {
 
 #[test]
 fn cli_holds_out_runs_and_reports_per_run_per_band_and_extrapolation() {
-    let dir = std::env::temp_dir().join(format!("eval_runs_{}", std::process::id()));
+    let dir = crate::util::scratch("eval_runs");
     std::fs::create_dir_all(&dir).unwrap();
     let p = scv();
     let ds = dataset(&|v, _| p.torque_nm(v), 5, DeltaThetaOffset::Run);
@@ -507,7 +507,7 @@ fn cli_holds_out_runs_and_reports_per_run_per_band_and_extrapolation() {
 /// `frictl eval --lugre` scores it far better than no model.
 #[test]
 fn fit_lugre_then_eval_scores_it() {
-    let dir = std::env::temp_dir().join(format!("eval_lugre_{}", std::process::id()));
+    let dir = crate::util::scratch("eval_lugre");
     std::fs::create_dir_all(&dir).unwrap();
     let curve = ScvParams {
         ka: f64::INFINITY,

@@ -157,7 +157,7 @@ fn leg_pinn_joints_in_frictiond_equal_offline_inference() {
     let bins = Binaries::with_frictl(PathBuf::from(env!("CARGO_BIN_EXE_frictl")))
         .expect("frictiond next to frictl (cargo build --workspace --bins)");
     let leg = LegSetup::load(&[]).unwrap();
-    let dir = std::env::temp_dir().join(format!("frictl_leg_pinn_{}", std::process::id()));
+    let dir = crate::util::scratch("frictl_leg_pinn");
     std::fs::create_dir_all(&dir).unwrap();
     let knee = leg.index("l_knee").unwrap();
     let ankle = leg.index("l_ankle_roll").unwrap();

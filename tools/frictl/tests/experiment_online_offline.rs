@@ -90,7 +90,7 @@ fn daemon_pinn_output_equals_offline_inference_on_the_recorded_states() {
     let bins = Binaries::with_frictl(env!("CARGO_BIN_EXE_frictl").into())
         .expect("frictiond next to frictl: cargo build --workspace --bins");
     let setups = JointSetup::both(&[]).unwrap();
-    let dir = std::env::temp_dir().join(format!("frictl_online_offline_{}", std::process::id()));
+    let dir = crate::util::scratch("frictl_online_offline");
     std::fs::create_dir_all(&dir).unwrap();
     let mut files = vec![];
     for (i, s) in setups.iter().enumerate() {

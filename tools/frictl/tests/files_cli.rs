@@ -33,7 +33,7 @@ fn run(args: &[&str]) -> (bool, String) {
 
 #[test]
 fn inputs_that_are_fifos_or_devices_are_refused_naming_them() {
-    let dir = std::env::temp_dir().join(format!("frictl-files-cli-{}", std::process::id()));
+    let dir = crate::util::scratch("frictl-files-cli");
     std::fs::create_dir_all(&dir).unwrap();
     let fifo = dir.join("input");
     let _ = std::fs::remove_file(&fifo);

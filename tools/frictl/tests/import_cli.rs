@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn dir() -> PathBuf {
-    let d = std::env::temp_dir().join(format!("frictl-import-cli-{}", std::process::id()));
+    let d = crate::util::scratch("frictl-import-cli");
     std::fs::create_dir_all(&d).unwrap();
     d
 }

@@ -41,8 +41,7 @@ fn first_epoch_loss(report: &Path) -> f64 {
 
 #[test]
 fn closed_loop_recording_labels_and_training_continues_from_the_model() {
-    let dir: PathBuf =
-        std::env::temp_dir().join(format!("frictl-onpolicy-cli-{}", std::process::id()));
+    let dir: PathBuf = crate::util::scratch("frictl-onpolicy-cli");
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     // A short open-loop protocol on the ankle roll, labelled, SCV fitted, a tiny PINN trained.

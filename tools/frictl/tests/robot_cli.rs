@@ -37,7 +37,7 @@ fn ok_in(dir: &Path, args: &[&str]) -> Output {
 }
 
 fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("frictl-{name}-{}", std::process::id()));
+    let d = crate::util::scratch(&format!("frictl-{name}"));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d

@@ -24,7 +24,7 @@ fn dataset(dir: &Path) -> (PathBuf, PathBuf) {
 
 #[test]
 fn three_tiny_trials_then_resume() {
-    let dir = std::env::temp_dir().join(format!("frictl-search-cli-{}", std::process::id()));
+    let dir = crate::util::scratch("frictl-search-cli");
     std::fs::create_dir_all(&dir).unwrap();
     let (ds, scv) = dataset(&dir);
     let out = dir.join("search");

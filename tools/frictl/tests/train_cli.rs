@@ -31,7 +31,7 @@ struct Fixture {
 fn fixture() -> &'static Fixture {
     static F: OnceLock<Fixture> = OnceLock::new();
     F.get_or_init(|| {
-        let dir = std::env::temp_dir().join(format!("frictl-train-cli-{}", std::process::id()));
+        let dir = crate::util::scratch("frictl-train-cli");
         std::fs::create_dir_all(&dir).unwrap();
         ok(
             frictl(&small_acquire_args(

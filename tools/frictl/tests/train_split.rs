@@ -22,7 +22,7 @@ struct Fixture {
 fn fixture() -> &'static Fixture {
     static F: OnceLock<Fixture> = OnceLock::new();
     F.get_or_init(|| {
-        let dir = std::env::temp_dir().join(format!("frictl-train-split-{}", std::process::id()));
+        let dir = crate::util::scratch("frictl-train-split");
         std::fs::create_dir_all(&dir).unwrap();
         let mut datasets = Vec::new();
         for seed in ["4", "5"] {
