@@ -28,13 +28,19 @@ const SETS: &[&str] = &[
     "protocol.steps.levels_a=[0.8, -0.8]",
 ];
 
-#[test]
-fn whole_state_labels_beat_the_single_joint_view_on_a_simultaneously_excited_leg() {
+/// One simultaneous acquisition of the preset leg (seed 11) and its nominal robot.
+struct Acquired {
+    leg: LegParams,
+    rows: Vec<Vec<LogRow>>,
+    summaries: Vec<frictionless_acquire::protocol::RunSummary>,
+    robot: frictionless_dynamics::Robot,
+}
+
+fn acquire() -> Acquired {
     let leg = LegParams::preset().unwrap();
     let sets: Vec<String> = SETS.iter().map(|s| s.to_string()).collect();
     let protocols = leg_protocols(&leg, &sets).unwrap();
-    let n = leg.joints.len();
-    let mut rows: Vec<Vec<LogRow>> = vec![Vec::new(); n];
+    let mut rows: Vec<Vec<LogRow>> = vec![Vec::new(); leg.joints.len()];
     let summaries = run_leg_offline(&leg, &protocols, 11, &mut |r| {
         for (k, row) in r.iter().enumerate() {
             rows[k].push(*row);
@@ -46,6 +52,22 @@ fn whole_state_labels_beat_the_single_joint_view_on_a_simultaneously_excited_leg
         .unwrap()
         .nominal_robot()
         .clone();
+    Acquired {
+        leg,
+        rows,
+        summaries,
+        robot,
+    }
+}
+
+#[test]
+fn whole_state_labels_beat_the_single_joint_view_on_a_simultaneously_excited_leg() {
+    let Acquired {
+        leg,
+        rows,
+        summaries,
+        robot,
+    } = acquire();
     let labels = label_leg(&leg, &robot, &rows).unwrap();
     let mut errors = BTreeMap::new();
     for (k, l) in labels.iter().enumerate() {
@@ -98,23 +120,11 @@ fn whole_state_labels_beat_the_single_joint_view_on_a_simultaneously_excited_leg
 #[test]
 #[allow(clippy::needless_range_loop)] // every joint's row of one sample
 fn the_leg_plant_and_the_label_dynamics_agree_on_the_truth() {
-    let leg = LegParams::preset().unwrap();
+    let Acquired {
+        leg, rows, robot, ..
+    } = acquire();
     assert!(leg.perturbation.is_none());
-    let sets: Vec<String> = SETS.iter().map(|s| s.to_string()).collect();
-    let protocols = leg_protocols(&leg, &sets).unwrap();
     let n = leg.joints.len();
-    let mut rows: Vec<Vec<LogRow>> = vec![Vec::new(); n];
-    run_leg_offline(&leg, &protocols, 11, &mut |r| {
-        for (k, row) in r.iter().enumerate() {
-            rows[k].push(*row);
-        }
-        Ok(())
-    })
-    .unwrap();
-    let robot = frictionless_sim::LegPlant::new(leg.clone(), 0)
-        .unwrap()
-        .nominal_robot()
-        .clone();
     let idx: Vec<usize> = leg
         .joints
         .iter()

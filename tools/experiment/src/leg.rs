@@ -24,7 +24,7 @@ use super::metrics::{self, DisturbanceMetrics, TrackCriterion, TrackMetrics};
 use super::run::{JointPlan, JointTrace, Pulse, Rig, TrialOptions, TrialSpec, run_trial_on};
 use super::search::{KpBisection, MinKp};
 use super::session::{Binaries, FrictionModel, Mode};
-use super::suite::{SearchStep, run_parallel};
+use super::suite::{SearchStep, amp_freq, run_parallel};
 
 /// The leg as the controller and frictiond's config need it.
 #[derive(Clone, Debug)]
@@ -291,18 +291,6 @@ pub struct LegSuiteReport {
     pub trials: usize,
     /// Wall-clock seconds.
     pub wall_s: f64,
-}
-
-/// Amplitude and frequency of a sine (0, 0 for a hold).
-fn amp_freq(r: &Reference) -> (f64, f64) {
-    match *r {
-        Reference::Sine {
-            amplitude_rad,
-            freq_hz,
-            ..
-        } => (amplitude_rad, freq_hz),
-        Reference::Hold { .. } => (0.0, 0.0),
-    }
 }
 
 /// The centre of a sine (the held position for a hold).

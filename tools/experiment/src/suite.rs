@@ -76,8 +76,8 @@ pub fn sine(index: usize) -> Reference {
     }
 }
 
-/// Amplitude and frequency of a sine reference.
-fn amp_freq(r: &Reference) -> (f64, f64) {
+/// Amplitude and frequency of a sine reference (0, 0 for a hold).
+pub(crate) fn amp_freq(r: &Reference) -> (f64, f64) {
     match *r {
         Reference::Sine {
             amplitude_rad,
