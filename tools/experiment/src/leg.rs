@@ -131,14 +131,27 @@ pub struct LegModel {
     pub label: String,
     /// Model per payload joint (one per leg joint).
     pub per_joint: Vec<FrictionModel>,
+    /// A PINN joint's fixed Δθ offset [motor rad] per payload joint (`None` or no entry: latched
+    /// at enable), as frictiond's `delta_theta_offset_motor_rad`.
+    pub delta_theta_offset_motor_rad: Vec<Option<f64>>,
+    /// `kfc` per payload joint (`None` or no entry: the shipped law's).
+    pub kfc: Vec<Option<f64>>,
 }
 
 impl LegModel {
-    /// `model` on every one of `n` joints, labelled as the model.
+    /// `model` on every one of `n` joints, labelled as the model, with the shipped law.
     pub fn uniform(model: FrictionModel, n: usize) -> Self {
+        Self::per_joint(model.label(), vec![model; n])
+    }
+
+    /// `per_joint` models (payload order) under `label`, with the shipped law and Δθ offsets
+    /// latched at enable.
+    pub fn per_joint(label: &str, per_joint: Vec<FrictionModel>) -> Self {
         Self {
-            label: model.label().to_owned(),
-            per_joint: vec![model; n],
+            label: label.to_owned(),
+            per_joint,
+            delta_theta_offset_motor_rad: Vec::new(),
+            kfc: Vec::new(),
         }
     }
 }
@@ -146,8 +159,9 @@ impl LegModel {
 impl LegModel {
     /// The compensation a frictiond config describes (e.g. the one `frictl robot run` writes), by
     /// joint name: each leg joint runs the config's model for the joint of the same name (CV, SCV,
-    /// PINN or none), and `none` if the config does not list it. A LuGre joint is an error (the
-    /// experiments compare none / CV / SCV / PINN).
+    /// PINN or none) with the config's `kfc` and `delta_theta_offset_motor_rad`, and `none` if the
+    /// config does not list it. A LuGre joint is an error (the experiments compare none / CV / SCV /
+    /// PINN).
     pub fn from_daemon_config(
         label: &str,
         path: &std::path::Path,
@@ -159,10 +173,14 @@ impl LegModel {
             source: Box::new(source),
         })?;
         let mut per_joint = vec![FrictionModel::None; leg.dof()];
+        let mut offsets = vec![None; leg.dof()];
+        let mut kfc = vec![None; leg.dof()];
         for (raw, spec) in cfg.raw.joint.iter().zip(&cfg.models) {
             let Ok(i) = leg.index(&raw.name) else {
                 continue;
             };
+            offsets[i] = raw.delta_theta_offset_motor_rad;
+            kfc[i] = Some(raw.kfc);
             per_joint[i] = match spec {
                 ModelSpec::None => FrictionModel::None,
                 ModelSpec::Cv(p) => FrictionModel::Cv(*p),
@@ -179,6 +197,8 @@ impl LegModel {
         Ok(Self {
             label: label.to_owned(),
             per_joint,
+            delta_theta_offset_motor_rad: offsets,
+            kfc,
         })
     }
 }
@@ -356,9 +376,9 @@ fn run_one(
         joints,
         seed: cfg.seed,
         sets: cfg.sets.clone(),
-        pinn_delta_theta_offset_motor_rad: [Some(0.0); 2],
+        pinn_delta_theta_offset_motor_rad: model.delta_theta_offset_motor_rad.clone(),
         raw_friction: false,
-        kfc: [None; 2],
+        kfc: model.kfc.clone(),
     };
     let opts = TrialOptions {
         rotor_inertia_in_m: cfg.rotor_inertia_in_m,

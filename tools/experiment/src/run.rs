@@ -155,15 +155,15 @@ pub struct TrialSpec {
     pub seed: u64,
     /// Plant `--set` overrides (also applied to the controller's link model).
     pub sets: Vec<String>,
-    /// PINN Δθ offset θ_off [motor rad] for frictiond per joint index (fixed across enables),
-    /// `None` = latch at enable. The virtual plant's encoders read θ = r·φ, so 0 makes Δθ the
+    /// PINN Δθ offset θ_off [motor rad] for frictiond per payload index (fixed across enables),
+    /// `None` (or no entry) = latch at enable. The virtual plant's encoders read θ = r·φ, so 0 makes Δθ the
     /// absolute deflection — the offset of a training log latched once at its torque-free start.
-    pub pinn_delta_theta_offset_motor_rad: [Option<f64>; 2],
+    pub pinn_delta_theta_offset_motor_rad: Vec<Option<f64>>,
     /// frictiond with `kfc = 1`, no friction clip and no LPF, so the recorded τ̂_F is the model's
     /// raw output (for checking online against offline inference); `false` = the shipped law.
     pub raw_friction: bool,
-    /// `kfc` per joint index instead of the shipped config's (`None` = shipped).
-    pub kfc: [Option<f64>; 2],
+    /// `kfc` per payload index instead of the shipped config's (`None` or no entry = shipped).
+    pub kfc: Vec<Option<f64>>,
 }
 
 /// Further per-trial settings (kept out of [`TrialSpec`] so existing struct literals stay valid).

@@ -136,9 +136,9 @@ pub fn run_grouped(
             joints: group.iter().map(|&g| plans[g].0.clone()).collect(),
             seed: cfg.seed,
             sets: cfg.sets.clone(),
-            pinn_delta_theta_offset_motor_rad: cfg.pinn_delta_theta_offset_motor_rad,
+            pinn_delta_theta_offset_motor_rad: cfg.pinn_delta_theta_offset_motor_rad.to_vec(),
             raw_friction: false,
-            kfc: cfg.kfc,
+            kfc: cfg.kfc.to_vec(),
         };
         let trace = run_trial_with(
             bins,

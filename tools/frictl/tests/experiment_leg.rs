@@ -59,14 +59,8 @@ fn leg_oracle_and_scv_need_a_lower_min_kp_than_none_on_knee_and_ankle_roll() {
     };
     let models = vec![
         LegModel::uniform(FrictionModel::None, n),
-        LegModel {
-            label: "CV".into(),
-            per_joint: per(&|p| FrictionModel::Cv(nominal_cv(p))),
-        },
-        LegModel {
-            label: "SCV".into(),
-            per_joint: per(&|p| FrictionModel::Scv(nominal_scv(p))),
-        },
+        LegModel::per_joint("CV", per(&|p| FrictionModel::Cv(nominal_cv(p)))),
+        LegModel::per_joint("SCV", per(&|p| FrictionModel::Scv(nominal_scv(p)))),
         LegModel::uniform(FrictionModel::Oracle, n),
     ];
     let mut cfg = LegSuiteConfig::paper(bins, models);
@@ -196,9 +190,9 @@ fn leg_pinn_joints_in_frictiond_equal_offline_inference() {
         joints,
         seed: 3,
         sets: vec![],
-        pinn_delta_theta_offset_motor_rad: [None; 2],
+        pinn_delta_theta_offset_motor_rad: vec![],
         raw_friction: true,
-        kfc: [None; 2],
+        kfc: vec![],
     };
     let trace =
         run_trial_on(&bins, &Rig::Leg(&leg), &spec, &TrialOptions::default()).expect("leg trial");

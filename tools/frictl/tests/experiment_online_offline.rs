@@ -127,9 +127,9 @@ fn daemon_pinn_output_equals_offline_inference_on_the_recorded_states() {
             joints: plans.to_vec(),
             seed: 3,
             sets: vec![],
-            pinn_delta_theta_offset_motor_rad: [offset; 2],
+            pinn_delta_theta_offset_motor_rad: vec![offset; 2],
             raw_friction: true,
-            kfc: [None; 2],
+            kfc: vec![],
         };
         let trace = run_trial(&bins, &setups, &spec).expect("closed-loop trial");
         for tr in &trace.joints {

@@ -40,9 +40,9 @@ fn run(model: FrictionModel, lpf: Lpf, duration_s: f64) -> (JointTrace, [JointSe
         }],
         seed: 5,
         sets: vec![],
-        pinn_delta_theta_offset_motor_rad: [Some(0.0); 2],
+        pinn_delta_theta_offset_motor_rad: vec![Some(0.0); 2],
         raw_friction: false,
-        kfc: [None; 2],
+        kfc: vec![],
     };
     let mut opts = TrialOptions::default();
     opts.lpf[ANKLE] = Some(lpf);
