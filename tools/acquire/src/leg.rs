@@ -22,7 +22,8 @@ use std::collections::BTreeMap;
 
 use frictionless_dataset::Dataset;
 use frictionless_ident::preprocess::{
-    JointStates, PreprocessConfig, PreprocessError, WholeBody, preprocess_whole_body,
+    JointStates, PreprocessConfig, PreprocessError, PreprocessSummary, WholeBody,
+    preprocess_whole_body,
 };
 
 use crate::config::ProtocolConfig;
@@ -86,6 +87,8 @@ pub struct LegJointLabels {
     pub error_full_state_nm: Option<f64>,
     /// The same for `single_joint_view` [Nm].
     pub error_single_joint_view_nm: Option<f64>,
+    /// The label pipeline's summary of `full_state` (chunks, Δθ offset).
+    pub summary: PreprocessSummary,
 }
 
 /// label − truth RMS on valid, active rows sliding faster than 0.03 rad/s [Nm] (None without truth
@@ -138,7 +141,7 @@ pub fn label_leg(
         let mut meta = crate::log_meta(p);
         meta.plant_link = None;
         let cfg = label_config(p);
-        let (full_state, _) = preprocess_whole_body(&log, &meta, &whole, &state, &cfg)?;
+        let (full_state, summary) = preprocess_whole_body(&log, &meta, &whole, &state, &cfg)?;
         let held: BTreeMap<String, f64> = names
             .iter()
             .zip(&q)
@@ -161,6 +164,7 @@ pub fn label_leg(
             error_single_joint_view_nm: label_error_rms_nm(&single_joint_view),
             full_state,
             single_joint_view,
+            summary,
         });
     }
     Ok(out)
@@ -171,8 +175,17 @@ fn breakaway_nm(p: &PlantParams) -> f64 {
     p.f_s0_nm + p.f_cm_nm
 }
 
-/// One protocol per leg joint (the leg's order), from the knee preset's `[protocol]` with `sets`
-/// (`protocol.KEY=VALUE`) applied, then per joint: the range is the joint's limits, the safety
+/// The re-centring and hold gains of every leg joint, applied before the caller's `sets`:
+/// K_p 200 1/s², K_d 28 1/s (ζ ≈ 1). With the knee preset's 400 and 40, the hip pitch, carrying
+/// the whole leg, held at its upper limit margin in a limit cycle of its drive's torsional mode
+/// (≈ 77 Hz, current saturating at ±i_max), where no label can follow the motor.
+pub const LEG_HOLD_GAINS: [&str; 2] = [
+    "protocol.position_kp_per_s2=200",
+    "protocol.position_kd_per_s=28",
+];
+
+/// One protocol per leg joint (the leg's order), from the knee preset's `[protocol]` with
+/// [`LEG_HOLD_GAINS`] and then `sets` (`protocol.KEY=VALUE`) applied, then per joint: the range is the joint's limits, the safety
 /// current its `i_max_a`, and `current_scale` is the knee's times (breakaway_j / breakaway_knee) ·
 /// (k_t·|r|)_knee / (k_t·|r|)_j, so each joint's sines, ramps and steps reach the same multiples of
 /// its own breakaway friction. The closed-loop tracking sets are off (the single-joint inertia of
@@ -181,7 +194,12 @@ pub fn leg_protocols(
     leg: &LegParams,
     sets: &[String],
 ) -> Result<Vec<ProtocolConfig>, LegAcquireError> {
-    let table = load_table("knee", None, sets)?;
+    let sets: Vec<String> = LEG_HOLD_GAINS
+        .iter()
+        .map(|s| (*s).to_owned())
+        .chain(sets.iter().cloned())
+        .collect();
+    let table = load_table("knee", None, &sets)?;
     let template = ProtocolConfig::from_table(&table)?;
     let knee = PlantParams::from_table(&table)?;
     let knee_torque_per_a = knee.kt_nm_per_a * knee.gear_ratio_signed.abs();
@@ -356,6 +374,23 @@ pub fn run_leg_offline(
         rows.extend(r.iter().map(|x| x.row));
         sink(&rows)
     })
+}
+
+/// Every joint's rows of [`run_leg_offline`] (`rows[k]`: joint k of `leg`, one per sample) and
+/// each joint's summary.
+pub fn run_leg_offline_rows(
+    leg: &LegParams,
+    protocols: &[ProtocolConfig],
+    seed: u64,
+) -> Result<(Vec<Vec<LogRow>>, Vec<RunSummary>), LegAcquireError> {
+    let mut rows: Vec<Vec<LogRow>> = vec![Vec::new(); leg.joints.len()];
+    let summaries = run_leg_offline(leg, protocols, seed, &mut |r| {
+        for (k, row) in r.iter().enumerate() {
+            rows[k].push(*row);
+        }
+        Ok(())
+    })?;
+    Ok((rows, summaries))
 }
 
 /// [`run_leg_offline`] with each joint's velocity estimate in the rows.

@@ -14,7 +14,7 @@
 use std::collections::BTreeMap;
 
 use frictionless_acquire::LogRow;
-use frictionless_acquire::leg::{label_leg, leg_protocols, run_leg_offline};
+use frictionless_acquire::leg::{label_leg, leg_protocols, run_leg_offline_rows};
 use frictionless_dataset::Dataset;
 use frictionless_sim::LegParams;
 
@@ -40,14 +40,7 @@ fn acquire() -> Acquired {
     let leg = LegParams::preset().unwrap();
     let sets: Vec<String> = SETS.iter().map(|s| s.to_string()).collect();
     let protocols = leg_protocols(&leg, &sets).unwrap();
-    let mut rows: Vec<Vec<LogRow>> = vec![Vec::new(); leg.joints.len()];
-    let summaries = run_leg_offline(&leg, &protocols, 11, &mut |r| {
-        for (k, row) in r.iter().enumerate() {
-            rows[k].push(*row);
-        }
-        Ok(())
-    })
-    .unwrap();
+    let (rows, summaries) = run_leg_offline_rows(&leg, &protocols, 11).unwrap();
     let robot = frictionless_sim::LegPlant::new(leg.clone(), 0)
         .unwrap()
         .nominal_robot()
