@@ -205,3 +205,83 @@ fn torque_sensed_demo_trains_on_two_speeds_and_tests_on_the_third() {
     assert!(rmse("scv") < rmse("none"), "{report}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `frictl demo --robot leg --quick`: the coupled six-joint leg excited at once, labelled from the
+/// whole leg's state, a model per joint, one six-joint frictiond config, the closed loop on the
+/// knee and the ankle roll. Every joint reports both label errors and every model's offline error
+/// against the truth; on the hips and the knee the whole-state label beats the single-joint view by
+/// 5×; frictiond accepts the written config; the oracle needs a lower minimum K_p than no
+/// compensation on both tested joints.
+#[test]
+fn leg_demo_labels_from_the_whole_state_and_runs_six_models_in_one_frictiond() {
+    let dir = crate::util::scratch("frictl_demo_leg");
+    let _ = std::fs::remove_dir_all(&dir);
+    let d = dir.to_str().unwrap();
+    let pid = frictl(&[
+        "demo", "--robot", "leg", "--quick", "--seed", "2", "--out", d,
+    ]);
+    let report = json(&dir.join("report.json"));
+    assert_eq!(report["format"], "frictionless-demo-leg-v1");
+    let joints = report["joints"].as_object().unwrap();
+    assert_eq!(joints.len(), 6, "{report}");
+    for (name, j) in joints {
+        let full = j["label_error_nm"]["full_state"].as_f64().unwrap();
+        let single = j["label_error_nm"]["single_joint_view"].as_f64().unwrap();
+        eprintln!("{name}: label error whole state {full:.3} Nm, single-joint view {single:.3} Nm");
+        if name.contains("hip") || name.contains("knee") {
+            assert!(full <= 0.2 * single, "{name}: {full} vs {single}");
+        }
+        for model in ["none", "CV", "SCV", "LuGre", "PINN"] {
+            let v = &j["models"][model]["eval"]["rmse_true_all"];
+            assert!(
+                v.as_f64().is_some_and(f64::is_finite),
+                "{name}/{model}: {v}"
+            );
+        }
+    }
+    let models = dir.join("models");
+    let frictiond = Path::new(env!("CARGO_BIN_EXE_frictl")).with_file_name("frictiond");
+    for cfg in ["frictiond.toml", "frictiond_scv.toml", "frictiond_cv.toml"] {
+        let out = Command::new(&frictiond)
+            .arg("--config")
+            .arg(models.join(cfg))
+            .arg("--check")
+            .output()
+            .expect("run frictiond --check");
+        assert!(
+            out.status.success(),
+            "{cfg}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let text = std::fs::read_to_string(models.join("frictiond.toml")).unwrap();
+    assert_eq!(
+        text.matches("friction_model = \"pinn\"").count(),
+        6,
+        "{text}"
+    );
+    let kp = |joint: &str, model: &str| {
+        report["joints"][joint]["models"][model]["min_kp"]["kp"]
+            .as_f64()
+            .unwrap_or(f64::INFINITY)
+    };
+    for joint in ["l_knee", "l_ankle_roll"] {
+        for model in ["none", "CV", "SCV", "PINN", "oracle (true friction)"] {
+            let c = &report["joints"][joint]["models"][model];
+            assert!(c["min_kp"]["outcome"].is_string(), "{joint}/{model}: {c}");
+            assert!(
+                c["disturbance_rmse_rad"]
+                    .as_f64()
+                    .is_some_and(f64::is_finite)
+            );
+        }
+        assert!(
+            kp(joint, "oracle (true friction)") < kp(joint, "none"),
+            "{joint}: {}",
+            report["joints"][joint]
+        );
+    }
+    assert!(dir.join("experiments/leg-report.json").is_file());
+    assert!(run_dirs(pid).is_empty(), "run directories left behind");
+    let _ = std::fs::remove_dir_all(&dir);
+}

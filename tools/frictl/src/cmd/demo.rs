@@ -102,6 +102,11 @@ pub struct Args {
     /// speed runs, evaluation on the held-out third; no closed-loop experiments), see `demo::torque`.
     #[arg(long, value_enum, default_value_t = DemoSensor::MotorEncoder)]
     pub sensor: DemoSensor,
+    /// `leg`: the coupled six-joint ergoCub left leg instead of two independent joints (every joint
+    /// excited at once, labels from the whole leg's state, a model per joint, one six-joint
+    /// frictiond config, the closed loop on the knee and the ankle roll), see `demo::leg`.
+    #[arg(long, value_enum, default_value_t = RobotSel::Joints)]
+    pub robot: RobotSel,
 }
 
 /// Which joint the demo runs on.
@@ -113,10 +118,11 @@ pub enum DemoSensor {
     Torque,
 }
 
+mod leg;
 mod onpolicy;
 mod torque;
 
-use super::experiment::{self, ModelSel};
+use super::experiment::{self, ModelSel, RobotSel};
 use super::{acquire, eval, export, fit, preprocess, stage, train};
 use onpolicy::{RoundEntry, final_round, onpolicy_md, onpolicy_round};
 
@@ -297,19 +303,9 @@ fn read_typed<T: serde::de::DeserializeOwned>(p: &Path) -> anyhow::Result<T> {
 /// `--pinn-delta-theta-offset`), or `enable` when training latched per chunk (no single value).
 fn pinn_offset_arg(train_report: &Path) -> anyhow::Result<String> {
     let report: TrainReport = read_typed(train_report)?;
-    let offsets: Vec<Option<f64>> = report
-        .datasets
-        .iter()
-        .map(|d| d.delta_theta_offset_motor_rad)
-        .collect();
-    match offsets.first() {
-        Some(Some(v)) if offsets.iter().all(|o| *o == Some(*v)) => Ok(format!("{v:e}")),
-        Some(Some(_)) => anyhow::bail!(
-            "{}: the datasets were latched with different Δθ offsets ({offsets:?}); frictiond takes one",
-            train_report.display()
-        ),
-        _ => Ok("enable".into()),
-    }
+    let offset = super::robot::trained_offset(&report)
+        .with_context(|| train_report.display().to_string())?;
+    Ok(offset.map_or_else(|| "enable".into(), |v| format!("{v:e}")))
 }
 
 impl Sizes {
@@ -641,7 +637,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             !args.distill,
             "--distill is an option of the motor-encoder demo (knee and ankle roll)"
         );
+        anyhow::ensure!(
+            args.robot == RobotSel::Joints,
+            "--sensor torque runs one torque-sensed joint, not --robot leg"
+        );
         return torque::run(&args);
+    }
+    if args.robot == RobotSel::Leg {
+        anyhow::ensure!(
+            !args.causal
+                && !args.with_rotor_inertia
+                && !args.distill
+                && args.onpolicy_rounds.is_none(),
+            "--causal, --with-rotor-inertia, --distill and --onpolicy-rounds are options of the \
+             two-joint demo; --robot leg labels with the leg's own settings (demo::leg)"
+        );
     }
     install_signal_flag()?;
     let started = Instant::now();
@@ -680,6 +690,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
         out.display()
     );
+    if args.robot == RobotSel::Leg {
+        return leg::run(&args, &mut r, &dirs, started);
+    }
     let mut per_joint: BTreeMap<String, JointEntry> = BTreeMap::new();
     let mut eval_md = String::new();
     let mut all_files = vec![];
@@ -757,7 +770,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             Err(_) => None,
         };
         if let Some(ev) = &ev {
-            eval_md += &eval_table(joint, ev);
+            eval_md += &eval_table(joint, "unseen tracking run", ev);
         }
         let mut entry = joint_entry(ev.as_ref(), files);
         if let Some(d) = distilled.remove(joint) {
@@ -916,9 +929,10 @@ fn fit(r: &mut Runner, preset: &str, files: &JointFiles) -> anyhow::Result<()> {
 /// virtual knee (measured in docs/inputs.md §2.1). The ankle roll keeps `[Δθ, ṡ]` (type 4 gave no
 /// closed-loop gain there).
 fn feature_set(preset: &str) -> FeatureSet {
-    match preset {
-        "knee" => FeatureSet::DeltaThetaJointPosJointVel,
-        _ => FeatureSet::DeltaThetaJointVel,
+    if preset.contains("knee") {
+        FeatureSet::DeltaThetaJointPosJointVel
+    } else {
+        FeatureSet::DeltaThetaJointVel
     }
 }
 
@@ -1035,9 +1049,9 @@ fn export(r: &mut Runner, preset: &str, files: &JointFiles) -> anyhow::Result<()
 }
 
 /// The markdown table of one joint's evaluation.
-fn eval_table(joint: &str, ev: &EvalReport) -> String {
+fn eval_table(joint: &str, run: &str, ev: &EvalReport) -> String {
     let mut md = format!(
-        "\n**{joint}: friction RMSE on the unseen tracking run [Nm]** (label; truth in parentheses)\n\n| model | all | sliding | stick |\n|---|---|---|---|\n"
+        "\n**{joint}: friction RMSE on the {run} [Nm]** (label; truth in parentheses)\n\n| model | all | sliding | stick |\n|---|---|---|---|\n"
     );
     for (key, label) in EVAL_MODELS {
         let m = ev.models.get(key);

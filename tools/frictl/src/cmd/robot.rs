@@ -720,7 +720,7 @@ fn check_data(
 
 /// The Δθ offset frictiond keeps for a PINN: the one its training latched (all datasets the same),
 /// `None` (latch at enable) when training latched per chunk.
-fn trained_offset(report: &TrainReport) -> anyhow::Result<Option<f64>> {
+pub(crate) fn trained_offset(report: &TrainReport) -> anyhow::Result<Option<f64>> {
     let offsets: Vec<Option<f64>> = report
         .datasets
         .iter()

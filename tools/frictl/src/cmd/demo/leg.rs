@@ -1,0 +1,597 @@
+//! `frictl demo --robot leg`: the method on the coupled six-joint ergoCub left leg, end to end.
+//!
+//! 1. **Acquire** two simultaneous runs of every leg joint on the coupled plant
+//!    (`frictionless_acquire::leg`, in process, as `frictl acquire --preset leg` runs them): the
+//!    training protocol (seed S) and an unseen variant of it (other sine frequencies and amplitudes,
+//!    ramp slopes, step levels and starting poses; seed S + 100).
+//! 2. **Label** every joint of both runs from the whole leg's state (`label_leg`: one RNEA of the
+//!    nominal URDF per sample over every joint's logged position) and, for comparison, from the
+//!    single-joint view (the other joints held at their mean positions). Each joint's label error
+//!    against the plant's truth is the report's `label_error_nm`.
+//! 3. **Fit** CV, SCV and LuGre, **train** the PINN (SCV prior) and **evaluate** every model on the
+//!    unseen run, per joint, through the real `frictl fit|train|eval` stages.
+//! 4. **One frictiond config for the six joints** per compensation (`models/frictiond.toml` with the
+//!    PINNs, `frictiond_scv.toml`, `frictiond_cv.toml`), each read back through `frictiond-config`.
+//! 5. **Closed loop** (`frictionless_experiment::leg::run_leg_suite`): one frictiond with six
+//!    models against the leg in lockstep under the whole-leg computed-torque controller; minimum K_p
+//!    and a disturbance trial on the knee and the ankle roll while the rest of the leg holds, for
+//!    none, CV, SCV, PINN and the oracle.
+//!
+//! `report.json` (`frictionless-demo-leg-v1`) keeps the default demo's per-joint keys
+//! (`joints.<name>.models.<model>.eval.rmse_true_all`, `….min_kp.kp`) and adds
+//! `joints.<name>.label_error_nm = {"full_state", "single_joint_view"}`.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context;
+use frictionless_acquire::leg::{
+    LegJointLabels, label_config, label_leg, leg_protocols, run_leg_offline_rows,
+};
+use frictionless_eval::{Metrics, Report as EvalReport};
+use frictionless_experiment::controller::Reference;
+use frictionless_experiment::leg::{
+    LegCell, LegModel, LegSetup, LegSuiteConfig, LegTestJoint, run_leg_suite,
+};
+use frictionless_experiment::search::MinKp;
+use frictionless_experiment::session::{
+    Binaries, DaemonJoint, FrictionModel, ORACLE_LABEL, daemon_joint,
+};
+use frictionless_sim::LegParams;
+
+use super::super::preprocess::{Provenance, write_dataset};
+use super::{
+    Args, Dirs, EVAL_MODELS, JointFiles, Runner, Sizes, Stage, eval_table, evaluate, fit, s,
+    train_args,
+};
+
+/// `protocol.KEY=VALUE` of the training run of `--quick`: one start, one sine frequency, one ramp
+/// pair, two steps.
+const QUICK_TRAIN: &[&str] = &[
+    "protocol.n_starts=1",
+    "protocol.recentre_s=1.0",
+    "protocol.current_scale=0.4",
+    "protocol.sines.amplitude_to_a=0.7",
+    "protocol.sines.frequencies_hz=[0.7]",
+    "protocol.ramps.slopes_a_per_s=[0.39]",
+    "protocol.steps.levels_a=[0.8, -0.8]",
+];
+
+/// The unseen run of `--quick`: the same length, other frequency, slope, levels and starting pose.
+const QUICK_TEST: &[&str] = &[
+    "protocol.n_starts=1",
+    "protocol.recentre_s=1.0",
+    "protocol.current_scale=0.4",
+    "protocol.start_shrink_deg=14",
+    "protocol.sines.amplitude_to_a=0.7",
+    "protocol.sines.frequencies_hz=[1.1]",
+    "protocol.ramps.slopes_a_per_s=[0.3]",
+    "protocol.steps.levels_a=[1.0, -1.0]",
+];
+
+/// The unseen run of the default and `--full` flavours: one start at other poses, other sine
+/// frequencies and amplitudes, ramp slopes and step levels than the training protocol.
+const TEST: &[&str] = &[
+    "protocol.n_starts=1",
+    "protocol.start_shrink_deg=14",
+    "protocol.sines.frequencies_hz=[1.2, 0.6]",
+    "protocol.sines.amplitude_from_a=0.8",
+    "protocol.sines.amplitude_to_a=1.6",
+    "protocol.sines.amplitude_step_a=0.4",
+    "protocol.ramps.slopes_a_per_s=[0.19, 0.35]",
+    "protocol.steps.levels_a=[0.8, -0.8, 1.2, -1.2]",
+];
+
+/// `report.json` of the leg demo.
+#[derive(serde::Serialize)]
+struct LegReport<'a> {
+    format: &'static str,
+    producer: String,
+    settings: &'static str,
+    seed: u64,
+    network: super::Network,
+    /// Samples per joint of the training and the unseen run.
+    samples: [usize; 2],
+    joints: &'a BTreeMap<String, LegJointEntry>,
+    /// The closed-loop suite's own report (`None` with `--no-experiments`).
+    closed_loop: Option<&'a frictionless_experiment::leg::LegSuiteReport>,
+    stages: &'a [Stage],
+    total_seconds: f64,
+}
+
+/// `report.json` `joints.JOINT`.
+#[derive(serde::Serialize)]
+struct LegJointEntry {
+    /// label − truth RMS on the training run's valid, active, sliding rows [Nm].
+    label_error_nm: LabelError,
+    /// Model label (`none`, `CV`, `SCV`, `LuGre`, `PINN`, the oracle's) → results.
+    models: BTreeMap<String, LegModelEntry>,
+    files: super::JointFilesEntry,
+}
+
+/// Both label errors of one joint [Nm].
+#[derive(serde::Serialize)]
+struct LabelError {
+    full_state: Option<f64>,
+    single_joint_view: Option<f64>,
+}
+
+/// `report.json` `joints.JOINT.models.LABEL`.
+#[derive(serde::Serialize, Default)]
+struct LegModelEntry {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    eval: Option<Option<Metrics>>,
+    #[serde(flatten)]
+    closed_loop: Option<LegClosedLoop>,
+}
+
+/// The closed-loop results of a tested joint and model.
+#[derive(serde::Serialize)]
+struct LegClosedLoop {
+    min_kp: MinKp,
+    /// RMSE of τ̂_F/kfc against the true friction while tracking at the minimum K_p [Nm].
+    closed_loop_tau_f_rmse_nm: Option<f64>,
+    tracking_rmse_at_min_kp_rad: Option<f64>,
+    disturbance_kp: f64,
+    disturbance_rmse_rad: f64,
+}
+
+impl From<&LegCell> for LegClosedLoop {
+    fn from(c: &LegCell) -> Self {
+        Self {
+            min_kp: c.min_kp,
+            closed_loop_tau_f_rmse_nm: c
+                .track_at_min_kp
+                .map(|t| t.friction_est_rmse_nm)
+                .filter(|v| v.is_finite()),
+            tracking_rmse_at_min_kp_rad: c.track_at_min_kp.map(|t| t.rmse_rad),
+            disturbance_kp: c.disturbance_kp_per_s2,
+            disturbance_rmse_rad: c.disturbance.rmse_after_release_rad,
+        }
+    }
+}
+
+/// Runs `frictl demo --robot leg`.
+pub(super) fn run(
+    args: &Args,
+    r: &mut Runner,
+    dirs: &Dirs,
+    started: Instant,
+) -> anyhow::Result<()> {
+    let sizes = Sizes::for_args(args);
+    let setup = LegSetup::load(&[])?;
+    let leg = &setup.params;
+    let (train_sets, test_sets): (Vec<String>, Vec<String>) = if args.quick {
+        (strings(QUICK_TRAIN), strings(QUICK_TEST))
+    } else {
+        let starts = if args.full { sizes.n_starts } else { 1 };
+        (vec![format!("protocol.n_starts={starts}")], strings(TEST))
+    };
+
+    let train = acquire_and_label(r, leg, &setup.robot, &train_sets, args.seed, "train")?;
+    let test = acquire_and_label(r, leg, &setup.robot, &test_sets, args.seed + 100, "test")?;
+    let samples = [
+        train.first().map_or(0, |l| l.full_state.len()),
+        test.first().map_or(0, |l| l.full_state.len()),
+    ];
+
+    let mut files = Vec::with_capacity(leg.joints.len());
+    for ((p, tr), te) in leg.joints.iter().zip(&train).zip(&test) {
+        let f = JointFiles::new(dirs, &p.joint);
+        let t0 = Instant::now();
+        for (labels, path, seed) in [
+            (tr, &f.train_ds, args.seed),
+            (te, &f.test_ds, args.seed + 100),
+        ] {
+            write_joint_dataset(p, labels, path, seed)?;
+        }
+        r.stages.push(Stage {
+            name: format!("write datasets {}", p.joint),
+            seconds: t0.elapsed().as_secs_f64(),
+        });
+        fit(r, &p.joint, &f)?;
+        let a = train_args(
+            &sizes,
+            args.seed,
+            &p.joint,
+            &[&f.train_ds],
+            [&f.scv, &f.fwt, &f.train_report],
+            sizes.epochs,
+        )?;
+        r.stage(&format!("train {}", p.joint), &["train"], &a)?;
+        files.push(f);
+    }
+
+    let mut joints: BTreeMap<String, LegJointEntry> = BTreeMap::new();
+    let mut eval_md = String::new();
+    for ((p, f), labels) in leg.joints.iter().zip(&files).zip(&train) {
+        let ev: Option<EvalReport> = match evaluate(r, dirs, &p.joint, &p.joint, f) {
+            Ok(()) => Some(super::read_typed(&f.eval_json)?),
+            Err(e) => {
+                eprintln!("warning: {e:#}");
+                None
+            }
+        };
+        if let Some(ev) = &ev {
+            eval_md += &eval_table(&p.joint, "unseen run", ev);
+        }
+        let models = EVAL_MODELS
+            .iter()
+            .map(|(key, label)| {
+                let eval = Some(ev.as_ref().and_then(|e| e.models.get(*key)).copied());
+                let entry = LegModelEntry {
+                    eval,
+                    closed_loop: None,
+                };
+                ((*label).to_owned(), entry)
+            })
+            .collect();
+        joints.insert(
+            p.joint.clone(),
+            LegJointEntry {
+                label_error_nm: LabelError {
+                    full_state: labels.error_full_state_nm,
+                    single_joint_view: labels.error_single_joint_view_nm,
+                },
+                models,
+                files: super::JointFilesEntry {
+                    cv: s(&f.cv),
+                    scv: s(&f.scv),
+                    lugre: s(&f.lugre),
+                    pinn: s(&f.fwt),
+                    eval: s(&f.eval_json),
+                },
+            },
+        );
+    }
+
+    let configs = write_daemon_configs(&setup, &files, &dirs.models)?;
+    let suite = if args.no_experiments {
+        None
+    } else {
+        Some(closed_loop(r, args, &setup, &configs, &mut joints)?)
+    };
+    if let Some(s) = &suite {
+        std::fs::create_dir_all(&dirs.experiments)?;
+        frictionless::output_file::write(
+            dirs.experiments.join("leg-report.json"),
+            serde_json::to_string_pretty(s)?,
+        )?;
+    }
+
+    let total = started.elapsed().as_secs_f64();
+    let report = LegReport {
+        format: "frictionless-demo-leg-v1",
+        producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
+        settings: super::settings_name(args),
+        seed: args.seed,
+        network: super::Network {
+            hidden: sizes.hidden,
+            history: sizes.history,
+            epochs: sizes.epochs,
+            batch: sizes.batch,
+        },
+        samples,
+        joints: &joints,
+        closed_loop: suite.as_ref(),
+        stages: &r.stages,
+        total_seconds: total,
+    };
+    let out = &args.out;
+    frictionless::output_file::write(
+        out.join("report.json"),
+        serde_json::to_string_pretty(&report)?,
+    )?;
+    let md = report_md(&report, &eval_md, suite.as_ref());
+    frictionless::output_file::write(out.join("report.md"), &md)?;
+    println!("{md}");
+    eprintln!(
+        "frictl demo --robot leg: done in {total:.0} s → {}/report.md",
+        out.display()
+    );
+    Ok(())
+}
+
+fn strings(sets: &[&str]) -> Vec<String> {
+    sets.iter().map(|s| (*s).to_owned()).collect()
+}
+
+/// One simultaneous acquisition of the leg (`sets` on every joint's protocol, plant `seed`),
+/// labelled from both views; one stage record each.
+fn acquire_and_label(
+    r: &mut Runner,
+    leg: &LegParams,
+    robot: &frictionless_dynamics::Robot,
+    sets: &[String],
+    seed: u64,
+    what: &str,
+) -> anyhow::Result<Vec<LegJointLabels>> {
+    r.n += 1;
+    eprintln!("[{:>2}] acquire leg ({what}, seed {seed}) …", r.n);
+    let t0 = Instant::now();
+    let protocols = leg_protocols(leg, sets)?;
+    let (rows, _) = run_leg_offline_rows(leg, &protocols, seed)?;
+    let secs = t0.elapsed().as_secs_f64();
+    eprintln!(
+        "     {} samples per joint in {secs:.1} s",
+        rows.first().map_or(0, Vec::len)
+    );
+    r.stages.push(Stage {
+        name: format!("acquire leg ({what})"),
+        seconds: secs,
+    });
+    r.n += 1;
+    eprintln!(
+        "[{:>2}] label leg ({what}): whole state and single-joint view …",
+        r.n
+    );
+    let t0 = Instant::now();
+    let labels =
+        label_leg(leg, robot, &rows).with_context(|| format!("labelling the leg's {what} run"))?;
+    drop(rows);
+    for l in &labels {
+        eprintln!(
+            "     {:<14} label error {} Nm (whole state), {} Nm (single-joint view)",
+            l.joint,
+            opt(l.error_full_state_nm),
+            opt(l.error_single_joint_view_nm)
+        );
+    }
+    r.stages.push(Stage {
+        name: format!("label leg ({what})"),
+        seconds: t0.elapsed().as_secs_f64(),
+    });
+    Ok(labels)
+}
+
+fn opt(v: Option<f64>) -> String {
+    v.map_or("–".into(), |x| format!("{x:.3}"))
+}
+
+/// Writes joint `p`'s whole-state dataset of one run and its sidecar.
+fn write_joint_dataset(
+    p: &frictionless_sim::PlantParams,
+    labels: &LegJointLabels,
+    path: &Path,
+    seed: u64,
+) -> anyhow::Result<()> {
+    let cfg = label_config(p);
+    let meta = frictionless_acquire::log_meta(p);
+    write_dataset(
+        path,
+        &labels.full_state,
+        &labels.summary,
+        &Provenance {
+            input_log: format!(
+                "frictl demo --robot leg: simultaneous leg acquisition, seed {seed}"
+            ),
+            input_sha256: String::new(),
+            meta: &meta,
+            fs_hz: cfg.fs_hz,
+            settings: serde_json::to_value(&cfg)?,
+            dynamics: format!(
+                "URDF {} (nominal leg), the whole leg's logged state, fixed base",
+                frictionless_sim::leg::ERGOCUB_URDF_PATH
+            ),
+        },
+    )
+}
+
+/// A joint's model in one of the configs, from its files.
+type ModelOf = fn(&JointFiles) -> anyhow::Result<FrictionModel>;
+
+/// The six-joint frictiond configs: (label, path) of the PINN's (`frictiond.toml`), the SCV's and
+/// the CV's. Each joint gets the shipped law of its drive (`daemon_joint`), its fitted model and,
+/// for the PINN, the Δθ offset its training latched; model paths are relative to `models`.
+fn write_daemon_configs(
+    setup: &LegSetup,
+    files: &[JointFiles],
+    models: &Path,
+) -> anyhow::Result<Vec<(&'static str, PathBuf)>> {
+    use frictiond_config::{BackendConfig, BackendKind, LoopConfig, RawConfig, SafetyConfig};
+    let kinds: [(&str, &str, ModelOf); 3] = [
+        ("PINN", "frictiond.toml", |f| {
+            Ok(FrictionModel::Pinn(f.fwt.clone()))
+        }),
+        ("SCV", "frictiond_scv.toml", |f| {
+            Ok(FrictionModel::Scv(super::super::experiment::load_scv(
+                &f.scv,
+            )?))
+        }),
+        ("CV", "frictiond_cv.toml", |f| {
+            Ok(FrictionModel::Cv(super::super::experiment::load_cv(&f.cv)?))
+        }),
+    ];
+    let mut out = vec![];
+    for (label, name, model) in kinds {
+        let mut joints = vec![];
+        for (index, (p, f)) in setup.params.joints.iter().zip(files).enumerate() {
+            let offset = if label == "PINN" {
+                let report = super::read_typed(&f.train_report)?;
+                super::super::robot::trained_offset(&report).with_context(|| s(&f.train_report))?
+            } else {
+                None
+            };
+            let mut j = daemon_joint(
+                &DaemonJoint {
+                    name: p.joint.clone(),
+                    index,
+                    gear_ratio: p.gear_ratio_signed,
+                    kt_nm_per_a: p.kt_nm_per_a,
+                    model: model(f)?,
+                    delta_theta_offset_motor_rad: offset,
+                    kfc: None,
+                    lpf: None,
+                },
+                false,
+            )?;
+            // Beside the config: the directory moves as a whole.
+            if let Some(m) = &mut j.model {
+                *m = PathBuf::from(m.file_name().context("a PINN file name")?);
+            }
+            joints.push(j);
+        }
+        let cfg = RawConfig {
+            loop_: LoopConfig::default(),
+            backend: BackendConfig {
+                kind: BackendKind::Shm,
+                service_prefix: "frictionless".into(),
+                root_path: None,
+            },
+            safety: SafetyConfig::default(),
+            joint: joints,
+            bus: Vec::new(),
+        };
+        let path = models.join(name);
+        frictionless::output_file::write(
+            &path,
+            format!(
+                "# The coupled ergoCub left leg, {label} on every joint (frictl demo --robot leg).\n{}",
+                toml::to_string(&cfg)?
+            ),
+        )?;
+        // Read back as frictiond would (model files, their inputs against each joint).
+        frictiond_config::load(&path)
+            .with_context(|| format!("{} as frictiond reads it", path.display()))?;
+        out.push((label, path));
+    }
+    Ok(out)
+}
+
+/// The closed-loop suite on the knee and the ankle roll: none, the configs' CV / SCV / PINN, the
+/// oracle. Adds each tested joint's results to `joints`.
+fn closed_loop(
+    r: &mut Runner,
+    args: &Args,
+    setup: &LegSetup,
+    configs: &[(&'static str, PathBuf)],
+    joints: &mut BTreeMap<String, LegJointEntry>,
+) -> anyhow::Result<frictionless_experiment::leg::LegSuiteReport> {
+    let n = setup.dof();
+    let mut models = vec![LegModel::uniform(FrictionModel::None, n)];
+    for label in ["CV", "SCV", "PINN"] {
+        let (_, path) = configs
+            .iter()
+            .find(|(l, _)| *l == label)
+            .context("a config per model")?;
+        models.push(LegModel::from_daemon_config(label, path, setup)?);
+    }
+    models.push(LegModel::uniform(FrictionModel::Oracle, n));
+    let bins = match &r.frictiond {
+        Some(d) => Binaries {
+            frictl: r.exe.clone(),
+            frictiond: d.clone(),
+        },
+        None => Binaries::locate()?,
+    };
+    let mut cfg = LegSuiteConfig::paper(bins, models);
+    cfg.seed = args.seed;
+    cfg.jobs = 2;
+    if args.quick {
+        // Faster sines and a narrower search: the test's sizes.
+        cfg.joints = vec![
+            LegTestJoint {
+                sine: Reference::Sine {
+                    centre_rad: -0.8,
+                    amplitude_rad: 0.3,
+                    freq_hz: 0.5,
+                },
+                kp_range: (10.0, 3000.0),
+                ..LegTestJoint::knee()
+            },
+            LegTestJoint {
+                sine: Reference::Sine {
+                    centre_rad: 0.0,
+                    amplitude_rad: 0.1,
+                    freq_hz: 0.5,
+                },
+                kp_range: (300.0, 100_000.0),
+                ..LegTestJoint::ankle_roll()
+            },
+        ];
+        cfg.after_release_s = 1.0;
+    }
+    r.n += 1;
+    eprintln!(
+        "[{:>2}] closed loop on the leg: {} models × {} tested joints …",
+        r.n,
+        cfg.models.len(),
+        cfg.joints.len()
+    );
+    let t0 = Instant::now();
+    let report = run_leg_suite(&cfg)?;
+    let secs = t0.elapsed().as_secs_f64();
+    eprintln!("     {} trials in {secs:.1} s", report.trials);
+    r.stages.push(Stage {
+        name: "closed loop (leg)".into(),
+        seconds: secs,
+    });
+    for (joint, jr) in &report.joints {
+        let Some(entry) = joints.get_mut(joint) else {
+            continue;
+        };
+        for (label, cell) in &jr.models {
+            entry.models.entry(label.clone()).or_default().closed_loop =
+                Some(LegClosedLoop::from(cell));
+        }
+    }
+    debug_assert!(
+        report
+            .joints
+            .values()
+            .all(|j| j.models.contains_key(ORACLE_LABEL))
+    );
+    Ok(report)
+}
+
+/// `report.md`: the label errors, each joint's offline table and the closed-loop table.
+fn report_md(
+    report: &LegReport<'_>,
+    eval_md: &str,
+    suite: Option<&frictionless_experiment::leg::LegSuiteReport>,
+) -> String {
+    let mut md = format!(
+        "# frictl demo --robot leg ({} settings, seed {})\n\nThe coupled ergoCub left leg, every joint excited at once ({} samples per joint for training, {} in the unseen run); network {} H {}, {} epochs. Total {:.0} s.\n\n",
+        report.settings,
+        report.seed,
+        report.samples[0],
+        report.samples[1],
+        report.network.hidden,
+        report.network.history,
+        report.network.epochs,
+        report.total_seconds
+    );
+    md += "**Label error against the plant's truth [Nm RMS]** (training run, valid sliding rows)\n\n| joint | whole state | single-joint view |\n|---|---|---|\n";
+    for (joint, e) in report.joints {
+        md += &format!(
+            "| {joint} | {} | {} |\n",
+            opt(e.label_error_nm.full_state),
+            opt(e.label_error_nm.single_joint_view)
+        );
+    }
+    md += "\n**Offline: friction RMSE against the truth on the unseen run [Nm]**\n\n| joint | none | CV | SCV | LuGre | PINN |\n|---|---|---|---|---|---|\n";
+    for (joint, e) in report.joints {
+        let cell = |label: &str| {
+            opt(e
+                .models
+                .get(label)
+                .and_then(|m| m.eval.flatten())
+                .and_then(|m| m.rmse_true_all))
+        };
+        md += &format!(
+            "| {joint} | {} | {} | {} | {} | {} |\n",
+            cell("none"),
+            cell("CV"),
+            cell("SCV"),
+            cell("LuGre"),
+            cell("PINN")
+        );
+    }
+    md += eval_md;
+    if let Some(s) = suite {
+        md += "\n## Closed loop\n\n";
+        md += &s.markdown();
+    }
+    md
+}
