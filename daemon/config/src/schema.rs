@@ -408,6 +408,25 @@ pub struct RawConfig {
     pub bus: Vec<BusConfig>,
 }
 
+impl RawConfig {
+    /// A config for `joint` over shared memory with the default service prefix `frictionless`,
+    /// the iceoryx2 default root, the default loop and safety, no buses (what a pipeline that trained
+    /// the models writes for the robot).
+    pub fn shm(joint: Vec<JointConfig>) -> Self {
+        Self {
+            loop_: LoopConfig::default(),
+            backend: BackendConfig {
+                kind: BackendKind::Shm,
+                service_prefix: "frictionless".into(),
+                root_path: None,
+            },
+            safety: SafetyConfig::default(),
+            joint,
+            bus: Vec::new(),
+        }
+    }
+}
+
 /// Largest number of `[[bus]]` sections (sockets polled per tick).
 pub const MAX_BUSES: usize = 8;
 

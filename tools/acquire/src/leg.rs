@@ -175,6 +175,18 @@ fn breakaway_nm(p: &PlantParams) -> f64 {
     p.f_s0_nm + p.f_cm_nm
 }
 
+/// `protocol.KEY=VALUE` of a short leg protocol (one start, one sine frequency, one ramp pair, two
+/// steps; ≈ 27 simulated seconds): the tests' and `frictl demo --robot leg --quick`'s.
+pub const SHORT_PROTOCOL: [&str; 7] = [
+    "protocol.n_starts=1",
+    "protocol.recentre_s=1.0",
+    "protocol.current_scale=0.4",
+    "protocol.sines.amplitude_to_a=0.7",
+    "protocol.sines.frequencies_hz=[0.7]",
+    "protocol.ramps.slopes_a_per_s=[0.39]",
+    "protocol.steps.levels_a=[0.8, -0.8]",
+];
+
 /// The re-centring and hold gains of every leg joint, applied before the caller's `sets`:
 /// K_p 200 1/s², K_d 28 1/s (ζ ≈ 1). With the knee preset's 400 and 40, the hip pitch, carrying
 /// the whole leg, held at its upper limit margin in a limit cycle of its drive's torsional mode

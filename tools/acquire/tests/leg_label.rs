@@ -14,19 +14,9 @@
 use std::collections::BTreeMap;
 
 use frictionless_acquire::LogRow;
-use frictionless_acquire::leg::{label_leg, leg_protocols, run_leg_offline_rows};
+use frictionless_acquire::leg::{SHORT_PROTOCOL, label_leg, leg_protocols, run_leg_offline_rows};
 use frictionless_dataset::Dataset;
 use frictionless_sim::LegParams;
-
-const SETS: &[&str] = &[
-    "protocol.n_starts=1",
-    "protocol.recentre_s=1.0",
-    "protocol.current_scale=0.4",
-    "protocol.sines.amplitude_to_a=0.7",
-    "protocol.sines.frequencies_hz=[0.7]",
-    "protocol.ramps.slopes_a_per_s=[0.39]",
-    "protocol.steps.levels_a=[0.8, -0.8]",
-];
 
 /// One simultaneous acquisition of the preset leg (seed 11) and its nominal robot.
 struct Acquired {
@@ -38,7 +28,7 @@ struct Acquired {
 
 fn acquire() -> Acquired {
     let leg = LegParams::preset().unwrap();
-    let sets: Vec<String> = SETS.iter().map(|s| s.to_string()).collect();
+    let sets: Vec<String> = SHORT_PROTOCOL.iter().map(|s| s.to_string()).collect();
     let protocols = leg_protocols(&leg, &sets).unwrap();
     let (rows, summaries) = run_leg_offline_rows(&leg, &protocols, 11).unwrap();
     let robot = frictionless_sim::LegPlant::new(leg.clone(), 0)

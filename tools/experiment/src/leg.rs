@@ -124,6 +124,34 @@ impl LegTestJoint {
     }
 }
 
+impl LegTestJoint {
+    /// The knee (`−0.8 − 0.3·cos(2π·0.5·t)` rad, K_p in [10, 3000]) and the ankle roll
+    /// (`−0.1·cos(2π·0.5·t)` rad, K_p in [300, 100000]) on faster, smaller sines than the paper's:
+    /// the small sizes of the tests and of `frictl demo --robot leg --quick`.
+    pub fn fast_pair() -> Vec<Self> {
+        vec![
+            Self {
+                sine: Reference::Sine {
+                    centre_rad: -0.8,
+                    amplitude_rad: 0.3,
+                    freq_hz: 0.5,
+                },
+                kp_range: (10.0, 3000.0),
+                ..Self::knee()
+            },
+            Self {
+                sine: Reference::Sine {
+                    centre_rad: 0.0,
+                    amplitude_rad: 0.1,
+                    freq_hz: 0.5,
+                },
+                kp_range: (300.0, 100_000.0),
+                ..Self::ankle_roll()
+            },
+        ]
+    }
+}
+
 /// One compensation of the whole leg: frictiond's model per leg joint.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LegModel {

@@ -54,6 +54,14 @@ pub struct TrackMetrics {
     pub n: usize,
 }
 
+impl TrackMetrics {
+    /// [`TrackMetrics::friction_est_rmse_nm`] when there is one (`None` for a joint without a
+    /// friction estimate, whose value is not finite).
+    pub fn friction_estimate_rmse_nm(&self) -> Option<f64> {
+        Some(self.friction_est_rmse_nm).filter(|v| v.is_finite())
+    }
+}
+
 /// The window `[from_s, to_s)` as indices.
 fn window(tr: &JointTrace, from_s: f64, to_s: f64) -> Vec<usize> {
     (0..tr.t_s.len())

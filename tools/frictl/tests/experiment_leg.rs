@@ -64,26 +64,7 @@ fn leg_oracle_and_scv_need_a_lower_min_kp_than_none_on_knee_and_ankle_roll() {
         LegModel::uniform(FrictionModel::Oracle, n),
     ];
     let mut cfg = LegSuiteConfig::paper(bins, models);
-    cfg.joints = vec![
-        LegTestJoint {
-            sine: Reference::Sine {
-                centre_rad: -0.8,
-                amplitude_rad: 0.3,
-                freq_hz: 0.5,
-            },
-            kp_range: (10.0, 3000.0),
-            ..LegTestJoint::knee()
-        },
-        LegTestJoint {
-            sine: Reference::Sine {
-                centre_rad: 0.0,
-                amplitude_rad: 0.1,
-                freq_hz: 0.5,
-            },
-            kp_range: (300.0, 100_000.0),
-            ..LegTestJoint::ankle_roll()
-        },
-    ];
+    cfg.joints = LegTestJoint::fast_pair();
     cfg.iterations = 4;
     cfg.after_release_s = 1.0;
     cfg.jobs = 2;

@@ -602,8 +602,7 @@ impl From<&Cell> for ClosedLoopEntry {
             min_kp: c.min_kp,
             closed_loop_tau_f_rmse_nm: c
                 .track_at_min_kp
-                .map(|t| t.friction_est_rmse_nm)
-                .filter(|v| v.is_finite()),
+                .and_then(|t| t.friction_estimate_rmse_nm()),
             tracking_rmse_at_min_kp_rad: c.track_at_min_kp.map(|t| t.rmse_rad),
             tracking_rmse_at_low_kp_rad: c.track_at_low_kp.map(|(_, t)| t.rmse_rad),
             disturbance_rmse_own_kp_rad: c

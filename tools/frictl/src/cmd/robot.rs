@@ -28,8 +28,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use frictiond_config::{
-    BackendConfig, BackendKind, JointConfig, LoopConfig, LpfConfig, ModelKind, OodMode, RawConfig,
-    SafetyConfig, WarmupName, default_ood_margin, default_ood_ramp_ms,
+    JointConfig, LpfConfig, ModelKind, OodMode, RawConfig, WarmupName, default_ood_margin,
+    default_ood_ramp_ms,
 };
 use frictionless::features::FeatureSet;
 use frictionless_eval::Report as EvalReport;
@@ -780,17 +780,7 @@ fn daemon_config(robot: &RobotFile, plans: &[JointPlan], out: &Path) -> anyhow::
             ood_ramp_ms: default_ood_ramp_ms(),
         });
     }
-    Ok(RawConfig {
-        loop_: LoopConfig::default(),
-        backend: BackendConfig {
-            kind: BackendKind::Shm,
-            service_prefix: "frictionless".into(),
-            root_path: None,
-        },
-        safety: SafetyConfig::default(),
-        joint: joints,
-        bus: Vec::new(),
-    })
+    Ok(RawConfig::shm(joints))
 }
 
 /// One joint's report entry.

@@ -27,10 +27,9 @@ use std::time::Instant;
 
 use anyhow::Context;
 use frictionless_acquire::leg::{
-    LegJointLabels, label_config, label_leg, leg_protocols, run_leg_offline_rows,
+    LegJointLabels, SHORT_PROTOCOL, label_config, label_leg, leg_protocols, run_leg_offline_rows,
 };
 use frictionless_eval::{Metrics, Report as EvalReport};
-use frictionless_experiment::controller::Reference;
 use frictionless_experiment::leg::{
     LegCell, LegModel, LegSetup, LegSuiteConfig, LegTestJoint, run_leg_suite,
 };
@@ -45,18 +44,6 @@ use super::{
     Args, Dirs, EVAL_MODELS, JointFiles, Runner, Sizes, Stage, eval_table, evaluate, fit, s,
     train_args,
 };
-
-/// `protocol.KEY=VALUE` of the training run of `--quick`: one start, one sine frequency, one ramp
-/// pair, two steps.
-const QUICK_TRAIN: &[&str] = &[
-    "protocol.n_starts=1",
-    "protocol.recentre_s=1.0",
-    "protocol.current_scale=0.4",
-    "protocol.sines.amplitude_to_a=0.7",
-    "protocol.sines.frequencies_hz=[0.7]",
-    "protocol.ramps.slopes_a_per_s=[0.39]",
-    "protocol.steps.levels_a=[0.8, -0.8]",
-];
 
 /// The unseen run of `--quick`: the same length, other frequency, slope, levels and starting pose.
 const QUICK_TEST: &[&str] = &[
@@ -143,8 +130,7 @@ impl From<&LegCell> for LegClosedLoop {
             min_kp: c.min_kp,
             closed_loop_tau_f_rmse_nm: c
                 .track_at_min_kp
-                .map(|t| t.friction_est_rmse_nm)
-                .filter(|v| v.is_finite()),
+                .and_then(|t| t.friction_estimate_rmse_nm()),
             tracking_rmse_at_min_kp_rad: c.track_at_min_kp.map(|t| t.rmse_rad),
             disturbance_kp: c.disturbance_kp_per_s2,
             disturbance_rmse_rad: c.disturbance.rmse_after_release_rad,
@@ -163,7 +149,7 @@ pub(super) fn run(
     let setup = LegSetup::load(&[])?;
     let leg = &setup.params;
     let (train_sets, test_sets): (Vec<String>, Vec<String>) = if args.quick {
-        (strings(QUICK_TRAIN), strings(QUICK_TEST))
+        (strings(&SHORT_PROTOCOL), strings(QUICK_TEST))
     } else {
         let starts = if args.full { sizes.n_starts } else { 1 };
         (vec![format!("protocol.n_starts={starts}")], strings(TEST))
@@ -389,7 +375,6 @@ fn write_daemon_configs(
     files: &[JointFiles],
     models: &Path,
 ) -> anyhow::Result<Vec<(&'static str, PathBuf)>> {
-    use frictiond_config::{BackendConfig, BackendKind, LoopConfig, RawConfig, SafetyConfig};
     let kinds: [(&str, &str, ModelOf); 3] = [
         ("PINN", "frictiond.toml", |f| {
             Ok(FrictionModel::Pinn(f.fwt.clone()))
@@ -432,17 +417,7 @@ fn write_daemon_configs(
             }
             joints.push(j);
         }
-        let cfg = RawConfig {
-            loop_: LoopConfig::default(),
-            backend: BackendConfig {
-                kind: BackendKind::Shm,
-                service_prefix: "frictionless".into(),
-                root_path: None,
-            },
-            safety: SafetyConfig::default(),
-            joint: joints,
-            bus: Vec::new(),
-        };
+        let cfg = frictiond_config::RawConfig::shm(joints);
         let path = models.join(name);
         frictionless::output_file::write(
             &path,
@@ -489,27 +464,7 @@ fn closed_loop(
     cfg.seed = args.seed;
     cfg.jobs = 2;
     if args.quick {
-        // Faster sines and a narrower search: the test's sizes.
-        cfg.joints = vec![
-            LegTestJoint {
-                sine: Reference::Sine {
-                    centre_rad: -0.8,
-                    amplitude_rad: 0.3,
-                    freq_hz: 0.5,
-                },
-                kp_range: (10.0, 3000.0),
-                ..LegTestJoint::knee()
-            },
-            LegTestJoint {
-                sine: Reference::Sine {
-                    centre_rad: 0.0,
-                    amplitude_rad: 0.1,
-                    freq_hz: 0.5,
-                },
-                kp_range: (300.0, 100_000.0),
-                ..LegTestJoint::ankle_roll()
-            },
-        ];
+        cfg.joints = LegTestJoint::fast_pair();
         cfg.after_release_s = 1.0;
     }
     r.n += 1;
