@@ -210,8 +210,9 @@ fn torque_sensed_demo_trains_on_two_speeds_and_tests_on_the_third() {
 /// whole leg's state, a model per joint, one six-joint frictiond config, the closed loop on the
 /// knee and the ankle roll. Every joint reports both label errors and every model's offline error
 /// against the truth; on the hips and the knee the whole-state label beats the single-joint view by
-/// 5×; frictiond accepts the written config; the oracle needs a lower minimum K_p than no
-/// compensation on both tested joints.
+/// 5×; frictiond accepts the written configs; the oracle needs a lower minimum K_p than no
+/// compensation on both tested joints; `frictl robot run` on the robot file the demo wrote trains
+/// the six joints and writes one config frictiond accepts.
 #[test]
 fn leg_demo_labels_from_the_whole_state_and_runs_six_models_in_one_frictiond() {
     let dir = crate::util::scratch("frictl_demo_leg");
@@ -283,5 +284,40 @@ fn leg_demo_labels_from_the_whole_state_and_runs_six_models_in_one_frictiond() {
     }
     assert!(dir.join("experiments/leg-report.json").is_file());
     assert!(run_dirs(pid).is_empty(), "run directories left behind");
+
+    // The robot file it wrote: `frictl robot run` trains the six joints on the same datasets and
+    // writes one six-joint config that frictiond accepts.
+    let out = Command::new(env!("CARGO_BIN_EXE_frictl"))
+        .current_dir(&dir)
+        .args(["robot", "run", "robot.toml", "--out", "robot-out"])
+        .output()
+        .expect("run frictl robot run");
+    assert!(
+        out.status.success(),
+        "frictl robot run: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let cfg = dir.join("robot-out/frictiond.toml");
+    let text = std::fs::read_to_string(&cfg).unwrap();
+    for j in joints.keys() {
+        assert!(text.contains(&format!("name = \"{j}\"")), "{j} in {text}");
+    }
+    let check = Command::new(&frictiond)
+        .arg("--config")
+        .arg(&cfg)
+        .arg("--check")
+        .output()
+        .unwrap();
+    assert!(
+        check.status.success(),
+        "{}",
+        String::from_utf8_lossy(&check.stderr)
+    );
+    let robot_report = json(&dir.join("robot-out/report.json"));
+    assert_eq!(
+        robot_report["joints"].as_object().map(|j| j.len()),
+        Some(6),
+        "{robot_report}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

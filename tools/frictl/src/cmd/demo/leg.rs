@@ -233,10 +233,11 @@ pub(super) fn run(
     }
 
     let configs = write_daemon_configs(&setup, &files, &dirs.models)?;
+    write_robot_file(args, &sizes, &setup, &configs.joints, &files)?;
     let suite = if args.no_experiments {
         None
     } else {
-        Some(closed_loop(r, args, &setup, &configs, &mut joints)?)
+        Some(closed_loop(r, args, &setup, &configs.paths, &mut joints)?)
     };
     if let Some(s) = &suite {
         std::fs::create_dir_all(&dirs.experiments)?;
@@ -367,14 +368,22 @@ fn write_joint_dataset(
 /// A joint's model in one of the configs, from its files.
 type ModelOf = fn(&JointFiles) -> anyhow::Result<FrictionModel>;
 
-/// The six-joint frictiond configs: (label, path) of the PINN's (`frictiond.toml`), the SCV's and
-/// the CV's. Each joint gets the shipped law of its drive (`daemon_joint`), its fitted model and,
-/// for the PINN, the Δθ offset its training latched; model paths are relative to `models`.
+/// The configs [`write_daemon_configs`] wrote.
+struct DaemonConfigs {
+    /// (label, path) of the PINN's (`frictiond.toml`), the SCV's and the CV's.
+    paths: Vec<(&'static str, PathBuf)>,
+    /// The PINN config's joints.
+    joints: Vec<frictiond_config::JointConfig>,
+}
+
+/// The six-joint frictiond configs: the PINN's (`frictiond.toml`), the SCV's and the CV's. Each
+/// joint gets the shipped law of its drive (`daemon_joint`), its fitted model and, for the PINN,
+/// the Δθ offset its training latched; model paths are relative to `models`.
 fn write_daemon_configs(
     setup: &LegSetup,
     files: &[JointFiles],
     models: &Path,
-) -> anyhow::Result<Vec<(&'static str, PathBuf)>> {
+) -> anyhow::Result<DaemonConfigs> {
     let kinds: [(&str, &str, ModelOf); 3] = [
         ("PINN", "frictiond.toml", |f| {
             Ok(FrictionModel::Pinn(f.fwt.clone()))
@@ -389,6 +398,7 @@ fn write_daemon_configs(
         }),
     ];
     let mut out = vec![];
+    let mut pinn_joints = vec![];
     for (label, name, model) in kinds {
         let mut joints = vec![];
         for (index, (p, f)) in setup.params.joints.iter().zip(files).enumerate() {
@@ -418,6 +428,9 @@ fn write_daemon_configs(
             joints.push(j);
         }
         let cfg = frictiond_config::RawConfig::shm(joints);
+        if label == "PINN" {
+            pinn_joints = cfg.joint.clone();
+        }
         let path = models.join(name);
         frictionless::output_file::write(
             &path,
@@ -431,7 +444,86 @@ fn write_daemon_configs(
             .with_context(|| format!("{} as frictiond reads it", path.display()))?;
         out.push((label, path));
     }
-    Ok(out)
+    Ok(DaemonConfigs {
+        paths: out,
+        joints: pinn_joints,
+    })
+}
+
+/// `robot.toml` beside the report: the six leg joints for `frictl robot run` (and the Ray driver),
+/// each on the demo's whole-state datasets (paths relative to the file) with its drive's constants,
+/// the PINN's feature set, the law of `joints` (the PINN config's), and the demo's network trained
+/// once (`[search] trials = 0`).
+fn write_robot_file(
+    args: &Args,
+    sizes: &Sizes,
+    setup: &LegSetup,
+    joints: &[frictiond_config::JointConfig],
+    files: &[JointFiles],
+) -> anyhow::Result<()> {
+    use frictl::robot::{
+        JointSection, LpfSection, RobotFile, RobotSection, SearchSection, TrainSection,
+    };
+    let rel = |p: &Path| -> anyhow::Result<PathBuf> {
+        Ok(p.strip_prefix(&args.out)
+            .with_context(|| format!("{} is not under {}", p.display(), args.out.display()))?
+            .to_path_buf())
+    };
+    let mut joint = Vec::with_capacity(joints.len());
+    for ((p, j), f) in setup.params.joints.iter().zip(joints).zip(files) {
+        joint.push(JointSection {
+            name: p.joint.clone(),
+            preset: None,
+            logs: vec![],
+            test_logs: vec![],
+            datasets: vec![rel(&f.train_ds)?],
+            test_datasets: vec![rel(&f.test_ds)?],
+            gear_ratio: p.gear_ratio_signed,
+            kt_nm_per_a: p.kt_nm_per_a,
+            features: super::feature_set(&p.joint),
+            temperature: false,
+            max_curr_a: j.max_curr,
+            kfc: j.kfc,
+            max_output_friction_nm: j
+                .max_output_friction
+                .is_finite()
+                .then_some(j.max_output_friction),
+            lpf: j.lpf.map(|l| LpfSection {
+                order: l.order,
+                cutoff_hz: l.cutoff_hz,
+            }),
+            preprocess_args: vec![],
+        });
+    }
+    let robot = RobotFile {
+        robot: RobotSection {
+            name: "ergoCub left leg (frictl demo --robot leg)".into(),
+            seed: args.seed,
+            ..RobotSection::default()
+        },
+        acquire: Default::default(),
+        search: SearchSection {
+            trials: 0,
+            ..SearchSection::default()
+        },
+        train: TrainSection {
+            hidden: super::hidden_widths(sizes.hidden)?,
+            history: sizes.history as usize,
+            epochs: sizes.epochs as usize,
+            batch: sizes.batch as usize,
+            ..TrainSection::default()
+        },
+        joint,
+    };
+    let path = args.out.join("robot.toml");
+    let text = format!(
+        "# The coupled ergoCub left leg on the datasets of `frictl demo --robot leg`:\n# frictl robot run robot.toml --out robot-out\n{}",
+        toml::to_string(&robot)?
+    );
+    // Read back as `frictl robot` reads it.
+    frictl::robot::parse(&path, &text)?;
+    frictionless::output_file::write(&path, text)?;
+    Ok(())
 }
 
 /// The closed-loop suite on the knee and the ankle roll: none, the configs' CV / SCV / PINN, the
