@@ -12,7 +12,8 @@ use std::time::Duration;
 
 use crate::can_support::*;
 use crate::daemon_support::{Plant, TestEnv, frictiond_bin, repo_root};
-use frictionless_shm_types::can::mit::MitSpecial;
+use frictionless_drives::can::mit::MitSpecial;
+use frictionless_shm_types::{BusKind, CAN_DETAIL_ERROR_PASSIVE};
 use socketcan::{CanErrorFrame, CanFrame, CanSocket, Socket};
 
 const T: Duration = Duration::from_secs(20);
@@ -47,12 +48,21 @@ fn can_daemon_over_socketpair_follows_the_law_and_fails_safe() {
         injector.write_frame(&CanFrame::Error(f)).unwrap();
     }
     let rq = request([0.0, 0.0]);
-    let s = plant.status_until(None, T, |s| s.bus.error_frames >= 3);
+    let s = plant.status_until(None, T, |s| s.bus.error_reports >= 3);
     assert_eq!(
-        (s.bus.error_frames, s.bus.bus_off, s.bus.error_passive),
+        (
+            s.bus.error_reports,
+            s.bus.link_down,
+            s.bus.detail[CAN_DETAIL_ERROR_PASSIVE]
+        ),
         (3, 1, 2)
     );
-    assert!(s.bus.tx_frames > 0 && s.bus.rx_frames > 0, "{:?}", s.bus);
+    assert!(
+        s.bus.tx_messages > 0 && s.bus.rx_messages > 0,
+        "{:?}",
+        s.bus
+    );
+    assert_eq!(s.bus.bus_kind(), Some(BusKind::Can), "{:?}", s.bus);
     drive_until(&mut plant, &rq, T, |c| {
         c.i_ref_a[0] == 0.0 || c.i_ref_a[0] != 0.0
     });

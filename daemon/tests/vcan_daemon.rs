@@ -15,10 +15,10 @@ use std::time::{Duration, Instant};
 
 use crate::can_support::*;
 use crate::daemon_support::{Plant, TestEnv, frictl_path};
-use frictionless_shm_types::can::WireFrame;
-use frictionless_shm_types::can::mit::{self, MitRanges, MitRx, MitSpecial};
-use frictionless_shm_types::can::odrive::{self, OdriveMsg};
-use frictionless_shm_types::{FLAG_FAULT, FLAG_STALE, TorqueRequest};
+use frictionless_drives::can::WireFrame;
+use frictionless_drives::can::mit::{self, MitRanges, MitRx, MitSpecial};
+use frictionless_drives::can::odrive::{self, OdriveMsg};
+use frictionless_shm_types::{CAN_DETAIL_ERROR_PASSIVE, FLAG_FAULT, FLAG_STALE, TorqueRequest};
 use socketcan::{
     CanErrorFrame, CanFrame, CanSocket, EmbeddedFrame, ExtendedId, Socket, SocketOptions,
     StandardId,
@@ -47,8 +47,13 @@ fn vcan_daemon_mit_law_stale_errors_and_exit() {
     for f in [bus_off, passive] {
         injector.write_frame(&CanFrame::Error(f)).unwrap();
     }
-    let s = plant.status_until(None, T, |s| s.bus.error_frames >= 2);
-    assert_eq!((s.bus.bus_off, s.bus.error_passive), (1, 1), "{:?}", s.bus);
+    let s = plant.status_until(None, T, |s| s.bus.error_reports >= 2);
+    assert_eq!(
+        (s.bus.link_down, s.bus.detail[CAN_DETAIL_ERROR_PASSIVE]),
+        (1, 1),
+        "{:?}",
+        s.bus
+    );
     assert_eq!(s.bus.io_errors, 0, "{:?}", s.bus);
     // Foreign traffic (other ids, an extended id 0, a remote frame on id 0) does not disturb the loop.
     let foreign = [
@@ -65,7 +70,7 @@ fn vcan_daemon_mit_law_stale_errors_and_exit() {
     drive_until(&mut plant, &rq, T, |c| {
         c.valid_mask == 0b11 && (c.i_ref_a[0] - want[0]).abs() < 1e-9
     });
-    let s = plant.status_until(None, T, |s| s.bus.error_frames >= 2);
+    let s = plant.status_until(None, T, |s| s.bus.error_reports >= 2);
     assert_eq!(s.bus.io_errors, 0, "{:?}", s.bus);
 
     d.signal(libc::SIGTERM);
@@ -424,8 +429,8 @@ fn closed_loop_with_sim(odrive_bus: bool) {
         s.compute.quantile_upper_ns(0.99) as f64 / 1e3,
         s.compute.max_ns as f64 / 1e3,
         s.compute.total,
-        s.bus.rx_frames,
-        s.bus.tx_frames,
+        s.bus.rx_messages,
+        s.bus.tx_messages,
         s.bus.tx_dropped
     );
     d.signal(libc::SIGTERM);

@@ -1,5 +1,5 @@
 //! Fuzz target: arbitrary bytes into the MIT mini-cheetah / CubeMars decoders
-//! (`frictionless_shm_types::can::mit`).
+//! (`frictionless_drives::can::mit`).
 //!
 //! Never panics, with valid ranges (two fixed sets) and with ranges read from the input (often
 //! invalid: those must be refused, not crash). Round-trip properties with the fixed ranges:
@@ -12,8 +12,8 @@
 //!   pattern).
 #![no_main]
 
-use frictionless_shm_types::can::WireFrame;
-use frictionless_shm_types::can::mit::{self, MitCommand, MitRanges, MitReply, MitRx};
+use frictionless_drives::can::WireFrame;
+use frictionless_drives::can::mit::{self, MitCommand, MitRanges, MitReply, MitRx};
 use libfuzzer_sys::fuzz_target;
 
 /// Ranges of the virtual knee drive (`frictl sim serve --backend can`): motor side, kt·i_max torque.

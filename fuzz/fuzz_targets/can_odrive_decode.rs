@@ -1,5 +1,5 @@
 //! Fuzz target: arbitrary bytes into the ODrive "CAN Simple" decoder
-//! (`frictionless_shm_types::can::odrive`).
+//! (`frictionless_drives::can::odrive`).
 //!
 //! Never panics, also on frames that break the `WireFrame` invariants. Round trips on valid frames:
 //! a decoded message re-encodes to the same id, the same RTR flag, and the same bytes over the length
@@ -8,8 +8,8 @@
 //! (`NonFinite`), never silently sent. `can_id`/`split_id` are inverse on every 11-bit id.
 #![no_main]
 
-use frictionless_shm_types::can::odrive::{self, OdriveMsg};
-use frictionless_shm_types::can::{CanCodecError, WireFrame};
+use frictionless_drives::can::odrive::{self, OdriveMsg};
+use frictionless_drives::can::{CanCodecError, WireFrame};
 use libfuzzer_sys::fuzz_target;
 
 fn raw_frame(data: &[u8]) -> WireFrame {

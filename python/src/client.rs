@@ -117,14 +117,21 @@ fn status_dict<'py>(py: Python<'py>, s: &DaemonStatus) -> PyResult<Bound<'py, Py
     let kinds: Vec<u32> = s.model_kind[..n].iter().map(|&k| u32::from(k)).collect();
     d.set_item("model_kind", kinds)?;
     let b = PyDict::new(py);
-    b.set_item("rx_frames", s.bus.rx_frames)?;
-    b.set_item("tx_frames", s.bus.tx_frames)?;
-    b.set_item("error_frames", s.bus.error_frames)?;
-    b.set_item("bus_off", s.bus.bus_off)?;
-    b.set_item("error_passive", s.bus.error_passive)?;
-    b.set_item("tx_dropped", s.bus.tx_dropped)?;
-    b.set_item("io_errors", s.bus.io_errors)?;
-    b.set_item("stale_feedback_mask", s.bus.stale_feedback_mask)?;
+    let c = &s.bus;
+    b.set_item("kind", c.bus_kind().map_or("unknown", |k| k.name()))?;
+    b.set_item("links", c.links)?;
+    b.set_item("rx_messages", c.rx_messages)?;
+    b.set_item("tx_messages", c.tx_messages)?;
+    b.set_item("tx_dropped", c.tx_dropped)?;
+    b.set_item("error_reports", c.error_reports)?;
+    b.set_item("link_down", c.link_down)?;
+    b.set_item("io_errors", c.io_errors)?;
+    b.set_item("stale_feedback_mask", c.stale_feedback_mask)?;
+    let detail = PyDict::new(py);
+    for (name, v) in c.named_detail() {
+        detail.set_item(name, v)?;
+    }
+    b.set_item("detail", detail)?;
     d.set_item("bus", b)?;
     Ok(d)
 }

@@ -155,6 +155,10 @@ def test_commands_follow_the_law_and_status_reports(daemon):
     # The status is a snapshot of one of the ticks above.
     assert float(st.i_ref_a[0]) in seen[0] and float(st.i_ref_a[1]) in seen[1]
     assert st.period_ns == 1_000_000
+    # The shared-memory backend's link counters: the states and requests it took, what it sent.
+    assert st.bus["kind"] == "shm" and st.bus["links"] == 1, st.bus
+    assert st.bus["rx_messages"] >= 100 and st.bus["tx_messages"] >= 100, st.bus
+    assert st.bus["detail"] == {} and st.bus["io_errors"] == 0, st.bus
 
     proc.send_signal(signal.SIGTERM)
     code = proc.wait(timeout=20)

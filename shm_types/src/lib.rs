@@ -20,31 +20,21 @@
 //! every per-joint array; masks are `u64` bit sets (bit `j` = joint `j`). Type names are explicit and
 //! versioned (`frictionless::JointStates_v1`): change the layout ⇒ bump the version.
 //!
-//! ## Example: an MIT-mode torque command through the CAN codec
+//! The drive protocols spoken on a field bus (MIT mode, ODrive CAN Simple) are not here: they live in
+//! `frictionless-drives`, beside this crate.
+//!
+//! ## Example: a status snapshot's latency histogram
 //! ```
-//! use frictionless_shm_types::can::mit::{self, MitCommand, MitRanges, MitRx, MitSaturation};
+//! use frictionless_shm_types::{BusCounters, BusKind, CAN_DETAIL_ERROR_PASSIVE, DaemonStatus};
 //!
-//! // frictiond's command: pure feed-forward torque (kp = kd = 0) to the drive with motor id 3.
-//! let ranges = MitRanges::MINI_CHEETAH; // T ±18 Nm in 12 bits
-//! let (frame, sat) = mit::encode_command(3, &MitCommand::torque(1.25), &ranges)?;
-//! assert_eq!((frame.id, frame.len, frame.extended), (3, 8, false));
-//! assert!(!sat.any());
-//!
-//! // What the drive decodes: the same torque within one quantisation step.
-//! let MitRx::Command(rx) = mit::decode_command(&frame, &ranges)? else {
-//!     panic!("a torque command is not a special frame");
-//! };
-//! let t_step_nm = ranges.steps()[4];
-//! assert!((rx.t_ff_nm - 1.25).abs() <= 0.5 * t_step_nm);
-//!
-//! // Out of range is clamped to the range end and reported, never wrapped.
-//! let (frame, sat) = mit::encode_command(3, &MitCommand::torque(-30.0), &ranges)?;
-//! assert!(sat.has(MitSaturation::T));
-//! let MitRx::Command(rx) = mit::decode_command(&frame, &ranges)? else {
-//!     panic!("not a special frame");
-//! };
-//! assert_eq!(rx.t_ff_nm, ranges.t_min_nm);
-//! # Ok::<(), frictionless_shm_types::can::CanCodecError>(())
+//! let mut status = DaemonStatus::zeroed();
+//! status.compute.record(12_000); // 12 µs
+//! assert_eq!(status.compute.quantile_upper_ns(0.99), 12_000);
+//! // The backend tags its counters; a zeroed status names none.
+//! assert_eq!(status.bus.bus_kind(), Some(BusKind::None));
+//! status.bus = BusCounters::new(BusKind::Can, 2);
+//! status.bus.detail[CAN_DETAIL_ERROR_PASSIVE] = 3;
+//! assert_eq!(status.bus.named_detail().collect::<Vec<_>>(), [("error_passive", 3)]);
 //! ```
 
 #![warn(missing_docs)]
@@ -61,7 +51,6 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe as ps_factory};
 
-pub mod can;
 pub mod sim;
 
 /// Compile-time joint capacity of every payload.
@@ -359,7 +348,7 @@ impl Default for Histogram {
 /// Daemon health snapshot (daemon → monitors, ≈ 10–100 Hz).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
-#[type_name("frictionless::DaemonStatus_v3")]
+#[type_name("frictionless::DaemonStatus_v4")]
 pub struct DaemonStatus {
     /// Sequence number, +1 per message.
     pub seq: u64,
@@ -396,49 +385,126 @@ pub struct DaemonStatus {
     /// Model kind per joint: the code of the core's `frictionless::model::ModelKind`
     /// (`ModelKind::code`, `ModelKind::from_code`; 0 = none).
     pub model_kind: [u8; MAX_JOINTS],
-    /// Field-bus counters summed over every bus (all zero for the shared-memory backend).
+    /// I/O-link counters of the backend, summed over its links (filled by the backend).
     pub bus: BusCounters,
     /// Ticks since start in which the joint's model inputs were out of its training range
     /// ([`FLAG_OUT_OF_RANGE`]), per joint.
     pub out_of_range_ticks: [u64; MAX_JOINTS],
 }
 
-/// Field-bus (SocketCAN) health counters since start, summed over the daemon's buses.
+/// Which backend filled a [`BusCounters`] (its `kind` field, [`BusKind::code`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum BusKind {
+    /// No backend has filled the counters (a zeroed status).
+    None = 0,
+    /// iceoryx2 shared memory: messages are samples of the daemon's services.
+    Shm = 1,
+    /// SocketCAN: messages are classic CAN frames.
+    Can = 2,
+}
+
+/// [`BusCounters::detail`] slot of a CAN backend: error-passive and warning events
+/// (`CAN_ERR_CRTL` passive bits).
+pub const CAN_DETAIL_ERROR_PASSIVE: usize = 0;
+
+impl BusKind {
+    /// Every kind, in code order.
+    pub const ALL: [BusKind; 3] = [BusKind::None, BusKind::Shm, BusKind::Can];
+
+    /// The code carried in [`BusCounters::kind`].
+    pub const fn code(self) -> u32 {
+        self as u32
+    }
+
+    /// The kind of a code; `None` for a code no kind has.
+    pub fn from_code(code: u32) -> Option<BusKind> {
+        Self::ALL.into_iter().find(|k| k.code() == code)
+    }
+
+    /// Short name (`"none"`, `"shm"`, `"can"`), as `[backend] kind` spells it.
+    pub const fn name(self) -> &'static str {
+        match self {
+            BusKind::None => "none",
+            BusKind::Shm => "shm",
+            BusKind::Can => "can",
+        }
+    }
+
+    /// Names of the used [`BusCounters::detail`] slots of this kind, in slot order (the rest are 0).
+    pub const fn detail_names(self) -> &'static [&'static str] {
+        match self {
+            BusKind::None | BusKind::Shm => &[],
+            BusKind::Can => &["error_passive"],
+        }
+    }
+}
+
+/// Number of backend-specific [`BusCounters::detail`] slots.
+pub const BUS_DETAIL_SLOTS: usize = 4;
+
+/// Health counters of the daemon's I/O links since start, summed over its links; the same fields
+/// for every backend (what a "message" and a "link" are depends on [`BusCounters::kind`]), plus
+/// backend-specific `detail` slots named by [`BusKind::detail_names`].
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
-#[type_name("frictionless::BusCounters_v1")]
+#[type_name("frictionless::BusCounters_v2")]
 pub struct BusCounters {
-    /// Frames received and accepted (ids we own).
-    pub rx_frames: u64,
-    /// Frames sent.
-    pub tx_frames: u64,
-    /// Error frames received (`CAN_ERR_FLAG`).
-    pub error_frames: u64,
-    /// Bus-off events (`CAN_ERR_BUSOFF`).
-    pub bus_off: u64,
-    /// Error-passive / warning events (`CAN_ERR_CRTL` passive bits).
-    pub error_passive: u64,
-    /// Sends refused with ENOBUFS/EAGAIN (queue full; frame dropped, loop not stalled).
+    /// [`BusKind::code`] of the backend that filled these (0 = none).
+    pub kind: u32,
+    /// Number of links summed (CAN buses; 1 for shared memory).
+    pub links: u32,
+    /// Messages received and accepted (CAN: frames with ids we own; shm: new states and requests).
+    pub rx_messages: u64,
+    /// Messages sent (CAN: frames; shm: commands and status snapshots).
+    pub tx_messages: u64,
+    /// Sends dropped without blocking the tick (CAN: queue full, ENOBUFS/EAGAIN; shm: loan failed).
     pub tx_dropped: u64,
-    /// Other socket errors (read or write).
+    /// Error reports received from the link (CAN: error frames, `CAN_ERR_FLAG`).
+    pub error_reports: u64,
+    /// Link-down events (CAN: bus-off, `CAN_ERR_BUSOFF`).
+    pub link_down: u64,
+    /// Other read or write errors.
     pub io_errors: u64,
     /// Joints whose feedback was stale at the last tick (bit set), per the `[safety]` rule.
     pub stale_feedback_mask: u64,
+    /// Backend-specific counters; slot `k` is named by `BusKind::detail_names()[k]`.
+    pub detail: [u64; BUS_DETAIL_SLOTS],
 }
 
 impl BusCounters {
-    /// All zeros.
+    /// All zeros (kind [`BusKind::None`]).
     pub const fn zeroed() -> Self {
         Self {
-            rx_frames: 0,
-            tx_frames: 0,
-            error_frames: 0,
-            bus_off: 0,
-            error_passive: 0,
+            kind: 0,
+            links: 0,
+            rx_messages: 0,
+            tx_messages: 0,
             tx_dropped: 0,
+            error_reports: 0,
+            link_down: 0,
             io_errors: 0,
             stale_feedback_mask: 0,
+            detail: [0; BUS_DETAIL_SLOTS],
         }
+    }
+
+    /// Zeros, tagged with `kind` and `links`.
+    pub const fn new(kind: BusKind, links: u32) -> Self {
+        let mut c = Self::zeroed();
+        c.kind = kind.code();
+        c.links = links;
+        c
+    }
+
+    /// The kind of backend that filled these (`None` for an unknown code).
+    pub fn bus_kind(&self) -> Option<BusKind> {
+        BusKind::from_code(self.kind)
+    }
+
+    /// The used detail slots with their names.
+    pub fn named_detail(&self) -> impl Iterator<Item = (&'static str, u64)> + '_ {
+        let names = self.bus_kind().map_or(&[][..], BusKind::detail_names);
+        names.iter().copied().zip(self.detail)
     }
 }
 
@@ -951,6 +1017,20 @@ mod tests {
     use super::*;
 
     #[test]
+    fn bus_kinds_round_trip_their_codes_and_fit_their_detail_slots() {
+        for k in BusKind::ALL {
+            assert_eq!(BusKind::from_code(k.code()), Some(k));
+            assert!(k.detail_names().len() <= BUS_DETAIL_SLOTS, "{k:?}");
+        }
+        assert_eq!(BusKind::from_code(99), None);
+        assert_eq!(BusCounters::zeroed().bus_kind(), Some(BusKind::None));
+        assert_eq!(
+            BusKind::Can.detail_names()[CAN_DETAIL_ERROR_PASSIVE],
+            "error_passive"
+        );
+    }
+
+    #[test]
     fn daemon_status_layout_ends_with_the_out_of_range_counters() {
         use std::mem::{align_of, offset_of, size_of};
         let at = offset_of!(DaemonStatus, out_of_range_ticks);
@@ -1031,7 +1111,12 @@ mod tests {
         ds.model_kind[5] = 4;
         ds.tau_f_hat_nm[5] = 0.5;
         ds.out_of_range_ticks[63] = 42;
+        ds.bus = BusCounters::new(BusKind::Can, 2);
+        ds.bus.link_down = 1;
+        ds.bus.detail[CAN_DETAIL_ERROR_PASSIVE] = 9;
         let got = round_trip(&cfg, Ipc::daemon_status, ds);
+        assert_eq!(got.bus, ds.bus);
+        assert_eq!((got.bus.bus_kind(), got.bus.links), (Some(BusKind::Can), 2));
         assert_eq!(got.out_of_range_ticks[63], 42);
         assert_eq!(got.lateness.total, 1);
         assert_eq!(got.lateness.max_ns, 12_345);

@@ -14,10 +14,10 @@
 #
 # Usage: bash tests/canvm/run.sh
 # Knobs (env): CANVM_WORK (default target/canvm), CANVM_TIMEOUT seconds (default 600), CANVM_SKIP_APT=1,
-#              CANVM_PACKAGES (cargo packages whose test harnesses run in the VM; default "frictionless frictionless-shm-types frictiond frictionless-canlog frictl"),
+#              CANVM_PACKAGES (cargo packages whose test harnesses run in the VM; default "frictionless frictionless-drives frictiond frictionless-canlog frictl"),
 #              CANVM_FILTER (libtest name filter, default "vcan"), CANVM_ACCEL (auto|kvm|tcg, default auto),
 #              CANVM_MEM_MB (VM memory, default 2048: the initramfs is unpacked into it),
-#              CANVM_TESTS (only these integration-test targets, e.g. "shm_types_tests frictiond_e2e"; default:
+#              CANVM_TESTS (only these integration-test targets, e.g. "drives_tests frictiond_e2e"; default:
 #              every harness of the packages that has a test matching CANVM_FILTER, found with `--list`).
 #              CANVM_BUILD (musl | host, default musl): `host` runs the host target's (glibc) binaries and
 #              harnesses instead of building a static musl set: built in the normal target dir with cargo
@@ -31,7 +31,7 @@ cd "$(dirname "$0")/../.."
 ROOT=$(pwd)
 WORK=${CANVM_WORK:-$ROOT/target/canvm}
 TIMEOUT=${CANVM_TIMEOUT:-600}
-PACKAGES=${CANVM_PACKAGES:-"frictionless frictionless-shm-types frictiond frictionless-canlog frictl"}
+PACKAGES=${CANVM_PACKAGES:-"frictionless frictionless-drives frictiond frictionless-canlog frictl"}
 FILTER=${CANVM_FILTER:-vcan}
 TARGET=x86_64-unknown-linux-musl
 mkdir -p "$WORK"

@@ -1,9 +1,9 @@
 //! The CAN buses: `[[bus]]` checked against `[backend]` and the joints, each drive resolved
 //! (node id, units, MIT ranges), the worst-case bus load, and the `--check` summary.
 
-use frictionless_shm_types::can::busload;
-use frictionless_shm_types::can::mit::MitRanges;
-use frictionless_shm_types::can::units::{AngleUnit, CommandUnit, JointUnits};
+use frictionless_drives::can::busload;
+use frictionless_drives::can::mit::MitRanges;
+use frictionless_drives::can::units::{CommandUnit, JointUnits};
 
 use crate::schema::{
     BackendKind, BusConfig, BusJointConfig, CanProtocol, Config, JointConfig, MAX_BUSES, RawConfig,
@@ -156,7 +156,7 @@ pub(crate) fn check_bus(c: &Checker, b: usize, bus: &BusConfig) -> Result<(), Co
     }
     match bus.protocol {
         CanProtocol::Mit => {
-            if bus.host_id > frictionless_shm_types::can::frame::SFF_MAX {
+            if bus.host_id > frictionless_drives::can::frame::SFF_MAX {
                 return Err(c.fail(
                     key("host_id"),
                     bus.host_id,
@@ -215,10 +215,7 @@ pub(crate) fn resolve_drive(
             "joints on a CAN bus have no joint-torque measurement: kp and ki must be 0",
         ));
     }
-    let angle = match bus.protocol {
-        CanProtocol::Mit => AngleUnit::Rad,
-        CanProtocol::Odrive => AngleUnit::Rev,
-    };
+    let angle = bus.protocol.feedback_angle();
     let units = JointUnits::new(bj.command_unit, j.kt, j.gear_ratio, angle)
         .map_err(|e| c.fail(format!("joint[{pos}]"), &j.name, &e.to_string()))?;
     let (mit, reply_units) = match bus.protocol {
@@ -246,7 +243,7 @@ pub(crate) fn odrive_drive(
     bj: &BusJointConfig,
     units: JointUnits,
 ) -> Result<JointUnits, ConfigError> {
-    if bj.node_id > u32::from(frictionless_shm_types::can::odrive::NODE_MAX) {
+    if bj.node_id > u32::from(frictionless_drives::can::odrive::NODE_MAX) {
         return Err(c.fail(key("node_id"), bj.node_id, "ODrive node ids are 0..=63"));
     }
     let mit_keys = [
@@ -346,10 +343,10 @@ pub(crate) fn bus_load(
     n_drives: usize,
     rate_hz: f64,
 ) -> Result<BusLoad, ConfigError> {
-    let (bits, frames) = match bus.protocol {
-        CanProtocol::Mit => (busload::mit_bits_per_joint_tick(), 2),
-        CanProtocol::Odrive => (busload::odrive_bits_per_joint_tick(), 3),
-    };
+    let (bits, frames) = (
+        bus.protocol.bits_per_joint_tick(),
+        bus.protocol.frames_per_joint_tick(),
+    );
     // At most MAX_JOINTS drives (each joint on one bus).
     let n = n_drives as u32;
     let load = BusLoad {

@@ -72,7 +72,7 @@ use std::path::Path;
 
 pub use buses::{BusLoad, bus_summary};
 pub use frictionless::model::ModelKind;
-pub use frictionless_shm_types::can::units::CommandUnit;
+pub use frictionless_drives::can::units::CommandUnit;
 pub use models::{
     KT_REL_TOLERANCE, SignalSupply, check_model_file, check_model_inputs, signal_supply,
 };

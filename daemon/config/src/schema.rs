@@ -4,8 +4,8 @@
 use std::path::PathBuf;
 
 use frictionless::model::ModelKind;
-use frictionless_shm_types::can::mit::MitRanges;
-use frictionless_shm_types::can::units::{CommandUnit, JointUnits};
+use frictionless_drives::can::mit::MitRanges;
+use frictionless_drives::can::units::{CommandUnit, JointUnits};
 use serde::{Deserialize, Serialize};
 
 use crate::buses::BusLoad;
@@ -430,15 +430,8 @@ impl RawConfig {
 /// Largest number of `[[bus]]` sections (sockets polled per tick).
 pub const MAX_BUSES: usize = 8;
 
-/// Motor-drive protocol of one bus.
-#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum CanProtocol {
-    /// MIT mini-cheetah / CubeMars AK "MIT mode": one 8-byte command, one 6-byte reply per tick.
-    Mit,
-    /// ODrive CAN Simple: Set_Input_Torque per tick; cyclic Get_Encoder_Estimates, Get_Iq, Heartbeat.
-    Odrive,
-}
+/// Motor-drive protocol of one bus (defined with the codecs, in `frictionless-drives`).
+pub use frictionless_drives::can::CanProtocol;
 
 /// One `[[bus]]`: a SocketCAN interface with the drives on it.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use frictionless::features::{FeatureSpec, Signal};
-use frictionless_shm_types::can::units::AngleUnit;
+use frictionless_drives::can::units::AngleUnit;
 
 use super::*;
 use crate::buses::*;

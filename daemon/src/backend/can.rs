@@ -6,7 +6,7 @@
 //! data frames only) and every error class enabled (`CAN_ERR_MASK`: bus-off, controller problems, …).
 //!
 //! - [`Backend::read_states`] drains every socket (never blocks, at most [`MAX_FRAMES_PER_TICK`]
-//!   frames per bus), decodes feedback with the `frictionless_shm_types::can` codecs into the joint's
+//!   frames per bus), decodes feedback with the `frictionless_drives::can` codecs into the joint's
 //!   slots of a [`JointStates`] (motor side θ, ω as reported; joint side s = θ/r, ṡ = ω/r with the
 //!   signed gear ratio; the current), and applies the **per-joint** freshness rule: a drive silent
 //!   for more than `feedback_timeout_ticks` ticks gets its bit in
@@ -23,8 +23,10 @@
 //!   to shared memory so `frictl record` / `monitor` see what was sent.
 //! - Torque requests arrive and status leaves over shared memory as with the shm backend; the
 //!   status carries this backend's [`BusCounters`] (filled in here, so the RT loop need not know).
-//! - Error frames count `error_frames`, `bus_off` (`CAN_ERR_BUSOFF`) and `error_passive`
-//!   (`CAN_ERR_CRTL` with RX/TX passive). The RT thread only bumps atomics; a logger thread started
+//! - The counters are the bus-neutral [`BusCounters`] tagged [`BusKind::Can`]: frames are its
+//!   messages, each `[[bus]]` a link. Error frames count `error_reports`, bus-off (`CAN_ERR_BUSOFF`)
+//!   `link_down`, and error-passive (`CAN_ERR_CRTL` with RX/TX passive) the detail slot
+//!   [`CAN_DETAIL_ERROR_PASSIVE`]. The RT thread only bumps atomics; a logger thread started
 //!   at open logs changes at most once per second (off the RT thread).
 //! - Open enters MIT motor mode (`FF…FC`) / ODrive torque control + closed loop; an MIT drive (which
 //!   reports no mode, and answers commands in rest mode without applying them) is sent
@@ -52,12 +54,13 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use frictionless_shm_types::can::mit::{self, MitCommand, MitSpecial};
-use frictionless_shm_types::can::odrive::{self, OdriveMsg};
-use frictionless_shm_types::can::{CanCodecError, WireFrame};
+use frictionless_drives::can::mit::{self, MitCommand, MitSpecial};
+use frictionless_drives::can::odrive::{self, OdriveMsg};
+use frictionless_drives::can::{CanCodecError, WireFrame};
 use frictionless_shm_types::{
-    BusCounters, DaemonStatus, FAULT_DRIVE, FAULT_FEEDBACK_STALE, Inbox, IoError, Ipc, JointStates,
-    MotorCurrentCommand, Outbox, TorqueRequest, monotonic_ns,
+    BusCounters, BusKind, CAN_DETAIL_ERROR_PASSIVE, DaemonStatus, FAULT_DRIVE,
+    FAULT_FEEDBACK_STALE, Inbox, IoError, Ipc, JointStates, MotorCurrentCommand, Outbox,
+    TorqueRequest, monotonic_ns,
 };
 use socketcan::{CanFilter, CanFrame, CanSocket, EmbeddedFrame, Socket, SocketOptions};
 
@@ -98,9 +101,10 @@ struct SharedCounters {
 
 impl SharedCounters {
     fn store(&self, c: &BusCounters) {
-        self.error_frames.store(c.error_frames, Ordering::Relaxed);
-        self.bus_off.store(c.bus_off, Ordering::Relaxed);
-        self.error_passive.store(c.error_passive, Ordering::Relaxed);
+        self.error_frames.store(c.error_reports, Ordering::Relaxed);
+        self.bus_off.store(c.link_down, Ordering::Relaxed);
+        self.error_passive
+            .store(c.detail[CAN_DETAIL_ERROR_PASSIVE], Ordering::Relaxed);
         self.tx_dropped.store(c.tx_dropped, Ordering::Relaxed);
         self.io_errors.store(c.io_errors, Ordering::Relaxed);
         self.stale_mask
@@ -432,11 +436,12 @@ impl CanBackend {
                 .spawn(move || log_counters(&shared, &stop, &names))
                 .map_err(BackendError::LoggerThread)?
         };
+        let n_links = buses.len() as u32;
         let mut me = Self {
             buses,
             states,
             status: DaemonStatus::zeroed(),
-            counters: BusCounters::zeroed(),
+            counters: BusCounters::new(BusKind::Can, n_links),
             tick: 0,
             _ipc: ipc,
             request,
@@ -471,7 +476,7 @@ impl CanBackend {
             return;
         };
         match sock.write_frame(&frame) {
-            Ok(()) => counters.tx_frames += 1,
+            Ok(()) => counters.tx_messages += 1,
             Err(e) if is_full_or_empty(&e) => counters.tx_dropped += 1,
             Err(_) => counters.io_errors += 1,
         }
@@ -598,16 +603,16 @@ impl CanBackend {
     #[inline]
     fn count_error(&mut self, class: u32, data: &[u8]) {
         let c = &mut self.counters;
-        c.error_frames += 1;
+        c.error_reports += 1;
         if class & CAN_ERR_BUSOFF != 0 {
-            c.bus_off += 1;
+            c.link_down += 1;
         }
         if class & CAN_ERR_CRTL != 0
             && data
                 .get(1)
                 .is_some_and(|&x| x & (CAN_ERR_CRTL_RX_PASSIVE | CAN_ERR_CRTL_TX_PASSIVE) != 0)
         {
-            c.error_passive += 1;
+            c.detail[CAN_DETAIL_ERROR_PASSIVE] += 1;
         }
     }
 
@@ -643,7 +648,7 @@ impl Backend for CanBackend {
                         if let Ok(w) = WireFrame::try_from(f)
                             && self.accept(b, &w)
                         {
-                            self.counters.rx_frames += 1;
+                            self.counters.rx_messages += 1;
                             any = true;
                         }
                     }
@@ -884,10 +889,10 @@ fn log_counters(c: &SharedCounters, stop: &AtomicBool, buses: &[String]) {
 mod tests {
     //! The backend's I/O over `socketpair(AF_UNIX, SOCK_SEQPACKET)` sockets wrapped as real
     //! `socketcan::CanSocket`s (one write = one 16-byte datagram, as on AF_CAN): the test holds the
-    //! drive end and speaks the protocol with the `frictionless_shm_types::can` codecs.
+    //! drive end and speaks the protocol with the `frictionless_drives::can` codecs.
 
     use super::*;
-    use frictionless_shm_types::can::mit::{MitRanges, MitReply, MitRx};
+    use frictionless_drives::can::mit::{MitRanges, MitReply, MitRx};
     use frictionless_shm_types::{DaemonStatus, IpcConfig};
     use socketcan::CanErrorFrame;
 
@@ -1053,7 +1058,7 @@ i_max = 40.0
         assert_eq!(st.n_joints, 3);
         assert!(st.tau_meas_nm[0].is_nan(), "no torque sensor on the bus");
         assert_eq!(b.bus_counters().stale_feedback_mask, 0);
-        assert_eq!(b.bus_counters().rx_frames, 2);
+        assert_eq!(b.bus_counters().rx_messages, 2);
         // First replies after silence: enter motor mode again (a drive that answers may be in rest
         // mode — it started after open's frames, or reset).
         for id in [1, 2] {
@@ -1119,7 +1124,7 @@ i_max = 40.0
             (2, MitRx::Special(MitSpecial::EnterMotorMode))
         );
         let _ = mit_cmd(&drive);
-        assert_eq!(b.bus_counters().tx_frames, 2 + 2 + 2 + 6 + 3);
+        assert_eq!(b.bus_counters().tx_messages, 2 + 2 + 2 + 6 + 3);
         drop(b);
         // Drop: zero torque, then exit motor mode, per drive.
         near(torque(mit_cmd(&drive).1), 0.0, 1e-3);
@@ -1241,7 +1246,15 @@ i_max = 40.0
             "error frames are not feedback"
         );
         let c = b.bus_counters();
-        assert_eq!((c.error_frames, c.bus_off, c.error_passive), (4, 1, 2));
+        assert_eq!(
+            (
+                c.error_reports,
+                c.link_down,
+                c.detail[CAN_DETAIL_ERROR_PASSIVE]
+            ),
+            (4, 1, 2)
+        );
+        assert_eq!((c.bus_kind(), c.links), (Some(BusKind::Can), 1));
         // The status carries the counters (the RT loop does not need to know about them).
         let ipc_cfg = IpcConfig {
             root_path: e.cfg.root_path.clone(),
@@ -1257,7 +1270,7 @@ i_max = 40.0
             .unwrap()
             .expect("status");
         assert_eq!(got.ticks, 77);
-        assert_eq!((got.bus.error_frames, got.bus.bus_off), (4, 1));
+        assert_eq!((got.bus.error_reports, got.bus.link_down), (4, 1));
         assert_eq!(got.bus.stale_feedback_mask, 0b101);
     }
 
@@ -1277,7 +1290,7 @@ i_max = 40.0
         }
         let c = b.bus_counters();
         assert!(c.tx_dropped > 100, "{c:?}");
-        assert!(c.tx_frames > 0);
+        assert!(c.tx_messages > 0);
         assert_eq!(c.io_errors, 0);
         drop(drive);
     }

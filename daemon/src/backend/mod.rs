@@ -94,10 +94,9 @@ pub trait Backend {
     fn wait_request(&mut self, timeout_ns: u64) -> Result<bool, IoError> {
         self.wait_input(timeout_ns)
     }
-    /// Field-bus counters since start (zero for shared memory).
-    fn bus_counters(&self) -> BusCounters {
-        BusCounters::zeroed()
-    }
+    /// The backend's I/O-link counters since start, tagged with its [`frictionless_shm_types::BusKind`]
+    /// (every backend also puts them into each status it publishes).
+    fn bus_counters(&self) -> BusCounters;
 }
 
 /// The configured backend (static dispatch).

@@ -1,15 +1,18 @@
 //! iceoryx2 shared-memory backend: the `frictionless-shm-types` services.
 //!
 //! What this module **is**: [`ShmBackend`], the four services of a `frictiond` deployment
-//! (states and requests in; commands and status out) with latest-value semantics.
+//! (states and requests in; commands and status out) with latest-value semantics. Its
+//! [`BusCounters`] (kind [`BusKind::Shm`], one link) count samples: new states and requests
+//! received, commands and status snapshots sent, failed loans as dropped, other failures as I/O
+//! errors; every published status carries them.
 //!
 //! What it is **not**: no CAN (see [`super::can`]), no timing.
 
 use std::time::Duration;
 
 use frictionless_shm_types::{
-    DaemonStatus, Inbox, IoError, Ipc, IpcConfig, JointStates, MotorCurrentCommand, Outbox,
-    TorqueRequest,
+    BusCounters, BusKind, DaemonStatus, Inbox, IoError, Ipc, IpcConfig, JointStates,
+    MotorCurrentCommand, Outbox, TorqueRequest,
 };
 
 use super::{Backend, BackendError};
@@ -31,6 +34,33 @@ pub struct ShmBackend {
     request: Inbox<TorqueRequest>,
     command: Outbox<MotorCurrentCommand>,
     status: Outbox<DaemonStatus>,
+    counters: BusCounters,
+    /// The status as published: the caller's with this backend's counters.
+    status_out: DaemonStatus,
+}
+
+impl ShmBackend {
+    /// Counts one receive's outcome.
+    #[inline]
+    fn count_rx<T>(&mut self, r: Result<Option<T>, IoError>) -> Result<Option<T>, IoError> {
+        match &r {
+            Ok(Some(_)) => self.counters.rx_messages += 1,
+            Ok(None) => {}
+            Err(_) => self.counters.io_errors += 1,
+        }
+        r
+    }
+
+    /// Counts one send's outcome.
+    #[inline]
+    fn count_tx(&mut self, r: Result<(), IoError>) -> Result<(), IoError> {
+        match r {
+            Ok(()) => self.counters.tx_messages += 1,
+            Err(IoError::Loan) => self.counters.tx_dropped += 1,
+            Err(_) => self.counters.io_errors += 1,
+        }
+        r
+    }
 }
 
 impl ShmBackend {
@@ -51,6 +81,8 @@ impl ShmBackend {
             request: request.inbox()?,
             command: command.outbox()?,
             status: status.outbox()?,
+            counters: BusCounters::new(BusKind::Shm, 1),
+            status_out: DaemonStatus::zeroed(),
             _ipc: ipc,
         })
     }
@@ -58,17 +90,24 @@ impl ShmBackend {
 
 impl Backend for ShmBackend {
     fn read_states(&mut self) -> Result<Option<JointStates>, IoError> {
-        self.states.latest()
+        let r = self.states.latest();
+        self.count_rx(r)
     }
     fn read_request(&mut self) -> Result<Option<TorqueRequest>, IoError> {
-        self.request.latest()
+        let r = self.request.latest();
+        self.count_rx(r)
     }
     fn publish_command(&mut self, cmd: &MotorCurrentCommand) -> Result<(), IoError> {
         // iceoryx2 0.10 allocates one 48-byte Box per loaned sample (measured; see module doc).
-        alloc_count::exempt(|| self.command.publish(cmd))
+        let r = alloc_count::exempt(|| self.command.publish(cmd));
+        self.count_tx(r)
     }
     fn publish_status(&mut self, status: &DaemonStatus) -> Result<(), IoError> {
-        alloc_count::exempt(|| self.status.publish(status))
+        self.status_out = *status;
+        self.status_out.bus = self.counters;
+        let (out, s) = (&self.status, &self.status_out);
+        let r = alloc_count::exempt(|| out.publish(s));
+        self.count_tx(r)
     }
     fn wait_input(&mut self, timeout_ns: u64) -> Result<bool, IoError> {
         // One blocking `Listener::timed_wait` on the states' event service (0 allocations). An
@@ -80,5 +119,44 @@ impl Backend for ShmBackend {
     }
     fn wait_request(&mut self, timeout_ns: u64) -> Result<bool, IoError> {
         self.request.wait(Duration::from_nanos(timeout_ns))
+    }
+    fn bus_counters(&self) -> BusCounters {
+        self.counters
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use frictionless_shm_types::monotonic_ns;
+
+    /// The published status carries this backend's counters: kind shm, one link, the samples
+    /// received and sent so far.
+    #[test]
+    fn status_carries_the_shared_memory_counters() {
+        let id = format!(
+            "fl_shmbk_{}_{}",
+            std::process::id(),
+            monotonic_ns() % 1_000_000_000
+        );
+        let root = std::env::temp_dir().join(&id);
+        std::fs::create_dir_all(&root).unwrap();
+        let cfg = IpcConfig::new(Some(&root), &id);
+        let mut b = ShmBackend::open(&cfg).unwrap();
+        let peer = Ipc::open(&cfg, "peer").unwrap();
+        let states = peer.joint_states().unwrap().outbox().unwrap();
+        let status = peer.daemon_status().unwrap().inbox().unwrap();
+        assert!(b.read_states().unwrap().is_none());
+        states.publish(&JointStates::zeroed()).unwrap();
+        assert!(b.read_states().unwrap().is_some());
+        b.publish_command(&MotorCurrentCommand::zeroed()).unwrap();
+        b.publish_status(&DaemonStatus::zeroed()).unwrap();
+        let got = status.latest().unwrap().expect("status arrives").bus;
+        assert_eq!((got.bus_kind(), got.links), (Some(BusKind::Shm), 1));
+        assert_eq!((got.rx_messages, got.tx_messages), (1, 1), "{got:?}");
+        assert_eq!((got.tx_dropped, got.io_errors), (0, 0));
+        assert_eq!(b.bus_counters().tx_messages, 2);
+        drop((states, status, peer, b));
+        let _ = std::fs::remove_dir_all(root);
     }
 }

@@ -1,7 +1,7 @@
 //! Shared pieces of the `frictiond` CAN-backend tests (`can_backend.rs` on the host over a
 //! socketpair, `vcan_daemon.rs` on a real vcan in the CAN VM): the test process emulates MIT drives
 //! on a raw `socketcan::CanSocket` (decoding commands and replying with the codecs of
-//! `frictionless_shm_types::can`) and acts as the controller over shared memory, against a spawned
+//! `frictionless_drives::can`) and acts as the controller over shared memory, against a spawned
 //! `frictiond` with `[backend] kind = "can"`. The scenarios are written once and run over either
 //! socket kind.
 //!
@@ -18,8 +18,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use frictionless_shm_types::can::WireFrame;
-use frictionless_shm_types::can::mit::{self, MitRanges, MitReply, MitRx, MitSpecial};
+use frictionless_drives::can::WireFrame;
+use frictionless_drives::can::mit::{self, MitRanges, MitReply, MitRx, MitSpecial};
 use frictionless_shm_types::{FLAG_FAULT, FLAG_STALE, MotorCurrentCommand, TorqueRequest};
 use socketcan::{CanFrame, CanSocket, Socket};
 

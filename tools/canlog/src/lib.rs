@@ -1,6 +1,6 @@
 //! # `frictionless-canlog`: candump log files (`candump -L` format): parse, write, record, replay
 //!
-//! Crate table: `tools/canlog`; depends on `frictionless-shm-types` (wire frames), socketcan and
+//! Crate table: `tools/canlog`; depends on `frictionless-drives` (wire frames), socketcan and
 //! `frictionless` (its [`frictionless::regular_file`] reads); used by
 //! `frictl` (`frictl can record/replay`) and the fuzz crate (`candump_parse`).
 //!
@@ -20,7 +20,7 @@
 //! ## Example: parse a `candump -L` log, re-write it, decode a frame
 //! ```
 //! use frictionless_canlog::{LogFrame, format_entry, parse_line, parse_log, write_entry};
-//! use frictionless_shm_types::can::mit::{self, MitRanges, MitRx, MitSpecial};
+//! use frictionless_drives::can::mit::{self, MitRanges, MitRx, MitSpecial};
 //!
 //! // Motor 3 told to enter MIT motor mode, then an ODrive-style extended-id remote frame.
 //! let line = "(1700000000.000123) can0 003#FFFFFFFFFFFFFFFC";
@@ -28,7 +28,7 @@
 //! assert_eq!((e.stamp_us, e.iface.as_str()), (1_700_000_000_000_123, "can0"));
 //! let LogFrame::Can { frame, len8_dlc: None } = &e.frame else { panic!("a classic frame") };
 //! assert_eq!((frame.id, frame.extended, frame.len), (3, false, 8));
-//! // The frames are the codecs' `WireFrame`s: decode with `frictionless-shm-types`.
+//! // The frames are the codecs' `WireFrame`s: decode with `frictionless-drives`.
 //! let rx = mit::decode_command(frame, &MitRanges::MINI_CHEETAH).expect("an MIT frame");
 //! assert_eq!(rx, MitRx::Special(MitSpecial::EnterMotorMode));
 //!
@@ -55,8 +55,8 @@ use std::io::{self, BufRead, Write};
 use std::path::Path;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use frictionless_shm_types::can::WireFrame;
-use frictionless_shm_types::can::frame::{EFF_MAX, SFF_MAX};
+use frictionless_drives::can::WireFrame;
+use frictionless_drives::can::frame::{EFF_MAX, SFF_MAX};
 
 /// Valid CAN FD payload lengths.
 pub const FD_LENGTHS: [usize; 16] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64];

@@ -18,14 +18,14 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use frictionless_drives::can::WireFrame;
+use frictionless_drives::can::mit::{self, MitCommand, MitRanges, MitSpecial};
+use frictionless_drives::can::odrive::{self, OdriveMsg};
 use frictionless_plant::build_robot;
 use frictionless_plant::can::{
     AXIS_ERROR_WATCHDOG_TIMER_EXPIRED, CanServeOptions, CanServeStats, MIT_HOST_ID, Protocol,
     mit_ranges, run_with_stats, serve_socket,
 };
-use frictionless_shm_types::can::WireFrame;
-use frictionless_shm_types::can::mit::{self, MitCommand, MitRanges, MitSpecial};
-use frictionless_shm_types::can::odrive::{self, OdriveMsg};
 use frictionless_sim::PlantParams;
 use socketcan::{CanFilter, CanFrame, CanSocket, Socket, SocketOptions};
 

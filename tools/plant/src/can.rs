@@ -40,9 +40,9 @@ use std::os::fd::AsRawFd;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use frictionless_shm_types::can::WireFrame;
-use frictionless_shm_types::can::mit::{self, MitCommand, MitRanges, MitReply, MitRx, MitSpecial};
-use frictionless_shm_types::can::odrive::{self, OdriveMsg};
+use frictionless_drives::can::WireFrame;
+use frictionless_drives::can::mit::{self, MitCommand, MitRanges, MitReply, MitRx, MitSpecial};
+use frictionless_drives::can::odrive::{self, OdriveMsg};
 use socketcan::{CanFilter, CanFrame, CanSocket, Socket, SocketOptions};
 
 use super::{ServeError, ServedRobot};

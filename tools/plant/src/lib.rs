@@ -22,7 +22,7 @@
 pub mod can;
 pub mod shm;
 
-use frictionless_shm_types::can::CanCodecError;
+use frictionless_drives::can::CanCodecError;
 use frictionless_shm_types::{IoError, ShmError};
 use frictionless_sim::params::{ParamError, load_table};
 use frictionless_sim::{LegError, LegParams, LegPlant, Measurement, Plant, PlantParams, Truth};

@@ -12,10 +12,10 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use frictionless_shm_types::{
-    DaemonStatus, FLAG_CURRENT_SATURATED, FLAG_DISABLED, FLAG_FAULT, FLAG_FRICTION_CLIPPED,
-    FLAG_NON_FINITE, FLAG_OUT_OF_RANGE, FLAG_STALE, FLAG_WARMING_UP, Histogram, Ipc, IpcConfig,
-    STATUS_CPU_PINNED, STATUS_INPUT_STALE, STATUS_MEMORY_LOCKED, STATUS_SCHED_FIFO,
-    STATUS_STOPPING,
+    BusCounters, DaemonStatus, FLAG_CURRENT_SATURATED, FLAG_DISABLED, FLAG_FAULT,
+    FLAG_FRICTION_CLIPPED, FLAG_NON_FINITE, FLAG_OUT_OF_RANGE, FLAG_STALE, FLAG_WARMING_UP,
+    Histogram, Ipc, IpcConfig, STATUS_CPU_PINNED, STATUS_INPUT_STALE, STATUS_MEMORY_LOCKED,
+    STATUS_SCHED_FIFO, STATUS_STOPPING,
 };
 
 /// Arguments of `frictl monitor`.
@@ -77,6 +77,27 @@ fn hist_line(name: &str, h: &Histogram) -> String {
     )
 }
 
+/// The backend's link counters on one line, with its detail slots by name.
+fn bus_line(c: &BusCounters) -> String {
+    let kind = c.bus_kind().map_or("?", |k| k.name());
+    let mut line = format!(
+        "bus {kind} ({} link(s)): rx {}  tx {}  dropped {}  error reports {}  link down {}  io errors {}  stale mask {:#x}",
+        c.links,
+        c.rx_messages,
+        c.tx_messages,
+        c.tx_dropped,
+        c.error_reports,
+        c.link_down,
+        c.io_errors,
+        c.stale_feedback_mask
+    );
+    for (name, v) in c.named_detail() {
+        line.push_str(&format!("  {name} {v}"));
+    }
+    line.push('\n');
+    line
+}
+
 /// Renders one status snapshot as text.
 pub fn render(s: &DaemonStatus) -> String {
     let rt: Vec<&str> = [
@@ -108,6 +129,7 @@ pub fn render(s: &DaemonStatus) -> String {
         hist_line("compute", &s.compute),
         hist_line("input age", &s.input_age),
     );
+    out.push_str(&bus_line(&s.bus));
     out.push_str(" idx  model     τ̂_F [Nm]    i_ref [A]  out-of-range ticks  flags\n");
     for k in 0..(s.n_joints as usize).min(frictionless_shm_types::MAX_JOINTS) {
         // Joints are sparse by index; show those with any activity or a configured model.
@@ -183,5 +205,23 @@ mod tests {
             "{line}"
         );
         assert!(text.contains("out-of-range ticks"), "{text}");
+    }
+
+    #[test]
+    fn render_shows_the_bus_counters_with_their_kind_and_detail() {
+        use frictionless_shm_types::{BusKind, CAN_DETAIL_ERROR_PASSIVE};
+        let mut s = DaemonStatus::zeroed();
+        s.bus = BusCounters::new(BusKind::Can, 2);
+        s.bus.rx_messages = 77;
+        s.bus.link_down = 1;
+        s.bus.detail[CAN_DETAIL_ERROR_PASSIVE] = 5;
+        let text = render(&s);
+        let line = text.lines().find(|l| l.starts_with("bus ")).expect(&text);
+        assert!(line.starts_with("bus can (2 link(s))"), "{line}");
+        assert!(
+            line.contains("rx 77 ") && line.contains("link down 1 "),
+            "{line}"
+        );
+        assert!(line.ends_with("error_passive 5"), "{line}");
     }
 }

@@ -1,8 +1,8 @@
 //! # CAN motor-drive wire formats
 //!
 //! What this module **is**: pure, allocation-free encoders/decoders of the CAN frames spoken by motor
-//! drives, shared by `frictiond` (sends commands, decodes feedback) and `frictl` (drive emulator,
-//! candump tools):
+//! drives, shared by `frictiond` (sends commands, decodes feedback), the plant's drive emulator and
+//! the candump tools:
 //! - [`frame`]: [`WireFrame`], a classic CAN frame independent of any socket library (conversions to and
 //!   from `socketcan::CanFrame` behind the default feature `socketcan`).
 //! - [`mit`]: MIT mini-cheetah / CubeMars AK "MIT mode" (bit-packed fixed point, big-endian).
@@ -21,6 +21,55 @@ pub mod odrive;
 pub mod units;
 
 pub use frame::WireFrame;
+use units::AngleUnit;
+
+/// The drive protocols of a CAN bus (`[[bus]] protocol` in frictiond's config: `"mit"`, `"odrive"`).
+/// A new protocol is one module beside [`mit`] and [`odrive`] plus one variant here.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CanProtocol {
+    /// MIT mini-cheetah / CubeMars AK "MIT mode": one 8-byte command, one 6-byte reply per tick.
+    Mit,
+    /// ODrive CAN Simple: Set_Input_Torque per tick; cyclic Get_Encoder_Estimates, Get_Iq, Heartbeat.
+    Odrive,
+}
+
+impl CanProtocol {
+    /// Every protocol, in declaration order.
+    pub const ALL: [CanProtocol; 2] = [CanProtocol::Mit, CanProtocol::Odrive];
+
+    /// The config name (`"mit"`, `"odrive"`).
+    pub fn name(self) -> &'static str {
+        match self {
+            CanProtocol::Mit => "mit",
+            CanProtocol::Odrive => "odrive",
+        }
+    }
+
+    /// Unit of the motor-side position and velocity the drive reports.
+    pub fn feedback_angle(self) -> AngleUnit {
+        match self {
+            CanProtocol::Mit => AngleUnit::Rad,
+            CanProtocol::Odrive => AngleUnit::Rev,
+        }
+    }
+
+    /// Worst-case bits one joint puts on the bus per tick ([`busload`]).
+    pub fn bits_per_joint_tick(self) -> u32 {
+        match self {
+            CanProtocol::Mit => busload::mit_bits_per_joint_tick(),
+            CanProtocol::Odrive => busload::odrive_bits_per_joint_tick(),
+        }
+    }
+
+    /// Frames one joint puts on the bus per tick (commands and cyclic feedback).
+    pub fn frames_per_joint_tick(self) -> u32 {
+        match self {
+            CanProtocol::Mit => 2,
+            CanProtocol::Odrive => 3,
+        }
+    }
+}
 
 /// Error of a CAN codec. `Copy`, no heap data (RT-safe).
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]

@@ -5,9 +5,9 @@
 use std::os::fd::{FromRawFd, OwnedFd};
 use std::time::Duration;
 
-use frictionless_shm_types::can::WireFrame;
-use frictionless_shm_types::can::mit::{self, MitCommand, MitRanges, MitReply, MitRx};
-use frictionless_shm_types::can::odrive::{self, OdriveMsg};
+use frictionless_drives::can::WireFrame;
+use frictionless_drives::can::mit::{self, MitCommand, MitRanges, MitReply, MitRx};
+use frictionless_drives::can::odrive::{self, OdriveMsg};
 use socketcan::{CanFrame, CanSocket, Socket};
 
 fn pair() -> (CanSocket, CanSocket) {

@@ -7,8 +7,8 @@
 use std::io::ErrorKind;
 use std::time::Duration;
 
-use frictionless_shm_types::can::WireFrame;
-use frictionless_shm_types::can::mit::{self, MitCommand, MitRanges, MitReply, MitRx, MitSpecial};
+use frictionless_drives::can::WireFrame;
+use frictionless_drives::can::mit::{self, MitCommand, MitRanges, MitReply, MitRx, MitSpecial};
 use socketcan::{CanFilter, CanFrame, CanSocket, Socket, SocketOptions};
 
 const IFACE: &str = "vcan0";

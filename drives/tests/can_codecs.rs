@@ -1,11 +1,11 @@
 //! MIT / ODrive codec tests: hand-computed byte vectors, round trips, saturation, proptest, units,
 //! serde config, bus-load numbers.
 
-use frictionless_shm_types::can::busload::*;
-use frictionless_shm_types::can::mit::{self, *};
-use frictionless_shm_types::can::odrive::{self, OdriveMsg};
-use frictionless_shm_types::can::units::*;
-use frictionless_shm_types::can::{CanCodecError, WireFrame};
+use frictionless_drives::can::busload::*;
+use frictionless_drives::can::mit::{self, *};
+use frictionless_drives::can::odrive::{self, OdriveMsg};
+use frictionless_drives::can::units::*;
+use frictionless_drives::can::{CanCodecError, WireFrame};
 use proptest::prelude::*;
 
 /// Ranges where x_int == x: min 0, max 2^bits − 1 (so byte vectors follow from the layout alone).
