@@ -1,4 +1,6 @@
-//! The per-joint friction estimator: PINN (from a model) or CV / SCV, one sample per tick.
+//! The per-joint friction estimator: PINN (from a model), CV / SCV or LuGre, one sample per tick.
+//! [`fl_estimator_kind`] says which (the code of the core's `ModelKind`, as in frictiond's status;
+//! [`fl_model_kind_name`] names a code).
 //!
 //! It is `frictionless::model::JointModel`, the enum frictiond's RT tick holds: creation allocates
 //! once (a PINN copies its network); [`fl_estimator_estimate`], [`fl_estimator_reset`],
@@ -7,9 +9,12 @@
 
 use fl_core::features::{JointSample, WarmupPolicy};
 use fl_core::friction::{CvParams, ScvParams};
-use fl_core::model::{FrictionModel, JointModel, PinnEstimator};
+use fl_core::lugre::LugreEstimator;
+use fl_core::model::{FrictionModel, JointModel, ModelKind, PinnEstimator};
+use std::ffi::{CString, c_char};
+use std::sync::OnceLock;
 
-use crate::friction::{fl_cv_params, fl_scv_params, validated};
+use crate::friction::{fl_cv_params, fl_lugre_params, fl_scv_params, validated};
 use crate::model::fl_model;
 use crate::{Fail, arg, arg_mut, fl_status, guard};
 
@@ -130,6 +135,65 @@ pub unsafe extern "C" fn fl_estimator_create_scv(
         hand_out(JointModel::Scv(validated(ScvParams::from(p))?), out);
         Ok(())
     })
+}
+
+/// Creates a LuGre estimator integrating its bristle state once per call with step `dt_s` [s] (the
+/// loop period; frictiond's is `1 / [loop] rate_hz`). The state is reset to 0 by
+/// [`fl_estimator_reset`]. `FL_STATUS_INVALID_ARGUMENT` naming a bad parameter or step.
+///
+/// # Safety
+/// `params` is NULL or readable; `out` is NULL or points to writable storage.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fl_estimator_create_lugre(
+    params: *const fl_lugre_params,
+    dt_s: f64,
+    out: *mut *mut fl_estimator,
+) -> fl_status {
+    guard(|| {
+        // SAFETY: caller contract.
+        let p = unsafe { arg(params, "fl_estimator_create_lugre: `params` is NULL") }?;
+        // SAFETY: caller contract.
+        let out = unsafe { arg_mut(out, "fl_estimator_create_lugre: `out` is NULL") }?;
+        let est = LugreEstimator::new(p.into(), dt_s)
+            .map_err(|e| Fail::owned(fl_status::InvalidArgument, e.to_string()))?;
+        hand_out(JointModel::Lugre(est), out);
+        Ok(())
+    })
+}
+
+/// The estimator's model kind into `*kind`: the code of the core's `ModelKind` (the codes
+/// frictiond's status carries per joint; [`fl_model_kind_name`] names one). Allocation-free.
+///
+/// # Safety
+/// `est` is NULL or a live handle; `kind` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn fl_estimator_kind(est: *const fl_estimator, kind: *mut u8) -> fl_status {
+    guard(|| {
+        // SAFETY: caller contract.
+        let e = unsafe { arg(est, "fl_estimator_kind: `est` is NULL") }?;
+        // SAFETY: caller contract.
+        let out = unsafe { arg_mut(kind, "fl_estimator_kind: `kind` is NULL") }?;
+        *out = e.model.kind().code();
+        Ok(())
+    })
+}
+
+/// The short name of model-kind code `code` (`"none"`, `"cv"`, `"scv"`, `"scv-code"`, `"pinn"`,
+/// `"lugre"`, … — the core's `ModelKind` list), static and NUL-terminated; NULL for a code no kind
+/// has. Iterate `code = 0, 1, …` until NULL to list every kind.
+#[unsafe(no_mangle)]
+pub extern "C" fn fl_model_kind_name(code: u8) -> *const c_char {
+    static NAMES: OnceLock<Vec<(u8, CString)>> = OnceLock::new();
+    let names = NAMES.get_or_init(|| {
+        ModelKind::ALL
+            .iter()
+            .filter_map(|k| Some((k.code(), CString::new(k.name()).ok()?)))
+            .collect()
+    });
+    names
+        .iter()
+        .find(|(c, _)| *c == code)
+        .map_or(std::ptr::null(), |(_, n)| n.as_ptr())
 }
 
 /// Frees an estimator. Does nothing for NULL.
@@ -340,5 +404,94 @@ mod tests {
             }
             fl_model_free(m);
         }
+    }
+
+    const LUGRE: fl_lugre_params = fl_lugre_params {
+        kc: 1.0,
+        kv: 0.3,
+        ks: 1.6,
+        vs: 0.1,
+        alpha: 1.5,
+        sigma0: 1.0e4,
+        sigma1: 30.0,
+    };
+
+    /// A LuGre estimator through the C ABI is the core's `LugreEstimator` tick for tick, reports
+    /// the LuGre kind code, and a reset returns its bristle state to 0 (same output as a fresh one).
+    #[test]
+    fn lugre_estimator_is_the_cores_and_resets_its_state() {
+        let mut core = LugreEstimator::new((&LUGRE).into(), 1e-3).unwrap();
+        // SAFETY (whole test): every pointer is to a live local or a live handle made here, freed once.
+        unsafe {
+            let mut e = ptr::null_mut();
+            assert_eq!(
+                fl_estimator_create_lugre(&LUGRE, 1e-3, &mut e),
+                fl_status::Ok
+            );
+            let mut kind = 0u8;
+            assert_eq!(fl_estimator_kind(e, &mut kind), fl_status::Ok);
+            assert_eq!(ModelKind::from_code(kind), Some(ModelKind::Lugre));
+            assert_eq!(fl_estimator_reset(e, &sample(0)), fl_status::Ok);
+            let mut first = Vec::new();
+            let mut y = f64::NAN;
+            for k in 0..200 {
+                assert_eq!(fl_estimator_estimate(e, &sample(k), &mut y), fl_status::Ok);
+                assert_eq!(y, core.step(sample(k).sdot_rad_s), "tick {k}");
+                first.push(y);
+            }
+            assert_eq!(fl_estimator_reset(e, &sample(0)), fl_status::Ok);
+            for (k, want) in first.iter().enumerate().take(20) {
+                assert_eq!(fl_estimator_estimate(e, &sample(k), &mut y), fl_status::Ok);
+                assert_eq!(y, *want, "tick {k} after the reset");
+            }
+            fl_estimator_free(e);
+        }
+    }
+
+    #[test]
+    fn lugre_estimator_refuses_a_bad_parameter_or_step_naming_it() {
+        let bad = fl_lugre_params {
+            sigma0: -1.0,
+            ..LUGRE
+        };
+        // SAFETY: pointers to live locals; `e` stays NULL on failure.
+        unsafe {
+            let mut e = ptr::null_mut();
+            assert_eq!(
+                fl_estimator_create_lugre(&bad, 1e-3, &mut e),
+                fl_status::InvalidArgument
+            );
+            assert!(e.is_null());
+            let msg = std::ffi::CStr::from_ptr(crate::fl_last_error()).to_string_lossy();
+            assert!(msg.contains("sigma0"), "{msg}");
+            assert_eq!(
+                fl_estimator_create_lugre(&LUGRE, f64::NAN, &mut e),
+                fl_status::InvalidArgument
+            );
+            assert!(e.is_null());
+        }
+    }
+
+    /// `fl_model_kind_name` lists exactly the core's kinds, in code order, then NULL.
+    #[test]
+    fn model_kind_names_are_the_cores_list() {
+        let mut names = Vec::new();
+        for code in 0..=u8::MAX {
+            let p = fl_model_kind_name(code);
+            if p.is_null() {
+                break;
+            }
+            // SAFETY: a non-NULL result is a static NUL-terminated string.
+            names.push(
+                unsafe { std::ffi::CStr::from_ptr(p) }
+                    .to_str()
+                    .unwrap()
+                    .to_owned(),
+            );
+        }
+        let want: Vec<&str> = ModelKind::ALL.iter().map(|k| k.name()).collect();
+        assert_eq!(names, want);
+        assert!(names.iter().any(|n| n == "lugre"));
+        assert!(fl_model_kind_name(u8::MAX).is_null());
     }
 }

@@ -12,6 +12,7 @@
 //! `ka = +∞` means a true sign(). The evaluation is the core's (`frictionless::friction`).
 
 use fl_core::friction::{CvParams, ScvParams, StaticFriction};
+use fl_core::lugre::LugreParams;
 
 use crate::{Fail, arg, arg_mut, fl_status, guard};
 
@@ -43,6 +44,41 @@ pub struct fl_scv_params {
     pub vs: f64,
     /// Stribeck shape exponent alpha, > 0.
     pub alpha: f64,
+}
+
+/// LuGre parameters (joint side): the SCV Stribeck curve (sign() Coulomb, no `ka`) plus the bristle
+/// stiffness σ0 and damping σ1. The names are the fit file's and the daemon config's.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct fl_lugre_params {
+    /// Coulomb level kc [Nm], > 0.
+    pub kc: f64,
+    /// Viscous coefficient kv = σ2 [Nm·s/rad], ≥ 0.
+    pub kv: f64,
+    /// Breakaway (static) level ks [Nm], ≥ 0.
+    pub ks: f64,
+    /// Stribeck velocity vs [rad/s], > 0.
+    pub vs: f64,
+    /// Stribeck shape exponent alpha, > 0.
+    pub alpha: f64,
+    /// Bristle stiffness σ0 [Nm/rad], > 0.
+    pub sigma0: f64,
+    /// Bristle damping σ1 [Nm·s/rad], ≥ 0.
+    pub sigma1: f64,
+}
+
+impl From<&fl_lugre_params> for LugreParams {
+    fn from(p: &fl_lugre_params) -> Self {
+        LugreParams {
+            kc: p.kc,
+            kv: p.kv,
+            ks: p.ks,
+            vs: p.vs,
+            alpha: p.alpha,
+            sigma0: p.sigma0,
+            sigma1: p.sigma1,
+        }
+    }
 }
 
 impl From<&fl_cv_params> for CvParams {

@@ -13,7 +13,9 @@ and ``frictiond``:
 - :func:`write_fwt` / :func:`fwt_bytes` — a ``.fwt`` from NumPy (or PyTorch) weights, so a network
   trained in Python runs in frictiond without ONNX.
 - :func:`fit_cv`, :func:`fit_scv`, :func:`fit_scv_code` — the static friction fits of ``frictl fit`` on
-  arrays; :func:`friction_torque` evaluates a fitted model.
+  arrays; :func:`friction_torque` evaluates a fitted model; :func:`lugre_friction_torque` steps a
+  LuGre model through a velocity sequence.
+- ``MODEL_KIND_*`` — the status codes of the core's model kinds (``MODEL_KIND_LUGRE``, …).
 - :class:`DaemonClient` — publish joint states and torque requests to a running ``frictiond`` over
   iceoryx2 shared memory and read its current commands and status.
 
@@ -46,12 +48,8 @@ from ._native import (
     FLAG_WARMING_UP,
     FAULT_DRIVE,
     FAULT_FEEDBACK_STALE,
+    LUGRE_PARAM_NAMES as _LUGRE_PARAM_NAMES,
     MAX_JOINTS,
-    MODEL_KIND_CV,
-    MODEL_KIND_NONE,
-    MODEL_KIND_PINN,
-    MODEL_KIND_SCV,
-    MODEL_KIND_SCV_CODE,
     STATUS_CPU_PINNED,
     STATUS_INPUT_STALE,
     STATUS_MEMORY_LOCKED,
@@ -106,12 +104,18 @@ __all__ = [
     "STATUS_CPU_PINNED",
     "STATUS_INPUT_STALE",
     "STATUS_STOPPING",
-    "MODEL_KIND_NONE",
-    "MODEL_KIND_CV",
-    "MODEL_KIND_SCV",
-    "MODEL_KIND_SCV_CODE",
-    "MODEL_KIND_PINN",
+    "LUGRE_PARAM_NAMES",
+    "lugre_friction_torque",
 ]
+
+# MODEL_KIND_<NAME>: one per kind of the core's `ModelKind` list (the native module defines them
+# from it, e.g. MODEL_KIND_PINN, MODEL_KIND_LUGRE), re-exported here without restating the list.
+_MODEL_KINDS = {n: getattr(_native, n) for n in dir(_native) if n.startswith("MODEL_KIND_")}
+globals().update(_MODEL_KINDS)
+__all__ += sorted(_MODEL_KINDS)
+
+#: LuGre parameter names in the order :func:`lugre_friction_torque` takes a sequence.
+LUGRE_PARAM_NAMES: Tuple[str, ...] = tuple(_LUGRE_PARAM_NAMES)
 
 PathType = Union[str, "PathLike[str]"]
 
@@ -539,6 +543,21 @@ def friction_torque(model: str, params: Any, sdot: Any) -> np.ndarray:
     return _native.friction_torque(key, [float(p) for p in params], v)
 
 
+def lugre_friction_torque(params: Any, sdot: Any, dt_s: float = 1e-3) -> np.ndarray:
+    """τ_F [Nm] of a LuGre model stepped through the velocities ``sdot`` [rad/s], one sample every
+    ``dt_s`` [s], from bristle state 0 — what frictiond's LuGre joint outputs after an enable (the
+    core's ``LugreEstimator``).
+
+    ``params``: a dict by :data:`LUGRE_PARAM_NAMES` (``kc``, ``kv``, ``ks``, ``vs``, ``alpha``,
+    ``sigma0``, ``sigma1``; joint side SI) or a sequence in that order. Raises ``ValueError`` naming
+    a bad parameter or step.
+    """
+    if isinstance(params, dict):
+        params = [float(params[n]) for n in LUGRE_PARAM_NAMES]
+    v = np.ascontiguousarray(np.asarray(sdot, dtype=np.float64).reshape(-1))
+    return _native.lugre_friction_torque([float(p) for p in params], v, float(dt_s))
+
+
 # --------------------------------------------------------------------------------------------------
 # frictiond client
 
@@ -638,6 +657,10 @@ class DaemonStatus:
     model_kind: np.ndarray
     """``MODEL_KIND_*`` per joint."""
     bus: dict
+    """The backend's link counters: ``kind`` (``"shm"``, ``"can"``), ``links``, ``rx_messages``,
+    ``tx_messages``, ``tx_dropped``, ``error_reports``, ``link_down``, ``io_errors``,
+    ``stale_feedback_mask`` and ``detail`` (backend-specific counters by name, e.g. CAN's
+    ``error_passive``)."""
 
 
 def _command(d: Optional[dict]) -> Optional[MotorCurrentCommand]:

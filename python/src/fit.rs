@@ -1,6 +1,7 @@
 //! CV / SCV fits on NumPy arrays: [`fit_static`] runs `frictionless-ident`'s fitter (the one `frictl
 //! fit` runs) and answers with the `model` / `params` of the fit JSON; [`friction_torque`] evaluates a
-//! static model with the core's `StaticFriction::torque_nm`.
+//! static model with the core's `StaticFriction::torque_nm`; [`lugre_friction_torque`] steps the
+//! core's `LugreEstimator` (the one frictiond runs) through a velocity sequence.
 //!
 //! What it is: argument conversion and the sliding-quadrant selection `frictl fit` applies by
 //! default. What it is not: a fitter or a friction model of its own.
@@ -8,6 +9,7 @@
 use std::collections::BTreeMap;
 
 use frictionless::friction::{CvParams, ScvCodeParams, ScvParams, StaticFriction};
+use frictionless::lugre::{LugreEstimator, LugreParams};
 use frictionless_ident::fit::{
     FitBounds, FitOptions, FitResult, Fittable, Loss, Method, fit, select, sliding_quadrant_mask,
 };
@@ -195,5 +197,38 @@ pub fn friction_torque<'py>(
         "Scv" => eval::<ScvParams>(&params, &v)?,
         _ => eval::<ScvCodeParams>(&params, &v)?,
     };
+    Ok(PyArray1::from_vec(py, tau))
+}
+
+/// τ_F [Nm] of a LuGre model (parameters in `LugreParams::PARAM_NAMES` order) stepped through
+/// `sdot_rad_s` [rad/s], one sample every `dt_s` [s], from bristle state 0 (frictiond's joint after
+/// an enable). `ValueError` naming a bad parameter, step or parameter count.
+#[pyfunction]
+pub fn lugre_friction_torque<'py>(
+    py: Python<'py>,
+    params: Vec<f64>,
+    sdot_rad_s: PyReadonlyArray1<'py, f64>,
+    dt_s: f64,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let names = LugreParams::PARAM_NAMES;
+    let [kc, kv, ks, vs, alpha, sigma0, sigma1] = params[..] else {
+        return Err(PyValueError::new_err(format!(
+            "LuGre: {} parameters given, expected {} ({})",
+            params.len(),
+            names.len(),
+            names.join(", ")
+        )));
+    };
+    let p = LugreParams {
+        kc,
+        kv,
+        ks,
+        vs,
+        alpha,
+        sigma0,
+        sigma1,
+    };
+    let mut est = LugreEstimator::new(p, dt_s).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let tau = sdot_rad_s.as_array().iter().map(|&v| est.step(v)).collect();
     Ok(PyArray1::from_vec(py, tau))
 }

@@ -80,6 +80,7 @@ fn native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<estimator::Estimator>()?;
     m.add_function(wrap_pyfunction!(fit::fit_static, m)?)?;
     m.add_function(wrap_pyfunction!(fit::friction_torque, m)?)?;
+    m.add_function(wrap_pyfunction!(fit::lugre_friction_torque, m)?)?;
     m.add_class::<client::DaemonClient>()?;
     m.add_function(wrap_pyfunction!(client::monotonic_ns, m)?)?;
     m.add("MAX_JOINTS", frictionless_shm_types::MAX_JOINTS)?;
@@ -110,6 +111,10 @@ fn native(m: &Bound<'_, PyModule>) -> PyResult<()> {
         );
         m.add(name.as_str(), kind.code())?;
     }
+    m.add(
+        "LUGRE_PARAM_NAMES",
+        frictionless::lugre::LugreParams::PARAM_NAMES.to_vec(),
+    )?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -85,3 +85,38 @@ def test_friction_torque_matches_the_formulas():
     )
     with pytest.raises(ValueError):
         fl.friction_torque("cv", [1.0, 2.0], v)
+
+
+def test_every_model_kind_of_the_core_is_exported():
+    native = {n for n in dir(fl._native) if n.startswith("MODEL_KIND_")}
+    assert "MODEL_KIND_LUGRE" in native
+    for n in native:
+        assert getattr(fl, n) == getattr(fl._native, n), n
+        assert n in fl.__all__, n
+    assert len({getattr(fl, n) for n in native}) == len(native)
+
+
+LUGRE = dict(kc=1.0, kv=0.3, ks=1.6, vs=0.1, alpha=1.5, sigma0=1.0e4, sigma1=30.0)
+
+
+def test_lugre_starts_at_rest_and_reaches_the_steady_state_curve():
+    assert fl.LUGRE_PARAM_NAMES == ("kc", "kv", "ks", "vs", "alpha", "sigma0", "sigma1")
+    for v in (0.05, -0.4, 1.2):
+        tau = fl.lugre_friction_torque(LUGRE, np.full(2000, v), dt_s=1e-3)
+        # Independent reference: at steady state dz/dt = 0, τ = g(v)·sign(v) + kv·v.
+        g = LUGRE["kc"] + (LUGRE["ks"] - LUGRE["kc"]) * np.exp(-abs(v / LUGRE["vs"]) ** LUGRE["alpha"])
+        assert tau[-1] == pytest.approx(g * np.sign(v) + LUGRE["kv"] * v, rel=1e-6)
+        # From rest the bristles still deflect on the first tick: not yet the steady state.
+        assert abs(tau[0] - tau[-1]) > 1e-3
+    seq = [LUGRE[n] for n in fl.LUGRE_PARAM_NAMES]
+    v = 0.3 * np.sin(np.linspace(0.0, 6.0, 500))
+    np.testing.assert_array_equal(fl.lugre_friction_torque(seq, v), fl.lugre_friction_torque(LUGRE, v))
+
+
+def test_lugre_refuses_a_bad_parameter_naming_it():
+    with pytest.raises(ValueError, match="sigma0"):
+        fl.lugre_friction_torque(dict(LUGRE, sigma0=-1.0), np.zeros(3))
+    with pytest.raises(ValueError, match="dt_s"):
+        fl.lugre_friction_torque(LUGRE, np.zeros(3), dt_s=0.0)
+    with pytest.raises(ValueError, match="7"):
+        fl.lugre_friction_torque([1.0, 2.0], np.zeros(3))
