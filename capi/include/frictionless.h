@@ -99,6 +99,25 @@ typedef struct fl_scv_params {
     double alpha;
 } fl_scv_params;
 
+// LuGre parameters (joint side): the SCV Stribeck curve (sign() Coulomb, no `ka`) plus the bristle
+// stiffness σ0 and damping σ1. The names are the fit file's and the daemon config's.
+typedef struct fl_lugre_params {
+    // Coulomb level kc [Nm], > 0.
+    double kc;
+    // Viscous coefficient kv = σ2 [Nm·s/rad], ≥ 0.
+    double kv;
+    // Breakaway (static) level ks [Nm], ≥ 0.
+    double ks;
+    // Stribeck velocity vs [rad/s], > 0.
+    double vs;
+    // Stribeck shape exponent alpha, > 0.
+    double alpha;
+    // Bristle stiffness σ0 [Nm/rad], > 0.
+    double sigma0;
+    // Bristle damping σ1 [Nm·s/rad], ≥ 0.
+    double sigma1;
+} fl_lugre_params;
+
 // One tick of joint and motor state (the estimators' input).
 typedef struct fl_joint_sample {
     // Joint position s [rad].
@@ -268,6 +287,28 @@ fl_status fl_estimator_create_cv(const struct fl_cv_params *params, struct fl_es
 // # Safety
 // `params` is NULL or readable; `out` is NULL or points to writable storage.
 fl_status fl_estimator_create_scv(const struct fl_scv_params *params, struct fl_estimator **out);
+
+// Creates a LuGre estimator integrating its bristle state once per call with step `dt_s` [s] (the
+// loop period; frictiond's is `1 / [loop] rate_hz`). The state is reset to 0 by
+// [`fl_estimator_reset`]. `FL_STATUS_INVALID_ARGUMENT` naming a bad parameter or step.
+//
+// # Safety
+// `params` is NULL or readable; `out` is NULL or points to writable storage.
+fl_status fl_estimator_create_lugre(const struct fl_lugre_params *params,
+                                    double dt_s,
+                                    struct fl_estimator **out);
+
+// The estimator's model kind into `*kind`: the code of the core's `ModelKind` (the codes
+// frictiond's status carries per joint; [`fl_model_kind_name`] names one). Allocation-free.
+//
+// # Safety
+// `est` is NULL or a live handle; `kind` is NULL or writable.
+fl_status fl_estimator_kind(const struct fl_estimator *est, uint8_t *kind);
+
+// The short name of model-kind code `code` (`"none"`, `"cv"`, `"scv"`, `"scv-code"`, `"pinn"`,
+// `"lugre"`, … — the core's `ModelKind` list), static and NUL-terminated; NULL for a code no kind
+// has. Iterate `code = 0, 1, …` until NULL to list every kind.
+const char *fl_model_kind_name(uint8_t code);
 
 // Frees an estimator. Does nothing for NULL.
 //
