@@ -39,6 +39,79 @@ pub struct MatSpec {
     pub negate: Vec<Role>,
     /// A gap of the desired-current stream larger than this closes a chunk [s].
     pub desired_gap_s: f64,
+    /// The root link's orientation in the world, for the whole-body state: a channel under
+    /// `robot_logger_device` (e.g. `orientations/waist_imu_0`) of 3 elements, roll, pitch, yaw
+    /// [rad] (R = Rz(y)·Ry(p)·Rx(r), the logger's convention), or of 4, the quaternion `x y z w`.
+    pub base_orientation: Option<String>,
+    /// Measured wrenches applied to the robot: `(URDF frame, channel)`, the channel (e.g.
+    /// `FTs/l_foot_front_ft` or `cartesian_wrenches/<name>`) of 6 elements `f_x f_y f_z` [N], `mu_x
+    /// mu_y mu_z` [N·m] in the frame's coordinates about its origin.
+    pub wrenches: Vec<(String, String)>,
+}
+
+/// A quaternion `[x, y, z, w]` of roll, pitch, yaw [rad] with R = Rz(yaw)·Ry(pitch)·Rx(roll).
+pub fn rpy_to_quat_xyzw(roll: f64, pitch: f64, yaw: f64) -> [f64; 4] {
+    let (sr, cr) = (roll / 2.0).sin_cos();
+    let (sp, cp) = (pitch / 2.0).sin_cos();
+    let (sy, cy) = (yaw / 2.0).sin_cos();
+    [
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+        cr * cp * cy + sr * sp * sy,
+    ]
+}
+
+/// A channel of the whole-body state read whole per block: its `data` (N, 1, m) and `m`.
+struct StateChannel {
+    data: h5::Dataset,
+    width: usize,
+}
+
+/// Opens the channel `name` (a path under the root) that the state needs: present, (n, 1, m) with
+/// `m` in `widths`; the error names the channel and what was found.
+fn state_channel(
+    path: &Path,
+    root: &h5::Group,
+    name: &str,
+    n: usize,
+    widths: &[usize],
+    what: &str,
+) -> Result<StateChannel, LogsError> {
+    let fmt = |msg: String| LogsError::Format {
+        path: path.display().to_string(),
+        msg,
+    };
+    let data = root
+        .group(name)
+        .and_then(|g| g.dataset("data"))
+        .map_err(|_| fmt(format!("{what}: no channel `{ROOT}/{name}` with a `data` dataset")))?;
+    let shape = data.shape();
+    let ok = shape.len() == 3 && shape[0] == n && shape[1] == 1 && widths.contains(&shape[2]);
+    if !ok {
+        return Err(fmt(format!(
+            "{what}: `{name}/data` has shape {shape:?}; expected ({n}, 1, {}) on the clock of              joints_state/positions",
+            widths
+                .iter()
+                .map(usize::to_string)
+                .collect::<Vec<_>>()
+                .join(" or ")
+        )));
+    }
+    check_stored(path, &format!("{name}/data"), &data)?;
+    Ok(StateChannel {
+        width: shape[2],
+        data,
+    })
+}
+
+impl StateChannel {
+    /// Rows `a..e`, every element.
+    fn block(&self, path: &Path, a: usize, e: usize) -> Result<ndarray::Array2<f64>, LogsError> {
+        self.data
+            .read_slice_2d(ndarray::s![a..e, 0, ..])
+            .map_err(|x| h5err(path, "state channel data", x))
+    }
 }
 
 const ROOT: &str = "robot_logger_device";
@@ -206,6 +279,18 @@ fn read_ts(path: &Path, ts: &h5::Dataset, a: usize, b: usize) -> Result<Vec<f64>
 /// Reads one joint from a YARP robot logger `.mat` file into a run named after the file stem. The
 /// joint's name is in the report's `sources["joint"]`.
 pub fn read(path: &Path, spec: &MatSpec, progress: Progress) -> Result<ImportedRun, LogsError> {
+    read_streamed(path, spec, progress, None)
+}
+
+/// [`read`], handing the rows to `stream` in blocks as they are read (hyperslabs of at most 65 536
+/// ticks) instead of holding them (`None`: held; see [`crate::BlockSink`]): the returned run then
+/// has the report and no rows.
+pub fn read_streamed(
+    path: &Path,
+    spec: &MatSpec,
+    progress: Progress,
+    stream: Option<crate::BlockSink<'_>>,
+) -> Result<ImportedRun, LogsError> {
     let p = path.display().to_string();
     let fmt = |msg: String| LogsError::Format {
         path: p.clone(),
@@ -284,6 +369,7 @@ pub fn read(path: &Path, spec: &MatSpec, progress: Progress) -> Result<ImportedR
     let mut notes = Vec::new();
     let mut sources = Vec::new();
     let mut state: Option<(crate::StateLayout, Vec<usize>)> = None;
+    // The velocity and acceleration columns are those of the positions (checked below).
     for (role, name) in wanted {
         match channel(path, &file, &root, name, &joints)? {
             Some((ch, names, n)) => {
@@ -354,6 +440,19 @@ pub fn read(path: &Path, spec: &MatSpec, progress: Progress) -> Result<ImportedR
         });
     }
     let ts = timestamps(path, &root, "joints_state/positions", n)?;
+    let extras = match state.as_mut() {
+        Some((layout, cols)) => state_extras(path, &file, &root, spec, n, layout, cols, &mut notes)?,
+        None => {
+            if spec.base_orientation.is_some() || !spec.wrenches.is_empty() {
+                return Err(LogsError::Usage(
+                    "a base orientation or a wrench enters the whole-body state, which only the \
+                     current label with a URDF reads"
+                        .into(),
+                ));
+            }
+            StateExtras::default()
+        }
+    };
     // Chunk spans from the desired-current stream.
     let mut spans: Vec<(f64, f64)> = Vec::new();
     if let Ok(g) = root.group(DESIRED)
@@ -393,7 +492,8 @@ pub fn read(path: &Path, spec: &MatSpec, progress: Progress) -> Result<ImportedR
     // Map order is time then `roles` in order: the same as `chans`.
     let state_cols = state.as_ref().map(|s| s.1.clone()).unwrap_or_default();
     let positions = chans.first().map(|c| c.1.data.clone());
-    let mut b = RunBuilder::with_joints(map, joints.clone(), state.map(|s| s.0), &p, "mat");
+    let mut b = RunBuilder::with_joints(map, joints.clone(), state.map(|s| s.0), &p, "mat")
+        .streaming(stream);
     {
         let rep = b.report_mut();
         rep.sources.insert("joint".into(), joint.clone());
@@ -427,9 +527,15 @@ pub fn read(path: &Path, spec: &MatSpec, progress: Progress) -> Result<ImportedR
             let all: ndarray::Array2<f64> = pos
                 .read_slice_2d(ndarray::s![a..e, 0, ..])
                 .map_err(|x| h5err(path, "joints_state/positions data", x))?;
+            let vel = extras.qdot.as_ref().map(|c| c.block(path, a, e)).transpose()?;
+            let acc = extras.qddot.as_ref().map(|c| c.block(path, a, e)).transpose()?;
             for &c in &state_cols {
                 cols.push(all.column(c).to_owned());
+                for d in [&vel, &acc].into_iter().flatten() {
+                    cols.push(d.column(c).to_owned());
+                }
             }
+            extras.push_block(path, a, e, &mut cols)?;
         }
         for (k, &tk) in t.iter().enumerate() {
             let mut chunk = 0u32;
@@ -463,4 +569,122 @@ pub fn read(path: &Path, spec: &MatSpec, progress: Progress) -> Result<ImportedR
         .file_stem()
         .map_or_else(|| "run".to_string(), |s| s.to_string_lossy().into_owned());
     b.finish(&p, name)
+}
+
+/// The whole-body state's channels beyond the joint positions.
+#[derive(Default)]
+struct StateExtras {
+    /// `joints_state/velocities`, same elements as the positions.
+    qdot: Option<StateChannel>,
+    /// `joints_state/accelerations`, same elements as the positions.
+    qddot: Option<StateChannel>,
+    /// The base orientation channel (3: roll, pitch, yaw; 4: quaternion x y z w).
+    base: Option<StateChannel>,
+    /// One channel of 6 elements per wrench.
+    wrenches: Vec<StateChannel>,
+}
+
+/// Finds the state's further channels: the joints' velocities and accelerations when logged with
+/// the positions' elements, the base orientation and the wrenches asked for; fills `layout`.
+#[allow(clippy::too_many_arguments)]
+fn state_extras(
+    path: &Path,
+    file: &h5::File,
+    root: &h5::Group,
+    spec: &MatSpec,
+    n: usize,
+    layout: &mut crate::StateLayout,
+    cols: &[usize],
+    notes: &mut Vec<String>,
+) -> Result<StateExtras, LogsError> {
+    let mut out = StateExtras::default();
+    let pos_names = root
+        .group("joints_state/positions")
+        .and_then(|g| g.dataset("elements_names"))
+        .and_then(|d| cellstr(file, &d))
+        .map_err(|e| h5err(path, "joints_state/positions/elements_names", e))?;
+    for (name, slot) in [
+        ("joints_state/velocities", &mut out.qdot),
+        ("joints_state/accelerations", &mut out.qddot),
+    ] {
+        let Ok(g) = root.group(name) else { continue };
+        if !g.link_exists("data") {
+            continue;
+        }
+        let names = g
+            .dataset("elements_names")
+            .and_then(|d| cellstr(file, &d))
+            .map_err(|e| h5err(path, &format!("{name}/elements_names"), e))?;
+        if names != pos_names {
+            notes.push(format!(
+                "{name}: not the elements of joints_state/positions: not used (smoothed from q)"
+            ));
+            continue;
+        }
+        *slot = Some(state_channel(path, root, name, n, &[pos_names.len()], name)?);
+        notes.push(format!("whole-body state: {name} as logged"));
+    }
+    let k = cols.len();
+    layout.qdot = vec![out.qdot.is_some(); k];
+    layout.qddot = vec![out.qddot.is_some(); k];
+    if let Some(b) = &spec.base_orientation {
+        let ch = state_channel(path, root, b, n, &[3, 4], "--base-orientation")?;
+        notes.push(format!(
+            "base orientation from {b} ({})",
+            if ch.width == 3 {
+                "roll, pitch, yaw [rad]"
+            } else {
+                "quaternion x, y, z, w"
+            }
+        ));
+        out.base = Some(ch);
+        layout.base_quat = true;
+    }
+    for (frame, name) in &spec.wrenches {
+        out.wrenches.push(state_channel(
+            path,
+            root,
+            name,
+            n,
+            &[6],
+            &format!("--wrench {frame}={name}"),
+        )?);
+        notes.push(format!(
+            "external wrench at frame `{frame}` from {name} (N, N·m, frame coordinates)"
+        ));
+        layout.wrenches.push(frame.clone());
+    }
+    Ok(out)
+}
+
+impl StateExtras {
+    /// Appends rows `a..e` of the base quaternion (4 columns) and the wrenches (6 each) to `cols`.
+    fn push_block(
+        &self,
+        path: &Path,
+        a: usize,
+        e: usize,
+        cols: &mut Vec<ndarray::Array1<f64>>,
+    ) -> Result<(), LogsError> {
+        if let Some(b) = &self.base {
+            let v = b.block(path, a, e)?;
+            if b.width == 4 {
+                cols.extend(v.columns().into_iter().map(|c| c.to_owned()));
+            } else {
+                let mut q: [Vec<f64>; 4] = Default::default();
+                for r in v.rows() {
+                    let x = rpy_to_quat_xyzw(r[0], r[1], r[2]);
+                    for (c, xc) in q.iter_mut().zip(x) {
+                        c.push(xc);
+                    }
+                }
+                cols.extend(q.into_iter().map(ndarray::Array1::from));
+            }
+        }
+        for w in &self.wrenches {
+            let v = w.block(path, a, e)?;
+            cols.extend(v.columns().into_iter().map(|c| c.to_owned()));
+        }
+        Ok(())
+    }
 }

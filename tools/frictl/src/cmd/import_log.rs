@@ -180,6 +180,20 @@ pub struct MatArgs {
     /// channel).
     #[arg(long)]
     pub joint: Vec<String>,
+    /// The channel of the root link's orientation in the world (a robot on a tilted pole), a path
+    /// under `robot_logger_device`: 3 elements roll, pitch, yaw [rad] (e.g.
+    /// `orientations/waist_imu_0`, the IMU frame taken as the root link's) or 4, a quaternion x, y,
+    /// z, w (default: the root link at the identity pose).
+    #[arg(long, value_name = "CHANNEL")]
+    pub base_orientation: Option<String>,
+    /// A measured wrench applied to the robot at a URDF frame, `FRAME=CHANNEL` (repeatable): a
+    /// channel of 6 elements f_x f_y f_z [N], mu_x mu_y mu_z [N·m] in the frame's coordinates about
+    /// its origin (e.g. `--wrench l_foot_rear=FTs/l_foot_rear_ft`).
+    #[arg(long = "wrench", value_name = "FRAME=CHANNEL")]
+    pub wrenches: Vec<String>,
+    /// Stream the log: read and label it in windows of this many grid samples (see `import csv`).
+    #[arg(long, value_name = "N")]
+    pub window_samples: Option<usize>,
     /// Options every format shares.
     #[command(flatten)]
     #[serde(flatten)]
@@ -240,6 +254,28 @@ fn urdf_names(body: &Option<WholeBody>) -> Option<Vec<String>> {
         .map(|b| b.robot().joint_names().map(str::to_string).collect())
 }
 
+/// `--wrench FRAME=SOURCE` texts as `(frame, source)`, each frame checked in the URDF when there is
+/// one; `example` is shown when the `=` is missing.
+fn frame_pairs(
+    texts: &[String],
+    body: Option<&WholeBody>,
+    example: &str,
+) -> anyhow::Result<Vec<(String, String)>> {
+    let mut out = Vec::new();
+    for w in texts {
+        let Some((frame, source)) = w.split_once('=') else {
+            bail!("--wrench {w:?}: expected FRAME=SOURCE (e.g. {example})");
+        };
+        if let Some(b) = body {
+            b.robot()
+                .frame_id(frame.trim())
+                .map_err(|e| anyhow::anyhow!("--wrench {w:?}: {e}"))?;
+        }
+        out.push((frame.trim().to_string(), source.trim().to_string()));
+    }
+    Ok(out)
+}
+
 /// Runs `frictl import csv`.
 pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
     let mut spec = csv_log::CsvSpec::parse(&args.columns, &args.units, &args.common.negate)?;
@@ -273,18 +309,7 @@ pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
                 Some(q)
             }
         };
-        let mut wrenches = Vec::new();
-        for w in &args.wrenches {
-            let Some((frame, template)) = w.split_once('=') else {
-                bail!("--wrench {w:?}: expected FRAME=TEMPLATE (e.g. l_foot=ft_l_foot_{{c}})");
-            };
-            if let Some(b) = &body {
-                b.robot()
-                    .frame_id(frame.trim())
-                    .map_err(|e| anyhow::anyhow!("--wrench {w:?}: {e}"))?;
-            }
-            wrenches.push((frame.trim().to_string(), template.trim().to_string()));
-        }
+        let wrenches = frame_pairs(&args.wrenches, body.as_ref(), "l_foot=ft_l_foot_{c}")?;
         spec.state = Some(csv_log::CsvState {
             wrenches,
             positions: positions.clone(),
@@ -363,11 +388,26 @@ pub fn run_mat(args: MatArgs) -> anyhow::Result<()> {
         state_joints: urdf_names(&body),
         negate,
         desired_gap_s: args.common.gap_s.unwrap_or(1.0),
+        base_orientation: args.base_orientation.clone(),
+        wrenches: frame_pairs(&args.wrenches, body.as_ref(), "l_foot_rear=FTs/l_foot_rear_ft")?,
     };
     anyhow::ensure!(
         !spec.all_joints || spec.state_joints.is_some(),
         "--joints all labels the joints of the whole-body state, which only the current label reads"
     );
+    if let Some(w) = args.window_samples {
+        let mut common = args.common;
+        common.gap_s = Some(spec.desired_gap_s);
+        return super::import_stream::run_stream(
+            &args.files,
+            "mat",
+            LabelSource::Current,
+            &common,
+            body.as_ref(),
+            w,
+            |f, stream| mat_log::read_streamed(f, &spec, &mut |_, _| {}, stream),
+        );
+    }
     let runs = read_all(&args.files, |p, pr| mat_log::read(p, &spec, pr))?;
     finish(runs, &args.files, "mat", 1.0, None, args.common, body)
 }

@@ -1,4 +1,4 @@
-//! `frictl import csv … --window-samples N`: the import without holding the log. The reader hands
+//! `frictl import csv|mat|mcap … --window-samples N`: the import without holding the log. The reader hands
 //! its rows in blocks to `frictionless-ident`'s [`StreamLabeller`] (windows of N grid samples with
 //! margins derived from the smoother and filter settings, the rows equal to the whole-log import),
 //! whose rows are appended to each joint's dataset as they come. Every output is written through
@@ -37,6 +37,7 @@ struct Streamer<'a> {
     outs: Vec<Out>,
     state_names: Vec<String>,
     base_logged: bool,
+    wrench_frames: Vec<String>,
 }
 
 impl<'a> Streamer<'a> {
@@ -68,6 +69,7 @@ impl<'a> Streamer<'a> {
             if let Some(st) = &block.state {
                 self.state_names = st.names.clone();
                 self.base_logged = st.base_quat_xyzw.is_some();
+                self.wrench_frames = st.wrenches.iter().map(|w| w.frame.clone()).collect();
             }
             self.labeller = Some(StreamLabeller::new(
                 &self.joints,
@@ -107,20 +109,41 @@ pub fn run_csv(
     body: Option<&WholeBody>,
     window: usize,
 ) -> anyhow::Result<()> {
+    let reads = |r: Role| spec.columns.iter().any(|c| c.0 == r);
+    let default_label = if reads(Role::TauF) {
+        LabelSource::Given
+    } else if reads(Role::TauJoint) {
+        LabelSource::TorqueSensor
+    } else {
+        LabelSource::Current
+    };
+    run_stream(files, "csv", default_label, common, body, window, |f, stream| {
+        csv_log::read_streamed(f, spec, &mut |_, _| {}, stream)
+    })
+}
+
+/// Runs `frictl import FORMAT` streamed: `read` reads one log, handing its rows to the sink it is
+/// given; the label is `--label` or `default_label`.
+pub fn run_stream(
+    files: &[PathBuf],
+    format: &str,
+    default_label: LabelSource,
+    common: &CommonArgs,
+    body: Option<&WholeBody>,
+    window: usize,
+    mut read: impl FnMut(
+        &Path,
+        Option<frictionless_logs::BlockSink<'_>>,
+    ) -> Result<ImportedRun, frictionless_logs::LogsError>,
+) -> anyhow::Result<()> {
     let started = std::time::Instant::now();
     anyhow::ensure!(window > 0, "--window-samples {window}: must be > 0");
-    let reads = |r: Role| spec.columns.iter().any(|c| c.0 == r);
-    let label: LabelSource = match common.label {
-        Some(l) => l.into(),
-        None if reads(Role::TauF) => LabelSource::Given,
-        None if reads(Role::TauJoint) => LabelSource::TorqueSensor,
-        None => LabelSource::Current,
-    };
+    let label: LabelSource = common.label.map_or(default_label, Into::into);
     let dynamics = match (label, body) {
         (LabelSource::Current, Some(b)) => Dynamics::WholeBody(b),
         (LabelSource::Current, None) => bail!(
-            "--window-samples with the current label needs the whole-body state: pass --urdf and \
-             --positions TEMPLATE"
+            "--window-samples with the current label needs the whole-body state: pass --urdf (and \
+             for a CSV, --positions TEMPLATE)"
         ),
         _ => Dynamics::None,
     };
@@ -134,6 +157,7 @@ pub fn run_csv(
         outs: Vec::new(),
         state_names: Vec::new(),
         base_logged: false,
+        wrench_frames: Vec::new(),
     };
     let mut runs: Vec<ImportedRun> = Vec::new();
     for f in files {
@@ -149,7 +173,7 @@ pub fn run_csv(
             block_rows: window,
             sink: &mut sink,
         };
-        let run = csv_log::read_streamed(f, spec, &mut |_, _| {}, Some(stream));
+        let run = read(f, Some(stream));
         if let Some(e) = failed {
             return Err(e.context(format!("labelling {}", f.display())));
         }
@@ -168,7 +192,9 @@ pub fn run_csv(
     st.write(rest)?;
     let plan = body.map(|b| {
         let names: Vec<String> = st.joints.iter().map(|j| j.joint.clone()).collect();
-        b.plan(&st.state_names, &names, st.base_logged)
+        let mut p = b.plan(&st.state_names, &names, st.base_logged);
+        p.wrenches = st.wrench_frames.clone();
+        p
     });
     let inputs: Vec<&Path> = files.iter().map(PathBuf::as_path).collect();
     let mut hashes = Vec::new();
@@ -196,7 +222,7 @@ pub fn run_csv(
         let settings = serde_json::json!({
             "pipeline": jl.cfg,
             "import": {
-                "format": "csv",
+                "format": format,
                 "label": label,
                 "joints_of_this_pass": joint_names,
                 "derivations": sum.derivations,
@@ -272,7 +298,7 @@ pub fn run_csv(
             },
         )?;
         eprintln!(
-            "frictl import csv: {}: {} samples ({} valid), streamed in windows of {} (+{} / +{} margin) -> {}",
+            "frictl import {format}: {}: {} samples ({} valid), streamed in windows of {} (+{} / +{} margin) -> {}",
             jl.joint,
             o.rows,
             o.valid,
@@ -283,7 +309,7 @@ pub fn run_csv(
         );
     }
     eprintln!(
-        "frictl import csv: {} runs streamed, at most {} grid and {} raw samples held, in {:.2} s",
+        "frictl import {format}: {} runs streamed, at most {} grid and {} raw samples held, in {:.2} s",
         runs.len(),
         stats.max_grid_samples,
         stats.max_raw_samples,
