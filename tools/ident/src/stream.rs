@@ -489,12 +489,14 @@ impl<'a> StreamLabeller<'a> {
         } = self.stats;
         while self.open.emitted + window + trail <= avail {
             let e = self.open.emitted;
+            // The raw samples held now: each step drops those before the next lead margin.
+            let held = self.buf[0].time_s.len();
             self.segment(
                 t0,
                 e.saturating_sub(lead),
                 e + window + trail,
                 e..e + window,
-                n_raw,
+                held,
             )?;
             self.open.emitted = e + window;
             // Drop the raw samples before the next step's lead margin (keep the one bracketing it).
@@ -788,7 +790,8 @@ mod tests {
         let StreamStats { lead, trail, .. } = sl.stats();
         assert!(lead > 0 && trail > 0, "margins {lead}, {trail}");
         let mut got: Vec<Dataset> = vec![Dataset::default(); joints.len()];
-        let blocks = [1usize, 37, 250, 3, 511];
+        // 1 600 rows hold two windows: a push that labels several windows in one call.
+        let blocks = [1usize, 37, 250, 3, 511, 1600];
         let mut biggest = 0;
         for (signals, st) in &log {
             let n = signals[0].time_s.len();
