@@ -653,6 +653,217 @@ fn mat_whole_body_label_matches_pinocchio() {
     );
 }
 
+/// The log of `make_fixtures.py tilted` (the leg of [`leg_fixture`] on a root link tilted 20° in roll
+/// and −10° in pitch, yawed 30°, swaying 2°, with a 250–350 N wrench applied at `l_foot_rear_ft`; the
+/// currents from Pinocchio's rnea with that gravity and `fext`), written once per test process.
+#[cfg(feature = "mat")]
+fn tilted_fixture() -> PathBuf {
+    static DIR: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    DIR.get_or_init(|| {
+        let py = std::env::var_os("FRICTIONLESS_PY")
+            .expect("FRICTIONLESS_PY must name a python with pinocchio, h5py (tests/run.sh)");
+        let d = dir().join("tilted");
+        let script =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../logs/tests/fixtures/make_fixtures.py");
+        let st = Command::new(py)
+            .arg(script)
+            .arg("tilted")
+            .arg(ergocub_urdf())
+            .arg(&d)
+            .status()
+            .unwrap();
+        assert!(st.success(), "make_fixtures.py tilted failed");
+        d
+    })
+    .clone()
+}
+
+/// The base orientation channels and the wrench of the tilted log.
+#[cfg(feature = "mat")]
+const TILT_RPY: [&str; 2] = ["--base-orientation", "orientations/waist_imu_0"];
+#[cfg(feature = "mat")]
+const TILT_QUAT: [&str; 2] = ["--base-orientation", "frames/world/root_link/orientation"];
+#[cfg(feature = "mat")]
+const TILT_WRENCH: [&str; 2] = ["--wrench", "l_foot_rear_ft=FTs/l_foot_rear_ft"];
+
+/// `frictl import mat tilted.mat` of the knee and the hip pitch into `DIR/<name>_{joint}.csv` with
+/// `extra` options; the output.
+#[cfg(feature = "mat")]
+fn import_tilted(name: &str, extra: &[&str]) -> std::process::Output {
+    let d = tilted_fixture();
+    let out = d.join(format!("{name}_{{joint}}.csv"));
+    let urdf = ergocub_urdf();
+    let log = d.join("tilted.mat");
+    let mut args = vec![
+        "import",
+        "mat",
+        s(&log),
+        "--joint",
+        "l_knee",
+        "--joint",
+        "l_hip_pitch",
+        "--urdf",
+        s(&urdf),
+        "--gear-ratio",
+        "100",
+        "--kt",
+        "0.1",
+        "-o",
+        s(&out),
+    ];
+    args.extend(extra);
+    frictl(&args)
+}
+
+/// RMS of the knee's and the hip pitch's τ_ID in `DIR/<name>_{joint}.csv` against Pinocchio's, and
+/// the valid samples.
+#[cfg(feature = "mat")]
+fn tilted_rms(name: &str) -> [(f64, usize); 2] {
+    let d = tilted_fixture();
+    let reference =
+        frictionless_dataset::read_columns(&d.join("tilted_ref.csv")).expect("tilted_ref.csv");
+    ["l_knee", "l_hip_pitch"].map(|j| {
+        let ds = dataset(&d.join(format!("{name}_{j}.csv")));
+        let r = rms_vs(&ds, &ds.tau_id_nm, &reference[&format!("tau_id_{j}")]);
+        eprintln!("{name} {j}: tau_ID RMS {:.4} Nm on {} samples", r.0, r.1);
+        r
+    })
+}
+
+#[cfg(feature = "mat")]
+#[test]
+#[ignore = "needs FRICTIONLESS_PY (tests/run.sh): Pinocchio writes the tilted log"]
+fn mat_base_orientation_tilts_the_gravity_like_pinocchio() {
+    // Roll, pitch, yaw [rad] (the IMU channel) and the quaternion x y z w (a logged frame).
+    for (name, base) in [("rpy", TILT_RPY), ("quat", TILT_QUAT)] {
+        let mut extra = base.to_vec();
+        extra.extend(TILT_WRENCH);
+        ok(import_tilted(name, &extra), "import mat --base-orientation");
+        for (rms, n) in tilted_rms(name) {
+            assert!(n > 7000 && rms < 0.15, "{name}: RMS {rms} on {n}");
+        }
+        let wb = &sidecar(&tilted_fixture().join(format!("{name}_l_knee.csv")))["settings"]["import"]
+            ["whole_body"];
+        assert!(
+            wb["base"]
+                .as_str()
+                .unwrap()
+                .contains("orientation from the log"),
+            "{wb}"
+        );
+    }
+    // Without it the root link is upright: the gravity is 20° off.
+    ok(
+        import_tilted("upright", &TILT_WRENCH),
+        "import mat (upright)",
+    );
+    let [(knee, _), (hip, _)] = tilted_rms("upright");
+    assert!(
+        knee > 1.0 && hip > 1.0,
+        "the tilt must matter: knee {knee}, hip {hip}"
+    );
+    // A channel that is not there, or not an orientation, is named.
+    let e = err_text(
+        import_tilted("bad", &["--base-orientation", "orientations/waist_imu_9"]),
+        "an absent orientation channel",
+    );
+    assert!(e.contains("orientations/waist_imu_9"), "{e}");
+    let e = err_text(
+        import_tilted("bad", &["--base-orientation", "FTs/l_foot_rear_ft"]),
+        "a 6-element orientation channel",
+    );
+    assert!(
+        e.contains("FTs/l_foot_rear_ft") && e.contains("3 or 4"),
+        "{e}"
+    );
+    assert!(!tilted_fixture().join("bad_l_knee.csv").exists());
+}
+
+#[cfg(feature = "mat")]
+#[test]
+#[ignore = "needs FRICTIONLESS_PY (tests/run.sh): Pinocchio writes the tilted log"]
+fn mat_measured_wrench_enters_the_label_like_pinocchio() {
+    let mut extra = TILT_RPY.to_vec();
+    extra.extend(TILT_WRENCH);
+    ok(import_tilted("wrench", &extra), "import mat --wrench");
+    for (rms, n) in tilted_rms("wrench") {
+        assert!(n > 7000 && rms < 0.15, "RMS {rms} on {n}");
+    }
+    let wb =
+        &sidecar(&tilted_fixture().join("wrench_l_knee.csv"))["settings"]["import"]["whole_body"];
+    assert_eq!(
+        wb["wrenches"],
+        serde_json::json!(["l_foot_rear_ft"]),
+        "{wb}"
+    );
+    ok(
+        import_tilted("no_wrench", &TILT_RPY),
+        "import mat (no wrench)",
+    );
+    let [(knee, _), (hip, _)] = tilted_rms("no_wrench");
+    assert!(
+        knee > 1.0 && hip > 1.0,
+        "the wrench must matter: knee {knee}, hip {hip}"
+    );
+    let e = err_text(
+        import_tilted("bad", &["--wrench", "l_foot_rear_ft=FTs/r_foot_rear_ft"]),
+        "an absent wrench channel",
+    );
+    assert!(e.contains("FTs/r_foot_rear_ft"), "{e}");
+    let e = err_text(
+        import_tilted("bad", &["--wrench", "l_foot_nowhere=FTs/l_foot_rear_ft"]),
+        "a frame the URDF lacks",
+    );
+    assert!(e.contains("l_foot_nowhere"), "{e}");
+}
+
+#[cfg(feature = "mat")]
+#[test]
+#[ignore = "needs FRICTIONLESS_PY (tests/run.sh): Pinocchio writes the tilted log"]
+fn mat_streamed_import_equals_the_whole_read() {
+    let mut extra = TILT_RPY.to_vec();
+    extra.extend(TILT_WRENCH);
+    ok(import_tilted("whole", &extra), "import mat");
+    extra.extend(["--window-samples", "500"]);
+    ok(
+        import_tilted("streamed", &extra),
+        "import mat --window-samples",
+    );
+    let d = tilted_fixture();
+    for j in ["l_knee", "l_hip_pitch"] {
+        let whole = frictionless_dataset::read_columns(&d.join(format!("whole_{j}.csv"))).unwrap();
+        let streamed =
+            frictionless_dataset::read_columns(&d.join(format!("streamed_{j}.csv"))).unwrap();
+        let mut names: Vec<&String> = whole.keys().collect();
+        names.sort();
+        assert_eq!(
+            names,
+            {
+                let mut v: Vec<&String> = streamed.keys().collect();
+                v.sort();
+                v
+            },
+            "{j}: columns"
+        );
+        let rows = whole["time_s"].len();
+        assert!(rows > 7000, "{j}: {rows} rows");
+        for name in names {
+            let (a, b) = (&whole[name], &streamed[name]);
+            assert_eq!(a.len(), b.len(), "{j} {name}: rows");
+            for (k, (x, y)) in a.iter().zip(b).enumerate() {
+                assert!(
+                    (x.is_nan() && y.is_nan()) || (x - y).abs() <= 1e-9,
+                    "{j} {name} row {k}: whole {x}, streamed {y}"
+                );
+            }
+        }
+        let stream = &sidecar(&d.join(format!("streamed_{j}.csv")))["settings"]["import"]["stream"];
+        assert_eq!(stream["window_samples"], 500, "{stream}");
+        let held = stream["max_grid_samples_held"].as_u64().unwrap() as usize;
+        assert!(held < rows / 4, "held {held} of {rows}: {stream}");
+    }
+}
+
 #[test]
 #[ignore = "needs FRICTIONLESS_PY (tests/run.sh): Pinocchio writes the whole-body log"]
 fn whole_body_bad_templates_are_clear_errors() {

@@ -62,35 +62,60 @@ pub fn rpy_to_quat_xyzw(roll: f64, pitch: f64, yaw: f64) -> [f64; 4] {
     ]
 }
 
-/// A channel of the whole-body state read whole per block: its `data` (N, 1, m) and `m`.
+/// A channel of the whole-body state read whole per block: its `data` (N, 1, m), `m`, and the
+/// column of each component in its canonical order.
 struct StateChannel {
     data: h5::Dataset,
     width: usize,
+    order: Vec<usize>,
 }
 
+/// The YARP robot logger's element names of an orientation sensor (roll, pitch, yaw [rad]).
+const RPY_NAMES: [&str; 3] = ["r", "p", "y"];
+/// The logger's element names of a frame's orientation quaternion (`frames/<root>/<frame>/orientation`).
+const QUAT_NAMES: [&str; 4] = ["qx", "qy", "qz", "qw"];
+/// The logger's element names of a force-torque sensor or a cartesian wrench.
+const WRENCH_NAMES: [&str; 6] = ["f_x", "f_y", "f_z", "mu_x", "mu_y", "mu_z"];
+
 /// Opens the channel `name` (a path under the root) that the state needs: present, (n, 1, m) with
-/// `m` in `widths`; the error names the channel and what was found.
+/// `m` the length of one of `known` (or of `widths` when `known` is empty); the error names the
+/// channel and what was found. When its `elements_names` are the `known` names in any order the
+/// components are taken by name, otherwise in order (said in `notes`).
+#[allow(clippy::too_many_arguments)]
 fn state_channel(
     path: &Path,
+    file: &h5::File,
     root: &h5::Group,
     name: &str,
     n: usize,
+    known: &[&[&str]],
     widths: &[usize],
     what: &str,
+    notes: &mut Vec<String>,
 ) -> Result<StateChannel, LogsError> {
     let fmt = |msg: String| LogsError::Format {
         path: path.display().to_string(),
         msg,
     };
-    let data = root
+    let group = root
         .group(name)
-        .and_then(|g| g.dataset("data"))
-        .map_err(|_| fmt(format!("{what}: no channel `{ROOT}/{name}` with a `data` dataset")))?;
+        .map_err(|_| fmt(format!("{what}: no channel `{ROOT}/{name}`")))?;
+    let data = group.dataset("data").map_err(|_| {
+        fmt(format!(
+            "{what}: the channel `{ROOT}/{name}` has no `data` (nothing logged)"
+        ))
+    })?;
+    let widths: Vec<usize> = if known.is_empty() {
+        widths.to_vec()
+    } else {
+        known.iter().map(|k| k.len()).collect()
+    };
     let shape = data.shape();
     let ok = shape.len() == 3 && shape[0] == n && shape[1] == 1 && widths.contains(&shape[2]);
     if !ok {
         return Err(fmt(format!(
-            "{what}: `{name}/data` has shape {shape:?}; expected ({n}, 1, {}) on the clock of              joints_state/positions",
+            "{what}: `{name}/data` has shape {shape:?}; expected ({n}, 1, {}), on the ticks of \
+             joints_state/positions",
             widths
                 .iter()
                 .map(usize::to_string)
@@ -99,18 +124,38 @@ fn state_channel(
         )));
     }
     check_stored(path, &format!("{name}/data"), &data)?;
-    Ok(StateChannel {
-        width: shape[2],
-        data,
-    })
+    let width = shape[2];
+    let mut order: Vec<usize> = (0..width).collect();
+    if let Some(names) = known.iter().find(|k| k.len() == width) {
+        let logged = group
+            .dataset("elements_names")
+            .and_then(|d| cellstr(file, &d))
+            .unwrap_or_default();
+        let by_name: Option<Vec<usize>> = names
+            .iter()
+            .map(|c| logged.iter().position(|l| l == c))
+            .collect();
+        match by_name {
+            Some(o) => order = o,
+            None => notes.push(format!(
+                "{name}: elements_names {logged:?} are not {names:?}: taken in that order"
+            )),
+        }
+    }
+    Ok(StateChannel { width, data, order })
 }
 
 impl StateChannel {
-    /// Rows `a..e`, every element.
+    /// Rows `a..e`, every element, the columns in the canonical order.
     fn block(&self, path: &Path, a: usize, e: usize) -> Result<ndarray::Array2<f64>, LogsError> {
-        self.data
+        let v: ndarray::Array2<f64> = self
+            .data
             .read_slice_2d(ndarray::s![a..e, 0, ..])
-            .map_err(|x| h5err(path, "state channel data", x))
+            .map_err(|x| h5err(path, "state channel data", x))?;
+        if self.order.iter().enumerate().all(|(k, &c)| k == c) {
+            return Ok(v);
+        }
+        Ok(v.select(ndarray::Axis(1), &self.order))
     }
 }
 
@@ -282,9 +327,9 @@ pub fn read(path: &Path, spec: &MatSpec, progress: Progress) -> Result<ImportedR
     read_streamed(path, spec, progress, None)
 }
 
-/// [`read`], handing the rows to `stream` in blocks as they are read (hyperslabs of at most 65 536
-/// ticks) instead of holding them (`None`: held; see [`crate::BlockSink`]): the returned run then
-/// has the report and no rows.
+/// [`read`], handing the rows to `stream` in blocks as they are read (hyperslabs of the sink's block
+/// size, at most 65 536 ticks) instead of holding them (`None`: held; see [`crate::BlockSink`]):
+/// the returned run then has the report and no rows.
 pub fn read_streamed(
     path: &Path,
     spec: &MatSpec,
@@ -440,8 +485,10 @@ pub fn read_streamed(
         });
     }
     let ts = timestamps(path, &root, "joints_state/positions", n)?;
-    let extras = match state.as_mut() {
-        Some((layout, cols)) => state_extras(path, &file, &root, spec, n, layout, cols, &mut notes)?,
+    let mut extras = match state.as_mut() {
+        Some((layout, cols)) => {
+            state_extras(path, &file, &root, spec, n, layout, cols, &mut notes)?
+        }
         None => {
             if spec.base_orientation.is_some() || !spec.wrenches.is_empty() {
                 return Err(LogsError::Usage(
@@ -492,6 +539,10 @@ pub fn read_streamed(
     // Map order is time then `roles` in order: the same as `chans`.
     let state_cols = state.as_ref().map(|s| s.1.clone()).unwrap_or_default();
     let positions = chans.first().map(|c| c.1.data.clone());
+    // Hyperslabs of at most BLOCK ticks; streamed, of the sink's block size.
+    let block = stream
+        .as_ref()
+        .map_or(BLOCK, |s| s.block_rows.clamp(1, BLOCK));
     let mut b = RunBuilder::with_joints(map, joints.clone(), state.map(|s| s.0), &p, "mat")
         .streaming(stream);
     {
@@ -510,7 +561,7 @@ pub fn read_streamed(
     let mut span_i = 0usize;
     let mut a = 0;
     while a < n {
-        let e = (a + BLOCK).min(n);
+        let e = (a + block).min(n);
         let t = read_ts(path, &ts, a, e)?;
         // Joint-major: every role of the first joint, then the next joint's (the row order).
         let mut cols = Vec::with_capacity(chans.len() * joints.len() + state_cols.len());
@@ -527,8 +578,16 @@ pub fn read_streamed(
             let all: ndarray::Array2<f64> = pos
                 .read_slice_2d(ndarray::s![a..e, 0, ..])
                 .map_err(|x| h5err(path, "joints_state/positions data", x))?;
-            let vel = extras.qdot.as_ref().map(|c| c.block(path, a, e)).transpose()?;
-            let acc = extras.qddot.as_ref().map(|c| c.block(path, a, e)).transpose()?;
+            let vel = extras
+                .qdot
+                .as_ref()
+                .map(|c| c.block(path, a, e))
+                .transpose()?;
+            let acc = extras
+                .qddot
+                .as_ref()
+                .map(|c| c.block(path, a, e))
+                .transpose()?;
             for &c in &state_cols {
                 cols.push(all.column(c).to_owned());
                 for d in [&vel, &acc].into_iter().flatten() {
@@ -582,6 +641,8 @@ struct StateExtras {
     base: Option<StateChannel>,
     /// One channel of 6 elements per wrench.
     wrenches: Vec<StateChannel>,
+    /// The last finite base quaternion handed on (its sign continues).
+    last_quat: Option<[f64; 4]>,
 }
 
 /// Finds the state's further channels: the joints' velocities and accelerations when logged with
@@ -621,14 +682,34 @@ fn state_extras(
             ));
             continue;
         }
-        *slot = Some(state_channel(path, root, name, n, &[pos_names.len()], name)?);
+        *slot = Some(state_channel(
+            path,
+            file,
+            root,
+            name,
+            n,
+            &[],
+            &[pos_names.len()],
+            name,
+            notes,
+        )?);
         notes.push(format!("whole-body state: {name} as logged"));
     }
     let k = cols.len();
     layout.qdot = vec![out.qdot.is_some(); k];
     layout.qddot = vec![out.qddot.is_some(); k];
     if let Some(b) = &spec.base_orientation {
-        let ch = state_channel(path, root, b, n, &[3, 4], "--base-orientation")?;
+        let ch = state_channel(
+            path,
+            file,
+            root,
+            b,
+            n,
+            &[&RPY_NAMES, &QUAT_NAMES],
+            &[],
+            &format!("--base-orientation {b}"),
+            notes,
+        )?;
         notes.push(format!(
             "base orientation from {b} ({})",
             if ch.width == 3 {
@@ -643,11 +724,14 @@ fn state_extras(
     for (frame, name) in &spec.wrenches {
         out.wrenches.push(state_channel(
             path,
+            file,
             root,
             name,
             n,
-            &[6],
+            &[&WRENCH_NAMES],
+            &[],
             &format!("--wrench {frame}={name}"),
+            notes,
         )?);
         notes.push(format!(
             "external wrench at frame `{frame}` from {name} (N, N·m, frame coordinates)"
@@ -659,8 +743,10 @@ fn state_extras(
 
 impl StateExtras {
     /// Appends rows `a..e` of the base quaternion (4 columns) and the wrenches (6 each) to `cols`.
+    /// The quaternion's sign is kept continuous from row to row (q and −q are the same rotation;
+    /// a logged quaternion may flip, and interpolating across a flip passes near zero).
     fn push_block(
-        &self,
+        &mut self,
         path: &Path,
         a: usize,
         e: usize,
@@ -668,18 +754,26 @@ impl StateExtras {
     ) -> Result<(), LogsError> {
         if let Some(b) = &self.base {
             let v = b.block(path, a, e)?;
-            if b.width == 4 {
-                cols.extend(v.columns().into_iter().map(|c| c.to_owned()));
-            } else {
-                let mut q: [Vec<f64>; 4] = Default::default();
-                for r in v.rows() {
-                    let x = rpy_to_quat_xyzw(r[0], r[1], r[2]);
-                    for (c, xc) in q.iter_mut().zip(x) {
-                        c.push(xc);
+            let mut q: [Vec<f64>; 4] = std::array::from_fn(|_| Vec::with_capacity(e - a));
+            for r in v.rows() {
+                let mut x = if b.width == 4 {
+                    [r[0], r[1], r[2], r[3]]
+                } else {
+                    rpy_to_quat_xyzw(r[0], r[1], r[2])
+                };
+                if x.iter().all(|c| c.is_finite()) {
+                    if let Some(p) = self.last_quat
+                        && p.iter().zip(&x).map(|(u, v)| u * v).sum::<f64>() < 0.0
+                    {
+                        x = x.map(|c| -c);
                     }
+                    self.last_quat = Some(x);
                 }
-                cols.extend(q.into_iter().map(ndarray::Array1::from));
+                for (c, xc) in q.iter_mut().zip(x) {
+                    c.push(xc);
+                }
             }
+            cols.extend(q.into_iter().map(ndarray::Array1::from));
         }
         for w in &self.wrenches {
             let v = w.block(path, a, e)?;

@@ -389,7 +389,11 @@ pub fn run_mat(args: MatArgs) -> anyhow::Result<()> {
         negate,
         desired_gap_s: args.common.gap_s.unwrap_or(1.0),
         base_orientation: args.base_orientation.clone(),
-        wrenches: frame_pairs(&args.wrenches, body.as_ref(), "l_foot_rear=FTs/l_foot_rear_ft")?,
+        wrenches: frame_pairs(
+            &args.wrenches,
+            body.as_ref(),
+            "l_foot_rear=FTs/l_foot_rear_ft",
+        )?,
     };
     anyhow::ensure!(
         !spec.all_joints || spec.state_joints.is_some(),

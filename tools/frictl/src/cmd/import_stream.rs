@@ -117,9 +117,15 @@ pub fn run_csv(
     } else {
         LabelSource::Current
     };
-    run_stream(files, "csv", default_label, common, body, window, |f, stream| {
-        csv_log::read_streamed(f, spec, &mut |_, _| {}, stream)
-    })
+    run_stream(
+        files,
+        "csv",
+        default_label,
+        common,
+        body,
+        window,
+        |f, stream| csv_log::read_streamed(f, spec, &mut |_, _| {}, stream),
+    )
 }
 
 /// Runs `frictl import FORMAT` streamed: `read` reads one log, handing its rows to the sink it is
