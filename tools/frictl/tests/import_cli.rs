@@ -651,6 +651,28 @@ fn mat_whole_body_label_matches_pinocchio() {
         side["settings"]["import"]["whole_body"]["not_in_urdf"],
         serde_json::json!(["l_foot_dummy"])
     );
+    // This log has positions only: logged derivatives are a clear error.
+    let e = err_text(
+        frictl(&[
+            "import",
+            "mat",
+            s(&d.join("leg.mat")),
+            "--logged-derivatives",
+            "--urdf",
+            s(&urdf),
+            "--gear-ratio",
+            "100",
+            "--kt",
+            "0.1",
+            "-o",
+            s(&d.join("mat_knee_logged.csv")),
+        ]),
+        "import mat --logged-derivatives without them",
+    );
+    assert!(
+        e.contains("joints_state/velocities") && e.contains("leg.mat"),
+        "{e}"
+    );
 }
 
 /// The log of `make_fixtures.py tilted` (the leg of [`leg_fixture`] on a root link tilted 20° in roll
@@ -796,6 +818,22 @@ fn mat_measured_wrench_enters_the_label_like_pinocchio() {
         serde_json::json!(["l_foot_rear_ft"]),
         "{wb}"
     );
+    // The joints' velocities and accelerations as logged (exact in this log) instead of smoothed.
+    extra.push("--logged-derivatives");
+    ok(
+        import_tilted("logged", &extra),
+        "import mat --logged-derivatives",
+    );
+    for (rms, n) in tilted_rms("logged") {
+        assert!(n > 7000 && rms < 0.15, "logged: RMS {rms} on {n}");
+    }
+    let notes = sidecar(&tilted_fixture().join("logged_l_knee.csv"))["settings"]["import"]["runs"]
+        [0]["report"]["notes"]
+        .to_string();
+    assert!(
+        notes.contains("joints_state/accelerations as logged"),
+        "{notes}"
+    );
     ok(
         import_tilted("no_wrench", &TILT_RPY),
         "import mat (no wrench)",
@@ -821,19 +859,31 @@ fn mat_measured_wrench_enters_the_label_like_pinocchio() {
 #[test]
 #[ignore = "needs FRICTIONLESS_PY (tests/run.sh): Pinocchio writes the tilted log"]
 fn mat_streamed_import_equals_the_whole_read() {
-    let mut extra = TILT_RPY.to_vec();
-    extra.extend(TILT_WRENCH);
-    ok(import_tilted("whole", &extra), "import mat");
-    extra.extend(["--window-samples", "500"]);
-    ok(
-        import_tilted("streamed", &extra),
-        "import mat --window-samples",
-    );
+    // The joints' derivatives smoothed from q (the default) and as logged.
+    for (tag, derivatives) in [("smoothed", None), ("logged", Some("--logged-derivatives"))] {
+        let mut extra = TILT_RPY.to_vec();
+        extra.extend(TILT_WRENCH);
+        extra.extend(derivatives);
+        ok(import_tilted(&format!("whole_{tag}"), &extra), "import mat");
+        extra.extend(["--window-samples", "500"]);
+        ok(
+            import_tilted(&format!("streamed_{tag}"), &extra),
+            "import mat --window-samples",
+        );
+        streamed_equals_whole(tag);
+    }
+}
+
+/// The tilted log's `whole_<tag>_{joint}.csv` and `streamed_<tag>_{joint}.csv` agree to 1e-9 in
+/// every column, and the streamed import held a fraction of the log.
+#[cfg(feature = "mat")]
+fn streamed_equals_whole(tag: &str) {
     let d = tilted_fixture();
     for j in ["l_knee", "l_hip_pitch"] {
-        let whole = frictionless_dataset::read_columns(&d.join(format!("whole_{j}.csv"))).unwrap();
+        let whole =
+            frictionless_dataset::read_columns(&d.join(format!("whole_{tag}_{j}.csv"))).unwrap();
         let streamed =
-            frictionless_dataset::read_columns(&d.join(format!("streamed_{j}.csv"))).unwrap();
+            frictionless_dataset::read_columns(&d.join(format!("streamed_{tag}_{j}.csv"))).unwrap();
         let mut names: Vec<&String> = whole.keys().collect();
         names.sort();
         assert_eq!(
@@ -853,11 +903,12 @@ fn mat_streamed_import_equals_the_whole_read() {
             for (k, (x, y)) in a.iter().zip(b).enumerate() {
                 assert!(
                     (x.is_nan() && y.is_nan()) || (x - y).abs() <= 1e-9,
-                    "{j} {name} row {k}: whole {x}, streamed {y}"
+                    "{tag} {j} {name} row {k}: whole {x}, streamed {y}"
                 );
             }
         }
-        let stream = &sidecar(&d.join(format!("streamed_{j}.csv")))["settings"]["import"]["stream"];
+        let stream =
+            &sidecar(&d.join(format!("streamed_{tag}_{j}.csv")))["settings"]["import"]["stream"];
         assert_eq!(stream["window_samples"], 500, "{stream}");
         let held = stream["max_grid_samples_held"].as_u64().unwrap() as usize;
         assert!(held < rows / 4, "held {held} of {rows}: {stream}");

@@ -40,9 +40,16 @@ pub struct MatSpec {
     /// A gap of the desired-current stream larger than this closes a chunk [s].
     pub desired_gap_s: f64,
     /// The root link's orientation in the world, for the whole-body state: a channel under
-    /// `robot_logger_device` (e.g. `orientations/waist_imu_0`) of 3 elements, roll, pitch, yaw
-    /// [rad] (R = Rz(y)·Ry(p)·Rx(r), the logger's convention), or of 4, the quaternion `x y z w`.
+    /// `robot_logger_device` on the ticks of `joints_state/positions`, of 3 elements roll, pitch,
+    /// yaw [rad] (R = Rz(y)·Ry(p)·Rx(r): an orientation sensor's YARP roll-pitch-yaw, which the
+    /// logger converts to radians; e.g. `orientations/waist_imu_0`, elements `r p y`), or of 4, the
+    /// quaternion `x y z w` (e.g. `frames/<root>/<frame>/orientation`, elements `qx qy qz qw`).
     pub base_orientation: Option<String>,
+    /// Take the whole-body state's q̇ and q̈ as logged (`joints_state/velocities`,
+    /// `joints_state/accelerations`, when they have the elements of `joints_state/positions`)
+    /// instead of the smoother's estimates from q (the default, as the authors do: a logger may
+    /// write encoder accelerations that the firmware does not estimate).
+    pub logged_derivatives: bool,
     /// Measured wrenches applied to the robot: `(URDF frame, channel)`, the channel (e.g.
     /// `FTs/l_foot_front_ft` or `cartesian_wrenches/<name>`) of 6 elements `f_x f_y f_z` [N], `mu_x
     /// mu_y mu_z` [N·m] in the frame's coordinates about its origin.
@@ -645,8 +652,9 @@ struct StateExtras {
     last_quat: Option<[f64; 4]>,
 }
 
-/// Finds the state's further channels: the joints' velocities and accelerations when logged with
-/// the positions' elements, the base orientation and the wrenches asked for; fills `layout`.
+/// Finds the state's further channels: the joints' velocities and accelerations when asked for and
+/// logged with the positions' elements, the base orientation and the wrenches asked for; fills
+/// `layout`.
 #[allow(clippy::too_many_arguments)]
 fn state_extras(
     path: &Path,
@@ -668,10 +676,13 @@ fn state_extras(
         ("joints_state/velocities", &mut out.qdot),
         ("joints_state/accelerations", &mut out.qddot),
     ] {
-        let Ok(g) = root.group(name) else { continue };
-        if !g.link_exists("data") {
+        if !spec.logged_derivatives {
             continue;
         }
+        let Some(g) = root.group(name).ok().filter(|g| g.link_exists("data")) else {
+            notes.push(format!("{name}: absent (smoothed from q)"));
+            continue;
+        };
         let names = g
             .dataset("elements_names")
             .and_then(|d| cellstr(file, &d))
@@ -694,6 +705,14 @@ fn state_extras(
             notes,
         )?);
         notes.push(format!("whole-body state: {name} as logged"));
+    }
+    if spec.logged_derivatives && out.qdot.is_none() && out.qddot.is_none() {
+        return Err(LogsError::Format {
+            path: path.display().to_string(),
+            msg: "logged derivatives: neither joints_state/velocities nor \
+                  joints_state/accelerations has the elements of joints_state/positions"
+                .into(),
+        });
     }
     let k = cols.len();
     layout.qdot = vec![out.qdot.is_some(); k];

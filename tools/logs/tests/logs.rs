@@ -239,6 +239,7 @@ fn a_2gb_sparse_file_and_a_fifo_are_refused_quickly() {
             negate: vec![],
             desired_gap_s: 1.0,
             base_orientation: None,
+            logged_derivatives: false,
             wrenches: Vec::new(),
         };
         let e = frictionless_logs::mat_log::read(&path, &ms, &mut no_progress()).unwrap_err();
@@ -573,6 +574,7 @@ fn yarp_mat_file_from_h5py() {
         negate: vec![],
         desired_gap_s: 1.0,
         base_orientation: None,
+        logged_derivatives: false,
         wrenches: Vec::new(),
     };
     let run = read(&path, &sp, &mut no_progress()).unwrap();
@@ -643,6 +645,7 @@ fn mat_dataset_declaring_more_than_it_stores_is_refused() {
         negate: vec![],
         desired_gap_s: 1.0,
         base_orientation: None,
+        logged_derivatives: false,
         wrenches: Vec::new(),
     };
     let e = read(&path, &sp, &mut no_progress())

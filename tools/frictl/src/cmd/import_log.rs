@@ -180,17 +180,26 @@ pub struct MatArgs {
     /// channel).
     #[arg(long)]
     pub joint: Vec<String>,
-    /// The channel of the root link's orientation in the world (a robot on a tilted pole), a path
-    /// under `robot_logger_device`: 3 elements roll, pitch, yaw [rad] (e.g.
-    /// `orientations/waist_imu_0`, the IMU frame taken as the root link's) or 4, a quaternion x, y,
-    /// z, w (default: the root link at the identity pose).
+    /// The channel of the root link's orientation in the world (a robot on a tilted pole; the base
+    /// is taken at rest), a path under `robot_logger_device` on the ticks of the joint positions:
+    /// 3 elements roll, pitch, yaw [rad] with R = Rz(yaw)·Ry(pitch)·Rx(roll), as the logger writes
+    /// an orientation sensor (`orientations/<imu>`, elements `r p y`, taken as the root link's own),
+    /// or 4, the quaternion x, y, z, w of a logged frame (`frames/<root>/<frame>/orientation`,
+    /// elements `qx qy qz qw`). Components are matched by those element names when present.
+    /// Default: the root link at the identity pose.
     #[arg(long, value_name = "CHANNEL")]
     pub base_orientation: Option<String>,
     /// A measured wrench applied to the robot at a URDF frame, `FRAME=CHANNEL` (repeatable): a
     /// channel of 6 elements f_x f_y f_z [N], mu_x mu_y mu_z [N·m] in the frame's coordinates about
-    /// its origin (e.g. `--wrench l_foot_rear=FTs/l_foot_rear_ft`).
+    /// its origin, on the ticks of the joint positions (e.g. `--wrench
+    /// l_foot_rear_ft=FTs/l_foot_rear_ft`).
     #[arg(long = "wrench", value_name = "FRAME=CHANNEL")]
     pub wrenches: Vec<String>,
+    /// Take the whole-body state's joint velocities and accelerations as logged
+    /// (`joints_state/velocities`, `joints_state/accelerations`) instead of smoothing them from
+    /// the positions (the default, as the authors do).
+    #[arg(long)]
+    pub logged_derivatives: bool,
     /// Stream the log: read and label it in windows of this many grid samples (see `import csv`).
     #[arg(long, value_name = "N")]
     pub window_samples: Option<usize>,
@@ -389,10 +398,11 @@ pub fn run_mat(args: MatArgs) -> anyhow::Result<()> {
         negate,
         desired_gap_s: args.common.gap_s.unwrap_or(1.0),
         base_orientation: args.base_orientation.clone(),
+        logged_derivatives: args.logged_derivatives,
         wrenches: frame_pairs(
             &args.wrenches,
             body.as_ref(),
-            "l_foot_rear=FTs/l_foot_rear_ft",
+            "l_foot_rear_ft=FTs/l_foot_rear_ft",
         )?,
     };
     anyhow::ensure!(
