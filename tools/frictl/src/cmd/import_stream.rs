@@ -1,4 +1,4 @@
-//! `frictl import csv|mat|mcap … --window-samples N`: the import without holding the log. The reader hands
+//! `frictl import csv|mat … --window-samples N`: the import without holding the log. The reader hands
 //! its rows in blocks to `frictionless-ident`'s [`StreamLabeller`] (windows of N grid samples with
 //! margins derived from the smoother and filter settings, the rows equal to the whole-log import),
 //! whose rows are appended to each joint's dataset as they come. Every output is written through
