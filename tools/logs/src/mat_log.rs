@@ -39,6 +39,12 @@ pub struct MatSpec {
     pub negate: Vec<Role>,
     /// A gap of the desired-current stream larger than this closes a chunk [s].
     pub desired_gap_s: f64,
+}
+
+/// What a `.mat` log adds to the whole-body state beyond the joint positions (read only with
+/// [`MatSpec::state_joints`]; [`read_state`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MatState {
     /// The root link's orientation in the world, for the whole-body state: a channel under
     /// `robot_logger_device` on the ticks of `joints_state/positions`, of 3 elements roll, pitch,
     /// yaw [rad] (R = Rz(y)·Ry(p)·Rx(r): an orientation sensor's YARP roll-pitch-yaw, which the
@@ -331,7 +337,17 @@ fn read_ts(path: &Path, ts: &h5::Dataset, a: usize, b: usize) -> Result<Vec<f64>
 /// Reads one joint from a YARP robot logger `.mat` file into a run named after the file stem. The
 /// joint's name is in the report's `sources["joint"]`.
 pub fn read(path: &Path, spec: &MatSpec, progress: Progress) -> Result<ImportedRun, LogsError> {
-    read_streamed(path, spec, progress, None)
+    read_streamed(path, spec, &MatState::default(), progress, None)
+}
+
+/// [`read`] with the whole-body state's further channels `state`.
+pub fn read_state(
+    path: &Path,
+    spec: &MatSpec,
+    state: &MatState,
+    progress: Progress,
+) -> Result<ImportedRun, LogsError> {
+    read_streamed(path, spec, state, progress, None)
 }
 
 /// [`read`], handing the rows to `stream` in blocks as they are read (hyperslabs of the sink's block
@@ -340,6 +356,7 @@ pub fn read(path: &Path, spec: &MatSpec, progress: Progress) -> Result<ImportedR
 pub fn read_streamed(
     path: &Path,
     spec: &MatSpec,
+    extra: &MatState,
     progress: Progress,
     stream: Option<crate::BlockSink<'_>>,
 ) -> Result<ImportedRun, LogsError> {
@@ -494,12 +511,15 @@ pub fn read_streamed(
     let ts = timestamps(path, &root, "joints_state/positions", n)?;
     let mut extras = match state.as_mut() {
         Some((layout, cols)) => {
-            state_extras(path, &file, &root, spec, n, layout, cols, &mut notes)?
+            state_extras(path, &file, &root, extra, n, layout, cols, &mut notes)?
         }
         None => {
-            if spec.base_orientation.is_some() || !spec.wrenches.is_empty() {
+            if extra.base_orientation.is_some()
+                || !extra.wrenches.is_empty()
+                || extra.logged_derivatives
+            {
                 return Err(LogsError::Usage(
-                    "a base orientation or a wrench enters the whole-body state, which only the \
+                    "a base orientation, a wrench or logged derivatives enter the whole-body state, which only the \
                      current label with a URDF reads"
                         .into(),
                 ));
@@ -660,7 +680,7 @@ fn state_extras(
     path: &Path,
     file: &h5::File,
     root: &h5::Group,
-    spec: &MatSpec,
+    spec: &MatState,
     n: usize,
     layout: &mut crate::StateLayout,
     cols: &[usize],

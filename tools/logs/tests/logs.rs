@@ -238,9 +238,6 @@ fn a_2gb_sparse_file_and_a_fifo_are_refused_quickly() {
             state_joints: None,
             negate: vec![],
             desired_gap_s: 1.0,
-            base_orientation: None,
-            logged_derivatives: false,
-            wrenches: Vec::new(),
         };
         let e = frictionless_logs::mat_log::read(&path, &ms, &mut no_progress()).unwrap_err();
         assert!(e.to_string().contains("MATLAB 7.3"), "{e}");
@@ -573,9 +570,6 @@ fn yarp_mat_file_from_h5py() {
         state_joints: None,
         negate: vec![],
         desired_gap_s: 1.0,
-        base_orientation: None,
-        logged_derivatives: false,
-        wrenches: Vec::new(),
     };
     let run = read(&path, &sp, &mut no_progress()).unwrap();
     assert_eq!(
@@ -644,9 +638,6 @@ fn mat_dataset_declaring_more_than_it_stores_is_refused() {
         state_joints: None,
         negate: vec![],
         desired_gap_s: 1.0,
-        base_orientation: None,
-        logged_derivatives: false,
-        wrenches: Vec::new(),
     };
     let e = read(&path, &sp, &mut no_progress())
         .unwrap_err()

@@ -397,6 +397,8 @@ pub fn run_mat(args: MatArgs) -> anyhow::Result<()> {
         state_joints: urdf_names(&body),
         negate,
         desired_gap_s: args.common.gap_s.unwrap_or(1.0),
+    };
+    let extra = mat_log::MatState {
         base_orientation: args.base_orientation.clone(),
         logged_derivatives: args.logged_derivatives,
         wrenches: frame_pairs(
@@ -419,10 +421,12 @@ pub fn run_mat(args: MatArgs) -> anyhow::Result<()> {
             &common,
             body.as_ref(),
             w,
-            |f, stream| mat_log::read_streamed(f, &spec, &mut |_, _| {}, stream),
+            |f, stream| mat_log::read_streamed(f, &spec, &extra, &mut |_, _| {}, stream),
         );
     }
-    let runs = read_all(&args.files, |p, pr| mat_log::read(p, &spec, pr))?;
+    let runs = read_all(&args.files, |p, pr| {
+        mat_log::read_state(p, &spec, &extra, pr)
+    })?;
     finish(runs, &args.files, "mat", 1.0, None, args.common, body)
 }
 
