@@ -795,19 +795,14 @@ impl StateExtras {
             let v = b.block(path, a, e)?;
             let mut q: [Vec<f64>; 4] = std::array::from_fn(|_| Vec::with_capacity(e - a));
             for r in v.rows() {
-                let mut x = if b.width == 4 {
-                    [r[0], r[1], r[2], r[3]]
-                } else {
-                    rpy_to_quat_xyzw(r[0], r[1], r[2])
-                };
-                if x.iter().all(|c| c.is_finite()) {
-                    if let Some(p) = self.last_quat
-                        && p.iter().zip(&x).map(|(u, v)| u * v).sum::<f64>() < 0.0
-                    {
-                        x = x.map(|c| -c);
-                    }
-                    self.last_quat = Some(x);
-                }
+                let x = crate::run::continue_sign(
+                    &mut self.last_quat,
+                    if b.width == 4 {
+                        [r[0], r[1], r[2], r[3]]
+                    } else {
+                        rpy_to_quat_xyzw(r[0], r[1], r[2])
+                    },
+                );
                 for (c, xc) in q.iter_mut().zip(x) {
                     c.push(xc);
                 }

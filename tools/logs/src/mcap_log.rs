@@ -188,6 +188,31 @@ pub fn decode_joint_state(payload: &[u8]) -> Result<JointState, String> {
     })
 }
 
+/// The orientation of a CDR-encoded `sensor_msgs/msg/Imu`: the quaternion `[x, y, z, w]`, or
+/// `None` when the message says it has none (`orientation_covariance[0] == -1`, per the message's
+/// definition). Only the header, the orientation and its covariance's first element are read.
+pub fn decode_imu_orientation(payload: &[u8]) -> Result<Option<[f64; 4]>, String> {
+    if payload.len() < 4 {
+        return Err("message shorter than the CDR header".into());
+    }
+    let le = match payload[1] {
+        0x01 => true,
+        0x00 => false,
+        k => return Err(format!("unsupported CDR encapsulation kind {k:#04x}")),
+    };
+    let mut c = Cdr {
+        buf: &payload[4..],
+        pos: 0,
+        le,
+    };
+    c.i32()?; // header.stamp.sec
+    c.u32()?; // header.stamp.nanosec
+    c.string()?; // header.frame_id
+    let q = [c.f64()?, c.f64()?, c.f64()?, c.f64()?];
+    let cov0 = c.f64()?;
+    Ok((cov0 != -1.0).then_some(q))
+}
+
 /// Largest MCAP record accepted [bytes] (a chunk; recorders write ~1 MiB).
 const MAX_RECORD: usize = 256 << 20;
 /// Most bytes handed to the MCAP reader per read [bytes]: its buffer grows with the bytes the file
@@ -325,9 +350,31 @@ fn prefixes_fit(opcode: u8, data: &[u8]) -> bool {
     walk().is_some()
 }
 const SCHEMA: &str = "sensor_msgs/msg/JointState";
+const IMU_SCHEMA: &str = "sensor_msgs/msg/Imu";
 
 /// Reads one joint from an MCAP bag into a run named after the file stem.
 pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<ImportedRun, LogsError> {
+    read_with_base(path, spec, None, progress)
+}
+
+/// [`read`], the whole-body state's root-link orientation from the `sensor_msgs/msg/Imu`
+/// messages on `base_topic` (their `orientation`, taken as the root link's in the world): each
+/// `JointState` row takes the last orientation read before it in the bag's order (sample and
+/// hold), its sign continued from the previous one; rows before the first are dropped (counted as
+/// non-finite `base_quat_*`). Needs [`McapSpec::state_joints`].
+pub fn read_with_base(
+    path: &Path,
+    spec: &McapSpec,
+    base_topic: Option<&str>,
+    progress: Progress,
+) -> Result<ImportedRun, LogsError> {
+    if base_topic.is_some() && spec.state_joints.is_none() {
+        return Err(LogsError::Usage(
+            "a base orientation enters the whole-body state, which only the current label with \
+             a URDF reads"
+                .into(),
+        ));
+    }
     if let Some(r) = spec.effort_role {
         // Time, s or ṡ as the effort's role would overwrite a field read from elsewhere.
         check_effort(r)?;
@@ -362,6 +409,11 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
     reader.notify_read(magic.len());
     let mut schemas: BTreeMap<u16, (String, String)> = BTreeMap::new();
     let mut wanted: Vec<u16> = Vec::new();
+    // The base orientation topic's channels, the last orientation read, and counts.
+    let mut imu_ids: Vec<u16> = Vec::new();
+    let mut last_base: Option<[f64; 4]> = None;
+    let mut imu_msgs = 0u64;
+    let mut imu_without = 0u64;
     let mut topics: BTreeMap<String, String> = BTreeMap::new();
     let mut names_seen: Vec<String> = Vec::new();
     if spec.all_joints && spec.state_joints.is_none() {
@@ -438,8 +490,36 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
                     }
                     wanted.push(ch.id);
                 }
+                if Some(ch.topic.as_str()) == base_topic {
+                    if schema != IMU_SCHEMA || ch.message_encoding != "cdr" {
+                        return Err(fmt(format!(
+                            "base orientation topic {} carries `{schema}` ({}), not {IMU_SCHEMA} \
+                             (cdr)",
+                            ch.topic, ch.message_encoding
+                        )));
+                    }
+                    imu_ids.push(ch.id);
+                }
             }
             Record::Message { header, data } => {
+                if imu_ids.contains(&header.channel_id) {
+                    imu_msgs += 1;
+                    match decode_imu_orientation(&data).map_err(|e| {
+                        fmt(format!(
+                            "message {imu_msgs} on {}: {e}",
+                            base_topic.unwrap_or_default()
+                        ))
+                    })? {
+                        Some(q) => {
+                            last_base = Some(crate::run::continue_sign(&mut last_base, q));
+                        }
+                        None => {
+                            imu_without += 1;
+                            last_base = Some([f64::NAN; 4]);
+                        }
+                    }
+                    return Ok(());
+                }
                 if !wanted.contains(&header.channel_id) {
                     return Ok(());
                 }
@@ -463,6 +543,7 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
                                 l.qdot = vec![true; state_names.len()];
                                 state_qdot = true;
                             }
+                            l.base_quat = base_topic.is_some();
                             l
                         });
                         if spec.all_joints {
@@ -571,6 +652,9 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
                         });
                     }
                 }
+                if base_topic.is_some() {
+                    vals.extend(last_base.unwrap_or([f64::NAN; 4]));
+                }
                 let row = b.row_mut();
                 row[..vals.len()].copy_from_slice(&vals);
                 b.push(|| format!("message {msg_no}"), 0)?;
@@ -646,6 +730,15 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
             }
         )));
     }
+    if let Some(bt) = base_topic
+        && imu_ids.is_empty()
+    {
+        let list: Vec<String> = topics.iter().map(|(t, s)| format!("{t} ({s})")).collect();
+        return Err(fmt(format!(
+            "no base orientation topic {bt}; the bag has: {}",
+            list.join(", ")
+        )));
+    }
     if msg_no > 0 && t0.is_none() {
         return Err(LogsError::JointNotFound {
             path: p,
@@ -676,6 +769,12 @@ pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<Imported
             rep.notes.push(format!(
                 "names in the messages that the URDF lacks (not used): {}",
                 not_in_urdf.join(", ")
+            ));
+        }
+        if let Some(bt) = base_topic {
+            rep.notes.push(format!(
+                "base orientation: the last sensor_msgs/msg/Imu orientation on {bt} before each \
+                 message ({imu_msgs} messages, {imu_without} without an orientation)"
             ));
         }
     }

@@ -222,6 +222,21 @@ impl StateLayout {
 /// The components of a wrench, in column order (`{c}` of a wrench template).
 pub const WRENCH_COMPONENTS: [&str; 6] = ["fx", "fy", "fz", "mx", "my", "mz"];
 
+/// `x` (a quaternion) or `−x`, whichever continues the sign of the last finite one in `prev`
+/// (updated): q and −q are the same rotation, and interpolating across a sign flip passes near
+/// zero. A non-finite `x` is returned as is.
+pub(crate) fn continue_sign(prev: &mut Option<[f64; 4]>, x: [f64; 4]) -> [f64; 4] {
+    if !x.iter().all(|c| c.is_finite()) {
+        return x;
+    }
+    let y = match prev {
+        Some(p) if p.iter().zip(&x).map(|(u, v)| u * v).sum::<f64>() < 0.0 => x.map(|c| -c),
+        _ => x,
+    };
+    *prev = Some(y);
+    y
+}
+
 /// Where a streaming read hands its rows: blocks of `block_rows` rows (the last one shorter), each
 /// an [`ImportedRun`] of those rows only, with an empty report (the run's report comes with the
 /// run at the end, whose signals are then empty). A sink's error stops the read.

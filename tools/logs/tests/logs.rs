@@ -280,6 +280,37 @@ fn cdr_decoder_rejects_truncated_and_oversized_messages() {
     }
 }
 
+#[test]
+fn imu_orientation_decodes_and_a_missing_one_is_none() {
+    // Header, stamp, frame id "imu" (4 bytes with its NUL: the f64s start aligned), x y z w,
+    // covariance[0], the rest.
+    let imu = |cov0: f64| {
+        let mut m = vec![0, 1, 0, 0];
+        m.extend(5i32.to_le_bytes());
+        m.extend(7u32.to_le_bytes());
+        m.extend(4u32.to_le_bytes());
+        m.extend(b"imu\0");
+        for v in [0.1f64, -0.2, 0.3, 0.9, cov0] {
+            m.extend(v.to_le_bytes());
+        }
+        m.extend([0u8; 8 * 8 + 8 * (3 + 9) * 2]);
+        m
+    };
+    assert_eq!(
+        mcap_log::decode_imu_orientation(&imu(0.01)).unwrap(),
+        Some([0.1, -0.2, 0.3, 0.9])
+    );
+    // orientation_covariance[0] = -1: the message has no orientation.
+    assert_eq!(mcap_log::decode_imu_orientation(&imu(-1.0)).unwrap(), None);
+    let m = imu(0.0);
+    for cut in 0..44 {
+        assert!(
+            mcap_log::decode_imu_orientation(&m[..cut]).is_err(),
+            "{cut}"
+        );
+    }
+}
+
 /// The uncompressed bag of the `log_importers` fuzz seed (written by `fixtures/make_fixtures.py
 /// mcap-seed`: 24 `JointState` messages on `/joint_states`, joints `a`, `wrist`, `b`), with the fuzz
 /// target's spec and 0xFF separator stripped, copied to a temporary file.

@@ -164,6 +164,12 @@ pub struct McapArgs {
     /// none.
     #[arg(long, default_value = "tau_joint")]
     pub effort: String,
+    /// Topic of sensor_msgs/msg/Imu messages whose `orientation` (a quaternion x, y, z, w in the
+    /// world) is the root link's, for the whole-body state (a robot on a tilted pole; the base is
+    /// taken at rest): each JointState message takes the last orientation before it in the bag.
+    /// Default: the root link at the identity pose.
+    #[arg(long, value_name = "TOPIC")]
+    pub base_orientation: Option<String>,
     /// Options every format shares.
     #[command(flatten)]
     #[serde(flatten)]
@@ -375,7 +381,10 @@ pub fn run_mcap(args: McapArgs) -> anyhow::Result<()> {
         !spec.all_joints || spec.state_joints.is_some(),
         "--joints all labels the joints of the whole-body state, which only the current label reads"
     );
-    let runs = read_all(&args.files, |p, pr| mcap_log::read(p, &spec, pr))?;
+    let base = args.base_orientation.as_deref();
+    let runs = read_all(&args.files, |p, pr| {
+        mcap_log::read_with_base(p, &spec, base, pr)
+    })?;
     finish(runs, &args.files, "mcap", 0.1, None, args.common, body)
 }
 
