@@ -890,6 +890,19 @@ fn mat_measured_wrench_enters_the_label_like_pinocchio() {
         serde_json::json!(["l_foot_rear_ft"]),
         "{wb}"
     );
+    // The same wrench logged with its elements in another order: matched by name.
+    let mut reordered = TILT_RPY.to_vec();
+    reordered.extend([
+        "--wrench",
+        "l_foot_rear_ft=cartesian_wrenches/l_foot_rear_ft",
+    ]);
+    ok(
+        import_tilted("reordered", &reordered),
+        "import mat --wrench (reordered)",
+    );
+    for (rms, n) in tilted_rms("reordered") {
+        assert!(n > 7000 && rms < 0.15, "reordered: RMS {rms} on {n}");
+    }
     // The joints' velocities and accelerations as logged (exact in this log) instead of smoothed.
     extra.push("--logged-derivatives");
     ok(
