@@ -10,8 +10,14 @@
 //! larger than the given gap (1 s, the authors' rule); robot ticks outside every span are skipped
 //! (counted). Without that channel the whole file is one stream split by the pipeline's gap rule.
 //!
-//! Bounded: each channel's `data` (N, 1, n) is read as hyperslabs of 65 536 rows of the one joint's
-//! column, so memory is the joint's signals, whatever the file size. Sizes are checked before
+//! The whole-body state ([`MatSpec::state_joints`]) is every joint of `joints_state/positions`, and,
+//! when asked for ([`MatState`]), the joints' logged velocities and accelerations, the root link's
+//! orientation (roll/pitch/yaw or a quaternion) and measured wrenches at URDF frames, each from a
+//! channel on the same ticks.
+//!
+//! Bounded: each channel's `data` (N, 1, n) is read as hyperslabs of 65 536 rows (streamed: of the
+//! sink's block) of the one joint's column (the state's channels: every column), so memory is the
+//! joints' signals, whatever the file size. Sizes are checked before
 //! anything is read: a cellstr holds at most [`MAX_NAMES`] names of at most [`MAX_NAME_UNITS`] code
 //! units, and a dataset may not declare more bytes than the file could hold ([`check_stored`]: an
 //! HDF5 dataset whose chunks were never written reads as fill values of any declared size).
