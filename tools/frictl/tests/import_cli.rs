@@ -870,6 +870,15 @@ fn mat_base_orientation_tilts_the_gravity_like_pinocchio() {
         e.contains("FTs/l_foot_rear_ft") && e.contains("3 or 4"),
         "{e}"
     );
+    // Another label has no whole-body state for the orientation to enter: said, not ignored.
+    let e = err_text(
+        import_tilted(
+            "bad",
+            &[TILT_RPY[0], TILT_RPY[1], "--label", "torque-sensor"],
+        ),
+        "a base orientation with the torque-sensor label",
+    );
+    assert!(e.contains("whole-body state"), "{e}");
     assert!(!tilted_fixture().join("bad_l_knee.csv").exists());
 }
 
