@@ -23,7 +23,7 @@ use super::controller::Reference;
 use super::metrics::{self, DisturbanceMetrics, TrackCriterion, TrackMetrics};
 use super::run::{JointPlan, JointTrace, Pulse, Rig, TrialOptions, TrialSpec, run_trial_on};
 use super::search::{KpBisection, MinKp};
-use super::session::{Binaries, FrictionModel, Mode};
+use super::session::{Binaries, FrictionModel, Lpf, Mode};
 use super::suite::{SearchStep, amp_freq, run_parallel};
 
 /// The leg as the controller and frictiond's config need it.
@@ -164,6 +164,8 @@ pub struct LegModel {
     pub delta_theta_offset_motor_rad: Vec<Option<f64>>,
     /// `kfc` per payload joint (`None` or no entry: the shipped law's).
     pub kfc: Vec<Option<f64>>,
+    /// τ̂_F low-pass per payload joint (`None` or no entry: the shipped law's).
+    pub lpf: Vec<Option<Lpf>>,
 }
 
 impl LegModel {
@@ -180,6 +182,7 @@ impl LegModel {
             per_joint,
             delta_theta_offset_motor_rad: Vec::new(),
             kfc: Vec::new(),
+            lpf: Vec::new(),
         }
     }
 }
@@ -187,9 +190,9 @@ impl LegModel {
 impl LegModel {
     /// The compensation a frictiond config describes (e.g. the one `frictl robot run` writes), by
     /// joint name: each leg joint runs the config's model for the joint of the same name (CV, SCV,
-    /// PINN or none) with the config's `kfc` and `delta_theta_offset_motor_rad`, and `none` if the
-    /// config does not list it. A LuGre joint is an error (the experiments compare none / CV / SCV /
-    /// PINN).
+    /// PINN or none) with the config's `kfc`, `lpf` and `delta_theta_offset_motor_rad`, and `none`
+    /// if the config does not list it. A LuGre joint is an error (the experiments compare none /
+    /// CV / SCV / PINN).
     pub fn from_daemon_config(
         label: &str,
         path: &std::path::Path,
@@ -203,12 +206,15 @@ impl LegModel {
         let mut per_joint = vec![FrictionModel::None; leg.dof()];
         let mut offsets = vec![None; leg.dof()];
         let mut kfc = vec![None; leg.dof()];
+        let mut lpf = vec![None; leg.dof()];
         for (raw, spec) in cfg.raw.joint.iter().zip(&cfg.models) {
             let Ok(i) = leg.index(&raw.name) else {
                 continue;
             };
             offsets[i] = raw.delta_theta_offset_motor_rad;
             kfc[i] = Some(raw.kfc);
+            // No `lpf` key in the config is no filter, not the shipped one.
+            lpf[i] = Some(Lpf::from(raw.lpf));
             per_joint[i] = match spec {
                 ModelSpec::None => FrictionModel::None,
                 ModelSpec::Cv(p) => FrictionModel::Cv(*p),
@@ -227,6 +233,7 @@ impl LegModel {
             per_joint,
             delta_theta_offset_motor_rad: offsets,
             kfc,
+            lpf,
         })
     }
 }
@@ -409,8 +416,8 @@ fn run_one(
         kfc: model.kfc.clone(),
     };
     let opts = TrialOptions {
+        lpf: model.lpf.clone(),
         rotor_inertia_in_m: cfg.rotor_inertia_in_m,
-        ..TrialOptions::default()
     };
     let trace = run_trial_on(&cfg.bins, &Rig::Leg(leg), &spec, &opts)?;
     if cfg.progress {
@@ -633,10 +640,12 @@ mod tests {
         let scv = "friction_model = \"coulomb_viscous_stribeck\"\nkc = 1.0\nka = 50.0\nkv = 0.5\n\
                    ks = 2.0\nvs = 0.1\nalpha = 1.0";
         let cv = "friction_model = \"coulomb_viscous\"\nkc = 3.0\nka = 50.0\nkv = 0.25";
+        let law =
+            "kfc = 0.6\nlpf = { order = 2, cutoff_hz = 20.0 }\ndelta_theta_offset_motor_rad = 0.25";
         let text = format!(
             "{head}{}{}{}",
             joint("l_ankle_roll", 0, cv),
-            joint("l_knee", 1, scv),
+            joint("l_knee", 1, &format!("{scv}\n{law}")),
             joint("r_knee", 2, cv)
         );
         let path = dir.join("ok.toml");
@@ -653,6 +662,21 @@ mod tests {
                 assert_eq!(*f, FrictionModel::None, "joint {i}");
             }
         }
+        // each listed joint's law as the config has it (the knee is payload index 3: beyond the
+        // single-joint suite's two), the unlisted ones the shipped law's
+        assert_eq!(m.kfc[knee], Some(0.6));
+        assert_eq!(
+            m.lpf[knee],
+            Some(Lpf::Butterworth {
+                order: 2,
+                cutoff_hz: 20.0
+            })
+        );
+        assert_eq!(m.delta_theta_offset_motor_rad[knee], Some(0.25));
+        assert_eq!((m.kfc[ankle], m.lpf[ankle]), (Some(1.0), Some(Lpf::Off)));
+        assert_eq!(m.delta_theta_offset_motor_rad[ankle], None);
+        let hip = leg.index("l_hip_pitch").unwrap();
+        assert_eq!((m.kfc[hip], m.lpf[hip]), (None, None));
         // LuGre is refused, naming the file and the joint
         let lugre = "friction_model = \"lugre\"\nkc = 1.0\nkv = 0.5\nks = 2.0\nvs = 0.1\n\
                      alpha = 1.0\nsigma0 = 1e4\nsigma1 = 10.0";

@@ -167,10 +167,11 @@ pub struct TrialSpec {
 }
 
 /// Further per-trial settings (kept out of [`TrialSpec`] so existing struct literals stay valid).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct TrialOptions {
-    /// τ̂_F low-pass per joint index instead of the shipped config's (`None` = shipped).
-    pub lpf: [Option<Lpf>; 2],
+    /// τ̂_F low-pass per payload index instead of the shipped config's (`None` or no entry =
+    /// shipped).
+    pub lpf: Vec<Option<Lpf>>,
     /// Add the reflected rotor inertia r²·J_m (from the preset) to the controller's M (diagnostic;
     /// the paper's M is the link inertia only).
     pub rotor_inertia_in_m: bool,

@@ -145,7 +145,7 @@ pub fn run_grouped(
             setups,
             &spec,
             &TrialOptions {
-                lpf: cfg.lpf,
+                lpf: cfg.lpf.to_vec(),
                 rotor_inertia_in_m: cfg.rotor_inertia_in_m,
             },
         )?;

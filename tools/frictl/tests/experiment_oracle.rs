@@ -44,7 +44,10 @@ fn run(model: FrictionModel, lpf: Lpf, duration_s: f64) -> (JointTrace, [JointSe
         raw_friction: false,
         kfc: vec![],
     };
-    let mut opts = TrialOptions::default();
+    let mut opts = TrialOptions {
+        lpf: vec![None; ANKLE + 1],
+        ..TrialOptions::default()
+    };
     opts.lpf[ANKLE] = Some(lpf);
     let mut trace = run_trial_with(&bins, &setups, &spec, &opts).expect("closed-loop trial");
     (trace.joints.remove(0), setups)
