@@ -10,7 +10,8 @@
 //! every joint the log has ([`JointStates`], matched to the URDF's names), in SI units and the
 //! project's signs, with a record of every conversion ([`RunReport`]):
 //! - [`csv_log`]: any CSV with a column → [`Role`] mapping and per-role [`Unit`]s, streamed row by row;
-//! - [`mcap_log`]: ROS 2 MCAP bags of `sensor_msgs/msg/JointState` (CDR), streamed record by record;
+//! - [`mcap_log`]: ROS 2 MCAP bags of `sensor_msgs/msg/JointState` (CDR; the whole-body state also
+//!   from `sensor_msgs/msg/Imu` and `geometry_msgs/msg/WrenchStamped` topics), streamed record by record;
 //! - `mat_log` (cargo feature `mat`, needs the system HDF5 library): the YARP robot logger's MATLAB
 //!   v7.3 files, read one column of one dataset at a time.
 //!
@@ -29,6 +30,7 @@ pub mod csv_log;
 #[cfg(feature = "mat")]
 pub mod mat_log;
 pub mod mcap_log;
+mod mcap_state;
 pub mod plausibility;
 mod roles;
 mod run;

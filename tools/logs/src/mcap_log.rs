@@ -13,6 +13,10 @@
 //! The CDR payload is decoded by hand ([`decode_joint_state`]): the message is five fields of
 //! primitives, strings and sequences, every read is bounds-checked, and the serde-based `cdr` crate
 //! has had no release since 2021 — a dependency for twenty lines was not worth it.
+//!
+//! The whole-body state ([`read_state`]) can also take the root link's orientation from a
+//! `sensor_msgs/msg/Imu` topic and measured wrenches from `geometry_msgs/msg/WrenchStamped` topics
+//! ([`McapState`]), each sampled and held onto the `JointState` rows in the bag's order.
 
 use std::collections::BTreeMap;
 use std::io::Read;
@@ -21,6 +25,8 @@ use std::path::Path;
 use mcap::records::{Record, op};
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
 
+use crate::mcap_state::StateTopics;
+pub use crate::mcap_state::decode_wrench;
 use crate::run::RunBuilder;
 use crate::{ImportedRun, LogsError, Progress, Role, RoleMap, open_regular};
 
@@ -87,13 +93,29 @@ pub struct JointState {
 }
 
 /// CDR cursor (XCDR1, alignment counted from the first byte after the 4-byte encapsulation header).
-struct Cdr<'a> {
+pub(crate) struct Cdr<'a> {
     buf: &'a [u8],
     pos: usize,
     le: bool,
 }
 
 impl<'a> Cdr<'a> {
+    /// A cursor after the encapsulation header (little- or big-endian XCDR1).
+    pub(crate) fn new(payload: &'a [u8]) -> Result<Self, String> {
+        if payload.len() < 4 {
+            return Err("message shorter than the CDR header".into());
+        }
+        let le = match payload[1] {
+            0x01 => true,
+            0x00 => false,
+            k => return Err(format!("unsupported CDR encapsulation kind {k:#04x}")),
+        };
+        Ok(Self {
+            buf: &payload[4..],
+            pos: 0,
+            le,
+        })
+    }
     fn align(&mut self, n: usize) -> Result<(), String> {
         let pad = (n - self.pos % n) % n;
         self.take(pad).map(|_| ())
@@ -114,7 +136,7 @@ impl<'a> Cdr<'a> {
         self.pos = end;
         Ok(s)
     }
-    fn u32(&mut self) -> Result<u32, String> {
+    pub(crate) fn u32(&mut self) -> Result<u32, String> {
         self.align(4)?;
         let b: [u8; 4] = self.take(4)?.try_into().map_err(|_| "u32".to_string())?;
         Ok(if self.le {
@@ -123,10 +145,10 @@ impl<'a> Cdr<'a> {
             u32::from_be_bytes(b)
         })
     }
-    fn i32(&mut self) -> Result<i32, String> {
+    pub(crate) fn i32(&mut self) -> Result<i32, String> {
         self.u32().map(|v| v as i32)
     }
-    fn f64(&mut self) -> Result<f64, String> {
+    pub(crate) fn f64(&mut self) -> Result<f64, String> {
         self.align(8)?;
         let b: [u8; 8] = self.take(8)?.try_into().map_err(|_| "f64".to_string())?;
         Ok(if self.le {
@@ -143,7 +165,7 @@ impl<'a> Cdr<'a> {
         }
         Ok(n)
     }
-    fn string(&mut self) -> Result<String, String> {
+    pub(crate) fn string(&mut self) -> Result<String, String> {
         let n = self.count(1)?;
         let b = self.take(n)?;
         let b = b.strip_suffix(&[0]).unwrap_or(b);
@@ -157,19 +179,7 @@ impl<'a> Cdr<'a> {
 
 /// Decodes a CDR-encoded `sensor_msgs/msg/JointState` (little- or big-endian XCDR1).
 pub fn decode_joint_state(payload: &[u8]) -> Result<JointState, String> {
-    if payload.len() < 4 {
-        return Err("message shorter than the CDR header".into());
-    }
-    let le = match payload[1] {
-        0x01 => true,
-        0x00 => false,
-        k => return Err(format!("unsupported CDR encapsulation kind {k:#04x}")),
-    };
-    let mut c = Cdr {
-        buf: &payload[4..],
-        pos: 0,
-        le,
-    };
+    let mut c = Cdr::new(payload)?;
     let sec = c.i32()?;
     let nsec = c.u32()?;
     let frame_id = c.string()?;
@@ -192,19 +202,7 @@ pub fn decode_joint_state(payload: &[u8]) -> Result<JointState, String> {
 /// `None` when the message says it has none (`orientation_covariance[0] == -1`, per the message's
 /// definition). Only the header, the orientation and its covariance's first element are read.
 pub fn decode_imu_orientation(payload: &[u8]) -> Result<Option<[f64; 4]>, String> {
-    if payload.len() < 4 {
-        return Err("message shorter than the CDR header".into());
-    }
-    let le = match payload[1] {
-        0x01 => true,
-        0x00 => false,
-        k => return Err(format!("unsupported CDR encapsulation kind {k:#04x}")),
-    };
-    let mut c = Cdr {
-        buf: &payload[4..],
-        pos: 0,
-        le,
-    };
+    let mut c = Cdr::new(payload)?;
     c.i32()?; // header.stamp.sec
     c.u32()?; // header.stamp.nanosec
     c.string()?; // header.frame_id
@@ -350,7 +348,6 @@ fn prefixes_fit(opcode: u8, data: &[u8]) -> bool {
     walk().is_some()
 }
 const SCHEMA: &str = "sensor_msgs/msg/JointState";
-const IMU_SCHEMA: &str = "sensor_msgs/msg/Imu";
 
 /// Reads one joint from an MCAP bag into a run named after the file stem.
 pub fn read(path: &Path, spec: &McapSpec, progress: Progress) -> Result<ImportedRun, LogsError> {
@@ -368,10 +365,42 @@ pub fn read_with_base(
     base_topic: Option<&str>,
     progress: Progress,
 ) -> Result<ImportedRun, LogsError> {
-    if base_topic.is_some() && spec.state_joints.is_none() {
+    let extra = McapState {
+        base_orientation: base_topic.map(str::to_string),
+        wrenches: Vec::new(),
+    };
+    read_state(path, spec, &extra, progress)
+}
+
+/// What an MCAP bag adds to the whole-body state beyond the joint positions (read only with
+/// [`McapSpec::state_joints`]; [`read_state`]). Each `JointState` row takes the last message of
+/// each topic read before it in the bag's order (sample and hold).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct McapState {
+    /// Topic of `sensor_msgs/msg/Imu` messages whose `orientation` is the root link's in the
+    /// world (see [`read_with_base`]).
+    pub base_orientation: Option<String>,
+    /// Measured wrenches applied to the robot: `(URDF frame, topic)`, the topic's
+    /// `geometry_msgs/msg/WrenchStamped` messages' `wrench.force` [N] and `wrench.torque` [N·m] in
+    /// the coordinates of the URDF frame, about its origin (the message's frame must be that
+    /// frame; a `header.frame_id` that is not its name is warned about). A `JointState` row before
+    /// the topic's first message is an error.
+    pub wrenches: Vec<(String, String)>,
+}
+
+/// [`read`] with the whole-body state's [`McapState`] topics. Needs [`McapSpec::state_joints`]
+/// when any is given.
+pub fn read_state(
+    path: &Path,
+    spec: &McapSpec,
+    extra: &McapState,
+    progress: Progress,
+) -> Result<ImportedRun, LogsError> {
+    let mut state_topics = StateTopics::new(extra);
+    if state_topics.any() && spec.state_joints.is_none() {
         return Err(LogsError::Usage(
-            "a base orientation enters the whole-body state, which only the current label with \
-             a URDF reads"
+            "a base orientation or a wrench enters the whole-body state, which only the current \
+             label with a URDF reads"
                 .into(),
         ));
     }
@@ -409,11 +438,6 @@ pub fn read_with_base(
     reader.notify_read(magic.len());
     let mut schemas: BTreeMap<u16, (String, String)> = BTreeMap::new();
     let mut wanted: Vec<u16> = Vec::new();
-    // The base orientation topic's channels, the last orientation read, and counts.
-    let mut imu_ids: Vec<u16> = Vec::new();
-    let mut last_base: Option<[f64; 4]> = None;
-    let mut imu_msgs = 0u64;
-    let mut imu_without = 0u64;
     let mut topics: BTreeMap<String, String> = BTreeMap::new();
     let mut names_seen: Vec<String> = Vec::new();
     if spec.all_joints && spec.state_joints.is_none() {
@@ -490,34 +514,15 @@ pub fn read_with_base(
                     }
                     wanted.push(ch.id);
                 }
-                if Some(ch.topic.as_str()) == base_topic {
-                    if schema != IMU_SCHEMA || ch.message_encoding != "cdr" {
-                        return Err(fmt(format!(
-                            "base orientation topic {} carries `{schema}` ({}), not {IMU_SCHEMA} \
-                             (cdr)",
-                            ch.topic, ch.message_encoding
-                        )));
-                    }
-                    imu_ids.push(ch.id);
-                }
+                state_topics
+                    .channel(&ch.topic, &schema, &ch.message_encoding, ch.id)
+                    .map_err(fmt)?;
             }
             Record::Message { header, data } => {
-                if imu_ids.contains(&header.channel_id) {
-                    imu_msgs += 1;
-                    match decode_imu_orientation(&data).map_err(|e| {
-                        fmt(format!(
-                            "message {imu_msgs} on {}: {e}",
-                            base_topic.unwrap_or_default()
-                        ))
-                    })? {
-                        Some(q) => {
-                            last_base = Some(crate::run::continue_sign(&mut last_base, q));
-                        }
-                        None => {
-                            imu_without += 1;
-                            last_base = Some([f64::NAN; 4]);
-                        }
-                    }
+                if state_topics
+                    .message(header.channel_id, &data)
+                    .map_err(fmt)?
+                {
                     return Ok(());
                 }
                 if !wanted.contains(&header.channel_id) {
@@ -543,7 +548,7 @@ pub fn read_with_base(
                                 l.qdot = vec![true; state_names.len()];
                                 state_qdot = true;
                             }
-                            l.base_quat = base_topic.is_some();
+                            state_topics.layout(&mut l);
                             l
                         });
                         if spec.all_joints {
@@ -652,9 +657,9 @@ pub fn read_with_base(
                         });
                     }
                 }
-                if base_topic.is_some() {
-                    vals.extend(last_base.unwrap_or([f64::NAN; 4]));
-                }
+                state_topics
+                    .extend_row(&mut vals, &spec.topic, msg_no, &topics)
+                    .map_err(fmt)?;
                 let row = b.row_mut();
                 row[..vals.len()].copy_from_slice(&vals);
                 b.push(|| format!("message {msg_no}"), 0)?;
@@ -730,15 +735,7 @@ pub fn read_with_base(
             }
         )));
     }
-    if let Some(bt) = base_topic
-        && imu_ids.is_empty()
-    {
-        let list: Vec<String> = topics.iter().map(|(t, s)| format!("{t} ({s})")).collect();
-        return Err(fmt(format!(
-            "no base orientation topic {bt}; the bag has: {}",
-            list.join(", ")
-        )));
-    }
+    state_topics.check_present(&topics).map_err(fmt)?;
     if msg_no > 0 && t0.is_none() {
         return Err(LogsError::JointNotFound {
             path: p,
@@ -771,12 +768,7 @@ pub fn read_with_base(
                 not_in_urdf.join(", ")
             ));
         }
-        if let Some(bt) = base_topic {
-            rep.notes.push(format!(
-                "base orientation: the last sensor_msgs/msg/Imu orientation on {bt} before each \
-                 message ({imu_msgs} messages, {imu_without} without an orientation)"
-            ));
-        }
+        state_topics.report(rep);
     }
     if let Some(t0) = t0 {
         rep.notes.push(format!(

@@ -311,6 +311,26 @@ fn imu_orientation_decodes_and_a_missing_one_is_none() {
     }
 }
 
+#[test]
+fn wrench_stamped_decodes_its_frame_force_and_torque() {
+    // Header, stamp, frame id "l_f" (4 bytes with its NUL: the f64s start aligned), force, torque.
+    let mut m = vec![0, 1, 0, 0];
+    m.extend(5i32.to_le_bytes());
+    m.extend(7u32.to_le_bytes());
+    m.extend(4u32.to_le_bytes());
+    m.extend(b"l_f\0");
+    for v in [1.0f64, -2.0, 300.0, 4.0, -5.0, 6.0] {
+        m.extend(v.to_le_bytes());
+    }
+    assert_eq!(
+        mcap_log::decode_wrench(&m).unwrap(),
+        ("l_f".to_string(), [1.0, -2.0, 300.0, 4.0, -5.0, 6.0])
+    );
+    for cut in 0..m.len() {
+        assert!(mcap_log::decode_wrench(&m[..cut]).is_err(), "{cut}");
+    }
+}
+
 /// The uncompressed bag of the `log_importers` fuzz seed (written by `fixtures/make_fixtures.py
 /// mcap-seed`: 24 `JointState` messages on `/joint_states`, joints `a`, `wrist`, `b`), with the fuzz
 /// target's spec and 0xFF separator stripped, copied to a temporary file.
