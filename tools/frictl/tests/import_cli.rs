@@ -677,7 +677,7 @@ fn mat_whole_body_label_matches_pinocchio() {
 
 /// The logs of `make_fixtures.py tilted` (the leg of [`leg_fixture`] on a root link tilted 20° in roll
 /// and −10° in pitch, yawed 30°, swaying 2°; `tilted.mat` with a 250–350 N wrench applied at
-/// `l_foot_rear_ft`, `tilted.mcap` without it; the currents from Pinocchio's rnea with that gravity
+/// `l_foot_rear_ft`, `tilted.mcap` without it, `tilted_wrench.mcap` with it; the currents from Pinocchio's rnea with that gravity
 /// and `fext`), written once per test process.
 fn tilted_fixture() -> PathBuf {
     static DIR: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
@@ -822,6 +822,95 @@ fn mcap_imu_base_orientation_tilts_the_gravity_like_pinocchio() {
         "a topic that is not an Imu",
     );
     assert!(e.contains("sensor_msgs/msg/Imu"), "{e}");
+}
+
+#[test]
+#[ignore = "needs FRICTIONLESS_PY (tests/run.sh): Pinocchio writes the tilted log"]
+fn mcap_measured_wrench_enters_the_label_like_pinocchio() {
+    let d = tilted_fixture();
+    let urdf = ergocub_urdf();
+    let bag = d.join("tilted_wrench.mcap");
+    let import = |name: &str, wrench: Option<&str>| {
+        let out = d.join(format!("{name}_{{joint}}.csv"));
+        let mut args = vec![
+            "import",
+            "mcap",
+            s(&bag),
+            "--joint",
+            "l_knee",
+            "--joint",
+            "l_hip_pitch",
+            "--effort",
+            "current",
+            "--base-orientation",
+            "/imu",
+            "--urdf",
+            s(&urdf),
+            "--gear-ratio",
+            "100",
+            "--kt",
+            "0.1",
+            "-o",
+            s(&out),
+        ];
+        if let Some(w) = wrench {
+            args.extend(["--wrench", w]);
+        }
+        frictl(&args)
+    };
+    ok(
+        import("mcap_wrench", Some("l_foot_rear_ft=/l_foot_rear_ft")),
+        "import mcap --wrench",
+    );
+    for (rms, n) in tilted_rms_vs("mcap_wrench", "tau_id_") {
+        assert!(n > 7000 && rms < 0.15, "RMS {rms} on {n}");
+    }
+    let side = sidecar(&d.join("mcap_wrench_l_knee.csv"));
+    assert_eq!(
+        side["settings"]["import"]["whole_body"]["wrenches"],
+        serde_json::json!(["l_foot_rear_ft"]),
+        "{side}"
+    );
+    // Without it the label misses the foot's 250–350 N.
+    ok(import("mcap_no_wrench", None), "import mcap (no wrench)");
+    let [(knee, _), (hip, _)] = tilted_rms_vs("mcap_no_wrench", "tau_id_");
+    assert!(
+        knee > 1.0 && hip > 1.0,
+        "the wrench must matter: knee {knee}, hip {hip}"
+    );
+    let e = err_text(
+        import("mcap_bad", Some("l_foot_rear_ft=/nope")),
+        "an absent wrench topic",
+    );
+    assert!(
+        e.contains("/nope") && e.contains("/l_foot_rear_ft ("),
+        "{e}"
+    );
+    let e = err_text(
+        import("mcap_bad", Some("l_foot_rear_ft=/imu")),
+        "a topic that is not a WrenchStamped",
+    );
+    assert!(
+        e.contains("/imu") && e.contains("geometry_msgs/msg/WrenchStamped"),
+        "{e}"
+    );
+    let e = err_text(
+        import("mcap_bad", Some("l_foot_nowhere=/l_foot_rear_ft")),
+        "a frame the URDF lacks",
+    );
+    assert!(
+        e.contains("l_foot_nowhere") && e.contains("/l_foot_rear_ft"),
+        "{e}"
+    );
+    let e = err_text(
+        import("mcap_bad", Some("l_foot_rear_ft=/l_foot_rear_ft_late")),
+        "no wrench before the first joint state",
+    );
+    assert!(
+        e.contains("/l_foot_rear_ft_late") && e.contains("message 1 on /joint_states"),
+        "{e}"
+    );
+    assert!(!d.join("mcap_bad_l_knee.csv").exists());
 }
 
 #[cfg(feature = "mat")]

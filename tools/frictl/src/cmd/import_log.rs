@@ -170,6 +170,12 @@ pub struct McapArgs {
     /// Default: the root link at the identity pose.
     #[arg(long, value_name = "TOPIC")]
     pub base_orientation: Option<String>,
+    /// A measured wrench applied to the robot at a URDF frame, `FRAME=TOPIC` (repeatable): the
+    /// topic's geometry_msgs/msg/WrenchStamped `force` [N] and `torque` [N·m], in the message's
+    /// frame, which must be the URDF frame FRAME, about its origin; each JointState message takes
+    /// the last wrench before it in the bag (e.g. `--wrench l_foot_rear_ft=/l_foot_rear_ft`).
+    #[arg(long = "wrench", value_name = "FRAME=TOPIC")]
+    pub wrenches: Vec<String>,
     /// Options every format shares.
     #[command(flatten)]
     #[serde(flatten)]
@@ -381,9 +387,16 @@ pub fn run_mcap(args: McapArgs) -> anyhow::Result<()> {
         !spec.all_joints || spec.state_joints.is_some(),
         "--joints all labels the joints of the whole-body state, which only the current label reads"
     );
-    let base = args.base_orientation.as_deref();
+    let extra = mcap_log::McapState {
+        base_orientation: args.base_orientation.clone(),
+        wrenches: frame_pairs(
+            &args.wrenches,
+            body.as_ref(),
+            "l_foot_rear_ft=/l_foot_rear_ft",
+        )?,
+    };
     let runs = read_all(&args.files, |p, pr| {
-        mcap_log::read_with_base(p, &spec, base, pr)
+        mcap_log::read_state(p, &spec, &extra, pr)
     })?;
     finish(runs, &args.files, "mcap", 0.1, None, args.common, body)
 }
