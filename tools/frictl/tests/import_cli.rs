@@ -911,6 +911,16 @@ fn mcap_measured_wrench_enters_the_label_like_pinocchio() {
         "{e}"
     );
     assert!(!d.join("mcap_bad_l_knee.csv").exists());
+    // A message whose header.frame_id is not the URDF frame named: warned about.
+    let out = ok(
+        import("mcap_other_frame", Some("l_foot_rear=/l_foot_rear_ft")),
+        "import mcap --wrench (another frame)",
+    );
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        e.contains("header.frame_id `l_foot_rear_ft` is not the URDF frame `l_foot_rear`"),
+        "{e}"
+    );
 }
 
 #[cfg(feature = "mat")]
