@@ -712,13 +712,24 @@ const TILT_WRENCH: [&str; 2] = ["--wrench", "l_foot_rear_ft=FTs/l_foot_rear_ft"]
 /// `extra` options; the output.
 #[cfg(feature = "mat")]
 fn import_tilted(name: &str, extra: &[&str]) -> std::process::Output {
+    import_tilted_log("tilted.mat", name, extra)
+}
+
+/// `frictl import mat|mcap FILE` (a file of the tilted fixture, the format from its extension) of
+/// the knee and the hip pitch into `DIR/<name>_{joint}.csv` with `extra` options; the output.
+fn import_tilted_log(file: &str, name: &str, extra: &[&str]) -> std::process::Output {
     let d = tilted_fixture();
     let out = d.join(format!("{name}_{{joint}}.csv"));
     let urdf = ergocub_urdf();
-    let log = d.join("tilted.mat");
+    let log = d.join(file);
+    let format = if file.ends_with(".mcap") {
+        "mcap"
+    } else {
+        "mat"
+    };
     let mut args = vec![
         "import",
-        "mat",
+        format,
         s(&log),
         "--joint",
         "l_knee",
@@ -765,33 +776,12 @@ fn tilted_rms(name: &str) -> [(f64, usize); 2] {
 #[ignore = "needs FRICTIONLESS_PY (tests/run.sh): Pinocchio writes the tilted log"]
 fn mcap_imu_base_orientation_tilts_the_gravity_like_pinocchio() {
     let d = tilted_fixture();
-    let urdf = ergocub_urdf();
-    let bag = d.join("tilted.mcap");
     let import = |name: &str, base: Option<&str>| {
-        let out = d.join(format!("{name}_{{joint}}.csv"));
-        let mut args = vec![
-            "import",
-            "mcap",
-            s(&bag),
-            "--joint",
-            "l_knee",
-            "--joint",
-            "l_hip_pitch",
-            "--effort",
-            "current",
-            "--urdf",
-            s(&urdf),
-            "--gear-ratio",
-            "100",
-            "--kt",
-            "0.1",
-            "-o",
-            s(&out),
-        ];
+        let mut extra = vec!["--effort", "current"];
         if let Some(topic) = base {
-            args.extend(["--base-orientation", topic]);
+            extra.extend(["--base-orientation", topic]);
         }
-        frictl(&args)
+        import_tilted_log("tilted.mcap", name, &extra)
     };
     // The Imu orientation's sign alternates from message to message in this bag.
     ok(
@@ -828,35 +818,12 @@ fn mcap_imu_base_orientation_tilts_the_gravity_like_pinocchio() {
 #[ignore = "needs FRICTIONLESS_PY (tests/run.sh): Pinocchio writes the tilted log"]
 fn mcap_measured_wrench_enters_the_label_like_pinocchio() {
     let d = tilted_fixture();
-    let urdf = ergocub_urdf();
-    let bag = d.join("tilted_wrench.mcap");
     let import = |name: &str, wrench: Option<&str>| {
-        let out = d.join(format!("{name}_{{joint}}.csv"));
-        let mut args = vec![
-            "import",
-            "mcap",
-            s(&bag),
-            "--joint",
-            "l_knee",
-            "--joint",
-            "l_hip_pitch",
-            "--effort",
-            "current",
-            "--base-orientation",
-            "/imu",
-            "--urdf",
-            s(&urdf),
-            "--gear-ratio",
-            "100",
-            "--kt",
-            "0.1",
-            "-o",
-            s(&out),
-        ];
+        let mut extra = vec!["--effort", "current", "--base-orientation", "/imu"];
         if let Some(w) = wrench {
-            args.extend(["--wrench", w]);
+            extra.extend(["--wrench", w]);
         }
-        frictl(&args)
+        import_tilted_log("tilted_wrench.mcap", name, &extra)
     };
     ok(
         import("mcap_wrench", Some("l_foot_rear_ft=/l_foot_rear_ft")),
