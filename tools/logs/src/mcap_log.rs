@@ -396,6 +396,40 @@ pub fn read_state(
     extra: &McapState,
     progress: Progress,
 ) -> Result<ImportedRun, LogsError> {
+    read_streamed(path, spec, extra, progress, None)
+}
+
+/// [`read_state`], handing the rows to `stream` in blocks as they are read instead of holding
+/// them (the returned run then has the report and no rows; see [`crate::BlockSink`]).
+///
+/// Streamed, the first `JointState` message decides which of `position`, `velocity` and `effort`
+/// are read (an empty array there: not measured, for the whole bag), and a later message with an
+/// empty array where the first had values is an error naming it: the rows already handed on
+/// cannot be taken back. (Held whole, a field empty in any message is dropped for the whole bag.)
+pub fn read_streamed(
+    path: &Path,
+    spec: &McapSpec,
+    extra: &McapState,
+    progress: Progress,
+    stream: Option<crate::BlockSink<'_>>,
+) -> Result<ImportedRun, LogsError> {
+    // Streamed: which of position, velocity, effort the first message lacks. Each block's
+    // signals for those are removed before the block goes on (they hold placeholders).
+    let absent = std::cell::Cell::new([false; 3]);
+    let streaming = stream.is_some();
+    let block_rows = stream.as_ref().map_or(1, |s| s.block_rows);
+    let mut inner = stream.map(|s| s.sink);
+    let mut masked = |mut block: ImportedRun| -> Result<(), String> {
+        let a = absent.get();
+        for sig in std::iter::once(&mut block.signals).chain(&mut block.other_joints) {
+            drop_absent(sig, a);
+        }
+        inner.as_mut().map_or(Ok(()), |sink| sink(block))
+    };
+    let mut sink = streaming.then_some(crate::BlockSink {
+        block_rows,
+        sink: &mut masked,
+    });
     let mut state_topics = StateTopics::new(extra);
     if state_topics.any() && spec.state_joints.is_none() {
         return Err(LogsError::Usage(
@@ -531,6 +565,31 @@ pub fn read_state(
                 msg_no += 1;
                 let js = decode_joint_state(&data)
                     .map_err(|e| fmt(format!("message {msg_no} on {}: {e}", spec.topic)))?;
+                let lacks = [
+                    js.position.is_empty(),
+                    js.velocity.is_empty(),
+                    spec.effort_role.is_some() && js.effort.is_empty(),
+                ];
+                if streaming {
+                    if builder.is_none() {
+                        if lacks[0] && lacks[1] {
+                            return Err(fmt(format!(
+                                "message {msg_no} on {}: neither `position` nor `velocity` has \
+                                 values; a streamed read takes its fields from the first message",
+                                spec.topic
+                            )));
+                        }
+                        absent.set(lacks);
+                    } else if let Some(k) = (0..3).find(|&k| lacks[k] && !absent.get()[k]) {
+                        return Err(fmt(format!(
+                            "message {msg_no} on {}: `{}` is empty, and the first message had \
+                             values: a streamed read takes the first message's fields from every \
+                             message (read the bag whole to drop the field for the whole bag)",
+                            spec.topic,
+                            ["position", "velocity", "effort"][k]
+                        )));
+                    }
+                }
                 let b = builder.get_or_insert_with(|| {
                     {
                         let layout = spec.state_joints.as_ref().map(|urdf| {
@@ -564,7 +623,8 @@ pub fn read_state(
                             layout,
                             &p,
                             "mcap",
-                        );
+                        )
+                        .streaming(sink.take());
                         let rep = nb.report_mut();
                         rep.sources
                             .insert("time".into(), "header.stamp - first stamp".into());
@@ -808,18 +868,7 @@ pub fn read_state(
         .map_or_else(|| "run".to_string(), |s| s.to_string_lossy().into_owned());
     let mut run = b.finish(&p, name)?;
     for sig in std::iter::once(&mut run.signals).chain(&mut run.other_joints) {
-        if empty[0] > 0 {
-            sig.s_rad = None;
-        }
-        if empty[1] > 0 {
-            sig.sdot_rad_s = None;
-        }
-        if empty[2] > 0 {
-            sig.tau_joint_nm = None;
-            sig.tau_motor_nm = None;
-            sig.tau_f_nm = None;
-            sig.current_a = None;
-        }
+        drop_absent(sig, [empty[0] > 0, empty[1] > 0, empty[2] > 0]);
         if sig.s_rad.is_none() && sig.sdot_rad_s.is_none() {
             return Err(fmt(format!(
                 "joint {}: neither position nor velocity is in every message",
@@ -833,4 +882,21 @@ pub fn read_state(
         st.qdot.iter_mut().for_each(|v| *v = None);
     }
     Ok(run)
+}
+
+/// Removes from `sig` the signals of the `JointState` fields marked absent: position, velocity,
+/// effort (whichever role it was read as).
+fn drop_absent(sig: &mut crate::RunSignals, absent: [bool; 3]) {
+    if absent[0] {
+        sig.s_rad = None;
+    }
+    if absent[1] {
+        sig.sdot_rad_s = None;
+    }
+    if absent[2] {
+        sig.tau_joint_nm = None;
+        sig.tau_motor_nm = None;
+        sig.tau_f_nm = None;
+        sig.current_a = None;
+    }
 }

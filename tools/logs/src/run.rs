@@ -126,6 +126,39 @@ pub struct RunReport {
     pub warnings: Vec<String>,
 }
 
+impl RunReport {
+    /// What a user should see of this report, one line each, prefixed by the source: the reader's
+    /// warnings, the rows dropped for a non-finite value (per role) and for a time that did not
+    /// increase.
+    pub fn warning_lines(&self) -> Vec<String> {
+        let src = &self.source;
+        let mut out: Vec<String> = self
+            .warnings
+            .iter()
+            .map(|w| format!("{src}: {w}"))
+            .collect();
+        let nf: u64 = self.non_finite.values().sum();
+        if nf > 0 {
+            let per: Vec<String> = self
+                .non_finite
+                .iter()
+                .map(|(k, v)| format!("{k}: {v}"))
+                .collect();
+            out.push(format!(
+                "{src}: {nf} non-finite values dropped ({})",
+                per.join(", ")
+            ));
+        }
+        if self.time_not_increasing > 0 {
+            out.push(format!(
+                "{src}: {} rows whose time did not increase dropped",
+                self.time_not_increasing
+            ));
+        }
+        out
+    }
+}
+
 /// One imported run: the signals for the pipeline and the report of how they were read.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ImportedRun {
@@ -238,8 +271,8 @@ pub(crate) fn continue_sign(prev: &mut Option<[f64; 4]>, x: [f64; 4]) -> [f64; 4
 }
 
 /// Where a streaming read hands its rows: blocks of `block_rows` rows (the last one shorter), each
-/// an [`ImportedRun`] of those rows only, with an empty report (the run's report comes with the
-/// run at the end, whose signals are then empty). A sink's error stops the read.
+/// an [`ImportedRun`] of those rows only, with a report that holds only the source and format (the
+/// run's report comes with the run at the end, whose signals are then empty). A sink's error stops the read.
 pub struct BlockSink<'a> {
     /// Rows per block (at least 1).
     pub block_rows: usize,
@@ -336,7 +369,13 @@ impl<'s> RunBuilder<'s> {
                 signals: joints.next().unwrap_or_default(),
                 other_joints: joints.collect(),
                 state,
-                report: RunReport::default(),
+                // The source names the block's rows in what is said about them (e.g. the
+                // plausibility check of a streamed import).
+                report: RunReport {
+                    source: self.report.source.clone(),
+                    format: self.report.format.clone(),
+                    ..RunReport::default()
+                },
             };
             (s.sink)(block).map_err(|msg| LogsError::Format {
                 path: self.report.source.clone(),

@@ -857,6 +857,97 @@ fn mcap_empty_effort_and_duplicate_joint_names_are_explained() {
     );
 }
 
+/// `mcap_log::read_streamed` of `path` in blocks of `block_rows`: the blocks, and the run (or the
+/// error) it returns.
+fn mcap_blocks(
+    path: &Path,
+    spec: &McapSpec,
+    block_rows: usize,
+) -> (
+    Vec<frictionless_logs::ImportedRun>,
+    Result<frictionless_logs::ImportedRun, LogsError>,
+) {
+    let mut blocks = Vec::new();
+    let mut sink = |b: frictionless_logs::ImportedRun| {
+        blocks.push(b);
+        Ok(())
+    };
+    let stream = frictionless_logs::BlockSink {
+        block_rows,
+        sink: &mut sink,
+    };
+    let extra = mcap_log::McapState::default();
+    let run = mcap_log::read_streamed(path, spec, &extra, &mut no_progress(), Some(stream));
+    (blocks, run)
+}
+
+#[test]
+#[ignore = "needs FRICTIONLESS_PY (tests/run.sh)"]
+fn mcap_streamed_read_hands_on_the_whole_reads_rows_in_blocks() {
+    let path = fixture("mcap", "bag.mcap");
+    let sp = wrist(Some(Role::TauF));
+    let whole = mcap_log::read(&path, &sp, &mut no_progress()).unwrap();
+    let (blocks, run) = mcap_blocks(&path, &sp, 250);
+    let run = run.unwrap();
+    assert_eq!(run.report.rows_used, whole.report.rows_used);
+    assert!(run.signals.time_s.is_empty(), "the rows went to the blocks");
+    let lens: Vec<usize> = blocks.iter().map(|b| b.signals.time_s.len()).collect();
+    assert_eq!(lens, [250, 250, 250, 250, 200]);
+    let cat = |f: fn(&frictionless_logs::ImportedRun) -> Option<&Vec<f64>>| -> Vec<f64> {
+        blocks.iter().flat_map(|b| f(b).unwrap().clone()).collect()
+    };
+    assert_eq!(
+        cat(|b| Some(&b.signals.time_s)),
+        whole.signals.time_s,
+        "time"
+    );
+    assert_eq!(
+        cat(|b| b.signals.s_rad.as_ref()),
+        *whole.signals.s_rad.as_ref().unwrap()
+    );
+    assert_eq!(
+        cat(|b| b.signals.sdot_rad_s.as_ref()),
+        *whole.signals.sdot_rad_s.as_ref().unwrap()
+    );
+    assert_eq!(
+        cat(|b| b.signals.tau_f_nm.as_ref()),
+        *whole.signals.tau_f_nm.as_ref().unwrap()
+    );
+    assert!(
+        blocks
+            .iter()
+            .all(|b| b.report.source == path.display().to_string()),
+        "each block names its log"
+    );
+}
+
+#[test]
+#[ignore = "needs FRICTIONLESS_PY (tests/run.sh)"]
+fn mcap_streamed_read_refuses_a_field_that_goes_missing_and_drops_one_never_there() {
+    // Message 38 lacks the effort the 37 before it had: the rows already handed on had it.
+    let path = py_fixture("mcap-empty-effort", "empty_effort.mcap");
+    let (blocks, run) = mcap_blocks(&path, &wrist(Some(Role::TauF)), 10);
+    let e = run.unwrap_err().to_string();
+    assert!(
+        e.contains("message 38") && e.contains("`effort` is empty") && e.contains("first message"),
+        "{e}"
+    );
+    assert_eq!(blocks.len(), 3, "the blocks before message 38 went on");
+    // The first message decides: a bag whose velocity is never there streams without it.
+    let path = py_fixture("mcap-no-velocity", "no_velocity.mcap");
+    let (blocks, run) = mcap_blocks(&path, &wrist(Some(Role::TauF)), 40);
+    let run = run.unwrap();
+    assert_eq!(run.report.rows_used, 100);
+    assert_eq!(
+        blocks.iter().map(|b| b.signals.time_s.len()).sum::<usize>(),
+        100
+    );
+    for b in &blocks {
+        assert!(b.signals.sdot_rad_s.is_none(), "no velocity in the bag");
+        assert!(b.signals.s_rad.is_some() && b.signals.tau_f_nm.is_some());
+    }
+}
+
 /// A CSV log `t,q,qd,f` of `rows` rows every `dt` (in the file's own time unit, `t_scale` per
 /// second) with q = `amp`·sin(2t) in whatever unit `amp` is.
 fn unit_log(name: &str, rows: usize, dt: f64, t_scale: f64, amp: f64) -> PathBuf {
