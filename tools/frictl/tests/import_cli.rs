@@ -1034,9 +1034,33 @@ fn mat_streamed_import_equals_the_whole_read() {
     }
 }
 
+#[test]
+#[ignore = "needs FRICTIONLESS_PY (tests/run.sh): Pinocchio writes the tilted log"]
+fn mcap_streamed_import_equals_the_whole_read() {
+    // Base orientation and wrench sampled and held onto the JointState rows, in both reads.
+    let mut extra = vec![
+        "--effort",
+        "current",
+        "--base-orientation",
+        "/imu",
+        "--wrench",
+        "l_foot_rear_ft=/l_foot_rear_ft",
+    ];
+    ok(
+        import_tilted_log("tilted_wrench.mcap", "whole_mcap", &extra),
+        "import mcap",
+    );
+    extra.extend(["--window-samples", "500"]);
+    let out = import_tilted_log("tilted_wrench.mcap", "streamed_mcap", &extra);
+    ok(out, "import mcap --window-samples");
+    streamed_equals_whole("mcap");
+    for (rms, n) in tilted_rms_vs("streamed_mcap", "tau_id_") {
+        assert!(n > 7000 && rms < 0.15, "RMS {rms} on {n}");
+    }
+}
+
 /// The tilted log's `whole_<tag>_{joint}.csv` and `streamed_<tag>_{joint}.csv` agree to 1e-9 in
 /// every column, and the streamed import held a fraction of the log.
-#[cfg(feature = "mat")]
 fn streamed_equals_whole(tag: &str) {
     let d = tilted_fixture();
     for j in ["l_knee", "l_hip_pitch"] {
@@ -1775,6 +1799,66 @@ fn csv_streamed_import_equals_the_whole_log_and_holds_a_window() {
         );
         assert_eq!(side["samples"].as_u64(), Some(w.len() as u64));
     }
+}
+
+#[test]
+fn csv_streamed_import_checks_the_units_on_the_first_window() {
+    let d = dir().join("stream_units");
+    std::fs::create_dir_all(&d).unwrap();
+    let log = d.join("leg.csv");
+    leg_csv(&log, 3_000);
+    let urdf = ergocub_urdf();
+    let out = d.join("ds_{joint}.csv");
+    let import = |unit: &str| {
+        frictl(&[
+            "import",
+            "csv",
+            s(&log),
+            "--joint",
+            "l_knee",
+            "--column",
+            "time=t",
+            "--column",
+            "s=q_{joint}",
+            "--column",
+            "current=i_{joint}",
+            "--unit",
+            unit,
+            "--positions",
+            "q_{joint}",
+            "--urdf",
+            s(&urdf),
+            "--gear-ratio",
+            "100",
+            "--kt",
+            "0.1",
+            "--window-samples",
+            "1000",
+            "-o",
+            s(&out),
+        ])
+    };
+    // Seconds declared as milliseconds: 1 kHz rows would be 1 MHz.
+    let e = err_text(import("time=ms"), "a time in s declared ms, streamed");
+    assert!(
+        e.contains("--unit time=s") && e.contains("first window") && e.contains("leg.csv"),
+        "{e}"
+    );
+    assert!(
+        !d.join("ds_l_knee.csv").exists() && !d.join("ds_l_knee.json").exists(),
+        "nothing written"
+    );
+    ok(import("time=s"), "import csv --window-samples");
+    // The log's one NaN position is reported as the whole-log import reports it; the units pass.
+    let side = sidecar(&d.join("ds_l_knee.csv"));
+    let w = &side["settings"]["import"]["warnings"];
+    assert_eq!(w.as_array().map(Vec::len), Some(1), "{w}");
+    assert!(
+        w[0].as_str()
+            .unwrap()
+            .ends_with("leg.csv: 1 non-finite values dropped (q:l_hip_pitch: 1)"),
+        "{w}"
+    );
 }
 
 #[test]

@@ -176,6 +176,11 @@ pub struct McapArgs {
     /// the last wrench before it in the bag (e.g. `--wrench l_foot_rear_ft=/l_foot_rear_ft`).
     #[arg(long = "wrench", value_name = "FRAME=TOPIC")]
     pub wrenches: Vec<String>,
+    /// Stream the bag: read and label it in windows of this many grid samples (see `import csv`).
+    /// The first JointState message then decides which of position, velocity and effort are read;
+    /// a later message that lacks one of them is an error.
+    #[arg(long, value_name = "N")]
+    pub window_samples: Option<usize>,
     /// Options every format shares.
     #[command(flatten)]
     #[serde(flatten)]
@@ -395,6 +400,23 @@ pub fn run_mcap(args: McapArgs) -> anyhow::Result<()> {
             "l_foot_rear_ft=/l_foot_rear_ft",
         )?,
     };
+    if let Some(w) = args.window_samples {
+        let default_label = match effort_role {
+            Some(Role::TauF) => LabelSource::Given,
+            Some(Role::TauJoint) => LabelSource::TorqueSensor,
+            _ => LabelSource::Current,
+        };
+        return super::import_stream::run_stream(
+            &args.files,
+            "mcap",
+            default_label,
+            &args.common,
+            body.as_ref(),
+            None,
+            w,
+            |f, stream| mcap_log::read_streamed(f, &spec, &extra, &mut |_, _| {}, stream),
+        );
+    }
     let runs = read_all(&args.files, |p, pr| {
         mcap_log::read_state(p, &spec, &extra, pr)
     })?;
@@ -442,6 +464,7 @@ pub fn run_mat(args: MatArgs) -> anyhow::Result<()> {
             LabelSource::Current,
             &common,
             body.as_ref(),
+            None,
             w,
             |f, stream| mat_log::read_streamed(f, &spec, &extra, &mut |_, _| {}, stream),
         );
@@ -705,31 +728,7 @@ fn finish(
         (None, None) => Dynamics::None,
     };
     for r in &runs {
-        warnings.extend(
-            r.report
-                .warnings
-                .iter()
-                .map(|w| format!("{}: {w}", r.report.source)),
-        );
-        let nf: u64 = r.report.non_finite.values().sum();
-        if nf > 0 {
-            warnings.push(format!(
-                "{}: {nf} non-finite values dropped ({})",
-                r.report.source,
-                r.report
-                    .non_finite
-                    .iter()
-                    .map(|(k, v)| format!("{k}: {v}"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ));
-        }
-        if r.report.time_not_increasing > 0 {
-            warnings.push(format!(
-                "{}: {} rows whose time did not increase dropped",
-                r.report.source, r.report.time_not_increasing
-            ));
-        }
+        warnings.extend(r.report.warning_lines());
     }
     // Units and rates: what a wrong declaration leaves in the numbers, before any work.
     let findings = frictionless_logs::plausibility::check(&runs, labels[0].cfg.gap_s, units);

@@ -14,7 +14,7 @@ use frictionless_ident::preprocess::{
     Dynamics, JointLabel, PreprocessConfig, RunJoints, SignalsLabel, WholeBody,
 };
 use frictionless_ident::stream::{StreamLabeller, StreamStats};
-use frictionless_logs::{ImportedRun, Role, csv_log};
+use frictionless_logs::{ImportedRun, Role, Unit, csv_log};
 
 use super::import_log::{CommonArgs, out_path, per_joint};
 
@@ -38,10 +38,39 @@ struct Streamer<'a> {
     state_names: Vec<String>,
     base_logged: bool,
     wrench_frames: Vec<String>,
+    /// The declared units (a CSV's), for the plausibility check's suggested fixes.
+    units: Option<&'a [(Role, Unit)]>,
+    /// Whether the next block is the first of its log: the plausibility check runs on it.
+    first_of_log: bool,
+    /// The plausibility check's warnings, for every log so far.
+    findings: Vec<String>,
 }
 
 impl<'a> Streamer<'a> {
     fn block(&mut self, block: ImportedRun) -> anyhow::Result<()> {
+        if std::mem::take(&mut self.first_of_log) {
+            // Units and rates, on the log's first window (a span or a speed in it is a lower
+            // bound of the whole log's): what a wrong declaration leaves in the numbers.
+            let gap_s = self.common.gap_s.unwrap_or(0.1);
+            let findings = frictionless_logs::plausibility::check(
+                std::slice::from_ref(&block),
+                gap_s,
+                self.units,
+            );
+            let refused: Vec<&str> = findings
+                .iter()
+                .filter(|f| f.refuse)
+                .map(|f| f.message.as_str())
+                .collect();
+            if !refused.is_empty() {
+                bail!("{} (checked on the log's first window)", refused.join("\n"));
+            }
+            self.findings.extend(
+                findings
+                    .into_iter()
+                    .map(|f| format!("{} (on the log's first window)", f.message)),
+            );
+        }
         if self.labeller.is_none() {
             for j in &block.joints {
                 let mut cfg = PreprocessConfig::for_joint(j);
@@ -123,19 +152,23 @@ pub fn run_csv(
         default_label,
         common,
         body,
+        Some(&spec.units),
         window,
         |f, stream| csv_log::read_streamed(f, spec, &mut |_, _| {}, stream),
     )
 }
 
 /// Runs `frictl import FORMAT` streamed: `read` reads one log, handing its rows to the sink it is
-/// given; the label is `--label` or `default_label`.
+/// given; the label is `--label` or `default_label`; `units` are the declared units (a CSV's),
+/// which the plausibility check's fixes name.
+#[allow(clippy::too_many_arguments)]
 pub fn run_stream(
     files: &[PathBuf],
     format: &str,
     default_label: LabelSource,
     common: &CommonArgs,
     body: Option<&WholeBody>,
+    units: Option<&[(Role, Unit)]>,
     window: usize,
     mut read: impl FnMut(
         &Path,
@@ -164,9 +197,13 @@ pub fn run_stream(
         state_names: Vec::new(),
         base_logged: false,
         wrench_frames: Vec::new(),
+        units,
+        first_of_log: true,
+        findings: Vec::new(),
     };
     let mut runs: Vec<ImportedRun> = Vec::new();
     for f in files {
+        st.first_of_log = true;
         let mut failed: Option<anyhow::Error> = None;
         let mut sink = |block: ImportedRun| {
             st.block(block).map_err(|e| {
@@ -194,6 +231,8 @@ pub fn run_stream(
         bail!("no usable rows in {}", files.len());
     };
     let (rest, stats) = labeller.finish()?;
+    let mut warnings: Vec<String> = runs.iter().flat_map(|r| r.report.warning_lines()).collect();
+    warnings.append(&mut st.findings);
     let (rest, sums): (Vec<Dataset>, Vec<_>) = rest.into_iter().unzip();
     st.write(rest)?;
     let plan = body.map(|b| {
@@ -236,6 +275,7 @@ pub fn run_stream(
                 "stream": stream_json(&stats),
                 "dropped_single_sample_chunks": sum.dropped_single_sample_chunks,
                 "runs": reports,
+                "warnings": warnings,
             }
         });
         let side = DatasetSidecar {
@@ -313,6 +353,9 @@ pub fn run_stream(
             stats.trail,
             o.path.display()
         );
+    }
+    for w in &warnings {
+        eprintln!("warning: {w}");
     }
     eprintln!(
         "frictl import {format}: {} runs streamed, at most {} grid and {} raw samples held, in {:.2} s",
