@@ -20,6 +20,8 @@ if [ ! -x "$VENV/bin/python" ]; then
   "$PY" -m venv "$VENV"
 fi
 "$VENV/bin/pip" install -q --disable-pip-version-check "maturin>=1.9,<2" numpy pytest
+# Set up the venv only (CI does it in the background while other stages build).
+[ -z "${PY_SETUP_ONLY:-}" ] || exit 0
 # The maturin build backend runs the `maturin` executable from PATH.
 export PATH="$VENV/bin:$PATH"
 

@@ -13,6 +13,8 @@ if [ ! -x "$VENV/bin/python" ]; then
   python3 -m venv "$VENV"
 fi
 "$VENV/bin/pip" install -q --disable-pip-version-check -r python/ray/requirements.txt
+# Set up the venv only (CI does it in the background while other stages build).
+[ -z "${RAY_SETUP_ONLY:-}" ] || exit 0
 
 # $FRICTL and $FRICTIOND, when both are set, name binaries already built (CI passes those of
 # tests/run.sh); otherwise they are built here.
