@@ -133,6 +133,7 @@ pub fn label_leg(
         qdot: vec![None; n],
         qddot: vec![None; n],
         base_quat_xyzw: None,
+        base_frame: None,
         wrenches: Vec::new(),
     };
     let mut out = Vec::with_capacity(n);
@@ -155,6 +156,7 @@ pub fn label_leg(
             qdot: vec![None],
             qddot: vec![None],
             base_quat_xyzw: None,
+            base_frame: None,
             wrenches: Vec::new(),
         };
         let (single_joint_view, _) = preprocess_whole_body(&log, &meta, &single, &own, &cfg)?;

@@ -485,4 +485,25 @@ impl Robot {
         }
         Ok(out)
     }
+
+    /// Placement of the named frame `id` in the root frame for configuration `q` (Pinocchio's
+    /// `updateFramePlacement` on a fixed base): the frame's chain to the root only, no allocation.
+    pub fn frame_placement(&self, id: FrameId, q: &[f64]) -> Result<Transform, DynamicsError> {
+        check_len("q", self.dof(), q.len())?;
+        let frame = self
+            .frames
+            .get(id.0)
+            .ok_or_else(|| DynamicsError::BadInput {
+                what: "frame id".into(),
+                value: format!("{} (the model has {} frames)", id.0, self.frames.len()),
+            })?;
+        let mut x = frame.placement;
+        let mut body = frame.body;
+        while body > 0 {
+            let j = body - 1;
+            x = self.joints[j].placement(q[j]).compose(&x);
+            body = self.joints[j].parent_body;
+        }
+        Ok(x)
+    }
 }

@@ -622,3 +622,53 @@ fn a_urdf_path_that_is_not_a_regular_file_is_refused() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn frame_placement_follows_the_chain_of_the_double_pendulum() {
+    let (l1, c2) = (0.7, 0.25);
+    let robot = Robot::from_urdf_str(
+        &double_pendulum_urdf(1.0, 0.3, 0.02, l1, 2.0, c2, 0.05),
+        "dp",
+    )
+    .unwrap();
+    let (q1, q2) = (0.4, -1.1);
+    let q = robot.vector_from_names([("j1", q1), ("j2", q2)]).unwrap();
+    let tip = robot
+        .frame_placement(robot.frame_id("tip").unwrap(), &q)
+        .unwrap();
+    // Rotations about +y: the tip hangs 0.5 below joint 2, which hangs l1 below joint 1.
+    let ry = |a: f64| *nalgebra::Rotation3::from_axis_angle(&Vector3::y_axis(), a).matrix();
+    let j1 = Vector3::new(0.3, -0.2, 1.0);
+    let expected =
+        j1 + ry(q1) * (Vector3::new(0.0, 0.0, -l1) + ry(q2) * Vector3::new(0.0, 0.0, -0.5));
+    assert!(
+        (tip.pos - expected).norm() < 1e-12,
+        "{} vs {}",
+        tip.pos,
+        expected
+    );
+    assert!((tip.rot - ry(q1 + q2)).norm() < 1e-12);
+    // The same through every body's placement.
+    let bodies = robot.body_placements(&q).unwrap();
+    for (k, f) in robot.frames.iter().enumerate() {
+        let x = robot
+            .frame_placement(frictionless_dynamics::FrameId(k), &q)
+            .unwrap();
+        let y = bodies[f.body].compose(&f.placement);
+        assert!(
+            (x.rot - y.rot).norm() < 1e-12 && (x.pos - y.pos).norm() < 1e-12,
+            "{}",
+            f.name
+        );
+    }
+    assert!(
+        robot
+            .frame_placement(frictionless_dynamics::FrameId(999), &q)
+            .is_err()
+    );
+    assert!(
+        robot
+            .frame_placement(robot.frame_id("tip").unwrap(), &q[..1])
+            .is_err()
+    );
+}

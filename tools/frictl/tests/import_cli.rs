@@ -799,6 +799,21 @@ fn mcap_imu_base_orientation_tilts_the_gravity_like_pinocchio() {
             .contains("orientation from the log"),
         "{side}"
     );
+    // The waist IMU's topic: its messages' frame_id names the URDF frame of its orientation.
+    ok(
+        import("mcap_waist_imu", Some("/waist_imu")),
+        "import mcap --base-orientation /waist_imu",
+    );
+    for (rms, n) in tilted_rms_vs("mcap_waist_imu", "tau_id_nw_") {
+        assert!(n > 7000 && rms < 0.15, "waist IMU: RMS {rms} on {n}");
+    }
+    let base =
+        sidecar(&d.join("mcap_waist_imu_l_knee.csv"))["settings"]["import"]["whole_body"]["base"]
+            .clone();
+    assert!(
+        base.as_str().unwrap().contains("frame `waist_imu_0`"),
+        "{base}"
+    );
     ok(import("mcap_upright", None), "import mcap (upright)");
     let [(knee, _), (hip, _)] = tilted_rms_vs("mcap_upright", "tau_id_nw_");
     assert!(
@@ -893,6 +908,66 @@ fn mcap_measured_wrench_enters_the_label_like_pinocchio() {
 #[cfg(feature = "mat")]
 #[test]
 #[ignore = "needs FRICTIONLESS_PY (tests/run.sh): Pinocchio writes the tilted log"]
+fn mat_imu_mounted_rotated_gives_the_root_orientation_through_the_urdf() {
+    // `orientations/waist_imu_0` is the waist IMU's own orientation (on torso_1, rotated 90° about
+    // two axes against the root link): its name is a URDF frame, placed on the root link at each q.
+    let d = tilted_fixture();
+    let mut extra = TILT_RPY.to_vec();
+    extra.extend(TILT_WRENCH);
+    ok(import_tilted("imu", &extra), "import mat (the IMU's frame)");
+    for (rms, n) in tilted_rms("imu") {
+        assert!(n > 7000 && rms < 0.15, "RMS {rms} on {n}");
+    }
+    let base =
+        sidecar(&d.join("imu_l_knee.csv"))["settings"]["import"]["whole_body"]["base"].clone();
+    assert!(
+        base.as_str().unwrap().contains("frame `waist_imu_0`"),
+        "{base}"
+    );
+    // The same orientation taken as the root link's is far off.
+    extra.extend(["--base-frame", "root_link"]);
+    ok(
+        import_tilted("imu_as_root", &extra),
+        "import mat --base-frame root_link",
+    );
+    let [(knee, _), (hip, _)] = tilted_rms("imu_as_root");
+    assert!(
+        knee > 1.0 && hip > 1.0,
+        "the IMU's mounting must matter: knee {knee}, hip {hip}"
+    );
+    // A channel whose name is no URDF frame needs --base-frame: refused, saying so.
+    let mut root = vec!["--base-orientation", "orientations/root_rpy"];
+    root.extend(TILT_WRENCH);
+    let e = err_text(
+        import_tilted("bad", &root),
+        "an orientation of an unknown frame",
+    );
+    assert!(
+        e.contains("`root_rpy`") && e.contains("--base-frame"),
+        "{e}"
+    );
+    root.extend(["--base-frame", "root_link"]);
+    ok(
+        import_tilted("root_rpy", &root),
+        "import mat --base-frame root_link",
+    );
+    for (rms, n) in tilted_rms("root_rpy") {
+        assert!(n > 7000 && rms < 0.15, "RMS {rms} on {n}");
+    }
+    let e = err_text(
+        import_tilted(
+            "bad",
+            &[TILT_RPY[0], TILT_RPY[1], "--base-frame", "nowhere"],
+        ),
+        "a --base-frame the URDF lacks",
+    );
+    assert!(e.contains("--base-frame nowhere"), "{e}");
+    assert!(!d.join("bad_l_knee.csv").exists());
+}
+
+#[cfg(feature = "mat")]
+#[test]
+#[ignore = "needs FRICTIONLESS_PY (tests/run.sh): Pinocchio writes the tilted log"]
 fn mat_base_orientation_tilts_the_gravity_like_pinocchio() {
     // Roll, pitch, yaw [rad] (the IMU channel) and the quaternion x y z w (a logged frame).
     for (name, base) in [("rpy", TILT_RPY), ("quat", TILT_QUAT)] {
@@ -904,13 +979,13 @@ fn mat_base_orientation_tilts_the_gravity_like_pinocchio() {
         }
         let wb = &sidecar(&tilted_fixture().join(format!("{name}_l_knee.csv")))["settings"]["import"]
             ["whole_body"];
-        assert!(
-            wb["base"]
-                .as_str()
-                .unwrap()
-                .contains("orientation from the log"),
-            "{wb}"
-        );
+        // The IMU's own frame, or the root link's (the logged frame `root_link`).
+        let frame = if name == "rpy" {
+            "of frame `waist_imu_0` from the log"
+        } else {
+            "root-link orientation from the log"
+        };
+        assert!(wb["base"].as_str().unwrap().contains(frame), "{wb}");
     }
     // Without it the root link is upright: the gravity is 20° off.
     ok(

@@ -804,7 +804,7 @@ mod tests {
                 .any(|d| d.contains("whole-body RNEA"))
         );
         // The plan names where each joint comes from.
-        let plan = body.plan(&st.names, &["l_knee".to_string()], false);
+        let plan = body.plan(&st.names, &["l_knee".to_string()], None);
         assert!(plan.from_log.contains(&"l_hip_pitch".to_string()));
         assert_eq!(plan.held.get("torso_pitch"), Some(&0.2));
         assert!(plan.held_at_zero.contains(&"r_hip_pitch".to_string()));

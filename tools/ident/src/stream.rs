@@ -346,6 +346,7 @@ impl<'a> StreamLabeller<'a> {
                     .map(|x| x.as_ref().map(|_| Vec::new()))
                     .collect(),
                 base_quat_xyzw: st.base_quat_xyzw.as_ref().map(|_| Default::default()),
+                base_frame: st.base_frame.clone(),
                 wrenches: st
                     .wrenches
                     .iter()

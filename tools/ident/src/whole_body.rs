@@ -16,6 +16,7 @@
 use std::collections::BTreeMap;
 
 use frictionless_dynamics::{BaseState, ExternalWrench, Force, FrameId, Motion, Robot, Workspace};
+use nalgebra::{Rotation3, UnitQuaternion};
 use serde::Serialize;
 
 use super::kalman::{self, KalmanConfig};
@@ -33,9 +34,14 @@ pub struct JointStates {
     pub qdot: Vec<Option<Vec<f64>>>,
     /// Acceleration per joint when logged [rad/s² or m/s²] (absent: from the smoother).
     pub qddot: Vec<Option<Vec<f64>>>,
-    /// Orientation of the root link in the world, unit quaternion `[x, y, z, w]` per sample (absent:
-    /// the root link is welded to the world at the identity pose).
+    /// Orientation in the world of the root link, or of [`Self::base_frame`], unit quaternion
+    /// `[x, y, z, w]` per sample (absent: the root link is welded to the world at the identity
+    /// pose).
     pub base_quat_xyzw: Option<[Vec<f64>; 4]>,
+    /// The frame whose orientation `base_quat_xyzw` is, as the log names it (an IMU's; `None`:
+    /// the root link's). The label places it on the root link through the URDF at each sample's q
+    /// ([`WholeBody::with_base_frame`] overrides it).
+    pub base_frame: Option<String>,
     /// Measured wrenches applied to the robot at named frames, per sample.
     pub wrenches: Vec<FrameWrench>,
 }
@@ -65,6 +71,7 @@ impl JointStates {
                 .collect(),
             names,
             base_quat_xyzw: None,
+            base_frame: None,
             wrenches: Vec::new(),
         }
     }
@@ -119,7 +126,8 @@ pub struct StatePlan {
     pub held_at_zero: Vec<String>,
     /// Names in the log that are not movable joints of the URDF (not used).
     pub not_in_urdf: Vec<String>,
-    /// The base: `fixed` (identity) or `orientation from the log`.
+    /// The base: fixed at the identity pose, or its orientation from the log (the root link's, or
+    /// a named frame's placed on it through the URDF).
     pub base: String,
     /// Frames with a measured external wrench from the log.
     pub wrenches: Vec<String>,
@@ -131,6 +139,8 @@ pub struct WholeBody {
     robot: Robot,
     held: BTreeMap<String, f64>,
     q_held: Vec<f64>,
+    /// The frame whose orientation a logged base orientation is, whatever the log says.
+    base_frame: Option<String>,
 }
 
 /// One joint whose q comes from the log (or from a labelled joint's own signals).
@@ -153,6 +163,8 @@ pub(crate) struct Labelled<'a> {
 pub(crate) struct Tracks<'a> {
     joints: Vec<Track<'a>>,
     base: Option<&'a [Vec<f64>; 4]>,
+    /// The frame whose orientation `base` is (`None`: the root link).
+    base_frame: Option<FrameId>,
     wrenches: Vec<(FrameId, &'a [Vec<f64>; 6])>,
 }
 
@@ -182,6 +194,39 @@ impl WholeBody {
             robot,
             held,
             q_held,
+            base_frame: None,
+        })
+    }
+
+    /// The frame (a URDF link or joint, e.g. an IMU's) whose orientation in the world a logged base
+    /// orientation is, instead of the one the log names (`None`: the log's; the root link when it
+    /// names none). Fails when the URDF has no such frame.
+    pub fn with_base_frame(mut self, frame: Option<String>) -> Result<Self, PreprocessError> {
+        if let Some(f) = &frame {
+            self.robot
+                .frame_id(f)
+                .map_err(|e| bad(format!("--base-frame {f}: {e}")))?;
+        }
+        self.base_frame = frame;
+        Ok(self)
+    }
+
+    /// The frame whose orientation a logged base orientation is: the override, else the log's
+    /// name for it (`log_frame`); `None` for the root link. A name the URDF lacks is an error
+    /// saying how to name it.
+    fn resolve_base_frame(&self, log_frame: Option<&str>) -> Result<Option<FrameId>, String> {
+        let Some(name) = self.base_frame.as_deref().or(log_frame) else {
+            return Ok(None);
+        };
+        if name == self.robot.root_link {
+            return Ok(None);
+        }
+        self.robot.frame_id(name).map(Some).map_err(|_| {
+            format!(
+                "the log gives the orientation of frame `{name}`, which the URDF {} lacks: pass \
+                 --base-frame with the URDF frame it is (the sensor's frame, or the root link `{}`)",
+                self.robot.source, self.robot.root_link
+            )
         })
     }
 
@@ -192,12 +237,24 @@ impl WholeBody {
 
     /// Which URDF joints come from a log holding `log_names` (plus the `labelled` joints, whose own
     /// positions count as logged).
-    pub fn plan(&self, log_names: &[String], labelled: &[String], base_logged: bool) -> StatePlan {
+    /// `base`: whether the log gives a base orientation, and the frame it names for it.
+    pub fn plan(
+        &self,
+        log_names: &[String],
+        labelled: &[String],
+        base: Option<Option<&str>>,
+    ) -> StatePlan {
+        let frame = base.map(|f| self.resolve_base_frame(f));
         let mut p = StatePlan {
-            base: if base_logged {
-                "root-link orientation from the log (at rest)".into()
-            } else {
-                "fixed at the identity pose".into()
+            base: match frame {
+                None => "fixed at the identity pose".into(),
+                Some(Ok(None)) => "root-link orientation from the log (at rest)".into(),
+                Some(Ok(Some(id))) => format!(
+                    "orientation of frame `{}` from the log, placed on the root link through the \
+                     URDF at each sample's q (at rest)",
+                    self.robot.frames[id.0].name
+                ),
+                Some(Err(e)) => e,
             },
             ..StatePlan::default()
         };
@@ -290,9 +347,16 @@ impl WholeBody {
                     .map_err(|e| bad(format!("--wrench {}: {e}", w.frame)))
             })
             .collect::<Result<_, _>>()?;
+        let base_frame = match st.base_quat_xyzw {
+            Some(_) => self
+                .resolve_base_frame(st.base_frame.as_deref())
+                .map_err(bad)?,
+            None => None,
+        };
         Ok(Tracks {
             joints: out,
             base: st.base_quat_xyzw.as_ref(),
+            base_frame,
             wrenches,
         })
     }
@@ -376,6 +440,13 @@ impl WholeBody {
                     match BaseState::from_arrays([0.0; 3], quat, [0.0; 6], [0.0; 6]) {
                         Ok(mut bs) => {
                             bs.vel = Motion::ZERO;
+                            if let Some(f) = tracks.base_frame {
+                                // R_world_root = R_world_frame · R_root_frame(q)ᵀ.
+                                let x = self.robot.frame_placement(f, &q).map_err(err)?;
+                                let r = Rotation3::from_matrix_unchecked(x.rot);
+                                bs.orientation *=
+                                    UnitQuaternion::from_rotation_matrix(&r).inverse();
+                            }
                             self.robot
                                 .rnea_floating(ws, &bs, &q, &qd, &qdd, &ext, &mut tau)
                                 .map_err(err)?;

@@ -345,6 +345,7 @@ fn state_columns(
             spec.factor(Role::Sddot),
         ],
         base_quat: st.base_quat.is_some(),
+        base_frame: None,
         wrenches: st.wrenches.iter().map(|w| w.0.clone()).collect(),
         names,
     };

@@ -765,6 +765,7 @@ fn state_extras(
         ));
         out.base = Some(ch);
         layout.base_quat = true;
+        layout.base_frame = orientation_frame(b);
     }
     for (frame, name) in &spec.wrenches {
         out.wrenches.push(state_channel(
@@ -821,4 +822,18 @@ impl StateExtras {
         }
         Ok(())
     }
+}
+
+/// The frame whose orientation a base-orientation channel holds, as the logger names it: the
+/// sensor of `orientations/<sensor>` (the YARP logger names an orientation sensor's channel after
+/// it, as the URDF names its frame), the `<frame>` of `frames/<root>/<frame>/orientation`, else
+/// the channel's last component.
+fn orientation_frame(channel: &str) -> Option<String> {
+    let parts: Vec<&str> = channel.split('/').filter(|p| !p.is_empty()).collect();
+    let name = match parts.as_slice() {
+        [.., frame, "orientation"] => frame,
+        [.., last] => last,
+        [] => return None,
+    };
+    Some((*name).to_string())
 }

@@ -202,13 +202,19 @@ pub fn decode_joint_state(payload: &[u8]) -> Result<JointState, String> {
 /// `None` when the message says it has none (`orientation_covariance[0] == -1`, per the message's
 /// definition). Only the header, the orientation and its covariance's first element are read.
 pub fn decode_imu_orientation(payload: &[u8]) -> Result<Option<[f64; 4]>, String> {
+    decode_imu(payload).map(|(_, q)| q)
+}
+
+/// [`decode_imu_orientation`] with the message's `header.frame_id` (the frame whose orientation
+/// in the world it is, per the message's definition).
+pub fn decode_imu(payload: &[u8]) -> Result<(String, Option<[f64; 4]>), String> {
     let mut c = Cdr::new(payload)?;
     c.i32()?; // header.stamp.sec
     c.u32()?; // header.stamp.nanosec
-    c.string()?; // header.frame_id
+    let frame = c.string()?;
     let q = [c.f64()?, c.f64()?, c.f64()?, c.f64()?];
     let cov0 = c.f64()?;
-    Ok((cov0 != -1.0).then_some(q))
+    Ok((frame, (cov0 != -1.0).then_some(q)))
 }
 
 /// Largest MCAP record accepted [bytes] (a chunk; recorders write ~1 MiB).
@@ -720,6 +726,9 @@ pub fn read_streamed(
                 state_topics
                     .extend_row(&mut vals, &spec.topic, msg_no, &topics)
                     .map_err(fmt)?;
+                if let Some(f) = state_topics.base_frame() {
+                    b.set_base_frame(f);
+                }
                 let row = b.row_mut();
                 row[..vals.len()].copy_from_slice(&vals);
                 b.push(|| format!("message {msg_no}"), 0)?;

@@ -5,7 +5,7 @@
 
 use std::collections::BTreeMap;
 
-use crate::mcap_log::{Cdr, McapState, decode_imu_orientation};
+use crate::mcap_log::{Cdr, McapState, decode_imu};
 use crate::{RunReport, StateLayout};
 
 const IMU_SCHEMA: &str = "sensor_msgs/msg/Imu";
@@ -42,6 +42,10 @@ pub(crate) struct StateTopics<'a> {
     last_base: Option<[f64; 4]>,
     imu_msgs: u64,
     imu_without: u64,
+    /// The first `Imu` message's non-empty `header.frame_id`.
+    imu_frame: Option<String>,
+    /// `Imu` messages whose `header.frame_id` is another: (count, the first such).
+    imu_other_frame: (u64, Option<String>),
     wrenches: Vec<WrenchTopic>,
 }
 
@@ -53,6 +57,8 @@ impl<'a> StateTopics<'a> {
             last_base: None,
             imu_msgs: 0,
             imu_without: 0,
+            imu_frame: None,
+            imu_other_frame: (0, None),
             wrenches: extra
                 .wrenches
                 .iter()
@@ -64,6 +70,12 @@ impl<'a> StateTopics<'a> {
     /// Whether anything beyond the joint positions is read.
     pub(crate) fn any(&self) -> bool {
         self.extra.base_orientation.is_some() || !self.extra.wrenches.is_empty()
+    }
+
+    /// The frame whose orientation the base topic gives: its first message's `header.frame_id`
+    /// (`None` when empty: the root link's).
+    pub(crate) fn base_frame(&self) -> Option<&str> {
+        self.imu_frame.as_deref()
     }
 
     /// Adds the orientation and the wrenches to the state's layout.
@@ -111,9 +123,19 @@ impl<'a> StateTopics<'a> {
             mine = true;
             self.imu_msgs += 1;
             let topic = self.extra.base_orientation.as_deref().unwrap_or_default();
-            match decode_imu_orientation(data)
-                .map_err(|e| format!("message {} on {topic}: {e}", self.imu_msgs))?
-            {
+            let (frame, q) = decode_imu(data)
+                .map_err(|e| format!("message {} on {topic}: {e}", self.imu_msgs))?;
+            match &self.imu_frame {
+                None if self.imu_msgs == 1 => {
+                    self.imu_frame = Some(frame).filter(|f| !f.is_empty());
+                }
+                known if known.as_deref().unwrap_or_default() != frame => {
+                    self.imu_other_frame.0 += 1;
+                    self.imu_other_frame.1.get_or_insert(frame);
+                }
+                _ => {}
+            }
+            match q {
                 Some(q) => {
                     self.last_base = Some(crate::run::continue_sign(&mut self.last_base, q));
                 }
@@ -197,9 +219,22 @@ impl<'a> StateTopics<'a> {
         if let Some(bt) = &self.extra.base_orientation {
             rep.notes.push(format!(
                 "base orientation: the last sensor_msgs/msg/Imu orientation on {bt} before each \
-                 message ({} messages, {} without an orientation)",
-                self.imu_msgs, self.imu_without
+                 message ({} messages, {} without an orientation), of frame {}",
+                self.imu_msgs,
+                self.imu_without,
+                self.imu_frame
+                    .as_deref()
+                    .map_or("(none named: the root link)".to_string(), |f| format!(
+                        "`{f}`"
+                    ))
             ));
+            if let (n @ 1.., Some(other)) = &self.imu_other_frame {
+                rep.warnings.push(format!(
+                    "base orientation topic {bt}: {n} messages name frame `{other}`, not the first \
+                     message's `{}`; every orientation was taken as that frame's",
+                    self.imu_frame.as_deref().unwrap_or_default()
+                ));
+            }
         }
         for ((frame, topic), w) in self.extra.wrenches.iter().zip(&self.wrenches) {
             rep.sources.insert(

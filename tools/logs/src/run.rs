@@ -196,8 +196,13 @@ pub struct StateLayout {
     pub qddot: Vec<bool>,
     /// Multiply q, q̇, q̈ by these for SI units (the `s`, `sdot`, `sddot` roles' units).
     pub factors: [f64; 3],
-    /// Four more columns: the root link's orientation quaternion `[x, y, z, w]`.
+    /// Four more columns: an orientation quaternion `[x, y, z, w]` in the world, the root link's
+    /// or that of [`Self::base_frame`].
     pub base_quat: bool,
+    /// The frame whose orientation the quaternion is, as the log names it (a `.mat` orientation
+    /// sensor's name, an MCAP `Imu`'s `header.frame_id`; `None`: the root link's). The label finds
+    /// it in the URDF ([`frictionless_ident::preprocess::JointStates::base_frame`]).
+    pub base_frame: Option<String>,
     /// Six more columns per frame named: a measured wrench applied to the robot there, `[fx, fy,
     /// fz]` [N] then `[mx, my, mz]` [N·m] in the frame's coordinates.
     pub wrenches: Vec<String>,
@@ -213,6 +218,7 @@ impl StateLayout {
             qddot: vec![false; n],
             factors: [1.0; 3],
             base_quat: false,
+            base_frame: None,
             wrenches: Vec::new(),
         }
     }
@@ -420,6 +426,7 @@ impl<'s> RunBuilder<'s> {
             }
             if layout.base_quat {
                 st.base_quat_xyzw = Some(std::array::from_fn(|_| cols.next().unwrap_or_default()));
+                st.base_frame = layout.base_frame.clone();
             }
             for f in &layout.wrenches {
                 st.wrenches
@@ -431,6 +438,16 @@ impl<'s> RunBuilder<'s> {
             st
         });
         (joints, state)
+    }
+
+    /// Names the frame whose orientation the state's quaternion is (see
+    /// [`StateLayout::base_frame`]), when it is learnt while reading (an MCAP `Imu`'s frame).
+    pub(crate) fn set_base_frame(&mut self, frame: &str) {
+        if let Some(l) = self.state.as_mut()
+            && l.base_frame.as_deref() != Some(frame)
+        {
+            l.base_frame = Some(frame.to_string());
+        }
     }
 
     pub(crate) fn report_mut(&mut self) -> &mut RunReport {

@@ -90,6 +90,13 @@ pub struct CommonArgs {
         allow_hyphen_values = true
     )]
     pub fixed_joints: Vec<String>,
+    /// The URDF frame whose orientation in the world the logged base orientation is (an IMU's
+    /// frame, e.g. `waist_imu_0`; placed on the root link through the URDF at each sample's q).
+    /// Default: the frame the log names — a .mat `orientations/<sensor>` channel's sensor, the
+    /// `<frame>` of `frames/<root>/<frame>/orientation`, an MCAP Imu's `header.frame_id` — or the
+    /// root link when it names none (a CSV's `--base-quat`).
+    #[arg(long, value_name = "FRAME")]
+    pub base_frame: Option<String>,
     /// Resampling, filter, smoother and sample-limit settings.
     #[command(flatten)]
     #[serde(flatten)]
@@ -272,7 +279,8 @@ fn whole_body_for(common: &CommonArgs, default_current: bool) -> anyhow::Result<
     if !current {
         return Ok(None);
     }
-    urdf_whole_body(common.urdf.as_deref(), &common.fixed_joints).map(Some)
+    let body = urdf_whole_body(common.urdf.as_deref(), &common.fixed_joints)?;
+    Ok(Some(body.with_base_frame(common.base_frame.clone())?))
 }
 
 fn urdf_names(body: &Option<WholeBody>) -> Option<Vec<String>> {
@@ -660,9 +668,12 @@ fn finish(
                     .unwrap_or_default()
             })
             .collect();
-        let base = runs
-            .iter()
-            .any(|r| r.state.as_ref().is_some_and(|s| s.base_quat_xyzw.is_some()));
+        let base = runs.iter().find_map(|r| {
+            r.state
+                .as_ref()
+                .filter(|s| s.base_quat_xyzw.is_some())
+                .map(|s| s.base_frame.as_deref())
+        });
         let mut plan = b.plan(&log_names, &joints, base);
         plan.wrenches = runs
             .first()

@@ -36,7 +36,8 @@ struct Streamer<'a> {
     labeller: Option<StreamLabeller<'a>>,
     outs: Vec<Out>,
     state_names: Vec<String>,
-    base_logged: bool,
+    /// Whether the log gives a base orientation, and the frame it names for it.
+    base: Option<Option<String>>,
     wrench_frames: Vec<String>,
     /// The declared units (a CSV's), for the plausibility check's suggested fixes.
     units: Option<&'a [(Role, Unit)]>,
@@ -97,7 +98,7 @@ impl<'a> Streamer<'a> {
             }
             if let Some(st) = &block.state {
                 self.state_names = st.names.clone();
-                self.base_logged = st.base_quat_xyzw.is_some();
+                self.base = st.base_quat_xyzw.as_ref().map(|_| st.base_frame.clone());
                 self.wrench_frames = st.wrenches.iter().map(|w| w.frame.clone()).collect();
             }
             self.labeller = Some(StreamLabeller::new(
@@ -195,7 +196,7 @@ pub fn run_stream(
         labeller: None,
         outs: Vec::new(),
         state_names: Vec::new(),
-        base_logged: false,
+        base: None,
         wrench_frames: Vec::new(),
         units,
         first_of_log: true,
@@ -237,7 +238,11 @@ pub fn run_stream(
     st.write(rest)?;
     let plan = body.map(|b| {
         let names: Vec<String> = st.joints.iter().map(|j| j.joint.clone()).collect();
-        let mut p = b.plan(&st.state_names, &names, st.base_logged);
+        let mut p = b.plan(
+            &st.state_names,
+            &names,
+            st.base.as_ref().map(Option::as_deref),
+        );
         p.wrenches = st.wrench_frames.clone();
         p
     });

@@ -300,9 +300,10 @@ fn run_whole_body(
         qdot: qd,
         qddot: qdd,
         base_quat_xyzw: None,
+        base_frame: None,
         wrenches: Vec::new(),
     };
-    let plan = body.plan(&state.names, std::slice::from_ref(&meta.joint), false);
+    let plan = body.plan(&state.names, std::slice::from_ref(&meta.joint), None);
     if !plan.held_at_zero.is_empty() {
         eprintln!(
             "warning: URDF joints neither in the log nor given with --fixed-joint, held at 0 rad: {}",
