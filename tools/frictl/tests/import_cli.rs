@@ -962,6 +962,11 @@ fn mat_imu_mounted_rotated_gives_the_root_orientation_through_the_urdf() {
         "a --base-frame the URDF lacks",
     );
     assert!(e.contains("--base-frame nowhere"), "{e}");
+    let e = err_text(
+        import_tilted("bad", &["--base-frame", "waist_imu_0"]),
+        "a --base-frame without a base orientation",
+    );
+    assert!(e.contains("give --base-orientation"), "{e}");
     assert!(!d.join("bad_l_knee.csv").exists());
 }
 

@@ -322,6 +322,7 @@ pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
     spec.joints = args.joint.clone();
     spec.all_joints = args.common.joints_all.is_some();
     check(&args.files, &args.common)?;
+    check_base_frame(&args.common, ("--base-quat", args.base_quat.is_some()))?;
     let body = match &args.positions {
         Some(_) => {
             let reads = |r: Role| spec.columns.iter().any(|c| c.0 == r);
@@ -384,6 +385,10 @@ pub fn run_mcap(args: McapArgs) -> anyhow::Result<()> {
         .map(|n| Role::parse(n))
         .collect::<Result<Vec<_>, _>>()?;
     check(&args.files, &args.common)?;
+    check_base_frame(
+        &args.common,
+        ("--base-orientation", args.base_orientation.is_some()),
+    )?;
     let body = whole_body_for(
         &args.common,
         !matches!(effort_role, Some(Role::TauF | Role::TauJoint)),
@@ -442,6 +447,10 @@ pub fn run_mat(args: MatArgs) -> anyhow::Result<()> {
         .map(|n| Role::parse(n))
         .collect::<Result<Vec<_>, _>>()?;
     check(&args.files, &args.common)?;
+    check_base_frame(
+        &args.common,
+        ("--base-orientation", args.base_orientation.is_some()),
+    )?;
     let body = whole_body_for(&args.common, true)?;
     let spec = mat_log::MatSpec {
         joints: args.joint.clone(),
@@ -503,6 +512,15 @@ const JOINT: &str = "{joint}";
 
 pub(crate) fn out_path(out: &Path, joint: &str) -> PathBuf {
     PathBuf::from(out.to_string_lossy().replace(JOINT, joint))
+}
+
+/// Refuses `--base-frame` without a logged base orientation (`base_option`: the format's option
+/// for it, `None` when not given): it would change nothing, silently.
+fn check_base_frame(common: &CommonArgs, base_option: (&str, bool)) -> anyhow::Result<()> {
+    if let (Some(f), (option, false)) = (&common.base_frame, base_option) {
+        bail!("--base-frame {f} names the frame of a logged base orientation: give {option}");
+    }
+    Ok(())
 }
 
 fn check(files: &[PathBuf], common: &CommonArgs) -> anyhow::Result<()> {
