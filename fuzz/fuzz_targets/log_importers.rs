@@ -9,12 +9,14 @@
 //! - `c ROLE=COLUMN` (a `--column`), `u ROLE=UNIT` (a `--unit`), `n ROLE` (a `--negate`),
 //!   `d X` (the delimiter: the first byte of X, ASCII only, as frictl requires);
 //! - `t TOPIC`, `j JOINT`, `e ROLE|none` (the MCAP topic, joint and `--effort`; a role `--effort`
-//!   refuses is passed to `mcap_log::read` as well, which must refuse it too).
+//!   refuses is passed to `mcap_log::read` as well, which must refuse it too);
+//! - `b N`: the streamed MCAP read's rows per block (default 7).
 //!
 //! Without `c` lines the CSV header's columns are mapped in order to `time`, `s`, `sdot`, … (every
 //! role, in canonical order). MCAP defaults: topic `/joint_states`, joint `wrist`, effort `tau_joint`.
 //!
-//! Both readers run on every input: each must return a run or an error naming the file, never panic,
+//! Both readers run on every input, the MCAP one whole and streamed (`mcap_log::read_streamed`, whose
+//! blocks must hold the whole read's rows): each must return a run or an error naming the file, never panic,
 //! and an accepted run must hold one finite value per row in every signal with strictly increasing
 //! time and a report that counts what it used.
 #![no_main]
@@ -38,6 +40,7 @@ fuzz_target!(|data: &[u8]| {
     };
     let (mut columns, mut units, mut negate) = (Vec::new(), Vec::new(), Vec::new());
     let mut delimiter = b',';
+    let mut block_rows: usize = 7;
     let (mut topic, mut joint, mut effort) = (
         "/joint_states".to_string(),
         "wrist".to_string(),
@@ -57,6 +60,7 @@ fuzz_target!(|data: &[u8]| {
             "t" => topic = value.to_string(),
             "j" => joint = value.to_string(),
             "e" => effort = value.to_string(),
+            "b" => block_rows = value.trim().parse().unwrap_or(block_rows).clamp(1, 1 << 16),
             _ => {}
         }
     }
@@ -105,7 +109,52 @@ fuzz_target!(|data: &[u8]| {
         effort_role,
         negate,
     };
-    if let Ok(run) = mcap_log::read(&mcap_path, &sp, &mut no_progress) {
-        check(&run);
+    let whole = mcap_log::read(&mcap_path, &sp, &mut no_progress);
+    if let Ok(run) = &whole {
+        check(run);
+    }
+    // Streamed (`--window-samples`): blocks of `block_rows` rows, each of one length in every
+    // signal; when the read succeeds, the blocks hold every used row, the whole read's if it
+    // succeeded too.
+    let mut times: Vec<f64> = Vec::new();
+    let mut sink = |b: frictionless_logs::ImportedRun| {
+        let n = b.signals.time_s.len();
+        assert!(n >= 1 && n <= block_rows, "a block of {n} rows (at most {block_rows})");
+        assert!(signal_lengths(&b.signals).all(|len| len == n), "one length per block");
+        times.extend_from_slice(&b.signals.time_s);
+        Ok(())
+    };
+    let stream = frictionless_logs::BlockSink {
+        block_rows,
+        sink: &mut sink,
+    };
+    let extra = mcap_log::McapState::default();
+    let streamed =
+        mcap_log::read_streamed(&mcap_path, &sp, &extra, &mut no_progress, Some(stream));
+    if let Ok(run) = &streamed {
+        assert_eq!(times.len() as u64, run.report.rows_used, "every used row in a block");
+        if let Ok(w) = &whole {
+            assert_eq!(times, w.signals.time_s, "the streamed rows are the whole read's");
+        }
     }
 });
+
+/// The lengths of the signals a run holds.
+fn signal_lengths(s: &frictionless_logs::RunSignals) -> impl Iterator<Item = usize> + '_ {
+    [
+        &s.s_rad,
+        &s.sdot_rad_s,
+        &s.sddot_rad_s2,
+        &s.theta_motor_rad,
+        &s.omega_motor_rad_s,
+        &s.current_a,
+        &s.tau_joint_nm,
+        &s.tau_motor_nm,
+        &s.tau_f_nm,
+        &s.temperature_c,
+    ]
+    .into_iter()
+    .flatten()
+    .map(Vec::len)
+    .chain([s.chunk.len()])
+}
