@@ -218,6 +218,11 @@ impl WholeBody {
         let Some(name) = self.base_frame.as_deref().or(log_frame) else {
             return Ok(None);
         };
+        // A ROS 1 style frame id (`/imu_link`) names the URDF's `imu_link`.
+        let name = match self.robot.frame_id(name) {
+            Err(_) if name.starts_with('/') => name.trim_start_matches('/'),
+            _ => name,
+        };
         if name == self.robot.root_link {
             return Ok(None);
         }
@@ -461,5 +466,42 @@ impl WholeBody {
             }
         }
         Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ergocub() -> WholeBody {
+        let urdf = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../tests/fixtures/ergocub/ergoCubSN001.urdf");
+        WholeBody::new(Robot::from_urdf_file(urdf).unwrap(), BTreeMap::new()).unwrap()
+    }
+
+    #[test]
+    fn the_logged_orientation_frame_is_found_in_the_urdf_or_refused() {
+        let b = ergocub();
+        let base = |frame: Option<&str>| b.plan(&[], &[], Some(frame)).base;
+        assert!(base(Some("waist_imu_0")).contains("frame `waist_imu_0`"));
+        // A ROS 1 style frame id, and the root link by name.
+        assert!(base(Some("/waist_imu_0")).contains("frame `waist_imu_0`"));
+        assert!(base(Some("root_link")).starts_with("root-link orientation"));
+        assert!(base(None).starts_with("root-link orientation"));
+        let e = base(Some("imu_link"));
+        assert!(
+            e.contains("`imu_link`") && e.contains("--base-frame"),
+            "{e}"
+        );
+        assert!(b.plan(&[], &[], None).base.starts_with("fixed"));
+        // The override wins over the log's name; a frame the URDF lacks is refused at once.
+        let forced = ergocub().with_base_frame(Some("root_link".into())).unwrap();
+        assert!(
+            forced
+                .plan(&[], &[], Some(Some("waist_imu_0")))
+                .base
+                .starts_with("root-link orientation")
+        );
+        assert!(ergocub().with_base_frame(Some("nowhere".into())).is_err());
     }
 }
