@@ -939,7 +939,7 @@ fn mat_imu_mounted_rotated_gives_the_root_orientation_through_the_urdf() {
     let mut root = vec!["--base-orientation", "orientations/root_rpy"];
     root.extend(TILT_WRENCH);
     let e = err_text(
-        import_tilted("bad", &root),
+        import_tilted("imu_bad", &root),
         "an orientation of an unknown frame",
     );
     assert!(
@@ -963,11 +963,11 @@ fn mat_imu_mounted_rotated_gives_the_root_orientation_through_the_urdf() {
     );
     assert!(e.contains("--base-frame nowhere"), "{e}");
     let e = err_text(
-        import_tilted("bad", &["--base-frame", "waist_imu_0"]),
+        import_tilted("imu_bad", &["--base-frame", "waist_imu_0"]),
         "a --base-frame without a base orientation",
     );
     assert!(e.contains("give --base-orientation"), "{e}");
-    assert!(!d.join("bad_l_knee.csv").exists());
+    assert!(!d.join("imu_bad_l_knee.csv").exists());
 }
 
 #[cfg(feature = "mat")]

@@ -18,6 +18,7 @@
 //! `sensor_msgs/msg/Imu` topic and measured wrenches from `geometry_msgs/msg/WrenchStamped` topics
 //! ([`McapState`]), each sampled and held onto the `JointState` rows in the bag's order.
 
+use std::cell::Cell;
 use std::collections::BTreeMap;
 use std::io::Read;
 use std::path::Path;
@@ -421,7 +422,7 @@ pub fn read_streamed(
 ) -> Result<ImportedRun, LogsError> {
     // Streamed: which of position, velocity, effort the first message lacks. Each block's
     // signals for those are removed before the block goes on (they hold placeholders).
-    let absent = std::cell::Cell::new([false; 3]);
+    let absent = Cell::new([false; 3]);
     let streaming = stream.is_some();
     let block_rows = stream.as_ref().map_or(1, |s| s.block_rows);
     let mut inner = stream.map(|s| s.sink);
@@ -432,11 +433,11 @@ pub fn read_streamed(
         }
         inner.as_mut().map_or(Ok(()), |sink| sink(block))
     };
-    let mut sink = streaming.then_some(crate::BlockSink {
+    let sink = streaming.then_some(crate::BlockSink {
         block_rows,
         sink: &mut masked,
     });
-    let mut state_topics = StateTopics::new(extra);
+    let state_topics = StateTopics::new(extra);
     if state_topics.any() && spec.state_joints.is_none() {
         return Err(LogsError::Usage(
             "a base orientation or a wrench enters the whole-body state, which only the current \
@@ -448,38 +449,7 @@ pub fn read_streamed(
         // Time, s or ṡ as the effort's role would overwrite a field read from elsewhere.
         check_effort(r)?;
     }
-    let p = path.display().to_string();
-    let fmt = |msg: String| LogsError::Format {
-        path: p.clone(),
-        msg,
-    };
-    let mut file = open_regular(path)?;
-    let total = file.metadata().map(|m| m.len()).unwrap_or(0);
-    if total == 0 {
-        return Err(LogsError::Empty {
-            path: p,
-            what: "empty file".into(),
-        });
-    }
-    let mut magic = [0u8; 8];
-    let got = file.read(&mut magic).map_err(|e| LogsError::io(path, e))?;
-    if got < 8 || magic != *mcap::MAGIC {
-        return Err(fmt("not an MCAP file (no MCAP magic at the start)".into()));
-    }
-    // The magic goes through the reader too: the data section's CRC covers it.
-    let mut reader = LinearReader::new_with_options(
-        LinearReaderOptions::default()
-            .with_emit_chunks(true)
-            .with_validate_data_section_crc(true)
-            .with_validate_summary_section_crc(true)
-            .with_record_length_limit(MAX_RECORD),
-    );
-    reader.insert(magic.len()).copy_from_slice(&magic);
-    reader.notify_read(magic.len());
-    let mut schemas: BTreeMap<u16, (String, String)> = BTreeMap::new();
-    let mut wanted: Vec<u16> = Vec::new();
-    let mut topics: BTreeMap<String, String> = BTreeMap::new();
-    let mut names_seen: Vec<String> = Vec::new();
+    let (file, total) = open_bag(path)?;
     if spec.all_joints && spec.state_joints.is_none() {
         return Err(LogsError::Usage(
             "all joints: the whole-body state (the URDF's joint names) is needed".into(),
@@ -488,7 +458,6 @@ pub fn read_streamed(
     if spec.joints.is_empty() && !spec.all_joints {
         return Err(LogsError::Usage("no joint named to read".into()));
     }
-    let mut joints: Vec<String> = spec.joints.clone();
     let mut roles = vec![Role::S, Role::Sdot];
     if let Some(r) = spec.effort_role {
         roles.push(r);
@@ -497,254 +466,92 @@ pub fn read_streamed(
     for &r in &spec.negate {
         map.negate(r)?;
     }
-    // Created at the first message on the topic (its names give the whole-body state's joints).
-    let mut builder: Option<RunBuilder> = None;
-    let mut state_names: Vec<String> = Vec::new();
-    let mut not_in_urdf: Vec<String> = Vec::new();
-    let mut state_vel_empty = 0u64;
-    let mut state_qdot = false;
+    let mut bag = Bag {
+        p: path.display().to_string(),
+        spec,
+        state_topics,
+        absent: streaming.then_some(&absent),
+        sink,
+        schemas: BTreeMap::new(),
+        wanted: Vec::new(),
+        topics: BTreeMap::new(),
+        names_seen: Vec::new(),
+        joints: spec.joints.clone(),
+        roles,
+        map,
+        builder: None,
+        state_names: Vec::new(),
+        not_in_urdf: Vec::new(),
+        state_vel_empty: 0,
+        state_qdot: false,
+        msg_no: 0,
+        t0: None,
+        empty: [0; 3],
+        first_empty: [None; 3],
+    };
+    let unclosed = read_records(path, file, total, progress, |opcode, data| {
+        bag.record(opcode, data)
+    })?;
+    bag.finish(path, total, unclosed)
+}
+
+/// Opens an MCAP file and checks its magic; the file (read past the magic) and its size.
+fn open_bag(path: &Path) -> Result<(std::fs::File, u64), LogsError> {
+    let mut file = open_regular(path)?;
+    let total = file.metadata().map(|m| m.len()).unwrap_or(0);
+    if total == 0 {
+        return Err(LogsError::Empty {
+            path: path.display().to_string(),
+            what: "empty file".into(),
+        });
+    }
+    let mut magic = [0u8; 8];
+    let got = file.read(&mut magic).map_err(|e| LogsError::io(path, e))?;
+    if got < 8 || magic != *mcap::MAGIC {
+        return Err(LogsError::Format {
+            path: path.display().to_string(),
+            msg: "not an MCAP file (no MCAP magic at the start)".into(),
+        });
+    }
+    Ok((file, total))
+}
+
+/// Feeds `file` (of `total` bytes, read past its magic by [`open_bag`]) through the `mcap`
+/// crate's linear reader, at most [`READ_STEP`] bytes per read, and hands every record to
+/// `handle` (opcode, body), the records of each chunk split here ([`chunk_records`]). Returns
+/// where the whole records ended when the file has no footer (a recording killed before it was
+/// closed: what is whole is read).
+fn read_records(
+    path: &Path,
+    mut file: std::fs::File,
+    total: u64,
+    progress: Progress,
+    mut handle: impl FnMut(u8, &[u8]) -> Result<(), LogsError>,
+) -> Result<Option<u64>, LogsError> {
+    let fmt = |msg: String| LogsError::Format {
+        path: path.display().to_string(),
+        msg,
+    };
+    // The magic goes through the reader too: the data section's CRC covers it.
+    let mut reader = LinearReader::new_with_options(
+        LinearReaderOptions::default()
+            .with_emit_chunks(true)
+            .with_validate_data_section_crc(true)
+            .with_validate_summary_section_crc(true)
+            .with_record_length_limit(MAX_RECORD),
+    );
+    reader
+        .insert(mcap::MAGIC.len())
+        .copy_from_slice(mcap::MAGIC);
+    reader.notify_read(mcap::MAGIC.len());
     let mut done: u64 = 8;
-    let mut msg_no: u64 = 0;
-    let mut t0: Option<f64> = None;
-    let mut empty = [0u64; 3];
-    let mut first_empty: [Option<u64>; 3] = [None; 3];
     // Offset of the next record in the file (after the 8-byte magic).
     let mut offset: u64 = 8;
     let mut footer = false;
-    let mut unclosed: Option<u64> = None;
-    // One record (top level or inside a chunk).
-    let mut handle = |opcode: u8, data: &[u8]| -> Result<(), LogsError> {
-        // Only schemas, channels and messages are used; the rest is never parsed.
-        if !matches!(opcode, op::SCHEMA | op::CHANNEL | op::MESSAGE) {
-            return Ok(());
-        }
-        if !prefixes_fit(opcode, data) {
-            return Err(fmt(format!(
-                "a {} record's length field exceeds the record ({} bytes)",
-                if opcode == op::SCHEMA {
-                    "schema"
-                } else {
-                    "channel"
-                },
-                data.len()
-            )));
-        }
-        let rec = mcap::parse_record(opcode, data).map_err(|e| fmt(e.to_string()))?;
-        match rec {
-            Record::Schema { header, .. } => {
-                schemas.insert(header.id, (header.name, header.encoding));
-            }
-            Record::Channel(ch) => {
-                let schema = schemas
-                    .get(&ch.schema_id)
-                    .map_or("?".to_string(), |s| s.0.clone());
-                topics.insert(ch.topic.clone(), schema.clone());
-                if ch.topic == spec.topic {
-                    if schema != SCHEMA {
-                        return Err(fmt(format!(
-                            "topic {} carries `{schema}`, not {SCHEMA}",
-                            ch.topic
-                        )));
-                    }
-                    if ch.message_encoding != "cdr" {
-                        return Err(fmt(format!(
-                            "topic {} is encoded `{}`, not cdr",
-                            ch.topic, ch.message_encoding
-                        )));
-                    }
-                    wanted.push(ch.id);
-                }
-                state_topics
-                    .channel(&ch.topic, &schema, &ch.message_encoding, ch.id)
-                    .map_err(fmt)?;
-            }
-            Record::Message { header, data } => {
-                if state_topics
-                    .message(header.channel_id, &data)
-                    .map_err(fmt)?
-                {
-                    return Ok(());
-                }
-                if !wanted.contains(&header.channel_id) {
-                    return Ok(());
-                }
-                msg_no += 1;
-                let js = decode_joint_state(&data)
-                    .map_err(|e| fmt(format!("message {msg_no} on {}: {e}", spec.topic)))?;
-                let lacks = [
-                    js.position.is_empty(),
-                    js.velocity.is_empty(),
-                    spec.effort_role.is_some() && js.effort.is_empty(),
-                ];
-                if streaming {
-                    if builder.is_none() {
-                        if lacks[0] && lacks[1] {
-                            return Err(fmt(format!(
-                                "message {msg_no} on {}: neither `position` nor `velocity` has \
-                                 values; a streamed read takes its fields from the first message",
-                                spec.topic
-                            )));
-                        }
-                        absent.set(lacks);
-                    } else if let Some(k) = (0..3).find(|&k| lacks[k] && !absent.get()[k]) {
-                        return Err(fmt(format!(
-                            "message {msg_no} on {}: `{}` is empty, and the first message had \
-                             values: a streamed read takes the first message's fields from every \
-                             message (read the bag whole to drop the field for the whole bag)",
-                            spec.topic,
-                            ["position", "velocity", "effort"][k]
-                        )));
-                    }
-                }
-                let b = builder.get_or_insert_with(|| {
-                    {
-                        let layout = spec.state_joints.as_ref().map(|urdf| {
-                            // Every name is kept (the pipeline lists the URDF's missing ones).
-                            for n in &js.name {
-                                if !urdf.contains(n) && !not_in_urdf.contains(n) {
-                                    not_in_urdf.push(n.clone());
-                                }
-                                if !state_names.contains(n) {
-                                    state_names.push(n.clone());
-                                }
-                            }
-                            let mut l = crate::StateLayout::positions(state_names.clone());
-                            if !js.velocity.is_empty() {
-                                l.qdot = vec![true; state_names.len()];
-                                state_qdot = true;
-                            }
-                            state_topics.layout(&mut l);
-                            l
-                        });
-                        if spec.all_joints {
-                            joints = state_names
-                                .iter()
-                                .filter(|n| !not_in_urdf.contains(n))
-                                .cloned()
-                                .collect();
-                        }
-                        let mut nb = RunBuilder::with_joints(
-                            map.clone(),
-                            joints.clone(),
-                            layout,
-                            &p,
-                            "mcap",
-                        )
-                        .streaming(sink.take());
-                        let rep = nb.report_mut();
-                        rep.sources
-                            .insert("time".into(), "header.stamp - first stamp".into());
-                        rep.sources.insert("s".into(), "position".into());
-                        rep.sources.insert("sdot".into(), "velocity".into());
-                        if let Some(r) = spec.effort_role {
-                            rep.sources.insert(r.name().into(), "effort".into());
-                        }
-                        nb
-                    }
-                });
-                let mut idx = Vec::with_capacity(joints.len());
-                for joint in &joints {
-                    if js.name.iter().filter(|n| *n == joint).count() > 1 {
-                        return Err(fmt(format!(
-                            "message {msg_no} on {}: joint `{joint}` is named more than once in \
-                             `name` ({}): which entry holds it is ambiguous",
-                            spec.topic,
-                            js.name.join(", ")
-                        )));
-                    }
-                    match js.name.iter().position(|n| n == joint) {
-                        Some(j) => idx.push(j),
-                        None => {
-                            for n in &js.name {
-                                if !names_seen.contains(n) && names_seen.len() < 256 {
-                                    names_seen.push(n.clone());
-                                }
-                            }
-                            if joints.len() == 1 {
-                                b.skip("joint not in message");
-                            } else {
-                                b.skip(&format!("joint {joint} not in message"));
-                            }
-                            return Ok(());
-                        }
-                    }
-                }
-                // An empty array is "not measured": a placeholder 0 now, and the whole
-                // signal is dropped at the end if any message lacked it. A wrong length
-                // is a broken message: NaN, counted and dropped.
-                let msg = msg_no;
-                let mut pick = |v: &[f64], j: usize, k: usize, empty: &mut [u64; 3]| {
-                    if v.is_empty() {
-                        empty[k] += 1;
-                        first_empty[k].get_or_insert(msg);
-                        0.0
-                    } else if v.len() == js.name.len() {
-                        v[j]
-                    } else {
-                        f64::NAN
-                    }
-                };
-                let t = js.stamp_s - *t0.get_or_insert(js.stamp_s);
-                let per_joint = roles.len();
-                let mut vals = Vec::with_capacity(1 + per_joint * idx.len());
-                vals.push(t);
-                for (n, &j) in idx.iter().enumerate() {
-                    // Count an empty array once per message, not once per joint.
-                    let mut e = [0u64; 3];
-                    let pos = pick(&js.position, j, 0, &mut e);
-                    let vel = pick(&js.velocity, j, 1, &mut e);
-                    let eff = pick(&js.effort, j, 2, &mut e);
-                    if n == 0 {
-                        for (k, x) in e.iter().enumerate() {
-                            empty[k] += x;
-                        }
-                    }
-                    vals.extend([pos, vel]);
-                    if spec.effort_role.is_some() {
-                        vals.push(eff);
-                    }
-                }
-                let state_vel = state_qdot;
-                if state_qdot && js.velocity.is_empty() {
-                    state_vel_empty += 1;
-                }
-                for name in &state_names {
-                    let k = js.name.iter().position(|n| n == name);
-                    let at = |v: &[f64]| match k {
-                        Some(k) if v.len() == js.name.len() => v[k],
-                        _ => f64::NAN,
-                    };
-                    vals.push(at(&js.position));
-                    if state_vel {
-                        vals.push(if js.velocity.is_empty() {
-                            0.0
-                        } else {
-                            at(&js.velocity)
-                        });
-                    }
-                }
-                state_topics
-                    .extend_row(&mut vals, &spec.topic, msg_no, &topics)
-                    .map_err(fmt)?;
-                if let Some(f) = state_topics.base_frame() {
-                    b.set_base_frame(f);
-                }
-                let row = b.row_mut();
-                row[..vals.len()].copy_from_slice(&vals);
-                b.push(|| format!("message {msg_no}"), 0)?;
-            }
-            _ => {}
-        }
-        Ok(())
-    };
     while let Some(ev) = reader.next_event() {
         let ev = match ev {
             Ok(ev) => ev,
-            // A recording killed before it was closed: no footer; what is whole is read.
-            Err(mcap::McapError::UnexpectedEof) if !footer => {
-                unclosed = Some(offset);
-                break;
-            }
+            Err(mcap::McapError::UnexpectedEof) if !footer => return Ok(Some(offset)),
             Err(mcap::McapError::BadDataCrc { saved, calculated }) => {
                 return Err(fmt(format!(
                     "the CRC of the data section (byte 0 to {offset}) is {calculated:08X}, its \
@@ -792,105 +599,417 @@ pub fn read_streamed(
             LinearReadEvent::Record { data, opcode } => handle(opcode, data)?,
         }
     }
-    if wanted.is_empty() {
-        let list: Vec<String> = topics.iter().map(|(t, s)| format!("{t} ({s})")).collect();
-        return Err(fmt(format!(
-            "no topic {}; the bag has: {}",
-            spec.topic,
-            if list.is_empty() {
-                "no channels".into()
-            } else {
-                list.join(", ")
-            }
-        )));
+    Ok(None)
+}
+
+/// One bag being read: the channels met so far, and the `JointState` messages on the topic
+/// turned into rows of a [`RunBuilder`] (created at the first one: its names give the
+/// whole-body state's joints).
+struct Bag<'a, 's> {
+    /// The bag's path, for messages.
+    p: String,
+    spec: &'a McapSpec,
+    state_topics: StateTopics<'a>,
+    /// Streamed: which of position, velocity, effort the first message lacks (set there).
+    absent: Option<&'a Cell<[bool; 3]>>,
+    /// Streamed: where the builder hands its blocks (taken when it is created).
+    sink: Option<crate::BlockSink<'s>>,
+    schemas: BTreeMap<u16, (String, String)>,
+    /// Channels of the `JointState` topic.
+    wanted: Vec<u16>,
+    /// Every topic met, with its schema name.
+    topics: BTreeMap<String, String>,
+    /// Names of the messages that lack a labelled joint (at most 256, for the error).
+    names_seen: Vec<String>,
+    /// The labelled joints.
+    joints: Vec<String>,
+    roles: Vec<Role>,
+    map: RoleMap,
+    builder: Option<RunBuilder<'s>>,
+    state_names: Vec<String>,
+    not_in_urdf: Vec<String>,
+    state_vel_empty: u64,
+    state_qdot: bool,
+    msg_no: u64,
+    /// The first message's stamp [s since the epoch].
+    t0: Option<f64>,
+    /// Messages with an empty position, velocity, effort, and the first of each.
+    empty: [u64; 3],
+    first_empty: [Option<u64>; 3],
+}
+
+impl<'s> Bag<'_, 's> {
+    fn fmt(&self, msg: String) -> LogsError {
+        LogsError::Format {
+            path: self.p.clone(),
+            msg,
+        }
     }
-    state_topics.check_present(&topics).map_err(fmt)?;
-    if msg_no > 0 && t0.is_none() {
-        return Err(LogsError::JointNotFound {
-            path: p,
-            joint: joints.join(", "),
-            available: names_seen.join(", "),
-        });
-    }
-    let Some(mut b) = builder else {
-        return Err(LogsError::Empty {
-            path: p,
-            what: format!("no message on {}", spec.topic),
-        });
-    };
-    let rep = b.report_mut();
-    if spec.state_joints.is_some() {
-        rep.notes.push(format!(
-            "whole-body state: {} joints of the first message's names{}",
-            state_names.len(),
-            if state_vel_empty > 0 {
-                format!(
-                    "; velocity empty in {state_vel_empty} messages: the state's velocities are not used"
-                )
-            } else {
-                String::new()
+
+    /// One record (top level or inside a chunk): schemas, channels and messages are parsed, the
+    /// rest is skipped.
+    fn record(&mut self, opcode: u8, data: &[u8]) -> Result<(), LogsError> {
+        if !matches!(opcode, op::SCHEMA | op::CHANNEL | op::MESSAGE) {
+            return Ok(());
+        }
+        if !prefixes_fit(opcode, data) {
+            return Err(self.fmt(format!(
+                "a {} record's length field exceeds the record ({} bytes)",
+                if opcode == op::SCHEMA {
+                    "schema"
+                } else {
+                    "channel"
+                },
+                data.len()
+            )));
+        }
+        let rec = mcap::parse_record(opcode, data).map_err(|e| self.fmt(e.to_string()))?;
+        match rec {
+            Record::Schema { header, .. } => {
+                self.schemas
+                    .insert(header.id, (header.name, header.encoding));
             }
-        ));
-        if !not_in_urdf.is_empty() {
+            Record::Channel(ch) => {
+                let schema = self
+                    .schemas
+                    .get(&ch.schema_id)
+                    .map_or("?".to_string(), |s| s.0.clone());
+                self.topics.insert(ch.topic.clone(), schema.clone());
+                if ch.topic == self.spec.topic {
+                    if schema != SCHEMA {
+                        return Err(self.fmt(format!(
+                            "topic {} carries `{schema}`, not {SCHEMA}",
+                            ch.topic
+                        )));
+                    }
+                    if ch.message_encoding != "cdr" {
+                        return Err(self.fmt(format!(
+                            "topic {} is encoded `{}`, not cdr",
+                            ch.topic, ch.message_encoding
+                        )));
+                    }
+                    self.wanted.push(ch.id);
+                }
+                self.state_topics
+                    .channel(&ch.topic, &schema, &ch.message_encoding, ch.id)
+                    .map_err(|e| self.fmt(e))?;
+            }
+            Record::Message { header, data } => {
+                let mine = self.state_topics.message(header.channel_id, &data);
+                if mine.map_err(|e| self.fmt(e))? || !self.wanted.contains(&header.channel_id) {
+                    return Ok(());
+                }
+                self.msg_no += 1;
+                let js = decode_joint_state(&data).map_err(|e| {
+                    self.fmt(format!(
+                        "message {} on {}: {e}",
+                        self.msg_no, self.spec.topic
+                    ))
+                })?;
+                self.check_fields(&js)?;
+                if self.builder.is_none() {
+                    self.builder = Some(self.start(&js));
+                }
+                self.row(&js)?;
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    /// Streamed: the first message decides which fields are read; a later one lacking one of
+    /// them is an error.
+    fn check_fields(&self, js: &JointState) -> Result<(), LogsError> {
+        let Some(absent) = self.absent else {
+            return Ok(());
+        };
+        let lacks = [
+            js.position.is_empty(),
+            js.velocity.is_empty(),
+            self.spec.effort_role.is_some() && js.effort.is_empty(),
+        ];
+        if self.builder.is_none() {
+            if lacks[0] && lacks[1] {
+                return Err(self.fmt(format!(
+                    "message {} on {}: neither `position` nor `velocity` has values; a streamed \
+                     read takes its fields from the first message",
+                    self.msg_no, self.spec.topic
+                )));
+            }
+            absent.set(lacks);
+        } else if let Some(k) = (0..3).find(|&k| lacks[k] && !absent.get()[k]) {
+            return Err(self.fmt(format!(
+                "message {} on {}: `{}` is empty, and the first message had values: a streamed \
+                 read takes the first message's fields from every message (read the bag whole \
+                 to drop the field for the whole bag)",
+                self.msg_no,
+                self.spec.topic,
+                ["position", "velocity", "effort"][k]
+            )));
+        }
+        Ok(())
+    }
+
+    /// The builder, at the first message: its names give the whole-body state's joints (and,
+    /// with `all_joints`, the labelled ones).
+    fn start(&mut self, js: &JointState) -> RunBuilder<'s> {
+        let layout = self.spec.state_joints.as_ref().map(|urdf| {
+            // Every name is kept (the pipeline lists the URDF's missing ones).
+            for n in &js.name {
+                if !urdf.contains(n) && !self.not_in_urdf.contains(n) {
+                    self.not_in_urdf.push(n.clone());
+                }
+                if !self.state_names.contains(n) {
+                    self.state_names.push(n.clone());
+                }
+            }
+            let mut l = crate::StateLayout::positions(self.state_names.clone());
+            if !js.velocity.is_empty() {
+                l.qdot = vec![true; self.state_names.len()];
+                self.state_qdot = true;
+            }
+            self.state_topics.layout(&mut l);
+            l
+        });
+        if self.spec.all_joints {
+            self.joints = self
+                .state_names
+                .iter()
+                .filter(|n| !self.not_in_urdf.contains(n))
+                .cloned()
+                .collect();
+        }
+        let mut b = RunBuilder::with_joints(
+            self.map.clone(),
+            self.joints.clone(),
+            layout,
+            &self.p,
+            "mcap",
+        )
+        .streaming(self.sink.take());
+        let rep = b.report_mut();
+        rep.sources
+            .insert("time".into(), "header.stamp - first stamp".into());
+        rep.sources.insert("s".into(), "position".into());
+        rep.sources.insert("sdot".into(), "velocity".into());
+        if let Some(r) = self.spec.effort_role {
+            rep.sources.insert(r.name().into(), "effort".into());
+        }
+        b
+    }
+
+    /// One message's row: time, each labelled joint's roles, the whole-body state.
+    fn row(&mut self, js: &JointState) -> Result<(), LogsError> {
+        let msg_no = self.msg_no;
+        let topic = &self.spec.topic;
+        let mut idx = Vec::with_capacity(self.joints.len());
+        for joint in &self.joints {
+            if js.name.iter().filter(|n| *n == joint).count() > 1 {
+                return Err(self.fmt(format!(
+                    "message {msg_no} on {topic}: joint `{joint}` is named more than once in \
+                     `name` ({}): which entry holds it is ambiguous",
+                    js.name.join(", ")
+                )));
+            }
+            match js.name.iter().position(|n| n == joint) {
+                Some(j) => idx.push(j),
+                None => {
+                    for n in &js.name {
+                        if !self.names_seen.contains(n) && self.names_seen.len() < 256 {
+                            self.names_seen.push(n.clone());
+                        }
+                    }
+                    let b = self.builder.as_mut().expect("created before the first row");
+                    if self.joints.len() == 1 {
+                        b.skip("joint not in message");
+                    } else {
+                        b.skip(&format!("joint {joint} not in message"));
+                    }
+                    return Ok(());
+                }
+            }
+        }
+        // An empty array is "not measured": a placeholder 0 now, and the whole signal is
+        // dropped at the end if any message lacked it. A wrong length is a broken message:
+        // NaN, counted and dropped.
+        let first_empty = &mut self.first_empty;
+        let mut pick = |v: &[f64], j: usize, k: usize, empty: &mut [u64; 3]| {
+            if v.is_empty() {
+                empty[k] += 1;
+                first_empty[k].get_or_insert(msg_no);
+                0.0
+            } else if v.len() == js.name.len() {
+                v[j]
+            } else {
+                f64::NAN
+            }
+        };
+        let t = js.stamp_s - *self.t0.get_or_insert(js.stamp_s);
+        let mut vals = Vec::with_capacity(1 + self.roles.len() * idx.len());
+        vals.push(t);
+        for (n, &j) in idx.iter().enumerate() {
+            // Count an empty array once per message, not once per joint.
+            let mut e = [0u64; 3];
+            let pos = pick(&js.position, j, 0, &mut e);
+            let vel = pick(&js.velocity, j, 1, &mut e);
+            let eff = pick(&js.effort, j, 2, &mut e);
+            if n == 0 {
+                for (k, x) in e.iter().enumerate() {
+                    self.empty[k] += x;
+                }
+            }
+            vals.extend([pos, vel]);
+            if self.spec.effort_role.is_some() {
+                vals.push(eff);
+            }
+        }
+        if self.state_qdot && js.velocity.is_empty() {
+            self.state_vel_empty += 1;
+        }
+        for name in &self.state_names {
+            let k = js.name.iter().position(|n| n == name);
+            let at = |v: &[f64]| match k {
+                Some(k) if v.len() == js.name.len() => v[k],
+                _ => f64::NAN,
+            };
+            vals.push(at(&js.position));
+            if self.state_qdot {
+                vals.push(if js.velocity.is_empty() {
+                    0.0
+                } else {
+                    at(&js.velocity)
+                });
+            }
+        }
+        self.state_topics
+            .extend_row(&mut vals, topic, msg_no, &self.topics)
+            .map_err(|e| self.fmt(e))?;
+        let b = self.builder.as_mut().expect("created before the first row");
+        if let Some(f) = self.state_topics.base_frame() {
+            b.set_base_frame(f);
+        }
+        let row = b.row_mut();
+        row[..vals.len()].copy_from_slice(&vals);
+        b.push(|| format!("message {msg_no}"), 0)
+    }
+
+    /// The run, once every record is read: the checks that need the whole bag, the report's
+    /// notes and warnings, the signals of a field empty in some message dropped.
+    fn finish(
+        self,
+        path: &Path,
+        total: u64,
+        unclosed: Option<u64>,
+    ) -> Result<ImportedRun, LogsError> {
+        let (spec, msg_no, empty) = (self.spec, self.msg_no, self.empty);
+        if self.wanted.is_empty() {
+            let list: Vec<String> = self
+                .topics
+                .iter()
+                .map(|(t, s)| format!("{t} ({s})"))
+                .collect();
+            return Err(self.fmt(format!(
+                "no topic {}; the bag has: {}",
+                spec.topic,
+                if list.is_empty() {
+                    "no channels".into()
+                } else {
+                    list.join(", ")
+                }
+            )));
+        }
+        self.state_topics
+            .check_present(&self.topics)
+            .map_err(|e| self.fmt(e))?;
+        if msg_no > 0 && self.t0.is_none() {
+            return Err(LogsError::JointNotFound {
+                path: self.p.clone(),
+                joint: self.joints.join(", "),
+                available: self.names_seen.join(", "),
+            });
+        }
+        let Some(mut b) = self.builder else {
+            return Err(LogsError::Empty {
+                path: self.p,
+                what: format!("no message on {}", spec.topic),
+            });
+        };
+        let rep = b.report_mut();
+        if spec.state_joints.is_some() {
             rep.notes.push(format!(
-                "names in the messages that the URDF lacks (not used): {}",
-                not_in_urdf.join(", ")
+                "whole-body state: {} joints of the first message's names{}",
+                self.state_names.len(),
+                if self.state_vel_empty > 0 {
+                    format!(
+                        "; velocity empty in {} messages: the state's velocities are not used",
+                        self.state_vel_empty
+                    )
+                } else {
+                    String::new()
+                }
+            ));
+            if !self.not_in_urdf.is_empty() {
+                rep.notes.push(format!(
+                    "names in the messages that the URDF lacks (not used): {}",
+                    self.not_in_urdf.join(", ")
+                ));
+            }
+            self.state_topics.report(rep);
+        }
+        if let Some(t0) = self.t0 {
+            rep.notes.push(format!(
+                "time origin: first header.stamp = {t0:.9} s since the epoch"
             ));
         }
-        state_topics.report(rep);
-    }
-    if let Some(t0) = t0 {
-        rep.notes.push(format!(
-            "time origin: first header.stamp = {t0:.9} s since the epoch"
-        ));
-    }
-    if let Some(at) = unclosed {
-        rep.warnings.push(format!(
-            "no footer: the recording was not closed (killed?); the {msg_no} messages on {} in \
-             the whole records before byte {at} were read, the last {} bytes (an unfinished \
-             record) were not",
-            spec.topic,
-            total.saturating_sub(at)
-        ));
-    }
-    for (k, f) in ["position", "velocity", "effort"].iter().enumerate() {
-        if empty[k] > 0 {
+        if let Some(at) = unclosed {
+            rep.warnings.push(format!(
+                "no footer: the recording was not closed (killed?); the {msg_no} messages on {} in \
+                 the whole records before byte {at} were read, the last {} bytes (an unfinished \
+                 record) were not",
+                spec.topic,
+                total.saturating_sub(at)
+            ));
+        }
+        for (k, f) in ["position", "velocity", "effort"].iter().enumerate() {
+            if empty[k] == 0 || (k == 2 && spec.effort_role.is_none()) {
+                continue;
+            }
             let what = if k == 2 {
                 spec.effort_role
                     .map_or("-".into(), |r| r.name().to_string())
             } else {
                 ["s", "sdot"][k].to_string()
             };
-            if k == 2 && spec.effort_role.is_none() {
-                continue;
-            }
             rep.warnings.push(format!(
                 "field `{f}` is empty (not measured) in {} of {msg_no} messages (first: message \
                  {}): {what} is not used for the whole bag",
                 empty[k],
-                first_empty[k].unwrap_or(0)
+                self.first_empty[k].unwrap_or(0)
             ));
         }
-    }
-    let name = path
-        .file_stem()
-        .map_or_else(|| "run".to_string(), |s| s.to_string_lossy().into_owned());
-    let mut run = b.finish(&p, name)?;
-    for sig in std::iter::once(&mut run.signals).chain(&mut run.other_joints) {
-        drop_absent(sig, [empty[0] > 0, empty[1] > 0, empty[2] > 0]);
-        if sig.s_rad.is_none() && sig.sdot_rad_s.is_none() {
-            return Err(fmt(format!(
-                "joint {}: neither position nor velocity is in every message",
-                joints.join(", ")
-            )));
+        let name = path
+            .file_stem()
+            .map_or_else(|| "run".to_string(), |s| s.to_string_lossy().into_owned());
+        let mut run = b.finish(&self.p, name)?;
+        for sig in std::iter::once(&mut run.signals).chain(&mut run.other_joints) {
+            drop_absent(sig, [empty[0] > 0, empty[1] > 0, empty[2] > 0]);
+            if sig.s_rad.is_none() && sig.sdot_rad_s.is_none() {
+                return Err(LogsError::Format {
+                    path: self.p.clone(),
+                    msg: format!(
+                        "joint {}: neither position nor velocity is in every message",
+                        self.joints.join(", ")
+                    ),
+                });
+            }
         }
+        if self.state_vel_empty > 0
+            && let Some(st) = &mut run.state
+        {
+            st.qdot.iter_mut().for_each(|v| *v = None);
+        }
+        Ok(run)
     }
-    if state_vel_empty > 0
-        && let Some(st) = &mut run.state
-    {
-        st.qdot.iter_mut().for_each(|v| *v = None);
-    }
-    Ok(run)
 }
 
 /// Removes from `sig` the signals of the `JointState` fields marked absent: position, velocity,

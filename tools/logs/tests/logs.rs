@@ -858,7 +858,7 @@ fn mcap_empty_effort_and_duplicate_joint_names_are_explained() {
 }
 
 /// `mcap_log::read_streamed` of `path` in blocks of `block_rows`: the blocks, and the run (or the
-/// error) it returns.
+/// error) it returns. (Its tests write their own fixture files: the tests run in parallel.)
 fn mcap_blocks(
     path: &Path,
     spec: &McapSpec,
@@ -884,7 +884,7 @@ fn mcap_blocks(
 #[test]
 #[ignore = "needs FRICTIONLESS_PY (tests/run.sh)"]
 fn mcap_streamed_read_hands_on_the_whole_reads_rows_in_blocks() {
-    let path = fixture("mcap", "bag.mcap");
+    let path = fixture("mcap", "bag_streamed.mcap");
     let sp = wrist(Some(Role::TauF));
     let whole = mcap_log::read(&path, &sp, &mut no_progress()).unwrap();
     let (blocks, run) = mcap_blocks(&path, &sp, 250);
@@ -925,7 +925,7 @@ fn mcap_streamed_read_hands_on_the_whole_reads_rows_in_blocks() {
 #[ignore = "needs FRICTIONLESS_PY (tests/run.sh)"]
 fn mcap_streamed_read_refuses_a_field_that_goes_missing_and_drops_one_never_there() {
     // Message 38 lacks the effort the 37 before it had: the rows already handed on had it.
-    let path = py_fixture("mcap-empty-effort", "empty_effort.mcap");
+    let path = py_fixture("mcap-empty-effort", "empty_effort_streamed.mcap");
     let (blocks, run) = mcap_blocks(&path, &wrist(Some(Role::TauF)), 10);
     let e = run.unwrap_err().to_string();
     assert!(
