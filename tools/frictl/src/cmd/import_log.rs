@@ -8,15 +8,15 @@
 //! of one log are labelled in one pass, one dataset each. Formats, roles, units and the minimal
 //! columns per label source: `docs/robot-logs.md`.
 
-use std::collections::BTreeMap;
 use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
+use frictionless_dataset::Dataset;
 use frictionless_dataset::{ColumnDocOwned, DatasetSidecar, LabelSource, RunInfo};
 use frictionless_ident::preprocess::{
-    Dynamics, JointLabel, PreprocessConfig, RunJoints, SignalsLabel, WholeBody, preprocess_joints,
-    required_signals,
+    Dynamics, JointLabel, PreprocessConfig, RunJoints, SignalsLabel, SignalsSummary, WholeBody,
+    preprocess_joints, required_signals,
 };
 use frictionless_logs::{ImportedRun, Role, csv_log, mcap_log};
 use sha2::Digest;
@@ -581,6 +581,7 @@ pub(crate) fn per_joint(values: &[String], joint: &str, flag: &str) -> anyhow::R
     Ok(mine.or(all))
 }
 
+/// Labels the runs read whole and writes each joint's dataset and sidecar.
 fn finish(
     runs: Vec<ImportedRun>,
     files: &[PathBuf],
@@ -591,6 +592,104 @@ fn finish(
     body: Option<WholeBody>,
 ) -> anyhow::Result<()> {
     let started = std::time::Instant::now();
+    let joints = labelled_joints(&runs, &common)?;
+    let label = label_of(&runs, &common)?;
+    let whole = label == LabelSource::Current && runs.iter().all(|r| r.state.is_some());
+    let body = body.filter(|_| whole);
+    let mut warnings = Vec::new();
+    let model = dynamics_of(&runs, &joints, label, &common, body.as_ref(), &mut warnings)?;
+    let link = model
+        .link
+        .as_ref()
+        .map(frictionless_sim::link::link_from_model)
+        .transpose()?;
+    let labels = joint_labels(&joints, &common, format, default_gap_s, label)?;
+    let dyn_ = match (&body, &link) {
+        (Some(b), _) => Dynamics::WholeBody(b),
+        (None, Some(l)) => Dynamics::Link(l.as_ref()),
+        (None, None) => Dynamics::None,
+    };
+    for r in &runs {
+        warnings.extend(r.report.warning_lines());
+    }
+    // Units and rates: what a wrong declaration leaves in the numbers, before any work.
+    let suspicious = plausibility(&runs, labels[0].cfg.gap_s, units)?;
+    warnings.extend(suspicious.iter().cloned());
+    let inputs = Inputs::hash(files)?;
+    let import = WholeImport {
+        inputs: &inputs,
+        runs: &runs,
+        format,
+        label,
+        joints: &joints,
+        plan: &model.plan,
+        dynamics: &model.text,
+        warnings: &warnings,
+        suspicious: &suspicious,
+        out: &common.out,
+    };
+    let mut empty = Vec::new();
+    let mut written = 0usize;
+    // The datasets are held until written: joints are labelled in passes of at most
+    // JOINTS_PER_PASS (one RNEA per sample and pass), each pass written before the next.
+    let run_joints: Vec<RunJoints<'_>> = runs
+        .iter()
+        .map(|r| RunJoints {
+            signals: r.joint_signals().collect(),
+            state: r.state.as_ref(),
+        })
+        .collect();
+    for (pass, batch) in labels.chunks(JOINTS_PER_PASS).enumerate() {
+        let first = pass * JOINTS_PER_PASS;
+        let subset: Vec<RunJoints<'_>> = run_joints
+            .iter()
+            .map(|r| RunJoints {
+                signals: r.signals[first..first + batch.len()].to_vec(),
+                state: r.state,
+            })
+            .collect();
+        let results = preprocess_joints(&subset, batch, dyn_).with_context(|| {
+            format!(
+                "labelling {} ({label:?} label needs: {})",
+                files
+                    .iter()
+                    .map(|f| f.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                required_signals(label).join(", ")
+            )
+        })?;
+        for (jl, (ds, sum)) in batch.iter().zip(results) {
+            if ds.is_empty() {
+                empty.push(jl.joint.clone());
+            }
+            import.write(jl, &ds, &sum)?;
+            written += 1;
+        }
+    }
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
+    for r in &runs {
+        eprintln!(
+            "  run {}: {} of {} rows used",
+            r.name, r.report.rows_used, r.report.rows_read,
+        );
+    }
+    if !empty.is_empty() {
+        bail!("no samples for {}", empty.join(", "));
+    }
+    eprintln!(
+        "frictl import {format}: {} runs, {written} joint(s), {}, in {:.2} s",
+        runs.len(),
+        model.text,
+        started.elapsed().as_secs_f64(),
+    );
+    Ok(())
+}
+
+/// The labelled joints, the same in every run; several need `{joint}` in `-o`.
+fn labelled_joints(runs: &[ImportedRun], common: &CommonArgs) -> anyhow::Result<Vec<String>> {
     let joints: Vec<String> = runs[0].joints.clone();
     for r in &runs[1..] {
         anyhow::ensure!(
@@ -608,6 +707,12 @@ fn finish(
         joints.len(),
         joints.join(", ")
     );
+    Ok(joints)
+}
+
+/// The label: `--label`, else the log's friction column, torque sensor or current; refused when
+/// the log lacks what it needs (with what the reader said), or the current label has no URDF.
+fn label_of(runs: &[ImportedRun], common: &CommonArgs) -> anyhow::Result<LabelSource> {
     let first = &runs[0].signals;
     let label: LabelSource = match common.label {
         Some(l) => l.into(),
@@ -655,69 +760,93 @@ fn finish(
          --urdf-joint if the joint is named differently there); a robot log is never labelled \
          with the simulator's virtual leg"
     );
-    let mut warnings = Vec::new();
-    let whole = label == LabelSource::Current && runs.iter().all(|r| r.state.is_some());
-    let body = body.filter(|_| whole);
-    // The single-joint view, when the log gives no whole-body state.
-    let (link_model, mut dynamics) = match (&body, label) {
-        (None, LabelSource::Current) => {
-            anyhow::ensure!(
-                joints.len() == 1,
-                "labelling several joints with the current label needs the positions of every joint (--positions for CSV)"
-            );
-            let urdf_joint = common.urdf_joint.as_deref().unwrap_or(&joints[0]);
-            let (m, d) = urdf_link(common.urdf.as_deref(), urdf_joint, &common.fixed_joints)?;
-            (Some(m), format!("single-joint view: {d}"))
+    Ok(label)
+}
+
+/// The link dynamics of the label, as the sidecar describes them.
+struct LabelDynamics {
+    /// The single-joint view's link model (the current label without a whole-body state).
+    link: Option<frictionless_sim::params::LinkModel>,
+    /// One line for the sidecar's `dynamics` and the summary.
+    text: String,
+    /// The whole-body state plan (`settings.import.whole_body`), or null.
+    plan: serde_json::Value,
+}
+
+/// The label's dynamics: the whole-body RNEA (`body`, with its plan and the warnings about held
+/// and unknown joints), the single-joint view of the URDF, or none.
+fn dynamics_of(
+    runs: &[ImportedRun],
+    joints: &[String],
+    label: LabelSource,
+    common: &CommonArgs,
+    body: Option<&WholeBody>,
+    warnings: &mut Vec<String>,
+) -> anyhow::Result<LabelDynamics> {
+    let Some(b) = body else {
+        if label != LabelSource::Current {
+            return Ok(LabelDynamics {
+                link: None,
+                text: "none (the label does not use inverse dynamics)".into(),
+                plan: serde_json::Value::Null,
+            });
         }
-        (Some(_), _) => (None, String::new()),
-        (None, _) => (
-            None,
-            "none (the label does not use inverse dynamics)".to_string(),
-        ),
+        // The single-joint view, when the log gives no whole-body state.
+        anyhow::ensure!(
+            joints.len() == 1,
+            "labelling several joints with the current label needs the positions of every joint (--positions for CSV)"
+        );
+        let urdf_joint = common.urdf_joint.as_deref().unwrap_or(&joints[0]);
+        let (m, d) = urdf_link(common.urdf.as_deref(), urdf_joint, &common.fixed_joints)?;
+        return Ok(LabelDynamics {
+            link: Some(m),
+            text: format!("single-joint view: {d}"),
+            plan: serde_json::Value::Null,
+        });
     };
-    let mut plan_json = serde_json::Value::Null;
-    if let Some(b) = &body {
-        let log_names: Vec<String> = runs
-            .iter()
-            .flat_map(|r| {
-                r.state
-                    .as_ref()
-                    .map(|s| s.names.clone())
-                    .unwrap_or_default()
-            })
-            .collect();
-        let base = runs.iter().find_map(|r| {
+    let log_names: Vec<String> = runs
+        .iter()
+        .flat_map(|r| {
             r.state
                 .as_ref()
-                .filter(|s| s.base_quat_xyzw.is_some())
-                .map(|s| s.base_frame.as_deref())
-        });
-        let mut plan = b.plan(&log_names, &joints, base);
-        plan.wrenches = runs
-            .first()
-            .and_then(|r| r.state.as_ref())
-            .map(|s| s.wrenches.iter().map(|w| w.frame.clone()).collect())
-            .unwrap_or_default();
-        for j in &joints {
-            anyhow::ensure!(
-                b.robot().joint_index(j).is_ok(),
-                "joint `{j}` is not a movable joint of the URDF {} (the whole-body label matches by name)",
-                b.robot().source
-            );
-        }
-        if !plan.held_at_zero.is_empty() {
-            warnings.push(format!(
-                "URDF joints neither in the log nor given with --fixed-joint, held at 0 rad: {}",
-                plan.held_at_zero.join(", ")
-            ));
-        }
-        if !plan.not_in_urdf.is_empty() {
-            warnings.push(format!(
-                "log joints the URDF lacks (not used): {}",
-                plan.not_in_urdf.join(", ")
-            ));
-        }
-        dynamics = format!(
+                .map(|s| s.names.clone())
+                .unwrap_or_default()
+        })
+        .collect();
+    let base = runs.iter().find_map(|r| {
+        r.state
+            .as_ref()
+            .filter(|s| s.base_quat_xyzw.is_some())
+            .map(|s| s.base_frame.as_deref())
+    });
+    let mut plan = b.plan(&log_names, joints, base);
+    plan.wrenches = runs
+        .first()
+        .and_then(|r| r.state.as_ref())
+        .map(|s| s.wrenches.iter().map(|w| w.frame.clone()).collect())
+        .unwrap_or_default();
+    for j in joints {
+        anyhow::ensure!(
+            b.robot().joint_index(j).is_ok(),
+            "joint `{j}` is not a movable joint of the URDF {} (the whole-body label matches by name)",
+            b.robot().source
+        );
+    }
+    if !plan.held_at_zero.is_empty() {
+        warnings.push(format!(
+            "URDF joints neither in the log nor given with --fixed-joint, held at 0 rad: {}",
+            plan.held_at_zero.join(", ")
+        ));
+    }
+    if !plan.not_in_urdf.is_empty() {
+        warnings.push(format!(
+            "log joints the URDF lacks (not used): {}",
+            plan.not_in_urdf.join(", ")
+        ));
+    }
+    Ok(LabelDynamics {
+        link: None,
+        text: format!(
             "whole-body RNEA on URDF {} ({} joints): {} from the log, {} held at given values, {} held at 0; base {}; g = 9.80665 (settings.import.whole_body)",
             b.robot().source,
             b.robot().dof(),
@@ -725,15 +854,21 @@ fn finish(
             plan.held.len(),
             plan.held_at_zero.len(),
             plan.base
-        );
-        plan_json = serde_json::to_value(&plan)?;
-    }
-    let link = link_model
-        .as_ref()
-        .map(frictionless_sim::link::link_from_model)
-        .transpose()?;
+        ),
+        plan: serde_json::to_value(&plan)?,
+    })
+}
+
+/// Each joint's label settings: the pipeline options, the gear ratio and torque constant.
+fn joint_labels(
+    joints: &[String],
+    common: &CommonArgs,
+    format: &str,
+    default_gap_s: f64,
+    label: LabelSource,
+) -> anyhow::Result<Vec<JointLabel>> {
     let mut labels = Vec::with_capacity(joints.len());
-    for j in &joints {
+    for j in joints {
         let mut cfg = PreprocessConfig::for_joint(j);
         cfg.gap_s = common.gap_s.unwrap_or(default_gap_s);
         if format == "mat" {
@@ -751,16 +886,17 @@ fn finish(
             cfg,
         });
     }
-    let dyn_ = match (&body, &link) {
-        (Some(b), _) => Dynamics::WholeBody(b),
-        (None, Some(l)) => Dynamics::Link(l.as_ref()),
-        (None, None) => Dynamics::None,
-    };
-    for r in &runs {
-        warnings.extend(r.report.warning_lines());
-    }
-    // Units and rates: what a wrong declaration leaves in the numbers, before any work.
-    let findings = frictionless_logs::plausibility::check(&runs, labels[0].cfg.gap_s, units);
+    Ok(labels)
+}
+
+/// The units and rates check ([`frictionless_logs::plausibility`]) of `runs`: an error with every
+/// refusal, else the warnings.
+pub(crate) fn plausibility(
+    runs: &[ImportedRun],
+    gap_s: f64,
+    units: Option<&[(Role, frictionless_logs::Unit)]>,
+) -> anyhow::Result<Vec<String>> {
+    let findings = frictionless_logs::plausibility::check(runs, gap_s, units);
     let refused: Vec<&str> = findings
         .iter()
         .filter(|f| f.refuse)
@@ -769,108 +905,97 @@ fn finish(
     if !refused.is_empty() {
         bail!("{}", refused.join("\n"));
     }
-    let suspicious: Vec<String> = findings.into_iter().map(|f| f.message).collect();
-    warnings.extend(suspicious.iter().cloned());
-    let mut hashes = Vec::new();
-    for f in files {
-        hashes.push(
-            frictionless_dataset::file_sha256_hex(f)
-                .with_context(|| format!("cannot read {}", f.display()))?,
-        );
+    Ok(findings.into_iter().map(|f| f.message).collect())
+}
+
+/// The logs of one import and their SHA-256, as each dataset's sidecar records them.
+pub(crate) struct Inputs<'a> {
+    files: &'a [PathBuf],
+    hashes: Vec<String>,
+}
+
+impl<'a> Inputs<'a> {
+    /// Hashes every file.
+    pub(crate) fn hash(files: &'a [PathBuf]) -> anyhow::Result<Self> {
+        let mut hashes = Vec::with_capacity(files.len());
+        for f in files {
+            hashes.push(
+                frictionless_dataset::file_sha256_hex(f)
+                    .with_context(|| format!("cannot read {}", f.display()))?,
+            );
+        }
+        Ok(Self { files, hashes })
     }
-    let input_sha256 = if hashes.len() == 1 {
-        hashes[0].clone()
-    } else {
-        format!("{:x}", sha2::Sha256::digest(hashes.join("\n").as_bytes()))
-    };
-    let reports: Vec<_> = runs
-        .iter()
-        .zip(&hashes)
-        .map(|(r, h)| serde_json::json!({ "run": r.name, "sha256": h, "report": r.report }))
-        .collect();
-    let inputs: Vec<&Path> = files.iter().map(PathBuf::as_path).collect();
-    let mut empty = Vec::new();
-    let mut written: BTreeMap<String, PathBuf> = BTreeMap::new();
-    // The datasets are held until written: joints are labelled in passes of at most
-    // JOINTS_PER_PASS (one RNEA per sample and pass), each pass written before the next.
-    let run_joints: Vec<RunJoints<'_>> = runs
-        .iter()
-        .map(|r| RunJoints {
-            signals: r.joint_signals().collect(),
-            state: r.state.as_ref(),
-        })
-        .collect();
-    for (pass, batch) in labels.chunks(JOINTS_PER_PASS).enumerate() {
-        let first = pass * JOINTS_PER_PASS;
-        let subset: Vec<RunJoints<'_>> = run_joints
-            .iter()
-            .map(|r| RunJoints {
-                signals: r.signals[first..first + batch.len()].to_vec(),
-                state: r.state,
-            })
-            .collect();
-        let results = preprocess_joints(&subset, batch, dyn_).with_context(|| {
-            format!(
-                "labelling {} ({label:?} label needs: {})",
-                files
-                    .iter()
-                    .map(|f| f.display().to_string())
-                    .collect::<Vec<_>>()
-                    .join(", "),
-                required_signals(label).join(", ")
-            )
-        })?;
-        for (jl, (ds, sum)) in batch.iter().zip(results) {
-            let joint = jl.joint.as_str();
-            let out = out_path(&common.out, joint);
-            let side_path = out.with_extension("json");
-            super::check_outputs(&inputs, &[&out, &side_path])?;
-            let mut joint_warnings = warnings.clone();
-            if label == LabelSource::Given
-                && let Some(w) = frictionless_logs::label_sign_warning(&ds)
-            {
-                joint_warnings.push(w);
-            }
-            let (r, kt) = (jl.label.gear_ratio_signed, jl.label.kt_nm_per_a);
-            let placeholder = |v: Option<f64>| v.unwrap_or(1.0);
-            // An import that keeps nothing is refused before it replaces anything, with the
-            // plausibility findings as the likely cause.
-            let n_valid = ds.valid.iter().filter(|v| **v).count();
-            let empty_runs: Vec<String> = runs
+
+    /// The files, for [`super::check_outputs`].
+    pub(crate) fn paths(&self) -> Vec<&Path> {
+        self.files.iter().map(PathBuf::as_path).collect()
+    }
+
+    /// Each run's name, file hash and reader's report.
+    pub(crate) fn reports(&self, runs: &[ImportedRun]) -> Vec<serde_json::Value> {
+        runs.iter()
+            .zip(&self.hashes)
+            .map(|(r, h)| serde_json::json!({ "run": r.name, "sha256": h, "report": r.report }))
+            .collect()
+    }
+
+    /// A dataset's sidecar for `jl`'s rows (`samples`, `valid` of them, with the columns of
+    /// `columns_of`) labelled from these logs' `runs`: `settings` as given, the rest from the
+    /// label and its summary `sum`.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn sidecar(
+        &self,
+        runs: &[ImportedRun],
+        jl: &JointLabel,
+        sum: &SignalsSummary,
+        columns_of: &Dataset,
+        samples: usize,
+        valid: usize,
+        dynamics: String,
+        settings: serde_json::Value,
+    ) -> DatasetSidecar {
+        DatasetSidecar {
+            format: "frictionless-dataset-v1".into(),
+            producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
+            input_log: self
+                .files
                 .iter()
-                .zip(&sum.run_chunks)
-                .filter(|(_, c)| c.is_empty())
-                .map(|(r, _)| {
-                    format!(
-                        "run {}: {} of {} rows read, 0 chunks",
-                        r.name, r.report.rows_used, r.report.rows_read
-                    )
-                })
-                .collect();
-            if n_valid == 0 || !empty_runs.is_empty() {
-                bail!(
-                    "{joint}: {n_valid} valid samples of {}{}{}",
-                    ds.len(),
-                    if empty_runs.is_empty() {
-                        String::new()
-                    } else {
-                        format!("; nothing of {}", empty_runs.join(", "))
-                    },
-                    if suspicious.is_empty() {
-                        "; check the units and --gap-s".to_string()
-                    } else {
-                        format!("; likely why: {}", suspicious.join("; "))
-                    }
-                );
-            }
-            // The CSV is written to a temporary file now and replaces the old dataset only
-            // together with its sidecar, below (the sidecar last): a stopped import leaves the
-            // previous pair or no sidecar.
-            let mut csv_out = frictionless::output_file::AtomicFile::create(&out)
-                .with_context(|| format!("cannot write {}", out.display()))?;
-            ds.write_csv_to(&mut csv_out, &out)?;
-            let valid = ds.valid.iter().filter(|v| **v).count();
-            let run_infos: Vec<RunInfo> = runs
+                .map(|f| f.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", "),
+            // One file's hash, or the hash of the files' hashes.
+            input_sha256: if self.hashes.len() == 1 {
+                self.hashes[0].clone()
+            } else {
+                format!(
+                    "{:x}",
+                    sha2::Sha256::digest(self.hashes.join("\n").as_bytes())
+                )
+            },
+            joint: jl.joint.clone(),
+            gear_ratio_signed: jl.label.gear_ratio_signed.unwrap_or(1.0),
+            kt_nm_per_a: jl.label.kt_nm_per_a.unwrap_or(1.0),
+            fs_hz: jl.cfg.fs_hz,
+            settings,
+            dynamics,
+            delta_theta_offset_motor_rad: sum
+                .delta_theta_offsets_motor_rad
+                .first()
+                .copied()
+                .filter(|v| v.is_finite())
+                .unwrap_or(0.0),
+            samples,
+            valid_samples: valid,
+            chunks: sum.run_chunks.iter().map(Vec::len).sum(),
+            short_chunks: sum.short_chunks,
+            columns: columns_of
+                .columns()
+                .iter()
+                .map(ColumnDocOwned::from)
+                .collect(),
+            label: jl.label.source,
+            runs: runs
                 .iter()
                 .zip(&sum.run_chunks)
                 .map(|(r, c)| RunInfo {
@@ -878,95 +1003,139 @@ fn finish(
                     source: r.report.source.clone(),
                     chunks: c.clone(),
                 })
-                .collect();
-            let settings = serde_json::json!({
-                "pipeline": jl.cfg,
-                "import": {
-                    "format": format,
-                    "label": label,
-                    "joints_of_this_pass": joints,
-                    "gear_ratio_signed": r.map_or("not given (1 written as a placeholder)".to_string(), |r| r.to_string()),
-                    "kt_nm_per_a": kt.map_or("not given (1 written as a placeholder)".to_string(), |k| k.to_string()),
-                    "derivations": sum.derivations,
-                    "whole_body": plan_json,
-                    "dropped_single_sample_chunks": sum.dropped_single_sample_chunks,
-                    "delta_theta_offsets_motor_rad": sum.delta_theta_offsets_motor_rad.iter().map(|v| if v.is_finite() { serde_json::json!(v) } else { serde_json::Value::Null }).collect::<Vec<_>>(),
-                    "runs": reports,
-                    "warnings": joint_warnings,
-                }
-            });
-            let side = DatasetSidecar {
-                format: "frictionless-dataset-v1".into(),
-                producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
-                input_log: files
-                    .iter()
-                    .map(|f| f.display().to_string())
-                    .collect::<Vec<_>>()
-                    .join(", "),
-                input_sha256: input_sha256.clone(),
-                joint: joint.to_string(),
-                gear_ratio_signed: placeholder(r),
-                kt_nm_per_a: placeholder(kt),
-                fs_hz: jl.cfg.fs_hz,
-                settings,
-                dynamics: dynamics.clone(),
-                delta_theta_offset_motor_rad: sum
-                    .delta_theta_offsets_motor_rad
-                    .first()
-                    .copied()
-                    .filter(|v| v.is_finite())
-                    .unwrap_or(0.0),
-                samples: ds.len(),
-                valid_samples: valid,
-                chunks: sum.run_chunks.iter().map(Vec::len).sum(),
-                short_chunks: sum.short_chunks,
-                columns: ds.columns().iter().map(ColumnDocOwned::from).collect(),
-                label,
-                runs: run_infos,
-                absent_columns: sum.absent_columns.iter().map(|s| s.to_string()).collect(),
-            };
-            let mut side_out = frictionless::output_file::AtomicFile::create(&side_path)
-                .with_context(|| format!("cannot write {}", side_path.display()))?;
-            side_out
-                .write_all(serde_json::to_string_pretty(&side)?.as_bytes())
-                .with_context(|| format!("cannot write {}", side_path.display()))?;
-            frictionless::output_file::commit_with_marker(vec![csv_out], side_out).with_context(
-                || format!("cannot write {} and {}", out.display(), side_path.display()),
-            )?;
-            for w in &joint_warnings[warnings.len()..] {
-                eprintln!("warning: {joint}: {w}");
-            }
-            if ds.is_empty() {
-                empty.push(joint.to_string());
-            }
-            eprintln!(
-                "frictl import {format}: {joint}: {} samples ({valid} valid, {} chunks, {} too short), label {label:?}, absent columns [{}] -> {}",
-                ds.len(),
-                side.chunks,
-                sum.short_chunks,
-                side.absent_columns.join(", "),
-                out.display()
-            );
-            written.insert(joint.to_string(), out);
+                .collect(),
+            absent_columns: sum.absent_columns.iter().map(|s| s.to_string()).collect(),
         }
     }
-    for w in &warnings {
-        eprintln!("warning: {w}");
-    }
-    for r in &runs {
-        eprintln!(
-            "  run {}: {} of {} rows used",
-            r.name, r.report.rows_used, r.report.rows_read,
+}
+
+/// Writes `side` beside the dataset written to `csv` and replaces the previous pair at once (the
+/// sidecar last, through [`frictionless::output_file::commit_with_marker`]).
+pub(crate) fn commit_pair(
+    csv: frictionless::output_file::AtomicFile,
+    out: &Path,
+    side: &DatasetSidecar,
+) -> anyhow::Result<()> {
+    let side_path = out.with_extension("json");
+    let mut side_out = frictionless::output_file::AtomicFile::create(&side_path)
+        .with_context(|| format!("cannot write {}", side_path.display()))?;
+    side_out
+        .write_all(serde_json::to_string_pretty(side)?.as_bytes())
+        .with_context(|| format!("cannot write {}", side_path.display()))?;
+    frictionless::output_file::commit_with_marker(vec![csv], side_out)
+        .with_context(|| format!("cannot write {} and {}", out.display(), side_path.display()))
+}
+
+/// What every dataset of one whole-log import shares.
+struct WholeImport<'a> {
+    inputs: &'a Inputs<'a>,
+    runs: &'a [ImportedRun],
+    format: &'a str,
+    label: LabelSource,
+    joints: &'a [String],
+    plan: &'a serde_json::Value,
+    dynamics: &'a str,
+    warnings: &'a [String],
+    /// The plausibility warnings: the likely cause when a joint keeps nothing.
+    suspicious: &'a [String],
+    out: &'a Path,
+}
+
+impl WholeImport<'_> {
+    /// Writes one joint's dataset and sidecar; refuses, before replacing anything, a dataset
+    /// that keeps nothing of a run or no valid sample.
+    fn write(&self, jl: &JointLabel, ds: &Dataset, sum: &SignalsSummary) -> anyhow::Result<()> {
+        let (format, label) = (self.format, self.label);
+        let joint = jl.joint.as_str();
+        let out = out_path(self.out, joint);
+        super::check_outputs(&self.inputs.paths(), &[&out, &out.with_extension("json")])?;
+        let mut warnings = self.warnings.to_vec();
+        if label == LabelSource::Given
+            && let Some(w) = frictionless_logs::label_sign_warning(ds)
+        {
+            warnings.push(w);
+        }
+        // An import that keeps nothing is refused before it replaces anything, with the
+        // plausibility findings as the likely cause.
+        let valid = ds.valid.iter().filter(|v| **v).count();
+        let empty_runs: Vec<String> = self
+            .runs
+            .iter()
+            .zip(&sum.run_chunks)
+            .filter(|(_, c)| c.is_empty())
+            .map(|(r, _)| {
+                format!(
+                    "run {}: {} of {} rows read, 0 chunks",
+                    r.name, r.report.rows_used, r.report.rows_read
+                )
+            })
+            .collect();
+        if valid == 0 || !empty_runs.is_empty() {
+            bail!(
+                "{joint}: {valid} valid samples of {}{}{}",
+                ds.len(),
+                if empty_runs.is_empty() {
+                    String::new()
+                } else {
+                    format!("; nothing of {}", empty_runs.join(", "))
+                },
+                if self.suspicious.is_empty() {
+                    "; check the units and --gap-s".to_string()
+                } else {
+                    format!("; likely why: {}", self.suspicious.join("; "))
+                }
+            );
+        }
+        // The CSV is written to a temporary file now and replaces the old dataset only together
+        // with its sidecar (the sidecar last): a stopped import leaves the previous pair or no
+        // sidecar.
+        let mut csv_out = frictionless::output_file::AtomicFile::create(&out)
+            .with_context(|| format!("cannot write {}", out.display()))?;
+        ds.write_csv_to(&mut csv_out, &out)?;
+        let (r, kt) = (jl.label.gear_ratio_signed, jl.label.kt_nm_per_a);
+        let not_given = "not given (1 written as a placeholder)";
+        let settings = serde_json::json!({
+            "pipeline": jl.cfg,
+            "import": {
+                "format": format,
+                "label": label,
+                "joints_of_this_pass": self.joints,
+                "gear_ratio_signed": r.map_or(not_given.to_string(), |r| r.to_string()),
+                "kt_nm_per_a": kt.map_or(not_given.to_string(), |k| k.to_string()),
+                "derivations": sum.derivations,
+                "whole_body": self.plan,
+                "dropped_single_sample_chunks": sum.dropped_single_sample_chunks,
+                "delta_theta_offsets_motor_rad": sum
+                    .delta_theta_offsets_motor_rad
+                    .iter()
+                    .map(|v| if v.is_finite() { serde_json::json!(v) } else { serde_json::Value::Null })
+                    .collect::<Vec<_>>(),
+                "runs": self.inputs.reports(self.runs),
+                "warnings": warnings,
+            }
+        });
+        let side = self.inputs.sidecar(
+            self.runs,
+            jl,
+            sum,
+            ds,
+            ds.len(),
+            valid,
+            self.dynamics.to_string(),
+            settings,
         );
+        commit_pair(csv_out, &out, &side)?;
+        for w in &warnings[self.warnings.len()..] {
+            eprintln!("warning: {joint}: {w}");
+        }
+        eprintln!(
+            "frictl import {format}: {joint}: {} samples ({valid} valid, {} chunks, {} too short), label {label:?}, absent columns [{}] -> {}",
+            ds.len(),
+            side.chunks,
+            sum.short_chunks,
+            side.absent_columns.join(", "),
+            out.display()
+        );
+        Ok(())
     }
-    if !empty.is_empty() {
-        bail!("no samples for {}", empty.join(", "));
-    }
-    eprintln!(
-        "frictl import {format}: {} runs, {} joint(s), {dynamics}, in {:.2} s",
-        runs.len(),
-        written.len(),
-        started.elapsed().as_secs_f64(),
-    );
-    Ok(())
 }

@@ -4,19 +4,18 @@
 //! whose rows are appended to each joint's dataset as they come. Every output is written through
 //! the atomic writer and appears, complete with its sidecar, only at the end.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use frictionless::output_file::AtomicFile;
-use frictionless_dataset::{ColumnDocOwned, Dataset, DatasetSidecar, LabelSource, RunInfo};
+use frictionless_dataset::{Dataset, LabelSource};
 use frictionless_ident::preprocess::{
     Dynamics, JointLabel, PreprocessConfig, RunJoints, SignalsLabel, WholeBody,
 };
 use frictionless_ident::stream::{StreamLabeller, StreamStats};
 use frictionless_logs::{ImportedRun, Role, Unit, csv_log};
 
-use super::import_log::{CommonArgs, out_path, per_joint};
+use super::import_log::{CommonArgs, Inputs, commit_pair, out_path, per_joint, plausibility};
 
 /// One joint's output being written.
 struct Out {
@@ -53,23 +52,12 @@ impl<'a> Streamer<'a> {
             // Units and rates, on the log's first window (a span or a speed in it is a lower
             // bound of the whole log's): what a wrong declaration leaves in the numbers.
             let gap_s = self.common.gap_s.unwrap_or(0.1);
-            let findings = frictionless_logs::plausibility::check(
-                std::slice::from_ref(&block),
-                gap_s,
-                self.units,
-            );
-            let refused: Vec<&str> = findings
-                .iter()
-                .filter(|f| f.refuse)
-                .map(|f| f.message.as_str())
-                .collect();
-            if !refused.is_empty() {
-                bail!("{} (checked on the log's first window)", refused.join("\n"));
-            }
+            let findings = plausibility(std::slice::from_ref(&block), gap_s, self.units)
+                .context("checked on the log's first window")?;
             self.findings.extend(
                 findings
                     .into_iter()
-                    .map(|f| format!("{} (on the log's first window)", f.message)),
+                    .map(|f| format!("{f} (on the log's first window)")),
             );
         }
         if self.labeller.is_none() {
@@ -246,29 +234,26 @@ pub fn run_stream(
         p.wrenches = st.wrench_frames.clone();
         p
     });
-    let inputs: Vec<&Path> = files.iter().map(PathBuf::as_path).collect();
-    let mut hashes = Vec::new();
-    for f in files {
-        hashes.push(
-            frictionless_dataset::file_sha256_hex(f)
-                .with_context(|| format!("cannot read {}", f.display()))?,
-        );
-    }
+    let inputs = Inputs::hash(files)?;
+    let dynamics = match &plan {
+        Some(p) => format!(
+            "whole-body RNEA ({} joints from the log, {} held, {} held at 0; base {}), streamed",
+            p.from_log.len(),
+            p.held.len(),
+            p.held_at_zero.len(),
+            p.base
+        ),
+        None => "none (the label does not use inverse dynamics)".into(),
+    };
     let joint_names: Vec<String> = st.joints.iter().map(|j| j.joint.clone()).collect();
     for ((jl, o), sum) in st.joints.iter().zip(st.outs).zip(sums) {
-        let side_path = o.path.with_extension("json");
-        super::check_outputs(&inputs, &[&o.path, &side_path])?;
+        super::check_outputs(&inputs.paths(), &[&o.path, &o.path.with_extension("json")])?;
         anyhow::ensure!(
             o.valid > 0,
             "{}: 0 valid samples of {}; check the units and --gap-s",
             jl.joint,
             o.rows
         );
-        let reports: Vec<_> = runs
-            .iter()
-            .zip(&hashes)
-            .map(|(r, h)| serde_json::json!({ "run": r.name, "sha256": h, "report": r.report }))
-            .collect();
         let settings = serde_json::json!({
             "pipeline": jl.cfg,
             "import": {
@@ -279,75 +264,21 @@ pub fn run_stream(
                 "whole_body": plan,
                 "stream": stream_json(&stats),
                 "dropped_single_sample_chunks": sum.dropped_single_sample_chunks,
-                "runs": reports,
+                "runs": inputs.reports(&runs),
                 "warnings": warnings,
             }
         });
-        let side = DatasetSidecar {
-            format: "frictionless-dataset-v1".into(),
-            producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
-            input_log: files
-                .iter()
-                .map(|f| f.display().to_string())
-                .collect::<Vec<_>>()
-                .join(", "),
-            input_sha256: hashes.join(","),
-            joint: jl.joint.clone(),
-            gear_ratio_signed: jl.label.gear_ratio_signed.unwrap_or(1.0),
-            kt_nm_per_a: jl.label.kt_nm_per_a.unwrap_or(1.0),
-            fs_hz: jl.cfg.fs_hz,
+        let side = inputs.sidecar(
+            &runs,
+            jl,
+            &sum,
+            &Dataset::default(),
+            o.rows,
+            o.valid,
+            dynamics.clone(),
             settings,
-            dynamics: match &plan {
-                Some(p) => format!(
-                    "whole-body RNEA ({} joints from the log, {} held, {} held at 0; base {}), streamed",
-                    p.from_log.len(),
-                    p.held.len(),
-                    p.held_at_zero.len(),
-                    p.base
-                ),
-                None => "none (the label does not use inverse dynamics)".into(),
-            },
-            delta_theta_offset_motor_rad: sum
-                .delta_theta_offsets_motor_rad
-                .first()
-                .copied()
-                .filter(|v| v.is_finite())
-                .unwrap_or(0.0),
-            samples: o.rows,
-            valid_samples: o.valid,
-            chunks: sum.run_chunks.iter().map(Vec::len).sum(),
-            short_chunks: sum.short_chunks,
-            columns: Dataset::default()
-                .columns()
-                .iter()
-                .map(ColumnDocOwned::from)
-                .collect(),
-            label,
-            runs: runs
-                .iter()
-                .zip(&sum.run_chunks)
-                .map(|(r, c)| RunInfo {
-                    name: r.name.clone(),
-                    source: r.report.source.clone(),
-                    chunks: c.clone(),
-                })
-                .collect(),
-            absent_columns: sum.absent_columns.iter().map(|s| s.to_string()).collect(),
-        };
-        let mut side_out = AtomicFile::create(&side_path)
-            .with_context(|| format!("cannot write {}", side_path.display()))?;
-        side_out
-            .write_all(serde_json::to_string_pretty(&side)?.as_bytes())
-            .with_context(|| format!("cannot write {}", side_path.display()))?;
-        frictionless::output_file::commit_with_marker(vec![o.file], side_out).with_context(
-            || {
-                format!(
-                    "cannot write {} and {}",
-                    o.path.display(),
-                    side_path.display()
-                )
-            },
-        )?;
+        );
+        commit_pair(o.file, &o.path, &side)?;
         eprintln!(
             "frictl import {format}: {}: {} samples ({} valid), streamed in windows of {} (+{} / +{} margin) -> {}",
             jl.joint,
