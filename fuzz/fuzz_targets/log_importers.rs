@@ -119,8 +119,14 @@ fuzz_target!(|data: &[u8]| {
     let mut times: Vec<f64> = Vec::new();
     let mut sink = |b: frictionless_logs::ImportedRun| {
         let n = b.signals.time_s.len();
-        assert!(n >= 1 && n <= block_rows, "a block of {n} rows (at most {block_rows})");
-        assert!(signal_lengths(&b.signals).all(|len| len == n), "one length per block");
+        assert!(
+            n >= 1 && n <= block_rows,
+            "a block of {n} rows (at most {block_rows})"
+        );
+        assert!(
+            signal_lengths(&b.signals).all(|len| len == n),
+            "one length per block"
+        );
         times.extend_from_slice(&b.signals.time_s);
         Ok(())
     };
@@ -129,32 +135,27 @@ fuzz_target!(|data: &[u8]| {
         sink: &mut sink,
     };
     let extra = mcap_log::McapState::default();
-    let streamed =
-        mcap_log::read_streamed(&mcap_path, &sp, &extra, &mut no_progress, Some(stream));
+    let streamed = mcap_log::read_streamed(&mcap_path, &sp, &extra, &mut no_progress, Some(stream));
     if let Ok(run) = &streamed {
-        assert_eq!(times.len() as u64, run.report.rows_used, "every used row in a block");
+        assert_eq!(
+            times.len() as u64,
+            run.report.rows_used,
+            "every used row in a block"
+        );
         if let Ok(w) = &whole {
-            assert_eq!(times, w.signals.time_s, "the streamed rows are the whole read's");
+            assert_eq!(
+                times, w.signals.time_s,
+                "the streamed rows are the whole read's"
+            );
         }
     }
 });
 
-/// The lengths of the signals a run holds.
+/// The lengths of the signals a run holds, and of its chunk ids.
 fn signal_lengths(s: &frictionless_logs::RunSignals) -> impl Iterator<Item = usize> + '_ {
-    [
-        &s.s_rad,
-        &s.sdot_rad_s,
-        &s.sddot_rad_s2,
-        &s.theta_motor_rad,
-        &s.omega_motor_rad_s,
-        &s.current_a,
-        &s.tau_joint_nm,
-        &s.tau_motor_nm,
-        &s.tau_f_nm,
-        &s.temperature_c,
-    ]
-    .into_iter()
-    .flatten()
-    .map(Vec::len)
-    .chain([s.chunk.len()])
+    log_import::signals(s)
+        .into_iter()
+        .flatten()
+        .map(Vec::len)
+        .chain([s.chunk.len()])
 }

@@ -35,7 +35,15 @@ pub fn check(run: &ImportedRun) {
         s.time_s.iter().all(|t| t.is_finite()) && s.time_s.windows(2).all(|w| w[0] < w[1]),
         "time is finite and strictly increasing"
     );
-    for col in [
+    for col in signals(s).into_iter().flatten() {
+        assert_eq!(col.len(), n, "one value per row in every signal");
+        assert!(col.iter().all(|v| v.is_finite()), "every value is finite");
+    }
+}
+
+/// Every signal a run may hold.
+pub fn signals(s: &frictionless_logs::RunSignals) -> [&Option<Vec<f64>>; 10] {
+    [
         &s.s_rad,
         &s.sdot_rad_s,
         &s.sddot_rad_s2,
@@ -47,10 +55,4 @@ pub fn check(run: &ImportedRun) {
         &s.tau_f_nm,
         &s.temperature_c,
     ]
-    .into_iter()
-    .flatten()
-    {
-        assert_eq!(col.len(), n, "one value per row in every signal");
-        assert!(col.iter().all(|v| v.is_finite()), "every value is finite");
-    }
 }

@@ -766,6 +766,15 @@ fn tilted_rms_vs(name: &str, reference_prefix: &str) -> [(f64, usize); 2] {
     })
 }
 
+/// Asserts that both joints' τ_ID are over 1 N·m RMS off Pinocchio's: `what` (left out of the
+/// import) matters.
+fn assert_far_off([(knee, _), (hip, _)]: [(f64, usize); 2], what: &str) {
+    assert!(
+        knee > 1.0 && hip > 1.0,
+        "the {what} must matter: knee {knee}, hip {hip}"
+    );
+}
+
 /// [`tilted_rms_vs`] against τ_ID with the wrench.
 #[cfg(feature = "mat")]
 fn tilted_rms(name: &str) -> [(f64, usize); 2] {
@@ -815,11 +824,7 @@ fn mcap_imu_base_orientation_tilts_the_gravity_like_pinocchio() {
         "{base}"
     );
     ok(import("mcap_upright", None), "import mcap (upright)");
-    let [(knee, _), (hip, _)] = tilted_rms_vs("mcap_upright", "tau_id_nw_");
-    assert!(
-        knee > 1.0 && hip > 1.0,
-        "the tilt must matter: knee {knee}, hip {hip}"
-    );
+    assert_far_off(tilted_rms_vs("mcap_upright", "tau_id_nw_"), "tilt");
     let e = err_text(import("mcap_bad", Some("/nope")), "an absent topic");
     assert!(e.contains("/nope") && e.contains("/imu"), "{e}");
     let e = err_text(
@@ -855,11 +860,7 @@ fn mcap_measured_wrench_enters_the_label_like_pinocchio() {
     );
     // Without it the label misses the foot's 250–350 N.
     ok(import("mcap_no_wrench", None), "import mcap (no wrench)");
-    let [(knee, _), (hip, _)] = tilted_rms_vs("mcap_no_wrench", "tau_id_");
-    assert!(
-        knee > 1.0 && hip > 1.0,
-        "the wrench must matter: knee {knee}, hip {hip}"
-    );
+    assert_far_off(tilted_rms_vs("mcap_no_wrench", "tau_id_"), "wrench");
     let e = err_text(
         import("mcap_bad", Some("l_foot_rear_ft=/nope")),
         "an absent wrench topic",
@@ -930,11 +931,7 @@ fn mat_imu_mounted_rotated_gives_the_root_orientation_through_the_urdf() {
         import_tilted("imu_as_root", &extra),
         "import mat --base-frame root_link",
     );
-    let [(knee, _), (hip, _)] = tilted_rms("imu_as_root");
-    assert!(
-        knee > 1.0 && hip > 1.0,
-        "the IMU's mounting must matter: knee {knee}, hip {hip}"
-    );
+    assert_far_off(tilted_rms("imu_as_root"), "IMU's mounting");
     // A channel whose name is no URDF frame needs --base-frame: refused, saying so.
     let mut root = vec!["--base-orientation", "orientations/root_rpy"];
     root.extend(TILT_WRENCH);
@@ -997,11 +994,7 @@ fn mat_base_orientation_tilts_the_gravity_like_pinocchio() {
         import_tilted("upright", &TILT_WRENCH),
         "import mat (upright)",
     );
-    let [(knee, _), (hip, _)] = tilted_rms("upright");
-    assert!(
-        knee > 1.0 && hip > 1.0,
-        "the tilt must matter: knee {knee}, hip {hip}"
-    );
+    assert_far_off(tilted_rms("upright"), "tilt");
     // A channel that is not there, or not an orientation, is named.
     let e = err_text(
         import_tilted("bad", &["--base-orientation", "orientations/waist_imu_9"]),
@@ -1078,11 +1071,7 @@ fn mat_measured_wrench_enters_the_label_like_pinocchio() {
         import_tilted("no_wrench", &TILT_RPY),
         "import mat (no wrench)",
     );
-    let [(knee, _), (hip, _)] = tilted_rms("no_wrench");
-    assert!(
-        knee > 1.0 && hip > 1.0,
-        "the wrench must matter: knee {knee}, hip {hip}"
-    );
+    assert_far_off(tilted_rms("no_wrench"), "wrench");
     let e = err_text(
         import_tilted("bad", &["--wrench", "l_foot_rear_ft=FTs/r_foot_rear_ft"]),
         "an absent wrench channel",
