@@ -953,7 +953,7 @@ fn mat_imu_mounted_rotated_gives_the_root_orientation_through_the_urdf() {
     }
     let e = err_text(
         import_tilted(
-            "bad",
+            "imu_bad",
             &[TILT_RPY[0], TILT_RPY[1], "--base-frame", "nowhere"],
         ),
         "a --base-frame the URDF lacks",
