@@ -432,81 +432,13 @@ pub fn read_streamed(
         }
     };
     let joint = joints.join(", ");
-    let wanted: [(Role, &str); 5] = [
-        (Role::S, "joints_state/positions"),
-        (Role::Theta, "motors_state/positions"),
-        (Role::Omega, "motors_state/velocities"),
-        (Role::Current, "motors_state/currents"),
-        (Role::Temperature, "motors_state/temperatures"),
-    ];
-    let mut chans: Vec<(Role, Channel)> = Vec::new();
-    let mut n_ticks = None;
-    let mut notes = Vec::new();
-    let mut sources = Vec::new();
-    let mut state: Option<(crate::StateLayout, Vec<usize>)> = None;
-    // The velocity and acceleration columns are those of the positions (checked below).
-    for (role, name) in wanted {
-        match channel(path, &file, &root, name, &joints)? {
-            Some((ch, names, n)) => {
-                if role == Role::S
-                    && let Some(urdf) = &spec.state_joints
-                {
-                    let mut st_names = Vec::new();
-                    let mut st_cols = Vec::new();
-                    let mut unknown = Vec::new();
-                    // Every joint is kept (the pipeline lists the URDF's missing ones).
-                    for (k, nm) in names.iter().enumerate() {
-                        if !urdf.contains(nm) {
-                            unknown.push(nm.as_str());
-                        }
-                        if !st_names.contains(nm) {
-                            st_names.push(nm.clone());
-                            st_cols.push(k);
-                        }
-                    }
-                    notes.push(format!(
-                        "whole-body state: {} joints of {name}",
-                        st_names.len()
-                    ));
-                    if !unknown.is_empty() {
-                        notes.push(format!(
-                            "joints of {name} that the URDF lacks (not used): {}",
-                            unknown.join(", ")
-                        ));
-                    }
-                    state = Some((crate::StateLayout::positions(st_names), st_cols));
-                }
-                match n_ticks {
-                    None => n_ticks = Some(n),
-                    Some(m) if m != n => {
-                        notes.push(format!(
-                            "{name}: {n} samples, not the {m} of joints_state/positions: not used"
-                        ));
-                        continue;
-                    }
-                    _ => {}
-                }
-                sources.push((
-                    role,
-                    format!(
-                        "{name} (element {})",
-                        ch.cols
-                            .iter()
-                            .map(usize::to_string)
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ),
-                ));
-                chans.push((role, ch));
-            }
-            None if role == Role::S => {
-                return Err(fmt(format!(
-                    "no `{ROOT}/joints_state/positions` channel (the joint position)"
-                )));
-            }
-            None => notes.push(format!("{name}: absent")),
-        }
-    }
+    let JointChannels {
+        chans,
+        n_ticks,
+        mut notes,
+        sources,
+        mut state,
+    } = joint_channels(path, &file, &root, spec, &joints)?;
     let n = n_ticks.unwrap_or(0);
     if n == 0 {
         return Err(LogsError::Empty {
@@ -534,36 +466,7 @@ pub fn read_streamed(
         }
     };
     // Chunk spans from the desired-current stream.
-    let mut spans: Vec<(f64, f64)> = Vec::new();
-    if let Ok(g) = root.group(DESIRED)
-        && let Ok(dts) = g.dataset("timestamps")
-    {
-        check_stored(path, &format!("{DESIRED}/timestamps"), &dts)?;
-        let m = dts.shape().first().copied().unwrap_or(0);
-        let mut a = 0;
-        while a < m {
-            let b = (a + BLOCK).min(m);
-            for t in read_ts(path, &dts, a, b)? {
-                if !t.is_finite() {
-                    continue;
-                }
-                match spans.last_mut() {
-                    Some(s) if t - s.1 <= spec.desired_gap_s && t >= s.1 => s.1 = t,
-                    _ => spans.push((t, t)),
-                }
-            }
-            a = b;
-        }
-        notes.push(format!(
-            "chunks: {} spans of {DESIRED} between gaps > {} s",
-            spans.len(),
-            spec.desired_gap_s
-        ));
-    } else {
-        notes.push(format!(
-            "no {DESIRED} channel: chunks from gaps of the robot ticks"
-        ));
-    }
+    let spans = desired_spans(path, &root, spec.desired_gap_s, &mut notes)?;
     let roles: Vec<Role> = chans.iter().map(|c| c.0).collect();
     let mut map = RoleMap::si(&roles);
     for &r in &spec.negate {
@@ -661,6 +564,144 @@ pub fn read_streamed(
         .file_stem()
         .map_or_else(|| "run".to_string(), |s| s.to_string_lossy().into_owned());
     b.finish(&p, name)
+}
+
+/// The channels of the labelled joints' signals, in the row's role order (the position first).
+#[derive(Default)]
+struct JointChannels {
+    chans: Vec<(Role, Channel)>,
+    /// The position channel's ticks.
+    n_ticks: Option<usize>,
+    notes: Vec<String>,
+    /// Each role's channel and elements, for the report.
+    sources: Vec<(Role, String)>,
+    /// The whole-body state's layout and the position columns it reads (with a URDF).
+    state: Option<(crate::StateLayout, Vec<usize>)>,
+}
+
+/// Finds the position, motor position, velocity, current and temperature channels of `joints`
+/// (a channel with another tick count than the positions' is noted and not used) and, with the
+/// URDF's names, the whole-body state's joints.
+fn joint_channels(
+    path: &Path,
+    file: &h5::File,
+    root: &h5::Group,
+    spec: &MatSpec,
+    joints: &[String],
+) -> Result<JointChannels, LogsError> {
+    let wanted: [(Role, &str); 5] = [
+        (Role::S, "joints_state/positions"),
+        (Role::Theta, "motors_state/positions"),
+        (Role::Omega, "motors_state/velocities"),
+        (Role::Current, "motors_state/currents"),
+        (Role::Temperature, "motors_state/temperatures"),
+    ];
+    let mut out = JointChannels::default();
+    // The velocity and acceleration columns are those of the positions (checked below).
+    for (role, name) in wanted {
+        match channel(path, file, root, name, joints)? {
+            Some((ch, names, n)) => {
+                if role == Role::S
+                    && let Some(urdf) = &spec.state_joints
+                {
+                    let mut st_names = Vec::new();
+                    let mut st_cols = Vec::new();
+                    let mut unknown = Vec::new();
+                    // Every joint is kept (the pipeline lists the URDF's missing ones).
+                    for (k, nm) in names.iter().enumerate() {
+                        if !urdf.contains(nm) {
+                            unknown.push(nm.as_str());
+                        }
+                        if !st_names.contains(nm) {
+                            st_names.push(nm.clone());
+                            st_cols.push(k);
+                        }
+                    }
+                    out.notes.push(format!(
+                        "whole-body state: {} joints of {name}",
+                        st_names.len()
+                    ));
+                    if !unknown.is_empty() {
+                        out.notes.push(format!(
+                            "joints of {name} that the URDF lacks (not used): {}",
+                            unknown.join(", ")
+                        ));
+                    }
+                    out.state = Some((crate::StateLayout::positions(st_names), st_cols));
+                }
+                match out.n_ticks {
+                    None => out.n_ticks = Some(n),
+                    Some(m) if m != n => {
+                        out.notes.push(format!(
+                            "{name}: {n} samples, not the {m} of joints_state/positions: not used"
+                        ));
+                        continue;
+                    }
+                    _ => {}
+                }
+                out.sources.push((
+                    role,
+                    format!(
+                        "{name} (element {})",
+                        ch.cols
+                            .iter()
+                            .map(usize::to_string)
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                ));
+                out.chans.push((role, ch));
+            }
+            None if role == Role::S => {
+                return Err(LogsError::Format {
+                    path: path.display().to_string(),
+                    msg: format!("no `{ROOT}/joints_state/positions` channel (the joint position)"),
+                });
+            }
+            None => out.notes.push(format!("{name}: absent")),
+        }
+    }
+    Ok(out)
+}
+/// The spans of the desired-current stream's stamps between gaps longer than `gap_s` [s] (the
+/// chunks: the robot ticks outside them are skipped); none without the stream (noted).
+fn desired_spans(
+    path: &Path,
+    root: &h5::Group,
+    gap_s: f64,
+    notes: &mut Vec<String>,
+) -> Result<Vec<(f64, f64)>, LogsError> {
+    let mut spans: Vec<(f64, f64)> = Vec::new();
+    if let Ok(g) = root.group(DESIRED)
+        && let Ok(dts) = g.dataset("timestamps")
+    {
+        check_stored(path, &format!("{DESIRED}/timestamps"), &dts)?;
+        let m = dts.shape().first().copied().unwrap_or(0);
+        let mut a = 0;
+        while a < m {
+            let b = (a + BLOCK).min(m);
+            for t in read_ts(path, &dts, a, b)? {
+                if !t.is_finite() {
+                    continue;
+                }
+                match spans.last_mut() {
+                    Some(s) if t - s.1 <= gap_s && t >= s.1 => s.1 = t,
+                    _ => spans.push((t, t)),
+                }
+            }
+            a = b;
+        }
+        notes.push(format!(
+            "chunks: {} spans of {DESIRED} between gaps > {} s",
+            spans.len(),
+            gap_s
+        ));
+    } else {
+        notes.push(format!(
+            "no {DESIRED} channel: chunks from gaps of the robot ticks"
+        ));
+    }
+    Ok(spans)
 }
 
 /// The whole-body state's channels beyond the joint positions.
