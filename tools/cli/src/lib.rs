@@ -15,6 +15,7 @@
 pub mod acquire;
 pub mod can;
 pub mod convert;
+pub mod demo;
 pub mod distill;
 pub mod dynamics;
 pub mod eval;
@@ -27,6 +28,7 @@ pub mod monitor;
 pub mod predict;
 pub mod preprocess;
 pub mod record;
+pub mod robot;
 pub mod search;
 pub mod sim;
 pub mod stage;

@@ -7,7 +7,6 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use frictionless::friction::{CvParams, ScvParams};
 use frictionless_dataset::fit_file::FittedModel;
 use frictionless_experiment::controller::PAPER_KD_PER_S;
 use frictionless_experiment::metrics::TrackCriterion;
@@ -126,29 +125,6 @@ fn per_joint_f64(what: &str, spec: &str, joints: &[usize]) -> anyhow::Result<[Op
         }
     }
     Ok(out)
-}
-
-/// Loads the CV parameters written by `frictl fit cv --json`.
-pub fn load_cv(path: &Path) -> anyhow::Result<CvParams> {
-    match FittedModel::read(path)? {
-        FittedModel::Cv { params } => Ok(params),
-        other => bail!(
-            "{}: a fit of model {:?}, --cv needs a CV fit (`frictl fit cv`)",
-            path.display(),
-            other.tag()
-        ),
-    }
-}
-
-/// Loads the SCV parameters written by `frictl fit scv --json` (or `scv-code`, in paper form).
-pub fn load_scv(path: &Path) -> anyhow::Result<ScvParams> {
-    match FittedModel::read(path)? {
-        FittedModel::Cv { .. } => bail!(
-            "{}: a fit of model \"Cv\", --scv needs an SCV fit (`frictl fit scv`)",
-            path.display()
-        ),
-        scv => Ok(scv.to_scv()),
-    }
 }
 
 /// Runs `frictl experiment`.
@@ -367,12 +343,12 @@ fn load_models(args: &Args, joints: &[usize]) -> anyhow::Result<Vec<(usize, Fric
             };
             let fm = match m {
                 ModelSel::None => FrictionModel::None,
-                ModelSel::Cv => FrictionModel::Cv(load_cv(Path::new(
+                ModelSel::Cv => FrictionModel::Cv(FittedModel::read_cv(Path::new(
                     cv.as_ref()
                         .and_then(|c| c[j].as_ref())
                         .ok_or_else(|| missing("cv"))?,
                 ))?),
-                ModelSel::Scv => FrictionModel::Scv(load_scv(Path::new(
+                ModelSel::Scv => FrictionModel::Scv(FittedModel::read_scv(Path::new(
                     scv.as_ref()
                         .and_then(|c| c[j].as_ref())
                         .ok_or_else(|| missing("scv"))?,

@@ -10,6 +10,7 @@ pub mod eval;
 pub mod experiment;
 pub mod export;
 pub mod fit;
+mod host;
 pub mod import;
 pub mod import_log;
 mod import_stream;

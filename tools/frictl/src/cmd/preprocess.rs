@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 
 use anyhow::Context;
-use frictionless_dataset::{ColumnDocOwned, DatasetSidecar, LabelSource};
+use frictionless_ident::dataset_file::{Provenance, write_dataset};
 use frictionless_ident::preprocess::{LogMeta, PreprocessConfig, RawLog, preprocess};
 use frictionless_sim::params::LinkModel;
 
@@ -273,64 +273,4 @@ fn write_settings(
     }
     eprintln!("{msg}");
     Ok(())
-}
-
-/// Where a labelled dataset comes from, for its sidecar.
-pub struct Provenance<'a> {
-    /// The source log as given.
-    pub input_log: String,
-    /// SHA-256 of the source log (hex).
-    pub input_sha256: String,
-    /// The log's joint constants.
-    pub meta: &'a LogMeta,
-    /// Output sample rate [Hz].
-    pub fs_hz: f64,
-    /// The pipeline's settings.
-    pub settings: serde_json::Value,
-    /// The link dynamics of τ_ID (description).
-    pub dynamics: String,
-}
-
-/// Writes a current-labelled dataset `ds` to `out` and its sidecar (`out` with `.json`) together:
-/// the sidecar last, so a dataset without a complete sidecar is never left looking complete.
-pub fn write_dataset(
-    out: &std::path::Path,
-    ds: &frictionless_dataset::Dataset,
-    summary: &frictionless_ident::preprocess::PreprocessSummary,
-    from: &Provenance<'_>,
-) -> anyhow::Result<()> {
-    let mut csv_out = frictionless::output_file::AtomicFile::create(out)
-        .with_context(|| format!("cannot write {}", out.display()))?;
-    ds.write_csv_to(&mut csv_out, out)?;
-    let side = DatasetSidecar {
-        format: "frictionless-dataset-v1".into(),
-        producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
-        input_log: from.input_log.clone(),
-        input_sha256: from.input_sha256.clone(),
-        joint: from.meta.joint.clone(),
-        gear_ratio_signed: from.meta.gear_ratio_signed,
-        kt_nm_per_a: from.meta.kt_nm_per_a,
-        fs_hz: from.fs_hz,
-        settings: from.settings.clone(),
-        dynamics: from.dynamics.clone(),
-        delta_theta_offset_motor_rad: summary.delta_theta_offset_motor_rad,
-        samples: ds.len(),
-        valid_samples: ds.valid.iter().filter(|v| **v).count(),
-        chunks: summary.chunks,
-        short_chunks: summary.short_chunks,
-        columns: ds.columns().iter().map(ColumnDocOwned::from).collect(),
-        label: LabelSource::Current,
-        runs: Vec::new(),
-        absent_columns: Vec::new(),
-    };
-    let side_path = out.with_extension("json");
-    let mut side_out = frictionless::output_file::AtomicFile::create(&side_path)
-        .with_context(|| format!("cannot write {}", side_path.display()))?;
-    std::io::Write::write_all(
-        &mut side_out,
-        serde_json::to_string_pretty(&side)?.as_bytes(),
-    )
-    .with_context(|| format!("cannot write {}", side_path.display()))?;
-    frictionless::output_file::commit_with_marker(vec![csv_out], side_out)
-        .with_context(|| format!("cannot write {} and {}", out.display(), side_path.display()))
 }
