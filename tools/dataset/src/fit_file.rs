@@ -42,6 +42,24 @@ pub enum FitFileError {
     },
 }
 
+/// Why [`FittedModel::read_cv`] or [`FittedModel::read_scv`] cannot use a fit file.
+#[derive(Debug, thiserror::Error)]
+pub enum ReadModelError {
+    /// The file cannot be read as a fit.
+    #[error(transparent)]
+    File(#[from] FitFileError),
+    /// A fit of another model than the reader needs.
+    #[error("{}: a fit of model {found:?}, {needed}", path.display())]
+    WrongModel {
+        /// The file.
+        path: PathBuf,
+        /// Its `model` tag.
+        found: &'static str,
+        /// What the reader needs (e.g. "--cv needs a CV fit (`frictl fit cv`)").
+        needed: &'static str,
+    },
+}
+
 /// The fit-file tags of the core's model list, quoted and `|`-separated (for messages).
 pub fn fit_tags() -> String {
     ModelKind::ALL
@@ -179,6 +197,32 @@ impl FittedModel {
             Self::Scv { .. } => ModelKind::Scv,
             Self::ScvCode { .. } => ModelKind::ScvCode,
             Self::Lugre { .. } => ModelKind::Lugre,
+        }
+    }
+
+    /// Reads a CV fit (`frictl fit cv --json`); a fit of another model is
+    /// [`ReadModelError::WrongModel`].
+    pub fn read_cv(path: &Path) -> Result<CvParams, ReadModelError> {
+        match Self::read(path)? {
+            Self::Cv { params } => Ok(params),
+            other => Err(ReadModelError::WrongModel {
+                path: path.to_path_buf(),
+                found: other.tag(),
+                needed: "--cv needs a CV fit (`frictl fit cv`)",
+            }),
+        }
+    }
+
+    /// Reads the SCV parameters of an SCV fit (`frictl fit scv --json`; `scv-code` in paper form,
+    /// LuGre's curve); a CV fit is [`ReadModelError::WrongModel`].
+    pub fn read_scv(path: &Path) -> Result<ScvParams, ReadModelError> {
+        match Self::read(path)? {
+            cv @ Self::Cv { .. } => Err(ReadModelError::WrongModel {
+                path: path.to_path_buf(),
+                found: cv.tag(),
+                needed: "--scv needs an SCV fit (`frictl fit scv`)",
+            }),
+            scv => Ok(scv.to_scv()),
         }
     }
 

@@ -51,6 +51,7 @@
 
 #![warn(missing_docs)]
 
+pub mod dataset_file;
 pub mod fit;
 pub mod kalman;
 pub mod preprocess;

@@ -4,52 +4,13 @@
 //! file) and `frictl can replay FILE [--iface IFACE] [--loop] [--speed X]`. The format and pacing
 //! live in [`frictionless_canlog`]. Not a bus analyser: no decoding, no filters.
 
-use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use anyhow::Context;
 use frictionless_canlog as canlog;
 
-/// Arguments of `frictl can`.
-#[derive(clap::Args, Debug)]
-pub struct Args {
-    /// What to do.
-    #[command(subcommand)]
-    pub action: Action,
-}
-
-/// `frictl can` subcommands.
-#[derive(clap::Subcommand, Debug)]
-pub enum Action {
-    /// Record frames from IFACE into FILE (candump -L format).
-    Record {
-        /// CAN interface, e.g. can0 or vcan0.
-        iface: String,
-        /// Output log file.
-        file: PathBuf,
-        /// Stop after this many frames (0 = no limit).
-        #[arg(long, default_value_t = 0)]
-        count: u64,
-        /// Stop after this many seconds.
-        #[arg(long)]
-        seconds: Option<f64>,
-    },
-    /// Replay FILE, paced by its timestamps.
-    Replay {
-        /// Log file (candump -L format).
-        file: PathBuf,
-        /// Send everything on this interface instead of the one named in each line.
-        #[arg(long)]
-        iface: Option<String>,
-        /// Repeat forever.
-        #[arg(long = "loop")]
-        repeat: bool,
-        /// Time scale: 2 = twice as fast.
-        #[arg(long, default_value_t = 1.0)]
-        speed: f64,
-    },
-}
+pub use frictl_cli::can::*;
 
 static STOP: AtomicBool = AtomicBool::new(false);
 

@@ -7,7 +7,7 @@
 //! unambiguous. After writing, the file is read back and its kernel compared with the imported f32
 //! network on random inputs. Not a trainer; no ONNX Runtime involved.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::{SystemTime, UNIX_EPOCH};
 
 use anyhow::{Context, bail};
@@ -18,44 +18,7 @@ use frictionless::units::GearRatio;
 use frictionless::weights::{self, InputRange, ModelFile, ModelMeta, TrainingMeta};
 use frictionless_interop::{self as interop, ModelHints, onnx, safetensors};
 
-/// Source format.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Format {
-    /// ONNX (PyTorch export: Gemm/MatMul+Add/Relu chain).
-    Onnx,
-    /// safetensors (PyTorch nn.Sequential state dict).
-    Safetensors,
-}
-
-use super::train::Features;
-
-/// Weight storage precision.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Dtype {
-    /// IEEE binary32.
-    F32,
-    /// IEEE binary16.
-    F16,
-    /// bfloat16.
-    Bf16,
-    /// int8 hidden-layer weights, per-output-channel scales (output layer f32).
-    Int8,
-    /// 14-bit fixed-point hidden-layer weights in int16, per-output-channel scales (output layer
-    /// f32).
-    Int16,
-}
-
-impl From<Dtype> for StorageDtype {
-    fn from(d: Dtype) -> Self {
-        match d {
-            Dtype::F32 => StorageDtype::F32,
-            Dtype::F16 => StorageDtype::F16,
-            Dtype::Bf16 => StorageDtype::Bf16,
-            Dtype::Int8 => StorageDtype::Int8,
-            Dtype::Int16 => StorageDtype::Int16,
-        }
-    }
-}
+pub use frictl_cli::import::*;
 
 /// Arguments of `frictl import`.
 #[derive(clap::Args, Debug)]
@@ -78,42 +41,6 @@ pub enum What {
     Mat(super::import_log::MatArgs),
     /// ROS 2 MCAP bags of sensor_msgs/JointState into a dataset.
     Mcap(super::import_log::McapArgs),
-}
-
-/// Arguments of `frictl import onnx|safetensors`.
-#[derive(clap::Args, Debug)]
-pub struct ModelArgs {
-    /// The ONNX or safetensors file.
-    pub input: PathBuf,
-    /// The `.fwt` file to write.
-    #[arg(short = 'o', long)]
-    pub output: PathBuf,
-    /// Input feature set (required unless the file carries `frictionless.features` metadata).
-    #[arg(long)]
-    pub features: Option<Features>,
-    /// The last input is the motor temperature [°C].
-    #[arg(long)]
-    pub temperature: bool,
-    /// History length H (samples per block); inferred from the input width when omitted.
-    #[arg(long)]
-    pub history: Option<usize>,
-    /// Joint name, e.g. l_ankle_roll.
-    #[arg(long)]
-    pub joint: Option<String>,
-    /// Signed gear ratio r (motor angle per joint angle), e.g. -160.
-    #[arg(long, allow_hyphen_values = true)]
-    pub gear_ratio: Option<f64>,
-    /// Torque constant k_t [Nm/A] the training labels used.
-    #[arg(long)]
-    pub kt: Option<f64>,
-    /// Weight storage precision of the written file.
-    #[arg(long, value_enum, default_value = "f32")]
-    pub dtype: Dtype,
-    /// Training range of the inputs: one `MIN:MAX` per feature block in input order, then one for
-    /// the temperature with `--temperature`, in the inputs' units (e.g. `-0.05:0.05,-2:2`).
-    /// Omitted: the file stores no range and frictiond never flags the model out of range.
-    #[arg(long, allow_hyphen_values = true)]
-    pub input_range: Option<String>,
 }
 
 /// Parses `--input-range` for `spec`: `MIN:MAX` per block, then the temperature's if any.
@@ -356,5 +283,34 @@ mod tests {
         assert!(e.contains("2 ranges given") && e.contains("needs 3"), "{e}");
         assert!(parse_input_range("-1:1,x:2,1:2", &spec).is_err());
         assert!(parse_input_range("-1,1", &spec).is_err());
+    }
+
+    /// `frictl import csv` as a stage (the torque-sensed demo runs it): argv → clap → the same value.
+    #[test]
+    fn the_import_csv_stage_gives_its_arguments_back() {
+        use super::super::import_log;
+        use frictl_cli::stage::{argv, defaults, roundtrip};
+        let p = std::path::PathBuf::from;
+        let mut common: import_log::CommonArgs = defaults().unwrap();
+        common.out = p("ds_{joint}.csv");
+        common.label = Some(import_log::LabelArg::TorqueSensor);
+        common.gear_ratio = vec!["-100".into(), "l_knee=-160".into()];
+        common.fixed_joints = vec!["r_knee=-0.5".into()];
+        common.gap_s = Some(-1.0);
+        let args = import_log::CsvArgs {
+            files: vec![p("a.csv"), p("-b.csv")],
+            joint: vec!["l_knee".into()],
+            columns: vec!["time=t".into()],
+            delimiter: ';',
+            common,
+            ..defaults().unwrap()
+        };
+        let words = argv(&["import", "csv"], &args).expect("argv");
+        let back: import_log::CsvArgs = roundtrip(2, &words).expect("roundtrip");
+        assert_eq!(
+            serde_json::to_value(&args).unwrap(),
+            serde_json::to_value(&back).unwrap(),
+            "{words:?}"
+        );
     }
 }

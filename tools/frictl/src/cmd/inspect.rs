@@ -3,19 +3,9 @@
 //! Uses [`frictionless::weights::inspect`], which tolerates a bad CRC or a truncated payload so the
 //! header can still be shown; the command then exits non-zero with the problem. Not a converter.
 
-use std::path::PathBuf;
-
 use anyhow::Context;
 
-/// Arguments of `frictl inspect`.
-#[derive(clap::Args, Debug)]
-pub struct Args {
-    /// The `.fwt` weight file.
-    pub file: PathBuf,
-    /// Print the view as JSON instead of text.
-    #[arg(long)]
-    pub json: bool,
-}
+pub use frictl_cli::inspect::*;
 
 /// Runs `frictl inspect`: prints the view, then fails if the file is not valid.
 pub fn run(args: Args) -> anyhow::Result<()> {

@@ -10,6 +10,7 @@ pub mod eval;
 pub mod experiment;
 pub mod export;
 pub mod fit;
+mod host;
 pub mod import;
 pub mod import_log;
 mod import_stream;
@@ -21,8 +22,9 @@ pub mod record;
 pub mod robot;
 pub mod search;
 pub mod sim;
-pub mod stage;
 pub mod train;
+
+pub use frictl_cli::stage;
 
 /// Refuses, before any work, an output that would overwrite one of the command's inputs (the same file
 /// by device and inode, whatever the spelling of the path), whose directory does not exist, or that

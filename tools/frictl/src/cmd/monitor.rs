@@ -7,7 +7,6 @@
 //!
 //! What it is **not**: no control; it never publishes anything.
 
-use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
@@ -18,25 +17,7 @@ use frictionless_shm_types::{
     STATUS_SCHED_FIFO, STATUS_STOPPING,
 };
 
-/// Arguments of `frictl monitor`.
-#[derive(clap::Args, Debug)]
-pub struct Args {
-    /// Service-name prefix of the daemon (`[backend] service_prefix`).
-    #[arg(long, default_value = "frictionless")]
-    pub prefix: String,
-    /// iceoryx2 root path (`[backend] root_path`); default: iceoryx2's.
-    #[arg(long)]
-    pub root_path: Option<PathBuf>,
-    /// Refresh interval [ms].
-    #[arg(long, default_value_t = 500)]
-    pub interval_ms: u64,
-    /// Print one snapshot and exit.
-    #[arg(long)]
-    pub once: bool,
-    /// Give up after this many seconds without a status (0 = wait forever).
-    #[arg(long, default_value_t = 10)]
-    pub timeout_s: u64,
-}
+pub use frictl_cli::monitor::*;
 
 fn kind_name(k: u8) -> &'static str {
     frictionless::model::ModelKind::from_code(k).map_or("?", |k| k.name())

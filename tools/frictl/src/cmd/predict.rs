@@ -6,7 +6,6 @@
 //! the real inference kernel ([`frictionless::kernel::Mlp`]), not a reference loop.
 
 use std::io::{BufWriter, Write};
-use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use frictionless::kernel::Mlp;
@@ -14,15 +13,7 @@ use frictionless::mlp::StorageDtype;
 
 use super::import::{Format, load_foreign};
 
-/// Arguments of `frictl predict`.
-#[derive(clap::Args, Debug)]
-pub struct Args {
-    /// The model: `.fwt`, `.onnx` or `.safetensors` (chosen by extension).
-    pub file: PathBuf,
-    /// CSV file, one raw input vector per row, no header.
-    #[arg(long)]
-    pub input: PathBuf,
-}
+pub use frictl_cli::predict::*;
 
 /// Runs `frictl predict`.
 pub fn run(args: Args) -> anyhow::Result<()> {

@@ -3,87 +3,13 @@
 //! See `frictionless_ident::preprocess` for the pipeline and `frictionless_dataset` for the columns.
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
 
 use anyhow::Context;
-use frictionless_dataset::{ColumnDocOwned, DatasetSidecar, LabelSource};
-use frictionless_ident::kalman::KalmanConfig;
+use frictionless_ident::dataset_file::{Provenance, write_dataset};
 use frictionless_ident::preprocess::{LogMeta, PreprocessConfig, RawLog, preprocess};
 use frictionless_sim::params::LinkModel;
 
-/// Source of the link dynamics for τ_ID.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum LinkSource {
-    /// The sidecar's simulator link model if present and no `--urdf` given, else the URDF.
-    Auto,
-    /// The URDF (`--urdf`, default `virtual_leg`).
-    Urdf,
-    /// The simulator's link model from the sidecar (`plant.link`); an error if absent.
-    Sidecar,
-}
-
-/// The label pipeline's settings shared by `frictl preprocess` and `frictl import csv|mat|mcap`
-/// (everything but the chunk gap, whose default differs).
-#[derive(clap::Args, Debug, Clone, serde::Serialize)]
-pub struct PipelineArgs {
-    /// Causal ṡ/s̈ columns (forward Kalman filter, what the daemon sees) for training on causal
-    /// signals; the label itself always uses the zero-phase current and the RTS smoother.
-    #[arg(long)]
-    pub causal: bool,
-    /// Butterworth order for the current.
-    #[arg(long, default_value_t = 5)]
-    pub butter_order: usize,
-    /// Butterworth cut-off [Hz].
-    #[arg(long, default_value_t = 100.0)]
-    pub butter_cutoff_hz: f64,
-    /// Output sample rate [Hz].
-    #[arg(long, default_value_t = 1000.0)]
-    pub fs_hz: f64,
-    /// Kalman P₀ diagonal (pos, vel, acc).
-    #[arg(long, num_args = 3, value_delimiter = ',', default_values_t = [1e-5, 1e-4, 1e4])]
-    pub kalman_p0: Vec<f64>,
-    /// Kalman Q diagonal per step (pos, vel, acc).
-    #[arg(long, num_args = 3, value_delimiter = ',', default_values_t = [1e-5, 1e-4, 1e4])]
-    pub kalman_q: Vec<f64>,
-    /// Kalman measurement variance R [rad²].
-    #[arg(long, default_value_t = 1e-4)]
-    pub kalman_r: f64,
-    /// |s̈| limit [rad/s²].
-    #[arg(long, default_value_t = 10.0)]
-    pub joint_acc_limit: f64,
-    /// |ṡ| limit [rad/s].
-    #[arg(long, default_value_t = 10.0)]
-    pub joint_vel_limit: f64,
-    /// |i_f| limit [A] (default 10).
-    #[arg(long)]
-    pub im_limit: Option<f64>,
-    /// |τ_F| limit [Nm] (default: 15 for ankle roll joints, else 100).
-    #[arg(long)]
-    pub tauf_limit: Option<f64>,
-}
-
-impl PipelineArgs {
-    /// Writes these settings into `cfg`.
-    pub fn apply(&self, cfg: &mut PreprocessConfig) {
-        cfg.fs_hz = self.fs_hz;
-        cfg.butter_order = self.butter_order;
-        cfg.butter_cutoff_hz = self.butter_cutoff_hz;
-        cfg.causal = self.causal;
-        cfg.kalman = KalmanConfig {
-            p0: [self.kalman_p0[0], self.kalman_p0[1], self.kalman_p0[2]],
-            q: [self.kalman_q[0], self.kalman_q[1], self.kalman_q[2]],
-            r: self.kalman_r,
-        };
-        cfg.limits.joint_acc_limit_rad_s2 = self.joint_acc_limit;
-        cfg.limits.joint_vel_limit_rad_s = self.joint_vel_limit;
-        if let Some(v) = self.im_limit {
-            cfg.limits.im_limit_a = v;
-        }
-        if let Some(v) = self.tauf_limit {
-            cfg.limits.tauf_limit_nm = v;
-        }
-    }
-}
+pub use frictl_cli::preprocess::*;
 
 /// The `--fixed-joint NAME=RAD` values by name.
 pub fn parse_fixed_joints(fixed_joints: &[String]) -> anyhow::Result<BTreeMap<String, f64>> {
@@ -135,56 +61,6 @@ pub fn urdf_link(
         },
         d,
     ))
-}
-
-/// Arguments of `frictl preprocess`.
-#[derive(clap::Args, Debug, serde::Serialize)]
-pub struct Args {
-    /// Acquisition log CSV (its sidecar is the same path with `.json`).
-    pub log: PathBuf,
-    /// Output dataset CSV (its sidecar is written next to it with `.json`).
-    #[arg(short = 'o', long = "out")]
-    pub out: PathBuf,
-    /// Resampling, filter, smoother and sample-limit settings.
-    #[command(flatten)]
-    #[serde(flatten)]
-    pub pipeline: PipelineArgs,
-    /// Which link dynamics give τ_ID. `auto` (default): the simulator's own link model when the
-    /// sidecar has one (`plant.link`, i.e. a simulated log) and no `--urdf` is given — the label is
-    /// then computed with exactly the dynamics that produced the data — else the URDF.
-    #[arg(long, value_enum, default_value_t = LinkSource::Auto)]
-    #[serde(serialize_with = "super::stage::as_value_enum")]
-    pub link: LinkSource,
-    /// URDF for inverse dynamics (default `virtual_leg` = the project's `config/urdf/virtual_leg.urdf`).
-    #[arg(long)]
-    pub urdf: Option<String>,
-    /// Joint name in the URDF (default: the sidecar's `joint`).
-    #[arg(long)]
-    pub joint: Option<String>,
-    /// Position of another URDF joint, held fixed [rad] (repeatable; absent joints are 0).
-    #[arg(long = "fixed-joint", value_name = "NAME=RAD")]
-    pub fixed_joints: Vec<String>,
-    /// Whole-body τ_ID: the log's columns of the other joints' positions, a template with `{joint}`
-    /// replaced by each URDF joint name (e.g. `q_{joint}`); the log's own joint comes from `s_rad`.
-    /// Implies the URDF (`--urdf`, `--fixed-joint`; joints neither logged nor fixed are held at 0).
-    #[arg(long, value_name = "TEMPLATE")]
-    pub positions: Option<String>,
-    /// Velocity column template for `--positions` (absent: the Kalman smoother).
-    #[arg(long, value_name = "TEMPLATE", requires = "positions")]
-    pub velocities: Option<String>,
-    /// Acceleration column template for `--positions`.
-    #[arg(long, value_name = "TEMPLATE", requires = "positions")]
-    pub accelerations: Option<String>,
-    /// Same as `--link sidecar` (kept for existing scripts).
-    #[arg(long)]
-    pub link_from_sidecar: bool,
-    /// Time gap that starts a new chunk [s].
-    #[arg(long, default_value_t = 1.0)]
-    pub gap_s: f64,
-    /// Ablation: subtract J·φ̈ (φ̈ from the motor encoder θ/r) from the label with this J [kg·m²];
-    /// `sidecar` = the simulator's r²·J_m.
-    #[arg(long)]
-    pub subtract_reflected_inertia: Option<String>,
 }
 
 /// Runs `frictl preprocess`.
@@ -398,64 +274,4 @@ fn write_settings(
     }
     eprintln!("{msg}");
     Ok(())
-}
-
-/// Where a labelled dataset comes from, for its sidecar.
-pub struct Provenance<'a> {
-    /// The source log as given.
-    pub input_log: String,
-    /// SHA-256 of the source log (hex).
-    pub input_sha256: String,
-    /// The log's joint constants.
-    pub meta: &'a LogMeta,
-    /// Output sample rate [Hz].
-    pub fs_hz: f64,
-    /// The pipeline's settings.
-    pub settings: serde_json::Value,
-    /// The link dynamics of τ_ID (description).
-    pub dynamics: String,
-}
-
-/// Writes a current-labelled dataset `ds` to `out` and its sidecar (`out` with `.json`) together:
-/// the sidecar last, so a dataset without a complete sidecar is never left looking complete.
-pub fn write_dataset(
-    out: &std::path::Path,
-    ds: &frictionless_dataset::Dataset,
-    summary: &frictionless_ident::preprocess::PreprocessSummary,
-    from: &Provenance<'_>,
-) -> anyhow::Result<()> {
-    let mut csv_out = frictionless::output_file::AtomicFile::create(out)
-        .with_context(|| format!("cannot write {}", out.display()))?;
-    ds.write_csv_to(&mut csv_out, out)?;
-    let side = DatasetSidecar {
-        format: "frictionless-dataset-v1".into(),
-        producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
-        input_log: from.input_log.clone(),
-        input_sha256: from.input_sha256.clone(),
-        joint: from.meta.joint.clone(),
-        gear_ratio_signed: from.meta.gear_ratio_signed,
-        kt_nm_per_a: from.meta.kt_nm_per_a,
-        fs_hz: from.fs_hz,
-        settings: from.settings.clone(),
-        dynamics: from.dynamics.clone(),
-        delta_theta_offset_motor_rad: summary.delta_theta_offset_motor_rad,
-        samples: ds.len(),
-        valid_samples: ds.valid.iter().filter(|v| **v).count(),
-        chunks: summary.chunks,
-        short_chunks: summary.short_chunks,
-        columns: ds.columns().iter().map(ColumnDocOwned::from).collect(),
-        label: LabelSource::Current,
-        runs: Vec::new(),
-        absent_columns: Vec::new(),
-    };
-    let side_path = out.with_extension("json");
-    let mut side_out = frictionless::output_file::AtomicFile::create(&side_path)
-        .with_context(|| format!("cannot write {}", side_path.display()))?;
-    std::io::Write::write_all(
-        &mut side_out,
-        serde_json::to_string_pretty(&side)?.as_bytes(),
-    )
-    .with_context(|| format!("cannot write {}", side_path.display()))?;
-    frictionless::output_file::commit_with_marker(vec![csv_out], side_out)
-        .with_context(|| format!("cannot write {} and {}", out.display(), side_path.display()))
 }

@@ -303,7 +303,7 @@ mod tests {
     use frictionless::model::ModelKind;
 
     use super::*;
-    use crate::cmd::{acquire, eval, export, fit, import_log, preprocess, train};
+    use crate::{acquire, eval, export, fit, preprocess, train};
 
     /// `args` → [`argv`] → clap → the same serialised value; returns the words.
     fn assert_roundtrip<A: clap::Args + FromArgMatches + Serialize>(
@@ -343,24 +343,6 @@ mod tests {
         assert!(
             !words.iter().any(|w| w.starts_with("--prefix")),
             "{words:?}"
-        );
-
-        let mut common: import_log::CommonArgs = defaults().unwrap();
-        common.out = p("ds_{joint}.csv");
-        common.label = Some(import_log::LabelArg::TorqueSensor);
-        common.gear_ratio = vec!["-100".into(), "l_knee=-160".into()];
-        common.fixed_joints = vec!["r_knee=-0.5".into()];
-        common.gap_s = Some(-1.0);
-        assert_roundtrip(
-            &["import", "csv"],
-            &import_log::CsvArgs {
-                files: vec![p("a.csv"), p("-b.csv")],
-                joint: vec!["l_knee".into()],
-                columns: vec!["time=t".into()],
-                delimiter: ';',
-                common,
-                ..defaults().unwrap()
-            },
         );
 
         assert_roundtrip(
@@ -430,7 +412,7 @@ mod tests {
 
     #[test]
     fn the_experiment_stage_gives_its_arguments_back() {
-        use crate::cmd::experiment::{self, ControllerInertia, Kind, ModelSel, RobotSel};
+        use crate::experiment::{self, ControllerInertia, Kind, ModelSel, RobotSel};
         let words = assert_roundtrip(
             &["experiment"],
             &experiment::Args {
@@ -455,7 +437,7 @@ mod tests {
 
     #[test]
     fn the_search_stage_gives_its_arguments_back() {
-        use crate::cmd::search;
+        use crate::search;
         assert_roundtrip(
             &["search"],
             &search::Args {

@@ -36,8 +36,8 @@ use frictionless::features::FeatureSet;
 use frictionless::model::ModelKind;
 
 use super::{Args, Runner, Stage, read_json, read_typed, s, settings_name};
-use crate::cmd::import_log::{self, LabelArg};
-use crate::cmd::{acquire, eval, fit, stage, train};
+use crate::{Host, ImportCsv, ImportLabel};
+use frictl_cli::{acquire, eval, fit, stage, train};
 
 /// The preset logged as a torque-sensed joint.
 const PRESET: &str = "knee";
@@ -156,7 +156,7 @@ fn held_out_models(ev: &EvalReport) -> anyhow::Result<(BTreeMap<String, RunMetri
 }
 
 /// Runs `frictl demo --sensor torque`.
-pub fn run(args: &Args) -> anyhow::Result<()> {
+pub fn run(args: &Args, host: &dyn Host) -> anyhow::Result<()> {
     super::install_signal_flag()?;
     let started = Instant::now();
     let sizes = Sizes::for_args(args);
@@ -169,7 +169,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         std::fs::create_dir_all(d).with_context(|| format!("cannot create {}", d.display()))?;
     }
     let mut r = Runner {
-        exe: std::env::current_exe().context("cannot find the running executable")?,
+        exe: host.frictl()?,
         frictiond: None,
         logs,
         stages: vec![],
@@ -239,8 +239,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let ds = data.join("arm.csv");
     let ds_truth = data.join("arm_truth.csv");
     for (dst, label, truth_column) in [
-        (&ds, LabelArg::TorqueSensor, None),
-        (&ds_truth, LabelArg::Given, Some("tau_f=tau_f_true_nm")),
+        (&ds, ImportLabel::TorqueSensor, None),
+        (&ds_truth, ImportLabel::Given, Some("tau_f=tau_f_true_nm")),
     ] {
         let mut columns: Vec<String> = [
             "time=time_s",
@@ -252,21 +252,24 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         .map(String::from)
         .into();
         columns.extend(truth_column.map(String::from));
-        let mut common: import_log::CommonArgs = stage::defaults()?;
-        common.out = dst.clone();
-        common.label = Some(label);
-        common.gear_ratio = vec![r_signed.to_string()];
-        common.kt = vec![kt.to_string()];
-        r.stage(
-            &format!("import csv ({} label)", stage::value_name(&label)),
-            &["import", "csv"],
-            &import_log::CsvArgs {
-                files: logs_csv.clone(),
-                joint: vec![joint.clone()],
-                columns,
-                common,
-                ..stage::defaults()?
-            },
+        let argv = host.import_csv_argv(&ImportCsv {
+            files: &logs_csv,
+            joint: &joint,
+            columns: &columns,
+            out: dst,
+            label,
+            gear_ratio_signed: r_signed,
+            kt_nm_per_a: kt,
+        })?;
+        r.frictl(
+            &format!(
+                "import csv ({} label)",
+                match label {
+                    ImportLabel::TorqueSensor => "torque-sensor",
+                    ImportLabel::Given => "given",
+                }
+            ),
+            &argv,
         )?;
     }
 

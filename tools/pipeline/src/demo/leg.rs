@@ -39,11 +39,12 @@ use frictionless_experiment::session::{
 };
 use frictionless_sim::LegParams;
 
-use super::super::preprocess::{Provenance, write_dataset};
 use super::{
     Args, Dirs, EVAL_MODELS, JointFiles, Runner, Sizes, Stage, eval_table, evaluate, fit, s,
     train_args,
 };
+use frictionless_dataset::fit_file::FittedModel;
+use frictionless_ident::dataset_file::{Provenance, write_dataset};
 
 /// The unseen run of `--quick`: the same length, other frequency, slope, levels and starting pose.
 const QUICK_TEST: &[&str] = &[
@@ -362,7 +363,8 @@ fn write_joint_dataset(
                 frictionless_sim::leg::ERGOCUB_URDF_PATH
             ),
         },
-    )
+    )?;
+    Ok(())
 }
 
 /// A joint's model in one of the configs, from its files.
@@ -389,12 +391,10 @@ fn write_daemon_configs(
             Ok(FrictionModel::Pinn(f.fwt.clone()))
         }),
         ("SCV", "frictiond_scv.toml", |f| {
-            Ok(FrictionModel::Scv(super::super::experiment::load_scv(
-                &f.scv,
-            )?))
+            Ok(FrictionModel::Scv(FittedModel::read_scv(&f.scv)?))
         }),
         ("CV", "frictiond_cv.toml", |f| {
-            Ok(FrictionModel::Cv(super::super::experiment::load_cv(&f.cv)?))
+            Ok(FrictionModel::Cv(FittedModel::read_cv(&f.cv)?))
         }),
     ];
     let mut out = vec![];
@@ -404,7 +404,7 @@ fn write_daemon_configs(
         for (index, (p, f)) in setup.params.joints.iter().zip(files).enumerate() {
             let offset = if label == "PINN" {
                 let report = super::read_typed(&f.train_report)?;
-                super::super::robot::trained_offset(&report).with_context(|| s(&f.train_report))?
+                crate::robot_run::trained_offset(&report).with_context(|| s(&f.train_report))?
             } else {
                 None
             };
@@ -461,7 +461,7 @@ fn write_robot_file(
     joints: &[frictiond_config::JointConfig],
     files: &[JointFiles],
 ) -> anyhow::Result<()> {
-    use frictl::robot::{
+    use crate::robot::{
         JointSection, LpfSection, RobotFile, RobotSection, SearchSection, TrainSection,
     };
     let rel = |p: &Path| -> anyhow::Result<PathBuf> {
@@ -521,7 +521,7 @@ fn write_robot_file(
         toml::to_string(&robot)?
     );
     // Read back as `frictl robot` reads it.
-    frictl::robot::parse(&path, &text)?;
+    crate::robot::parse(&path, &text)?;
     frictionless::output_file::write(&path, text)?;
     Ok(())
 }
