@@ -11,6 +11,8 @@
 //! live in the binary.
 
 #![warn(missing_docs)]
+// The arguments' doc comments are clap's `--help` text, which writes units as `[ms]`: not links.
+#![allow(rustdoc::broken_intra_doc_links)]
 
 pub mod acquire;
 pub mod can;

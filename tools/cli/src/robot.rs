@@ -49,15 +49,12 @@ pub struct PlanArgs {
 /// The last stage `--until` runs.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
+// The variants are the stages of `--until`'s help; doc comments would become per-value help text.
+#[allow(missing_docs)]
 pub enum Until {
-    /// The datasets.
     Data,
-    /// The CV and SCV fits.
     Fit,
-    /// The search (or the training).
     Search,
-    /// The evaluation.
     Eval,
-    /// The ONNX export.
     Export,
 }

@@ -50,7 +50,7 @@ pub struct Provenance<'a> {
     pub input_sha256: String,
     /// The log's joint constants.
     pub meta: &'a LogMeta,
-    /// Output sample rate [Hz].
+    /// Output sample rate \[Hz\].
     pub fs_hz: f64,
     /// The pipeline's settings.
     pub settings: serde_json::Value,

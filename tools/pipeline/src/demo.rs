@@ -1,5 +1,6 @@
 //! `frictl demo` — the whole method end to end on the virtual joints, every stage through the real
-//! CLI (`frictl <stage>` subprocesses of this executable, `frictiond` for the experiments):
+//! CLI (`frictl <stage>` subprocesses of the host's `frictl`, [`Host::frictl`]; `frictiond` for the
+//! experiments):
 //! acquire (knee and ankle roll; a training protocol run and an unseen tracking test run) →
 //! preprocess (label) → fit CV and SCV → train the PINN → on-policy rounds → evaluate on the test
 //! runs → export ONNX → closed-loop experiments (minimum K_p, disturbance at the own and at the
@@ -447,7 +448,7 @@ struct DistilledEntry {
     student_mac: usize,
 }
 
-/// Options of [`distill_pinn`].
+/// Options of the distillation stage (`distill_pinn`).
 #[derive(Clone, Debug)]
 pub struct DistillStage {
     /// The student's hidden widths.

@@ -6,7 +6,7 @@
 //! [`load`] / [`parse`] with [`RobotError`] naming the file, the key and the value, and the checks
 //! serde cannot express (unique names, exactly one data source per joint, ranges ordered).
 //!
-//! What it is **not**: it runs nothing; the command layer (`frictl robot`) turns a joint into
+//! What it is **not**: it runs nothing; the pipeline ([`crate::robot_run`]) turns a joint into
 //! `frictl` stages, and the Ray driver (`python/ray/frictl_ray.py`) reads the same plan.
 //!
 //! ```toml
@@ -152,7 +152,7 @@ pub struct SearchSection {
     /// Test fraction (reported only).
     #[serde(default = "default_frac")]
     pub test_frac: f64,
-    /// Early stopping patience [epochs].
+    /// Early stopping patience \[epochs\].
     #[serde(default)]
     pub patience: Option<usize>,
     /// Batch size range.
@@ -278,7 +278,7 @@ fn default_features() -> FeatureSet {
 pub struct LpfSection {
     /// Butterworth order.
     pub order: usize,
-    /// Cut-off [Hz].
+    /// Cut-off \[Hz\].
     pub cutoff_hz: f64,
 }
 
@@ -316,12 +316,12 @@ pub struct JointSection {
     /// must have a temperature column).
     #[serde(default)]
     pub temperature: bool,
-    /// frictiond's current clamp [A].
+    /// frictiond's current clamp \[A\].
     pub max_curr_a: f64,
     /// frictiond's friction compensation gain.
     #[serde(default = "default_kfc")]
     pub kfc: f64,
-    /// frictiond's friction clip [Nm] (absent: none).
+    /// frictiond's friction clip \[Nm\] (absent: none).
     #[serde(default)]
     pub max_output_friction_nm: Option<f64>,
     /// frictiond's τ̂_F low-pass (absent: none).

@@ -1,4 +1,4 @@
-//! `frictl robot` — a whole robot from one TOML file (schema: `frictl::robot`).
+//! `frictl robot` — a whole robot from one TOML file (schema: [`crate::robot`]).
 //!
 //! `frictl robot run ROBOT.toml --out DIR` runs, for every joint, the stages acquire (simulator
 //! presets) or preprocess (raw logs) → fit CV and SCV → search (or train) → eval → export ONNX, each as
