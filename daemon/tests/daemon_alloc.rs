@@ -223,10 +223,7 @@ sigma1 = 1.0
         // job, and with other processes on the CPUs most ticks are late): require jobs by the
         // thousand, not a share of the ticks.
         eprintln!("helper: {jobs} jobs over {ticks} counted ticks + {READY_AFTER} before");
-        assert!(
-            jobs >= TICKS / 20,
-            "the helper ran only {jobs} jobs: {lat}"
-        );
+        assert!(jobs >= TICKS / 20, "the helper ran only {jobs} jobs: {lat}");
     } else {
         assert!(lat.contains("rt_threads=1\n"), "{lat}");
     }

@@ -7,8 +7,8 @@
 //! fails to compile there.
 //!
 //! What it is **not**: it does no work. The `frictl` binary parses these arguments and calls the
-//! library crates of `tools/`; the robot-log importers' arguments (`frictl import csv|mat|mcap`) still
-//! live in the binary.
+//! library crates of `tools/`; the work of `frictl import csv|mat|mcap` is
+//! `frictionless-import`'s.
 
 #![warn(missing_docs)]
 // The arguments' doc comments are clap's `--help` text, which writes units as `[ms]`: not links.
@@ -25,6 +25,7 @@ pub mod experiment;
 pub mod export;
 pub mod fit;
 pub mod import;
+pub mod import_log;
 pub mod inspect;
 pub mod monitor;
 pub mod predict;

@@ -8,6 +8,7 @@
 //! `frictionless-dynamics` (URDF, RNEA/CRBA), `frictionless-sim` (virtual joint),
 //! `frictionless-acquire` (excitation protocol, logs), `frictionless-dataset` (file formats),
 //! `frictionless-ident` (label pipeline, CV/SCV fit), `frictionless-logs` (robot logs),
+//! `frictionless-import` (robot logs into datasets, `frictl import csv|mat|mcap`),
 //! `frictionless-train` (PINN trainer, random search, distillation), `frictionless-eval` (offline
 //! evaluation, drift, figures), `frictionless-experiment` (closed-loop experiments),
 //! `frictionless-plant` (the virtual robot as a process, `sim serve`), `frictionless-interop` (ONNX,

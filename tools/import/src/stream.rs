@@ -15,7 +15,10 @@ use frictionless_ident::preprocess::{
 use frictionless_ident::stream::{StreamLabeller, StreamStats};
 use frictionless_logs::{ImportedRun, Role, Unit, csv_log};
 
-use super::import_log::{CommonArgs, Inputs, commit_pair, out_path, per_joint, plausibility};
+use frictl_cli::import_log::CommonArgs;
+
+use crate::check_outputs;
+use crate::whole::{Inputs, commit_pair, out_path, per_joint, plausibility};
 
 /// One joint's output being written.
 struct Out {
@@ -247,7 +250,7 @@ pub fn run_stream(
     };
     let joint_names: Vec<String> = st.joints.iter().map(|j| j.joint.clone()).collect();
     for ((jl, o), sum) in st.joints.iter().zip(st.outs).zip(sums) {
-        super::check_outputs(&inputs.paths(), &[&o.path, &o.path.with_extension("json")])?;
+        check_outputs(&inputs.paths(), &[&o.path, &o.path.with_extension("json")])?;
         anyhow::ensure!(
             o.valid > 0,
             "{}: 0 valid samples of {}; check the units and --gap-s",

@@ -1,0 +1,60 @@
+//! # `frictionless-import`: robot logs into datasets
+//!
+//! Crate table: `tools/import`. What it **is**: the work behind `frictl import csv|mat|mcap` — the
+//! runs `frictionless-logs` reads, labelled by `frictionless-ident`'s one pipeline (the `current`
+//! label's τ_ID from the whole robot's state when the log has it, else the single-joint view of the
+//! URDF), one dataset and sidecar (`frictionless-dataset`) per labelled joint, written atomically:
+//! - [`whole`]: the log held in memory, joints labelled in passes of a few;
+//! - [`stream`]: `--window-samples N`, the log read and labelled in windows, never held whole;
+//! - [`urdf`]: the robot from `--urdf` and `--fixed-joint` (also `frictl preprocess`'s);
+//! - [`check_outputs`]: the refusal, before any work, of an output that would overwrite an input.
+//!
+//! It takes the arguments `frictl-cli` parses and reports with `anyhow`, as the command layer does.
+//! What it is **not**: a log reader (`frictionless-logs`) or the label pipeline
+//! (`frictionless-ident`); formats, roles and units are in `docs/robot-logs.md`.
+
+#![warn(missing_docs)]
+
+pub mod stream;
+pub mod urdf;
+pub mod whole;
+
+pub use urdf::{parse_fixed_joints, urdf_link, urdf_whole_body};
+pub use whole::{run_csv, run_mat, run_mcap};
+
+/// Refuses, before any work, an output that would overwrite one of the command's inputs (the same file
+/// by device and inode, whatever the spelling of the path), whose directory does not exist, or that
+/// exists and is not a regular file or is a symlink ([`frictionless::output_file::check`]: the
+/// file is written through that module, which checks again). Every
+/// command that reads files and writes others calls it first, so a mistake such as
+/// `frictl preprocess log.csv -o log.csv` loses nothing and a long run does not fail at its end.
+pub fn check_outputs(
+    inputs: &[&std::path::Path],
+    outputs: &[&std::path::Path],
+) -> anyhow::Result<()> {
+    use std::os::unix::fs::MetadataExt;
+    let id = |p: &std::path::Path| std::fs::metadata(p).ok().map(|m| (m.dev(), m.ino()));
+    for out in outputs {
+        let dir = match out.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => std::path::Path::new("."),
+        };
+        anyhow::ensure!(
+            dir.is_dir(),
+            "{}: the output directory {} does not exist",
+            out.display(),
+            dir.display()
+        );
+        frictionless::output_file::check(out)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
+        let Some(out_id) = id(out) else { continue };
+        if let Some(input) = inputs.iter().find(|i| id(i) == Some(out_id)) {
+            anyhow::bail!(
+                "{}: is also an input of this command ({}); refusing to overwrite it (nothing was written)",
+                out.display(),
+                input.display()
+            );
+        }
+    }
+    Ok(())
+}
