@@ -1918,15 +1918,26 @@ fn csv_streamed_import_checks_the_units_on_the_first_window() {
         "nothing written"
     );
     ok(import("time=s"), "import csv --window-samples");
-    // The log's one NaN position is reported as the whole-log import reports it; the units pass.
+    // The log's one NaN position and the URDF joints held at 0 are reported as the whole-log
+    // import reports them; the units pass.
     let side = sidecar(&d.join("ds_l_knee.csv"));
     let w = &side["settings"]["import"]["warnings"];
-    assert_eq!(w.as_array().map(Vec::len), Some(1), "{w}");
+    let w: Vec<&str> = w
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_str().unwrap())
+        .collect();
+    assert_eq!(w.len(), 2, "{w:?}");
     assert!(
-        w[0].as_str()
-            .unwrap()
-            .ends_with("leg.csv: 1 non-finite values dropped (q:l_hip_pitch: 1)"),
-        "{w}"
+        w[0].ends_with("leg.csv: 1 non-finite values dropped (q:l_hip_pitch: 1)"),
+        "{w:?}"
+    );
+    assert!(
+        w[1].starts_with(
+            "URDF joints neither in the log nor given with --fixed-joint, held at 0 rad: "
+        ) && w[1].contains("torso_roll"),
+        "{w:?}"
     );
 }
 

@@ -18,7 +18,7 @@ use frictionless_logs::{ImportedRun, Role, Unit, csv_log};
 use frictl_cli::import_log::CommonArgs;
 
 use crate::check_outputs;
-use crate::whole::{Inputs, commit_pair, out_path, per_joint, plausibility};
+use crate::whole::{Inputs, commit_pair, out_path, per_joint, plan_warnings, plausibility};
 
 /// One joint's output being written.
 struct Out {
@@ -237,6 +237,7 @@ pub fn run_stream(
         p.wrenches = st.wrench_frames.clone();
         p
     });
+    warnings.extend(plan.iter().flat_map(plan_warnings));
     let inputs = Inputs::hash(files)?;
     let dynamics = match &plan {
         Some(p) => format!(

@@ -617,18 +617,7 @@ fn dynamics_of(
             b.robot().source
         );
     }
-    if !plan.held_at_zero.is_empty() {
-        warnings.push(format!(
-            "URDF joints neither in the log nor given with --fixed-joint, held at 0 rad: {}",
-            plan.held_at_zero.join(", ")
-        ));
-    }
-    if !plan.not_in_urdf.is_empty() {
-        warnings.push(format!(
-            "log joints the URDF lacks (not used): {}",
-            plan.not_in_urdf.join(", ")
-        ));
-    }
+    warnings.extend(plan_warnings(&plan));
     Ok(LabelDynamics {
         link: None,
         text: format!(
@@ -642,6 +631,25 @@ fn dynamics_of(
         ),
         plan: serde_json::to_value(&plan)?,
     })
+}
+
+/// The warnings of a whole-body state's plan: the URDF joints held at 0 and the log's joints the
+/// URDF lacks, each named.
+pub(crate) fn plan_warnings(plan: &frictionless_ident::preprocess::StatePlan) -> Vec<String> {
+    let mut out = Vec::new();
+    if !plan.held_at_zero.is_empty() {
+        out.push(format!(
+            "URDF joints neither in the log nor given with --fixed-joint, held at 0 rad: {}",
+            plan.held_at_zero.join(", ")
+        ));
+    }
+    if !plan.not_in_urdf.is_empty() {
+        out.push(format!(
+            "log joints the URDF lacks (not used): {}",
+            plan.not_in_urdf.join(", ")
+        ));
+    }
+    out
 }
 
 /// Each joint's label settings: the pipeline options, the gear ratio and torque constant.
