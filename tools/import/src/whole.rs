@@ -106,8 +106,11 @@ pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
     spec.delimiter = args.delimiter as u8;
     spec.joints = args.joint.clone();
     spec.all_joints = args.common.joints_all.is_some();
-    check(&args.files, &args.common)?;
-    check_base_frame(&args.common, ("--base-quat", args.base_quat.is_some()))?;
+    check(
+        &args.files,
+        &args.common,
+        ("--base-quat", args.base_quat.is_some()),
+    )?;
     let body = match &args.positions {
         Some(_) => {
             let reads = |r: Role| spec.columns.iter().any(|c| c.0 == r);
@@ -169,8 +172,8 @@ pub fn run_mcap(args: McapArgs) -> anyhow::Result<()> {
         .iter()
         .map(|n| Role::parse(n))
         .collect::<Result<Vec<_>, _>>()?;
-    check(&args.files, &args.common)?;
-    check_base_frame(
+    check(
+        &args.files,
         &args.common,
         ("--base-orientation", args.base_orientation.is_some()),
     )?;
@@ -231,8 +234,8 @@ pub fn run_mat(args: MatArgs) -> anyhow::Result<()> {
         .iter()
         .map(|n| Role::parse(n))
         .collect::<Result<Vec<_>, _>>()?;
-    check(&args.files, &args.common)?;
-    check_base_frame(
+    check(
+        &args.files,
         &args.common,
         ("--base-orientation", args.base_orientation.is_some()),
     )?;
@@ -299,16 +302,13 @@ pub(crate) fn out_path(out: &Path, joint: &str) -> PathBuf {
     PathBuf::from(out.to_string_lossy().replace(JOINT, joint))
 }
 
-/// Refuses `--base-frame` without a logged base orientation (`base_option`: the format's option
-/// for it, `None` when not given): it would change nothing, silently.
-fn check_base_frame(common: &CommonArgs, base_option: (&str, bool)) -> anyhow::Result<()> {
+/// Checks the options every format shares, before any work: the numbers, `--base-frame` only with
+/// a logged base orientation (`base_option`: the format's option for it, and whether it is given;
+/// alone it would change nothing, silently) and the outputs.
+fn check(files: &[PathBuf], common: &CommonArgs, base_option: (&str, bool)) -> anyhow::Result<()> {
     if let (Some(f), (option, false)) = (&common.base_frame, base_option) {
         bail!("--base-frame {f} names the frame of a logged base orientation: give {option}");
     }
-    Ok(())
-}
-
-fn check(files: &[PathBuf], common: &CommonArgs) -> anyhow::Result<()> {
     // Every number is checked, needed or not: each goes into the sidecar.
     for (v, r) in per_joint_values(&common.gear_ratio, "--gear-ratio")? {
         anyhow::ensure!(
