@@ -76,6 +76,8 @@ pub mod alloc_count;
 pub mod backend;
 pub mod config;
 pub mod instance;
-pub mod params;
+/// The runtime parameters built from a validated config (they live with the schema, in
+/// `frictiond-config`, so the config fuzzer and other tools build them without the daemon).
+pub use frictiond_config::params;
 pub mod rt;
 pub mod sdnotify;

@@ -1,6 +1,6 @@
 //! Fuzz target: arbitrary text as a frictiond TOML config, through the validation `frictiond --check`
 //! runs: `frictiond_config::parse` (schema, every range, buses and drives, model-file checks), then,
-//! for an accepted config, `frictiond::params::build` (estimators, filter design, laws).
+//! for an accepted config, `frictiond_config::params::build` (estimators, filter design, laws).
 //!
 //! Both must return an error or a value, never panic. An accepted config must also re-validate after
 //! a round trip through `toml::to_string` of its raw form (what `frictl` writes for frictiond).
@@ -20,7 +20,7 @@ fuzz_target!(|data: &[u8]| {
     let Ok(cfg) = frictiond_config::parse(path, text) else {
         return;
     };
-    let _ = frictiond::params::build(&cfg, 0);
+    let _ = frictiond_config::params::build(&cfg, 0);
     let again = toml::to_string(&cfg.raw).expect("an accepted config serialises");
     frictiond_config::parse(path, &again)
         .expect("an accepted config re-validates after a round trip");

@@ -1,5 +1,5 @@
-//! `frictiond-config`: frictiond's TOML configuration — the typed schema, its validation and the
-//! resolved per-joint and per-bus parameters.
+//! `frictiond-config`: frictiond's TOML configuration — the typed schema, its validation, the
+//! resolved per-joint and per-bus parameters, and the runtime parameters built from them ([`params`]).
 //!
 //! What this crate **is**: one TOML file (`serde` + `toml`, unknown keys are errors) describing the loop
 //! (`[loop]`), the I/O backend (`[backend]`), safety behaviour (`[safety]`), the joints
@@ -11,8 +11,11 @@
 //! `frictiond --check` runs (including reading every model file) and return a [`Config`] or a
 //! [`ConfigError`] naming the file, the key and the value.
 //!
-//! What it is **not**: no model construction or filter design (frictiond's `params`), no IPC, no I/O
-//! besides reading the config and model files. Used by `frictiond` and by `frictl`; it depends on
+//! [`params::build`] turns a [`Config`] into what frictiond's RT thread runs: per-joint estimators
+//! (models read from their files), control laws and filter coefficients, allocated here, off the RT
+//! thread.
+//!
+//! What it is **not**: no IPC, no threads, no I/O besides reading the config and model files. Used by `frictiond` and by `frictl`; it depends on
 //! neither. Units: SI, joint side; the velocity threshold is in **rad/s** (BLF used deg/s).
 //!
 //! ## Example: parse, read resolved values, write back with `toml::to_string`
@@ -63,6 +66,7 @@
 
 mod buses;
 mod models;
+pub mod params;
 mod schema;
 #[cfg(test)]
 mod tests;

@@ -1,5 +1,6 @@
-//! Runtime parameters built from a validated [`Config`]: everything the RT thread needs, allocated
-//! off-thread and handed over as one `Box<Params>`.
+//! Runtime parameters built from a validated [`Config`]: everything frictiond's RT thread needs,
+//! allocated off-thread and handed over as one `Box<Params>` (the daemon re-exports this module as
+//! `frictiond::params`).
 //!
 //! What this module **is**: construction of per-joint friction estimators and control laws (filter
 //! coefficients designed here, not on the RT thread), and the model-file check used by `--check`.
@@ -16,7 +17,7 @@ use frictionless::weights::WeightError;
 use frictionless::filter::{CausalButterworth, FilterError};
 use frictionless::law::{Gains, JointLaw};
 
-use crate::config::{Config, ModelSpec, OnStale, OodMode, StaticFallback, WarmupName};
+use crate::{Config, ModelSpec, OnStale, OodMode, StaticFallback, WarmupName};
 
 /// Why the runtime parameters could not be built. Messages name the joint, the file and the cause.
 #[derive(Debug, thiserror::Error)]
@@ -60,7 +61,7 @@ pub enum ParamsError {
 }
 
 /// The model-file check `--check` runs, defined with the config schema.
-pub use crate::config::check_model_file;
+pub use crate::check_model_file;
 
 /// Status code of a joint's model (`DaemonStatus::model_kind`): its kind's ABI code.
 pub fn kind_code(m: &JointModel) -> u8 {
