@@ -18,14 +18,24 @@
 # `fuzz_seed_files_are_valid` in tests/weights_bad_input.rs; the CAN corpora with a few valid frames and
 # log lines written here), builds all targets once, then runs libFuzzer with ASan on the stable toolchain
 # (RUSTC_BOOTSTRAP=1 unlocks the -Z flags cargo-fuzz needs) and prints each target's execution count.
-# Runs FUZZ_JOBS targets at a time (default: the CPU count). Exits non-zero when a target crashes; the
-# reproducer is left in fuzz/artifacts/<target>/.
+# Runs FUZZ_JOBS targets at a time (default: the CPU count). FUZZ_BUILD=dev builds the targets without
+# optimisation (cargo-fuzz --dev: a few times faster to build, fewer executions per second; what CI's
+# short smoke run uses); the default, release, is for fuzzing at length. FUZZ_SANITIZER (default
+# address) is passed to cargo-fuzz's --sanitizer. Exits non-zero when a target crashes; the reproducer
+# is left in fuzz/artifacts/<target>/.
 set -euo pipefail
 SECS="${1:-60}"
 shift || true
 ALL=(weights_reader can_mit_decode can_odrive_decode candump_parse frictiond_config dataset_readers onnx_import log_importers urdf_robot)
 FEATURES=()
 TEST_FEATURES=()
+# Flags of both `cargo fuzz build` and `cargo fuzz run` (the same, or run builds again).
+BUILD_FLAGS=(--sanitizer "${FUZZ_SANITIZER:-address}")
+case "${FUZZ_BUILD:-release}" in
+  release) ;;
+  dev) BUILD_FLAGS+=(--dev) ;;
+  *) echo "FUZZ_BUILD=${FUZZ_BUILD}: expected release or dev" >&2; exit 2 ;;
+esac
 if mat=$(bash "$(dirname "$0")/../tests/have-hdf5.sh"); then
   read -r -a TEST_FEATURES <<< "$mat"
   ALL+=(mat_import)
@@ -38,7 +48,8 @@ if [ $# -gt 0 ]; then TARGETS=("$@"); else TARGETS=("${ALL[@]}"); fi
 cd "$(dirname "$0")/.."
 ROOT="$(pwd)"
 if ! command -v cargo-fuzz >/dev/null 2>&1; then
-  cargo install cargo-fuzz --locked
+  # A debug build of the tool: it only drives cargo, and builds in a fraction of the release time.
+  cargo install cargo-fuzz --locked --debug
 fi
 
 seed() { # seed <target> <name> <printf-format>
@@ -91,9 +102,9 @@ done
 
 echo "== [${SECONDS} s] building ${TARGETS[*]}"
 if [ $# -gt 0 ]; then
-  for t in "${TARGETS[@]}"; do RUSTC_BOOTSTRAP=1 cargo fuzz build "${FEATURES[@]}" "$t"; done
+  for t in "${TARGETS[@]}"; do RUSTC_BOOTSTRAP=1 cargo fuzz build "${BUILD_FLAGS[@]}" "${FEATURES[@]}" "$t"; done
 else
-  RUSTC_BOOTSTRAP=1 cargo fuzz build "${FEATURES[@]}"   # every target in one cargo build
+  RUSTC_BOOTSTRAP=1 cargo fuzz build "${BUILD_FLAGS[@]}" "${FEATURES[@]}"   # every target in one cargo build
 fi
 # One libFuzzer process per core (FUZZ_JOBS, default: the CPU count): each is single-threaded.
 JOBS=${FUZZ_JOBS:-$(nproc)}
@@ -109,7 +120,7 @@ fuzz_one() { # fuzz_one <target>: runs it, prints one line; non-zero on a crash
   case "$t" in frictiond_config|dataset_readers|onnx_import|log_importers) limit+=(-max_len=65536) ;; esac
   # An HDF5 file per input: a plan that makes the importer read for more than 10 s is a hang.
   case "$t" in mat_import) limit+=(-max_len=4096 -timeout=10) ;; esac
-  RUSTC_BOOTSTRAP=1 cargo fuzz run "${FEATURES[@]}" "$t" "$ROOT/fuzz/corpus/$t" -- "${limit[@]}" \
+  RUSTC_BOOTSTRAP=1 cargo fuzz run "${BUILD_FLAGS[@]}" "${FEATURES[@]}" "$t" "$ROOT/fuzz/corpus/$t" -- "${limit[@]}" \
     -print_final_stats=1 > "$log" 2>&1 || { tail -n 60 "$log" >&2; echo "fuzz: $t FAILED (see $log)"; return 1; }
   runs=$(grep -oE 'stat::number_of_executed_units: *[0-9]+' "$log" | grep -oE '[0-9]+$' | tail -n1)
   secs=$(grep -oE 'Done [0-9]+ runs in [0-9]+ second' "$log" | grep -oE '[0-9]+ second' | grep -oE '[0-9]+' | tail -n1)
