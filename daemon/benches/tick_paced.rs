@@ -160,6 +160,7 @@ fn students() -> Vec<ModelFile> {
                 max_rmse_nm: f64::MAX,
                 probe_kind: Default::default(),
                 lr_final: None,
+                init: Default::default(),
             };
             distill_probes(&teacher, [0; 32], &cfg, |_| {
                 std::ops::ControlFlow::Continue(())

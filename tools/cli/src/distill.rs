@@ -24,6 +24,25 @@ impl From<ProbeKindArg> for distill::ProbeKind {
     }
 }
 
+/// `--init`: where the student's training starts ([`distill::StudentInit`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum StudentInitArg {
+    /// A fresh random initialisation.
+    Fresh,
+    /// The teacher pruned to `--hidden` (same depth, each layer at most as wide), each following
+    /// layer refitted by least squares to the teacher's values.
+    Prune,
+}
+
+impl From<StudentInitArg> for distill::StudentInit {
+    fn from(k: StudentInitArg) -> Self {
+        match k {
+            StudentInitArg::Fresh => distill::StudentInit::Fresh,
+            StudentInitArg::Prune => distill::StudentInit::Prune,
+        }
+    }
+}
+
 /// Storage dtype of the student.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum StudentDtype {
@@ -108,6 +127,11 @@ pub struct Args {
     /// constant --lr).
     #[arg(long)]
     pub lr_final: Option<f32>,
+    /// Where the student starts: `fresh` (random) or `prune` (the teacher's strongest units, the
+    /// layers after them refitted to the teacher: keeps the teacher's function across its whole input
+    /// range; needs the teacher's depth and widths no larger than its).
+    #[arg(long, value_enum, default_value_t = StudentInitArg::Fresh)]
+    pub init: StudentInitArg,
     /// Seed of the initialisation, shuffles and probes (and of the split with --test-frac).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,

@@ -1232,3 +1232,114 @@ fn distill_probes_only_gates_on_the_teacher_inside_its_input_range() {
     );
     assert!(!tiny.exists());
 }
+
+/// `--init prune`: the student starts as the teacher narrowed (its strongest units, the layers after
+/// them refitted to the teacher), so at the teacher's own widths it starts at the teacher; a depth or
+/// width the teacher does not have is refused before training, naming both.
+#[test]
+fn distill_init_prune_starts_from_the_teacher_and_refuses_other_shapes() {
+    let f = fixture();
+    let teacher_path = f.dir.join("prune_teacher.fwt");
+    ok(
+        train(
+            &teacher_path,
+            &["--hidden", "24,16", "--epochs", "3", "--seed", "8"],
+        ),
+        "train teacher",
+    );
+    let distill = |out: &Path, extra: &[&str]| -> Output {
+        let mut args = vec![
+            "distill",
+            s(&teacher_path),
+            "-o",
+            s(out),
+            "--threads",
+            "2",
+            "--quiet",
+            "--probes-only",
+            "6000",
+            "--init",
+            "prune",
+        ];
+        args.extend_from_slice(extra);
+        frictl(&args)
+    };
+    let start_of = |text: &str| -> f64 {
+        let line = text
+            .lines()
+            .find(|l| l.starts_with("pruned start"))
+            .unwrap_or_else(|| panic!("no pruned-start line in {text}"));
+        let after = line.split("RMSE vs teacher ").nth(1).unwrap();
+        after.split_whitespace().next().unwrap().parse().unwrap()
+    };
+    // Every unit kept: the refits reproduce the teacher; a tiny learning rate keeps it there.
+    let full = f.dir.join("prune_full.fwt");
+    let out = ok(
+        distill(
+            &full,
+            &[
+                "--hidden",
+                "24,16",
+                "--epochs",
+                "1",
+                "--lr",
+                "1e-7",
+                "--max-rmse-nm",
+                "1e-3",
+            ],
+        ),
+        "distill --init prune at the teacher's widths",
+    );
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(start_of(&text) < 1e-3, "{text}");
+    assert!(full.exists());
+    // Narrower: a start much closer to the teacher than its spread.
+    let narrow = f.dir.join("prune_narrow.fwt");
+    let out = frictl(&[
+        "distill",
+        s(&teacher_path),
+        "-o",
+        s(&narrow),
+        "--threads",
+        "2",
+        "--quiet",
+        "--probes-only",
+        "6000",
+        "--init",
+        "prune",
+        "--hidden",
+        "12,8",
+        "--epochs",
+        "1",
+        "--lr",
+        "1e-7",
+        "--max-rmse-nm",
+        "100",
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(out.status.success(), "{text}");
+    let start = start_of(&text);
+    let std: f64 = text
+        .split("teacher output std ")
+        .nth(1)
+        .and_then(|t| t.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no teacher std in {text}"));
+    assert!(
+        start < 0.5 * std,
+        "pruned start {start} Nm, teacher std {std} Nm"
+    );
+
+    for (hidden, what) in [("24,16,8", "deeper"), ("32,16", "wider")] {
+        let bad = f.dir.join(format!("prune_{what}.fwt"));
+        let e = err_text(
+            distill(&bad, &["--hidden", hidden, "--epochs", "1"]),
+            "distill --init prune into another shape",
+        );
+        assert!(
+            e.contains("--init prune") && e.contains("[24, 16]"),
+            "{what}: {e}"
+        );
+        assert!(!bad.exists());
+    }
+}

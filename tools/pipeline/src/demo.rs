@@ -473,7 +473,7 @@ fn distill_pinn(
     test_ds: &Path,
     out: &Path,
 ) -> anyhow::Result<DistilledEntry> {
-    use frictl_cli::distill::{Args as DistillArgs, ProbeKindArg, StudentDtype};
+    use frictl_cli::distill::{Args as DistillArgs, ProbeKindArg, StudentDtype, StudentInitArg};
     let args = DistillArgs {
         teacher: teacher.to_path_buf(),
         datasets: vec![train_ds.to_path_buf()],
@@ -490,6 +490,7 @@ fn distill_pinn(
         probes: None,
         probe_kind: ProbeKindArg::Uniform,
         lr_final: None,
+        init: StudentInitArg::Fresh,
         seed: opts.seed,
         max_rmse_ratio: opts.max_rmse_ratio,
         min_band_samples: 100,

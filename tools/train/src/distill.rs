@@ -30,7 +30,7 @@ use std::ops::ControlFlow;
 
 use frictionless::friction::ScvParams;
 use frictionless::kernel::Mlp;
-use frictionless::mlp::StorageDtype;
+use frictionless::mlp::{MlpWeights, StorageDtype};
 use frictionless::weights::{ModelFile, ModelMeta, TrainingMeta, round_to_dtype};
 use frictionless_dataset::bands::{DEFAULT_BAND_EDGES_RAD_S, ResidualProfile};
 use serde::{Deserialize, Serialize};
@@ -137,6 +137,51 @@ pub fn probe_inputs_of_kind(
         .collect()
 }
 
+/// Where the student's training starts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum StudentInit {
+    /// A fresh random initialisation (the trainer's).
+    #[default]
+    Fresh,
+    /// The teacher pruned to the student's widths ([`crate::prune::prune`], refitted on up to
+    /// [`PRUNE_ROWS`] of the training rows): same depth as the teacher, each layer at most as wide.
+    Prune,
+}
+
+/// The most training rows (evenly spaced over all of them) the pruned start is refitted on.
+pub const PRUNE_ROWS: usize = 40_000;
+
+/// The trainer of a student with the teacher's normalisation, started as `init` says; with
+/// [`StudentInit::Prune`], also the pruned starting weights.
+fn student_trainer(
+    teacher: &ModelFile,
+    init: StudentInit,
+    cfg: TrainConfig,
+    data: &Dataset<'_>,
+    val: Option<&Dataset<'_>>,
+) -> Result<(Trainer, Option<MlpWeights>), PipelineError> {
+    match init {
+        StudentInit::Fresh => Ok((
+            Trainer::with_normalisation(cfg, teacher.mlp.norm.clone(), data, val)?,
+            None,
+        )),
+        StudentInit::Prune => {
+            let (n, n_in) = (data.n_rows(), data.n_inputs);
+            let rows = n.min(PRUNE_ROWS);
+            let x: Vec<f32> = (0..rows)
+                .flat_map(|i| {
+                    let r = i * n / rows;
+                    data.x[r * n_in..(r + 1) * n_in].iter().copied()
+                })
+                .collect();
+            let start = crate::prune::prune(&teacher.mlp, &cfg.hidden, &x)
+                .map_err(|e| usage(format!("--init prune: {e}")))?;
+            Ok((Trainer::from_init(cfg, &start, data, val)?, Some(start)))
+        }
+    }
+}
+
 /// How to distil.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DistillConfig {
@@ -155,6 +200,9 @@ pub struct DistillConfig {
     /// Cosine decay of the learning rate from `train.lr` to this over the epochs (`None`: constant).
     #[serde(default)]
     pub lr_final: Option<f32>,
+    /// Where the student starts.
+    #[serde(default)]
+    pub init: StudentInit,
     /// The gate: every student RMSE must be ≤ this × the teacher's (e.g. 1.05).
     pub max_rmse_ratio: f64,
     /// |ṡ| bands with fewer test rows are reported but not gated.
@@ -431,7 +479,7 @@ pub fn distill(
     };
     let val_view = prepared.val.view();
     let val = (!prepared.val.is_empty()).then_some(&val_view);
-    let mut trainer = Trainer::with_normalisation(tcfg, teacher.mlp.norm.clone(), &data, val)?;
+    let (mut trainer, _) = student_trainer(teacher, cfg.init, tcfg, &data, val)?;
     if let Some(end) = cfg.lr_final {
         trainer.set_cosine_decay(end)?;
     }
@@ -506,6 +554,9 @@ pub struct ProbeDistillConfig {
     /// Cosine decay of the learning rate from `train.lr` to this over the epochs (`None`: constant).
     #[serde(default)]
     pub lr_final: Option<f32>,
+    /// Where the student starts.
+    #[serde(default)]
+    pub init: StudentInit,
 }
 
 /// The gate of a probe-only distillation: student against teacher inside the teacher's input range,
@@ -570,6 +621,9 @@ pub struct ProbeDistilled {
     pub gate: ProbeGate,
     /// 1-based epoch of the kept weights.
     pub best_epoch: usize,
+    /// With [`StudentInit::Prune`]: the pruned start's RMSE against the teacher on the validation
+    /// probes, before any training \[Nm\] (f32 math).
+    pub start_rmse_vs_teacher_nm: Option<f64>,
 }
 
 /// Distils `teacher` without data: training, validation and gate rows are independent draws of
@@ -626,8 +680,14 @@ pub fn distill_probes(
         lambda: 0.0,
         ..cfg.train.clone()
     };
-    let mut trainer =
-        Trainer::with_normalisation(tcfg, teacher.mlp.norm.clone(), &data, Some(&val))?;
+    let (mut trainer, start) = student_trainer(teacher, cfg.init, tcfg, &data, Some(&val))?;
+    let start_rmse_vs_teacher_nm = match &start {
+        Some(w) => Some(super::rmse(
+            &Predictor::new(w, cfg.train.threads.max(1))?.predict(&x_val)?,
+            &y_val,
+        )),
+        None => None,
+    };
     if let Some(end) = cfg.lr_final {
         trainer.set_cosine_decay(end)?;
     }
@@ -701,6 +761,7 @@ pub fn distill_probes(
             max_rmse_nm: cfg.max_rmse_nm,
         },
         best_epoch: outcome.best_epoch,
+        start_rmse_vs_teacher_nm,
     })
 }
 

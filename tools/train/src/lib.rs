@@ -25,7 +25,8 @@
 //! Around the engine: [`data`] builds input windows through the daemon's own `History` and splits
 //! whole chunks into train/validation/test; [`pipeline`] reads datasets and the SCV fit, runs the
 //! trainer and builds the `.fwt` and the JSON report (`frictl train`); [`search`] is the parallel,
-//! resumable random search (`frictl search`). The engine itself does **not** read files or fit the SCV
+//! resumable random search (`frictl search`); [`distill`] trains a smaller student on a teacher
+//! (`frictl distill`), from scratch or from the teacher narrowed by [`prune`]. The engine itself does **not** read files or fit the SCV
 //! model. Entry points: [`Trainer::new`] / [`Trainer::resume`], [`Trainer::train`],
 //! [`Trainer::save_checkpoint`], [`Predictor`] and [`rmse`].
 //!
@@ -71,6 +72,7 @@ mod eval;
 mod net;
 mod norm;
 pub mod pipeline;
+pub mod prune;
 mod rng;
 pub mod search;
 pub mod synthetic;

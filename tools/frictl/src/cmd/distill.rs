@@ -79,6 +79,7 @@ fn run_probes_only(args: &Args, probes: usize) -> anyhow::Result<()> {
         max_rmse_nm: args.max_rmse_nm,
         probe_kind: args.probe_kind.into(),
         lr_final: args.lr_final,
+        init: args.init.into(),
     };
     if !args.quiet {
         eprintln!(
@@ -107,6 +108,11 @@ fn run_probes_only(args: &Args, probes: usize) -> anyhow::Result<()> {
         }
         ControlFlow::Continue(())
     })?;
+    if let Some(start) = out.start_rmse_vs_teacher_nm {
+        println!(
+            "pruned start (before training): RMSE vs teacher {start:.5} Nm on the validation probes"
+        );
+    }
     println!("{}", out.gate.line());
     print_inference(&teacher, &out.model);
     if !out.gate.passed() {
@@ -303,6 +309,7 @@ pub fn distill_file(args: &Args) -> anyhow::Result<Outcome> {
         },
         probe_kind: args.probe_kind.into(),
         lr_final: args.lr_final,
+        init: args.init.into(),
         dtype: args.dtype.into(),
         teacher_weight: args.teacher_weight,
         probes,
