@@ -13,6 +13,9 @@
 //! `--probes-only N` distils without data: N training probes inside the teacher's stored input range
 //! (plus N/4 validation and N/4 gate probes, independent draws), the teacher's output the only
 //! target; the gate is the output RMSE against the teacher on the gate probes, ≤ `--max-rmse-nm`.
+//!
+//! `--init prune` starts the student from the teacher narrowed to `--hidden`
+//! (`frictionless_train::prune`) instead of a random initialisation.
 
 use std::ops::ControlFlow;
 use std::path::PathBuf;
