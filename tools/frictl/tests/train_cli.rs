@@ -1240,29 +1240,20 @@ fn distill_probes_only_gates_on_the_teacher_inside_its_input_range() {
 fn distill_init_prune_starts_from_the_teacher_and_refuses_other_shapes() {
     let f = fixture();
     let teacher_path = f.dir.join("prune_teacher.fwt");
-    ok(
-        train(
-            &teacher_path,
-            &["--hidden", "24,16", "--epochs", "3", "--seed", "8"],
-        ),
-        "train teacher",
+    let trained = train(
+        &teacher_path,
+        &["--hidden", "24,16", "--epochs", "3", "--seed", "8"],
     );
+    ok(trained, "train teacher");
     let distill = |out: &Path, extra: &[&str]| -> Output {
-        let mut args = vec![
-            "distill",
-            s(&teacher_path),
-            "-o",
-            s(out),
-            "--threads",
-            "2",
+        let fixed = [
+            "--threads=2",
             "--quiet",
-            "--probes-only",
-            "6000",
-            "--init",
-            "prune",
+            "--probes-only=6000",
+            "--init=prune",
         ];
-        args.extend_from_slice(extra);
-        frictl(&args)
+        let head = ["distill", s(&teacher_path), "-o", s(out)];
+        frictl(&[&head[..], &fixed, extra].concat())
     };
     let start_of = |text: &str| -> f64 {
         let line = text
@@ -1295,29 +1286,23 @@ fn distill_init_prune_starts_from_the_teacher_and_refuses_other_shapes() {
     assert!(full.exists());
     // Narrower: a start much closer to the teacher than its spread.
     let narrow = f.dir.join("prune_narrow.fwt");
-    let out = frictl(&[
-        "distill",
-        s(&teacher_path),
-        "-o",
-        s(&narrow),
-        "--threads",
-        "2",
-        "--quiet",
-        "--probes-only",
-        "6000",
-        "--init",
-        "prune",
-        "--hidden",
-        "12,8",
-        "--epochs",
-        "1",
-        "--lr",
-        "1e-7",
-        "--max-rmse-nm",
-        "100",
-    ]);
+    let out = ok(
+        distill(
+            &narrow,
+            &[
+                "--hidden",
+                "12,8",
+                "--epochs",
+                "1",
+                "--lr",
+                "1e-7",
+                "--max-rmse-nm",
+                "100",
+            ],
+        ),
+        "distill --init prune into narrower layers",
+    );
     let text = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert!(out.status.success(), "{text}");
     let start = start_of(&text);
     let std: f64 = text
         .split("teacher output std ")
