@@ -488,3 +488,43 @@ fn a_torque_sensed_joint_trains_on_joint_pos_joint_vel_with_temperature() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `[search] pick = true`: the robot runs the search's pick (the fastest trial within
+/// `max_rmse_ratio` × the best validation RMSE), passes the ratio to the search, and its frictiond
+/// config loads that model.
+#[test]
+fn a_search_pick_is_the_model_the_robot_runs() {
+    let dir = tmp("robot-search-pick");
+    torque_sensed_dataset(&dir, "data/ds.csv");
+    torque_sensed_robot(
+        &dir,
+        "[search]\ntrials = 3\nepochs = 1\nhidden = [4, 12]\nhistory = [3, 5]\npick = true\nmax_rmse_ratio = 1.5",
+        "features = \"joint-pos-joint-vel\"",
+    );
+    let plan: serde_json::Value =
+        serde_json::from_slice(&ok_in(&dir, &["robot", "plan", "robot.toml", "--out", "o"]).stdout)
+            .unwrap();
+    let joint = &plan["joints"][0];
+    assert_eq!(joint["model"], "joints/r_wrist/search/pick.fwt");
+    let args: Vec<&str> = joint["search_args"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a.as_str().unwrap())
+        .collect();
+    assert!(args.contains(&"--max-rmse-ratio=1.5"), "{args:?}");
+    ok_in(&dir, &["robot", "run", "robot.toml", "--out", "o"]);
+    let search = dir.join("o/joints/r_wrist/search");
+    let pick = std::fs::read(search.join("pick.fwt")).unwrap();
+    // The pick is one of the trials, and the frictiond config names it.
+    let config = std::fs::read_to_string(dir.join("o/frictiond.toml")).unwrap();
+    assert!(config.contains("search/pick.fwt"), "{config}");
+    let trial_files: Vec<Vec<u8>> = std::fs::read_dir(search.join("trials"))
+        .unwrap()
+        .flatten()
+        .filter(|e| e.path().extension().is_some_and(|x| x == "fwt"))
+        .map(|e| std::fs::read(e.path()).unwrap())
+        .collect();
+    assert!(trial_files.contains(&pick), "pick.fwt is a trial's model");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

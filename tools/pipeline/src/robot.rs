@@ -173,6 +173,17 @@ pub struct SearchSection {
     /// Dropout range.
     #[serde(default)]
     pub dropout: Option<[f32; 2]>,
+    /// Run the search's pick instead of its best trial: the fastest trial (hot µs on this CPU, the
+    /// kernel frictiond runs) whose validation RMSE is within `max_rmse_ratio` × the best.
+    #[serde(default)]
+    pub pick: bool,
+    /// The pick's bound on the validation RMSE, as a multiple of the best trial's.
+    #[serde(default = "default_max_rmse_ratio")]
+    pub max_rmse_ratio: f64,
+}
+
+fn default_max_rmse_ratio() -> f64 {
+    1.05
 }
 
 fn default_trials() -> usize {
@@ -204,6 +215,8 @@ impl Default for SearchSection {
             history: None,
             lambda: None,
             dropout: None,
+            pick: false,
+            max_rmse_ratio: default_max_rmse_ratio(),
         }
     }
 }
@@ -463,6 +476,20 @@ pub fn parse(path: &Path, text: &str) -> Result<RobotFile, RobotError> {
             "each ≥ 1",
         ));
     }
+    if !(s.max_rmse_ratio.is_finite() && s.max_rmse_ratio >= 1.0) {
+        return Err(bad(
+            "search.max_rmse_ratio".into(),
+            s.max_rmse_ratio.to_string(),
+            "finite and ≥ 1 (a multiple of the best validation RMSE)",
+        ));
+    }
+    if s.pick && s.trials == 0 {
+        return Err(bad(
+            "search.pick".into(),
+            "true".into(),
+            "needs a search (trials ≥ 1): with trials = 0 the joint is trained once",
+        ));
+    }
     if s.trials > 0 && s.val_frac <= 0.0 {
         return Err(bad(
             "search.val_frac".into(),
@@ -586,6 +613,35 @@ features = "motor-vel-joint-vel"
         );
         let msg = e(&GOOD.replace("\"motor-vel-joint-vel\"", "\"velocity\""));
         assert!(msg.contains("velocity"), "{msg}");
+    }
+
+    #[test]
+    fn the_search_pick_needs_a_search_and_a_ratio_of_at_least_one() {
+        let f = parse(Path::new("r.toml"), GOOD).unwrap();
+        assert!(!f.search.pick, "the best trial by default");
+        assert_eq!(f.search.max_rmse_ratio, 1.05);
+        let with = |extra: &str| GOOD.replace("trials = 4", &format!("trials = 4\n{extra}"));
+        let f = parse(
+            Path::new("r.toml"),
+            &with("pick = true\nmax_rmse_ratio = 1.2"),
+        )
+        .unwrap();
+        assert!(f.search.pick);
+        assert_eq!(f.search.max_rmse_ratio, 1.2);
+        let e = |text: &str| {
+            parse(Path::new("robot.toml"), text)
+                .unwrap_err()
+                .to_string()
+        };
+        let msg = e(&with("max_rmse_ratio = 0.9"));
+        assert!(msg.contains("search.max_rmse_ratio = 0.9"), "{msg}");
+        let msg = e(&with("max_rmse_ratio = nan"));
+        assert!(msg.contains("search.max_rmse_ratio = NaN"), "{msg}");
+        let msg = e(&GOOD.replace("trials = 4", "trials = 0\npick = true"));
+        assert!(
+            msg.contains("search.pick = true") && msg.contains("trials"),
+            "{msg}"
+        );
     }
 
     #[test]

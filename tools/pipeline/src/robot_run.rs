@@ -236,6 +236,7 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> anyhow::Result<JointPlan> 
         history_range: pair(sr.history),
         lambda_range: sr.lambda.map(|r| r.to_vec()),
         dropout_range: sr.dropout.map(|r| r.to_vec()),
+        max_rmse_ratio: sr.max_rmse_ratio,
         ..stage::defaults()?
     };
     // Completed by its users (the search stage below, the Ray driver) with `--out` and the
@@ -254,7 +255,12 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> anyhow::Result<JointPlan> 
                 ..search_base
             },
         )?;
-        let (m, r) = (format!("{sd}/best.fwt"), format!("{sd}/best.train.json"));
+        // The search writes both; the robot runs the one the file asks for.
+        let which = if sr.pick { "pick" } else { "best" };
+        let (m, r) = (
+            format!("{sd}/{which}.fwt"),
+            format!("{sd}/{which}.train.json"),
+        );
         stages.push(Stage {
             id: "search".into(),
             phase: Until::Search,
