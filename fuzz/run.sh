@@ -19,8 +19,8 @@
 # log lines written here), builds all targets once, then runs libFuzzer with ASan on the stable toolchain
 # (RUSTC_BOOTSTRAP=1 unlocks the -Z flags cargo-fuzz needs) and prints each target's execution count.
 # Runs FUZZ_JOBS targets at a time (default: the CPU count). FUZZ_BUILD=dev builds the targets without
-# optimisation (cargo-fuzz --dev: a few times faster to build, fewer executions per second; what CI's
-# short smoke run uses); the default, release, is for fuzzing at length. FUZZ_SANITIZER (default
+# optimisation (cargo-fuzz --dev: quicker to build, fewer executions per second; what CI's short smoke
+# run uses); the default, release, is for fuzzing at length. FUZZ_SANITIZER (default
 # address) is passed to cargo-fuzz's --sanitizer. Exits non-zero when a target crashes; the reproducer
 # is left in fuzz/artifacts/<target>/.
 set -euo pipefail
