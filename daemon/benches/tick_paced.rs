@@ -177,7 +177,7 @@ const PREFETCH: [(&str, Prefetch); 3] = [
     ("after", Prefetch::After),
     ("lead", Prefetch::Lead),
 ];
-/// The accuracy gate of the done-when: max |Δτ̂_F| against f32 [Nm].
+/// The accuracy gate of a storage change: max |Δτ̂_F| against f32 [Nm].
 const GATE_NM: f32 = 0.01;
 /// Paced ticks per cell (≥ 5000).
 const TICKS: usize = 5000;
