@@ -115,7 +115,10 @@ pub fn prune(teacher: &MlpWeights, hidden: &[usize], x: &[f32]) -> Result<MlpWei
             n_out: keep.len(),
             weight: keep
                 .iter()
-                .flat_map(|&r| w.row(r).iter().map(|&v| v as f32).collect::<Vec<_>>())
+                .flat_map(|&r| {
+                    let w = &w;
+                    (0..w.ncols()).map(move |c| w[(r, c)] as f32)
+                })
                 .collect(),
             bias: keep.iter().map(|&r| b[r] as f32).collect(),
             activation: Activation::Relu,
@@ -198,36 +201,17 @@ fn ridge_solve(p: &DMatrix<f64>, t: &DMatrix<f64>) -> DMatrix<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::rmse;
+    use frictionless::kernel::Mlp;
+    use frictionless::mlp::StorageDtype;
     use frictionless::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
+    use rand::{Rng, SeedableRng};
 
-    fn forward(m: &MlpWeights, x: &[f32]) -> Vec<f64> {
-        let n_in = m.layers[0].n_in;
-        x.chunks(n_in)
-            .map(|row| {
-                let mut a: Vec<f64> = row
-                    .iter()
-                    .enumerate()
-                    .map(|(c, &v)| {
-                        (f64::from(v) - f64::from(m.norm.mean[c])) / f64::from(m.norm.scale[c])
-                    })
-                    .collect();
-                for l in &m.layers {
-                    a = (0..l.n_out)
-                        .map(|o| {
-                            let z = f64::from(l.bias[o])
-                                + (0..l.n_in)
-                                    .map(|i| f64::from(l.weight[o * l.n_in + i]) * a[i])
-                                    .sum::<f64>();
-                            if l.activation == Activation::Relu {
-                                z.max(0.0)
-                            } else {
-                                z
-                            }
-                        })
-                        .collect();
-                }
-                a[0]
-            })
+    /// Outputs of `m` on the rows of `x`, on the kernel frictiond runs (f32).
+    fn forward(m: &MlpWeights, x: &[f32]) -> Vec<f32> {
+        let mut k = Mlp::new(m, StorageDtype::F32).unwrap();
+        x.chunks(m.layers[0].n_in)
+            .map(|row| k.forward(row))
             .collect()
     }
 
@@ -244,22 +228,10 @@ mod tests {
         .unwrap()
     }
 
+    /// `n` rows of `n_in` inputs, uniform in [−1, 1).
     fn inputs(n: usize, n_in: usize, seed: u64) -> Vec<f32> {
-        let mut s = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (0..n * n_in)
-            .map(|_| {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                ((s >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-            })
-            .collect()
-    }
-
-    fn rms(a: &[f64], b: &[f64]) -> f64 {
-        (a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / a.len() as f64).sqrt()
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        (0..n * n_in).map(|_| rng.random_range(-1.0..1.0)).collect()
     }
 
     #[test]
@@ -268,7 +240,7 @@ mod tests {
         let x = inputs(2000, 6, 1);
         let p = prune(&t, &[12, 9], &x).unwrap();
         let probe = inputs(500, 6, 2);
-        let err = rms(&forward(&p, &probe), &forward(&t, &probe));
+        let err = rmse(&forward(&p, &probe), &forward(&t, &probe));
         assert!(err < 1e-4, "full-width refit is off by {err}");
     }
 
@@ -289,7 +261,7 @@ mod tests {
         let p = prune(&t, &[6], &x).unwrap();
         assert_eq!(p.layers[0].n_out, 6);
         let probe = inputs(800, 4, 6);
-        let err = rms(&forward(&p, &probe), &forward(&t, &probe));
+        let err = rmse(&forward(&p, &probe), &forward(&t, &probe));
         assert!(
             err < 1e-4,
             "dropping a dead and a constant unit costs {err}"
@@ -305,7 +277,7 @@ mod tests {
         let probe = inputs(2000, 8, 10);
         let y = forward(&t, &probe);
         let p = prune(&t, &[24, 12], &x).unwrap();
-        let pruned = rms(&forward(&p, &probe), &y);
+        let pruned = rmse(&forward(&p, &probe), &y);
         // Plain truncation: the first 24 and 12 units, the other weights as they were.
         let mut cut = t.clone();
         cut.layers[0].weight.truncate(24 * 8);
@@ -319,8 +291,8 @@ mod tests {
         cut.layers[1].n_out = 12;
         cut.layers[2].weight.truncate(12);
         cut.layers[2].n_in = 12;
-        let truncated = rms(&forward(&cut, &probe), &y);
-        let spread = rms(&y, &vec![y.iter().sum::<f64>() / y.len() as f64; y.len()]);
+        let truncated = rmse(&forward(&cut, &probe), &y);
+        let spread = rmse(&y, &vec![y.iter().sum::<f32>() / y.len() as f32; y.len()]);
         assert!(
             pruned < 0.75 * truncated && pruned < 0.75 * spread,
             "pruned {pruned}, truncated {truncated}, teacher spread {spread}"
