@@ -48,7 +48,7 @@ if [ $# -gt 0 ]; then TARGETS=("$@"); else TARGETS=("${ALL[@]}"); fi
 cd "$(dirname "$0")/.."
 ROOT="$(pwd)"
 if ! command -v cargo-fuzz >/dev/null 2>&1; then
-  # A debug build of the tool: it only drives cargo, and builds in a fraction of the release time.
+  # A debug build of the tool is enough: it only drives cargo.
   cargo install cargo-fuzz --locked --debug
 fi
 
