@@ -1003,6 +1003,11 @@ fn distill_gates_on_held_out_data_inherits_meta_and_records_the_teacher() {
     );
     let text = String::from_utf8_lossy(&out.stdout).into_owned();
     assert!(text.contains("all") && text.contains("ok"), "{text}");
+    let notice = "no training report of the teacher";
+    assert!(
+        !String::from_utf8_lossy(&out.stderr).contains(notice),
+        "the report next to the teacher is found"
+    );
     let student = read_file(&student_path).unwrap();
     let (tm, sm) = (&teacher.meta, &student.meta);
     assert_eq!(sm.features, tm.features);
@@ -1049,6 +1054,32 @@ fn distill_gates_on_held_out_data_inherits_meta_and_records_the_teacher() {
         "{e}"
     );
     assert!(!tiny.exists(), "a failed student must not be written");
+
+    // A teacher without its training report: distill says which Δθ latch and warm-up it assumes.
+    let lone_dir = f.dir.join("lone");
+    std::fs::create_dir_all(&lone_dir).unwrap();
+    let lone = lone_dir.join("teacher.fwt");
+    std::fs::copy(&teacher_path, &lone).unwrap();
+    let lone_out = frictl(&[
+        "distill",
+        s(&lone),
+        "--dataset",
+        s(&f.ds),
+        "-o",
+        s(&lone_dir.join("student.fwt")),
+        "--hidden",
+        "1",
+        "--epochs",
+        "1",
+        "--quiet",
+    ]);
+    let e = String::from_utf8_lossy(&lone_out.stderr).into_owned();
+    assert!(
+        e.contains(notice)
+            && e.contains("lone/teacher.train.json")
+            && e.contains("--teacher-report"),
+        "{e}"
+    );
 }
 
 /// `frictl distill --probes-only`: without any dataset, a student learns the teacher inside its

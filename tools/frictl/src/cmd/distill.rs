@@ -39,6 +39,15 @@ fn teacher_report(args: &Args) -> anyhow::Result<Option<TrainReport>> {
         None => (pipeline::default_report_path(&args.teacher), false),
     };
     if !given && !path.exists() {
+        if args.delta_theta_offset.is_none() || args.warmup.is_none() {
+            eprintln!(
+                "frictl distill: no training report of the teacher at {} (give --teacher-report); \
+                 unless --delta-theta-offset and --warmup say otherwise, the Δθ offset is latched per \
+                 run and the warm-up holds zero. Both must be how the teacher was trained, or its \
+                 targets are computed on inputs it never saw",
+                path.display()
+            );
+        }
         return Ok(None);
     }
     let text = frictionless::regular_file::read_text(&path)
