@@ -977,10 +977,10 @@ fn distill_gates_on_held_out_data_inherits_meta_and_records_the_teacher() {
     );
     let teacher = read_file(&teacher_path).unwrap();
     let student_path = f.dir.join("student.fwt");
-    let distill = |out: &Path, extra: &[&str]| -> Output {
+    let distill_from = |teacher: &Path, out: &Path, extra: &[&str]| -> Output {
         let mut args = vec![
             "distill",
-            s(&teacher_path),
+            s(teacher),
             "--dataset",
             s(&f.ds),
             "-o",
@@ -992,6 +992,7 @@ fn distill_gates_on_held_out_data_inherits_meta_and_records_the_teacher() {
         args.extend_from_slice(extra);
         frictl(&args)
     };
+    let distill = |out: &Path, extra: &[&str]| distill_from(&teacher_path, out, extra);
     let out = ok(
         distill(
             &student_path,
@@ -1060,19 +1061,11 @@ fn distill_gates_on_held_out_data_inherits_meta_and_records_the_teacher() {
     std::fs::create_dir_all(&lone_dir).unwrap();
     let lone = lone_dir.join("teacher.fwt");
     std::fs::copy(&teacher_path, &lone).unwrap();
-    let lone_out = frictl(&[
-        "distill",
-        s(&lone),
-        "--dataset",
-        s(&f.ds),
-        "-o",
-        s(&lone_dir.join("student.fwt")),
-        "--hidden",
-        "1",
-        "--epochs",
-        "1",
-        "--quiet",
-    ]);
+    let lone_out = distill_from(
+        &lone,
+        &lone_dir.join("student.fwt"),
+        &["--hidden", "1", "--epochs", "1"],
+    );
     let e = String::from_utf8_lossy(&lone_out.stderr).into_owned();
     assert!(
         e.contains(notice)
