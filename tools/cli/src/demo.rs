@@ -39,10 +39,10 @@ pub struct Args {
     /// the current model on the union of every dataset so far (`frictl train --init`).
     #[arg(long)]
     pub onpolicy_rounds: Option<u32>,
-    /// Distil each joint's final PINN into a small student (the pipeline's distillation stage: the
-    /// teacher pruned to 32×32, 16×16 with `--quick`, then trained on the teacher's output over its
-    /// training datasets), gated on the unseen test run at 1.05× the teacher's RMSE, overall and per
-    /// |ṡ| band; the
+    /// Distil each joint's final PINN into a small student (the pipeline's distillation stage: a
+    /// 32×32×32 int16 student, or with `--quick` the teacher pruned to 16×16, trained on the
+    /// teacher's output over its training datasets), gated on the unseen test run at 1.05× the
+    /// teacher's RMSE, overall and per |ṡ| band; the
     /// report's `joints.JOINT.models.pinn_distilled` has both RMSEs and inference times. The
     /// experiments keep using the teacher.
     #[arg(long)]
