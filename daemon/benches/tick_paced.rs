@@ -27,7 +27,7 @@
 //! `TICK_PACED_THREADS=2`, `TICK_PACED_PREFETCH=lead` and `TICK_PACED_MODELS=student` only those
 //! cells, and
 //! `TICK_PACED_REPEAT=k` runs each paced cell k times, `TICK_PACED_ONLY_PACED=1` skips parts 0
-//! and 1).
+//! and 1, `TICK_PACED_STUDENT=FILE` makes the students 32 distinct copies of that model).
 //! Each paced cell also reports the time the hypervisor stole from this VM's vCPUs meanwhile
 //! (`steal` in `/proc/stat`, all CPUs, ms): the guest's run-queue delay cannot see that steal, so a
 //! cell with steal did not run on a quiet host even over its steal-free ticks.
@@ -131,10 +131,31 @@ const MODELS: [(&str, Models); 2] = [("paper", Models::Paper), ("student", Model
 /// make every student's weights distinct).
 const STUDENT_WIDTHS: [[usize; 2]; 3] = [[32, 32], [24, 32], [32, 24]];
 
+/// The 32 students: [`distilled_students`], or with `TICK_PACED_STUDENT=FILE` 32 copies of that model (e.g. a student `frictl demo
+/// --distill` wrote), joint k's weights scaled by 1 + k·1e-4 so that no two are equal: the cost of
+/// 32 joints running a real student's shape and dtype.
+fn students() -> Vec<ModelFile> {
+    if let Ok(path) = std::env::var("TICK_PACED_STUDENT") {
+        let file = frictionless::weights::read_file(std::path::Path::new(&path))
+            .unwrap_or_else(|e| panic!("TICK_PACED_STUDENT={path}: {e}"));
+        return (0..32u16)
+            .map(|k| {
+                let mut f = file.clone();
+                let g = 1.0 + f32::from(k) * 1e-4;
+                for l in &mut f.mlp.layers {
+                    l.weight.iter_mut().chain(&mut l.bias).for_each(|w| *w *= g);
+                }
+                f
+            })
+            .collect();
+    }
+    distilled_students()
+}
+
 /// 32 students, joint k distilled without data from joint k's paper-size network (probes inside
 /// mean ± 3·scale of its identity normalisation), f32; the gate bound is loose (the teachers are
 /// random functions: the students are here for their cost, not their accuracy).
-fn students() -> Vec<ModelFile> {
+fn distilled_students() -> Vec<ModelFile> {
     use frictionless_train::TrainConfig;
     use frictionless_train::distill::{ProbeDistillConfig, distill_probes};
     (0..32u64)
@@ -509,10 +530,12 @@ fn main() {
         let s = students();
         let macs = |f: &ModelFile| f.mlp.macs();
         println!(
-            "Students: {} distilled in {:.1} s, hidden {:?}, {}–{} MAC each (paper-size: {} MAC).\n",
+            "Students: {} made in {:.1} s, hidden {:?}, {}–{} MAC each (paper-size: {} MAC).\n",
             s.len(),
             (monotonic_ns() - t) as f64 / 1e9,
-            STUDENT_WIDTHS,
+            s.iter()
+                .map(|f| f.mlp.layers.iter().map(|l| l.n_out).collect::<Vec<_>>())
+                .collect::<std::collections::BTreeSet<_>>(),
             s.iter().map(macs).min().unwrap_or(0),
             s.iter().map(macs).max().unwrap_or(0),
             macs(&paper_file(0, StorageDtype::F32)),
