@@ -33,6 +33,10 @@ use std::time::{Duration, Instant};
 
 const PAPER: &[usize] = &[40, 268, 215, 1];
 const ERGOCUB: &[usize] = &[50, 450, 210, 280, 1];
+/// The shape of the default demo's distilled students (H 30 × 3 features, three 32-wide layers).
+const STUDENT: &[usize] = &[90, 32, 32, 32, 1];
+/// A two-layer student of the same inputs.
+const STUDENT2: &[usize] = &[90, 32, 32, 1];
 const DTYPES: [StorageDtype; 5] = StorageDtype::ALL;
 const N_INPUTS: usize = 64;
 
@@ -146,7 +150,12 @@ impl Cli {
 
 fn hot(c: &mut Criterion) {
     let mut rng = ChaCha8Rng::seed_from_u64(40);
-    for (model, sizes) in [("paper", PAPER), ("ergocub", ERGOCUB)] {
+    for (model, sizes) in [
+        ("paper", PAPER),
+        ("ergocub", ERGOCUB),
+        ("student", STUDENT),
+        ("student2", STUDENT2),
+    ] {
         let w = random_net(&mut rng, sizes);
         let xs = random_inputs(&mut rng, &w, N_INPUTS);
         let mut g = c.benchmark_group(format!("hot/{model}"));

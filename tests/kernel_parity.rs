@@ -267,6 +267,13 @@ fn fixed_shapes_all_paths_all_dtypes() {
         &[1024, 1024, 1],
         &[5, 1024, 1000, 1024, 999, 1],
         &[64, 128, 144, 136, 120, 1],
+        // Small students: one to three output blocks, whose inputs the AVX2 f32 path splits over
+        // several accumulator sets (input counts below, at and off a multiple of the split).
+        &[90, 32, 32, 32, 1],
+        &[90, 16, 16, 1],
+        &[3, 16, 1],
+        &[4, 32, 1],
+        &[31, 48, 7, 1],
     ];
     let mut rng = ChaCha8Rng::seed_from_u64(2);
     for s in shapes {

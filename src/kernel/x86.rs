@@ -378,7 +378,7 @@ pub(super) mod avx2 {
         // SAFETY (all calls below): block range blk..blk+G lies within 0..p.n_blk.
         while blk + MAX_G <= p.n_blk {
             unsafe {
-                group::<D, MAX_G>(
+                group::<D, MAX_G, 1>(
                     w,
                     p.row0 + blk * ni,
                     ni,
@@ -394,23 +394,27 @@ pub(super) mod avx2 {
             unsafe { bias.add(blk * LANES) },
             unsafe { y.add(blk * LANES) },
         );
+        // Fewer blocks than MAX_G: the inputs are split over S interleaved accumulator sets so that
+        // 8 FMA chains stay in flight (a chain waits for the previous FMA's result).
         unsafe {
             match p.n_blk - blk {
-                1 => group::<D, 1>(w, r0, ni, x, bb, yy),
-                2 => group::<D, 2>(w, r0, ni, x, bb, yy),
-                3 => group::<D, 3>(w, r0, ni, x, bb, yy),
+                1 => group::<D, 1, 4>(w, r0, ni, x, bb, yy),
+                2 => group::<D, 2, 2>(w, r0, ni, x, bb, yy),
+                3 => group::<D, 3, 1>(w, r0, ni, x, bb, yy),
                 _ => {}
             }
         }
     }
 
-    /// `G` consecutive output blocks; block `g`'s row for input `i` is `row0 + g * ni + i`.
+    /// `G` consecutive output blocks; block `g`'s row for input `i` is `row0 + g * ni + i`. Input
+    /// `i` goes to accumulator set `i % S` (for `i` below the largest multiple of `S`, the rest to
+    /// set 0); the sets are added in order at the end.
     ///
     /// # Safety
     /// As for [`dense`], restricted to these `G` blocks.
     #[target_feature(enable = "avx2,fma,f16c")]
     #[inline]
-    unsafe fn group<const D: u8, const G: usize>(
+    unsafe fn group<const D: u8, const G: usize, const S: usize>(
         w: *const u8,
         row0: usize,
         ni: usize,
@@ -418,19 +422,41 @@ pub(super) mod avx2 {
         bias: *const f32,
         y: *mut f32,
     ) {
-        let mut acc = [[_mm256_setzero_ps(); 2]; G];
-        for (g, a) in acc.iter_mut().enumerate() {
+        let mut sets = [[[_mm256_setzero_ps(); 2]; G]; S];
+        for (g, a) in sets[0].iter_mut().enumerate() {
             // SAFETY: G bias blocks, 64-byte aligned.
             *a = unsafe { load_block(bias.add(g * LANES)) };
         }
-        for i in 0..ni {
-            // SAFETY: i < ni floats at x.
+        let split = ni - ni % S;
+        let mut i = 0;
+        while i < split {
+            for (k, acc) in sets.iter_mut().enumerate() {
+                // SAFETY: i + k < ni floats at x.
+                let xv = _mm256_set1_ps(unsafe { *x.add(i + k) });
+                for (g, a) in acc.iter_mut().enumerate() {
+                    // SAFETY: row row0 + g*ni + i + k belongs to this layer.
+                    let wv = unsafe { load_row::<D>(w, row0 + g * ni + i + k) };
+                    a[0] = _mm256_fmadd_ps(wv[0], xv, a[0]);
+                    a[1] = _mm256_fmadd_ps(wv[1], xv, a[1]);
+                }
+            }
+            i += S;
+        }
+        for i in split..ni {
+            // SAFETY: as above.
             let xv = _mm256_set1_ps(unsafe { *x.add(i) });
-            for (g, a) in acc.iter_mut().enumerate() {
-                // SAFETY: row row0 + g*ni + i belongs to this layer.
+            for (g, a) in sets[0].iter_mut().enumerate() {
+                // SAFETY: as above.
                 let wv = unsafe { load_row::<D>(w, row0 + g * ni + i) };
                 a[0] = _mm256_fmadd_ps(wv[0], xv, a[0]);
                 a[1] = _mm256_fmadd_ps(wv[1], xv, a[1]);
+            }
+        }
+        let mut acc = sets[0];
+        for set in &sets[1..] {
+            for (a, b) in acc.iter_mut().zip(set) {
+                a[0] = _mm256_add_ps(a[0], b[0]);
+                a[1] = _mm256_add_ps(a[1], b[1]);
             }
         }
         let z = _mm256_setzero_ps();
