@@ -132,6 +132,10 @@ pub struct Args {
     /// range; needs the teacher's depth and widths no larger than its).
     #[arg(long, value_enum, default_value_t = StudentInitArg::Fresh)]
     pub init: StudentInitArg,
+    /// The student's history length H: it reads the newest H samples of each of the teacher's
+    /// feature blocks (default: the teacher's H; at most it). Fewer inputs, a smaller first layer.
+    #[arg(long)]
+    pub history: Option<usize>,
     /// Seed of the initialisation, shuffles and probes (and of the split with --test-frac).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,

@@ -1056,6 +1056,59 @@ fn distill_gates_on_held_out_data_inherits_meta_and_records_the_teacher() {
     );
     assert!(!tiny.exists(), "a failed student must not be written");
 
+    // A student with a shorter history reads the newest samples of each of the teacher's blocks,
+    // with the teacher's normalisation of those inputs (the gate is opened wide: this checks the
+    // plumbing, not the accuracy).
+    let h = tm.features.history;
+    assert!(h >= 3, "the fixture's teacher has H {h}");
+    let short = f.dir.join("short.fwt");
+    ok(
+        distill(
+            &short,
+            &[
+                "--hidden",
+                "8",
+                "--epochs",
+                "2",
+                "--history",
+                "2",
+                "--max-rmse-ratio",
+                "1000",
+            ],
+        ),
+        "distill --history 2",
+    );
+    let short = read_file(&short).unwrap();
+    assert_eq!(short.meta.features.history, 2);
+    assert_eq!(short.meta.features.set, tm.features.set);
+    let n_blocks = tm.features.set.n_blocks();
+    assert_eq!(
+        short.mlp.n_inputs(),
+        2 * n_blocks + usize::from(tm.features.temperature)
+    );
+    for b in 0..n_blocks {
+        for k in 0..2 {
+            let (si, ti) = (b * 2 + k, b * h + h - 2 + k);
+            assert_eq!(
+                short.mlp.norm.mean[si], teacher.mlp.norm.mean[ti],
+                "block {b}"
+            );
+            assert_eq!(
+                short.mlp.norm.scale[si], teacher.mlp.norm.scale[ti],
+                "block {b}"
+            );
+        }
+    }
+    for bad in ["0", &(h + 1).to_string()] {
+        let out = f.dir.join(format!("bad_history_{bad}.fwt"));
+        let e = err_text(
+            distill(&out, &["--hidden", "8", "--epochs", "1", "--history", bad]),
+            "distill --history out of range",
+        );
+        assert!(e.contains(&format!("--history {bad}")), "{e}");
+        assert!(!out.exists());
+    }
+
     // A teacher without its training report: distill says which Δθ latch and warm-up it assumes.
     let lone_dir = f.dir.join("lone");
     std::fs::create_dir_all(&lone_dir).unwrap();

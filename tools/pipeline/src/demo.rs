@@ -502,6 +502,7 @@ fn distill_pinn(
         probe_kind: ProbeKindArg::Uniform,
         lr_final: Some(1e-5),
         init: opts.init,
+        history: None,
         seed: opts.seed,
         max_rmse_ratio: opts.max_rmse_ratio,
         min_band_samples: 100,

@@ -20,7 +20,9 @@
 //!   not gated).
 //!
 //! The student inherits the teacher's features, history, normalisation, joint, gear ratio, k_t, SCV
-//! prior, filtering and stored input range; its header records the teacher file's SHA-256
+//! prior, filtering and stored input range; with [`DistillConfig::history`] it reads only the newest
+//! samples of each feature block (a shorter history: fewer inputs, a smaller first layer) and keeps
+//! the teacher's normalisation of those inputs; its header records the teacher file's SHA-256
 //! (`teacher_sha256`, `.fwt` ≥ 1.5), the datasets' hash and its own validation/test RMSE.
 //!
 //! What it is **not**: no second trainer (the loss, optimiser and data pipeline are the ones of
@@ -28,9 +30,10 @@
 
 use std::ops::ControlFlow;
 
+use frictionless::features::FeatureSpec;
 use frictionless::friction::ScvParams;
 use frictionless::kernel::Mlp;
-use frictionless::mlp::{MlpWeights, StorageDtype};
+use frictionless::mlp::{MlpWeights, Normalisation, StorageDtype};
 use frictionless::weights::{ModelFile, ModelMeta, TrainingMeta, round_to_dtype};
 use frictionless_dataset::bands::{DEFAULT_BAND_EDGES_RAD_S, ResidualProfile};
 use serde::{Deserialize, Serialize};
@@ -155,7 +158,7 @@ pub const PRUNE_ROWS: usize = 40_000;
 /// The trainer of a student with the teacher's normalisation, started as `init` says; with
 /// [`StudentInit::Prune`], also the pruned starting weights.
 fn student_trainer(
-    teacher: &ModelFile,
+    teacher: &MlpWeights,
     init: StudentInit,
     cfg: TrainConfig,
     data: &Dataset<'_>,
@@ -163,7 +166,7 @@ fn student_trainer(
 ) -> Result<(Trainer, Option<MlpWeights>), PipelineError> {
     match init {
         StudentInit::Fresh => Ok((
-            Trainer::with_normalisation(cfg, teacher.mlp.norm.clone(), data, val)?,
+            Trainer::with_normalisation(cfg, teacher.norm.clone(), data, val)?,
             None,
         )),
         StudentInit::Prune => {
@@ -175,7 +178,7 @@ fn student_trainer(
                     data.x[r * n_in..(r + 1) * n_in].iter().copied()
                 })
                 .collect();
-            let start = crate::prune::prune(&teacher.mlp, &cfg.hidden, &x)
+            let start = crate::prune::prune(teacher, &cfg.hidden, &x)
                 .map_err(|e| usage(format!("--init prune: {e}")))?;
             Ok((Trainer::from_init(cfg, &start, data, val)?, Some(start)))
         }
@@ -211,6 +214,64 @@ pub struct DistillConfig {
     pub warmup: WarmupPolicy,
     /// Where Δθ is latched (the teacher's).
     pub delta_theta_offset: DeltaThetaOffset,
+    /// The student's history length H: the newest `history` samples of each of the teacher's feature
+    /// blocks (`None`: the teacher's H). At most the teacher's.
+    #[serde(default)]
+    pub history: Option<usize>,
+}
+
+/// The student's feature spec: the teacher's with history `history` (`None`: the teacher's), and
+/// the teacher input column each student input reads (per block its newest samples, oldest first,
+/// then the temperature). Errors unless 1 ≤ `history` ≤ the teacher's H.
+pub fn student_inputs(
+    teacher: &FeatureSpec,
+    history: Option<usize>,
+) -> Result<(FeatureSpec, Vec<usize>), PipelineError> {
+    let (ht, hs) = (teacher.history, history.unwrap_or(teacher.history));
+    if !(1..=ht).contains(&hs) {
+        return Err(usage(format!(
+            "--history {hs}: the student's history must be between 1 and the teacher's {ht}"
+        )));
+    }
+    let spec = FeatureSpec {
+        history: hs,
+        ..*teacher
+    };
+    let mut cols: Vec<usize> = (0..teacher.set.n_blocks())
+        .flat_map(|b| b * ht + (ht - hs)..(b + 1) * ht)
+        .collect();
+    if let Some(t) = teacher.temperature_index() {
+        cols.push(t);
+    }
+    debug_assert_eq!(cols.len(), spec.n_inputs());
+    Ok((spec, cols))
+}
+
+/// The columns `cols` of every row of `x` (rows of `n` values).
+fn take_columns(x: &[f32], n: usize, cols: &[usize]) -> Vec<f32> {
+    x.chunks_exact(n.max(1))
+        .flat_map(|row| cols.iter().map(move |&c| row[c]))
+        .collect()
+}
+
+/// `w` seen through the input columns `cols`: its normalisation and first layer restricted to them
+/// (the dropped inputs then sit at their normalised mean, 0). `w` itself when `cols` are all of
+/// its inputs in order.
+fn restricted(w: &MlpWeights, cols: &[usize]) -> MlpWeights {
+    let n = w.n_inputs();
+    if cols.len() == n && cols.iter().enumerate().all(|(i, &c)| i == c) {
+        return w.clone();
+    }
+    let mut v = w.clone();
+    v.norm = Normalisation {
+        mean: cols.iter().map(|&c| w.norm.mean[c]).collect(),
+        scale: cols.iter().map(|&c| w.norm.scale[c]).collect(),
+    };
+    if let Some(first) = v.layers.first_mut() {
+        first.weight = take_columns(&w.layers[0].weight, n, cols);
+        first.n_in = cols.len();
+    }
+    v
 }
 
 /// One gated figure: teacher and student RMSE against the label on the test set.
@@ -321,17 +382,19 @@ fn band_name(lo: f64, hi: Option<f64>) -> String {
     }
 }
 
-/// The gate of `student` against `teacher` on `set` (rows mapped back to `sources` for ṡ).
+/// The gate of `student` against `teacher` on `set` (rows mapped back to `sources` for ṡ): the
+/// teacher reads `set.x`, the student the same rows as `student_x` (its own inputs).
 pub fn gate(
     teacher: &ModelFile,
     student: &ModelFile,
     sources: &Sources,
     set: &SetData,
+    student_x: &[f32],
     max_rmse_ratio: f64,
     min_band_samples: usize,
 ) -> Result<Gate, PipelineError> {
-    let profile = |file: &ModelFile| -> Result<ResidualProfile, PipelineError> {
-        let y = kernel_outputs(file, &set.x)?;
+    let profile = |file: &ModelFile, x: &[f32]| -> Result<ResidualProfile, PipelineError> {
+        let y = kernel_outputs(file, x)?;
         let rows = set
             .rows
             .iter()
@@ -347,7 +410,7 @@ pub fn gate(
             1.0,
         ))
     };
-    let (t, s) = (profile(teacher)?, profile(student)?);
+    let (t, s) = (profile(teacher, &set.x)?, profile(student, student_x)?);
     let row = |what: String, n: usize, tr: Option<f64>, sr: Option<f64>, gated: bool| {
         let (tr, sr) = (tr.unwrap_or(f64::NAN), sr.unwrap_or(f64::NAN));
         let gated = gated && tr.is_finite();
@@ -441,13 +504,15 @@ pub fn distill(
         cfg.delta_theta_offset,
     )?;
     let n_in = meta.features.n_inputs();
+    let (student_spec, cols) = student_inputs(&meta.features, cfg.history)?;
+    let student_x = |x: &[f32]| take_columns(x, n_in, &cols);
     let threads = cfg.train.threads.max(1);
     // Teacher targets through the batched trainer path (the teacher's stored weights, f32 math).
     let mut teacher_pred = Predictor::new(&teacher.mlp, threads)?;
     let train = &prepared.train;
     let y_teacher = teacher_pred.predict(&train.x)?;
     let w = cfg.teacher_weight;
-    let mut x = train.x.clone();
+    let mut x = student_x(&train.x);
     let mut y: Vec<f32> = y_teacher
         .iter()
         .zip(&train.y_label_nm)
@@ -464,7 +529,7 @@ pub fn distill(
     .flatten()
     .collect();
     let y_probe = teacher_pred.predict(&probes)?;
-    x.extend_from_slice(&probes);
+    x.extend_from_slice(&student_x(&probes));
     y.extend_from_slice(&y_probe);
     s.extend_from_slice(&y_probe);
     let mut tcfg = cfg.train.clone();
@@ -475,11 +540,17 @@ pub fn distill(
         x: &x,
         y_label_nm: &y,
         y_scv_nm: &s,
-        n_inputs: n_in,
+        n_inputs: cols.len(),
     };
-    let val_view = prepared.val.view();
+    let (val_x, test_x) = (student_x(&prepared.val.x), student_x(&prepared.test.x));
+    let val_view = Dataset {
+        x: &val_x,
+        n_inputs: cols.len(),
+        ..prepared.val.view()
+    };
     let val = (!prepared.val.is_empty()).then_some(&val_view);
-    let (mut trainer, _) = student_trainer(teacher, cfg.init, tcfg, &data, val)?;
+    let view = restricted(&teacher.mlp, &cols);
+    let (mut trainer, _) = student_trainer(&view, cfg.init, tcfg, &data, val)?;
     if let Some(end) = cfg.lr_final {
         trainer.set_cosine_decay(end)?;
     }
@@ -498,20 +569,21 @@ pub fn distill(
                 quant_max_error_nm: None,
                 teacher_sha256: Some(teacher_sha256),
             },
+            features: student_spec,
             ..meta.clone()
         },
         dtype: cfg.dtype,
         mlp: weights,
     };
-    let rmse_on = |set: &SetData| -> Result<Option<f64>, PipelineError> {
+    let rmse_on = |set: &SetData, x: &[f32]| -> Result<Option<f64>, PipelineError> {
         if set.is_empty() {
             return Ok(None);
         }
-        let y = kernel_outputs(&student, &set.x)?;
+        let y = kernel_outputs(&student, x)?;
         Ok(Some(super::rmse(&y, &set.y_label_nm)))
     };
-    let val_rmse = rmse_on(&prepared.val)?;
-    let test_rmse = rmse_on(&prepared.test)?;
+    let val_rmse = rmse_on(&prepared.val, &val_x)?;
+    let test_rmse = rmse_on(&prepared.test, &test_x)?;
     student.meta.training.val_rmse_nm = val_rmse.map_or(f32::NAN, |v| v as f32);
     student.meta.training.test_rmse_nm = test_rmse.map_or(f32::NAN, |v| v as f32);
     let gate = gate(
@@ -519,6 +591,7 @@ pub fn distill(
         &student,
         sources,
         &prepared.test,
+        &test_x,
         cfg.max_rmse_ratio,
         cfg.min_band_samples,
     )?;
@@ -680,7 +753,7 @@ pub fn distill_probes(
         lambda: 0.0,
         ..cfg.train.clone()
     };
-    let (mut trainer, start) = student_trainer(teacher, cfg.init, tcfg, &data, Some(&val))?;
+    let (mut trainer, start) = student_trainer(&teacher.mlp, cfg.init, tcfg, &data, Some(&val))?;
     let start_rmse_vs_teacher_nm = match &start {
         Some(w) => Some(super::rmse(
             &Predictor::new(w, cfg.train.threads.max(1))?.predict(&x_val)?,
@@ -849,6 +922,58 @@ mod tests {
             gated,
             passed: !gated || s <= r * t,
         }
+    }
+
+    #[test]
+    fn a_shorter_student_history_reads_the_newest_samples_and_keeps_their_normalisation() {
+        let teacher = ranged_model();
+        let spec = &teacher.meta.features; // 2 blocks × H 10 + temperature
+        let (same, all) = student_inputs(spec, None).unwrap();
+        assert_eq!(&same, spec);
+        assert_eq!(all, (0..21).collect::<Vec<_>>());
+        let (short, cols) = student_inputs(spec, Some(3)).unwrap();
+        assert_eq!(short.history, 3);
+        assert_eq!(short.n_inputs(), 7);
+        // Block b's newest samples are its last columns (oldest first), the temperature last.
+        assert_eq!(cols, vec![7, 8, 9, 17, 18, 19, 20]);
+        for bad in [0, 11] {
+            let e = student_inputs(spec, Some(bad)).unwrap_err().to_string();
+            assert!(
+                e.contains(&format!("--history {bad}")) && e.contains("10"),
+                "{e}"
+            );
+        }
+        // Two rows of 21 inputs whose values are their column numbers (+100 on the second).
+        let x: Vec<f32> = (0..42).map(|i| (i % 21 + 100 * (i / 21)) as f32).collect();
+        assert_eq!(
+            take_columns(&x, 21, &cols),
+            [
+                7., 8., 9., 17., 18., 19., 20., 107., 108., 109., 117., 118., 119., 120.
+            ]
+        );
+        // The restricted teacher: the kept inputs' normalisation and first-layer columns, and the
+        // same output as the full teacher when the dropped inputs sit at their mean.
+        let mut w = teacher.mlp.clone();
+        w.norm.mean = (0..21).map(|i| 0.1 * i as f32).collect();
+        w.norm.scale = (0..21).map(|i| 1.0 + 0.05 * i as f32).collect();
+        let r = restricted(&w, &cols);
+        assert_eq!(r.n_inputs(), 7);
+        assert_eq!(
+            r.norm.mean,
+            cols.iter().map(|&c| w.norm.mean[c]).collect::<Vec<_>>()
+        );
+        assert_eq!(
+            r.norm.scale,
+            cols.iter().map(|&c| w.norm.scale[c]).collect::<Vec<_>>()
+        );
+        let mut full = w.norm.mean.clone();
+        for (k, &c) in cols.iter().enumerate() {
+            full[c] += 0.3 * (k as f32 - 3.0);
+        }
+        let kept = take_columns(&full, 21, &cols);
+        let (a, b) = (w.forward_reference(&full)[0], r.forward_reference(&kept)[0]);
+        assert!((a - b).abs() < 1e-5, "{a} vs {b}");
+        assert_eq!(restricted(&w, &all), w);
     }
 
     #[test]

@@ -3,7 +3,8 @@
 //! the teacher's stored input range, with the label and SCV terms of the datasets), and write it only
 //! if its RMSE against the data on held-out runs is within `--max-rmse-ratio` of the teacher's,
 //! overall and per |ṡ| band. The method is `frictionless_train::distill`; the student inherits the
-//! teacher's inputs, normalisation and metadata and records the teacher's SHA-256.
+//! teacher's inputs, normalisation and metadata and records the teacher's SHA-256; `--history H`
+//! gives it only the newest H samples of each of the teacher's feature blocks.
 //!
 //! The held-out set: `--test-run`/`--test-chunks`/`--test-dataset`/`--test-frac` as in `frictl train`;
 //! without any of them, the split of the teacher's training report (`TEACHER.train.json`) when its
@@ -59,6 +60,12 @@ fn teacher_report(args: &Args) -> anyhow::Result<Option<TrainReport>> {
 
 /// `frictl distill --probes-only N`.
 fn run_probes_only(args: &Args, probes: usize) -> anyhow::Result<()> {
+    if let Some(h) = args.history {
+        anyhow::bail!(
+            "--history {h}: a shorter student history needs data (--dataset); --probes-only \
+             students keep the teacher's history"
+        );
+    }
     super::check_outputs(&[&args.teacher], &[&args.out])?;
     let teacher = frictionless::weights::read_file(&args.teacher)
         .with_context(|| format!("teacher {}", args.teacher.display()))?;
@@ -329,13 +336,16 @@ pub fn distill_file(args: &Args) -> anyhow::Result<Outcome> {
         min_band_samples: args.min_band_samples,
         warmup,
         delta_theta_offset,
+        history: args.history,
     };
+    let (student_spec, _) = distill::student_inputs(&teacher.meta.features, args.history)?;
     if !args.quiet {
         eprintln!(
-            "frictl distill: {} [{}] {} → hidden {:?} ({}), {} probes; chunks train {} / val {} / test {}",
+            "frictl distill: {} [{}] {} → [{}] hidden {:?} ({}), {} probes; chunks train {} / val {} / test {}",
             sources.joint,
             teacher.meta.features,
             args.teacher.display(),
+            student_spec,
             args.hidden,
             StorageDtype::from(args.dtype).name(),
             probes,
