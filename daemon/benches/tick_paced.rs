@@ -28,7 +28,8 @@
 //! `TICK_PACED_DTYPES=int16,f16` measures only those dtypes, `TICK_PACED_JOINTS=32`,
 //! `TICK_PACED_THREADS=2`, `TICK_PACED_PREFETCH=lead` and `TICK_PACED_MODELS=student` only those
 //! cells, and
-//! `TICK_PACED_REPEAT=k` runs each paced cell k times, `TICK_PACED_ONLY_PACED=1` skips parts 0
+//! `TICK_PACED_REPEAT=k` runs each paced cell k times, `TICK_PACED_LEAD_US=u` prefetches u µs
+//! before the deadline instead of frictiond's default 200, `TICK_PACED_ONLY_PACED=1` skips parts 0
 //! and 1, `TICK_PACED_STUDENT=FILE` makes the students 32 distinct copies of that model).
 //! Each paced cell also reports the time the hypervisor stole from this VM's vCPUs meanwhile
 //! (`steal` in `/proc/stat`, all CPUs, ms, 10 ms granularity): the per-tick test above sees only
@@ -207,8 +208,16 @@ const GATE_NM: f32 = 0.01;
 const TICKS: usize = 5000;
 /// Period [ns] (1 kHz).
 const PERIOD_NS: u64 = 1_000_000;
-/// `prefetch_lead_us` used for "lead" [ns] (frictiond's default).
+/// `prefetch_lead_us` used for "lead" [ns] (frictiond's default); `TICK_PACED_LEAD_US` changes it.
 const LEAD_NS: u64 = 200_000;
+
+/// The lead of "lead" prefetching [ns]: `TICK_PACED_LEAD_US` if set, else [`LEAD_NS`].
+fn lead_ns() -> u64 {
+    std::env::var("TICK_PACED_LEAD_US")
+        .ok()
+        .and_then(|v| v.parse::<u64>().ok())
+        .map_or(LEAD_NS, |us| us * 1000)
+}
 /// Bytes written to evict every cache level (L3 here is 32 MiB).
 const EVICT_BYTES: usize = 64 << 20;
 
@@ -615,7 +624,7 @@ fn main() {
                                 budget_ns: PERIOD_NS / 4 * 3,
                                 release_ns: HELPER_RELEASE_GRACE_NS,
                                 prefetch,
-                                lead_ns: LEAD_NS,
+                                lead_ns: lead_ns(),
                                 lockstep: false,
                             };
                             let steal0 = steal_ms();
