@@ -216,7 +216,7 @@ fn lead_ns() -> u64 {
     std::env::var("TICK_PACED_LEAD_US")
         .ok()
         .and_then(|v| v.parse::<u64>().ok())
-        .map_or(LEAD_NS, |us| us * 1000)
+        .map_or(LEAD_NS, |us| us.saturating_mul(1000))
 }
 /// Bytes written to evict every cache level (L3 here is 32 MiB).
 const EVICT_BYTES: usize = 64 << 20;

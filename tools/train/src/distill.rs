@@ -28,6 +28,7 @@
 //! What it is **not**: no second trainer (the loss, optimiser and data pipeline are the ones of
 //! `frictl train`), no file writing (the command writes the student only when the gate passes).
 
+use std::borrow::Cow;
 use std::ops::ControlFlow;
 
 use frictionless::features::FeatureSpec;
@@ -247,6 +248,11 @@ pub fn student_inputs(
     Ok((spec, cols))
 }
 
+/// Whether `cols` are all `n` columns in order (the student reads the teacher's inputs).
+fn all_columns(cols: &[usize], n: usize) -> bool {
+    cols.len() == n && cols.iter().enumerate().all(|(i, &c)| i == c)
+}
+
 /// The columns `cols` of every row of `x` (rows of `n` values).
 fn take_columns(x: &[f32], n: usize, cols: &[usize]) -> Vec<f32> {
     x.chunks_exact(n.max(1))
@@ -254,12 +260,21 @@ fn take_columns(x: &[f32], n: usize, cols: &[usize]) -> Vec<f32> {
         .collect()
 }
 
+/// The student's rows of `x`: `x` itself when it reads every column, else [`take_columns`].
+fn student_rows<'a>(x: &'a [f32], n: usize, cols: &[usize]) -> Cow<'a, [f32]> {
+    if all_columns(cols, n) {
+        Cow::Borrowed(x)
+    } else {
+        Cow::Owned(take_columns(x, n, cols))
+    }
+}
+
 /// `w` seen through the input columns `cols`: its normalisation and first layer restricted to them
 /// (the dropped inputs then sit at their normalised mean, 0). `w` itself when `cols` are all of
 /// its inputs in order.
 fn restricted(w: &MlpWeights, cols: &[usize]) -> MlpWeights {
     let n = w.n_inputs();
-    if cols.len() == n && cols.iter().enumerate().all(|(i, &c)| i == c) {
+    if all_columns(cols, n) {
         return w.clone();
     }
     let mut v = w.clone();
@@ -505,14 +520,14 @@ pub fn distill(
     )?;
     let n_in = meta.features.n_inputs();
     let (student_spec, cols) = student_inputs(&meta.features, cfg.history)?;
-    let student_x = |x: &[f32]| take_columns(x, n_in, &cols);
+    let student_x = |x| student_rows(x, n_in, &cols);
     let threads = cfg.train.threads.max(1);
     // Teacher targets through the batched trainer path (the teacher's stored weights, f32 math).
     let mut teacher_pred = Predictor::new(&teacher.mlp, threads)?;
     let train = &prepared.train;
     let y_teacher = teacher_pred.predict(&train.x)?;
     let w = cfg.teacher_weight;
-    let mut x = student_x(&train.x);
+    let mut x = student_x(&train.x).into_owned();
     let mut y: Vec<f32> = y_teacher
         .iter()
         .zip(&train.y_label_nm)

@@ -243,6 +243,8 @@ pub fn distill_file(args: &Args) -> anyhow::Result<Outcome> {
     super::check_outputs(&inputs, &[&args.out])?;
     let teacher = frictionless::weights::read_file(&args.teacher)
         .with_context(|| format!("teacher {}", args.teacher.display()))?;
+    // Checked against the teacher's H before any dataset is read.
+    let (student_spec, _) = distill::student_inputs(&teacher.meta.features, args.history)?;
     let teacher_sha256 = frictionless_dataset::file_sha256(&args.teacher)
         .with_context(|| format!("teacher {}: cannot read", args.teacher.display()))?;
     let report = teacher_report(args)?;
@@ -338,7 +340,6 @@ pub fn distill_file(args: &Args) -> anyhow::Result<Outcome> {
         delta_theta_offset,
         history: args.history,
     };
-    let (student_spec, _) = distill::student_inputs(&teacher.meta.features, args.history)?;
     if !args.quiet {
         eprintln!(
             "frictl distill: {} [{}] {} → [{}] hidden {:?} ({}), {} probes; chunks train {} / val {} / test {}",
