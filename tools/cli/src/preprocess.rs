@@ -1,7 +1,7 @@
 //! Arguments of `frictl preprocess`.
 
 use frictionless_ident::kalman::KalmanConfig;
-use frictionless_ident::preprocess::PreprocessConfig;
+use frictionless_ident::preprocess::{LabelFilter, PreprocessConfig};
 use std::path::PathBuf;
 
 /// Source of the link dynamics for τ_ID.
@@ -53,6 +53,19 @@ pub struct PipelineArgs {
     /// |τ_F| limit [Nm] (default: 15 for ankle roll joints, else 100).
     #[arg(long)]
     pub tauf_limit: Option<f64>,
+    /// How the `current` label's current is filtered: `separate` (the authors': the Butterworth
+    /// above, while q̈ and φ̈ come from the Kalman smoother) or `matched` (the current through the
+    /// smoother's own acceleration response, so that a step of the current leaves no spike in the
+    /// label; a row whose smoother window holds a rejected sample is rejected too).
+    #[arg(long, default_value = "separate", value_parser = label_filter_parser())]
+    pub label_filter: LabelFilter,
+}
+
+/// `--label-filter`'s parser: the names of [`LabelFilter::ALL`].
+fn label_filter_parser() -> impl clap::builder::TypedValueParser<Value = LabelFilter> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(LabelFilter::ALL.map(LabelFilter::name))
+        .try_map(|name| LabelFilter::parse(&name).ok_or(format!("unknown label filter {name:?}")))
 }
 
 impl PipelineArgs {
@@ -75,6 +88,7 @@ impl PipelineArgs {
         if let Some(v) = self.tauf_limit {
             cfg.limits.tauf_limit_nm = v;
         }
+        cfg.label_filter = self.label_filter;
     }
 }
 

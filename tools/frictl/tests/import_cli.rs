@@ -2023,3 +2023,84 @@ fn csv_measured_wrench_enters_the_label_like_pinocchio_rnea_with_fext() {
         );
     }
 }
+
+/// label − truth RMS on valid sliding rows of a dataset with the simulator's truth.
+fn label_error_nm(ds: &frictionless_dataset::Dataset) -> (f64, usize) {
+    let truth = ds
+        .tau_f_true_nm
+        .as_ref()
+        .expect("a simulated log has its truth");
+    let (mut e2, mut n) = (0.0, 0usize);
+    for (k, t) in truth.iter().enumerate() {
+        if ds.valid[k] && ds.sdot_rad_s[k].abs() > 0.03 {
+            e2 += (ds.tau_f_label_nm[k] - t).powi(2);
+            n += 1;
+        }
+    }
+    ((e2 / n.max(1) as f64).sqrt(), n)
+}
+
+#[test]
+fn preprocess_label_filter_matched_is_closer_to_the_truth_and_is_recorded() {
+    let d = dir().join("label-filter");
+    std::fs::create_dir_all(&d).unwrap();
+    ok(
+        frictl(&crate::util::small_acquire_args(
+            "knee",
+            "4",
+            &d,
+            "knee",
+            &[],
+        )),
+        "acquire",
+    );
+    let log = d.join("knee.csv");
+    let run = |filter: Option<&str>, out: &Path| {
+        // J_eq·φ̈ subtracted: what remains of the label's error is the estimation's.
+        let mut args = vec![
+            "preprocess",
+            s(&log),
+            "--out",
+            s(out),
+            "--subtract-reflected-inertia",
+            "sidecar",
+        ];
+        if let Some(f) = filter {
+            args.extend(["--label-filter", f]);
+        }
+        ok(frictl(&args), "preprocess");
+        (label_error_nm(&dataset(out)), sidecar(out))
+    };
+    let ((e_sep, n_sep), side_sep) = run(None, &d.join("separate.csv"));
+    let ((e_mat, n_mat), side_mat) = run(Some("matched"), &d.join("matched.csv"));
+    assert_eq!(side_sep["settings"]["label_filter"], "separate");
+    assert_eq!(side_mat["settings"]["label_filter"], "matched");
+    eprintln!(
+        "label − truth RMS: matched {e_mat:.3} Nm ({n_mat} rows), separate {e_sep:.3} Nm ({n_sep} rows)"
+    );
+    // The matched label also rejects the rows next to rejected ones, so it keeps fewer.
+    assert!(
+        n_mat > n_sep / 2 && n_mat <= n_sep,
+        "{n_mat} of {n_sep} rows"
+    );
+    assert!(
+        e_mat < 0.8 * e_sep,
+        "label − truth RMS: matched {e_mat} Nm, separate {e_sep} Nm"
+    );
+    let e = err_text(
+        frictl(&[
+            "preprocess",
+            s(&log),
+            "--out",
+            s(&d.join("bad.csv")),
+            "--label-filter",
+            "butterworth",
+        ]),
+        "an unknown label filter",
+    );
+    assert!(
+        e.contains("butterworth") && e.contains("separate, matched"),
+        "{e}"
+    );
+    assert!(!d.join("bad.csv").exists());
+}

@@ -13,6 +13,7 @@
 //!   [`preprocess::preprocess_joints`]);
 //! - [`stream`]: the same pipeline on a log read in blocks (windows with margins derived from the
 //!   smoother and filter settings; the rows equal the whole-log result);
+//! - [`matched`]: the matched `current` label (every term at the sample rate, then one filter);
 //! - [`whole_body`]: τ_ID = RNEA(q, q̇, q̈) on the whole URDF from every joint a log has, for the
 //!   `current` label;
 //! - [`fit`]: least-squares fits of the static CV and SCV friction models to a dataset (`frictl fit`).
@@ -54,6 +55,7 @@
 pub mod dataset_file;
 pub mod fit;
 pub mod kalman;
+pub mod matched;
 pub mod preprocess;
 mod signals;
 pub mod stream;

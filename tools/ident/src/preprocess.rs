@@ -21,6 +21,10 @@
 //! supply it anyway). `subtract_reflected_inertia_kgm2` (ablation, `--subtract-reflected-inertia
 //! sidecar`) removes J_eq·φ̂̈ with φ̂̈ the smoothed acceleration of θ/r from the **motor** encoder —
 //! the physically right term (φ̈, not s̈: they differ by the flexspline oscillation).
+//! `label_filter` ([`LabelFilter`], `--label-filter`): the authors' `separate` filters (the
+//! Butterworth on the current, the smoother on the positions) or `matched` ([`crate::matched`]: the
+//! current through the smoother's own acceleration response, so that a step of the current, which
+//! steps the accelerations with it, leaves no spike in the label).
 //! Kalman tuning: the authors' knee P/Q/R are the default; `--kalman-q/-r` changes it. The measured
 //! label errors behind these choices are in `docs/decisions.md` ("Identification").
 //! Link model: `frictl preprocess --link auto` (default) uses the simulator's own link model when the
@@ -36,6 +40,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::kalman::{self, KalmanConfig, KalmanError};
+use super::matched;
 use frictionless::filter::{Butterworth, FilterError};
 use frictionless_dataset::Dataset;
 use frictionless_sim::link::LinkDynamics;
@@ -147,6 +152,42 @@ pub struct PreprocessConfig {
     /// Ablation: subtract `J·φ̂̈` from the label with this J [kg·m²] (0 = off, the paper's label);
     /// φ̂̈ is the smoothed acceleration of θ/r (motor encoder reflected to the joint).
     pub subtract_reflected_inertia_kgm2: f64,
+    /// How the `current` label's current is filtered (default: the authors'
+    /// [`LabelFilter::Separate`]).
+    #[serde(default)]
+    pub label_filter: LabelFilter,
+}
+
+/// How the current of the `current` label τ_F = r·k_t·i − J·φ̈ − τ_ID(q, q̇, q̈) is filtered.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LabelFilter {
+    /// The authors': the current through the zero-phase Butterworth, q̇, q̈ and φ̈ from the Kalman
+    /// smoother (each term its own filter).
+    #[default]
+    Separate,
+    /// The current through the Kalman smoother's own acceleration response, so that every term
+    /// sees the same filter; rows whose smoother window holds a rejected sample are rejected
+    /// ([`crate::matched`]).
+    Matched,
+}
+
+impl LabelFilter {
+    /// Every filter, in the order of [`Self::name`]'s documentation.
+    pub const ALL: [Self; 2] = [Self::Separate, Self::Matched];
+
+    /// The name on the command line and in files (`separate`, `matched`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Separate => "separate",
+            Self::Matched => "matched",
+        }
+    }
+
+    /// Parses [`Self::name`].
+    pub fn parse(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|f| f.name() == name)
+    }
 }
 
 impl PreprocessConfig {
@@ -161,6 +202,7 @@ impl PreprocessConfig {
             kalman: KalmanConfig::knee(),
             limits: SampleLimits::for_joint(joint),
             subtract_reflected_inertia_kgm2: 0.0,
+            label_filter: LabelFilter::Separate,
         }
     }
 
@@ -424,6 +466,12 @@ fn preprocess_impl(
     let mut truth_a = Vec::new();
     let mut summary = PreprocessSummary::default();
     let mut offset: Option<f64> = None;
+    let matched = cfg.label_filter == LabelFilter::Matched;
+    let reach = if matched {
+        matched::reach_samples(&cfg.kalman, dt)?
+    } else {
+        0
+    };
     let mut body = match (dynamics, state) {
         (Dynamics::WholeBody(b), Some(st)) => {
             st.check(log.time_s.len())
@@ -482,14 +530,18 @@ fn preprocess_impl(
         // zero-phase current and the RTS-smoothed s̈. `causal` only changes the ṡ/s̈ columns the
         // models read (the daemon's forward KF), never the label — a causal label would add the
         // lag mismatch of two different causal filters (current vs. s̈) to the target.
-        let i_f = match bw.filtfilt(&im) {
-            Ok(y) => y,
-            Err(FilterError::TooShort { .. }) => {
-                chunk_ok = false;
-                summary.short_chunks += 1;
-                im.clone()
+        let i_f = if matched {
+            matched::smoothed_current(&cfg.kalman, dt, &im)?
+        } else {
+            match bw.filtfilt(&im) {
+                Ok(y) => y,
+                Err(FilterError::TooShort { .. }) => {
+                    chunk_ok = false;
+                    summary.short_chunks += 1;
+                    im.clone()
+                }
+                Err(e) => return Err(e.into()),
             }
-            Err(e) => return Err(e.into()),
         };
         let est = kalman::smooth(&cfg.kalman, dt, &s)?;
         let feat = if cfg.causal {
@@ -497,7 +549,7 @@ fn preprocess_impl(
         } else {
             est.clone()
         };
-        // Reflected motor acceleration φ̈ (θ/r through the same smoother), only for the ablation.
+        // Reflected motor acceleration φ̈ (θ/r through the same smoother), when subtracted.
         let phi_ddot = if cfg.subtract_reflected_inertia_kgm2 != 0.0 {
             let phi: Vec<f64> = theta.iter().map(|t| t / r).collect();
             kalman::smooth(&cfg.kalman, dt, &phi)?.acc_rad_s2
@@ -522,6 +574,12 @@ fn preprocess_impl(
             ),
             None => None,
         };
+        let l = &cfg.limits;
+        let (mut tau_ids, mut tau_fs, mut within) = (
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+        );
         for k in 0..n {
             let (sk, vk, ak) = (s[k], est.vel_rad_s[k], est.acc_rad_s2[k]);
             let tau_id = match (&whole, link) {
@@ -536,12 +594,20 @@ fn preprocess_impl(
             let tau_f = r * meta.kt_nm_per_a * i_f[k]
                 - tau_id
                 - cfg.subtract_reflected_inertia_kgm2 * phi_ddot[k];
-            let l = &cfg.limits;
-            let valid = chunk_ok
-                && ak.abs() < l.joint_acc_limit_rad_s2
-                && vk.abs() < l.joint_vel_limit_rad_s
-                && i_f[k].abs() < l.im_limit_a
-                && tau_f.abs() < l.tauf_limit_nm;
+            within.push(
+                ak.abs() < l.joint_acc_limit_rad_s2
+                    && vk.abs() < l.joint_vel_limit_rad_s
+                    && i_f[k].abs() < l.im_limit_a
+                    && tau_f.abs() < l.tauf_limit_nm,
+            );
+            tau_ids.push(tau_id);
+            tau_fs.push(tau_f);
+        }
+        let within = matched::within_reach(&within, reach);
+        for k in 0..n {
+            let sk = s[k];
+            let (tau_id, tau_f) = (tau_ids[k], tau_fs[k]);
+            let valid = chunk_ok && within[k];
             ds.time_s.push(tq[k]);
             ds.chunk.push(ci as u32);
             ds.source_chunk.push(log.chunk[a + prev[k]]);

@@ -4,7 +4,8 @@
 //! (streaming) runs. The chunk split, resampler and filters are [`super::preprocess`]'s.
 
 use super::kalman;
-use super::preprocess::{PreprocessConfig, PreprocessError, interp, split_chunks};
+use super::matched;
+use super::preprocess::{LabelFilter, PreprocessConfig, PreprocessError, interp, split_chunks};
 use super::whole_body::{JointStates, WholeBody};
 use frictionless::filter::{Butterworth, FilterError};
 use frictionless_dataset::Dataset;
@@ -153,6 +154,8 @@ pub(crate) struct Labeller<'a> {
     run_chunks: Vec<u32>,
     /// Rows labelled so far (the dataset may have been drained by a streaming run).
     rows: usize,
+    /// [`matched::reach_samples`] of the smoother (0 unless the label is matched).
+    reach: usize,
 }
 
 fn missing(column: &'static str) -> PreprocessError {
@@ -301,6 +304,11 @@ impl<'a> Labeller<'a> {
             ),
             L::Given => derive("tau_f_label_nm: the given tau_f, interpolated"),
         }
+        let reach = if cfg.label_filter == LabelFilter::Matched && label.source == L::Current {
+            matched::reach_samples(&cfg.kalman, 1.0 / cfg.fs_hz)?
+        } else {
+            0
+        };
         Ok(Self {
             label: *label,
             cfg: cfg.clone(),
@@ -319,7 +327,14 @@ impl<'a> Labeller<'a> {
             offset: None,
             run_chunks: Vec::new(),
             rows: 0,
+            reach,
         })
+    }
+
+    /// The `current` label with [`LabelFilter::Matched`].
+    fn matched_current(&self) -> bool {
+        self.cfg.label_filter == LabelFilter::Matched
+            && self.label.source == frictionless_dataset::LabelSource::Current
     }
 
     /// Labels samples `a..b` of `run` on the grid `tq` and appends the rows `keep` of `tq` to the
@@ -360,7 +375,13 @@ impl<'a> Labeller<'a> {
         let theta = li(&run.theta_motor_rad);
         let omega = li(&run.omega_motor_rad_s);
         let im = li(&run.current_a);
-        let i_f = im.as_deref().map(&mut lowpass).transpose()?;
+        // The matched `current` label gives the current the smoother's response (crate::matched).
+        let i_f = match im.as_deref() {
+            Some(i) if self.matched_current() => {
+                Some(matched::smoothed_current(&cfg.kalman, dt, i)?)
+            }
+            other => other.map(&mut lowpass).transpose()?,
+        };
         let tj = li(&run.tau_joint_nm)
             .as_deref()
             .map(&mut lowpass)
@@ -412,10 +433,22 @@ impl<'a> Labeller<'a> {
             _ => f64::NAN,
         };
         let l = &cfg.limits;
-        let ds = &mut self.ds;
         debug_assert!(keep.end <= n);
-        self.rows += keep.len();
-        for k in keep {
+        // Labels and limits of every grid row (a matched label's row is valid only when its
+        // smoother window, which reaches beyond `keep`, holds no rejected row).
+        let reach = if self.matched_current() {
+            self.reach
+        } else {
+            0
+        };
+        let rows = if reach > 0 {
+            keep.start.saturating_sub(reach)..(keep.end + reach).min(n)
+        } else {
+            keep.clone()
+        };
+        let mut labels = Vec::with_capacity(rows.len());
+        let mut within = Vec::with_capacity(rows.len());
+        for k in rows.clone() {
             let sk = s.as_ref().map_or(f64::NAN, |s| s[k]);
             let (vk, ak) = (vel_nc[k], acc_nc[k]);
             let tau_id = match (self.label.source, tau_id_given, self.link) {
@@ -441,14 +474,25 @@ impl<'a> Labeller<'a> {
                 L::Given => tf.as_ref().map_or(f64::NAN, |x| x[k]),
             };
             // A limit on an absent quantity (NaN) does not reject the sample.
-            let within = |x: f64, lim: f64| x.is_nan() || x.abs() < lim;
-            let valid = chunk_ok
-                && tau_f.is_finite()
-                && vk.is_finite()
-                && within(ak, l.joint_acc_limit_rad_s2)
-                && within(vk, l.joint_vel_limit_rad_s)
-                && within(ifk, l.im_limit_a)
-                && tau_f.abs() < l.tauf_limit_nm;
+            let lim = |x: f64, lim: f64| x.is_nan() || x.abs() < lim;
+            within.push(
+                tau_f.is_finite()
+                    && vk.is_finite()
+                    && lim(ak, l.joint_acc_limit_rad_s2)
+                    && lim(vk, l.joint_vel_limit_rad_s)
+                    && lim(ifk, l.im_limit_a)
+                    && tau_f.abs() < l.tauf_limit_nm,
+            );
+            labels.push((tau_id, tau_f, ifk));
+        }
+        let within = matched::within_reach(&within, reach);
+        let ds = &mut self.ds;
+        self.rows += keep.len();
+        for k in keep {
+            let j = k - rows.start;
+            let (tau_id, tau_f, ifk) = labels[j];
+            let valid = chunk_ok && within[j];
+            let sk = s.as_ref().map_or(f64::NAN, |s| s[k]);
             let at = |x: &Option<Vec<f64>>| x.as_ref().map_or(f64::NAN, |x| x[k]);
             let thk = at(&theta);
             ds.time_s.push(tq[k]);

@@ -632,7 +632,7 @@ impl<'a> StreamLabeller<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::preprocess::{SignalsLabel, WholeBody, preprocess_joints};
+    use crate::preprocess::{LabelFilter, SignalsLabel, WholeBody, preprocess_joints};
 
     /// A two-run log of two moving leg joints: jittered sampling, chunk-id changes, a time gap, a
     /// chunk too short for the filter and a single-sample chunk, all at places that fall inside
@@ -698,7 +698,7 @@ mod tests {
         out
     }
 
-    fn joints() -> Vec<JointLabel> {
+    fn joints(label_filter: LabelFilter) -> Vec<JointLabel> {
         ["l_knee", "l_hip_pitch"]
             .iter()
             .map(|j| JointLabel {
@@ -708,7 +708,10 @@ mod tests {
                     gear_ratio_signed: Some(100.0),
                     kt_nm_per_a: Some(0.1),
                 },
-                cfg: PreprocessConfig::for_joint(j),
+                cfg: PreprocessConfig {
+                    label_filter,
+                    ..PreprocessConfig::for_joint(j)
+                },
             })
             .collect()
     }
@@ -769,13 +772,22 @@ mod tests {
 
     #[test]
     fn streamed_label_equals_the_whole_log_with_bounded_memory() {
+        streamed_equals_whole(LabelFilter::Separate);
+    }
+
+    #[test]
+    fn streamed_matched_label_equals_the_whole_log() {
+        streamed_equals_whole(LabelFilter::Matched);
+    }
+
+    fn streamed_equals_whole(label_filter: LabelFilter) {
         let body = WholeBody::new(
             frictionless_dynamics::virtual_leg().unwrap(),
             Default::default(),
         )
         .unwrap();
         let log = log();
-        let joints = joints();
+        let joints = joints(label_filter);
         let dynamics = Dynamics::WholeBody(&body);
         let runs: Vec<RunJoints<'_>> = log
             .iter()
@@ -837,10 +849,13 @@ mod tests {
         }
         let (w0, _) = &whole[0];
         assert!(w0.len() > 10 * window, "the log is long against the window");
-        assert_eq!(
-            whole[0].1.short_chunks, 2,
-            "the short chunk is in the log (both runs)"
-        );
+        // The short chunk is in the log (both runs); the matched label runs no Butterworth on it.
+        let short = if label_filter == LabelFilter::Separate {
+            2
+        } else {
+            0
+        };
+        assert_eq!(whole[0].1.short_chunks, short, "{label_filter:?}");
         assert_eq!(whole[0].1.dropped_single_sample_chunks, 2);
         // Bounded memory: one step labels at most window + margins grid samples, and the raw
         // samples held are those of one step (sampling ≥ 0.9 ms on a 1 ms grid) plus a block.
