@@ -22,7 +22,7 @@ use std::collections::BTreeMap;
 
 use frictionless_dataset::Dataset;
 use frictionless_ident::preprocess::{
-    JointStates, PreprocessConfig, PreprocessError, PreprocessSummary, WholeBody,
+    JointStates, LabelFilter, PreprocessConfig, PreprocessError, PreprocessSummary, WholeBody,
     preprocess_whole_body,
 };
 
@@ -72,6 +72,24 @@ pub fn label_config(p: &PlantParams) -> PreprocessConfig {
     cfg
 }
 
+/// Factor on the smoother's acceleration process noise of the matched leg label
+/// ([`matched_label_config`]), every joint alike (1 = the knee's
+/// [`frictionless_ident::kalman::KalmanConfig::knee`]). With the matched label the smoother's
+/// bandwidth is the whole label's; ten times the knee's process noise is the single setting that
+/// measured best over the leg's six drives (`docs/results.md`, "The whole leg end to end").
+pub const MATCHED_LABEL_Q_ACC_FACTOR: f64 = 10.0;
+
+/// The matched label's settings of a leg joint's rows: [`label_config`] with
+/// [`LabelFilter::Matched`] (the current through the smoother that gives q̈ and φ̈) and the
+/// smoother of [`MATCHED_LABEL_Q_ACC_FACTOR`] on every joint.
+pub fn matched_label_config(p: &PlantParams) -> PreprocessConfig {
+    let mut cfg = label_config(p);
+    cfg.kalman.q[2] =
+        PreprocessConfig::for_joint(&p.joint).kalman.q[2] * MATCHED_LABEL_Q_ACC_FACTOR;
+    cfg.label_filter = LabelFilter::Matched;
+    cfg
+}
+
 /// One leg joint's labels from a simultaneous acquisition (see [`label_leg`]).
 #[derive(Clone, Debug)]
 pub struct LegJointLabels {
@@ -87,6 +105,9 @@ pub struct LegJointLabels {
     pub error_full_state_nm: Option<f64>,
     /// The same for `single_joint_view` [Nm].
     pub error_single_joint_view_nm: Option<f64>,
+    /// The same errors with the matched label ([`matched_label_config`]) instead: (whole state,
+    /// single-joint view) [Nm].
+    pub error_matched_nm: (Option<f64>, Option<f64>),
     /// The label pipeline's summary of `full_state` (chunks, Δθ offset).
     pub summary: PreprocessSummary,
 }
@@ -107,8 +128,9 @@ pub fn label_error_rms_nm(ds: &Dataset) -> Option<f64> {
 
 /// Labels every joint of one simultaneous leg acquisition twice, in one pass over the joints: from
 /// the whole leg's state (every joint's logged position through `robot`, the URDF the label
-/// believes) and from the single-joint view, each with [`label_config`]. `rows[k]` are the logged
-/// rows of `leg.joints[k]`, all of one length.
+/// believes) and from the single-joint view, each with [`label_config`]; and measures both views'
+/// error with the matched label ([`matched_label_config`]) too. `rows[k]` are the logged rows of
+/// `leg.joints[k]`, all of one length.
 pub fn label_leg(
     leg: &LegParams,
     robot: &Robot,
@@ -160,10 +182,16 @@ pub fn label_leg(
             wrenches: Vec::new(),
         };
         let (single_joint_view, _) = preprocess_whole_body(&log, &meta, &single, &own, &cfg)?;
+        let m = matched_label_config(p);
+        let error_matched_nm = (
+            label_error_rms_nm(&preprocess_whole_body(&log, &meta, &whole, &state, &m)?.0),
+            label_error_rms_nm(&preprocess_whole_body(&log, &meta, &single, &own, &m)?.0),
+        );
         out.push(LegJointLabels {
             joint: p.joint.clone(),
             error_full_state_nm: label_error_rms_nm(&full_state),
             error_single_joint_view_nm: label_error_rms_nm(&single_joint_view),
+            error_matched_nm,
             full_state,
             single_joint_view,
             summary,

@@ -232,6 +232,9 @@ fn leg_demo_labels_from_the_whole_state_and_runs_six_models_in_one_frictiond() {
         if name.contains("hip") || name.contains("knee") {
             assert!(full <= 0.2 * single, "{name}: {full} vs {single}");
         }
+        // The matched label is measured beside the training labels, and is closer to the truth.
+        let matched = j["label_error_nm"]["matched_full_state"].as_f64().unwrap();
+        assert!(matched < full, "{name}: matched {matched} vs {full}");
         for model in ["none", "CV", "SCV", "LuGre", "PINN"] {
             let v = &j["models"][model]["eval"]["rmse_true_all"];
             assert!(

@@ -19,7 +19,8 @@
 //!
 //! `report.json` (`frictionless-demo-leg-v1`) keeps the default demo's per-joint keys
 //! (`joints.<name>.models.<model>.eval.rmse_true_all`, `….min_kp.kp`) and adds
-//! `joints.<name>.label_error_nm = {"full_state", "single_joint_view"}`.
+//! `joints.<name>.label_error_nm = {"full_state", "single_joint_view"}` (and the same two with the
+//! matched label, `matched_full_state` and `matched_single_joint_view`).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -98,11 +99,14 @@ struct LegJointEntry {
     files: super::JointFilesEntry,
 }
 
-/// Both label errors of one joint [Nm].
+/// Both label errors of one joint [Nm]: the training labels' (the authors' separate filters) and
+/// the matched label's (`--label-filter matched`).
 #[derive(serde::Serialize)]
 struct LabelError {
     full_state: Option<f64>,
     single_joint_view: Option<f64>,
+    matched_full_state: Option<f64>,
+    matched_single_joint_view: Option<f64>,
 }
 
 /// `report.json` `joints.JOINT.models.LABEL`.
@@ -220,6 +224,8 @@ pub(super) fn run(
                 label_error_nm: LabelError {
                     full_state: labels.error_full_state_nm,
                     single_joint_view: labels.error_single_joint_view_nm,
+                    matched_full_state: labels.error_matched_nm.0,
+                    matched_single_joint_view: labels.error_matched_nm.1,
                 },
                 models,
                 files: super::JointFilesEntry {
@@ -320,10 +326,12 @@ fn acquire_and_label(
     drop(rows);
     for l in &labels {
         eprintln!(
-            "     {:<14} label error {} Nm (whole state), {} Nm (single-joint view)",
+            "     {:<14} label error {} Nm (whole state), {} Nm (single-joint view); matched: {} / {} Nm",
             l.joint,
             opt(l.error_full_state_nm),
-            opt(l.error_single_joint_view_nm)
+            opt(l.error_single_joint_view_nm),
+            opt(l.error_matched_nm.0),
+            opt(l.error_matched_nm.1)
         );
     }
     r.stages.push(Stage {
@@ -609,12 +617,15 @@ fn report_md(
         report.network.epochs,
         report.total_seconds
     );
-    md += "**Label error against the plant's truth [Nm RMS]** (training run, valid sliding rows)\n\n| joint | whole state | single-joint view |\n|---|---|---|\n";
+    md += "**Label error against the plant's truth [Nm RMS]** (training run, valid sliding rows; the models train on the first two columns' labels)\n\n| joint | whole state | single-joint view | matched, whole state | matched, single-joint view |\n|---|---|---|---|---|\n";
     for (joint, e) in report.joints {
+        let l = &e.label_error_nm;
         md += &format!(
-            "| {joint} | {} | {} |\n",
-            opt(e.label_error_nm.full_state),
-            opt(e.label_error_nm.single_joint_view)
+            "| {joint} | {} | {} | {} | {} |\n",
+            opt(l.full_state),
+            opt(l.single_joint_view),
+            opt(l.matched_full_state),
+            opt(l.matched_single_joint_view)
         );
     }
     md += "\n**Offline: friction RMSE against the truth on the unseen run [Nm]**\n\n| joint | none | CV | SCV | LuGre | PINN |\n|---|---|---|---|---|---|\n";
