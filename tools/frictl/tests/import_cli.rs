@@ -2024,22 +2024,6 @@ fn csv_measured_wrench_enters_the_label_like_pinocchio_rnea_with_fext() {
     }
 }
 
-/// label − truth RMS on valid sliding rows of a dataset with the simulator's truth.
-fn label_error_nm(ds: &frictionless_dataset::Dataset) -> (f64, usize) {
-    let truth = ds
-        .tau_f_true_nm
-        .as_ref()
-        .expect("a simulated log has its truth");
-    let (mut e2, mut n) = (0.0, 0usize);
-    for (k, t) in truth.iter().enumerate() {
-        if ds.valid[k] && ds.sdot_rad_s[k].abs() > 0.03 {
-            e2 += (ds.tau_f_label_nm[k] - t).powi(2);
-            n += 1;
-        }
-    }
-    ((e2 / n.max(1) as f64).sqrt(), n)
-}
-
 #[test]
 fn preprocess_label_filter_matched_is_closer_to_the_truth_and_is_recorded() {
     let d = dir().join("label-filter");
@@ -2069,7 +2053,13 @@ fn preprocess_label_filter_matched_is_closer_to_the_truth_and_is_recorded() {
             args.extend(["--label-filter", f]);
         }
         ok(frictl(&args), "preprocess");
-        (label_error_nm(&dataset(out)), sidecar(out))
+        let ds = dataset(out);
+        let rows = (0..ds.len())
+            .filter(|&k| ds.valid[k] && ds.active[k] && ds.sdot_rad_s[k].abs() > 0.03)
+            .count();
+        let rms =
+            frictionless_acquire::leg::label_error_rms_nm(&ds).expect("truth and sliding rows");
+        ((rms, rows), sidecar(out))
     };
     let ((e_sep, n_sep), side_sep) = run(None, &d.join("separate.csv"));
     let ((e_mat, n_mat), side_mat) = run(Some("matched"), &d.join("matched.csv"));
