@@ -436,11 +436,7 @@ impl<'a> Labeller<'a> {
         debug_assert!(keep.end <= n);
         // Labels and limits of every grid row (a matched label's row is valid only when its
         // smoother window, which reaches beyond `keep`, holds no rejected row).
-        let reach = if self.matched_current() {
-            self.reach
-        } else {
-            0
-        };
+        let reach = self.reach;
         let rows = if reach > 0 {
             keep.start.saturating_sub(reach)..(keep.end + reach).min(n)
         } else {
