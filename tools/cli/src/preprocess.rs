@@ -1,7 +1,7 @@
 //! Arguments of `frictl preprocess`.
 
 use frictionless_ident::kalman::KalmanConfig;
-use frictionless_ident::preprocess::{LabelFilter, PreprocessConfig};
+use frictionless_ident::preprocess::{LabelFilter, PreprocessConfig, Ripple};
 use std::path::PathBuf;
 
 /// Source of the link dynamics for τ_ID.
@@ -59,6 +59,18 @@ pub struct PipelineArgs {
     /// label; a row whose smoother window holds a rejected sample is rejected too).
     #[arg(long, default_value = "separate", value_parser = label_filter_parser())]
     pub label_filter: LabelFilter,
+    /// The matched label's ripple step: `off`, or `wave-generator` (identify the drive's friction
+    /// ripple at twice the motor angle from the log and add back what the smoother removed of it;
+    /// needs `--label-filter matched`, the motor position and the whole log in memory).
+    #[arg(long, default_value = "off", value_parser = ripple_parser())]
+    pub ripple: Ripple,
+}
+
+/// `--ripple`'s parser: the names of [`Ripple::ALL`].
+fn ripple_parser() -> impl clap::builder::TypedValueParser<Value = Ripple> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(Ripple::ALL.map(Ripple::name))
+        .try_map(|name| Ripple::parse(&name).ok_or(format!("unknown ripple step {name:?}")))
 }
 
 /// `--label-filter`'s parser: the names of [`LabelFilter::ALL`].
@@ -89,6 +101,7 @@ impl PipelineArgs {
             cfg.limits.tauf_limit_nm = v;
         }
         cfg.label_filter = self.label_filter;
+        cfg.ripple = self.ripple;
     }
 }
 

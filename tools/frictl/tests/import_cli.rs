@@ -2094,3 +2094,79 @@ fn preprocess_label_filter_matched_is_closer_to_the_truth_and_is_recorded() {
     );
     assert!(!d.join("bad.csv").exists());
 }
+
+/// `--ripple wave-generator` on a simulated knee log (the preset's friction ripple e₁ at twice the
+/// motor angle): the identified amplitude is the plant's e₁·f_c0 within 30 %, the label gets closer
+/// to the truth than the matched label alone, and the sidecar records the setting and the fit.
+/// Without the matched label, or with an unknown step, nothing is written.
+#[test]
+fn preprocess_ripple_wave_generator_identifies_the_plant_ripple() {
+    let d = dir().join("ripple");
+    std::fs::create_dir_all(&d).unwrap();
+    ok(
+        frictl(&crate::util::small_acquire_args(
+            "knee",
+            "4",
+            &d,
+            "knee",
+            &[],
+        )),
+        "acquire",
+    );
+    let log = d.join("knee.csv");
+    let run = |extra: &[&str], out: &Path| {
+        let mut args = vec![
+            "preprocess",
+            s(&log),
+            "--out",
+            s(out),
+            "--subtract-reflected-inertia",
+            "sidecar",
+            "--label-filter",
+            "matched",
+        ];
+        args.extend(extra);
+        ok(frictl(&args), "preprocess");
+        let ds = dataset(out);
+        let rms =
+            frictionless_acquire::leg::label_error_rms_nm(&ds).expect("truth and sliding rows");
+        (rms, sidecar(out))
+    };
+    let (e_mat, side_mat) = run(&[], &d.join("matched.csv"));
+    let (e_rip, side_rip) = run(&["--ripple", "wave-generator"], &d.join("ripple.csv"));
+    assert_eq!(side_mat["settings"]["ripple"], "off");
+    assert_eq!(side_rip["settings"]["ripple"], "wave-generator");
+    let fit = &side_rip["settings"]["ripple_fit"];
+    let (a, b) = (
+        fit["sin_nm"].as_f64().unwrap(),
+        fit["cos_nm"].as_f64().unwrap(),
+    );
+    let plant = &sidecar(&log)["plant"];
+    let expected = plant["e1"].as_f64().unwrap() * plant["f_c0_nm"].as_f64().unwrap();
+    eprintln!(
+        "ripple amplitude {:.3} Nm (plant e1·f_c0 {expected:.3} Nm); label − truth RMS: matched \
+         {e_mat:.3} Nm, with the ripple step {e_rip:.3} Nm",
+        a.hypot(b)
+    );
+    assert_eq!(fit["applied"], true, "{fit}");
+    assert!(
+        (a.hypot(b) / expected - 1.0).abs() < 0.3,
+        "amplitude {} vs {expected}",
+        a.hypot(b)
+    );
+    assert!(e_rip < 0.95 * e_mat, "{e_rip} vs {e_mat}");
+    for (extra, needle) in [
+        (&["--ripple", "wave-generator"][..], "matched"),
+        (
+            &["--label-filter", "matched", "--ripple", "gears"][..],
+            "off, wave-generator",
+        ),
+    ] {
+        let out = d.join("bad.csv");
+        let mut args = vec!["preprocess", s(&log), "--out", s(&out)];
+        args.extend(extra);
+        let e = err_text(frictl(&args), "a refused ripple setting");
+        assert!(e.contains(needle), "{e}");
+        assert!(!out.exists());
+    }
+}

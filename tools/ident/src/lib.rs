@@ -14,6 +14,8 @@
 //! - [`stream`]: the same pipeline on a log read in blocks (windows with margins derived from the
 //!   smoother and filter settings; the rows equal the whole-log result);
 //! - [`matched`]: the matched `current` label (every term at the sample rate, then one filter);
+//! - [`ripple`]: the wave generator's friction ripple (twice the motor angle), identified from the
+//!   log and added back to the matched label where its smoother removed it;
 //! - [`whole_body`]: τ_ID = RNEA(q, q̇, q̈) on the whole URDF from every joint a log has, for the
 //!   `current` label;
 //! - [`fit`]: least-squares fits of the static CV and SCV friction models to a dataset (`frictl fit`).
@@ -57,6 +59,7 @@ pub mod fit;
 pub mod kalman;
 pub mod matched;
 pub mod preprocess;
+pub mod ripple;
 mod signals;
 pub mod stream;
 pub mod whole_body;

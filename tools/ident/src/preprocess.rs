@@ -25,6 +25,9 @@
 //! Butterworth on the current, the smoother on the positions) or `matched` ([`crate::matched`]: the
 //! current through the smoother's own acceleration response, so that a step of the current, which
 //! steps the accelerations with it, leaves no spike in the label).
+//! `ripple` ([`Ripple`], `--ripple`): with the matched label, `wave-generator` identifies the
+//! drive's friction ripple at twice the motor angle and adds back what the smoother removed of it
+//! ([`crate::ripple`]; the log is labelled a second time for the fit).
 //! Kalman tuning: the authors' knee P/Q/R are the default; `--kalman-q/-r` changes it. The measured
 //! label errors behind these choices are in `docs/decisions.md` ("Identification").
 //! Link model: `frictl preprocess --link auto` (default) uses the simulator's own link model when the
@@ -102,6 +105,9 @@ pub enum PreprocessError {
     /// Dataset I/O.
     #[error(transparent)]
     Dataset(#[from] frictionless_dataset::DatasetError),
+    /// Settings that cannot work together, or a step the log lacks a signal for.
+    #[error("preprocess settings: {0}")]
+    Settings(String),
 }
 
 /// Per-sample limits (samples beyond any limit get `valid = 0`). Authors' defaults: 10 rad/s²,
@@ -156,6 +162,40 @@ pub struct PreprocessConfig {
     /// [`LabelFilter::Separate`]).
     #[serde(default)]
     pub label_filter: LabelFilter,
+    /// Whether the matched label gets the wave generator's friction ripple back
+    /// ([`crate::ripple`]; default off).
+    #[serde(default)]
+    pub ripple: Ripple,
+}
+
+/// The ripple step of the matched `current` label ([`crate::ripple`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Ripple {
+    /// No ripple step.
+    #[default]
+    Off,
+    /// Identify the friction ripple at twice the motor angle and add back what the smoother
+    /// removed of it (needs the motor position and the matched label).
+    WaveGenerator,
+}
+
+impl Ripple {
+    /// Every setting, in the order of [`Self::name`]'s documentation.
+    pub const ALL: [Self; 2] = [Self::Off, Self::WaveGenerator];
+
+    /// The name on the command line and in files (`off`, `wave-generator`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Off => "off",
+            Self::WaveGenerator => "wave-generator",
+        }
+    }
+
+    /// Parses [`Self::name`].
+    pub fn parse(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|f| f.name() == name)
+    }
 }
 
 /// How the current of the `current` label τ_F = r·k_t·i − J·φ̈ − τ_ID(q, q̇, q̈) is filtered.
@@ -203,6 +243,7 @@ impl PreprocessConfig {
             limits: SampleLimits::for_joint(joint),
             subtract_reflected_inertia_kgm2: 0.0,
             label_filter: LabelFilter::Separate,
+            ripple: Ripple::Off,
         }
     }
 
@@ -226,6 +267,14 @@ impl PreprocessConfig {
                 self.subtract_reflected_inertia_kgm2,
                 "finite",
             );
+        }
+        if self.ripple != Ripple::Off && self.label_filter != LabelFilter::Matched {
+            return Err(PreprocessError::Settings(format!(
+                "ripple {} needs the matched label (label filter `matched`, not `{}`): only there \
+                 does every term of the label see the smoother whose loss the step adds back",
+                self.ripple.name(),
+                self.label_filter.name()
+            )));
         }
         Ok(())
     }
@@ -362,6 +411,8 @@ pub struct PreprocessSummary {
     pub short_chunks: usize,
     /// Δθ offset r·s₀ − θ₀ [motor rad].
     pub delta_theta_offset_motor_rad: f64,
+    /// The ripple step's fit ([`Ripple::WaveGenerator`]; `None`: off, or too few rows to fit).
+    pub ripple: Option<crate::ripple::RippleFit>,
 }
 
 /// Splits sample indices into `[start, end)` ranges at chunk-id changes and gaps > `gap_s`.
@@ -437,7 +488,30 @@ pub fn preprocess_whole_body(
     preprocess_impl(log, meta, Dynamics::WholeBody(body), Some(state), cfg)
 }
 
+/// The label, then the ripple step when `cfg` asks for it (the log labelled a second time with the
+/// fit's settings, [`crate::ripple::correct`]).
 fn preprocess_impl(
+    log: &RawLog,
+    meta: &LogMeta,
+    dynamics: Dynamics<'_>,
+    state: Option<&JointStates>,
+    cfg: &PreprocessConfig,
+) -> Result<(Dataset, PreprocessSummary), PreprocessError> {
+    let (mut ds, mut summary) = label_log(log, meta, dynamics, state, cfg)?;
+    if cfg.ripple == Ripple::WaveGenerator {
+        let (wide, _) = label_log(
+            log,
+            meta,
+            dynamics,
+            state,
+            &crate::ripple::fit_settings(cfg),
+        )?;
+        summary.ripple = crate::ripple::correct(&mut ds, &wide, cfg)?;
+    }
+    Ok((ds, summary))
+}
+
+fn label_log(
     log: &RawLog,
     meta: &LogMeta,
     dynamics: Dynamics<'_>,

@@ -5,7 +5,9 @@
 
 use super::kalman;
 use super::matched;
-use super::preprocess::{LabelFilter, PreprocessConfig, PreprocessError, interp, split_chunks};
+use super::preprocess::{
+    LabelFilter, PreprocessConfig, PreprocessError, Ripple, interp, split_chunks,
+};
 use super::whole_body::{JointStates, WholeBody};
 use frictionless::filter::{Butterworth, FilterError};
 use frictionless_dataset::Dataset;
@@ -80,6 +82,9 @@ pub struct SignalsSummary {
     pub absent_columns: Vec<&'static str>,
     /// How each derived quantity was obtained (e.g. `sdot_rad_s: Kalman smoother on s`).
     pub derivations: Vec<String>,
+    /// The ripple step's fit ([`crate::preprocess::Ripple::WaveGenerator`]; `None`: off, or too
+    /// few rows to fit).
+    pub ripple: Option<crate::ripple::RippleFit>,
 }
 
 fn all_or_none<'r>(
@@ -266,6 +271,18 @@ impl<'a> Labeller<'a> {
                 None
             }
         };
+        if cfg.ripple == Ripple::WaveGenerator {
+            if label.source != L::Current {
+                return Err(PreprocessError::Settings(format!(
+                    "ripple {} corrects the `current` label, not the {:?} label",
+                    cfg.ripple.name(),
+                    label.source
+                )));
+            }
+            if !has_theta {
+                return Err(missing("theta (the ripple step's angle is the motor's)"));
+            }
+        }
         let r_dtheta = if has_s && has_theta {
             Some(need_r(
                 "finite and non-zero (delta theta = r*s - theta needs the gear ratio)",
@@ -598,7 +615,46 @@ pub fn preprocess_signals(
 /// The pipeline of [`preprocess_signals`] for several joints of one log in one pass: the runs' chunks
 /// and grids are shared, and with [`Dynamics::WholeBody`] one RNEA per grid sample gives τ_ID of every
 /// labelled joint (each run needs its [`RunJoints::state`]). One dataset per joint, in `joints` order.
+/// A joint whose settings ask for the ripple step gets it ([`crate::ripple::correct`]; the joints
+/// are labelled a second time with the fit's settings).
 pub fn preprocess_joints(
+    runs: &[RunJoints<'_>],
+    joints: &[JointLabel],
+    dynamics: Dynamics<'_>,
+) -> Result<Vec<(Dataset, SignalsSummary)>, PreprocessError> {
+    let mut out = label_joints(runs, joints, dynamics)?;
+    if joints.iter().any(|j| j.cfg.ripple == Ripple::WaveGenerator) {
+        let wide_joints: Vec<JointLabel> = joints
+            .iter()
+            .map(|j| JointLabel {
+                cfg: crate::ripple::fit_settings(&j.cfg),
+                ..j.clone()
+            })
+            .collect();
+        let wide = label_joints(runs, &wide_joints, dynamics)?;
+        for ((jl, (ds, sum)), (w, _)) in joints.iter().zip(&mut out).zip(&wide) {
+            if jl.cfg.ripple != Ripple::WaveGenerator {
+                continue;
+            }
+            sum.ripple = crate::ripple::correct(ds, w, &jl.cfg).map_err(|e| match e {
+                PreprocessError::Settings(m) => {
+                    PreprocessError::Settings(format!("joint `{}`: {m}", jl.joint))
+                }
+                e => e,
+            })?;
+            sum.derivations.push(sum.ripple.map_or_else(
+                || {
+                    "tau_f_label_nm: wave-generator ripple not identified (too few sliding rows)"
+                        .into()
+                },
+                |r| r.describe(),
+            ));
+        }
+    }
+    Ok(out)
+}
+
+fn label_joints(
     runs: &[RunJoints<'_>],
     joints: &[JointLabel],
     dynamics: Dynamics<'_>,

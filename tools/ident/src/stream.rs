@@ -6,6 +6,8 @@
 //! kept. The rows of every joint are taken as they come ([`StreamLabeller::take_rows`]) and equal
 //! the whole-log result to rounding (the margins are set for a relative 1e-13).
 //!
+//! The ripple step ([`crate::ripple`]) is refused here: it fits the whole log at once.
+//!
 //! Memory: the raw samples from the current window's lead margin on, at most `window + lead +
 //! trail` grid samples per labelling step, plus the block being pushed ([`StreamStats`] records
 //! the largest counts).
@@ -212,6 +214,14 @@ impl<'a> StreamLabeller<'a> {
         let (mut lead, mut trail) = (0, 0);
         for jl in joints {
             jl.cfg.validate()?;
+            if jl.cfg.ripple != crate::preprocess::Ripple::Off {
+                return Err(PreprocessError::Settings(format!(
+                    "joint `{}`: ripple {} fits the whole log at once and cannot run windowed; \
+                     label without the window (the whole log in memory) or without the ripple step",
+                    jl.joint,
+                    jl.cfg.ripple.name()
+                )));
+            }
             let (l, t) = margins(&jl.cfg)?;
             lead = lead.max(l);
             trail = trail.max(t);
@@ -778,6 +788,23 @@ mod tests {
     #[test]
     fn streamed_matched_label_equals_the_whole_log() {
         streamed_equals_whole(LabelFilter::Matched);
+    }
+
+    /// The ripple step fits the whole log: a windowed run refuses it before reading anything.
+    #[test]
+    fn the_ripple_step_is_refused_windowed() {
+        let body = WholeBody::new(
+            frictionless_dynamics::virtual_leg().unwrap(),
+            Default::default(),
+        )
+        .unwrap();
+        let mut joints = joints(LabelFilter::Matched);
+        joints[1].cfg.ripple = crate::preprocess::Ripple::WaveGenerator;
+        let e = StreamLabeller::new(&joints, Dynamics::WholeBody(&body), 4096)
+            .err()
+            .expect("refused")
+            .to_string();
+        assert!(e.contains("l_hip_pitch") && e.contains("whole log"), "{e}");
     }
 
     fn streamed_equals_whole(label_filter: LabelFilter) {

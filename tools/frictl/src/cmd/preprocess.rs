@@ -181,6 +181,10 @@ fn write_settings(
     summary: frictionless_ident::preprocess::PreprocessSummary,
     started: std::time::Instant,
 ) -> anyhow::Result<()> {
+    let mut settings = settings;
+    if let (Some(r), Some(map)) = (summary.ripple, settings.as_object_mut()) {
+        map.insert("ripple_fit".into(), serde_json::to_value(r)?);
+    }
     write_dataset(
         &args.out,
         &ds,
@@ -203,6 +207,11 @@ fn write_settings(
         started.elapsed().as_secs_f64(),
         args.out.display()
     );
+    match (cfg.ripple, summary.ripple) {
+        (frictionless_ident::preprocess::Ripple::Off, _) => {}
+        (_, Some(r)) => msg += &format!("\n  {}", r.describe()),
+        (_, None) => msg += "\n  wave-generator ripple not identified: too few sliding rows",
+    }
     if let Some(t) = &ds.tau_f_true_nm {
         let (mut e2, mut n) = (0.0, 0usize);
         for (k, truth) in t.iter().enumerate() {
