@@ -581,6 +581,102 @@ pub fn run_leg_suite(cfg: &LegSuiteConfig) -> Result<LegSuiteReport, ExperimentE
     Ok(report)
 }
 
+/// One on-policy run of the leg ([`record_leg`]): tested joint `joint` (an index into
+/// [`LegSuiteConfig::joints`]) tracks `reference` at `kp_per_s2` while the rest holds.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct LegRecordPlan {
+    /// Index into [`LegSuiteConfig::joints`].
+    pub joint: usize,
+    /// Reference of the tested joint.
+    pub reference: Reference,
+    /// K_p of the tested joint [1/s²].
+    pub kp_per_s2: f64,
+    /// Duration [s].
+    pub duration_s: f64,
+}
+
+/// The on-policy sines of tested joint `joint` around `kp_per_s2`: the first `runs` (at most four)
+/// of [`super::onpolicy::SINE_VARIATIONS`] on its test sine, `periods` periods each.
+pub fn leg_record_plans(
+    cfg: &LegSuiteConfig,
+    joint: usize,
+    kp_per_s2: f64,
+    runs: usize,
+    periods: f64,
+) -> Vec<LegRecordPlan> {
+    let Some(tj) = cfg.joints.get(joint) else {
+        return vec![];
+    };
+    let Reference::Sine {
+        centre_rad,
+        amplitude_rad,
+        freq_hz,
+    } = tj.sine
+    else {
+        return vec![];
+    };
+    super::onpolicy::SINE_VARIATIONS
+        .iter()
+        .take(runs)
+        .map(|&(a, f, k)| LegRecordPlan {
+            joint,
+            reference: Reference::Sine {
+                centre_rad,
+                amplitude_rad: amplitude_rad * a,
+                freq_hz: freq_hz * f,
+            },
+            kp_per_s2: kp_per_s2 * k,
+            duration_s: periods / (freq_hz * f),
+        })
+        .collect()
+}
+
+/// Runs every plan with `cfg.models[model]` compensating (the rest of the leg holding, as in
+/// [`run_leg_suite`]); returns every leg joint's trace per plan, in plan order.
+pub fn record_leg(
+    cfg: &LegSuiteConfig,
+    model: usize,
+    plans: &[LegRecordPlan],
+) -> Result<Vec<Vec<JointTrace>>, ExperimentError> {
+    super::session::install_signal_flag()?;
+    let leg = LegSetup::load(&cfg.sets)?;
+    if model >= cfg.models.len() {
+        return Err(ExperimentError::JointIndex(model));
+    }
+    let trials: Vec<LegTrial> = plans
+        .iter()
+        .map(|p| {
+            let name = &cfg
+                .joints
+                .get(p.joint)
+                .ok_or(ExperimentError::JointIndex(p.joint))?
+                .name;
+            Ok(LegTrial {
+                tested: leg.index(name)?,
+                model,
+                kp_per_s2: p.kp_per_s2,
+                reference: p.reference,
+                pulse: None,
+                duration_s: p.duration_s,
+            })
+        })
+        .collect::<Result<_, ExperimentError>>()?;
+    let results = run_parallel(cfg.jobs.max(1), &trials, |t| run_one(cfg, &leg, t));
+    // The first failure is the error; runs after it did not start.
+    let mut out = Vec::with_capacity(results.len());
+    let mut skipped = false;
+    for r in results {
+        match r {
+            Some(r) => out.push(r?),
+            None => skipped = true,
+        }
+    }
+    if skipped {
+        return Err(ExperimentError::Interrupted);
+    }
+    Ok(out)
+}
+
 impl LegSuiteReport {
     /// A Markdown table: one row per (joint, model) with the minimum K_p and the disturbance metrics.
     pub fn markdown(&self) -> String {
@@ -629,6 +725,44 @@ mod tests {
             "[[joint]]\nname = \"{name}\"\nindex = {index}\ngear_ratio = 100.0\nkt = 0.1\n\
              max_curr = 5.0\n{model}\n"
         )
+    }
+
+    /// The on-policy sines vary the test sine's amplitude, frequency and gain, none is the test
+    /// sine itself, and each lasts the asked periods.
+    #[test]
+    fn leg_record_plans_vary_the_test_sine_around_the_gain() {
+        let cfg = LegSuiteConfig::paper(
+            Binaries {
+                frictl: "frictl".into(),
+                frictiond: "frictiond".into(),
+            },
+            vec![],
+        );
+        let Reference::Sine {
+            centre_rad,
+            amplitude_rad,
+            freq_hz,
+        } = cfg.joints[0].sine
+        else {
+            panic!("the knee's test reference is a sine")
+        };
+        let plans = leg_record_plans(&cfg, 0, 400.0, 6, 3.0);
+        assert_eq!(plans.len(), 4, "{plans:?}");
+        for p in &plans {
+            let Reference::Sine {
+                centre_rad: c,
+                amplitude_rad: a,
+                freq_hz: f,
+            } = p.reference
+            else {
+                panic!("{p:?}")
+            };
+            assert_eq!((p.joint, c), (0, centre_rad));
+            assert!(a != amplitude_rad || f != freq_hz, "{p:?}");
+            assert!((p.duration_s * f - 3.0).abs() < 1e-9, "{p:?}");
+            assert!((280.0..=800.0).contains(&p.kp_per_s2), "{p:?}");
+        }
+        assert!(leg_record_plans(&cfg, 5, 400.0, 4, 3.0).is_empty());
     }
 
     #[test]

@@ -65,6 +65,15 @@ pub struct RecordPlan {
     pub duration_s: f64,
 }
 
+/// The on-policy sines, as (amplitude, frequency, K_p) factors on the experiments' test sine and the
+/// given gain: none of them is the test sine.
+pub const SINE_VARIATIONS: [(f64, f64, f64); 4] = [
+    (0.6, 1.5, 1.0),
+    (1.3, 0.7, 0.7),
+    (1.0, 1.25, 1.5),
+    (0.8, 0.9, 2.0),
+];
+
 /// The varied runs of joint `index` around `kp_per_s2` (`runs` of them, at most 6: four sines,
 /// then a positive and a negative pulse; `periods` sine periods each). None of them is the
 /// experiments' test sine: the amplitudes are 0.6–1.3× and the frequencies 0.7–1.5× its own.
@@ -77,15 +86,8 @@ pub fn plans(index: usize, kp_per_s2: f64, runs: usize, periods: f64) -> Vec<Rec
         } => (centre_rad, amplitude_rad, freq_hz),
         Reference::Hold { s_rad } => (s_rad, 0.0, 1.0),
     };
-    // (amplitude factor, frequency factor, gain factor)
-    const SINES: [(f64, f64, f64); 4] = [
-        (0.6, 1.5, 1.0),
-        (1.3, 0.7, 0.7),
-        (1.0, 1.25, 1.5),
-        (0.8, 0.9, 2.0),
-    ];
     let pulse_nm = if index == 0 { 15.0 } else { 5.0 };
-    let mut out: Vec<RecordPlan> = SINES
+    let mut out: Vec<RecordPlan> = SINE_VARIATIONS
         .iter()
         .map(|&(a, f, k)| RecordPlan {
             index,
