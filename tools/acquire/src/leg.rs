@@ -22,8 +22,8 @@ use std::collections::BTreeMap;
 
 use frictionless_dataset::Dataset;
 use frictionless_ident::preprocess::{
-    JointStates, LabelFilter, PreprocessConfig, PreprocessError, PreprocessSummary, WholeBody,
-    preprocess_whole_body,
+    JointStates, LabelFilter, PreprocessConfig, PreprocessError, PreprocessSummary, Ripple,
+    WholeBody, preprocess_whole_body,
 };
 
 use crate::config::ProtocolConfig;
@@ -43,7 +43,8 @@ pub enum LegAcquireError {
     Run(#[from] AcquireError),
 }
 
-/// Factor on the label smoother's acceleration process noise for a leg joint (1 = the knee's
+/// Factor on the smoother's acceleration process noise of the authors' separate-filter label
+/// ([`separate_label_config`]) for a leg joint (1 = the knee's
 /// [`frictionless_ident::kalman::KalmanConfig::knee`]).
 ///
 /// The hip yaw's drive (small reflected rotor inertia, CSD-20) rings in its torsional mode when
@@ -51,7 +52,7 @@ pub enum LegAcquireError {
 /// motion and the friction label misses the friction's sign changes. A 100× process noise lets the
 /// smoother follow it. The ankles are the end of the chain: their floor is the smoother's lag, which
 /// a 1000× process noise lowers. The hips' pitch and roll and the knee keep the knee's smoother.
-pub fn label_kalman_q_acc_factor(joint: &str) -> f64 {
+pub fn separate_kalman_q_acc_factor(joint: &str) -> f64 {
     if joint.contains("hip_yaw") {
         100.0
     } else if joint.contains("ankle") {
@@ -61,32 +62,34 @@ pub fn label_kalman_q_acc_factor(joint: &str) -> f64 {
     }
 }
 
-/// The label settings of a leg joint's rows: [`PreprocessConfig::for_joint`] with the smoother of
-/// [`label_kalman_q_acc_factor`] and the reflected rotor inertia J_eq·φ̂̈ subtracted (the leg's
-/// plant keeps the rotor on the motor side of the flexspline, so the link-side τ_ID holds no
-/// armature).
-pub fn label_config(p: &PlantParams) -> PreprocessConfig {
+/// The authors' separate-filter label of a leg joint's rows, the comparison:
+/// [`PreprocessConfig::for_joint`] (the current through the zero-phase Butterworth) with the
+/// smoother of [`separate_kalman_q_acc_factor`] and the reflected rotor inertia J_eq·φ̂̈
+/// subtracted (the leg's plant keeps the rotor on the motor side of the flexspline, so the
+/// link-side τ_ID holds no armature).
+pub fn separate_label_config(p: &PlantParams) -> PreprocessConfig {
     let mut cfg = PreprocessConfig::for_joint(&p.joint);
-    cfg.kalman.q[2] *= label_kalman_q_acc_factor(&p.joint);
+    cfg.kalman.q[2] *= separate_kalman_q_acc_factor(&p.joint);
     cfg.subtract_reflected_inertia_kgm2 = p.j_eq_kgm2();
     cfg
 }
 
-/// Factor on the smoother's acceleration process noise of the matched leg label
-/// ([`matched_label_config`]), every joint alike (1 = the knee's
-/// [`frictionless_ident::kalman::KalmanConfig::knee`]). With the matched label the smoother's
-/// bandwidth is the whole label's; ten times the knee's process noise is the single setting that
-/// measured best over the leg's six drives (`docs/results.md`, "The whole leg end to end").
-pub const MATCHED_LABEL_Q_ACC_FACTOR: f64 = 10.0;
+/// Factor on the smoother's acceleration process noise of the leg's label ([`label_config`]),
+/// every joint alike (1 = the knee's [`frictionless_ident::kalman::KalmanConfig::knee`]). With the
+/// matched label the smoother's bandwidth is the whole label's; ten times the knee's process
+/// noise is the single setting that measured best over the leg's six drives and several
+/// protocols (`docs/results.md`, "The whole leg end to end").
+pub const LABEL_Q_ACC_FACTOR: f64 = 10.0;
 
-/// The matched label's settings of a leg joint's rows: [`label_config`] with
-/// [`LabelFilter::Matched`] (the current through the smoother that gives q̈ and φ̈) and the
-/// smoother of [`MATCHED_LABEL_Q_ACC_FACTOR`] on every joint.
-pub fn matched_label_config(p: &PlantParams) -> PreprocessConfig {
-    let mut cfg = label_config(p);
-    cfg.kalman.q[2] =
-        PreprocessConfig::for_joint(&p.joint).kalman.q[2] * MATCHED_LABEL_Q_ACC_FACTOR;
+/// The label of a leg joint's rows: [`LabelFilter::Matched`] (the current through the smoother
+/// that gives q̈ and φ̈) with the smoother of [`LABEL_Q_ACC_FACTOR`], the wave generator's ripple
+/// step ([`Ripple::WaveGenerator`]) and the reflected rotor inertia J_eq·φ̂̈ subtracted.
+pub fn label_config(p: &PlantParams) -> PreprocessConfig {
+    let mut cfg = PreprocessConfig::for_joint(&p.joint);
+    cfg.kalman.q[2] *= LABEL_Q_ACC_FACTOR;
+    cfg.subtract_reflected_inertia_kgm2 = p.j_eq_kgm2();
     cfg.label_filter = LabelFilter::Matched;
+    cfg.ripple = Ripple::WaveGenerator;
     cfg
 }
 
@@ -105,9 +108,9 @@ pub struct LegJointLabels {
     pub error_full_state_nm: Option<f64>,
     /// The same for `single_joint_view` [Nm].
     pub error_single_joint_view_nm: Option<f64>,
-    /// The same errors with the matched label ([`matched_label_config`]) instead: (whole state,
-    /// single-joint view) [Nm].
-    pub error_matched_nm: (Option<f64>, Option<f64>),
+    /// The same errors with the authors' separate filters ([`separate_label_config`]) instead:
+    /// (whole state, single-joint view) [Nm].
+    pub error_separate_nm: (Option<f64>, Option<f64>),
     /// The label pipeline's summary of `full_state` (chunks, Δθ offset).
     pub summary: PreprocessSummary,
 }
@@ -129,7 +132,7 @@ pub fn label_error_rms_nm(ds: &Dataset) -> Option<f64> {
 /// Labels every joint of one simultaneous leg acquisition twice, in one pass over the joints: from
 /// the whole leg's state (every joint's logged position through `robot`, the URDF the label
 /// believes) and from the single-joint view, each with [`label_config`]; and measures both views'
-/// error with the matched label ([`matched_label_config`]) too. `rows[k]` are the logged rows of
+/// error with the authors' separate filters ([`separate_label_config`]) too. `rows[k]` are the logged rows of
 /// `leg.joints[k]`, all of one length.
 pub fn label_leg(
     leg: &LegParams,
@@ -182,8 +185,8 @@ pub fn label_leg(
             wrenches: Vec::new(),
         };
         let (single_joint_view, _) = preprocess_whole_body(&log, &meta, &single, &own, &cfg)?;
-        let m = matched_label_config(p);
-        let error_matched_nm = (
+        let m = separate_label_config(p);
+        let error_separate_nm = (
             label_error_rms_nm(&preprocess_whole_body(&log, &meta, &whole, &state, &m)?.0),
             label_error_rms_nm(&preprocess_whole_body(&log, &meta, &single, &own, &m)?.0),
         );
@@ -191,7 +194,7 @@ pub fn label_leg(
             joint: p.joint.clone(),
             error_full_state_nm: label_error_rms_nm(&full_state),
             error_single_joint_view_nm: label_error_rms_nm(&single_joint_view),
-            error_matched_nm,
+            error_separate_nm,
             full_state,
             single_joint_view,
             summary,

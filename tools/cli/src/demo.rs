@@ -36,7 +36,9 @@ pub struct Args {
     /// `--full` 2; 0 = train on the open-loop protocol only). Each round finds the current PINN's
     /// minimum K_p, records varied closed-loop runs with it compensating through the real processes
     /// (`frictl experiment record`), labels them (`frictl preprocess`) and continues training from
-    /// the current model on the union of every dataset so far (`frictl train --init`).
+    /// the current model on the union of every dataset so far (`frictl train --init`). With
+    /// `--robot leg` the rounds run on the coupled leg (the knee and the ankle roll tested, the rest
+    /// holding; labels from the whole leg's state).
     #[arg(long)]
     pub onpolicy_rounds: Option<u32>,
     /// Distil each joint's final PINN into a small student (the pipeline's distillation stage: a

@@ -601,12 +601,9 @@ pub fn run(args: Args, host: &dyn Host) -> anyhow::Result<()> {
     }
     if args.robot == RobotSel::Leg {
         anyhow::ensure!(
-            !args.causal
-                && !args.with_rotor_inertia
-                && !args.distill
-                && args.onpolicy_rounds.is_none(),
-            "--causal, --with-rotor-inertia, --distill and --onpolicy-rounds are options of the \
-             two-joint demo; --robot leg labels with the leg's own settings (demo::leg)"
+            !args.causal && !args.with_rotor_inertia && !args.distill,
+            "--causal, --with-rotor-inertia and --distill are options of the two-joint demo; \
+             --robot leg labels with the leg's own settings (demo::leg)"
         );
     }
     install_signal_flag()?;

@@ -9,18 +9,24 @@
 //!    single-joint view (the other joints held at their mean positions). Each joint's label error
 //!    against the plant's truth is the report's `label_error_nm`.
 //! 3. **Fit** CV, SCV and LuGre, **train** the PINN (SCV prior) and **evaluate** every model on the
-//!    unseen run, per joint, through the real `frictl fit|train|eval` stages.
+//!    unseen run, per joint, through the real `frictl fit|train|eval` stages (the PINN as it is
+//!    after step 5).
 //! 4. **One frictiond config for the six joints** per compensation (`models/frictiond.toml` with the
 //!    PINNs, `frictiond_scv.toml`, `frictiond_cv.toml`), each read back through `frictiond-config`.
-//! 5. **Closed loop** (`frictionless_experiment::leg::run_leg_suite`): one frictiond with six
+//! 5. **On-policy rounds** (`--onpolicy-rounds`, default 1; DAgger as in the two-joint demo): the
+//!    PINNs' minimum K_p on the knee and the ankle roll, closed-loop runs around it with them
+//!    compensating, the tested joint's rows labelled from the whole leg's state and its training
+//!    continued on the union (`--init`).
+//! 6. **Closed loop** (`frictionless_experiment::leg::run_leg_suite`): one frictiond with six
 //!    models against the leg in lockstep under the whole-leg computed-torque controller; minimum K_p
 //!    and a disturbance trial on the knee and the ankle roll while the rest of the leg holds, for
 //!    none, CV, SCV, PINN and the oracle.
 //!
 //! `report.json` (`frictionless-demo-leg-v1`) keeps the default demo's per-joint keys
 //! (`joints.<name>.models.<model>.eval.rmse_true_all`, `….min_kp.kp`) and adds
-//! `joints.<name>.label_error_nm = {"full_state", "single_joint_view"}` (and the same two with the
-//! matched label, `matched_full_state` and `matched_single_joint_view`).
+//! `joints.<name>.label_error_nm = {"full_state", "single_joint_view"}` of the training label (matched,
+//! with the wave generator's ripple step: `label_config`) and the same two with the authors'
+//! separate filters, `separate_full_state` and `separate_single_joint_view`.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -85,6 +91,8 @@ struct LegReport<'a> {
     joints: &'a BTreeMap<String, LegJointEntry>,
     /// The closed-loop suite's own report (`None` with `--no-experiments`).
     closed_loop: Option<&'a frictionless_experiment::leg::LegSuiteReport>,
+    /// The on-policy rounds (`--onpolicy-rounds`; none with `--no-experiments`).
+    onpolicy_rounds: &'a [LegRound],
     stages: &'a [Stage],
     total_seconds: f64,
 }
@@ -99,14 +107,14 @@ struct LegJointEntry {
     files: super::JointFilesEntry,
 }
 
-/// Both label errors of one joint [Nm]: the training labels' (the authors' separate filters) and
-/// the matched label's (`--label-filter matched`).
+/// Both label errors of one joint [Nm]: the training labels' (matched, with the ripple step:
+/// `label_config`) and the authors' separate filters' (`separate_label_config`).
 #[derive(serde::Serialize)]
 struct LabelError {
     full_state: Option<f64>,
     single_joint_view: Option<f64>,
-    matched_full_state: Option<f64>,
-    matched_single_joint_view: Option<f64>,
+    separate_full_state: Option<f64>,
+    separate_single_joint_view: Option<f64>,
 }
 
 /// `report.json` `joints.JOINT.models.LABEL`.
@@ -193,6 +201,17 @@ pub(super) fn run(
         r.stage(&format!("train {}", p.joint), &["train"], &a)?;
         files.push(f);
     }
+    let rounds = if args.no_experiments {
+        0
+    } else {
+        args.onpolicy_rounds.unwrap_or(sizes.onpolicy_rounds)
+    };
+    let mut onpolicy = Vec::with_capacity(rounds as usize);
+    for k in 1..=rounds {
+        onpolicy.push(onpolicy_round(
+            r, args, &sizes, dirs, &setup, &mut files, k,
+        )?);
+    }
 
     let mut joints: BTreeMap<String, LegJointEntry> = BTreeMap::new();
     let mut eval_md = String::new();
@@ -224,8 +243,8 @@ pub(super) fn run(
                 label_error_nm: LabelError {
                     full_state: labels.error_full_state_nm,
                     single_joint_view: labels.error_single_joint_view_nm,
-                    matched_full_state: labels.error_matched_nm.0,
-                    matched_single_joint_view: labels.error_matched_nm.1,
+                    separate_full_state: labels.error_separate_nm.0,
+                    separate_single_joint_view: labels.error_separate_nm.1,
                 },
                 models,
                 files: super::JointFilesEntry {
@@ -269,6 +288,7 @@ pub(super) fn run(
         samples,
         joints: &joints,
         closed_loop: suite.as_ref(),
+        onpolicy_rounds: &onpolicy,
         stages: &r.stages,
         total_seconds: total,
     };
@@ -285,6 +305,273 @@ pub(super) fn run(
         out.display()
     );
     Ok(())
+}
+
+/// The closed-loop suite's settings for `models`: the paper's (the knee and the ankle roll, the
+/// rest holding), the demo's seed, two trials at once; `--quick`: the faster, smaller sines.
+fn suite_config(r: &Runner, args: &Args, models: Vec<LegModel>) -> anyhow::Result<LegSuiteConfig> {
+    let bins = match &r.frictiond {
+        Some(d) => Binaries {
+            frictl: r.exe.clone(),
+            frictiond: d.clone(),
+        },
+        None => Binaries::locate()?,
+    };
+    let mut cfg = LegSuiteConfig::paper(bins, models);
+    cfg.seed = args.seed;
+    cfg.jobs = 2;
+    if args.quick {
+        cfg.joints = LegTestJoint::fast_pair();
+        cfg.after_release_s = 1.0;
+    }
+    Ok(cfg)
+}
+
+/// `report.json` `onpolicy_rounds[]`: one on-policy round on the leg.
+#[derive(serde::Serialize)]
+struct LegRound {
+    /// 1 = the first round (its PINNs are the protocol's).
+    round: u32,
+    /// Tested joint → what the round measured and added.
+    joints: BTreeMap<String, LegRoundJoint>,
+}
+
+/// `report.json` `onpolicy_rounds[].joints.JOINT`.
+#[derive(serde::Serialize)]
+struct LegRoundJoint {
+    /// The round's PINN (before its data): minimum K_p of the PINN-only search.
+    min_kp: Option<MinKp>,
+    /// RMSE of τ̂_F/kfc against the true friction while tracking at that K_p [Nm].
+    closed_loop_tau_f_rmse_nm: Option<f64>,
+    /// Closed-loop runs recorded around that K_p.
+    runs: usize,
+    /// Valid rows of the recorded runs' dataset.
+    valid_rows: usize,
+    /// Its label − truth RMS on valid sliding rows [Nm].
+    label_error_nm: Option<f64>,
+    /// The dataset.
+    dataset: String,
+}
+
+/// One on-policy round on the leg (DAgger, as the two-joint demo's): the current PINNs' minimum
+/// K_p on the knee and the ankle roll, closed-loop runs around it with those PINNs compensating
+/// on every joint (the rest of the leg holding), the tested joint's rows labelled from the whole
+/// leg's state (`label_config`), added to its datasets, and its training continued from them
+/// (`--init`). Replaces the tested joints' `fwt` and `train_report`.
+fn onpolicy_round(
+    r: &mut Runner,
+    args: &Args,
+    sizes: &Sizes,
+    dirs: &Dirs,
+    setup: &LegSetup,
+    files: &mut [JointFiles],
+    k: u32,
+) -> anyhow::Result<LegRound> {
+    // The round's configs (the final ones replace them once the rounds are done).
+    let configs = write_daemon_configs(setup, files, &dirs.models)?;
+    let (_, pinn) = configs
+        .paths
+        .iter()
+        .find(|(l, _)| *l == "PINN")
+        .context("the PINN config")?;
+    let model = LegModel::from_daemon_config("PINN", pinn, setup)?;
+    let mut cfg = suite_config(r, args, vec![model])?;
+    r.n += 1;
+    eprintln!(
+        "[{:>2}] on-policy round {k}: min K_p of the round-{} PINNs …",
+        r.n,
+        k - 1
+    );
+    let t0 = Instant::now();
+    let search = run_leg_suite(&cfg)?;
+    let mut plans = vec![];
+    let mut cells = vec![];
+    for (j, tj) in cfg.joints.iter().enumerate() {
+        let cell = search
+            .joints
+            .get(&tj.name)
+            .and_then(|jr| jr.models.get("PINN"))
+            .with_context(|| format!("no PINN result on {}", tj.name))?;
+        plans.extend(frictionless_experiment::leg::leg_record_plans(
+            &cfg,
+            j,
+            cell.min_kp.kp_for_runs(),
+            sizes.onpolicy_runs as usize,
+            sizes.periods,
+        ));
+        cells.push(cell.clone());
+    }
+    cfg.seed = args.seed + 1000 * u64::from(k);
+    let traces = frictionless_experiment::leg::record_leg(&cfg, 0, &plans)?;
+    r.stages.push(Stage {
+        name: format!("on-policy round {k}: search and record (leg)"),
+        seconds: t0.elapsed().as_secs_f64(),
+    });
+    let whole =
+        frictionless_ident::preprocess::WholeBody::new(setup.robot.clone(), BTreeMap::new())?;
+    let names: Vec<String> = setup
+        .params
+        .joints
+        .iter()
+        .map(|p| p.joint.clone())
+        .collect();
+    let mut joints = BTreeMap::new();
+    for ((j, tj), cell) in cfg.joints.iter().enumerate().zip(&cells) {
+        let index = setup.index(&tj.name)?;
+        let p = &setup.params.joints[index];
+        let runs: Vec<&[frictionless_experiment::run::JointTrace]> = plans
+            .iter()
+            .zip(&traces)
+            .filter(|(plan, _)| plan.joint == j)
+            .map(|(_, t)| t.as_slice())
+            .collect();
+        let (log, state) = traces_log(&runs, index, &names)?;
+        let mut meta = frictionless_acquire::log_meta(p);
+        meta.plant_link = None;
+        let cfg_label = label_config(p);
+        let (ds, summary) = frictionless_ident::preprocess::preprocess_whole_body(
+            &log, &meta, &whole, &state, &cfg_label,
+        )
+        .with_context(|| format!("labelling the on-policy runs of {}", p.joint))?;
+        let path = dirs.data.join(format!("{}_onpolicy{k}_ds.csv", p.joint));
+        write_dataset(
+            &path,
+            &ds,
+            &summary,
+            &Provenance {
+                input_log: format!(
+                    "frictl demo --robot leg: on-policy round {k}, {} closed-loop runs, seed {}",
+                    runs.len(),
+                    cfg.seed
+                ),
+                input_sha256: String::new(),
+                meta: &meta,
+                fs_hz: cfg_label.fs_hz,
+                settings: serde_json::to_value(&cfg_label)?,
+                dynamics: format!(
+                    "URDF {} (nominal leg), the whole leg's logged state, fixed base",
+                    frictionless_sim::leg::ERGOCUB_URDF_PATH
+                ),
+            },
+        )?;
+        let f = &mut files[index];
+        f.datasets.push(path.clone());
+        let offset = match super::pinn_offset_arg(&f.train_report)?.as_str() {
+            "enable" => "chunk".to_owned(),
+            v => v.to_owned(),
+        };
+        let fwt = dirs.models.join(format!("{}_onpolicy{k}.fwt", p.joint));
+        let report = dirs
+            .models
+            .join(format!("{}_onpolicy{k}_train.json", p.joint));
+        let datasets: Vec<&Path> = f.datasets.iter().map(PathBuf::as_path).collect();
+        let mut a = train_args(
+            sizes,
+            args.seed,
+            &p.joint,
+            &datasets,
+            [&f.scv, &fwt, &report],
+            sizes.onpolicy_epochs,
+        )?;
+        a.init = Some(f.fwt.clone());
+        a.delta_theta_offset = offset.parse().map_err(|e| {
+            anyhow::anyhow!("Δθ offset {offset:?} of {}: {e}", f.train_report.display())
+        })?;
+        if let Some(lr) = sizes.onpolicy_lr {
+            a.lr = lr;
+        }
+        r.stage(
+            &format!("on-policy round {k}: train {} (--init)", p.joint),
+            &["train"],
+            &a,
+        )?;
+        f.fwt = fwt;
+        f.train_report = report;
+        joints.insert(
+            tj.name.clone(),
+            LegRoundJoint {
+                min_kp: Some(cell.min_kp),
+                closed_loop_tau_f_rmse_nm: cell
+                    .track_at_min_kp
+                    .and_then(|t| t.friction_estimate_rmse_nm()),
+                runs: runs.len(),
+                valid_rows: ds.valid.iter().filter(|v| **v).count(),
+                label_error_nm: frictionless_acquire::leg::label_error_rms_nm(&ds),
+                dataset: s(&path),
+            },
+        );
+    }
+    Ok(LegRound { round: k, joints })
+}
+
+/// Seconds between the runs of an on-policy log (a chunk each).
+const RUN_GAP_S: f64 = 5.0;
+
+/// The acquisition log of payload joint `index` over `runs` (each every leg joint's trace of one
+/// closed-loop run; a chunk per run, [`RUN_GAP_S`] apart) and the whole leg's positions on its
+/// clock (`names` in payload order).
+fn traces_log(
+    runs: &[&[frictionless_experiment::run::JointTrace]],
+    index: usize,
+    names: &[String],
+) -> anyhow::Result<(
+    frictionless_ident::preprocess::RawLog,
+    frictionless_ident::preprocess::JointStates,
+)> {
+    let mut log = frictionless_ident::preprocess::RawLog {
+        tau_f_true_nm: Some(vec![]),
+        phi_ddot_rad_s2: Some(vec![]),
+        ..Default::default()
+    };
+    let mut q: Vec<Vec<f64>> = vec![vec![]; names.len()];
+    let mut t0 = 0.0;
+    for (chunk, run) in runs.iter().enumerate() {
+        let tr = run
+            .iter()
+            .find(|t| t.index == index)
+            .with_context(|| format!("an on-policy run without joint {index}"))?;
+        let n = tr.t_s.len();
+        let at = |v: &[f64], k: usize| v.get(k).copied().unwrap_or(f64::NAN);
+        for k in 0..n {
+            log.time_s.push(t0 + tr.t_s[k]);
+            log.chunk.push(chunk as u32);
+            log.active.push(true);
+            log.s_rad.push(tr.s_rad[k]);
+            log.theta_motor_rad.push(at(&tr.theta_motor_rad, k));
+            log.omega_motor_rad_s.push(at(&tr.omega_motor_rad_s, k));
+            log.i_meas_a.push(at(&tr.i_meas_a, k));
+            log.temperature_c.push(at(&tr.temperature_c, k));
+            if let Some(t) = &mut log.tau_f_true_nm {
+                t.push(at(&tr.tau_f_true_nm, k));
+            }
+            if let Some(a) = &mut log.phi_ddot_rad_s2 {
+                a.push(at(&tr.phi_ddot_rad_s2, k));
+            }
+        }
+        for (i, qi) in q.iter_mut().enumerate() {
+            let other = run
+                .iter()
+                .find(|t| t.index == i)
+                .with_context(|| format!("an on-policy run without joint {i}"))?;
+            anyhow::ensure!(
+                other.s_rad.len() == n,
+                "on-policy run: joints {index} and {i} have {n} and {} rows",
+                other.s_rad.len()
+            );
+            qi.extend_from_slice(&other.s_rad);
+        }
+        t0 += tr.t_s.last().copied().unwrap_or(0.0) + RUN_GAP_S;
+    }
+    let state = frictionless_ident::preprocess::JointStates {
+        names: names.to_vec(),
+        q,
+        qdot: vec![None; names.len()],
+        qddot: vec![None; names.len()],
+        base_quat_xyzw: None,
+        base_frame: None,
+        wrenches: Vec::new(),
+    };
+    Ok((log, state))
 }
 
 fn strings(sets: &[&str]) -> Vec<String> {
@@ -326,12 +613,12 @@ fn acquire_and_label(
     drop(rows);
     for l in &labels {
         eprintln!(
-            "     {:<14} label error {} Nm (whole state), {} Nm (single-joint view); matched: {} / {} Nm",
+            "     {:<14} label error {} Nm (whole state), {} Nm (single-joint view); separate filters: {} / {} Nm",
             l.joint,
             opt(l.error_full_state_nm),
             opt(l.error_single_joint_view_nm),
-            opt(l.error_matched_nm.0),
-            opt(l.error_matched_nm.1)
+            opt(l.error_separate_nm.0),
+            opt(l.error_separate_nm.1)
         );
     }
     r.stages.push(Stage {
@@ -553,20 +840,7 @@ fn closed_loop(
         models.push(LegModel::from_daemon_config(label, path, setup)?);
     }
     models.push(LegModel::uniform(FrictionModel::Oracle, n));
-    let bins = match &r.frictiond {
-        Some(d) => Binaries {
-            frictl: r.exe.clone(),
-            frictiond: d.clone(),
-        },
-        None => Binaries::locate()?,
-    };
-    let mut cfg = LegSuiteConfig::paper(bins, models);
-    cfg.seed = args.seed;
-    cfg.jobs = 2;
-    if args.quick {
-        cfg.joints = LegTestJoint::fast_pair();
-        cfg.after_release_s = 1.0;
-    }
+    let cfg = suite_config(r, args, models)?;
     r.n += 1;
     eprintln!(
         "[{:>2}] closed loop on the leg: {} models × {} tested joints …",
@@ -617,15 +891,15 @@ fn report_md(
         report.network.epochs,
         report.total_seconds
     );
-    md += "**Label error against the plant's truth [Nm RMS]** (training run, valid sliding rows; the models train on the first two columns' labels)\n\n| joint | whole state | single-joint view | matched, whole state | matched, single-joint view |\n|---|---|---|---|---|\n";
+    md += "**Label error against the plant's truth [Nm RMS]** (training run, valid sliding rows; the models train on the first two columns' labels: matched, with the wave generator's ripple; the last two are the authors' separate filters)\n\n| joint | whole state | single-joint view | separate, whole state | separate, single-joint view |\n|---|---|---|---|---|\n";
     for (joint, e) in report.joints {
         let l = &e.label_error_nm;
         md += &format!(
             "| {joint} | {} | {} | {} | {} |\n",
             opt(l.full_state),
             opt(l.single_joint_view),
-            opt(l.matched_full_state),
-            opt(l.matched_single_joint_view)
+            opt(l.separate_full_state),
+            opt(l.separate_single_joint_view)
         );
     }
     md += "\n**Offline: friction RMSE against the truth on the unseen run [Nm]**\n\n| joint | none | CV | SCV | LuGre | PINN |\n|---|---|---|---|---|---|\n";
@@ -650,6 +924,22 @@ fn report_md(
     if let Some(s) = suite {
         md += "\n## Closed loop\n\n";
         md += &s.markdown();
+    }
+    if !report.onpolicy_rounds.is_empty() {
+        md += "\n## On-policy rounds (DAgger)\n\nEach round searches the current PINNs' minimum K_p, records closed-loop runs around it with them compensating (the rest of the leg holding), labels the tested joint's rows from the whole leg's state and continues its training on the union; the closed-loop table above is the last round's PINNs'.\n\n| round | joint | min K_p before [1/s²] | closed-loop τ̂_F error before [Nm] | runs | valid rows | label error [Nm] |\n|---|---|---|---|---|---|---|\n";
+        for round in report.onpolicy_rounds {
+            for (joint, j) in &round.joints {
+                md += &format!(
+                    "| {} | {joint} | {} | {} | {} | {} | {} |\n",
+                    round.round,
+                    j.min_kp.map_or("–".into(), |m| m.display()),
+                    opt(j.closed_loop_tau_f_rmse_nm),
+                    j.runs,
+                    j.valid_rows,
+                    opt(j.label_error_nm)
+                );
+            }
+        }
     }
     md
 }
