@@ -582,7 +582,8 @@ pub fn run_leg_suite(cfg: &LegSuiteConfig) -> Result<LegSuiteReport, ExperimentE
 }
 
 /// One on-policy run of the leg ([`record_leg`]): tested joint `joint` (an index into
-/// [`LegSuiteConfig::joints`]) tracks `reference` at `kp_per_s2` while the rest holds.
+/// [`LegSuiteConfig::joints`]) follows `reference` at `kp_per_s2` (with `pulse`, if any) while the
+/// rest holds.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct LegRecordPlan {
     /// Index into [`LegSuiteConfig::joints`].
@@ -591,12 +592,16 @@ pub struct LegRecordPlan {
     pub reference: Reference,
     /// K_p of the tested joint [1/s²].
     pub kp_per_s2: f64,
+    /// External torque pulse on the tested joint, if any.
+    pub pulse: Option<Pulse>,
     /// Duration [s].
     pub duration_s: f64,
 }
 
-/// The on-policy sines of tested joint `joint` around `kp_per_s2`: the first `runs` (at most four)
-/// of [`super::onpolicy::SINE_VARIATIONS`] on its test sine, `periods` periods each.
+/// The on-policy runs of tested joint `joint` around `kp_per_s2` (at most six, the two-joint
+/// rounds' mix): the four [`super::onpolicy::SINE_VARIATIONS`] of its test sine, `periods` periods
+/// each, and two holds at the sine's centre with its disturbance pulse, positive at `kp_per_s2` and
+/// negative at 0.7× (5 s each), interleaved so that a short list has both kinds; the first `runs`.
 pub fn leg_record_plans(
     cfg: &LegSuiteConfig,
     joint: usize,
@@ -615,9 +620,8 @@ pub fn leg_record_plans(
     else {
         return vec![];
     };
-    super::onpolicy::SINE_VARIATIONS
+    let mut all: Vec<LegRecordPlan> = super::onpolicy::SINE_VARIATIONS
         .iter()
-        .take(runs)
         .map(|&(a, f, k)| LegRecordPlan {
             joint,
             reference: Reference::Sine {
@@ -626,8 +630,26 @@ pub fn leg_record_plans(
                 freq_hz: freq_hz * f,
             },
             kp_per_s2: kp_per_s2 * k,
+            pulse: None,
             duration_s: periods / (freq_hz * f),
         })
+        .collect();
+    for (sign, k) in [(1.0, 1.0), (-1.0, 0.7)] {
+        all.push(LegRecordPlan {
+            joint,
+            reference: Reference::Hold { s_rad: centre_rad },
+            kp_per_s2: kp_per_s2 * k,
+            pulse: Some(Pulse {
+                torque_nm: sign * tj.pulse.torque_nm,
+                ..tj.pulse
+            }),
+            duration_s: 5.0_f64.max(tj.pulse.end_s() + 1.0),
+        });
+    }
+    [0, 4, 1, 2, 5, 3]
+        .iter()
+        .take(runs)
+        .map(|&i| all[i].clone())
         .collect()
 }
 
@@ -656,7 +678,7 @@ pub fn record_leg(
                 model,
                 kp_per_s2: p.kp_per_s2,
                 reference: p.reference,
-                pulse: None,
+                pulse: p.pulse,
                 duration_s: p.duration_s,
             })
         })
@@ -728,7 +750,7 @@ mod tests {
     }
 
     /// The on-policy sines vary the test sine's amplitude, frequency and gain, none is the test
-    /// sine itself, and each lasts the asked periods.
+    /// sine itself, and each lasts the asked periods; two holds carry the joint's pulse, both signs.
     #[test]
     fn leg_record_plans_vary_the_test_sine_around_the_gain() {
         let cfg = LegSuiteConfig::paper(
@@ -747,8 +769,14 @@ mod tests {
             panic!("the knee's test reference is a sine")
         };
         let plans = leg_record_plans(&cfg, 0, 400.0, 6, 3.0);
-        assert_eq!(plans.len(), 4, "{plans:?}");
-        for p in &plans {
+        assert_eq!(plans.len(), 6, "{plans:?}");
+        let pulses: Vec<f64> = plans
+            .iter()
+            .filter_map(|p| p.pulse.map(|q| q.torque_nm))
+            .collect();
+        assert_eq!(pulses, [15.0, -15.0], "{plans:?}");
+        assert!(leg_record_plans(&cfg, 0, 400.0, 2, 3.0)[1].pulse.is_some());
+        for p in plans.iter().filter(|p| p.pulse.is_none()) {
             let Reference::Sine {
                 centre_rad: c,
                 amplitude_rad: a,

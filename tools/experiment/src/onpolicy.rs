@@ -38,7 +38,7 @@ pub const SOURCE_CLOSED_LOOP: &str = "closed-loop-shm";
 pub const PULSE_MARGIN_ROWS: usize = 50;
 
 /// Rows to keep: those at least [`PULSE_MARGIN_ROWS`] away from every row with an external torque.
-fn unlabelled_mask(tau_ext_nm: &[f64], n: usize) -> Vec<bool> {
+pub fn unlabelled_mask(tau_ext_nm: &[f64], n: usize) -> Vec<bool> {
     let mut keep = vec![true; n];
     for (k, &t) in tau_ext_nm.iter().enumerate().take(n) {
         if t != 0.0 {

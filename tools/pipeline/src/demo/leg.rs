@@ -508,8 +508,9 @@ fn onpolicy_round(
 const RUN_GAP_S: f64 = 5.0;
 
 /// The acquisition log of payload joint `index` over `runs` (each every leg joint's trace of one
-/// closed-loop run; a chunk per run, [`RUN_GAP_S`] apart) and the whole leg's positions on its
-/// clock (`names` in payload order).
+/// closed-loop run; a chunk per run, [`RUN_GAP_S`] apart, split where a disturbance pulse acts,
+/// whose rows are left out as in the two-joint rounds) and the whole leg's positions on its clock
+/// (`names` in payload order).
 fn traces_log(
     runs: &[&[frictionless_experiment::run::JointTrace]],
     index: usize,
@@ -525,16 +526,28 @@ fn traces_log(
     };
     let mut q: Vec<Vec<f64>> = vec![vec![]; names.len()];
     let mut t0 = 0.0;
-    for (chunk, run) in runs.iter().enumerate() {
+    let mut chunk = 0u32;
+    for run in runs {
         let tr = run
             .iter()
             .find(|t| t.index == index)
             .with_context(|| format!("an on-policy run without joint {index}"))?;
         let n = tr.t_s.len();
         let at = |v: &[f64], k: usize| v.get(k).copied().unwrap_or(f64::NAN);
-        for k in 0..n {
+        // The rows near a disturbance pulse are left out (the label would count the external
+        // torque as friction); a chunk ends there.
+        let keep = frictionless_experiment::onpolicy::unlabelled_mask(&tr.tau_ext_nm, n);
+        let mut kept = vec![];
+        for (k, &keep_k) in keep.iter().enumerate() {
+            if !keep_k {
+                if kept.last().is_some_and(|&last: &usize| last + 1 == k) {
+                    chunk += 1;
+                }
+                continue;
+            }
+            kept.push(k);
             log.time_s.push(t0 + tr.t_s[k]);
-            log.chunk.push(chunk as u32);
+            log.chunk.push(chunk);
             log.active.push(true);
             log.s_rad.push(tr.s_rad[k]);
             log.theta_motor_rad.push(at(&tr.theta_motor_rad, k));
@@ -558,8 +571,9 @@ fn traces_log(
                 "on-policy run: joints {index} and {i} have {n} and {} rows",
                 other.s_rad.len()
             );
-            qi.extend_from_slice(&other.s_rad);
+            qi.extend(kept.iter().map(|&k| other.s_rad[k]));
         }
+        chunk += 1;
         t0 += tr.t_s.last().copied().unwrap_or(0.0) + RUN_GAP_S;
     }
     let state = frictionless_ident::preprocess::JointStates {
