@@ -368,7 +368,8 @@ fn sigterm_stops_a_real_time_and_a_waiting_lockstep_plant_with_exit_0() {
 #[test]
 fn lockstep_timeout_without_answers_holds_then_zeroes_and_keeps_going() {
     // A client that answers only state 1 with 1 A, then goes silent: the plant times out every
-    // tick (10 ms here), holds the command for 3 simulated ms, then applies 0 A.
+    // tick (100 ms here: long enough for the client to open and read state 1 on a loaded machine),
+    // holds the command for 3 simulated ms, then applies 0 A.
     let s = Scratch::new("ls_to");
     let mut plant = Plant::spawn(
         &s,
@@ -377,7 +378,7 @@ fn lockstep_timeout_without_answers_holds_then_zeroes_and_keeps_going() {
             "ankle_roll",
             "--lockstep",
             "--lockstep-timeout-ms",
-            "10",
+            "100",
             "--command-timeout-ms",
             "3",
             "--duration-s",
