@@ -40,7 +40,7 @@ use frictionless_dataset::Dataset;
 /// Width of the smoothed motion sign σ(ṡ) = tanh(ṡ / width) of the regressors [rad/s].
 pub const SIGN_WIDTH_RAD_S: f64 = 0.01;
 
-/// The fit's rows slide one way faster than this over the high-pass's reach [rad/s].
+/// The fit's rows slide one way faster than this, every row of their segment [rad/s].
 pub const SLIDING_RAD_S: f64 = 0.03;
 
 /// Factor on the label smoother's acceleration process noise for the fit's label.
@@ -170,6 +170,13 @@ pub fn fit(
     fs_hz: f64,
 ) -> Result<Option<RippleFit>, PreprocessError> {
     check(wide)?;
+    if valid.len() != wide.len() {
+        return Err(PreprocessError::Settings(format!(
+            "ripple wave-generator: {} valid flags for a label of {} rows",
+            valid.len(),
+            wide.len()
+        )));
+    }
     let rows = segment_rows(wide, valid, wide_kalman, fs_hz)?;
     if rows.len() < MIN_FIT_ROWS {
         return Ok(None);
