@@ -598,10 +598,9 @@ pub struct LegRecordPlan {
     pub duration_s: f64,
 }
 
-/// The on-policy runs of tested joint `joint` around `kp_per_s2` (at most six, the two-joint
-/// rounds' mix): the four [`super::onpolicy::SINE_VARIATIONS`] of its test sine, `periods` periods
-/// each, and two holds at the sine's centre with its disturbance pulse, positive at `kp_per_s2` and
-/// negative at 0.7× (5 s each), interleaved so that a short list has both kinds; the first `runs`.
+/// The on-policy runs of tested joint `joint` around `kp_per_s2`: the two-joint rounds'
+/// [`super::onpolicy::varied_runs`] of its test sine, the holds at the sine's centre with its
+/// disturbance pulse; the first `runs` (at most six), `periods` sine periods each.
 pub fn leg_record_plans(
     cfg: &LegSuiteConfig,
     joint: usize,
@@ -612,45 +611,23 @@ pub fn leg_record_plans(
     let Some(tj) = cfg.joints.get(joint) else {
         return vec![];
     };
-    let Reference::Sine {
-        centre_rad,
-        amplitude_rad,
-        freq_hz,
-    } = tj.sine
-    else {
-        return vec![];
-    };
-    let mut all: Vec<LegRecordPlan> = super::onpolicy::SINE_VARIATIONS
-        .iter()
-        .map(|&(a, f, k)| LegRecordPlan {
-            joint,
-            reference: Reference::Sine {
-                centre_rad,
-                amplitude_rad: amplitude_rad * a,
-                freq_hz: freq_hz * f,
-            },
-            kp_per_s2: kp_per_s2 * k,
-            pulse: None,
-            duration_s: periods / (freq_hz * f),
-        })
-        .collect();
-    for (sign, k) in [(1.0, 1.0), (-1.0, 0.7)] {
-        all.push(LegRecordPlan {
-            joint,
-            reference: Reference::Hold { s_rad: centre_rad },
-            kp_per_s2: kp_per_s2 * k,
-            pulse: Some(Pulse {
-                torque_nm: sign * tj.pulse.torque_nm,
-                ..tj.pulse
-            }),
-            duration_s: 5.0_f64.max(tj.pulse.end_s() + 1.0),
-        });
-    }
-    [0, 4, 1, 2, 5, 3]
-        .iter()
-        .take(runs)
-        .map(|&i| all[i].clone())
-        .collect()
+    super::onpolicy::varied_runs(
+        tj.sine,
+        centre(&tj.sine),
+        tj.pulse,
+        kp_per_s2,
+        runs,
+        periods,
+    )
+    .into_iter()
+    .map(|r| LegRecordPlan {
+        joint,
+        reference: r.reference,
+        kp_per_s2: r.kp_per_s2,
+        pulse: r.pulse,
+        duration_s: r.duration_s,
+    })
+    .collect()
 }
 
 /// Runs every plan with `cfg.models[model]` compensating (the rest of the leg holding, as in

@@ -74,11 +74,32 @@ pub const SINE_VARIATIONS: [(f64, f64, f64); 4] = [
     (0.8, 0.9, 2.0),
 ];
 
-/// The varied runs of joint `index` around `kp_per_s2` (`runs` of them, at most 6: four sines,
-/// then a positive and a negative pulse; `periods` sine periods each). None of them is the
-/// experiments' test sine: the amplitudes are 0.6–1.3× and the frequencies 0.7–1.5× its own.
-pub fn plans(index: usize, kp_per_s2: f64, runs: usize, periods: f64) -> Vec<RecordPlan> {
-    let (centre_rad, amplitude_rad, freq_hz) = match sine(index) {
+/// One varied on-policy run of a joint ([`varied_runs`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VariedRun {
+    /// Reference.
+    pub reference: Reference,
+    /// K_p [1/s²].
+    pub kp_per_s2: f64,
+    /// Disturbance pulse, if any.
+    pub pulse: Option<Pulse>,
+    /// Duration [s].
+    pub duration_s: f64,
+}
+
+/// The varied runs of a joint around `kp_per_s2` (`runs` of them, at most 6): the four
+/// [`SINE_VARIATIONS`] of its `test_sine` (`periods` periods each), then two holds at `hold_rad`
+/// with `pulse`, positive at `kp_per_s2` and negative at 0.7× (at least 5 s, 1 s after the pulse),
+/// interleaved so that a short list has both kinds. None of them is the experiments' test sine.
+pub fn varied_runs(
+    test_sine: Reference,
+    hold_rad: f64,
+    pulse: Pulse,
+    kp_per_s2: f64,
+    runs: usize,
+    periods: f64,
+) -> Vec<VariedRun> {
+    let (centre_rad, amplitude_rad, freq_hz) = match test_sine {
         Reference::Sine {
             centre_rad,
             amplitude_rad,
@@ -86,11 +107,9 @@ pub fn plans(index: usize, kp_per_s2: f64, runs: usize, periods: f64) -> Vec<Rec
         } => (centre_rad, amplitude_rad, freq_hz),
         Reference::Hold { s_rad } => (s_rad, 0.0, 1.0),
     };
-    let pulse_nm = if index == 0 { 15.0 } else { 5.0 };
-    let mut out: Vec<RecordPlan> = SINE_VARIATIONS
+    let mut out: Vec<VariedRun> = SINE_VARIATIONS
         .iter()
-        .map(|&(a, f, k)| RecordPlan {
-            index,
+        .map(|&(a, f, k)| VariedRun {
             reference: Reference::Sine {
                 centre_rad,
                 amplitude_rad: amplitude_rad * a,
@@ -102,18 +121,14 @@ pub fn plans(index: usize, kp_per_s2: f64, runs: usize, periods: f64) -> Vec<Rec
         })
         .collect();
     for (sign, k) in [(1.0, 1.0), (-1.0, 0.7)] {
-        out.push(RecordPlan {
-            index,
-            reference: Reference::Hold {
-                s_rad: hold_rad(index),
-            },
+        out.push(VariedRun {
+            reference: Reference::Hold { s_rad: hold_rad },
             kp_per_s2: kp_per_s2 * k,
             pulse: Some(Pulse {
-                start_s: 1.0,
-                duration_s: 1.0,
-                torque_nm: sign * pulse_nm,
+                torque_nm: sign * pulse.torque_nm,
+                ..pulse
             }),
-            duration_s: 5.0,
+            duration_s: 5.0_f64.max(pulse.end_s() + 1.0),
         });
     }
     // Interleave sines and pulses so a short list has both kinds.
@@ -121,8 +136,37 @@ pub fn plans(index: usize, kp_per_s2: f64, runs: usize, periods: f64) -> Vec<Rec
     order
         .iter()
         .take(runs.min(order.len()))
-        .map(|&i| out[i].clone())
+        .map(|&i| out[i])
         .collect()
+}
+
+/// The varied runs of joint `index` around `kp_per_s2` ([`varied_runs`] of its test sine, held at
+/// its hold position, with a 1 s pulse of 15 Nm on the knee and 5 Nm on the ankle roll at 1 s). None
+/// of them is the experiments' test sine: the amplitudes are 0.6–1.3× and the frequencies 0.7–1.5×
+/// its own.
+pub fn plans(index: usize, kp_per_s2: f64, runs: usize, periods: f64) -> Vec<RecordPlan> {
+    let pulse = Pulse {
+        start_s: 1.0,
+        duration_s: 1.0,
+        torque_nm: if index == 0 { 15.0 } else { 5.0 },
+    };
+    varied_runs(
+        sine(index),
+        hold_rad(index),
+        pulse,
+        kp_per_s2,
+        runs,
+        periods,
+    )
+    .into_iter()
+    .map(|r| RecordPlan {
+        index,
+        reference: r.reference,
+        kp_per_s2: r.kp_per_s2,
+        pulse: r.pulse,
+        duration_s: r.duration_s,
+    })
+    .collect()
 }
 
 /// Runs every plan with joint `index`'s model from `models` (one model per planned joint); returns

@@ -2024,9 +2024,9 @@ fn csv_measured_wrench_enters_the_label_like_pinocchio_rnea_with_fext() {
     }
 }
 
-#[test]
-fn preprocess_label_filter_matched_is_closer_to_the_truth_and_is_recorded() {
-    let d = dir().join("label-filter");
+/// A small simulated knee acquisition (seed 4) in `dir()/NAME`: (the directory, the log).
+fn small_knee_log(name: &str) -> (PathBuf, PathBuf) {
+    let d = dir().join(name);
     std::fs::create_dir_all(&d).unwrap();
     ok(
         frictl(&crate::util::small_acquire_args(
@@ -2039,6 +2039,12 @@ fn preprocess_label_filter_matched_is_closer_to_the_truth_and_is_recorded() {
         "acquire",
     );
     let log = d.join("knee.csv");
+    (d, log)
+}
+
+#[test]
+fn preprocess_label_filter_matched_is_closer_to_the_truth_and_is_recorded() {
+    let (d, log) = small_knee_log("label-filter");
     let run = |filter: Option<&str>, out: &Path| {
         // J_eq·φ̈ subtracted: what remains of the label's error is the estimation's.
         let mut args = vec![
@@ -2101,19 +2107,7 @@ fn preprocess_label_filter_matched_is_closer_to_the_truth_and_is_recorded() {
 /// Without the matched label, or with an unknown step, nothing is written.
 #[test]
 fn preprocess_ripple_wave_generator_identifies_the_plant_ripple() {
-    let d = dir().join("ripple");
-    std::fs::create_dir_all(&d).unwrap();
-    ok(
-        frictl(&crate::util::small_acquire_args(
-            "knee",
-            "4",
-            &d,
-            "knee",
-            &[],
-        )),
-        "acquire",
-    );
-    let log = d.join("knee.csv");
+    let (d, log) = small_knee_log("ripple");
     let run = |extra: &[&str], out: &Path| {
         let mut args = vec![
             "preprocess",

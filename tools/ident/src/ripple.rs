@@ -143,20 +143,17 @@ fn regressors(ds: &Dataset, a: usize, b: usize) -> Option<[Vec<f64>; 2]> {
     Some([xs, xc])
 }
 
-/// Least squares of `y` on two columns; `None` when singular.
+/// Least squares of `y` on two columns (rows `(y, p, q)`); `None` when singular.
 fn solve2(rows: &[(f64, f64, f64)]) -> Option<(f64, f64)> {
-    let (mut aa, mut ab, mut bb, mut ay, mut by) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    let mut ata = nalgebra::Matrix2::<f64>::zeros();
+    let mut aty = nalgebra::Vector2::<f64>::zeros();
     for &(y, p, q) in rows {
-        aa += p * p;
-        ab += p * q;
-        bb += q * q;
-        ay += p * y;
-        by += q * y;
+        let x = nalgebra::Vector2::new(p, q);
+        ata += x * x.transpose();
+        aty += x * y;
     }
-    let det = aa * bb - ab * ab;
-    let beta = ((bb * ay - ab * by) / det, (aa * by - ab * ay) / det);
-    (det > 1e-12 * (aa * bb).max(f64::MIN_POSITIVE) && beta.0.is_finite() && beta.1.is_finite())
-        .then_some(beta)
+    let beta = ata.cholesky()?.solve(&aty);
+    (beta[0].is_finite() && beta[1].is_finite()).then_some((beta[0], beta[1]))
 }
 
 /// Identifies the ripple's amplitudes from `wide`, a matched label with [`fit_settings`], on the

@@ -456,37 +456,7 @@ fn onpolicy_round(
         )?;
         let f = &mut files[index];
         f.datasets.push(path.clone());
-        let offset = match super::pinn_offset_arg(&f.train_report)?.as_str() {
-            "enable" => "chunk".to_owned(),
-            v => v.to_owned(),
-        };
-        let fwt = dirs.models.join(format!("{}_onpolicy{k}.fwt", p.joint));
-        let report = dirs
-            .models
-            .join(format!("{}_onpolicy{k}_train.json", p.joint));
-        let datasets: Vec<&Path> = f.datasets.iter().map(PathBuf::as_path).collect();
-        let mut a = train_args(
-            sizes,
-            args.seed,
-            &p.joint,
-            &datasets,
-            [&f.scv, &fwt, &report],
-            sizes.onpolicy_epochs,
-        )?;
-        a.init = Some(f.fwt.clone());
-        a.delta_theta_offset = offset.parse().map_err(|e| {
-            anyhow::anyhow!("Δθ offset {offset:?} of {}: {e}", f.train_report.display())
-        })?;
-        if let Some(lr) = sizes.onpolicy_lr {
-            a.lr = lr;
-        }
-        r.stage(
-            &format!("on-policy round {k}: train {} (--init)", p.joint),
-            &["train"],
-            &a,
-        )?;
-        f.fwt = fwt;
-        f.train_report = report;
+        super::onpolicy::continue_training(r, args, sizes, dirs, f, &p.joint, &p.joint, k)?;
         joints.insert(
             tj.name.clone(),
             LegRoundJoint {

@@ -125,39 +125,56 @@ pub(super) fn onpolicy_round(
         )?;
         std::fs::remove_file(&raw).ok();
         f.datasets.push(ds);
-        // The Δθ offset stays the one the first model was trained with, for every dataset: frictiond
-        // runs one fixed offset per joint.
-        let offset = match pinn_offset_arg(&f.train_report)?.as_str() {
-            "enable" => "chunk".to_owned(),
-            v => v.to_owned(),
-        };
-        let fwt = dirs.models.join(format!("{joint}_onpolicy{k}.fwt"));
-        let report = dirs.models.join(format!("{joint}_onpolicy{k}_train.json"));
-        let datasets: Vec<&Path> = f.datasets.iter().map(PathBuf::as_path).collect();
-        let mut a = train_args(
-            sizes,
-            args.seed,
-            preset,
-            &datasets,
-            [&f.scv, &fwt, &report],
-            sizes.onpolicy_epochs,
-        )?;
-        a.init = Some(f.fwt.clone());
-        a.delta_theta_offset = offset.parse().map_err(|e| {
-            anyhow::anyhow!("Δθ offset {offset:?} of {}: {e}", f.train_report.display())
-        })?;
-        if let Some(lr) = sizes.onpolicy_lr {
-            a.lr = lr;
-        }
-        r.stage(
-            &format!("on-policy round {k}: train {preset} (--init)"),
-            &["train"],
-            &a,
-        )?;
-        f.fwt = fwt;
-        f.train_report = report;
+        continue_training(r, args, sizes, dirs, f, preset, joint, k)?;
     }
     Ok(entry)
+}
+
+/// Round `k`'s training of one joint: from its current PINN (`--init`) on every dataset so far
+/// (`f.datasets`), for the sizes' on-policy epochs and rate, with the Δθ offset the first model was
+/// trained with (frictiond runs one fixed offset per joint). Replaces `f.fwt` and `f.train_report`
+/// by `{joint}_onpolicy{k}.fwt` and its report; `preset` names the stage and the train settings.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn continue_training(
+    r: &mut Runner,
+    args: &Args,
+    sizes: &Sizes,
+    dirs: &Dirs,
+    f: &mut JointFiles,
+    preset: &str,
+    joint: &str,
+    k: u32,
+) -> anyhow::Result<()> {
+    let offset = match pinn_offset_arg(&f.train_report)?.as_str() {
+        "enable" => "chunk".to_owned(),
+        v => v.to_owned(),
+    };
+    let fwt = dirs.models.join(format!("{joint}_onpolicy{k}.fwt"));
+    let report = dirs.models.join(format!("{joint}_onpolicy{k}_train.json"));
+    let datasets: Vec<&Path> = f.datasets.iter().map(PathBuf::as_path).collect();
+    let mut a = train_args(
+        sizes,
+        args.seed,
+        preset,
+        &datasets,
+        [&f.scv, &fwt, &report],
+        sizes.onpolicy_epochs,
+    )?;
+    a.init = Some(f.fwt.clone());
+    a.delta_theta_offset = offset.parse().map_err(|e| {
+        anyhow::anyhow!("Δθ offset {offset:?} of {}: {e}", f.train_report.display())
+    })?;
+    if let Some(lr) = sizes.onpolicy_lr {
+        a.lr = lr;
+    }
+    r.stage(
+        &format!("on-policy round {k}: train {preset} (--init)"),
+        &["train"],
+        &a,
+    )?;
+    f.fwt = fwt;
+    f.train_report = report;
+    Ok(())
 }
 
 /// The last round's entry: the final PINNs' results from the experiments and the evaluation.
