@@ -13,8 +13,7 @@ use crate::mlp::{
 };
 use crate::units::GearRatio;
 
-use super::inspect::LayerInfo;
-use super::layout::{self, Layout, Unit, off};
+use super::layout::{self, LayerInfo, Layout, Unit, off};
 use super::{ModelFile, ModelMeta, SignalFiltering, TrainingMeta, WeightError};
 
 // ---------------------------------------------------------------------------------------------

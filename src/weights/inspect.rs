@@ -7,23 +7,12 @@ use std::fmt;
 
 use crate::features::{Feature, FeatureSpec};
 use crate::friction::ScvParams;
-use crate::mlp::{Activation, StorageDtype};
+use crate::mlp::StorageDtype;
 
 use super::SignalFiltering;
 use super::WeightError;
 use super::codec;
-use super::layout::{self, Unit};
-
-/// Shape of one dense layer as the header's layer table states it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
-pub struct LayerInfo {
-    /// Inputs.
-    pub n_in: usize,
-    /// Outputs.
-    pub n_out: usize,
-    /// Activation after the affine map.
-    pub activation: Activation,
-}
+use super::layout::{self, LayerInfo, Unit};
 
 /// Everything the header says, the derived sizes, and the integrity verdict.
 #[derive(Clone, Debug, serde::Serialize)]

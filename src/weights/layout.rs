@@ -8,6 +8,17 @@ use crate::mlp::{Activation, StorageDtype};
 
 use super::SignalFiltering;
 
+/// Shape of one dense layer as the header's layer table states it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct LayerInfo {
+    /// Inputs.
+    pub n_in: usize,
+    /// Outputs.
+    pub n_out: usize,
+    /// Activation after the affine map.
+    pub activation: Activation,
+}
+
 /// The 8 magic bytes every `.fwt` file starts with (`"FWT\0"` + `"\r\n\x1a\n"`, which catches
 /// text-mode transfers that rewrite line endings or stop at Ctrl-Z, as PNG's signature does).
 pub const MAGIC: [u8; 8] = *b"FWT\0\r\n\x1a\n";

@@ -24,8 +24,8 @@ use crate::mlp::{MlpShapeError, MlpWeights, StorageDtype};
 use crate::units::GearRatio;
 
 pub use codec::{encoded_layout, round_to_dtype};
-pub use inspect::{Inspection, LayerInfo};
-pub use layout::{Layout, RANGE_BLOCKS, Unit};
+pub use inspect::Inspection;
+pub use layout::{LayerInfo, Layout, RANGE_BLOCKS, Unit};
 
 /// Which velocity/current signals the model was trained on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
