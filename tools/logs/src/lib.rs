@@ -29,6 +29,7 @@
 pub mod csv_log;
 #[cfg(feature = "mat")]
 pub mod mat_log;
+mod mcap_cdr;
 pub mod mcap_log;
 mod mcap_state;
 pub mod plausibility;

@@ -5,24 +5,27 @@
 
 use std::collections::BTreeMap;
 
-use crate::mcap_log::{Cdr, McapState, decode_imu};
+use crate::mcap_cdr::decode_imu;
+use crate::mcap_cdr::decode_wrench;
 use crate::{RunReport, StateLayout};
 
 const IMU_SCHEMA: &str = "sensor_msgs/msg/Imu";
 const WRENCH_SCHEMA: &str = "geometry_msgs/msg/WrenchStamped";
 
-/// Decodes a CDR-encoded `geometry_msgs/msg/WrenchStamped`: `header.frame_id` and `[fx, fy, fz]`
-/// [N] then `[mx, my, mz]` [N·m] (the message's force and torque).
-pub fn decode_wrench(payload: &[u8]) -> Result<(String, [f64; 6]), String> {
-    let mut c = Cdr::new(payload)?;
-    c.i32()?; // header.stamp.sec
-    c.u32()?; // header.stamp.nanosec
-    let frame_id = c.string()?;
-    let mut w = [0.0; 6];
-    for x in &mut w {
-        *x = c.f64()?;
-    }
-    Ok((frame_id, w))
+/// What an MCAP bag adds to the whole-body state beyond the joint positions (read only with
+/// [`McapSpec::state_joints`](crate::mcap_log::McapSpec::state_joints); [`read_state`](crate::mcap_log::read_state)). Each `JointState` row takes the last message of
+/// each topic read before it in the bag's order (sample and hold).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct McapState {
+    /// Topic of `sensor_msgs/msg/Imu` messages whose `orientation` is the root link's in the
+    /// world (see [`read_with_base`](crate::mcap_log::read_with_base)).
+    pub base_orientation: Option<String>,
+    /// Measured wrenches applied to the robot: `(URDF frame, topic)`, the topic's
+    /// `geometry_msgs/msg/WrenchStamped` messages' `wrench.force` [N] and `wrench.torque` [N·m] in
+    /// the coordinates of the URDF frame, about its origin (the message's frame must be that
+    /// frame; a `header.frame_id` that is not its name is warned about). A `JointState` row before
+    /// the topic's first message is an error.
+    pub wrenches: Vec<(String, String)>,
 }
 
 /// Per wrench topic: its channels, the last wrench read, the messages read and the first
