@@ -230,7 +230,7 @@ pub struct PlantParams {
     /// The joint torque sensor of a torque-sensed joint (`[plant.torque_sensor]`, optional; read only
     /// by `frictl acquire --sensor torque`, see [`crate::torque_sensor`]).
     #[serde(default)]
-    pub torque_sensor: crate::torque_sensor::TorqueSensorParams,
+    pub torque_sensor: TorqueSensorParams,
 }
 
 impl PlantParams {
@@ -547,6 +547,52 @@ pub fn load_table(
         }
     }
     Ok(table)
+}
+
+/// Parameters of the joint torque sensor (`[plant.torque_sensor]`, every key optional).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TorqueSensorParams {
+    /// White measurement noise σ [Nm] (default 0.02 Nm: a strain-gauge joint sensor of ≈ 50 Nm range).
+    pub noise_std_nm: f64,
+    /// Constant offset (zero drift) [Nm] (default 0.05 Nm).
+    pub offset_nm: f64,
+    /// Resolution [Nm] (default 1 mNm; 0 = unquantised).
+    pub resolution_nm: f64,
+}
+
+impl Default for TorqueSensorParams {
+    fn default() -> Self {
+        Self {
+            noise_std_nm: 0.02,
+            offset_nm: 0.05,
+            resolution_nm: 1e-3,
+        }
+    }
+}
+
+impl TorqueSensorParams {
+    /// Checks every value is finite and the noise and resolution are ≥ 0.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        check(
+            "torque_sensor.noise_std_nm",
+            self.noise_std_nm,
+            self.noise_std_nm >= 0.0,
+            "must be finite and >= 0",
+        )?;
+        check(
+            "torque_sensor.offset_nm",
+            self.offset_nm,
+            self.offset_nm.is_finite(),
+            "must be finite",
+        )?;
+        check(
+            "torque_sensor.resolution_nm",
+            self.resolution_nm,
+            self.resolution_nm >= 0.0,
+            "must be finite and >= 0",
+        )
+    }
 }
 
 /// `Ok` when `value` is finite and `ok` holds, else [`ParamError::Invalid`] naming `key` and `why`.

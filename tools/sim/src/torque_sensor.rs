@@ -1,8 +1,9 @@
 //! A joint torque sensor between the gearbox output and the link, and a logger's jittered clock: what a
 //! torque-sensed arm reports besides its joint encoder and motor current.
 //!
-//! What it is: [`TorqueSensorParams`] (the `[plant.torque_sensor]` table: noise, offset, resolution) and
-//! [`TorqueSensor`], which turns a sample's [`Truth`] into the reading of a sensor at the output flange:
+//! What it is: [`TorqueSensor`], which turns a sample's [`Truth`] into the reading of a sensor at the
+//! output flange (its parameters, [`TorqueSensorParams`], are the `[plant.torque_sensor]` table of
+//! [`crate::params`]: noise, offset, resolution):
 //!
 //! ```text
 //! τ_joint = τ_t − τ_Fj + offset + N(0, σ²), rounded to the resolution        [Nm, joint side]
@@ -23,59 +24,12 @@
 //! What it is not: part of the plant's equations (the sensor is ideal-stiff, it does not change the
 //! dynamics) or a log writer (`frictionless-acquire`).
 
+use crate::params::ParamError;
+pub use crate::params::TorqueSensorParams;
+use crate::plant::Truth;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
-use serde::{Deserialize, Serialize};
-
-use crate::params::{ParamError, check};
-use crate::plant::Truth;
-
-/// Parameters of the joint torque sensor (`[plant.torque_sensor]`, every key optional).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct TorqueSensorParams {
-    /// White measurement noise σ [Nm] (default 0.02 Nm: a strain-gauge joint sensor of ≈ 50 Nm range).
-    pub noise_std_nm: f64,
-    /// Constant offset (zero drift) [Nm] (default 0.05 Nm).
-    pub offset_nm: f64,
-    /// Resolution [Nm] (default 1 mNm; 0 = unquantised).
-    pub resolution_nm: f64,
-}
-
-impl Default for TorqueSensorParams {
-    fn default() -> Self {
-        Self {
-            noise_std_nm: 0.02,
-            offset_nm: 0.05,
-            resolution_nm: 1e-3,
-        }
-    }
-}
-
-impl TorqueSensorParams {
-    /// Checks every value is finite and the noise and resolution are ≥ 0.
-    pub fn validate(&self) -> Result<(), ParamError> {
-        check(
-            "torque_sensor.noise_std_nm",
-            self.noise_std_nm,
-            self.noise_std_nm >= 0.0,
-            "must be finite and >= 0",
-        )?;
-        check(
-            "torque_sensor.offset_nm",
-            self.offset_nm,
-            self.offset_nm.is_finite(),
-            "must be finite",
-        )?;
-        check(
-            "torque_sensor.resolution_nm",
-            self.resolution_nm,
-            self.resolution_nm >= 0.0,
-            "must be finite and >= 0",
-        )
-    }
-}
 
 /// The link-side torque at the output flange, τ_t − τ_Fj [Nm] (what an ideal sensor reads).
 pub fn link_side_torque_nm(truth: &Truth) -> f64 {
