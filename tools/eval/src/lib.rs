@@ -21,7 +21,8 @@
 //! - [`Report`]: the JSON written by `frictl eval --json` (schema below), read by `frictl demo`;
 //! - [`drift`]: the drift monitor (`--drift`): residual per band and temperature bin on a new log
 //!   against the model's reference, input-range coverage, and a `retrain` / `ok` verdict;
-//! - [`plot`]: the PNG figures (plotters, bitmap backend).
+//! - [`plot`]: the PNG figures (plotters, bitmap backend);
+//! - [`job`]: one whole evaluation (`frictl eval`) as a call: files in, report and figures out.
 //!
 //! Which rows are evaluated: rows with `valid = 1`, in the selected chunks (all; the held-out runs of
 //! `--test-run` / `--test-dataset`, the other runs then being the training runs; and/or a PINN's test
@@ -73,6 +74,7 @@
 #![warn(missing_docs)]
 
 pub mod drift;
+pub mod job;
 pub mod plot;
 pub mod runs;
 
@@ -136,6 +138,28 @@ pub enum EvalError {
         /// Reason.
         msg: String,
     },
+    /// A dataset cannot be read, or a model cannot be run on it.
+    #[error("{path}: {msg}")]
+    Dataset {
+        /// The dataset (or the model on the dataset).
+        path: String,
+        /// Reason.
+        msg: String,
+    },
+    /// The selection of rows, runs or chunks to score is empty or names what does not exist.
+    #[error("{0}")]
+    Selection(String),
+    /// A held-out run named by the caller is no run of any dataset.
+    #[error("held-out run {name}: no dataset has a run of that name (runs: {known})")]
+    UnknownRun {
+        /// The name given.
+        name: String,
+        /// The runs there are, comma separated.
+        known: String,
+    },
+    /// A figure could not be drawn.
+    #[error(transparent)]
+    Plot(#[from] plot::PlotError),
     /// An option is out of range.
     #[error("{key} = {value}: {reason}")]
     Option {
