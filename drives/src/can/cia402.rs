@@ -965,6 +965,87 @@ pub const COB_ID_INVALID: u32 = 1 << 31;
 /// COB-ID bit 30 (TPDO): no RTR allowed.
 pub const COB_ID_NO_RTR: u32 = 1 << 30;
 
+/// The PDO layout frictiond maps on a CiA 402 drive (all synchronous, transmission type 1 unless
+/// noted): RPDO1 = controlword 0x6040 + target torque 0x6071 (CST) or torque offset 0x60B2;
+/// TPDO1 = statusword 0x6041 + position actual 0x6064 + torque actual 0x6077 (8 bytes);
+/// TPDO2 = velocity actual 0x606C [+ the joint-side encoder]; TPDO3 (optional) = the temperature
+/// object, every `tpdo3_every` SYNCs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Layout {
+    /// RPDO1 mapping.
+    pub rpdo1: PdoMap,
+    /// TPDO1 mapping.
+    pub tpdo1: PdoMap,
+    /// TPDO2 mapping.
+    pub tpdo2: PdoMap,
+    /// TPDO3 mapping (temperature), if any.
+    pub tpdo3: Option<PdoMap>,
+    /// TPDO3 transmission type (every n-th SYNC, 1..=240).
+    pub tpdo3_every: u8,
+}
+
+impl Layout {
+    /// The layout for a drive (`torque_offset`: 0x60B2 instead of 0x6071).
+    pub fn new(
+        torque_offset: bool,
+        joint_encoder: Option<PdoEntry>,
+        temperature: Option<PdoEntry>,
+        tpdo3_every: u8,
+    ) -> Result<Self, CanCodecError> {
+        let target = if torque_offset {
+            obj::TORQUE_OFFSET
+        } else {
+            obj::TARGET_TORQUE
+        };
+        let rpdo1 = PdoMap::new(&[
+            PdoEntry::new(obj::CONTROLWORD, 0, 16),
+            PdoEntry::new(target, 0, 16),
+        ])?;
+        let tpdo1 = PdoMap::new(&[
+            PdoEntry::new(obj::STATUSWORD, 0, 16),
+            PdoEntry::new(obj::POSITION_ACTUAL, 0, 32),
+            PdoEntry::new(obj::TORQUE_ACTUAL, 0, 16),
+        ])?;
+        let vel = PdoEntry::new(obj::VELOCITY_ACTUAL, 0, 32);
+        let tpdo2 = match joint_encoder {
+            Some(e) => PdoMap::new(&[vel, e])?,
+            None => PdoMap::new(&[vel])?,
+        };
+        let tpdo3 = temperature.map(|t| PdoMap::new(&[t])).transpose()?;
+        if !(1..=240).contains(&tpdo3_every) {
+            return Err(CanCodecError::BadUnitParameter {
+                field: "temperature_every",
+                value: f64::from(tpdo3_every),
+            });
+        }
+        Ok(Self {
+            rpdo1,
+            tpdo1,
+            tpdo2,
+            tpdo3,
+            tpdo3_every,
+        })
+    }
+
+    /// Worst-case bits per SYNC cycle of this layout (without the SYNC itself).
+    pub fn bits_per_tick(&self) -> u32 {
+        let mut t = [(self.tpdo1.bytes(), 1), (self.tpdo2.bytes(), 1), (0, 1)];
+        let n = match self.tpdo3 {
+            Some(m) => {
+                t[2] = (m.bytes(), self.tpdo3_every);
+                3
+            }
+            None => 2,
+        };
+        super::busload::cia402_bits_per_node_tick(&[self.rpdo1.bytes()], &t[..n])
+    }
+
+    /// Frames per cycle (RPDO1, TPDO1, TPDO2; TPDO3 counted when sent every cycle).
+    pub fn frames_per_tick(&self) -> u32 {
+        3 + u32::from(self.tpdo3.is_some() && self.tpdo3_every == 1)
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // CiA 402
 
@@ -1500,6 +1581,20 @@ mod tests {
             apply_controlword(DriveState::Fault, 0x80, false, false),
             DriveState::Fault
         );
+    }
+
+    #[test]
+    fn layout_bits() {
+        let l = Layout::new(false, None, None, 100).unwrap();
+        assert_eq!((l.rpdo1.bytes(), l.tpdo1.bytes(), l.tpdo2.bytes()), (4, 8, 4));
+        assert_eq!(l.bits_per_tick(), 95 + 135 + 95);
+        let enc = PdoEntry::new(obj::ADDITIONAL_POSITION, 1, 32);
+        let temp = PdoEntry::new(0x2031, 1, 32);
+        let l = Layout::new(true, Some(enc), Some(temp), 100).unwrap();
+        assert_eq!(l.rpdo1.entries()[1].index, obj::TORQUE_OFFSET);
+        assert_eq!(l.bits_per_tick(), 95 + 135 + 135 + 1);
+        assert!(Layout::new(false, None, Some(temp), 0).is_err());
+        assert!(Layout::new(false, Some(PdoEntry::new(0x60E4, 1, 12)), None, 1).is_err());
     }
 
     #[test]
