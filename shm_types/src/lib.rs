@@ -406,6 +406,9 @@ pub enum BusKind {
 /// [`BusCounters::detail`] slot of a CAN backend: error-passive and warning events
 /// (`CAN_ERR_CRTL` passive bits).
 pub const CAN_DETAIL_ERROR_PASSIVE: usize = 0;
+/// [`BusCounters::detail`] slot of a CAN backend: CANopen EMCY messages received (error codes other
+/// than "error reset"; CiA 402 drives).
+pub const CAN_DETAIL_EMCY: usize = 1;
 
 impl BusKind {
     /// Every kind, in code order.
@@ -434,7 +437,7 @@ impl BusKind {
     pub const fn detail_names(self) -> &'static [&'static str] {
         match self {
             BusKind::None | BusKind::Shm => &[],
-            BusKind::Can => &["error_passive"],
+            BusKind::Can => &["error_passive", "emcy"],
         }
     }
 }

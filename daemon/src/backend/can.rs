@@ -58,7 +58,7 @@ use frictionless_drives::can::mit::{self, MitCommand, MitSpecial};
 use frictionless_drives::can::odrive::{self, OdriveMsg};
 use frictionless_drives::can::{CanCodecError, WireFrame};
 use frictionless_shm_types::{
-    BusCounters, BusKind, CAN_DETAIL_ERROR_PASSIVE, DaemonStatus, FAULT_DRIVE,
+    BusCounters, BusKind, CAN_DETAIL_EMCY, CAN_DETAIL_ERROR_PASSIVE, DaemonStatus, FAULT_DRIVE,
     FAULT_FEEDBACK_STALE, Inbox, IoError, Ipc, JointStates, MotorCurrentCommand, Outbox,
     TorqueRequest, monotonic_ns,
 };
@@ -66,6 +66,8 @@ use socketcan::{CanFilter, CanFrame, CanSocket, EmbeddedFrame, Socket, SocketOpt
 
 use super::{Backend, BackendError};
 use crate::alloc_count;
+
+mod cia402;
 use crate::config::{CanProtocol, Config, ResolvedBus, ResolvedDrive};
 
 /// At most this many frames are read from one bus per tick (a flooded bus cannot stall the tick).
@@ -97,6 +99,9 @@ struct SharedCounters {
     tx_dropped: AtomicU64,
     io_errors: AtomicU64,
     stale_mask: AtomicU64,
+    emcy: AtomicU64,
+    /// Last CiA 402 EMCY: node << 16 | error code.
+    last_emcy: AtomicU64,
 }
 
 impl SharedCounters {
@@ -109,9 +114,11 @@ impl SharedCounters {
         self.io_errors.store(c.io_errors, Ordering::Relaxed);
         self.stale_mask
             .store(c.stale_feedback_mask, Ordering::Relaxed);
+        self.emcy
+            .store(c.detail[CAN_DETAIL_EMCY], Ordering::Relaxed);
     }
 
-    fn load(&self) -> [u64; 6] {
+    fn load(&self) -> [u64; 8] {
         [
             self.error_frames.load(Ordering::Relaxed),
             self.bus_off.load(Ordering::Relaxed),
@@ -119,6 +126,8 @@ impl SharedCounters {
             self.tx_dropped.load(Ordering::Relaxed),
             self.io_errors.load(Ordering::Relaxed),
             self.stale_mask.load(Ordering::Relaxed),
+            self.emcy.load(Ordering::Relaxed),
+            self.last_emcy.load(Ordering::Relaxed),
         ]
     }
 }
@@ -138,6 +147,8 @@ struct Drive {
     /// Whether the feedback was stale at the previous tick (true before the first reply): an MIT
     /// drive answering again is re-entered at once.
     was_stale: bool,
+    /// CiA 402: the drive's CANopen runtime (configured at open).
+    co: Option<cia402::Co>,
 }
 
 /// One bus: its socket and drives.
@@ -237,6 +248,11 @@ fn configure_socket(s: &CanSocket, bus: &ResolvedBus, strict: bool) -> Result<()
 pub fn owned_ids(bus: &ResolvedBus) -> Vec<u32> {
     match bus.protocol {
         CanProtocol::Mit => vec![bus.host_id],
+        CanProtocol::Cia402 => bus
+            .joints
+            .iter()
+            .flat_map(|d| cia402::owned_ids(d.node_id))
+            .collect(),
         CanProtocol::Odrive => bus
             .joints
             .iter()
@@ -353,6 +369,13 @@ pub fn reload_conflicts(running: &Config, new: &Config) -> Vec<String> {
                 o.max_curr_a.to_string(),
                 n.max_curr_a.to_string(),
             );
+            if o.cia402 != n.cia402 {
+                field(
+                    "[bus.joint.cia402]",
+                    format!("{:?}", o.cia402.map(|x| x.cfg)),
+                    format!("{:?}", n.cia402.map(|x| x.cfg)),
+                );
+            }
         }
     }
     out
@@ -393,7 +416,7 @@ impl CanBackend {
         let mut buses = Vec::with_capacity(socks.len());
         for (bus, sock) in cfg.buses.iter().zip(socks) {
             configure_socket(&sock, bus, false)?;
-            let drives = bus
+            let mut drives: Vec<Drive> = bus
                 .joints
                 .iter()
                 .map(|d| {
@@ -408,9 +431,17 @@ impl CanBackend {
                         heartbeat: None,
                         was_valid: false,
                         was_stale: true,
+                        co: None,
                     }
                 })
                 .collect();
+            if bus.protocol == CanProtocol::Cia402 {
+                let period_us = cfg.raw.loop_.period_us;
+                for d in &mut drives {
+                    d.co = Some(cia402::configure(&sock, &bus.interface, &d.cfg, period_us)?);
+                }
+                cia402::start_all(&sock, drives.iter().map(|d| d.cfg.node_id as u8));
+            }
             buses.push(Bus {
                 sock,
                 protocol: bus.protocol,
@@ -489,6 +520,8 @@ impl CanBackend {
         drive.last_enter_tick = self.tick;
         let node = drive.cfg.node_id;
         match bus.protocol {
+            // Configured and started at open; the controlword sequencing enables it.
+            CanProtocol::Cia402 => {}
             CanProtocol::Mit => Self::send(
                 &bus.sock,
                 &mut self.counters,
@@ -533,6 +566,33 @@ impl CanBackend {
         let bus = &mut self.buses[b];
         let st = &mut self.states;
         match bus.protocol {
+            CanProtocol::Cia402 => {
+                if f.extended || f.rtr {
+                    return false;
+                }
+                let node = f.id & 0x7F;
+                let Some(d) = bus.drives.iter_mut().find(|d| d.cfg.node_id == node) else {
+                    return false;
+                };
+                let Some(c) = d.co.as_mut() else {
+                    return false;
+                };
+                let k = d.cfg.index;
+                let u = d.cfg.units;
+                let (owned, feedback, emcy) =
+                    c.accept(f, self.tick, st, k, u.gear_ratio, u.kt_nm_per_a);
+                if feedback {
+                    d.last_fb_tick = Some(self.tick);
+                }
+                if emcy {
+                    self.counters.detail[CAN_DETAIL_EMCY] += 1;
+                    self.shared.last_emcy.store(
+                        u64::from(c.node) << 16 | u64::from(c.last_emcy),
+                        Ordering::Relaxed,
+                    );
+                }
+                owned
+            }
             CanProtocol::Mit => {
                 if f.id != bus.host_id || f.extended || f.rtr || f.len < 6 {
                     return false;
@@ -664,13 +724,14 @@ impl Backend for CanBackend {
                 let k = drive.cfg.index;
                 let is_stale = drive
                     .last_fb_tick
-                    .is_none_or(|t| self.tick - t > bus.timeout_ticks);
+                    .is_none_or(|t| self.tick - t > bus.timeout_ticks)
+                    || drive.co.is_some_and(|c| c.heartbeat_stale(self.tick));
                 let drive_fault = match drive.heartbeat {
                     Some((err, state)) => {
                         err != 0 || u32::from(state) != odrive::AXIS_STATE_CLOSED_LOOP_CONTROL
                     }
                     None => false,
-                };
+                } || drive.co.is_some_and(|c| c.faulted());
                 let mut flags = self.states.fault_flags[k] & !(FAULT_FEEDBACK_STALE | FAULT_DRIVE);
                 if is_stale {
                     flags |= FAULT_FEEDBACK_STALE;
@@ -684,6 +745,7 @@ impl Backend for CanBackend {
                 // that answers again after silence — it started after our enable edge, or reset —
                 // is re-entered at once, not only at the next enable edge.
                 let (rearm, answers_again) = match bus.protocol {
+                    CanProtocol::Cia402 => (false, false),
                     CanProtocol::Mit => (is_stale, drive.was_stale && !is_stale),
                     CanProtocol::Odrive => (
                         drive.heartbeat.is_some_and(|(err, state)| {
@@ -736,6 +798,12 @@ impl Backend for CanBackend {
                 };
                 let value = d.cfg.units.command_from_current(i_a);
                 let frame = match bus.protocol {
+                    CanProtocol::Cia402 => match d.co.as_mut() {
+                        Some(c) => c
+                            .rpdo(value, cia402::Goal::Enabled)
+                            .ok_or(CanCodecError::NonFinite { field: "rpdo" }),
+                        None => Err(CanCodecError::NonFinite { field: "cia402" }),
+                    },
                     CanProtocol::Mit => match d.cfg.mit {
                         Some(r) => {
                             mit::encode_command(d.cfg.node_id, &MitCommand::torque(value), &r)
@@ -751,6 +819,14 @@ impl Backend for CanBackend {
                     ),
                 };
                 Self::send(&bus.sock, &mut self.counters, frame);
+            }
+            // CiA 402: frictiond is the SYNC producer; RPDOs (transmission type 1) apply at it.
+            if bus.protocol == CanProtocol::Cia402 {
+                Self::send(
+                    &bus.sock,
+                    &mut self.counters,
+                    Ok(frictionless_drives::can::cia402::encode_sync(None)),
+                );
             }
         }
         self.shared.store(&self.counters);
@@ -806,6 +882,37 @@ impl Backend for CanBackend {
 
 impl Drop for CanBackend {
     fn drop(&mut self) {
+        // CiA 402: quick stop with 0 torque for a few SYNC cycles, then NMT stop.
+        for bus in &mut self.buses {
+            if bus.protocol != CanProtocol::Cia402 {
+                continue;
+            }
+            for _ in 0..cia402::STOP_CYCLES {
+                for d in &mut bus.drives {
+                    if let Some(c) = d.co.as_mut() {
+                        let f = c.rpdo(0.0, cia402::Goal::QuickStop);
+                        Self::send(
+                            &bus.sock,
+                            &mut self.counters,
+                            f.ok_or(CanCodecError::NonFinite { field: "rpdo" }),
+                        );
+                    }
+                }
+                Self::send(
+                    &bus.sock,
+                    &mut self.counters,
+                    Ok(frictionless_drives::can::cia402::encode_sync(None)),
+                );
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            for d in &bus.drives {
+                let stop = frictionless_drives::can::cia402::encode_nmt(
+                    frictionless_drives::can::cia402::NmtCommand::Stop,
+                    d.cfg.node_id as u8,
+                );
+                Self::send(&bus.sock, &mut self.counters, stop);
+            }
+        }
         // Zero torque, then leave motor mode / idle the axis.
         for bus in &self.buses {
             for d in &bus.drives {
@@ -818,7 +925,7 @@ impl Drop for CanBackend {
                         let exit = mit::encode_special(node, MitSpecial::ExitMotorMode);
                         Self::send(&bus.sock, &mut self.counters, exit);
                     }
-                    (CanProtocol::Mit, None) => {}
+                    (CanProtocol::Mit, None) | (CanProtocol::Cia402, _) => {}
                     (CanProtocol::Odrive, _) => {
                         let n = node as u8;
                         let zero = OdriveMsg::SetInputTorque { torque_nm: 0.0 };
@@ -872,6 +979,15 @@ fn log_counters(c: &SharedCounters, stop: &AtomicBool, buses: &[String]) {
                 d(4),
                 now[3],
                 now[4]
+            );
+        }
+        if now[6] != last[6] {
+            let (node, code) = (now[7] >> 16, (now[7] & 0xFFFF) as u16);
+            tracing::warn!(
+                "CAN {buses:?}: +{} CiA 402 EMCY (total {}); last: node {node} error code {code:#06X} ({})",
+                d(6),
+                now[6],
+                frictionless_drives::can::cia402::emcy_text(code)
             );
         }
         if now[5] != last[5] {

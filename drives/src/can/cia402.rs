@@ -1586,7 +1586,10 @@ mod tests {
     #[test]
     fn layout_bits() {
         let l = Layout::new(false, None, None, 100).unwrap();
-        assert_eq!((l.rpdo1.bytes(), l.tpdo1.bytes(), l.tpdo2.bytes()), (4, 8, 4));
+        assert_eq!(
+            (l.rpdo1.bytes(), l.tpdo1.bytes(), l.tpdo2.bytes()),
+            (4, 8, 4)
+        );
         assert_eq!(l.bits_per_tick(), 95 + 135 + 95);
         let enc = PdoEntry::new(obj::ADDITIONAL_POSITION, 1, 32);
         let temp = PdoEntry::new(0x2031, 1, 32);

@@ -9,6 +9,8 @@
 //! - [`odrive`]: ODrive "CAN Simple" (id = node << 5 | cmd, little-endian `f32`).
 //! - [`cia402`]: CANopen (NMT, SYNC, SDO, EMCY, heartbeat, PDOs) and the CiA 402 drive profile
 //!   (statusword / controlword state machine, ‰-of-rated torque and increment units).
+//! - [`cia402_node`]: a socket-free emulated CiA 402 drive (object dictionary, NMT slave, SDO server,
+//!   SYNC-driven PDOs, EMCY, heartbeat) for the plant and for tests of the master.
 //! - [`units`]: per-joint mapping between the daemon's motor current [A] and what a drive expects
 //!   (current, motor torque or joint torque), and motor-side feedback back to the joint side.
 //! - [`busload`]: bits per classic frame with worst-case bit stuffing and the bus load of a config.
@@ -18,6 +20,7 @@
 
 pub mod busload;
 pub mod cia402;
+pub mod cia402_node;
 pub mod frame;
 pub mod mit;
 pub mod odrive;
