@@ -20,7 +20,7 @@
 //! every per-joint array; masks are `u64` bit sets (bit `j` = joint `j`). Type names are explicit and
 //! versioned (`frictionless::JointStates_v1`): change the layout ⇒ bump the version.
 //!
-//! The drive protocols spoken on a field bus (MIT mode, ODrive CAN Simple) are not here: they live in
+//! The drive protocols spoken on a field bus (MIT mode, ODrive CAN Simple, CiA 402) are not here: they live in
 //! `frictionless-drives`, beside this crate.
 //!
 //! ## Example: a status snapshot's latency histogram
@@ -34,7 +34,10 @@
 //! assert_eq!(status.bus.bus_kind(), Some(BusKind::None));
 //! status.bus = BusCounters::new(BusKind::Can, 2);
 //! status.bus.detail[CAN_DETAIL_ERROR_PASSIVE] = 3;
-//! assert_eq!(status.bus.named_detail().collect::<Vec<_>>(), [("error_passive", 3)]);
+//! assert_eq!(
+//!     status.bus.named_detail().collect::<Vec<_>>(),
+//!     [("error_passive", 3), ("emcy", 0)]
+//! );
 //! ```
 
 #![warn(missing_docs)]

@@ -1012,7 +1012,7 @@ mod tests {
     use frictionless_shm_types::{DaemonStatus, IpcConfig};
     use socketcan::CanErrorFrame;
 
-    fn pair() -> (CanSocket, CanSocket) {
+    pub(super) fn pair() -> (CanSocket, CanSocket) {
         let mut fds = [0; 2];
         // SAFETY: fds is a valid 2-element array; on success both fds are new and owned by us.
         let rc = unsafe {
@@ -1033,9 +1033,9 @@ mod tests {
         }
     }
 
-    struct Env {
+    pub(super) struct Env {
         dir: std::path::PathBuf,
-        cfg: Config,
+        pub(super) cfg: Config,
     }
 
     impl Drop for Env {
@@ -1044,7 +1044,7 @@ mod tests {
         }
     }
 
-    fn env(tag: &str, body: &str) -> Env {
+    pub(super) fn env(tag: &str, body: &str) -> Env {
         let id = format!("fldcan_{tag}_{}_{}", std::process::id(), monotonic_ns());
         let dir = std::env::temp_dir().join(&id);
         std::fs::create_dir_all(&dir).unwrap();
@@ -1530,5 +1530,219 @@ command_unit = "joint_torque"
             }
         }
         assert!(rearmed, "idle axis was not re-armed");
+    }
+}
+
+#[cfg(test)]
+mod cia402_tests {
+    //! The CiA 402 path over a socketpair, against the emulated node of `frictionless-drives`
+    //! (`cia402_node`) running in a thread: start-up by SDO, enable, CST torque, EMCY → drive fault
+    //! and its reset, heartbeat loss → stale, quick stop and NMT stop at drop.
+
+    use super::*;
+    use frictionless_drives::can::cia402::{DriveState, NmtState};
+    use frictionless_drives::can::cia402_node::{Cia402Node, NodeParams};
+    use std::sync::Mutex;
+    use std::sync::atomic::AtomicBool;
+
+    const CIA: &str = r#"
+[[joint]]
+name = "knee"
+index = 0
+gear_ratio = -100.0
+kt = 0.157
+max_curr = 5.0
+friction_model = "none"
+[[bus]]
+interface = "vcan0"
+bitrate = 1000000
+protocol = "cia402"
+max_load = 0.9
+feedback_timeout_ticks = 20
+[[bus.joint]]
+joint = "knee"
+node_id = 3
+command_unit = "motor_torque"
+[bus.joint.cia402]
+fault_reset = true
+velocity_unit_rad_s = 0.1
+joint_encoder = { index = 0x60E4, sub = 1, bits = 32, counts_per_rev = 8192 }
+heartbeat_ms = 10
+heartbeat_timeout_ms = 50
+"#;
+
+    /// The emulated drive in a thread: answers frames, ticks every ms, sends its heartbeat unless
+    /// muted.
+    struct Emu {
+        node: Arc<Mutex<Cia402Node>>,
+        /// An EMCY code to fault the drive with (0 = none), sent by the thread.
+        fault: Arc<std::sync::atomic::AtomicU16>,
+        mute_heartbeat: Arc<AtomicBool>,
+        stop: Arc<AtomicBool>,
+        thread: Option<JoinHandle<()>>,
+    }
+
+    impl Emu {
+        fn start(sock: CanSocket) -> Self {
+            let mut n = Cia402Node::new(&NodeParams {
+                node: 3,
+                rated_torque_mnm: 500,
+                max_torque_permille: 2000,
+                counts_per_rev: 4096,
+            })
+            .unwrap();
+            n.set_feedback(1024, -5, 40, 2048, 0);
+            let node = Arc::new(Mutex::new(n));
+            let mute_heartbeat = Arc::new(AtomicBool::new(false));
+            let stop = Arc::new(AtomicBool::new(false));
+            let fault = Arc::new(std::sync::atomic::AtomicU16::new(0));
+            let (n2, m2, s2, f2) = (
+                node.clone(),
+                mute_heartbeat.clone(),
+                stop.clone(),
+                fault.clone(),
+            );
+            let thread = std::thread::spawn(move || {
+                let tx = |f: &WireFrame| {
+                    let _ = sock.write_frame(&CanFrame::try_from(*f).unwrap());
+                };
+                let boot = n2.lock().unwrap().boot().unwrap();
+                tx(&boot);
+                let mut last = std::time::Instant::now();
+                while !s2.load(Ordering::Relaxed) {
+                    if let Ok(f) = sock.read_frame_timeout(Duration::from_micros(500))
+                        && let Ok(w) = WireFrame::try_from(&f)
+                    {
+                        let out = n2.lock().unwrap().on_frame(&w);
+                        out.frames().iter().for_each(tx);
+                    }
+                    let code = f2.swap(0, Ordering::Relaxed);
+                    if code != 0 {
+                        let emcy = n2.lock().unwrap().inject_fault(code).unwrap();
+                        tx(&emcy);
+                    }
+                    if last.elapsed() >= Duration::from_millis(1) {
+                        last = std::time::Instant::now();
+                        let out = n2.lock().unwrap().tick_ms();
+                        if !m2.load(Ordering::Relaxed) {
+                            out.frames().iter().for_each(tx);
+                        }
+                    }
+                }
+            });
+            Self {
+                node,
+                fault,
+                mute_heartbeat,
+                stop,
+                thread: Some(thread),
+            }
+        }
+
+        fn with<R>(&self, f: impl FnOnce(&mut Cia402Node) -> R) -> R {
+            f(&mut self.node.lock().unwrap())
+        }
+    }
+
+    impl Drop for Emu {
+        fn drop(&mut self) {
+            self.stop.store(true, Ordering::Relaxed);
+            if let Some(t) = self.thread.take() {
+                let _ = t.join();
+            }
+        }
+    }
+
+    /// Runs ticks (1 ms apart) until `done` holds, at most `max` ticks; returns the last states.
+    fn run_until(
+        b: &mut CanBackend,
+        cmd: &MotorCurrentCommand,
+        max: usize,
+        mut done: impl FnMut(&CanBackend, &JointStates) -> bool,
+    ) -> JointStates {
+        let mut st = JointStates::zeroed();
+        for _ in 0..max {
+            if let Some(s) = b.read_states().unwrap() {
+                st = s;
+            }
+            b.publish_command(cmd).unwrap();
+            if done(b, &st) {
+                return st;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        panic!("condition not reached in {max} ticks; last states {st:?}");
+    }
+
+    #[test]
+    fn cia402_drive_starts_enables_follows_faults_resets_and_stops() {
+        let e = super::tests::env("cia402", CIA);
+        let (host, drive) = super::tests::pair();
+        let emu = Emu::start(drive);
+        let mut b = CanBackend::with_sockets(&e.cfg, vec![host]).unwrap();
+        // Start-up read the scales by SDO, wrote CST and the mapping, started the node.
+        let co = b.buses[0].drives[0].co.unwrap();
+        assert_eq!((co.torque.rated_mnm, co.torque.max_permille), (500, 2000));
+        assert_eq!(co.pos.counts_per_rev, 4096.0);
+        assert_eq!(emu.with(|n| n.mode()), 10);
+        assert_eq!(emu.with(|n| n.get(0x1A01, 2)), Some(0x60E4_0120));
+        assert_eq!(emu.with(|n| n.get(0x1017, 0)), Some(10));
+
+        // The NMT start reaches the node (it then answers SYNCs).
+        let idle = MotorCurrentCommand::zeroed();
+        run_until(&mut b, &idle, 2000, |_, _| {
+            emu.with(|n| n.nmt() == NmtState::Operational)
+        });
+        // Enable and command 2 A = 0.314 Nm motor torque = 628 ‰ of 0.5 Nm.
+        let mut cmd = MotorCurrentCommand::zeroed();
+        cmd.valid_mask = 1;
+        cmd.i_ref_a[0] = 2.0;
+        run_until(&mut b, &cmd, 2000, |_, _| {
+            emu.with(|n| {
+                n.state() == DriveState::OperationEnabled && n.applied_torque_permille() == 628
+            })
+        });
+        let st = run_until(&mut b, &cmd, 2000, |b, st| {
+            b.counters().stale_feedback_mask == 0 && st.fault_flags[0] == 0 && st.seq > 0
+        });
+        let near = |a: f64, z: f64| assert!((a - z).abs() < 1e-9, "{a} vs {z}");
+        near(st.theta_motor_rad[0], std::f64::consts::FRAC_PI_2); // 1024 / 4096 rev
+        near(st.s_rad[0], std::f64::consts::FRAC_PI_2); // joint encoder 2048 / 8192 rev
+        near(st.omega_motor_rad_s[0], -0.5);
+        near(st.sdot_rad_s[0], 0.005);
+        near(st.current_a[0], 0.040 * 0.5 / 0.157);
+
+        // EMCY + fault: the joint is flagged, the EMCY counted; fault_reset = true resets it (edge),
+        // the drive's "error reset" EMCY clears the flag, and the drive is enabled again.
+        emu.fault.store(0x4310, Ordering::Relaxed);
+        let _ = run_until(&mut b, &cmd, 2000, |b, st| {
+            st.fault_flags[0] & FAULT_DRIVE != 0 && b.counters().detail[CAN_DETAIL_EMCY] == 1
+        });
+        assert_eq!(b.buses[0].drives[0].co.unwrap().last_emcy, 0x4310);
+        let _ = run_until(&mut b, &cmd, 3000, |_, st| {
+            st.fault_flags[0] == 0
+                && emu.with(|n| {
+                    n.state() == DriveState::OperationEnabled && n.applied_torque_permille() == 628
+                })
+        });
+
+        // Heartbeat loss: the joint goes stale although its TPDOs still arrive; back when it returns.
+        emu.mute_heartbeat.store(true, Ordering::Relaxed);
+        let _ = run_until(&mut b, &cmd, 2000, |b, st| {
+            b.counters().stale_feedback_mask == 1 && st.fault_flags[0] & FAULT_FEEDBACK_STALE != 0
+        });
+        emu.mute_heartbeat.store(false, Ordering::Relaxed);
+        let _ = run_until(&mut b, &cmd, 2000, |b, _| {
+            b.counters().stale_feedback_mask == 0
+        });
+
+        // Drop: quick stop with 0 torque (the drive leaves operation enabled), then NMT stop.
+        drop(b);
+        std::thread::sleep(Duration::from_millis(50));
+        emu.with(|n| {
+            assert_eq!(n.nmt(), NmtState::Stopped);
+            assert_ne!(n.state(), DriveState::OperationEnabled);
+            assert_eq!(n.applied_torque_permille(), 0);
+        });
     }
 }

@@ -313,7 +313,8 @@ impl Cia402Node {
         self.set(obj::STATUSWORD, 0, u32::from(sw));
     }
 
-    fn apply_controlword(&mut self, cw: u16) {
+    /// Applies a controlword; returns the EMCY "error reset" frame when it cleared a fault.
+    fn apply_controlword(&mut self, cw: u16) -> Option<WireFrame> {
         let edge = cw & co::cw::FAULT_RESET != 0 && self.last_cw & co::cw::FAULT_RESET == 0;
         self.last_cw = cw;
         let stays = matches!(
@@ -322,12 +323,14 @@ impl Cia402Node {
         );
         let before = self.state;
         self.state = co::apply_controlword(self.state, cw, edge, stays);
+        self.refresh_statusword();
         if before == DriveState::Fault && self.state != DriveState::Fault {
             self.emcy_code = 0;
             self.set(obj::ERROR_CODE, 0, 0);
             self.set(obj::ERROR_REGISTER, 0, 0);
+            return co::encode_emcy(self.node, &Emcy::default()).ok();
         }
-        self.refresh_statusword();
+        None
     }
 
     /// The boot-up frame; the node enters pre-operational (the 402 state goes to switch on
@@ -451,7 +454,9 @@ impl Cia402Node {
         for (e, v) in map.entries().iter().zip(raw) {
             if e.index == obj::CONTROLWORD && e.sub == 0 {
                 self.set(obj::CONTROLWORD, 0, v);
-                self.apply_controlword(v as u16);
+                if let Some(f) = self.apply_controlword(v as u16) {
+                    out.push(Ok(f));
+                }
             } else {
                 self.set(e.index, e.sub, v);
             }
@@ -467,7 +472,7 @@ impl Cia402Node {
         }
         // Automatic transitions: a quick stop that does not stay ends in switch on disabled.
         if self.state == DriveState::QuickStopActive {
-            self.apply_controlword(self.last_cw);
+            let _ = self.apply_controlword(self.last_cw);
         }
         for k in 0..4u16 {
             let comm = self
@@ -581,7 +586,11 @@ impl Cia402Node {
                 }
                 self.set(addr.index, addr.sub, v);
                 match addr.index {
-                    obj::CONTROLWORD => self.apply_controlword(v as u16),
+                    // An "error reset" EMCY of an SDO-written fault reset is not sent (one frame
+                    // per request); the statusword shows the reset.
+                    obj::CONTROLWORD => {
+                        let _ = self.apply_controlword(v as u16);
+                    }
                     obj::MODES_OF_OPERATION => self.set(obj::MODES_DISPLAY, 0, v),
                     _ => {}
                 }
@@ -826,11 +835,16 @@ mod tests {
         let e = n.inject_fault(0x4310).unwrap();
         assert_eq!(co::decode_emcy(&e).unwrap().1.code, 0x4310);
         assert_eq!(n.applied_torque_permille(), 0);
-        for cw in [0x00, 0x80] {
-            n.on_frame(&co::encode_pdo(0x203, &rmap, &[cw, 0]).unwrap());
-            n.on_frame(&co::encode_sync(None));
-        }
+        n.on_frame(&co::encode_pdo(0x203, &rmap, &[0x00, 0]).unwrap());
+        n.on_frame(&co::encode_sync(None));
+        n.on_frame(&co::encode_pdo(0x203, &rmap, &[0x80, 0]).unwrap());
+        let out = n.on_frame(&co::encode_sync(None));
         assert_eq!(n.state(), DriveState::SwitchOnDisabled);
+        assert_eq!(
+            co::decode_emcy(&out.frames()[0]).unwrap().1,
+            Emcy::default(),
+            "error reset"
+        );
         assert_eq!(n.emcy_code(), 0);
         // Heartbeat from 0x1017.
         n.on_frame(
