@@ -4,7 +4,8 @@
 #   fuzz/run.sh 30 candump_parse       # only the named targets
 #   FUZZ_RUNS=1000000 fuzz/run.sh 0 onnx_import   # a fixed number of executions instead of a time
 # Targets: weights_reader (.fwt reader), can_mit_decode (MIT command/reply/special decoders),
-# can_odrive_decode (ODrive CAN Simple decoder), candump_parse (candump -L line parser),
+# can_odrive_decode (ODrive CAN Simple decoder), can_cia402_decode (CANopen / CiA 402 decoders and
+# state machine), candump_parse (candump -L line parser),
 # frictiond_config (the TOML config through what `frictiond --check` runs), dataset_readers (dataset
 # CSV, JSON sidecar and fit file), onnx_import (ONNX and safetensors importers), log_importers (the CSV
 # and ROS 2 MCAP robot-log importers of `frictl import csv|mcap`, with the column/unit/sign spec taken
@@ -26,7 +27,7 @@
 set -euo pipefail
 SECS="${1:-60}"
 shift || true
-ALL=(weights_reader can_mit_decode can_odrive_decode candump_parse frictiond_config dataset_readers onnx_import log_importers urdf_robot)
+ALL=(weights_reader can_mit_decode can_odrive_decode can_cia402_decode candump_parse frictiond_config dataset_readers onnx_import log_importers urdf_robot)
 FEATURES=()
 TEST_FEATURES=()
 # Flags of both `cargo fuzz build` and `cargo fuzz run` (the same, or run builds again).
@@ -89,6 +90,13 @@ for l in sys.stdin:
       seed "$t" encoder '\x80\x29\x00\x00\x00\x00\x80\x3f\x00\x00\x00\xbf'
       seed "$t" heartbeat '\x80\x21\x00\x00\x00\x08\x00\x00\x08\x00\x00\x00'
       seed "$t" rtr '\x02\x29\x00\x00' ;;
+    can_cia402_decode)
+      # SDO write 0x6040 = 6 to node 0x7F; TPDO1 of node 5 (mapping from bytes 13..); NMT start;
+      # EMCY 0x4310 of node 3.
+      seed "$t" sdo '\x80\x7f\x06\x00\x2b\x40\x60\x00\x06\x00\x00\x00\x00'
+      seed "$t" tpdo '\x80\x85\x01\x00\x37\x02\xfe\xff\xff\xff\x70\xfe\x00\x03\x41\x64\x77'
+      seed "$t" nmt '\x20\x00\x00\x00\x01\x05'
+      seed "$t" emcy '\x80\x83\x00\x00\x10\x43\x08\x01\x02\x03\x04\x05' ;;
     candump_parse)
       seed "$t" classic '(1700000000.123456) vcan0 001#7FFF7FF0000007FF\n(1700000000.124456) vcan0 000#018000800800\n'
       seed "$t" ext_rtr '(0.000001) can0 12345678#R\n(0.000002) can0 02C#R8\n'

@@ -284,7 +284,11 @@ fn can_check_refuses_models_the_drives_cannot_feed() {
 #[test]
 fn can_example_configs_validate() {
     let root = repo_root();
-    for name in ["config/can_mit.toml", "config/can_odrive.toml"] {
+    for name in [
+        "config/can_mit.toml",
+        "config/can_odrive.toml",
+        "config/can_cia402.toml",
+    ] {
         let out = Command::new(frictiond_bin())
             .arg("--config")
             .arg(root.join(name))

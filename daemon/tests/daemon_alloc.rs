@@ -238,3 +238,119 @@ sigma1 = 1.0
         "{exempt} exempt over {ticks} ticks"
     );
 }
+
+/// The CAN backend with a CiA 402 drive (emulated, over a socketpair): TPDO / heartbeat decode,
+/// the controlword sequencing, RPDO and SYNC every tick allocate nothing on the RT thread.
+#[test]
+fn rt_thread_allocates_nothing_with_a_cia402_drive() {
+    use crate::can_support::{CHILD_FD, Cia402Emu, socketpair, start_daemon, write_can_config};
+    const READY_AFTER: u64 = 2_000;
+    const TICKS: u64 = 10_000;
+    let env = TestEnv::new("alloc_cia402");
+    let cfg = write_can_config(
+        &env,
+        &format!(
+            r#"
+[loop]
+period_us = 1000
+status_every_ticks = 100
+ready_after_ticks = {READY_AFTER}
+[safety]
+stale_after_ticks = 50
+on_stale = "zero"
+[[joint]]
+name = "knee"
+index = 0
+gear_ratio = -100.0
+kt = 0.157
+max_curr = 5.0
+kfc = 0.85
+friction_model = "cv"
+kc = 8.1
+ka = 50.84
+kv = 5.55
+[[bus]]
+interface = "fd:{CHILD_FD}"
+bitrate = 1000000
+protocol = "cia402"
+max_load = 0.9
+feedback_timeout_ticks = 20
+[[bus.joint]]
+joint = "knee"
+node_id = 4
+command_unit = "motor_torque"
+[bus.joint.cia402]
+fault_reset = true
+velocity_unit_rad_s = 0.0015339807878856412
+joint_encoder = {{ index = 0x60E4, sub = 1, bits = 32, counts_per_rev = 40960 }}
+heartbeat_ms = 10
+"#
+        ),
+    );
+    let (test_end, daemon_end) = socketpair();
+    let emu = Cia402Emu::start(test_end, 4);
+    let report = env.dir.join("alloc_report.txt");
+    let mut d = start_daemon(
+        &cfg,
+        Some(&daemon_end),
+        &[("FRICTIOND_ALLOC_REPORT", report.to_str().unwrap())],
+    );
+    drop(daemon_end);
+    let mut plant = Plant::open(&env.ipc, "controller");
+    let mut rq = TorqueRequest::zeroed();
+    rq.n_joints = 1;
+    rq.enable_mask = 1;
+    let t0 = std::time::Instant::now();
+    let mut k = 0u64;
+    let mut enabled_seen = false;
+    loop {
+        k += 1;
+        rq.tau_des_nm[0] = 5.0 * (k as f64 * 0.01).sin();
+        plant.seq += 1;
+        rq.seq = plant.seq;
+        plant.request.publish(&rq).unwrap();
+        std::thread::sleep(Duration::from_millis(1));
+        enabled_seen |= emu.node.lock().unwrap().state()
+            == frictionless_drives::can::cia402::DriveState::OperationEnabled;
+        if let Some(s) = plant.status.latest().unwrap()
+            && s.ticks >= READY_AFTER + TICKS
+        {
+            break;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "the daemon did not reach {TICKS} ticks in 120 s"
+        );
+        if !d.alive() {
+            let (st, log) = d.wait_exit(Duration::from_secs(5));
+            panic!("frictiond exited ({st}): {log}");
+        }
+    }
+    d.signal(libc::SIGTERM);
+    let (st, log) = d.wait_exit(Duration::from_secs(20));
+    assert!(st.success(), "{log}");
+    assert!(
+        enabled_seen,
+        "the drive never reached operation enabled: {log}"
+    );
+    assert!(emu.syncs.load(std::sync::atomic::Ordering::Relaxed) > TICKS);
+    let text = std::fs::read_to_string(&report).expect("allocation report written at exit");
+    let get = |key: &str| -> u64 {
+        text.lines()
+            .find_map(|l| l.strip_prefix(&format!("{key}=")))
+            .unwrap_or_else(|| panic!("{key} missing in {text}"))
+            .parse()
+            .unwrap()
+    };
+    let (ticks, allocs) = (get("rt_counted_ticks"), get("rt_allocations"));
+    eprintln!("CiA 402: {allocs} RT-thread allocations over {ticks} ticks");
+    assert!(ticks >= TICKS, "only {ticks} ticks counted");
+    assert_eq!(allocs, 0, "RT-thread allocations after READY: {text}");
+    // SIGTERM: quick stop, then NMT stop.
+    let n = emu.node.lock().unwrap();
+    assert_eq!(n.nmt(), frictionless_drives::can::cia402::NmtState::Stopped);
+    assert_ne!(
+        n.state(),
+        frictionless_drives::can::cia402::DriveState::OperationEnabled
+    );
+}

@@ -6,8 +6,8 @@
 //! targets:
 //! - [`can`]: classic CAN 2.0 — [`can::WireFrame`] (a frame as plain data), the per-joint unit
 //!   mapping ([`can::units`]), the bus-load budget ([`can::busload`]), and one module per drive
-//!   protocol: [`can::mit`] (MIT mini-cheetah / CubeMars AK "MIT mode") and [`can::odrive`] (ODrive
-//!   "CAN Simple"). [`can::CanProtocol`] is the closed list of them, as `[[bus]] protocol` names it.
+//!   protocol: [`can::mit`] (MIT mini-cheetah / CubeMars AK "MIT mode"), [`can::odrive`] (ODrive
+//!   "CAN Simple") and [`can::cia402`] (CANopen with the CiA 402 drive profile). [`can::CanProtocol`] is the closed list of them, as `[[bus]] protocol` names it.
 //!
 //! What it is **not**: no sockets, no threads, no timing, no friction or control law; errors are `Copy`
 //! values without heap data so the RT loop can construct and match them. The `#[repr(C)]` payloads
@@ -15,7 +15,7 @@
 //! `frictiond`'s `backend::can`.
 //!
 //! ## Where another drive protocol goes
-//! - **On CAN** (e.g. CiA 402 over CANopen, a vendor protocol): one new file `src/can/<name>.rs` with
+//! - **On CAN** (e.g. a vendor protocol): one new file `src/can/<name>.rs` with
 //!   `encode_*` / `decode_*` functions over [`can::WireFrame`] (copy the shape of [`can::odrive`]),
 //!   and one [`can::CanProtocol`] variant. Its methods (feedback angle unit, bits and frames per joint
 //!   per tick) then fail to compile until the new protocol answers them, and so do the `match`es in

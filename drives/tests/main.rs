@@ -4,6 +4,7 @@
 //! `tests/canvm/run.sh`, which selects this target by name, `drives_tests`). Not here: the unit
 //! tests of the payloads and codecs (in `src/`), anything that starts `frictiond` (`daemon/tests/`).
 
+mod can_cia402;
 mod can_codecs;
 mod can_socketpair;
 mod can_vcan;

@@ -20,7 +20,7 @@
 //! every per-joint array; masks are `u64` bit sets (bit `j` = joint `j`). Type names are explicit and
 //! versioned (`frictionless::JointStates_v1`): change the layout ⇒ bump the version.
 //!
-//! The drive protocols spoken on a field bus (MIT mode, ODrive CAN Simple) are not here: they live in
+//! The drive protocols spoken on a field bus (MIT mode, ODrive CAN Simple, CiA 402) are not here: they live in
 //! `frictionless-drives`, beside this crate.
 //!
 //! ## Example: a status snapshot's latency histogram
@@ -34,7 +34,10 @@
 //! assert_eq!(status.bus.bus_kind(), Some(BusKind::None));
 //! status.bus = BusCounters::new(BusKind::Can, 2);
 //! status.bus.detail[CAN_DETAIL_ERROR_PASSIVE] = 3;
-//! assert_eq!(status.bus.named_detail().collect::<Vec<_>>(), [("error_passive", 3)]);
+//! assert_eq!(
+//!     status.bus.named_detail().collect::<Vec<_>>(),
+//!     [("error_passive", 3), ("emcy", 0)]
+//! );
 //! ```
 
 #![warn(missing_docs)]
@@ -406,6 +409,9 @@ pub enum BusKind {
 /// [`BusCounters::detail`] slot of a CAN backend: error-passive and warning events
 /// (`CAN_ERR_CRTL` passive bits).
 pub const CAN_DETAIL_ERROR_PASSIVE: usize = 0;
+/// [`BusCounters::detail`] slot of a CAN backend: CANopen EMCY messages received (error codes other
+/// than "error reset"; CiA 402 drives).
+pub const CAN_DETAIL_EMCY: usize = 1;
 
 impl BusKind {
     /// Every kind, in code order.
@@ -434,7 +440,7 @@ impl BusKind {
     pub const fn detail_names(self) -> &'static [&'static str] {
         match self {
             BusKind::None | BusKind::Shm => &[],
-            BusKind::Can => &["error_passive"],
+            BusKind::Can => &["error_passive", "emcy"],
         }
     }
 }

@@ -2,12 +2,13 @@
 //! (node id, units, MIT ranges), the worst-case bus load, and the `--check` summary.
 
 use frictionless_drives::can::busload;
+use frictionless_drives::can::cia402::{Layout, PdoEntry};
 use frictionless_drives::can::mit::MitRanges;
 use frictionless_drives::can::units::{CommandUnit, JointUnits};
 
 use crate::schema::{
-    BackendKind, BusConfig, BusJointConfig, CanProtocol, Config, JointConfig, MAX_BUSES, RawConfig,
-    ResolvedBus, ResolvedDrive,
+    BackendKind, BusConfig, BusJointConfig, CanProtocol, Cia402Drive, Cia402DriveLoop, Cia402Mode,
+    Cia402Object, Config, JointConfig, MAX_BUSES, RawConfig, ResolvedBus, ResolvedDrive,
 };
 use crate::validate::{Checker, ConfigError};
 
@@ -18,8 +19,11 @@ pub struct BusLoad {
     pub n_joints: u32,
     /// Frames per second on the bus (commands and feedback).
     pub frames_per_s: f64,
-    /// Worst-case bits (with stuffing) of the frames one joint puts on the bus per tick.
+    /// Worst-case bits (with stuffing) of the frames one joint puts on the bus per tick (CiA 402:
+    /// the largest of the bus's drives).
     pub bits_per_joint_tick: u32,
+    /// Worst-case bits per tick of the bus's own frames (CiA 402: the SYNC; 0 for MIT / ODrive).
+    pub bits_per_bus_tick: u32,
     /// Frames per joint per tick.
     pub frames_per_joint_tick: u32,
     /// Bitrate [bit/s].
@@ -34,11 +38,16 @@ impl std::fmt::Display for BusLoad {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "{} joint(s): {:.0} frames/s, {} bits per joint and tick in {} frame(s) (worst-case stuffing), load {:.1} % of {} bit/s (limit {:.1} %)",
+            "{} joint(s): {:.0} frames/s, {} bits per joint and tick in {} frame(s){} (worst-case stuffing), load {:.1} % of {} bit/s (limit {:.1} %)",
             self.n_joints,
             self.frames_per_s,
             self.bits_per_joint_tick,
             self.frames_per_joint_tick,
+            if self.bits_per_bus_tick > 0 {
+                format!(" + {} bits of SYNC per tick", self.bits_per_bus_tick)
+            } else {
+                String::new()
+            },
             100.0 * self.load,
             self.bitrate_bps,
             100.0 * self.limit
@@ -57,11 +66,29 @@ pub fn bus_summary(cfg: &Config) -> String {
             bus.interface, bus.protocol, bus.load
         );
         for d in &bus.joints {
-            let _ = writeln!(
+            let _ = write!(
                 s,
                 "    joint[{}] {} node {} command {:?}",
                 d.index, cfg.raw.joint[d.joint_pos].name, d.node_id, d.units.command
             );
+            if let Some(x) = &d.cia402 {
+                let sdo = |v: Option<String>| v.unwrap_or_else(|| "SDO read".into());
+                let _ = write!(
+                    s,
+                    ", cia402 {:?} (0x6060 = {}), rated torque {} mNm, max torque {} ‰, {} bits per tick, fault reset {}",
+                    x.cfg.mode,
+                    x.op_mode,
+                    sdo(x.cfg.rated_torque_mnm.map(|v| v.to_string())),
+                    sdo(x.cfg.max_torque_permille.map(|v| v.to_string())),
+                    x.bits_per_tick,
+                    if x.cfg.fault_reset {
+                        "allowed"
+                    } else {
+                        "not allowed"
+                    }
+                );
+            }
+            let _ = writeln!(s);
         }
     }
     s
@@ -88,7 +115,7 @@ pub(crate) fn resolve_buses(
         for k in 0..bus.joint.len() {
             drives.push(resolve_drive(c, raw, b, k, &mut on_bus)?);
         }
-        let load = bus_load(c, b, bus, drives.len(), rate_hz)?;
+        let load = bus_load(c, b, bus, &drives, rate_hz)?;
         out.push(ResolvedBus {
             interface: bus.interface.clone(),
             protocol: bus.protocol,
@@ -164,7 +191,7 @@ pub(crate) fn check_bus(c: &Checker, b: usize, bus: &BusConfig) -> Result<(), Co
                 ));
             }
         }
-        CanProtocol::Odrive => {
+        CanProtocol::Odrive | CanProtocol::Cia402 => {
             if bus.host_id != 0 {
                 return Err(c.fail(
                     key("host_id"),
@@ -218,11 +245,18 @@ pub(crate) fn resolve_drive(
     let angle = bus.protocol.feedback_angle();
     let units = JointUnits::new(bj.command_unit, j.kt, j.gear_ratio, angle)
         .map_err(|e| c.fail(format!("joint[{pos}]"), &j.name, &e.to_string()))?;
-    let (mit, reply_units) = match bus.protocol {
-        CanProtocol::Odrive => (None, odrive_drive(c, &key, bj, units)?),
+    if bus.protocol != CanProtocol::Cia402 && bj.cia402.is_some() {
+        return Err(c.fail(key("cia402"), "<set>", "only used by protocol = \"cia402\""));
+    }
+    let (mit, reply_units, cia402) = match bus.protocol {
+        CanProtocol::Odrive => (None, odrive_drive(c, &key, bj, units)?, None),
         CanProtocol::Mit => {
             let (ranges, reply) = mit_drive(c, &key, b, bus, bj, j, units)?;
-            (Some(ranges), reply)
+            (Some(ranges), reply, None)
+        }
+        CanProtocol::Cia402 => {
+            let (reply, d) = cia402_drive(c, &key, bj, j, units)?;
+            (None, reply, Some(d))
         }
     };
     Ok(ResolvedDrive {
@@ -233,6 +267,7 @@ pub(crate) fn resolve_drive(
         reply_units,
         mit,
         max_curr_a: j.max_curr,
+        cia402,
     })
 }
 
@@ -246,6 +281,19 @@ pub(crate) fn odrive_drive(
     if bj.node_id > u32::from(frictionless_drives::can::odrive::NODE_MAX) {
         return Err(c.fail(key("node_id"), bj.node_id, "ODrive node ids are 0..=63"));
     }
+    refuse_mit_keys(c, key, bj)?;
+    Ok(JointUnits {
+        command: CommandUnit::Current,
+        ..units
+    })
+}
+
+/// The MIT-only keys of a drive on another protocol are refused, naming the first one set.
+fn refuse_mit_keys(
+    c: &Checker,
+    key: &dyn Fn(&str) -> String,
+    bj: &BusJointConfig,
+) -> Result<(), ConfigError> {
     let mit_keys = [
         ("p_max", bj.p_max.is_some()),
         ("v_max", bj.v_max.is_some()),
@@ -260,10 +308,200 @@ pub(crate) fn odrive_drive(
             return Err(c.fail(key(n), "<set>", "only used by protocol = \"mit\""));
         }
     }
-    Ok(JointUnits {
-        command: CommandUnit::Current,
-        ..units
-    })
+    Ok(())
+}
+
+/// CiA 402 drive keys: node id 1..=127, `command_unit = "motor_torque"` (targets are ‰ of the motor
+/// rated torque), `[bus.joint.cia402]` with a velocity unit, mode and drive loop consistent, the
+/// optional objects complete, the heartbeat times, and — when rated and max torque are given — a
+/// max torque that covers the joint's current clamp. Returns the reply units (torque actual is a
+/// motor torque) and the resolved drive with its PDO layout.
+pub(crate) fn cia402_drive(
+    c: &Checker,
+    key: &dyn Fn(&str) -> String,
+    bj: &BusJointConfig,
+    j: &JointConfig,
+    units: JointUnits,
+) -> Result<(JointUnits, Cia402Drive), ConfigError> {
+    if !(1..=127).contains(&bj.node_id) {
+        return Err(c.fail(key("node_id"), bj.node_id, "CANopen node ids are 1..=127"));
+    }
+    refuse_mit_keys(c, key, bj)?;
+    if bj.command_unit != CommandUnit::MotorTorque {
+        return Err(c.fail(
+            key("command_unit"),
+            format!("{:?}", bj.command_unit),
+            "CiA 402 torque targets are per mille of the motor rated torque: command_unit must be \"motor_torque\"",
+        ));
+    }
+    let Some(cfg) = bj.cia402 else {
+        return Err(c.fail(
+            key("cia402"),
+            "<missing>",
+            "required by protocol = \"cia402\" ([bus.joint.cia402] with at least velocity_unit_rad_s)",
+        ));
+    };
+    let k = |n: &str| key(&format!("cia402.{n}"));
+    let op_mode = match (cfg.mode, cfg.drive_loop) {
+        (Cia402Mode::Cst, None) => frictionless_drives::can::cia402::mode::CST,
+        (Cia402Mode::Cst, Some(l)) => {
+            return Err(c.fail(
+                k("drive_loop"),
+                format!("{l:?}"),
+                "only used by mode = \"torque_offset\"",
+            ));
+        }
+        (Cia402Mode::TorqueOffset, Some(Cia402DriveLoop::Csp)) => {
+            frictionless_drives::can::cia402::mode::CSP
+        }
+        (Cia402Mode::TorqueOffset, Some(Cia402DriveLoop::Csv)) => {
+            frictionless_drives::can::cia402::mode::CSV
+        }
+        (Cia402Mode::TorqueOffset, None) => {
+            return Err(c.fail(
+                k("drive_loop"),
+                "<missing>",
+                "mode = \"torque_offset\" needs the drive's own loop: \"csp\" or \"csv\"",
+            ));
+        }
+    };
+    if cfg.rated_torque_mnm == Some(0) {
+        return Err(c.fail(
+            k("rated_torque_mnm"),
+            0,
+            "must be > 0 [mNm] (or left out: read 0x6076 by SDO)",
+        ));
+    }
+    if cfg.max_torque_permille == Some(0) {
+        return Err(c.fail(
+            k("max_torque_permille"),
+            0,
+            "must be > 0 [‰ of rated] (or left out: read 0x6072 by SDO)",
+        ));
+    }
+    if let Some(n) = cfg.counts_per_rev {
+        c.finite_pos(k("counts_per_rev"), n)?;
+    }
+    let Some(vel) = cfg.velocity_unit_rad_s else {
+        return Err(c.fail(
+            k("velocity_unit_rad_s"),
+            "<missing>",
+            "required: motor rad/s per unit of 0x606C (vendor-specific; e.g. 0.10471975511965977 for rpm)",
+        ));
+    };
+    c.finite_pos(k("velocity_unit_rad_s"), vel)?;
+    let object = |name: &str, o: &Cia402Object, encoder: bool| -> Result<PdoEntry, ConfigError> {
+        let kk = |f: &str| k(&format!("{name}.{f}"));
+        if !matches!(o.bits, 8 | 16 | 32) {
+            return Err(c.fail(kk("bits"), o.bits, "must be 8, 16 or 32"));
+        }
+        match (encoder, o.counts_per_rev, o.unit_c) {
+            (true, Some(n), None) => c.finite_pos(kk("counts_per_rev"), n)?,
+            (true, None, _) => {
+                return Err(c.fail(
+                    kk("counts_per_rev"),
+                    "<missing>",
+                    "required: increments per joint revolution",
+                ));
+            }
+            (true, Some(_), Some(_)) => {
+                return Err(c.fail(kk("unit_c"), "<set>", "only used by the temperature object"));
+            }
+            (false, None, Some(u)) => {
+                if !(u.is_finite() && u != 0.0) {
+                    return Err(c.fail(
+                        kk("unit_c"),
+                        u,
+                        "must be finite and non-zero [°C per unit]",
+                    ));
+                }
+            }
+            (false, None, None) => {
+                return Err(c.fail(
+                    kk("unit_c"),
+                    "<missing>",
+                    "required: °C per unit (e.g. 0.001 for m°C)",
+                ));
+            }
+            (false, Some(_), _) => {
+                return Err(c.fail(
+                    kk("counts_per_rev"),
+                    "<set>",
+                    "only used by the joint encoder",
+                ));
+            }
+        }
+        Ok(PdoEntry::new(o.index, o.sub, o.bits))
+    };
+    let enc = cfg
+        .joint_encoder
+        .as_ref()
+        .map(|o| object("joint_encoder", o, true))
+        .transpose()?;
+    let temp = cfg
+        .temperature
+        .as_ref()
+        .map(|o| object("temperature", o, false))
+        .transpose()?;
+    if !(1..=240).contains(&cfg.temperature_every) {
+        return Err(c.fail(
+            k("temperature_every"),
+            cfg.temperature_every,
+            "must be 1..=240 SYNCs",
+        ));
+    }
+    if cfg.heartbeat_ms == 0 {
+        return Err(c.fail(
+            k("heartbeat_ms"),
+            0,
+            "must be 1..=65535 [ms] (the drive's heartbeat is how a silent node is found)",
+        ));
+    }
+    let hb_timeout = cfg
+        .heartbeat_timeout_ms
+        .unwrap_or(3 * u32::from(cfg.heartbeat_ms));
+    if hb_timeout <= u32::from(cfg.heartbeat_ms) {
+        return Err(c.fail(
+            k("heartbeat_timeout_ms"),
+            hb_timeout,
+            &format!("must be > heartbeat_ms = {}", cfg.heartbeat_ms),
+        ));
+    }
+    let layout = Layout::new(
+        cfg.mode == Cia402Mode::TorqueOffset,
+        enc,
+        temp,
+        cfg.temperature_every,
+    )
+    .map_err(|e| c.fail(key("cia402"), "<mapping>", &e.to_string()))?;
+    if let (Some(rated), Some(max)) = (cfg.rated_torque_mnm, cfg.max_torque_permille) {
+        let max_nm = f64::from(rated) * f64::from(max.min(i16::MAX as u16)) / 1e6;
+        let max_cmd = units.command_from_current(j.max_curr).abs();
+        if max_cmd > max_nm * (1.0 + 1e-12) {
+            return Err(c.fail(
+                k("max_torque_permille"),
+                max,
+                &format!(
+                    "joint {:?} max_curr = {} A is {max_cmd} Nm motor torque, more than the drive's max torque {max_nm} Nm (the drive would clamp silently)",
+                    j.name, j.max_curr
+                ),
+            ));
+        }
+    }
+    let bits_per_tick = layout.bits_per_tick();
+    Ok((
+        JointUnits {
+            command: CommandUnit::MotorTorque,
+            ..units
+        },
+        Cia402Drive {
+            cfg,
+            op_mode,
+            heartbeat_timeout_ms: hb_timeout,
+            layout,
+            bits_per_tick,
+        },
+    ))
 }
 
 /// MIT drive keys: motor id 1..=255 (not the host id), the fixed-point ranges, and a feed-forward
@@ -335,30 +573,53 @@ pub(crate) fn mit_drive(
     Ok((ranges, reply))
 }
 
-/// The worst-case load of `bus[b]` with `n_drives` drives at `rate_hz`; refused above `max_load`.
+/// The worst-case load of `bus[b]` with its `drives` at `rate_hz`; refused above `max_load`. CiA
+/// 402: each drive's own layout plus one SYNC per tick.
 pub(crate) fn bus_load(
     c: &Checker,
     b: usize,
     bus: &BusConfig,
-    n_drives: usize,
+    drives: &[ResolvedDrive],
     rate_hz: f64,
 ) -> Result<BusLoad, ConfigError> {
-    let (bits, frames) = (
+    // At most MAX_JOINTS drives (each joint on one bus).
+    let n = drives.len() as u32;
+    let per_drive = |d: &ResolvedDrive| {
+        d.cia402.map_or(
+            (
+                bus.protocol.bits_per_joint_tick(),
+                bus.protocol.frames_per_joint_tick(),
+            ),
+            |x| (x.bits_per_tick, x.layout.frames_per_tick()),
+        )
+    };
+    let (mut total_bits, mut total_frames) = (0u64, 0u32);
+    let (mut bits, mut frames) = (
         bus.protocol.bits_per_joint_tick(),
         bus.protocol.frames_per_joint_tick(),
     );
-    // At most MAX_JOINTS drives (each joint on one bus).
-    let n = n_drives as u32;
+    for (k, d) in drives.iter().enumerate() {
+        let (b_, f_) = per_drive(d);
+        total_bits += u64::from(b_);
+        total_frames += f_;
+        if k == 0 || b_ > bits {
+            (bits, frames) = (b_, f_);
+        }
+    }
+    let bus_bits = bus.protocol.bits_per_bus_tick();
+    total_bits += u64::from(bus_bits);
+    total_frames += u32::from(bus_bits > 0);
     let load = BusLoad {
         n_joints: n,
-        frames_per_s: f64::from(n * frames) * rate_hz,
+        frames_per_s: f64::from(total_frames) * rate_hz,
         bits_per_joint_tick: bits,
+        bits_per_bus_tick: bus_bits,
         frames_per_joint_tick: frames,
         bitrate_bps: bus.bitrate,
-        load: busload::load_fraction(n, bits, rate_hz, bus.bitrate as f64),
+        load: busload::load_fraction_bits(total_bits, rate_hz, bus.bitrate as f64),
         limit: bus.max_load,
     };
-    if busload::check_load(n, bits, rate_hz, bus.bitrate as f64, bus.max_load).is_err() {
+    if !(load.load.is_finite() && load.load <= bus.max_load) {
         return Err(c.fail(
             format!("bus[{b}].max_load"),
             bus.max_load,

@@ -78,7 +78,8 @@ pub use buses::{BusLoad, bus_summary};
 pub use frictionless::model::ModelKind;
 pub use frictionless_drives::can::units::CommandUnit;
 pub use models::{
-    KT_REL_TOLERANCE, SignalSupply, check_model_file, check_model_inputs, signal_supply,
+    KT_REL_TOLERANCE, SignalSupply, check_model_file, check_model_inputs, cia402_signal_supply,
+    signal_supply,
 };
 pub use schema::*;
 pub use validate::{ConfigError, MAX_TICK_SPAN_S};

@@ -109,9 +109,10 @@ impl std::fmt::Display for SignalSupply {
     }
 }
 
-/// What `backend` (and, for CAN, the bus's `protocol`) supplies for `signal`. Both CAN protocols
-/// report motor-side position and velocity only (MIT reply: p, v, i; ODrive Get_Encoder_Estimates:
-/// pos, vel in motor rev) and no temperature the daemon decodes.
+/// What `backend` (and, for CAN, the bus's `protocol`) supplies for `signal`. The CAN protocols
+/// report motor-side position and velocity (MIT reply: p, v, i; ODrive Get_Encoder_Estimates: pos,
+/// vel in motor rev; CiA 402 TPDOs 0x6064, 0x606C) and, by protocol alone, no joint-side encoder or
+/// temperature; a CiA 402 drive that maps them supplies more ([`cia402_signal_supply`]).
 pub fn signal_supply(
     backend: BackendKind,
     protocol: Option<CanProtocol>,
@@ -119,12 +120,27 @@ pub fn signal_supply(
 ) -> SignalSupply {
     match (backend, protocol) {
         (BackendKind::Shm, _) | (BackendKind::Can, None) => SignalSupply::Publisher,
-        (BackendKind::Can, Some(CanProtocol::Mit | CanProtocol::Odrive)) => match signal {
-            Signal::MotorPosRad | Signal::MotorVelRadS => SignalSupply::Measured,
-            Signal::JointPosRad => SignalSupply::DerivedFrom(Signal::MotorPosRad),
-            Signal::JointVelRadS => SignalSupply::DerivedFrom(Signal::MotorVelRadS),
-            Signal::TemperatureC => SignalSupply::Absent,
-        },
+        (BackendKind::Can, Some(CanProtocol::Mit | CanProtocol::Odrive | CanProtocol::Cia402)) => {
+            match signal {
+                Signal::MotorPosRad | Signal::MotorVelRadS => SignalSupply::Measured,
+                Signal::JointPosRad => SignalSupply::DerivedFrom(Signal::MotorPosRad),
+                Signal::JointVelRadS => SignalSupply::DerivedFrom(Signal::MotorVelRadS),
+                Signal::TemperatureC => SignalSupply::Absent,
+            }
+        }
+    }
+}
+
+/// What a CiA 402 drive supplies: motor position and velocity always; the joint position measured
+/// when its `joint_encoder` is mapped (else derived, s = θ/r); the temperature when mapped.
+pub fn cia402_signal_supply(drive: &crate::schema::Cia402Drive, signal: Signal) -> SignalSupply {
+    match signal {
+        Signal::MotorPosRad | Signal::MotorVelRadS => SignalSupply::Measured,
+        Signal::JointPosRad if drive.cfg.joint_encoder.is_some() => SignalSupply::Measured,
+        Signal::JointPosRad => SignalSupply::DerivedFrom(Signal::MotorPosRad),
+        Signal::JointVelRadS => SignalSupply::DerivedFrom(Signal::MotorVelRadS),
+        Signal::TemperatureC if drive.cfg.temperature.is_some() => SignalSupply::Measured,
+        Signal::TemperatureC => SignalSupply::Absent,
     }
 }
 
@@ -138,14 +154,32 @@ pub fn check_model_inputs(
     backend: BackendKind,
     protocol: Option<CanProtocol>,
 ) -> Result<(), String> {
-    let where_ = match (backend, protocol) {
+    check_supply(joint, spec, where_name(backend, protocol), |s| {
+        signal_supply(backend, protocol, s)
+    })
+}
+
+fn where_name(backend: BackendKind, protocol: Option<CanProtocol>) -> &'static str {
+    match (backend, protocol) {
         (BackendKind::Can, Some(CanProtocol::Mit)) => "the can backend (protocol = \"mit\")",
         (BackendKind::Can, Some(CanProtocol::Odrive)) => "the can backend (protocol = \"odrive\")",
+        (BackendKind::Can, Some(CanProtocol::Cia402)) => {
+            "the can backend (protocol = \"cia402\", this drive's PDO layout)"
+        }
         (BackendKind::Can, None) => "the can backend",
         (BackendKind::Shm, _) => "the shm backend",
-    };
+    }
+}
+
+/// [`check_model_inputs`] over a supply function.
+fn check_supply(
+    joint: &str,
+    spec: &FeatureSpec,
+    where_: &str,
+    supply: impl Fn(Signal) -> SignalSupply,
+) -> Result<(), String> {
     for signal in spec.required_signals() {
-        if signal_supply(backend, protocol, signal) == SignalSupply::Absent {
+        if supply(signal) == SignalSupply::Absent {
             return Err(format!(
                 "joint {joint}: feature set `{}` ({spec}) needs `{signal}`, which {where_} does not supply",
                 spec.set
@@ -153,8 +187,7 @@ pub fn check_model_inputs(
         }
     }
     if spec.set.uses_delta_theta()
-        && let SignalSupply::DerivedFrom(from) =
-            signal_supply(backend, protocol, Signal::JointPosRad)
+        && let SignalSupply::DerivedFrom(from) = supply(Signal::JointPosRad)
     {
         return Err(format!(
             "joint {joint}: feature set `{}` ({spec}) needs `s_rad` from a joint-side encoder for Δθ = r·s − θ, but {where_} derives `s_rad` from `{from}` (s = θ/r): Δθ would be constant; use a set without Δθ (e.g. motor-vel-joint-vel, joint-pos-joint-vel)",
@@ -373,11 +406,22 @@ pub(crate) fn check_pinn_inputs(
 ) -> Result<(), ConfigError> {
     for (k, (j, features)) in raw.joint.iter().zip(pinn_features).enumerate() {
         let Some(spec) = features else { continue };
-        let protocol = buses
-            .iter()
-            .find(|b| b.joints.iter().any(|d| d.index == j.index))
-            .map(|b| b.protocol);
-        if let Err(message) = check_model_inputs(&j.name, spec, raw.backend.kind, protocol) {
+        let on_bus = buses.iter().find_map(|b| {
+            b.joints
+                .iter()
+                .find(|d| d.index == j.index)
+                .map(|d| (b.protocol, d.cia402))
+        });
+        let protocol = on_bus.map(|(p, _)| p);
+        let checked = match on_bus {
+            Some((_, Some(drive))) => {
+                check_supply(&j.name, spec, where_name(raw.backend.kind, protocol), |s| {
+                    cia402_signal_supply(&drive, s)
+                })
+            }
+            _ => check_model_inputs(&j.name, spec, raw.backend.kind, protocol),
+        };
+        if let Err(message) = checked {
             let Some(ModelSpec::Pinn { path, .. }) = models.get(k) else {
                 continue;
             };

@@ -500,6 +500,115 @@ pub struct BusJointConfig {
     /// `current`.
     #[serde(default)]
     pub reply_unit: Option<CommandUnit>,
+    /// CiA 402: the drive's CANopen keys (`[bus.joint.cia402]`; required with `protocol =
+    /// "cia402"`, refused otherwise).
+    #[serde(default)]
+    pub cia402: Option<Cia402Config>,
+}
+
+/// How frictiond drives a CiA 402 joint (`[bus.joint.cia402] mode`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Cia402Mode {
+    /// Cyclic synchronous torque (0x6060 = 10): the daemon's torque is the target torque 0x6071.
+    Cst,
+    /// The drive keeps its own position (CSP, 8) or velocity (CSV, 9) loop, commanded by another
+    /// master; the daemon's torque is the feed-forward torque offset 0x60B2.
+    TorqueOffset,
+}
+
+/// The drive's own loop in [`Cia402Mode::TorqueOffset`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Cia402DriveLoop {
+    /// Cyclic synchronous position (0x6060 = 8).
+    Csp,
+    /// Cyclic synchronous velocity (0x6060 = 9).
+    Csv,
+}
+
+/// An extra object a TPDO carries (`{ index = 0x60E4, sub = 1, bits = 32, … }`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Cia402Object {
+    /// Object index.
+    pub index: u16,
+    /// Sub-index.
+    #[serde(default)]
+    pub sub: u8,
+    /// Length in bits (8, 16 or 32; signed). Default 32.
+    #[serde(default = "default_object_bits")]
+    pub bits: u8,
+    /// Joint-side encoder: increments per joint revolution (required there, refused for the
+    /// temperature).
+    #[serde(default)]
+    pub counts_per_rev: Option<f64>,
+    /// Temperature: °C per unit (e.g. 0.001 for milli-°C; required there, refused for the encoder).
+    #[serde(default)]
+    pub unit_c: Option<f64>,
+}
+
+fn default_object_bits() -> u8 {
+    32
+}
+
+/// `[bus.joint.cia402]`: the CANopen side of one drive. Scales left out are read by SDO at start-up
+/// (rated torque 0x6076, max torque 0x6072, encoder resolution 0x608F); the velocity unit has no
+/// standard object and is always given.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Cia402Config {
+    /// `cst` (default) or `torque_offset`.
+    #[serde(default = "default_cia402_mode")]
+    pub mode: Cia402Mode,
+    /// With `mode = "torque_offset"`: the drive's loop, `csp` or `csv` (required there).
+    #[serde(default)]
+    pub drive_loop: Option<Cia402DriveLoop>,
+    /// Whether frictiond may reset a drive fault (controlword bit 7 edge). Default false: a fault
+    /// stays until someone resets it on purpose.
+    #[serde(default)]
+    pub fault_reset: bool,
+    /// Motor rated torque 0x6076 [mNm]; left out: read by SDO.
+    #[serde(default)]
+    pub rated_torque_mnm: Option<u32>,
+    /// Max torque 0x6072 [‰ of rated]; left out: read by SDO.
+    #[serde(default)]
+    pub max_torque_permille: Option<u16>,
+    /// Motor encoder increments per motor revolution (0x6064's unit); left out: read by SDO from
+    /// 0x608F (sub 1 increments / sub 2 revolutions).
+    #[serde(default)]
+    pub counts_per_rev: Option<f64>,
+    /// Motor rad/s per unit of 0x606C velocity actual value (vendor-specific: e.g. 2π/60 for rpm,
+    /// 2π/counts_per_rev for increments/s). Required.
+    #[serde(default)]
+    pub velocity_unit_rad_s: Option<f64>,
+    /// The joint-side encoder object (e.g. 0x60E4:01) mapped into TPDO2; left out: s = θ/r.
+    #[serde(default)]
+    pub joint_encoder: Option<Cia402Object>,
+    /// The drive temperature object (vendor-specific, e.g. Synapticon 0x2031:01 in m°C) mapped into
+    /// TPDO3, sent every `temperature_every` SYNCs.
+    #[serde(default)]
+    pub temperature: Option<Cia402Object>,
+    /// SYNCs between temperature TPDOs (1..=240). Default 100.
+    #[serde(default = "default_temperature_every")]
+    pub temperature_every: u8,
+    /// Heartbeat producer time written to the drive's 0x1017 [ms] (1..=65535). Default 100.
+    #[serde(default = "default_heartbeat_ms")]
+    pub heartbeat_ms: u16,
+    /// A drive whose heartbeat is missing this long is stale [ms] (> heartbeat_ms). Default 3 ×
+    /// heartbeat_ms.
+    #[serde(default)]
+    pub heartbeat_timeout_ms: Option<u32>,
+}
+
+fn default_cia402_mode() -> Cia402Mode {
+    Cia402Mode::Cst
+}
+fn default_temperature_every() -> u8 {
+    100
+}
+fn default_heartbeat_ms() -> u16 {
+    100
 }
 
 /// Validated friction model parameters of one joint.
@@ -582,6 +691,24 @@ pub struct ResolvedDrive {
     pub mit: Option<MitRanges>,
     /// Current clamp of the joint [A] (`[[joint]] max_curr`).
     pub max_curr_a: f64,
+    /// CiA 402 drive settings (other protocols: `None`).
+    pub cia402: Option<Cia402Drive>,
+}
+
+/// A validated `[bus.joint.cia402]`, with its PDO layout and worst-case bits per cycle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Cia402Drive {
+    /// As written (validated).
+    pub cfg: Cia402Config,
+    /// Mode of operation written to 0x6060 (10 CST, 8 CSP, 9 CSV).
+    pub op_mode: i8,
+    /// Heartbeat timeout [ms].
+    pub heartbeat_timeout_ms: u32,
+    /// RPDO1 (controlword + target torque or torque offset), TPDO1 (statusword, position, torque),
+    /// TPDO2 (velocity [+ joint-side encoder]), TPDO3 (temperature, if any).
+    pub layout: frictionless_drives::can::cia402::Layout,
+    /// Worst-case bits this drive puts on the bus per cycle.
+    pub bits_per_tick: u32,
 }
 
 impl Config {

@@ -855,3 +855,195 @@ fn models_whose_inputs_the_backend_cannot_supply_are_refused() {
         SignalSupply::Publisher
     );
 }
+
+/// `n` joints on one CiA 402 bus; `extra` is appended to every `[bus.joint.cia402]`.
+fn cia402_joints(n: usize, max_load: f64, extra: &str) -> String {
+    let mut text = String::from("[backend]\nkind = \"can\"\n");
+    for k in 0..n {
+        text += &format!(
+            "[[joint]]\nname = \"j{k}\"\nindex = {k}\ngear_ratio = 100.0\nkt = 0.1\nmax_curr = 5.0\nfriction_model = \"none\"\n"
+        );
+    }
+    text += &format!(
+        "[[bus]]\ninterface = \"can0\"\nbitrate = 1000000\nprotocol = \"cia402\"\nmax_load = {max_load}\n"
+    );
+    for k in 0..n {
+        text += &format!(
+            "[[bus.joint]]\njoint = \"j{k}\"\nnode_id = {}\ncommand_unit = \"motor_torque\"\n[bus.joint.cia402]\nvelocity_unit_rad_s = 0.1\n{extra}\n",
+            k + 1
+        );
+    }
+    text
+}
+
+#[test]
+fn cia402_example_resolves_layout_scales_and_load() {
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/can_cia402.toml"),
+    )
+    .unwrap();
+    let c = p(&text).unwrap();
+    let bus = &c.buses[0];
+    assert_eq!(bus.protocol, CanProtocol::Cia402);
+    let knee = bus.joints[0].cia402.unwrap();
+    assert_eq!(knee.op_mode, 10);
+    assert_eq!(knee.cfg.rated_torque_mnm, Some(500));
+    assert_eq!(knee.heartbeat_timeout_ms, 300);
+    assert_eq!(knee.layout.tpdo2.bytes(), 8, "velocity + joint encoder");
+    assert_eq!(knee.bits_per_tick, 95 + 135 + 135);
+    let ankle = bus.joints[1].cia402.unwrap();
+    assert_eq!(
+        (ankle.cfg.rated_torque_mnm, ankle.cfg.counts_per_rev),
+        (None, None)
+    );
+    assert_eq!(ankle.bits_per_tick, 95 + 135 + 95);
+    // SYNC 55 + 365 + 325 bits per ms on 1 Mbit/s.
+    assert!((bus.load.load - 0.745).abs() < 1e-12, "{}", bus.load);
+    assert_eq!(bus.load.bits_per_bus_tick, 55);
+    let summary = bus_summary(&c);
+    assert!(
+        summary.contains("Cia402") && summary.contains("SDO read"),
+        "{summary}"
+    );
+    assert!(summary.contains("+ 55 bits of SYNC"), "{summary}");
+    // The knee maps a joint-side encoder: s_rad is measured (Δθ models are possible); the ankle's
+    // is derived from the motor encoder; neither maps a temperature.
+    assert_eq!(
+        cia402_signal_supply(&knee, Signal::JointPosRad),
+        SignalSupply::Measured
+    );
+    assert_eq!(
+        cia402_signal_supply(&ankle, Signal::JointPosRad),
+        SignalSupply::DerivedFrom(Signal::MotorPosRad)
+    );
+    assert_eq!(
+        cia402_signal_supply(&ankle, Signal::TemperatureC),
+        SignalSupply::Absent
+    );
+}
+
+#[test]
+fn cia402_bus_budget_counts_the_sync_and_refuses_a_third_node_at_1khz() {
+    // Default layout without joint encoder: 95 + 135 + 95 = 325 bits per node, + 55 SYNC.
+    let c = p(&cia402_joints(2, 0.75, "")).unwrap();
+    assert!((c.buses[0].load.load - 0.705).abs() < 1e-12);
+    let e = p(&cia402_joints(3, 0.75, "")).unwrap_err().to_string();
+    for needle in [
+        "bus[0].max_load",
+        "103.0 %",
+        "limit 75.0 %",
+        "55 bits of SYNC",
+    ] {
+        assert!(e.contains(needle), "{needle}: {e}");
+    }
+    // At 500 Hz three fit (51.5 %).
+    let slow = format!("[loop]\nperiod_us = 2000\n{}", cia402_joints(3, 0.75, ""));
+    assert!((p(&slow).unwrap().buses[0].load.load - 0.515).abs() < 1e-12);
+}
+
+#[test]
+fn cia402_config_errors_name_key_and_value() {
+    let one = cia402_joints(1, 0.9, "");
+    let sub = |from: &str, to: &str| {
+        assert!(one.contains(from), "{from}");
+        one.replacen(from, to, 1)
+    };
+    assert_refused(
+        &sub("node_id = 1", "node_id = 128"),
+        "bus[0].joint[0].node_id",
+        "128",
+    );
+    assert_refused(
+        &sub(
+            "command_unit = \"motor_torque\"",
+            "command_unit = \"current\"",
+        ),
+        "bus[0].joint[0].command_unit",
+        "motor_torque",
+    );
+    assert_refused(
+        &sub("velocity_unit_rad_s = 0.1", ""),
+        "bus[0].joint[0].cia402.velocity_unit_rad_s",
+        "<missing>",
+    );
+    assert_refused(
+        &sub("[bus.joint.cia402]\nvelocity_unit_rad_s = 0.1", ""),
+        "bus[0].joint[0].cia402",
+        "<missing>",
+    );
+    assert_refused(
+        &cia402_joints(1, 0.9, "mode = \"torque_offset\""),
+        "bus[0].joint[0].cia402.drive_loop",
+        "csp",
+    );
+    assert_refused(
+        &cia402_joints(1, 0.9, "drive_loop = \"csv\""),
+        "bus[0].joint[0].cia402.drive_loop",
+        "Csv",
+    );
+    assert_refused(
+        &cia402_joints(1, 0.9, "joint_encoder = { index = 0x60E4, sub = 1 }"),
+        "bus[0].joint[0].cia402.joint_encoder.counts_per_rev",
+        "<missing>",
+    );
+    assert_refused(
+        &cia402_joints(
+            1,
+            0.9,
+            "temperature = { index = 0x2031, sub = 1, bits = 12, unit_c = 0.001 }",
+        ),
+        "bus[0].joint[0].cia402.temperature.bits",
+        "12",
+    );
+    assert_refused(
+        &cia402_joints(1, 0.9, "heartbeat_ms = 100\nheartbeat_timeout_ms = 100"),
+        "bus[0].joint[0].cia402.heartbeat_timeout_ms",
+        "100",
+    );
+    assert_refused(
+        &cia402_joints(1, 0.9, "rated_torque_mnm = 0"),
+        "bus[0].joint[0].cia402.rated_torque_mnm",
+        "0",
+    );
+    // kt·max_curr = 0.5 Nm > 400 mNm · 1000 ‰.
+    assert_refused(
+        &cia402_joints(1, 0.9, "rated_torque_mnm = 400\nmax_torque_permille = 1000"),
+        "bus[0].joint[0].cia402.max_torque_permille",
+        "1000",
+    );
+    p(&cia402_joints(
+        1,
+        0.9,
+        "rated_torque_mnm = 500\nmax_torque_permille = 1000",
+    ))
+    .unwrap();
+    // torque_offset with a drive loop resolves to CSP / CSV and maps 0x60B2.
+    let c = p(&cia402_joints(
+        1,
+        0.9,
+        "mode = \"torque_offset\"\ndrive_loop = \"csv\"",
+    ))
+    .unwrap();
+    let d = c.buses[0].joints[0].cia402.unwrap();
+    assert_eq!(d.op_mode, 9);
+    assert_eq!(d.layout.rpdo1.entries()[1].index, 0x60B2);
+    // The section on another protocol, and MIT keys on a CiA 402 drive, are refused.
+    let mit = mit_joints(1, 0.9).replace(
+        "i_max = 40.0\n",
+        "i_max = 40.0\n[bus.joint.cia402]\nvelocity_unit_rad_s = 0.1\n",
+    );
+    assert_refused(&mit, "bus[0].joint[0].cia402", "<set>");
+    assert_refused(
+        &sub(
+            "command_unit = \"motor_torque\"",
+            "command_unit = \"motor_torque\"\nt_max = 1.0",
+        ),
+        "bus[0].joint[0].t_max",
+        "<set>",
+    );
+    assert_refused(
+        &sub("max_load = 0.9", "max_load = 0.9\nhost_id = 5"),
+        "bus[0].host_id",
+        "5",
+    );
+}

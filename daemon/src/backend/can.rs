@@ -58,7 +58,7 @@ use frictionless_drives::can::mit::{self, MitCommand, MitSpecial};
 use frictionless_drives::can::odrive::{self, OdriveMsg};
 use frictionless_drives::can::{CanCodecError, WireFrame};
 use frictionless_shm_types::{
-    BusCounters, BusKind, CAN_DETAIL_ERROR_PASSIVE, DaemonStatus, FAULT_DRIVE,
+    BusCounters, BusKind, CAN_DETAIL_EMCY, CAN_DETAIL_ERROR_PASSIVE, DaemonStatus, FAULT_DRIVE,
     FAULT_FEEDBACK_STALE, Inbox, IoError, Ipc, JointStates, MotorCurrentCommand, Outbox,
     TorqueRequest, monotonic_ns,
 };
@@ -66,6 +66,8 @@ use socketcan::{CanFilter, CanFrame, CanSocket, EmbeddedFrame, Socket, SocketOpt
 
 use super::{Backend, BackendError};
 use crate::alloc_count;
+
+mod cia402;
 use crate::config::{CanProtocol, Config, ResolvedBus, ResolvedDrive};
 
 /// At most this many frames are read from one bus per tick (a flooded bus cannot stall the tick).
@@ -97,6 +99,9 @@ struct SharedCounters {
     tx_dropped: AtomicU64,
     io_errors: AtomicU64,
     stale_mask: AtomicU64,
+    emcy: AtomicU64,
+    /// Last CiA 402 EMCY: node << 16 | error code.
+    last_emcy: AtomicU64,
 }
 
 impl SharedCounters {
@@ -109,9 +114,11 @@ impl SharedCounters {
         self.io_errors.store(c.io_errors, Ordering::Relaxed);
         self.stale_mask
             .store(c.stale_feedback_mask, Ordering::Relaxed);
+        self.emcy
+            .store(c.detail[CAN_DETAIL_EMCY], Ordering::Relaxed);
     }
 
-    fn load(&self) -> [u64; 6] {
+    fn load(&self) -> [u64; 8] {
         [
             self.error_frames.load(Ordering::Relaxed),
             self.bus_off.load(Ordering::Relaxed),
@@ -119,6 +126,8 @@ impl SharedCounters {
             self.tx_dropped.load(Ordering::Relaxed),
             self.io_errors.load(Ordering::Relaxed),
             self.stale_mask.load(Ordering::Relaxed),
+            self.emcy.load(Ordering::Relaxed),
+            self.last_emcy.load(Ordering::Relaxed),
         ]
     }
 }
@@ -138,6 +147,8 @@ struct Drive {
     /// Whether the feedback was stale at the previous tick (true before the first reply): an MIT
     /// drive answering again is re-entered at once.
     was_stale: bool,
+    /// CiA 402: the drive's CANopen runtime (configured at open).
+    co: Option<cia402::Co>,
 }
 
 /// One bus: its socket and drives.
@@ -237,6 +248,11 @@ fn configure_socket(s: &CanSocket, bus: &ResolvedBus, strict: bool) -> Result<()
 pub fn owned_ids(bus: &ResolvedBus) -> Vec<u32> {
     match bus.protocol {
         CanProtocol::Mit => vec![bus.host_id],
+        CanProtocol::Cia402 => bus
+            .joints
+            .iter()
+            .flat_map(|d| cia402::owned_ids(d.node_id))
+            .collect(),
         CanProtocol::Odrive => bus
             .joints
             .iter()
@@ -353,6 +369,13 @@ pub fn reload_conflicts(running: &Config, new: &Config) -> Vec<String> {
                 o.max_curr_a.to_string(),
                 n.max_curr_a.to_string(),
             );
+            if o.cia402 != n.cia402 {
+                field(
+                    "[bus.joint.cia402]",
+                    format!("{:?}", o.cia402.map(|x| x.cfg)),
+                    format!("{:?}", n.cia402.map(|x| x.cfg)),
+                );
+            }
         }
     }
     out
@@ -393,7 +416,7 @@ impl CanBackend {
         let mut buses = Vec::with_capacity(socks.len());
         for (bus, sock) in cfg.buses.iter().zip(socks) {
             configure_socket(&sock, bus, false)?;
-            let drives = bus
+            let mut drives: Vec<Drive> = bus
                 .joints
                 .iter()
                 .map(|d| {
@@ -408,9 +431,17 @@ impl CanBackend {
                         heartbeat: None,
                         was_valid: false,
                         was_stale: true,
+                        co: None,
                     }
                 })
                 .collect();
+            if bus.protocol == CanProtocol::Cia402 {
+                let period_us = cfg.raw.loop_.period_us;
+                for d in &mut drives {
+                    d.co = Some(cia402::configure(&sock, &bus.interface, &d.cfg, period_us)?);
+                }
+                cia402::start_all(&sock, drives.iter().map(|d| d.cfg.node_id as u8));
+            }
             buses.push(Bus {
                 sock,
                 protocol: bus.protocol,
@@ -489,6 +520,8 @@ impl CanBackend {
         drive.last_enter_tick = self.tick;
         let node = drive.cfg.node_id;
         match bus.protocol {
+            // Configured and started at open; the controlword sequencing enables it.
+            CanProtocol::Cia402 => {}
             CanProtocol::Mit => Self::send(
                 &bus.sock,
                 &mut self.counters,
@@ -533,6 +566,33 @@ impl CanBackend {
         let bus = &mut self.buses[b];
         let st = &mut self.states;
         match bus.protocol {
+            CanProtocol::Cia402 => {
+                if f.extended || f.rtr {
+                    return false;
+                }
+                let node = f.id & 0x7F;
+                let Some(d) = bus.drives.iter_mut().find(|d| d.cfg.node_id == node) else {
+                    return false;
+                };
+                let Some(c) = d.co.as_mut() else {
+                    return false;
+                };
+                let k = d.cfg.index;
+                let u = d.cfg.units;
+                let (owned, feedback, emcy) =
+                    c.accept(f, self.tick, st, k, u.gear_ratio, u.kt_nm_per_a);
+                if feedback {
+                    d.last_fb_tick = Some(self.tick);
+                }
+                if emcy {
+                    self.counters.detail[CAN_DETAIL_EMCY] += 1;
+                    self.shared.last_emcy.store(
+                        u64::from(c.node) << 16 | u64::from(c.last_emcy),
+                        Ordering::Relaxed,
+                    );
+                }
+                owned
+            }
             CanProtocol::Mit => {
                 if f.id != bus.host_id || f.extended || f.rtr || f.len < 6 {
                     return false;
@@ -664,13 +724,14 @@ impl Backend for CanBackend {
                 let k = drive.cfg.index;
                 let is_stale = drive
                     .last_fb_tick
-                    .is_none_or(|t| self.tick - t > bus.timeout_ticks);
+                    .is_none_or(|t| self.tick - t > bus.timeout_ticks)
+                    || drive.co.is_some_and(|c| c.heartbeat_stale(self.tick));
                 let drive_fault = match drive.heartbeat {
                     Some((err, state)) => {
                         err != 0 || u32::from(state) != odrive::AXIS_STATE_CLOSED_LOOP_CONTROL
                     }
                     None => false,
-                };
+                } || drive.co.is_some_and(|c| c.faulted());
                 let mut flags = self.states.fault_flags[k] & !(FAULT_FEEDBACK_STALE | FAULT_DRIVE);
                 if is_stale {
                     flags |= FAULT_FEEDBACK_STALE;
@@ -684,6 +745,7 @@ impl Backend for CanBackend {
                 // that answers again after silence — it started after our enable edge, or reset —
                 // is re-entered at once, not only at the next enable edge.
                 let (rearm, answers_again) = match bus.protocol {
+                    CanProtocol::Cia402 => (false, false),
                     CanProtocol::Mit => (is_stale, drive.was_stale && !is_stale),
                     CanProtocol::Odrive => (
                         drive.heartbeat.is_some_and(|(err, state)| {
@@ -736,6 +798,12 @@ impl Backend for CanBackend {
                 };
                 let value = d.cfg.units.command_from_current(i_a);
                 let frame = match bus.protocol {
+                    CanProtocol::Cia402 => match d.co.as_mut() {
+                        Some(c) => c
+                            .rpdo(value, cia402::Goal::Enabled)
+                            .ok_or(CanCodecError::NonFinite { field: "rpdo" }),
+                        None => Err(CanCodecError::NonFinite { field: "cia402" }),
+                    },
                     CanProtocol::Mit => match d.cfg.mit {
                         Some(r) => {
                             mit::encode_command(d.cfg.node_id, &MitCommand::torque(value), &r)
@@ -751,6 +819,14 @@ impl Backend for CanBackend {
                     ),
                 };
                 Self::send(&bus.sock, &mut self.counters, frame);
+            }
+            // CiA 402: frictiond is the SYNC producer; RPDOs (transmission type 1) apply at it.
+            if bus.protocol == CanProtocol::Cia402 {
+                Self::send(
+                    &bus.sock,
+                    &mut self.counters,
+                    Ok(frictionless_drives::can::cia402::encode_sync(None)),
+                );
             }
         }
         self.shared.store(&self.counters);
@@ -806,6 +882,37 @@ impl Backend for CanBackend {
 
 impl Drop for CanBackend {
     fn drop(&mut self) {
+        // CiA 402: quick stop with 0 torque for a few SYNC cycles, then NMT stop.
+        for bus in &mut self.buses {
+            if bus.protocol != CanProtocol::Cia402 {
+                continue;
+            }
+            for _ in 0..cia402::STOP_CYCLES {
+                for d in &mut bus.drives {
+                    if let Some(c) = d.co.as_mut() {
+                        let f = c.rpdo(0.0, cia402::Goal::QuickStop);
+                        Self::send(
+                            &bus.sock,
+                            &mut self.counters,
+                            f.ok_or(CanCodecError::NonFinite { field: "rpdo" }),
+                        );
+                    }
+                }
+                Self::send(
+                    &bus.sock,
+                    &mut self.counters,
+                    Ok(frictionless_drives::can::cia402::encode_sync(None)),
+                );
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            for d in &bus.drives {
+                let stop = frictionless_drives::can::cia402::encode_nmt(
+                    frictionless_drives::can::cia402::NmtCommand::Stop,
+                    d.cfg.node_id as u8,
+                );
+                Self::send(&bus.sock, &mut self.counters, stop);
+            }
+        }
         // Zero torque, then leave motor mode / idle the axis.
         for bus in &self.buses {
             for d in &bus.drives {
@@ -818,7 +925,7 @@ impl Drop for CanBackend {
                         let exit = mit::encode_special(node, MitSpecial::ExitMotorMode);
                         Self::send(&bus.sock, &mut self.counters, exit);
                     }
-                    (CanProtocol::Mit, None) => {}
+                    (CanProtocol::Mit, None) | (CanProtocol::Cia402, _) => {}
                     (CanProtocol::Odrive, _) => {
                         let n = node as u8;
                         let zero = OdriveMsg::SetInputTorque { torque_nm: 0.0 };
@@ -874,6 +981,15 @@ fn log_counters(c: &SharedCounters, stop: &AtomicBool, buses: &[String]) {
                 now[4]
             );
         }
+        if now[6] != last[6] {
+            let (node, code) = (now[7] >> 16, (now[7] & 0xFFFF) as u16);
+            tracing::warn!(
+                "CAN {buses:?}: +{} CiA 402 EMCY (total {}); last: node {node} error code {code:#06X} ({})",
+                d(6),
+                now[6],
+                frictionless_drives::can::cia402::emcy_text(code)
+            );
+        }
         if now[5] != last[5] {
             tracing::warn!(
                 "CAN {buses:?}: joints with stale drive feedback (bit mask) {:#x} (was {:#x})",
@@ -896,7 +1012,7 @@ mod tests {
     use frictionless_shm_types::{DaemonStatus, IpcConfig};
     use socketcan::CanErrorFrame;
 
-    fn pair() -> (CanSocket, CanSocket) {
+    pub(super) fn pair() -> (CanSocket, CanSocket) {
         let mut fds = [0; 2];
         // SAFETY: fds is a valid 2-element array; on success both fds are new and owned by us.
         let rc = unsafe {
@@ -917,9 +1033,9 @@ mod tests {
         }
     }
 
-    struct Env {
+    pub(super) struct Env {
         dir: std::path::PathBuf,
-        cfg: Config,
+        pub(super) cfg: Config,
     }
 
     impl Drop for Env {
@@ -928,7 +1044,7 @@ mod tests {
         }
     }
 
-    fn env(tag: &str, body: &str) -> Env {
+    pub(super) fn env(tag: &str, body: &str) -> Env {
         let id = format!("fldcan_{tag}_{}_{}", std::process::id(), monotonic_ns());
         let dir = std::env::temp_dir().join(&id);
         std::fs::create_dir_all(&dir).unwrap();
@@ -1414,5 +1530,219 @@ command_unit = "joint_torque"
             }
         }
         assert!(rearmed, "idle axis was not re-armed");
+    }
+}
+
+#[cfg(test)]
+mod cia402_tests {
+    //! The CiA 402 path over a socketpair, against the emulated node of `frictionless-drives`
+    //! (`cia402_node`) running in a thread: start-up by SDO, enable, CST torque, EMCY → drive fault
+    //! and its reset, heartbeat loss → stale, quick stop and NMT stop at drop.
+
+    use super::*;
+    use frictionless_drives::can::cia402::{DriveState, NmtState};
+    use frictionless_drives::can::cia402_node::{Cia402Node, NodeParams};
+    use std::sync::Mutex;
+    use std::sync::atomic::AtomicBool;
+
+    const CIA: &str = r#"
+[[joint]]
+name = "knee"
+index = 0
+gear_ratio = -100.0
+kt = 0.157
+max_curr = 5.0
+friction_model = "none"
+[[bus]]
+interface = "vcan0"
+bitrate = 1000000
+protocol = "cia402"
+max_load = 0.9
+feedback_timeout_ticks = 20
+[[bus.joint]]
+joint = "knee"
+node_id = 3
+command_unit = "motor_torque"
+[bus.joint.cia402]
+fault_reset = true
+velocity_unit_rad_s = 0.1
+joint_encoder = { index = 0x60E4, sub = 1, bits = 32, counts_per_rev = 8192 }
+heartbeat_ms = 10
+heartbeat_timeout_ms = 50
+"#;
+
+    /// The emulated drive in a thread: answers frames, ticks every ms, sends its heartbeat unless
+    /// muted.
+    struct Emu {
+        node: Arc<Mutex<Cia402Node>>,
+        /// An EMCY code to fault the drive with (0 = none), sent by the thread.
+        fault: Arc<std::sync::atomic::AtomicU16>,
+        mute_heartbeat: Arc<AtomicBool>,
+        stop: Arc<AtomicBool>,
+        thread: Option<JoinHandle<()>>,
+    }
+
+    impl Emu {
+        fn start(sock: CanSocket) -> Self {
+            let mut n = Cia402Node::new(&NodeParams {
+                node: 3,
+                rated_torque_mnm: 500,
+                max_torque_permille: 2000,
+                counts_per_rev: 4096,
+            })
+            .unwrap();
+            n.set_feedback(1024, -5, 40, 2048, 0);
+            let node = Arc::new(Mutex::new(n));
+            let mute_heartbeat = Arc::new(AtomicBool::new(false));
+            let stop = Arc::new(AtomicBool::new(false));
+            let fault = Arc::new(std::sync::atomic::AtomicU16::new(0));
+            let (n2, m2, s2, f2) = (
+                node.clone(),
+                mute_heartbeat.clone(),
+                stop.clone(),
+                fault.clone(),
+            );
+            let thread = std::thread::spawn(move || {
+                let tx = |f: &WireFrame| {
+                    let _ = sock.write_frame(&CanFrame::try_from(*f).unwrap());
+                };
+                let boot = n2.lock().unwrap().boot().unwrap();
+                tx(&boot);
+                let mut last = std::time::Instant::now();
+                while !s2.load(Ordering::Relaxed) {
+                    if let Ok(f) = sock.read_frame_timeout(Duration::from_micros(500))
+                        && let Ok(w) = WireFrame::try_from(&f)
+                    {
+                        let out = n2.lock().unwrap().on_frame(&w);
+                        out.frames().iter().for_each(tx);
+                    }
+                    let code = f2.swap(0, Ordering::Relaxed);
+                    if code != 0 {
+                        let emcy = n2.lock().unwrap().inject_fault(code).unwrap();
+                        tx(&emcy);
+                    }
+                    if last.elapsed() >= Duration::from_millis(1) {
+                        last = std::time::Instant::now();
+                        let out = n2.lock().unwrap().tick_ms();
+                        if !m2.load(Ordering::Relaxed) {
+                            out.frames().iter().for_each(tx);
+                        }
+                    }
+                }
+            });
+            Self {
+                node,
+                fault,
+                mute_heartbeat,
+                stop,
+                thread: Some(thread),
+            }
+        }
+
+        fn with<R>(&self, f: impl FnOnce(&mut Cia402Node) -> R) -> R {
+            f(&mut self.node.lock().unwrap())
+        }
+    }
+
+    impl Drop for Emu {
+        fn drop(&mut self) {
+            self.stop.store(true, Ordering::Relaxed);
+            if let Some(t) = self.thread.take() {
+                let _ = t.join();
+            }
+        }
+    }
+
+    /// Runs ticks (1 ms apart) until `done` holds, at most `max` ticks; returns the last states.
+    fn run_until(
+        b: &mut CanBackend,
+        cmd: &MotorCurrentCommand,
+        max: usize,
+        mut done: impl FnMut(&CanBackend, &JointStates) -> bool,
+    ) -> JointStates {
+        let mut st = JointStates::zeroed();
+        for _ in 0..max {
+            if let Some(s) = b.read_states().unwrap() {
+                st = s;
+            }
+            b.publish_command(cmd).unwrap();
+            if done(b, &st) {
+                return st;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        panic!("condition not reached in {max} ticks; last states {st:?}");
+    }
+
+    #[test]
+    fn cia402_drive_starts_enables_follows_faults_resets_and_stops() {
+        let e = super::tests::env("cia402", CIA);
+        let (host, drive) = super::tests::pair();
+        let emu = Emu::start(drive);
+        let mut b = CanBackend::with_sockets(&e.cfg, vec![host]).unwrap();
+        // Start-up read the scales by SDO, wrote CST and the mapping, started the node.
+        let co = b.buses[0].drives[0].co.unwrap();
+        assert_eq!((co.torque.rated_mnm, co.torque.max_permille), (500, 2000));
+        assert_eq!(co.pos.counts_per_rev, 4096.0);
+        assert_eq!(emu.with(|n| n.mode()), 10);
+        assert_eq!(emu.with(|n| n.get(0x1A01, 2)), Some(0x60E4_0120));
+        assert_eq!(emu.with(|n| n.get(0x1017, 0)), Some(10));
+
+        // The NMT start reaches the node (it then answers SYNCs).
+        let idle = MotorCurrentCommand::zeroed();
+        run_until(&mut b, &idle, 2000, |_, _| {
+            emu.with(|n| n.nmt() == NmtState::Operational)
+        });
+        // Enable and command 2 A = 0.314 Nm motor torque = 628 ‰ of 0.5 Nm.
+        let mut cmd = MotorCurrentCommand::zeroed();
+        cmd.valid_mask = 1;
+        cmd.i_ref_a[0] = 2.0;
+        run_until(&mut b, &cmd, 2000, |_, _| {
+            emu.with(|n| {
+                n.state() == DriveState::OperationEnabled && n.applied_torque_permille() == 628
+            })
+        });
+        let st = run_until(&mut b, &cmd, 2000, |b, st| {
+            b.counters().stale_feedback_mask == 0 && st.fault_flags[0] == 0 && st.seq > 0
+        });
+        let near = |a: f64, z: f64| assert!((a - z).abs() < 1e-9, "{a} vs {z}");
+        near(st.theta_motor_rad[0], std::f64::consts::FRAC_PI_2); // 1024 / 4096 rev
+        near(st.s_rad[0], std::f64::consts::FRAC_PI_2); // joint encoder 2048 / 8192 rev
+        near(st.omega_motor_rad_s[0], -0.5);
+        near(st.sdot_rad_s[0], 0.005);
+        near(st.current_a[0], 0.040 * 0.5 / 0.157);
+
+        // EMCY + fault: the joint is flagged, the EMCY counted; fault_reset = true resets it (edge),
+        // the drive's "error reset" EMCY clears the flag, and the drive is enabled again.
+        emu.fault.store(0x4310, Ordering::Relaxed);
+        let _ = run_until(&mut b, &cmd, 2000, |b, st| {
+            st.fault_flags[0] & FAULT_DRIVE != 0 && b.counters().detail[CAN_DETAIL_EMCY] == 1
+        });
+        assert_eq!(b.buses[0].drives[0].co.unwrap().last_emcy, 0x4310);
+        let _ = run_until(&mut b, &cmd, 3000, |_, st| {
+            st.fault_flags[0] == 0
+                && emu.with(|n| {
+                    n.state() == DriveState::OperationEnabled && n.applied_torque_permille() == 628
+                })
+        });
+
+        // Heartbeat loss: the joint goes stale although its TPDOs still arrive; back when it returns.
+        emu.mute_heartbeat.store(true, Ordering::Relaxed);
+        let _ = run_until(&mut b, &cmd, 2000, |b, st| {
+            b.counters().stale_feedback_mask == 1 && st.fault_flags[0] & FAULT_FEEDBACK_STALE != 0
+        });
+        emu.mute_heartbeat.store(false, Ordering::Relaxed);
+        let _ = run_until(&mut b, &cmd, 2000, |b, _| {
+            b.counters().stale_feedback_mask == 0
+        });
+
+        // Drop: quick stop with 0 torque (the drive leaves operation enabled), then NMT stop.
+        drop(b);
+        std::thread::sleep(Duration::from_millis(50));
+        emu.with(|n| {
+            assert_eq!(n.nmt(), NmtState::Stopped);
+            assert_ne!(n.state(), DriveState::OperationEnabled);
+            assert_eq!(n.applied_torque_permille(), 0);
+        });
     }
 }

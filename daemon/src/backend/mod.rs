@@ -70,6 +70,17 @@ pub enum BackendError {
         /// Buses configured.
         buses: usize,
     },
+    /// A CiA 402 drive's start-up failed: an SDO abort (its code, meaning and the object), a time-out,
+    /// or a value read back that differs from what was written.
+    #[error("CAN interface {interface:?}, CiA 402 node {node}: {message}")]
+    Cia402Startup {
+        /// Interface name.
+        interface: String,
+        /// CANopen node id.
+        node: u8,
+        /// What failed.
+        message: String,
+    },
     /// The bus-counter logger thread could not be spawned.
     #[error("spawning the CAN logger thread: {0}")]
     LoggerThread(#[source] std::io::Error),

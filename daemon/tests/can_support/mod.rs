@@ -695,3 +695,78 @@ pub fn sighup_scenario(
     assert_eq!(log.matches("reloaded").count(), 1, "{log}");
     log
 }
+
+/// An emulated CiA 402 drive (`frictionless_drives::can::cia402_node`) on the test end of a
+/// socket, in a thread: boot-up, then it answers every frame and ticks its heartbeat every ms. The
+/// motor position follows the applied torque (a unit inertia), so the TPDOs change every cycle.
+pub struct Cia402Emu {
+    /// The node (lock briefly).
+    pub node: Arc<Mutex<frictionless_drives::can::cia402_node::Cia402Node>>,
+    /// SYNCs seen.
+    pub syncs: Arc<std::sync::atomic::AtomicU64>,
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Cia402Emu {
+    /// Starts node `node` (rated torque 500 mNm, max 2000 ‰, 4096 increments per revolution).
+    pub fn start(sock: CanSocket, node: u8) -> Self {
+        use frictionless_drives::can::cia402_node::{Cia402Node, NodeParams};
+        let n = Cia402Node::new(&NodeParams {
+            node,
+            rated_torque_mnm: 500,
+            max_torque_permille: 2000,
+            counts_per_rev: 4096,
+        })
+        .unwrap();
+        let node = Arc::new(Mutex::new(n));
+        let stop = Arc::new(AtomicBool::new(false));
+        let syncs = Arc::new(std::sync::atomic::AtomicU64::new(0));
+        let (n2, s2, c2) = (node.clone(), stop.clone(), syncs.clone());
+        let thread = std::thread::spawn(move || {
+            let tx = |f: &WireFrame| {
+                let _ = sock.write_frame(&CanFrame::try_from(*f).unwrap());
+            };
+            let boot = n2.lock().unwrap().boot().unwrap();
+            tx(&boot);
+            let (mut pos, mut vel) = (0.0f64, 0.0f64);
+            let mut last = Instant::now();
+            while !s2.load(Ordering::Relaxed) {
+                if let Ok(f) = sock.read_frame_timeout(Duration::from_micros(500))
+                    && let Ok(w) = WireFrame::try_from(&f)
+                {
+                    let mut n = n2.lock().unwrap();
+                    if w.id == 0x80 {
+                        c2.fetch_add(1, Ordering::Relaxed);
+                        let t = f64::from(n.applied_torque_permille());
+                        vel += 1e-3 * t;
+                        pos += 1e-3 * vel;
+                        n.set_feedback(pos as i32, vel as i32, t as i16, (pos / 100.0) as i32, 0);
+                    }
+                    let out = n.on_frame(&w);
+                    out.frames().iter().for_each(tx);
+                }
+                if last.elapsed() >= Duration::from_millis(1) {
+                    last = Instant::now();
+                    let out = n2.lock().unwrap().tick_ms();
+                    out.frames().iter().for_each(tx);
+                }
+            }
+        });
+        Self {
+            node,
+            syncs,
+            stop,
+            thread: Some(thread),
+        }
+    }
+}
+
+impl Drop for Cia402Emu {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}

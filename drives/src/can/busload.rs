@@ -5,6 +5,9 @@
 //! data bytes. `g + 8n` bits (SOF … CRC) are subject to stuffing; 13 = CRC delimiter, ACK slot and
 //! delimiter, EOF (7), interframe space (3). 8 data bytes, standard id: 111 bits unstuffed, 135 worst case.
 //!
+//! CANopen / CiA 402 adds one SYNC per bus and cycle ([`cia402_sync_bits`], 55 bits worst case) to
+//! the per-node PDOs ([`cia402_bits_per_node_tick`]).
+//!
 //! Not here: CAN FD, error frames, arbitration delays.
 
 /// Worst-case bits on the wire of one classic frame with `data_len` (0..=8, clamped) bytes.
@@ -31,6 +34,30 @@ pub const fn odrive_bits_per_joint_tick() -> u32 {
     frame_bits_worst(4, false) + 2 * frame_bits_worst(8, false)
 }
 
+/// Worst-case bits of a CANopen SYNC without counter (0 data bytes), once per bus and cycle.
+pub const fn cia402_sync_bits() -> u32 {
+    frame_bits_worst(0, false)
+}
+
+/// Worst-case bits one CiA 402 node puts on the bus per SYNC cycle: its RPDO(s) of `rpdo_bytes`
+/// data bytes and its TPDOs of `tpdo_bytes`, each TPDO `(bytes, every)` sent on every `every`-th
+/// SYNC (transmission type 1..=240; 0 counts as 1), the fraction rounded up to a whole bit.
+pub fn cia402_bits_per_node_tick(rpdo_bytes: &[u8], tpdo_bytes: &[(u8, u8)]) -> u32 {
+    let r: u32 = rpdo_bytes.iter().map(|&n| frame_bits_worst(n, false)).sum();
+    let t: u32 = tpdo_bytes
+        .iter()
+        .map(|&(n, every)| frame_bits_worst(n, false).div_ceil(u32::from(every.max(1))))
+        .sum();
+    r + t
+}
+
+/// Worst-case bits per node and cycle of the project's default CiA 402 layout: RPDO1 4 bytes
+/// (controlword + target torque or torque offset), TPDO1 8 bytes (statusword, position, torque),
+/// TPDO2 8 bytes (velocity, joint-side encoder): 95 + 135 + 135 = 365.
+pub const fn cia402_default_bits_per_node_tick() -> u32 {
+    frame_bits_worst(4, false) + 2 * frame_bits_worst(8, false)
+}
+
 /// Bus load (fraction of the bitrate, 1.0 = saturated) of `n_joints` joints each putting
 /// `bits_per_joint_tick` bits on the bus per tick at `rate_hz`, on a `bitrate_bps` bus.
 pub fn load_fraction(
@@ -40,6 +67,11 @@ pub fn load_fraction(
     bitrate_bps: f64,
 ) -> f64 {
     n_joints as f64 * bits_per_joint_tick as f64 * rate_hz / bitrate_bps
+}
+
+/// Bus load of `bits_per_tick` bits per tick in all (per-bus frames such as SYNC included).
+pub fn load_fraction_bits(bits_per_tick: u64, rate_hz: f64, bitrate_bps: f64) -> f64 {
+    bits_per_tick as f64 * rate_hz / bitrate_bps
 }
 
 /// Largest number of joints whose load stays ≤ `limit` (e.g. 0.75).

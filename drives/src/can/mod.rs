@@ -7,6 +7,10 @@
 //!   from `socketcan::CanFrame` behind the default feature `socketcan`).
 //! - [`mit`]: MIT mini-cheetah / CubeMars AK "MIT mode" (bit-packed fixed point, big-endian).
 //! - [`odrive`]: ODrive "CAN Simple" (id = node << 5 | cmd, little-endian `f32`).
+//! - [`cia402`]: CANopen (NMT, SYNC, SDO, EMCY, heartbeat, PDOs) and the CiA 402 drive profile
+//!   (statusword / controlword state machine, ‰-of-rated torque and increment units).
+//! - [`cia402_node`]: a socket-free emulated CiA 402 drive (object dictionary, NMT slave, SDO server,
+//!   SYNC-driven PDOs, EMCY, heartbeat) for the plant and for tests of the master.
 //! - [`units`]: per-joint mapping between the daemon's motor current [A] and what a drive expects
 //!   (current, motor torque or joint torque), and motor-side feedback back to the joint side.
 //! - [`busload`]: bits per classic frame with worst-case bit stuffing and the bus load of a config.
@@ -15,6 +19,8 @@
 //! so the RT loop can construct and match them.
 
 pub mod busload;
+pub mod cia402;
+pub mod cia402_node;
 pub mod frame;
 pub mod mit;
 pub mod odrive;
@@ -23,7 +29,8 @@ pub mod units;
 pub use frame::WireFrame;
 use units::AngleUnit;
 
-/// The drive protocols of a CAN bus (`[[bus]] protocol` in frictiond's config: `"mit"`, `"odrive"`).
+/// The drive protocols of a CAN bus (`[[bus]] protocol` in frictiond's config: `"mit"`, `"odrive"`,
+/// `"cia402"`).
 /// A new protocol is one module beside [`mit`] and [`odrive`] plus one variant here.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -32,33 +39,48 @@ pub enum CanProtocol {
     Mit,
     /// ODrive CAN Simple: Set_Input_Torque per tick; cyclic Get_Encoder_Estimates, Get_Iq, Heartbeat.
     Odrive,
+    /// CiA 402 over CANopen: SYNC per cycle from the master, RPDO controlword + target torque (or
+    /// torque offset), TPDOs statusword / position / torque and velocity / joint-side encoder.
+    Cia402,
 }
 
 impl CanProtocol {
     /// Every protocol, in declaration order.
-    pub const ALL: [CanProtocol; 2] = [CanProtocol::Mit, CanProtocol::Odrive];
+    pub const ALL: [CanProtocol; 3] = [CanProtocol::Mit, CanProtocol::Odrive, CanProtocol::Cia402];
 
-    /// The config name (`"mit"`, `"odrive"`).
+    /// The config name (`"mit"`, `"odrive"`, `"cia402"`).
     pub fn name(self) -> &'static str {
         match self {
             CanProtocol::Mit => "mit",
             CanProtocol::Odrive => "odrive",
+            CanProtocol::Cia402 => "cia402",
         }
     }
 
-    /// Unit of the motor-side position and velocity the drive reports.
+    /// Unit of the motor-side position and velocity the drive reports (CiA 402: increments and
+    /// velocity units, converted to rad by the per-drive scales before this unit applies).
     pub fn feedback_angle(self) -> AngleUnit {
         match self {
-            CanProtocol::Mit => AngleUnit::Rad,
+            CanProtocol::Mit | CanProtocol::Cia402 => AngleUnit::Rad,
             CanProtocol::Odrive => AngleUnit::Rev,
         }
     }
 
-    /// Worst-case bits one joint puts on the bus per tick ([`busload`]).
+    /// Worst-case bits one joint puts on the bus per tick ([`busload`]; CiA 402: the default layout,
+    /// the config computes a drive's own from its mapping).
     pub fn bits_per_joint_tick(self) -> u32 {
         match self {
             CanProtocol::Mit => busload::mit_bits_per_joint_tick(),
             CanProtocol::Odrive => busload::odrive_bits_per_joint_tick(),
+            CanProtocol::Cia402 => busload::cia402_default_bits_per_node_tick(),
+        }
+    }
+
+    /// Worst-case bits the bus carries per tick besides the joints' frames (CiA 402: the SYNC).
+    pub fn bits_per_bus_tick(self) -> u32 {
+        match self {
+            CanProtocol::Mit | CanProtocol::Odrive => 0,
+            CanProtocol::Cia402 => busload::cia402_sync_bits(),
         }
     }
 
@@ -66,7 +88,7 @@ impl CanProtocol {
     pub fn frames_per_joint_tick(self) -> u32 {
         match self {
             CanProtocol::Mit => 2,
-            CanProtocol::Odrive => 3,
+            CanProtocol::Odrive | CanProtocol::Cia402 => 3,
         }
     }
 }

@@ -203,6 +203,6 @@ mod tests {
             line.contains("rx 77 ") && line.contains("link down 1 "),
             "{line}"
         );
-        assert!(line.ends_with("error_passive 5"), "{line}");
+        assert!(line.ends_with("error_passive 5  emcy 0"), "{line}");
     }
 }
