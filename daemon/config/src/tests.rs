@@ -855,3 +855,59 @@ fn models_whose_inputs_the_backend_cannot_supply_are_refused() {
         SignalSupply::Publisher
     );
 }
+
+/// `[joint.speed_current_limit]`: parsed, defaulted, built into the law, and each rule refused
+/// with its key and value.
+#[test]
+fn speed_current_limit_is_parsed_built_and_checked() {
+    let with = |body: &str| {
+        GOOD.replace(
+            "lpf = { order = 2, cutoff_hz = 10.0 }",
+            &format!("lpf = {{ order = 2, cutoff_hz = 10.0 }}\nspeed_current_limit = {{ {body} }}"),
+        )
+    };
+    let c = p(&with(
+        "rated_motor_speed_rad_s = 300.0, no_load_motor_speed_rad_s = 600.0",
+    ))
+    .unwrap();
+    let l = c.raw.joint[0].speed_current_limit.unwrap();
+    assert_eq!(l.safety_factor, 1.0, "default");
+    assert!(c.raw.joint[1].speed_current_limit.is_none());
+    let params = crate::params::build(&c, 0).unwrap();
+    let g = params.joints[0].law.gains;
+    // r = −100: 4.5 rad/s at the joint is 450 rad/s at the motor, half-way down the slope.
+    assert!((g.current_limit_a(4.5) - 2.5).abs() < 1e-12);
+    assert_eq!(g.current_limit_a(1.0), 5.0);
+    assert_eq!(params.joints[1].law.gains.current_limit_a(100.0), 3.0);
+    // Written back (frictl writes configs through these types) and read again, unchanged.
+    let text = toml::to_string(&c.raw).unwrap();
+    assert!(text.contains("speed_current_limit"), "{text}");
+    for (body, key, val) in [
+        (
+            "rated_motor_speed_rad_s = 0.0, no_load_motor_speed_rad_s = 600.0",
+            "joint[0].speed_current_limit.rated_motor_speed_rad_s",
+            "0",
+        ),
+        (
+            "rated_motor_speed_rad_s = 300.0, no_load_motor_speed_rad_s = 200.0",
+            "joint[0].speed_current_limit.no_load_motor_speed_rad_s",
+            "200",
+        ),
+        (
+            "rated_motor_speed_rad_s = 300.0, no_load_motor_speed_rad_s = 600.0, safety_factor = 1.5",
+            "joint[0].speed_current_limit.safety_factor",
+            "1.5",
+        ),
+        (
+            "rated_motor_speed_rad_s = 300.0, no_load_motor_speed_rad_s = 600.0, safety_factor = 0.0",
+            "joint[0].speed_current_limit.safety_factor",
+            "0",
+        ),
+    ] {
+        assert_refused(&with(body), key, val);
+    }
+    let e = p(&with("rated_motor_speed_rad_s = 300.0"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("no_load_motor_speed_rad_s"), "{e}");
+}

@@ -312,6 +312,36 @@ pub(crate) fn check_joints(
     Ok((models, pinn_features))
 }
 
+/// `joint[k].speed_current_limit` as the law's limit (none when absent); a broken rule names its
+/// key, value and the rule (`frictionless::law::SpeedCurrentLimit::new`'s).
+pub(crate) fn speed_current_limit(
+    c: &Checker,
+    k: usize,
+    j: &JointConfig,
+) -> Result<Option<frictionless::law::SpeedCurrentLimit>, ConfigError> {
+    let Some(l) = j.speed_current_limit else {
+        return Ok(None);
+    };
+    frictionless::law::SpeedCurrentLimit::new(
+        l.rated_motor_speed_rad_s,
+        l.no_load_motor_speed_rad_s,
+        l.safety_factor,
+    )
+    .map(Some)
+    .map_err(|rule| {
+        let value = match rule.field {
+            "rated_motor_speed_rad_s" => l.rated_motor_speed_rad_s,
+            "no_load_motor_speed_rad_s" => l.no_load_motor_speed_rad_s,
+            _ => l.safety_factor,
+        };
+        c.fail(
+            format!("joint[{k}].speed_current_limit.{}", rule.field),
+            value,
+            rule.rule,
+        )
+    })
+}
+
 /// The keys of `joint[k]` that do not depend on its model (name, index, gains, limits, filter,
 /// out-of-range settings); `fs_hz` is the loop rate.
 pub(crate) fn check_joint(
@@ -343,6 +373,7 @@ pub(crate) fn check_joint(
     }
     c.finite_pos(key("kt"), j.kt)?;
     c.finite_pos(key("max_curr"), j.max_curr)?;
+    speed_current_limit(c, k, j)?;
     if !(j.kfc.is_finite() && (0.0..=2.0).contains(&j.kfc)) {
         return Err(c.fail(key("kfc"), j.kfc, "must be in [0, 2]"));
     }

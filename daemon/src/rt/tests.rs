@@ -206,6 +206,7 @@ fn mixed_params(n: usize, rt_threads: u8) -> Box<Params> {
                 max_output_friction_nm: 3.0,
                 joint_velocity_threshold_rad_s: 0.05,
                 dt_s: 1e-3,
+                speed_limit: None,
             };
             JointRt {
                 index: 3 * k,
