@@ -51,6 +51,7 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe as ps_factory};
 
+pub mod control;
 pub mod sim;
 
 /// Compile-time joint capacity of every payload.

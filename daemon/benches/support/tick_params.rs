@@ -113,6 +113,7 @@ pub fn params_with(n: usize, rt_threads: u8, model: impl Fn(usize) -> JointModel
                 Some(CausalButterworth::design(2, 30.0, 1000.0).unwrap()),
             ),
             ood: OodRt::off(),
+            compensation: true,
         })
         .collect();
     let mut p = Box::new(Params {

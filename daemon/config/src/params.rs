@@ -87,6 +87,9 @@ pub struct JointRt {
     pub law: JointLaw,
     /// Out-of-training-range check and blend.
     pub ood: OodRt,
+    /// Friction compensation switch (runtime `compensation = on|off`; on when built): off feeds
+    /// the law 0 friction while the model keeps running.
+    pub compensation: bool,
 }
 
 /// One joint's out-of-training-range handling on the RT thread: the check's settings, the static
@@ -335,6 +338,7 @@ pub fn build(cfg: &Config, generation: u64) -> Result<Box<Params>, ParamsError> 
             model,
             law: JointLaw::new(gains, lpf),
             ood,
+            compensation: true,
         });
     }
     let mut p = Box::new(Params {

@@ -423,6 +423,25 @@ pub struct RawConfig {
     /// `[[bus]]`: CAN buses (required, ≥ 1, with `[backend] kind = "can"`; forbidden otherwise).
     #[serde(default)]
     pub bus: Vec<BusConfig>,
+    /// `[control]`: runtime control of the running daemon.
+    #[serde(default)]
+    pub control: ControlConfig,
+}
+
+/// `[control]`: the `<prefix>/control` request–response service (`frictl ctl`).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ControlConfig {
+    /// Accept runtime sets (`kfc`, `max_output_friction`, `max_curr`, `compensation`, `ood`);
+    /// false: gets only, every set refused. Default true.
+    #[serde(default = "default_true")]
+    pub writes: bool,
+}
+
+impl Default for ControlConfig {
+    fn default() -> Self {
+        Self { writes: true }
+    }
 }
 
 impl RawConfig {
@@ -440,6 +459,7 @@ impl RawConfig {
             safety: SafetyConfig::default(),
             joint,
             bus: Vec::new(),
+            control: ControlConfig::default(),
         }
     }
 }

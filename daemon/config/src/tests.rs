@@ -911,3 +911,64 @@ fn speed_current_limit_is_parsed_built_and_checked() {
         .to_string();
     assert!(e.contains("no_load_motor_speed_rad_s"), "{e}");
 }
+
+/// A runtime request is checked by the file's rules and names joint, key, value and rule.
+#[test]
+fn runtime_requests_follow_the_file_rules() {
+    use crate::runtime::{Change, check};
+    let c = p(GOOD).unwrap();
+    let ok = |joint: &str, key: &str, value: &str| check(&c, 7, joint, key, value).unwrap();
+    let set = ok("ankle", "kfc", "0.5");
+    assert_eq!((set.generation, set.joint_index), (7, 3));
+    assert_eq!(set.change, Change::Kfc(0.5));
+    assert_eq!(
+        ok("knee", "max_output_friction", "inf").change,
+        Change::MaxOutputFriction(f64::INFINITY)
+    );
+    assert_eq!(ok("knee", "max_curr", "2.5").change, Change::MaxCurr(2.5));
+    assert_eq!(
+        ok("knee", "compensation", "off").change,
+        Change::Compensation(false)
+    );
+    assert_eq!(
+        ok("knee", "compensation", "on").change,
+        Change::Compensation(true)
+    );
+    assert_eq!(ok("knee", "ood", "off").change, Change::Ood(OodMode::Off));
+    for (joint, key, value, rule) in [
+        ("knee", "kfc", "3", "must be in [0, 2]"),
+        ("knee", "kfc", "-0.1", "must be in [0, 2]"),
+        ("knee", "kfc", "x", "must be a number"),
+        ("knee", "max_output_friction", "0", "must be > 0"),
+        ("knee", "max_curr", "0", "must be finite and > 0"),
+        (
+            "knee",
+            "max_curr",
+            "6",
+            "must be <= the file's max_curr (5)",
+        ),
+        ("knee", "compensation", "maybe", "must be on or off"),
+        (
+            "knee",
+            "ood",
+            "static",
+            "only a PINN joint whose file sets ood",
+        ),
+        ("knee", "kp", "1", "not a runtime key"),
+        ("hip", "kfc", "1", "no such joint (configured: knee, ankle)"),
+    ] {
+        let e = check(&c, 0, joint, key, value).unwrap_err();
+        assert!(e.rule.starts_with(rule), "{key} = {value}: {e}");
+        let text = e.to_string();
+        assert!(
+            text.contains(joint) && text.contains(key) && text.contains(value),
+            "{text}"
+        );
+    }
+    // The file's own refusals use the same words.
+    assert_refused(
+        &GOOD.replace("kfc = 0.85", "kfc = 3.0"),
+        "joint[0].kfc",
+        "must be in [0, 2]",
+    );
+}

@@ -483,6 +483,7 @@ pub fn daemon_config(
             .map(|j| daemon_joint(j, raw_friction))
             .collect::<Result<_, _>>()?,
         bus: Vec::new(),
+        control: Default::default(),
     })
 }
 
