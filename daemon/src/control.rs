@@ -11,6 +11,7 @@
 //! next reload, which restores every value to the (new) file's ([`ControlState::reset`]).
 
 use std::sync::mpsc::{SyncSender, TrySendError};
+use std::time::{Duration, Instant};
 
 use frictionless_shm_types::control::{
     CONTROL_BAD_REQUEST, CONTROL_BUSY, CONTROL_KEYS, CONTROL_OK, CONTROL_OP_GET, CONTROL_OP_SET,
@@ -31,12 +32,20 @@ struct JointValues {
     set_since_ns: [u64; CONTROL_KEYS.len()],
 }
 
+/// Log lines per [`LOG_WINDOW`] at most; the rest are counted into the next line.
+const LOG_LINES_PER_WINDOW: u32 = 20;
+/// The window of [`LOG_LINES_PER_WINDOW`].
+const LOG_WINDOW: Duration = Duration::from_secs(1);
+
 /// What gets report: per joint of the file in use, its values; the generation and its load time.
 #[derive(Debug, Clone)]
 pub struct ControlState {
     generation: u64,
     since_ns: u64,
     joints: Vec<JointValues>,
+    log_window: Option<Instant>,
+    log_lines: u32,
+    unlogged: u64,
 }
 
 fn ood_code(m: OodMode) -> u32 {
@@ -54,6 +63,9 @@ impl ControlState {
             generation,
             since_ns: now_ns,
             joints: Vec::new(),
+            log_window: None,
+            log_lines: 0,
+            unlogged: 0,
         };
         s.reset(cfg, generation, now_ns);
         s
@@ -84,7 +96,7 @@ impl ControlState {
     }
 
     /// Answers `req` against `cfg` (the file in use). A valid set is queued on `tx` for the RT
-    /// thread; `writes` is `[control] writes`. Logs every set and refusal.
+    /// thread; `writes` is `[control] writes`. Logs sets and refusals (rate-limited).
     pub fn answer(
         &mut self,
         cfg: &Config,
@@ -113,13 +125,13 @@ impl ControlState {
                     "joint `{joint}`: `{key}` = {value}: runtime writes are disabled ([control] writes = false in {})",
                     cfg.file.display()
                 );
-                tracing::warn!("control: refused: {msg}");
+                self.log(true, &format!("refused: {msg}"));
                 self.view(cfg, pos, CONTROL_WRITES_DISABLED, &msg)
             }
             CONTROL_OP_SET => match check(cfg, self.generation, joint, key, value) {
                 Err(refusal) => {
                     let msg = refusal.to_string();
-                    tracing::warn!("control: refused: {msg}");
+                    self.log(true, &format!("refused: {msg}"));
                     self.view(cfg, pos, CONTROL_REFUSED, &msg)
                 }
                 Ok(set) => match tx.try_send(set) {
@@ -129,19 +141,49 @@ impl ControlState {
                             "joint `{joint}`: `{key}` = {value}: applied from the next tick (generation {})",
                             self.generation
                         );
-                        tracing::info!("control: {msg}");
+                        self.log(false, &msg);
                         self.view(cfg, pos, CONTROL_OK, &msg)
                     }
                     Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
                         let msg = format!(
                             "joint `{joint}`: `{key}` = {value}: the RT thread's queue is full, try again"
                         );
-                        tracing::warn!("control: {msg}");
+                        self.log(true, &msg);
                         self.view(cfg, pos, CONTROL_BUSY, &msg)
                     }
                 },
             },
             op => ControlResponse::with(CONTROL_BAD_REQUEST, &format!("unknown op {op}")),
+        }
+    }
+
+    /// Logs a set (`warn`: a refusal) — at most [`LOG_LINES_PER_WINDOW`] lines per
+    /// [`LOG_WINDOW`], so a client that sets every millisecond cannot flood the journal; the lines
+    /// left out are counted into the next one.
+    fn log(&mut self, warn: bool, msg: &str) {
+        let now = Instant::now();
+        if self
+            .log_window
+            .is_none_or(|t| now.duration_since(t) >= LOG_WINDOW)
+        {
+            self.log_window = Some(now);
+            self.log_lines = 0;
+        }
+        if self.log_lines >= LOG_LINES_PER_WINDOW {
+            self.unlogged += 1;
+            return;
+        }
+        self.log_lines += 1;
+        let more = std::mem::take(&mut self.unlogged);
+        let more = if more > 0 {
+            format!(" ({more} earlier control requests not logged)")
+        } else {
+            String::new()
+        };
+        if warn {
+            tracing::warn!("control: {msg}{more}");
+        } else {
+            tracing::info!("control: {msg}{more}");
         }
     }
 

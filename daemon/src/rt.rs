@@ -753,6 +753,8 @@ impl Telemetry {
         s.tau_f_hat_nm = *tau_f;
         s.i_ref_a = cmd.i_ref_a;
         s.joint_flags = cmd.flags;
+        s.control_applied = shared.control_applied.load(Ordering::Relaxed);
+        s.control_dropped = shared.control_dropped.load(Ordering::Relaxed);
         let _ = backend.publish_status(s);
         shared
             .lateness_p99_ns

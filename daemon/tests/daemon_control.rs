@@ -99,6 +99,20 @@ fn sets_take_effect_on_the_next_tick_refusals_name_the_rule_and_reload_restores(
         let i = knee_current(&mut plant);
         assert!(close(i, want), "{key}={value}: {i} vs {want}");
     }
+    // DaemonStatus counts the applied changes (published every 10 ticks).
+    let mut applied = 0;
+    for _ in 0..50 {
+        let i = knee_current(&mut plant);
+        assert!(close(i, knee_ref(0.3, true, 0.5)), "{i}");
+        if let Some(s) = plant.status.latest().unwrap() {
+            applied = s.control_applied;
+            assert_eq!(s.control_dropped, 0);
+            if applied >= 4 {
+                break;
+            }
+        }
+    }
+    assert_eq!(applied, 4, "DaemonStatus::control_applied");
     let g = get(&c, "knee_cv");
     assert_eq!((g.kfc, g.max_curr_a, g.compensation), (0.3, 0.5, 1));
     assert!(
@@ -211,7 +225,10 @@ fn frictl_ctl_sets_and_gets_a_live_daemon() {
     };
     let (ok, out, err) = ctl(&["set", "knee_cv", "kfc=0.3", "compensation=off"]);
     assert!(ok, "{out}{err}");
-    assert!(out.contains("`kfc` = 0.3") && out.contains("`compensation` = off"), "{out}");
+    assert!(
+        out.contains("`kfc` = 0.3") && out.contains("`compensation` = off"),
+        "{out}"
+    );
     let i = knee_current(&mut plant);
     assert!(close(i, knee_ref(0.3, false, 5.0)), "{i}");
     let (ok, out, err) = ctl(&["get", "knee_cv", "--json"]);

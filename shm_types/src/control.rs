@@ -245,8 +245,10 @@ impl Ipc {
     /// `<prefix>/control`, the daemon's end (one server per prefix).
     pub fn control_server(&self) -> Result<ControlServer, ShmError> {
         let (name, f) = self.control_service()?;
+        // Never block the daemon's supervisor on a client that does not read its answers.
         let server = f
             .server_builder()
+            .backpressure_strategy(BackpressureStrategy::DiscardData)
             .create()
             .map_err(|e| ipc_err("create server", &name, e))?;
         Ok(ControlServer { name, server })
@@ -257,6 +259,7 @@ impl Ipc {
         let (name, f) = self.control_service()?;
         let client = f
             .client_builder()
+            .backpressure_strategy(BackpressureStrategy::DiscardData)
             .create()
             .map_err(|e| ipc_err("create client", &name, e))?;
         Ok(ControlClient { name, client })
@@ -323,5 +326,30 @@ impl ControlClient {
             }
             std::thread::sleep(Duration::from_millis(1));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn texts_round_trip_and_refuse_what_does_not_fit() {
+        let r = ControlRequest::set("l_knee", "kfc", "0.7").unwrap();
+        assert_eq!(r.op, CONTROL_OP_SET);
+        assert_eq!(
+            (text(&r.joint), text(&r.key), text(&r.value)),
+            (Some("l_knee"), Some("kfc"), Some("0.7"))
+        );
+        assert_eq!(text(&ControlRequest::get("a").unwrap().key), Some(""));
+        assert!(ControlRequest::get(&"j".repeat(CONTROL_TEXT_BYTES + 1)).is_none());
+        assert!(ControlRequest::set("a", "k\0", "1").is_none());
+        assert!(ControlRequest::get(&"j".repeat(CONTROL_TEXT_BYTES)).is_some());
+        // A long message is cut at a character boundary, never mid-character.
+        let long = "é".repeat(CONTROL_MESSAGE_BYTES);
+        let m = ControlResponse::with(CONTROL_REFUSED, &long);
+        assert_eq!(m.message().len(), CONTROL_MESSAGE_BYTES);
+        assert!(m.message().chars().all(|c| c == 'é'));
+        assert_eq!(ood_mode_name(2), "static");
     }
 }
