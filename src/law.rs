@@ -11,8 +11,17 @@
 //! τ̂_F   = kfc·f  (0 if kfc ≤ 0);  τ̂_F ← Butterworth LPF(τ̂_F)  (if configured)
 //! e_int += (τ_des − τ_meas)·dt     (only when ki > 0; anti-windup: ki·|e_int| ≤ max_curr·|kt·r|)
 //! i     = (τ_des + kp·(τ_des − τ_meas) + ki·e_int + τ̂_F) / (kt·r)       (signed r)
-//! i     = clamp(i, ±max_curr);   any NaN/±∞ on the way → i = 0 and the joint's state is reset
+//! i     = clamp(i, ±I_lim(|ω_m|));   any NaN/±∞ on the way → i = 0 and the joint's state is reset
 //! ```
+//! The current limit `I_lim` is `max_curr` (the constant clamp), or with a [`SpeedCurrentLimit`]
+//! the drive's torque–speed curve in the **motor** speed |ω_m| = |r·ṡ| [rad/s]:
+//!
+//! ```text
+//! I_lim(|ω_m|) = sf·max_curr                                   |ω_m| ≤ ω_rated
+//!              = sf·max_curr·(ω_no_load − |ω_m|)/(ω_no_load − ω_rated)   ω_rated < |ω_m| < ω_no_load
+//!              = 0                                             |ω_m| ≥ ω_no_load
+//! ```
+//! (sf = safety factor in (0, 1]; the BLF `PositionToCurrentController`'s limit).
 //! [`JointLaw::reset`] is the bumpless-enable hook (filter and integral cleared; the caller also
 //! resets the friction model). What happened on a tick (clip, saturation, non-finite) comes back as
 //! [`LawFlags`]; frictiond maps them to its ABI's `FLAG_*` bits.
@@ -30,7 +39,7 @@ use crate::filter::CausalButterworth;
 pub struct LawFlags {
     /// The friction estimate was clipped to ±max_output_friction (velocity gate open).
     pub friction_clipped: bool,
-    /// The current was clamped to ±max_curr.
+    /// The current was clamped to ±I_lim (max_curr, or the speed-dependent limit).
     pub current_saturated: bool,
     /// A non-finite input or intermediate: the output is 0 and the state was reset.
     pub non_finite: bool,
@@ -66,12 +75,118 @@ pub struct Gains {
     pub joint_velocity_threshold_rad_s: f64,
     /// Tick period [s] (for the integral).
     pub dt_s: f64,
+    /// Speed-dependent current limit (none = the constant clamp ±max_curr).
+    pub speed_limit: Option<SpeedCurrentLimit>,
 }
 
 impl Gains {
     /// Whether the law needs a measured torque (kp or ki non-zero).
     pub fn uses_torque_feedback(&self) -> bool {
         self.kp != 0.0 || self.ki != 0.0
+    }
+
+    /// The current limit I_lim [A] at joint velocity ṡ [rad/s]: `max_curr_a`, or the
+    /// [`SpeedCurrentLimit`] curve at the motor speed |r·ṡ|. ≥ 0 for a finite ṡ.
+    #[inline]
+    pub fn current_limit_a(&self, sdot_rad_s: f64) -> f64 {
+        match &self.speed_limit {
+            None => self.max_curr_a,
+            Some(l) => l.limit_a(self.max_curr_a, (self.gear_ratio * sdot_rad_s).abs()),
+        }
+    }
+}
+
+/// A rule of [`SpeedCurrentLimit::new`] that its values break: the field and what it must satisfy.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LimitRule {
+    /// The field at fault (`rated_motor_speed_rad_s`, `no_load_motor_speed_rad_s`, `safety_factor`).
+    pub field: &'static str,
+    /// What it must satisfy.
+    pub rule: &'static str,
+}
+
+impl std::fmt::Display for LimitRule {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "`{}` {}", self.field, self.rule)
+    }
+}
+
+impl std::error::Error for LimitRule {}
+
+/// The drive's torque–speed curve as a current limit: `safety_factor · max_curr` up to the rated
+/// motor speed, then linear to 0 A at the no-load motor speed, 0 A beyond. Speeds are of the
+/// **motor** shaft (|ω_m| = |r·ṡ|, as motor data sheets give them) in rad/s.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpeedCurrentLimit {
+    rated_motor_speed_rad_s: f64,
+    no_load_motor_speed_rad_s: f64,
+    safety_factor: f64,
+}
+
+impl SpeedCurrentLimit {
+    /// Checks the rules: `0 < rated < no_load`, both finite; `safety_factor` in (0, 1].
+    pub fn new(
+        rated_motor_speed_rad_s: f64,
+        no_load_motor_speed_rad_s: f64,
+        safety_factor: f64,
+    ) -> Result<Self, LimitRule> {
+        if !(rated_motor_speed_rad_s.is_finite() && rated_motor_speed_rad_s > 0.0) {
+            return Err(LimitRule {
+                field: "rated_motor_speed_rad_s",
+                rule: "must be finite and > 0",
+            });
+        }
+        if !(no_load_motor_speed_rad_s.is_finite()
+            && no_load_motor_speed_rad_s > rated_motor_speed_rad_s)
+        {
+            return Err(LimitRule {
+                field: "no_load_motor_speed_rad_s",
+                rule: "must be finite and > rated_motor_speed_rad_s",
+            });
+        }
+        if !(safety_factor > 0.0 && safety_factor <= 1.0) {
+            return Err(LimitRule {
+                field: "safety_factor",
+                rule: "must be in (0, 1]",
+            });
+        }
+        Ok(Self {
+            rated_motor_speed_rad_s,
+            no_load_motor_speed_rad_s,
+            safety_factor,
+        })
+    }
+
+    /// Rated motor speed [rad/s]: the end of the flat part.
+    pub fn rated_motor_speed_rad_s(&self) -> f64 {
+        self.rated_motor_speed_rad_s
+    }
+
+    /// No-load motor speed [rad/s]: where the limit reaches 0 A.
+    pub fn no_load_motor_speed_rad_s(&self) -> f64 {
+        self.no_load_motor_speed_rad_s
+    }
+
+    /// Safety factor in (0, 1] on `max_curr`.
+    pub fn safety_factor(&self) -> f64 {
+        self.safety_factor
+    }
+
+    /// The limit [A] for a clamp `max_curr_a` at motor speed |ω_m| = `motor_speed_abs_rad_s` (≥ 0).
+    /// A NaN speed gives 0 A.
+    #[inline]
+    pub fn limit_a(&self, max_curr_a: f64, motor_speed_abs_rad_s: f64) -> f64 {
+        let top = self.safety_factor * max_curr_a;
+        let w = motor_speed_abs_rad_s;
+        if w <= self.rated_motor_speed_rad_s {
+            top
+        } else if w < self.no_load_motor_speed_rad_s {
+            top * (self.no_load_motor_speed_rad_s - w)
+                / (self.no_load_motor_speed_rad_s - self.rated_motor_speed_rad_s)
+        } else {
+            // At and beyond the no-load speed, and for a NaN speed.
+            0.0
+        }
     }
 }
 
@@ -91,7 +206,7 @@ pub struct LawInput {
 /// One tick's result for one joint.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LawOutput {
-    /// Commanded motor current [A], finite and within ±max_curr.
+    /// Commanded motor current [A], finite and within ±I_lim (≤ max_curr).
     pub i_a: f64,
     /// Friction compensation actually applied, τ̂_F [Nm] (after clip, kfc, filter).
     pub tau_f_hat_nm: f64,
@@ -106,6 +221,8 @@ pub struct JointLaw {
     pub gains: Gains,
     lpf: Option<CausalButterworth>,
     e_int_nm_s: f64,
+    /// Last finite ṡ a [`JointLaw::step`] saw [rad/s]: the speed the stale-state output limits at.
+    last_sdot_rad_s: f64,
 }
 
 /// Friction after the velocity-gated clip: `(f, clipped)`.
@@ -141,6 +258,7 @@ impl JointLaw {
             gains,
             lpf,
             e_int_nm_s: 0.0,
+            last_sdot_rad_s: 0.0,
         }
     }
 
@@ -169,6 +287,7 @@ impl JointLaw {
         if !inputs_finite {
             return self.non_finite();
         }
+        self.last_sdot_rad_s = x.sdot_rad_s;
         let mut flags = LawFlags::NONE;
         let (f, clipped) = gated_clip(x.friction_nm, x.sdot_rad_s, &g);
         flags.friction_clipped = clipped;
@@ -190,7 +309,7 @@ impl JointLaw {
         if !i.is_finite() || !tau_f.is_finite() {
             return self.non_finite();
         }
-        let (i, sat) = clamp_current(i, g.max_curr_a);
+        let (i, sat) = clamp_current(i, g.current_limit_a(x.sdot_rad_s));
         flags.current_saturated = sat;
         LawOutput {
             i_a: i,
@@ -199,7 +318,8 @@ impl JointLaw {
         }
     }
 
-    /// Static output (stale state): i = τ_des/(kt·r), clamped; no friction, no feedback.
+    /// Static output (stale state): i = τ_des/(kt·r), clamped; no friction, no feedback. The
+    /// speed-dependent limit is taken at the last finite ṡ a [`JointLaw::step`] saw (0 before any).
     #[inline]
     pub fn feed_forward_only(&mut self, tau_des_nm: f64) -> LawOutput {
         let g = self.gains;
@@ -207,7 +327,7 @@ impl JointLaw {
         if !i.is_finite() {
             return self.non_finite();
         }
-        let (i, sat) = clamp_current(i, g.max_curr_a);
+        let (i, sat) = clamp_current(i, g.current_limit_a(self.last_sdot_rad_s));
         LawOutput {
             i_a: i,
             tau_f_hat_nm: 0.0,
@@ -247,6 +367,7 @@ mod tests {
             max_output_friction_nm: 8.0,
             joint_velocity_threshold_rad_s: 0.05,
             dt_s: 1e-3,
+            speed_limit: None,
         }
     }
 
@@ -395,5 +516,77 @@ mod tests {
         assert!((out.i_a - 1.0 / (0.0665 * -160.0)).abs() < 1e-12);
         assert_eq!(out.tau_f_hat_nm, 0.0);
         assert_eq!(law.feed_forward_only(f64::NAN).i_a, 0.0);
+    }
+
+    /// r = −160, max_curr 3 A, sf 0.5: 1.5 A up to 100 rad/s at the motor (0.625 rad/s at the
+    /// joint), 0 A from 300 rad/s (1.875 rad/s).
+    fn limited() -> Gains {
+        Gains {
+            speed_limit: Some(SpeedCurrentLimit::new(100.0, 300.0, 0.5).unwrap()),
+            ..gains()
+        }
+    }
+
+    #[test]
+    fn speed_limit_at_the_knee_points() {
+        let g = limited();
+        let lim = |sdot: f64| g.current_limit_a(sdot);
+        // Flat part, both directions of motion, up to and at the rated speed.
+        assert_eq!(lim(0.0), 1.5);
+        assert_eq!(lim(0.3), 1.5);
+        assert_eq!(lim(100.0 / 160.0), 1.5);
+        assert_eq!(lim(-100.0 / 160.0), 1.5);
+        // Half-way down the slope: 200 rad/s at the motor.
+        assert!((lim(200.0 / 160.0) - 0.75).abs() < 1e-12);
+        assert!((lim(-200.0 / 160.0) - 0.75).abs() < 1e-12);
+        // Just past the knee: continuous.
+        assert!((lim(100.0001 / 160.0) - 1.5).abs() < 1e-5);
+        assert!(lim(100.0001 / 160.0) < 1.5);
+        // At and beyond the no-load speed: 0 A.
+        assert_eq!(lim(300.0 / 160.0), 0.0);
+        assert_eq!(lim(10.0), 0.0);
+        assert_eq!(lim(f64::NAN), 0.0);
+        // Without a speed limit: the constant clamp at every speed.
+        assert_eq!(gains().current_limit_a(100.0), 3.0);
+    }
+
+    #[test]
+    fn step_clamps_to_the_speed_limit_and_flags_it() {
+        let mut law = JointLaw::new(limited(), None);
+        // A 100 Nm request wants far more than any limit; the sign follows r < 0.
+        for (sdot, want) in [(0.0, 1.5), (200.0 / 160.0, 0.75), (2.0, 0.0)] {
+            let out = law.step(&input(100.0, 0.0, sdot));
+            assert!(
+                (out.i_a + want).abs() < 1e-12,
+                "ṡ {sdot}: {} vs -{want}",
+                out.i_a
+            );
+            assert!(out.flags.current_saturated);
+        }
+        // Within the limit: unchanged, not flagged.
+        let out = law.step(&input(1.0, 0.0, 200.0 / 160.0));
+        assert!((out.i_a - 1.0 / (0.0665 * -160.0)).abs() < 1e-12);
+        assert!(!out.flags.current_saturated);
+        // The stale-state output limits at the last speed a step saw (here 0.75 A).
+        let out = law.feed_forward_only(100.0);
+        assert!((out.i_a + 0.75).abs() < 1e-12, "{}", out.i_a);
+        assert!(out.flags.current_saturated);
+    }
+
+    #[test]
+    fn speed_limit_rules_name_the_field() {
+        let field = |r: f64, n: f64, f: f64| SpeedCurrentLimit::new(r, n, f).unwrap_err().field;
+        assert_eq!(field(0.0, 300.0, 1.0), "rated_motor_speed_rad_s");
+        assert_eq!(field(f64::NAN, 300.0, 1.0), "rated_motor_speed_rad_s");
+        assert_eq!(field(f64::INFINITY, 300.0, 1.0), "rated_motor_speed_rad_s");
+        assert_eq!(field(100.0, 100.0, 1.0), "no_load_motor_speed_rad_s");
+        assert_eq!(
+            field(100.0, f64::INFINITY, 1.0),
+            "no_load_motor_speed_rad_s"
+        );
+        assert_eq!(field(100.0, 300.0, 0.0), "safety_factor");
+        assert_eq!(field(100.0, 300.0, 1.01), "safety_factor");
+        assert_eq!(field(100.0, 300.0, f64::NAN), "safety_factor");
+        assert!(SpeedCurrentLimit::new(100.0, 300.0, 1.0).is_ok());
     }
 }

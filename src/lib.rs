@@ -71,6 +71,7 @@
 //!     max_output_friction_nm: f64::INFINITY,
 //!     joint_velocity_threshold_rad_s: 0.0,
 //!     dt_s: 1e-3,
+//!     speed_limit: None, // Some(SpeedCurrentLimit::new(rated, no_load, sf)?): a torque–speed curve
 //! };
 //! let mut law = JointLaw::new(gains, None);
 //! let out = law.step(&LawInput {

@@ -21,7 +21,8 @@
 // Bit of `fl_law_output::flags`: the friction estimate was clipped (velocity gate open).
 #define FL_LAW_FRICTION_CLIPPED 1
 
-// Bit of `fl_law_output::flags`: the current was clamped to ±max_curr_a.
+// Bit of `fl_law_output::flags`: the current was clamped to ±I_lim (max_curr_a or the speed
+// limit).
 #define FL_LAW_CURRENT_SATURATED 2
 
 // Bit of `fl_law_output::flags`: a non-finite input or intermediate; the output is 0 A and the
@@ -158,6 +159,16 @@ typedef struct fl_law_params {
     uint32_t bwfilter_order;
     // Low-pass cut-off [Hz], in (0, 1/(2·dt_s)) (read only when enabled).
     double bwfilter_cutoff_hz;
+    // Whether the current limit depends on the motor speed |ω_m| = |r·ṡ| (false: ±max_curr_a).
+    bool speed_limit_enabled;
+    // Rated motor speed [rad/s], finite and > 0: the limit is `current_safety_factor ·
+    // max_curr_a` up to it (read only when enabled).
+    double rated_motor_speed_rad_s;
+    // No-load motor speed [rad/s], finite and > rated: the limit falls linearly to 0 A here
+    // (read only when enabled).
+    double no_load_motor_speed_rad_s;
+    // Safety factor on `max_curr_a`, in (0, 1] (read only when enabled).
+    double current_safety_factor;
 } fl_law_params;
 
 // One tick's inputs.
@@ -174,7 +185,7 @@ typedef struct fl_law_input {
 
 // One tick's result.
 typedef struct fl_law_output {
-    // Motor current command [A], finite, within ±max_curr_a.
+    // Motor current command [A], finite, within ±I_lim (≤ max_curr_a).
     double i_a;
     // Friction compensation applied, τ̂_F [Nm] (after clip, kfc, filter).
     double tau_f_hat_nm;

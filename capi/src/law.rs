@@ -4,7 +4,9 @@
 //! f     = clamp(f, ±max_output_friction_nm)  only if |ṡ| > joint_velocity_threshold_rad_s
 //! τ̂_F   = kfc·f (0 if kfc ≤ 0), then the Butterworth LPF if enabled
 //! i     = (τ_des + kp·(τ_des − τ_meas) + ki·∫(τ_des − τ_meas) + τ̂_F) / (kt·r)    (signed r)
-//! i     = clamp(i, ±max_curr_a); any NaN/±∞ → i = 0 and the state reset
+//! i     = clamp(i, ±I_lim);  any NaN/±∞ → i = 0 and the state reset
+//! I_lim = max_curr_a, or with `speed_limit_enabled` the torque–speed curve at |ω_m| = |r·ṡ|:
+//!         sf·max_curr_a up to rated_motor_speed_rad_s, linear to 0 at no_load_motor_speed_rad_s
 //! ```
 //! Field names are the BLF device's `TORQUE_CURRENT_PARAMS` keys (`kt`, `kfc`, `kp`, `ki`,
 //! `max_curr`, `max_output_friction`, `joint_velocity_threshold`, `bwfilter_*`) with their SI unit
@@ -13,13 +15,14 @@
 //! allocate, lock or panic. One thread at a time per law.
 
 use fl_core::filter::CausalButterworth;
-use fl_core::law::{Gains, JointLaw, LawInput, LawOutput};
+use fl_core::law::{Gains, JointLaw, LawInput, LawOutput, SpeedCurrentLimit};
 
 use crate::{Fail, arg, arg_mut, fl_status, guard};
 
 /// Bit of `fl_law_output::flags`: the friction estimate was clipped (velocity gate open).
 pub const FL_LAW_FRICTION_CLIPPED: u32 = 1;
-/// Bit of `fl_law_output::flags`: the current was clamped to ±max_curr_a.
+/// Bit of `fl_law_output::flags`: the current was clamped to ±I_lim (max_curr_a or the speed
+/// limit).
 pub const FL_LAW_CURRENT_SATURATED: u32 = 2;
 /// Bit of `fl_law_output::flags`: a non-finite input or intermediate; the output is 0 A and the
 /// law's state was reset.
@@ -53,6 +56,16 @@ pub struct fl_law_params {
     pub bwfilter_order: u32,
     /// Low-pass cut-off [Hz], in (0, 1/(2·dt_s)) (read only when enabled).
     pub bwfilter_cutoff_hz: f64,
+    /// Whether the current limit depends on the motor speed |ω_m| = |r·ṡ| (false: ±max_curr_a).
+    pub speed_limit_enabled: bool,
+    /// Rated motor speed [rad/s], finite and > 0: the limit is `current_safety_factor ·
+    /// max_curr_a` up to it (read only when enabled).
+    pub rated_motor_speed_rad_s: f64,
+    /// No-load motor speed [rad/s], finite and > rated: the limit falls linearly to 0 A here
+    /// (read only when enabled).
+    pub no_load_motor_speed_rad_s: f64,
+    /// Safety factor on `max_curr_a`, in (0, 1] (read only when enabled).
+    pub current_safety_factor: f64,
 }
 
 /// One tick's inputs.
@@ -73,7 +86,7 @@ pub struct fl_law_input {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct fl_law_output {
-    /// Motor current command [A], finite, within ±max_curr_a.
+    /// Motor current command [A], finite, within ±I_lim (≤ max_curr_a).
     pub i_a: f64,
     /// Friction compensation applied, τ̂_F [Nm] (after clip, kfc, filter).
     pub tau_f_hat_nm: f64,
@@ -162,6 +175,27 @@ fn build(p: &fl_law_params) -> Result<JointLaw, Fail> {
     } else {
         None
     };
+    let speed_limit = if p.speed_limit_enabled {
+        let l = SpeedCurrentLimit::new(
+            p.rated_motor_speed_rad_s,
+            p.no_load_motor_speed_rad_s,
+            p.current_safety_factor,
+        )
+        .map_err(|rule| {
+            // The C field of the core's `safety_factor` is `current_safety_factor`.
+            let field = match rule.field {
+                "safety_factor" => "current_safety_factor",
+                f => f,
+            };
+            Fail::owned(
+                fl_status::InvalidArgument,
+                format!("fl_law_create: `{field}` {}", rule.rule),
+            )
+        })?;
+        Some(l)
+    } else {
+        None
+    };
     let gains = Gains {
         kt_nm_per_a: p.kt_nm_per_a,
         gear_ratio: p.gear_ratio,
@@ -172,6 +206,7 @@ fn build(p: &fl_law_params) -> Result<JointLaw, Fail> {
         max_output_friction_nm: p.max_output_friction_nm,
         joint_velocity_threshold_rad_s: p.joint_velocity_threshold_rad_s,
         dt_s: p.dt_s,
+        speed_limit,
     };
     Ok(JointLaw::new(gains, lpf))
 }

@@ -155,6 +155,10 @@ fn per_tick_entry_points_do_not_allocate() {
             bwfilter_enabled: true,
             bwfilter_order: 2,
             bwfilter_cutoff_hz: 20.0,
+            speed_limit_enabled: true,
+            rated_motor_speed_rad_s: 100.0,
+            no_load_motor_speed_rad_s: 400.0,
+            current_safety_factor: 0.9,
         };
         assert_eq!(fl_law_create(&params, &mut law), fl_status::Ok);
         // Touch the thread-local error buffer once (its first use on a thread is free too, but

@@ -275,6 +275,7 @@ fn check_output(out: &BTreeMap<String, Vec<Vec<String>>>, c: &Case) {
             max_output_friction_nm: 8.0,
             joint_velocity_threshold_rad_s: 0.0,
             dt_s: 1e-3,
+            speed_limit: None,
         },
         Some(CausalButterworth::design(2, 20.0, 1e3).unwrap()),
     );

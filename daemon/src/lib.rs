@@ -4,7 +4,8 @@
 //! runtime parameters built from it ([`params`], with the per-joint control law of
 //! `frictionless::law`), the I/O backends ([`backend`]: iceoryx2 shared memory, SocketCAN), the RT
 //! loop ([`rt`], the tick top to bottom in one module), systemd notification ([`sdnotify`]) and the
-//! RT-thread allocation counter ([`alloc_count`]), the one-daemon-per-prefix lock ([`instance`]). The
+//! RT-thread allocation counter ([`alloc_count`]), the one-daemon-per-prefix lock ([`instance`]),
+//! the answers to runtime control requests ([`control`], with the checks of [`runtime`]). The
 //! binary `frictiond` (`main.rs`) is the supervisor that wires them together; the library exists so
 //! benches and tests can drive the same code.
 //!
@@ -75,9 +76,12 @@
 pub mod alloc_count;
 pub mod backend;
 pub mod config;
+pub mod control;
 pub mod instance;
 /// The runtime parameters built from a validated config (they live with the schema, in
 /// `frictiond-config`, so the config fuzzer and other tools build them without the daemon).
 pub use frictiond_config::params;
+/// Runtime changes of joint values: checked by the file's rules, applied at a tick boundary.
+pub use frictiond_config::runtime;
 pub mod rt;
 pub mod sdnotify;

@@ -7,7 +7,9 @@
 //! new one is bad; the signal loop never reads a file), systemd
 //! notifications (READY, WATCHDOG gated on the RT heartbeat, STATUS, RELOADING + MONOTONIC_USEC) and
 //! freeing of replaced parameter sets, and logs stale input once on entry and once on recovery
-//! (rate-limited, [`StaleLog`]). One daemon per service prefix ([`instance::InstanceLock`]).
+//! (rate-limited, [`StaleLog`]), and answers runtime control requests on `<prefix>/control`
+//! ([`frictiond::control`]: checked here, applied by the RT thread at its next tick boundary). One
+//! daemon per service prefix ([`instance::InstanceLock`]).
 //! `frictiond --config FILE --check` validates without IPC.
 //!
 //! Environment: `FRICTIOND_ALLOC_REPORT=FILE` counts RT-thread allocations after READY and writes
@@ -180,8 +182,32 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     shut_down(rt, stop_reason, alloc_report, latency_report)
 }
 
+/// Opens `<prefix>/control` on a node of the supervisor's own (the RT thread's ports are its own).
+fn open_control(
+    cfg: &config::Config,
+) -> anyhow::Result<(
+    frictionless_shm_types::Ipc,
+    frictionless_shm_types::control::ControlServer,
+)> {
+    let ipc_cfg = frictionless_shm_types::IpcConfig::new(
+        cfg.root_path.as_deref(),
+        &cfg.raw.backend.service_prefix,
+    );
+    let ipc = frictionless_shm_types::Ipc::open(&ipc_cfg, "frictiond-control")
+        .context("opening the control node")?;
+    let server = ipc
+        .control_server()
+        .context("opening the control service")?;
+    Ok((ipc, server))
+}
+
+/// Capacity of the runtime-change queue to the RT thread (a full queue refuses a request).
+const CONTROL_QUEUE: usize = 64;
+
 /// The running RT thread and the supervisor's ends of its channels and shared atomics.
 struct Rt {
+    /// Runtime changes to the RT thread, applied at its next tick boundary.
+    tx_control: std::sync::mpsc::SyncSender<frictiond::runtime::RuntimeSet>,
     thread: std::thread::JoinHandle<Option<rt::RtSummary>>,
     /// Replaced parameter sets coming back to be freed off the RT thread.
     rx_old: std::sync::mpsc::Receiver<Box<params::Params>>,
@@ -200,11 +226,14 @@ fn start_rt(
     let (tx_params, rx_params) = std::sync::mpsc::sync_channel(1);
     let (tx_old, rx_old) = std::sync::mpsc::sync_channel(4);
     let (tx_started, rx_started) = std::sync::mpsc::sync_channel(1);
+    let (tx_control, rx_control) =
+        std::sync::mpsc::sync_channel::<frictiond::runtime::RuntimeSet>(CONTROL_QUEUE);
     let setup = rt::RtSetup {
         config: cfg.clone(),
         params,
         rx_params,
         tx_old,
+        rx_control,
         shared: shared.clone(),
         started: tx_started,
         count_allocs,
@@ -229,6 +258,7 @@ fn start_rt(
         granted & frictionless_shm_types::STATUS_CPU_PINNED != 0,
     );
     Ok(Rt {
+        tx_control,
         thread: rt_thread,
         rx_old,
         tx_params,
@@ -248,6 +278,9 @@ fn supervise(
 ) -> anyhow::Result<i32> {
     let shared = &rt.shared;
     let ready_after = cfg.raw.loop_.ready_after_ticks;
+    let (_control_node, control) = open_control(&cfg)?;
+    let mut control_state =
+        frictiond::control::ControlState::new(&cfg, 0, frictionless_shm_types::monotonic_ns());
     let mut reloads = Reloads::new(cfg);
     let mut stale_log = StaleLog::default();
     let wd = sdnotify::watchdog_interval();
@@ -267,6 +300,26 @@ fn supervise(
             }
         }
         reloads.poll(&rt.tx_params);
+        if reloads.generation != control_state.generation() {
+            // A reload restores every runtime value to the new file's.
+            control_state.reset(
+                &reloads.running,
+                reloads.generation,
+                frictionless_shm_types::monotonic_ns(),
+            );
+        }
+        let served = control.serve(|req| {
+            control_state.answer(
+                &reloads.running,
+                reloads.running.raw.control.writes,
+                req,
+                &rt.tx_control,
+                frictionless_shm_types::monotonic_ns(),
+            )
+        });
+        if let Err(e) = served {
+            tracing::warn!("control: {e}");
+        }
         for line in stale_log.observe(
             shared.stale_episodes.load(Ordering::Relaxed),
             shared.input_stale.load(Ordering::Relaxed),
@@ -349,6 +402,7 @@ fn shut_down(
         rx_old,
         // Held (not dropped) until the end, as while supervising.
         tx_params: _tx_params,
+        tx_control: _tx_control,
         shared,
     } = rt;
     tracing::info!(
@@ -373,8 +427,11 @@ fn shut_down(
     if let Some(path) = alloc_report {
         let (counted, exempt) = alloc_count::totals();
         let ticks = shared.counted_ticks.load(Ordering::Relaxed);
+        let applied = shared.control_applied.load(Ordering::Relaxed);
+        let dropped = shared.control_dropped.load(Ordering::Relaxed);
         let text = format!(
-            "rt_allocations={counted}\nrt_exempt_allocations={exempt}\nrt_counted_ticks={ticks}\n"
+            "rt_allocations={counted}\nrt_exempt_allocations={exempt}\nrt_counted_ticks={ticks}\n\
+             rt_control_applied={applied}\nrt_control_dropped={dropped}\n"
         );
         frictionless::output_file::write(&path, text)
             .with_context(|| format!("writing {}", path.display()))?;

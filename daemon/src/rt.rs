@@ -12,7 +12,10 @@
 //! 1. [`Inputs::poll`]: newest [`JointStates`] and [`TorqueRequest`] (latest value), freshness by
 //!    `seq` and `stamp_ns` (lockstep: by `seq` and the timeout, since its time is not wall time);
 //! 2. parameter hand-over: `try_recv` a new `Box<Params>` (built off-thread), send the old one back
-//!    to be freed off-thread;
+//!    to be freed off-thread; then (2b, [`apply_runtime_sets`]) the runtime changes waiting in
+//!    their bounded queue, checked off-thread (`frictiond_config::runtime`), applied to their
+//!    joint — a change is visible from this tick on; one checked against a replaced parameter
+//!    generation is dropped;
 //! 3. [`compute`]: per joint, enable edge → reset (bumpless), model estimate, out-of-training-range
 //!    check of the newest sample (`FLAG_OUT_OF_RANGE`; under `ood = "static"` the estimate ramps to
 //!    the joint's static model, see [`crate::params::OodRt`]), control law
@@ -68,6 +71,7 @@ use crate::alloc_count;
 use crate::backend::{AnyBackend, Backend};
 use crate::config::{Config, OnStale, Prefetch, Trigger};
 use crate::params::{JointRt, Params};
+use crate::runtime::RuntimeSet;
 
 mod crew;
 mod rt_setup;
@@ -106,6 +110,10 @@ pub struct Shared {
     pub stale_episodes: AtomicU64,
     /// Ticks whose helper half (`rt_threads = 2`) was late and published as 0 A + `FLAG_STALE`.
     pub helper_late: AtomicU64,
+    /// Runtime changes applied at a tick boundary (step 2b).
+    pub control_applied: AtomicU64,
+    /// Runtime changes dropped because a reload replaced the parameters they were checked against.
+    pub control_dropped: AtomicU64,
 }
 
 /// Newest value of one input with its freshness.
@@ -307,7 +315,8 @@ pub fn compute_joints(
             let f = j.ood.blend(model_nm, ood, &sample);
             let o = j.law.step(&LawInput {
                 tau_des_nm: rq.tau_des_nm[k],
-                friction_nm: f,
+                // Compensation switched off at run time: the model runs on, the law gets 0.
+                friction_nm: if j.compensation { f } else { 0.0 },
                 sdot_rad_s: sample.sdot_rad_s,
                 tau_meas_nm: st.tau_meas_nm[k],
             });
@@ -597,6 +606,34 @@ impl ParamSlot {
     }
 }
 
+/// Most runtime changes applied in one tick (the rest wait for the next: the step stays bounded).
+pub const MAX_RUNTIME_SETS_PER_TICK: usize = 64;
+
+/// Step 2b: applies up to [`MAX_RUNTIME_SETS_PER_TICK`] waiting runtime changes to `p` (allocation-
+/// and lock-free: `try_recv` on a bounded queue of `Copy` values). A change for another generation
+/// than `p`'s (a reload came in between) or a joint index `p` does not have is dropped. Returns
+/// `(applied, dropped)`.
+#[inline]
+pub fn apply_runtime_sets(p: &mut Params, rx: &Receiver<RuntimeSet>) -> (u64, u64) {
+    let (mut applied, mut dropped) = (0, 0);
+    for _ in 0..MAX_RUNTIME_SETS_PER_TICK {
+        let Ok(set) = rx.try_recv() else { break };
+        let joint = if set.generation == p.generation {
+            p.joints.iter_mut().find(|j| j.index == set.joint_index)
+        } else {
+            None
+        };
+        match joint {
+            Some(j) => {
+                j.apply(set.change);
+                applied += 1;
+            }
+            None => dropped += 1,
+        }
+    }
+    (applied, dropped)
+}
+
 impl Freshness {
     /// Step 3a: whether this tick's state and request are stale. Clock trigger: by `seq` and by
     /// stamp age against the wake time. Lockstep: its time is not wall time, so there is no
@@ -716,6 +753,8 @@ impl Telemetry {
         s.tau_f_hat_nm = *tau_f;
         s.i_ref_a = cmd.i_ref_a;
         s.joint_flags = cmd.flags;
+        s.control_applied = shared.control_applied.load(Ordering::Relaxed);
+        s.control_dropped = shared.control_dropped.load(Ordering::Relaxed);
         let _ = backend.publish_status(s);
         shared
             .lateness_p99_ns
@@ -772,6 +811,7 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
         params,
         rx_params,
         tx_old,
+        rx_control,
         shared,
         started,
         count_allocs,
@@ -840,6 +880,16 @@ pub fn run(setup: RtSetup) -> Option<RtSummary> {
             let generation = slot.params.generation;
             shared.generation.store(generation, Ordering::Relaxed);
             tele.status.generation = generation;
+        }
+        // 2b. runtime changes, at the same boundary (never while the helper holds its half)
+        if helper_free {
+            let (applied, dropped) = apply_runtime_sets(&mut slot.params, &rx_control);
+            if applied > 0 {
+                shared.control_applied.fetch_add(applied, Ordering::Relaxed);
+            }
+            if dropped > 0 {
+                shared.control_dropped.fetch_add(dropped, Ordering::Relaxed);
+            }
         }
 
         // 3. compute

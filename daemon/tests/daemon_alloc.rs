@@ -146,6 +146,10 @@ sigma1 = 1.0
         ],
     );
     let mut plant = Plant::open(&env.ipc, "plant");
+    // Runtime sets arrive all along (kfc and the compensation switch, between every two steps):
+    // checked by the supervisor, applied by the RT thread at its tick boundaries.
+    let (_ctl_node, ctl) = crate::daemon_control::connect(&env, "knee");
+    let mut sets = 0u64;
     let mut js = JointStates::zeroed();
     js.n_joints = 4;
     let mut rq = TorqueRequest::zeroed();
@@ -172,6 +176,15 @@ sigma1 = 1.0
         // The ankle and the LuGre wrist are re-enabled every 500 steps (their reset on enable).
         rq.enable_mask = if k % 500 < 450 { 0b1111 } else { 0b0101 };
         plant.send(&js, &rq);
+        let (joint, key, value) = match k % 4 {
+            0 => ("knee", "kfc", "0.5"),
+            1 => ("knee", "kfc", "0.85"),
+            2 => ("ankle", "compensation", "off"),
+            _ => ("ankle", "compensation", "on"),
+        };
+        let r = crate::daemon_control::set(&ctl, joint, key, value);
+        assert_eq!(r.status, 0, "{}", r.message());
+        sets += 1;
         std::thread::sleep(Duration::from_millis(1));
         if let Some(s) = plant.status.latest().unwrap() {
             ood_seen = ood_seen.max(s.out_of_range_ticks[2]);
@@ -209,6 +222,13 @@ sigma1 = 1.0
         "RT thread: {allocs} allocations, {exempt} exempt (iceoryx2 loan) over {ticks} ticks"
     );
     assert!(ticks >= TICKS, "only {ticks} ticks counted");
+    assert!(sets >= 100, "only {sets} runtime sets");
+    let applied = get("rt_control_applied");
+    assert_eq!(
+        applied, sets,
+        "every runtime set was applied by the RT thread"
+    );
+    assert_eq!(get("rt_control_dropped"), 0);
     assert_eq!(allocs, 0, "RT-thread allocations after READY: {text}");
     let lat = std::fs::read_to_string(&latency).expect("latency report written at exit");
     if extra_loop.contains("rt_threads = 2") {

@@ -13,6 +13,7 @@ mod daemon_support;
 
 mod can_backend;
 mod daemon_alloc;
+mod daemon_control;
 mod daemon_e2e;
 mod daemon_features;
 mod daemon_lockstep;

@@ -751,3 +751,20 @@ class DaemonClient:
     def status(self, timeout_s: float = 0.0) -> Optional[DaemonStatus]:
         """The newest status, waiting up to ``timeout_s`` for one; ``None`` if none arrived."""
         return _status(self._c.status(timeout_s))
+
+    def control_get(self, joint: str, timeout_s: float = 2.0) -> dict:
+        """A joint's values in the running daemon (``<prefix>/control``): ``kfc``,
+        ``max_output_friction``, ``max_curr``, ``compensation`` (bool), ``ood``, ``model``, the
+        ``generation`` with ``generation_since_ns``, and ``set_since_ns`` per key (``None``: the
+        file's value). Raises ``ValueError`` for an unknown joint, :class:`IpcError` without a daemon."""
+        return self._c.control_get(joint, timeout_s)
+
+    def control_set(self, joint: str, key: str, value, timeout_s: float = 2.0) -> dict:
+        """Sets ``key`` (``kfc``, ``max_output_friction``, ``max_curr``, ``compensation``,
+        ``ood``) of ``joint`` in the running daemon, checked by its config's rules and applied from
+        its next tick until a reload. ``value`` as in the config (``True``/``False`` for
+        ``compensation`` become ``on``/``off``). Returns the joint's values; raises ``ValueError``
+        with the daemon's message (naming the rule) when refused."""
+        if isinstance(value, bool):
+            value = "on" if value else "off"
+        return self._c.control_set(joint, key, str(value), timeout_s)

@@ -14,6 +14,9 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
+use frictionless_shm_types::control::{
+    CONTROL_KEYS, CONTROL_OK, ControlClient, ControlRequest, ControlResponse, ood_mode_name,
+};
 use frictionless_shm_types::{
     DaemonStatus, Histogram, Inbox, Ipc, IpcConfig, JointStates, MAX_JOINTS, MotorCurrentCommand,
     Outbox, TorqueRequest,
@@ -144,8 +147,41 @@ pub struct DaemonClient {
     request: Option<Outbox<TorqueRequest>>,
     cmd: Inbox<MotorCurrentCommand>,
     status: Inbox<DaemonStatus>,
+    control: Option<ControlClient>,
     states_seq: u64,
     request_seq: u64,
+}
+
+/// A [`ControlResponse`] as a dict (`set_since_ns`: per key, `None` = the file's value).
+fn control_dict<'py>(
+    py: Python<'py>,
+    joint: &str,
+    r: &ControlResponse,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("joint", joint)?;
+    d.set_item("index", r.joint_index)?;
+    d.set_item("generation", r.generation)?;
+    d.set_item("generation_since_ns", r.generation_since_ns)?;
+    d.set_item("kfc", r.kfc)?;
+    d.set_item("max_output_friction", r.max_output_friction_nm)?;
+    d.set_item("max_curr", r.max_curr_a)?;
+    d.set_item("compensation", r.compensation != 0)?;
+    d.set_item("ood", ood_mode_name(r.ood_mode))?;
+    d.set_item(
+        "model",
+        u8::try_from(r.model_kind)
+            .ok()
+            .and_then(frictionless::model::ModelKind::from_code)
+            .map_or("?", |k| k.name()),
+    )?;
+    let since = PyDict::new(py);
+    for (k, t) in CONTROL_KEYS.iter().zip(r.set_since_ns) {
+        since.set_item(*k, (t != 0).then_some(t))?;
+    }
+    d.set_item("set_since_ns", since)?;
+    d.set_item("message", r.message())?;
+    Ok(d)
 }
 
 #[pymethods]
@@ -171,6 +207,7 @@ impl DaemonClient {
             request: None,
             cmd,
             status,
+            control: None,
             states_seq: 0,
             request_seq: 0,
         })
@@ -316,5 +353,53 @@ impl DaemonClient {
             .wait_latest(duration(timeout_s)?)
             .map_err(|e| IpcError::new_err(format!("{}: {e}", self.status.name())))?;
         s.map(|s| status_dict(py, &s)).transpose()
+    }
+
+    /// A joint's values in the running daemon (`<prefix>/control` get), waiting up to `timeout_s`
+    /// for the answer. Raises `ValueError` when the daemon refuses (unknown joint).
+    #[pyo3(signature = (joint, timeout_s = 2.0))]
+    fn control_get<'py>(
+        &mut self,
+        py: Python<'py>,
+        joint: &str,
+        timeout_s: f64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let req = ControlRequest::get(joint)
+            .ok_or_else(|| PyValueError::new_err("joint name longer than 64 bytes"))?;
+        let r = self.control_call(&req, timeout_s)?;
+        control_dict(py, joint, &r)
+    }
+
+    /// Sets `key` (`kfc`, `max_output_friction`, `max_curr`, `compensation` = `on`/`off`, `ood`)
+    /// of `joint` to `value` (written as in the config) in the running daemon; applied from its
+    /// next tick until a reload. Returns the joint's values; raises `ValueError` with the daemon's
+    /// message (which names the rule) when refused.
+    #[pyo3(signature = (joint, key, value, timeout_s = 2.0))]
+    fn control_set<'py>(
+        &mut self,
+        py: Python<'py>,
+        joint: &str,
+        key: &str,
+        value: &str,
+        timeout_s: f64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let req = ControlRequest::set(joint, key, value)
+            .ok_or_else(|| PyValueError::new_err("joint, key and value must each fit 64 bytes"))?;
+        let r = self.control_call(&req, timeout_s)?;
+        control_dict(py, joint, &r)
+    }
+}
+
+impl DaemonClient {
+    fn control_call(&mut self, req: &ControlRequest, timeout_s: f64) -> PyResult<ControlResponse> {
+        if self.control.is_none() {
+            self.control = Some(self.ipc.control_client().map_err(ipc_err)?);
+        }
+        let c = self.control.as_ref().expect("just opened");
+        let r = c.call(req, duration(timeout_s)?).map_err(ipc_err)?;
+        if r.status != CONTROL_OK {
+            return Err(PyValueError::new_err(r.message().to_owned()));
+        }
+        Ok(r)
     }
 }

@@ -166,6 +166,39 @@ def test_commands_follow_the_law_and_status_reports(daemon):
     assert code == 0, log.read()
 
 
+def test_control_set_changes_the_next_tick_and_refusals_name_the_rule(daemon):
+    proc, prefix, root, model, log = daemon
+    client = fl.DaemonClient(prefix, root, node_name="pytest-ctl")
+    assert client.wait_for_daemon(20.0), "frictiond did not open its ports"
+    deadline = time.monotonic() + 20.0
+    while True:
+        try:
+            got = client.control_get("ankle")
+            break
+        except fl.IpcError:
+            assert time.monotonic() < deadline, "no control answer"
+    assert got["kfc"] == KFC1 and got["compensation"] and got["set_since_ns"]["kfc"] is None
+    set_ = client.control_set("ankle", "kfc", 0.4)
+    assert set_["kfc"] == 0.4 and set_["set_since_ns"]["kfc"] > 0
+    client.control_set("ankle", "compensation", False)
+    assert not client.control_get("ankle")["compensation"]
+    with pytest.raises(ValueError, match=r"must be in \[0, 2\]"):
+        client.control_set("ankle", "kfc", 3)
+    with pytest.raises(ValueError, match="no such joint"):
+        client.control_get("hip")
+    # The next tick: compensation off, so i = τ_des/(kt·r) on the ankle.
+    for k in range(3):
+        js = fl.JointStates(n_joints=2, sdot_rad_s=np.array([0.0, 0.3]))
+        seq = client.publish_states(js)
+        client.publish_request(fl.TorqueRequest(np.array([0.0, 0.5]), enable_mask=0b10,
+                                                state_seq=seq, seq=seq))
+        c = client.command_for(seq, timeout_s=20.0)
+        assert c is not None
+        assert abs(c.i_ref_a[1] - current_ref(0.5, 0.0, 0.4, KT1, R1, MAX_I1)) <= 1e-12, k
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=20) == 0
+
+
 def test_client_errors(tmp_path):
     with pytest.raises(ValueError, match="n_joints"):
         c = fl.DaemonClient(f"flpy_err_{os.getpid()}", tmp_path)

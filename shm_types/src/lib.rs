@@ -54,6 +54,7 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe as ps_factory};
 
+pub mod control;
 pub mod sim;
 
 /// Compile-time joint capacity of every payload.
@@ -351,7 +352,7 @@ impl Default for Histogram {
 /// Daemon health snapshot (daemon → monitors, ≈ 10–100 Hz).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
-#[type_name("frictionless::DaemonStatus_v4")]
+#[type_name("frictionless::DaemonStatus_v5")]
 pub struct DaemonStatus {
     /// Sequence number, +1 per message.
     pub seq: u64,
@@ -393,6 +394,11 @@ pub struct DaemonStatus {
     /// Ticks since start in which the joint's model inputs were out of its training range
     /// ([`FLAG_OUT_OF_RANGE`]), per joint.
     pub out_of_range_ticks: [u64; MAX_JOINTS],
+    /// Runtime changes (`<prefix>/control` sets) applied by the RT thread since start.
+    pub control_applied: u64,
+    /// Runtime changes dropped since start because a reload replaced the parameters they were
+    /// checked against.
+    pub control_dropped: u64,
 }
 
 /// Which backend filled a [`BusCounters`] (its `kind` field, [`BusKind::code`]).
@@ -537,6 +543,8 @@ impl DaemonStatus {
             model_kind: [0; MAX_JOINTS],
             bus: BusCounters::zeroed(),
             out_of_range_ticks: [0; MAX_JOINTS],
+            control_applied: 0,
+            control_dropped: 0,
         }
     }
 }
@@ -1037,12 +1045,15 @@ mod tests {
     }
 
     #[test]
-    fn daemon_status_layout_ends_with_the_out_of_range_counters() {
+    fn daemon_status_layout_ends_with_the_out_of_range_and_control_counters() {
         use std::mem::{align_of, offset_of, size_of};
         let at = offset_of!(DaemonStatus, out_of_range_ticks);
         assert_eq!(at, offset_of!(DaemonStatus, bus) + size_of::<BusCounters>());
         assert_eq!(at % align_of::<u64>(), 0);
-        assert_eq!(size_of::<DaemonStatus>(), at + 8 * MAX_JOINTS);
+        let control = offset_of!(DaemonStatus, control_applied);
+        assert_eq!(control, at + 8 * MAX_JOINTS);
+        assert_eq!(offset_of!(DaemonStatus, control_dropped), control + 8);
+        assert_eq!(size_of::<DaemonStatus>(), control + 16);
     }
 
     fn unique_config(tag: &str) -> IpcConfig {

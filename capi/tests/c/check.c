@@ -284,6 +284,35 @@ int main(int argc, char **argv) {
     bad.bwfilter_cutoff_hz = 600.0;
     EXPECT(fl_law_create(&bad, &law) == FL_STATUS_INVALID_ARGUMENT);
 
+    /* The speed-dependent current limit: 0.5 * 3 A up to 100 rad/s at the motor, 0 A at 300;
+     * half-way down the slope (200 rad/s) a large request gets 0.75 A. */
+    fl_law_params sl = lp;
+    sl.bwfilter_enabled = false;
+    sl.speed_limit_enabled = true;
+    sl.rated_motor_speed_rad_s = 100.0;
+    sl.no_load_motor_speed_rad_s = 300.0;
+    sl.current_safety_factor = 0.5;
+    CHECK(fl_law_create(&sl, &law));
+    fl_law_input fast = {.tau_des_nm = 100.0 * info.gear_ratio,
+                         .friction_nm = 0.0,
+                         .sdot_rad_s = 200.0 / fabs(info.gear_ratio),
+                         .tau_meas_nm = 0.0};
+    CHECK(fl_law_step(law, &fast, &o));
+    EXPECT(fabs(o.i_a - 0.75) < 1e-9 && (o.flags & FL_LAW_CURRENT_SATURATED));
+    fast.sdot_rad_s = 0.0;
+    CHECK(fl_law_step(law, &fast, &o));
+    EXPECT(fabs(o.i_a - 1.5) < 1e-12);
+    fl_law_free(law);
+    law = NULL;
+    bad = sl;
+    bad.current_safety_factor = 1.5;
+    EXPECT(fl_law_create(&bad, &law) == FL_STATUS_INVALID_ARGUMENT && law == NULL);
+    EXPECT(strstr(fl_last_error(), "current_safety_factor") != NULL);
+    bad = sl;
+    bad.no_load_motor_speed_rad_s = 50.0;
+    EXPECT(fl_law_create(&bad, &law) == FL_STATUS_INVALID_ARGUMENT);
+    EXPECT(strstr(fl_last_error(), "no_load_motor_speed_rad_s") != NULL);
+
     /* Bad files. */
     for (int i = 4; i < argc; i++) {
         char *colon = strchr(argv[i], ':');

@@ -102,6 +102,7 @@ pub fn params_with(n: usize, rt_threads: u8, model: impl Fn(usize) -> JointModel
         max_output_friction_nm: 8.0,
         joint_velocity_threshold_rad_s: 0.05,
         dt_s: 1e-3,
+        speed_limit: None,
     };
     let joints = (0..n)
         .map(|k| JointRt {
@@ -112,6 +113,7 @@ pub fn params_with(n: usize, rt_threads: u8, model: impl Fn(usize) -> JointModel
                 Some(CausalButterworth::design(2, 30.0, 1000.0).unwrap()),
             ),
             ood: OodRt::off(),
+            compensation: true,
         })
         .collect();
     let mut p = Box::new(Params {

@@ -67,6 +67,7 @@
 mod buses;
 mod models;
 pub mod params;
+pub mod runtime;
 mod schema;
 #[cfg(test)]
 mod tests;

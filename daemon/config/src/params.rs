@@ -50,6 +50,14 @@ pub enum ParamsError {
         /// The parameter (or period) at fault.
         source: frictionless::lugre::LugreParamError,
     },
+    /// The speed-dependent current limit breaks a rule (a validated config never does).
+    #[error("joint {joint}: speed_current_limit: {source}")]
+    SpeedLimit {
+        /// Joint name.
+        joint: String,
+        /// The rule broken.
+        source: frictionless::law::LimitRule,
+    },
     /// The τ̂_F low-pass cannot be designed.
     #[error("joint {joint}: lpf: {source}")]
     Lpf {
@@ -79,6 +87,9 @@ pub struct JointRt {
     pub law: JointLaw,
     /// Out-of-training-range check and blend.
     pub ood: OodRt,
+    /// Friction compensation switch (runtime `compensation = on|off`; on when built): off feeds
+    /// the law 0 friction while the model keeps running.
+    pub compensation: bool,
 }
 
 /// One joint's out-of-training-range handling on the RT thread: the check's settings, the static
@@ -217,6 +228,25 @@ impl Params {
     }
 }
 
+/// The law's speed-dependent limit of a joint (none when absent).
+fn speed_limit(
+    j: &crate::JointConfig,
+) -> Result<Option<frictionless::law::SpeedCurrentLimit>, ParamsError> {
+    let Some(l) = j.speed_current_limit else {
+        return Ok(None);
+    };
+    frictionless::law::SpeedCurrentLimit::new(
+        l.rated_motor_speed_rad_s,
+        l.no_load_motor_speed_rad_s,
+        l.safety_factor,
+    )
+    .map(Some)
+    .map_err(|source| ParamsError::SpeedLimit {
+        joint: j.name.clone(),
+        source,
+    })
+}
+
 /// Builds the runtime parameters (loads model files, designs filters). Off the RT thread.
 pub fn build(cfg: &Config, generation: u64) -> Result<Box<Params>, ParamsError> {
     let dt_s = cfg.raw.loop_.period_us as f64 * 1e-6;
@@ -292,6 +322,7 @@ pub fn build(cfg: &Config, generation: u64) -> Result<Box<Params>, ParamsError> 
             max_output_friction_nm: j.max_output_friction,
             joint_velocity_threshold_rad_s: j.joint_velocity_threshold_rad_s,
             dt_s,
+            speed_limit: speed_limit(j)?,
         };
         configured_mask |= 1u64 << j.index;
         let ramp_s = j.ood_ramp_ms * 1e-3;
@@ -307,6 +338,7 @@ pub fn build(cfg: &Config, generation: u64) -> Result<Box<Params>, ParamsError> 
             model,
             law: JointLaw::new(gains, lpf),
             ood,
+            compensation: true,
         });
     }
     let mut p = Box::new(Params {

@@ -228,6 +228,20 @@ pub struct LpfConfig {
     pub cutoff_hz: f64,
 }
 
+/// `[joint.speed_current_limit]`: the drive's torque–speed curve as a current limit (see
+/// `frictionless::law::SpeedCurrentLimit`). Speeds are of the **motor** shaft, |ω_m| = |r·ṡ|.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SpeedCurrentLimitConfig {
+    /// Rated motor speed [rad/s]: up to it the limit is `safety_factor · max_curr`.
+    pub rated_motor_speed_rad_s: f64,
+    /// No-load motor speed [rad/s] (> rated): the limit falls linearly to 0 A here.
+    pub no_load_motor_speed_rad_s: f64,
+    /// Factor on `max_curr` in (0, 1]; default 1.
+    #[serde(default = "one")]
+    pub safety_factor: f64,
+}
+
 /// Serde of a joint's `friction_model` (use with `#[serde(with = "friction_model_name")]`): the
 /// core's [`ModelKind`], written as its [`ModelKind::config_name`] (the ergoCub names:
 /// `coulomb_viscous`, `coulomb_viscous_stribeck`, …) and read from that or its short
@@ -299,6 +313,9 @@ pub struct JointConfig {
     pub kt: f64,
     /// Current clamp ±max_curr [A], > 0.
     pub max_curr: f64,
+    /// Speed-dependent current limit (none = the constant clamp ±max_curr).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub speed_current_limit: Option<SpeedCurrentLimitConfig>,
     /// Friction compensation gain kfc (0 disables compensation), 0–2.
     #[serde(default = "one")]
     pub kfc: f64,
@@ -406,6 +423,25 @@ pub struct RawConfig {
     /// `[[bus]]`: CAN buses (required, ≥ 1, with `[backend] kind = "can"`; forbidden otherwise).
     #[serde(default)]
     pub bus: Vec<BusConfig>,
+    /// `[control]`: runtime control of the running daemon.
+    #[serde(default)]
+    pub control: ControlConfig,
+}
+
+/// `[control]`: the `<prefix>/control` request–response service (`frictl ctl`).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ControlConfig {
+    /// Accept runtime sets (`kfc`, `max_output_friction`, `max_curr`, `compensation`, `ood`);
+    /// false: gets only, every set refused. Default true.
+    #[serde(default = "default_true")]
+    pub writes: bool,
+}
+
+impl Default for ControlConfig {
+    fn default() -> Self {
+        Self { writes: true }
+    }
 }
 
 impl RawConfig {
@@ -423,6 +459,7 @@ impl RawConfig {
             safety: SafetyConfig::default(),
             joint,
             bus: Vec::new(),
+            control: ControlConfig::default(),
         }
     }
 }

@@ -1047,3 +1047,120 @@ fn cia402_config_errors_name_key_and_value() {
         "5",
     );
 }
+
+/// `[joint.speed_current_limit]`: parsed, defaulted, built into the law, and each rule refused
+/// with its key and value.
+#[test]
+fn speed_current_limit_is_parsed_built_and_checked() {
+    let with = |body: &str| {
+        GOOD.replace(
+            "lpf = { order = 2, cutoff_hz = 10.0 }",
+            &format!("lpf = {{ order = 2, cutoff_hz = 10.0 }}\nspeed_current_limit = {{ {body} }}"),
+        )
+    };
+    let c = p(&with(
+        "rated_motor_speed_rad_s = 300.0, no_load_motor_speed_rad_s = 600.0",
+    ))
+    .unwrap();
+    let l = c.raw.joint[0].speed_current_limit.unwrap();
+    assert_eq!(l.safety_factor, 1.0, "default");
+    assert!(c.raw.joint[1].speed_current_limit.is_none());
+    let params = crate::params::build(&c, 0).unwrap();
+    let g = params.joints[0].law.gains;
+    // r = −100: 4.5 rad/s at the joint is 450 rad/s at the motor, half-way down the slope.
+    assert!((g.current_limit_a(4.5) - 2.5).abs() < 1e-12);
+    assert_eq!(g.current_limit_a(1.0), 5.0);
+    assert_eq!(params.joints[1].law.gains.current_limit_a(100.0), 3.0);
+    // Written back (frictl writes configs through these types) and read again, unchanged.
+    let text = toml::to_string(&c.raw).unwrap();
+    assert!(text.contains("speed_current_limit"), "{text}");
+    for (body, key, val) in [
+        (
+            "rated_motor_speed_rad_s = 0.0, no_load_motor_speed_rad_s = 600.0",
+            "joint[0].speed_current_limit.rated_motor_speed_rad_s",
+            "0",
+        ),
+        (
+            "rated_motor_speed_rad_s = 300.0, no_load_motor_speed_rad_s = 200.0",
+            "joint[0].speed_current_limit.no_load_motor_speed_rad_s",
+            "200",
+        ),
+        (
+            "rated_motor_speed_rad_s = 300.0, no_load_motor_speed_rad_s = 600.0, safety_factor = 1.5",
+            "joint[0].speed_current_limit.safety_factor",
+            "1.5",
+        ),
+        (
+            "rated_motor_speed_rad_s = 300.0, no_load_motor_speed_rad_s = 600.0, safety_factor = 0.0",
+            "joint[0].speed_current_limit.safety_factor",
+            "0",
+        ),
+    ] {
+        assert_refused(&with(body), key, val);
+    }
+    let e = p(&with("rated_motor_speed_rad_s = 300.0"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("no_load_motor_speed_rad_s"), "{e}");
+}
+
+/// A runtime request is checked by the file's rules and names joint, key, value and rule.
+#[test]
+fn runtime_requests_follow_the_file_rules() {
+    use crate::runtime::{Change, check};
+    let c = p(GOOD).unwrap();
+    let ok = |joint: &str, key: &str, value: &str| check(&c, 7, joint, key, value).unwrap();
+    let set = ok("ankle", "kfc", "0.5");
+    assert_eq!((set.generation, set.joint_index), (7, 3));
+    assert_eq!(set.change, Change::Kfc(0.5));
+    assert_eq!(
+        ok("knee", "max_output_friction", "inf").change,
+        Change::MaxOutputFriction(f64::INFINITY)
+    );
+    assert_eq!(ok("knee", "max_curr", "2.5").change, Change::MaxCurr(2.5));
+    assert_eq!(
+        ok("knee", "compensation", "off").change,
+        Change::Compensation(false)
+    );
+    assert_eq!(
+        ok("knee", "compensation", "on").change,
+        Change::Compensation(true)
+    );
+    assert_eq!(ok("knee", "ood", "off").change, Change::Ood(OodMode::Off));
+    for (joint, key, value, rule) in [
+        ("knee", "kfc", "3", "must be in [0, 2]"),
+        ("knee", "kfc", "-0.1", "must be in [0, 2]"),
+        ("knee", "kfc", "x", "must be a number"),
+        ("knee", "max_output_friction", "0", "must be > 0"),
+        ("knee", "max_curr", "0", "must be finite and > 0"),
+        (
+            "knee",
+            "max_curr",
+            "6",
+            "must be <= the file's max_curr (5)",
+        ),
+        ("knee", "compensation", "maybe", "must be on or off"),
+        (
+            "knee",
+            "ood",
+            "static",
+            "only a PINN joint whose file sets ood",
+        ),
+        ("knee", "kp", "1", "not a runtime key"),
+        ("hip", "kfc", "1", "no such joint (configured: knee, ankle)"),
+    ] {
+        let e = check(&c, 0, joint, key, value).unwrap_err();
+        assert!(e.rule.starts_with(rule), "{key} = {value}: {e}");
+        let text = e.to_string();
+        assert!(
+            text.contains(joint) && text.contains(key) && text.contains(value),
+            "{text}"
+        );
+    }
+    // The file's own refusals use the same words.
+    assert_refused(
+        &GOOD.replace("kfc = 0.85", "kfc = 3.0"),
+        "joint[0].kfc",
+        "must be in [0, 2]",
+    );
+}

@@ -9,6 +9,7 @@ use frictionless_shm_types::MAX_JOINTS;
 
 use crate::ModelKind;
 use crate::models::model_spec;
+use crate::runtime;
 use crate::schema::{JointConfig, LoopConfig, ModelSpec, OodMode, Prefetch, RawConfig};
 
 /// Why a configuration is not acceptable. Every variant names the file; most name the key and value.
@@ -312,6 +313,47 @@ pub(crate) fn check_joints(
     Ok((models, pinn_features))
 }
 
+/// A rule's verdict on `key = value` as a [`ConfigError`] (the rules are in [`crate::runtime`],
+/// shared with the runtime requests).
+fn rule(
+    c: &Checker,
+    key: String,
+    value: f64,
+    verdict: Result<(), &'static str>,
+) -> Result<(), ConfigError> {
+    verdict.map_err(|req| c.fail(key, value, req))
+}
+
+/// `joint[k].speed_current_limit` as the law's limit (none when absent); a broken rule names its
+/// key, value and the rule (`frictionless::law::SpeedCurrentLimit::new`'s).
+pub(crate) fn speed_current_limit(
+    c: &Checker,
+    k: usize,
+    j: &JointConfig,
+) -> Result<Option<frictionless::law::SpeedCurrentLimit>, ConfigError> {
+    let Some(l) = j.speed_current_limit else {
+        return Ok(None);
+    };
+    frictionless::law::SpeedCurrentLimit::new(
+        l.rated_motor_speed_rad_s,
+        l.no_load_motor_speed_rad_s,
+        l.safety_factor,
+    )
+    .map(Some)
+    .map_err(|rule| {
+        let value = match rule.field {
+            "rated_motor_speed_rad_s" => l.rated_motor_speed_rad_s,
+            "no_load_motor_speed_rad_s" => l.no_load_motor_speed_rad_s,
+            _ => l.safety_factor,
+        };
+        c.fail(
+            format!("joint[{k}].speed_current_limit.{}", rule.field),
+            value,
+            rule.rule,
+        )
+    })
+}
+
 /// The keys of `joint[k]` that do not depend on its model (name, index, gains, limits, filter,
 /// out-of-range settings); `fs_hz` is the loop rate.
 pub(crate) fn check_joint(
@@ -342,19 +384,22 @@ pub(crate) fn check_joint(
         ));
     }
     c.finite_pos(key("kt"), j.kt)?;
-    c.finite_pos(key("max_curr"), j.max_curr)?;
-    if !(j.kfc.is_finite() && (0.0..=2.0).contains(&j.kfc)) {
-        return Err(c.fail(key("kfc"), j.kfc, "must be in [0, 2]"));
-    }
+    rule(
+        c,
+        key("max_curr"),
+        j.max_curr,
+        runtime::max_curr_rule(j.max_curr),
+    )?;
+    speed_current_limit(c, k, j)?;
+    rule(c, key("kfc"), j.kfc, runtime::kfc_rule(j.kfc))?;
     c.nonneg(key("kp"), j.kp)?;
     c.nonneg(key("ki"), j.ki)?;
-    if j.max_output_friction.is_nan() || j.max_output_friction <= 0.0 {
-        return Err(c.fail(
-            key("max_output_friction"),
-            j.max_output_friction,
-            "must be > 0",
-        ));
-    }
+    rule(
+        c,
+        key("max_output_friction"),
+        j.max_output_friction,
+        runtime::max_output_friction_rule(j.max_output_friction),
+    )?;
     c.nonneg(
         key("joint_velocity_threshold_rad_s"),
         j.joint_velocity_threshold_rad_s,

@@ -28,6 +28,8 @@ pub struct RtSetup {
     pub rx_params: Receiver<Box<Params>>,
     /// Old parameters back to the supervisor to be freed.
     pub tx_old: SyncSender<Box<Params>>,
+    /// Runtime changes, checked off-thread, applied at a tick boundary (bounded queue).
+    pub rx_control: Receiver<crate::runtime::RuntimeSet>,
     /// Shared atomics.
     pub shared: Arc<Shared>,
     /// Start-up result: Ok(granted STATUS_* flags) or why set-up failed.

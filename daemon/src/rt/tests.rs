@@ -206,6 +206,7 @@ fn mixed_params(n: usize, rt_threads: u8) -> Box<Params> {
                 max_output_friction_nm: 3.0,
                 joint_velocity_threshold_rad_s: 0.05,
                 dt_s: 1e-3,
+                speed_limit: None,
             };
             JointRt {
                 index: 3 * k,
@@ -215,6 +216,7 @@ fn mixed_params(n: usize, rt_threads: u8) -> Box<Params> {
                     Some(CausalButterworth::design(2, 30.0, 1000.0).unwrap()),
                 ),
                 ood: OodRt::off(),
+                compensation: true,
             }
         })
         .collect();
@@ -593,4 +595,70 @@ fn freshness_by_seq_age_and_stamp_age() {
         "no new sample for 6 ticks"
     );
     assert!(l.stale(11, 20_000, 9_000, 5, 1000), "stamp 11 periods old");
+}
+
+/// Step 2b: a runtime change is applied at the tick boundary and the tick computes exactly the
+/// law with the new value; a change checked against another generation is dropped.
+#[test]
+fn runtime_sets_apply_at_the_tick_boundary_and_stale_generations_drop() {
+    use crate::runtime::{Change, RuntimeSet};
+    use frictionless::law::{JointLaw, LawInput};
+    let mut p = params("zero");
+    let mut twin = p.joints[0].law; // the law with the file's values, stepped alongside
+    let (tx, rx) = std::sync::mpsc::sync_channel(4);
+    let mut prev = 0;
+    let inp = inputs(2.0, 1.0);
+    let law_out = |law: &mut JointLaw, f: f64| {
+        law.step(&LawInput {
+            tau_des_nm: 2.0,
+            friction_nm: f,
+            sdot_rad_s: 1.0,
+            tau_meas_nm: 0.0,
+        })
+        .i_a
+    };
+    // The joint's CV model at ṡ = 1 (stateless: the same value every tick).
+    let f = match &p.joints[0].model {
+        JointModel::Cv(cv) => frictionless::friction::StaticFriction::torque_nm(cv, 1.0),
+        other => panic!("the test joint is CV, not {other:?}"),
+    };
+    let c = run(&mut p, &inp, FRESH, &mut prev);
+    twin.reset();
+    assert_eq!(c.i_ref_a[2], law_out(&mut twin, f));
+    for (change, on) in [
+        (Change::Kfc(0.4), true),
+        (Change::MaxCurr(0.15), true),
+        (Change::Compensation(false), false),
+        (Change::Compensation(true), true),
+    ] {
+        tx.send(RuntimeSet {
+            generation: 0,
+            joint_index: 2,
+            change,
+        })
+        .unwrap();
+        assert_eq!(apply_runtime_sets(&mut p, &rx), (1, 0));
+        match change {
+            Change::Kfc(v) => twin.gains.kfc = v,
+            Change::MaxCurr(v) => twin.gains.max_curr_a = v,
+            _ => {}
+        }
+        let c = run(&mut p, &inp, FRESH, &mut prev);
+        let want = law_out(&mut twin, if on { f } else { 0.0 });
+        assert_eq!(c.i_ref_a[2], want, "{change:?}");
+    }
+    assert_eq!(p.joints[0].law.gains.kfc, 0.4);
+    // Checked against generation 1 (a reload the RT thread has not taken) or an unknown joint.
+    for (generation, joint_index) in [(1, 2), (0, 5)] {
+        tx.send(RuntimeSet {
+            generation,
+            joint_index,
+            change: Change::Kfc(2.0),
+        })
+        .unwrap();
+    }
+    assert_eq!(apply_runtime_sets(&mut p, &rx), (0, 2));
+    assert_eq!(p.joints[0].law.gains.kfc, 0.4);
+    // Empty queue: nothing to do.
+    assert_eq!(apply_runtime_sets(&mut p, &rx), (0, 0));
 }

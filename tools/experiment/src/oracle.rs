@@ -55,6 +55,7 @@ impl OracleCompensation {
             max_output_friction_nm: settings.max_output_friction_nm,
             joint_velocity_threshold_rad_s: settings.joint_velocity_threshold_rad_s,
             dt_s: 1.0 / FS_HZ,
+            speed_limit: None,
         };
         Ok(Self {
             settings,

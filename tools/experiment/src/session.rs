@@ -385,6 +385,7 @@ pub fn daemon_joint(j: &DaemonJoint, raw_friction: bool) -> Result<JointConfig, 
         gear_ratio: j.gear_ratio,
         kt: j.kt_nm_per_a,
         max_curr: shipped.max_curr,
+        speed_current_limit: None,
         kfc: 1.0,
         kp: 0.0,
         ki: 0.0,
@@ -482,6 +483,7 @@ pub fn daemon_config(
             .map(|j| daemon_joint(j, raw_friction))
             .collect::<Result<_, _>>()?,
         bus: Vec::new(),
+        control: Default::default(),
     })
 }
 

@@ -60,6 +60,8 @@ enum Command {
     Experiment(cmd::experiment::Args),
     /// Live view of a running frictiond.
     Monitor(cmd::monitor::Args),
+    /// Get or set a running frictiond's joint values (kfc, limits, compensation switch, ood).
+    Ctl(cmd::ctl::Args),
     /// Record states, requests, commands and status from shared memory to CSV.
     Record(cmd::record::Args),
     /// CAN bus tools: record and replay candump logs.
@@ -102,6 +104,7 @@ fn main() -> std::process::ExitCode {
         Command::Eval(a) => cmd::eval::run(a),
         Command::Experiment(a) => cmd::experiment::run(a),
         Command::Monitor(a) => cmd::monitor::run(a),
+        Command::Ctl(a) => cmd::ctl::run(a),
         Command::Record(a) => cmd::record::run(a),
         Command::Can(a) => cmd::can::run(a),
         Command::Demo(a) => cmd::demo::run(a),

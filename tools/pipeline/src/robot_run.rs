@@ -708,6 +708,7 @@ fn daemon_config(robot: &RobotFile, plans: &[JointPlan], out: &Path) -> anyhow::
             gear_ratio: j.gear_ratio,
             kt: j.kt_nm_per_a,
             max_curr: j.max_curr_a,
+            speed_current_limit: None,
             kfc: j.kfc,
             kp: 0.0,
             ki: 0.0,
