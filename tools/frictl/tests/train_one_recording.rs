@@ -267,3 +267,62 @@ fn a_recording_too_short_for_blocks_is_refused_naming_the_options() {
     ]);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `--motor-encoder incremental` latches Δθ at every chunk start (the report lists no offset to
+/// configure) and is refused together with `--delta-theta-offset`; `absolute` keeps the recording's
+/// offset.
+#[test]
+fn an_incremental_motor_encoder_trains_latched_per_chunk() {
+    let dir = scratch("frictl-train-incremental");
+    let ds = one_recording(&dir, "ds", 8.0, 0.0);
+    let cv = dir.join("cv.json");
+    ok(&["fit", "cv", s(&ds), "--json", s(&cv)]);
+    let model = dir.join("m.fwt");
+    let base = [
+        "train",
+        "--dataset",
+        s(&ds),
+        "--scv",
+        s(&cv),
+        "--out",
+        s(&model),
+        "--hidden",
+        "8",
+        "--history",
+        "4",
+        "--epochs",
+        "1",
+        "--quiet",
+    ];
+    let report = || -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.join("m.train.json")).unwrap()).unwrap()
+    };
+    ok(&[&base[..], &["--motor-encoder", "incremental"]].concat());
+    let r = report();
+    assert_eq!(r["delta_theta_offset"], "chunk");
+    assert!(r["datasets"][0]["delta_theta_offset_motor_rad"].is_null());
+    ok(&[&base[..], &["--motor-encoder", "absolute"]].concat());
+    let r = report();
+    assert_eq!(r["delta_theta_offset"], "run");
+    assert!(r["datasets"][0]["delta_theta_offset_motor_rad"].is_number());
+    let e = err_text(
+        frictl(
+            &[
+                &base[..],
+                &[
+                    "--motor-encoder",
+                    "incremental",
+                    "--delta-theta-offset",
+                    "run",
+                ],
+            ]
+            .concat(),
+        ),
+        "incremental with a latch",
+    );
+    assert!(
+        e.contains("--motor-encoder") && e.contains("--delta-theta-offset"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

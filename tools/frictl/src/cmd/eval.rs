@@ -88,6 +88,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         None
     };
+    // A split by time blocks names the blocks' keys: the datasets are read through the same blocks.
+    let blocks = match (&test_chunks, &args.train_report) {
+        (Some(_), Some(r)) => report_blocks(r, &all_paths)?,
+        _ => vec![Vec::new(); all_paths.len()],
+    };
 
     let mut loaded = Vec::new();
     for p in &all_paths {
@@ -104,7 +109,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 eprintln!("frictl eval: warning: {w}");
             }
         }
-        let runs = dataset_runs(p, side.as_ref(), &ds);
+        let mut runs = dataset_runs(p, side.as_ref(), &ds);
+        let ds = match blocks.get(loaded.len()) {
+            Some(b) if !b.is_empty() => {
+                for run in &mut runs {
+                    let cut: Vec<u32> = b
+                        .iter()
+                        .filter(|k| run.chunks.contains(&k.chunk))
+                        .map(|k| k.key.chunk)
+                        .collect();
+                    run.chunks.extend(cut);
+                }
+                frictionless_train::data::with_blocks(&ds, b[0].key.dataset, b)
+            }
+            _ => ds,
+        };
         loaded.push((p.clone(), ds, joint, runs));
     }
 
@@ -452,4 +471,45 @@ fn drift_monitor(
         out.push(drift::model_drift(&m.name, new, reference, coverage, o));
     }
     Ok(drift::report(out, o))
+}
+
+/// The time blocks of the training report's split ([`frictionless_train::data::Block`]) per evaluated
+/// dataset (matched like `eval::test_chunks_from_report`: by SHA-256, else by path); empty lists when
+/// the split is by chunks.
+fn report_blocks(
+    report: &std::path::Path,
+    datasets: &[PathBuf],
+) -> anyhow::Result<Vec<Vec<frictionless_train::data::Block>>> {
+    let text = frictionless::regular_file::read_text(report)
+        .with_context(|| format!("--train-report {}", report.display()))?;
+    let r: frictionless_train::pipeline::TrainReport = serde_json::from_str(&text)
+        .with_context(|| format!("--train-report {}: not a train report", report.display()))?;
+    let mut out = vec![Vec::new(); datasets.len()];
+    for (i, d) in datasets.iter().enumerate() {
+        let sha = frictionless_dataset::file_sha256_hex(d)
+            .with_context(|| format!("cannot read {}", d.display()))?;
+        let path = d.display().to_string();
+        let Some(di) = r
+            .datasets
+            .iter()
+            .position(|rd| rd.sha256 == sha)
+            .or_else(|| r.datasets.iter().position(|rd| rd.path == path))
+        else {
+            continue;
+        };
+        out[i] = r
+            .split
+            .blocks
+            .iter()
+            .filter(|b| b.key.dataset as usize == di)
+            .map(|b| frictionless_train::data::Block {
+                key: frictionless_train::data::ChunkKey {
+                    dataset: i as u32,
+                    chunk: b.key.chunk,
+                },
+                ..*b
+            })
+            .collect();
+    }
+    Ok(out)
 }
