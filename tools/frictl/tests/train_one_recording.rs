@@ -326,3 +326,174 @@ fn an_incremental_motor_encoder_trains_latched_per_chunk() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `frictl config` writes one `[[joint]]` for a PINN (its encoder semantics, the offset its training
+/// latched for an absolute encoder, its CV fit as the static fallback) or for a fitted model, in a
+/// config frictiond's checker accepts; a model trained with a fixed offset is refused for an
+/// incremental encoder, a Δθ model without its report for an absolute one, and a limit frictiond
+/// refuses is named as frictiond names it.
+#[test]
+fn frictl_config_writes_checked_joints_for_pinns_and_fits() {
+    let dir = scratch("frictl-config");
+    let ds = one_recording(&dir, "ds", 8.0, 0.0);
+    let (cv, scv) = (dir.join("cv.json"), dir.join("scv.json"));
+    ok(&["fit", "cv", s(&ds), "--json", s(&cv)]);
+    ok(&["fit", "scv", s(&ds), "--json", s(&scv)]);
+    let train = |model: &Path, extra: &[&str]| {
+        let base = [
+            "train",
+            "--dataset",
+            s(&ds),
+            "--scv",
+            s(&cv),
+            "--out",
+            s(model),
+            "--hidden",
+            "8",
+            "--history",
+            "4",
+            "--epochs",
+            "1",
+            "--quiet",
+        ];
+        ok(&[&base[..], extra].concat());
+    };
+    let (abs, inc) = (dir.join("abs.fwt"), dir.join("inc.fwt"));
+    train(&abs, &[]);
+    train(&inc, &["--motor-encoder", "incremental"]);
+    let (abs_r, inc_r) = (dir.join("abs.train.json"), dir.join("inc.train.json"));
+    let out = dir.join("frictiond.toml");
+    ok(&[
+        "config",
+        "--pinn",
+        s(&abs),
+        "--train-report",
+        s(&abs_r),
+        "--fit",
+        s(&cv),
+        "--max-curr",
+        "3",
+        "--kfc",
+        "0.8",
+        "-o",
+        s(&out),
+    ]);
+    let c = frictiond_config::load(&out).unwrap();
+    let j = &c.raw.joint[0];
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&abs_r).unwrap()).unwrap();
+    let off = report["datasets"][0]["delta_theta_offset_motor_rad"]
+        .as_f64()
+        .unwrap();
+    assert_eq!(j.name, "r_wrist");
+    assert_eq!(
+        (j.gear_ratio, j.kt, j.max_curr, j.kfc),
+        (100.0, 0.1, 3.0, 0.8)
+    );
+    assert_eq!(j.friction_model, frictiond_config::ModelKind::Pinn);
+    assert_eq!(j.delta_theta_offset_motor_rad, Some(off));
+    assert_eq!(j.motor_encoder, frictiond_config::MotorEncoder::Absolute);
+    assert_eq!(j.ood, frictiond_config::OodMode::Static);
+    let fit = frictionless_dataset::fit_file::FittedModel::read_cv(&cv).unwrap();
+    assert_eq!(
+        (j.kc, j.ka, j.kv),
+        (Some(fit.kc), Some(fit.ka), Some(fit.kv))
+    );
+    // Incremental: no offset, and only a model trained latched per chunk.
+    ok(&[
+        "config",
+        "--pinn",
+        s(&inc),
+        "--train-report",
+        s(&inc_r),
+        "--motor-encoder",
+        "incremental",
+        "--fit",
+        s(&cv),
+        "--max-curr",
+        "3",
+        "-o",
+        s(&out),
+    ]);
+    let j = frictiond_config::load(&out).unwrap().raw.joint[0].clone();
+    assert_eq!(j.motor_encoder, frictiond_config::MotorEncoder::Incremental);
+    assert_eq!(j.delta_theta_offset_motor_rad, None);
+    let before = std::fs::read(&out).unwrap();
+    let e = err_text(
+        frictl(&[
+            "config",
+            "--pinn",
+            s(&abs),
+            "--train-report",
+            s(&abs_r),
+            "--motor-encoder",
+            "incremental",
+            "--max-curr",
+            "3",
+            "-o",
+            s(&out),
+        ]),
+        "a fixed-offset model on an incremental encoder",
+    );
+    assert!(
+        e.contains("--motor-encoder incremental") && e.contains("retrain"),
+        "{e}"
+    );
+    let e = err_text(
+        frictl(&[
+            "config",
+            "--pinn",
+            s(&abs),
+            "--max-curr",
+            "3",
+            "-o",
+            s(&out),
+        ]),
+        "a Δθ model without its report",
+    );
+    assert!(e.contains("--train-report"), "{e}");
+    let e = err_text(
+        frictl(&[
+            "config",
+            "--pinn",
+            s(&abs),
+            "--train-report",
+            s(&abs_r),
+            "--max-curr=-1",
+            "-o",
+            s(&out),
+        ]),
+        "a negative current clamp",
+    );
+    assert!(e.contains("joint[0].max_curr"), "{e}");
+    assert_eq!(
+        std::fs::read(&out).unwrap(),
+        before,
+        "a refused config is not written"
+    );
+    // A fitted model as the joint's model.
+    ok(&[
+        "config",
+        "--fit",
+        s(&scv),
+        "--joint",
+        "r_wrist",
+        "--gear-ratio",
+        "100",
+        "--kt",
+        "0.1",
+        "--max-curr",
+        "3",
+        "-o",
+        s(&out),
+    ]);
+    let j = frictiond_config::load(&out).unwrap().raw.joint[0].clone();
+    assert_eq!(j.friction_model, frictiond_config::ModelKind::Scv);
+    assert!(j.ks.is_some() && j.vs.is_some() && j.alpha.is_some());
+    let e = err_text(
+        frictl(&["config", "--fit", s(&scv), "--max-curr", "3", "-o", s(&out)]),
+        "a fit without a joint",
+    );
+    assert!(e.contains("--joint"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
