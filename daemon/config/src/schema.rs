@@ -299,6 +299,36 @@ pub enum OodMode {
     Static,
 }
 
+/// Whether a joint's motor encoder keeps its zero across power-ups.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum MotorEncoder {
+    /// The motor angle θ reads the same zero at every power-up (an absolute encoder, or an
+    /// incremental one homed to a fixed reference): a calibrated `delta_theta_offset_motor_rad`
+    /// holds across boots.
+    #[default]
+    Absolute,
+    /// Each power-up has its own zero: a fixed Δθ offset is wrong after the next boot, so a PINN
+    /// joint that reads Δθ latches it at every enable (no `delta_theta_offset_motor_rad`), and its
+    /// model is trained latched per chunk (`frictl train --motor-encoder incremental`).
+    Incremental,
+}
+
+impl MotorEncoder {
+    /// `"absolute"` or `"incremental"` (the config and robot-file spelling).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Absolute => "absolute",
+            Self::Incremental => "incremental",
+        }
+    }
+
+    /// Whether this is the default (`absolute`), for `skip_serializing_if`.
+    pub fn is_default(&self) -> bool {
+        *self == Self::Absolute
+    }
+}
+
 /// One `[[joint]]` as written.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -377,6 +407,10 @@ pub struct JointConfig {
     /// training logs were latched with (0 for the virtual joints).
     #[serde(default)]
     pub delta_theta_offset_motor_rad: Option<f64>,
+    /// The motor encoder's kind (`absolute`, the default, or `incremental`): with `incremental`
+    /// a PINN joint reading Δθ may not set `delta_theta_offset_motor_rad`.
+    #[serde(default, skip_serializing_if = "MotorEncoder::is_default")]
+    pub motor_encoder: MotorEncoder,
     /// Out-of-training-range handling (PINN joints): `off`, `flag` (default) or `static`.
     #[serde(default)]
     pub ood: OodMode,

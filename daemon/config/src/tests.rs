@@ -1164,3 +1164,40 @@ fn runtime_requests_follow_the_file_rules() {
         "must be in [0, 2]",
     );
 }
+
+/// `motor_encoder` is `absolute` by default and not written then; `incremental` refuses a fixed
+/// Δθ offset (a zero that moves at every power-up), naming the key, the value and what to do, and
+/// is written back by the serializer.
+#[test]
+fn an_incremental_motor_encoder_refuses_a_fixed_delta_theta_offset() {
+    let c = p(GOOD).unwrap();
+    assert_eq!(c.raw.joint[0].motor_encoder, MotorEncoder::Absolute);
+    let written = toml::to_string(&c.raw).unwrap();
+    assert!(!written.contains("motor_encoder"), "{written}");
+    let with = |extra: &str| GOOD.replacen("kv = 5.55", &format!("kv = 5.55\n{extra}"), 1);
+    p(&with(
+        "motor_encoder = \"absolute\"\ndelta_theta_offset_motor_rad = 0.25",
+    ))
+    .unwrap();
+    let c = p(&with("motor_encoder = \"incremental\"")).unwrap();
+    assert_eq!(c.raw.joint[0].motor_encoder, MotorEncoder::Incremental);
+    let again = toml::to_string(&c.raw).unwrap();
+    assert!(again.contains("motor_encoder = \"incremental\""), "{again}");
+    assert_eq!(p(&again).unwrap().raw, c.raw);
+    let e = p(&with(
+        "motor_encoder = \"incremental\"\ndelta_theta_offset_motor_rad = 0.25",
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("joint[0].delta_theta_offset_motor_rad")
+            && e.contains("0.25")
+            && e.contains("incremental")
+            && e.contains("--motor-encoder incremental"),
+        "{e}"
+    );
+    let e = p(&with("motor_encoder = \"relative\""))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("motor_encoder") && e.contains("relative"), "{e}");
+}

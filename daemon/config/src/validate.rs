@@ -10,7 +10,9 @@ use frictionless_shm_types::MAX_JOINTS;
 use crate::ModelKind;
 use crate::models::model_spec;
 use crate::runtime;
-use crate::schema::{JointConfig, LoopConfig, ModelSpec, OodMode, Prefetch, RawConfig};
+use crate::schema::{
+    JointConfig, LoopConfig, ModelSpec, MotorEncoder, OodMode, Prefetch, RawConfig,
+};
 
 /// Why a configuration is not acceptable. Every variant names the file; most name the key and value.
 #[derive(Debug, thiserror::Error)]
@@ -408,6 +410,15 @@ pub(crate) fn check_joint(
         && !off.is_finite()
     {
         return Err(c.fail(key("delta_theta_offset_motor_rad"), off, "must be finite"));
+    }
+    if let Some(off) = j.delta_theta_offset_motor_rad
+        && j.motor_encoder == MotorEncoder::Incremental
+    {
+        return Err(c.fail(
+            key("delta_theta_offset_motor_rad"),
+            off,
+            "is a fixed encoder zero, but motor_encoder = \"incremental\" has a new zero at every power-up: remove the key (Δθ is then latched at every enable) and use a model trained with `frictl train --motor-encoder incremental`",
+        ));
     }
     if let Some(lpf) = j.lpf {
         if !(1..=8).contains(&lpf.order) {

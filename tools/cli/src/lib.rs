@@ -16,6 +16,7 @@
 
 pub mod acquire;
 pub mod can;
+pub mod config;
 pub mod convert;
 pub mod ctl;
 pub mod demo;

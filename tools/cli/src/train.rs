@@ -59,6 +59,28 @@ impl From<Warmup> for WarmupPolicy {
     }
 }
 
+/// The motor encoder's kind (`--motor-encoder`), as frictiond's `[[joint]] motor_encoder`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum MotorEncoder {
+    /// The same zero at every power-up: Δθ latched as `--delta-theta-offset` says (default once per
+    /// dataset), and frictiond is configured with the report's offset.
+    Absolute,
+    /// A new zero at every power-up: Δθ latched at every chunk start, as frictiond latches it at
+    /// every enable (no offset to configure; `--delta-theta-offset` is refused).
+    Incremental,
+}
+
+impl MotorEncoder {
+    /// Where Δθ is latched for this encoder, given `--delta-theta-offset` (ignored when
+    /// incremental: clap refuses both together).
+    pub fn latch(self, given: DeltaThetaOffset) -> DeltaThetaOffset {
+        match self {
+            Self::Absolute => given,
+            Self::Incremental => DeltaThetaOffset::Chunk,
+        }
+    }
+}
+
 /// Storage precision of the weights in the `.fwt`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Dtype {
@@ -149,6 +171,13 @@ pub struct Args {
     #[arg(long, default_value = "run", allow_hyphen_values = true)]
     #[serde(serialize_with = "super::stage::as_display")]
     pub delta_theta_offset: DeltaThetaOffset,
+    /// The motor encoder's kind: `absolute` (the same zero at every power-up) or `incremental` (a
+    /// new zero at every power-up: Δθ is latched at every chunk start, as frictiond latches it at
+    /// every enable, so the model needs no offset from this log; with `delta-theta-*` features this
+    /// is what a robot with incremental motor encoders must use). Not with --delta-theta-offset.
+    #[arg(long, value_enum, default_value_t = MotorEncoder::Absolute, conflicts_with = "delta_theta_offset")]
+    #[serde(serialize_with = "super::stage::as_value_enum")]
+    pub motor_encoder: MotorEncoder,
     /// Storage dtype of the weights.
     #[arg(long, value_enum, default_value_t = Dtype::F32)]
     #[serde(serialize_with = "super::stage::as_value_enum")]

@@ -15,6 +15,7 @@ use std::path::{Path, PathBuf};
 use frictionless::weights::ModelFile;
 use frictionless_dataset::bands::ResidualProfile;
 use frictionless_dataset::{Dataset, DatasetSidecar, MotionRange, RunInfo, dataset_runs};
+use frictionless_train::data::{Block, ChunkKey};
 
 use crate::drift::{self, Coverage, DriftOptions, DriftReport};
 use crate::{
@@ -210,11 +211,12 @@ fn load_models(job: &EvalJob) -> Result<(Vec<ModelSpec>, Vec<PinnFile>), EvalErr
 /// Every dataset (training then held-out), each checked against every PINN.
 fn load_datasets(
     paths: &[PathBuf],
+    blocks: &[Vec<Block>],
     pinn_files: &[PinnFile],
     warnings: &mut Vec<String>,
 ) -> Result<Vec<Loaded>, EvalError> {
     let mut loaded = Vec::new();
-    for p in paths {
+    for (p, b) in paths.iter().zip(blocks) {
         let (ds, side) = read_dataset(p)?;
         let joint = side.as_ref().map(|s| s.joint.clone()).unwrap_or_default();
         // A PINN whose inputs read a column this dataset lacks is refused by name (a torque-sensed
@@ -224,7 +226,23 @@ fn load_datasets(
                 warnings.push(w);
             }
         }
-        let runs = dataset_runs(p, side.as_ref(), &ds);
+        let mut runs = dataset_runs(p, side.as_ref(), &ds);
+        // A split by time blocks names the blocks' keys: the dataset is read through the same
+        // blocks, and each run keeps the blocks cut from its chunks.
+        let ds = match b.first() {
+            Some(first) => {
+                for run in &mut runs {
+                    let cut: Vec<u32> = b
+                        .iter()
+                        .filter(|k| run.chunks.contains(&k.chunk))
+                        .map(|k| k.key.chunk)
+                        .collect();
+                    run.chunks.extend(cut);
+                }
+                frictionless_train::data::with_blocks(&ds, first.key.dataset, b)
+            }
+            None => ds,
+        };
         loaded.push(Loaded {
             path: p.clone(),
             ds,
@@ -320,7 +338,11 @@ pub fn run(job: &EvalJob) -> Result<EvalOutcome, EvalError> {
         }
         (_, false) => None,
     };
-    let loaded = load_datasets(&all_paths, &pinn_files, &mut warnings)?;
+    let blocks = match (&test_chunks, &job.train_report) {
+        (Some(_), Some(r)) => report_blocks(r, &all_paths)?,
+        _ => vec![Vec::new(); all_paths.len()],
+    };
+    let loaded = load_datasets(&all_paths, &blocks, &pinn_files, &mut warnings)?;
     let (held, train_range) = hold_out(job, &loaded)?;
     let training_range = training_range(job, train_range)?;
     let holding_out = !job.test_runs.is_empty() || !job.test_datasets.is_empty();
@@ -573,6 +595,45 @@ fn drift_monitor(
         ));
     }
     Ok(drift::report(out, o))
+}
+
+/// The time blocks of the training report's split ([`Block`]) per evaluated dataset (matched like
+/// [`crate::test_chunks_from_report`]: by SHA-256, else by path); empty lists when the split is by
+/// chunks.
+fn report_blocks(report: &Path, datasets: &[PathBuf]) -> Result<Vec<Vec<Block>>, EvalError> {
+    let text = frictionless::regular_file::read_text(report).map_err(|e| io_err(report, e))?;
+    let r: frictionless_train::pipeline::TrainReport =
+        serde_json::from_str(&text).map_err(|e| EvalError::TrainReport {
+            path: report.display().to_string(),
+            msg: format!("not a train report: {e}"),
+        })?;
+    let mut out = vec![Vec::new(); datasets.len()];
+    for (i, d) in datasets.iter().enumerate() {
+        let sha = frictionless_dataset::file_sha256_hex(d).map_err(|e| io_err(d, e))?;
+        let path = d.display().to_string();
+        let Some(di) = r
+            .datasets
+            .iter()
+            .position(|rd| rd.sha256 == sha)
+            .or_else(|| r.datasets.iter().position(|rd| rd.path == path))
+        else {
+            continue;
+        };
+        out[i] = r
+            .split
+            .blocks
+            .iter()
+            .filter(|b| b.key.dataset as usize == di)
+            .map(|b| Block {
+                key: ChunkKey {
+                    dataset: i as u32,
+                    chunk: b.key.chunk,
+                },
+                ..*b
+            })
+            .collect();
+    }
+    Ok(out)
 }
 
 /// The share of the scored rows outside a PINN's input range (none for a static model).

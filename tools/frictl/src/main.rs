@@ -48,6 +48,8 @@ enum Command {
     Fit(cmd::fit::Args),
     /// Train the physics-informed network.
     Train(cmd::train::Args),
+    /// Write a checked frictiond config with one [[joint]] for a fitted model or a PINN.
+    Config(cmd::config::Args),
     /// Distil a model into a smaller student, gated on held-out accuracy against the data.
     Distill(cmd::distill::Args),
     /// Random hyper-parameter search over the paper's ranges.
@@ -98,6 +100,7 @@ fn main() -> std::process::ExitCode {
         Command::Preprocess(a) => cmd::preprocess::run(a),
         Command::Fit(a) => cmd::fit::run(a),
         Command::Train(a) => cmd::train::run(a),
+        Command::Config(a) => cmd::config::run(a),
         Command::Distill(a) => cmd::distill::run(a),
         Command::Search(a) => cmd::search::run_cli(a),
         Command::Robot(a) => cmd::robot::run(a),

@@ -22,6 +22,7 @@ mod robot_cli;
 mod search_cli;
 mod sim_serve_shm;
 mod train_cli;
+mod train_one_recording;
 mod train_split;
 mod util;
 mod vcan_sim_serve;

@@ -528,3 +528,118 @@ fn a_search_pick_is_the_model_the_robot_runs() {
     assert!(trial_files.contains(&pick), "pick.fwt is a trial's model");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// One uninterrupted 14 s recording of a joint with joint and motor encoders (`frictl import csv`,
+/// 1 kHz, θ = 100·s − 0.002·τ_F + 3 rad: the encoder's zero of that boot), written as `dir/rel`.
+fn one_recording(dir: &Path, rel: &str) {
+    let log = dir.join("one.csv");
+    let mut text = String::from("t,q,qd,friction,theta\n");
+    for k in 0..14_000 {
+        let t = k as f64 * 1e-3;
+        let w = 2.0 + 0.5 * (0.3 * t).sin();
+        let (q, v) = (0.4 * (w * t).sin(), 0.4 * w * (w * t).cos());
+        let f = 0.3 * (50.0 * v).tanh() + 0.2 * v;
+        text += &format!("{t},{q},{v},{f},{}\n", 100.0 * q - 0.002 * f + 3.0);
+    }
+    std::fs::write(&log, text).unwrap();
+    let out = dir.join(rel);
+    std::fs::create_dir_all(out.parent().unwrap()).unwrap();
+    ok_in(
+        dir,
+        &[
+            "import",
+            "csv",
+            s(&log),
+            "--joint",
+            "r_wrist",
+            "--column",
+            "time=t",
+            "--column",
+            "s=q",
+            "--column",
+            "sdot=qd",
+            "--column",
+            "tau_f=friction",
+            "--column",
+            "theta=theta",
+            "--gear-ratio",
+            "100",
+            "--kt",
+            "0.1",
+            "-o",
+            s(&out),
+        ],
+    );
+}
+
+/// A robot whose joint has one recording and an incremental motor encoder: `robot run` trains with
+/// validation and test blocks of that recording (the default fractions), latches Δθ per chunk, and
+/// writes a frictiond joint with `motor_encoder = "incremental"`, no fixed offset and its CV fit as
+/// the static fallback (`ood = "static"`), which frictiond's own checker accepts.
+#[test]
+fn one_recording_with_an_incremental_encoder_gives_a_latched_joint_with_a_static_fallback() {
+    let dir = tmp("robot-one-recording");
+    one_recording(&dir, "data/ds.csv");
+    torque_sensed_robot(
+        &dir,
+        "[search]\ntrials = 0\n[train]\nhidden = [8]\nhistory = 4\nepochs = 1\nbatch = 256",
+        "motor_encoder = \"incremental\"",
+    );
+    ok_in(&dir, &["robot", "run", "robot.toml", "--out", "o"]);
+    let report: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("o/joints/r_wrist/pinn.train.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(report["delta_theta_offset"], "chunk");
+    assert!(report["datasets"][0]["delta_theta_offset_motor_rad"].is_null());
+    assert!(report["split"]["val_samples"].as_u64().unwrap() > 0);
+    assert!(!report["split"]["blocks"].as_array().unwrap().is_empty());
+    let cfg = frictiond_config::load(&dir.join("o/frictiond.toml")).unwrap();
+    let j = &cfg.raw.joint[0];
+    assert_eq!(j.motor_encoder, frictiond_config::MotorEncoder::Incremental);
+    assert_eq!(j.delta_theta_offset_motor_rad, None);
+    assert_eq!(j.ood, frictiond_config::OodMode::Static);
+    // The evaluation scores the test blocks of the recording.
+    let eval: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("o/joints/r_wrist/eval.json")).unwrap(),
+    )
+    .unwrap();
+    let n = eval
+        .pointer("/datasets/0/evaluated")
+        .and_then(|v| v.as_u64());
+    let test_rows: u64 = report["split"]["blocks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|b| {
+            report["split"]["test"]
+                .as_array()
+                .unwrap()
+                .contains(&b["key"])
+        })
+        .map(|b| b["end_row"].as_u64().unwrap() - b["start_row"].as_u64().unwrap())
+        .sum();
+    assert!(
+        n.is_some_and(|n| n > 0 && n <= test_rows),
+        "eval of the test blocks ({test_rows} rows): {n:?}"
+    );
+    let cv =
+        frictionless_dataset::fit_file::FittedModel::read_cv(&dir.join("o/joints/r_wrist/cv.json"))
+            .unwrap();
+    assert_eq!((j.kc, j.ka, j.kv), (Some(cv.kc), Some(cv.ka), Some(cv.kv)));
+    // The same robot with an absolute encoder keeps the training log's offset.
+    torque_sensed_robot(
+        &dir,
+        "[search]\ntrials = 0\n[train]\nhidden = [8]\nhistory = 4\nepochs = 1\nbatch = 256",
+        "",
+    );
+    ok_in(&dir, &["robot", "run", "robot.toml", "--out", "o"]);
+    let cfg = frictiond_config::load(&dir.join("o/frictiond.toml")).unwrap();
+    let off = cfg.raw.joint[0].delta_theta_offset_motor_rad.unwrap();
+    assert!((off - 3.0).abs() < 0.05, "the log's encoder zero: {off}");
+    assert_eq!(
+        cfg.raw.joint[0].motor_encoder,
+        frictiond_config::MotorEncoder::Absolute
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

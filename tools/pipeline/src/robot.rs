@@ -22,6 +22,7 @@
 //! kt_nm_per_a = 0.157
 //! max_curr_a = 5.0
 //! features = "delta-theta-joint-vel"  # any of the core's feature sets (default the paper's)
+//! motor_encoder = "incremental" # or "absolute" (default): does θ keep its zero across power-ups
 //! temperature = false           # the motor temperature as one more input
 //! ```
 
@@ -329,6 +330,12 @@ pub struct JointSection {
     /// must have a temperature column).
     #[serde(default)]
     pub temperature: bool,
+    /// The motor encoder's kind, as frictiond's `[[joint]] motor_encoder`: `absolute` (default; one
+    /// zero at every power-up, the train report's Δθ offset is configured) or `incremental` (a new
+    /// zero at every power-up: a Δθ model is trained latched per chunk and frictiond latches at every
+    /// enable).
+    #[serde(default)]
+    pub motor_encoder: frictiond_config::MotorEncoder,
     /// frictiond's current clamp \[A\].
     pub max_curr_a: f64,
     /// frictiond's friction compensation gain.

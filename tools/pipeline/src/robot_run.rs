@@ -35,6 +35,7 @@ use frictiond_config::{
 };
 use frictionless::features::FeatureSet;
 use frictionless_eval::Report as EvalReport;
+use frictionless_train::data::DeltaThetaOffset;
 use frictionless_train::pipeline::{self, TrainReport};
 use frictionless_train::search::{TrialResult, read_results};
 use sha2::{Digest, Sha256};
@@ -216,6 +217,12 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> anyhow::Result<JointPlan> 
         });
     }
     let sr = &robot.search;
+    // An incremental motor encoder: Δθ latched per chunk, as frictiond latches it at every enable.
+    let motor_encoder = match j.motor_encoder {
+        frictiond_config::MotorEncoder::Absolute => train::MotorEncoder::Absolute,
+        frictiond_config::MotorEncoder::Incremental => train::MotorEncoder::Incremental,
+    };
+    let latch = motor_encoder.latch(DeltaThetaOffset::Run);
     let mut inputs = with_sidecars(&train);
     inputs.push(scv.clone());
     let pair = |r: Option<[usize; 2]>| r.map(|r| r.to_vec());
@@ -237,6 +244,7 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> anyhow::Result<JointPlan> 
         lambda_range: sr.lambda.map(|r| r.to_vec()),
         dropout_range: sr.dropout.map(|r| r.to_vec()),
         max_rmse_ratio: sr.max_rmse_ratio,
+        delta_theta_offset: latch,
         ..stage::defaults()?
     };
     // Completed by its users (the search stage below, the Ray driver) with `--out` and the
@@ -292,6 +300,7 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> anyhow::Result<JointPlan> 
                 val_frac: sr.val_frac,
                 test_frac: sr.test_frac,
                 temperature: j.temperature,
+                motor_encoder,
                 ..stage::defaults()?
             },
         )?;
@@ -696,12 +705,24 @@ fn read_typed<T: serde::de::DeserializeOwned>(p: &Path) -> anyhow::Result<T> {
     serde_json::from_str(&t).with_context(|| format!("{}: not the expected JSON", p.display()))
 }
 
-/// The frictiond config of the robot: every joint with its PINN (model paths relative to `out`).
+/// The frictiond config of the robot: every joint with its PINN (model paths relative to `out`), its
+/// encoder kind, the Δθ offset its training latched (none for an incremental encoder: latched at
+/// every enable), and its CV fit as the static model it falls back to while its inputs are out of
+/// the training range (`ood = "static"`).
 fn daemon_config(robot: &RobotFile, plans: &[JointPlan], out: &Path) -> anyhow::Result<RawConfig> {
     let mut joints = vec![];
     for (index, (j, p)) in robot.joint.iter().zip(plans).enumerate() {
         let report: TrainReport = read_typed(&out.join(&p.model_report))?;
         let offset = trained_offset(&report).with_context(|| p.model_report.clone())?;
+        if offset.is_some() && j.motor_encoder == frictiond_config::MotorEncoder::Incremental {
+            bail!(
+                "{}: joint {} has motor_encoder = \"incremental\", but its model was trained with a fixed Δθ offset; it must be trained latched per chunk",
+                p.model_report,
+                j.name
+            );
+        }
+        let cv = frictionless_dataset::fit_file::FittedModel::read_cv(&out.join(&p.cv))
+            .with_context(|| format!("the static fallback of joint {}", j.name))?;
         joints.push(JointConfig {
             name: j.name.clone(),
             index,
@@ -719,9 +740,9 @@ fn daemon_config(robot: &RobotFile, plans: &[JointPlan], out: &Path) -> anyhow::
                 cutoff_hz: l.cutoff_hz,
             }),
             friction_model: ModelKind::Pinn,
-            kc: None,
-            kv: None,
-            ka: None,
+            kc: Some(cv.kc),
+            kv: Some(cv.kv),
+            ka: Some(cv.ka),
             ks: None,
             vs: None,
             alpha: None,
@@ -731,7 +752,8 @@ fn daemon_config(robot: &RobotFile, plans: &[JointPlan], out: &Path) -> anyhow::
             model_for: None,
             warmup: WarmupName::HoldZero,
             delta_theta_offset_motor_rad: offset,
-            ood: OodMode::default(),
+            motor_encoder: j.motor_encoder,
+            ood: OodMode::Static,
             ood_margin: default_ood_margin(),
             ood_ramp_ms: default_ood_ramp_ms(),
         });

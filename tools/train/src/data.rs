@@ -16,6 +16,11 @@
 //! - [`ChunkKey`] (dataset index, chunk id) and [`split_chunks`]: train/validation/test chosen as whole
 //!   chunks by a seeded shuffle (or explicit test chunks), never by overlapping windows (the authors'
 //!   leak, `docs/method.md` §7).
+//! - [`Block`], [`cut_chunk`] and [`with_blocks`]: a recording with too few chunks for the requested
+//!   sets (one long robot log is one chunk) is cut into contiguous time blocks, which are then split
+//!   like chunks. Each block is a chunk of its own (the history restarts there) and every block but
+//!   the first of its chunk begins with [`BLOCK_GAP_ROWS`] rows that are never samples, so no window
+//!   and no sample adjacent to a window of another block crosses a block boundary.
 //! - [`select`]: gathers one set's inputs and both targets (label, SCV prior of the newest ṡ).
 //!
 //! What it is **not**: no file reading (see `super::pipeline`), no filtering or labelling (that is
@@ -25,7 +30,9 @@ use std::collections::BTreeSet;
 use std::fmt;
 use std::str::FromStr;
 
-use frictionless::features::{FeatureError, FeatureSpec, History, JointSample, WarmupPolicy};
+use frictionless::features::{
+    FeatureError, FeatureSpec, History, JointSample, MAX_HISTORY, WarmupPolicy,
+};
 use frictionless::friction::{ScvParams, StaticFriction};
 use frictionless::units::GearRatio;
 use rand::SeedableRng;
@@ -65,6 +72,23 @@ pub enum DataError {
     /// A chunk key could not be parsed.
     #[error("chunk `{0}`: expected CHUNK or DATASET:CHUNK (non-negative integers)")]
     ChunkKey(String),
+    /// The fractions leave the training set without a chunk.
+    #[error(
+        "--val-frac = {val_frac}: with {test} test chunk(s) and {val} validation chunk(s) no training \
+         chunk is left of the {n} chunk(s) with samples{hint}"
+    )]
+    NoTrainingChunk {
+        /// `--val-frac`.
+        val_frac: f64,
+        /// Test chunks chosen.
+        test: usize,
+        /// Validation chunks chosen.
+        val: usize,
+        /// Chunks split.
+        n: usize,
+        /// What to do instead (empty, or starting with "; ").
+        hint: String,
+    },
 }
 
 /// The samples of one dataset: row-major inputs and where each sample comes from.
@@ -283,6 +307,10 @@ pub struct Split {
     pub val: Vec<ChunkKey>,
     /// Test chunks (never used for training or model selection).
     pub test: Vec<ChunkKey>,
+    /// The time blocks chunks were cut into (empty when the split is by the datasets' own chunks):
+    /// a block's [`Block::key`] is its key in the three sets; [`with_blocks`] relabels a dataset so.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub blocks: Vec<Block>,
 }
 
 impl Split {
@@ -330,6 +358,88 @@ impl SetKind {
             SetKind::Test => "test",
         }
     }
+}
+
+/// Rows at the start of every block but the first of a cut chunk that are never samples (the gap
+/// between blocks): the longest history the core accepts, so it is at least H for every model.
+pub const BLOCK_GAP_ROWS: usize = MAX_HISTORY;
+
+/// Fewest rows a block is cut to (with samples, after its gap).
+pub const MIN_BLOCK_ROWS: usize = 8 * MAX_HISTORY;
+
+/// How many blocks the chunks of a recording are cut into in all (the granularity of the fractions:
+/// 5 %), fewer when a chunk is too short for blocks of [`MIN_BLOCK_ROWS`].
+pub const BLOCKS_PER_SPLIT: usize = 20;
+
+/// A contiguous time block of one chunk of one dataset: the unit of the split when the datasets have
+/// too few chunks for the requested sets.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Block {
+    /// Its key in the sets of the split: the dataset, and a chunk id the dataset does not use.
+    pub key: ChunkKey,
+    /// The dataset's `chunk` it was cut from.
+    pub chunk: u32,
+    /// First dataset row (the first row of the gap when there is one).
+    pub start_row: usize,
+    /// One past the last dataset row.
+    pub end_row: usize,
+    /// Leading rows that are never samples (0 for the first block of a chunk, else
+    /// [`BLOCK_GAP_ROWS`]).
+    pub gap_rows: usize,
+}
+
+/// Cuts chunk `chunk` of `ds` (dataset index `dataset`) into `n_blocks` blocks of equal row count,
+/// keyed `first_id`, `first_id + 1`, …; empty when the chunk's rows are not contiguous, or when
+/// `n_blocks < 2` or the blocks would be shorter than [`MIN_BLOCK_ROWS`] after their gap.
+pub fn cut_chunk(
+    ds: &Dataset,
+    dataset: u32,
+    chunk: u32,
+    n_blocks: usize,
+    first_id: u32,
+) -> Vec<Block> {
+    let Some(a) = ds.chunk.iter().position(|&c| c == chunk) else {
+        return Vec::new();
+    };
+    let b = ds.chunk[a..]
+        .iter()
+        .position(|&c| c != chunk)
+        .map_or(ds.len(), |e| a + e);
+    let len = b - a;
+    if n_blocks < 2
+        || ds.chunk[b..].contains(&chunk)
+        || len / n_blocks < MIN_BLOCK_ROWS + BLOCK_GAP_ROWS
+    {
+        return Vec::new();
+    }
+    (0..n_blocks)
+        .map(|i| Block {
+            key: ChunkKey {
+                dataset,
+                chunk: first_id + i as u32,
+            },
+            chunk,
+            start_row: a + i * len / n_blocks,
+            end_row: a + (i + 1) * len / n_blocks,
+            gap_rows: if i == 0 { 0 } else { BLOCK_GAP_ROWS },
+        })
+        .collect()
+}
+
+/// `ds` (dataset index `dataset`) with each of its blocks as a chunk of its own: the rows of a block
+/// get the block's chunk id and its gap rows are not `valid`. Blocks of other datasets are ignored.
+pub fn with_blocks(ds: &Dataset, dataset: u32, blocks: &[Block]) -> Dataset {
+    let mut out = ds.clone();
+    for b in blocks.iter().filter(|b| b.key.dataset == dataset) {
+        let end = b.end_row.min(out.len());
+        for k in b.start_row.min(end)..end {
+            out.chunk[k] = b.key.chunk;
+        }
+        for k in b.start_row.min(end)..(b.start_row + b.gap_rows).min(end) {
+            out.valid[k] = false;
+        }
+    }
+    out
 }
 
 fn n_for(frac: f64, n: usize) -> usize {
@@ -394,14 +504,12 @@ pub fn split_chunks(all: &[ChunkKey], spec: &SplitSpec) -> Result<Split, DataErr
     let n_val = n_for(spec.val_frac, n).min(rest.len());
     let mut val: Vec<ChunkKey> = rest.drain(..n_val).collect();
     if rest.is_empty() {
-        return Err(DataError::Split {
-            key: "--val-frac",
-            value: spec.val_frac.to_string(),
-            reason: format!(
-                "with {} test chunk(s) and {} validation chunk(s) no training chunk is left of the {n} chunk(s) with samples",
-                test.len(),
-                val.len()
-            ),
+        return Err(DataError::NoTrainingChunk {
+            val_frac: spec.val_frac,
+            test: test.len(),
+            val: val.len(),
+            n,
+            hint: String::new(),
         });
     }
     rest.sort();
@@ -411,6 +519,7 @@ pub fn split_chunks(all: &[ChunkKey], spec: &SplitSpec) -> Result<Split, DataErr
         train: rest,
         val,
         test,
+        blocks: Vec::new(),
     })
 }
 
@@ -609,6 +718,104 @@ mod tests {
         )
         .unwrap_err();
         assert!(bad.to_string().starts_with("--val-frac = 1.5"), "{bad}");
+    }
+
+    #[test]
+    fn a_long_chunk_is_cut_into_blocks_with_a_gap_before_each_but_the_first() {
+        let n = 5 * (MIN_BLOCK_ROWS + BLOCK_GAP_ROWS) + 17;
+        let mut ds = toy_dataset();
+        let pad = |v: &mut Vec<f64>| v.resize(n, 0.5);
+        ds.time_s = (0..n).map(|k| k as f64 * 1e-3).collect();
+        // Chunk 3 is rows 10.., chunk 1 the first ten rows.
+        ds.chunk = (0..n).map(|k| if k < 10 { 1 } else { 3 }).collect();
+        ds.source_chunk = vec![0; n];
+        ds.active = vec![true; n];
+        ds.valid = vec![true; n];
+        for v in [
+            &mut ds.s_rad,
+            &mut ds.sdot_rad_s,
+            &mut ds.sddot_rad_s2,
+            &mut ds.theta_motor_rad,
+            &mut ds.delta_theta_motor_rad,
+            &mut ds.omega_motor_rad_s,
+            &mut ds.i_meas_a,
+            &mut ds.i_filt_a,
+            &mut ds.tau_id_nm,
+            &mut ds.tau_f_label_nm,
+            &mut ds.temperature_c,
+        ] {
+            pad(v);
+        }
+        let blocks = cut_chunk(&ds, 2, 3, 5, 4);
+        assert_eq!(blocks.len(), 5);
+        assert_eq!(blocks[0].start_row, 10);
+        assert_eq!(blocks[4].end_row, n);
+        for (i, b) in blocks.iter().enumerate() {
+            assert_eq!(
+                b.key,
+                ChunkKey {
+                    dataset: 2,
+                    chunk: 4 + i as u32
+                }
+            );
+            assert_eq!(b.chunk, 3);
+            assert_eq!(b.gap_rows, if i == 0 { 0 } else { BLOCK_GAP_ROWS });
+            assert!(b.end_row - b.start_row >= MIN_BLOCK_ROWS + b.gap_rows);
+            if i > 0 {
+                assert_eq!(b.start_row, blocks[i - 1].end_row, "blocks tile the chunk");
+            }
+        }
+        // Too many blocks for the chunk, one block, an absent chunk: no cut.
+        assert!(cut_chunk(&ds, 2, 3, 6, 4).is_empty());
+        assert!(cut_chunk(&ds, 2, 3, 1, 4).is_empty());
+        assert!(cut_chunk(&ds, 2, 9, 2, 4).is_empty());
+        let cut = with_blocks(&ds, 2, &blocks);
+        assert!(
+            cut.chunk[..10].iter().all(|&c| c == 1),
+            "other chunks unchanged"
+        );
+        for b in &blocks {
+            assert!(
+                cut.chunk[b.start_row..b.end_row]
+                    .iter()
+                    .all(|&c| c == b.key.chunk)
+            );
+            assert!(
+                !cut.valid[b.start_row..b.start_row + b.gap_rows]
+                    .iter()
+                    .any(|&v| v)
+            );
+            assert!(
+                cut.valid[b.start_row + b.gap_rows..b.end_row]
+                    .iter()
+                    .all(|&v| v)
+            );
+        }
+        let other = with_blocks(&ds, 0, &blocks);
+        assert!(
+            other.chunk == ds.chunk && other.valid == ds.valid,
+            "blocks of another dataset change nothing"
+        );
+        // Every window of a block's samples lies inside the block, after its gap.
+        let spec = FeatureSpec {
+            set: FeatureSet::DeltaThetaJointVel,
+            history: MAX_HISTORY,
+            temperature: false,
+        };
+        let w = build_inputs(
+            &cut,
+            &spec,
+            GearRatio::new(1.0).unwrap(),
+            WarmupPolicy::HoldZero,
+            DeltaThetaOffset::Run,
+        )
+        .unwrap();
+        for (&row, &chunk) in w.rows.iter().zip(&w.chunk) {
+            if let Some(b) = blocks.iter().find(|b| b.key.chunk == chunk) {
+                assert!(row + 1 >= b.start_row + MAX_HISTORY && row < b.end_row);
+                assert!(row >= b.start_row + b.gap_rows);
+            }
+        }
     }
 
     fn toy_dataset() -> Dataset {

@@ -36,7 +36,10 @@
 //! config            {hidden[], dropout, lambda, lr, batch_size, epochs, seed, threads, patience, abort_loss}
 //! dtype             "f32" | "f16" | "bf16"
 //! split             {spec {val_frac, test_frac, seed, test_chunks}, train[], val[], test[] (each {dataset, chunk}),
-//!                    train_samples, val_samples, test_samples, skipped_non_finite}
+//!                    train_samples, val_samples, test_samples, skipped_non_finite,
+//!                    blocks[] {key {dataset, chunk}, chunk, start_row, end_row, gap_rows} when a
+//!                    recording with too few chunks was cut into time blocks (see [`split_for`]):
+//!                    the chunk ids of the sets are then the blocks' keys}
 //! epochs[]          {epoch (1-based), train_loss (Nm², dropout on), val_loss (Nm², eval mode) | null,
 //!                    val_rmse_nm | null, is_best, seconds}
 //! best_epoch, stopped_early, resumed (bool), n_params
@@ -384,6 +387,14 @@ pub fn chunks_with_valid_rows(sources: &Sources) -> Vec<ChunkKey> {
 }
 
 /// The chunk split for these datasets (the same for every H, so search trials are comparable).
+///
+/// When the datasets' own chunks are too few for the requested sets (one long recording is one
+/// chunk), the chunks that are not explicit test chunks are cut into contiguous time blocks
+/// ([`data::cut_chunk`]: [`data::BLOCKS_PER_SPLIT`] in all, a gap of [`data::BLOCK_GAP_ROWS`] rows
+/// before each but the first of a chunk) and the blocks are split like chunks; the blocks are in
+/// [`Split::blocks`], and [`prepare`] and [`training_range`] read the datasets through them
+/// ([`blocked`]). A held-out `--test-dataset` is the test set as it is: no test fraction is
+/// carved out of the training recordings then.
 pub fn split_for(sources: &Sources, spec: &SplitSpec) -> Result<Split, PipelineError> {
     let mut spec = spec.clone();
     if let Some(t) = &mut spec.test_chunks
@@ -416,7 +427,77 @@ pub fn split_for(sources: &Sources, spec: &SplitSpec) -> Result<Split, PipelineE
             ),
         });
     }
-    data::split_chunks(&chunks, &spec).map_err(PipelineError::Split)
+    let hint = "; use --val-frac 0 (no validation) and --test-frac 0 (no test set), hold out another \
+                recording with --test-dataset, or give a longer recording (a recording with too few \
+                chunks is cut into time blocks of at least";
+    let too_few = match data::split_chunks(&chunks, &spec) {
+        Err(e @ DataError::NoTrainingChunk { .. }) => e,
+        other => return other.map_err(PipelineError::Split),
+    };
+    let held: Vec<ChunkKey> = spec.test_chunks.clone().unwrap_or_default();
+    let rest: Vec<ChunkKey> = chunks
+        .iter()
+        .copied()
+        .filter(|k| !held.contains(k))
+        .collect();
+    let per_chunk = data::BLOCKS_PER_SPLIT.div_ceil(rest.len().max(1));
+    let mut blocks = Vec::new();
+    for (d, s) in sources.list.iter().enumerate() {
+        let mut next_id = s.data.chunk.iter().copied().max().map_or(0, |m| m + 1);
+        for k in rest.iter().filter(|k| k.dataset as usize == d) {
+            // As many blocks as fit (at least MIN_BLOCK_ROWS each), at most `per_chunk`.
+            let n_rows = s.data.chunk.iter().filter(|&&c| c == k.chunk).count();
+            let n = per_chunk.min(n_rows / (data::MIN_BLOCK_ROWS + data::BLOCK_GAP_ROWS));
+            let cut = data::cut_chunk(&s.data, k.dataset, k.chunk, n, next_id);
+            next_id += cut.len() as u32;
+            blocks.extend(cut);
+        }
+    }
+    let rows_hint = |e: DataError| match e {
+        DataError::NoTrainingChunk {
+            val_frac,
+            test,
+            val,
+            n,
+            ..
+        } => DataError::NoTrainingChunk {
+            val_frac,
+            test,
+            val,
+            n,
+            hint: format!(
+                "{hint} {} rows each, {} rows apart)",
+                data::MIN_BLOCK_ROWS,
+                data::BLOCK_GAP_ROWS
+            ),
+        },
+        e => e,
+    };
+    if blocks.is_empty() {
+        return Err(PipelineError::Split(rows_hint(too_few)));
+    }
+    let cut = blocked(sources, &blocks);
+    let keys = chunks_with_valid_rows(&cut);
+    let mut split = data::split_chunks(&keys, &spec)
+        .map_err(rows_hint)
+        .map_err(PipelineError::Split)?;
+    split.blocks = blocks;
+    Ok(split)
+}
+
+/// The datasets as the split sees them: each dataset with its [`Split::blocks`] as chunks of their
+/// own ([`data::with_blocks`]); borrowed unchanged when there are no blocks.
+pub fn blocked<'a>(sources: &'a Sources, blocks: &[data::Block]) -> std::borrow::Cow<'a, Sources> {
+    if blocks.is_empty() {
+        return std::borrow::Cow::Borrowed(sources);
+    }
+    let mut out = sources.clone();
+    for (d, s) in out.list.iter_mut().enumerate() {
+        if blocks.iter().any(|b| b.key.dataset as usize == d) {
+            s.data = data::with_blocks(&s.data, d as u32, blocks);
+        }
+    }
+    std::borrow::Cow::Owned(out)
 }
 
 /// The chunks (with valid rows) of whole runs held out as the test set: every run named in `test_runs`
@@ -481,6 +562,7 @@ pub fn held_out_chunks(
 
 /// The range of s and ṡ over the valid rows of the training and validation chunks: what the model saw.
 pub fn training_range(sources: &Sources, split: &Split) -> MotionRange {
+    let sources = blocked(sources, &split.blocks);
     let mut r = MotionRange::default();
     for (d, s) in sources.list.iter().enumerate() {
         let chunks: Vec<u32> = split
@@ -543,6 +625,7 @@ pub fn prepare(
     offset: DeltaThetaOffset,
 ) -> Result<Prepared, PipelineError> {
     check_inputs(sources, spec)?;
+    let sources = &*blocked(sources, &split.blocks);
     let windows: Vec<Windows> = sources
         .list
         .iter()
@@ -667,6 +750,9 @@ pub struct SplitReport {
     pub test_samples: usize,
     /// Valid rows skipped for non-finite inputs.
     pub skipped_non_finite: usize,
+    /// The time blocks chunks were cut into ([`Split::blocks`]; absent when the split is by chunks).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub blocks: Vec<data::Block>,
 }
 
 /// The SCV prior in the report.
@@ -1027,6 +1113,7 @@ pub fn train_model(
             val_samples: prepared.val.len(),
             test_samples: prepared.test.len(),
             skipped_non_finite: prepared.skipped_non_finite,
+            blocks: split.blocks.clone(),
         },
         epochs: outcome.history.clone(),
         best_epoch: outcome.best_epoch,

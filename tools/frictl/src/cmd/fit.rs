@@ -188,7 +188,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 /// Daemon `[[joint]]` keys for a fitted model (SCV code form = SCV with ka = inf, alpha = 2).
-fn daemon_keys(m: &FittedModel) -> Vec<(&'static str, f64)> {
+pub(crate) fn daemon_keys(m: &FittedModel) -> Vec<(&'static str, f64)> {
     if let FittedModel::Lugre { params: l } = m {
         return vec![
             ("kc", l.kc),

@@ -85,19 +85,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     spec.validate().context("--history")?;
     let warmup: WarmupPolicy = args.warmup.into();
+    let delta_theta_offset = args.motor_encoder.latch(args.delta_theta_offset);
     let init = args
         .init
         .as_deref()
         .map(|p| init_weights(p, &spec))
         .transpose()?;
-    let prepared = pipeline::prepare(
-        &sources,
-        &scv,
-        &split,
-        &spec,
-        warmup,
-        args.delta_theta_offset,
-    )?;
+    let prepared = pipeline::prepare(&sources, &scv, &split, &spec, warmup, delta_theta_offset)?;
     let config = TrainConfig {
         hidden: args.hidden.clone(),
         dropout: args.dropout,
@@ -113,7 +107,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let job = Job {
         spec,
         warmup,
-        delta_theta_offset: args.delta_theta_offset,
+        delta_theta_offset,
         config,
         dtype: args.dtype.into(),
         checkpoint: args.checkpoint.clone(),

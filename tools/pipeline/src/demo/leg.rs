@@ -761,6 +761,7 @@ fn write_robot_file(
             kt_nm_per_a: p.kt_nm_per_a,
             features: super::feature_set(&p.joint),
             temperature: false,
+            motor_encoder: frictiond_config::MotorEncoder::Absolute,
             max_curr_a: j.max_curr,
             kfc: j.kfc,
             max_output_friction_nm: j
