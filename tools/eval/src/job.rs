@@ -597,31 +597,42 @@ fn drift_monitor(
     Ok(drift::report(out, o))
 }
 
-/// The time blocks of the training report's split ([`Block`]) per evaluated dataset (matched like
-/// [`crate::test_chunks_from_report`]: by SHA-256, else by path); empty lists when the split is by
-/// chunks.
+/// The time blocks of the training report's split ([`Block`], key `split.blocks`) per evaluated
+/// dataset (matched like [`crate::test_chunks_from_report`]: by SHA-256, else by path); empty lists
+/// when the split is by chunks (no key).
 fn report_blocks(report: &Path, datasets: &[PathBuf]) -> Result<Vec<Vec<Block>>, EvalError> {
-    let text = frictionless::regular_file::read_text(report).map_err(|e| io_err(report, e))?;
-    let r: frictionless_train::pipeline::TrainReport =
-        serde_json::from_str(&text).map_err(|e| EvalError::TrainReport {
-            path: report.display().to_string(),
-            msg: format!("not a train report: {e}"),
-        })?;
     let mut out = vec![Vec::new(); datasets.len()];
+    let v = read_json(report)?;
+    let Some(blocks) = v.pointer("/split/blocks") else {
+        return Ok(out);
+    };
+    let blocks: Vec<Block> =
+        serde_json::from_value(blocks.clone()).map_err(|e| EvalError::TrainReport {
+            path: report.display().to_string(),
+            msg: format!("key `split.blocks` is not a list of blocks: {e}"),
+        })?;
+    let rep_ds = v
+        .get("datasets")
+        .and_then(serde_json::Value::as_array)
+        .cloned()
+        .unwrap_or_default();
+    let field =
+        |d: &serde_json::Value, k: &str| d.get(k).and_then(|x| x.as_str()).map(str::to_owned);
     for (i, d) in datasets.iter().enumerate() {
         let sha = frictionless_dataset::file_sha256_hex(d).map_err(|e| io_err(d, e))?;
         let path = d.display().to_string();
-        let Some(di) = r
-            .datasets
+        let Some(di) = rep_ds
             .iter()
-            .position(|rd| rd.sha256 == sha)
-            .or_else(|| r.datasets.iter().position(|rd| rd.path == path))
+            .position(|rd| field(rd, "sha256").as_deref() == Some(sha.as_str()))
+            .or_else(|| {
+                rep_ds
+                    .iter()
+                    .position(|rd| field(rd, "path").as_deref() == Some(path.as_str()))
+            })
         else {
             continue;
         };
-        out[i] = r
-            .split
-            .blocks
+        out[i] = blocks
             .iter()
             .filter(|b| b.key.dataset as usize == di)
             .map(|b| Block {

@@ -105,6 +105,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         warmup: WarmupName::HoldZero,
         delta_theta_offset_motor_rad: None,
         motor_encoder: encoder,
+        speed_current_limit: None,
         ood: OodMode::default(),
         ood_margin: default_ood_margin(),
         ood_ramp_ms: default_ood_ramp_ms(),
