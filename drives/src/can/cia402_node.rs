@@ -38,7 +38,7 @@ struct Entry {
 }
 
 /// Frames a call produced (at most 8).
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Out {
     frames: [WireFrame; 8],
     n: usize,
