@@ -28,7 +28,7 @@
 //!     revolution, velocity 0x606C in increments/s, torque 0x6077 from the measured current, the
 //!     joint-side encoder 0x60E4:01 in [`CIA402_JOINT_COUNTS_PER_REV`] increments per joint
 //!     revolution, temperature 0x2031:01 in m°C. No command timeout (the drive's own RPDO or
-//!     heartbeat-consumer supervision is not emulated). `config/cia402_joint.eds` lists its objects.
+//!     heartbeat-consumer supervision is not emulated).
 //! - [`run`] / [`run_with_stats`] / [`serve_socket`]: the 1 kHz real-time loop on absolute deadlines
 //!   (like the shared-memory plant): between ticks it waits on the socket (`ppoll`, ns timeout) and
 //!   answers frames as they arrive; every tick it steps each plant 1 ms with the drive's current.
