@@ -1,8 +1,7 @@
 //! [`Cia402Node`]: a socket-free emulated CiA 402 drive (the slave side), for the plant's
 //! `frictl sim serve --backend can --protocol cia402` and for tests of the master.
 //!
-//! What it **is**: a fixed object dictionary ([`Cia402Node::new`] lists it; `config/cia402_joint.eds`
-//! describes the same objects for other CANopen stacks), the NMT slave (boot-up, pre-operational,
+//! What it **is**: a fixed object dictionary ([`Cia402Node::new`] lists it), the NMT slave (boot-up, pre-operational,
 //! operational, stopped; PDOs only when operational, SDO in pre-operational and operational), an SDO
 //! server (expedited download and upload, segmented upload of 0x1008; everything else aborts with
 //! the CiA 301 code), PDOs that follow the mapping the master wrote into the dictionary (RPDOs
@@ -38,7 +37,7 @@ struct Entry {
 }
 
 /// Frames a call produced (at most 8).
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Out {
     frames: [WireFrame; 8],
     n: usize,

@@ -75,7 +75,7 @@ pub enum SimCommand {
     /// Prints "ready" on stderr once the services are open and a one-line summary at exit
     /// (SIGINT/SIGTERM or --duration-s). Removes dead iceoryx2 nodes under the root at start.
     ///
-    /// `--backend can`: the joints answer as motor drives on --bus (MIT or ODrive protocol,
+    /// `--backend can`: the joints answer as motor drives on --bus (MIT, ODrive or CiA 402 protocol,
     /// node ids --node-ids).
     Serve(Box<ServeArgs>),
 }

@@ -117,6 +117,7 @@ fn start(
                     .iter()
                     .map(|&n| CanFilter::new(u32::from(n) << 5, 0x7E0))
                     .collect(),
+                Protocol::Cia402 => panic!("this harness speaks MIT and ODrive only"),
             };
             host.set_filters(&filters).unwrap();
             let _ = host.set_socket_option_int(libc::SOL_SOCKET, libc::SO_RCVBUFFORCE, 4 << 20);
@@ -705,6 +706,7 @@ fn vcan_bench_can_io() {
         let (host, emu) = start(Link::Vcan("vcan0"), presets, protocol, &nodes, 500);
         let mut buf = Vec::with_capacity(256);
         match protocol {
+            Protocol::Cia402 => panic!("this harness speaks MIT and ODrive only"),
             Protocol::Mit => mit_enter(&host, &nodes),
             Protocol::Odrive => {
                 for &n in &nodes {
@@ -737,6 +739,7 @@ fn vcan_bench_can_io() {
             .zip(&ranges)
             .map(|(&n, r)| {
                 let f = match protocol {
+                    Protocol::Cia402 => panic!("this harness speaks MIT and ODrive only"),
                     Protocol::Mit => {
                         mit::encode_command(u32::from(n), &MitCommand::torque(0.0), r)
                             .unwrap()

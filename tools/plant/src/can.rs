@@ -20,6 +20,15 @@
 //!     idles (0 A) like a real drive: MIT leaves motor mode, ODrive goes IDLE with
 //!     `AXIS_ERROR_WATCHDOG_TIMER_EXPIRED`. It re-enters on the next enable (MIT enter-motor-mode
 //!     frame, ODrive Set_Axis_State 8); commands before that are answered but not applied.
+//!   - **CiA 402** over CANopen ([`frictionless_drives::can::cia402_node::Cia402Node`]: object
+//!     dictionary, NMT slave, SDO server, SYNC-driven PDOs, EMCY, heartbeat): the drive boots into
+//!     pre-operational at start; in operation enabled it applies CST target torque 0x6071 (+ torque
+//!     offset 0x60B2; CSP / CSV: only 0x60B2) as motor torque, in ‰ of its rated torque 0x6076 =
+//!     k_t·i_max (0x6072 = 1000 ‰). Position 0x6064 in [`CIA402_COUNTS_PER_REV`] increments per motor
+//!     revolution, velocity 0x606C in increments/s, torque 0x6077 from the measured current, the
+//!     joint-side encoder 0x60E4:01 in [`CIA402_JOINT_COUNTS_PER_REV`] increments per joint
+//!     revolution, temperature 0x2031:01 in m°C. No command timeout (the drive's own RPDO or
+//!     heartbeat-consumer supervision is not emulated).
 //! - [`run`] / [`run_with_stats`] / [`serve_socket`]: the 1 kHz real-time loop on absolute deadlines
 //!   (like the shared-memory plant): between ticks it waits on the socket (`ppoll`, ns timeout) and
 //!   answers frames as they arrive; every tick it steps each plant 1 ms with the drive's current.
@@ -41,6 +50,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use frictionless_drives::can::WireFrame;
+use frictionless_drives::can::cia402_node::{self, Cia402Node, NodeParams};
 use frictionless_drives::can::mit::{self, MitCommand, MitRanges, MitReply, MitRx, MitSpecial};
 use frictionless_drives::can::odrive::{self, OdriveMsg};
 use socketcan::{CanFilter, CanFrame, CanSocket, Socket, SocketOptions};
@@ -66,6 +76,10 @@ pub const AXIS_ERROR_ESTOP_REQUESTED: u32 = 0x0000_4000;
 pub const CONTROL_MODE_POSITION: i32 = 3;
 /// A queued frame older than this many ticks is dropped (and counted) instead of sent late.
 pub const TX_MAX_AGE_TICKS: u64 = 2;
+/// CiA 402 emulated drive: 0x6064 increments per motor revolution (0x608F:01, 0x608F:02 = 1).
+pub const CIA402_COUNTS_PER_REV: u32 = 16384;
+/// CiA 402 emulated drive: 0x60E4:01 increments per joint revolution.
+pub const CIA402_JOINT_COUNTS_PER_REV: f64 = 524_288.0;
 /// Frames the transmit queue holds before dropping the oldest.
 const TX_QUEUE_CAP: usize = 64;
 /// Frames read per drain call at most (bounds the time spent before the next tick).
@@ -82,6 +96,8 @@ pub enum Protocol {
     Mit,
     /// ODrive "CAN Simple".
     Odrive,
+    /// CiA 402 over CANopen.
+    Cia402,
 }
 
 /// Options of [`run`] (`frictl sim serve --backend can …`).
@@ -163,6 +179,8 @@ pub enum FrameOutcome {
         /// The answer (MIT reply, ODrive RTR answer).
         reply: Option<WireFrame>,
     },
+    /// Handled by a CiA 402 node; the frames to send (SDO response, TPDOs after a SYNC, EMCY).
+    HandledMany(cia402_node::Out),
 }
 
 /// One emulated drive. Time is counted in ticks (1 ms).
@@ -184,6 +202,7 @@ pub struct Drive {
     zero_offset_rad: f64,
     i_ref_a: f64,
     timeouts: u64,
+    co: Option<Box<Cia402Node>>,
 }
 
 impl Drive {
@@ -208,8 +227,24 @@ impl Drive {
                     max: odrive::NODE_MAX,
                 });
             }
-            Protocol::Mit | Protocol::Odrive => {}
+            Protocol::Cia402 if node == 0 || node > 127 => {
+                return Err(ServeError::Cia402NodeRange { node });
+            }
+            Protocol::Mit | Protocol::Odrive | Protocol::Cia402 => {}
         }
+        let co = if protocol == Protocol::Cia402 {
+            let rated = (p.kt_nm_per_a * p.i_max_a * 1000.0).round().max(1.0) as u32;
+            let n = Cia402Node::new(&NodeParams {
+                node,
+                rated_torque_mnm: rated,
+                max_torque_permille: 1000,
+                counts_per_rev: CIA402_COUNTS_PER_REV,
+            })
+            .map_err(|_| ServeError::Cia402NodeRange { node })?;
+            Some(Box::new(n))
+        } else {
+            None
+        };
         let ranges = mit_ranges(p);
         ranges.validate().map_err(|source| ServeError::MitRanges {
             joint: p.joint.clone(),
@@ -232,7 +267,31 @@ impl Drive {
             zero_offset_rad: 0.0,
             i_ref_a: 0.0,
             timeouts: 0,
+            co,
         })
+    }
+
+    /// The CiA 402 node (CiA 402 drives only).
+    pub fn cia402(&self) -> Option<&Cia402Node> {
+        self.co.as_deref()
+    }
+
+    /// Faults a CiA 402 drive with EMCY `code` (returns the EMCY frame; `None` for other protocols).
+    pub fn cia402_fault(&mut self, code: u16) -> Option<WireFrame> {
+        self.co.as_mut().and_then(|n| n.inject_fault(code).ok())
+    }
+
+    /// The kernel filters for the ids this drive receives (CiA 402: its node's ids, and NMT and
+    /// SYNC, which are for every node).
+    pub fn filters(&self) -> Vec<CanFilter> {
+        match self.protocol {
+            Protocol::Cia402 => vec![
+                CanFilter::new(u32::from(self.node), 0x7F),
+                CanFilter::new(0x000, 0x7FF),
+                CanFilter::new(0x080, 0x7FF),
+            ],
+            _ => vec![self.filter()],
+        }
     }
 
     /// Node id.
@@ -245,9 +304,12 @@ impl Drive {
         &self.ranges
     }
 
-    /// Whether the drive is in motor mode (MIT) / CLOSED_LOOP_CONTROL (ODrive).
+    /// Whether the drive is in motor mode (MIT) / CLOSED_LOOP_CONTROL (ODrive) / operation enabled
+    /// (CiA 402).
     pub fn enabled(&self) -> bool {
-        self.enabled
+        self.co.as_deref().map_or(self.enabled, |n| {
+            n.state() == frictionless_drives::can::cia402::DriveState::OperationEnabled
+        })
     }
 
     /// ODrive axis error bits (0 for MIT).
@@ -270,6 +332,7 @@ impl Drive {
         match self.protocol {
             Protocol::Mit => CanFilter::new(u32::from(self.node), 0x7FF),
             Protocol::Odrive => CanFilter::new(u32::from(self.node) << 5, 0x7E0),
+            Protocol::Cia402 => CanFilter::new(u32::from(self.node), 0x7F),
         }
     }
 
@@ -281,7 +344,54 @@ impl Drive {
         match self.protocol {
             Protocol::Mit => f.id == u32::from(self.node),
             Protocol::Odrive => f.id <= 0x7FF && odrive::split_id(f.id).0 == self.node,
+            Protocol::Cia402 => {
+                use frictionless_drives::can::cia402::{CobKind, classify};
+                match classify(f.id) {
+                    CobKind::Nmt | CobKind::Sync => true,
+                    CobKind::SdoRequest(n) | CobKind::Rpdo(_, n) => n == self.node,
+                    _ => false,
+                }
+            }
         }
+    }
+
+    /// Whether a frame goes to every drive on the bus (CiA 402 NMT and SYNC).
+    pub fn is_broadcast(&self, f: &WireFrame) -> bool {
+        self.protocol == Protocol::Cia402 && !f.extended && (f.id == 0x000 || f.id == 0x080)
+    }
+
+    fn on_cia402(&mut self, f: &WireFrame, meas: &Measurement) -> FrameOutcome {
+        let Some(n) = self.co.as_deref_mut() else {
+            return FrameOutcome::Rejected;
+        };
+        if f.id == 0x080 {
+            // The TPDOs of this SYNC carry the latest measurement.
+            let cpr = f64::from(CIA402_COUNTS_PER_REV);
+            let counts = |rad: f64, per_rev: f64| {
+                (rad * per_rev / std::f64::consts::TAU)
+                    .round()
+                    .clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
+            };
+            let rated = f64::from(n.rated_torque_mnm()) / 1000.0;
+            let pm = (meas.i_meas_a * self.kt_nm_per_a / rated * 1000.0)
+                .round()
+                .clamp(-32767.0, 32767.0) as i16;
+            let temp_mc = (meas.temperature_c * 1000.0)
+                .round()
+                .clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32;
+            n.set_feedback(
+                counts(meas.theta_motor_rad, cpr),
+                counts(meas.omega_motor_rad_s, cpr),
+                pm,
+                counts(meas.s_rad, CIA402_JOINT_COUNTS_PER_REV),
+                if meas.temperature_c.is_finite() {
+                    temp_mc
+                } else {
+                    0
+                },
+            );
+        }
+        FrameOutcome::HandledMany(n.on_frame(f))
     }
 
     fn feed(&mut self, tick: u64) {
@@ -296,6 +406,7 @@ impl Drive {
         match self.protocol {
             Protocol::Mit => self.on_mit(f, meas, tick),
             Protocol::Odrive => self.on_odrive(f, meas, tick),
+            Protocol::Cia402 => self.on_cia402(f, meas),
         }
     }
 
@@ -443,9 +554,10 @@ impl Drive {
                     self.axis_error |= AXIS_ERROR_WATCHDOG_TIMER_EXPIRED;
                     self.odrive_torque_nm = 0.0;
                 }
+                Protocol::Cia402 => {}
             }
         }
-        let tau_motor_nm = if !self.enabled {
+        let tau_motor_nm = if !self.enabled() {
             0.0
         } else {
             match self.protocol {
@@ -460,6 +572,9 @@ impl Drive {
                     self.odrive_torque_nm
                 }
                 Protocol::Odrive => 0.0,
+                Protocol::Cia402 => self.co.as_deref().map_or(0.0, |n| {
+                    f64::from(n.applied_torque_permille()) * f64::from(n.rated_torque_mnm()) / 1e6
+                }),
             }
         };
         let i = tau_motor_nm / self.kt_nm_per_a;
@@ -471,8 +586,18 @@ impl Drive {
         self.i_ref_a
     }
 
-    /// Frames the drive sends by itself after tick `tick` (ODrive cyclic messages; none for MIT).
-    pub fn cyclic(&self, meas: &Measurement, tick: u64, mut out: impl FnMut(WireFrame)) {
+    /// Frames the drive sends by itself after tick `tick` (ODrive cyclic messages; CiA 402 boot-up
+    /// on the first tick, then its heartbeat; none for MIT).
+    pub fn cyclic(&mut self, meas: &Measurement, tick: u64, mut out: impl FnMut(WireFrame)) {
+        if let Some(n) = self.co.as_deref_mut() {
+            if n.nmt() == frictionless_drives::can::cia402::NmtState::BootUp
+                && let Ok(f) = n.boot()
+            {
+                out(f);
+            }
+            n.tick_ms().frames().iter().for_each(|f| out(*f));
+            return;
+        }
         if self.protocol != Protocol::Odrive {
             return;
         }
@@ -563,7 +688,7 @@ pub fn run_with_stats(
         bus: opts.bus.clone(),
         source,
     })?;
-    let filters: Vec<CanFilter> = drives.iter().map(Drive::filter).collect();
+    let filters: Vec<CanFilter> = drives.iter().flat_map(Drive::filters).collect();
     sock.set_filters(&filters)
         .map_err(|source| ServeError::SetFilters {
             bus: opts.bus.clone(),
@@ -698,6 +823,7 @@ fn drain_rx(
         };
         let mut mine = false;
         for (d, m) in drives.iter_mut().zip(meas) {
+            let broadcast = d.is_broadcast(&wf);
             match d.on_frame(&wf, m, tick) {
                 FrameOutcome::NotMine => continue,
                 FrameOutcome::Rejected => st.rx_decode_errors += 1,
@@ -706,9 +832,16 @@ fn drain_rx(
                         tx.send(sock, r, tick, st);
                     }
                 }
+                FrameOutcome::HandledMany(out) => {
+                    for r in out.frames() {
+                        tx.send(sock, *r, tick, st);
+                    }
+                }
             }
             mine = true;
-            break;
+            if !broadcast {
+                break;
+            }
         }
         if mine {
             st.rx_frames += 1;
@@ -804,7 +937,7 @@ fn serve_drives(
             *m = robot.measurement(k);
         }
         tick += 1;
-        for (d, m) in drives.iter().zip(&meas) {
+        for (d, m) in drives.iter_mut().zip(&meas) {
             d.cyclic(m, tick, |f| tx.send(sock, f, tick, &mut st));
         }
         st.ticks += 1;
@@ -1082,5 +1215,83 @@ mod tests {
         assert!(Drive::new(Protocol::Mit, 0, &p, 20).is_err());
         assert!(Drive::new(Protocol::Odrive, 64, &p, 20).is_err());
         assert!(Drive::new(Protocol::Odrive, 63, &p, 20).is_ok());
+    }
+
+    #[test]
+    fn cia402_drive_boots_takes_sdo_and_applies_cst_torque_at_sync() {
+        use frictionless_drives::can::cia402::{self as co, DriveState, NmtCommand, SdoAddr};
+        let p = PlantParams::preset("knee").unwrap();
+        let mut d = Drive::new(Protocol::Cia402, 5, &p, 0).unwrap();
+        let m = Measurement {
+            time_s: 0.0,
+            s_rad: 0.25,
+            theta_motor_rad: std::f64::consts::PI,
+            omega_motor_rad_s: 1.0,
+            i_meas_a: 0.5,
+            temperature_c: 40.0,
+        };
+        let mut sent = Vec::new();
+        d.cyclic(&m, 1, |f| sent.push(f));
+        assert_eq!(sent[0].id, 0x705, "boot-up");
+        assert_eq!(sent[0].data[0], 0);
+        let handle = |d: &mut Drive, f: WireFrame| match d.on_frame(&f, &m, 1) {
+            FrameOutcome::HandledMany(out) => out.frames().to_vec(),
+            other => panic!("{other:?}"),
+        };
+        let ack = handle(
+            &mut d,
+            co::encode_sdo_request(
+                5,
+                &co::sdo_download(SdoAddr::new(0x6060, 0), 10, 1).unwrap(),
+            )
+            .unwrap(),
+        );
+        assert_eq!(ack[0].id, 0x585);
+        handle(&mut d, co::encode_nmt(NmtCommand::Start, 0).unwrap());
+        let rated = (p.kt_nm_per_a * p.i_max_a * 1000.0).round();
+        let rmap = co::PdoMap::new(&[
+            co::PdoEntry::new(0x6040, 0, 16),
+            co::PdoEntry::new(0x6071, 0, 16),
+        ])
+        .unwrap();
+        let mut tpdo1 = Vec::new();
+        for cw in [0x06, 0x07, 0x0F] {
+            handle(&mut d, co::encode_pdo(0x205, &rmap, &[cw, 500]).unwrap());
+            tpdo1 = handle(&mut d, co::encode_sync(None));
+        }
+        assert!(d.enabled());
+        assert_eq!(d.cia402().unwrap().state(), DriveState::OperationEnabled);
+        // 500 ‰ of the rated torque k_t·i_max → i_max / 2.
+        let i = d.current_a(&m, 2);
+        assert!(
+            (i - 0.5 * rated / 1000.0 / p.kt_nm_per_a).abs() < 1e-9,
+            "{i}"
+        );
+        // The TPDOs carry the measurement: π rad = half a revolution of 16384 increments.
+        let mut raw = [0u32; 8];
+        let t1 = co::PdoMap::new(&[
+            co::PdoEntry::new(0x6041, 0, 16),
+            co::PdoEntry::new(0x6064, 0, 32),
+            co::PdoEntry::new(0x6077, 0, 16),
+        ])
+        .unwrap();
+        co::decode_pdo(&tpdo1[0], &t1, &mut raw).unwrap();
+        assert_eq!(raw[1], 8192);
+        let pm = (0.5 * p.kt_nm_per_a / (rated / 1000.0) * 1000.0).round();
+        assert_eq!(co::sign_extend(raw[2], 16), pm as i32);
+        // NMT and SYNC go to every drive on the bus.
+        assert!(d.is_broadcast(&co::encode_sync(None)));
+        assert!(
+            !d.owns(
+                &co::encode_sdo_request(
+                    6,
+                    &co::SdoRequest::Upload {
+                        addr: SdoAddr::new(0x1000, 0)
+                    }
+                )
+                .unwrap()
+            )
+        );
+        assert!(Drive::new(Protocol::Cia402, 0, &p, 0).is_err());
     }
 }

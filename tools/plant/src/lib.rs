@@ -147,6 +147,12 @@ pub enum ServeError {
         /// The largest ODrive node id.
         max: u8,
     },
+    /// A CiA 402 node id outside 1..=127.
+    #[error("CiA 402 node id {node} out of range 1..=127")]
+    Cia402NodeRange {
+        /// The node id.
+        node: u8,
+    },
     /// The MIT ranges derived from a joint's parameters are not encodable.
     #[error("MIT ranges of joint `{joint}`")]
     MitRanges {
