@@ -148,7 +148,9 @@ sigma1 = 1.0
     let mut plant = Plant::open(&env.ipc, "plant");
     // Runtime sets arrive all along (kfc and the compensation switch, between every two steps):
     // checked by the supervisor, applied by the RT thread at its tick boundaries.
-    let (_ctl_node, ctl) = crate::daemon_control::connect(&env, "knee");
+    // Not waited for: the plant must connect before counting starts (below).
+    let ctl_node = frictionless_shm_types::Ipc::open(&env.ipc, "ctl").unwrap();
+    let ctl = ctl_node.control_client().unwrap();
     let mut sets = 0u64;
     let mut js = JointStates::zeroed();
     js.n_joints = 4;
@@ -182,9 +184,16 @@ sigma1 = 1.0
             2 => ("ankle", "compensation", "off"),
             _ => ("ankle", "compensation", "on"),
         };
-        let r = crate::daemon_control::set(&ctl, joint, key, value);
-        assert_eq!(r.status, 0, "{}", r.message());
-        sets += 1;
+        let req = frictionless_shm_types::control::ControlRequest::set(joint, key, value).unwrap();
+        match ctl.call(&req, T) {
+            Ok(r) => {
+                assert_eq!(r.status, 0, "{}", r.message());
+                sets += 1;
+            }
+            // Before the daemon's control server is up a request finds no server at once.
+            Err(e) if sets == 0 => assert!(e.to_string().contains("no server"), "{e}"),
+            Err(e) => panic!("after {sets} sets: {e}"),
+        }
         std::thread::sleep(Duration::from_millis(1));
         if let Some(s) = plant.status.latest().unwrap() {
             ood_seen = ood_seen.max(s.out_of_range_ticks[2]);
