@@ -473,37 +473,55 @@ fn drift_monitor(
     Ok(drift::report(out, o))
 }
 
-/// The time blocks of the training report's split ([`frictionless_train::data::Block`]) per evaluated
-/// dataset (matched like `eval::test_chunks_from_report`: by SHA-256, else by path); empty lists when
-/// the split is by chunks.
+/// The time blocks of the training report's split ([`frictionless_train::data::Block`], key
+/// `split.blocks`) per evaluated dataset (matched like `eval::test_chunks_from_report`: by SHA-256,
+/// else by path); empty lists when the split is by chunks (no key).
 fn report_blocks(
     report: &std::path::Path,
     datasets: &[PathBuf],
 ) -> anyhow::Result<Vec<Vec<frictionless_train::data::Block>>> {
+    use frictionless_train::data::{Block, ChunkKey};
+    let mut out = vec![Vec::new(); datasets.len()];
     let text = frictionless::regular_file::read_text(report)
         .with_context(|| format!("--train-report {}", report.display()))?;
-    let r: frictionless_train::pipeline::TrainReport = serde_json::from_str(&text)
-        .with_context(|| format!("--train-report {}: not a train report", report.display()))?;
-    let mut out = vec![Vec::new(); datasets.len()];
+    let v: serde_json::Value = serde_json::from_str(&text)
+        .with_context(|| format!("--train-report {}: not JSON", report.display()))?;
+    let Some(blocks) = v.pointer("/split/blocks") else {
+        return Ok(out);
+    };
+    let blocks: Vec<Block> = serde_json::from_value(blocks.clone()).with_context(|| {
+        format!(
+            "--train-report {}: key `split.blocks` is not a list of blocks",
+            report.display()
+        )
+    })?;
+    let rep_ds = v
+        .get("datasets")
+        .and_then(serde_json::Value::as_array)
+        .cloned()
+        .unwrap_or_default();
+    let field =
+        |d: &serde_json::Value, k: &str| d.get(k).and_then(|x| x.as_str()).map(str::to_owned);
     for (i, d) in datasets.iter().enumerate() {
         let sha = frictionless_dataset::file_sha256_hex(d)
             .with_context(|| format!("cannot read {}", d.display()))?;
         let path = d.display().to_string();
-        let Some(di) = r
-            .datasets
+        let Some(di) = rep_ds
             .iter()
-            .position(|rd| rd.sha256 == sha)
-            .or_else(|| r.datasets.iter().position(|rd| rd.path == path))
+            .position(|rd| field(rd, "sha256").as_deref() == Some(sha.as_str()))
+            .or_else(|| {
+                rep_ds
+                    .iter()
+                    .position(|rd| field(rd, "path").as_deref() == Some(path.as_str()))
+            })
         else {
             continue;
         };
-        out[i] = r
-            .split
-            .blocks
+        out[i] = blocks
             .iter()
             .filter(|b| b.key.dataset as usize == di)
-            .map(|b| frictionless_train::data::Block {
-                key: frictionless_train::data::ChunkKey {
+            .map(|b| Block {
+                key: ChunkKey {
                     dataset: i as u32,
                     chunk: b.key.chunk,
                 },
