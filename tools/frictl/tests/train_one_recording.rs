@@ -497,3 +497,73 @@ fn frictl_config_writes_checked_joints_for_pinns_and_fits() {
     assert!(e.contains("--joint"), "{e}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A log with the motor angle imported without `--gear-ratio` (Δθ = r·s − θ needs r) is refused
+/// naming the flag (it said "`gear_ratio_signed` = NaN is invalid"); without the motor angle r is
+/// not needed and a set without Δθ trains on the import.
+#[test]
+fn a_log_with_a_motor_angle_and_no_gear_ratio_is_refused_naming_the_flag() {
+    let dir = scratch("frictl-no-gear-ratio");
+    let log = dir.join("log.csv");
+    let mut text = String::from("t,q,qd,friction,theta\n");
+    for k in 0..3000 {
+        let t = k as f64 * 1e-3;
+        let (q, v) = (0.4 * (2.0 * t).sin(), 0.8 * (2.0 * t).cos());
+        let f = 0.3 * (50.0 * v).tanh() + 0.2 * v;
+        text += &format!("{t},{q},{v},{f},{}\n", 100.0 * q);
+    }
+    std::fs::write(&log, text).unwrap();
+    let ds = dir.join("ds.csv");
+    let import = |extra: &[&str]| {
+        let base = [
+            "import",
+            "csv",
+            s(&log),
+            "--joint",
+            "r_wrist",
+            "--column",
+            "time=t",
+            "--column",
+            "s=q",
+            "--column",
+            "sdot=qd",
+            "--column",
+            "tau_f=friction",
+            "-o",
+            s(&ds),
+        ];
+        frictl(&[&base[..], extra].concat())
+    };
+    // With the motor angle, Δθ needs r: the missing flag is named.
+    let e = err_text(
+        import(&["--column", "theta=theta"]),
+        "θ without --gear-ratio",
+    );
+    assert!(e.contains("--gear-ratio is not given"), "{e}");
+    crate::util::ok(import(&[]), "import without θ");
+    let cv = dir.join("cv.json");
+    ok(&["fit", "cv", s(&ds), "--json", s(&cv)]);
+    let model = dir.join("m.fwt");
+    let base = [
+        "train",
+        "--dataset",
+        s(&ds),
+        "--scv",
+        s(&cv),
+        "--out",
+        s(&model),
+        "--hidden",
+        "8",
+        "--history",
+        "4",
+        "--epochs",
+        "1",
+        "--val-frac",
+        "0",
+        "--test-frac",
+        "0",
+        "--quiet",
+    ];
+    ok(&[&base[..], &["--features", "joint-pos-joint-vel"]].concat());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

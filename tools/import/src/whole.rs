@@ -433,17 +433,19 @@ fn finish(
                 state: r.state,
             })
             .collect();
-        let results = preprocess_joints(&subset, batch, dyn_).with_context(|| {
-            format!(
-                "labelling {} ({label:?} label needs: {})",
-                files
-                    .iter()
-                    .map(|f| f.display().to_string())
-                    .collect::<Vec<_>>()
-                    .join(", "),
-                required_signals(label).join(", ")
-            )
-        })?;
+        let results = preprocess_joints(&subset, batch, dyn_)
+            .map_err(name_the_flag)
+            .with_context(|| {
+                format!(
+                    "labelling {} ({label:?} label needs: {})",
+                    files
+                        .iter()
+                        .map(|f| f.display().to_string())
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                    required_signals(label).join(", ")
+                )
+            })?;
         for (jl, (ds, sum)) in batch.iter().zip(results) {
             if ds.is_empty() {
                 empty.push(jl.joint.clone());
@@ -650,6 +652,29 @@ pub(crate) fn plan_warnings(plan: &frictionless_ident::preprocess::StatePlan) ->
         ));
     }
     out
+}
+
+/// A gear ratio or torque constant the labelling needs but the command line did not give
+/// (NaN in the settings) is reported as the missing flag.
+fn name_the_flag(e: frictionless_ident::preprocess::PreprocessError) -> anyhow::Error {
+    use frictionless_ident::preprocess::PreprocessError as P;
+    match e {
+        P::Config {
+            name,
+            value,
+            requirement,
+        } if value.is_nan() && matches!(name, "gear_ratio_signed" | "kt_nm_per_a") => {
+            let (flag, what) = if name == "gear_ratio_signed" {
+                ("--gear-ratio", "R (signed)")
+            } else {
+                ("--kt", "KT [Nm/A]")
+            };
+            anyhow::anyhow!(
+                "{flag} is not given, and it is needed: {name} must be {requirement}; give `{flag} {what}` (or `NAME={what}` per joint)"
+            )
+        }
+        e => e.into(),
+    }
 }
 
 /// Each joint's label settings: the pipeline options, the gear ratio and torque constant.
