@@ -17,6 +17,7 @@
 pub mod acquire;
 pub mod can;
 pub mod convert;
+pub mod count;
 pub mod demo;
 pub mod distill;
 pub mod dynamics;
