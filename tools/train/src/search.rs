@@ -152,7 +152,7 @@ impl SearchSpace {
             ),
         ];
         for (flag, [lo, hi], ends, set) in ranges {
-            if !(ends[0] <= ends[1]) {
+            if ends[0].partial_cmp(&ends[1]).is_none_or(|o| o.is_gt()) {
                 return Err(usage(
                     flag,
                     &lo,
