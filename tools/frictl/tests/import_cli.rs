@@ -2384,5 +2384,51 @@ fn the_other_joints_positions_are_checked_against_the_urdf_before_labelling() {
         "a missing --base-quat column",
     );
     assert!(err.contains("column `qx` (of --base-quat)"), "{err}");
+    // An all-zero base quaternion is named as such (before: "check the units and --gap-s").
+    let quat = d.join("quat0.csv");
+    let mut out = format!("{header},qx,qy,qz,qw\n");
+    for l in text.lines().skip(1) {
+        out.push_str(l);
+        out.push_str(",0,0,0,0\n");
+    }
+    std::fs::write(&quat, out).unwrap();
+    let err = err_text(
+        frictl(&[
+            "import",
+            "csv",
+            s(&quat),
+            "--label",
+            "current",
+            "--joint",
+            "l_knee",
+            "--column",
+            "time=time_s",
+            "--column",
+            "s=q_{joint}",
+            "--column",
+            "current=i_{joint}",
+            "--column",
+            "theta=theta_{joint}",
+            "--column",
+            "omega=omega_{joint}",
+            "--gear-ratio",
+            &r,
+            "--kt",
+            &kt,
+            "--urdf",
+            s(&urdf),
+            "--positions",
+            "q_{joint}",
+            "--base-quat",
+            "qx,qy,qz,qw",
+            "-o",
+            s(&d.join("quat0_out.csv")),
+        ]),
+        "an all-zero base quaternion",
+    );
+    assert!(
+        err.contains("is not a rotation") && err.contains("norm 0.000"),
+        "{err}"
+    );
     std::fs::remove_dir_all(&d).unwrap();
 }

@@ -743,6 +743,22 @@ pub(crate) fn state_plausibility(
     for r in runs {
         let Some(st) = &r.state else { continue };
         let t = &r.signals.time_s;
+        if let Some(qs) = &st.base_quat_xyzw
+            && let Some(k) = (0..qs[0].len()).find(|&k| {
+                let n2: f64 = qs.iter().map(|c| c[k] * c[k]).sum();
+                !(0.25..=4.0).contains(&n2)
+            })
+        {
+            let q: Vec<f64> = qs.iter().map(|c| c[k]).collect();
+            bail!(
+                "{}: the base orientation quaternion [x, y, z, w] = {q:?} at t = {:.3} s is not a \
+                 rotation (norm {:.3}, a unit quaternion has 1): check the orientation columns \
+                 and their order x, y, z, w",
+                r.report.source,
+                t.get(k).copied().unwrap_or(f64::NAN),
+                q.iter().map(|v| v * v).sum::<f64>().sqrt()
+            );
+        }
         for (name, q) in st.names.iter().zip(&st.q) {
             let Ok(j) = robot.joint_index(name) else {
                 continue;
