@@ -39,7 +39,7 @@ pub struct Args {
     #[arg(long)]
     pub dataset: Option<PathBuf>,
     /// Number of random probe inputs (inside the training range).
-    #[arg(long, default_value_t = 1000)]
+    #[arg(long, default_value_t = 1000, value_parser = crate::count::probes)]
     pub samples: usize,
     /// Seed of the random probe inputs.
     #[arg(long, default_value_t = 1)]

@@ -84,7 +84,7 @@ pub struct Args {
     pub datasets: Vec<PathBuf>,
     /// Distil without data: this many training probes inside the teacher's stored input range (and a
     /// quarter as many for validation and for the gate), gated by `--max-rmse-nm`.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", value_parser = crate::count::probes)]
     pub probes_only: Option<usize>,
     /// The gate of `--probes-only`: the student's output RMSE against the teacher on the gate probes
     /// must be ≤ this [Nm].
@@ -116,7 +116,7 @@ pub struct Args {
     #[arg(long, default_value_t = 0.5)]
     pub teacher_weight: f32,
     /// Probe inputs drawn inside the teacher's input range (default: a quarter of the training rows).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::count::probes)]
     pub probes: Option<usize>,
     /// How probes are drawn inside the teacher's input range: `uniform` (each input alone) or
     /// `trajectory` (each feature block the history of a smooth signal, as the daemon feeds it;

@@ -78,7 +78,10 @@ pub struct Args {
     pub robot: RobotSel,
     /// `--robot leg`: a compensation per frictiond config, `LABEL=FILE`, comma-separated (each leg
     /// joint runs the model of the config's joint of the same name, none if not listed; e.g. the
-    /// config `frictl robot run` writes). `none` always runs; `--model oracle` adds the oracle.
+    /// config `frictl robot run` writes; a config naming no leg joint is refused). Each label is one
+    /// row of the report: non-empty, given once, not `none` (always runs) or `oracle` (`--model
+    /// oracle` adds it). Only with `--robot leg`, which takes no `--joint`, `--cv`, `--scv`,
+    /// `--pinn` and no `--model` but `oracle`.
     #[arg(long, value_delimiter = ',')]
     pub leg_config: Vec<String>,
     /// `--robot leg`: the joints not under test move on sines of this amplitude [rad] at 0.3 Hz

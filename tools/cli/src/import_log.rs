@@ -131,7 +131,7 @@ pub struct CsvArgs {
     /// Stream the log: read and label it in windows of this many grid samples (plus margins the
     /// smoother and filter settings need), appending each joint's rows as they come; the log is
     /// never held whole and the rows equal the whole-log import's.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", value_parser = crate::count::window_samples)]
     pub window_samples: Option<usize>,
     /// Options every format shares.
     #[command(flatten)]
@@ -170,7 +170,7 @@ pub struct McapArgs {
     /// Stream the bag: read and label it in windows of this many grid samples (see `import csv`).
     /// The first JointState message then decides which of position, velocity and effort are read;
     /// a later message that lacks one of them is an error.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", value_parser = crate::count::window_samples)]
     pub window_samples: Option<usize>,
     /// Options every format shares.
     #[command(flatten)]
@@ -209,7 +209,7 @@ pub struct MatArgs {
     #[arg(long)]
     pub logged_derivatives: bool,
     /// Stream the log: read and label it in windows of this many grid samples (see `import csv`).
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", value_parser = crate::count::window_samples)]
     pub window_samples: Option<usize>,
     /// Options every format shares.
     #[command(flatten)]

@@ -18,6 +18,7 @@ pub mod acquire;
 pub mod can;
 pub mod config;
 pub mod convert;
+pub mod count;
 pub mod ctl;
 pub mod demo;
 pub mod distill;

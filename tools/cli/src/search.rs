@@ -26,7 +26,7 @@ pub struct Args {
     #[arg(long)]
     pub scv: PathBuf,
     /// Number of trials (trial indices 0..N).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::count::trials)]
     pub trials: usize,
     /// Output directory.
     #[arg(long)]
@@ -43,7 +43,8 @@ pub struct Args {
     /// Search seed: the split and every trial's hyper-parameters and training seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Continue the search in --out (skips trials already in results.jsonl; --trials may grow).
+    /// Continue the search in --out (skips trials recorded ok in results.jsonl, runs the failed ones
+    /// again; --trials may grow).
     #[arg(long)]
     pub resume: bool,
     /// Input feature set.
@@ -90,7 +91,7 @@ pub struct Args {
     pub quiet: bool,
     /// Run exactly these trials (comma separated indices < --trials) into --out, one after the other,
     /// each with --threads threads; appends to --out's results.jsonl (shared safely by several
-    /// processes on one file system), skips trials already there, writes no tables (`frictl search
+    /// processes on one file system), skips trials recorded ok there, writes no tables (`frictl search
     /// finish`). --out's search.json, when present, must match these settings.
     #[arg(long, value_delimiter = ',', value_name = "K,K,…")]
     pub only_trials: Option<Vec<usize>>,
@@ -126,7 +127,7 @@ pub enum Action {
         /// The search directory.
         dir: PathBuf,
         /// Only trials 0..N (default: every trial recorded).
-        #[arg(long)]
+        #[arg(long, value_parser = crate::count::trials)]
         trials: Option<usize>,
         /// Pick (pick.fwt) the fastest trial within this × the best validation RMSE.
         #[arg(long, default_value_t = 1.05)]

@@ -226,12 +226,24 @@ pub struct HeldOut {
 
 impl HeldOut {
     /// `--dataset` files followed by the `--test-dataset` files (the order of the loaded sources).
-    pub fn all_datasets(&self, datasets: &[PathBuf]) -> Vec<PathBuf> {
-        datasets
+    /// Refuses one file named twice (by device and inode, whatever the spelling): a repeated
+    /// `--dataset` would count its rows twice, a `--test-dataset` that is also a `--dataset` would
+    /// test on training rows. [`distinct_contents`] refuses copies once the files are read.
+    pub fn all_datasets(&self, datasets: &[PathBuf]) -> anyhow::Result<Vec<PathBuf>> {
+        use std::os::unix::fs::MetadataExt;
+        let id = |p: &PathBuf| std::fs::metadata(p).ok().map(|m| (m.dev(), m.ino()));
+        let all: Vec<(&str, &PathBuf)> = datasets
             .iter()
-            .chain(&self.test_datasets)
-            .cloned()
-            .collect()
+            .map(|p| ("--dataset", p))
+            .chain(self.test_datasets.iter().map(|p| ("--test-dataset", p)))
+            .collect();
+        for (k, (flag, p)) in all.iter().enumerate() {
+            let Some(i) = id(p) else { continue };
+            if let Some((first_flag, first)) = all[..k].iter().find(|(_, q)| id(q) == Some(i)) {
+                anyhow::bail!("{}", twice(flag, p, first_flag, first));
+            }
+        }
+        Ok(all.into_iter().map(|(_, p)| p.clone()).collect())
     }
 
     /// The test chunks: `--test-chunks` plus every chunk of the held-out runs and test datasets
@@ -253,6 +265,45 @@ impl HeldOut {
         keys.dedup();
         Ok(Some(keys))
     }
+}
+
+/// The message for a dataset given twice: `flag path` is `first_flag first`.
+fn twice(flag: &str, path: &std::path::Path, first_flag: &str, first: &std::path::Path) -> String {
+    let why = if flag == first_flag {
+        "its rows would count twice"
+    } else {
+        "the held-out rows would be training rows"
+    };
+    format!(
+        "{flag} {}: is the same data as {first_flag} {}; {why} (give each dataset once)",
+        path.display(),
+        first.display()
+    )
+}
+
+/// Refuses two loaded datasets with the same content (SHA-256), e.g. a copy given as
+/// `--test-dataset` of a `--dataset`; `n_train_datasets` = number of `--dataset` files (the rest are
+/// `--test-dataset`s).
+pub fn distinct_contents(
+    sources: &pipeline::Sources,
+    n_train_datasets: usize,
+) -> anyhow::Result<()> {
+    let flag = |k: usize| {
+        if k < n_train_datasets {
+            "--dataset"
+        } else {
+            "--test-dataset"
+        }
+    };
+    for (k, s) in sources.list.iter().enumerate() {
+        if let Some(j) = sources.list[..k].iter().position(|t| t.sha256 == s.sha256) {
+            anyhow::bail!(
+                "{}",
+                twice(flag(k), &s.path, flag(j), &sources.list[j].path)
+            );
+        }
+    }
+    Ok(())
 }
 
 /// Number of cores available to this process (≥ 1).

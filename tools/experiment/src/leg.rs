@@ -207,6 +207,14 @@ impl LegModel {
         let mut offsets = vec![None; leg.dof()];
         let mut kfc = vec![None; leg.dof()];
         let mut lpf = vec![None; leg.dof()];
+        if !cfg.raw.joint.iter().any(|raw| leg.index(&raw.name).is_ok()) {
+            let names = |v: Vec<&str>| v.join(", ");
+            return Err(ExperimentError::LegConfigNoJoint {
+                path: path.to_owned(),
+                joints: names(cfg.raw.joint.iter().map(|j| j.name.as_str()).collect()),
+                leg: names(leg.params.joints.iter().map(|p| p.joint.as_str()).collect()),
+            });
+        }
         for (raw, spec) in cfg.raw.joint.iter().zip(&cfg.models) {
             let Ok(i) = leg.index(&raw.name) else {
                 continue;

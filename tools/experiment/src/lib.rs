@@ -155,6 +155,20 @@ pub enum ExperimentError {
         #[source]
         source: Box<frictiond_config::ConfigError>,
     },
+    /// A leg compensation config none of whose joints is a joint of the leg (it would compensate
+    /// nothing under its label).
+    #[error(
+        "frictiond config {}: none of its joints ({joints}) is a joint of the leg ({leg}); it would run no compensation",
+        .path.display()
+    )]
+    LegConfigNoJoint {
+        /// The config file.
+        path: PathBuf,
+        /// Its joint names, comma separated.
+        joints: String,
+        /// The leg's joint names, comma separated.
+        leg: String,
+    },
     /// A leg compensation config with a model the experiments do not compare.
     #[error("frictiond config {}: joint `{joint}` runs LuGre; the leg experiments compare none, CV, SCV and PINN", .path.display())]
     LegModelKind {

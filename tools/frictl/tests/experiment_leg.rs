@@ -14,6 +14,8 @@
 
 use std::path::PathBuf;
 
+use crate::util::s;
+
 use frictionless::friction::{CvParams, ScvParams};
 use frictionless_experiment::controller::Reference;
 use frictionless_experiment::leg::{
@@ -209,4 +211,76 @@ fn leg_pinn_joints_in_frictiond_equal_offline_inference() {
         .map(|r| (k.s_des_rad[r] - k.s_rad[r]).abs())
         .fold(0.0, f64::max);
     assert!(err < 0.1, "knee max tracking error {err} rad");
+}
+
+/// `frictl experiment all --robot leg` refuses, before any trial, labels that would merge two
+/// models' rows (`none`, `oracle`, repeated, empty), a config that names no leg joint, options of the
+/// single joints and an unusable `--out` (before: merged rows, a silent run without compensation,
+/// ignored options, and an `--out` found unusable after the whole run).
+#[test]
+fn leg_options_that_would_merge_rows_or_be_ignored_are_refused_before_any_trial() {
+    let dir = crate::util::scratch("frictl-leg-options");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let config = |name: &str, joint: &str| {
+        let p = dir.join(name);
+        std::fs::write(
+            &p,
+            format!(
+                "[backend]\nkind = \"shm\"\n[[joint]]\nname = \"{joint}\"\nindex = 0\n\
+                 gear_ratio = -100.0\nkt = 0.157\nmax_curr = 5.0\nfriction_model = \"none\"\n"
+            ),
+        )
+        .unwrap();
+        p
+    };
+    let knee = config("knee.toml", "l_knee");
+    let other = config("other.toml", "r_wrist");
+    let out = dir.join("out");
+    let leg = |extra: &[&str]| {
+        let mut a = vec!["experiment", "all", "--robot", "leg", "--out", s(&out)];
+        a.extend_from_slice(extra);
+        crate::util::err_text(crate::util::frictl(&a), &format!("{extra:?}"))
+    };
+    let cfg = |label: &str, p: &std::path::Path| format!("{label}={}", p.display());
+    for (extra, says) in [
+        (vec![cfg("none", &knee)], "built-in row"),
+        (vec![cfg("oracle", &knee)], "built-in row"),
+        (vec![cfg("", &knee)], "non-empty label"),
+        (
+            vec![format!("{},{}", cfg("A", &knee), cfg("A", &knee))],
+            "given twice",
+        ),
+        (vec![cfg("W", &other)], "none of its joints (r_wrist)"),
+    ] {
+        let mut a = vec!["--leg-config"];
+        a.extend(extra.iter().map(String::as_str));
+        let err = leg(&a);
+        assert!(err.contains(says), "{extra:?}: {err}");
+    }
+    let err = leg(&["--joint", "knee"]);
+    assert!(err.contains("--joint"), "{err}");
+    let err = leg(&["--model", "scv"]);
+    assert!(err.contains("--model scv"), "{err}");
+    let err = crate::util::err_text(
+        crate::util::frictl(&[
+            "experiment",
+            "all",
+            "--leg-config",
+            &cfg("A", &knee),
+            "--out",
+            s(&out),
+        ]),
+        "--leg-config without --robot leg",
+    );
+    assert!(err.contains("only with --robot leg"), "{err}");
+    // An --out that is a file: refused up front.
+    let file = dir.join("a-file");
+    std::fs::write(&file, "").unwrap();
+    let err = crate::util::err_text(
+        crate::util::frictl(&["experiment", "all", "--robot", "leg", "--out", s(&file)]),
+        "--out over a file",
+    );
+    assert!(err.contains("--out") && err.contains("a-file"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
 }

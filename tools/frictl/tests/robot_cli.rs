@@ -454,6 +454,37 @@ fn sigterm_to_robot_run_ends_and_reaps_its_search_child() {
 }
 
 #[test]
+fn sigkill_of_robot_run_takes_its_search_child_and_a_rerun_owns_the_directory() {
+    // Before: the search child lived on under PID 1 and a rerun started a second search in the
+    // same directory.
+    let dir = tmp("robot-sigkill");
+    let (mut parent, search) = long_search(&dir);
+    parent.kill().unwrap();
+    let _ = parent.wait();
+    let gone = (0..2400).any(|_| {
+        std::thread::sleep(std::time::Duration::from_millis(50));
+        !alive(search)
+    });
+    if !gone {
+        let _ = nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(search as i32),
+            nix::sys::signal::Signal::SIGKILL,
+        );
+    }
+    assert!(
+        gone,
+        "the search child {search} outlived a SIGKILLed robot run"
+    );
+    // The locks went with both processes: a rerun proceeds.
+    let robot = dir.join("robot.toml");
+    ok_in(
+        &dir,
+        &["robot", "run", s(&robot), "--out", "o", "--until", "fit"],
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
 fn a_torque_sensed_joint_trains_on_joint_pos_joint_vel_with_temperature() {
     // No motor encoder: the dataset has s, ṡ and the temperature but no θ or ω.
     let dir = tmp("robot-torque-sensed");

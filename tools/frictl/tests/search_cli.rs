@@ -133,3 +133,137 @@ fn three_tiny_trials_then_resume() {
         "nothing left to run"
     );
 }
+
+/// `frictl search` on the tiny network ranges (fast trials) with `extra` arguments.
+fn tiny_search(
+    ds: &Path,
+    scv: &Path,
+    out: &Path,
+    trials: &str,
+    extra: &[&str],
+) -> std::process::Output {
+    let mut a = vec![
+        "search",
+        "--dataset",
+        s(ds),
+        "--scv",
+        s(scv),
+        "--trials",
+        trials,
+        "--out",
+        s(out),
+        "--parallel",
+        "1",
+        "--threads",
+        "1",
+        "--epochs",
+        "1",
+        "--quiet",
+    ];
+    for (k, v) in [("--hidden-range", "8,16"), ("--batch-range", "256,512")] {
+        if !extra.contains(&k) {
+            a.extend_from_slice(&[k, v]);
+        }
+    }
+    a.extend_from_slice(extra);
+    frictl(&a)
+}
+
+#[test]
+fn a_failed_trial_fails_the_search_and_resume_runs_it_again() {
+    // Before: a trial that could not write its model (as on a full disk) was recorded and the
+    // search exited 0; `--resume` skipped it for good.
+    let dir = crate::util::scratch("frictl-search-failed");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let (ds, scv) = dataset(&dir);
+    let out = dir.join("search");
+    // Trial 1's model path is a directory: its outputs cannot be written.
+    let blocked = out.join("trials/trial_0001.fwt");
+    std::fs::create_dir_all(&blocked).unwrap();
+    let r = tiny_search(&ds, &scv, &out, "2", &[]);
+    let err = String::from_utf8_lossy(&r.stderr).into_owned();
+    assert!(!r.status.success(), "a failed trial exited 0:\n{err}");
+    assert!(
+        err.contains("1 of 2 trial(s) failed") && err.contains("--resume"),
+        "{err}"
+    );
+    let rec = read_results(&out.join("results.jsonl")).unwrap();
+    let status = |k: usize| -> Vec<String> {
+        read_results(&out.join("results.jsonl"))
+            .unwrap()
+            .iter()
+            .filter(|t| t.params.trial == k)
+            .map(|t| t.status.clone())
+            .collect()
+    };
+    assert_eq!(rec.len(), 2);
+    assert_eq!(status(1), ["failed"]);
+    // The cause gone, `--resume` runs the failed trial again (only it) and succeeds.
+    std::fs::remove_dir(&blocked).unwrap();
+    let r = tiny_search(&ds, &scv, &out, "2", &["--resume"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert_eq!(status(0), ["ok"], "the ok trial is not run again");
+    assert_eq!(status(1), ["failed", "ok"]);
+    let ranked: Vec<TrialResult> =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    assert!(ranked.iter().all(|t| t.status == "ok") && ranked.len() == 2);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_search_directory_has_one_owner_and_bad_settings_are_refused_before_any_trial() {
+    let dir = crate::util::scratch("frictl-search-lock");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let (ds, scv) = dataset(&dir);
+    let out = dir.join("search");
+    std::fs::create_dir_all(&out).unwrap();
+    // Another owner holds the directory's lock: refused, nothing written (before: two searches
+    // wrote one results table).
+    let lock = std::fs::File::create(out.join(".search.lock")).unwrap();
+    lock.lock().unwrap();
+    let r = tiny_search(&ds, &scv, &out, "1", &[]);
+    let err = String::from_utf8_lossy(&r.stderr).into_owned();
+    assert!(!r.status.success(), "{err}");
+    assert!(
+        err.contains("another `frictl search`") && err.contains(".search.lock"),
+        "{err}"
+    );
+    assert!(!out.join("results.jsonl").exists() && !out.join("search.json").exists());
+    let r = tiny_search(&ds, &scv, &out, "1", &["--only-trials", "0"]);
+    assert!(!r.status.success(), "a worker ran beside the search");
+    drop(lock);
+
+    // Settings the trainer refuses at either end of a range, and a bad pick ratio, are refused
+    // before the first trial (before: every trial failed and the search exited 0).
+    for (flag, value, says) in [
+        ("--history-range", "3,65", "--history-range 3,65"),
+        ("--hidden-range", "8,2000", "--hidden-range 8,2000"),
+        ("--dropout-range", "0.1,1.5", "--dropout-range 0.1,1.5"),
+        ("--lambda-range", "0.2,1.5", "--lambda-range 0.2,1.5"),
+        ("--max-rmse-ratio", "0", "--max-rmse-ratio 0"),
+        ("--max-rmse-ratio", "nan", "--max-rmse-ratio NaN"),
+    ] {
+        let bad = dir.join("bad");
+        let r = tiny_search(&ds, &scv, &bad, "1", &[flag, value]);
+        let err = String::from_utf8_lossy(&r.stderr).into_owned();
+        assert!(!r.status.success(), "{flag} {value} accepted");
+        assert!(err.contains(says), "{flag} {value}: {err}");
+        assert!(
+            !bad.join("results.jsonl").exists(),
+            "{flag} {value}: a trial ran"
+        );
+    }
+    // A trial count that cannot be held is refused by the option's bound (before: OOM-killed).
+    let r = tiny_search(&ds, &scv, &dir.join("huge"), "1e11", &[]);
+    let err = String::from_utf8_lossy(&r.stderr).into_owned();
+    assert!(
+        !r.status.success() && err.contains("--trials") && err.contains("bound"),
+        "{err}"
+    );
+    // The directory free again, the search runs.
+    let r = tiny_search(&ds, &scv, &out, "1", &[]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -501,3 +501,21 @@ fn the_leg_preset_is_not_mixed_with_single_joints() {
         "{err}"
     );
 }
+
+#[test]
+fn an_initial_pose_beyond_three_turns_is_refused_before_serving() {
+    // Before: 100 rad was accepted and the plant served from it.
+    for pose in ["100", "nan"] {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_frictl"))
+            .args(["sim", "serve", "--preset", "knee", "--lockstep"])
+            .arg(format!("--initial-pose-rad={pose}"))
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{pose} accepted");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains("--initial-pose-rad entry 1") && err.contains("three turns"),
+            "{pose}: {err}"
+        );
+    }
+}

@@ -1405,3 +1405,148 @@ fn distill_init_prune_starts_from_the_teacher_and_refuses_other_shapes() {
         assert!(!bad.exists());
     }
 }
+
+/// Outputs that are inputs (the teacher's report included), data given twice and counts that cannot
+/// be allocated are refused before any work, naming the flag, and leave every file as it was.
+#[test]
+fn outputs_over_inputs_repeated_data_and_huge_counts_are_refused_before_any_work() {
+    let f = fixture();
+    let dir = f.dir.join("refusals");
+    std::fs::create_dir_all(&dir).unwrap();
+    let teacher = dir.join("teacher.fwt");
+    ok(
+        train(&teacher, &["--hidden", "8,8", "--epochs", "1"]),
+        "train teacher",
+    );
+    let report = dir.join("teacher.train.json");
+    let report_bytes = std::fs::read(&report).unwrap();
+    let refused = |args: &[&str], says: &[&str]| {
+        let r = frictl(args);
+        let err = String::from_utf8_lossy(&r.stderr).into_owned();
+        // Exit 1 or 2 (an error, not an abort by signal).
+        assert!(
+            matches!(r.status.code(), Some(1 | 2)),
+            "frictl {args:?}: {:?}\n{err}",
+            r.status
+        );
+        for s in says {
+            assert!(err.contains(s), "frictl {args:?}: no `{s}` in\n{err}");
+        }
+    };
+    // D1: the teacher's training report, read by default or named, is never the student (before:
+    // overwritten with the .fwt, exit 0).
+    let distill = ["distill", s(&teacher), "--threads", "1", "--epochs", "1"];
+    refused(
+        &[&distill[..], &["--dataset", s(&f.ds), "-o", s(&report)]].concat(),
+        &["is also an input", "teacher.train.json"],
+    );
+    let copy = dir.join("copy.train.json");
+    std::fs::copy(&report, &copy).unwrap();
+    refused(
+        &[
+            &distill[..],
+            &[
+                "--dataset",
+                s(&f.ds),
+                "--teacher-report",
+                s(&copy),
+                "-o",
+                s(&copy),
+            ],
+        ]
+        .concat(),
+        &["is also an input"],
+    );
+    refused(
+        &[&distill[..], &["--probes-only", "100", "-o", s(&report)]].concat(),
+        &["is also an input"],
+    );
+    assert_eq!(std::fs::read(&report).unwrap(), report_bytes, "report kept");
+    // Two outputs of one command on one file.
+    let same = dir.join("same.fwt");
+    refused(
+        &[
+            "train",
+            "--dataset",
+            s(&f.ds),
+            "--scv",
+            s(&f.scv),
+            "--out",
+            s(&same),
+            "--report",
+            s(&same),
+        ],
+        &["another output"],
+    );
+    // D2: counts sizing an allocation are bounded (before: aborted on a 2.4e15-byte allocation).
+    let student = dir.join("student.fwt");
+    refused(
+        &[&distill[..], &["--probes-only", "1e14", "-o", s(&student)]].concat(),
+        &["--probes-only", "bound"],
+    );
+    refused(
+        &[
+            &distill[..],
+            &["--dataset", s(&f.ds), "--probes", "1e14", "-o", s(&student)],
+        ]
+        .concat(),
+        &["--probes", "bound"],
+    );
+    refused(
+        &[
+            "convert",
+            s(&teacher),
+            "-o",
+            s(&student),
+            "--dtype",
+            "f16",
+            "--samples",
+            "1e14",
+        ],
+        &["--samples", "bound"],
+    );
+    assert!(!student.exists());
+    // D3: one dataset twice, as training and test data or as two training sets, by path or as a copy
+    // (before: accepted; the held-out gate ran on training rows).
+    let ds_copy = dir.join("ds_copy.csv");
+    std::fs::copy(&f.ds, &ds_copy).unwrap();
+    std::fs::copy(f.ds.with_extension("json"), ds_copy.with_extension("json")).unwrap();
+    let model = dir.join("m.fwt");
+    let base = [
+        "train",
+        "--scv",
+        s(&f.scv),
+        "--out",
+        s(&model),
+        "--dataset",
+        s(&f.ds),
+    ];
+    refused(
+        &[&base[..], &["--test-dataset", s(&f.ds)]].concat(),
+        &["--test-dataset", "same data as --dataset", "training rows"],
+    );
+    refused(
+        &[&base[..], &["--dataset", s(&f.ds)]].concat(),
+        &["same data as --dataset", "twice"],
+    );
+    refused(
+        &[&base[..], &["--test-dataset", s(&ds_copy)]].concat(),
+        &["ds_copy.csv", "same data as --dataset"],
+    );
+    refused(
+        &[
+            &distill[..],
+            &[
+                "--dataset",
+                s(&f.ds),
+                "--test-dataset",
+                s(&f.ds),
+                "-o",
+                s(&student),
+            ],
+        ]
+        .concat(),
+        &["same data as --dataset"],
+    );
+    assert!(!model.exists() && !student.exists());
+}

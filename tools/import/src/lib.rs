@@ -23,10 +23,12 @@ pub use urdf::{parse_fixed_joints, urdf_link, urdf_whole_body};
 pub use whole::{run_csv, run_mat, run_mcap};
 
 /// Refuses, before any work, an output that would overwrite one of the command's inputs (the same file
-/// by device and inode, whatever the spelling of the path), whose directory does not exist, or that
+/// by device and inode, whatever the spelling of the path), that is another output of the command
+/// (the same canonical path, e.g. `--report R -o R`), whose directory does not exist, or that
 /// exists and is not a regular file or is a symlink ([`frictionless::output_file::check`]: the
 /// file is written through that module, which checks again). Every
-/// command that reads files and writes others calls it first, so a mistake such as
+/// command that reads files and writes others calls it first with every file it reads, the implicit
+/// ones included (sidecars, a model's training report), so a mistake such as
 /// `frictl preprocess log.csv -o log.csv` loses nothing and a long run does not fail at its end.
 pub fn check_outputs(
     inputs: &[&std::path::Path],
@@ -34,7 +36,28 @@ pub fn check_outputs(
 ) -> anyhow::Result<()> {
     use std::os::unix::fs::MetadataExt;
     let id = |p: &std::path::Path| std::fs::metadata(p).ok().map(|m| (m.dev(), m.ino()));
-    for out in outputs {
+    // The canonical directory and file name: equal for two spellings of one path, existing or not.
+    let canonical = |p: &std::path::Path| {
+        let dir = match p.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => std::path::Path::new("."),
+        };
+        std::fs::canonicalize(dir)
+            .ok()
+            .map(|d| (d, p.file_name().map(|n| n.to_os_string())))
+    };
+    for (k, out) in outputs.iter().enumerate() {
+        if let Some(other) = outputs[..k].iter().find(|o| {
+            (canonical(o).is_some() && canonical(o) == canonical(out))
+                || id(o).is_some_and(|i| id(out) == Some(i))
+        }) {
+            anyhow::bail!(
+                "{}: is also another output of this command ({}); refusing to write both to one \
+                 file (nothing was written)",
+                out.display(),
+                other.display()
+            );
+        }
         let dir = match out.parent() {
             Some(d) if !d.as_os_str().is_empty() => d,
             _ => std::path::Path::new("."),

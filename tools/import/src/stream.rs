@@ -63,6 +63,11 @@ impl<'a> Streamer<'a> {
                     .map(|f| format!("{f} (on the log's first window)")),
             );
         }
+        // The whole robot's state, every window (a glitch may be anywhere), once the units and
+        // rates passed (a wrong time unit shows as speeds too).
+        if let Dynamics::WholeBody(b) = &self.dynamics {
+            crate::whole::state_plausibility(std::slice::from_ref(&block), b.robot())?;
+        }
         if self.labeller.is_none() {
             for j in &block.joints {
                 let mut cfg = PreprocessConfig::for_joint(j);

@@ -6,7 +6,12 @@ use std::collections::BTreeMap;
 use anyhow::Context;
 use frictionless_sim::params::LinkModel;
 
-/// The `--fixed-joint NAME=RAD` values by name.
+/// Largest |position| of a held joint \[rad\]: three turns (no joint of a robot this labels turns
+/// further; a larger value is a unit or typing mistake).
+pub const MAX_FIXED_JOINT_RAD: f64 = 6.0 * std::f64::consts::PI;
+
+/// The `--fixed-joint NAME=RAD` values by name: each joint once, at a finite position within
+/// ±[`MAX_FIXED_JOINT_RAD`].
 pub fn parse_fixed_joints(fixed_joints: &[String]) -> anyhow::Result<BTreeMap<String, f64>> {
     let mut other = BTreeMap::new();
     for s in fixed_joints {
@@ -18,9 +23,31 @@ pub fn parse_fixed_joints(fixed_joints: &[String]) -> anyhow::Result<BTreeMap<St
             .parse()
             .with_context(|| format!("--fixed-joint {s:?}: {v:?} is not a number"))?;
         anyhow::ensure!(v.is_finite(), "--fixed-joint {s:?}: not finite");
-        other.insert(n.trim().to_owned(), v);
+        anyhow::ensure!(
+            v.abs() <= MAX_FIXED_JOINT_RAD,
+            "--fixed-joint {s:?}: more than three turns (±{MAX_FIXED_JOINT_RAD:.2} rad); positions \
+             are in rad"
+        );
+        anyhow::ensure!(
+            other.insert(n.trim().to_owned(), v).is_none(),
+            "--fixed-joint {s:?}: joint `{}` is held twice",
+            n.trim()
+        );
     }
     Ok(other)
+}
+
+/// Refuses a labelled joint (`--joint`, `--urdf-joint`) that is also held by `--fixed-joint`: its
+/// own motion would be replaced by a constant in its label's τ_ID.
+pub fn check_not_held(labelled: &[&str], fixed_joints: &[String]) -> anyhow::Result<()> {
+    let held = parse_fixed_joints(fixed_joints)?;
+    if let Some(j) = labelled.iter().find(|j| held.contains_key(**j)) {
+        anyhow::bail!(
+            "--fixed-joint {j}=…: `{j}` is the labelled joint; a held joint is one whose motion \
+             the label ignores (drop it from --fixed-joint)"
+        );
+    }
+    Ok(())
 }
 
 /// The whole-body model for τ_ID: the URDF (default `virtual_leg`) with the `--fixed-joint` values.
@@ -45,6 +72,7 @@ pub fn urdf_link(
     fixed_joints: &[String],
 ) -> anyhow::Result<(LinkModel, String)> {
     anyhow::ensure!(!joint.is_empty(), "no joint name: pass --joint");
+    check_not_held(&[joint], fixed_joints)?;
     let other = parse_fixed_joints(fixed_joints)?;
     let urdf = urdf.unwrap_or("virtual_leg").to_string();
     let d = format!("URDF {urdf} joint {joint}, other joints {other:?}, fixed base, g = 9.80665");

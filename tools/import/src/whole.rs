@@ -108,6 +108,7 @@ pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
     spec.all_joints = args.common.joints_all.is_some();
     check(
         &args.files,
+        &args.joint,
         &args.common,
         ("--base-quat", args.base_quat.is_some()),
     )?;
@@ -174,6 +175,7 @@ pub fn run_mcap(args: McapArgs) -> anyhow::Result<()> {
         .collect::<Result<Vec<_>, _>>()?;
     check(
         &args.files,
+        &args.joint,
         &args.common,
         ("--base-orientation", args.base_orientation.is_some()),
     )?;
@@ -236,6 +238,7 @@ pub fn run_mat(args: MatArgs) -> anyhow::Result<()> {
         .collect::<Result<Vec<_>, _>>()?;
     check(
         &args.files,
+        &args.joint,
         &args.common,
         ("--base-orientation", args.base_orientation.is_some()),
     )?;
@@ -305,7 +308,18 @@ pub(crate) fn out_path(out: &Path, joint: &str) -> PathBuf {
 /// Checks the options every format shares, before any work: the numbers, `--base-frame` only with
 /// a logged base orientation (`base_option`: the format's option for it, and whether it is given;
 /// alone it would change nothing, silently) and the outputs.
-fn check(files: &[PathBuf], common: &CommonArgs, base_option: (&str, bool)) -> anyhow::Result<()> {
+fn check(
+    files: &[PathBuf],
+    joints: &[String],
+    common: &CommonArgs,
+    base_option: (&str, bool),
+) -> anyhow::Result<()> {
+    for (k, j) in joints.iter().enumerate() {
+        anyhow::ensure!(!joints[..k].contains(j), "--joint {j}: given twice");
+    }
+    let mut labelled: Vec<&str> = joints.iter().map(String::as_str).collect();
+    labelled.extend(common.urdf_joint.as_deref());
+    crate::urdf::check_not_held(&labelled, &common.fixed_joints)?;
     if let (Some(f), (option, false)) = (&common.base_frame, base_option) {
         bail!("--base-frame {f} names the frame of a logged base orientation: give {option}");
     }
@@ -400,6 +414,9 @@ fn finish(
     // Units and rates: what a wrong declaration leaves in the numbers, before any work.
     let suspicious = plausibility(&runs, labels[0].cfg.gap_s, units)?;
     warnings.extend(suspicious.iter().cloned());
+    if let Some(b) = &body {
+        state_plausibility(&runs, b.robot())?;
+    }
     let inputs = Inputs::hash(files)?;
     let import = WholeImport {
         inputs: &inputs,
@@ -570,6 +587,10 @@ fn dynamics_of(
     body: Option<&WholeBody>,
     warnings: &mut Vec<String>,
 ) -> anyhow::Result<LabelDynamics> {
+    // Again with the joints `--joints all` found in the log.
+    let mut labelled: Vec<&str> = joints.iter().map(String::as_str).collect();
+    labelled.extend(common.urdf_joint.as_deref());
+    crate::urdf::check_not_held(&labelled, &common.fixed_joints)?;
     let Some(b) = body else {
         if label != LabelSource::Current {
             return Ok(LabelDynamics {
@@ -724,6 +745,101 @@ pub(crate) fn plausibility(
         bail!("{}", refused.join("\n"));
     }
     Ok(findings.into_iter().map(|f| f.message).collect())
+}
+
+/// Margin outside a joint's URDF limits still taken as a logged position, as a fraction of the
+/// limits' span (at least [`LIMIT_MARGIN`]): encoder offsets, limits drawn tight, a simulated leg
+/// that does not stop at them.
+const LIMIT_MARGIN_OF_SPAN: f64 = 0.5;
+/// The smallest such margin \[rad or m\].
+const LIMIT_MARGIN: f64 = 0.1;
+/// A position step faster than this \[rad/s or m/s\] between two samples is a glitch (≈ 1000 rpm
+/// at the joint; the labelled joint's own check warns above 30 rad/s).
+const MAX_STATE_SPEED: f64 = 100.0;
+
+/// The whole robot's state checked like the labelled joint, before labelling: every logged joint's
+/// position inside its URDF limits (with a margin, [`LIMIT_MARGIN_OF_SPAN`]) and without a step faster than
+/// [`MAX_STATE_SPEED`]. The error names the run, the joint (its column) and the sample, and tells a
+/// unit mistake (most samples outside the limits: degrees for rad) from a glitch (a few).
+pub(crate) fn state_plausibility(
+    runs: &[ImportedRun],
+    robot: &frictionless_dynamics::Robot,
+) -> anyhow::Result<()> {
+    for r in runs {
+        let Some(st) = &r.state else { continue };
+        let t = &r.signals.time_s;
+        if let Some(qs) = &st.base_quat_xyzw
+            && let Some(k) = (0..qs[0].len()).find(|&k| {
+                let n2: f64 = qs.iter().map(|c| c[k] * c[k]).sum();
+                !(0.25..=4.0).contains(&n2)
+            })
+        {
+            let q: Vec<f64> = qs.iter().map(|c| c[k]).collect();
+            bail!(
+                "{}: the base orientation quaternion [x, y, z, w] = {q:?} at t = {:.3} s is not a \
+                 rotation (norm {:.3}, a unit quaternion has 1): check the orientation columns \
+                 and their order x, y, z, w",
+                r.report.source,
+                t.get(k).copied().unwrap_or(f64::NAN),
+                q.iter().map(|v| v * v).sum::<f64>().sqrt()
+            );
+        }
+        for (name, q) in st.names.iter().zip(&st.q) {
+            let Ok(j) = robot.joint_index(name) else {
+                continue;
+            };
+            let joint = &robot.joints[j];
+            let margin = (LIMIT_MARGIN_OF_SPAN * (joint.upper - joint.lower)).max(LIMIT_MARGIN);
+            let (lo, hi) = (joint.lower - margin, joint.upper + margin);
+            let outside: Vec<usize> = (0..q.len())
+                .filter(|&k| !(lo..=hi).contains(&q[k]))
+                .collect();
+            if let Some(&k) = outside.first() {
+                let at = t.get(k).copied().unwrap_or(f64::NAN);
+                if outside.len() * 2 > q.len() {
+                    bail!(
+                        "{}: joint `{name}` (whole-body position column): {} of {} samples outside \
+                         its URDF limits [{:.3}, {:.3}] and their margin (first {} at t = {at:.3} \
+                         s): positions are \
+                         in rad; if the log is in degrees, declare the unit (e.g. --unit s=deg)",
+                        r.report.source,
+                        outside.len(),
+                        q.len(),
+                        joint.lower,
+                        joint.upper,
+                        q[k]
+                    );
+                }
+                bail!(
+                    "{}: joint `{name}` (whole-body position column): {} sample(s) outside its URDF \
+                     limits [{:.3}, {:.3}] and their margin, the first {} at t = {at:.3} s: a \
+                     glitch in the log \
+                     (remove or repair those rows)",
+                    r.report.source,
+                    outside.len(),
+                    joint.lower,
+                    joint.upper,
+                    q[k]
+                );
+            }
+            if let Some(k) = (1..q.len().min(t.len())).find(|&k| {
+                let dt = t[k] - t[k - 1];
+                dt > 0.0 && ((q[k] - q[k - 1]) / dt).abs() > MAX_STATE_SPEED
+            }) {
+                bail!(
+                    "{}: joint `{name}` (whole-body position column) jumps from {} to {} between \
+                     t = {:.4} s and {:.4} s (faster than {MAX_STATE_SPEED} rad/s): a glitch in the \
+                     log (remove or repair those rows)",
+                    r.report.source,
+                    q[k - 1],
+                    q[k],
+                    t[k - 1],
+                    t[k]
+                );
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The logs of one import and their SHA-256, as each dataset's sidecar records them.

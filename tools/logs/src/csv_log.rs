@@ -295,10 +295,10 @@ fn state_columns(
     if let Some(cols) = &st.base_quat {
         for c in cols {
             idx.push(header.iter().position(|h| h == c).ok_or_else(|| {
-                LogsError::MissingColumn {
+                LogsError::MissingOptionColumn {
                     path: p.to_string(),
                     column: c.clone(),
-                    role: Role::S,
+                    option: "--base-quat".into(),
                     header: header.join(", "),
                 }
             })?);
@@ -314,10 +314,10 @@ fn state_columns(
         for c in crate::WRENCH_COMPONENTS {
             let name = template.replace("{c}", c);
             idx.push(header.iter().position(|h| *h == name).ok_or_else(|| {
-                LogsError::MissingColumn {
+                LogsError::MissingOptionColumn {
                     path: p.to_string(),
                     column: name.clone(),
-                    role: Role::TauJoint,
+                    option: format!("--wrench {frame}={template}"),
                     header: header.join(", "),
                 }
             })?);

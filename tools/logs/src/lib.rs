@@ -73,6 +73,20 @@ pub enum LogsError {
         /// What is missing (`empty file`, `no data rows`, …).
         what: String,
     },
+    /// A column an option names (`--base-quat`, `--wrench`) is not in the header.
+    #[error(
+        "{path}: column `{column}` (of {option}) is not in the header; the header has: {header}"
+    )]
+    MissingOptionColumn {
+        /// File.
+        path: String,
+        /// Column name asked for.
+        column: String,
+        /// The option naming it, e.g. `--base-quat`.
+        option: String,
+        /// The header, comma separated.
+        header: String,
+    },
     /// A mapped column is not in the header.
     #[error(
         "{path}: column `{column}` (role {role}) is not in the header; the header has: {header}"

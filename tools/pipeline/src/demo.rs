@@ -134,6 +134,7 @@ impl Runner {
             .with_context(|| format!("cannot create {}", log.display()))?;
         let t0 = Instant::now();
         let mut cmd = Command::new(&self.exe);
+        crate::die_with_parent(&mut cmd);
         if let Some(frictiond) = &self.frictiond {
             cmd.env("FRICTIOND", frictiond);
         }

@@ -18,6 +18,30 @@ pub mod demo;
 pub mod robot;
 pub mod robot_run;
 
+/// Makes the child `cmd` starts die with this process: `PR_SET_PDEATHSIG = SIGTERM` set in the child
+/// before it runs, so a stage (e.g. a long `frictl search`) does not outlive a pipeline killed
+/// outright (SIGKILL, the OOM killer) and a rerun never finds it still writing into the directory.
+/// A child whose parent already died before the call exits at once. The signal is sent when the
+/// thread that spawned the child ends: spawn from a thread that outlives the child (the pipelines
+/// spawn and wait on one thread).
+pub fn die_with_parent(cmd: &mut std::process::Command) {
+    use std::os::unix::process::CommandExt;
+    // SAFETY: getpid before the fork; in the child only prctl, getppid and _exit run, all
+    // async-signal-safe, with no allocation or lock.
+    let parent = unsafe { libc::getpid() };
+    unsafe {
+        cmd.pre_exec(move || {
+            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            if libc::getppid() != parent {
+                libc::_exit(1);
+            }
+            Ok(())
+        });
+    }
+}
+
 /// What a pipeline needs from the `frictl` that runs it, beyond the command lines of its stages.
 pub trait Host {
     /// The `frictl` executable every stage runs as (`frictl` passes `std::env::current_exe()`).

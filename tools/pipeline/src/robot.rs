@@ -473,6 +473,16 @@ pub fn parse(path: &Path, text: &str) -> Result<RobotFile, RobotError> {
             ));
         }
     }
+    if s.trials > frictl_cli::count::MAX_TRIALS {
+        return Err(bad(
+            "search.trials".into(),
+            s.trials.to_string(),
+            &format!(
+                "at most {} (`frictl search --trials`'s bound)",
+                frictl_cli::count::MAX_TRIALS
+            ),
+        ));
+    }
     if s.epochs == 0 || s.threads_per_trial == 0 || s.parallel == 0 {
         return Err(bad(
             "search".into(),
@@ -489,6 +499,111 @@ pub fn parse(path: &Path, text: &str) -> Result<RobotFile, RobotError> {
             s.max_rmse_ratio.to_string(),
             "finite and ≥ 1 (a multiple of the best validation RMSE)",
         ));
+    }
+    // The trainer's own checks, before any stage: both ends of every search range, and `[train]`
+    // key by key (before: history 0, hidden [0] or lr −1 failed at the train stage, naming the
+    // child's flag).
+    let d = frictionless_train::search::SearchSpace::default();
+    let space = frictionless_train::search::SearchSpace {
+        batch: s.batch.map_or(d.batch, |r| (r[0], r[1])),
+        hidden: s.hidden.map_or(d.hidden, |r| (r[0], r[1])),
+        lr: s.lr.map_or(d.lr, |r| (r[0], r[1])),
+        history: s.history.map_or(d.history, |r| (r[0], r[1])),
+        lambda: s.lambda.map_or(d.lambda, |r| (r[0], r[1])),
+        dropout: s.dropout.map_or(d.dropout, |r| (r[0], r[1])),
+    };
+    if s.trials > 0 {
+        for j in &file.joint {
+            space.validate(j.features, j.temperature).map_err(|e| {
+                bad(
+                    format!("search.{}", e.range),
+                    format!("[{}]", e.value.replace(',', ", ")),
+                    &e.why,
+                )
+            })?;
+        }
+    }
+    let t = &file.train;
+    let base = frictionless_train::TrainConfig {
+        hidden: vec![8],
+        dropout: 0.0,
+        lambda: 0.0,
+        lr: 1e-3,
+        batch_size: 1,
+        epochs: 1,
+        seed: 0,
+        threads: 1,
+        patience: None,
+        abort_loss: None,
+    };
+    let train_keys = [
+        (
+            "hidden",
+            format!("{:?}", t.hidden),
+            frictionless_train::TrainConfig {
+                hidden: t.hidden.clone(),
+                ..base.clone()
+            },
+        ),
+        (
+            "epochs",
+            t.epochs.to_string(),
+            frictionless_train::TrainConfig {
+                epochs: t.epochs,
+                ..base.clone()
+            },
+        ),
+        (
+            "batch",
+            t.batch.to_string(),
+            frictionless_train::TrainConfig {
+                batch_size: t.batch,
+                ..base.clone()
+            },
+        ),
+        (
+            "lr",
+            t.lr.to_string(),
+            frictionless_train::TrainConfig {
+                lr: t.lr,
+                ..base.clone()
+            },
+        ),
+        (
+            "lambda",
+            t.lambda.to_string(),
+            frictionless_train::TrainConfig {
+                lambda: t.lambda,
+                ..base.clone()
+            },
+        ),
+        (
+            "dropout",
+            t.dropout.to_string(),
+            frictionless_train::TrainConfig {
+                dropout: t.dropout,
+                ..base.clone()
+            },
+        ),
+    ];
+    for (key, value, cfg) in train_keys {
+        cfg.validate()
+            .map_err(|e| bad(format!("train.{key}"), value, &e.to_string()))?;
+    }
+    for j in &file.joint {
+        frictionless::features::FeatureSpec {
+            set: j.features,
+            history: t.history,
+            temperature: j.temperature,
+        }
+        .validate()
+        .map_err(|e| {
+            bad(
+                "train.history".into(),
+                t.history.to_string(),
+                &e.to_string(),
+            )
+        })?;
     }
     if s.pick && s.trials == 0 {
         return Err(bad(
@@ -620,6 +735,56 @@ features = "motor-vel-joint-vel"
         );
         let msg = e(&GOOD.replace("\"motor-vel-joint-vel\"", "\"velocity\""));
         assert!(msg.contains("velocity"), "{msg}");
+    }
+
+    #[test]
+    fn train_and_search_values_the_trainer_refuses_are_named_by_their_key() {
+        // Before: these passed `robot plan` and failed at the train stage, naming the child's flag.
+        let e = |text: &str| {
+            parse(Path::new("robot.toml"), text)
+                .unwrap_err()
+                .to_string()
+        };
+        let with_train = |t: &str| format!("[train]\n{t}\n{GOOD}");
+        for (text, says) in [
+            ("history = 0", "train.history = 0"),
+            ("history = 65", "train.history = 65"),
+            ("hidden = [0]", "train.hidden = [0]"),
+            ("hidden = [8, 5000]", "train.hidden = [8, 5000]"),
+            ("lr = -1.0", "train.lr = -1"),
+            ("dropout = 1.0", "train.dropout = 1"),
+            ("lambda = 2.0", "train.lambda = 2"),
+            ("epochs = 0", "train.epochs = 0"),
+            ("batch = 0", "train.batch = 0"),
+        ] {
+            let msg = e(&with_train(text));
+            assert!(msg.contains(says), "{text}: {msg}");
+        }
+        for (from, to, says) in [
+            (
+                "hidden = [8, 16]",
+                "hidden = [8, 2000]",
+                "search.hidden = [8, 2000]",
+            ),
+            (
+                "hidden = [8, 16]",
+                "history = [3, 65]",
+                "search.history = [3, 65]",
+            ),
+            (
+                "hidden = [8, 16]",
+                "dropout = [0.1, 1.5]",
+                "search.dropout = [0.1, 1.5]",
+            ),
+            (
+                "trials = 4",
+                "trials = 100000000000",
+                "search.trials = 100000000000",
+            ),
+        ] {
+            let msg = e(&GOOD.replace(from, to));
+            assert!(msg.contains(says), "{to}: {msg}");
+        }
     }
 
     #[test]

@@ -595,7 +595,9 @@ fn run_stage(
     if sig != 0 {
         return Err(stopped(sig, &format!("before {joint_dir}: {}", st.id)));
     }
-    let mut child = Command::new(exe)
+    let mut cmd = Command::new(exe);
+    crate::die_with_parent(&mut cmd);
+    let mut child = cmd
         .args(&st.args)
         .current_dir(out)
         .stdin(Stdio::null())

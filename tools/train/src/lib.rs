@@ -359,6 +359,14 @@ pub struct Trainer {
     epoch_lr: f32,
 }
 
+impl TrainConfig {
+    /// Refuses what the trainer would refuse (widths, dropout, λ, lr, batch, epochs, threads), without
+    /// data: a pipeline or a search checks its settings with it before the first run starts.
+    pub fn validate(&self) -> Result<(), TrainError> {
+        check_config(self)
+    }
+}
+
 fn check_config(cfg: &TrainConfig) -> Result<(), TrainError> {
     let bad = |m: String| Err(TrainError::Config(m));
     if cfg.hidden.is_empty() || cfg.hidden.len() > limits::MAX_HIDDEN_LAYERS {

@@ -7,8 +7,11 @@
 //! loaded and split once (one chunk split for all trials, independent of H, so validation RMSEs are
 //! comparable), `parallel` worker threads take trials from a queue, each trial trains with
 //! `threads_total / parallel` threads and writes `DIR/trials/trial_NNNN.fwt` (+ `.train.json`), and
-//! appends one JSON line to `DIR/results.jsonl` when it finishes. A restart with `resume` skips the
-//! trials already in that file. At the end `DIR/results.json` and `DIR/results.csv` list every trial
+//! appends one JSON line to `DIR/results.jsonl` when it finishes, `"failed"` with the reason when it
+//! failed (a full disk, a diverged run). A restart with `resume` skips the trials recorded `ok` in
+//! that file and runs the failed ones again. One search at a time owns `DIR`: an exclusive `flock`
+//! on `DIR/.search.lock` (released by the kernel when the holder dies, SIGKILL included) refuses a
+//! second search or `finish` there; [`run_trials`] workers share it with each other only. At the end `DIR/results.json` and `DIR/results.csv` list every trial
 //! sorted by validation RMSE (failed trials last) and the best model is copied to `DIR/best.fwt`
 //! (+ `DIR/best.train.json`). `DIR/search.json` records the search settings; a resume with different
 //! settings is refused.
@@ -72,6 +75,118 @@ impl Default for SearchSpace {
             lambda: (0.1, 0.5),
             dropout: (0.01, 0.1),
         }
+    }
+}
+
+/// A range of a [`SearchSpace`] the trainer would refuse ([`SearchSpace::validate`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RangeError {
+    /// The range: `batch`, `hidden`, `lr`, `history`, `lambda` or `dropout` (`frictl search
+    /// --hidden-range`, a robot file's `search.hidden`).
+    pub range: &'static str,
+    /// Its MIN and MAX as given, `MIN,MAX`.
+    pub value: String,
+    /// Why it is refused.
+    pub why: String,
+}
+
+impl SearchSpace {
+    /// Refuses, before any trial runs, a range the trainer would refuse at either end (so no trial
+    /// can fail on its draw): MIN ≤ MAX, and the trainer's own checks
+    /// ([`TrainConfig::validate`], [`FeatureSpec::validate`]) on both ends of every range.
+    pub fn validate(&self, features: FeatureSet, temperature: bool) -> Result<(), RangeError> {
+        let base = TrainConfig {
+            hidden: vec![self.hidden.0; 2],
+            dropout: self.dropout.0,
+            lambda: self.lambda.0,
+            lr: self.lr.0,
+            batch_size: self.batch.0,
+            epochs: 1,
+            seed: 0,
+            threads: 1,
+            patience: None,
+            abort_loss: None,
+        };
+        let usage = |range: &'static str,
+                     lo: &dyn std::fmt::Display,
+                     hi: &dyn std::fmt::Display,
+                     why: String| RangeError {
+            range,
+            value: format!("{lo},{hi}"),
+            why,
+        };
+        type Set = fn(&mut TrainConfig, f64);
+        // (option, MIN and MAX as the user wrote them, as numbers, the setter)
+        let text =
+            |a: &dyn std::fmt::Display, b: &dyn std::fmt::Display| [a.to_string(), b.to_string()];
+        let ranges: [(&'static str, [String; 2], [f64; 2], Set); 5] = [
+            (
+                "batch",
+                text(&self.batch.0, &self.batch.1),
+                [self.batch.0 as f64, self.batch.1 as f64],
+                |c, v| c.batch_size = v as usize,
+            ),
+            (
+                "hidden",
+                text(&self.hidden.0, &self.hidden.1),
+                [self.hidden.0 as f64, self.hidden.1 as f64],
+                |c, v| c.hidden = vec![v as usize; 2],
+            ),
+            (
+                "lr",
+                text(&self.lr.0, &self.lr.1),
+                [self.lr.0 as f64, self.lr.1 as f64],
+                |c, v| c.lr = v as f32,
+            ),
+            (
+                "lambda",
+                text(&self.lambda.0, &self.lambda.1),
+                [self.lambda.0 as f64, self.lambda.1 as f64],
+                |c, v| c.lambda = v as f32,
+            ),
+            (
+                "dropout",
+                text(&self.dropout.0, &self.dropout.1),
+                [self.dropout.0 as f64, self.dropout.1 as f64],
+                |c, v| c.dropout = v as f32,
+            ),
+        ];
+        for (flag, [lo, hi], ends, set) in ranges {
+            if ends[0].partial_cmp(&ends[1]).is_none_or(|o| o.is_gt()) {
+                return Err(usage(
+                    flag,
+                    &lo,
+                    &hi,
+                    "expected MIN,MAX with MIN ≤ MAX".into(),
+                ));
+            }
+            for (v, shown) in ends.into_iter().zip([&lo, &hi]) {
+                let mut c = base.clone();
+                set(&mut c, v);
+                c.validate().map_err(|e| {
+                    usage(flag, &lo, &hi, format!("the trainer refuses {shown}: {e}"))
+                })?;
+            }
+        }
+        let (h0, h1) = self.history;
+        if h0 > h1 {
+            return Err(usage(
+                "history",
+                &h0,
+                &h1,
+                "expected MIN,MAX with MIN ≤ MAX".into(),
+            ));
+        }
+        for history in [h0, h1] {
+            FeatureSpec {
+                set: features,
+                history,
+                temperature,
+            }
+            .validate()
+            .map_err(|e| usage("history", &h0, &h1, format!("H = {history}: {e}")))?;
+        }
+        Ok(())
     }
 }
 
@@ -317,6 +432,64 @@ pub enum SearchError {
     /// Invalid options.
     #[error("{0}")]
     Usage(String),
+}
+
+/// The lock file of a search directory (its content: the last holder's PID).
+pub const LOCK_FILE: &str = ".search.lock";
+
+/// Takes `dir`'s lock (`flock` on `DIR/.search.lock`, held until the returned file is dropped or
+/// the process ends in any way, SIGKILL included): `exclusive` for a whole search ([`run_search`],
+/// [`finish`]), shared for [`run_trials`] (several schedulers' workers may share a directory, but
+/// not with a running search or a `finish`). Refused, naming the holder's PID, when another
+/// process holds it in a conflicting way.
+fn lock_dir(dir: &Path, exclusive: bool) -> Result<std::fs::File, SearchError> {
+    use std::io::{Seek, Write};
+    use std::os::unix::fs::OpenOptionsExt;
+    let path = dir.join(LOCK_FILE);
+    let mut f = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .custom_flags(libc::O_NOFOLLOW)
+        .open(&path)
+        .map_err(|e| ferr(&path, format!("cannot open the lock file: {e}")))?;
+    let taken = if exclusive {
+        f.try_lock()
+    } else {
+        f.try_lock_shared()
+    };
+    match taken {
+        Ok(()) => {}
+        Err(std::fs::TryLockError::WouldBlock) => {
+            let holder = std::fs::read_to_string(&path).unwrap_or_default();
+            let holder = holder.trim();
+            return Err(ferr(
+                dir,
+                format!(
+                    "another `frictl search` (pid {}) is using this directory (it holds {}); wait \
+                     for it to end or use another --out",
+                    if holder.is_empty() { "unknown" } else { holder },
+                    path.display()
+                ),
+            ));
+        }
+        Err(std::fs::TryLockError::Error(e)) => {
+            return Err(ferr(&path, format!("cannot lock: {e}")));
+        }
+    }
+    if exclusive {
+        f.set_len(0)
+            .and_then(|()| f.rewind())
+            .and_then(|()| writeln!(f, "{}", std::process::id()))
+            .map_err(|e| ferr(&path, format!("cannot write: {e}")))?;
+    }
+    Ok(f)
+}
+
+/// Whether `done` holds an `ok` record of trial `k` (a trial recorded only as failed runs again).
+fn has_ok(done: &[TrialResult], k: usize) -> bool {
+    done.iter().any(|r| r.params.trial == k && r.status == "ok")
 }
 
 fn ferr(path: &Path, detail: impl std::fmt::Display) -> SearchError {
@@ -593,6 +766,7 @@ pub fn run_search(
     let dir = &run.dir;
     std::fs::create_dir_all(dir.join("trials"))
         .map_err(|e| ferr(&dir.join("trials"), format!("cannot create: {e}")))?;
+    let _lock = lock_dir(dir, true)?;
     let settings_path = dir.join("search.json");
     let results_path = dir.join("results.jsonl");
     let done = if run.resume {
@@ -620,7 +794,7 @@ pub fn run_search(
         .map_err(|e| ferr(&settings_path, format!("cannot write: {e}")))?;
     let split = pipeline::split_for(sources, &settings.split)?;
     let pending: Vec<TrialParams> = (0..run.trials)
-        .filter(|k| !done.iter().any(|r| r.params.trial == *k))
+        .filter(|k| !has_ok(&done, *k))
         .map(|k| draw(&settings.space, settings.seed, k))
         .collect();
     let file = frictionless::output_file::open_append(&results_path)
@@ -773,8 +947,8 @@ pub fn append_result(path: &Path, r: &TrialResult) -> Result<(), SearchError> {
 }
 
 /// Runs exactly the trials `trials` of the search in `dir` (the entry point of an external
-/// scheduler): `search.json` is written if absent, else must match `settings`; trials already in
-/// `results.jsonl` are skipped; each finished trial is appended as it ends, one after the other, each
+/// scheduler): `search.json` is written if absent, else must match `settings`; trials recorded `ok`
+/// in `results.jsonl` are skipped (failed ones run again); each finished trial is appended as it ends, one after the other, each
 /// with `threads` threads. Writes no tables (see [`finish`]). Returns the trials run.
 pub fn run_trials(
     sources: &Sources,
@@ -793,15 +967,14 @@ pub fn run_trials(
     }
     std::fs::create_dir_all(dir.join("trials"))
         .map_err(|e| ferr(&dir.join("trials"), format!("cannot create: {e}")))?;
+    let _lock = lock_dir(dir, false)?;
     claim_settings(dir, settings)?;
     let results_path = dir.join("results.jsonl");
     let done = read_results(&results_path)?;
     let split = pipeline::split_for(sources, &settings.split)?;
     let mut ran = Vec::new();
     for &k in trials {
-        if done.iter().any(|r| r.params.trial == k)
-            || ran.iter().any(|r: &TrialResult| r.params.trial == k)
-        {
+        if has_ok(&done, k) || ran.iter().any(|r: &TrialResult| r.params.trial == k) {
             continue;
         }
         let p = draw(&settings.space, settings.seed, k);
@@ -820,6 +993,7 @@ pub fn finish(dir: &Path, trials: Option<usize>) -> Result<Vec<TrialResult>, Sea
     if !results_path.is_file() {
         return Err(ferr(&results_path, "no such file: not a search directory"));
     }
+    let _lock = lock_dir(dir, true)?;
     let all = read_results(&results_path)?
         .into_iter()
         .filter(|r| trials.is_none_or(|n| r.params.trial < n))

@@ -121,6 +121,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     let mut file = weights::read_file(&args.input)?;
+    // Each probe: its inputs and the reference output, then one output per kernel path.
+    frictl_cli::count::fits_in_memory(
+        &format!("--samples {}", args.samples),
+        args.samples,
+        (file.mlp.n_inputs() + 8) * std::mem::size_of::<f32>() + std::mem::size_of::<Vec<f32>>(),
+        frictl_cli::count::available_memory_bytes(),
+    )?;
     let old_dtype = file.dtype;
     let mut inputs = probe_inputs(&file, args.samples, args.seed);
     let n_random = inputs.len();

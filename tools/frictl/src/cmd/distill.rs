@@ -33,12 +33,23 @@ use super::train::cores;
 
 pub use frictl_cli::distill::*;
 
+/// The teacher's training report: `--teacher-report`, else the one next to the teacher (read when it
+/// exists, so an input of the command either way).
+fn teacher_report_path(args: &Args) -> PathBuf {
+    args.teacher_report
+        .clone()
+        .unwrap_or_else(|| pipeline::default_report_path(&args.teacher))
+}
+
+/// Bytes one probe row costs a distillation of `teacher` (its inputs as f32 in the probe set, the
+/// student's copy and the trainer's batches, its target), for [`frictl_cli::count::fits_in_memory`].
+fn probe_bytes(teacher: &frictionless::weights::ModelFile) -> usize {
+    (teacher.mlp.n_inputs() + 2) * std::mem::size_of::<f32>() * 4
+}
+
 /// The teacher's training report, if one is given or sits next to the teacher.
 fn teacher_report(args: &Args) -> anyhow::Result<Option<TrainReport>> {
-    let (path, given) = match &args.teacher_report {
-        Some(p) => (p.clone(), true),
-        None => (pipeline::default_report_path(&args.teacher), false),
-    };
+    let (path, given) = (teacher_report_path(args), args.teacher_report.is_some());
     if !given && !path.exists() {
         if args.delta_theta_offset.is_none() || args.warmup.is_none() {
             eprintln!(
@@ -66,9 +77,18 @@ fn run_probes_only(args: &Args, probes: usize) -> anyhow::Result<()> {
              students keep the teacher's history"
         );
     }
-    super::check_outputs(&[&args.teacher], &[&args.out])?;
+    // The teacher's report is not read here, but it is the teacher's: never overwritten.
+    let report = teacher_report_path(args);
+    super::check_outputs(&[&args.teacher, &report], &[&args.out])?;
     let teacher = frictionless::weights::read_file(&args.teacher)
         .with_context(|| format!("teacher {}", args.teacher.display()))?;
+    // Training probes plus a quarter each for validation and the gate.
+    frictl_cli::count::fits_in_memory(
+        &format!("--probes-only {probes}"),
+        probes.saturating_add(2 * (probes / 4).max(1)),
+        probe_bytes(&teacher),
+        frictl_cli::count::available_memory_bytes(),
+    )?;
     let teacher_sha256 = frictionless_dataset::file_sha256(&args.teacher)
         .with_context(|| format!("teacher {}: cannot read", args.teacher.display()))?;
     if teacher.meta.training.input_range.is_none() {
@@ -235,20 +255,31 @@ pub struct Outcome {
 /// pipelines' distillation stage): writes the student to `args.out` only when the held-out gate
 /// passes and says which in [`Outcome::written`]; errors on bad input or a failed training.
 pub fn distill_file(args: &Args) -> anyhow::Result<Outcome> {
-    let datasets = args.held_out.all_datasets(&args.datasets);
+    let datasets = args.held_out.all_datasets(&args.datasets)?;
     let sidecars: Vec<PathBuf> = datasets.iter().map(|d| d.with_extension("json")).collect();
     let mut inputs: Vec<&std::path::Path> = datasets.iter().map(PathBuf::as_path).collect();
     inputs.extend(sidecars.iter().map(PathBuf::as_path));
     inputs.push(&args.teacher);
+    let report_path = teacher_report_path(args);
+    inputs.push(&report_path);
     super::check_outputs(&inputs, &[&args.out])?;
     let teacher = frictionless::weights::read_file(&args.teacher)
         .with_context(|| format!("teacher {}", args.teacher.display()))?;
+    if let Some(p) = args.probes {
+        frictl_cli::count::fits_in_memory(
+            &format!("--probes {p}"),
+            p,
+            probe_bytes(&teacher),
+            frictl_cli::count::available_memory_bytes(),
+        )?;
+    }
     // Checked against the teacher's H before any dataset is read.
     let (student_spec, _) = distill::student_inputs(&teacher.meta.features, args.history)?;
     let teacher_sha256 = frictionless_dataset::file_sha256(&args.teacher)
         .with_context(|| format!("teacher {}: cannot read", args.teacher.display()))?;
     let report = teacher_report(args)?;
     let sources = pipeline::load_sources(&datasets)?;
+    frictl_cli::train::distinct_contents(&sources, args.datasets.len())?;
     if sources.joint != teacher.meta.joint_name {
         bail!(
             "the datasets are of joint `{}`, the teacher {} of `{}`",

@@ -15,8 +15,23 @@ pub use frictl_cli::eval::*;
 pub fn run(args: Args) -> anyhow::Result<()> {
     let started = std::time::Instant::now();
     if let Some(json) = &args.json {
-        let mut inputs: Vec<&std::path::Path> = args.datasets.iter().map(|p| p.as_path()).collect();
-        inputs.extend(args.pinns.iter().map(|p| p.as_path()));
+        let data: Vec<&PathBuf> = args.datasets.iter().chain(&args.test_datasets).collect();
+        let sidecars: Vec<PathBuf> = data.iter().map(|d| d.with_extension("json")).collect();
+        let reports: Vec<PathBuf> = args
+            .pinns
+            .iter()
+            .map(|p| frictionless_train::pipeline::default_report_path(p))
+            .collect();
+        let mut inputs: Vec<&std::path::Path> = data.iter().map(|p| p.as_path()).collect();
+        inputs.extend(sidecars.iter().map(PathBuf::as_path));
+        inputs.extend(args.pinns.iter().map(PathBuf::as_path));
+        inputs.extend(reports.iter().map(PathBuf::as_path));
+        inputs.extend(
+            [&args.cv, &args.scv, &args.lugre, &args.train_report]
+                .into_iter()
+                .flatten()
+                .map(PathBuf::as_path),
+        );
         super::check_outputs(&inputs, &[json])?;
     }
     let drift = args.drift.then(|| args.drift_options()).transpose()?;

@@ -133,6 +133,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.robot == RobotSel::Leg {
         return run_leg(&args);
     }
+    anyhow::ensure!(
+        args.leg_config.is_empty(),
+        "--leg-config {}: only with --robot leg (the single joints take --cv/--scv/--pinn)",
+        args.leg_config.join(",")
+    );
     let started = std::time::Instant::now();
     let joints: Vec<usize> = match args.joint {
         JointSel::Knee => vec![0],
@@ -681,6 +686,50 @@ fn run_leg(args: &Args) -> anyhow::Result<()> {
             .map_or_else(String::new, |v| v.get_name().to_owned())
     );
     anyhow::ensure!(!args.realtime, "--robot leg runs in lockstep only");
+    // Options of the single joints are refused, not ignored.
+    anyhow::ensure!(
+        args.joint == JointSel::Both,
+        "--joint with --robot leg: the leg suite tests its knee and ankle roll (no --joint)"
+    );
+    if let Some(m) = args
+        .model
+        .as_ref()
+        .and_then(|m| m.iter().find(|m| **m != ModelSel::Oracle))
+    {
+        anyhow::bail!(
+            "--model {} with --robot leg: the leg's compensations are --leg-config LABEL=FILE \
+             (--model takes only `oracle` there)",
+            clap::ValueEnum::to_possible_value(m)
+                .map_or_else(String::new, |v| v.get_name().to_owned())
+        );
+    }
+    for (flag, v) in [
+        ("--cv", &args.cv),
+        ("--scv", &args.scv),
+        ("--pinn", &args.pinn),
+    ] {
+        anyhow::ensure!(
+            v.is_none(),
+            "{flag} with --robot leg: the leg's compensations are --leg-config LABEL=FILE"
+        );
+    }
+    // The outputs, before the run: the directory exists or is created, and every file is writable.
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("--out {}: cannot create", args.out.display()))?;
+    let tables = args.out.join("leg-tables.md");
+    let report_path = args.out.join("leg-report.json");
+    let mut outputs: Vec<&Path> = vec![&tables, &report_path];
+    outputs.extend(args.json.as_deref());
+    let configs: Vec<&Path> = args
+        .leg_config
+        .iter()
+        .filter_map(|i| i.split_once('=').map(|(_, f)| Path::new(f)))
+        .collect();
+    super::check_outputs(&configs, &outputs)?;
+    let probe = args.out.join(format!(".write-test-{}", std::process::id()));
+    std::fs::write(&probe, b"")
+        .with_context(|| format!("--out {}: not writable", args.out.display()))?;
+    let _ = std::fs::remove_file(&probe);
     anyhow::ensure!(
         args.criterion_frac > 0.0 && args.periods > args.skip_periods && args.skip_periods >= 0.0,
         "need --criterion-frac > 0 and --periods > --skip-periods ≥ 0"
@@ -692,6 +741,21 @@ fn run_leg(args: &Args) -> anyhow::Result<()> {
         let (label, file) = item
             .split_once('=')
             .with_context(|| format!("--leg-config {item:?}: expected LABEL=FILE"))?;
+        // Each label is one row of the report: not empty, not a built-in row, not repeated.
+        let label = label.trim();
+        anyhow::ensure!(
+            !label.is_empty() && !file.is_empty(),
+            "--leg-config {item:?}: expected LABEL=FILE with a non-empty label and file"
+        );
+        anyhow::ensure!(
+            !["none", "oracle"].contains(&label),
+            "--leg-config {item:?}: `{label}` is the label of a built-in row (no compensation, the \
+             oracle); name the config's row otherwise"
+        );
+        anyhow::ensure!(
+            !models.iter().any(|m| m.label == label),
+            "--leg-config {item:?}: the label `{label}` is given twice (each is one row of the report)"
+        );
         models.push(LegModel::from_daemon_config(label, Path::new(file), &leg)?);
     }
     if args

@@ -28,7 +28,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .flatten()
         .map(|p| p.as_path())
         .collect();
-    super::check_outputs(&[&args.dataset], &outputs)?;
+    super::check_outputs(
+        &[&args.dataset, &args.dataset.with_extension("json")],
+        &outputs,
+    )?;
     if let Some(s0) = args.sigma0 {
         anyhow::ensure!(
             s0.is_finite() && s0 > 0.0,

@@ -33,6 +33,7 @@ pub fn run_cli(cli: Cli) -> anyhow::Result<()> {
             }),
             _,
         ) => {
+            check_ratio(max_rmse_ratio)?;
             let all = finish(&dir, trials)?;
             println!(
                 "frictl search finish: {} trial(s), {} ok; results in {} (results.csv, results.json)",
@@ -72,10 +73,9 @@ fn space(args: &Args) -> anyhow::Result<SearchSpace> {
         lambda: pair("lambda", &args.lambda_range, d.lambda)?,
         dropout: pair("dropout", &args.dropout_range, d.dropout)?,
     };
-    anyhow::ensure!(
-        sp.lr.0 > 0.0 && sp.batch.0 > 0 && sp.hidden.0 > 0 && sp.history.0 > 0,
-        "--lr-range, --batch-range, --hidden-range and --history-range must be > 0"
-    );
+    // Both ends of every range through the trainer's own checks: no trial fails on its draw.
+    sp.validate(args.features.into(), args.temperature)
+        .map_err(|e| anyhow::anyhow!("--{}-range {}: {}", e.range, e.value, e.why))?;
     Ok(sp)
 }
 
@@ -144,8 +144,36 @@ fn print_pick(all: &[TrialResult], dir: &std::path::Path, ratio: f64) -> anyhow:
     Ok(())
 }
 
+/// `--max-rmse-ratio`, checked before any trial runs.
+fn check_ratio(ratio: f64) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        ratio.is_finite() && ratio >= 1.0,
+        "--max-rmse-ratio {ratio}: must be finite and ≥ 1"
+    );
+    Ok(())
+}
+
+/// The error of a search whose trials `all` include failed ones (the tables list them; `--resume`
+/// runs them again); `Ok` when every trial is `ok`.
+fn failed_trials(all: &[TrialResult], resume: &str) -> anyhow::Result<()> {
+    let failed: Vec<&TrialResult> = all.iter().filter(|r| r.status != "ok").collect();
+    if let Some(first) = failed.first() {
+        anyhow::bail!(
+            "{} of {} trial(s) failed (trial {}: {}); they are recorded as failed and {resume} runs \
+             them again",
+            failed.len(),
+            all.len(),
+            first.params.trial,
+            first.error.as_deref().unwrap_or("no reason recorded")
+        );
+    }
+    Ok(())
+}
+
 /// Runs `frictl search`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    check_ratio(args.max_rmse_ratio)?;
+    let space = space(&args)?;
     let scv_bytes =
         frictionless::regular_file::read(&args.scv, frictionless::regular_file::MAX_TEXT_BYTES)
             .map_err(|e| anyhow::anyhow!("{}: cannot read: {e}", args.scv.display()))?;
@@ -155,11 +183,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         test_runs: args.test_runs.clone(),
         test_datasets: args.test_datasets.clone(),
     };
-    let datasets = held_out.all_datasets(&args.datasets);
+    let datasets = held_out.all_datasets(&args.datasets)?;
     let sources = pipeline::load_sources(&datasets)?;
+    frictl_cli::train::distinct_contents(&sources, args.datasets.len())?;
     let scv = pipeline::load_scv(&args.scv)?;
     let settings = SearchSettings {
-        space: space(&args)?,
+        space,
         seed: args.seed,
         epochs: args.epochs,
         features: args.features.into(),
@@ -216,7 +245,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 args.out.display()
             );
         }
-        return Ok(());
+        return failed_trials(&ran, "the same --only-trials");
     }
     let run = SearchRun {
         dir: args.out.clone(),
@@ -246,8 +275,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if quiet {
         publish_pick(&args.out, &all, args.max_rmse_ratio)?;
-        Ok(())
     } else {
-        print_pick(&all, &args.out, args.max_rmse_ratio)
+        print_pick(&all, &args.out, args.max_rmse_ratio)?;
     }
+    failed_trials(&all, "`--resume`")
 }

@@ -86,6 +86,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
 /// `frictl sim serve`.
 fn serve(a: ServeArgs) -> anyhow::Result<()> {
+    // A pose is joint angles: finite and within three turns (a value in degrees or a typo is
+    // refused before anything starts; before, 100 rad was accepted).
+    if let Some((k, q)) = a.initial_pose_rad.iter().enumerate().find(|(_, q)| {
+        !(q.is_finite() && q.abs() <= frictionless_import::urdf::MAX_FIXED_JOINT_RAD)
+    }) {
+        anyhow::bail!(
+            "--initial-pose-rad entry {}: {q} rad is outside ±{:.2} rad (three turns); the pose \
+             is in rad",
+            k + 1,
+            frictionless_import::urdf::MAX_FIXED_JOINT_RAD
+        );
+    }
     let stop = frictionless_plant::install_stop_flag()?;
     let mut robot =
         frictionless_plant::build_robot(&a.preset, a.params.as_deref(), &a.sets, a.seed)?;

@@ -61,13 +61,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .report
         .clone()
         .unwrap_or_else(|| pipeline::default_report_path(&args.out));
-    let datasets = args.held_out.all_datasets(&args.datasets);
+    let datasets = args.held_out.all_datasets(&args.datasets)?;
     let sidecars: Vec<PathBuf> = datasets.iter().map(|d| d.with_extension("json")).collect();
     let mut inputs: Vec<&std::path::Path> = datasets.iter().map(PathBuf::as_path).collect();
     inputs.extend(sidecars.iter().map(PathBuf::as_path));
     inputs.push(&args.scv);
+    inputs.extend(args.init.as_deref());
     super::check_outputs(&inputs, &[&args.out, &report_path])?;
     let sources = pipeline::load_sources(&datasets)?;
+    frictl_cli::train::distinct_contents(&sources, args.datasets.len())?;
     let scv = pipeline::load_scv(&args.scv)?;
     let split_spec = SplitSpec {
         val_frac: args.val_frac,
