@@ -3,6 +3,8 @@
 //! `frictionless_eval` for the method, the rows evaluated and the JSON schema; the run itself is
 //! `frictionless_eval::job`.
 
+use std::path::PathBuf;
+
 use anyhow::Context;
 use frictionless::features::WarmupPolicy;
 use frictionless_eval::job::{self, EvalJob};
