@@ -211,6 +211,7 @@ pub fn compute(
         &mut cmd.i_ref_a,
         &mut cmd.flags,
         tau_f_out,
+        &mut cmd.tau_f_model_nm,
     );
 }
 
@@ -259,7 +260,8 @@ impl<'a> TickCtx<'a> {
 
 /// Task 3 for a set of joints (all of them, or one RT thread's half): per joint, enable edge →
 /// reset, model, range check, law, stale/fault/NaN handling, written at the joint's index into
-/// `i_a`, `flags` and `tau_f_out`. Returns the bits of the joints that ran the normal path.
+/// `i_a`, `flags`, `tau_f_out` (the law's τ̂_F, after kfc, clip and filter) and `model_out` (the
+/// estimate the law was given). Returns the bits of the joints that ran the normal path.
 #[inline]
 pub fn compute_joints(
     joints: &mut [JointRt],
@@ -267,6 +269,7 @@ pub fn compute_joints(
     i_a: &mut [f64; MAX_JOINTS],
     flags: &mut [u32; MAX_JOINTS],
     tau_f_out: &mut [f64; MAX_JOINTS],
+    model_out: &mut [f64; MAX_JOINTS],
 ) -> u64 {
     let (st, rq, fresh) = (cx.st, cx.rq, cx.fresh);
     let mut active = 0u64;
@@ -326,11 +329,15 @@ pub fn compute_joints(
                 0
             };
             let ood_flag = if ood { FLAG_OUT_OF_RANGE } else { 0 };
-            JointOut::from_law(o, warming | ood_flag)
+            JointOut {
+                tau_f_model_nm: f,
+                ..JointOut::from_law(o, warming | ood_flag)
+            }
         };
         i_a[k] = out.i_a;
         flags[k] = out.flags;
         tau_f_out[k] = out.tau_f_hat_nm;
+        model_out[k] = out.tau_f_model_nm;
     }
     active
 }
@@ -366,6 +373,8 @@ pub fn abi_flags(f: LawFlags) -> u32 {
 struct JointOut {
     i_a: f64,
     tau_f_hat_nm: f64,
+    /// The estimate the law was given (0 off the model path).
+    tau_f_model_nm: f64,
     flags: u32,
 }
 
@@ -376,6 +385,7 @@ impl JointOut {
         Self {
             i_a: 0.0,
             tau_f_hat_nm: 0.0,
+            tau_f_model_nm: 0.0,
             flags,
         }
     }
@@ -386,6 +396,7 @@ impl JointOut {
         Self {
             i_a: o.i_a,
             tau_f_hat_nm: o.tau_f_hat_nm,
+            tau_f_model_nm: 0.0,
             flags: abi_flags(o.flags) | extra,
         }
     }
@@ -790,6 +801,7 @@ fn publish_stop(
     cmd.valid_mask = configured_mask;
     cmd.i_ref_a = [0.0; MAX_JOINTS];
     cmd.flags = [0; MAX_JOINTS];
+    cmd.tau_f_model_nm = [0.0; MAX_JOINTS];
     status.flags |= STATUS_STOPPING;
     for _ in 0..3 {
         cmd.seq = cmd.seq.wrapping_add(1);

@@ -613,7 +613,7 @@ class TorqueRequest:
 
 @dataclass(frozen=True)
 class MotorCurrentCommand:
-    """Motor current references (daemon → plant), ``frictionless::MotorCurrentCommand_v1``."""
+    """Motor current references (daemon → plant), ``frictionless::MotorCurrentCommand_v2``."""
 
     seq: int
     stamp_ns: int
@@ -626,6 +626,10 @@ class MotorCurrentCommand:
     """Current reference [A] per joint (clamped, finite)."""
     flags: np.ndarray
     """Per-joint ``FLAG_*`` bits."""
+    tau_f_model_nm: np.ndarray
+    """The friction estimate the control law was given [Nm] per joint: the model's output (blended
+    to the static model out of range under ``ood = "static"``), before kfc, clip and filter; 0 for a
+    joint that did not run its model."""
 
     def is_valid(self, j: int) -> bool:
         """Whether ``i_ref_a[j]`` is a valid command."""
@@ -668,6 +672,7 @@ def _command(d: Optional[dict]) -> Optional[MotorCurrentCommand]:
         return None
     d["i_ref_a"] = np.asarray(d["i_ref_a"], dtype=np.float64)
     d["flags"] = np.asarray(d["flags"], dtype=np.uint32)
+    d["tau_f_model_nm"] = np.asarray(d["tau_f_model_nm"], dtype=np.float64)
     return MotorCurrentCommand(**d)
 
 

@@ -95,6 +95,7 @@ fn command_dict<'py>(py: Python<'py>, c: &MotorCurrentCommand) -> PyResult<Bound
     d.set_item("n_joints", c.n_joints)?;
     d.set_item("i_ref_a", c.i_ref_a[..n].to_vec())?;
     d.set_item("flags", c.flags[..n].to_vec())?;
+    d.set_item("tau_f_model_nm", c.tau_f_model_nm[..n].to_vec())?;
     Ok(d)
 }
 

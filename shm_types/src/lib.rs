@@ -210,7 +210,7 @@ impl Default for TorqueRequest {
 /// Motor current references (daemon → plant/drives).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
-#[type_name("frictionless::MotorCurrentCommand_v1")]
+#[type_name("frictionless::MotorCurrentCommand_v2")]
 pub struct MotorCurrentCommand {
     /// Sequence number, +1 per message.
     pub seq: u64,
@@ -230,6 +230,11 @@ pub struct MotorCurrentCommand {
     pub i_ref_a: [f64; MAX_JOINTS],
     /// Per-joint flags ([`FLAG_CURRENT_SATURATED`], …).
     pub flags: [u32; MAX_JOINTS],
+    /// The friction estimate the control law was given this tick [Nm]: the model's output (under
+    /// `ood = "static"`, blended towards the static model while [`FLAG_OUT_OF_RANGE`]), before kfc,
+    /// the friction clip and the filter; also while runtime compensation is off. 0 for a joint that
+    /// did not run its model this tick (disabled, stale, fault). `frictl replay` records it.
+    pub tau_f_model_nm: [f64; MAX_JOINTS],
 }
 
 impl MotorCurrentCommand {
@@ -245,6 +250,7 @@ impl MotorCurrentCommand {
             reserved: 0,
             i_ref_a: [0.0; MAX_JOINTS],
             flags: [0; MAX_JOINTS],
+            tau_f_model_nm: [0.0; MAX_JOINTS],
         }
     }
 

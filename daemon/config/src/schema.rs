@@ -1,7 +1,7 @@
 //! The schema: the file as written ([`RawConfig`] and its sections, serde with unknown keys
 //! refused, defaults) and the validated result ([`Config`], [`ModelSpec`], [`ResolvedBus`]).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use frictionless::model::ModelKind;
 use frictionless_drives::can::mit::MitRanges;
@@ -494,6 +494,23 @@ impl RawConfig {
             joint,
             bus: Vec::new(),
             control: ControlConfig::default(),
+        }
+    }
+
+    /// Rewrites every relative path the file holds (the joints' model files, the iceoryx2 root
+    /// path) as `base` joined with it, so that the config written to another directory names the
+    /// same files (`base` is the directory of the file it was read from, as in [`crate::parse`]).
+    pub fn make_paths_absolute(&mut self, base: &Path) {
+        let fix = |p: &mut PathBuf| {
+            if p.is_relative() {
+                *p = base.join(&*p);
+            }
+        };
+        if let Some(p) = self.backend.root_path.as_mut() {
+            fix(p);
+        }
+        for p in self.joint.iter_mut().filter_map(|j| j.model.as_mut()) {
+            fix(p);
         }
     }
 }

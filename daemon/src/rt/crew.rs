@@ -67,6 +67,7 @@ struct JobOut {
     i_a: [f64; MAX_JOINTS],
     flags: [u32; MAX_JOINTS],
     tau_f_nm: [f64; MAX_JOINTS],
+    tau_f_model_nm: [f64; MAX_JOINTS],
     active: u64,
 }
 
@@ -298,6 +299,7 @@ impl Crew {
                 i_a: [0.0; MAX_JOINTS],
                 flags: [0; MAX_JOINTS],
                 tau_f_nm: [0.0; MAX_JOINTS],
+                tau_f_model_nm: [0.0; MAX_JOINTS],
                 active: 0,
             }),
         });
@@ -401,7 +403,14 @@ impl Crew {
         };
         // SAFETY: `joints[..split]` is this thread's half; the helper only ever gets `[split..]`.
         let mine = unsafe { std::slice::from_raw_parts_mut(base, split) };
-        let mut active = compute_joints(mine, &cx, &mut cmd.i_ref_a, &mut cmd.flags, tau_f_out);
+        let mut active = compute_joints(
+            mine,
+            &cx,
+            &mut cmd.i_ref_a,
+            &mut cmd.flags,
+            tau_f_out,
+            &mut cmd.tau_f_model_nm,
+        );
         // The helper has not claimed the job: run its half here (it will never touch this job).
         let stolen = posted
             && self.ren.done.load(Ordering::Acquire) != self.posted
@@ -422,8 +431,15 @@ impl Crew {
             // SAFETY: the claim is ours, so the helper never reads this job or `joints[split..]`;
             // `split < n` because a job was posted.
             let theirs = unsafe { std::slice::from_raw_parts_mut(base.add(split), n - split) };
-            *prev_active =
-                active | compute_joints(theirs, &cx, &mut cmd.i_ref_a, &mut cmd.flags, tau_f_out);
+            *prev_active = active
+                | compute_joints(
+                    theirs,
+                    &cx,
+                    &mut cmd.i_ref_a,
+                    &mut cmd.flags,
+                    tau_f_out,
+                    &mut cmd.tau_f_model_nm,
+                );
             return true;
         }
         let on_time = posted && spin_until_eq(&self.ren.done, self.posted, by_ns);
@@ -436,6 +452,7 @@ impl Crew {
                 cmd.i_ref_a[k] = out.i_a[k];
                 cmd.flags[k] = out.flags[k];
                 tau_f_out[k] = out.tau_f_nm[k];
+                cmd.tau_f_model_nm[k] = out.tau_f_model_nm[k];
             }
             active |= out.active;
         } else {
@@ -450,6 +467,7 @@ impl Crew {
                 cmd.i_ref_a[k] = 0.0;
                 cmd.flags[k] = flag;
                 tau_f_out[k] = 0.0;
+                cmd.tau_f_model_nm[k] = 0.0;
             }
             if split < n {
                 self.late += 1;
@@ -562,7 +580,14 @@ fn helper_main(ren: &Rendezvous, plan: CrewPlan, rt_flags: u32) -> HelperReport 
             on_stale: job.on_stale,
             prev_active: job.prev_active,
         };
-        out.active = compute_joints(joints, &cx, &mut out.i_a, &mut out.flags, &mut out.tau_f_nm);
+        out.active = compute_joints(
+            joints,
+            &cx,
+            &mut out.i_a,
+            &mut out.flags,
+            &mut out.tau_f_nm,
+            &mut out.tau_f_model_nm,
+        );
         ren.done.store(seen, Ordering::Release);
         let next_ns = if plan.lockstep || job.deadline_ns == 0 {
             0

@@ -102,6 +102,32 @@ fn enable_edge_resets_the_filter_and_masks_follow_the_request() {
     assert_eq!(again, first);
 }
 
+/// The command carries the estimate the law was given: the CV model's value, before kfc and
+/// the LPF (which the current and the status's τ̂_F went through); 0 off the model path.
+#[test]
+fn the_command_carries_the_model_estimate_before_kfc_and_filter() {
+    let mut p = params("zero");
+    p.joints[0].law.gains.kfc = 0.5;
+    let mut prev = 0;
+    let inp = inputs(0.0, 1.0);
+    let mut cmd = MotorCurrentCommand::zeroed();
+    let mut tau_f = [0.0; MAX_JOINTS];
+    compute(&mut p, &inp, FRESH, &mut prev, &mut cmd, &mut tau_f);
+    // CV at ṡ = 1 rad/s: kc·tanh(ka·ṡ) + kv·ṡ = tanh(1000) ≈ 1 Nm.
+    let model = 1000.0f64.tanh();
+    assert!(
+        (cmd.tau_f_model_nm[2] - model).abs() < 1e-12,
+        "{}",
+        cmd.tau_f_model_nm[2]
+    );
+    // The law's τ̂_F went through kfc and the first LPF step: well below the model's.
+    assert!(tau_f[2].abs() < 0.5 * model, "law τ̂_F {}", tau_f[2]);
+    let mut off = inputs(0.0, 1.0);
+    off.request.value.enable_mask = 0;
+    compute(&mut p, &off, FRESH, &mut prev, &mut cmd, &mut tau_f);
+    assert_eq!(cmd.tau_f_model_nm[2], 0.0, "a disabled joint ran no model");
+}
+
 #[test]
 fn stale_fault_and_nan_paths() {
     let mut p = params("static_model");
