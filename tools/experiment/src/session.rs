@@ -691,9 +691,36 @@ impl Session {
     ) -> Result<(), ExperimentError> {
         let cfg = self.dir.join("frictiond.toml");
         write_daemon_config(&cfg, &self.ipc, mode, joints, raw_friction)?;
+        self.spawn_daemon(bins, &cfg, probe)
+    }
+
+    /// Starts `frictiond` on `raw` (written to the run directory; its backend should name this
+    /// session's [`Session::ipc`]) and waits until it subscribed to the torque requests (`probe`
+    /// returns the subscriber count).
+    pub fn start_daemon_config(
+        &mut self,
+        bins: &Binaries,
+        raw: &RawConfig,
+        probe: impl Fn() -> usize,
+    ) -> Result<(), ExperimentError> {
+        let cfg = self.dir.join("frictiond.toml");
+        let text = toml::to_string(raw).map_err(ExperimentError::SerializeConfig)?;
+        frictionless::output_file::write(&cfg, &text).map_err(|source| ExperimentError::Write {
+            path: cfg.clone(),
+            source,
+        })?;
+        self.spawn_daemon(bins, &cfg, probe)
+    }
+
+    fn spawn_daemon(
+        &mut self,
+        bins: &Binaries,
+        cfg: &Path,
+        probe: impl Fn() -> usize,
+    ) -> Result<(), ExperimentError> {
         self.spawn(
             "frictiond",
-            Command::new(&bins.frictiond).arg("--config").arg(&cfg),
+            Command::new(&bins.frictiond).arg("--config").arg(cfg),
         )?;
         self.wait_until("frictiond", Duration::from_secs(20), || probe() >= 1)
     }

@@ -7,7 +7,7 @@
 //! from one TOML file (`robot`; trials on a Ray cluster through `python/ray/frictl_ray.py`), model import,
 //! export and inspection (`import`, `export`, `convert`, `inspect`, `predict`), evaluation (`eval`),
 //! the paper's closed-loop experiments (`experiment`), live views of a running daemon (`monitor`,
-//! `record`), CAN tools (`can`) and the end-to-end `demo`.
+//! `record`), recorded data through the daemon as deployed (`replay`), CAN tools (`can`) and the end-to-end `demo`.
 //!
 //! What it is **not**: it never links the daemon; it talks to `frictiond` only through the shared-memory
 //! ABI in `frictionless-shm-types`, through files and by starting it as a process.
@@ -66,6 +66,8 @@ enum Command {
     Ctl(cmd::ctl::Args),
     /// Record states, requests, commands and status from shared memory to CSV.
     Record(cmd::record::Args),
+    /// Play recorded datasets through frictiond as deployed: what the daemon would have done.
+    Replay(cmd::replay::Args),
     /// CAN bus tools: record and replay candump logs.
     Can(cmd::can::Args),
     /// The whole method end to end on the virtual joints.
@@ -109,6 +111,7 @@ fn main() -> std::process::ExitCode {
         Command::Monitor(a) => cmd::monitor::run(a),
         Command::Ctl(a) => cmd::ctl::run(a),
         Command::Record(a) => cmd::record::run(a),
+        Command::Replay(a) => cmd::replay::run(a),
         Command::Can(a) => cmd::can::run(a),
         Command::Demo(a) => cmd::demo::run(a),
     };

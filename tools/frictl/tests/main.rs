@@ -18,6 +18,7 @@ mod import_cli;
 mod leg_frictiond;
 mod onpolicy_cli;
 mod plant_common;
+mod replay_cli;
 mod robot_cli;
 mod search_cli;
 mod sim_serve_shm;

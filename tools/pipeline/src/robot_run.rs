@@ -867,13 +867,24 @@ fn opt(v: Option<f64>) -> String {
 }
 
 fn report_md(robot: &RobotFile, joints: &BTreeMap<String, JointReport>, total_s: f64) -> String {
+    // What trained each PINN: the search's trials, or (trials = 0) one `[train]` run.
+    let training = if robot.search.trials == 0 {
+        let t = &robot.train;
+        format!(
+            "one training ([train]: hidden {:?}, history {}, {} epoch(s), batch {})",
+            t.hidden, t.history, t.epochs, t.batch
+        )
+    } else {
+        format!(
+            "search: {} trial(s) × {} epoch(s)",
+            robot.search.trials, robot.search.epochs
+        )
+    };
     let mut md = format!(
-        "# {}: friction models\n\nSeed {}; {} joint(s); search: {} trial(s) × {} epoch(s) per joint. Total {:.0} s.\nfrictiond config: `frictiond.toml` (`frictiond --config frictiond.toml --check`).\n\n",
+        "# {}: friction models\n\nSeed {}; {} joint(s); {training} per joint. Total {:.0} s.\nfrictiond config: `frictiond.toml` (`frictiond --config frictiond.toml --check`).\n\n",
         robot.robot.name,
         robot.robot.seed,
         robot.joint.len(),
-        robot.search.trials,
-        robot.search.epochs,
         total_s
     );
     md += "| joint | source | r | k_t [Nm/A] | best trial | val RMSE [Nm] | eval RMSE none / CV / SCV / PINN [Nm] |\n|---|---|---|---|---|---|---|\n";

@@ -60,5 +60,5 @@ pub mod torque_sensor;
 
 pub use leg::{JointSample, LegError, LegParams, LegPlant, Perturbation};
 pub use link::{LinkDynamics, Pendulum};
-pub use params::{LinkModel, ParamError, PlantParams, SensorParams};
+pub use params::{LinkModel, MotorEncoderKind, ParamError, PlantParams, SensorParams};
 pub use plant::{Measurement, Plant, PlantState, Sample, Truth};

@@ -126,6 +126,11 @@ pub struct SensorParams {
     pub motor_encoder_counts_per_rev: u32,
     /// Motor velocity = motor-encoder difference over this many samples divided by its duration.
     pub motor_velocity_window_samples: u32,
+    /// The motor encoder's kind: `absolute` (θ = r·φ at every power-up, the default) or
+    /// `incremental` (the counter starts at 0 at every power-up: θ = r·(φ − φ at power-up), so each
+    /// boot of the plant — its start or reset at rest — reads its own zero, as on a robot).
+    #[serde(default)]
+    pub motor_encoder: MotorEncoderKind,
     /// Standard deviation of the current-measurement noise σ_i [A].
     pub current_noise_std_a: f64,
     /// Current measurement resolution [A] (1 mA).
@@ -134,6 +139,17 @@ pub struct SensorParams {
     pub temperature_sensor: bool,
     /// Temperature resolution [°C].
     pub temperature_resolution_c: f64,
+}
+
+/// Whether the motor encoder keeps its zero across power-ups ([`SensorParams::motor_encoder`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MotorEncoderKind {
+    /// The same zero at every power-up.
+    #[default]
+    Absolute,
+    /// Counts from 0 at every power-up.
+    Incremental,
 }
 
 /// Every parameter of the virtual harmonic-drive joint (reference §2–§5).

@@ -20,7 +20,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
 use crate::link::LinkDynamics;
-use crate::params::{ParamError, PlantParams};
+use crate::params::{MotorEncoderKind, ParamError, PlantParams};
 use crate::stribeck::StribeckTable;
 use frictionless::fastmath;
 
@@ -354,6 +354,9 @@ pub(crate) struct Sensors {
     /// Quantised θ of the last N + 1 samples (ring).
     theta_hist: Vec<f64>,
     theta_pos: usize,
+    /// What the motor encoder read at power-up and subtracts ever since (0 for an absolute one)
+    /// [motor rad].
+    theta_zero_rad: f64,
 }
 
 impl Sensors {
@@ -361,6 +364,7 @@ impl Sensors {
         Self {
             theta_hist: vec![0.0; p.sensors.motor_velocity_window_samples as usize + 1],
             theta_pos: 0,
+            theta_zero_rad: 0.0,
         }
     }
 
@@ -370,9 +374,15 @@ impl Sensors {
         quantise(p.gear_ratio_signed * st.phi_rad, q)
     }
 
-    /// Fills the motor-velocity window with the current θ (a joint at rest).
+    /// A power-up at rest: an incremental motor encoder takes the current θ as its zero; fills the
+    /// motor-velocity window with the θ it reads.
     pub(crate) fn reset(&mut self, p: &PlantParams, st: &PlantState) {
-        let theta_q = Self::theta_quantised(p, st);
+        let raw = Self::theta_quantised(p, st);
+        self.theta_zero_rad = match p.sensors.motor_encoder {
+            MotorEncoderKind::Absolute => 0.0,
+            MotorEncoderKind::Incremental => raw,
+        };
+        let theta_q = raw - self.theta_zero_rad;
         self.theta_hist.iter_mut().for_each(|t| *t = theta_q);
     }
 
@@ -386,7 +396,7 @@ impl Sensors {
     ) -> Measurement {
         let sens = &p.sensors;
         let q_s = std::f64::consts::TAU / f64::from(sens.joint_encoder_counts_per_rev);
-        let theta = Self::theta_quantised(p, st);
+        let theta = Self::theta_quantised(p, st) - self.theta_zero_rad;
         // ring of the last N+1 quantised motor angles
         let n = self.theta_hist.len();
         self.theta_pos = (self.theta_pos + 1) % n;

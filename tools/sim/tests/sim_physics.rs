@@ -553,3 +553,52 @@ mod perturbed {
         }
     }
 }
+
+/// An incremental motor encoder reads 0 at every power-up (start or reset at rest) and then the
+/// same motion as an absolute one; the joint encoder is untouched.
+#[test]
+fn an_incremental_motor_encoder_reads_zero_at_every_power_up() {
+    let pend = frictionless_sim::Pendulum {
+        inertia_kgm2: 0.574,
+        gravity_amplitude_nm: 16.6,
+        gravity_phase_rad: 0.3,
+    };
+    let abs_p = params("knee", &["plant.initial_s_rad=0.7"]);
+    let inc_p = params(
+        "knee",
+        &[
+            "plant.initial_s_rad=0.7",
+            "plant.sensors.motor_encoder=incremental",
+        ],
+    );
+    let mut abs = Plant::new(abs_p.clone(), pend, 4).unwrap();
+    let mut inc = Plant::new(inc_p, pend, 4).unwrap();
+    let zero = abs.measurement().theta_motor_rad;
+    assert!(zero.abs() > 10.0, "absolute θ at 0.7 rad: {zero}");
+    assert_eq!(inc.measurement().theta_motor_rad, 0.0);
+    for k in 0..3000 {
+        let i = sweep_current_a(&abs_p, k);
+        let a = abs.step(i, 0.0).meas;
+        let b = inc.step(i, 0.0).meas;
+        assert!(
+            (b.theta_motor_rad - (a.theta_motor_rad - zero)).abs() < 1e-9,
+            "sample {k}"
+        );
+        assert_eq!(a.s_rad, b.s_rad);
+        assert!(
+            (a.omega_motor_rad_s - b.omega_motor_rad_s).abs() < 1e-9,
+            "sample {k}"
+        );
+    }
+    // Another power-up at another pose: a new zero.
+    inc.reset_at_rest(-0.4);
+    assert_eq!(inc.measurement().theta_motor_rad, 0.0);
+    let table = load_table(
+        "knee",
+        None,
+        &["plant.sensors.motor_encoder=relative".into()],
+    )
+    .unwrap();
+    let err = PlantParams::from_table(&table).unwrap_err().to_string();
+    assert!(err.contains("relative"), "{err}");
+}

@@ -21,6 +21,7 @@ pub mod monitor;
 pub mod predict;
 pub mod preprocess;
 pub mod record;
+pub mod replay;
 pub mod robot;
 pub mod search;
 pub mod sim;
