@@ -567,3 +567,52 @@ fn a_log_with_a_motor_angle_and_no_gear_ratio_is_refused_naming_the_flag() {
     ok(&[&base[..], &["--features", "joint-pos-joint-vel"]].concat());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `frictl distill` on one recording cut into blocks draws its default probes from the training
+/// blocks' rows (a quarter of them), not from the dataset's one chunk id, which no block carries.
+#[test]
+fn distill_on_one_recording_draws_probes_from_its_training_blocks() {
+    let dir = scratch("frictl-distill-one-recording");
+    let ds = one_recording(&dir, "ds", 14.0, 0.0);
+    let cv = dir.join("cv.json");
+    ok(&["fit", "cv", s(&ds), "--json", s(&cv)]);
+    let teacher = dir.join("t.fwt");
+    ok(&[
+        "train",
+        "--dataset",
+        s(&ds),
+        "--scv",
+        s(&cv),
+        "--out",
+        s(&teacher),
+        "--hidden",
+        "16",
+        "--history",
+        "4",
+        "--epochs",
+        "1",
+        "--quiet",
+    ]);
+    let out = frictl(&[
+        "distill",
+        s(&teacher),
+        "--dataset",
+        s(&ds),
+        "--hidden",
+        "8",
+        "--epochs",
+        "1",
+        "-o",
+        s(&dir.join("s.fwt")),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    let probes: usize = err
+        .split(" probes;")
+        .next()
+        .and_then(|h| h.rsplit(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no probe count in: {err}"));
+    // 14 s at 1 kHz: the training blocks hold well over 4000 valid rows.
+    assert!(probes > 1000, "{probes} probes: {err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -327,6 +327,26 @@ impl Split {
         }
     }
 
+    /// Valid rows of `key` in `ds` (the dataset `key.dataset` names): a block's rows after its
+    /// gap, or the rows of the dataset's chunk `key.chunk`.
+    pub fn valid_rows(&self, key: ChunkKey, ds: &Dataset) -> usize {
+        match self.blocks.iter().find(|b| b.key == key) {
+            Some(b) => ds
+                .valid
+                .get(b.start_row + b.gap_rows..b.end_row)
+                .unwrap_or(&[])
+                .iter()
+                .filter(|v| **v)
+                .count(),
+            None => ds
+                .chunk
+                .iter()
+                .zip(&ds.valid)
+                .filter(|(c, v)| **c == key.chunk && **v)
+                .count(),
+        }
+    }
+
     /// The chunks of one set.
     pub fn chunks(&self, kind: SetKind) -> &[ChunkKey] {
         match kind {
@@ -791,6 +811,27 @@ mod tests {
                     .all(|&v| v)
             );
         }
+        // A block's valid rows are its rows after the gap; a chunk key counts the chunk's rows.
+        let split = Split {
+            train: vec![blocks[1].key],
+            val: vec![],
+            test: vec![],
+            blocks: blocks.clone(),
+        };
+        assert_eq!(
+            split.valid_rows(blocks[1].key, &ds),
+            blocks[1].end_row - blocks[1].start_row - BLOCK_GAP_ROWS
+        );
+        assert_eq!(
+            split.valid_rows(
+                ChunkKey {
+                    dataset: 2,
+                    chunk: 1
+                },
+                &ds
+            ),
+            10
+        );
         let other = with_blocks(&ds, 0, &blocks);
         assert!(
             other.chunk == ds.chunk && other.valid == ds.valid,

@@ -335,14 +335,7 @@ pub fn distill_file(args: &Args) -> anyhow::Result<Outcome> {
         let train_rows: usize = split
             .train
             .iter()
-            .map(|k| {
-                let d = &sources.list[k.dataset as usize].data;
-                d.chunk
-                    .iter()
-                    .zip(&d.valid)
-                    .filter(|(c, v)| **c == k.chunk && **v)
-                    .count()
-            })
+            .map(|k| split.valid_rows(*k, &sources.list[k.dataset as usize].data))
             .sum();
         train_rows / 4
     });
