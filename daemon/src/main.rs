@@ -49,6 +49,31 @@ struct Cli {
     check: bool,
 }
 
+/// `FRICTIONLESS_GENERATE_ASSETS=DIR frictiond` writes `DIR/man/frictiond.1` and the bash, zsh and
+/// fish completions in `DIR/{bash,zsh,fish}/` from [`Cli`] and exits: the Debian package's build runs it
+/// (packaging/deb.sh). An environment variable, not an option, so that the pages and completions
+/// describe only the real command line.
+fn generate_assets(dir: &std::path::Path) -> anyhow::Result<()> {
+    use clap::CommandFactory;
+    use clap_complete::Shell;
+    let cmd = Cli::command();
+    let man = dir.join("man");
+    std::fs::create_dir_all(&man).with_context(|| format!("creating {}", man.display()))?;
+    clap_mangen::generate_to(cmd.clone(), &man)
+        .with_context(|| format!("writing man pages to {}", man.display()))?;
+    for (shell, sub) in [
+        (Shell::Bash, "bash"),
+        (Shell::Zsh, "zsh"),
+        (Shell::Fish, "fish"),
+    ] {
+        let out = dir.join(sub);
+        std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+        clap_complete::generate_to(shell, &mut cmd.clone(), "frictiond", &out)
+            .with_context(|| format!("writing {shell} completions to {}", out.display()))?;
+    }
+    Ok(())
+}
+
 fn init_logging() {
     use std::io::IsTerminal;
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
@@ -141,9 +166,14 @@ fn summary(cfg: &config::Config) -> String {
 }
 
 fn main() -> std::process::ExitCode {
-    init_logging();
-    let cli = Cli::parse();
-    match run(cli) {
+    let result = match std::env::var_os("FRICTIONLESS_GENERATE_ASSETS") {
+        Some(dir) => generate_assets(std::path::Path::new(&dir)),
+        None => {
+            init_logging();
+            run(Cli::parse())
+        }
+    };
+    match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             // One line, on stderr (the journal under systemd), whatever RUST_LOG filters.

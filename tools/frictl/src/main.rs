@@ -74,6 +74,32 @@ enum Command {
     Demo(cmd::demo::Args),
 }
 
+/// `FRICTIONLESS_GENERATE_ASSETS=DIR frictl` writes `DIR/man/frictl*.1` (one page per subcommand) and
+/// the bash, zsh and fish completions in `DIR/{bash,zsh,fish}/` from [`Cli`] and exits: the Debian
+/// package's build runs it (packaging/deb.sh). An environment variable, not a subcommand, so that the
+/// pages and completions describe only the real command line.
+fn generate_assets(dir: &std::path::Path) -> anyhow::Result<()> {
+    use anyhow::Context;
+    use clap::CommandFactory;
+    use clap_complete::Shell;
+    let cmd = Cli::command();
+    let man = dir.join("man");
+    std::fs::create_dir_all(&man).with_context(|| format!("creating {}", man.display()))?;
+    clap_mangen::generate_to(cmd.clone(), &man)
+        .with_context(|| format!("writing man pages to {}", man.display()))?;
+    for (shell, sub) in [
+        (Shell::Bash, "bash"),
+        (Shell::Zsh, "zsh"),
+        (Shell::Fish, "fish"),
+    ] {
+        let out = dir.join(sub);
+        std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+        clap_complete::generate_to(shell, &mut cmd.clone(), "frictl", &out)
+            .with_context(|| format!("writing {shell} completions to {}", out.display()))?;
+    }
+    Ok(())
+}
+
 /// Log lines (warnings of the served drives, `sim serve --backend can`'s summary) go to stderr;
 /// `RUST_LOG` overrides the default (frictl's own info, dependencies' warnings).
 fn init_logging() {
@@ -88,6 +114,15 @@ fn init_logging() {
 }
 
 fn main() -> std::process::ExitCode {
+    if let Some(dir) = std::env::var_os("FRICTIONLESS_GENERATE_ASSETS") {
+        return match generate_assets(std::path::Path::new(&dir)) {
+            Ok(()) => std::process::ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("frictl: error: {}", frictionless::error_line(e.as_ref()));
+                std::process::ExitCode::FAILURE
+            }
+        };
+    }
     let cli = Cli::parse();
     init_logging();
     let result = match cli.command {
