@@ -15,7 +15,9 @@
 # Usage: bash tests/systemd-vm/run.sh [PATH.deb]   (default: the newest target/debian/frictionless_*.deb;
 #        none there → bash packaging/deb.sh builds it)
 # Knobs (env): SVM_WORK (default target/systemd-vm), SVM_TIMEOUT seconds for the VM (default 600),
-#              SVM_ACCEL (auto|kvm|tcg), SVM_MEM_MB (default 2048), SVM_MIRROR (default: deb.debian.org).
+#              SVM_ACCEL (auto|kvm|tcg), SVM_MEM_MB (default 2048), SVM_MIRROR (default: deb.debian.org),
+#              SVM_IMAGE_ONLY=1 (build or check the cached root image and stop: CI builds it in the
+#              background while cargo works).
 # Last line: "systemd-vm: N passed, N failed"; exit code non-zero on any failure or timeout.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -26,19 +28,6 @@ MIRROR=${SVM_MIRROR:-http://deb.debian.org/debian}
 mkdir -p "$WORK"
 log() { echo "systemd-vm: [${SECONDS} s] $*" >&2; }
 fail() { log "$*"; echo "systemd-vm: 0 passed, 1 failed"; exit 1; }
-
-# 1. The package.
-deb=${1:-}
-if [ -z "$deb" ]; then
-  deb=$(ls -t target/debian/frictionless_*.deb 2>/dev/null | head -n1 || true)
-  if [ -z "$deb" ]; then
-    log "no package in target/debian: building it (bash packaging/deb.sh)"
-    bash packaging/deb.sh >&2
-    deb=$(ls -t target/debian/frictionless_*.deb | head -n1)
-  fi
-fi
-[ -f "$deb" ] || fail "no package at $deb"
-log "package $deb ($(du -k "$deb" | cut -f1) KiB)"
 
 # 2. Host tools.
 need=""
@@ -100,14 +89,32 @@ else
   log "cached root image $WORK/base.img"
 fi
 
-# 4. The second disk: the package and the driver.
+if [ -n "${SVM_IMAGE_ONLY:-}" ]; then
+  log "root image ready (SVM_IMAGE_ONLY: no package, no boot)"
+  exit 0
+fi
+
+# 4. The package.
+deb=${1:-}
+if [ -z "$deb" ]; then
+  deb=$(ls -t target/debian/frictionless_*.deb 2>/dev/null | head -n1 || true)
+  if [ -z "$deb" ]; then
+    log "no package in target/debian: building it (bash packaging/deb.sh)"
+    bash packaging/deb.sh >&2
+    deb=$(ls -t target/debian/frictionless_*.deb | head -n1)
+  fi
+fi
+[ -f "$deb" ] || fail "no package at $deb"
+log "package $deb ($(du -k "$deb" | cut -f1) KiB)"
+
+# 5. The second disk: the package and the driver.
 P=$WORK/payload
 rm -rf "$P" && mkdir -p "$P"
 cp "$deb" "$P/"
 cp tests/systemd-vm/driver.sh "$P/driver.sh"
 mkfs.ext4 -q -F -L svmpayload -d "$P" "$WORK/payload.img" "$(( $(du -sm "$P" | cut -f1) + 16 ))M"
 
-# 5. Boot. KVM only if it can really work (as tests/canvm/run.sh decides).
+# 6. Boot. KVM only if it can really work (as tests/canvm/run.sh decides).
 accel=${SVM_ACCEL:-auto}
 if [ "$accel" = auto ]; then
   accel=tcg
@@ -127,7 +134,7 @@ set -e
 log "VM exited (qemu rc $qrc)"
 tr -d '\r' < "$WORK/console.log" | sed 's/\x1b\[[0-9;?]*[a-zA-Z]//g' > "$WORK/console.txt"
 
-# 6. The driver's verdicts: "svm: PASS name: detail" / "svm: FAIL name: detail", then "svm: DONE".
+# 7. The driver's verdicts: "svm: PASS name: detail" / "svm: FAIL name: detail", then "svm: DONE".
 grep -E '^svm: ' "$WORK/console.txt" >&2 || true
 passed=$(grep -cE '^svm: PASS ' "$WORK/console.txt" || true)
 failed=$(grep -cE '^svm: FAIL ' "$WORK/console.txt" || true)
