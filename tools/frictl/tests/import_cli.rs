@@ -2246,6 +2246,78 @@ fn preprocess_ripple_wave_generator_identifies_the_plant_ripple() {
     }
 }
 
+/// A log that leaves no valid row (the first 0.2 s of an acquisition: the joint mostly at rest,
+/// every row within the matched smoother's reach of a rejected one) is refused by `frictl
+/// preprocess --label-filter matched`, with and without `--ripple wave-generator`, naming the
+/// dataset and the counts, and nothing is written (before: a dataset and sidecar of 200 rows,
+/// 0 valid, that looked complete).
+#[test]
+fn preprocess_writes_no_dataset_without_a_valid_row() {
+    let (d, log) = small_knee_log("no-valid");
+    let text = std::fs::read_to_string(&log).unwrap();
+    let head: Vec<&str> = text.lines().take(201).collect();
+    let short = d.join("short.csv");
+    std::fs::write(&short, head.join("\n") + "\n").unwrap();
+    std::fs::copy(log.with_extension("json"), short.with_extension("json")).unwrap();
+    for extra in [
+        &["--label-filter", "matched", "--ripple", "wave-generator"][..],
+        &["--label-filter", "matched"][..],
+    ] {
+        let out = d.join("short_ds.csv");
+        let mut args = vec!["preprocess", s(&short), "--out", s(&out)];
+        args.extend_from_slice(extra);
+        let e = err_text(frictl(&args), &format!("preprocess {extra:?} of 200 rows"));
+        assert!(
+            e.contains("short_ds.csv: not written")
+                && e.contains("none of its 200 samples is valid"),
+            "{extra:?}: {e}"
+        );
+        assert!(
+            !out.exists() && !out.with_extension("json").exists(),
+            "{extra:?}: a dataset was written"
+        );
+    }
+    // One motor-angle glitch (1e308 rad: its double, the ripple's angle, is not finite): that
+    // chunk gets no ripple correction and every valid label stays finite (before: the ripple
+    // step failed with "position sample … = NaN is not finite").
+    let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
+    let col = lines[0]
+        .split(',')
+        .position(|c| c == "theta_motor_rad")
+        .unwrap();
+    let mid = lines.len() / 2;
+    let mut cells: Vec<String> = lines[mid].split(',').map(str::to_owned).collect();
+    cells[col] = "1e308".into();
+    lines[mid] = cells.join(",");
+    let glitch = d.join("glitch.csv");
+    std::fs::write(&glitch, lines.join("\n") + "\n").unwrap();
+    std::fs::copy(log.with_extension("json"), glitch.with_extension("json")).unwrap();
+    let out = d.join("glitch_ds.csv");
+    ok(
+        frictl(&[
+            "preprocess",
+            s(&glitch),
+            "--out",
+            s(&out),
+            "--label-filter",
+            "matched",
+            "--ripple",
+            "wave-generator",
+        ]),
+        "preprocess --ripple of a log with a motor-angle glitch",
+    );
+    let ds = dataset(&out);
+    let valid: Vec<f64> = (0..ds.len())
+        .filter(|&k| ds.valid[k])
+        .map(|k| ds.tau_f_label_nm[k])
+        .collect();
+    assert!(
+        valid.len() > 1000 && valid.iter().all(|f| f.is_finite()),
+        "{} valid rows",
+        valid.len()
+    );
+}
+
 /// The robot's options are refused, before the log is read, when they would change the label
 /// silently: the labelled joint held by `--fixed-joint` (before: accepted, the knee's label moved
 /// by 11.8 Nm RMS), a joint held twice or at an absurd position (1e308 rad), a `--joint` twice.
