@@ -7,7 +7,7 @@
 //! temperature = `motors_state/temperatures` (when logged); ṡ and s̈ are left to the pipeline's
 //! smoother, as the authors do. Time is `timestamps − t₀` of `joints_state/positions`: its ticks
 //! are the reference time base, and every other joint channel is read on its own `timestamps` and
-//! aligned onto them ([`Aligned`]: a tick at a sample takes it, a tick between two close samples
+//! aligned onto them (`Aligned`: a tick at a sample takes it, a tick between two close samples
 //! is interpolated, a tick in a gap of the channel drops its row, counted and warned, and the gap
 //! closes the chunk). Chunks are
 //! the spans of the exogenous `current_control/motors/desired/current` stream between its gaps
