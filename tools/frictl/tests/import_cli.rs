@@ -675,6 +675,87 @@ fn mat_whole_body_label_matches_pinocchio() {
     );
 }
 
+/// The same 500 Hz whole-leg motion as `.mat` and as CSV with the motor currents missing for 0.2 s
+/// (`make_fixtures.py leg`: `leg_gap.mat`, whose current channel's own timestamps skip those ticks,
+/// and `leg_gap.csv`, whose current cells there are NaN): the `.mat` import aligns the current
+/// channel onto the positions' ticks by its timestamps, drops the rows in its gap (counted and
+/// said) and labels the knee as the CSV import does (before: the channel, of another length than
+/// the positions', was not used).
+#[cfg(feature = "mat")]
+#[test]
+#[ignore = "needs FRICTIONLESS_PY (tests/run.sh): Pinocchio writes the whole-body log"]
+fn mat_channel_with_a_gap_is_aligned_by_its_timestamps_and_labels_as_the_csv() {
+    let d = leg_fixture();
+    let urdf = ergocub_urdf();
+    let robot = ["--urdf", s(&urdf), "--gear-ratio", "100", "--kt", "0.1"];
+    let (csv_log, mat_log) = (d.join("leg_gap.csv"), d.join("leg_gap.mat"));
+    let csv_out = d.join("gap_csv_knee.csv");
+    let mut args = vec![
+        "import",
+        "csv",
+        s(&csv_log),
+        "--joint",
+        "l_knee",
+        "--column",
+        "time=t",
+        "--column",
+        "s=q_{joint}",
+        "--column",
+        "current=i_{joint}",
+        "--positions",
+        "q_{joint}",
+        "-o",
+        s(&csv_out),
+    ];
+    args.extend(robot);
+    ok(frictl(&args), "import csv leg_gap.csv");
+    let mat_out = d.join("gap_mat_knee.csv");
+    let mut args = vec!["import", "mat", s(&mat_log), "-o", s(&mat_out)];
+    args.extend(robot);
+    let mat = ok(frictl(&args), "import mat leg_gap.mat");
+    let err = String::from_utf8_lossy(&mat.stderr);
+    // 0.2 s at 500 Hz: 100 ticks without a current.
+    assert!(
+        err.contains("motors_state/currents: 100 rows dropped"),
+        "{err}"
+    );
+    let f_ref = leg_ref("tau_f_l_knee");
+    let (dc, dm) = (dataset(&csv_out), dataset(&mat_out));
+    let (rms_csv, n_csv) = rms_vs(&dc, &dc.tau_f_label_nm, &f_ref);
+    let (rms_mat, n_mat) = rms_vs(&dm, &dm.tau_f_label_nm, &f_ref);
+    eprintln!(
+        "knee label RMS vs the true friction: csv {rms_csv:.4} Nm on {n_csv}, mat {rms_mat:.4} Nm \
+         on {n_mat}"
+    );
+    assert!(
+        n_mat > 10_000 && n_mat.abs_diff(n_csv) < 50,
+        "{n_mat} vs {n_csv}"
+    );
+    assert!(
+        rms_mat <= 1.1 * rms_csv + 0.005,
+        "mat {rms_mat} Nm vs csv {rms_csv} Nm"
+    );
+    // Sample by sample on the common 1 kHz grid, the two labels are the same.
+    let by_ms: std::collections::HashMap<i64, f64> = dc
+        .time_s
+        .iter()
+        .zip(&dc.valid)
+        .zip(&dc.tau_f_label_nm)
+        .filter(|((_, v), _)| **v)
+        .map(|((t, _), f)| ((t * 1000.0).round() as i64, *f))
+        .collect();
+    let (mut e2, mut n) = (0.0, 0usize);
+    for ((t, v), f) in dm.time_s.iter().zip(&dm.valid).zip(&dm.tau_f_label_nm) {
+        if let (true, Some(g)) = (*v, by_ms.get(&((t * 1000.0).round() as i64))) {
+            e2 += (f - g).powi(2);
+            n += 1;
+        }
+    }
+    let diff = (e2 / n.max(1) as f64).sqrt();
+    eprintln!("mat vs csv label: RMS difference {diff:.2e} Nm on {n} samples");
+    assert!(n > 10_000 && diff < 1e-3, "{diff} Nm on {n}");
+}
+
 /// The logs of `make_fixtures.py tilted` (the leg of [`leg_fixture`] on a root link tilted 20° in roll
 /// and −10° in pitch, yawed 30°, swaying 2°; `tilted.mat` with a 250–350 N wrench applied at
 /// `l_foot_rear_ft`, `tilted.mcap` without it, `tilted_wrench.mcap` with it; the currents from Pinocchio's rnea with that gravity
@@ -2163,6 +2244,78 @@ fn preprocess_ripple_wave_generator_identifies_the_plant_ripple() {
         assert!(e.contains(needle), "{e}");
         assert!(!out.exists());
     }
+}
+
+/// A log that leaves no valid row (the first 0.2 s of an acquisition: the joint mostly at rest,
+/// every row within the matched smoother's reach of a rejected one) is refused by `frictl
+/// preprocess --label-filter matched`, with and without `--ripple wave-generator`, naming the
+/// dataset and the counts, and nothing is written (before: a dataset and sidecar of 200 rows,
+/// 0 valid, that looked complete).
+#[test]
+fn preprocess_writes_no_dataset_without_a_valid_row() {
+    let (d, log) = small_knee_log("no-valid");
+    let text = std::fs::read_to_string(&log).unwrap();
+    let head: Vec<&str> = text.lines().take(201).collect();
+    let short = d.join("short.csv");
+    std::fs::write(&short, head.join("\n") + "\n").unwrap();
+    std::fs::copy(log.with_extension("json"), short.with_extension("json")).unwrap();
+    for extra in [
+        &["--label-filter", "matched", "--ripple", "wave-generator"][..],
+        &["--label-filter", "matched"][..],
+    ] {
+        let out = d.join("short_ds.csv");
+        let mut args = vec!["preprocess", s(&short), "--out", s(&out)];
+        args.extend_from_slice(extra);
+        let e = err_text(frictl(&args), &format!("preprocess {extra:?} of 200 rows"));
+        assert!(
+            e.contains("short_ds.csv: not written")
+                && e.contains("none of its 200 samples is valid"),
+            "{extra:?}: {e}"
+        );
+        assert!(
+            !out.exists() && !out.with_extension("json").exists(),
+            "{extra:?}: a dataset was written"
+        );
+    }
+    // One motor-angle glitch (1e308 rad: its double, the ripple's angle, is not finite): that
+    // chunk gets no ripple correction and every valid label stays finite (before: the ripple
+    // step failed with "position sample … = NaN is not finite").
+    let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
+    let col = lines[0]
+        .split(',')
+        .position(|c| c == "theta_motor_rad")
+        .unwrap();
+    let mid = lines.len() / 2;
+    let mut cells: Vec<String> = lines[mid].split(',').map(str::to_owned).collect();
+    cells[col] = "1e308".into();
+    lines[mid] = cells.join(",");
+    let glitch = d.join("glitch.csv");
+    std::fs::write(&glitch, lines.join("\n") + "\n").unwrap();
+    std::fs::copy(log.with_extension("json"), glitch.with_extension("json")).unwrap();
+    let out = d.join("glitch_ds.csv");
+    ok(
+        frictl(&[
+            "preprocess",
+            s(&glitch),
+            "--out",
+            s(&out),
+            "--label-filter",
+            "matched",
+            "--ripple",
+            "wave-generator",
+        ]),
+        "preprocess --ripple of a log with a motor-angle glitch",
+    );
+    let ds = dataset(&out);
+    let valid: Vec<f64> = (0..ds.len())
+        .filter(|&k| ds.valid[k])
+        .map(|k| ds.tau_f_label_nm[k])
+        .collect();
+    assert!(
+        valid.len() > 1000 && valid.iter().all(|f| f.is_finite()),
+        "{} valid rows",
+        valid.len()
+    );
 }
 
 /// The robot's options are refused, before the log is read, when they would change the label

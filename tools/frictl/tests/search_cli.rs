@@ -236,24 +236,43 @@ fn a_search_directory_has_one_owner_and_bad_settings_are_refused_before_any_tria
     drop(lock);
 
     // Settings the trainer refuses at either end of a range, and a bad pick ratio, are refused
-    // before the first trial (before: every trial failed and the search exited 0).
-    for (flag, value, says) in [
-        ("--history-range", "3,65", "--history-range 3,65"),
-        ("--hidden-range", "8,2000", "--hidden-range 8,2000"),
-        ("--dropout-range", "0.1,1.5", "--dropout-range 0.1,1.5"),
-        ("--lambda-range", "0.2,1.5", "--lambda-range 0.2,1.5"),
-        ("--max-rmse-ratio", "0", "--max-rmse-ratio 0"),
-        ("--max-rmse-ratio", "nan", "--max-rmse-ratio NaN"),
+    // before the first trial, naming the option and the limit (before: every trial failed and the
+    // search exited 0).
+    for (args, says, limit) in [
+        (
+            &["--history-range", "3,65"][..],
+            "--history-range 3,65",
+            "64",
+        ),
+        (
+            &["--hidden-range", "8,2000"],
+            "--hidden-range 8,2000",
+            "1..=1024",
+        ),
+        (
+            &["--dropout-range", "0.1,1.5"],
+            "--dropout-range 0.1,1.5",
+            "[0, 1)",
+        ),
+        (
+            &["--lambda-range", "0.2,1.5"],
+            "--lambda-range 0.2,1.5",
+            "[0, 1]",
+        ),
+        (
+            &["--lambda-range=-0.5,0.3"],
+            "--lambda-range -0.5,0.3",
+            "[0, 1]",
+        ),
+        (&["--max-rmse-ratio", "0"], "--max-rmse-ratio 0", "≥ 1"),
+        (&["--max-rmse-ratio", "nan"], "--max-rmse-ratio NaN", "≥ 1"),
     ] {
         let bad = dir.join("bad");
-        let r = tiny_search(&ds, &scv, &bad, "1", &[flag, value]);
+        let r = tiny_search(&ds, &scv, &bad, "1", args);
         let err = String::from_utf8_lossy(&r.stderr).into_owned();
-        assert!(!r.status.success(), "{flag} {value} accepted");
-        assert!(err.contains(says), "{flag} {value}: {err}");
-        assert!(
-            !bad.join("results.jsonl").exists(),
-            "{flag} {value}: a trial ran"
-        );
+        assert!(!r.status.success(), "{args:?} accepted");
+        assert!(err.contains(says) && err.contains(limit), "{args:?}: {err}");
+        assert!(!bad.join("results.jsonl").exists(), "{args:?}: a trial ran");
     }
     // A trial count that cannot be held is refused by the option's bound (before: OOM-killed).
     let r = tiny_search(&ds, &scv, &dir.join("huge"), "1e11", &[]);

@@ -30,6 +30,28 @@ pub enum WriteError {
     /// The sidecar does not serialise.
     #[error("dataset sidecar: {0}")]
     Json(serde_json::Error),
+    /// No row is valid with a finite label: such a dataset would look complete and hold nothing
+    /// to fit or train on, so nothing is written.
+    #[error(
+        "{}: not written: none of its {samples} samples is valid with a finite label ({valid} \
+         marked valid, {nan_label} of those with a non-finite label; {short_chunks} of {chunks} \
+         chunks too short to filter)",
+        path.display()
+    )]
+    NoValidRows {
+        /// The dataset CSV that was not written.
+        path: PathBuf,
+        /// Samples of the dataset.
+        samples: usize,
+        /// Samples marked valid.
+        valid: usize,
+        /// Valid samples whose `tau_f_label_nm` is not finite.
+        nan_label: usize,
+        /// Chunks of the log.
+        chunks: usize,
+        /// Chunks too short to filter.
+        short_chunks: usize,
+    },
     /// The CSV and its sidecar could not be committed.
     #[error("cannot write {} and {}", csv.display(), sidecar.display())]
     Commit {
@@ -59,13 +81,32 @@ pub struct Provenance<'a> {
 }
 
 /// Writes a current-labelled dataset `ds` to `out` and its sidecar (`out` with `.json`) together:
-/// the sidecar last, so a dataset without a complete sidecar is never left looking complete.
+/// the sidecar last, so a dataset without a complete sidecar is never left looking complete. A
+/// dataset without a valid row of finite label is refused ([`WriteError::NoValidRows`]) and
+/// nothing is written.
 pub fn write_dataset(
     out: &Path,
     ds: &Dataset,
     summary: &PreprocessSummary,
     from: &Provenance<'_>,
 ) -> Result<(), WriteError> {
+    let valid = ds.valid.iter().filter(|v| **v).count();
+    let nan_label = ds
+        .valid
+        .iter()
+        .zip(&ds.tau_f_label_nm)
+        .filter(|(v, f)| **v && !f.is_finite())
+        .count();
+    if valid == nan_label {
+        return Err(WriteError::NoValidRows {
+            path: out.to_path_buf(),
+            samples: ds.len(),
+            valid,
+            nan_label,
+            chunks: summary.chunks,
+            short_chunks: summary.short_chunks,
+        });
+    }
     let mut csv_out = AtomicFile::create(out).map_err(|source| WriteError::Io {
         path: out.to_path_buf(),
         source,

@@ -128,9 +128,10 @@ fn chunks(ds: &Dataset) -> Vec<(usize, usize)> {
     out
 }
 
-/// x_s and x_c of rows `a..b`, or `None` when a row has no motor angle or ṡ.
+/// x_s and x_c of rows `a..b`, or `None` when a row has no motor angle or ṡ (or an angle whose
+/// double is not finite: its sine is not a number).
 fn regressors(ds: &Dataset, a: usize, b: usize) -> Option<[Vec<f64>; 2]> {
-    if !(a..b).all(|k| ds.theta_motor_rad[k].is_finite() && ds.sdot_rad_s[k].is_finite()) {
+    if !(a..b).all(|k| (2.0 * ds.theta_motor_rad[k]).is_finite() && ds.sdot_rad_s[k].is_finite()) {
         return None;
     }
     let (mut xs, mut xc) = (Vec::with_capacity(b - a), Vec::with_capacity(b - a));

@@ -991,7 +991,13 @@ impl WholeImport<'_> {
         }
         // An import that keeps nothing is refused before it replaces anything, with the
         // plausibility findings as the likely cause.
-        let valid = ds.valid.iter().filter(|v| **v).count();
+        // A valid row is one with a finite label (a NaN label is nothing to fit on).
+        let valid = ds
+            .valid
+            .iter()
+            .zip(&ds.tau_f_label_nm)
+            .filter(|(v, f)| **v && f.is_finite())
+            .count();
         let empty_runs: Vec<String> = self
             .runs
             .iter()

@@ -5,7 +5,11 @@
 //! UTF-16 char arrays under `/#refs#`). Signals: s = `joints_state/positions`, θ =
 //! `motors_state/positions`, ω = `motors_state/velocities`, current = `motors_state/currents`,
 //! temperature = `motors_state/temperatures` (when logged); ṡ and s̈ are left to the pipeline's
-//! smoother, as the authors do. Time is `timestamps − t₀` of `joints_state/positions`. Chunks are
+//! smoother, as the authors do. Time is `timestamps − t₀` of `joints_state/positions`: its ticks
+//! are the reference time base, and every other joint channel is read on its own `timestamps` and
+//! aligned onto them (`Aligned`: a tick at a sample takes it, a tick between two close samples
+//! is interpolated, a tick in a gap of the channel drops its row, counted and warned, and the gap
+//! closes the chunk). Chunks are
 //! the spans of the exogenous `current_control/motors/desired/current` stream between its gaps
 //! larger than the given gap (1 s, the authors' rule); robot ticks outside every span are skipped
 //! (counted). Without that channel the whole file is one stream split by the pipeline's gap rule.
@@ -196,6 +200,213 @@ const STORED_SLACK: u64 = 1 << 20;
 struct Channel {
     data: h5::Dataset,
     cols: Vec<usize>,
+}
+
+/// A joint channel other than the positions, read on its own `timestamps` and aligned onto the
+/// positions' ticks (the reference time base): a tick at one of the channel's stamps (within
+/// [`SAME_TICK`] of the reference period) takes that sample; a tick between two stamps closer than
+/// [`MAX_STEP`] periods (the larger of the two channels' periods) is interpolated linearly; a tick
+/// in a longer gap of the channel, or before its first or after its last stamp, has no value and
+/// its row is dropped (counted per channel). The channel is read forward in blocks of [`BLOCK`]
+/// samples; the reference ticks come in increasing order (a tick not after the previous one keeps
+/// the previous value: the run builder drops its row as a time that did not increase).
+struct Aligned {
+    /// The channel's name under the root (e.g. `motors_state/currents`).
+    name: String,
+    data: h5::Dataset,
+    ts: h5::Dataset,
+    /// Samples in the file.
+    len: usize,
+    /// The labelled joints' columns.
+    cols: Vec<usize>,
+    /// The next sample of the file not yet in the buffer.
+    next: usize,
+    /// Buffered stamps and, per labelled joint, values (finite, increasing stamps only).
+    t: Vec<f64>,
+    v: Vec<Vec<f64>>,
+    /// Index into the buffer of the last stamp at or before the previous query.
+    cursor: usize,
+    /// A tick within this of a stamp takes its sample [s].
+    same_s: f64,
+    /// Longest span between two stamps interpolated across [s].
+    max_step_s: f64,
+    /// Samples whose stamp was not finite or not after the previous stamp (not used).
+    bad_stamps: u64,
+    /// Reference ticks taken at a stamp, interpolated, and without a value.
+    exact: u64,
+    interpolated: u64,
+    missing: u64,
+    /// Rows dropped for a tick without a value (counted by the reader: ticks outside the
+    /// desired-current stream are not).
+    dropped: u64,
+    /// The previous query [s].
+    last_query: f64,
+}
+
+/// A reference tick within this fraction of the reference period of a channel's stamp takes that
+/// sample.
+const SAME_TICK: f64 = 0.01;
+/// Two stamps of a channel at most this many periods apart are interpolated between; a longer
+/// span is a gap (its ticks have no value).
+const MAX_STEP: f64 = 1.5;
+
+/// The median step of the first (at most [`BLOCK`]) finite, increasing stamps of `ts`; `None`
+/// with fewer than two.
+fn median_step(path: &Path, ts: &h5::Dataset, len: usize) -> Result<Option<f64>, LogsError> {
+    let t = read_ts(path, ts, 0, len.min(BLOCK))?;
+    let mut d: Vec<f64> = t
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|d| d.is_finite() && *d > 0.0)
+        .collect();
+    if d.is_empty() {
+        return Ok(None);
+    }
+    d.sort_by(f64::total_cmp);
+    Ok(Some(d[d.len() / 2]))
+}
+
+impl Aligned {
+    /// The channel `name` with its data `ch`, aligned onto ticks of period `ref_step_s`.
+    fn open(
+        path: &Path,
+        root: &h5::Group,
+        name: &str,
+        ch: Channel,
+        len: usize,
+        ref_step_s: f64,
+    ) -> Result<Self, LogsError> {
+        let ts = timestamps(path, root, name, len)?;
+        let own = median_step(path, &ts, len)?.unwrap_or(ref_step_s);
+        Ok(Self {
+            name: name.to_string(),
+            data: ch.data,
+            ts,
+            len,
+            v: vec![Vec::new(); ch.cols.len()],
+            cols: ch.cols,
+            next: 0,
+            t: Vec::new(),
+            cursor: 0,
+            same_s: SAME_TICK * ref_step_s,
+            max_step_s: MAX_STEP * own.max(ref_step_s),
+            bad_stamps: 0,
+            exact: 0,
+            interpolated: 0,
+            missing: 0,
+            dropped: 0,
+            last_query: f64::NEG_INFINITY,
+        })
+    }
+
+    /// Reads the next block of the file into the buffer, dropping what lies before the cursor;
+    /// `false` at the end of the file.
+    fn load(&mut self, path: &Path) -> Result<bool, LogsError> {
+        if self.next >= self.len {
+            return Ok(false);
+        }
+        let (a, e) = (self.next, (self.next + BLOCK).min(self.len));
+        let t = read_ts(path, &self.ts, a, e)?;
+        let mut cols = Vec::with_capacity(self.cols.len());
+        for &c in &self.cols {
+            let v: ndarray::Array1<f64> = self
+                .data
+                .read_slice_1d(ndarray::s![a..e, 0, c])
+                .map_err(|x| h5err(path, &format!("{} data", self.name), x))?;
+            cols.push(v);
+        }
+        self.t.drain(..self.cursor);
+        for v in &mut self.v {
+            v.drain(..self.cursor);
+        }
+        self.cursor = 0;
+        for (k, &tk) in t.iter().enumerate() {
+            if !(tk.is_finite() && self.t.last().is_none_or(|&l| tk > l)) {
+                self.bad_stamps += 1;
+                continue;
+            }
+            self.t.push(tk);
+            for (v, c) in self.v.iter_mut().zip(&cols) {
+                v.push(c[k]);
+            }
+        }
+        self.next = e;
+        Ok(true)
+    }
+
+    /// The labelled joints' values at reference tick `tq` into `out` (one per joint); `false`
+    /// (and `out` untouched) when the channel has no value there. A tick not after the previous
+    /// one leaves `out` as it is and answers `true`.
+    fn at(&mut self, path: &Path, tq: f64, out: &mut [f64]) -> Result<bool, LogsError> {
+        if tq.is_nan() || tq <= self.last_query {
+            return Ok(true);
+        }
+        self.last_query = tq;
+        // The buffer must hold a stamp after tq (or the file be read to its end).
+        while self.t.last().is_none_or(|&l| l <= tq) && self.load(path)? {}
+        while self.cursor + 1 < self.t.len() && self.t[self.cursor + 1] <= tq {
+            self.cursor += 1;
+        }
+        let c = self.cursor;
+        let Some(&t0) = self.t.get(c) else {
+            self.missing += 1;
+            return Ok(false);
+        };
+        let pick = |k: usize, out: &mut [f64], v: &[Vec<f64>]| {
+            for (o, v) in out.iter_mut().zip(v) {
+                *o = v[k];
+            }
+        };
+        if (tq - t0).abs() <= self.same_s {
+            pick(c, out, &self.v);
+            self.exact += 1;
+            return Ok(true);
+        }
+        let Some(&t1) = self.t.get(c + 1) else {
+            self.missing += 1;
+            return Ok(false);
+        };
+        if (t1 - tq).abs() <= self.same_s {
+            pick(c + 1, out, &self.v);
+            self.exact += 1;
+            return Ok(true);
+        }
+        if t0 < tq && tq < t1 && t1 - t0 <= self.max_step_s {
+            let w = (tq - t0) / (t1 - t0);
+            for (o, v) in out.iter_mut().zip(&self.v) {
+                *o = v[c] + w * (v[c + 1] - v[c]);
+            }
+            self.interpolated += 1;
+            return Ok(true);
+        }
+        self.missing += 1;
+        Ok(false)
+    }
+
+    /// What the alignment did, for the report: a note always, a warning when ticks had no value
+    /// or stamps were unusable.
+    fn say(&self, notes: &mut Vec<String>, warnings: &mut Vec<String>) {
+        notes.push(format!(
+            "{}: {} samples on its own timestamps aligned onto joints_state/positions: {} ticks \
+             at a sample, {} interpolated (stamps at most {:.6} s apart), {} in its gaps (rows \
+             dropped)",
+            self.name, self.len, self.exact, self.interpolated, self.max_step_s, self.missing
+        ));
+        if self.dropped > 0 {
+            warnings.push(format!(
+                "{}: {} rows dropped: their ticks of joints_state/positions fall in gaps of its \
+                 timestamps (longer than {:.6} s) or outside them",
+                self.name, self.dropped, self.max_step_s
+            ));
+        }
+        if self.bad_stamps > 0 {
+            warnings.push(format!(
+                "{}: {} samples whose timestamp was not finite or not after the previous one: \
+                 not used",
+                self.name, self.bad_stamps
+            ));
+        }
+    }
 }
 
 fn h5err(path: &Path, what: &str, e: impl std::fmt::Display) -> LogsError {
@@ -433,7 +644,7 @@ pub fn read_streamed(
     };
     let joint = joints.join(", ");
     let JointChannels {
-        chans,
+        chans: joint_chans,
         n_ticks,
         mut notes,
         sources,
@@ -447,6 +658,19 @@ pub fn read_streamed(
         });
     }
     let ts = timestamps(path, &root, "joints_state/positions", n)?;
+    // Every other joint channel on its own timestamps, aligned onto the positions' ticks.
+    let ref_step_s = median_step(path, &ts, n)?.unwrap_or(f64::INFINITY);
+    let mut chans: Vec<(Role, Lane)> = Vec::with_capacity(joint_chans.len());
+    for (role, ch, len, name) in joint_chans {
+        chans.push(if role == Role::S {
+            (role, Lane::Ticks(ch))
+        } else {
+            (
+                role,
+                Lane::Own(Aligned::open(path, &root, &name, ch, len, ref_step_s)?),
+            )
+        });
+    }
     let mut extras = match state.as_mut() {
         Some((layout, cols)) => {
             state_extras(path, &file, &root, extra, n, layout, cols, &mut notes)?
@@ -474,7 +698,17 @@ pub fn read_streamed(
     }
     // Map order is time then `roles` in order: the same as `chans`.
     let state_cols = state.as_ref().map(|s| s.1.clone()).unwrap_or_default();
-    let positions = chans.first().map(|c| c.1.data.clone());
+    let positions = chans.first().and_then(|c| match &c.1 {
+        Lane::Ticks(ch) => Some(ch.data.clone()),
+        Lane::Own(_) => None,
+    });
+    let gap_reasons: Vec<String> = chans
+        .iter()
+        .map(|(_, l)| match l {
+            Lane::Own(al) => format!("in a gap of {}", al.name),
+            Lane::Ticks(_) => String::new(),
+        })
+        .collect();
     // Hyperslabs of at most BLOCK ticks; streamed, of the sink's block size.
     let block = stream
         .as_ref()
@@ -495,19 +729,46 @@ pub fn read_streamed(
     }
     let mut t0: Option<f64> = None;
     let mut span_i = 0usize;
+    // Chunks closed by a channel's gap so far, and whether the previous tick was in one.
+    let (mut gap_breaks, mut in_gap) = (0u32, false);
     let mut a = 0;
     while a < n {
         let e = (a + block).min(n);
         let t = read_ts(path, &ts, a, e)?;
+        // Per channel, per joint: the block's values; `gap[k]`: the first channel without a
+        // value at tick k.
+        let mut gap: Vec<Option<usize>> = vec![None; e - a];
+        let mut per_chan: Vec<Vec<ndarray::Array1<f64>>> = Vec::with_capacity(chans.len());
+        for (ci, (role, lane)) in chans.iter_mut().enumerate() {
+            per_chan.push(match lane {
+                Lane::Ticks(ch) => (0..joints.len())
+                    .map(|j| {
+                        ch.data
+                            .read_slice_1d(ndarray::s![a..e, 0, ch.cols[j]])
+                            .map_err(|x| h5err(path, &format!("{role} data"), x))
+                    })
+                    .collect::<Result<_, _>>()?,
+                Lane::Own(al) => {
+                    let mut v = vec![ndarray::Array1::from_elem(e - a, f64::NAN); joints.len()];
+                    let mut at = vec![f64::NAN; joints.len()];
+                    for (k, &tk) in t.iter().enumerate() {
+                        if al.at(path, tk, &mut at)? {
+                            for (vj, x) in v.iter_mut().zip(&at) {
+                                vj[k] = *x;
+                            }
+                        } else if gap[k].is_none() {
+                            gap[k] = Some(ci);
+                        }
+                    }
+                    v
+                }
+            });
+        }
         // Joint-major: every role of the first joint, then the next joint's (the row order).
         let mut cols = Vec::with_capacity(chans.len() * joints.len() + state_cols.len());
         for j in 0..joints.len() {
-            for (role, ch) in &chans {
-                let v: ndarray::Array1<f64> = ch
-                    .data
-                    .read_slice_1d(ndarray::s![a..e, 0, ch.cols[j]])
-                    .map_err(|x| h5err(path, &format!("{role} data"), x))?;
-                cols.push(v);
+            for c in &mut per_chan {
+                cols.push(std::mem::take(&mut c[j]));
             }
         }
         if let (Some(pos), false) = (&positions, state_cols.is_empty()) {
@@ -544,6 +805,19 @@ pub fn read_streamed(
                 }
                 chunk = span_i as u32;
             }
+            if let Some(ci) = gap[k] {
+                b.skip(&gap_reasons[ci]);
+                if let Lane::Own(al) = &mut chans[ci].1 {
+                    al.dropped += 1;
+                }
+                in_gap = true;
+                continue;
+            }
+            // A channel's gap closes the chunk: the pipeline never interpolates across it.
+            if std::mem::take(&mut in_gap) && t0.is_some() {
+                gap_breaks += 1;
+            }
+            chunk += gap_breaks;
             let origin = *t0.get_or_insert(tk);
             let row = b.row_mut();
             row[0] = tk - origin;
@@ -554,6 +828,14 @@ pub fn read_streamed(
         }
         a = e;
         progress(a as u64, n as u64);
+    }
+    {
+        let rep = b.report_mut();
+        for (_, lane) in &chans {
+            if let Lane::Own(al) = lane {
+                al.say(&mut rep.notes, &mut rep.warnings);
+            }
+        }
     }
     if let Some(t0) = t0 {
         b.report_mut()
@@ -566,10 +848,19 @@ pub fn read_streamed(
     b.finish(&p, name)
 }
 
+/// How a joint channel's samples meet the positions' ticks.
+enum Lane {
+    /// The positions themselves: sample k is tick k.
+    Ticks(Channel),
+    /// Any other channel: on its own timestamps, aligned.
+    Own(Aligned),
+}
+
 /// The channels of the labelled joints' signals, in the row's role order (the position first).
 #[derive(Default)]
 struct JointChannels {
-    chans: Vec<(Role, Channel)>,
+    /// Role, channel, its sample count and its name under the root.
+    chans: Vec<(Role, Channel, usize, String)>,
     /// The position channel's ticks.
     n_ticks: Option<usize>,
     notes: Vec<String>,
@@ -580,8 +871,8 @@ struct JointChannels {
 }
 
 /// Finds the position, motor position, velocity, current and temperature channels of `joints`
-/// (a channel with another tick count than the positions' is noted and not used) and, with the
-/// URDF's names, the whole-body state's joints.
+/// (each with its own sample count: all but the positions are aligned by their timestamps) and,
+/// with the URDF's names, the whole-body state's joints.
 fn joint_channels(
     path: &Path,
     file: &h5::File,
@@ -629,15 +920,8 @@ fn joint_channels(
                     }
                     out.state = Some((crate::StateLayout::positions(st_names), st_cols));
                 }
-                match out.n_ticks {
-                    None => out.n_ticks = Some(n),
-                    Some(m) if m != n => {
-                        out.notes.push(format!(
-                            "{name}: {n} samples, not the {m} of joints_state/positions: not used"
-                        ));
-                        continue;
-                    }
-                    _ => {}
+                if role == Role::S {
+                    out.n_ticks = Some(n);
                 }
                 out.sources.push((
                     role,
@@ -650,7 +934,7 @@ fn joint_channels(
                             .join(", ")
                     ),
                 ));
-                out.chans.push((role, ch));
+                out.chans.push((role, ch, n, name.to_string()));
             }
             None if role == Role::S => {
                 return Err(LogsError::Format {

@@ -80,9 +80,12 @@ pub enum ServeError {
         joints: usize,
     },
     /// A non-finite initial pose.
-    #[error("--initial-pose-rad: value {k} is {value}")]
+    #[error(
+        "--initial-pose-rad entry {} (joint index {k}) is {value}: not a finite angle [rad]",
+        .k + 1
+    )]
     InitialPoseValue {
-        /// Position in the list.
+        /// Position in the list (0-based: the served joint's index).
         k: usize,
         /// The value.
         value: f64,
@@ -440,4 +443,24 @@ pub fn install_stop_flag() -> Result<&'static std::sync::atomic::AtomicBool, Ser
         }
     }
     Ok(&STOP)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A non-finite pose names its entry as the option counts them (from 1) and the joint's
+    /// index (before: "value 0 is NaN", the 0 an index read as a value).
+    #[test]
+    fn a_non_finite_initial_pose_names_its_entry_and_joint_index() {
+        let mut robot = build_robot("knee,knee", None, &[], 0).unwrap();
+        let e = robot
+            .reset_at_rest(&[0.1, f64::NAN])
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "--initial-pose-rad entry 2 (joint index 1) is NaN: not a finite angle [rad]"
+        );
+    }
 }

@@ -95,12 +95,14 @@ impl SearchSpace {
     /// can fail on its draw): MIN ≤ MAX, and the trainer's own checks
     /// ([`TrainConfig::validate`], [`FeatureSpec::validate`]) on both ends of every range.
     pub fn validate(&self, features: FeatureSet, temperature: bool) -> Result<(), RangeError> {
+        // Each range's ends are tried on the paper's defaults, so a refusal names its own range.
+        let d = Self::default();
         let base = TrainConfig {
-            hidden: vec![self.hidden.0; 2],
-            dropout: self.dropout.0,
-            lambda: self.lambda.0,
-            lr: self.lr.0,
-            batch_size: self.batch.0,
+            hidden: vec![d.hidden.0; 2],
+            dropout: d.dropout.0,
+            lambda: d.lambda.0,
+            lr: d.lr.0,
+            batch_size: d.batch.0,
             epochs: 1,
             seed: 0,
             threads: 1,
