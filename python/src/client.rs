@@ -168,13 +168,16 @@ fn control_dict<'py>(
     d.set_item("max_curr", r.max_curr_a)?;
     d.set_item("compensation", r.compensation != 0)?;
     d.set_item("ood", ood_mode_name(r.ood_mode))?;
+    d.set_item("model", r.model())?;
     d.set_item(
-        "model",
+        "model_kind",
         u8::try_from(r.model_kind)
             .ok()
             .and_then(frictionless::model::ModelKind::from_code)
             .map_or("?", |k| k.name()),
     )?;
+    d.set_item("model_since_tick", r.model_since_tick)?;
+    d.set_item("models", r.models().collect::<Vec<_>>())?;
     let since = PyDict::new(py);
     for (k, t) in CONTROL_KEYS.iter().zip(r.set_since_ns) {
         since.set_item(*k, (t != 0).then_some(t))?;
@@ -370,8 +373,8 @@ impl DaemonClient {
         control_dict(py, joint, &r)
     }
 
-    /// Sets `key` (`kfc`, `max_output_friction`, `max_curr`, `compensation` = `on`/`off`, `ood`)
-    /// of `joint` to `value` (written as in the config) in the running daemon; applied from its
+    /// Sets `key` (`kfc`, `max_output_friction`, `max_curr`, `compensation` = `on`/`off`, `ood`,
+    /// `model` = a name of the joint's `models`) of `joint` to `value` (written as in the config) in the running daemon; applied from its
     /// next tick until a reload. Returns the joint's values; raises `ValueError` with the daemon's
     /// message (which names the rule) when refused.
     #[pyo3(signature = (joint, key, value, timeout_s = 2.0))]
