@@ -371,3 +371,61 @@ fn frictl_ctl_sets_and_gets_a_live_daemon() {
     let (st, log) = d.wait_exit(T);
     assert!(st.success(), "{log}");
 }
+
+#[test]
+#[ignore = "needs root (to run frictl as nobody) and the frictl binary beside frictiond: bash tests/run.sh"]
+fn another_user_is_refused_with_a_clear_message_while_the_owner_sets() {
+    use std::process::Command;
+    // SAFETY: geteuid has no preconditions.
+    assert_eq!(
+        unsafe { libc::geteuid() },
+        0,
+        "this test runs frictl as nobody: run it as root"
+    );
+    let frictl = frictl_bin();
+    let env = TestEnv::new("ctluser");
+    let cfg = env.write_config(&lockstep(""));
+    let mut d = Daemon::start(&cfg, &[]);
+    let mut plant = Plant::open(&env.ipc, "plant");
+    plant.wait_for_daemon(T);
+    let (_ipc, c) = connect(&env, "knee_cv");
+    let root = env.ipc.root_path.clone().unwrap();
+    let ctl = |as_nobody: bool, args: &[&str]| {
+        let mut cmd = if as_nobody {
+            let mut c = Command::new("setpriv");
+            c.args(["--reuid=nobody", "--regid=nogroup", "--clear-groups", "--"])
+                .arg(&frictl);
+            c
+        } else {
+            Command::new(&frictl)
+        };
+        let out = cmd
+            .arg("ctl")
+            .args(args)
+            .args(["--prefix", &env.ipc.service_prefix, "--root-path"])
+            .arg(&root)
+            .output()
+            .unwrap();
+        (
+            out.status.success(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (ok, err) = ctl(true, &["set", "knee_cv", "kfc=0.3"]);
+    assert!(!ok, "nobody's set must fail: {err}");
+    assert!(
+        err.contains("permission denied") && err.contains("only frictiond's user"),
+        "{err}"
+    );
+    let (ok, err) = ctl(true, &["get", "knee_cv"]);
+    assert!(!ok && err.contains("permission denied"), "{err}");
+    // Nothing changed; the owner's set goes through.
+    assert_eq!(get(&c, "knee_cv").kfc, 0.85);
+    let (ok, err) = ctl(false, &["set", "knee_cv", "kfc=0.3"]);
+    assert!(ok, "{err}");
+    let i = knee_current(&mut plant);
+    assert!(close(i, knee_ref(0.3, true, 5.0)), "{i}");
+    d.signal(libc::SIGTERM);
+    let (st, log) = d.wait_exit(T);
+    assert!(st.success(), "{log}");
+}

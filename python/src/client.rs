@@ -15,7 +15,8 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use frictionless_shm_types::control::{
-    CONTROL_KEYS, CONTROL_OK, ControlClient, ControlRequest, ControlResponse, ood_mode_name,
+    CONTROL_KEYS, CONTROL_OK, ControlClient, ControlRequest, ControlResponse, access_refusal,
+    ood_mode_name,
 };
 use frictionless_shm_types::{
     DaemonStatus, Histogram, Inbox, Ipc, IpcConfig, JointStates, MAX_JOINTS, MotorCurrentCommand,
@@ -195,7 +196,11 @@ impl DaemonClient {
     #[pyo3(signature = (service_prefix = "frictionless", root_path = None, node_name = "frictionless-py"))]
     fn new(service_prefix: &str, root_path: Option<PathBuf>, node_name: &str) -> PyResult<Self> {
         let cfg = IpcConfig::new(root_path.as_deref(), service_prefix);
-        let ipc = Ipc::open(&cfg, node_name).map_err(ipc_err)?;
+        // Another user's deployment: say who may connect instead of iceoryx2's error alone.
+        let ipc = Ipc::open(&cfg, node_name).map_err(|e| match access_refusal(&cfg) {
+            Some(why) => IpcError::new_err(format!("{why} ({})", message(&e))),
+            None => ipc_err(e),
+        })?;
         let cmd = ipc
             .motor_current_command()
             .and_then(|c| c.inbox())

@@ -14,7 +14,7 @@ use iceoryx2::port::client::Client;
 use iceoryx2::port::server::Server;
 use iceoryx2::prelude::*;
 
-use crate::{Ipc, MAX_NODES, ShmError, ipc_err};
+use crate::{Ipc, IpcConfig, MAX_NODES, ShmError, ipc_err};
 
 /// Bytes of each text field of a [`ControlRequest`] (UTF-8, NUL-padded).
 pub const CONTROL_TEXT_BYTES: usize = 64;
@@ -371,6 +371,36 @@ impl ControlClient {
             std::thread::sleep(Duration::from_millis(1));
         }
     }
+}
+
+/// Why this process cannot use `cfg`'s control service when another user owns the iceoryx2 root
+/// path: iceoryx2 creates its service files, node entries and shared-memory segments readable and
+/// writable by their creator's user only (0600; directories 0750), so only frictiond's own user
+/// (or root) can open its services. `None` when this process is root or owns the root path (or it
+/// does not exist yet). A client calls it when opening the service failed, to replace iceoryx2's
+/// error with one that says who may connect.
+pub fn access_refusal(cfg: &IpcConfig) -> Option<String> {
+    use std::os::unix::fs::MetadataExt;
+    // SAFETY: geteuid has no preconditions and cannot fail.
+    let euid = unsafe { libc::geteuid() };
+    if euid == 0 {
+        return None;
+    }
+    let root = match &cfg.root_path {
+        Some(p) => p.clone(),
+        None => {
+            let c = iceoryx2::config::Config::default();
+            std::path::PathBuf::from(c.global.root_path().to_string())
+        }
+    };
+    let owner = std::fs::metadata(&root).ok()?.uid();
+    (owner != euid).then(|| {
+        format!(
+            "permission denied: the control service `{}/control` under {} belongs to uid {owner} (frictiond's user), this process runs as uid {euid}; only frictiond's user may send control requests (run the client as that user, e.g. `sudo -u` it)",
+            cfg.service_prefix,
+            root.display()
+        )
+    })
 }
 
 #[cfg(test)]

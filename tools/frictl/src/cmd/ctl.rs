@@ -9,9 +9,10 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use frictionless_shm_types::control::{
-    CONTROL_KEYS, CONTROL_OK, ControlClient, ControlRequest, ControlResponse, ood_mode_name,
+    CONTROL_KEYS, CONTROL_OK, ControlClient, ControlRequest, ControlResponse, access_refusal,
+    ood_mode_name,
 };
-use frictionless_shm_types::{Ipc, IpcConfig};
+use frictionless_shm_types::{Ipc, IpcConfig, ShmError};
 
 pub use frictl_cli::ctl::*;
 
@@ -116,8 +117,14 @@ fn as_text(joint: &str, r: &ControlResponse) -> String {
 /// Runs `frictl ctl`.
 pub fn run(a: Args) -> anyhow::Result<()> {
     let cfg = IpcConfig::new(a.root_path.as_deref(), &a.prefix);
-    let ipc = Ipc::open(&cfg, "frictl-ctl").context("opening iceoryx2")?;
-    let client = ipc.control_client()?;
+    let refused = |e: ShmError| match access_refusal(&cfg) {
+        Some(why) => anyhow::anyhow!("{why} ({e})"),
+        None => anyhow::Error::new(e),
+    };
+    let ipc = Ipc::open(&cfg, "frictl-ctl")
+        .map_err(refused)
+        .context("opening iceoryx2")?;
+    let client = ipc.control_client().map_err(refused)?;
     let timeout = Duration::from_millis(a.timeout_ms);
     match a.command {
         CtlCommand::Get { joint, json } => {
