@@ -15,11 +15,11 @@ use std::time::{Duration, Instant};
 
 use frictionless_shm_types::control::{
     CONTROL_BAD_REQUEST, CONTROL_BUSY, CONTROL_KEYS, CONTROL_OK, CONTROL_OP_GET, CONTROL_OP_SET,
-    CONTROL_REFUSED, CONTROL_WRITES_DISABLED, ControlRequest, ControlResponse, text,
+    CONTROL_REFUSED, CONTROL_WRITES_DISABLED, ControlRequest, ControlResponse, put_text, text,
 };
 
 use crate::config::{Config, OodMode};
-use crate::runtime::{Change, RuntimeSet, check};
+use crate::runtime::{Change, RuntimeSet, check, model_kind, model_names};
 
 /// One joint's values in use and when each was set at run time (0 = the file's).
 #[derive(Debug, Clone)]
@@ -29,6 +29,10 @@ struct JointValues {
     max_curr_a: f64,
     compensation: bool,
     ood: OodMode,
+    /// Slot of the active model ([`model_names`]' order).
+    model_slot: usize,
+    /// Ticks completed when the model set was queued (0 = the file's).
+    model_since_tick: u64,
     set_since_ns: [u64; CONTROL_KEYS.len()],
 }
 
@@ -85,6 +89,8 @@ impl ControlState {
                 max_curr_a: j.max_curr,
                 compensation: true,
                 ood: j.ood,
+                model_slot: 0,
+                model_since_tick: 0,
                 set_since_ns: [0; CONTROL_KEYS.len()],
             })
             .collect();
@@ -96,7 +102,8 @@ impl ControlState {
     }
 
     /// Answers `req` against `cfg` (the file in use). A valid set is queued on `tx` for the RT
-    /// thread; `writes` is `[control] writes`. Logs sets and refusals (rate-limited).
+    /// thread; `writes` is `[control] writes`; `ticks` the RT thread's ticks completed so far (a
+    /// queued set applies from the next one). Logs sets and refusals (rate-limited).
     pub fn answer(
         &mut self,
         cfg: &Config,
@@ -104,6 +111,7 @@ impl ControlState {
         req: &ControlRequest,
         tx: &SyncSender<RuntimeSet>,
         now_ns: u64,
+        ticks: u64,
     ) -> ControlResponse {
         let (Some(joint), Some(key), Some(value)) =
             (text(&req.joint), text(&req.key), text(&req.value))
@@ -136,7 +144,7 @@ impl ControlState {
                 }
                 Ok(set) => match tx.try_send(set) {
                     Ok(()) => {
-                        self.record(pos, set.change, now_ns);
+                        self.record(pos, set.change, now_ns, ticks);
                         let msg = format!(
                             "joint `{joint}`: `{key}` = {value}: applied from the next tick (generation {})",
                             self.generation
@@ -187,7 +195,7 @@ impl ControlState {
         }
     }
 
-    fn record(&mut self, pos: usize, change: Change, now_ns: u64) {
+    fn record(&mut self, pos: usize, change: Change, now_ns: u64, ticks: u64) {
         let v = &mut self.joints[pos];
         match change {
             Change::Kfc(x) => v.kfc = x,
@@ -195,6 +203,10 @@ impl ControlState {
             Change::MaxCurr(x) => v.max_curr_a = x,
             Change::Compensation(on) => v.compensation = on,
             Change::Ood(m) => v.ood = m,
+            Change::Model(slot) => {
+                v.model_slot = slot;
+                v.model_since_tick = ticks;
+            }
         }
         if let Some(k) = CONTROL_KEYS.iter().position(|&k| k == change.key()) {
             v.set_since_ns[k] = now_ns;
@@ -212,8 +224,16 @@ impl ControlState {
         r.max_curr_a = v.max_curr_a;
         r.compensation = u32::from(v.compensation);
         r.ood_mode = ood_code(v.ood);
-        r.model_kind = u32::from(cfg.raw.joint[pos].friction_model.daemon_kind().code());
+        r.model_kind = u32::from(model_kind(cfg, pos, v.model_slot).code());
         r.set_since_ns = v.set_since_ns;
+        let names = model_names(cfg, pos);
+        // The names fit: the config's rule keeps them shorter than the field.
+        put_text(
+            &mut r.model,
+            names.get(v.model_slot).copied().unwrap_or("?"),
+        );
+        r.model_since_tick = v.model_since_tick;
+        r.set_models(names);
         r
     }
 }

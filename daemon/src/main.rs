@@ -345,6 +345,7 @@ fn supervise(
                 req,
                 &rt.tx_control,
                 frictionless_shm_types::monotonic_ns(),
+                shared.heartbeat.load(Ordering::Relaxed),
             )
         });
         if let Err(e) = served {

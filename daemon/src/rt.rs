@@ -309,7 +309,11 @@ pub fn compute_joints(
                 j.model.reset(&sample);
                 j.law.reset();
                 j.ood.reset();
+            } else if j.model_switched {
+                // A model switched in at run time starts fresh; the law's state is kept.
+                j.model.reset(&sample);
             }
+            j.model_switched = false;
             active |= bit;
             let model_nm = j.model.estimate(&sample);
             // Out of the training range: flagged, counted (Telemetry::record) and, with a static

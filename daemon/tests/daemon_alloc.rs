@@ -87,6 +87,13 @@ kc = 8.1
 ka = 50.84
 kv = 5.55
 
+[[joint.alternate]]
+name = "cv_b"
+friction_model = "cv"
+kc = 4.0
+ka = 20.0
+kv = 2.0
+
 [[joint]]
 name = "ankle"
 index = 1
@@ -120,6 +127,12 @@ ks = 0.8
 vs = 0.1
 alpha = 1.0
 
+[[joint.alternate]]
+name = "hip_b"
+friction_model = "pinn"
+model = "hip.fwt"
+warmup = "hold_zero"
+
 [[joint]]
 name = "wrist"
 index = 3
@@ -146,7 +159,8 @@ sigma1 = 1.0
         ],
     );
     let mut plant = Plant::open(&env.ipc, "plant");
-    // Runtime sets arrive all along (kfc and the compensation switch, between every two steps):
+    // Runtime sets arrive all along (kfc, the compensation switch and model switches among the
+    // preloaded models — a PINN, its PINN alternate, none — between every two steps):
     // checked by the supervisor, applied by the RT thread at its tick boundaries.
     // Not waited for: the plant must connect before counting starts (below).
     let ctl_node = frictionless_shm_types::Ipc::open(&env.ipc, "ctl").unwrap();
@@ -178,11 +192,16 @@ sigma1 = 1.0
         // The ankle and the LuGre wrist are re-enabled every 500 steps (their reset on enable).
         rq.enable_mask = if k % 500 < 450 { 0b1111 } else { 0b0101 };
         plant.send(&js, &rq);
-        let (joint, key, value) = match k % 4 {
+        let (joint, key, value) = match k % 8 {
             0 => ("knee", "kfc", "0.5"),
             1 => ("knee", "kfc", "0.85"),
             2 => ("ankle", "compensation", "off"),
-            _ => ("ankle", "compensation", "on"),
+            3 => ("ankle", "compensation", "on"),
+            4 => ("hip", "model", "hip_b"),
+            5 => ("hip", "model", "none"),
+            6 => ("hip", "model", "default"),
+            _ if k % 16 < 8 => ("knee", "model", "cv_b"),
+            _ => ("knee", "model", "default"),
         };
         let req = frictionless_shm_types::control::ControlRequest::set(joint, key, value).unwrap();
         match ctl.call(&req, T) {

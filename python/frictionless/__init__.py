@@ -759,14 +759,15 @@ class DaemonClient:
 
     def control_get(self, joint: str, timeout_s: float = 2.0) -> dict:
         """A joint's values in the running daemon (``<prefix>/control``): ``kfc``,
-        ``max_output_friction``, ``max_curr``, ``compensation`` (bool), ``ood``, ``model``, the
-        ``generation`` with ``generation_since_ns``, and ``set_since_ns`` per key (``None``: the
-        file's value). Raises ``ValueError`` for an unknown joint, :class:`IpcError` without a daemon."""
+        ``max_output_friction``, ``max_curr``, ``compensation`` (bool), ``ood``, ``model`` (the
+        active model's name: ``default``, an alternate's name or ``none``) with its ``model_kind``,
+        ``model_since_tick`` and the joint's ``models``, the ``generation`` with
+        ``generation_since_ns``, and ``set_since_ns`` per key (``None``: the file's value). Raises ``ValueError`` for an unknown joint, :class:`IpcError` without a daemon."""
         return self._c.control_get(joint, timeout_s)
 
     def control_set(self, joint: str, key: str, value, timeout_s: float = 2.0) -> dict:
         """Sets ``key`` (``kfc``, ``max_output_friction``, ``max_curr``, ``compensation``,
-        ``ood``) of ``joint`` in the running daemon, checked by its config's rules and applied from
+        ``ood``, ``model``) of ``joint`` in the running daemon, checked by its config's rules and applied from
         its next tick until a reload. ``value`` as in the config (``True``/``False`` for
         ``compensation`` become ``on``/``off``). Returns the joint's values; raises ``ValueError``
         with the daemon's message (naming the rule) when refused."""

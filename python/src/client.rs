@@ -15,7 +15,8 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use frictionless_shm_types::control::{
-    CONTROL_KEYS, CONTROL_OK, ControlClient, ControlRequest, ControlResponse, ood_mode_name,
+    CONTROL_KEYS, CONTROL_OK, ControlClient, ControlRequest, ControlResponse, access_refusal,
+    ood_mode_name,
 };
 use frictionless_shm_types::{
     DaemonStatus, Histogram, Inbox, Ipc, IpcConfig, JointStates, MAX_JOINTS, MotorCurrentCommand,
@@ -169,13 +170,16 @@ fn control_dict<'py>(
     d.set_item("max_curr", r.max_curr_a)?;
     d.set_item("compensation", r.compensation != 0)?;
     d.set_item("ood", ood_mode_name(r.ood_mode))?;
+    d.set_item("model", r.model())?;
     d.set_item(
-        "model",
+        "model_kind",
         u8::try_from(r.model_kind)
             .ok()
             .and_then(frictionless::model::ModelKind::from_code)
             .map_or("?", |k| k.name()),
     )?;
+    d.set_item("model_since_tick", r.model_since_tick)?;
+    d.set_item("models", r.models().collect::<Vec<_>>())?;
     let since = PyDict::new(py);
     for (k, t) in CONTROL_KEYS.iter().zip(r.set_since_ns) {
         since.set_item(*k, (t != 0).then_some(t))?;
@@ -193,7 +197,11 @@ impl DaemonClient {
     #[pyo3(signature = (service_prefix = "frictionless", root_path = None, node_name = "frictionless-py"))]
     fn new(service_prefix: &str, root_path: Option<PathBuf>, node_name: &str) -> PyResult<Self> {
         let cfg = IpcConfig::new(root_path.as_deref(), service_prefix);
-        let ipc = Ipc::open(&cfg, node_name).map_err(ipc_err)?;
+        // Another user's deployment: say who may connect instead of iceoryx2's error alone.
+        let ipc = Ipc::open(&cfg, node_name).map_err(|e| match access_refusal(&cfg) {
+            Some(why) => IpcError::new_err(format!("{why} ({})", message(&e))),
+            None => ipc_err(e),
+        })?;
         let cmd = ipc
             .motor_current_command()
             .and_then(|c| c.inbox())
@@ -371,8 +379,8 @@ impl DaemonClient {
         control_dict(py, joint, &r)
     }
 
-    /// Sets `key` (`kfc`, `max_output_friction`, `max_curr`, `compensation` = `on`/`off`, `ood`)
-    /// of `joint` to `value` (written as in the config) in the running daemon; applied from its
+    /// Sets `key` (`kfc`, `max_output_friction`, `max_curr`, `compensation` = `on`/`off`, `ood`,
+    /// `model` = a name of the joint's `models`) of `joint` to `value` (written as in the config) in the running daemon; applied from its
     /// next tick until a reload. Returns the joint's values; raises `ValueError` with the daemon's
     /// message (which names the rule) when refused.
     #[pyo3(signature = (joint, key, value, timeout_s = 2.0))]

@@ -3,8 +3,9 @@
 //! [`ControlClient`] in `frictl ctl`, tests and bindings).
 //!
 //! One request names one joint and, for a set, one `KEY=VALUE` (keys as in the config: `kfc`,
-//! `max_output_friction`, `max_curr`, `compensation`, `ood`); the response carries the status, a
-//! message naming the rule a refused value breaks, and the joint's values in use.
+//! `max_output_friction`, `max_curr`, `compensation`, `ood`, and `model`: the name of one of the
+//! joint's preloaded models); the response carries the status, a message naming the rule a refused
+//! value breaks, and the joint's values in use.
 
 use std::fmt::Debug;
 use std::time::{Duration, Instant};
@@ -13,7 +14,7 @@ use iceoryx2::port::client::Client;
 use iceoryx2::port::server::Server;
 use iceoryx2::prelude::*;
 
-use crate::{Ipc, MAX_NODES, ShmError, ipc_err};
+use crate::{Ipc, IpcConfig, MAX_NODES, ShmError, ipc_err};
 
 /// Bytes of each text field of a [`ControlRequest`] (UTF-8, NUL-padded).
 pub const CONTROL_TEXT_BYTES: usize = 64;
@@ -37,12 +38,13 @@ pub const CONTROL_BUSY: u32 = 3;
 pub const CONTROL_BAD_REQUEST: u32 = 4;
 
 /// The keys, in the order of [`ControlResponse::set_since_ns`].
-pub const CONTROL_KEYS: [&str; 5] = [
+pub const CONTROL_KEYS: [&str; 6] = [
     "kfc",
     "max_output_friction",
     "max_curr",
     "compensation",
     "ood",
+    "model",
 ];
 
 /// A request to the daemon (client → daemon).
@@ -65,7 +67,7 @@ pub struct ControlRequest {
 /// The daemon's answer (daemon → client).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
-#[type_name("frictionless::ControlResponse_v1")]
+#[type_name("frictionless::ControlResponse_v2")]
 pub struct ControlResponse {
     /// `CONTROL_OK`, `CONTROL_REFUSED`, …
     pub status: u32,
@@ -92,6 +94,15 @@ pub struct ControlResponse {
     /// Per key of [`CONTROL_KEYS`]: CLOCK_MONOTONIC time [ns] of the runtime set in use, 0 = the
     /// file's value.
     pub set_since_ns: [u64; CONTROL_KEYS.len()],
+    /// Name of the active model (`default`: the joint's own `friction_model`, an alternate's
+    /// `name`, or `none`; UTF-8, NUL-padded).
+    pub model: [u8; CONTROL_TEXT_BYTES],
+    /// The active model runs from the tick after this many ticks completed (`DaemonStatus::ticks`
+    /// counts the same ticks): the ticks completed when its set was queued, 0 = since the load.
+    pub model_since_tick: u64,
+    /// The joint's model names (`default`, its alternates in file order, `none`), comma-separated
+    /// (UTF-8, NUL-padded; cut at a name boundary, ending in `…` when they do not fit).
+    pub models: [u8; CONTROL_MESSAGE_BYTES],
     /// Human-readable result (a refusal names the joint, key, value and rule).
     pub message: [u8; CONTROL_MESSAGE_BYTES],
 }
@@ -158,6 +169,9 @@ impl ControlResponse {
             model_kind: 0,
             reserved: 0,
             set_since_ns: [0; CONTROL_KEYS.len()],
+            model: [0; CONTROL_TEXT_BYTES],
+            model_since_tick: 0,
+            models: [0; CONTROL_MESSAGE_BYTES],
             message: [0; CONTROL_MESSAGE_BYTES],
         };
         let mut end = message.len().min(CONTROL_MESSAGE_BYTES);
@@ -171,6 +185,36 @@ impl ControlResponse {
     /// The message text.
     pub fn message(&self) -> &str {
         text(&self.message).unwrap_or("")
+    }
+
+    /// The active model's name.
+    pub fn model(&self) -> &str {
+        text(&self.model).unwrap_or("")
+    }
+
+    /// The joint's model names, as listed in [`ControlResponse::models`].
+    pub fn models(&self) -> impl Iterator<Item = &str> {
+        text(&self.models)
+            .unwrap_or("")
+            .split(',')
+            .filter(|n| !n.is_empty())
+    }
+
+    /// Sets [`ControlResponse::models`] from `names`: as many whole names as fit, then `…`.
+    pub fn set_models<'a>(&mut self, names: impl IntoIterator<Item = &'a str>) {
+        let mut out = String::new();
+        for n in names {
+            let sep = usize::from(!out.is_empty());
+            if out.len() + sep + n.len() + ",…".len() > CONTROL_MESSAGE_BYTES {
+                out.push_str(",…");
+                break;
+            }
+            if sep == 1 {
+                out.push(',');
+            }
+            out.push_str(n);
+        }
+        put_text(&mut self.models, &out);
     }
 }
 
@@ -329,6 +373,36 @@ impl ControlClient {
     }
 }
 
+/// Why this process cannot use `cfg`'s control service when another user owns the iceoryx2 root
+/// path: iceoryx2 creates its service files, node entries and shared-memory segments readable and
+/// writable by their creator's user only (0600; directories 0750), so only frictiond's own user
+/// (or root) can open its services. `None` when this process is root or owns the root path (or it
+/// does not exist yet). A client calls it when opening the service failed, to replace iceoryx2's
+/// error with one that says who may connect.
+pub fn access_refusal(cfg: &IpcConfig) -> Option<String> {
+    use std::os::unix::fs::MetadataExt;
+    // SAFETY: geteuid has no preconditions and cannot fail.
+    let euid = unsafe { libc::geteuid() };
+    if euid == 0 {
+        return None;
+    }
+    let root = match &cfg.root_path {
+        Some(p) => p.clone(),
+        None => {
+            let c = iceoryx2::config::Config::default();
+            std::path::PathBuf::from(c.global.root_path().to_string())
+        }
+    };
+    let owner = std::fs::metadata(&root).ok()?.uid();
+    (owner != euid).then(|| {
+        format!(
+            "permission denied: the control service `{}/control` under {} belongs to uid {owner} (frictiond's user), this process runs as uid {euid}; only frictiond's user may send control requests (run the client as that user, e.g. `sudo -u` it)",
+            cfg.service_prefix,
+            root.display()
+        )
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -351,5 +425,14 @@ mod tests {
         assert_eq!(m.message().len(), CONTROL_MESSAGE_BYTES);
         assert!(m.message().chars().all(|c| c == 'é'));
         assert_eq!(ood_mode_name(2), "static");
+        // Model names: whole names only, `…` when the list does not fit.
+        let mut m = ControlResponse::with(CONTROL_OK, "ok");
+        m.set_models(["default", "scv_b", "none"]);
+        assert_eq!(m.models().collect::<Vec<_>>(), ["default", "scv_b", "none"]);
+        let long = "n".repeat(60);
+        m.set_models(std::iter::repeat_n(long.as_str(), 10));
+        let names: Vec<&str> = m.models().collect();
+        assert_eq!(names.last(), Some(&"…"));
+        assert!(names[..names.len() - 1].iter().all(|n| *n == long));
     }
 }

@@ -5,7 +5,7 @@
 #![allow(dead_code)] // each bench uses its part
 
 use frictiond::config::OnStale;
-use frictiond::params::{JointRt, OodRt, Params};
+use frictiond::params::{JointRt, ModelSlots, OodRt, Params};
 use frictiond::rt::{Inputs, Latest};
 use frictionless::features::{FeatureSet, FeatureSpec, WarmupPolicy};
 use frictionless::filter::CausalButterworth;
@@ -114,6 +114,8 @@ pub fn params_with(n: usize, rt_threads: u8, model: impl Fn(usize) -> JointModel
             ),
             ood: OodRt::off(),
             compensation: true,
+            slots: ModelSlots::new(Vec::new()),
+            model_switched: false,
         })
         .collect();
     let mut p = Box::new(Params {

@@ -83,7 +83,7 @@ pub use models::{
     signal_supply,
 };
 pub use schema::*;
-pub use validate::{ConfigError, MAX_TICK_SPAN_S};
+pub use validate::{ConfigError, MAX_MODEL_NAME_BYTES, MAX_TICK_SPAN_S, alternate_name_rule};
 
 use buses::resolve_buses;
 use models::check_pinn_inputs;
@@ -110,15 +110,16 @@ pub fn parse(path: &Path, text: &str) -> Result<Config, ConfigError> {
     check_loop(&c, &raw.loop_)?;
     check_tick_counts(&c, &raw)?;
     check_backend(&c, &raw, base)?;
-    let (models, pinn_features) = check_joints(&c, &raw, base)?;
+    let (models, alternates, pinns) = check_joints(&c, &raw, base)?;
     let fs_hz = 1e6 / raw.loop_.period_us as f64;
     let buses = resolve_buses(&c, &raw, fs_hz)?;
-    check_pinn_inputs(&c, &raw, &models, &pinn_features, &buses)?;
+    check_pinn_inputs(&c, &raw, &pinns, &buses)?;
     let root_path = raw.backend.root_path.as_ref().map(|p| base.join(p));
     Ok(Config {
         file: path.to_path_buf(),
         raw,
         models,
+        alternates,
         root_path,
         buses,
     })

@@ -197,15 +197,16 @@ fn check_supply(
     Ok(())
 }
 
-/// The joint's resolved model, and for a PINN the model file's input features.
+/// The joint's resolved model, and for a PINN the model file's input features. Keys in errors are
+/// `{table}.{key}` (`joint[k]`, or `joint[k].alternate[m]` for an alternate's keys).
 pub(crate) fn model_spec(
     c: &Checker,
     base: &Path,
-    k: usize,
+    table: &str,
     j: &JointConfig,
 ) -> Result<(ModelSpec, Option<FeatureSpec>), ConfigError> {
     use frictionless::friction::{CvParams, ScvParams, StaticFriction};
-    let key = |name: &str| format!("joint[{k}].{name}");
+    let key = |name: &str| format!("{table}.{name}");
     let model_name = j
         .friction_model
         .config_name()
@@ -395,17 +396,29 @@ pub(crate) fn model_spec(
     }
 }
 
+/// A PINN model of the config (a joint's own or an alternate) whose inputs the backend must supply.
+pub(crate) struct PinnInputs {
+    /// Position of the joint in `raw.joint`.
+    pub joint_pos: usize,
+    /// The key naming the model file (`joint[k].model`, `joint[k].alternate[m].model`).
+    pub key: String,
+    /// The resolved model file.
+    pub path: std::path::PathBuf,
+    /// Its input features.
+    pub features: FeatureSpec,
+}
+
 /// Every PINN's inputs must be suppliable by its joint's backend (and, on CAN, its bus protocol):
-/// [`check_model_inputs`] per PINN joint, the error naming `joint[k].model`.
+/// [`check_model_inputs`] per PINN model, the error naming its `model` key.
 pub(crate) fn check_pinn_inputs(
     c: &Checker,
     raw: &RawConfig,
-    models: &[ModelSpec],
-    pinn_features: &[Option<FeatureSpec>],
+    pinns: &[PinnInputs],
     buses: &[ResolvedBus],
 ) -> Result<(), ConfigError> {
-    for (k, (j, features)) in raw.joint.iter().zip(pinn_features).enumerate() {
-        let Some(spec) = features else { continue };
+    for p in pinns {
+        let j = &raw.joint[p.joint_pos];
+        let spec = &p.features;
         let on_bus = buses.iter().find_map(|b| {
             b.joints
                 .iter()
@@ -422,13 +435,10 @@ pub(crate) fn check_pinn_inputs(
             _ => check_model_inputs(&j.name, spec, raw.backend.kind, protocol),
         };
         if let Err(message) = checked {
-            let Some(ModelSpec::Pinn { path, .. }) = models.get(k) else {
-                continue;
-            };
             return Err(ConfigError::Model {
                 file: c.file.to_path_buf(),
-                key: format!("joint[{k}].model"),
-                path: path.clone(),
+                key: p.key.clone(),
+                path: p.path.clone(),
                 message,
             });
         }

@@ -90,6 +90,67 @@ pub struct JointRt {
     /// Friction compensation switch (runtime `compensation = on|off`; on when built): off feeds
     /// the law 0 friction while the model keeps running.
     pub compensation: bool,
+    /// The joint's other models (runtime `model = NAME`); [`JointRt::model`] is the active one.
+    pub slots: ModelSlots,
+    /// Set when [`JointRt::switch_model`] made another model active: the RT thread resets it with
+    /// the next sample it computes (a fresh history, as at an enable) and clears this.
+    pub model_switched: bool,
+}
+
+/// The models one joint can run, by slot: 0 its own (`friction_model`, named `default`), then its
+/// `[[joint.alternate]]`s in file order, then `none` (no friction) — the order of
+/// [`crate::runtime::model_names`]. The active model lives in [`JointRt::model`]; its slot here
+/// holds a [`NoFriction`] placeholder. All built off the RT thread; a switch only swaps.
+#[derive(Debug)]
+pub struct ModelSlots {
+    parked: Vec<JointModel>,
+    active: usize,
+}
+
+impl ModelSlots {
+    /// The slots of a joint whose own model is active and whose alternates are `alternates` (in
+    /// [`crate::runtime::model_names`]' order); `none` is added.
+    pub fn new(alternates: Vec<JointModel>) -> Self {
+        let mut parked = Vec::with_capacity(alternates.len() + 2);
+        parked.push(JointModel::None(NoFriction));
+        parked.extend(alternates);
+        parked.push(JointModel::None(NoFriction));
+        Self { parked, active: 0 }
+    }
+
+    /// The active slot.
+    pub fn active(&self) -> usize {
+        self.active
+    }
+
+    /// Number of slots.
+    pub fn len(&self) -> usize {
+        self.parked.len()
+    }
+
+    /// Whether there are no slots (never: `default` and `none` always exist).
+    pub fn is_empty(&self) -> bool {
+        self.parked.is_empty()
+    }
+}
+
+impl JointRt {
+    /// Makes slot `slot` the active model (RT thread, at a tick boundary: two swaps, no
+    /// allocation); a slot out of range or already active changes nothing. The law's state (filter,
+    /// integral) is kept; the new model is reset at the next computed sample
+    /// ([`JointRt::model_switched`]) and the out-of-range blend restarts from it.
+    #[inline]
+    pub fn switch_model(&mut self, slot: usize) {
+        let active = self.slots.active;
+        if slot == active || slot >= self.slots.parked.len() {
+            return;
+        }
+        std::mem::swap(&mut self.model, &mut self.slots.parked[active]);
+        std::mem::swap(&mut self.model, &mut self.slots.parked[slot]);
+        self.slots.active = slot;
+        self.model_switched = true;
+        self.ood.reset();
+    }
 }
 
 /// One joint's out-of-training-range handling on the RT thread: the check's settings, the static
@@ -247,60 +308,77 @@ fn speed_limit(
     })
 }
 
+/// One model of joint `j` (its own, or an alternate's as [`crate::AlternateModel::as_joint`]) and,
+/// for a PINN with `ood = "static"`, its static fallback; `who` names the joint in errors.
+fn joint_model(
+    j: &crate::JointConfig,
+    who: &str,
+    spec: &ModelSpec,
+    dt_s: f64,
+) -> Result<(JointModel, Option<JointModel>), ParamsError> {
+    let mut fallback = None;
+    let model = match spec {
+        ModelSpec::None => JointModel::None(NoFriction),
+        ModelSpec::Cv(p) => JointModel::Cv(*p),
+        ModelSpec::Scv(p) => JointModel::Scv(*p),
+        // The bristle state is integrated once per tick, at the loop period.
+        ModelSpec::Lugre(p) => {
+            JointModel::Lugre(frictionless::lugre::LugreEstimator::new(*p, dt_s).map_err(
+                |source| ParamsError::Lugre {
+                    joint: who.to_owned(),
+                    source,
+                },
+            )?)
+        }
+        ModelSpec::Pinn {
+            path,
+            warmup,
+            fallback: fb,
+        } => {
+            fallback = fb.map(|f| match f {
+                StaticFallback::Cv(p) => JointModel::Cv(p),
+                StaticFallback::Scv(p) => JointModel::Scv(p),
+            });
+            let file = frictionless::weights::read_file(path).map_err(|source| {
+                ParamsError::ReadModel {
+                    joint: who.to_owned(),
+                    path: path.clone(),
+                    source: Box::new(source),
+                }
+            })?;
+            let policy = match warmup {
+                WarmupName::ZeroPad => WarmupPolicy::ZeroPad,
+                WarmupName::HoldZero => WarmupPolicy::HoldZero,
+            };
+            let mut est = PinnEstimator::from_model_file(&file, policy).map_err(|source| {
+                ParamsError::Model {
+                    joint: who.to_owned(),
+                    path: path.clone(),
+                    source: Box::new(source),
+                }
+            })?;
+            // A calibrated Δθ offset is kept across enables; without one, Δθ is latched at
+            // every enable (see `frictionless::features::History`).
+            est.fix_delta_theta_offset(j.delta_theta_offset_motor_rad);
+            JointModel::Pinn(Box::new(est))
+        }
+    };
+    Ok((model, fallback))
+}
+
 /// Builds the runtime parameters (loads model files, designs filters). Off the RT thread.
 pub fn build(cfg: &Config, generation: u64) -> Result<Box<Params>, ParamsError> {
     let dt_s = cfg.raw.loop_.period_us as f64 * 1e-6;
     let fs_hz = 1.0 / dt_s;
     let mut joints = Vec::with_capacity(cfg.raw.joint.len());
     let mut configured_mask = 0u64;
-    for (j, spec) in cfg.raw.joint.iter().zip(&cfg.models) {
-        let mut fallback = None;
-        let model = match spec {
-            ModelSpec::None => JointModel::None(NoFriction),
-            ModelSpec::Cv(p) => JointModel::Cv(*p),
-            ModelSpec::Scv(p) => JointModel::Scv(*p),
-            // The bristle state is integrated once per tick, at the loop period.
-            ModelSpec::Lugre(p) => {
-                JointModel::Lugre(frictionless::lugre::LugreEstimator::new(*p, dt_s).map_err(
-                    |source| ParamsError::Lugre {
-                        joint: j.name.clone(),
-                        source,
-                    },
-                )?)
-            }
-            ModelSpec::Pinn {
-                path,
-                warmup,
-                fallback: fb,
-            } => {
-                fallback = fb.map(|f| match f {
-                    StaticFallback::Cv(p) => JointModel::Cv(p),
-                    StaticFallback::Scv(p) => JointModel::Scv(p),
-                });
-                let file = frictionless::weights::read_file(path).map_err(|source| {
-                    ParamsError::ReadModel {
-                        joint: j.name.clone(),
-                        path: path.clone(),
-                        source: Box::new(source),
-                    }
-                })?;
-                let policy = match warmup {
-                    WarmupName::ZeroPad => WarmupPolicy::ZeroPad,
-                    WarmupName::HoldZero => WarmupPolicy::HoldZero,
-                };
-                let mut est = PinnEstimator::from_model_file(&file, policy).map_err(|source| {
-                    ParamsError::Model {
-                        joint: j.name.clone(),
-                        path: path.clone(),
-                        source: Box::new(source),
-                    }
-                })?;
-                // A calibrated Δθ offset is kept across enables; without one, Δθ is latched at
-                // every enable (see `frictionless::features::History`).
-                est.fix_delta_theta_offset(j.delta_theta_offset_motor_rad);
-                JointModel::Pinn(Box::new(est))
-            }
-        };
+    for ((j, spec), alternates) in cfg.raw.joint.iter().zip(&cfg.models).zip(&cfg.alternates) {
+        let (model, fallback) = joint_model(j, &j.name, spec, dt_s)?;
+        let mut others = Vec::with_capacity(alternates.len());
+        for (a, named) in j.alternate.iter().zip(alternates) {
+            let who = format!("{} (alternate {})", j.name, named.name);
+            others.push(joint_model(&a.as_joint(j), &who, &named.spec, dt_s)?.0);
+        }
         let lpf = match j.lpf {
             Some(l) => Some(
                 CausalButterworth::design(l.order, l.cutoff_hz, fs_hz).map_err(|source| {
@@ -339,6 +417,8 @@ pub fn build(cfg: &Config, generation: u64) -> Result<Box<Params>, ParamsError> 
             law: JointLaw::new(gains, lpf),
             ood,
             compensation: true,
+            slots: ModelSlots::new(others),
+            model_switched: false,
         });
     }
     let mut p = Box::new(Params {

@@ -4,8 +4,9 @@
 //! calls at a tick boundary.
 //!
 //! What this module **is**: the keys a running daemon accepts (`kfc`, `max_output_friction`,
-//! `max_curr`, `compensation`, `ood`), named as in the config, their rules, and the
-//! allocation-free application to one joint's runtime parameters.
+//! `max_curr`, `compensation`, `ood`, named as in the config, and `model`: which of the joint's
+//! preloaded models runs, [`model_names`]), their rules, and the allocation-free application to
+//! one joint's runtime parameters.
 //!
 //! What it is **not**: no IPC, no threads (the transport and the hand-over are frictiond's).
 //!
@@ -14,7 +15,8 @@
 //! generation before a reload is dropped by the RT thread, not applied to the new one
 //! ([`RuntimeSet::generation`]).
 
-use crate::schema::{JointConfig, OodMode};
+use crate::ModelKind;
+use crate::schema::{JointConfig, MODEL_NAME_DEFAULT, MODEL_NAME_NONE, OodMode};
 use crate::{Config, ModelSpec};
 
 use crate::params::JointRt;
@@ -71,6 +73,33 @@ pub enum Change {
     Compensation(bool),
     /// `ood`.
     Ood(OodMode),
+    /// `model`: the slot of [`model_names`] to run.
+    Model(usize),
+}
+
+/// The names of the models joint `pos` of `cfg` can run, by slot: `default` (its own
+/// `friction_model`), its `[[joint.alternate]]`s in file order, `none`. The RT thread's
+/// [`crate::params::ModelSlots`] holds them in this order.
+pub fn model_names(cfg: &Config, pos: usize) -> Vec<&str> {
+    let alternates = cfg.alternates.get(pos).map(Vec::as_slice).unwrap_or(&[]);
+    std::iter::once(MODEL_NAME_DEFAULT)
+        .chain(alternates.iter().map(|a| a.name.as_str()))
+        .chain(std::iter::once(MODEL_NAME_NONE))
+        .collect()
+}
+
+/// The kind of slot `slot` of joint `pos` ([`model_names`]' order) as the daemon runs it.
+pub fn model_kind(cfg: &Config, pos: usize, slot: usize) -> ModelKind {
+    let alternates = cfg.alternates.get(pos).map(Vec::as_slice).unwrap_or(&[]);
+    match slot {
+        0 => cfg
+            .raw
+            .joint
+            .get(pos)
+            .map_or(ModelKind::None, |j| j.friction_model.daemon_kind()),
+        s if s <= alternates.len() => alternates[s - 1].kind,
+        _ => ModelKind::None,
+    }
 }
 
 impl Change {
@@ -82,17 +111,19 @@ impl Change {
             Self::MaxCurr(_) => "max_curr",
             Self::Compensation(_) => "compensation",
             Self::Ood(_) => "ood",
+            Self::Model(_) => "model",
         }
     }
 }
 
 /// The keys [`check`] accepts, as the config names them.
-pub const RUNTIME_KEYS: [&str; 5] = [
+pub const RUNTIME_KEYS: [&str; 6] = [
     "kfc",
     "max_output_friction",
     "max_curr",
     "compensation",
     "ood",
+    "model",
 ];
 
 /// A checked change for the RT thread: `Copy`, no heap, so handing it over allocates nothing.
@@ -124,7 +155,8 @@ pub struct Refusal {
 /// Checks `key = value` for `joint` against `cfg` (the file in use, generation `generation`) by
 /// the file's rules, plus one of its own: a runtime `max_curr` may lower the file's clamp, never
 /// raise it (a CAN drive was opened with the file's). Values are written as in the config: numbers,
-/// `on`/`off` (or `true`/`false`) for `compensation`, `off`/`flag`/`static` for `ood`.
+/// `on`/`off` (or `true`/`false`) for `compensation`, `off`/`flag`/`static` for `ood`, a name of
+/// [`model_names`] for `model` (an unknown one is refused with the list).
 pub fn check(
     cfg: &Config,
     generation: u64,
@@ -196,6 +228,19 @@ pub fn check(
             ood_rule(mode, has_fallback).map_err(refuse)?;
             Change::Ood(mode)
         }
+        "model" => {
+            let name = value.trim().trim_matches('"');
+            let names = model_names(cfg, pos);
+            match names.iter().position(|&n| n == name) {
+                Some(slot) => Change::Model(slot),
+                None => {
+                    return Err(refuse(&format!(
+                        "no such model of this joint (available: {})",
+                        names.join(", ")
+                    )));
+                }
+            }
+        }
         _ => {
             return Err(refuse(&format!(
                 "not a runtime key (keys: {})",
@@ -215,7 +260,7 @@ impl JointRt {
     /// panic). Gains take effect in the next [`frictionless::law::JointLaw::step`]; the filter and
     /// integral state are kept. `compensation = off` feeds the law 0 friction (the model keeps
     /// running, so switching on needs no warm-up); `ood` restarts the blend from the joint's own
-    /// model.
+    /// model; `model` makes another preloaded model active ([`JointRt::switch_model`]).
     #[inline]
     pub fn apply(&mut self, change: Change) {
         match change {
@@ -227,6 +272,7 @@ impl JointRt {
                 self.ood.mode = mode;
                 self.ood.reset();
             }
+            Change::Model(slot) => self.switch_model(slot),
         }
     }
 }

@@ -422,6 +422,84 @@ pub struct JointConfig {
     /// 0–1000; 0 = switch at once]. Default 20.
     #[serde(default = "default_ood_ramp_ms")]
     pub ood_ramp_ms: f64,
+    /// `[[joint.alternate]]`: further friction models of this joint, loaded and validated with the
+    /// file, that a running daemon switches to with `model = NAME` ([`crate::runtime`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub alternate: Vec<AlternateModel>,
+}
+
+/// The name a running joint's own model (its `friction_model` keys) has among its models.
+pub const MODEL_NAME_DEFAULT: &str = "default";
+/// The name of "no friction model" among a joint's models (τ̂_F = 0), always available.
+pub const MODEL_NAME_NONE: &str = "none";
+
+/// One `[[joint.alternate]]`: a named friction model a running daemon can switch its joint to.
+/// The model keys mean what they mean on `[[joint]]` and follow the same rules (checked by the
+/// same code, on the joint with its model keys replaced by these, [`AlternateModel::as_joint`]);
+/// everything else (gains, limits, filter, `model_for`, Δθ offset, `ood`) is the joint's.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct AlternateModel {
+    /// The name `model = NAME` selects: 1–63 bytes of `A-Z a-z 0-9 _ - .`, unique in the joint,
+    /// not `default` or `none`.
+    pub name: String,
+    /// Friction model ([`friction_model_name`]).
+    #[serde(with = "friction_model_name")]
+    pub friction_model: ModelKind,
+    /// Coulomb level [Nm].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kc: Option<f64>,
+    /// Viscous coefficient [Nm·s/rad].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kv: Option<f64>,
+    /// Smooth-sign steepness [s/rad]; `inf` = sign().
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ka: Option<f64>,
+    /// Breakaway friction [Nm] (SCV).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ks: Option<f64>,
+    /// Stribeck velocity [rad/s] (SCV).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vs: Option<f64>,
+    /// Stribeck exponent (SCV).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alpha: Option<f64>,
+    /// Bristle stiffness σ0 [Nm/rad] (LuGre).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma0: Option<f64>,
+    /// Bristle damping σ1 [Nm·s/rad] (LuGre).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma1: Option<f64>,
+    /// `.fwt` model file for `pinn`, relative to the config file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model: Option<PathBuf>,
+    /// PINN warm-up policy.
+    #[serde(default)]
+    pub warmup: WarmupName,
+}
+
+impl AlternateModel {
+    /// `joint` with its model keys replaced by this alternate's and `ood = "off"` (the static
+    /// fallback of `ood = "static"` belongs to the joint's own model): what the model rules and
+    /// the estimator construction read.
+    pub fn as_joint(&self, joint: &JointConfig) -> JointConfig {
+        JointConfig {
+            friction_model: self.friction_model,
+            kc: self.kc,
+            kv: self.kv,
+            ka: self.ka,
+            ks: self.ks,
+            vs: self.vs,
+            alpha: self.alpha,
+            sigma0: self.sigma0,
+            sigma1: self.sigma1,
+            model: self.model.clone(),
+            warmup: self.warmup,
+            ood: OodMode::Off,
+            alternate: Vec::new(),
+            ..joint.clone()
+        }
+    }
 }
 
 fn one() -> f64 {
@@ -730,6 +808,17 @@ pub enum StaticFallback {
     Scv(frictionless::friction::ScvParams),
 }
 
+/// A validated `[[joint.alternate]]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NamedModel {
+    /// Its `name`.
+    pub name: String,
+    /// Its resolved model.
+    pub spec: ModelSpec,
+    /// Its kind as the daemon runs it.
+    pub kind: ModelKind,
+}
+
 /// A validated configuration.
 #[derive(Debug, Clone)]
 pub struct Config {
@@ -739,6 +828,8 @@ pub struct Config {
     pub raw: RawConfig,
     /// Resolved model per joint, same order as `raw.joint`.
     pub models: Vec<ModelSpec>,
+    /// Resolved `[[joint.alternate]]`s per joint, same order as `raw.joint` (each in file order).
+    pub alternates: Vec<Vec<NamedModel>>,
     /// Resolved iceoryx2 root path.
     pub root_path: Option<PathBuf>,
     /// Resolved `[[bus]]` sections (empty unless `[backend] kind = "can"`).

@@ -1201,3 +1201,121 @@ fn an_incremental_motor_encoder_refuses_a_fixed_delta_theta_offset() {
         .to_string();
     assert!(e.contains("motor_encoder") && e.contains("relative"), "{e}");
 }
+
+/// [`GOOD`] with `alternates` after the knee's own model keys.
+fn with_knee_alternates(alternates: &str) -> String {
+    GOOD.replacen("kv = 5.55\n", &format!("kv = 5.55\n{alternates}"), 1)
+}
+
+#[test]
+fn alternates_resolve_by_the_joints_rules_and_refusals_name_their_key() {
+    let c = p(&with_knee_alternates(
+        "[[joint.alternate]]\nname = \"scv_b\"\nfriction_model = \"scv\"\nkc = 1.0\nka = 40.0\nkv = 3.0\nks = 2.0\nvs = 0.1\nalpha = 0.8\n\
+         [[joint.alternate]]\nname = \"off.1\"\nfriction_model = \"none\"\n",
+    ))
+    .unwrap();
+    let names: Vec<&str> = c.alternates[0].iter().map(|a| a.name.as_str()).collect();
+    assert_eq!(names, ["scv_b", "off.1"]);
+    assert!(matches!(c.alternates[0][0].spec, ModelSpec::Scv(p) if p.ks == 2.0));
+    assert_eq!(c.alternates[0][1].spec, ModelSpec::None);
+    assert!(c.alternates[1].is_empty());
+    assert_eq!(
+        runtime::model_names(&c, 0),
+        ["default", "scv_b", "off.1", "none"]
+    );
+    assert_eq!(runtime::model_kind(&c, 0, 1), ModelKind::Scv);
+    assert_eq!(runtime::model_kind(&c, 0, 3), ModelKind::None);
+    // Written back and re-read unchanged; the RT parameters hold every alternate.
+    let back = p(&toml::to_string(&c.raw).unwrap()).unwrap();
+    assert_eq!(back.raw, c.raw);
+    let params = params::build(&c, 0).unwrap();
+    assert_eq!(params.joints[0].slots.len(), 4);
+    assert_eq!(params.joints[1].slots.len(), 2);
+
+    for (alternates, key, value, rule) in [
+        (
+            "[[joint.alternate]]\nname = \"none\"\nfriction_model = \"none\"\n",
+            "joint[0].alternate[0].name",
+            "\"none\"",
+            "reserved",
+        ),
+        (
+            "[[joint.alternate]]\nname = \"a b\"\nfriction_model = \"none\"\n",
+            "joint[0].alternate[0].name",
+            "\"a b\"",
+            "A-Z a-z 0-9",
+        ),
+        (
+            "[[joint.alternate]]\nname = \"x\"\nfriction_model = \"none\"\n\
+             [[joint.alternate]]\nname = \"x\"\nfriction_model = \"none\"\n",
+            "joint[0].alternate[1].name",
+            "\"x\"",
+            "unique",
+        ),
+        (
+            "[[joint.alternate]]\nname = \"cv2\"\nfriction_model = \"cv\"\nkc = 1.0\nka = 5.0\n",
+            "joint[0].alternate[0].kv",
+            "<missing>",
+            "required by friction_model",
+        ),
+        (
+            "[[joint.alternate]]\nname = \"cv2\"\nfriction_model = \"cv\"\nkc = -1.0\nka = 5.0\nkv = 1.0\n",
+            "joint[0].alternate[0].kc",
+            "-1",
+            "",
+        ),
+    ] {
+        let err = p(&with_knee_alternates(alternates)).unwrap_err();
+        match &err {
+            ConfigError::Invalid {
+                key: k,
+                value: v,
+                requirement,
+                ..
+            } => {
+                assert_eq!((k.as_str(), v.as_str()), (key, value), "{err}");
+                assert!(requirement.contains(rule), "{err}");
+            }
+            other => panic!("{other}"),
+        }
+    }
+    // An alternate's PINN file is read at load: a missing one names the alternate's key.
+    let err = p(&with_knee_alternates(
+        "[[joint.alternate]]\nname = \"net\"\nfriction_model = \"pinn\"\nmodel = \"missing.fwt\"\n",
+    ))
+    .unwrap_err();
+    let msg = err.to_string();
+    assert!(
+        msg.contains("joint[0].alternate[0].model") && msg.contains("/etc/x/missing.fwt"),
+        "{msg}"
+    );
+    // An unknown key inside an alternate is refused by the schema.
+    let err = p(&with_knee_alternates(
+        "[[joint.alternate]]\nname = \"x\"\nfriction_model = \"none\"\nkp = 1.0\n",
+    ))
+    .unwrap_err();
+    assert!(err.to_string().contains("kp"), "{err}");
+}
+
+#[test]
+fn runtime_model_sets_name_the_available_models() {
+    let c = p(&with_knee_alternates(
+        "[[joint.alternate]]\nname = \"cv_b\"\nfriction_model = \"cv\"\nkc = 1.0\nka = 5.0\nkv = 1.0\n",
+    ))
+    .unwrap();
+    let set = runtime::check(&c, 4, "knee", "model", "cv_b").unwrap();
+    assert_eq!((set.generation, set.change), (4, runtime::Change::Model(1)));
+    assert_eq!(
+        runtime::check(&c, 4, "knee", "model", "none")
+            .unwrap()
+            .change,
+        runtime::Change::Model(2)
+    );
+    let r = runtime::check(&c, 4, "knee", "model", "lugre").unwrap_err();
+    assert_eq!(
+        r.rule,
+        "no such model of this joint (available: default, cv_b, none)"
+    );
+    let r = runtime::check(&c, 4, "ankle", "model", "cv_b").unwrap_err();
+    assert!(r.rule.contains("(available: default, none)"), "{r}");
+}

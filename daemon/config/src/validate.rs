@@ -4,14 +4,14 @@
 
 use std::path::{Path, PathBuf};
 
-use frictionless::features::FeatureSpec;
 use frictionless_shm_types::MAX_JOINTS;
 
 use crate::ModelKind;
-use crate::models::model_spec;
+use crate::models::{PinnInputs, model_spec};
 use crate::runtime;
 use crate::schema::{
-    JointConfig, LoopConfig, ModelSpec, MotorEncoder, OodMode, Prefetch, RawConfig,
+    JointConfig, LoopConfig, MODEL_NAME_DEFAULT, MODEL_NAME_NONE, ModelSpec, MotorEncoder,
+    NamedModel, OodMode, Prefetch, RawConfig,
 };
 
 /// Why a configuration is not acceptable. Every variant names the file; most name the key and value.
@@ -286,13 +286,18 @@ pub(crate) fn check_backend(c: &Checker, raw: &RawConfig, base: &Path) -> Result
     Ok(())
 }
 
-/// The `[[joint]]` table: its size, then per joint its keys ([`check_joint`]) and its model
-/// ([`model_spec`]). Returns each joint's model and, for a PINN, its input features.
+/// What [`check_joints`] resolves: per joint its model and its alternates, and every PINN model
+/// whose inputs the backend must supply.
+pub(crate) type CheckedJoints = (Vec<ModelSpec>, Vec<Vec<NamedModel>>, Vec<PinnInputs>);
+
+/// The `[[joint]]` table: its size, then per joint its keys ([`check_joint`]), its model
+/// ([`model_spec`]) and its `[[joint.alternate]]`s (the same rules, keys named
+/// `joint[k].alternate[m].KEY`).
 pub(crate) fn check_joints(
     c: &Checker,
     raw: &RawConfig,
     base: &Path,
-) -> Result<(Vec<ModelSpec>, Vec<Option<FeatureSpec>>), ConfigError> {
+) -> Result<CheckedJoints, ConfigError> {
     if raw.joint.is_empty() {
         return Err(c.fail("joint".into(), "[]", "at least one [[joint]] is required"));
     }
@@ -305,14 +310,72 @@ pub(crate) fn check_joints(
     }
     let fs_hz = 1e6 / raw.loop_.period_us as f64;
     let mut models = Vec::with_capacity(raw.joint.len());
-    let mut pinn_features = Vec::with_capacity(raw.joint.len());
+    let mut alternates = Vec::with_capacity(raw.joint.len());
+    let mut pinns = Vec::new();
     for (k, j) in raw.joint.iter().enumerate() {
         check_joint(c, raw, k, j, fs_hz)?;
-        let (model, features) = model_spec(c, base, k, j)?;
+        let table = format!("joint[{k}]");
+        let (model, features) = model_spec(c, base, &table, j)?;
+        if let (ModelSpec::Pinn { path, .. }, Some(features)) = (&model, features) {
+            pinns.push(PinnInputs {
+                joint_pos: k,
+                key: format!("{table}.model"),
+                path: path.clone(),
+                features,
+            });
+        }
         models.push(model);
-        pinn_features.push(features);
+        let mut named: Vec<NamedModel> = Vec::with_capacity(j.alternate.len());
+        for (m, a) in j.alternate.iter().enumerate() {
+            let table = format!("joint[{k}].alternate[{m}]");
+            if let Err(rule) = alternate_name_rule(&a.name) {
+                return Err(c.fail(format!("{table}.name"), format!("{:?}", a.name), rule));
+            }
+            if named.iter().any(|n| n.name == a.name) {
+                return Err(c.fail(
+                    format!("{table}.name"),
+                    format!("{:?}", a.name),
+                    &format!("must be unique among joint {:?}'s alternates", j.name),
+                ));
+            }
+            let (spec, features) = model_spec(c, base, &table, &a.as_joint(j))?;
+            if let (ModelSpec::Pinn { path, .. }, Some(features)) = (&spec, features) {
+                pinns.push(PinnInputs {
+                    joint_pos: k,
+                    key: format!("{table}.model"),
+                    path: path.clone(),
+                    features,
+                });
+            }
+            named.push(NamedModel {
+                name: a.name.clone(),
+                spec,
+                kind: a.friction_model.daemon_kind(),
+            });
+        }
+        alternates.push(named);
     }
-    Ok((models, pinn_features))
+    Ok((models, alternates, pinns))
+}
+
+/// Most bytes of a `[[joint.alternate]] name` (it travels in a control request's text field).
+pub const MAX_MODEL_NAME_BYTES: usize = frictionless_shm_types::control::CONTROL_TEXT_BYTES - 1;
+
+/// The rule of `[[joint.alternate]] name`: 1–[`MAX_MODEL_NAME_BYTES`] bytes of `A-Z a-z 0-9 _ - .`,
+/// not one of the reserved names `default` (the joint's own model) and `none`.
+pub fn alternate_name_rule(name: &str) -> Result<(), &'static str> {
+    if name.is_empty()
+        || name.len() > MAX_MODEL_NAME_BYTES
+        || !name
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b"_-.".contains(&b))
+    {
+        Err("must be 1-63 bytes of A-Z a-z 0-9 _ - .")
+    } else if name == MODEL_NAME_DEFAULT || name == MODEL_NAME_NONE {
+        Err("`default` (the joint's own model) and `none` (no friction) are reserved")
+    } else {
+        Ok(())
+    }
 }
 
 /// A rule's verdict on `key = value` as a [`ConfigError`] (the rules are in [`crate::runtime`],

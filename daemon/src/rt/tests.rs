@@ -162,7 +162,7 @@ fn stale_fault_and_nan_paths() {
 /// `n` joints at indices 0, 3, 6, …: PINNs of different sizes and dtypes (seeded random
 /// weights), CV and SCV models; the law with a filter and clamps.
 fn mixed_params(n: usize, rt_threads: u8) -> Box<Params> {
-    use crate::params::{JointRt, OodRt};
+    use crate::params::{JointRt, ModelSlots, OodRt};
     use frictionless::features::{FeatureSet, FeatureSpec, WarmupPolicy};
     use frictionless::filter::CausalButterworth;
     use frictionless::friction::{CvParams, ScvParams};
@@ -243,6 +243,8 @@ fn mixed_params(n: usize, rt_threads: u8) -> Box<Params> {
                 ),
                 ood: OodRt::off(),
                 compensation: true,
+                slots: ModelSlots::new(Vec::new()),
+                model_switched: false,
             }
         })
         .collect();

@@ -409,6 +409,7 @@ pub fn daemon_joint(j: &DaemonJoint, raw_friction: bool) -> Result<JointConfig, 
         ood: OodMode::default(),
         ood_margin: default_ood_margin(),
         ood_ramp_ms: default_ood_ramp_ms(),
+        alternate: Vec::new(),
     };
     if !raw_friction {
         out.kfc = shipped.kfc;

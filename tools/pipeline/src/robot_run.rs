@@ -758,6 +758,7 @@ fn daemon_config(robot: &RobotFile, plans: &[JointPlan], out: &Path) -> anyhow::
             ood: OodMode::Static,
             ood_margin: default_ood_margin(),
             ood_ramp_ms: default_ood_ramp_ms(),
+            alternate: Vec::new(),
         });
     }
     Ok(RawConfig::shm(joints))

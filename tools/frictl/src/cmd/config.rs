@@ -109,6 +109,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ood: OodMode::default(),
         ood_margin: default_ood_margin(),
         ood_ramp_ms: default_ood_ramp_ms(),
+        alternate: Vec::new(),
     };
     match &args.pinn {
         Some(model_path) => {

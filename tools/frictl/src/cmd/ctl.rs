@@ -9,9 +9,10 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use frictionless_shm_types::control::{
-    CONTROL_KEYS, CONTROL_OK, ControlClient, ControlRequest, ControlResponse, ood_mode_name,
+    CONTROL_KEYS, CONTROL_OK, ControlClient, ControlRequest, ControlResponse, access_refusal,
+    ood_mode_name,
 };
-use frictionless_shm_types::{Ipc, IpcConfig};
+use frictionless_shm_types::{Ipc, IpcConfig, ShmError};
 
 pub use frictl_cli::ctl::*;
 
@@ -27,7 +28,7 @@ fn call(
     Ok(r)
 }
 
-fn model_name(code: u32) -> &'static str {
+fn kind_name(code: u32) -> &'static str {
     u8::try_from(code)
         .ok()
         .and_then(frictionless::model::ModelKind::from_code)
@@ -61,7 +62,10 @@ fn as_json(joint: &str, r: &ControlResponse) -> serde_json::Value {
         "max_curr": r.max_curr_a,
         "compensation": if r.compensation != 0 { "on" } else { "off" },
         "ood": ood_mode_name(r.ood_mode),
-        "model": model_name(r.model_kind),
+        "model": r.model(),
+        "model_kind": kind_name(r.model_kind),
+        "model_since_tick": r.model_since_tick,
+        "models": r.models().collect::<Vec<_>>(),
         "set_since_ns": since,
     })
 }
@@ -74,8 +78,17 @@ fn as_text(joint: &str, r: &ControlResponse) -> String {
             format!("set at {} ns", r.set_since_ns[k])
         }
     };
+    let model_since = if r.set_since_ns[5] == 0 {
+        "file".to_owned()
+    } else {
+        format!(
+            "set at {} ns, active after tick {}",
+            r.set_since_ns[5], r.model_since_tick
+        )
+    };
     format!(
-        "joint {joint} (index {}), generation {} (loaded at {} ns), model {}\n\
+        "joint {joint} (index {}), generation {} (loaded at {} ns)\n\
+         model               {} ({}, {}; models: {})\n\
          kfc                 {} ({})\n\
          max_output_friction {} Nm ({})\n\
          max_curr            {} A ({})\n\
@@ -84,7 +97,10 @@ fn as_text(joint: &str, r: &ControlResponse) -> String {
         r.joint_index,
         r.generation,
         r.generation_since_ns,
-        model_name(r.model_kind),
+        r.model(),
+        kind_name(r.model_kind),
+        model_since,
+        r.models().collect::<Vec<_>>().join(", "),
         r.kfc,
         since(0),
         r.max_output_friction_nm,
@@ -101,8 +117,14 @@ fn as_text(joint: &str, r: &ControlResponse) -> String {
 /// Runs `frictl ctl`.
 pub fn run(a: Args) -> anyhow::Result<()> {
     let cfg = IpcConfig::new(a.root_path.as_deref(), &a.prefix);
-    let ipc = Ipc::open(&cfg, "frictl-ctl").context("opening iceoryx2")?;
-    let client = ipc.control_client()?;
+    let refused = |e: ShmError| match access_refusal(&cfg) {
+        Some(why) => anyhow::anyhow!("{why} ({e})"),
+        None => anyhow::Error::new(e),
+    };
+    let ipc = Ipc::open(&cfg, "frictl-ctl")
+        .map_err(refused)
+        .context("opening iceoryx2")?;
+    let client = ipc.control_client().map_err(refused)?;
     let timeout = Duration::from_millis(a.timeout_ms);
     match a.command {
         CtlCommand::Get { joint, json } => {
