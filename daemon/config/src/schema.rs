@@ -575,8 +575,8 @@ impl RawConfig {
         }
     }
 
-    /// Rewrites every relative path the file holds (the joints' model files, the iceoryx2 root
-    /// path) as `base` joined with it, so that the config written to another directory names the
+    /// Rewrites every relative path the file holds (the joints' and their alternates' model files,
+    /// the iceoryx2 root path) as `base` joined with it, so that the config written to another directory names the
     /// same files (`base` is the directory of the file it was read from, as in [`crate::parse`]).
     pub fn make_paths_absolute(&mut self, base: &Path) {
         let fix = |p: &mut PathBuf| {
@@ -587,8 +587,11 @@ impl RawConfig {
         if let Some(p) = self.backend.root_path.as_mut() {
             fix(p);
         }
-        for p in self.joint.iter_mut().filter_map(|j| j.model.as_mut()) {
-            fix(p);
+        for j in &mut self.joint {
+            let alternates = j.alternate.iter_mut().filter_map(|a| a.model.as_mut());
+            for p in j.model.as_mut().into_iter().chain(alternates) {
+                fix(p);
+            }
         }
     }
 }
