@@ -15,8 +15,8 @@
 //! stiff σ0 needs no small step; dz/dt is the tick's mean (Δz/Δt). The state is reset to 0 at every
 //! enable.
 //!
-//! What it is **not**: no identification (the static parameters come from an SCV fit, σ0 and σ1 are
-//! given: `frictl fit lugre`); no clamping or gain (the control law's).
+//! What it is **not**: no identification (that is `frictionless-ident`'s `lugre_fit`, `frictl fit
+//! lugre`, which simulates this estimator over a dataset); no clamping or gain (the control law's).
 
 /// LuGre parameters (joint side).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]

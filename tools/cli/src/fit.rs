@@ -92,12 +92,23 @@ pub struct Args {
     /// Upper bound of ks/kc (fs/fc for the code form).
     #[arg(long, default_value_t = FitBounds::default().ks_max_ratio)]
     pub ks_max_ratio: f64,
-    /// LuGre bristle stiffness σ0 [Nm/rad] (default: kc / 1e-3 rad).
+    /// LuGre: hold the bristle stiffness σ0 [Nm/rad] at this value instead of identifying it.
     #[arg(long)]
     pub sigma0: Option<f64>,
-    /// LuGre bristle damping σ1 [Nm·s/rad].
-    #[arg(long, default_value_t = 0.0)]
-    pub sigma1: f64,
+    /// LuGre: hold the bristle damping σ1 [Nm·s/rad] at this value instead of identifying it.
+    #[arg(long)]
+    pub sigma1: Option<f64>,
+    /// LuGre: no joint refinement of all seven parameters after the Stribeck and bristle stages.
+    #[arg(long)]
+    pub no_joint_refinement: bool,
+    /// Travel from a chunk's start before its rows enter the time-series error [rad] (the LuGre
+    /// fit's cost and every model's held-out RMSE): the simulated bristle state starts at 0, the
+    /// joint's does not.
+    #[arg(long, default_value_t = 0.01)]
+    pub warmup_travel_rad: f64,
+    /// A held-out dataset (repeatable): the fit reports its RMSE on each one's valid rows.
+    #[arg(long = "test-dataset", value_name = "CSV")]
+    pub test_datasets: Vec<PathBuf>,
     /// Write the TOML snippet here.
     #[arg(long)]
     pub toml: Option<PathBuf>,

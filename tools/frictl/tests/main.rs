@@ -14,6 +14,7 @@ mod experiment_leg;
 mod experiment_online_offline;
 mod experiment_oracle;
 mod files_cli;
+mod fit_lugre;
 mod import_cli;
 mod leg_frictiond;
 mod onpolicy_cli;

@@ -18,7 +18,9 @@
 //!   log and added back to the matched label where its smoother removed it;
 //! - [`whole_body`]: τ_ID = RNEA(q, q̇, q̈) on the whole URDF from every joint a log has, for the
 //!   `current` label;
-//! - [`fit`]: least-squares fits of the static CV and SCV friction models to a dataset (`frictl fit`).
+//! - [`fit`]: least-squares fits of the static CV and SCV friction models to a dataset (`frictl fit`);
+//! - [`lugre_fit`]: LuGre identification (Stribeck curve, bristle σ0 and σ1) from the time series
+//!   (`frictl fit lugre`).
 //!
 //! The Butterworth filters it runs are the core's one implementation, [`frictionless::filter`].
 //!
@@ -57,6 +59,7 @@
 pub mod dataset_file;
 pub mod fit;
 pub mod kalman;
+pub mod lugre_fit;
 pub mod matched;
 pub mod preprocess;
 pub mod ripple;

@@ -1,11 +1,15 @@
 //! `frictl fit cv|scv|scv-code|lugre DATASET.csv` — fit a friction model to a preprocessed dataset
 //! and print/write it as a `[[joint]]` TOML snippet in the daemon's config format, and as JSON
-//! ([`FitFile`]).
+//! ([`FitFile`], the one fit report; `docs/fitting.md` documents its keys).
 //!
-//! LuGre's static parameters (kc, kv, ks, vs, alpha) are those of the SCV fit (its smooth-sign ka is
-//! dropped: the bristle state replaces it); the bristle stiffness σ0 and damping σ1 are given
-//! (`--sigma0`, default kc / 1 mrad: the Coulomb level is reached at 1 mrad of joint-side
-//! pre-sliding deflection; `--sigma1`, default 0).
+//! The static models are fitted per sample ([`frictionless_ident::fit`]). LuGre is identified from
+//! the time series ([`frictionless_ident::lugre_fit`]): the Stribeck curve from the sliding rows,
+//! then the bristle stiffness σ0 and damping σ1 by simulating the bristle state over the dataset's
+//! chunks, then all seven together (`--no-joint-refinement` skips this); `--sigma0` / `--sigma1`
+//! hold one at a given value instead.
+//!
+//! Every model is also scored on held-out data (`--test-run` runs of the dataset, `--test-dataset`
+//! files) on the same rows: valid, past `--warmup-travel-rad` of travel in their chunk.
 
 use anyhow::Context;
 use frictiond_config::ModelKind;
@@ -16,6 +20,9 @@ use frictionless_dataset::fit_file::FittedModel;
 use frictionless_ident::fit::{
     FitBounds, FitError, FitOptions, FitResult, Fittable, Method, fit, select,
     sliding_quadrant_mask,
+};
+use frictionless_ident::lugre_fit::{
+    LugreFitOptions, LugreSeries, LugreStage, fit_lugre, lugre_errors, static_errors, time_segments,
 };
 use serde::{Deserialize, Serialize};
 
@@ -28,30 +35,35 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .flatten()
         .map(|p| p.as_path())
         .collect();
-    super::check_outputs(
-        &[&args.dataset, &args.dataset.with_extension("json")],
-        &outputs,
-    )?;
+    let mut inputs: Vec<std::path::PathBuf> =
+        vec![args.dataset.clone(), args.dataset.with_extension("json")];
+    for t in &args.test_datasets {
+        inputs.push(t.clone());
+        inputs.push(t.with_extension("json"));
+    }
+    let input_refs: Vec<&std::path::Path> = inputs.iter().map(|p| p.as_path()).collect();
+    super::check_outputs(&input_refs, &outputs)?;
     if let Some(s0) = args.sigma0 {
         anyhow::ensure!(
             s0.is_finite() && s0 > 0.0,
             "--sigma0 {s0}: must be finite and > 0"
         );
     }
+    if let Some(s1) = args.sigma1 {
+        anyhow::ensure!(
+            s1.is_finite() && s1 >= 0.0,
+            "--sigma1 {s1}: must be finite and ≥ 0"
+        );
+    }
     anyhow::ensure!(
-        args.sigma1.is_finite() && args.sigma1 >= 0.0,
-        "--sigma1 {}: must be finite and ≥ 0",
-        args.sigma1
+        args.warmup_travel_rad.is_finite() && args.warmup_travel_rad >= 0.0,
+        "--warmup-travel-rad {}: must be finite and ≥ 0",
+        args.warmup_travel_rad
     );
     let ds = Dataset::read_csv(&args.dataset)?;
-    let target = if args.truth {
-        ds.tau_f_true_nm
-            .clone()
-            .context("--truth: the dataset has no tau_f_true_nm column")?
-    } else {
-        ds.tau_f_label_nm.clone()
-    };
+    let target = target_column(&ds, &args.dataset, args.truth)?;
     let mut mask = ds.valid.clone();
+    let mut held_runs = Vec::new();
     if !args.test_runs.is_empty() {
         let side: Option<frictionless_dataset::DatasetSidecar> =
             frictionless::regular_file::read_text(&args.dataset.with_extension("json"))
@@ -73,6 +85,35 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         for (m, c) in mask.iter_mut().zip(&ds.chunk) {
             *m &= !held.contains(c);
         }
+        let rows: Vec<bool> = ds
+            .valid
+            .iter()
+            .zip(&ds.chunk)
+            .map(|(&v, c)| v && held.contains(c))
+            .collect();
+        held_runs.push(HeldOutData {
+            source: format!(
+                "{} runs {}",
+                args.dataset.display(),
+                args.test_runs.join(",")
+            ),
+            ds: None,
+            target: None,
+            rows,
+        });
+    }
+    // The rows the fit may use (before the sliding selection) and the held-out data.
+    let use_rows = mask.clone();
+    let mut held_out = held_runs;
+    for p in &args.test_datasets {
+        let t = Dataset::read_csv(p).with_context(|| format!("--test-dataset {}", p.display()))?;
+        let target = target_column(&t, p, args.truth)?;
+        held_out.push(HeldOutData {
+            source: p.display().to_string(),
+            rows: t.valid.clone(),
+            target: Some(target),
+            ds: Some(t),
+        });
     }
     if args.sliding_quadrants {
         for (m, s) in
@@ -109,75 +150,61 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             e => anyhow::Error::new(e),
         }
     };
+    let bounds = FitBounds {
+        ka_min: args.ka_min,
+        ka_max: args.ka_max,
+        vs_min: args.vs_min,
+        vs_max: args.vs_max,
+        alpha_min: args.alpha_min,
+        alpha_max: args.alpha_max,
+        ks_max_ratio: args.ks_max_ratio,
+    };
     let opts = FitOptions {
         method: args.method,
         adam_loss: args.loss,
         adam_epochs: args.epochs,
         adam_lr: args.lr,
-        bounds: FitBounds {
-            ka_min: args.ka_min,
-            ka_max: args.ka_max,
-            vs_min: args.vs_min,
-            vs_max: args.vs_max,
-            alpha_min: args.alpha_min,
-            alpha_max: args.alpha_max,
-            ks_max_ratio: args.ks_max_ratio,
-        },
+        bounds,
         ..FitOptions::default()
     };
     let started = std::time::Instant::now();
-    let (toml, json) = match args.model.0 {
-        ModelKind::Cv => report(
-            fit::<CvParams>(&v, &t, &opts).map_err(at_line)?,
-            |params| FittedModel::Cv { params },
-            &ds,
-            &target,
-            &args,
-        ),
-        ModelKind::Scv => report(
+    let ctx = Ctx {
+        ds: &ds,
+        target: &target,
+        held_out: &held_out,
+        args: &args,
+    };
+    let summary = match args.model.0 {
+        ModelKind::Cv => ctx
+            .static_summary(fit::<CvParams>(&v, &t, &opts).map_err(at_line)?, |params| {
+                FittedModel::Cv { params }
+            })?,
+        ModelKind::Scv => ctx.static_summary(
             fit::<ScvParams>(&v, &t, &opts).map_err(at_line)?,
             |params| FittedModel::Scv { params },
-            &ds,
-            &target,
-            &args,
-        ),
-        ModelKind::ScvCode => report(
+        )?,
+        ModelKind::ScvCode => ctx.static_summary(
             fit::<ScvCodeParams>(&v, &t, &opts).map_err(at_line)?,
             |params| FittedModel::ScvCode { params },
-            &ds,
-            &target,
-            &args,
-        ),
-        ModelKind::Lugre => {
-            let (sigma0, sigma1) = (args.sigma0, args.sigma1);
-            report(
-                fit::<ScvParams>(&v, &t, &opts).map_err(at_line)?,
-                move |s: ScvParams| FittedModel::Lugre {
-                    params: LugreParams {
-                        kc: s.kc,
-                        kv: s.kv,
-                        ks: s.ks,
-                        vs: s.vs,
-                        alpha: s.alpha,
-                        sigma0: sigma0.unwrap_or(s.kc / 1e-3),
-                        sigma1,
-                    },
-                },
-                &ds,
-                &target,
-                &args,
-            )
-        }
+        )?,
+        ModelKind::Lugre => ctx.lugre_summary(&use_rows, &mask, opts)?,
         kind @ (ModelKind::None | ModelKind::Pinn) => {
             anyhow::bail!("frictl fit: {kind} is not a model `frictl fit` fits")
         }
-    }?;
+    };
+    let (toml, json) = report(summary, &args)?;
     eprintln!(
         "frictl fit: {} of {} samples selected, fitted in {:.3} s",
-        v.len(),
+        json.n_samples,
         ds.len(),
         started.elapsed().as_secs_f64()
     );
+    for h in &json.held_out {
+        eprintln!(
+            "frictl fit: held-out {}: RMSE {:.4} Nm on {} rows",
+            h.source, h.rmse_nm, h.rows
+        );
+    }
     println!("{toml}");
     if let Some(p) = &args.toml {
         frictionless::output_file::write(p, &toml)
@@ -188,6 +215,186 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .with_context(|| format!("cannot write {}", p.display()))?;
     }
     Ok(())
+}
+
+/// The fit target of a dataset: the label, or with `--truth` the simulator's column.
+fn target_column(ds: &Dataset, path: &std::path::Path, truth: bool) -> anyhow::Result<Vec<f64>> {
+    if truth {
+        ds.tau_f_true_nm
+            .clone()
+            .with_context(|| format!("--truth: {} has no tau_f_true_nm column", path.display()))
+    } else {
+        Ok(ds.tau_f_label_nm.clone())
+    }
+}
+
+/// Held-out rows: of the fitted dataset (`ds`, `target` = `None`) or of a `--test-dataset`.
+struct HeldOutData {
+    source: String,
+    ds: Option<Dataset>,
+    target: Option<Vec<f64>>,
+    rows: Vec<bool>,
+}
+
+/// What a fit hands to [`report`].
+struct Summary {
+    fitted: FittedModel,
+    param_names: Vec<String>,
+    rmse_fitted_nm: f64,
+    mae_fitted_nm: f64,
+    rmse_valid_nm: f64,
+    n_samples: usize,
+    iterations: usize,
+    at_bounds: Vec<String>,
+    held_out: Vec<HeldOutScore>,
+    lugre: Option<LugreReport>,
+}
+
+/// A model's (RMSE, MAE, rows) on a series.
+type Scorer<'s> = dyn Fn(&LugreSeries) -> anyhow::Result<(f64, f64, usize)> + 's;
+
+/// The fitted dataset, its target and the held-out data.
+struct Ctx<'a> {
+    ds: &'a Dataset,
+    target: &'a [f64],
+    held_out: &'a [HeldOutData],
+    args: &'a Args,
+}
+
+/// A dataset's rows as a time series (`rows` enter the error).
+fn series_of<'a>(
+    ds: &'a Dataset,
+    target: &'a [f64],
+    rows: &'a [bool],
+    sliding: &'a [bool],
+    segment: &'a [u32],
+    dt_s: f64,
+) -> LugreSeries<'a> {
+    LugreSeries {
+        v_rad_s: &ds.sdot_rad_s,
+        tau_nm: target,
+        segment,
+        use_row: rows,
+        sliding,
+        dt_s,
+    }
+}
+
+impl Ctx<'_> {
+    /// Scores a model on each held-out data set: `score(series)` gives (RMSE, MAE, rows).
+    fn held_out_scores(&self, score: &Scorer) -> anyhow::Result<Vec<HeldOutScore>> {
+        let mut out = Vec::new();
+        for h in self.held_out {
+            let ds = h.ds.as_ref().unwrap_or(self.ds);
+            let target = h.target.as_deref().unwrap_or(self.target);
+            let (dt, seg) = time_segments(&ds.time_s, &ds.chunk)
+                .map_err(|e| anyhow::anyhow!("held-out {}: time column: {e}", h.source))?;
+            let series = series_of(ds, target, &h.rows, &h.rows, &seg, dt);
+            let (rmse_nm, mae_nm, rows) =
+                score(&series).with_context(|| format!("held-out {}", h.source))?;
+            out.push(HeldOutScore {
+                source: h.source.clone(),
+                rows,
+                rmse_nm,
+                mae_nm,
+            });
+        }
+        Ok(out)
+    }
+
+    fn static_summary<M: Fittable>(
+        &self,
+        r: FitResult<M>,
+        tagged: impl Fn(M) -> FittedModel,
+    ) -> anyhow::Result<Summary> {
+        let (rmse_valid, _) = frictionless_ident::fit::errors(
+            &r.model,
+            &select(&self.ds.sdot_rad_s, &self.ds.valid),
+            &select(self.target, &self.ds.valid),
+        );
+        let warmup = self.args.warmup_travel_rad;
+        let model = r.model;
+        let held_out = self.held_out_scores(&|s| Ok(static_errors(&model, s, warmup)?))?;
+        Ok(Summary {
+            fitted: tagged(r.model),
+            param_names: M::PARAM_NAMES.iter().map(|n| (*n).to_owned()).collect(),
+            rmse_fitted_nm: r.rmse_nm,
+            mae_fitted_nm: r.mae_nm,
+            rmse_valid_nm: rmse_valid,
+            n_samples: r.n_samples,
+            iterations: r.iterations,
+            at_bounds: r.at_bounds,
+            held_out,
+            lugre: None,
+        })
+    }
+
+    /// LuGre from the time series: `use_rows` may enter the cost, `sliding` (within them) give the
+    /// Stribeck curve.
+    fn lugre_summary(
+        &self,
+        use_rows: &[bool],
+        sliding: &[bool],
+        static_fit: FitOptions,
+    ) -> anyhow::Result<Summary> {
+        let a = self.args;
+        let (dt_s, seg) = time_segments(&self.ds.time_s, &self.ds.chunk)
+            .map_err(|e| anyhow::anyhow!("{}: time column: {e}", a.dataset.display()))?;
+        let series = series_of(self.ds, self.target, use_rows, sliding, &seg, dt_s);
+        let opts = LugreFitOptions {
+            static_fit,
+            warmup_travel_rad: a.warmup_travel_rad,
+            max_evals_joint: if a.no_joint_refinement {
+                0
+            } else {
+                LugreFitOptions::default().max_evals_joint
+            },
+            sigma0_fixed: a.sigma0,
+            sigma1_fixed: a.sigma1,
+            ..LugreFitOptions::default()
+        };
+        let r = fit_lugre(&series, &opts)
+            .map_err(|e| anyhow::anyhow!("{}: frictl fit lugre: {e}", a.dataset.display()))?;
+        let valid = series_of(self.ds, self.target, &self.ds.valid, sliding, &seg, dt_s);
+        let (rmse_valid, _, _) = lugre_errors(&r.params, &valid, a.warmup_travel_rad)?;
+        let params = r.params;
+        let held_out =
+            self.held_out_scores(&|s| Ok(lugre_errors(&params, s, a.warmup_travel_rad)?))?;
+        if !r.static_fit.at_bounds.is_empty() {
+            eprintln!(
+                "frictl fit lugre: Stribeck stage parameters on a bound: {}",
+                r.static_fit.at_bounds.join(", ")
+            );
+        }
+        let sf = r.static_fit.model;
+        Ok(Summary {
+            fitted: FittedModel::Lugre { params },
+            param_names: LugreParams::PARAM_NAMES
+                .iter()
+                .map(|n| (*n).to_owned())
+                .collect(),
+            rmse_fitted_nm: r.rmse_nm,
+            mae_fitted_nm: r.mae_nm,
+            rmse_valid_nm: rmse_valid,
+            n_samples: r.n_samples,
+            iterations: r.stages.iter().map(|s| s.evaluations).sum(),
+            at_bounds: r.at_bounds,
+            held_out,
+            lugre: Some(LugreReport {
+                dt_s,
+                warmup_travel_rad: a.warmup_travel_rad,
+                stribeck_fit: sf,
+                stribeck_rmse_nm: r.static_fit.rmse_nm,
+                stribeck_at_bounds: r.static_fit.at_bounds,
+                stages: r.stages,
+                held: [("sigma0", a.sigma0), ("sigma1", a.sigma1)]
+                    .into_iter()
+                    .filter(|(_, v)| v.is_some())
+                    .map(|(n, _)| n.to_owned())
+                    .collect(),
+            }),
+        })
+    }
 }
 
 /// Daemon `[[joint]]` keys for a fitted model (SCV code form = SCV with ka = inf, alpha = 2).
@@ -218,6 +425,18 @@ pub(crate) fn daemon_keys(m: &FittedModel) -> Vec<(&'static str, f64)> {
     }
 }
 
+/// The unit of a fitted parameter, by its name in any model's list.
+fn param_unit(name: &str) -> &'static str {
+    match name {
+        "kc" | "ks" | "fc" | "fs" => "Nm",
+        "kv" | "fv" | "sigma1" => "Nm·s/rad",
+        "ka" => "s/rad",
+        "vs" => "rad/s",
+        "sigma0" => "Nm/rad",
+        _ => "1",
+    }
+}
+
 fn toml_f64(v: f64) -> String {
     if v == f64::INFINITY {
         "inf".into()
@@ -226,25 +445,14 @@ fn toml_f64(v: f64) -> String {
     }
 }
 
-fn report<M: Fittable>(
-    r: FitResult<M>,
-    tagged: impl Fn(M) -> FittedModel,
-    ds: &Dataset,
-    target: &[f64],
-    args: &Args,
-) -> anyhow::Result<(String, FitFile)> {
+fn report(r: Summary, args: &Args) -> anyhow::Result<(String, FitFile)> {
     if !r.at_bounds.is_empty() {
         eprintln!(
             "frictl fit: parameters on a bound: {} (the unbounded optimum lies outside; see --help for the bound flags)",
             r.at_bounds.join(", ")
         );
     }
-    let (rmse_valid, _) = frictionless_ident::fit::errors(
-        &r.model,
-        &select(&ds.sdot_rad_s, &ds.valid),
-        &select(target, &ds.valid),
-    );
-    let fitted = tagged(r.model);
+    let fitted = r.fitted;
     if let FittedModel::Lugre { params } = &fitted {
         params
             .validate()
@@ -253,31 +461,40 @@ fn report<M: Fittable>(
     // The serialised name is a quoted string, valid TOML.
     let model_name = serde_json::to_value(FitFile::daemon_name(&fitted))?;
     let mut s = format!(
-        "# frictl fit {} ({:?}) on {}: {} samples, RMSE {:.4} Nm on the fitted samples, {:.4} Nm on all valid samples\n[[joint]]\nfriction_model = {model_name}\n",
+        "# frictl fit {} ({:?}) on {}: {} samples, RMSE {:.4} Nm on the fitted samples, {:.4} Nm on all valid samples\n",
         fitted.tag(),
         args.method,
         args.dataset.display(),
         r.n_samples,
-        r.rmse_nm,
-        rmse_valid
+        r.rmse_fitted_nm,
+        r.rmse_valid_nm
     );
+    for h in &r.held_out {
+        s += &format!(
+            "# held-out {}: RMSE {:.4} Nm on {} rows\n",
+            h.source, h.rmse_nm, h.rows
+        );
+    }
+    if !r.at_bounds.is_empty() {
+        s += &format!("# on a bound: {}\n", r.at_bounds.join(", "));
+    }
+    s += &format!("[[joint]]\nfriction_model = {model_name}\n");
     for (k, v) in daemon_keys(&fitted) {
         s += &format!("{k} = {}\n", toml_f64(v));
     }
     let json = FitFile {
         fitted,
         method: args.method,
-        param_names: match fitted {
-            FittedModel::Lugre { .. } => LugreParams::PARAM_NAMES.as_slice(),
-            _ => M::PARAM_NAMES,
-        }
-        .iter()
-        .map(|n| (*n).to_owned())
-        .collect(),
+        param_units: r
+            .param_names
+            .iter()
+            .map(|n| param_unit(n).to_owned())
+            .collect(),
+        param_names: r.param_names,
         daemon_friction_model: fitted.kind().daemon_kind(),
-        rmse_fitted_nm: r.rmse_nm,
-        mae_fitted_nm: r.mae_nm,
-        rmse_valid_nm: rmse_valid,
+        rmse_fitted_nm: r.rmse_fitted_nm,
+        mae_fitted_nm: r.mae_fitted_nm,
+        rmse_valid_nm: r.rmse_valid_nm,
         n_samples: r.n_samples,
         iterations: r.iterations,
         bounds: FitBounds {
@@ -289,12 +506,46 @@ fn report<M: Fittable>(
             alpha_max: args.alpha_max,
             ks_max_ratio: args.ks_max_ratio,
         },
-        at_bounds: r.at_bounds.clone(),
+        at_bounds: r.at_bounds,
         sliding_quadrants: args.sliding_quadrants,
         v_min_rad_s: args.v_min,
         dataset: args.dataset.display().to_string(),
+        held_out: r.held_out,
+        lugre: r.lugre,
     };
     Ok((s, json))
+}
+
+/// The error of a fitted model on one held-out data set.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HeldOutScore {
+    /// The data: `DATASET runs NAMES` (`--test-run`) or a `--test-dataset` path.
+    pub source: String,
+    /// Rows scored (valid, past the warm-up travel of their chunk).
+    pub rows: usize,
+    /// RMSE [Nm].
+    pub rmse_nm: f64,
+    /// MAE [Nm].
+    pub mae_nm: f64,
+}
+
+/// How a LuGre fit got its parameters.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LugreReport {
+    /// The row step the bristle state was integrated at [s].
+    pub dt_s: f64,
+    /// Travel from a chunk's start before its rows entered the cost [rad].
+    pub warmup_travel_rad: f64,
+    /// Stage 1: the static SCV fit to the sliding rows (its ka is not part of LuGre).
+    pub stribeck_fit: ScvParams,
+    /// Its RMSE on the sliding rows [Nm].
+    pub stribeck_rmse_nm: f64,
+    /// Its parameters on a bound.
+    pub stribeck_at_bounds: Vec<String>,
+    /// RMSE after each stage on the cost rows.
+    pub stages: Vec<LugreStage>,
+    /// Parameters held at a given value (`--sigma0`, `--sigma1`), not identified.
+    pub held: Vec<String>,
 }
 
 /// The whole JSON `frictl fit --json` writes.
@@ -307,6 +558,9 @@ pub struct FitFile {
     pub method: Method,
     /// Parameter names in the fitter's order.
     pub param_names: Vec<String>,
+    /// The unit of each parameter, in `param_names` order (absent in files written before).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub param_units: Vec<String>,
     /// The daemon's `friction_model` for the snippet.
     #[serde(with = "frictiond_config::friction_model_name")]
     pub daemon_friction_model: ModelKind,
@@ -330,6 +584,12 @@ pub struct FitFile {
     pub v_min_rad_s: f64,
     /// The dataset CSV.
     pub dataset: String,
+    /// The error on each held-out data set (`--test-run`, `--test-dataset`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub held_out: Vec<HeldOutScore>,
+    /// LuGre: the stages of the identification.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lugre: Option<LugreReport>,
 }
 
 impl FitFile {
