@@ -1319,3 +1319,21 @@ fn runtime_model_sets_name_the_available_models() {
     let r = runtime::check(&c, 4, "ankle", "model", "cv_b").unwrap_err();
     assert!(r.rule.contains("(available: default, none)"), "{r}");
 }
+
+/// `make_paths_absolute` rewrites every relative path of the file — the joint's model, its
+/// alternates' models, the iceoryx2 root — against the base, and leaves absolute ones.
+#[test]
+fn make_paths_absolute_covers_models_alternates_and_the_root() {
+    let text = "[backend]\nkind = \"shm\"\nroot_path = \"ipc\"\n\
+        [[joint]]\nname = \"a\"\nindex = 0\ngear_ratio = 1.0\nkt = 0.1\nmax_curr = 1.0\n\
+        friction_model = \"pinn\"\nmodel = \"m/a.fwt\"\n\
+        [[joint.alternate]]\nname = \"b\"\nfriction_model = \"pinn\"\nmodel = \"b.fwt\"\n\
+        [[joint.alternate]]\nname = \"c\"\nfriction_model = \"pinn\"\nmodel = \"/abs/c.fwt\"\n";
+    let mut raw: RawConfig = toml::from_str(text).unwrap();
+    raw.make_paths_absolute(std::path::Path::new("/robot/cfg"));
+    assert_eq!(raw.backend.root_path, Some(PathBuf::from("/robot/cfg/ipc")));
+    let j = &raw.joint[0];
+    assert_eq!(j.model, Some(PathBuf::from("/robot/cfg/m/a.fwt")));
+    assert_eq!(j.alternate[0].model, Some(PathBuf::from("/robot/cfg/b.fwt")));
+    assert_eq!(j.alternate[1].model, Some(PathBuf::from("/abs/c.fwt")));
+}
