@@ -21,4 +21,6 @@ mod daemon_ood;
 mod daemon_pinn;
 mod daemon_reliability;
 mod daemon_watch;
+mod vcan_cia402_candump;
+mod vcan_cia402_canopen;
 mod vcan_daemon;

@@ -5,6 +5,7 @@
 //! tests of the payloads and codecs (in `src/`), anything that starts `frictiond` (`daemon/tests/`).
 
 mod can_cia402;
+mod can_cia402_eds;
 mod can_codecs;
 mod can_socketpair;
 mod can_vcan;

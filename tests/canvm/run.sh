@@ -25,6 +25,10 @@
 #              used) and --workspace (CANVM_PACKAGES then only says which binaries must be there), so after
 #              `bash tests/run.sh` nothing is rebuilt; the ELF interpreter and every shared
 #              library `ldd` lists for them are copied into the initramfs at their host paths. CI uses it.
+#              CANVM_PYTHON (default python3): the CPython (with AF_CAN in its socket module) put into the
+#              VM, with a trimmed stdlib and tests/canvm/requirements.txt (python-canopen) installed into
+#              $CANVM_WORK/python (the wheels cached there), when a selected harness has a test matching
+#              CANVM_FILTER whose name holds `canopen`; inside, FRICTIONLESS_CANVM_PYTHON names it.
 # Last line: "canvm: N passed, N failed"; exit code non-zero on any failure or timeout.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -130,6 +134,29 @@ if [ -z "${CANVM_TESTS:-}" ]; then
   [ -n "$harnesses" ] || { log "no harness has a test matching '$FILTER'"; echo "canvm: 0 passed, 1 failed"; exit 1; }
 fi
 
+# Python with python-canopen, only when a selected test needs it (tests named `…canopen…`).
+PY_WANTED=""
+for h in $harnesses; do
+  if "$h" --list --include-ignored "$FILTER" 2>/dev/null | grep -E ': test$' | grep -q canopen; then PY_WANTED=1; fi
+done
+if [ -n "$PY_WANTED" ]; then
+  pybin=$(command -v "${CANVM_PYTHON:-python3}") || { log "CANVM_PYTHON=${CANVM_PYTHON:-python3} not found"; echo "canvm: 0 passed, 1 failed"; exit 1; }
+  # The interpreter itself (pyenv's python3 is a shim), its stdlib and its version.
+  read -r PYEXE PYSTD PYVER < <("$pybin" -c 'import os,sys,sysconfig; print(os.path.realpath(sys.executable), sysconfig.get_paths()["stdlib"], "%d.%d" % sys.version_info[:2])')
+  "$PYEXE" -c 'import socket; socket.AF_CAN; socket.CAN_RAW; socket.CAN_BCM' ||
+    { log "$PYEXE: the socket module has no AF_CAN (python-can's socketcan interface needs it)"; echo "canvm: 0 passed, 1 failed"; exit 1; }
+  PYSITE="$WORK/python/site-$PYVER"
+  req="$ROOT/tests/canvm/requirements.txt"
+  if [ ! -f "$PYSITE/.installed" ] || ! cmp -s "$req" "$PYSITE/.installed"; then
+    log "python-canopen for $PYEXE (wheels cached in $WORK/python/wheels)"
+    "$PYEXE" -m pip download -q -d "$WORK/python/wheels" -r "$req" ||
+      { log "pip download of $req failed"; echo "canvm: 0 passed, 1 failed"; exit 1; }
+    rm -rf "$PYSITE"
+    "$PYEXE" -m pip install -q --no-index --find-links "$WORK/python/wheels" --target "$PYSITE" -r "$req"
+    cp "$req" "$PYSITE/.installed"
+  fi
+fi
+
 # 4. initramfs.
 IR="$WORK/initramfs"
 rm -rf "$IR" && mkdir -p "$IR"/{bin,sbin,tests,proc,sys,dev,tmp,mods,dev/shm,run}
@@ -154,9 +181,31 @@ for h in $harnesses; do
 done
 # Line tables are not needed inside the VM; the guest unpacks the initramfs into RAM.
 command -v strip >/dev/null && strip --strip-debug "$IR"/bin/frictl* "$IR"/bin/frictiond* "$IR"/tests/* 2>/dev/null || true
-if [ "$BUILD" = host ]; then
-  # Dynamically linked: the ELF interpreter and every library the binaries need, at their host paths.
-  for f in "$IR"/bin/frictl* "$IR"/bin/frictiond* "$IR"/tests/*; do
+PYINIT=""
+if [ -n "$PY_WANTED" ]; then
+  # The interpreter at its host path (it finds its stdlib from there); the stdlib without what no
+  # test imports (tests, GUI, packaging tools, optimised bytecode); python-canopen and its
+  # dependencies in /py/site; the scripts and the EDS file at their host paths (the tests name them
+  # from CARGO_MANIFEST_DIR).
+  mkdir -p "$IR$(dirname "$PYEXE")" "$IR$PYSTD" "$IR/py"
+  cp -L "$PYEXE" "$IR$PYEXE"
+  (cd "$PYSTD" && tar -c --exclude=./site-packages --exclude=./test --exclude=./idlelib --exclude=./tkinter \
+     --exclude=./turtledemo --exclude=./ensurepip --exclude=./lib2to3 --exclude='./config-*' \
+     --exclude=./pydoc_data --exclude=./distutils --exclude='*/tests' --exclude='*.opt-1.pyc' \
+     --exclude='*.opt-2.pyc' --exclude='./lib-dynload/_test*' --exclude='./lib-dynload/_tkinter*' .) |
+    tar -x -C "$IR$PYSTD"
+  cp -a "$PYSITE" "$IR/py/site"
+  for f in "$ROOT"/tests/canvm/*.py "$ROOT"/config/*.eds; do
+    mkdir -p "$IR$(dirname "$f")" && cp "$f" "$IR$f"
+  done
+  PYINIT="export FRICTIONLESS_CANVM_PYTHON=$PYEXE PYTHONPATH=/py/site PYTHONDONTWRITEBYTECODE=1"
+  log "python $PYVER for the VM: $(du -sm "$IR$PYSTD" | cut -f1) MB stdlib, $(du -sm "$IR/py" | cut -f1) MB site-packages"
+fi
+if [ "$BUILD" = host ] || [ -n "$PY_WANTED" ]; then
+  # Dynamically linked: the ELF interpreter and every library the binaries (and Python with its
+  # extension modules) need, at their host paths.
+  for f in "$IR"/bin/frictl* "$IR"/bin/frictiond* "$IR"/tests/* ${PY_WANTED:+"$IR$PYEXE"} \
+           $( [ -n "$PY_WANTED" ] && find "$IR$PYSTD" "$IR/py" -name '*.so' ); do
     [ -f "$f" ] && ldd "$f" 2>/dev/null | grep -oE '/[^ ]+' || true
   done | sort -u | while read -r lib; do
     [ -e "$lib" ] || continue
@@ -173,6 +222,7 @@ for m in can-dev vcan vxcan can can-raw can-bcm can-gw; do insmod /mods/\$m.ko |
 ip link set lo up
 for i in vcan0 vcan1; do ip link add dev \$i type vcan && ip link set \$i mtu 16 && ip link set \$i up; done
 export PATH=/bin:/sbin TMPDIR=/tmp HOME=/tmp FRICTIONLESS_IN_CANVM=1
+$PYINIT
 rc=0
 for t in /tests/*; do
   echo "CANVM_HARNESS: \$t"

@@ -20,7 +20,7 @@ use super::cia402::{
 use super::{CanCodecError, WireFrame};
 
 /// Entries of the object dictionary.
-const OD_SIZE: usize = 128;
+const OD_SIZE: usize = 160;
 
 /// The device name served by 0x1008 (segmented upload).
 pub const DEVICE_NAME: &[u8] = b"frictionless emulated CiA 402 joint";
@@ -28,12 +28,69 @@ pub const DEVICE_NAME: &[u8] = b"frictionless emulated CiA 402 joint";
 /// Temperature object of the emulated drive (Synapticon's 0x2031:01, INTEGER32 m°C).
 pub const TEMPERATURE: SdoAddr = SdoAddr::new(0x2031, 1);
 
-#[derive(Debug, Clone, Copy, Default)]
-struct Entry {
-    addr: SdoAddr,
-    len: u8,
-    writable: bool,
-    value: u32,
+/// Manufacturer-specific test object of the emulation (UNSIGNED16, writable): writing a non-zero
+/// EMCY error code faults the drive as [`Cia402Node::inject_fault`] does (the SDO acknowledge, then
+/// the EMCY), so a master on the bus can exercise its fault handling.
+pub const SIMULATE_FAULT: SdoAddr = SdoAddr::new(0x2F00, 0);
+
+/// CiA 301 data types of the dictionary's entries.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum DataType {
+    /// UNSIGNED8.
+    #[default]
+    Unsigned8,
+    /// UNSIGNED16.
+    Unsigned16,
+    /// UNSIGNED32.
+    Unsigned32,
+    /// INTEGER8.
+    Integer8,
+    /// INTEGER16.
+    Integer16,
+    /// INTEGER32.
+    Integer32,
+}
+
+impl DataType {
+    /// The CiA 301 data type index (an EDS file's `DataType`).
+    pub const fn code(self) -> u16 {
+        match self {
+            Self::Integer8 => 0x0002,
+            Self::Integer16 => 0x0003,
+            Self::Integer32 => 0x0004,
+            Self::Unsigned8 => 0x0005,
+            Self::Unsigned16 => 0x0006,
+            Self::Unsigned32 => 0x0007,
+        }
+    }
+
+    /// Size [bytes].
+    pub const fn bytes(self) -> u8 {
+        match self {
+            Self::Unsigned8 | Self::Integer8 => 1,
+            Self::Unsigned16 | Self::Integer16 => 2,
+            Self::Unsigned32 | Self::Integer32 => 4,
+        }
+    }
+
+    /// Whether the type is signed (two's complement).
+    pub const fn signed(self) -> bool {
+        matches!(self, Self::Integer8 | Self::Integer16 | Self::Integer32)
+    }
+}
+
+/// One entry of the object dictionary (everything but the device name 0x1008, a
+/// VISIBLE_STRING [`DEVICE_NAME`] served by segmented upload).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Object {
+    /// Index and sub-index.
+    pub addr: SdoAddr,
+    /// Data type.
+    pub data_type: DataType,
+    /// Writable by SDO (`rw`); otherwise read-only.
+    pub writable: bool,
+    /// Raw value (the low [`DataType::bytes`] bytes; signed values in two's complement).
+    pub value: u32,
 }
 
 /// Frames a call produced (at most 8).
@@ -76,7 +133,7 @@ pub struct NodeParams {
 #[derive(Debug, Clone)]
 pub struct Cia402Node {
     node: u8,
-    od: [Entry; OD_SIZE],
+    od: [Object; OD_SIZE],
     n_od: usize,
     nmt: NmtState,
     state: DriveState,
@@ -87,6 +144,7 @@ pub struct Cia402Node {
     last_hb_ms: u64,
     segment: Option<(usize, bool)>,
     emcy_code: u16,
+    pending_emcy: Option<WireFrame>,
     /// Errors of PDOs received with the wrong length (EMCY 0x8210 is sent for them).
     pub pdo_length_errors: u64,
 }
@@ -98,13 +156,15 @@ impl Cia402Node {
     /// mapping parameters (sub 0–8; defaults RPDO1 = 0x6040 + 0x6071, TPDO1 = 0x6041 + 0x6064 +
     /// 0x6077, TPDO2 = 0x606C + 0x60E4:01), 0x603F, 0x6040, 0x6041, 0x605A (2), 0x6060, 0x6061,
     /// 0x6064, 0x606C, 0x6071, 0x6072, 0x6076, 0x6077, 0x608F:01/02, 0x60B2, 0x60E4:01, 0x2031:01
-    /// (temperature, m°C), 0x6502 (CSP, CSV, CST).
+    /// (temperature, m°C), 0x2F00 ([`SIMULATE_FAULT`]), 0x6502 (CSP, CSV, CST); every record's
+    /// sub 0 holds its highest sub-index. `config/cia402_frictionless.eds` describes the same
+    /// dictionary (a test keeps them equal).
     pub fn new(p: &NodeParams) -> Result<Self, CanCodecError> {
         let n = u32::from(p.node);
         co::node_id(0, p.node)?;
         let mut me = Self {
             node: p.node,
-            od: [Entry::default(); OD_SIZE],
+            od: [Object::default(); OD_SIZE],
             n_od: 0,
             nmt: NmtState::BootUp,
             state: DriveState::NotReadyToSwitchOn,
@@ -115,112 +175,90 @@ impl Cia402Node {
             last_hb_ms: 0,
             segment: None,
             emcy_code: 0,
+            pending_emcy: None,
             pdo_length_errors: 0,
         };
-        let mut add = |index: u16, sub: u8, len: u8, writable: bool, value: u32| {
-            me.od[me.n_od] = Entry {
+        let mut add = |index: u16, sub: u8, data_type: DataType, writable: bool, value: u32| {
+            me.od[me.n_od] = Object {
                 addr: SdoAddr::new(index, sub),
-                len,
+                data_type,
                 writable,
                 value,
             };
             me.n_od += 1;
         };
-        add(obj::DEVICE_TYPE, 0, 4, false, 0x0002_0192);
-        add(obj::ERROR_REGISTER, 0, 1, false, 0);
-        add(obj::PRODUCER_HEARTBEAT, 0, 2, true, 0);
-        add(obj::IDENTITY, 1, 4, false, 0);
-        add(obj::IDENTITY, 2, 4, false, 0x402);
-        add(obj::IDENTITY, 3, 4, false, 1);
-        add(obj::IDENTITY, 4, 4, false, n);
+        use DataType::{Integer8 as I8, Integer16 as I16, Integer32 as I32};
+        use DataType::{Unsigned8 as U8, Unsigned16 as U16, Unsigned32 as U32};
+        add(obj::DEVICE_TYPE, 0, U32, false, 0x0002_0192);
+        add(obj::ERROR_REGISTER, 0, U8, false, 0);
+        add(obj::PRODUCER_HEARTBEAT, 0, U16, true, 0);
+        add(obj::IDENTITY, 0, U8, false, 4);
+        add(obj::IDENTITY, 1, U32, false, 0);
+        add(obj::IDENTITY, 2, U32, false, 0x402);
+        add(obj::IDENTITY, 3, U32, false, 1);
+        add(obj::IDENTITY, 4, U32, false, n);
         let defaults: [[u32; 3]; 4] = [
             [0x6040_0010, 0x6071_0010, 0],
             [0x6041_0010, 0x6064_0020, 0x6077_0010],
             [0x606C_0020, 0x60E4_0120, 0],
             [0, 0, 0],
         ];
-        for k in 0..4u16 {
-            let r_valid = if k == 0 { 0 } else { co::COB_ID_INVALID };
-            add(
-                obj::RPDO_COMM + k,
-                1,
-                4,
-                true,
-                r_valid | (co::cob::RPDO[usize::from(k)] + n),
-            );
-            add(obj::RPDO_COMM + k, 2, 1, true, 1);
-            let rdef = if k == 0 { defaults[0] } else { [0; 3] };
-            let rn = rdef.iter().filter(|&&v| v != 0).count() as u32;
-            add(obj::RPDO_MAP + k, 0, 1, true, rn);
-            for s in 1..=8u8 {
-                add(
-                    obj::RPDO_MAP + k,
-                    s,
-                    4,
-                    true,
-                    *rdef.get(usize::from(s - 1)).unwrap_or(&0),
-                );
+        // Communication (sub 1 COB-ID, sub 2 transmission type) and mapping parameters of RPDO1–4
+        // and TPDO1–4.
+        for (comm, map, ids, valid) in [
+            (obj::RPDO_COMM, obj::RPDO_MAP, co::cob::RPDO, 1u16),
+            (obj::TPDO_COMM, obj::TPDO_MAP, co::cob::TPDO, 2),
+        ] {
+            for k in 0..4u16 {
+                let flag = if k < valid { 0 } else { co::COB_ID_INVALID };
+                add(comm + k, 0, U8, false, 2);
+                add(comm + k, 1, U32, true, flag | (ids[usize::from(k)] + n));
+                add(comm + k, 2, U8, true, 1);
+                let def = match (comm, k) {
+                    (obj::RPDO_COMM, 0) => defaults[0],
+                    (obj::TPDO_COMM, 0) => defaults[1],
+                    (obj::TPDO_COMM, 1) => defaults[2],
+                    _ => defaults[3],
+                };
+                let entries = def.iter().filter(|&&v| v != 0).count() as u32;
+                add(map + k, 0, U8, true, entries);
+                for s in 1..=8u8 {
+                    let v = *def.get(usize::from(s - 1)).unwrap_or(&0);
+                    add(map + k, s, U32, true, v);
+                }
             }
         }
-        for k in 0..4u16 {
-            let t_valid = if k < 2 { 0 } else { co::COB_ID_INVALID };
-            add(
-                obj::TPDO_COMM + k,
-                1,
-                4,
-                true,
-                t_valid | (co::cob::TPDO[usize::from(k)] + n),
-            );
-            add(obj::TPDO_COMM + k, 2, 1, true, 1);
-            let tdef = match k {
-                0 => defaults[1],
-                1 => defaults[2],
-                _ => [0; 3],
-            };
-            let tn = tdef.iter().filter(|&&v| v != 0).count() as u32;
-            add(obj::TPDO_MAP + k, 0, 1, true, tn);
-            for s in 1..=8u8 {
-                add(
-                    obj::TPDO_MAP + k,
-                    s,
-                    4,
-                    true,
-                    *tdef.get(usize::from(s - 1)).unwrap_or(&0),
-                );
-            }
-        }
-        add(obj::ERROR_CODE, 0, 2, false, 0);
-        add(obj::CONTROLWORD, 0, 2, true, 0);
-        add(obj::STATUSWORD, 0, 2, false, 0);
-        add(obj::QUICK_STOP_OPTION, 0, 2, true, 2);
-        add(obj::MODES_OF_OPERATION, 0, 1, true, 0);
-        add(obj::MODES_DISPLAY, 0, 1, false, 0);
-        add(obj::POSITION_ACTUAL, 0, 4, false, 0);
-        add(obj::VELOCITY_ACTUAL, 0, 4, false, 0);
-        add(obj::TARGET_TORQUE, 0, 2, true, 0);
-        add(
-            obj::MAX_TORQUE,
-            0,
-            2,
-            true,
-            u32::from(p.max_torque_permille),
-        );
-        add(obj::RATED_TORQUE, 0, 4, true, p.rated_torque_mnm);
-        add(obj::TORQUE_ACTUAL, 0, 2, false, 0);
-        add(obj::ENCODER_RESOLUTION, 1, 4, true, p.counts_per_rev);
-        add(obj::ENCODER_RESOLUTION, 2, 4, true, 1);
-        add(obj::TORQUE_OFFSET, 0, 2, true, 0);
-        add(obj::ADDITIONAL_POSITION, 1, 4, false, 0);
-        add(TEMPERATURE.index, TEMPERATURE.sub, 4, false, 0);
-        add(
-            obj::SUPPORTED_MODES,
-            0,
-            4,
-            false,
-            (1 << 7) | (1 << 8) | (1 << 9),
-        );
+        add(obj::ERROR_CODE, 0, U16, false, 0);
+        add(obj::CONTROLWORD, 0, U16, true, 0);
+        add(obj::STATUSWORD, 0, U16, false, 0);
+        add(obj::QUICK_STOP_OPTION, 0, I16, true, 2);
+        add(obj::MODES_OF_OPERATION, 0, I8, true, 0);
+        add(obj::MODES_DISPLAY, 0, I8, false, 0);
+        add(obj::POSITION_ACTUAL, 0, I32, false, 0);
+        add(obj::VELOCITY_ACTUAL, 0, I32, false, 0);
+        add(obj::TARGET_TORQUE, 0, I16, true, 0);
+        let max = u32::from(p.max_torque_permille);
+        add(obj::MAX_TORQUE, 0, U16, true, max);
+        add(obj::RATED_TORQUE, 0, U32, true, p.rated_torque_mnm);
+        add(obj::TORQUE_ACTUAL, 0, I16, false, 0);
+        add(obj::ENCODER_RESOLUTION, 0, U8, false, 2);
+        add(obj::ENCODER_RESOLUTION, 1, U32, true, p.counts_per_rev);
+        add(obj::ENCODER_RESOLUTION, 2, U32, true, 1);
+        add(obj::TORQUE_OFFSET, 0, I16, true, 0);
+        add(obj::ADDITIONAL_POSITION, 0, U8, false, 1);
+        add(obj::ADDITIONAL_POSITION, 1, I32, false, 0);
+        add(TEMPERATURE.index, 0, U8, false, 1);
+        add(TEMPERATURE.index, TEMPERATURE.sub, I32, false, 0);
+        add(SIMULATE_FAULT.index, SIMULATE_FAULT.sub, U16, true, 0);
+        let modes = (1 << 7) | (1 << 8) | (1 << 9);
+        add(obj::SUPPORTED_MODES, 0, U32, false, modes);
         me.refresh_statusword();
         Ok(me)
+    }
+
+    /// The object dictionary, in index order of creation (see [`Cia402Node::new`]).
+    pub fn objects(&self) -> &[Object] {
+        &self.od[..self.n_od]
     }
 
     fn find(&self, a: SdoAddr) -> Option<usize> {
@@ -235,7 +273,7 @@ impl Cia402Node {
 
     fn set(&mut self, index: u16, sub: u8, value: u32) {
         if let Some(k) = self.find(SdoAddr::new(index, sub)) {
-            let len = self.od[k].len;
+            let len = self.od[k].data_type.bytes();
             let mask = if len >= 4 {
                 u32::MAX
             } else {
@@ -383,7 +421,7 @@ impl Cia402Node {
 
     fn object_len(&self, e: &PdoEntry) -> Option<u8> {
         self.find(SdoAddr::new(e.index, e.sub))
-            .map(|k| self.od[k].len)
+            .map(|k| self.od[k].data_type.bytes())
     }
 
     /// Handles a received frame; returns the frames to send.
@@ -413,6 +451,9 @@ impl Cia402Node {
                     && let Some(r) = self.on_sdo(f)
                 {
                     out.push(co::encode_sdo_response(self.node, &r));
+                    if let Some(e) = self.pending_emcy.take() {
+                        out.push(Ok(e));
+                    }
                 }
             }
             CobKind::Rpdo(k, n) if n == self.node && self.nmt == NmtState::Operational => {
@@ -558,7 +599,7 @@ impl Cia402Node {
                 Some(SdoResponse::Upload {
                     addr,
                     data: e.value.to_le_bytes(),
-                    len: e.len,
+                    len: e.data_type.bytes(),
                 })
             }
             SdoRequest::Download { addr, data, len } => {
@@ -573,7 +614,7 @@ impl Cia402Node {
                         code: abort::READ_ONLY,
                     });
                 }
-                if len != e.len {
+                if len != e.data_type.bytes() {
                     return Some(SdoResponse::Abort {
                         addr,
                         code: abort::LENGTH_MISMATCH,
@@ -591,6 +632,9 @@ impl Cia402Node {
                         let _ = self.apply_controlword(v as u16);
                     }
                     obj::MODES_OF_OPERATION => self.set(obj::MODES_DISPLAY, 0, v),
+                    i if i == SIMULATE_FAULT.index && v != 0 => {
+                        self.pending_emcy = self.inject_fault(v as u16).ok();
+                    }
                     _ => {}
                 }
                 Some(SdoResponse::DownloadAck { addr })
@@ -860,5 +904,33 @@ mod tests {
         let out = n.on_frame(&co::encode_sync(None));
         assert!(out.frames().iter().any(|f| f.id == 0x83));
         assert_eq!(n.pdo_length_errors, 1);
+    }
+
+    #[test]
+    fn simulate_fault_object_faults_the_drive_with_an_emcy() {
+        let mut n = node();
+        n.boot().unwrap();
+        let req = co::sdo_download(SIMULATE_FAULT, 0x2310, 2).unwrap();
+        let out = n.on_frame(&co::encode_sdo_request(3, &req).unwrap());
+        assert_eq!(out.frames().len(), 2, "{out:?}");
+        assert!(matches!(
+            co::decode_sdo_response(&out.frames()[0], false).unwrap().1,
+            SdoResponse::DownloadAck { addr } if addr == SIMULATE_FAULT
+        ));
+        let (node, e) = co::decode_emcy(&out.frames()[1]).unwrap();
+        assert_eq!((node, e.code, e.register), (3, 0x2310, 1));
+        assert_eq!(n.state(), DriveState::Fault);
+        assert_eq!(n.get(obj::ERROR_CODE, 0), Some(0x2310));
+        // Writing 0 does nothing.
+        let mut m = self::node();
+        m.boot().unwrap();
+        let req = co::sdo_download(SIMULATE_FAULT, 0, 2).unwrap();
+        assert_eq!(
+            m.on_frame(&co::encode_sdo_request(3, &req).unwrap())
+                .frames()
+                .len(),
+            1
+        );
+        assert_eq!(m.state(), DriveState::SwitchOnDisabled);
     }
 }

@@ -27,4 +27,5 @@ mod train_cli;
 mod train_one_recording;
 mod train_split;
 mod util;
+mod vcan_cia402_canopen;
 mod vcan_sim_serve;
