@@ -14,7 +14,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use crate::can_support::{LogTail, start_daemon, write_can_config};
+use crate::can_support::{LogTail, cia402_knee_body, start_daemon, write_can_config};
 use crate::daemon_support::{Plant, TestEnv, frictl_path};
 use frictionless_canlog::{self as canlog, LogEntry, LogFrame};
 use frictionless_drives::can::WireFrame;
@@ -23,46 +23,6 @@ use frictionless_shm_types::{FLAG_FAULT, FLAG_STALE, TorqueRequest};
 use socketcan::{CanSocket, Socket, SocketOptions};
 
 const T: Duration = Duration::from_secs(60);
-
-/// The knee of `frictl sim serve --preset knee` on node 1 (k_t, gear ratio, current limit of the
-/// preset; 0x6076 / 0x6072 / 0x608F read from the drive).
-const CONFIG: &str = r#"
-[loop]
-period_us = 1000
-status_every_ticks = 20
-ready_after_ticks = 10
-
-[safety]
-stale_after_ticks = 200
-on_stale = "zero"
-
-[[joint]]
-name = "knee"
-index = 0
-gear_ratio = -100.0
-kt = 0.157
-max_curr = 5.0
-friction_model = "none"
-
-[[bus]]
-interface = "vcan0"
-bitrate = 1000000
-protocol = "cia402"
-max_load = 0.9
-feedback_timeout_ticks = 50
-
-[[bus.joint]]
-joint = "knee"
-node_id = 1
-command_unit = "motor_torque"
-[bus.joint.cia402]
-mode = "cst"
-fault_reset = true
-velocity_unit_rad_s = 0.0003834951969714103
-joint_encoder = { index = 0x60E4, sub = 1, bits = 32, counts_per_rev = 524288 }
-heartbeat_ms = 20
-heartbeat_timeout_ms = 300
-"#;
 
 struct Killed(Child);
 impl Drop for Killed {
@@ -132,7 +92,7 @@ fn recorder() -> (Arc<AtomicBool>, std::thread::JoinHandle<Vec<u8>>) {
 #[ignore = "needs vcan (run tests/canvm/run.sh)"]
 fn vcan_cia402_candump_record_and_replay_of_a_frictiond_session() {
     let env = TestEnv::new("vcancodump");
-    let cfg = write_can_config(&env, CONFIG);
+    let cfg = write_can_config(&env, &cia402_knee_body(1000));
     let (rec_stop, rec) = recorder();
     std::thread::sleep(Duration::from_millis(200));
     // frictiond waits for the drive's boot-up; the drive boots at its first tick.

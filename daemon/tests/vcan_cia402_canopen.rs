@@ -4,7 +4,7 @@
 //! real kernel vcan0. `#[ignore]`d on the host; the CAN VM (`tests/canvm/run.sh`) brings the Python.
 //!
 //! frictiond configures the drive by SDO (mode, heartbeat, the scales it reads, the PDO mapping),
-//! starts it, enables it over RPDO1 and drives CST torque with its SYNC (at 250 Hz: see [`CONFIG`]); the checks: the
+//! starts it, enables it over RPDO1 and drives CST torque with its SYNC (at 250 Hz: see [`PERIOD_US`]); the checks: the
 //! drive reaches operation enabled and applies frictiond's command (k_t·i in ‰ of the rated torque
 //! it read), its plant moves; an EMCY gives the joint a drive fault (counted in
 //! `DaemonStatus.bus.detail[emcy]`) and `fault_reset = true` brings it back; a heartbeat loss makes
@@ -13,7 +13,7 @@
 
 use std::time::{Duration, Instant};
 
-use crate::can_support::{LogTail, start_daemon, write_can_config};
+use crate::can_support::{LogTail, cia402_knee_body, start_daemon, write_can_config};
 use crate::daemon_support::{Plant, TestEnv};
 use frictionless_shm_types::{CAN_DETAIL_EMCY, FLAG_FAULT, FLAG_STALE, TorqueRequest};
 use frictionless_test_support::python_canopen::{PyProcess, eds, script};
@@ -26,43 +26,7 @@ const RATED_NM: f64 = 1.0;
 
 /// The loop runs at 250 Hz: Python in the emulated VM cannot follow 1 kHz (it falls behind, and the
 /// kernel drops what it has not read); 1 kHz is covered against the Rust emulated node.
-const CONFIG: &str = r#"
-[loop]
-period_us = 4000
-status_every_ticks = 20
-ready_after_ticks = 10
-
-[safety]
-stale_after_ticks = 200
-on_stale = "zero"
-
-[[joint]]
-name = "knee"
-index = 0
-gear_ratio = -100.0
-kt = 0.157
-max_curr = 5.0
-friction_model = "none"
-
-[[bus]]
-interface = "vcan0"
-bitrate = 1000000
-protocol = "cia402"
-max_load = 0.9
-feedback_timeout_ticks = 50
-
-[[bus.joint]]
-joint = "knee"
-node_id = 1
-command_unit = "motor_torque"
-[bus.joint.cia402]
-mode = "cst"
-fault_reset = true
-velocity_unit_rad_s = 0.0003834951969714103
-joint_encoder = { index = 0x60E4, sub = 1, bits = 32, counts_per_rev = 524288 }
-heartbeat_ms = 20
-heartbeat_timeout_ms = 300
-"#;
+const PERIOD_US: u64 = 4000;
 
 /// The torque [‰ of rated] frictiond sends for current `i_a`.
 fn permille(i_a: f64) -> i64 {
@@ -123,7 +87,7 @@ fn pump_until_line(
 #[ignore = "needs vcan and python-canopen (run tests/canvm/run.sh)"]
 fn vcan_cia402_canopen_frictiond_drives_a_python_canopen_drive() {
     let env = TestEnv::new("vcancop");
-    let cfg = write_can_config(&env, CONFIG);
+    let cfg = write_can_config(&env, &cia402_knee_body(PERIOD_US));
     let eds = eds();
     let mut py = PyProcess::start(
         &script("cia402_drive.py"),

@@ -1334,6 +1334,9 @@ fn make_paths_absolute_covers_models_alternates_and_the_root() {
     assert_eq!(raw.backend.root_path, Some(PathBuf::from("/robot/cfg/ipc")));
     let j = &raw.joint[0];
     assert_eq!(j.model, Some(PathBuf::from("/robot/cfg/m/a.fwt")));
-    assert_eq!(j.alternate[0].model, Some(PathBuf::from("/robot/cfg/b.fwt")));
+    assert_eq!(
+        j.alternate[0].model,
+        Some(PathBuf::from("/robot/cfg/b.fwt"))
+    );
     assert_eq!(j.alternate[1].model, Some(PathBuf::from("/abs/c.fwt")));
 }

@@ -770,3 +770,48 @@ impl Drop for Cia402Emu {
         }
     }
 }
+
+/// The config body of the knee of `frictl sim serve --preset knee --protocol cia402` on node 1 of
+/// vcan0 (k_t, gear ratio, current limit of the preset; 0x6076 / 0x6072 / 0x608F read from the
+/// drive), ticking every `period_us`.
+pub fn cia402_knee_body(period_us: u64) -> String {
+    format!(
+        r#"
+[loop]
+period_us = {period_us}
+status_every_ticks = 20
+ready_after_ticks = 10
+
+[safety]
+stale_after_ticks = 200
+on_stale = "zero"
+
+[[joint]]
+name = "knee"
+index = 0
+gear_ratio = -100.0
+kt = 0.157
+max_curr = 5.0
+friction_model = "none"
+
+[[bus]]
+interface = "vcan0"
+bitrate = 1000000
+protocol = "cia402"
+max_load = 0.9
+feedback_timeout_ticks = 50
+
+[[bus.joint]]
+joint = "knee"
+node_id = 1
+command_unit = "motor_torque"
+[bus.joint.cia402]
+mode = "cst"
+fault_reset = true
+velocity_unit_rad_s = 0.0003834951969714103
+joint_encoder = {{ index = 0x60E4, sub = 1, bits = 32, counts_per_rev = 524288 }}
+heartbeat_ms = 20
+heartbeat_timeout_ms = 300
+"#
+    )
+}

@@ -30,7 +30,8 @@ use frictionless::output_file::{self, AtomicFile};
 use frictionless_dataset::{Dataset, DatasetError};
 use frictionless_shm_types::{
     FLAG_DISABLED, FLAG_FAULT, FLAG_NON_FINITE, FLAG_OUT_OF_RANGE, FLAG_STALE, FLAG_WARMING_UP,
-    Ipc, JointStates, MAX_JOINTS, MotorCurrentCommand, ShmError, TorqueRequest, monotonic_ns,
+    Inbox, Ipc, JointStates, MAX_JOINTS, MotorCurrentCommand, Outbox, ShmError, TorqueRequest,
+    monotonic_ns,
 };
 use serde::Serialize;
 
@@ -341,10 +342,12 @@ pub fn replay(bins: &Binaries, job: &ReplayJob) -> Result<ReplayOutcome, ReplayE
     write_text(&outputs.config, &text)?;
 
     let ipc = Ipc::open(&session.ipc, "frictl_replay")?;
-    let js_out = ipc.joint_states()?.outbox()?;
     let rq_chan = ipc.torque_request()?;
-    let rq_out = rq_chan.outbox()?;
-    let cmd_in = ipc.motor_current_command()?.inbox()?;
+    let ports = Ports {
+        js_out: ipc.joint_states()?.outbox()?,
+        rq_out: rq_chan.outbox()?,
+        cmd_in: ipc.motor_current_command()?.inbox()?,
+    };
     session.start_daemon_config(bins, &raw, || rq_chan.subscriber_count())?;
 
     let n_joints = cfg.raw.joint.iter().map(|j| j.index + 1).max().unwrap_or(0);
@@ -361,33 +364,24 @@ pub fn replay(bins: &Binaries, job: &ReplayJob) -> Result<ReplayOutcome, ReplayE
             && joints
                 .iter()
                 .any(|j| j.data.chunk[k] != j.data.chunk[k - 1]);
-        if boundary {
-            reenables += 1;
+        // A chunk boundary: one tick with every joint disabled before the chunk's first row.
+        let masks: &[u64] = if boundary {
+            &[0, enable_mask]
+        } else {
+            &[enable_mask]
+        };
+        reenables += usize::from(boundary);
+        let mut cmd = MotorCurrentCommand::zeroed();
+        for &mask in masks {
             seq += 1;
-            tick(
-                &js_out,
-                &rq_out,
-                &cmd_in,
-                &mut session,
-                &joints,
-                k,
+            let at = Tick {
+                row: k,
                 seq,
                 n_joints,
-                0,
-            )?;
+                enable_mask: mask,
+            };
+            cmd = tick(&ports, &mut session, &joints, at)?;
         }
-        seq += 1;
-        let cmd = tick(
-            &js_out,
-            &rq_out,
-            &cmd_in,
-            &mut session,
-            &joints,
-            k,
-            seq,
-            n_joints,
-            enable_mask,
-        )?;
         for j in &mut joints {
             let i = j.index;
             j.out
@@ -455,20 +449,45 @@ fn output_paths(job: &ReplayJob, joints: &[Played]) -> Result<Outputs, ReplayErr
     Ok(o)
 }
 
-/// One daemon tick: row `k` of every dataset as joint states number `seq`, a request enabling
-/// `enable_mask`, and the daemon's command that answers it.
-#[allow(clippy::too_many_arguments)] // the ports, the session and the tick's values
+/// The replay's ends of the daemon's services.
+struct Ports {
+    js_out: Outbox<JointStates>,
+    rq_out: Outbox<TorqueRequest>,
+    cmd_in: Inbox<MotorCurrentCommand>,
+}
+
+/// What one tick plays.
+#[derive(Clone, Copy)]
+struct Tick {
+    /// Dataset row.
+    row: usize,
+    /// The joint states' sequence number.
+    seq: u64,
+    /// Payload joint count.
+    n_joints: usize,
+    /// Joints the request enables.
+    enable_mask: u64,
+}
+
+/// One daemon tick: row `at.row` of every dataset as joint states number `at.seq`, a request
+/// enabling `at.enable_mask`, and the daemon's command that answers it.
 fn tick(
-    js_out: &frictionless_shm_types::Outbox<JointStates>,
-    rq_out: &frictionless_shm_types::Outbox<TorqueRequest>,
-    cmd_in: &frictionless_shm_types::Inbox<MotorCurrentCommand>,
+    ports: &Ports,
     session: &mut Session,
     joints: &[Played],
-    k: usize,
-    seq: u64,
-    n_joints: usize,
-    enable_mask: u64,
+    at: Tick,
 ) -> Result<MotorCurrentCommand, ReplayError> {
+    let Tick {
+        row: k,
+        seq,
+        n_joints,
+        enable_mask,
+    } = at;
+    let Ports {
+        js_out,
+        rq_out,
+        cmd_in,
+    } = ports;
     let mut js = JointStates::zeroed();
     js.seq = seq;
     js.stamp_ns = monotonic_ns();

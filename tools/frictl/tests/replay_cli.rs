@@ -190,7 +190,8 @@ fn bad_replays_are_refused_naming_the_joint_the_rate_or_the_input() {
         let time_s: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
         let s_rad: Vec<f64> = time_s.iter().map(|t| 0.3 * t.sin()).collect();
         let ds = frictionless_dataset::Dataset {
-            chunk: vec![0; n],
+            // Two chunks: replay re-enables the joint at the second's first row.
+            chunk: (0..n).map(|k| u32::from(k >= 300)).collect(),
             source_chunk: vec![0; n],
             active: vec![true; n],
             valid: vec![true; n],
@@ -272,6 +273,7 @@ fn bad_replays_are_refused_naming_the_joint_the_rate_or_the_input() {
     let r = json(&out.join("replay.json"));
     assert_eq!(r["joints"][0]["rows"], 600);
     assert_eq!(r["joints"][0]["model_rows"], 600);
+    assert_eq!((r["ticks"].as_u64(), r["reenables"].as_u64()), (Some(601), Some(1)));
     let text = std::fs::read_to_string(out.join("knee.csv")).unwrap();
     let row: Vec<f64> = text
         .lines()
