@@ -273,7 +273,10 @@ fn bad_replays_are_refused_naming_the_joint_the_rate_or_the_input() {
     let r = json(&out.join("replay.json"));
     assert_eq!(r["joints"][0]["rows"], 600);
     assert_eq!(r["joints"][0]["model_rows"], 600);
-    assert_eq!((r["ticks"].as_u64(), r["reenables"].as_u64()), (Some(601), Some(1)));
+    assert_eq!(
+        (r["ticks"].as_u64(), r["reenables"].as_u64()),
+        (Some(601), Some(1))
+    );
     let text = std::fs::read_to_string(out.join("knee.csv")).unwrap();
     let row: Vec<f64> = text
         .lines()

@@ -7,6 +7,8 @@
 //! - [`whole`]: the log held in memory, joints labelled in passes of a few;
 //! - [`stream`]: `--window-samples N`, the log read and labelled in windows, never held whole;
 //! - [`urdf`]: the robot from `--urdf` and `--fixed-joint` (also `frictl preprocess`'s);
+//! - `shared` (private, below both imports): output paths, per-joint values, the plausibility
+//!   checks, the inputs' sidecar and the committing of a dataset with its sidecar;
 //! - [`check_outputs`]: the refusal, before any work, of an output that would overwrite an input.
 //!
 //! It takes the arguments `frictl-cli` parses and reports with `anyhow`, as the command layer does.
@@ -15,6 +17,7 @@
 
 #![warn(missing_docs)]
 
+mod shared;
 pub mod stream;
 pub mod urdf;
 pub mod whole;

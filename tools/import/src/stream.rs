@@ -18,7 +18,7 @@ use frictionless_logs::{ImportedRun, Role, Unit, csv_log};
 use frictl_cli::import_log::CommonArgs;
 
 use crate::check_outputs;
-use crate::whole::{Inputs, commit_pair, out_path, per_joint, plan_warnings, plausibility};
+use crate::shared::{Inputs, commit_pair, out_path, per_joint, plan_warnings, plausibility};
 
 /// One joint's output being written.
 struct Out {
@@ -66,7 +66,7 @@ impl<'a> Streamer<'a> {
         // The whole robot's state, every window (a glitch may be anywhere), once the units and
         // rates passed (a wrong time unit shows as speeds too).
         if let Dynamics::WholeBody(b) = &self.dynamics {
-            crate::whole::state_plausibility(std::slice::from_ref(&block), b.robot())?;
+            crate::shared::state_plausibility(std::slice::from_ref(&block), b.robot())?;
         }
         if self.labeller.is_none() {
             for j in &block.joints {
