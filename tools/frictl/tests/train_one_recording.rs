@@ -52,6 +52,27 @@ fn one_recording(dir: &Path, name: &str, seconds: f64, phase: f64) -> PathBuf {
     out
 }
 
+/// The arguments of `frictl train` of a small network (`hidden` wide, H = 4, one epoch, quiet) on
+/// `ds` with the prior `cv`, writing `model`.
+fn small_train<'a>(ds: &'a Path, cv: &'a Path, model: &'a Path, hidden: &'a str) -> Vec<&'a str> {
+    vec![
+        "train",
+        "--dataset",
+        s(ds),
+        "--scv",
+        s(cv),
+        "--out",
+        s(model),
+        "--hidden",
+        hidden,
+        "--history",
+        "4",
+        "--epochs",
+        "1",
+        "--quiet",
+    ]
+}
+
 fn scratch(name: &str) -> PathBuf {
     let d = crate::util::scratch(name);
     let _ = std::fs::remove_dir_all(&d);
@@ -160,22 +181,7 @@ fn one_recording_is_cut_into_time_blocks_with_no_window_across_a_boundary() {
 
     // The documented command runs on it, with validation, and reports the blocks.
     let model = dir.join("m.fwt");
-    ok(&[
-        "train",
-        "--dataset",
-        s(&ds),
-        "--scv",
-        s(&cv),
-        "--out",
-        s(&model),
-        "--hidden",
-        "8",
-        "--history",
-        "4",
-        "--epochs",
-        "1",
-        "--quiet",
-    ]);
+    ok(&small_train(&ds, &cv, &model, "8"));
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("m.train.json")).unwrap()).unwrap();
     assert!(r["split"]["val_samples"].as_u64().unwrap() > 0);
@@ -278,22 +284,7 @@ fn an_incremental_motor_encoder_trains_latched_per_chunk() {
     let cv = dir.join("cv.json");
     ok(&["fit", "cv", s(&ds), "--json", s(&cv)]);
     let model = dir.join("m.fwt");
-    let base = [
-        "train",
-        "--dataset",
-        s(&ds),
-        "--scv",
-        s(&cv),
-        "--out",
-        s(&model),
-        "--hidden",
-        "8",
-        "--history",
-        "4",
-        "--epochs",
-        "1",
-        "--quiet",
-    ];
+    let base = small_train(&ds, &cv, &model, "8");
     let report = || -> serde_json::Value {
         serde_json::from_str(&std::fs::read_to_string(dir.join("m.train.json")).unwrap()).unwrap()
     };
@@ -340,22 +331,7 @@ fn frictl_config_writes_checked_joints_for_pinns_and_fits() {
     ok(&["fit", "cv", s(&ds), "--json", s(&cv)]);
     ok(&["fit", "scv", s(&ds), "--json", s(&scv)]);
     let train = |model: &Path, extra: &[&str]| {
-        let base = [
-            "train",
-            "--dataset",
-            s(&ds),
-            "--scv",
-            s(&cv),
-            "--out",
-            s(model),
-            "--hidden",
-            "8",
-            "--history",
-            "4",
-            "--epochs",
-            "1",
-            "--quiet",
-        ];
+        let base = small_train(&ds, &cv, model, "8");
         ok(&[&base[..], extra].concat());
     };
     let (abs, inc) = (dir.join("abs.fwt"), dir.join("inc.fwt"));
@@ -577,22 +553,7 @@ fn distill_on_one_recording_draws_probes_from_its_training_blocks() {
     let cv = dir.join("cv.json");
     ok(&["fit", "cv", s(&ds), "--json", s(&cv)]);
     let teacher = dir.join("t.fwt");
-    ok(&[
-        "train",
-        "--dataset",
-        s(&ds),
-        "--scv",
-        s(&cv),
-        "--out",
-        s(&teacher),
-        "--hidden",
-        "16",
-        "--history",
-        "4",
-        "--epochs",
-        "1",
-        "--quiet",
-    ]);
+    ok(&small_train(&ds, &cv, &teacher, "16"));
     let out = frictl(&[
         "distill",
         s(&teacher),
