@@ -49,6 +49,23 @@ fn get(c: &ControlClient, joint: &str) -> ControlResponse {
 }
 
 /// One lockstep tick with torque 2 Nm and ṡ = 0.3 rad/s on every joint: the knee's current.
+/// SIGHUP, then `joint`'s get once it reports parameter generation `generation` (the reload done).
+fn reload(d: &Daemon, c: &ControlClient, joint: &str, generation: u64) -> ControlResponse {
+    d.signal(libc::SIGHUP);
+    let deadline = std::time::Instant::now() + T;
+    loop {
+        let g = get(c, joint);
+        if g.generation == generation {
+            return g;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "no reload to generation {generation}"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
 fn knee_current(plant: &mut Plant) -> f64 {
     let (js, rq) = inputs([2.0; 3], [0.3; 3]);
     let k = plant.publish_state(&js);
@@ -148,16 +165,7 @@ fn sets_take_effect_on_the_next_tick_refusals_name_the_rule_and_reload_restores(
 
     // A reload restores the file's values: once get reports the new generation, the next tick
     // runs the file's law again.
-    d.signal(libc::SIGHUP);
-    let deadline = std::time::Instant::now() + T;
-    let g = loop {
-        let g = get(&c, "knee_cv");
-        if g.generation == 1 {
-            break g;
-        }
-        assert!(std::time::Instant::now() < deadline, "no reload");
-        std::thread::sleep(Duration::from_millis(10));
-    };
+    let g = reload(&d, &c, "knee_cv", 1);
     assert_eq!((g.kfc, g.max_curr_a, g.compensation), (0.85, 5.0, 1));
     assert_eq!(g.set_since_ns, [0; CONTROL_KEYS.len()]);
     let i = knee_current(&mut plant);
@@ -268,16 +276,7 @@ fn model_sets_switch_among_the_preloaded_models_at_the_next_tick_and_reload_rest
     assert!(close(i, knee_ref_f(scv_b)), "{i}");
 
     // A reload reloads the alternates from the file and runs the joint's own model again.
-    d.signal(libc::SIGHUP);
-    let deadline = std::time::Instant::now() + T;
-    let g = loop {
-        let g = get(&c, "knee_cv");
-        if g.generation == 1 {
-            break g;
-        }
-        assert!(std::time::Instant::now() < deadline, "no reload");
-        std::thread::sleep(Duration::from_millis(10));
-    };
+    let g = reload(&d, &c, "knee_cv", 1);
     assert_eq!(
         (g.model(), g.model_since_tick, g.set_since_ns[5]),
         ("default", 0, 0)
