@@ -1,8 +1,6 @@
 //! The paper's closed-loop experiments on the coupled six-joint leg (`frictl sim serve --preset leg`).
 //!
-//! What this module **is**: [`LegSetup`] (the leg's parameters and its nominal URDF model, the one the
-//! whole-leg controller [`super::controller::LegComputedTorque`] uses for M(q) and h(q, q̇)),
-//! [`LegSuiteConfig`] and [`run_leg_suite`]: for each tested joint (normally the knee and the ankle
+//! What this module **is**: [`LegSuiteConfig`] and [`run_leg_suite`]: for each tested joint (normally the knee and the ankle
 //! roll) and each compensation ([`LegModel`]: one friction model per leg joint, run by one frictiond
 //! with six joints), the minimum-K_p search ([`KpBisection`] over sine-tracking trials) and a
 //! disturbance trial (hold, external torque pulse, release), while every other joint of the leg holds
@@ -15,49 +13,14 @@
 
 use std::collections::BTreeMap;
 
-use frictionless_sim::LegParams;
-use frictionless_sim::leg::LEG_PRESET_TOML;
-
 use super::ExperimentError;
 use super::controller::Reference;
 use super::metrics::{self, DisturbanceMetrics, TrackCriterion, TrackMetrics};
-use super::run::{JointPlan, JointTrace, Pulse, Rig, TrialOptions, TrialSpec, run_trial_on};
+use super::rig::{LegSetup, Rig};
+use super::run::{JointPlan, JointTrace, Pulse, TrialOptions, TrialSpec, run_trial_on};
 use super::search::{KpBisection, MinKp};
 use super::session::{Binaries, FrictionModel, Lpf, Mode};
 use super::suite::{SearchStep, amp_freq, run_parallel};
-
-/// The leg as the controller and frictiond's config need it.
-#[derive(Clone, Debug)]
-pub struct LegSetup {
-    /// The leg's drives (payload order) and URDF.
-    pub params: LegParams,
-    /// The nominal URDF model (kept joints movable, the rest locked): the controller's M and h.
-    pub robot: frictionless_dynamics::Robot,
-}
-
-impl LegSetup {
-    /// The built-in leg preset with `sets` (`JOINT:plant.KEY=VALUE` or `plant.KEY=VALUE`), the same
-    /// overrides the plant gets.
-    pub fn load(sets: &[String]) -> Result<Self, ExperimentError> {
-        let params = LegParams::from_toml_str(LEG_PRESET_TOML, "<preset leg>", sets)?;
-        let robot = params.nominal_robot()?;
-        Ok(Self { params, robot })
-    }
-
-    /// Joints of the leg.
-    pub fn dof(&self) -> usize {
-        self.params.joints.len()
-    }
-
-    /// Payload index of joint `name`.
-    pub fn index(&self, name: &str) -> Result<usize, ExperimentError> {
-        self.params
-            .joints
-            .iter()
-            .position(|p| p.joint == name)
-            .ok_or_else(|| ExperimentError::LegJoint(name.to_owned()))
-    }
-}
 
 /// What the joints not under test do during a trial.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]

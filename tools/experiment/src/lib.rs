@@ -12,7 +12,7 @@
 //! `disturbance`, in [`suite`]) and their tables, JSON and plots ([`report`]); the `oracle`
 //! diagnostic ([`oracle`]: compensation with the plant's true friction — a bound, not a model); the
 //! same experiments on the coupled six-joint leg with the whole-leg computed-torque controller
-//! ([`leg`]: [`leg::run_leg_suite`], through the same run loop with [`run::Rig::Leg`]); and
+//! ([`leg`]: [`leg::run_leg_suite`], through the same run loop with [`rig::Rig::Leg`]); and
 //! [`replay`], recorded datasets played through `frictiond` as deployed (`frictl replay`).
 //!
 //! What it is **not**: no physics (that is [`frictionless_sim`] in the plant process), no friction model
@@ -62,6 +62,7 @@ pub mod onpolicy;
 pub mod oracle;
 pub mod replay;
 pub mod report;
+pub mod rig;
 pub mod run;
 pub mod search;
 pub mod session;

@@ -19,7 +19,8 @@ use frictionless_acquire::log::{COLUMNS, SIM_COLUMNS};
 
 use super::ExperimentError;
 use super::controller::Reference;
-use super::run::{JointPlan, JointSetup, JointTrace, Pulse};
+use super::rig::JointSetup;
+use super::run::{JointPlan, JointTrace, Pulse};
 use super::session::{Binaries, FrictionModel};
 use super::suite::{self, SuiteConfig, hold_rad, sine};
 

@@ -1,11 +1,10 @@
 //! One closed-loop trial over shared memory: the experiment controller's loop.
 //!
-//! The plant is a [`Rig`]: the two single-joint presets (each planned joint controlled by
+//! The plant is a [`Rig`] ([`super::rig`]): the two single-joint presets (each planned joint controlled by
 //! [`ComputedTorque`] on its own link model) or the coupled leg (all six joints controlled at once by
 //! [`LegComputedTorque`]); both run through the one loop of [`run_trial_on`].
 //!
-//! What this module **is**: [`JointSetup`] (a plant preset's link model, gear ratio and k_t — the
-//! controller's M and h come from exactly the link model the plant simulates), [`TrialSpec`] (which
+//! What this module **is**: [`TrialSpec`] (which
 //! joints, gains, references, disturbance pulses and friction models) and [`run_trial`], which starts a
 //! [`Session`] (frictiond + plant), then per received `JointStates` (seq k) computes τ_des for every
 //! planned joint, publishes the `SimDisturbance` when it changes and the `TorqueRequest` with
@@ -24,83 +23,12 @@ use frictionless_shm_types::{
 
 use super::ExperimentError;
 use super::controller::{ComputedTorque, LegComputedTorque, Reference, Setpoint};
-use super::leg::LegSetup;
 use super::oracle::OracleCompensation;
+use super::rig::{JointSetup, Rig};
 use super::session::{
-    Binaries, DaemonJoint, FrictionModel, LawSettings, Lpf, Mode, PRESETS, PlantSpec, Session,
-    interrupted,
+    Binaries, DaemonJoint, FrictionModel, LawSettings, Lpf, Mode, PlantSpec, Session, interrupted,
 };
-use frictionless_sim::PlantParams;
-use frictionless_sim::link::{LinkDynamics, link_from_model};
-use frictionless_sim::params::load_table;
-
-/// A plant preset as the controller and the daemon config need it.
-pub struct JointSetup {
-    /// Preset name (`knee`, `ankle_roll`).
-    pub preset: String,
-    /// The plant parameters (joint name, signed r, k_t, range, initial pose, link model).
-    pub params: PlantParams,
-    /// The link model the plant simulates (M = I_L, h = g).
-    pub link: Box<dyn LinkDynamics>,
-}
-
-impl JointSetup {
-    /// Loads `preset` with `--set` overrides `sets` (the same ones the plant gets).
-    pub fn load(preset: &str, sets: &[String]) -> Result<Self, ExperimentError> {
-        let table = load_table(preset, None, sets)?;
-        let params = PlantParams::from_table(&table)?;
-        let link = link_from_model(&params.link)?;
-        Ok(Self {
-            preset: preset.to_owned(),
-            params,
-            link,
-        })
-    }
-
-    /// Both presets in payload order ([`PRESETS`]).
-    pub fn both(sets: &[String]) -> Result<[JointSetup; 2], ExperimentError> {
-        frictionless_sim::params::check_set_joints(sets, &PRESETS)?;
-        Ok([Self::load(PRESETS[0], sets)?, Self::load(PRESETS[1], sets)?])
-    }
-}
-
-/// The plant a trial runs against, and with it the controller: each single-joint preset with its own
-/// link model, or the coupled leg with the whole-leg computed torque on its nominal URDF.
-#[derive(Clone, Copy)]
-pub enum Rig<'a> {
-    /// The two independent single-joint presets ([`PRESETS`]: knee = 0, ankle_roll = 1); each
-    /// planned joint gets [`ComputedTorque`] on its preset's link model.
-    Pair(&'a [JointSetup; 2]),
-    /// The six-joint leg (`--preset leg`); every joint must be planned (one trial controls the whole
-    /// leg with [`LegComputedTorque`]).
-    Leg(&'a LegSetup),
-}
-
-impl Rig<'_> {
-    /// Joints of the plant.
-    pub fn dof(&self) -> usize {
-        match self {
-            Rig::Pair(s) => s.len(),
-            Rig::Leg(l) => l.dof(),
-        }
-    }
-
-    /// Drive parameters of joint `i` (joint name, signed r, k_t, initial pose, J_eq).
-    pub fn params(&self, i: usize) -> &PlantParams {
-        match self {
-            Rig::Pair(s) => &s[i].params,
-            Rig::Leg(l) => &l.params.joints[i],
-        }
-    }
-
-    /// The plant server's `--preset` argument.
-    fn preset_arg(&self) -> String {
-        match self {
-            Rig::Pair(_) => PRESETS.join(","),
-            Rig::Leg(_) => "leg".to_owned(),
-        }
-    }
-}
+use frictionless_sim::link::LinkDynamics;
 
 /// An external torque pulse on the joint output (through `SimDisturbance`).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -18,9 +18,8 @@
 use super::ExperimentError;
 use super::controller::Reference;
 use super::metrics::{self, DisturbanceMetrics, TrackCriterion, TrackMetrics};
-use super::run::{
-    JointPlan, JointSetup, JointTrace, Pulse, TrialOptions, TrialSpec, run_trial_with,
-};
+use super::rig::JointSetup;
+use super::run::{JointPlan, JointTrace, Pulse, TrialOptions, TrialSpec, run_trial_with};
 use super::search::{KpBisection, MinKp};
 use super::session::{Binaries, FrictionModel, Lpf, Mode};
 

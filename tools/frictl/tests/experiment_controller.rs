@@ -4,7 +4,8 @@
 
 use frictionless_experiment::controller::{ComputedTorque, Reference};
 use frictionless_experiment::metrics::{self, TrackCriterion};
-use frictionless_experiment::run::{JointSetup, JointTrace};
+use frictionless_experiment::rig::JointSetup;
+use frictionless_experiment::run::JointTrace;
 use frictionless_sim::Plant;
 
 /// Runs `periods` of `reference` at `kp`; `compensate` adds the true friction of the previous

@@ -19,8 +19,9 @@ use crate::util::s;
 use frictionless::friction::{CvParams, ScvParams};
 use frictionless_experiment::controller::Reference;
 use frictionless_experiment::leg::{
-    LegModel, LegSetup, LegSuiteConfig, LegSuiteReport, LegTestJoint, RestMotion, run_leg_suite,
+    LegModel, LegSuiteConfig, LegSuiteReport, LegTestJoint, RestMotion, run_leg_suite,
 };
+use frictionless_experiment::rig::LegSetup;
 use frictionless_experiment::session::{Binaries, FrictionModel, ORACLE_LABEL};
 use frictionless_sim::PlantParams;
 
@@ -128,7 +129,8 @@ fn leg_oracle_and_scv_need_a_lower_min_kp_than_none_on_knee_and_ankle_roll() {
 #[test]
 fn leg_pinn_joints_in_frictiond_equal_offline_inference() {
     use crate::experiment_online_offline::{model_file, replay};
-    use frictionless_experiment::run::{JointPlan, Rig, TrialOptions, TrialSpec, run_trial_on};
+    use frictionless_experiment::rig::Rig;
+    use frictionless_experiment::run::{JointPlan, TrialOptions, TrialSpec, run_trial_on};
     use frictionless_experiment::session::Mode;
 
     let bins = Binaries::with_frictl(PathBuf::from(env!("CARGO_BIN_EXE_frictl")))

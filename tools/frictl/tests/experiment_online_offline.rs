@@ -19,7 +19,8 @@ use frictionless::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
 use frictionless::units::GearRatio;
 use frictionless::weights::{ModelFile, ModelMeta, TrainingMeta};
 use frictionless_experiment::controller::Reference;
-use frictionless_experiment::run::{JointPlan, JointSetup, JointTrace, TrialSpec, run_trial};
+use frictionless_experiment::rig::JointSetup;
+use frictionless_experiment::run::{JointPlan, JointTrace, TrialSpec, run_trial};
 use frictionless_experiment::session::{Binaries, FrictionModel as Fm, Mode};
 
 /// A small ReLU network whose normalisation is sized to the joint's signals (so the output moves

@@ -11,7 +11,8 @@ use frictionless_dataset::fit_file::FittedModel;
 use frictionless_experiment::controller::PAPER_KD_PER_S;
 use frictionless_experiment::metrics::TrackCriterion;
 use frictionless_experiment::report::{SuiteReport, slug, write_trace_csv};
-use frictionless_experiment::run::{JointSetup, JointTrace, Pulse};
+use frictionless_experiment::rig::JointSetup;
+use frictionless_experiment::run::{JointTrace, Pulse};
 use frictionless_experiment::session::{
     Binaries, FrictionModel, LawSettings, Lpf, Mode, install_signal_flag,
 };
@@ -676,9 +677,8 @@ fn write_outputs(
 /// `frictl experiment all --robot leg`: parses the options into a [`LegSuiteConfig`], runs
 /// [`run_leg_suite`] and writes `leg-tables.md` and `leg-report.json`.
 fn run_leg(args: &Args) -> anyhow::Result<()> {
-    use frictionless_experiment::leg::{
-        LegModel, LegSetup, LegSuiteConfig, RestMotion, run_leg_suite,
-    };
+    use frictionless_experiment::leg::{LegModel, LegSuiteConfig, RestMotion, run_leg_suite};
+    use frictionless_experiment::rig::LegSetup;
     anyhow::ensure!(
         args.kind == Kind::All,
         "--robot leg runs `all` (min-K_p and disturbance), not `{}`",
