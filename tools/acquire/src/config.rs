@@ -143,6 +143,17 @@ pub struct ProtocolConfig {
     pub tracking: BTreeMap<String, TrackingConfig>,
 }
 
+/// `--set` overrides that turn a preset's protocol into its unseen test run: the closed-loop tracking
+/// test set only (no sines, ramps, steps or training tracking). `frictl demo` and `frictl robot run`
+/// record their held-out runs with them.
+pub const UNSEEN_TEST_RUN: [&str; 5] = [
+    "protocol.sines.enabled=false",
+    "protocol.ramps.enabled=false",
+    "protocol.steps.enabled=false",
+    "protocol.tracking.train.enabled=false",
+    "protocol.tracking.test.enabled=true",
+];
+
 impl ProtocolConfig {
     /// Parses the `[protocol]` table of a merged parameter table and validates it.
     pub fn from_table(table: &toml::Table) -> Result<Self, ParamError> {

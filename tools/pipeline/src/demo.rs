@@ -247,8 +247,9 @@ fn read_typed<T: serde::de::DeserializeOwned>(p: &Path) -> anyhow::Result<T> {
 /// `--pinn-delta-theta-offset`), or `enable` when training latched per chunk (no single value).
 fn pinn_offset_arg(train_report: &Path) -> anyhow::Result<String> {
     let report: TrainReport = read_typed(train_report)?;
-    let offset = crate::robot_run::trained_offset(&report)
-        .with_context(|| train_report.display().to_string())?;
+    let offset = report
+        .deployed_offset_rad()
+        .map_err(|e| anyhow::anyhow!("{}: {e}", train_report.display()))?;
     Ok(offset.map_or_else(|| "enable".into(), |v| format!("{v:e}")))
 }
 
@@ -793,17 +794,6 @@ pub fn run(args: Args, host: &dyn Host) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `frictl acquire --set` overrides that turn a preset's protocol into its unseen test run: the
-/// closed-loop tracking test set only (no sines, ramps, steps or training tracking). Used by the demo
-/// and by `frictl robot`.
-pub const UNSEEN_TEST_RUN: [&str; 5] = [
-    "protocol.sines.enabled=false",
-    "protocol.ramps.enabled=false",
-    "protocol.steps.enabled=false",
-    "protocol.tracking.train.enabled=false",
-    "protocol.tracking.test.enabled=true",
-];
-
 /// Stage 1, acquisition: the protocol (training) and an unseen closed-loop tracking set (test).
 fn acquire(
     r: &mut Runner,
@@ -834,7 +824,9 @@ fn acquire(
             seed: seed + 100,
             out: dirs.data.clone(),
             name: Some(format!("{joint}_test")),
-            sets: UNSEEN_TEST_RUN.map(String::from).into(),
+            sets: frictionless_acquire::config::UNSEEN_TEST_RUN
+                .map(String::from)
+                .into(),
             ..stage::defaults()?
         },
     )?;

@@ -101,7 +101,9 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> anyhow::Result<JointPlan> 
     let (train, test) = match j.source() {
         DataSource::Preset => {
             let preset = j.preset.clone().unwrap_or_default();
-            let mut test_sets: Vec<String> = crate::demo::UNSEEN_TEST_RUN.map(String::from).into();
+            let mut test_sets: Vec<String> = frictionless_acquire::config::UNSEEN_TEST_RUN
+                .map(String::from)
+                .into();
             test_sets.extend(robot.acquire.test_set.iter().cloned());
             let acquire_args = |seed: u64, name: &str, sets: Vec<String>| {
                 stage::argv(
@@ -684,23 +686,6 @@ fn check_data(
     Ok(())
 }
 
-/// The Δθ offset frictiond keeps for a PINN: the one its training latched (all datasets the same),
-/// `None` (latch at enable) when training latched per chunk.
-pub(crate) fn trained_offset(report: &TrainReport) -> anyhow::Result<Option<f64>> {
-    let offsets: Vec<Option<f64>> = report
-        .datasets
-        .iter()
-        .map(|d| d.delta_theta_offset_motor_rad)
-        .collect();
-    match offsets.first() {
-        Some(Some(v)) if offsets.iter().all(|o| *o == Some(*v)) => Ok(Some(*v)),
-        Some(Some(_)) => bail!(
-            "the datasets were latched with different Δθ offsets ({offsets:?}); frictiond takes one"
-        ),
-        _ => Ok(None),
-    }
-}
-
 fn read_typed<T: serde::de::DeserializeOwned>(p: &Path) -> anyhow::Result<T> {
     let t = frictionless::regular_file::read_text(p)
         .with_context(|| format!("cannot read {}", p.display()))?;
@@ -715,7 +700,9 @@ fn daemon_config(robot: &RobotFile, plans: &[JointPlan], out: &Path) -> anyhow::
     let mut joints = vec![];
     for (index, (j, p)) in robot.joint.iter().zip(plans).enumerate() {
         let report: TrainReport = read_typed(&out.join(&p.model_report))?;
-        let offset = trained_offset(&report).with_context(|| p.model_report.clone())?;
+        let offset = report
+            .deployed_offset_rad()
+            .map_err(|e| anyhow::anyhow!("{}: {e}", p.model_report))?;
         if offset.is_some() && j.motor_encoder == frictiond_config::MotorEncoder::Incremental {
             bail!(
                 "{}: joint {} has motor_encoder = \"incremental\", but its model was trained with a fixed Δθ offset; it must be trained latched per chunk",

@@ -830,6 +830,27 @@ pub struct TrainReport {
     pub residual_reference: Option<ResidualReference>,
 }
 
+impl TrainReport {
+    /// The Δθ offset frictiond keeps for this PINN (`[[joint]] delta_theta_offset_motor_rad`): the one
+    /// its training latched when every dataset was latched with the same value, `None` (frictiond
+    /// latches at enable) when training latched per chunk. Datasets latched with different offsets
+    /// are an error: frictiond takes one.
+    pub fn deployed_offset_rad(&self) -> Result<Option<f64>, String> {
+        let offsets: Vec<Option<f64>> = self
+            .datasets
+            .iter()
+            .map(|d| d.delta_theta_offset_motor_rad)
+            .collect();
+        match offsets.first() {
+            Some(Some(v)) if offsets.iter().all(|o| *o == Some(*v)) => Ok(Some(*v)),
+            Some(Some(_)) => Err(format!(
+                "the datasets were latched with different Δθ offsets ({offsets:?}); frictiond takes one"
+            )),
+            _ => Ok(None),
+        }
+    }
+}
+
 /// The residual profile a model had at training time (`residual_reference` in the report).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ResidualReference {

@@ -38,8 +38,9 @@ use frictionless_acquire::leg::{
 };
 use frictionless_eval::{Metrics, Report as EvalReport};
 use frictionless_experiment::leg::{
-    LegCell, LegModel, LegSetup, LegSuiteConfig, LegTestJoint, run_leg_suite,
+    LegCell, LegModel, LegSuiteConfig, LegTestJoint, run_leg_suite,
 };
+use frictionless_experiment::rig::LegSetup;
 use frictionless_experiment::search::MinKp;
 use frictionless_experiment::session::{
     Binaries, DaemonJoint, FrictionModel, ORACLE_LABEL, daemon_joint,
@@ -682,8 +683,11 @@ fn write_daemon_configs(
         let mut joints = vec![];
         for (index, (p, f)) in setup.params.joints.iter().zip(files).enumerate() {
             let offset = if label == "PINN" {
-                let report = super::read_typed(&f.train_report)?;
-                crate::robot_run::trained_offset(&report).with_context(|| s(&f.train_report))?
+                let report: frictionless_train::pipeline::TrainReport =
+                    super::read_typed(&f.train_report)?;
+                report
+                    .deployed_offset_rad()
+                    .map_err(|e| anyhow::anyhow!("{}: {e}", s(&f.train_report)))?
             } else {
                 None
             };
