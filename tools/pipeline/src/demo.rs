@@ -586,27 +586,9 @@ const EVAL_MODELS: [(&str, &str); 5] = [
 
 /// Runs `frictl demo`: the stages are children `frictl` ([`Host::frictl`]).
 pub fn run(args: Args, host: &dyn Host) -> anyhow::Result<()> {
+    check_options(&args)?;
     if args.sensor == DemoSensor::Torque {
-        anyhow::ensure!(
-            !args.causal && !args.with_rotor_inertia,
-            "--causal and --with-rotor-inertia are options of the motor-encoder demo's preprocess stage"
-        );
-        anyhow::ensure!(
-            !args.distill,
-            "--distill is an option of the motor-encoder demo (knee and ankle roll)"
-        );
-        anyhow::ensure!(
-            args.robot == RobotSel::Joints,
-            "--sensor torque runs one torque-sensed joint, not --robot leg"
-        );
         return torque::run(&args, host);
-    }
-    if args.robot == RobotSel::Leg {
-        anyhow::ensure!(
-            !args.causal && !args.with_rotor_inertia && !args.distill,
-            "--causal, --with-rotor-inertia and --distill are options of the two-joint demo; \
-             --robot leg labels with the leg's own settings (demo::leg)"
-        );
     }
     install_signal_flag()?;
     let started = Instant::now();
@@ -648,8 +630,6 @@ pub fn run(args: Args, host: &dyn Host) -> anyhow::Result<()> {
     if args.robot == RobotSel::Leg {
         return leg::run(&args, &mut r, &dirs, started);
     }
-    let mut per_joint: BTreeMap<String, JointEntry> = BTreeMap::new();
-    let mut eval_md = String::new();
     let mut all_files = vec![];
     for (preset, joint) in JOINTS {
         let files = JointFiles::new(&dirs, joint);
@@ -675,54 +655,100 @@ pub fn run(args: Args, host: &dyn Host) -> anyhow::Result<()> {
             k,
         )?);
     }
-    let mut distilled: BTreeMap<String, DistilledEntry> = BTreeMap::new();
-    if args.distill {
-        use frictl_cli::distill::{StudentDtype, StudentInitArg};
-        // Quick: the 32×32 teacher pruned to 16×16. Default: 32×32 students passed the gate with
-        // one seed in four, 32×32×32 ones with every seed tried (docs/distillation.md); a third
-        // layer cannot be pruned from the two-layer teacher, so it starts fresh.
-        let (hidden, init, dtype) = if args.quick {
-            (vec![16, 16], StudentInitArg::Prune, StudentDtype::F32)
-        } else {
-            (vec![32, 32, 32], StudentInitArg::Fresh, StudentDtype::Int16)
-        };
-        let opts = DistillStage {
-            hidden,
-            init,
-            dtype,
-            epochs: if args.quick { 20 } else { 200 },
-            seed: args.seed,
-            max_rmse_ratio: 1.05,
-        };
-        for ((_, joint), files) in JOINTS.into_iter().zip(&all_files) {
-            r.n += 1;
-            eprintln!("[{:>2}] distill {joint} (hidden {:?}) …", r.n, opts.hidden);
-            let t0 = Instant::now();
-            let out = dirs.models.join(format!("{joint}_distilled.fwt"));
-            let e = distill_pinn(host, &opts, files, &out)
-                .with_context(|| format!("distilling the {joint} PINN"))?;
-            eprintln!(
-                "     student {:?}: test RMSE {:.4} Nm (teacher {:.4} Nm), hot {} µs (teacher {} µs): {}",
-                e.hidden,
-                e.student_test_rmse_nm,
-                e.teacher_test_rmse_nm,
-                e.student_hot_us.map_or("-".into(), |v| format!("{v:.3}")),
-                e.teacher_hot_us.map_or("-".into(), |v| format!("{v:.3}")),
-                if e.gate_passed {
-                    "written"
-                } else {
-                    "refused by the gate, not written"
-                }
-            );
-            r.stages.push(Stage {
-                name: format!("distill {joint}"),
-                seconds: t0.elapsed().as_secs_f64(),
-            });
-            distilled.insert(joint.to_owned(), e);
-        }
+    let mut distilled = if args.distill {
+        distill_all(&mut r, &args, host, &dirs, &all_files)?
+    } else {
+        BTreeMap::new()
+    };
+    let (mut per_joint, eval_md) = evaluate_and_export(&mut r, &dirs, &all_files, &mut distilled)?;
+    let (exp_md, exp_temps) = if args.no_experiments {
+        (String::new(), vec![])
+    } else {
+        experiments(&mut r, &sizes, args.seed, &dirs, &all_files, &mut per_joint)?
+    };
+    if rounds > 0 {
+        onpolicy.push(final_round(rounds, &all_files, &per_joint));
     }
-    for ((preset, joint), files) in JOINTS.into_iter().zip(&all_files) {
-        let eval_result = evaluate(&mut r, &dirs, preset, joint, files);
+    write_report(
+        &args,
+        &sizes,
+        &r,
+        started,
+        &per_joint,
+        &onpolicy,
+        (&eval_md, &exp_md, &exp_temps),
+    )
+}
+
+/// The optional distillation stage: each joint's PINN distilled into a smaller student, kept only
+/// when it passes the gate.
+fn distill_all(
+    r: &mut Runner,
+    args: &Args,
+    host: &dyn Host,
+    dirs: &Dirs,
+    all_files: &[JointFiles],
+) -> anyhow::Result<BTreeMap<String, DistilledEntry>> {
+    let mut distilled = BTreeMap::new();
+    use frictl_cli::distill::{StudentDtype, StudentInitArg};
+    // Quick: the 32×32 teacher pruned to 16×16. Default: 32×32 students passed the gate with
+    // one seed in four, 32×32×32 ones with every seed tried (docs/distillation.md); a third
+    // layer cannot be pruned from the two-layer teacher, so it starts fresh.
+    let (hidden, init, dtype) = if args.quick {
+        (vec![16, 16], StudentInitArg::Prune, StudentDtype::F32)
+    } else {
+        (vec![32, 32, 32], StudentInitArg::Fresh, StudentDtype::Int16)
+    };
+    let opts = DistillStage {
+        hidden,
+        init,
+        dtype,
+        epochs: if args.quick { 20 } else { 200 },
+        seed: args.seed,
+        max_rmse_ratio: 1.05,
+    };
+    for ((_, joint), files) in JOINTS.into_iter().zip(all_files) {
+        r.n += 1;
+        eprintln!("[{:>2}] distill {joint} (hidden {:?}) …", r.n, opts.hidden);
+        let t0 = Instant::now();
+        let out = dirs.models.join(format!("{joint}_distilled.fwt"));
+        let e = distill_pinn(host, &opts, files, &out)
+            .with_context(|| format!("distilling the {joint} PINN"))?;
+        eprintln!(
+            "     student {:?}: test RMSE {:.4} Nm (teacher {:.4} Nm), hot {} µs (teacher {} µs): {}",
+            e.hidden,
+            e.student_test_rmse_nm,
+            e.teacher_test_rmse_nm,
+            e.student_hot_us.map_or("-".into(), |v| format!("{v:.3}")),
+            e.teacher_hot_us.map_or("-".into(), |v| format!("{v:.3}")),
+            if e.gate_passed {
+                "written"
+            } else {
+                "refused by the gate, not written"
+            }
+        );
+        r.stages.push(Stage {
+            name: format!("distill {joint}"),
+            seconds: t0.elapsed().as_secs_f64(),
+        });
+        distilled.insert(joint.to_owned(), e);
+    }
+    Ok(distilled)
+}
+
+/// Stages 5 and 6 for every joint: the offline evaluation (a failure is reported and the demo goes
+/// on: the closed-loop experiments do not need it) and the ONNX export; returns each joint's report
+/// entry (with its distilled student, when there is one) and the evaluation tables.
+fn evaluate_and_export(
+    r: &mut Runner,
+    dirs: &Dirs,
+    all_files: &[JointFiles],
+    distilled: &mut BTreeMap<String, DistilledEntry>,
+) -> anyhow::Result<(BTreeMap<String, JointEntry>, String)> {
+    let mut per_joint: BTreeMap<String, JointEntry> = BTreeMap::new();
+    let mut eval_md = String::new();
+    for ((preset, joint), files) in JOINTS.into_iter().zip(all_files) {
+        let eval_result = evaluate(r, dirs, preset, joint, files);
         if let Err(e) = &eval_result {
             // The closed-loop experiments do not need the offline evaluation: report and go on.
             eprintln!("warning: {e:#}");
@@ -730,7 +756,7 @@ pub fn run(args: Args, host: &dyn Host) -> anyhow::Result<()> {
                 "\n**{joint}**: the evaluation stage failed (see logs/); no offline RMSEs.\n"
             );
         }
-        export(&mut r, preset, files)?;
+        export(r, preset, files)?;
         let ev: Option<EvalReport> = match eval_result {
             Ok(()) => Some(read_typed(&files.eval_json)?),
             Err(_) => None,
@@ -750,19 +776,53 @@ pub fn run(args: Args, host: &dyn Host) -> anyhow::Result<()> {
         }
         per_joint.insert(joint.into(), entry);
     }
-    let (exp_md, exp_temps) = if args.no_experiments {
-        (String::new(), vec![])
-    } else {
-        experiments(&mut r, &sizes, args.seed, &dirs, &all_files, &mut per_joint)?
-    };
-    if rounds > 0 {
-        onpolicy.push(final_round(rounds, &all_files, &per_joint));
+    Ok((per_joint, eval_md))
+}
+
+/// The options that only some of the demo's robots take.
+fn check_options(args: &Args) -> anyhow::Result<()> {
+    if args.sensor == DemoSensor::Torque {
+        anyhow::ensure!(
+            !args.causal && !args.with_rotor_inertia,
+            "--causal and --with-rotor-inertia are options of the motor-encoder demo's preprocess stage"
+        );
+        anyhow::ensure!(
+            !args.distill,
+            "--distill is an option of the motor-encoder demo (knee and ankle roll)"
+        );
+        anyhow::ensure!(
+            args.robot == RobotSel::Joints,
+            "--sensor torque runs one torque-sensed joint, not --robot leg"
+        );
     }
+    if args.robot == RobotSel::Leg {
+        anyhow::ensure!(
+            !args.causal && !args.with_rotor_inertia && !args.distill,
+            "--causal, --with-rotor-inertia and --distill are options of the two-joint demo; \
+             --robot leg labels with the leg's own settings (demo::leg)"
+        );
+    }
+    Ok(())
+}
+
+/// The demo's report: `report.json` and `report.md` in the output directory (the markdown also on
+/// stdout), with the offline evaluation's and the closed-loop experiments' sections `eval_md` and
+/// `exp_md` and the experiments' plant temperatures `exp_temps`.
+fn write_report(
+    args: &Args,
+    sizes: &Sizes,
+    r: &Runner,
+    started: Instant,
+    per_joint: &BTreeMap<String, JointEntry>,
+    onpolicy: &[RoundEntry],
+    (eval_md, exp_md, exp_temps): (&str, &str, &[String]),
+) -> anyhow::Result<()> {
+    let out = &args.out;
     let total = started.elapsed().as_secs_f64();
     let report = DemoReport {
         format: "frictionless-demo-v1",
         producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
-        settings: settings_name(&args),
+        settings: settings_name(args),
         seed: args.seed,
         causal_labels: args.causal,
         network: Network {
@@ -772,8 +832,8 @@ pub fn run(args: Args, host: &dyn Host) -> anyhow::Result<()> {
             batch: sizes.batch,
         },
         protocol_starts: sizes.n_starts,
-        joints: &per_joint,
-        onpolicy_rounds: &onpolicy,
+        joints: per_joint,
+        onpolicy_rounds: onpolicy,
         stages: &r.stages,
         total_seconds: total,
     };
@@ -781,9 +841,9 @@ pub fn run(args: Args, host: &dyn Host) -> anyhow::Result<()> {
         out.join("report.json"),
         serde_json::to_string_pretty(&report)?,
     )?;
-    let mut md = report_md(&args, &sizes, &report, &eval_md, &exp_md, &exp_temps);
+    let mut md = report_md(args, sizes, &report, eval_md, exp_md, exp_temps);
     if !onpolicy.is_empty() {
-        md += &onpolicy_md(&onpolicy, &per_joint);
+        md += &onpolicy_md(onpolicy, per_joint);
     }
     frictionless::output_file::write(out.join("report.md"), &md)?;
     println!("{md}");

@@ -434,6 +434,18 @@ pub fn parse(path: &Path, text: &str) -> Result<RobotFile, RobotError> {
     if file.joint.is_empty() {
         return Err(bad("joint".into(), "[]".into(), "at least one [[joint]]"));
     }
+    check_search(&file, &bad)?;
+    check_train(&file, &bad)?;
+    check_joints(&file, &bad)?;
+    Ok(file)
+}
+
+/// A refusal of one key: (key, value, requirement) → the error naming the file.
+type Bad<'a> = dyn Fn(String, String, &str) -> RobotError + 'a;
+
+/// `[search]`: its ranges, counts and ratio, and the trainer's own checks of both ends of every
+/// range for every joint's inputs.
+fn check_search(file: &RobotFile, bad: &Bad) -> Result<(), RobotError> {
     let s = &file.search;
     for (key, lo, hi) in [
         (
@@ -500,6 +512,27 @@ pub fn parse(path: &Path, text: &str) -> Result<RobotFile, RobotError> {
             "finite and ≥ 1 (a multiple of the best validation RMSE)",
         ));
     }
+    check_search_space(file, bad)?;
+    if s.pick && s.trials == 0 {
+        return Err(bad(
+            "search.pick".into(),
+            "true".into(),
+            "needs a search (trials ≥ 1): with trials = 0 the joint is trained once",
+        ));
+    }
+    if s.trials > 0 && s.val_frac <= 0.0 {
+        return Err(bad(
+            "search.val_frac".into(),
+            s.val_frac.to_string(),
+            "> 0 (the search selects on validation RMSE)",
+        ));
+    }
+    Ok(())
+}
+
+/// `[search]`'s ranges as the trainer checks them, for every joint's inputs.
+fn check_search_space(file: &RobotFile, bad: &Bad) -> Result<(), RobotError> {
+    let s = &file.search;
     // The trainer's own checks, before any stage: both ends of every search range, and `[train]`
     // key by key (before: history 0, hidden [0] or lr −1 failed at the train stage, naming the
     // child's flag).
@@ -523,6 +556,11 @@ pub fn parse(path: &Path, text: &str) -> Result<RobotFile, RobotError> {
             })?;
         }
     }
+    Ok(())
+}
+
+/// `[train]` key by key with the trainer's own checks, and its history with every joint's inputs.
+fn check_train(file: &RobotFile, bad: &Bad) -> Result<(), RobotError> {
     let t = &file.train;
     let base = frictionless_train::TrainConfig {
         hidden: vec![8],
@@ -605,20 +643,11 @@ pub fn parse(path: &Path, text: &str) -> Result<RobotFile, RobotError> {
             )
         })?;
     }
-    if s.pick && s.trials == 0 {
-        return Err(bad(
-            "search.pick".into(),
-            "true".into(),
-            "needs a search (trials ≥ 1): with trials = 0 the joint is trained once",
-        ));
-    }
-    if s.trials > 0 && s.val_frac <= 0.0 {
-        return Err(bad(
-            "search.val_frac".into(),
-            s.val_frac.to_string(),
-            "> 0 (the search selects on validation RMSE)",
-        ));
-    }
+    Ok(())
+}
+
+/// Every `[[joint]]`: a usable, unique name, exactly one data source, and the drive's constants.
+fn check_joints(file: &RobotFile, bad: &Bad) -> Result<(), RobotError> {
     for (i, j) in file.joint.iter().enumerate() {
         let key = |k: &str| format!("joint[{i}].{k}");
         if j.name.is_empty() || j.name.contains(['/', '\\']) || j.name.starts_with('.') {
@@ -668,7 +697,7 @@ pub fn parse(path: &Path, text: &str) -> Result<RobotFile, RobotError> {
             }
         }
     }
-    Ok(file)
+    Ok(())
 }
 
 #[cfg(test)]

@@ -93,167 +93,256 @@ fn s(p: &Path) -> String {
 
 /// The stages of one joint.
 fn plan_joint(robot: &RobotFile, j: &JointSection) -> anyhow::Result<JointPlan> {
-    let dir = format!("joints/{}", j.name);
-    let f = |name: &str| format!("{dir}/{name}");
-    let seed = robot.robot.seed;
-    let mut stages = vec![];
-    let mut external_inputs = vec![];
+    let mut p = Planner {
+        robot,
+        j,
+        dir: format!("joints/{}", j.name),
+        stages: vec![],
+        external_inputs: vec![],
+    };
     let (train, test) = match j.source() {
-        DataSource::Preset => {
-            let preset = j.preset.clone().unwrap_or_default();
-            let mut test_sets: Vec<String> = frictionless_acquire::config::UNSEEN_TEST_RUN
-                .map(String::from)
-                .into();
-            test_sets.extend(robot.acquire.test_set.iter().cloned());
-            let acquire_args = |seed: u64, name: &str, sets: Vec<String>| {
-                stage::argv(
-                    &["acquire"],
-                    &acquire::Args {
-                        preset: preset.clone(),
-                        seed,
-                        out: PathBuf::from(&dir),
-                        name: Some(name.into()),
-                        sets,
-                        ..stage::defaults()?
-                    },
-                )
-            };
-            let train_args = acquire_args(seed, "train", robot.acquire.set.clone())?;
-            let test_args = acquire_args(seed + 100, "test", test_sets)?;
-            for (what, args) in [("train", train_args), ("test", test_args)] {
-                stages.push(Stage {
-                    id: format!("acquire_{what}"),
-                    phase: Until::Data,
-                    args,
-                    inputs: vec![],
-                    outputs: vec![f(&format!("{what}.csv")), f(&format!("{what}.json"))],
-                });
-                stages.push(Stage {
-                    id: format!("preprocess_{what}"),
-                    phase: Until::Data,
-                    args: preprocess_argv(
-                        j,
-                        preprocess::Args {
-                            log: PathBuf::from(f(&format!("{what}.csv"))),
-                            out: PathBuf::from(f(&format!("{what}_ds.csv"))),
-                            subtract_reflected_inertia: Some("sidecar".into()),
-                            ..stage::defaults()?
-                        },
-                    )?,
-                    inputs: vec![f(&format!("{what}.csv")), f(&format!("{what}.json"))],
-                    outputs: vec![f(&format!("{what}_ds.csv")), f(&format!("{what}_ds.json"))],
-                });
-            }
-            (vec![f("train_ds.csv")], vec![f("test_ds.csv")])
-        }
-        DataSource::Logs => {
-            let mut lists = (vec![], vec![]);
-            for (what, logs) in [("train", &j.logs), ("test", &j.test_logs)] {
-                for (i, log) in logs.iter().enumerate() {
-                    let ds = f(&format!("{what}_{i}_ds.csv"));
-                    let mut base = preprocess::Args {
-                        log: log.clone(),
-                        out: PathBuf::from(&ds),
-                        ..stage::defaults()?
-                    };
-                    if let Some(u) = &robot.robot.urdf {
-                        base.urdf = Some(s(u));
-                        base.joint = Some(j.name.clone());
-                        external_inputs.push(s(u));
-                    }
-                    let args = preprocess_argv(j, base)?;
-                    let sidecar = s(&log.with_extension("json"));
-                    external_inputs.extend([s(log), sidecar.clone()]);
-                    let mut inputs = vec![s(log), sidecar];
-                    inputs.extend(robot.robot.urdf.as_ref().map(|u| s(u)));
-                    stages.push(Stage {
-                        id: format!("preprocess_{what}_{i}"),
-                        phase: Until::Data,
-                        args,
-                        inputs,
-                        outputs: vec![ds.clone(), ds.replace(".csv", ".json")],
-                    });
-                    if what == "train" {
-                        lists.0.push(ds);
-                    } else {
-                        lists.1.push(ds);
-                    }
-                }
-            }
-            lists
-        }
-        DataSource::Datasets => {
-            let all = |v: &[PathBuf]| v.iter().map(|p| s(p)).collect::<Vec<_>>();
-            for p in j.datasets.iter().chain(&j.test_datasets) {
-                external_inputs.extend([s(p), s(&p.with_extension("json"))]);
-            }
-            (all(&j.datasets), all(&j.test_datasets))
-        }
+        DataSource::Preset => p.acquire_and_label()?,
+        DataSource::Logs => p.label_logs()?,
+        DataSource::Datasets => p.given_datasets(),
     };
-    let with_sidecars = |v: &[String]| {
-        v.iter()
-            .flat_map(|p| {
-                [
-                    p.clone(),
-                    Path::new(p).with_extension("json").display().to_string(),
-                ]
-            })
-            .collect::<Vec<_>>()
-    };
-    let (cv, scv) = (f("cv.json"), f("scv.json"));
-    for (m, out) in [(ModelKind::Cv, &cv), (ModelKind::Scv, &scv)] {
-        stages.push(Stage {
-            id: format!("fit_{}", m.name()),
-            phase: Until::Fit,
-            args: stage::argv(
-                &["fit"],
-                &fit::Args {
-                    model: fit::FitModel(m),
-                    dataset: PathBuf::from(&train[0]),
-                    json: Some(PathBuf::from(out)),
+    let (cv, scv) = p.fits(&train)?;
+    let (search_args, model) = p.model(&train, &scv)?;
+    p.evaluate(&train, &test, [&cv, &scv], &model)?;
+    p.export(&model.fwt)?;
+    Ok(JointPlan {
+        name: j.name.clone(),
+        features: j.features,
+        dir: p.dir,
+        train,
+        test,
+        cv,
+        scv,
+        model: model.fwt,
+        model_report: model.report,
+        search_dir: model.search_dir,
+        trials: robot.search.trials,
+        search_args,
+        external_inputs: p.external_inputs,
+        stages: p.stages,
+    })
+}
+
+/// The PINN a joint's plan ends with: trained once, or picked by a search.
+struct PlannedModel {
+    /// The `.fwt` frictiond runs.
+    fwt: String,
+    /// Its train report.
+    report: String,
+    /// The search directory (`None`: trained once).
+    search_dir: Option<String>,
+}
+
+/// One joint's plan while it is built: its stages and the files from outside the output directory
+/// they read, in stage order.
+struct Planner<'a> {
+    robot: &'a RobotFile,
+    j: &'a JointSection,
+    /// The joint's directory, relative to the output directory.
+    dir: String,
+    stages: Vec<Stage>,
+    external_inputs: Vec<String>,
+}
+
+impl Planner<'_> {
+    /// `name` in the joint's directory.
+    fn f(&self, name: &str) -> String {
+        format!("{}/{name}", self.dir)
+    }
+
+    /// A preset joint: the protocol (train) and the unseen tracking run (test) recorded on the
+    /// virtual robot, each labelled; returns the (train, test) datasets.
+    fn acquire_and_label(&mut self) -> anyhow::Result<(Vec<String>, Vec<String>)> {
+        let (robot, j) = (self.robot, self.j);
+        let seed = robot.robot.seed;
+        let mut test_sets: Vec<String> = frictionless_acquire::config::UNSEEN_TEST_RUN
+            .map(String::from)
+            .into();
+        test_sets.extend(robot.acquire.test_set.iter().cloned());
+        let acquire_args = |seed: u64, name: &str, sets: Vec<String>| {
+            stage::argv(
+                &["acquire"],
+                &acquire::Args {
+                    preset: j.preset.clone().unwrap_or_default(),
+                    seed,
+                    out: PathBuf::from(&self.dir),
+                    name: Some(name.into()),
+                    sets,
                     ..stage::defaults()?
                 },
-            )?,
-            inputs: with_sidecars(&train[..1]),
-            outputs: vec![out.clone()],
-        });
+            )
+        };
+        let train_args = acquire_args(seed, "train", robot.acquire.set.clone())?;
+        let test_args = acquire_args(seed + 100, "test", test_sets)?;
+        for (what, args) in [("train", train_args), ("test", test_args)] {
+            let (log, sidecar) = (
+                self.f(&format!("{what}.csv")),
+                self.f(&format!("{what}.json")),
+            );
+            let (ds, ds_sidecar) = (
+                self.f(&format!("{what}_ds.csv")),
+                self.f(&format!("{what}_ds.json")),
+            );
+            self.stages.push(Stage {
+                id: format!("acquire_{what}"),
+                phase: Until::Data,
+                args,
+                inputs: vec![],
+                outputs: vec![log.clone(), sidecar.clone()],
+            });
+            let args = preprocess_argv(
+                j,
+                preprocess::Args {
+                    log: PathBuf::from(&log),
+                    out: PathBuf::from(&ds),
+                    subtract_reflected_inertia: Some("sidecar".into()),
+                    ..stage::defaults()?
+                },
+            )?;
+            self.stages.push(Stage {
+                id: format!("preprocess_{what}"),
+                phase: Until::Data,
+                args,
+                inputs: vec![log, sidecar],
+                outputs: vec![ds, ds_sidecar],
+            });
+        }
+        Ok((vec![self.f("train_ds.csv")], vec![self.f("test_ds.csv")]))
     }
-    let sr = &robot.search;
-    // An incremental motor encoder: Δθ latched per chunk, as frictiond latches it at every enable.
-    let motor_encoder = match j.motor_encoder {
-        frictiond_config::MotorEncoder::Absolute => train::MotorEncoder::Absolute,
-        frictiond_config::MotorEncoder::Incremental => train::MotorEncoder::Incremental,
-    };
-    let latch = motor_encoder.latch(DeltaThetaOffset::Run);
-    let mut inputs = with_sidecars(&train);
-    inputs.push(scv.clone());
-    let pair = |r: Option<[usize; 2]>| r.map(|r| r.to_vec());
-    let search_base = search::Args {
-        datasets: train.iter().map(PathBuf::from).collect(),
-        scv: PathBuf::from(&scv),
-        trials: sr.trials,
-        seed,
-        epochs: sr.epochs,
-        features: train::Features(j.features),
-        val_frac: sr.val_frac,
-        test_frac: sr.test_frac,
-        temperature: j.temperature,
-        max_epochs_without_improvement: sr.patience,
-        batch_range: pair(sr.batch),
-        hidden_range: pair(sr.hidden),
-        lr_range: sr.lr.map(|r| r.to_vec()),
-        history_range: pair(sr.history),
-        lambda_range: sr.lambda.map(|r| r.to_vec()),
-        dropout_range: sr.dropout.map(|r| r.to_vec()),
-        max_rmse_ratio: sr.max_rmse_ratio,
-        delta_theta_offset: latch,
-        ..stage::defaults()?
-    };
-    // Completed by its users (the search stage below, the Ray driver) with `--out` and the
-    // parallelism.
-    let search_args = stage::partial_argv(&["search"], &search_base, &["out"])?;
-    let (model, model_report, search_dir) = if sr.trials > 0 {
-        let sd = f("search");
+
+    /// A joint with recorded logs (`logs`, `test_logs`): each labelled into a dataset (with the
+    /// robot's URDF when it names one); returns the (train, test) datasets.
+    fn label_logs(&mut self) -> anyhow::Result<(Vec<String>, Vec<String>)> {
+        let (robot, j) = (self.robot, self.j);
+        let mut lists = (vec![], vec![]);
+        for (what, logs) in [("train", &j.logs), ("test", &j.test_logs)] {
+            for (i, log) in logs.iter().enumerate() {
+                let ds = self.f(&format!("{what}_{i}_ds.csv"));
+                let mut base = preprocess::Args {
+                    log: log.clone(),
+                    out: PathBuf::from(&ds),
+                    ..stage::defaults()?
+                };
+                if let Some(u) = &robot.robot.urdf {
+                    base.urdf = Some(s(u));
+                    base.joint = Some(j.name.clone());
+                    self.external_inputs.push(s(u));
+                }
+                let args = preprocess_argv(j, base)?;
+                let sidecar = s(&log.with_extension("json"));
+                self.external_inputs.extend([s(log), sidecar.clone()]);
+                let mut inputs = vec![s(log), sidecar];
+                inputs.extend(robot.robot.urdf.as_ref().map(|u| s(u)));
+                self.stages.push(Stage {
+                    id: format!("preprocess_{what}_{i}"),
+                    phase: Until::Data,
+                    args,
+                    inputs,
+                    outputs: vec![ds.clone(), ds.replace(".csv", ".json")],
+                });
+                if what == "train" {
+                    lists.0.push(ds);
+                } else {
+                    lists.1.push(ds);
+                }
+            }
+        }
+        Ok(lists)
+    }
+
+    /// A joint with labelled datasets (`datasets`, `test_datasets`): no stage; returns them.
+    fn given_datasets(&mut self) -> (Vec<String>, Vec<String>) {
+        let j = self.j;
+        let all = |v: &[PathBuf]| v.iter().map(|p| s(p)).collect::<Vec<_>>();
+        for p in j.datasets.iter().chain(&j.test_datasets) {
+            self.external_inputs
+                .extend([s(p), s(&p.with_extension("json"))]);
+        }
+        (all(&j.datasets), all(&j.test_datasets))
+    }
+
+    /// The CV and SCV fits on the first training dataset; returns their files.
+    fn fits(&mut self, train: &[String]) -> anyhow::Result<(String, String)> {
+        let (cv, scv) = (self.f("cv.json"), self.f("scv.json"));
+        for (m, out) in [(ModelKind::Cv, &cv), (ModelKind::Scv, &scv)] {
+            self.stages.push(Stage {
+                id: format!("fit_{}", m.name()),
+                phase: Until::Fit,
+                args: stage::argv(
+                    &["fit"],
+                    &fit::Args {
+                        model: fit::FitModel(m),
+                        dataset: PathBuf::from(&train[0]),
+                        json: Some(PathBuf::from(out)),
+                        ..stage::defaults()?
+                    },
+                )?,
+                inputs: with_sidecars(&train[..1]),
+                outputs: vec![out.clone()],
+            });
+        }
+        Ok((cv, scv))
+    }
+
+    /// The PINN: a search when `[search] trials` > 0, else one training with `[train]`; returns the
+    /// search's arguments (without `--out` and the parallelism, for a driver such as Ray's) and
+    /// the model frictiond runs.
+    fn model(
+        &mut self,
+        train: &[String],
+        scv: &str,
+    ) -> anyhow::Result<(Vec<String>, PlannedModel)> {
+        let (robot, j) = (self.robot, self.j);
+        let sr = &robot.search;
+        // An incremental motor encoder: Δθ latched per chunk, as frictiond latches it at every enable.
+        let motor_encoder = match j.motor_encoder {
+            frictiond_config::MotorEncoder::Absolute => train::MotorEncoder::Absolute,
+            frictiond_config::MotorEncoder::Incremental => train::MotorEncoder::Incremental,
+        };
+        let mut inputs = with_sidecars(train);
+        inputs.push(scv.to_owned());
+        let pair = |r: Option<[usize; 2]>| r.map(|r| r.to_vec());
+        let search_base = search::Args {
+            datasets: train.iter().map(PathBuf::from).collect(),
+            scv: PathBuf::from(scv),
+            trials: sr.trials,
+            seed: robot.robot.seed,
+            epochs: sr.epochs,
+            features: train::Features(j.features),
+            val_frac: sr.val_frac,
+            test_frac: sr.test_frac,
+            temperature: j.temperature,
+            max_epochs_without_improvement: sr.patience,
+            batch_range: pair(sr.batch),
+            hidden_range: pair(sr.hidden),
+            lr_range: sr.lr.map(|r| r.to_vec()),
+            history_range: pair(sr.history),
+            lambda_range: sr.lambda.map(|r| r.to_vec()),
+            dropout_range: sr.dropout.map(|r| r.to_vec()),
+            max_rmse_ratio: sr.max_rmse_ratio,
+            delta_theta_offset: motor_encoder.latch(DeltaThetaOffset::Run),
+            ..stage::defaults()?
+        };
+        // Completed by its users (the search stage below, the Ray driver) with `--out` and the
+        // parallelism.
+        let search_args = stage::partial_argv(&["search"], &search_base, &["out"])?;
+        let model = if sr.trials > 0 {
+            self.search(search_base, inputs)?
+        } else {
+            self.train_once(train, scv, motor_encoder, inputs)?
+        };
+        Ok((search_args, model))
+    }
+
+    /// The search stage (`[search]`): writes both the best and the picked model; the robot runs
+    /// the one the file asks for.
+    fn search(&mut self, base: search::Args, inputs: Vec<String>) -> anyhow::Result<PlannedModel> {
+        let sr = &self.robot.search;
+        let sd = self.f("search");
         let args = stage::argv(
             &["search"],
             &search::Args {
@@ -262,31 +351,44 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> anyhow::Result<JointPlan> 
                 parallel: sr.parallel,
                 threads: Some(sr.parallel * sr.threads_per_trial),
                 quiet: true,
-                ..search_base
+                ..base
             },
         )?;
-        // The search writes both; the robot runs the one the file asks for.
         let which = if sr.pick { "pick" } else { "best" };
         let (m, r) = (
             format!("{sd}/{which}.fwt"),
             format!("{sd}/{which}.train.json"),
         );
-        stages.push(Stage {
+        self.stages.push(Stage {
             id: "search".into(),
             phase: Until::Search,
             args,
-            inputs: inputs.clone(),
+            inputs,
             outputs: vec![m.clone(), r.clone(), format!("{sd}/results.json")],
         });
-        (m, r, Some(sd))
-    } else {
-        let t = &robot.train;
-        let (m, r) = (f("pinn.fwt"), f("pinn.train.json"));
+        Ok(PlannedModel {
+            fwt: m,
+            report: r,
+            search_dir: Some(sd),
+        })
+    }
+
+    /// One training with the robot file's `[train]` settings.
+    fn train_once(
+        &mut self,
+        train: &[String],
+        scv: &str,
+        motor_encoder: train::MotorEncoder,
+        inputs: Vec<String>,
+    ) -> anyhow::Result<PlannedModel> {
+        let (robot, j) = (self.robot, self.j);
+        let (t, sr) = (&robot.train, &robot.search);
+        let (m, r) = (self.f("pinn.fwt"), self.f("pinn.train.json"));
         let args = stage::argv(
             &["train"],
             &train::Args {
                 datasets: train.iter().map(PathBuf::from).collect(),
-                scv: PathBuf::from(&scv),
+                scv: PathBuf::from(scv),
                 out: PathBuf::from(&m),
                 report: Some(PathBuf::from(&r)),
                 features: train::Features(j.features),
@@ -297,7 +399,7 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> anyhow::Result<JointPlan> 
                 lr: t.lr,
                 lambda: t.lambda,
                 dropout: t.dropout,
-                seed,
+                seed: robot.robot.seed,
                 threads: Some(sr.threads_per_trial),
                 val_frac: sr.val_frac,
                 test_frac: sr.test_frac,
@@ -306,76 +408,98 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> anyhow::Result<JointPlan> 
                 ..stage::defaults()?
             },
         )?;
-        stages.push(Stage {
+        self.stages.push(Stage {
             id: "train".into(),
             phase: Until::Search,
             args,
-            inputs: inputs.clone(),
+            inputs,
             outputs: vec![m.clone(), r.clone()],
         });
-        (m, r, None)
-    };
-    let eval_json = f("eval.json");
-    let (eval_sets, test_only) = if test.is_empty() {
-        (&train, true)
-    } else {
-        (&test, false)
-    };
-    let eval_args = stage::argv(
-        &["eval"],
-        &eval::Args {
-            datasets: eval_sets.iter().map(PathBuf::from).collect(),
-            cv: Some(PathBuf::from(&cv)),
-            scv: Some(PathBuf::from(&scv)),
-            pinns: vec![PathBuf::from(&model)],
-            train_report: Some(PathBuf::from(&model_report)),
-            out: Some(PathBuf::from(f("eval"))),
-            json: Some(PathBuf::from(&eval_json)),
-            test_only,
-            ..stage::defaults()?
-        },
-    )?;
-    let mut eval_inputs = with_sidecars(eval_sets);
-    eval_inputs.extend([cv.clone(), scv.clone(), model.clone(), model_report.clone()]);
-    stages.push(Stage {
-        id: "eval".into(),
-        phase: Until::Eval,
-        args: eval_args,
-        inputs: eval_inputs,
-        outputs: vec![eval_json],
-    });
-    let onnx = f(&format!("{}.onnx", j.name));
-    stages.push(Stage {
-        id: "export".into(),
-        phase: Until::Export,
-        args: stage::argv(
-            &["export"],
-            &export::Args {
-                format: export::Format::Onnx,
-                input: PathBuf::from(&model),
-                output: PathBuf::from(&onnx),
+        Ok(PlannedModel {
+            fwt: m,
+            report: r,
+            search_dir: None,
+        })
+    }
+
+    /// The evaluation of CV, SCV and the PINN on the held-out datasets (none: the split's test
+    /// chunks of the training datasets).
+    fn evaluate(
+        &mut self,
+        train: &[String],
+        test: &[String],
+        [cv, scv]: [&str; 2],
+        model: &PlannedModel,
+    ) -> anyhow::Result<()> {
+        let eval_json = self.f("eval.json");
+        let (eval_sets, test_only) = if test.is_empty() {
+            (train, true)
+        } else {
+            (test, false)
+        };
+        let eval_args = stage::argv(
+            &["eval"],
+            &eval::Args {
+                datasets: eval_sets.iter().map(PathBuf::from).collect(),
+                cv: Some(PathBuf::from(cv)),
+                scv: Some(PathBuf::from(scv)),
+                pinns: vec![PathBuf::from(&model.fwt)],
+                train_report: Some(PathBuf::from(&model.report)),
+                out: Some(PathBuf::from(self.f("eval"))),
+                json: Some(PathBuf::from(&eval_json)),
+                test_only,
                 ..stage::defaults()?
             },
-        )?,
-        inputs: vec![model.clone()],
-        outputs: vec![onnx],
-    });
-    Ok(JointPlan {
-        name: j.name.clone(),
-        features: j.features,
-        dir,
-        train,
-        test,
-        cv,
-        scv,
-        model,
-        model_report,
-        search_dir,
-        trials: sr.trials,
-        search_args,
-        external_inputs,
-        stages,
-    })
+        )?;
+        let mut eval_inputs = with_sidecars(eval_sets);
+        eval_inputs.extend([
+            cv.to_owned(),
+            scv.to_owned(),
+            model.fwt.clone(),
+            model.report.clone(),
+        ]);
+        self.stages.push(Stage {
+            id: "eval".into(),
+            phase: Until::Eval,
+            args: eval_args,
+            inputs: eval_inputs,
+            outputs: vec![eval_json],
+        });
+        Ok(())
+    }
+
+    /// The PINN exported to ONNX.
+    fn export(&mut self, fwt: &str) -> anyhow::Result<()> {
+        let onnx = self.f(&format!("{}.onnx", self.j.name));
+        self.stages.push(Stage {
+            id: "export".into(),
+            phase: Until::Export,
+            args: stage::argv(
+                &["export"],
+                &export::Args {
+                    format: export::Format::Onnx,
+                    input: PathBuf::from(fwt),
+                    output: PathBuf::from(&onnx),
+                    ..stage::defaults()?
+                },
+            )?,
+            inputs: vec![fwt.to_owned()],
+            outputs: vec![onnx],
+        });
+        Ok(())
+    }
+}
+
+/// Each dataset followed by its JSON sidecar.
+fn with_sidecars(v: &[String]) -> Vec<String> {
+    v.iter()
+        .flat_map(|p| {
+            [
+                p.clone(),
+                Path::new(p).with_extension("json").display().to_string(),
+            ]
+        })
+        .collect()
 }
 
 /// `frictl preprocess` of a joint: `base`, then the robot file's `preprocess_args` for the joint,
