@@ -161,11 +161,13 @@ pub fn run(args: &Args, host: &dyn Host) -> anyhow::Result<()> {
     let started = Instant::now();
     let sizes = Sizes::for_args(args);
     let out = &args.out;
-    let data = out.join("data");
-    let models = out.join("models");
-    let eval_dir = out.join("eval");
+    let dirs = Dirs {
+        data: out.join("data"),
+        models: out.join("models"),
+        eval: out.join("eval"),
+    };
     let logs = out.join("logs");
-    for d in [&data, &models, &eval_dir, &logs] {
+    for d in [&dirs.data, &dirs.models, &dirs.eval, &logs] {
         std::fs::create_dir_all(d).with_context(|| format!("cannot create {}", d.display()))?;
     }
     let mut r = Runner {
@@ -181,172 +183,24 @@ pub fn run(args: &Args, host: &dyn Host) -> anyhow::Result<()> {
         settings_name(args),
         out.display()
     );
-
-    // 1. Acquire: one torque-sensed log per speed.
-    let mut logs_csv: Vec<PathBuf> = Vec::new();
-    let mut runs = BTreeMap::new();
-    for (k, (name, freqs)) in SPEEDS.iter().enumerate() {
-        let seed = args.seed + k as u64;
-        r.stage(
-            &format!("acquire {PRESET} torque-sensed ({name}, seed {seed})"),
-            &["acquire"],
-            &acquire::Args {
-                preset: PRESET.into(),
-                seed,
-                out: data.clone(),
-                name: Some((*name).into()),
-                sensor: acquire::Sensor::Torque,
-                log_period_ms: 2.0,
-                jitter_ms: 0.2,
-                sets: vec![
-                    "protocol.n_starts=1".into(),
-                    // start at the tracking centre: no fast re-centring move in the log
-                    "plant.initial_s_rad=-0.8".into(),
-                    "protocol.sines.enabled=false".into(),
-                    "protocol.ramps.enabled=false".into(),
-                    "protocol.steps.enabled=false".into(),
-                    format!(
-                        "protocol.tracking.train.amplitudes_rad={}",
-                        sizes.amplitudes
-                    ),
-                    format!("protocol.tracking.train.frequencies_hz={freqs}"),
-                    format!("protocol.tracking.train.cycles={}", sizes.cycles),
-                ],
-                ..stage::defaults()?
-            },
-        )?;
-        let csv = data.join(format!("{name}.csv"));
-        runs.insert(
-            (*name).to_owned(),
-            RunEntry {
-                file: s(&csv),
-                peak_abs_sdot_rad_s: peak_abs_dq(&csv)?,
-            },
-        );
-        logs_csv.push(csv);
-    }
-    // The joint's facts from the acquisition sidecar (what a user reads off the robot's datasheet).
-    let side = read_json(&logs_csv[0].with_extension("json"))?;
-    let joint = side["joint"].as_str().unwrap_or_default().to_owned();
-    let r_signed = side["gear_ratio_signed"]
-        .as_f64()
-        .context("acquisition sidecar: gear_ratio_signed")?;
-    let kt = side["kt_nm_per_a"]
-        .as_f64()
-        .context("acquisition sidecar: kt_nm_per_a")?;
-
-    // 2. Import: torque-sensor label, and the truth as a `given` label for scoring.
-    let ds = data.join("arm.csv");
-    let ds_truth = data.join("arm_truth.csv");
-    for (dst, label, truth_column) in [
-        (&ds, ImportLabel::TorqueSensor, None),
-        (&ds_truth, ImportLabel::Given, Some("tau_f=tau_f_true_nm")),
-    ] {
-        let mut columns: Vec<String> = [
-            "time=time_s",
-            "s=q_rad",
-            "sdot=dq_rad_s",
-            "current=current_a",
-            "tau_joint=tau_joint_nm",
-        ]
-        .map(String::from)
-        .into();
-        columns.extend(truth_column.map(String::from));
-        let argv = host.import_csv_argv(&ImportCsv {
-            files: &logs_csv,
-            joint: &joint,
-            columns: &columns,
-            out: dst,
-            label,
-            gear_ratio_signed: r_signed,
-            kt_nm_per_a: kt,
-        })?;
-        r.frictl(
-            &format!(
-                "import csv ({} label)",
-                match label {
-                    ImportLabel::TorqueSensor => "torque-sensor",
-                    ImportLabel::Given => "given",
-                }
-            ),
-            &argv,
-        )?;
-    }
-
-    // 3. Fit CV and SCV on the training runs.
-    let cv = models.join("cv.json");
-    let scv = models.join("scv.json");
-    for (m, f) in [(ModelKind::Cv, &cv), (ModelKind::Scv, &scv)] {
-        r.stage(
-            &format!("fit {} (training runs)", m.name()),
-            &["fit"],
-            &fit::Args {
-                model: fit::FitModel(m),
-                dataset: ds.clone(),
-                test_runs: vec![HELD_OUT.into()],
-                json: Some(f.clone()),
-                ..stage::defaults()?
-            },
-        )?;
-    }
-
-    // 4. Train on slow + fast, the middle speed held out (validation would take a whole run: none).
-    let fwt = models.join("pinn.fwt");
-    let train_report = models.join("pinn_train.json");
-    let mut train_args = train::Args {
-        datasets: vec![ds.clone()],
-        val_frac: 0.0,
-        features: train::Features(FEATURES),
-        scv: scv.clone(),
-        out: fwt.clone(),
-        report: Some(train_report.clone()),
-        hidden: sizes
-            .hidden
-            .split(',')
-            .map(str::parse)
-            .collect::<Result<_, _>>()
-            .context("the demo's hidden widths")?,
-        history: sizes.history as usize,
-        epochs: sizes.epochs as usize,
-        batch: sizes.batch as usize,
-        seed: args.seed,
-        ..stage::defaults()?
-    };
-    train_args.held_out.test_runs = vec![HELD_OUT.into()];
-    r.stage("train (held-out run: mid)", &["train"], &train_args)?;
-
-    // 5. Evaluate on the held-out run, against the label and against the truth.
-    let mut held = Vec::new();
-    for (d, tag) in [(&ds, "label"), (&ds_truth, "truth")] {
-        let json = eval_dir.join(format!("{tag}.json"));
-        r.stage(
-            &format!("eval held-out run (vs {tag})"),
-            &["eval"],
-            &eval::Args {
-                datasets: vec![d.clone()],
-                test_runs: vec![HELD_OUT.into()],
-                cv: Some(cv.clone()),
-                scv: Some(scv.clone()),
-                pinns: vec![fwt.clone()],
-                train_report: Some(train_report.clone()),
-                out: Some(eval_dir.join(tag)),
-                json: Some(json.clone()),
-                ..stage::defaults()?
-            },
-        )?;
-        let ev: EvalReport = read_typed(&json)?;
-        held.push(held_out_models(&ev)?);
-    }
-    let (truth, _) = held.pop().context("two evaluations")?;
-    let (label, extrapolated_share) = held.pop().context("two evaluations")?;
-
+    let (logs_csv, runs) = acquire_runs(&mut r, args, &sizes, &dirs.data)?;
+    let facts = joint_facts(&logs_csv[0])?;
+    let [ds, ds_truth] = import_labels(&mut r, host, &logs_csv, &facts, &dirs.data)?;
+    let [cv, scv] = fit_static(&mut r, &ds, &dirs.models)?;
+    let [fwt, train_report] = train_pinn(&mut r, args, &sizes, &ds, &scv, &dirs.models)?;
+    let ((label, extrapolated_share), truth) = evaluate_held_out(
+        &mut r,
+        [&ds, &ds_truth],
+        [&cv, &scv, &fwt, &train_report],
+        &dirs.eval,
+    )?;
     let total = started.elapsed().as_secs_f64();
     let report = TorqueReport {
         format: "frictionless-demo-torque-v1",
         producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
         settings: settings_name(args),
         seed: args.seed,
-        joint,
+        joint: facts.joint,
         features: FEATURES.name(),
         held_out_run: HELD_OUT,
         training_runs: SPEEDS
@@ -381,6 +235,238 @@ pub fn run(args: &Args, host: &dyn Host) -> anyhow::Result<()> {
         out.display()
     );
     Ok(())
+}
+
+/// The demo's directories.
+struct Dirs {
+    data: PathBuf,
+    models: PathBuf,
+    eval: PathBuf,
+}
+
+/// The joint's facts from the acquisition sidecar (what a user reads off the robot's datasheet).
+struct JointFacts {
+    joint: String,
+    r_signed: f64,
+    kt_nm_per_a: f64,
+}
+
+/// 1. Acquire: one torque-sensed log per speed; returns the logs and their peak speeds.
+fn acquire_runs(
+    r: &mut Runner,
+    args: &Args,
+    sizes: &Sizes,
+    data: &Path,
+) -> anyhow::Result<(Vec<PathBuf>, BTreeMap<String, RunEntry>)> {
+    let mut logs_csv: Vec<PathBuf> = Vec::new();
+    let mut runs = BTreeMap::new();
+    for (k, (name, freqs)) in SPEEDS.iter().enumerate() {
+        let seed = args.seed + k as u64;
+        r.stage(
+            &format!("acquire {PRESET} torque-sensed ({name}, seed {seed})"),
+            &["acquire"],
+            &acquire::Args {
+                preset: PRESET.into(),
+                seed,
+                out: data.to_owned(),
+                name: Some((*name).into()),
+                sensor: acquire::Sensor::Torque,
+                log_period_ms: 2.0,
+                jitter_ms: 0.2,
+                sets: vec![
+                    "protocol.n_starts=1".into(),
+                    // start at the tracking centre: no fast re-centring move in the log
+                    "plant.initial_s_rad=-0.8".into(),
+                    "protocol.sines.enabled=false".into(),
+                    "protocol.ramps.enabled=false".into(),
+                    "protocol.steps.enabled=false".into(),
+                    format!(
+                        "protocol.tracking.train.amplitudes_rad={}",
+                        sizes.amplitudes
+                    ),
+                    format!("protocol.tracking.train.frequencies_hz={freqs}"),
+                    format!("protocol.tracking.train.cycles={}", sizes.cycles),
+                ],
+                ..stage::defaults()?
+            },
+        )?;
+        let csv = data.join(format!("{name}.csv"));
+        runs.insert(
+            (*name).to_owned(),
+            RunEntry {
+                file: s(&csv),
+                peak_abs_sdot_rad_s: peak_abs_dq(&csv)?,
+            },
+        );
+        logs_csv.push(csv);
+    }
+    Ok((logs_csv, runs))
+}
+
+/// The joint's name, signed gear ratio and k_t from the sidecar of the acquisition log `log`.
+fn joint_facts(log: &Path) -> anyhow::Result<JointFacts> {
+    let side = read_json(&log.with_extension("json"))?;
+    let joint = side["joint"].as_str().unwrap_or_default().to_owned();
+    let r_signed = side["gear_ratio_signed"]
+        .as_f64()
+        .context("acquisition sidecar: gear_ratio_signed")?;
+    let kt = side["kt_nm_per_a"]
+        .as_f64()
+        .context("acquisition sidecar: kt_nm_per_a")?;
+
+    Ok(JointFacts {
+        joint,
+        r_signed,
+        kt_nm_per_a: kt,
+    })
+}
+
+/// 2. Import: the torque-sensor label, and the truth as a `given` label for scoring; returns both
+/// datasets.
+fn import_labels(
+    r: &mut Runner,
+    host: &dyn Host,
+    logs_csv: &[PathBuf],
+    facts: &JointFacts,
+    data: &Path,
+) -> anyhow::Result<[PathBuf; 2]> {
+    let ds = data.join("arm.csv");
+    let ds_truth = data.join("arm_truth.csv");
+    for (dst, label, truth_column) in [
+        (&ds, ImportLabel::TorqueSensor, None),
+        (&ds_truth, ImportLabel::Given, Some("tau_f=tau_f_true_nm")),
+    ] {
+        let mut columns: Vec<String> = [
+            "time=time_s",
+            "s=q_rad",
+            "sdot=dq_rad_s",
+            "current=current_a",
+            "tau_joint=tau_joint_nm",
+        ]
+        .map(String::from)
+        .into();
+        columns.extend(truth_column.map(String::from));
+        let argv = host.import_csv_argv(&ImportCsv {
+            files: logs_csv,
+            joint: &facts.joint,
+            columns: &columns,
+            out: dst,
+            label,
+            gear_ratio_signed: facts.r_signed,
+            kt_nm_per_a: facts.kt_nm_per_a,
+        })?;
+        r.frictl(
+            &format!(
+                "import csv ({} label)",
+                match label {
+                    ImportLabel::TorqueSensor => "torque-sensor",
+                    ImportLabel::Given => "given",
+                }
+            ),
+            &argv,
+        )?;
+    }
+
+    Ok([ds, ds_truth])
+}
+
+/// 3. Fit CV and SCV on the training runs; returns their files.
+fn fit_static(r: &mut Runner, ds: &Path, models: &Path) -> anyhow::Result<[PathBuf; 2]> {
+    let cv = models.join("cv.json");
+    let scv = models.join("scv.json");
+    for (m, f) in [(ModelKind::Cv, &cv), (ModelKind::Scv, &scv)] {
+        r.stage(
+            &format!("fit {} (training runs)", m.name()),
+            &["fit"],
+            &fit::Args {
+                model: fit::FitModel(m),
+                dataset: ds.to_owned(),
+                test_runs: vec![HELD_OUT.into()],
+                json: Some(f.clone()),
+                ..stage::defaults()?
+            },
+        )?;
+    }
+
+    Ok([cv, scv])
+}
+
+/// 4. Train on slow + fast, the middle speed held out (validation would take a whole run: none);
+/// returns the model and its train report.
+fn train_pinn(
+    r: &mut Runner,
+    args: &Args,
+    sizes: &Sizes,
+    ds: &Path,
+    scv: &Path,
+    models: &Path,
+) -> anyhow::Result<[PathBuf; 2]> {
+    let fwt = models.join("pinn.fwt");
+    let train_report = models.join("pinn_train.json");
+    let mut train_args = train::Args {
+        datasets: vec![ds.to_owned()],
+        val_frac: 0.0,
+        features: train::Features(FEATURES),
+        scv: scv.to_owned(),
+        out: fwt.clone(),
+        report: Some(train_report.clone()),
+        hidden: sizes
+            .hidden
+            .split(',')
+            .map(str::parse)
+            .collect::<Result<_, _>>()
+            .context("the demo's hidden widths")?,
+        history: sizes.history as usize,
+        epochs: sizes.epochs as usize,
+        batch: sizes.batch as usize,
+        seed: args.seed,
+        ..stage::defaults()?
+    };
+    train_args.held_out.test_runs = vec![HELD_OUT.into()];
+    r.stage("train (held-out run: mid)", &["train"], &train_args)?;
+
+    Ok([fwt, train_report])
+}
+
+/// The held-out run's metrics per model and its extrapolated share (vs the label), and its metrics
+/// vs the truth.
+type HeldOutMetrics = (
+    (BTreeMap<String, RunMetrics>, Option<f64>),
+    BTreeMap<String, RunMetrics>,
+);
+
+/// 5. Evaluate on the held-out run, against the label and against the truth.
+fn evaluate_held_out(
+    r: &mut Runner,
+    [ds, ds_truth]: [&Path; 2],
+    [cv, scv, fwt, train_report]: [&Path; 4],
+    eval_dir: &Path,
+) -> anyhow::Result<HeldOutMetrics> {
+    let mut held = Vec::new();
+    for (d, tag) in [(ds, "label"), (ds_truth, "truth")] {
+        let json = eval_dir.join(format!("{tag}.json"));
+        r.stage(
+            &format!("eval held-out run (vs {tag})"),
+            &["eval"],
+            &eval::Args {
+                datasets: vec![d.to_owned()],
+                test_runs: vec![HELD_OUT.into()],
+                cv: Some(cv.to_owned()),
+                scv: Some(scv.to_owned()),
+                pinns: vec![fwt.to_owned()],
+                train_report: Some(train_report.to_owned()),
+                out: Some(eval_dir.join(tag)),
+                json: Some(json.clone()),
+                ..stage::defaults()?
+            },
+        )?;
+        let ev: EvalReport = read_typed(&json)?;
+        held.push(held_out_models(&ev)?);
+    }
+    let (truth, _) = held.pop().context("two evaluations")?;
+    let (label, extrapolated_share) = held.pop().context("two evaluations")?;
+
+    Ok(((label, extrapolated_share), truth))
 }
 
 fn report_md(r: &TorqueReport) -> String {
