@@ -176,32 +176,7 @@ pub(super) fn run(
         test.first().map_or(0, |l| l.full_state.len()),
     ];
 
-    let mut files = Vec::with_capacity(leg.joints.len());
-    for ((p, tr), te) in leg.joints.iter().zip(&train).zip(&test) {
-        let f = JointFiles::new(dirs, &p.joint);
-        let t0 = Instant::now();
-        for (labels, path, seed) in [
-            (tr, &f.train_ds, args.seed),
-            (te, &f.test_ds, args.seed + 100),
-        ] {
-            write_joint_dataset(p, labels, path, seed)?;
-        }
-        r.stages.push(Stage {
-            name: format!("write datasets {}", p.joint),
-            seconds: t0.elapsed().as_secs_f64(),
-        });
-        fit(r, &p.joint, &f)?;
-        let a = train_args(
-            &sizes,
-            args.seed,
-            &p.joint,
-            &[&f.train_ds],
-            [&f.scv, &f.fwt, &f.train_report],
-            sizes.epochs,
-        )?;
-        r.stage(&format!("train {}", p.joint), &["train"], &a)?;
-        files.push(f);
-    }
+    let mut files = fit_and_train(r, args, &sizes, dirs, leg, [&train, &test])?;
     let rounds = if args.no_experiments {
         0
     } else {
@@ -214,50 +189,7 @@ pub(super) fn run(
         )?);
     }
 
-    let mut joints: BTreeMap<String, LegJointEntry> = BTreeMap::new();
-    let mut eval_md = String::new();
-    for ((p, f), labels) in leg.joints.iter().zip(&files).zip(&train) {
-        let ev: Option<EvalReport> = match evaluate(r, dirs, &p.joint, &p.joint, f) {
-            Ok(()) => Some(super::read_typed(&f.eval_json)?),
-            Err(e) => {
-                eprintln!("warning: {e:#}");
-                None
-            }
-        };
-        if let Some(ev) = &ev {
-            eval_md += &eval_table(&p.joint, "unseen run", ev);
-        }
-        let models = EVAL_MODELS
-            .iter()
-            .map(|(key, label)| {
-                let eval = Some(ev.as_ref().and_then(|e| e.models.get(*key)).copied());
-                let entry = LegModelEntry {
-                    eval,
-                    closed_loop: None,
-                };
-                ((*label).to_owned(), entry)
-            })
-            .collect();
-        joints.insert(
-            p.joint.clone(),
-            LegJointEntry {
-                label_error_nm: LabelError {
-                    full_state: labels.error_full_state_nm,
-                    single_joint_view: labels.error_single_joint_view_nm,
-                    separate_full_state: labels.error_separate_nm.0,
-                    separate_single_joint_view: labels.error_separate_nm.1,
-                },
-                models,
-                files: super::JointFilesEntry {
-                    cv: s(&f.cv),
-                    scv: s(&f.scv),
-                    lugre: s(&f.lugre),
-                    pinn: s(&f.fwt),
-                    eval: s(&f.eval_json),
-                },
-            },
-        );
-    }
+    let (mut joints, eval_md) = evaluate_joints(r, dirs, leg, &files, &train)?;
 
     let configs = write_daemon_configs(&setup, &files, &dirs.models)?;
     write_robot_file(args, &sizes, &setup, &configs.joints, &files)?;
@@ -306,6 +238,102 @@ pub(super) fn run(
         out.display()
     );
     Ok(())
+}
+
+/// Per joint: its two datasets written from the leg's labels, the CV/SCV/LuGre fits and the PINN
+/// trained; returns each joint's files, in the leg's joint order.
+fn fit_and_train(
+    r: &mut Runner,
+    args: &Args,
+    sizes: &Sizes,
+    dirs: &Dirs,
+    leg: &LegParams,
+    [train, test]: [&[LegJointLabels]; 2],
+) -> anyhow::Result<Vec<JointFiles>> {
+    let mut files = Vec::with_capacity(leg.joints.len());
+    for ((p, tr), te) in leg.joints.iter().zip(train).zip(test) {
+        let f = JointFiles::new(dirs, &p.joint);
+        let t0 = Instant::now();
+        for (labels, path, seed) in [
+            (tr, &f.train_ds, args.seed),
+            (te, &f.test_ds, args.seed + 100),
+        ] {
+            write_joint_dataset(p, labels, path, seed)?;
+        }
+        r.stages.push(Stage {
+            name: format!("write datasets {}", p.joint),
+            seconds: t0.elapsed().as_secs_f64(),
+        });
+        fit(r, &p.joint, &f)?;
+        let a = train_args(
+            sizes,
+            args.seed,
+            &p.joint,
+            &[&f.train_ds],
+            [&f.scv, &f.fwt, &f.train_report],
+            sizes.epochs,
+        )?;
+        r.stage(&format!("train {}", p.joint), &["train"], &a)?;
+        files.push(f);
+    }
+    Ok(files)
+}
+
+/// Per joint: the offline evaluation on the unseen run (a failure is a warning: the closed loop
+/// does not need it) and the joint's report entry; returns the entries and the evaluation tables.
+fn evaluate_joints(
+    r: &mut Runner,
+    dirs: &Dirs,
+    leg: &LegParams,
+    files: &[JointFiles],
+    train: &[LegJointLabels],
+) -> anyhow::Result<(BTreeMap<String, LegJointEntry>, String)> {
+    let mut joints: BTreeMap<String, LegJointEntry> = BTreeMap::new();
+    let mut eval_md = String::new();
+    for ((p, f), labels) in leg.joints.iter().zip(files).zip(train) {
+        let ev: Option<EvalReport> = match evaluate(r, dirs, &p.joint, &p.joint, f) {
+            Ok(()) => Some(super::read_typed(&f.eval_json)?),
+            Err(e) => {
+                eprintln!("warning: {e:#}");
+                None
+            }
+        };
+        if let Some(ev) = &ev {
+            eval_md += &eval_table(&p.joint, "unseen run", ev);
+        }
+        let models = EVAL_MODELS
+            .iter()
+            .map(|(key, label)| {
+                let eval = Some(ev.as_ref().and_then(|e| e.models.get(*key)).copied());
+                let entry = LegModelEntry {
+                    eval,
+                    closed_loop: None,
+                };
+                ((*label).to_owned(), entry)
+            })
+            .collect();
+        joints.insert(
+            p.joint.clone(),
+            LegJointEntry {
+                label_error_nm: LabelError {
+                    full_state: labels.error_full_state_nm,
+                    single_joint_view: labels.error_single_joint_view_nm,
+                    separate_full_state: labels.error_separate_nm.0,
+                    separate_single_joint_view: labels.error_separate_nm.1,
+                },
+                models,
+                files: super::JointFilesEntry {
+                    cv: s(&f.cv),
+                    scv: s(&f.scv),
+                    lugre: s(&f.lugre),
+                    pinn: s(&f.fwt),
+                    eval: s(&f.eval_json),
+                },
+            },
+        );
+    }
+
+    Ok((joints, eval_md))
 }
 
 /// The closed-loop suite's settings for `models`: the paper's (the knee and the ankle roll, the
@@ -410,12 +438,6 @@ fn onpolicy_round(
     });
     let whole =
         frictionless_ident::preprocess::WholeBody::new(setup.robot.clone(), BTreeMap::new())?;
-    let names: Vec<String> = setup
-        .params
-        .joints
-        .iter()
-        .map(|p| p.joint.clone())
-        .collect();
     let mut joints = BTreeMap::new();
     for ((j, tj), cell) in cfg.joints.iter().enumerate().zip(&cells) {
         let index = setup.index(&tj.name)?;
@@ -426,35 +448,7 @@ fn onpolicy_round(
             .filter(|(plan, _)| plan.joint == j)
             .map(|(_, t)| t.as_slice())
             .collect();
-        let (log, state) = traces_log(&runs, index, &names)?;
-        let mut meta = frictionless_acquire::log_meta(p);
-        meta.plant_link = None;
-        let cfg_label = label_config(p);
-        let (ds, summary) = frictionless_ident::preprocess::preprocess_whole_body(
-            &log, &meta, &whole, &state, &cfg_label,
-        )
-        .with_context(|| format!("labelling the on-policy runs of {}", p.joint))?;
-        let path = dirs.data.join(format!("{}_onpolicy{k}_ds.csv", p.joint));
-        write_dataset(
-            &path,
-            &ds,
-            &summary,
-            &Provenance {
-                input_log: format!(
-                    "frictl demo --robot leg: on-policy round {k}, {} closed-loop runs, seed {}",
-                    runs.len(),
-                    cfg.seed
-                ),
-                input_sha256: String::new(),
-                meta: &meta,
-                fs_hz: cfg_label.fs_hz,
-                settings: serde_json::to_value(&cfg_label)?,
-                dynamics: format!(
-                    "URDF {} (nominal leg), the whole leg's logged state, fixed base",
-                    frictionless_sim::leg::ERGOCUB_URDF_PATH
-                ),
-            },
-        )?;
+        let (path, ds) = write_onpolicy_dataset(setup, &whole, index, &runs, dirs, k, cfg.seed)?;
         let f = &mut files[index];
         f.datasets.push(path.clone());
         super::onpolicy::continue_training(r, args, sizes, dirs, f, &p.joint, &p.joint, k)?;
@@ -473,6 +467,57 @@ fn onpolicy_round(
         );
     }
     Ok(LegRound { round: k, joints })
+}
+
+/// Labels the on-policy closed-loop runs `runs` of payload joint `index` (round `k`, recorded with
+/// `seed`) with the whole leg's state and writes them as a dataset; returns its path and the
+/// dataset.
+fn write_onpolicy_dataset(
+    setup: &LegSetup,
+    whole: &frictionless_ident::preprocess::WholeBody,
+    index: usize,
+    runs: &[&[frictionless_experiment::run::JointTrace]],
+    dirs: &Dirs,
+    k: u32,
+    seed: u64,
+) -> anyhow::Result<(PathBuf, frictionless_dataset::Dataset)> {
+    let p = &setup.params.joints[index];
+    let names: Vec<String> = setup
+        .params
+        .joints
+        .iter()
+        .map(|p| p.joint.clone())
+        .collect();
+    let (log, state) = traces_log(runs, index, &names)?;
+    let mut meta = frictionless_acquire::log_meta(p);
+    meta.plant_link = None;
+    let cfg_label = label_config(p);
+    let (ds, summary) = frictionless_ident::preprocess::preprocess_whole_body(
+        &log, &meta, whole, &state, &cfg_label,
+    )
+    .with_context(|| format!("labelling the on-policy runs of {}", p.joint))?;
+    let path = dirs.data.join(format!("{}_onpolicy{k}_ds.csv", p.joint));
+    write_dataset(
+        &path,
+        &ds,
+        &summary,
+        &Provenance {
+            input_log: format!(
+                "frictl demo --robot leg: on-policy round {k}, {} closed-loop runs, seed {}",
+                runs.len(),
+                seed
+            ),
+            input_sha256: String::new(),
+            meta: &meta,
+            fs_hz: cfg_label.fs_hz,
+            settings: serde_json::to_value(&cfg_label)?,
+            dynamics: format!(
+                "URDF {} (nominal leg), the whole leg's logged state, fixed base",
+                frictionless_sim::leg::ERGOCUB_URDF_PATH
+            ),
+        },
+    )?;
+    Ok((path, ds))
 }
 
 /// Seconds between the runs of an on-policy log (a chunk each).
