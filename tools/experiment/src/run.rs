@@ -18,7 +18,8 @@ use std::time::{Duration, Instant};
 
 use frictionless_shm_types::sim::{SimDisturbance, SimTruth};
 use frictionless_shm_types::{
-    DaemonStatus, Inbox, Ipc, JointStates, Outbox, TorqueRequest, monotonic_ns,
+    Channel, DaemonStatus, Inbox, Ipc, JointStates, MotorCurrentCommand, Outbox, TorqueRequest,
+    monotonic_ns,
 };
 
 use super::ExperimentError;
@@ -232,20 +233,12 @@ pub fn run_trial_on(
         session.keep_dir(true);
         eprintln!("run directory kept: {}", session.dir.display());
     }
-    let node = Ipc::open(&session.ipc, "experiment")?;
-    let js_ch = node.joint_states()?;
-    let js_in = js_ch.inbox()?;
-    let truth_in = node.sim_truth()?.inbox()?;
-    let status_in = node.daemon_status()?.inbox()?;
-    let req_ch = node.torque_request()?;
-    let req_out = req_ch.outbox()?;
-    let dist_out = node.sim_disturbance()?.outbox()?;
-    // also create the command service so the daemon and plant agree on it from the start
-    let _cmd_ch = node.motor_current_command()?;
-
+    // Declared after the session: the ports and the node drop first, then the session (children,
+    // run directory).
+    let ports = Ports::open(&session)?;
     let (daemon_joints, initial) = daemon_joints(rig, spec, opts);
     session.start_daemon(bins, spec.mode, &daemon_joints, spec.raw_friction, || {
-        req_ch.subscriber_count()
+        ports.req_ch.subscriber_count()
     })?;
     session.start_plant(
         bins,
@@ -271,17 +264,7 @@ pub fn run_trial_on(
         })
         .collect::<Result<_, _>>()?;
     let mut traces = empty_traces(rig, spec, &laws);
-    let mut oracles: Vec<Option<OracleCompensation>> = spec
-        .joints
-        .iter()
-        .zip(&laws)
-        .map(|(p, law)| {
-            (p.model == FrictionModel::Oracle)
-                .then(|| OracleCompensation::new(*law))
-                .transpose()
-        })
-        .collect::<Result<_, _>>()?;
-    let mut oracle_prev = vec![0.0f64; spec.joints.len()];
+    let mut oracles = Oracles::new(spec, &laws)?;
     let enable_mask = spec.joints.iter().fold(0u64, |m, p| m | (1u64 << p.index));
 
     let loop_start = Instant::now();
@@ -300,39 +283,20 @@ pub fn run_trial_on(
         if interrupted() {
             return Err(ExperimentError::Interrupted);
         }
-        let js = next_state(&js_in, &mut session, last_seq, seq0.is_none())?;
+        let js = next_state(&ports.js_in, &mut session, last_seq, seq0.is_none())?;
         let s0 = *seq0.get_or_insert(js.seq);
         last_seq = js.seq;
         let t = (js.seq - s0) as f64 * 1e-3;
         if t >= spec.duration_s {
             break;
         }
-        let truth: Option<SimTruth> = if truth_ok {
-            let got = wait_for(&truth_in, Duration::from_millis(500), |tr| tr.seq >= js.seq)?;
-            if got.is_none() && interrupted() {
-                return Err(ExperimentError::Interrupted);
-            }
-            if got.is_none() {
-                truth_ok = false;
-                eprintln!(
-                    "warning: the plant publishes no SimTruth; true friction is not recorded"
-                );
-            }
-            got
+        let truth = if truth_ok {
+            next_truth(&ports.truth_in, js.seq, &mut truth_ok)?
         } else {
             None
         };
-        // In lockstep the daemon publishes one DaemonStatus per tick, right after the command that
-        // answered the previous state; the plant can publish the next state before that status is
-        // out. Wait (briefly) for a status newer than the one recorded last tick, so row k always
-        // holds the daemon's output for state k − 1 (a fixed one-tick lag, no race).
-        let fresh_status = |st: &DaemonStatus| status.is_none_or(|old| st.seq > old.seq);
-        let st_new = if spec.mode == Mode::Lockstep && ticks > 0 {
-            wait_for(&status_in, Duration::from_millis(200), fresh_status)?
-        } else {
-            status_in.latest()?
-        };
-        if let Some(st) = st_new {
+        let lockstep_after_first = spec.mode == Mode::Lockstep && ticks > 0;
+        if let Some(st) = next_status(&ports.status_in, status, lockstep_after_first)? {
             status = Some(st);
         }
         let mut req = TorqueRequest::zeroed();
@@ -343,27 +307,12 @@ pub fn run_trial_on(
         ctrl.tau_des_nm(&js, &spec.joints, &sps, &mut taus)?;
         for (k, p) in spec.joints.iter().enumerate() {
             let j = p.index;
-            let sp = sps[k];
-            let mut tau = taus[k];
-            let mut f_hat = status.map_or(f64::NAN, |x| x.tau_f_hat_nm[j]);
-            if let Some(o) = &mut oracles[k] {
-                let tr = truth.ok_or(ExperimentError::OracleNoTruth)?;
-                if tr.seq != js.seq {
-                    return Err(ExperimentError::OracleSeq {
-                        truth_seq: tr.seq,
-                        state_seq: js.seq,
-                    });
-                }
-                let comp = o.step(tr.tau_f_true_nm[j], js.sdot_rad_s[j]);
-                tau += comp;
-                f_hat = oracle_prev[k];
-                oracle_prev[k] = comp;
-            }
+            let (tau, f_hat) = oracles.apply(k, j, &js, truth.as_ref(), taus[k], status)?;
             req.tau_des_nm[j] = tau;
             ext[j] = p.pulse.map_or(0.0, |pl| pl.at(t));
             traces[k].push_row(&Row {
                 t_s: t,
-                s_des_rad: sp.s_rad,
+                s_des_rad: sps[k].s_rad,
                 state: &js,
                 truth: truth.as_ref(),
                 status: status.as_ref(),
@@ -374,7 +323,7 @@ pub fn run_trial_on(
         }
         if ext != last_ext {
             dist_seq += 1;
-            publish_disturbance(&dist_out, dist_seq, &ext)?;
+            publish_disturbance(&ports.dist_out, dist_seq, &ext)?;
             last_ext.copy_from_slice(&ext);
         }
         req_seq += 1;
@@ -383,7 +332,8 @@ pub fn run_trial_on(
         req.state_seq = js.seq;
         req.enable_mask = enable_mask;
         req.n_joints = n as u32;
-        req_out
+        ports
+            .req_out
             .publish(&req)
             .map_err(|source| ExperimentError::Publish {
                 payload: "TorqueRequest",
@@ -395,13 +345,136 @@ pub fn run_trial_on(
     session
         .check_alive()
         .map_err(|e| ExperimentError::AfterRun(Box::new(e)))?;
-    // Locals drop in reverse order: ports and node first, then the session (children, run dir).
     Ok(TrialTrace {
         joints: traces,
         ticks,
         loop_wall_s,
         total_wall_s: started.elapsed().as_secs_f64(),
     })
+}
+
+/// The controller's iceoryx2 ports in the session's services. Every service the daemon and the
+/// plant use is created here, before either starts, so all agree on them from the start.
+struct Ports {
+    js_in: Inbox<JointStates>,
+    truth_in: Inbox<SimTruth>,
+    status_in: Inbox<DaemonStatus>,
+    req_out: Outbox<TorqueRequest>,
+    dist_out: Outbox<SimDisturbance>,
+    /// The request service: the daemon's subscription to it says it is up.
+    req_ch: Channel<TorqueRequest>,
+    /// Created only so that the daemon and the plant agree on it.
+    _cmd_ch: Channel<MotorCurrentCommand>,
+    _node: Ipc,
+}
+
+impl Ports {
+    fn open(session: &Session) -> Result<Self, ExperimentError> {
+        let node = Ipc::open(&session.ipc, "experiment")?;
+        let req_ch = node.torque_request()?;
+        Ok(Self {
+            js_in: node.joint_states()?.inbox()?,
+            truth_in: node.sim_truth()?.inbox()?,
+            status_in: node.daemon_status()?.inbox()?,
+            req_out: req_ch.outbox()?,
+            dist_out: node.sim_disturbance()?.outbox()?,
+            req_ch,
+            _cmd_ch: node.motor_current_command()?,
+            _node: node,
+        })
+    }
+}
+
+/// The plant's `SimTruth` for state `seq` (waiting up to 500 ms); the first time none comes,
+/// `truth_ok` is cleared with a warning and true friction is not recorded from then on.
+fn next_truth(
+    truth_in: &Inbox<SimTruth>,
+    seq: u64,
+    truth_ok: &mut bool,
+) -> Result<Option<SimTruth>, ExperimentError> {
+    let got = wait_for(truth_in, Duration::from_millis(500), |tr| tr.seq >= seq)?;
+    if got.is_none() && interrupted() {
+        return Err(ExperimentError::Interrupted);
+    }
+    if got.is_none() {
+        *truth_ok = false;
+        eprintln!("warning: the plant publishes no SimTruth; true friction is not recorded");
+    }
+    Ok(got)
+}
+
+/// The daemon's status to record with this state. In lockstep the daemon publishes one
+/// `DaemonStatus` per tick, right after the command that answered the previous state; the plant can
+/// publish the next state before that status is out. So after the first tick (`wait_fresh`) this
+/// waits (briefly) for a status newer than `last`, so row k always holds the daemon's output for
+/// state k − 1 (a fixed one-tick lag, no race); otherwise it takes the latest.
+fn next_status(
+    status_in: &Inbox<DaemonStatus>,
+    last: Option<DaemonStatus>,
+    wait_fresh: bool,
+) -> Result<Option<DaemonStatus>, ExperimentError> {
+    if wait_fresh {
+        let fresh = |st: &DaemonStatus| last.is_none_or(|old| st.seq > old.seq);
+        wait_for(status_in, Duration::from_millis(200), fresh)
+    } else {
+        Ok(status_in.latest()?)
+    }
+}
+
+/// The oracle compensation of the planned joints that use it (`FrictionModel::Oracle`): the true
+/// friction through the shipped law, added to τ_des by the controller instead of by frictiond.
+struct Oracles {
+    /// Per planned joint (`None`: frictiond compensates).
+    laws: Vec<Option<OracleCompensation>>,
+    /// The compensation each applied last tick (recorded as its τ̂_F, one tick behind as the
+    /// daemon's).
+    prev_nm: Vec<f64>,
+}
+
+impl Oracles {
+    fn new(spec: &TrialSpec, laws: &[LawSettings]) -> Result<Self, ExperimentError> {
+        let laws = spec
+            .joints
+            .iter()
+            .zip(laws)
+            .map(|(p, law)| {
+                (p.model == FrictionModel::Oracle)
+                    .then(|| OracleCompensation::new(*law))
+                    .transpose()
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Self {
+            prev_nm: vec![0.0; laws.len()],
+            laws,
+        })
+    }
+
+    /// Planned joint `k` (payload joint `j`): τ_des with the oracle's compensation added where it
+    /// has one, and the τ̂_F to record (the daemon's, or the oracle's of the previous tick).
+    fn apply(
+        &mut self,
+        k: usize,
+        j: usize,
+        js: &JointStates,
+        truth: Option<&SimTruth>,
+        tau_nm: f64,
+        status: Option<DaemonStatus>,
+    ) -> Result<(f64, f64), ExperimentError> {
+        let daemon_f_hat = status.map_or(f64::NAN, |x| x.tau_f_hat_nm[j]);
+        let Some(o) = &mut self.laws[k] else {
+            return Ok((tau_nm, daemon_f_hat));
+        };
+        let tr = truth.ok_or(ExperimentError::OracleNoTruth)?;
+        if tr.seq != js.seq {
+            return Err(ExperimentError::OracleSeq {
+                truth_seq: tr.seq,
+                state_seq: js.seq,
+            });
+        }
+        let comp = o.step(tr.tau_f_true_nm[j], js.sdot_rad_s[j]);
+        let f_hat = std::mem::replace(&mut self.prev_nm[k], comp);
+        Ok((tau_nm + comp, f_hat))
+    }
 }
 
 /// Joint indices within the rig; the leg with every joint planned once; the oracle only in
