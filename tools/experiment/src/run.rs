@@ -228,41 +228,14 @@ pub fn run_trial_on(
     let started = Instant::now();
     check_spec(rig, spec)?;
     let n = rig.dof();
-    let mut session = Session::new()?;
-    if std::env::var_os("FRICTL_KEEP_RUN_DIR").is_some() {
-        session.keep_dir(true);
-        eprintln!("run directory kept: {}", session.dir.display());
-    }
+    let mut session = new_session()?;
     // Declared after the session: the ports and the node drop first, then the session (children,
     // run directory).
     let ports = Ports::open(&session)?;
-    let (daemon_joints, initial) = daemon_joints(rig, spec, opts);
-    session.start_daemon(bins, spec.mode, &daemon_joints, spec.raw_friction, || {
-        ports.req_ch.subscriber_count()
-    })?;
-    session.start_plant(
-        bins,
-        spec.mode,
-        &PlantSpec {
-            seed: spec.seed,
-            preset: rig.preset_arg(),
-            initial_pose_rad: initial,
-            sets: spec.sets.clone(),
-        },
-    )?;
+    start_children(bins, rig, spec, opts, &mut session, &ports)?;
 
     let mut ctrl = Control::new(rig, spec, opts)?;
-    let laws: Vec<LawSettings> = spec
-        .joints
-        .iter()
-        .map(|p| {
-            LawSettings::shipped(
-                &rig.params(p.index).joint,
-                spec.kfc.get(p.index).copied().flatten(),
-                opts.lpf.get(p.index).copied().flatten(),
-            )
-        })
-        .collect::<Result<_, _>>()?;
+    let laws = trial_laws(rig, spec, opts)?;
     let mut traces = empty_traces(rig, spec, &laws);
     let mut oracles = Oracles::new(spec, &laws)?;
     let enable_mask = spec.joints.iter().fold(0u64, |m, p| m | (1u64 << p.index));
@@ -328,17 +301,10 @@ pub fn run_trial_on(
         }
         req_seq += 1;
         req.seq = req_seq;
-        req.stamp_ns = monotonic_ns();
         req.state_seq = js.seq;
         req.enable_mask = enable_mask;
         req.n_joints = n as u32;
-        ports
-            .req_out
-            .publish(&req)
-            .map_err(|source| ExperimentError::Publish {
-                payload: "TorqueRequest",
-                source,
-            })?;
+        publish_request(&ports.req_out, &mut req)?;
         ticks += 1;
     }
     let loop_wall_s = loop_start.elapsed().as_secs_f64();
@@ -350,6 +316,74 @@ pub fn run_trial_on(
         ticks,
         loop_wall_s,
         total_wall_s: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// A new session; its run directory is kept when `FRICTL_KEEP_RUN_DIR` is set.
+fn new_session() -> Result<Session, ExperimentError> {
+    let mut session = Session::new()?;
+    if std::env::var_os("FRICTL_KEEP_RUN_DIR").is_some() {
+        session.keep_dir(true);
+        eprintln!("run directory kept: {}", session.dir.display());
+    }
+    Ok(session)
+}
+
+/// Starts frictiond (waiting until it subscribes to the requests) and the plant, at the trial's
+/// initial pose.
+fn start_children(
+    bins: &Binaries,
+    rig: &Rig,
+    spec: &TrialSpec,
+    opts: &TrialOptions,
+    session: &mut Session,
+    ports: &Ports,
+) -> Result<(), ExperimentError> {
+    let (daemon_joints, initial) = daemon_joints(rig, spec, opts);
+    session.start_daemon(bins, spec.mode, &daemon_joints, spec.raw_friction, || {
+        ports.req_ch.subscriber_count()
+    })?;
+    session.start_plant(
+        bins,
+        spec.mode,
+        &PlantSpec {
+            seed: spec.seed,
+            preset: rig.preset_arg(),
+            initial_pose_rad: initial,
+            sets: spec.sets.clone(),
+        },
+    )?;
+    Ok(())
+}
+
+/// The law settings of each planned joint: the shipped ones with the spec's kfc and the options'
+/// filter where they set them.
+fn trial_laws(
+    rig: &Rig,
+    spec: &TrialSpec,
+    opts: &TrialOptions,
+) -> Result<Vec<LawSettings>, ExperimentError> {
+    spec.joints
+        .iter()
+        .map(|p| {
+            LawSettings::shipped(
+                &rig.params(p.index).joint,
+                spec.kfc.get(p.index).copied().flatten(),
+                opts.lpf.get(p.index).copied().flatten(),
+            )
+        })
+        .collect()
+}
+
+/// Stamps `req` now and publishes it.
+fn publish_request(
+    out: &Outbox<TorqueRequest>,
+    req: &mut TorqueRequest,
+) -> Result<(), ExperimentError> {
+    req.stamp_ns = monotonic_ns();
+    out.publish(req).map_err(|source| ExperimentError::Publish {
+        payload: "TorqueRequest",
+        source,
     })
 }
 
