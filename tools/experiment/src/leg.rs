@@ -430,62 +430,8 @@ pub fn run_leg_suite(cfg: &LegSuiteConfig) -> Result<LegSuiteReport, ExperimentE
     let pairs: Vec<(usize, usize)> = (0..cfg.joints.len())
         .flat_map(|j| (0..cfg.models.len()).map(move |m| (j, m)))
         .collect();
-    let mut searches: Vec<KpBisection> = pairs
-        .iter()
-        .map(|&(j, _)| {
-            let (lo, hi) = cfg.joints[j].kp_range;
-            KpBisection::new(lo, hi, cfg.iterations)
-        })
-        .collect::<Result<_, _>>()?;
-    let mut steps: Vec<Vec<SearchStep>> = vec![vec![]; pairs.len()];
-    let mut best: Vec<Option<(f64, TrackMetrics)>> = vec![None; pairs.len()];
-    let mut trials = 0usize;
-    loop {
-        let live: Vec<usize> = (0..pairs.len())
-            .filter(|&i| searches[i].candidate().is_some())
-            .collect();
-        if live.is_empty() {
-            break;
-        }
-        let batch: Vec<LegTrial> = live
-            .iter()
-            .map(|&i| {
-                let (j, m) = pairs[i];
-                let (_, f) = amp_freq(&cfg.joints[j].sine);
-                LegTrial {
-                    tested: tested[j],
-                    model: m,
-                    kp_per_s2: searches[i].candidate().expect("live"),
-                    reference: cfg.joints[j].sine,
-                    pulse: None,
-                    duration_s: cfg.periods / f,
-                }
-            })
-            .collect();
-        let results = run_parallel(cfg.jobs.max(1), &batch, |t| run_one(cfg, &leg, t));
-        trials += batch.len();
-        for ((&i, t), r) in live.iter().zip(&batch).zip(results) {
-            let Some(r) = r else { continue };
-            let traces = r?;
-            let (j, _) = pairs[i];
-            let (a, f) = amp_freq(&cfg.joints[j].sine);
-            let m = metrics::track(
-                &traces[t.tested],
-                cfg.criterion.skip_periods / f,
-                cfg.periods / f,
-            );
-            let passed = m.rmse_rad <= cfg.criterion.threshold_rad(a);
-            searches[i].report(passed);
-            steps[i].push(SearchStep {
-                kp_per_s2: t.kp_per_s2,
-                rmse_rad: m.rmse_rad,
-                passed,
-            });
-            if passed && best[i].is_none_or(|(kp, _)| t.kp_per_s2 < kp) {
-                best[i] = Some((t.kp_per_s2, m));
-            }
-        }
-    }
+    let mut searched = min_kp_searches(cfg, &leg, &tested, &pairs)?;
+    let mut trials = searched.trials;
     // disturbance: hold the sine's centre, the pulse, then observe
     let dist: Vec<LegTrial> = pairs
         .iter()
@@ -531,9 +477,9 @@ pub fn run_leg_suite(cfg: &LegSuiteConfig) -> Result<LegSuiteReport, ExperimentE
             })
             .fold(0.0, f64::max);
         let cell = LegCell {
-            min_kp: searches[i].result().expect("search done"),
-            search: std::mem::take(&mut steps[i]),
-            track_at_min_kp: best[i].map(|(_, m)| m),
+            min_kp: searched.searches[i].result().expect("search done"),
+            search: std::mem::take(&mut searched.steps[i]),
+            track_at_min_kp: searched.best[i].map(|(_, m)| m),
             disturbance_kp_per_s2: tj.disturbance_kp_per_s2,
             disturbance: metrics::disturbance(&traces[t.tested], centre(&tj.sine), &pulse),
             rest_max_abs_err_rad,
@@ -550,6 +496,91 @@ pub fn run_leg_suite(cfg: &LegSuiteConfig) -> Result<LegSuiteReport, ExperimentE
     }
     report.wall_s = started.elapsed().as_secs_f64();
     Ok(report)
+}
+
+/// The min-K_p searches of every (tested joint, model) pair, run in batches of one trial per live
+/// search.
+struct Searches {
+    /// Per pair, its bisection.
+    searches: Vec<KpBisection>,
+    /// Per pair, its trials in order.
+    steps: Vec<Vec<SearchStep>>,
+    /// Per pair, the lowest passing K_p and its tracking metrics.
+    best: Vec<Option<(f64, TrackMetrics)>>,
+    /// Trials run.
+    trials: usize,
+}
+
+/// Runs the min-K_p search of every (tested joint index in `cfg.joints`, model) pair in `pairs`
+/// (`tested`: each tested joint's payload index) to its end.
+fn min_kp_searches(
+    cfg: &LegSuiteConfig,
+    leg: &LegSetup,
+    tested: &[usize],
+    pairs: &[(usize, usize)],
+) -> Result<Searches, ExperimentError> {
+    let mut searches: Vec<KpBisection> = pairs
+        .iter()
+        .map(|&(j, _)| {
+            let (lo, hi) = cfg.joints[j].kp_range;
+            KpBisection::new(lo, hi, cfg.iterations)
+        })
+        .collect::<Result<_, _>>()?;
+    let mut steps: Vec<Vec<SearchStep>> = vec![vec![]; pairs.len()];
+    let mut best: Vec<Option<(f64, TrackMetrics)>> = vec![None; pairs.len()];
+    let mut trials = 0usize;
+    loop {
+        let live: Vec<usize> = (0..pairs.len())
+            .filter(|&i| searches[i].candidate().is_some())
+            .collect();
+        if live.is_empty() {
+            break;
+        }
+        let batch: Vec<LegTrial> = live
+            .iter()
+            .map(|&i| {
+                let (j, m) = pairs[i];
+                let (_, f) = amp_freq(&cfg.joints[j].sine);
+                LegTrial {
+                    tested: tested[j],
+                    model: m,
+                    kp_per_s2: searches[i].candidate().expect("live"),
+                    reference: cfg.joints[j].sine,
+                    pulse: None,
+                    duration_s: cfg.periods / f,
+                }
+            })
+            .collect();
+        let results = run_parallel(cfg.jobs.max(1), &batch, |t| run_one(cfg, leg, t));
+        trials += batch.len();
+        for ((&i, t), r) in live.iter().zip(&batch).zip(results) {
+            let Some(r) = r else { continue };
+            let traces = r?;
+            let (j, _) = pairs[i];
+            let (a, f) = amp_freq(&cfg.joints[j].sine);
+            let m = metrics::track(
+                &traces[t.tested],
+                cfg.criterion.skip_periods / f,
+                cfg.periods / f,
+            );
+            let passed = m.rmse_rad <= cfg.criterion.threshold_rad(a);
+            searches[i].report(passed);
+            steps[i].push(SearchStep {
+                kp_per_s2: t.kp_per_s2,
+                rmse_rad: m.rmse_rad,
+                passed,
+            });
+            if passed && best[i].is_none_or(|(kp, _)| t.kp_per_s2 < kp) {
+                best[i] = Some((t.kp_per_s2, m));
+            }
+        }
+    }
+    Ok(Searches {
+        searches,
+        steps,
+        best,
+        trials,
+    })
 }
 
 /// One on-policy run of the leg ([`record_leg`]): tested joint `joint` (an index into
