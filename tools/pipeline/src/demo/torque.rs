@@ -251,7 +251,7 @@ struct JointFacts {
     kt_nm_per_a: f64,
 }
 
-/// 1. Acquire: one torque-sensed log per speed; returns the logs and their peak speeds.
+/// Stage 1, acquire: one torque-sensed log per speed; returns the logs and their peak speeds.
 fn acquire_runs(
     r: &mut Runner,
     args: &Args,
@@ -321,7 +321,7 @@ fn joint_facts(log: &Path) -> anyhow::Result<JointFacts> {
     })
 }
 
-/// 2. Import: the torque-sensor label, and the truth as a `given` label for scoring; returns both
+/// Stage 2, import: the torque-sensor label, and the truth as a `given` label for scoring; returns both
 /// datasets.
 fn import_labels(
     r: &mut Runner,
@@ -370,7 +370,7 @@ fn import_labels(
     Ok([ds, ds_truth])
 }
 
-/// 3. Fit CV and SCV on the training runs; returns their files.
+/// Stage 3, fit CV and SCV on the training runs; returns their files.
 fn fit_static(r: &mut Runner, ds: &Path, models: &Path) -> anyhow::Result<[PathBuf; 2]> {
     let cv = models.join("cv.json");
     let scv = models.join("scv.json");
@@ -391,7 +391,7 @@ fn fit_static(r: &mut Runner, ds: &Path, models: &Path) -> anyhow::Result<[PathB
     Ok([cv, scv])
 }
 
-/// 4. Train on slow + fast, the middle speed held out (validation would take a whole run: none);
+/// Stage 4, train on slow + fast, the middle speed held out (validation would take a whole run: none);
 /// returns the model and its train report.
 fn train_pinn(
     r: &mut Runner,
@@ -435,7 +435,7 @@ type HeldOutMetrics = (
     BTreeMap<String, RunMetrics>,
 );
 
-/// 5. Evaluate on the held-out run, against the label and against the truth.
+/// Stage 5, evaluate on the held-out run, against the label and against the truth.
 fn evaluate_held_out(
     r: &mut Runner,
     [ds, ds_truth]: [&Path; 2],
