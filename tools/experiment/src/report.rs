@@ -178,38 +178,58 @@ impl SuiteReport {
         }
         let any = |f: &dyn Fn(&Cell) -> bool| self.joints.values().any(|m| m.values().any(f));
         if any(&|c| c.min_kp.is_some()) {
-            s += &format!(
-                "\n**Minimum K_p that tracks the sine** ({crit}; paper: ankle roll 13000 / 1000 / 900 / 550, knee 1000 / 100 / 70 / 30)\n\n"
-            );
-            s += &self.header();
-            for (j, m) in &self.joints {
-                s += &format!("| {j} |");
-                for k in self.columns() {
-                    let v = m
-                        .get(k)
-                        .and_then(|c| c.min_kp)
-                        .map_or("–".into(), |x| x.display());
-                    s += &format!(" {v} |");
-                }
-                s += "\n";
+            s += &self.min_kp_md(&crit);
+        }
+        s += &self.fixed_kp_md();
+        s += &format!(
+            "\n{} trials, {:.1} s wall clock.\n",
+            self.trials, self.wall_s
+        );
+        s
+    }
+
+    /// The minimum-K_p table and the metrics at each model's minimum K_p (`crit`: the criterion).
+    fn min_kp_md(&self, crit: &str) -> String {
+        let mut s = String::new();
+        s += &format!(
+            "\n**Minimum K_p that tracks the sine** ({crit}; paper: ankle roll 13000 / 1000 / 900 / 550, knee 1000 / 100 / 70 / 30)\n\n"
+        );
+        s += &self.header();
+        for (j, m) in &self.joints {
+            s += &format!("| {j} |");
+            for k in self.columns() {
+                let v = m
+                    .get(k)
+                    .and_then(|c| c.min_kp)
+                    .map_or("–".into(), |x| x.display());
+                s += &format!(" {v} |");
             }
-            s += "\n**At each model's minimum K_p**: tracking RMSE [rad], friction estimate τ̂_F/kfc vs true friction RMSE [Nm], friction left uncompensated (RMS) [Nm]\n\n";
-            s += "| joint | model | K_p | tracking RMSE | τ̂_F RMSE | residual friction |\n|---|---|---|---|---|---|\n";
-            for (j, m) in &self.joints {
-                for k in self.models_of(j) {
-                    let c = &m[k];
-                    if let (Some(kp), Some(t)) = (c.min_kp, c.track_at_min_kp) {
-                        s += &format!(
-                            "| {j} | {k} | {} | {:.4} | {} | {:.3} |\n",
-                            kp.display(),
-                            t.rmse_rad,
-                            fmt_opt(Some(t.friction_est_rmse_nm), 3),
-                            t.residual_friction_rms_nm
-                        );
-                    }
+            s += "\n";
+        }
+        s += "\n**At each model's minimum K_p**: tracking RMSE [rad], friction estimate τ̂_F/kfc vs true friction RMSE [Nm], friction left uncompensated (RMS) [Nm]\n\n";
+        s += "| joint | model | K_p | tracking RMSE | τ̂_F RMSE | residual friction |\n|---|---|---|---|---|---|\n";
+        for (j, m) in &self.joints {
+            for k in self.models_of(j) {
+                let c = &m[k];
+                if let (Some(kp), Some(t)) = (c.min_kp, c.track_at_min_kp) {
+                    s += &format!(
+                        "| {j} | {k} | {} | {:.4} | {} | {:.3} |\n",
+                        kp.display(),
+                        t.rmse_rad,
+                        fmt_opt(Some(t.friction_est_rmse_nm), 3),
+                        t.residual_friction_rms_nm
+                    );
                 }
             }
         }
+        s
+    }
+
+    /// The tables of the trials at a fixed K_p: sine tracking at the given one, the disturbance at
+    /// each model's own and at the common low one, and tracking at the low one.
+    fn fixed_kp_md(&self) -> String {
+        let mut s = String::new();
+        let any = |f: &dyn Fn(&Cell) -> bool| self.joints.values().any(|m| m.values().any(f));
         if any(&|c| c.track.is_some()) {
             s += "\n**Sine tracking at the given K_p**\n\n| joint | model | K_p | tracking RMSE [rad] | max error [rad] | τ̂_F RMSE [Nm] | residual friction [Nm] | τ_des RMS [Nm] |\n|---|---|---|---|---|---|---|---|\n";
             for (j, m) in &self.joints {
@@ -263,10 +283,6 @@ impl SuiteReport {
                 s += "\n";
             }
         }
-        s += &format!(
-            "\n{} trials, {:.1} s wall clock.\n",
-            self.trials, self.wall_s
-        );
         s
     }
 
@@ -394,62 +410,97 @@ pub fn write_plots(out: &Path, traces: &[(String, JointTrace)]) -> Result<(), Ex
                 ),
             ];
             for (area, (title, ylabel, series)) in panels.iter().zip(specs.iter()) {
-                let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-                for (_, ys, _) in series {
-                    for y in ys.iter().filter(|y| y.is_finite()) {
-                        lo = lo.min(*y);
-                        hi = hi.max(*y);
-                    }
-                }
-                if !lo.is_finite() {
-                    continue;
-                }
-                let pad = ((hi - lo) * 0.05).max(1e-6);
-                let mut b = ChartBuilder::on(area);
-                b.margin(8).x_label_area_size(30).y_label_area_size(60);
-                if font {
-                    b.caption(title.as_str(), ("sans-serif", 16));
-                }
-                let mut chart = b
-                    .build_cartesian_2d(t0..t1, (lo - pad)..(hi + pad))
-                    .map_err(|e| perr(&e))?;
-                let mut mesh = chart.configure_mesh();
-                if font {
-                    mesh.x_desc("t [s]").y_desc(*ylabel);
-                } else {
-                    mesh.disable_x_axis().disable_y_axis();
-                }
-                mesh.draw().map_err(|e| perr(&e))?;
-                for (label, ys, color) in series {
-                    let pts = tr
-                        .t_s
-                        .iter()
-                        .zip(ys.iter())
-                        .step_by(stride)
-                        .filter(|(_, y)| y.is_finite())
-                        .map(|(t, y)| (*t, *y));
-                    let s = chart
-                        .draw_series(LineSeries::new(pts, color))
-                        .map_err(|e| perr(&e))?;
-                    if font {
-                        let c = *color;
-                        s.label(*label)
-                            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
-                    }
-                }
-                if font {
-                    chart
-                        .configure_series_labels()
-                        .background_style(WHITE.mix(0.85))
-                        .border_style(BLACK)
-                        .draw()
-                        .map_err(|e| perr(&e))?;
-                }
+                let panel = Panel {
+                    title,
+                    ylabel,
+                    series,
+                };
+                draw_panel(area, &panel, &tr.t_s, (t0, t1), stride, font).map_err(|e| perr(&e))?;
             }
             root.present().map_err(|e| perr(&e))?;
             Ok(())
         };
         frictionless::output_file::write_by_path(&path, draw).map_err(|e| perr(&e))?;
+    }
+    Ok(())
+}
+
+/// One panel of a trial's figure: its title, y-axis label and series (label, values, colour).
+struct Panel<'a> {
+    title: &'a str,
+    ylabel: &'a str,
+    series: &'a [(&'a str, &'a [f64], plotters::style::RGBColor)],
+}
+
+/// Draws `panel` over the times `t_s` (x range `t0`..`t1`, every `stride`-th point) on `area`, with
+/// captions, axis labels and legend when a font is available; a panel with no finite value is left
+/// blank.
+fn draw_panel(
+    area: &plotters::drawing::DrawingArea<
+        plotters::backend::BitMapBackend<'_>,
+        plotters::coord::Shift,
+    >,
+    panel: &Panel,
+    t_s: &[f64],
+    (t0, t1): (f64, f64),
+    stride: usize,
+    font: bool,
+) -> Result<(), String> {
+    use plotters::prelude::*;
+    let Panel {
+        title,
+        ylabel,
+        series,
+    } = *panel;
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for (_, ys, _) in series {
+        for y in ys.iter().filter(|y| y.is_finite()) {
+            lo = lo.min(*y);
+            hi = hi.max(*y);
+        }
+    }
+    if !lo.is_finite() {
+        return Ok(());
+    }
+    let pad = ((hi - lo) * 0.05).max(1e-6);
+    let mut b = ChartBuilder::on(area);
+    b.margin(8).x_label_area_size(30).y_label_area_size(60);
+    if font {
+        b.caption(title, ("sans-serif", 16));
+    }
+    let mut chart = b
+        .build_cartesian_2d(t0..t1, (lo - pad)..(hi + pad))
+        .map_err(|e| e.to_string())?;
+    let mut mesh = chart.configure_mesh();
+    if font {
+        mesh.x_desc("t [s]").y_desc(ylabel);
+    } else {
+        mesh.disable_x_axis().disable_y_axis();
+    }
+    mesh.draw().map_err(|e| e.to_string())?;
+    for (label, ys, color) in series {
+        let pts = t_s
+            .iter()
+            .zip(ys.iter())
+            .step_by(stride)
+            .filter(|(_, y)| y.is_finite())
+            .map(|(t, y)| (*t, *y));
+        let s = chart
+            .draw_series(LineSeries::new(pts, color))
+            .map_err(|e| e.to_string())?;
+        if font {
+            let c = *color;
+            s.label(*label)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
+        }
+    }
+    if font {
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| e.to_string())?;
     }
     Ok(())
 }
