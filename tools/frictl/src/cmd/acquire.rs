@@ -345,102 +345,195 @@ fn run_leg(args: &Args) -> anyhow::Result<()> {
         frictionless::output_file::AtomicFile::create(&csv_path)
             .with_context(|| format!("cannot create {}", csv_path.display()))?,
     );
-    let mut header = String::from("time_s");
-    for (col, _, _) in &columns {
-        for j in &names {
-            header.push(',');
-            header.push_str(&col.replace("{joint}", j));
-        }
-    }
-    header.push('\n');
-    std::io::Write::write_all(&mut out, header.as_bytes())
+    std::io::Write::write_all(&mut out, leg_csv_header(&columns, &names).as_bytes())
         .with_context(|| format!("cannot write {}", csv_path.display()))?;
     let started = std::time::Instant::now();
     let mut line = String::new();
     let mut samples = 0u64;
     let n_fields = columns.len();
     let mut sink = |rows: &[frictionless_acquire::leg::LegRow]| -> Result<(), AcquireError> {
-        use std::fmt::Write as _;
-        line.clear();
-        let num = |line: &mut String, v: f64| {
-            let _ = write!(line, ",{}", frictionless_acquire::log::round_significant(v));
-        };
-        let _ = write!(
-            line,
-            "{}",
-            frictionless_acquire::log::round_significant(rows[0].row.meas.time_s)
-        );
-        let fields: [fn(&frictionless_acquire::leg::LegRow) -> f64; 10] = [
-            |r| r.row.meas.s_rad,
-            |r| r.sdot_rad_s,
-            |r| r.row.meas.theta_motor_rad,
-            |r| r.row.meas.omega_motor_rad_s,
-            |r| r.row.i_ref_a,
-            |r| r.row.meas.i_meas_a,
-            |r| r.row.meas.temperature_c,
-            |r| f64::from(r.row.chunk),
-            |r| f64::from(u8::from(r.row.active)),
-            |r| r.row.truth.map_or(f64::NAN, |t| t.tau_f_nm),
-        ];
-        for f in &fields[..n_fields] {
-            for r in rows {
-                num(&mut line, f(r));
-            }
-        }
-        line.push('\n');
+        leg_csv_line(&mut line, rows, n_fields);
         samples += 1;
         std::io::Write::write_all(&mut out, line.as_bytes())
             .map_err(|e| AcquireError::Sink(e.to_string()))
     };
-    let mut live_info = None;
-    let summaries = if args.live_shm {
-        let stop = frictionless_plant::install_stop_flag()?;
-        anyhow::ensure!(
-            args.connect_timeout_s.is_finite() && args.connect_timeout_s > 0.0,
-            "--connect-timeout-s must be > 0, got {}",
-            args.connect_timeout_s
-        );
-        let cfg = frictionless_shm_types::IpcConfig::new(args.root_path.as_deref(), &args.prefix);
-        let mut robot = frictionless_plant::shm::LiveJoint::connect(
-            &cfg,
-            0,
-            leg.joints[0].sample_period_s(),
-            Duration::from_secs_f64(args.connect_timeout_s),
-            Duration::from_millis(args.state_timeout_ms),
-            stop,
-        )?;
-        anyhow::ensure!(
-            robot.n_joints() == names.len(),
-            "--preset leg --live-shm: the plant on `{}` publishes {} joint(s), the leg has {} \
-             (serve it with `frictl sim serve --preset leg`)",
-            args.prefix,
-            robot.n_joints(),
-            names.len()
-        );
-        let result = frictionless_acquire::leg::run_leg(&mut robot, &leg, &protocols, &mut sink);
-        // Leave every joint at 0 A whatever happened (the plant also zeroes after its timeout).
-        let released = robot.release_all(names.len());
-        live_info = Some(LiveInfo {
-            prefix: args.prefix.clone(),
-            root_path: args.root_path.as_ref().map(|p| p.display().to_string()),
-            joint_index: 0,
-            first_seq: robot.first_seq(),
-            states_received: robot.states_received,
-            states_skipped: robot.states_skipped,
-            plant_publishes_sim_truth: robot.plant_publishes_sim_truth,
-        });
-        let summaries = result?;
-        released?;
-        summaries
+    let (summaries, live_info) = if args.live_shm {
+        let (summaries, info) = acquire_leg_live(args, &leg, &protocols, &mut sink)?;
+        (summaries, Some(info))
     } else {
-        frictionless_acquire::leg::run_leg_offline_with_velocity(
+        let summaries = frictionless_acquire::leg::run_leg_offline_with_velocity(
             &leg, &protocols, args.seed, &mut sink,
-        )?
+        )?;
+        (summaries, None)
     };
     let csv_out = out
         .into_inner()
         .map_err(|e| anyhow::anyhow!("cannot write {}: {}", csv_path.display(), e.error()))?;
     let period_s = leg.joints[0].sample_period_s();
+    let sidecar = LegSidecar {
+        live: live_info,
+        seed: (!args.live_shm).then_some(args.seed),
+        ..LegSidecar::new(&name, &leg, &protocols, &summaries, &columns, args.live_shm)
+    };
+    commit_log(csv_out, &csv_path, &json_path, &sidecar)?;
+    eprintln!(
+        "frictl acquire: leg, {} joints excited at once, {samples} samples ({:.1} simulated min, {} guard holds) in {:.2} s -> {}",
+        names.len(),
+        samples as f64 * period_s / 60.0,
+        summaries.iter().map(|s| s.latches.len()).sum::<usize>(),
+        started.elapsed().as_secs_f64(),
+        csv_path.display()
+    );
+    Ok(())
+}
+
+/// The leg log's header line: `time_s`, then each column of `columns` for every joint of `names`.
+fn leg_csv_header(columns: &[&(&str, &str, &str)], names: &[&str]) -> String {
+    let mut header = String::from("time_s");
+    for (col, _, _) in columns {
+        for j in names {
+            header.push(',');
+            header.push_str(&col.replace("{joint}", j));
+        }
+    }
+    header.push('\n');
+    header
+}
+
+impl<'a> LegSidecar<'a> {
+    /// The sidecar of the leg log `name`.csv (`live`: recorded through shared memory; the live
+    /// details and the seed are the caller's).
+    fn new(
+        name: &str,
+        leg: &'a frictionless_sim::LegParams,
+        protocols: &'a [ProtocolConfig],
+        summaries: &'a [frictionless_acquire::RunSummary],
+        columns: &[&(&str, &str, &str)],
+        live: bool,
+    ) -> Self {
+        LegSidecar {
+            format: "frictionless-acquire-leg-v1",
+            producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
+            preset: frictionless_plant::LEG_PRESET,
+            source: if live {
+                SOURCE_LIVE_SHM
+            } else {
+                SOURCE_OFFLINE_SIM
+            },
+            live: None,
+            seed: None,
+            sample_period_s: leg.joints[0].sample_period_s(),
+            csv: format!("{name}.csv"),
+            joints: leg
+                .joints
+                .iter()
+                .zip(protocols)
+                .zip(summaries)
+                .map(|((p, c), s)| LegSidecarJoint {
+                    joint: &p.joint,
+                    gear_ratio_signed: p.gear_ratio_signed,
+                    kt_nm_per_a: p.kt_nm_per_a,
+                    j_eq_kgm2: p.j_eq_kgm2(),
+                    protocol: c,
+                    summary: s,
+                })
+                .collect(),
+            columns: std::iter::once(serde_json::json!({"name": "time_s", "unit": "s",
+            "description": "simulated time"}))
+            .chain(
+                columns
+                    .iter()
+                    .map(|(n, u, d)| serde_json::json!({"name": n, "unit": u, "description": d})),
+            )
+            .collect(),
+            import_example: leg_import_example(name, leg),
+        }
+    }
+}
+
+/// One line of the leg's CSV log (without the newline): the time, then each of the first
+/// `n_fields` fields of [`LEG_COLUMNS`] for every joint of `rows`, in shortest round-trip form of
+/// their significant digits.
+fn leg_csv_line(line: &mut String, rows: &[frictionless_acquire::leg::LegRow], n_fields: usize) {
+    use std::fmt::Write as _;
+    line.clear();
+    let num = |line: &mut String, v: f64| {
+        let _ = write!(line, ",{}", frictionless_acquire::log::round_significant(v));
+    };
+    let _ = write!(
+        line,
+        "{}",
+        frictionless_acquire::log::round_significant(rows[0].row.meas.time_s)
+    );
+    let fields: [fn(&frictionless_acquire::leg::LegRow) -> f64; 10] = [
+        |r| r.row.meas.s_rad,
+        |r| r.sdot_rad_s,
+        |r| r.row.meas.theta_motor_rad,
+        |r| r.row.meas.omega_motor_rad_s,
+        |r| r.row.i_ref_a,
+        |r| r.row.meas.i_meas_a,
+        |r| r.row.meas.temperature_c,
+        |r| f64::from(r.row.chunk),
+        |r| f64::from(u8::from(r.row.active)),
+        |r| r.row.truth.map_or(f64::NAN, |t| t.tau_f_nm),
+    ];
+    for f in &fields[..n_fields] {
+        for r in rows {
+            num(line, f(r));
+        }
+    }
+}
+
+/// `--preset leg --live-shm`: the leg excited through a plant served on shared memory
+/// (`frictl sim serve --preset leg`); every joint is left at 0 A whatever happens.
+fn acquire_leg_live(
+    args: &Args,
+    leg: &frictionless_sim::LegParams,
+    protocols: &[ProtocolConfig],
+    sink: &mut dyn FnMut(&[frictionless_acquire::leg::LegRow]) -> Result<(), AcquireError>,
+) -> anyhow::Result<(Vec<frictionless_acquire::RunSummary>, LiveInfo)> {
+    let stop = frictionless_plant::install_stop_flag()?;
+    anyhow::ensure!(
+        args.connect_timeout_s.is_finite() && args.connect_timeout_s > 0.0,
+        "--connect-timeout-s must be > 0, got {}",
+        args.connect_timeout_s
+    );
+    let cfg = frictionless_shm_types::IpcConfig::new(args.root_path.as_deref(), &args.prefix);
+    let mut robot = frictionless_plant::shm::LiveJoint::connect(
+        &cfg,
+        0,
+        leg.joints[0].sample_period_s(),
+        Duration::from_secs_f64(args.connect_timeout_s),
+        Duration::from_millis(args.state_timeout_ms),
+        stop,
+    )?;
+    anyhow::ensure!(
+        robot.n_joints() == leg.joints.len(),
+        "--preset leg --live-shm: the plant on `{}` publishes {} joint(s), the leg has {} \
+         (serve it with `frictl sim serve --preset leg`)",
+        args.prefix,
+        robot.n_joints(),
+        leg.joints.len()
+    );
+    let result = frictionless_acquire::leg::run_leg(&mut robot, leg, protocols, sink);
+    // Leave every joint at 0 A whatever happened (the plant also zeroes after its timeout).
+    let released = robot.release_all(leg.joints.len());
+    let info = LiveInfo {
+        prefix: args.prefix.clone(),
+        root_path: args.root_path.as_ref().map(|p| p.display().to_string()),
+        joint_index: 0,
+        first_seq: robot.first_seq(),
+        states_received: robot.states_received,
+        states_skipped: robot.states_skipped,
+        plant_publishes_sim_truth: robot.plant_publishes_sim_truth,
+    };
+    let summaries = result?;
+    released?;
+    Ok((summaries, info))
+}
+
+/// The `frictl import csv` command that labels the leg log `name`.csv.
+fn leg_import_example(name: &str, leg: &frictionless_sim::LegParams) -> String {
     let urdf = frictionless_sim::leg::ERGOCUB_URDF_PATH;
     let mut example = format!(
         "frictl import csv {name}.csv --joints all --label current --column time=time_s \
@@ -457,53 +550,7 @@ fn run_leg(args: &Args) -> anyhow::Result<()> {
         );
     }
     example.push_str(" -o 'ds_{joint}.csv'");
-    let sidecar = LegSidecar {
-        format: "frictionless-acquire-leg-v1",
-        producer: format!("frictl {}", env!("CARGO_PKG_VERSION")),
-        preset: frictionless_plant::LEG_PRESET,
-        source: if args.live_shm {
-            SOURCE_LIVE_SHM
-        } else {
-            SOURCE_OFFLINE_SIM
-        },
-        live: live_info,
-        seed: (!args.live_shm).then_some(args.seed),
-        sample_period_s: period_s,
-        csv: format!("{name}.csv"),
-        joints: leg
-            .joints
-            .iter()
-            .zip(&protocols)
-            .zip(&summaries)
-            .map(|((p, c), s)| LegSidecarJoint {
-                joint: &p.joint,
-                gear_ratio_signed: p.gear_ratio_signed,
-                kt_nm_per_a: p.kt_nm_per_a,
-                j_eq_kgm2: p.j_eq_kgm2(),
-                protocol: c,
-                summary: s,
-            })
-            .collect(),
-        columns: std::iter::once(serde_json::json!({"name": "time_s", "unit": "s",
-            "description": "simulated time"}))
-        .chain(
-            columns
-                .iter()
-                .map(|(n, u, d)| serde_json::json!({"name": n, "unit": u, "description": d})),
-        )
-        .collect(),
-        import_example: example,
-    };
-    commit_log(csv_out, &csv_path, &json_path, &sidecar)?;
-    eprintln!(
-        "frictl acquire: leg, {} joints excited at once, {samples} samples ({:.1} simulated min, {} guard holds) in {:.2} s -> {}",
-        names.len(),
-        samples as f64 * period_s / 60.0,
-        summaries.iter().map(|s| s.latches.len()).sum::<usize>(),
-        started.elapsed().as_secs_f64(),
-        csv_path.display()
-    );
-    Ok(())
+    example
 }
 
 /// Writes the sidecar JSON and commits the CSV log and it as a pair (the sidecar last, so a log
