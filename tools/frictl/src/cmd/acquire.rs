@@ -37,13 +37,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let blocks = schedule(&protocol);
     anyhow::ensure!(!blocks.is_empty(), "the protocol has no enabled blocks");
 
-    let name = args.name.clone().unwrap_or_else(|| {
-        if args.live_shm {
-            format!("{}_live", plant_params.joint)
-        } else {
-            format!("{}_seed{}", plant_params.joint, args.seed)
-        }
-    });
+    let name = log_name(&args, &plant_params.joint);
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output directory {}", args.out.display()))?;
     let csv_path = args.out.join(format!("{name}.csv"));
@@ -56,43 +50,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let with_truth = !args.live_shm;
     let torque = args.sensor == Sensor::Torque;
-    anyhow::ensure!(
-        torque || (args.log_period_ms == 1.0 && args.jitter_ms == 0.0),
-        "--log-period-ms and --jitter-ms need --sensor torque"
-    );
-    let every = args.log_period_ms * 1e-3 / period_s;
-    anyhow::ensure!(
-        every.is_finite() && every >= 1.0 && (every - every.round()).abs() < 1e-9,
-        "--log-period-ms {}: must be a whole number (>= 1) of plant samples of {} ms",
-        args.log_period_ms,
-        period_s * 1e3
-    );
-    let writer = frictionless::output_file::AtomicFile::create(&csv_path)
-        .with_context(|| format!("cannot create {}", csv_path.display()))?;
-    let mut log = if torque {
-        Log::Arm(Box::new(ArmLog::new(
-            writer,
-            ArmLogOptions {
-                every_samples: every.round() as u32,
-                jitter_s: args.jitter_ms * 1e-3,
-                sample_period_s: period_s,
-                with_temperature: plant_params.sensors.temperature_sensor,
-                sensor: plant_params.torque_sensor.clone(),
-                seed: args.seed,
-            },
-        )?))
-    } else {
-        Log::Robot(CsvLog::new(writer, with_truth)?)
-    };
-    let bar = if std::io::stderr().is_terminal() {
-        indicatif::ProgressBar::new(total)
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} samples ({eta} left)")
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
+    let every = log_every(&args, period_s)?;
+    let mut log = open_log(&args, &plant_params, &csv_path, every, with_truth)?;
+    let bar = progress_bar(total);
     let started = std::time::Instant::now();
     let mut n = 0u64;
     let mut sink = |row: &frictionless_acquire::LogRow| -> Result<(), AcquireError> {
@@ -106,36 +66,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut t0 = None;
     let mut live_info = None;
     let summary = if args.live_shm {
-        let stop = frictionless_plant::install_stop_flag()?;
-        anyhow::ensure!(
-            args.connect_timeout_s.is_finite() && args.connect_timeout_s > 0.0,
-            "--connect-timeout-s must be > 0, got {}",
-            args.connect_timeout_s
-        );
-        let cfg = frictionless_shm_types::IpcConfig::new(args.root_path.as_deref(), &args.prefix);
-        let mut joint = frictionless_plant::shm::LiveJoint::connect(
-            &cfg,
-            args.joint_index,
-            period_s,
-            Duration::from_secs_f64(args.connect_timeout_s),
-            Duration::from_millis(args.state_timeout_ms),
-            stop,
+        let (summary, info) = acquire_live(
+            &args,
+            &plant_params,
+            link.as_ref(),
+            &protocol,
+            &blocks,
+            &mut sink,
         )?;
-        let model = ControllerModel::nominal(&plant_params, link.as_ref());
-        let result = run_protocol(&mut joint, &model, &protocol, &blocks, &mut sink);
-        // Leave the joint at 0 A whatever happened (the plant also zeroes after its timeout).
-        let released = joint.release();
-        live_info = Some(LiveInfo {
-            prefix: args.prefix.clone(),
-            root_path: args.root_path.as_ref().map(|p| p.display().to_string()),
-            joint_index: args.joint_index,
-            first_seq: joint.first_seq(),
-            states_received: joint.states_received,
-            states_skipped: joint.states_skipped,
-            plant_publishes_sim_truth: joint.plant_publishes_sim_truth,
-        });
-        let summary = result?;
-        released?;
+        live_info = Some(info);
         summary
     } else {
         let run = run_offline(&plant_params, &protocol, &blocks, args.seed, &mut sink)?;
@@ -181,22 +120,145 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         summary: &summary,
     };
     commit_log(csv_out, &csv_path, &json_path, &sidecar)?;
+    report_done(&summary, torque.then_some(rows), elapsed, &csv_path);
+    Ok(())
+}
+
+/// `--name`, or `JOINT_live` / `JOINT_seedN`.
+fn log_name(args: &Args, joint: &str) -> String {
+    args.name.clone().unwrap_or_else(|| {
+        if args.live_shm {
+            format!("{joint}_live")
+        } else {
+            format!("{joint}_seed{}", args.seed)
+        }
+    })
+}
+
+/// Plant samples per logged row (`--log-period-ms`, only with `--sensor torque`): a whole number
+/// ≥ 1 of plant samples of `period_s`.
+fn log_every(args: &Args, period_s: f64) -> anyhow::Result<f64> {
+    anyhow::ensure!(
+        args.sensor == Sensor::Torque || (args.log_period_ms == 1.0 && args.jitter_ms == 0.0),
+        "--log-period-ms and --jitter-ms need --sensor torque"
+    );
+    let every = args.log_period_ms * 1e-3 / period_s;
+    anyhow::ensure!(
+        every.is_finite() && every >= 1.0 && (every - every.round()).abs() < 1e-9,
+        "--log-period-ms {}: must be a whole number (>= 1) of plant samples of {} ms",
+        args.log_period_ms,
+        period_s * 1e3
+    );
+    Ok(every)
+}
+
+/// The console line of a finished single-joint acquisition (`arm_rows`: the rows of a
+/// torque-sensed arm log).
+fn report_done(
+    summary: &frictionless_acquire::RunSummary,
+    arm_rows: Option<u64>,
+    elapsed_s: f64,
+    csv_path: &std::path::Path,
+) {
     eprintln!(
         "frictl acquire: {} samples{} ({:.1} simulated min, {} chunks, {} active, {} guard holds) in {:.2} s -> {}",
         summary.samples,
-        if torque {
-            format!(", {rows} rows (torque-sensed arm log)")
-        } else {
-            String::new()
-        },
+        arm_rows.map_or(String::new(), |rows| format!(
+            ", {rows} rows (torque-sensed arm log)"
+        )),
         summary.duration_s / 60.0,
         summary.chunks,
         summary.active_samples,
         summary.latches.len(),
-        elapsed,
+        elapsed_s,
         csv_path.display()
     );
-    Ok(())
+}
+
+/// The log `csv_path` (not yet committed): a torque-sensed arm's every `every` plant samples with
+/// `--sensor torque`, else the robot's (with the truth column when `with_truth`).
+fn open_log(
+    args: &Args,
+    plant_params: &PlantParams,
+    csv_path: &std::path::Path,
+    every: f64,
+    with_truth: bool,
+) -> anyhow::Result<Log<frictionless::output_file::AtomicFile>> {
+    let period_s = plant_params.sample_period_s();
+    let writer = frictionless::output_file::AtomicFile::create(&csv_path)
+        .with_context(|| format!("cannot create {}", csv_path.display()))?;
+    Ok(if args.sensor == Sensor::Torque {
+        Log::Arm(Box::new(ArmLog::new(
+            writer,
+            ArmLogOptions {
+                every_samples: every.round() as u32,
+                jitter_s: args.jitter_ms * 1e-3,
+                sample_period_s: period_s,
+                with_temperature: plant_params.sensors.temperature_sensor,
+                sensor: plant_params.torque_sensor.clone(),
+                seed: args.seed,
+            },
+        )?))
+    } else {
+        Log::Robot(CsvLog::new(writer, with_truth)?)
+    })
+}
+
+/// A progress bar of `total` samples on a terminal, hidden otherwise.
+fn progress_bar(total: u64) -> indicatif::ProgressBar {
+    let bar = if std::io::stderr().is_terminal() {
+        indicatif::ProgressBar::new(total)
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} samples ({eta} left)")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    bar
+}
+
+/// `--live-shm`: the protocol run through a plant served on shared memory; the joint is left at
+/// 0 A whatever happens.
+fn acquire_live(
+    args: &Args,
+    plant_params: &PlantParams,
+    link: &dyn frictionless_sim::link::LinkDynamics,
+    protocol: &ProtocolConfig,
+    blocks: &[frictionless_acquire::protocol::Block],
+    sink: &mut dyn FnMut(&frictionless_acquire::LogRow) -> Result<(), AcquireError>,
+) -> anyhow::Result<(frictionless_acquire::RunSummary, LiveInfo)> {
+    let stop = frictionless_plant::install_stop_flag()?;
+    anyhow::ensure!(
+        args.connect_timeout_s.is_finite() && args.connect_timeout_s > 0.0,
+        "--connect-timeout-s must be > 0, got {}",
+        args.connect_timeout_s
+    );
+    let cfg = frictionless_shm_types::IpcConfig::new(args.root_path.as_deref(), &args.prefix);
+    let mut joint = frictionless_plant::shm::LiveJoint::connect(
+        &cfg,
+        args.joint_index,
+        plant_params.sample_period_s(),
+        Duration::from_secs_f64(args.connect_timeout_s),
+        Duration::from_millis(args.state_timeout_ms),
+        stop,
+    )?;
+    let model = ControllerModel::nominal(plant_params, link);
+    let result = run_protocol(&mut joint, &model, protocol, blocks, sink);
+    // Leave the joint at 0 A whatever happened (the plant also zeroes after its timeout).
+    let released = joint.release();
+    let info = LiveInfo {
+        prefix: args.prefix.clone(),
+        root_path: args.root_path.as_ref().map(|p| p.display().to_string()),
+        joint_index: args.joint_index,
+        first_seq: joint.first_seq(),
+        states_received: joint.states_received,
+        states_skipped: joint.states_skipped,
+        plant_publishes_sim_truth: joint.plant_publishes_sim_truth,
+    };
+    let summary = result?;
+    released?;
+    Ok((summary, info))
 }
 
 /// The log being written: the robot's (motor encoder) or a torque-sensed arm's.
