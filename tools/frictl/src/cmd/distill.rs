@@ -288,82 +288,10 @@ pub fn distill_file(args: &Args) -> anyhow::Result<Outcome> {
             teacher.meta.joint_name
         );
     }
-    let explicit_split = args.val_frac.is_some()
-        || args.test_frac.is_some()
-        || args.test_chunks.is_some()
-        || !args.held_out.test_runs.is_empty()
-        || !args.held_out.test_datasets.is_empty();
-    // The teacher's own split when it was trained on exactly these files.
-    let same_data = report.as_ref().filter(|r| {
-        r.datasets.len() == sources.list.len()
-            && r.datasets.iter().zip(&sources.list).all(|(d, s)| {
-                d.sha256
-                    == s.sha256
-                        .iter()
-                        .map(|b| format!("{b:02x}"))
-                        .collect::<String>()
-            })
-    });
-    let split_spec = match same_data {
-        Some(r) if !explicit_split => r.split.spec.clone(),
-        _ => SplitSpec {
-            val_frac: args.val_frac.unwrap_or(0.15),
-            test_frac: args.test_frac.unwrap_or(0.15),
-            seed: args.seed,
-            test_chunks: args.held_out.test_chunks(
-                &sources,
-                &args.test_chunks,
-                args.datasets.len(),
-            )?,
-        },
-    };
+    let split_spec = student_split(args, report.as_ref(), &sources)?;
     let split = pipeline::split_for(&sources, &split_spec)?;
-    let warmup: WarmupPolicy = match (args.warmup, &report) {
-        (Some(w), _) => w.into(),
-        (None, Some(r)) => r.warmup,
-        (None, None) => WarmupPolicy::HoldZero,
-    };
-    let delta_theta_offset = match (args.delta_theta_offset, &report) {
-        (Some(d), _) => d,
-        (None, Some(r)) => r.delta_theta_offset,
-        (None, None) => DeltaThetaOffset::Run,
-    };
-    let threads = args.threads.unwrap_or_else(cores).max(1);
-    // Probes default to a quarter of the training rows (counted after preparing; estimated here
-    // from the valid rows of the training chunks).
-    let probes = args.probes.unwrap_or_else(|| {
-        let train_rows: usize = split
-            .train
-            .iter()
-            .map(|k| split.valid_rows(*k, &sources.list[k.dataset as usize].data))
-            .sum();
-        train_rows / 4
-    });
-    let cfg = DistillConfig {
-        train: TrainConfig {
-            hidden: args.hidden.clone(),
-            dropout: 0.0,
-            lambda: args.lambda,
-            lr: args.lr,
-            batch_size: args.batch,
-            epochs: args.epochs,
-            seed: args.seed,
-            threads,
-            patience: None,
-            abort_loss: Some(1000.0),
-        },
-        probe_kind: args.probe_kind.into(),
-        lr_final: args.lr_final,
-        init: args.init.into(),
-        dtype: args.dtype.into(),
-        teacher_weight: args.teacher_weight,
-        probes,
-        max_rmse_ratio: args.max_rmse_ratio,
-        min_band_samples: args.min_band_samples,
-        warmup,
-        delta_theta_offset,
-        history: args.history,
-    };
+    let cfg = distill_config(args, report.as_ref(), &sources, &split);
+    let probes = cfg.probes;
     if !args.quiet {
         eprintln!(
             "frictl distill: {} [{}] {} → [{}] hidden {:?} ({}), {} probes; chunks train {} / val {} / test {}",
@@ -408,4 +336,99 @@ pub fn distill_file(args: &Args) -> anyhow::Result<Outcome> {
         best_epoch: out.best_epoch,
         val_rmse_nm: out.val_rmse_nm,
     })
+}
+
+/// The split the student trains on: the teacher's own when it was trained on exactly these files
+/// and no split option is given, else the options' (defaults 0.15 / 0.15).
+fn student_split(
+    args: &Args,
+    report: Option<&TrainReport>,
+    sources: &pipeline::Sources,
+) -> anyhow::Result<SplitSpec> {
+    let explicit_split = args.val_frac.is_some()
+        || args.test_frac.is_some()
+        || args.test_chunks.is_some()
+        || !args.held_out.test_runs.is_empty()
+        || !args.held_out.test_datasets.is_empty();
+    // The teacher's own split when it was trained on exactly these files.
+    let same_data = report.filter(|r| {
+        r.datasets.len() == sources.list.len()
+            && r.datasets.iter().zip(&sources.list).all(|(d, s)| {
+                d.sha256
+                    == s.sha256
+                        .iter()
+                        .map(|b| format!("{b:02x}"))
+                        .collect::<String>()
+            })
+    });
+    Ok(match same_data {
+        Some(r) if !explicit_split => r.split.spec.clone(),
+        _ => SplitSpec {
+            val_frac: args.val_frac.unwrap_or(0.15),
+            test_frac: args.test_frac.unwrap_or(0.15),
+            seed: args.seed,
+            test_chunks: args.held_out.test_chunks(
+                sources,
+                &args.test_chunks,
+                args.datasets.len(),
+            )?,
+        },
+    })
+}
+
+/// The distillation's settings from the options, with the teacher's warm-up and Δθ offset where
+/// the options leave them (from its train report `report`); probes default to a quarter of the
+/// training rows.
+fn distill_config(
+    args: &Args,
+    report: Option<&TrainReport>,
+    sources: &pipeline::Sources,
+    split: &frictionless_train::data::Split,
+) -> DistillConfig {
+    let warmup: WarmupPolicy = match (args.warmup, report) {
+        (Some(w), _) => w.into(),
+        (None, Some(r)) => r.warmup,
+        (None, None) => WarmupPolicy::HoldZero,
+    };
+    let delta_theta_offset = match (args.delta_theta_offset, report) {
+        (Some(d), _) => d,
+        (None, Some(r)) => r.delta_theta_offset,
+        (None, None) => DeltaThetaOffset::Run,
+    };
+    let threads = args.threads.unwrap_or_else(cores).max(1);
+    // Probes default to a quarter of the training rows (counted after preparing; estimated here
+    // from the valid rows of the training chunks).
+    let probes = args.probes.unwrap_or_else(|| {
+        let train_rows: usize = split
+            .train
+            .iter()
+            .map(|k| split.valid_rows(*k, &sources.list[k.dataset as usize].data))
+            .sum();
+        train_rows / 4
+    });
+    DistillConfig {
+        train: TrainConfig {
+            hidden: args.hidden.clone(),
+            dropout: 0.0,
+            lambda: args.lambda,
+            lr: args.lr,
+            batch_size: args.batch,
+            epochs: args.epochs,
+            seed: args.seed,
+            threads,
+            patience: None,
+            abort_loss: Some(1000.0),
+        },
+        probe_kind: args.probe_kind.into(),
+        lr_final: args.lr_final,
+        init: args.init.into(),
+        dtype: args.dtype.into(),
+        teacher_weight: args.teacher_weight,
+        probes,
+        max_rmse_ratio: args.max_rmse_ratio,
+        min_band_samples: args.min_band_samples,
+        warmup,
+        delta_theta_offset,
+        history: args.history,
+    }
 }
