@@ -11,7 +11,7 @@ use crate::schema::{
     BackendKind, CanProtocol, JointConfig, ModelSpec, OodMode, RawConfig, ResolvedBus,
     StaticFallback,
 };
-use crate::validate::{Checker, ConfigError};
+use crate::error::{Checker, ConfigError};
 
 /// Relative tolerance of the k_t comparison between a `.fwt` header and `[[joint]] kt`.
 pub const KT_REL_TOLERANCE: f64 = 1e-6;
