@@ -78,11 +78,14 @@ mod rt_setup;
 mod stats;
 #[cfg(test)]
 mod tests;
+mod thread_rt;
 
-pub use crew::{Crew, CrewPlan, HELPER_RELEASE_GRACE_NS, HelperReport, ThreadRt, prefetch_joints};
-pub use rt_setup::{RtRefusal, RtSetup, RtSetupError};
-use rt_setup::{sched_of_self, start};
-pub use stats::{FineHistogram, RtSummary, RtThreadReport, ThreadUsage};
+pub use crew::{Crew, CrewPlan, HELPER_RELEASE_GRACE_NS, prefetch_joints};
+use rt_setup::start;
+pub use rt_setup::{RtSetup, RtSetupError};
+pub use stats::{FineHistogram, HelperReport, RtSummary, RtThreadReport, ThreadUsage};
+use thread_rt::sched_of_self;
+pub use thread_rt::{RtRefusal, ThreadRt};
 
 /// State shared between the RT thread and the supervisor (atomics only).
 #[derive(Debug, Default)]

@@ -6,54 +6,12 @@ use frictionless_drives::can::cia402::{Layout, PdoEntry};
 use frictionless_drives::can::mit::MitRanges;
 use frictionless_drives::can::units::{CommandUnit, JointUnits};
 
+use crate::error::{Checker, ConfigError};
 use crate::schema::{
-    BackendKind, BusConfig, BusJointConfig, CanProtocol, Cia402Drive, Cia402DriveLoop, Cia402Mode,
-    Cia402Object, Config, JointConfig, MAX_BUSES, RawConfig, ResolvedBus, ResolvedDrive,
+    BackendKind, BusConfig, BusJointConfig, BusLoad, CanProtocol, Cia402Drive, Cia402DriveLoop,
+    Cia402Mode, Cia402Object, Config, JointConfig, MAX_BUSES, RawConfig, ResolvedBus,
+    ResolvedDrive,
 };
-use crate::validate::{Checker, ConfigError};
-
-/// Worst-case bus load of one bus from the config.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct BusLoad {
-    /// Drives on the bus.
-    pub n_joints: u32,
-    /// Frames per second on the bus (commands and feedback).
-    pub frames_per_s: f64,
-    /// Worst-case bits (with stuffing) of the frames one joint puts on the bus per tick (CiA 402:
-    /// the largest of the bus's drives).
-    pub bits_per_joint_tick: u32,
-    /// Worst-case bits per tick of the bus's own frames (CiA 402: the SYNC; 0 for MIT / ODrive).
-    pub bits_per_bus_tick: u32,
-    /// Frames per joint per tick.
-    pub frames_per_joint_tick: u32,
-    /// Bitrate [bit/s].
-    pub bitrate_bps: u64,
-    /// Load fraction (1 = saturated).
-    pub load: f64,
-    /// Configured limit fraction.
-    pub limit: f64,
-}
-
-impl std::fmt::Display for BusLoad {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "{} joint(s): {:.0} frames/s, {} bits per joint and tick in {} frame(s){} (worst-case stuffing), load {:.1} % of {} bit/s (limit {:.1} %)",
-            self.n_joints,
-            self.frames_per_s,
-            self.bits_per_joint_tick,
-            self.frames_per_joint_tick,
-            if self.bits_per_bus_tick > 0 {
-                format!(" + {} bits of SYNC per tick", self.bits_per_bus_tick)
-            } else {
-                String::new()
-            },
-            100.0 * self.load,
-            self.bitrate_bps,
-            100.0 * self.limit
-        )
-    }
-}
 
 /// One line per bus for `frictiond --check` (empty without buses).
 pub fn bus_summary(cfg: &Config) -> String {

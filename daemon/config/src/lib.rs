@@ -65,6 +65,7 @@
 #![warn(missing_docs)]
 
 mod buses;
+mod error;
 mod models;
 pub mod params;
 pub mod runtime;
@@ -75,7 +76,8 @@ mod validate;
 
 use std::path::Path;
 
-pub use buses::{BusLoad, bus_summary};
+pub use buses::bus_summary;
+pub use error::ConfigError;
 pub use frictionless::model::ModelKind;
 pub use frictionless_drives::can::units::CommandUnit;
 pub use models::{
@@ -83,11 +85,12 @@ pub use models::{
     signal_supply,
 };
 pub use schema::*;
-pub use validate::{ConfigError, MAX_MODEL_NAME_BYTES, MAX_TICK_SPAN_S, alternate_name_rule};
+pub use validate::{MAX_MODEL_NAME_BYTES, MAX_TICK_SPAN_S, alternate_name_rule};
 
 use buses::resolve_buses;
+use error::Checker;
 use models::check_pinn_inputs;
-use validate::{Checker, check_backend, check_joints, check_loop, check_tick_counts};
+use validate::{check_backend, check_joints, check_loop, check_tick_counts};
 
 /// Reads, parses and validates `path`, including every model file. Touches no IPC.
 pub fn load(path: &Path) -> Result<Config, ConfigError> {

@@ -7,11 +7,11 @@ use std::path::Path;
 use frictionless::features::{FeatureSpec, Signal};
 
 use crate::ModelKind;
+use crate::error::{Checker, ConfigError};
 use crate::schema::{
     BackendKind, CanProtocol, JointConfig, ModelSpec, OodMode, RawConfig, ResolvedBus,
     StaticFallback,
 };
-use crate::validate::{Checker, ConfigError};
 
 /// Relative tolerance of the k_t comparison between a `.fwt` header and `[[joint]] kt`.
 pub const KT_REL_TOLERANCE: f64 = 1e-6;
@@ -206,49 +206,22 @@ pub(crate) fn model_spec(
     j: &JointConfig,
 ) -> Result<(ModelSpec, Option<FeatureSpec>), ConfigError> {
     use frictionless::friction::{CvParams, ScvParams, StaticFriction};
-    let key = |name: &str| format!("{table}.{name}");
-    let model_name = j
-        .friction_model
-        .config_name()
-        .unwrap_or(j.friction_model.name());
-    let need = |name: &str, v: Option<f64>| -> Result<f64, ConfigError> {
-        v.ok_or_else(|| {
-            c.fail(
-                key(name),
-                "<missing>",
-                &format!("required by friction_model = {model_name:?}"),
-            )
-        })
-    };
-    let forbid = |names: &[(&str, bool)]| -> Result<(), ConfigError> {
-        for (n, present) in names {
-            if *present {
-                return Err(c.fail(
-                    key(n),
-                    "<set>",
-                    &format!("not used by friction_model = {model_name:?}"),
-                ));
-            }
-        }
-        Ok(())
-    };
-    let param_err = |e: frictionless::friction::FrictionParamError| match e {
-        frictionless::friction::FrictionParamError::Invalid {
-            name,
-            value,
-            requirement,
-            ..
-        } => c.fail(key(name), value, requirement),
-        other => c.fail(key("friction_model"), "?", &other.to_string()),
+    let keys = ModelKeys {
+        c,
+        table,
+        model_name: j
+            .friction_model
+            .config_name()
+            .unwrap_or(j.friction_model.name()),
     };
     match j.friction_model {
         ModelKind::ScvCode => Err(c.fail(
-            key("friction_model"),
-            model_name,
+            keys.key("friction_model"),
+            keys.model_name,
             "not a daemon model: the code form runs as coulomb_viscous_stribeck with ka = inf, alpha = 2",
         )),
         ModelKind::None => {
-            forbid(&[
+            keys.forbid(&[
                 ("kc", j.kc.is_some()),
                 ("kv", j.kv.is_some()),
                 ("ka", j.ka.is_some()),
@@ -262,7 +235,7 @@ pub(crate) fn model_spec(
             Ok((ModelSpec::None, None))
         }
         ModelKind::Cv => {
-            forbid(&[
+            keys.forbid(&[
                 ("ks", j.ks.is_some()),
                 ("vs", j.vs.is_some()),
                 ("alpha", j.alpha.is_some()),
@@ -271,129 +244,203 @@ pub(crate) fn model_spec(
                 ("sigma1", j.sigma1.is_some()),
             ])?;
             let p = CvParams {
-                kc: need("kc", j.kc)?,
-                ka: need("ka", j.ka)?,
-                kv: need("kv", j.kv)?,
+                kc: keys.need("kc", j.kc)?,
+                ka: keys.need("ka", j.ka)?,
+                kv: keys.need("kv", j.kv)?,
             };
-            p.validate().map_err(param_err)?;
+            p.validate().map_err(|e| keys.param_err(e))?;
             Ok((ModelSpec::Cv(p), None))
         }
         ModelKind::Scv => {
-            forbid(&[
+            keys.forbid(&[
                 ("model", j.model.is_some()),
                 ("sigma0", j.sigma0.is_some()),
                 ("sigma1", j.sigma1.is_some()),
             ])?;
             let p = ScvParams {
-                kc: need("kc", j.kc)?,
-                ka: need("ka", j.ka)?,
-                kv: need("kv", j.kv)?,
-                ks: need("ks", j.ks)?,
-                vs: need("vs", j.vs)?,
-                alpha: need("alpha", j.alpha)?,
+                kc: keys.need("kc", j.kc)?,
+                ka: keys.need("ka", j.ka)?,
+                kv: keys.need("kv", j.kv)?,
+                ks: keys.need("ks", j.ks)?,
+                vs: keys.need("vs", j.vs)?,
+                alpha: keys.need("alpha", j.alpha)?,
             };
-            p.validate().map_err(param_err)?;
+            p.validate().map_err(|e| keys.param_err(e))?;
             Ok((ModelSpec::Scv(p), None))
         }
         ModelKind::Lugre => {
-            forbid(&[("model", j.model.is_some()), ("ka", j.ka.is_some())])?;
+            keys.forbid(&[("model", j.model.is_some()), ("ka", j.ka.is_some())])?;
             let p = frictionless::lugre::LugreParams {
-                kc: need("kc", j.kc)?,
-                kv: need("kv", j.kv)?,
-                ks: need("ks", j.ks)?,
-                vs: need("vs", j.vs)?,
-                alpha: need("alpha", j.alpha)?,
-                sigma0: need("sigma0", j.sigma0)?,
-                sigma1: need("sigma1", j.sigma1)?,
+                kc: keys.need("kc", j.kc)?,
+                kv: keys.need("kv", j.kv)?,
+                ks: keys.need("ks", j.ks)?,
+                vs: keys.need("vs", j.vs)?,
+                alpha: keys.need("alpha", j.alpha)?,
+                sigma0: keys.need("sigma0", j.sigma0)?,
+                sigma1: keys.need("sigma1", j.sigma1)?,
             };
             p.validate()
-                .map_err(|e| c.fail(key(e.name), e.value, e.requirement))?;
+                .map_err(|e| c.fail(keys.key(e.name), e.value, e.requirement))?;
             Ok((ModelSpec::Lugre(p), None))
         }
-        ModelKind::Pinn => {
-            forbid(&[
-                ("sigma0", j.sigma0.is_some()),
-                ("sigma1", j.sigma1.is_some()),
-            ])?;
-            let fallback = if j.ood == OodMode::Static {
-                // The static model: kc, ka, kv (CV) and, if any of ks, vs, alpha is given, all
-                // three (SCV).
-                let need_static = |name: &str, v: Option<f64>| {
-                    v.ok_or_else(|| {
-                        c.fail(
-                            key(name),
-                            "<missing>",
-                            "required by ood = \"static\" (the static model of a PINN joint)",
-                        )
-                    })
-                };
-                let (kc, ka, kv) = (
-                    need_static("kc", j.kc)?,
-                    need_static("ka", j.ka)?,
-                    need_static("kv", j.kv)?,
-                );
-                Some(if j.ks.is_some() || j.vs.is_some() || j.alpha.is_some() {
-                    let p = ScvParams {
-                        kc,
-                        ka,
-                        kv,
-                        ks: need_static("ks", j.ks)?,
-                        vs: need_static("vs", j.vs)?,
-                        alpha: need_static("alpha", j.alpha)?,
-                    };
-                    p.validate().map_err(param_err)?;
-                    StaticFallback::Scv(p)
-                } else {
-                    let p = CvParams { kc, ka, kv };
-                    p.validate().map_err(param_err)?;
-                    StaticFallback::Cv(p)
-                })
-            } else {
-                forbid(&[
-                    ("kc", j.kc.is_some()),
-                    ("kv", j.kv.is_some()),
-                    ("ka", j.ka.is_some()),
-                    ("ks", j.ks.is_some()),
-                    ("vs", j.vs.is_some()),
-                    ("alpha", j.alpha.is_some()),
-                ])?;
-                None
-            };
-            let rel = j.model.as_ref().ok_or_else(|| {
-                c.fail(
-                    key("model"),
-                    "<missing>",
-                    "required by friction_model = \"pinn\"",
-                )
-            })?;
-            let path = base.join(rel);
-            let checked = check_model(&path, j).map_err(|message| ConfigError::Model {
-                file: c.file.to_path_buf(),
-                key: key("model"),
-                path: path.clone(),
-                message,
-            })?;
-            if fallback.is_some() && !checked.has_input_range {
-                return Err(c.fail(
-                    key("ood"),
-                    "\"static\"",
-                    &format!(
-                        "needs a model that stores its training input range, and {} stores none: the out-of-range check never fires, so the static fallback could never engage (use ood = \"flag\" or \"off\", or a model trained with a recorded input range)",
-                        path.display()
-                    ),
+        ModelKind::Pinn => pinn_spec(&keys, base, j),
+    }
+}
+
+/// The keys of one model's table (`joint[k]` or `joint[k].alternate[m]`) as [`model_spec`] names
+/// them in errors, with the rules every model kind shares: a key it needs, a key it does not use.
+struct ModelKeys<'a> {
+    c: &'a Checker<'a>,
+    table: &'a str,
+    /// `friction_model` as the file writes it.
+    model_name: &'a str,
+}
+
+impl ModelKeys<'_> {
+    /// `{table}.{name}`.
+    fn key(&self, name: &str) -> String {
+        format!("{}.{name}", self.table)
+    }
+
+    /// The value of key `name`, which the model kind requires.
+    fn need(&self, name: &str, v: Option<f64>) -> Result<f64, ConfigError> {
+        v.ok_or_else(|| {
+            self.c.fail(
+                self.key(name),
+                "<missing>",
+                &format!("required by friction_model = {:?}", self.model_name),
+            )
+        })
+    }
+
+    /// Refuses the first key of `names` that is present: the model kind does not use it.
+    fn forbid(&self, names: &[(&str, bool)]) -> Result<(), ConfigError> {
+        for (n, present) in names {
+            if *present {
+                return Err(self.c.fail(
+                    self.key(n),
+                    "<set>",
+                    &format!("not used by friction_model = {:?}", self.model_name),
                 ));
             }
-            let features = checked.features;
-            Ok((
-                ModelSpec::Pinn {
-                    path,
-                    warmup: j.warmup,
-                    fallback,
-                },
-                Some(features),
-            ))
+        }
+        Ok(())
+    }
+
+    /// A static model's parameter rule broken, named by its key.
+    fn param_err(&self, e: frictionless::friction::FrictionParamError) -> ConfigError {
+        match e {
+            frictionless::friction::FrictionParamError::Invalid {
+                name,
+                value,
+                requirement,
+                ..
+            } => self.c.fail(self.key(name), value, requirement),
+            other => self
+                .c
+                .fail(self.key("friction_model"), "?", &other.to_string()),
         }
     }
+}
+
+/// `friction_model = "pinn"`: its static fallback ([`static_fallback`]), the model file checked
+/// against the joint, and the file's input features.
+fn pinn_spec(
+    keys: &ModelKeys<'_>,
+    base: &Path,
+    j: &JointConfig,
+) -> Result<(ModelSpec, Option<FeatureSpec>), ConfigError> {
+    let c = keys.c;
+    keys.forbid(&[
+        ("sigma0", j.sigma0.is_some()),
+        ("sigma1", j.sigma1.is_some()),
+    ])?;
+    let fallback = static_fallback(keys, j)?;
+    let rel = j.model.as_ref().ok_or_else(|| {
+        c.fail(
+            keys.key("model"),
+            "<missing>",
+            "required by friction_model = \"pinn\"",
+        )
+    })?;
+    let path = base.join(rel);
+    let checked = check_model(&path, j).map_err(|message| ConfigError::Model {
+        file: c.file.to_path_buf(),
+        key: keys.key("model"),
+        path: path.clone(),
+        message,
+    })?;
+    if fallback.is_some() && !checked.has_input_range {
+        return Err(c.fail(
+            keys.key("ood"),
+            "\"static\"",
+            &format!(
+                "needs a model that stores its training input range, and {} stores none: the out-of-range check never fires, so the static fallback could never engage (use ood = \"flag\" or \"off\", or a model trained with a recorded input range)",
+                path.display()
+            ),
+        ));
+    }
+    let features = checked.features;
+    Ok((
+        ModelSpec::Pinn {
+            path,
+            warmup: j.warmup,
+            fallback,
+        },
+        Some(features),
+    ))
+}
+
+/// A PINN joint's static model: with `ood = "static"` kc, ka, kv (CV) and, if any of ks, vs, alpha
+/// is given, all three (SCV); otherwise none, and no static key may be set.
+fn static_fallback(
+    keys: &ModelKeys<'_>,
+    j: &JointConfig,
+) -> Result<Option<StaticFallback>, ConfigError> {
+    use frictionless::friction::{CvParams, ScvParams, StaticFriction};
+    if j.ood != OodMode::Static {
+        keys.forbid(&[
+            ("kc", j.kc.is_some()),
+            ("kv", j.kv.is_some()),
+            ("ka", j.ka.is_some()),
+            ("ks", j.ks.is_some()),
+            ("vs", j.vs.is_some()),
+            ("alpha", j.alpha.is_some()),
+        ])?;
+        return Ok(None);
+    }
+    let need_static = |name: &str, v: Option<f64>| {
+        v.ok_or_else(|| {
+            keys.c.fail(
+                keys.key(name),
+                "<missing>",
+                "required by ood = \"static\" (the static model of a PINN joint)",
+            )
+        })
+    };
+    let (kc, ka, kv) = (
+        need_static("kc", j.kc)?,
+        need_static("ka", j.ka)?,
+        need_static("kv", j.kv)?,
+    );
+    Ok(Some(
+        if j.ks.is_some() || j.vs.is_some() || j.alpha.is_some() {
+            let p = ScvParams {
+                kc,
+                ka,
+                kv,
+                ks: need_static("ks", j.ks)?,
+                vs: need_static("vs", j.vs)?,
+                alpha: need_static("alpha", j.alpha)?,
+            };
+            p.validate().map_err(|e| keys.param_err(e))?;
+            StaticFallback::Scv(p)
+        } else {
+            let p = CvParams { kc, ka, kv };
+            p.validate().map_err(|e| keys.param_err(e))?;
+            StaticFallback::Cv(p)
+        },
+    ))
 }
 
 /// A PINN model of the config (a joint's own or an alternate) whose inputs the backend must supply.

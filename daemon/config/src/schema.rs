@@ -1,5 +1,5 @@
 //! The schema: the file as written ([`RawConfig`] and its sections, serde with unknown keys
-//! refused, defaults) and the validated result ([`Config`], [`ModelSpec`], [`ResolvedBus`]).
+//! refused, defaults) and the validated result ([`Config`], [`ModelSpec`], [`ResolvedBus`] with its [`BusLoad`]).
 
 use std::path::{Path, PathBuf};
 
@@ -7,8 +7,6 @@ use frictionless::model::ModelKind;
 use frictionless_drives::can::mit::MitRanges;
 use frictionless_drives::can::units::{CommandUnit, JointUnits};
 use serde::{Deserialize, Serialize};
-
-use crate::buses::BusLoad;
 
 /// `[loop]`.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -837,6 +835,49 @@ pub struct Config {
     pub root_path: Option<PathBuf>,
     /// Resolved `[[bus]]` sections (empty unless `[backend] kind = "can"`).
     pub buses: Vec<ResolvedBus>,
+}
+
+/// Worst-case bus load of one bus from the config.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BusLoad {
+    /// Drives on the bus.
+    pub n_joints: u32,
+    /// Frames per second on the bus (commands and feedback).
+    pub frames_per_s: f64,
+    /// Worst-case bits (with stuffing) of the frames one joint puts on the bus per tick (CiA 402:
+    /// the largest of the bus's drives).
+    pub bits_per_joint_tick: u32,
+    /// Worst-case bits per tick of the bus's own frames (CiA 402: the SYNC; 0 for MIT / ODrive).
+    pub bits_per_bus_tick: u32,
+    /// Frames per joint per tick.
+    pub frames_per_joint_tick: u32,
+    /// Bitrate [bit/s].
+    pub bitrate_bps: u64,
+    /// Load fraction (1 = saturated).
+    pub load: f64,
+    /// Configured limit fraction.
+    pub limit: f64,
+}
+
+impl std::fmt::Display for BusLoad {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} joint(s): {:.0} frames/s, {} bits per joint and tick in {} frame(s){} (worst-case stuffing), load {:.1} % of {} bit/s (limit {:.1} %)",
+            self.n_joints,
+            self.frames_per_s,
+            self.bits_per_joint_tick,
+            self.frames_per_joint_tick,
+            if self.bits_per_bus_tick > 0 {
+                format!(" + {} bits of SYNC per tick", self.bits_per_bus_tick)
+            } else {
+                String::new()
+            },
+            100.0 * self.load,
+            self.bitrate_bps,
+            100.0 * self.limit
+        )
+    }
 }
 
 /// A validated `[[bus]]` with its drives resolved against the `[[joint]]` table.

@@ -7,6 +7,7 @@ use frictionless_drives::can::units::AngleUnit;
 
 use super::*;
 use crate::buses::*;
+use crate::error::*;
 use crate::models::*;
 use crate::validate::*;
 

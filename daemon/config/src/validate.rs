@@ -1,97 +1,19 @@
 //! Validation of the sections that stand on their own: `[loop]`, the tick counts, `[backend]` and
-//! each `[[joint]]`'s keys, with the error type and the [`Checker`] that names file, key and value.
-//! Models are resolved in `models`, buses in `buses`.
+//! each `[[joint]]`'s keys. Models are resolved in `models`, buses in `buses`; the error type and
+//! the [`Checker`] that names file, key and value are `error`'s.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use frictionless_shm_types::MAX_JOINTS;
 
 use crate::ModelKind;
+use crate::error::{Checker, ConfigError};
 use crate::models::{PinnInputs, model_spec};
 use crate::runtime;
 use crate::schema::{
     JointConfig, LoopConfig, MODEL_NAME_DEFAULT, MODEL_NAME_NONE, ModelSpec, MotorEncoder,
     NamedModel, OodMode, Prefetch, RawConfig,
 };
-
-/// Why a configuration is not acceptable. Every variant names the file; most name the key and value.
-#[derive(Debug, thiserror::Error)]
-pub enum ConfigError {
-    /// The file could not be read.
-    #[error("{file}: cannot read: {source}")]
-    Read {
-        /// Config file.
-        file: PathBuf,
-        /// OS error.
-        source: std::io::Error,
-    },
-    /// TOML syntax, a wrong type or an unknown key.
-    #[error("{file}: {message}")]
-    Parse {
-        /// Config file.
-        file: PathBuf,
-        /// toml's message (names the key, line and column).
-        message: String,
-    },
-    /// A key holds a value outside its domain.
-    #[error("{file}: key `{key}` = {value}: {requirement}")]
-    Invalid {
-        /// Config file.
-        file: PathBuf,
-        /// Full key path, e.g. `joint[1].max_curr`.
-        key: String,
-        /// The offending value as written.
-        value: String,
-        /// What it must satisfy.
-        requirement: String,
-    },
-    /// A model file is missing or invalid.
-    #[error("{file}: key `{key}` = {path:?}: {message}")]
-    Model {
-        /// Config file.
-        file: PathBuf,
-        /// Key path, e.g. `joint[0].model`.
-        key: String,
-        /// Resolved model path.
-        path: PathBuf,
-        /// What is wrong with it.
-        message: String,
-    },
-}
-
-pub(crate) struct Checker<'a> {
-    pub(crate) file: &'a Path,
-}
-
-impl Checker<'_> {
-    pub(crate) fn fail(
-        &self,
-        key: String,
-        value: impl std::fmt::Display,
-        req: &str,
-    ) -> ConfigError {
-        ConfigError::Invalid {
-            file: self.file.to_path_buf(),
-            key,
-            value: value.to_string(),
-            requirement: req.to_owned(),
-        }
-    }
-    pub(crate) fn finite_pos(&self, key: String, v: f64) -> Result<(), ConfigError> {
-        if v.is_finite() && v > 0.0 {
-            Ok(())
-        } else {
-            Err(self.fail(key, v, "must be finite and > 0"))
-        }
-    }
-    pub(crate) fn nonneg(&self, key: String, v: f64) -> Result<(), ConfigError> {
-        if v.is_finite() && v >= 0.0 {
-            Ok(())
-        } else {
-            Err(self.fail(key, v, "must be finite and >= 0"))
-        }
-    }
-}
 
 /// The online CPUs as the kernel lists them in `/sys/devices/system/cpu/online` (none when the file
 /// cannot be read or parsed, e.g. without `/sys`).

@@ -25,8 +25,8 @@ use frictionless_shm_types::{
     monotonic_ns, sleep_until_ns,
 };
 
-use super::rt_setup::{RtRefusal, apply_thread_rt, prefault_stack, sched_of_self};
-use super::stats::ThreadUsage;
+use super::stats::{HelperReport, ThreadUsage};
+use super::thread_rt::{RtRefusal, ThreadRt, apply_thread_rt, prefault_stack, sched_of_self};
 use super::{Freshness, Inputs, Latest, TickCtx, compute_joints};
 use crate::alloc_count;
 use crate::config::{Config, OnStale, Prefetch, Trigger};
@@ -210,32 +210,6 @@ impl CrewPlan {
             lockstep,
         }
     }
-}
-
-/// RT settings of one thread (`[loop]` `cpu` / `helper_cpu`, `priority`, `lock_memory`).
-#[derive(Debug, Clone, Copy, Default)]
-pub struct ThreadRt {
-    /// CPU to pin to.
-    pub cpu: Option<usize>,
-    /// SCHED_FIFO priority.
-    pub priority: Option<i32>,
-    /// `mlockall` (again from this thread, so its stack is locked too).
-    pub lock_memory: bool,
-}
-
-/// How the helper thread ran (for the latency report).
-#[derive(Debug, Clone, Copy, Default)]
-pub struct HelperReport {
-    /// Granted `STATUS_*` flags (`STATUS_CPU_PINNED` only with `helper_cpu`).
-    pub rt_flags: u32,
-    /// Scheduling policy at the end.
-    pub policy: i32,
-    /// Priority at the end.
-    pub priority: i32,
-    /// Jobs run.
-    pub jobs: u64,
-    /// Page faults and context switches during the loop.
-    pub usage: ThreadUsage,
 }
 
 /// The second RT thread of `[loop] rt_threads = 2` and the main thread's side of the join.

@@ -5,8 +5,6 @@
 
 use frictionless_shm_types::{DaemonStatus, STATUS_CPU_PINNED, STATUS_MEMORY_LOCKED};
 
-use super::crew::HelperReport;
-
 /// Resource usage of the calling thread (`getrusage(RUSAGE_THREAD)`): read before and after the
 /// loop only (a syscall), to tell page faults and preemptions apart from timer wake-up latency.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -135,6 +133,21 @@ pub struct RtSummary {
     pub helper_late: u64,
     /// Ticks whose helper half the main RT thread ran itself (the helper had not started it).
     pub helper_stolen: u64,
+}
+
+/// How the helper thread ran (for the latency report).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct HelperReport {
+    /// Granted `STATUS_*` flags (`STATUS_CPU_PINNED` only with `helper_cpu`).
+    pub rt_flags: u32,
+    /// Scheduling policy at the end.
+    pub policy: i32,
+    /// Priority at the end.
+    pub priority: i32,
+    /// Jobs run.
+    pub jobs: u64,
+    /// Page faults and context switches during the loop.
+    pub usage: ThreadUsage,
 }
 
 /// How the RT thread ran (for the latency report).
