@@ -13,6 +13,10 @@
 //!   `alpha`).
 //! - [`law`]: the per-joint control law `frictionless::law::JointLaw` (i = (τ_des + kfc·τ̂_F)/(k_t·r),
 //!   velocity-gated clip, LPF, PI, clamp, NaN handling).
+//! - [`control`]: a client of a running frictiond's runtime control service (`<prefix>/control`,
+//!   iceoryx2 request–response): per joint get and set of `kfc`, `max_output_friction`,
+//!   `max_curr`, `compensation`, `ood`, `model` — `frictionless_shm_types::control`'s client and
+//!   payloads, wrapped.
 //!
 //! Rules every entry point keeps: it returns an [`fl_status`] (or is an infallible getter), checks
 //! every pointer for null, catches any panic (`catch_unwind`) so none crosses the boundary, and on
@@ -21,10 +25,12 @@
 //!
 //! Threads: an `fl_model` may be used from any number of threads at once (it is never written after
 //! creation). An `fl_estimator` or `fl_law` holds per-joint state: one thread at a time (it may move
-//! between threads).
+//! between threads). An `fl_control` is bound to the thread that opened it (iceoryx2's ports are
+//! single-threaded); a call from another thread is refused.
 //!
 //! What it is **not**: no second implementation of anything — every computation is the core's
-//! (`frictionless`); no threads, no I/O besides reading a model file, no IPC, no ONNX.
+//! (`frictionless`), every control payload and port `frictionless-shm-types`'; no threads of its own,
+//! no I/O besides reading a model file and the control client's iceoryx2 request–response, no ONNX.
 
 #![allow(non_camel_case_types)]
 
@@ -32,18 +38,21 @@ use std::cell::Cell;
 use std::ffi::c_char;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 
+pub mod control;
 pub mod estimator;
 pub mod friction;
 pub mod law;
 pub mod model;
 
+pub use control::*;
 pub use estimator::*;
 pub use friction::*;
 pub use law::*;
 pub use model::*;
 
 /// The result of every fallible call. `FL_STATUS_OK` is 0; on any other value the call changed
-/// none of its outputs and [`fl_last_error`] says why.
+/// none of its outputs (except `FL_STATUS_REFUSED`, whose output holds the daemon's answer) and
+/// [`fl_last_error`] says why.
 #[repr(i32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum fl_status {
@@ -63,6 +72,13 @@ pub enum fl_status {
     Model = 6,
     /// A panic was caught inside the library (a bug: please report it with the message).
     Internal = 7,
+    /// iceoryx2 failed: the node or service could not be opened (permissions, root path), no
+    /// frictiond serves the prefix, or it gave no answer within the timeout.
+    Ipc = 8,
+    /// frictiond answered and refused the request (a value breaking a rule, an unknown joint, key
+    /// or model, writes disabled, its queue full): the output holds its answer, with its code and
+    /// the message naming the rule.
+    Refused = 9,
 }
 
 /// Capacity of the thread-local last-error buffer in bytes, NUL included; longer messages are
@@ -164,6 +180,24 @@ pub(crate) unsafe fn arg_mut<'a, T>(p: *mut T, what: &'static str) -> Result<&'a
     unsafe { p.as_mut() }.ok_or_else(|| Fail::null(what))
 }
 
+/// A `&str` from a NUL-terminated C string, or the failure naming it (null, not UTF-8).
+///
+/// # Safety
+/// `p` is null or points to a NUL-terminated string alive and unchanged during the call.
+pub(crate) unsafe fn arg_str<'a>(
+    p: *const c_char,
+    null: &'static str,
+    not_utf8: &'static str,
+) -> Result<&'a str, Fail> {
+    if p.is_null() {
+        return Err(Fail::null(null));
+    }
+    // SAFETY: non-null and NUL-terminated per the contract above.
+    unsafe { std::ffi::CStr::from_ptr(p) }
+        .to_str()
+        .map_err(|_| Fail::fixed(fl_status::InvalidArgument, not_utf8))
+}
+
 /// The message of the last failed call on this thread (NUL-terminated UTF-8, at most
 /// `FL_LAST_ERROR_CAPACITY - 1` bytes), or `""` if none failed yet. The pointer stays valid for the
 /// life of the thread; the text changes at the next failure on this thread. Never NULL.
@@ -185,6 +219,8 @@ pub extern "C" fn fl_status_name(status: i32) -> *const c_char {
         5 => "FL_STATUS_FORMAT\0",
         6 => "FL_STATUS_MODEL\0",
         7 => "FL_STATUS_INTERNAL\0",
+        8 => "FL_STATUS_IPC\0",
+        9 => "FL_STATUS_REFUSED\0",
         _ => "FL_STATUS_UNKNOWN\0",
     };
     s.as_ptr() as *const c_char
@@ -240,6 +276,8 @@ mod tests {
             (fl_status::Format, "FL_STATUS_FORMAT"),
             (fl_status::Model, "FL_STATUS_MODEL"),
             (fl_status::Internal, "FL_STATUS_INTERNAL"),
+            (fl_status::Ipc, "FL_STATUS_IPC"),
+            (fl_status::Refused, "FL_STATUS_REFUSED"),
         ] {
             // SAFETY: static NUL-terminated strings.
             let got = unsafe { CStr::from_ptr(fl_status_name(st as i32)) };

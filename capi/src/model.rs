@@ -5,7 +5,7 @@
 //! drops one. Estimators copy what they need at creation, so a model may be freed while estimators
 //! made from it live on.
 
-use std::ffi::{CStr, CString, c_char};
+use std::ffi::{CString, c_char};
 use std::path::Path;
 use std::sync::Arc;
 
@@ -16,7 +16,7 @@ use fl_core::model::PinnEstimator;
 use fl_core::weights::{ModelFile, WeightError};
 
 use crate::friction::fl_scv_params;
-use crate::{Fail, arg, arg_mut, fl_status, guard};
+use crate::{Fail, arg, arg_mut, arg_str, fl_status, guard};
 
 /// Storage precision of a model's weights (`FL_DTYPE_*`).
 pub type fl_dtype = u32;
@@ -153,16 +153,14 @@ pub unsafe extern "C" fn fl_model_open(path: *const c_char, out: *mut *mut fl_mo
     guard(|| {
         // SAFETY: caller contract.
         let out = unsafe { arg_mut(out, "fl_model_open: `out` is NULL") }?;
-        if path.is_null() {
-            return Err(Fail::null("fl_model_open: `path` is NULL"));
-        }
-        // SAFETY: non-null and NUL-terminated per the caller contract.
-        let path = unsafe { CStr::from_ptr(path) }.to_str().map_err(|_| {
-            Fail::fixed(
-                fl_status::InvalidArgument,
+        // SAFETY: caller contract.
+        let path = unsafe {
+            arg_str(
+                path,
+                "fl_model_open: `path` is NULL",
                 "fl_model_open: `path` is not valid UTF-8",
             )
-        })?;
+        }?;
         let file = fl_core::weights::read_file(Path::new(path)).map_err(|e| weight_fail(&e))?;
         fl_model::new(file)
             .map_err(|f| match f.message {
@@ -374,6 +372,7 @@ mod tests {
     use fl_core::random::{NormInit, RandomMlpSpec, WeightInit, seeded_mlp};
     use fl_core::units::GearRatio;
     use fl_core::weights::{ModelMeta, TrainingMeta};
+    use std::ffi::CStr;
     use std::ptr;
 
     /// A row count whose input buffer fits `usize` in elements but not the address space in bytes

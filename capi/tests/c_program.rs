@@ -14,38 +14,24 @@ use fl_core::kernel::Mlp;
 use fl_core::law::{Gains, JointLaw, LawInput};
 use fl_core::weights::ModelFile;
 
-use crate::support::{close, crate_dir, frictl, have, lib_dir, run_ok, sample, scratch, specs};
+use crate::support::{close, compile_c, crate_dir, frictl, have, run_ok, sample, scratch, specs};
 
 const TICKS: usize = 300;
 
 /// Compiles `check.c`: `static` links `libfrictionless.a`, else the `.so` (with an rpath);
 /// `extra` adds compiler flags (sanitizers).
 fn compile(out: &Path, static_link: bool, extra: &[&str]) -> PathBuf {
-    let lib = lib_dir();
     let exe = out.join(match (static_link, extra.is_empty()) {
         (true, _) => "check_static",
         (false, true) => "check_shared",
         (false, false) => "check_sanitized",
     });
-    let mut cmd = Command::new("cc");
-    cmd.args(["-std=c11", "-O1", "-g", "-Wall", "-Wextra", "-Werror"])
-        .args(extra)
-        .arg("-I")
-        .arg(crate_dir().join("include"))
-        .arg(crate_dir().join("tests/c/check.c"))
-        .arg("-o")
-        .arg(&exe);
-    if static_link {
-        // The link line the README and the header give for the static library.
-        cmd.arg(lib.join("libfrictionless.a"))
-            .args(["-lpthread", "-ldl", "-lm"]);
-    } else {
-        cmd.arg("-L")
-            .arg(&lib)
-            .arg(format!("-Wl,-rpath,{}", lib.display()))
-            .args(["-lfrictionless", "-lpthread", "-lm"]);
-    }
-    run_ok(&mut cmd);
+    compile_c(
+        &crate_dir().join("tests/c/check.c"),
+        &exe,
+        static_link,
+        extra,
+    );
     exe
 }
 

@@ -58,6 +58,32 @@ pub fn run_ok(cmd: &mut Command) -> Output {
     out
 }
 
+/// Compiles the C program `source` into `exe` with the system `cc` (C11, all warnings as errors):
+/// `static_link` links `libfrictionless.a` with the link line the header gives, else the `.so`
+/// (with an rpath); `extra` adds compiler flags (sanitizers).
+pub fn compile_c(source: &Path, exe: &Path, static_link: bool, extra: &[&str]) {
+    let lib = lib_dir();
+    let mut cmd = Command::new("cc");
+    cmd.args(["-std=c11", "-O1", "-g", "-Wall", "-Wextra", "-Werror"])
+        .args(extra)
+        .arg("-I")
+        .arg(crate_dir().join("include"))
+        .arg(source)
+        .arg("-o")
+        .arg(exe);
+    if static_link {
+        // The link line the README and the header give for the static library.
+        cmd.arg(lib.join("libfrictionless.a"))
+            .args(["-lpthread", "-ldl", "-lm"]);
+    } else {
+        cmd.arg("-L")
+            .arg(&lib)
+            .arg(format!("-Wl,-rpath,{}", lib.display()))
+            .args(["-lfrictionless", "-lpthread", "-lm"]);
+    }
+    run_ok(&mut cmd);
+}
+
 /// Whether `prog` is on PATH.
 pub fn have(prog: &str) -> bool {
     Command::new("sh")

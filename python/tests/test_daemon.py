@@ -67,6 +67,16 @@ friction_model = "cv"
 kc = {CV["kc"]!r}
 ka = {CV["ka"]!r}
 kv = {CV["kv"]!r}
+
+[[joint.alternate]]
+name = "scv_b"
+friction_model = "scv"
+kc = 1.0
+ka = 40.0
+kv = 3.0
+ks = 2.0
+vs = 0.1
+alpha = 0.8
 """
 
 
@@ -166,17 +176,21 @@ def test_commands_follow_the_law_and_status_reports(daemon):
     assert code == 0, log.read()
 
 
-def test_control_set_changes_the_next_tick_and_refusals_name_the_rule(daemon):
-    proc, prefix, root, model, log = daemon
+def control_client(prefix, root):
+    """A client once the daemon answers control gets (its server opens after the RT thread)."""
     client = fl.DaemonClient(prefix, root, node_name="pytest-ctl")
     assert client.wait_for_daemon(20.0), "frictiond did not open its ports"
     deadline = time.monotonic() + 20.0
     while True:
         try:
-            got = client.control_get("ankle")
-            break
+            return client, client.control_get("ankle")
         except fl.IpcError:
             assert time.monotonic() < deadline, "no control answer"
+
+
+def test_control_set_changes_the_next_tick_and_refusals_name_the_rule(daemon):
+    proc, prefix, root, model, log = daemon
+    client, got = control_client(prefix, root)
     assert got["kfc"] == KFC1 and got["compensation"] and got["set_since_ns"]["kfc"] is None
     set_ = client.control_set("ankle", "kfc", 0.4)
     assert set_["kfc"] == 0.4 and set_["set_since_ns"]["kfc"] > 0
@@ -195,6 +209,33 @@ def test_control_set_changes_the_next_tick_and_refusals_name_the_rule(daemon):
         c = client.command_for(seq, timeout_s=20.0)
         assert c is not None
         assert abs(c.i_ref_a[1] - current_ref(0.5, 0.0, 0.4, KT1, R1, MAX_I1)) <= 1e-12, k
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=20) == 0
+
+
+def test_control_reports_the_models_and_switches_them_by_name(daemon):
+    proc, prefix, root, model, log = daemon
+    client, got = control_client(prefix, root)
+    # The ankle's own CV, its one alternate and `none`; the knee's PINN and `none`.
+    assert (got["model"], got["model_kind"]) == ("default", "cv")
+    assert got["models"] == ["default", "scv_b", "none"]
+    assert got["model_since_tick"] == 0 and got["set_since_ns"]["model"] is None
+    knee = client.control_get("knee")
+    assert (knee["model"], knee["model_kind"], knee["models"]) == ("default", "pinn", ["default", "none"])
+
+    for name, kind in [("scv_b", "scv"), ("none", "none"), ("default", "cv"), ("scv_b", "scv")]:
+        set_ = client.control_set("ankle", "model", name)
+        assert (set_["model"], set_["model_kind"]) == (name, kind)
+        assert set_["set_since_ns"]["model"] > 0 and set_["models"] == ["default", "scv_b", "none"]
+        got = client.control_get("ankle")
+        assert (got["model"], got["model_kind"]) == (name, kind)
+    with pytest.raises(ValueError, match=r"no such model of this joint \(available: default, scv_b, none\)"):
+        client.control_set("ankle", "model", "lugre_x")
+    with pytest.raises(ValueError, match=r"no such model of this joint \(available: default, none\)"):
+        client.control_set("knee", "model", "scv_b")  # another joint's alternate
+    # Refused names changed nothing.
+    assert client.control_get("ankle")["model"] == "scv_b"
+    assert client.control_get("knee")["model"] == "default"
     proc.send_signal(signal.SIGTERM)
     assert proc.wait(timeout=20) == 0
 
