@@ -66,6 +66,14 @@ pub struct Args {
     /// Velocity threshold of the sliding selection [rad/s].
     #[arg(long, default_value_t = 0.03)]
     pub v_min: f64,
+    /// SCV: the sliding rows down to this |ṡ| are fitted [rad/s] (the Stribeck region below
+    /// `--v-min`; `--v-min` is the SCV's low-speed threshold and the CV's selection).
+    #[arg(long, default_value_t = 0.003)]
+    pub stribeck_v_min: f64,
+    /// SCV: share of the rows, at their end, held out as the validation block; the SCV is kept only
+    /// if it beats the CV there, else it is the CV (ks = kc).
+    #[arg(long, default_value_t = 0.2)]
+    pub validation_fraction: f64,
     /// Use the simulator truth column instead of the label (diagnostics).
     #[arg(long)]
     pub truth: bool,

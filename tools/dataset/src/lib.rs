@@ -787,7 +787,9 @@ pub fn read_columns(
     Ok(names.into_iter().zip(data).collect())
 }
 
-/// Minimal float formatting into a reusable buffer (std `Display`: shortest round-trip text).
+/// Minimal float formatting into a reusable buffer: shortest round-trip text, positional (std
+/// `Display`) for 1e-5 ≤ |v| < 1e16 and 0, else in exponent form (`LowerExp`, e.g. `1.5e-110`), since
+/// `Display` writes every leading zero of a tiny value (110 of them for 1e-110).
 mod ryu_like {
     use std::fmt::Write;
 
@@ -797,8 +799,46 @@ mod ryu_like {
     impl Buf {
         pub fn format(&mut self, v: f64) -> &[u8] {
             self.0.clear();
-            let _ = write!(self.0, "{v}");
+            let a = v.abs();
+            if a == 0.0 || !a.is_finite() || (1e-5..1e16).contains(&a) {
+                let _ = write!(self.0, "{v}");
+            } else {
+                let _ = write!(self.0, "{v:e}");
+            }
             self.0.as_bytes()
+        }
+    }
+
+    #[cfg(test)]
+    mod tests {
+        use super::Buf;
+
+        #[test]
+        fn floats_are_shortest_round_trip_text_without_runs_of_zeros() {
+            let mut b = Buf::default();
+            for (v, want) in [
+                (0.0, "0"),
+                (-0.0, "-0"),
+                (0.25, "0.25"),
+                (1e-5, "0.00001"),
+                (1.5e-110, "1.5e-110"),
+                (-3.0e-7, "-3e-7"),
+                (2.0e20, "2e20"),
+                (f64::NAN, "NaN"),
+                (f64::INFINITY, "inf"),
+            ] {
+                let t = std::str::from_utf8(b.format(v)).unwrap().to_owned();
+                assert_eq!(t, want, "{v:?}");
+                if v.is_finite() {
+                    assert_eq!(t.parse::<f64>().unwrap().to_bits(), v.to_bits(), "{t}");
+                }
+            }
+            for k in -320..300 {
+                let v = 1.2345678901234567 * 10f64.powi(k);
+                let t = std::str::from_utf8(b.format(v)).unwrap().to_owned();
+                assert!(t.len() <= 24, "{t}");
+                assert_eq!(t.parse::<f64>().unwrap(), v, "{t}");
+            }
         }
     }
 }

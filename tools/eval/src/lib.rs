@@ -667,6 +667,18 @@ pub fn build_report(
     }
 }
 
+/// What the per-run table's inside/outside columns mean: the training range they are relative to, or
+/// that there is none (the columns are then empty).
+fn per_run_header(range: Option<&TrainingRange>) -> String {
+    match range {
+        Some(t) => format!(
+            "inside/outside = s and sdot inside/outside the training range ({}): s [{:.4}, {:.4}] rad, sdot [{:.4}, {:.4}] rad/s",
+            t.source, t.range.s_rad[0], t.range.s_rad[1], t.range.sdot_rad_s[0], t.range.sdot_rad_s[1]
+        ),
+        None => "no training range given (the training runs or a train report): no extrapolation flags, inside/outside empty".into(),
+    }
+}
+
 /// Formats the report as a text table (pooled, then per dataset when there are several).
 pub fn format_table(r: &Report) -> String {
     fn f(v: Option<f64>) -> String {
@@ -708,15 +720,9 @@ pub fn format_table(r: &Report) -> String {
         }
     }
     if !r.per_run.is_empty() {
-        let range = match &r.training_range {
-            Some(t) => format!(
-                "training range ({}): s [{:.4}, {:.4}] rad, sdot [{:.4}, {:.4}] rad/s",
-                t.source, t.range.s_rad[0], t.range.s_rad[1], t.range.sdot_rad_s[0], t.range.sdot_rad_s[1]
-            ),
-            None => "no training range (give the training runs or a train report): no extrapolation flags".into(),
-        };
         s.push_str(&format!(
-            "\nPer run: RMSE [Nm] vs label; inside/outside = s and sdot inside/outside the {range}\n{:<22} {:<22} {:>8} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9}\n",
+            "\nPer run: RMSE [Nm] vs label; {}\n{:<22} {:<22} {:>8} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9}\n",
+            per_run_header(r.training_range.as_ref()),
             "run", "model", "n", "extrap", "all", "sliding", "stick", "inside", "outside"
         ));
         for run in &r.per_run {
@@ -844,6 +850,28 @@ pub fn test_chunks_from_report(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_per_run_header_says_which_training_range_or_that_there_is_none() {
+        let none = per_run_header(None);
+        assert!(none.starts_with("no training range given"), "{none}");
+        assert!(!none.contains("the no training range"), "{none}");
+        let t = TrainingRange {
+            source: "datasets".into(),
+            range: frictionless_dataset::MotionRange {
+                s_rad: [-0.5, 0.5],
+                sdot_rad_s: [-2.0, 2.0],
+                rows: 10,
+            },
+        };
+        let some = per_run_header(Some(&t));
+        assert!(
+            some.starts_with(
+                "inside/outside = s and sdot inside/outside the training range (datasets)"
+            ),
+            "{some}"
+        );
+    }
 
     fn ds(n: usize) -> Dataset {
         Dataset {

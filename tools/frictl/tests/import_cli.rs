@@ -2585,3 +2585,48 @@ fn the_other_joints_positions_are_checked_against_the_urdf_before_labelling() {
     );
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// A gear ratio the import needs but was not given is an error naming `--gear-ratio` (not the NaN it
+/// stands for inside), and `frictl preprocess` on a robot's CSV (no acquisition sidecar) points to
+/// `frictl import`.
+#[test]
+fn a_missing_gear_ratio_names_the_flag_and_preprocess_of_a_robot_csv_points_to_import() {
+    let d = dir().join("noratio");
+    std::fs::create_dir_all(&d).unwrap();
+    let log = d.join("robot.csv");
+    write_log(&log, 1.0, 1);
+    let out = d.join("ds.csv");
+    let e = err_text(
+        frictl(&[
+            "import",
+            "csv",
+            s(&log),
+            "--joint",
+            "wrist",
+            "--column",
+            "time=time",
+            "--column",
+            "s=q_deg",
+            "--column",
+            "theta=theta_motor",
+            "--column",
+            "tau_f=friction_nm",
+            "--unit",
+            "s=deg",
+            "--kt",
+            "0.1",
+            "-o",
+            s(&out),
+        ]),
+        "import without --gear-ratio",
+    );
+    assert!(e.contains("--gear-ratio"), "{e}");
+    assert!(!e.contains("NaN"), "{e}");
+    assert!(!out.exists(), "nothing written on error");
+    let e = err_text(
+        frictl(&["preprocess", s(&log), "--out", s(&out)]),
+        "preprocess of a robot CSV",
+    );
+    assert!(e.contains("frictl import"), "{e}");
+    assert!(e.contains("robot.json"), "{e}");
+}

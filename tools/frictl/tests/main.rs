@@ -15,6 +15,7 @@ mod experiment_online_offline;
 mod experiment_oracle;
 mod files_cli;
 mod fit_lugre;
+mod fit_scv;
 mod import_cli;
 mod leg_frictiond;
 mod onpolicy_cli;

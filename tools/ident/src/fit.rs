@@ -35,6 +35,8 @@
 //! - [`Method::Adam`]: the paper/authors' procedure for parity — full-batch Adam on softplus
 //!   parameters (lr 0.01, 3000 epochs, L1 or MSE loss).
 //! - [`sliding_quadrant_mask`]: the authors' sample selection (|ṡ| > 0.03 rad/s and ṡ·τ_F > 0).
+//! - [`fit_from_starts`]: [`fit`] with starts of the caller's besides the model's own; the SCV fit of
+//!   `frictl fit scv` (data-derived bounds, the CV fallback) is [`crate::scv_fit`].
 //!
 //! What it is not: a fitter for history (PINN) models, or a robust/weighted regression.
 
@@ -138,6 +140,14 @@ pub struct FitBounds {
     pub alpha_max: f64,
     /// Largest ks/kc (fs/fc for the code form).
     pub ks_max_ratio: f64,
+    /// Largest Coulomb level kc (fc) [Nm] (SCV, SCV code form; absent in files written before:
+    /// unbounded).
+    #[serde(default = "unbounded_kc")]
+    pub kc_max_nm: f64,
+}
+
+fn unbounded_kc() -> f64 {
+    P_MAX
 }
 
 impl Default for FitBounds {
@@ -150,6 +160,7 @@ impl Default for FitBounds {
             alpha_min: 0.2,
             alpha_max: 5.0,
             ks_max_ratio: 10.0,
+            kc_max_nm: P_MAX,
         }
     }
 }
@@ -164,6 +175,7 @@ impl FitBounds {
         alpha_min: P_MIN,
         alpha_max: P_MAX,
         ks_max_ratio: P_MAX,
+        kc_max_nm: P_MAX,
     };
 
     /// Checks `0 < lo ≤ hi` for each pair and `ks_max_ratio > 0` (∞ allowed as an upper bound).
@@ -173,6 +185,7 @@ impl FitBounds {
             ("vs", self.vs_min, self.vs_max),
             ("alpha", self.alpha_min, self.alpha_max),
             ("ks/kc", P_MIN, self.ks_max_ratio),
+            ("kc", P_MIN, self.kc_max_nm),
         ] {
             if !(lo > 0.0 && lo.is_finite() && hi >= lo) {
                 return Err(FitError::Bounds(format!(
@@ -426,7 +439,7 @@ impl Fittable for ScvParams {
 
     fn bounds(b: &FitBounds) -> Vec<(f64, f64)> {
         vec![
-            (P_MIN, P_MAX),
+            (P_MIN, b.kc_max_nm),
             (b.ka_min, b.ka_max),
             (P_MIN, P_MAX),
             (P_MIN, b.ks_max_ratio),
@@ -535,7 +548,7 @@ impl Fittable for ScvCodeParams {
 
     fn bounds(b: &FitBounds) -> Vec<(f64, f64)> {
         vec![
-            (P_MIN, P_MAX),
+            (P_MIN, b.kc_max_nm),
             (P_MIN, b.ks_max_ratio),
             (P_MIN, P_MAX),
             (b.vs_min, b.vs_max),
@@ -642,11 +655,23 @@ pub fn fit<M: Fittable>(
     tau_nm: &[f64],
     opts: &FitOptions,
 ) -> Result<FitResult<M>, FitError> {
+    fit_from_starts(v_rad_s, tau_nm, opts, &[])
+}
+
+/// [`fit`] that also tries `extra_starts` (besides [`Fittable::starts`]); each start is first moved
+/// into the bounds.
+pub fn fit_from_starts<M: Fittable>(
+    v_rad_s: &[f64],
+    tau_nm: &[f64],
+    opts: &FitOptions,
+    extra_starts: &[M],
+) -> Result<FitResult<M>, FitError> {
     check_data(v_rad_s, tau_nm, M::NAME, M::N_PARAMS)?;
     opts.bounds.validate()?;
     let (lo, hi) = z_box::<M>(&opts.bounds);
     let starts: Vec<M> = M::starts(v_rad_s, tau_nm)
         .iter()
+        .chain(extra_starts)
         .map(|s| project_into_bounds(s, &opts.bounds))
         .collect();
     let (model, iterations, last_pass) = match opts.method {

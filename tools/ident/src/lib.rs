@@ -19,6 +19,7 @@
 //! - [`whole_body`]: τ_ID = RNEA(q, q̇, q̈) on the whole URDF from every joint a log has, for the
 //!   `current` label;
 //! - [`fit`]: least-squares fits of the static CV and SCV friction models to a dataset (`frictl fit`);
+//! - [`scv_fit`]: the SCV fit `frictl fit scv` runs (data bounds, low-speed rows, the CV fallback);
 //! - [`lugre_fit`]: LuGre identification (Stribeck curve, bristle σ0 and σ1) from the time series
 //!   (`frictl fit lugre`).
 //!
@@ -63,6 +64,7 @@ pub mod lugre_fit;
 pub mod matched;
 pub mod preprocess;
 pub mod ripple;
+pub mod scv_fit;
 mod signals;
 pub mod stream;
 pub mod whole_body;

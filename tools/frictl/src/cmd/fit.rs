@@ -2,7 +2,9 @@
 //! and print/write it as a `[[joint]]` TOML snippet in the daemon's config format, and as JSON
 //! ([`FitFile`], the one fit report; `docs/fitting.md` documents its keys).
 //!
-//! The static models are fitted per sample ([`frictionless_ident::fit`]). LuGre is identified from
+//! The static models are fitted per sample ([`frictionless_ident::fit`]); the SCV by
+//! [`frictionless_ident::scv_fit`] (the low-speed rows in, bounds from the data, and the CV with
+//! ks = kc when the SCV does not beat it on a validation block of the rows). LuGre is identified from
 //! the time series ([`frictionless_ident::lugre_fit`]): the Stribeck curve from the sliding rows,
 //! then the bristle stiffness σ0 and damping σ1 by simulating the bristle state over the dataset's
 //! chunks, then all seven together (`--no-joint-refinement` skips this); `--sigma0` / `--sigma1`
@@ -24,6 +26,7 @@ use frictionless_ident::fit::{
 use frictionless_ident::lugre_fit::{
     LugreFitOptions, LugreSeries, LugreStage, fit_lugre, lugre_errors, static_errors, time_segments,
 };
+use frictionless_ident::scv_fit::{ScvFit, ScvFitInput, ScvValidation, fit_scv_guarded};
 use serde::{Deserialize, Serialize};
 
 pub use frictl_cli::fit::*;
@@ -158,6 +161,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         alpha_min: args.alpha_min,
         alpha_max: args.alpha_max,
         ks_max_ratio: args.ks_max_ratio,
+        ..FitBounds::default()
     };
     let opts = FitOptions {
         method: args.method,
@@ -179,10 +183,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .static_summary(fit::<CvParams>(&v, &t, &opts).map_err(at_line)?, |params| {
                 FittedModel::Cv { params }
             })?,
-        ModelKind::Scv => ctx.static_summary(
-            fit::<ScvParams>(&v, &t, &opts).map_err(at_line)?,
-            |params| FittedModel::Scv { params },
-        )?,
+        ModelKind::Scv => ctx.scv_summary(&use_rows, &mask, &opts)?,
         ModelKind::ScvCode => ctx.static_summary(
             fit::<ScvCodeParams>(&v, &t, &opts).map_err(at_line)?,
             |params| FittedModel::ScvCode { params },
@@ -248,6 +249,9 @@ struct Summary {
     at_bounds: Vec<String>,
     held_out: Vec<HeldOutScore>,
     lugre: Option<LugreReport>,
+    /// The bounds the fit used when the data narrowed the flags' (SCV).
+    bounds: Option<FitBounds>,
+    scv: Option<ScvReport>,
 }
 
 /// A model's (RMSE, MAE, rows) on a series.
@@ -326,7 +330,61 @@ impl Ctx<'_> {
             at_bounds: r.at_bounds,
             held_out,
             lugre: None,
+            bounds: None,
+            scv: None,
         })
+    }
+
+    /// The SCV ([`fit_scv_guarded`]): `use_rows` are the rows it may use, `cv_rows` (within them)
+    /// the CV's selection; the SCV fits the sliding rows down to `--stribeck-v-min`.
+    fn scv_summary(
+        &self,
+        use_rows: &[bool],
+        cv_rows: &[bool],
+        opts: &FitOptions,
+    ) -> anyhow::Result<Summary> {
+        let a = self.args;
+        anyhow::ensure!(
+            a.stribeck_v_min.is_finite() && a.stribeck_v_min >= 0.0,
+            "--stribeck-v-min {}: must be finite and ≥ 0",
+            a.stribeck_v_min
+        );
+        let scv_mask: Vec<bool> = if a.sliding_quadrants {
+            sliding_quadrant_mask(&self.ds.sdot_rad_s, self.target, a.stribeck_v_min)
+        } else {
+            vec![true; self.ds.len()]
+        };
+        let v = select(&self.ds.sdot_rad_s, use_rows);
+        let t = select(self.target, use_rows);
+        let scv_rows = select_bool(&scv_mask, use_rows);
+        let cv_rows = select_bool(cv_rows, use_rows);
+        let input = ScvFitInput {
+            v_rad_s: &v,
+            tau_nm: &t,
+            scv_rows: &scv_rows,
+            cv_rows: &cv_rows,
+            low_speed_rad_s: a.v_min,
+            validation_fraction: a.validation_fraction,
+        };
+        let f: ScvFit = fit_scv_guarded(&input, opts)
+            .map_err(|e| anyhow::anyhow!("{}: frictl fit scv: {e}", a.dataset.display()))?;
+        match &f.fallback {
+            Some(why) => eprintln!("frictl fit scv: {why}"),
+            None => eprintln!(
+                "frictl fit scv: validation block ({} rows): RMSE SCV {:.4} Nm < CV {:.4} Nm",
+                f.validation.rows,
+                f.validation.scv_rmse_nm.unwrap_or(f64::NAN),
+                f.validation.cv_rmse_nm
+            ),
+        }
+        let mut s = self.static_summary(f.result, |params| FittedModel::Scv { params })?;
+        s.bounds = Some(f.bounds);
+        s.scv = Some(ScvReport {
+            validation: f.validation,
+            fallback: f.fallback,
+            cv: f.cv.model,
+        });
+        Ok(s)
     }
 
     /// LuGre from the time series: `use_rows` may enter the cost, `sliding` (within them) give the
@@ -380,6 +438,8 @@ impl Ctx<'_> {
             iterations: r.stages.iter().map(|s| s.evaluations).sum(),
             at_bounds: r.at_bounds,
             held_out,
+            bounds: None,
+            scv: None,
             lugre: Some(LugreReport {
                 dt_s,
                 warmup_travel_rad: a.warmup_travel_rad,
@@ -497,7 +557,7 @@ fn report(r: Summary, args: &Args) -> anyhow::Result<(String, FitFile)> {
         rmse_valid_nm: r.rmse_valid_nm,
         n_samples: r.n_samples,
         iterations: r.iterations,
-        bounds: FitBounds {
+        bounds: r.bounds.unwrap_or(FitBounds {
             ka_min: args.ka_min,
             ka_max: args.ka_max,
             vs_min: args.vs_min,
@@ -505,13 +565,15 @@ fn report(r: Summary, args: &Args) -> anyhow::Result<(String, FitFile)> {
             alpha_min: args.alpha_min,
             alpha_max: args.alpha_max,
             ks_max_ratio: args.ks_max_ratio,
-        },
+            ..FitBounds::default()
+        }),
         at_bounds: r.at_bounds,
         sliding_quadrants: args.sliding_quadrants,
         v_min_rad_s: args.v_min,
         dataset: args.dataset.display().to_string(),
         held_out: r.held_out,
         lugre: r.lugre,
+        scv: r.scv,
     };
     Ok((s, json))
 }
@@ -527,6 +589,26 @@ pub struct HeldOutScore {
     pub rmse_nm: f64,
     /// MAE [Nm].
     pub mae_nm: f64,
+}
+
+/// How the SCV fit decided between the SCV and the CV ([`fit_scv_guarded`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ScvReport {
+    /// The validation block: both models' RMSE there.
+    pub validation: ScvValidation,
+    /// Why the SCV is the CV (`ks = kc`); absent when the SCV was better on the validation block.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fallback: Option<String>,
+    /// The CV fitted on the CV's rows (the SCV's fallback).
+    pub cv: CvParams,
+}
+
+/// `x` where `mask` is true.
+fn select_bool(x: &[bool], mask: &[bool]) -> Vec<bool> {
+    x.iter()
+        .zip(mask)
+        .filter_map(|(&v, &m)| m.then_some(v))
+        .collect()
 }
 
 /// How a LuGre fit got its parameters.
@@ -590,6 +672,9 @@ pub struct FitFile {
     /// LuGre: the stages of the identification.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lugre: Option<LugreReport>,
+    /// SCV: the validation block and the fallback to the CV.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scv: Option<ScvReport>,
 }
 
 impl FitFile {

@@ -17,6 +17,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &[&args.log, &sidecar_path],
         &[&args.out, &args.out.with_extension("json")],
     )?;
+    anyhow::ensure!(
+        !args.log.exists() || sidecar_path.exists(),
+        "{}: no sidecar {} beside it, so it is not a `frictl acquire` log; a robot's own log (CSV, YARP \
+         .mat, ROS 2 MCAP) is labelled by `frictl import csv|mat|mcap` (docs/robot-logs.md)",
+        args.log.display(),
+        sidecar_path.display()
+    );
     let meta = LogMeta::read_json(&sidecar_path)?;
     let log = RawLog::read_csv(&args.log)?;
     let sha = frictionless_dataset::file_sha256_hex(&args.log)
