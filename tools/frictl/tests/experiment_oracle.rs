@@ -15,9 +15,8 @@ use std::path::PathBuf;
 use frictionless::filter::Butterworth;
 use frictionless_experiment::controller::ComputedTorque;
 use frictionless_experiment::metrics;
-use frictionless_experiment::run::{
-    JointPlan, JointSetup, JointTrace, TrialOptions, run_trial_with,
-};
+use frictionless_experiment::rig::JointSetup;
+use frictionless_experiment::run::{JointPlan, JointTrace, TrialOptions, run_trial_with};
 use frictionless_experiment::session::{Binaries, FrictionModel, LawSettings, Lpf, Mode};
 use frictionless_experiment::suite::sine;
 
