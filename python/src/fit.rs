@@ -76,42 +76,9 @@ pub fn fit_static<'py>(
     bounds: BTreeMap<String, f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let tag = tag(model)?;
-    let method = match method {
-        "lm" => Method::Lm,
-        "adam" => Method::Adam,
-        _ => {
-            return Err(PyValueError::new_err(format!(
-                "method `{method}`: expected \"lm\" or \"adam\""
-            )));
-        }
-    };
-    let adam_loss = match loss {
-        "l1" => Loss::L1,
-        "mse" => Loss::Mse,
-        _ => {
-            return Err(PyValueError::new_err(format!(
-                "loss `{loss}`: expected \"l1\" or \"mse\""
-            )));
-        }
-    };
-    let mut b = FitBounds::default();
-    for (k, v) in &bounds {
-        let slot = match k.as_str() {
-            "ka_min" => &mut b.ka_min,
-            "ka_max" => &mut b.ka_max,
-            "vs_min" => &mut b.vs_min,
-            "vs_max" => &mut b.vs_max,
-            "alpha_min" => &mut b.alpha_min,
-            "alpha_max" => &mut b.alpha_max,
-            "ks_max_ratio" => &mut b.ks_max_ratio,
-            _ => {
-                return Err(PyValueError::new_err(format!(
-                    "bound `{k}`: expected ka_min, ka_max, vs_min, vs_max, alpha_min, alpha_max or ks_max_ratio"
-                )));
-            }
-        };
-        *slot = *v;
-    }
+    let method = parse_method(method)?;
+    let adam_loss = parse_loss(loss)?;
+    let b = parse_bounds(&bounds)?;
     let opts = FitOptions {
         method,
         adam_loss,
@@ -162,6 +129,64 @@ pub fn fit_static<'py>(
     d.set_item("mae_fitted_nm", f.mae_nm)?;
     d.set_item("n_samples", f.n_samples)?;
     d.set_item("iterations", f.iterations)?;
+    d.set_item("bounds", bounds_dict(py, &b)?)?;
+    d.set_item("at_bounds", f.at_bounds)?;
+    d.set_item("sliding_quadrants", sliding_quadrants)?;
+    d.set_item("v_min_rad_s", v_min_rad_s)?;
+    Ok(d)
+}
+
+/// The fitting method of its name (`"lm"`, `"adam"`).
+fn parse_method(method: &str) -> PyResult<Method> {
+    Ok(match method {
+        "lm" => Method::Lm,
+        "adam" => Method::Adam,
+        _ => {
+            return Err(PyValueError::new_err(format!(
+                "method `{method}`: expected \"lm\" or \"adam\""
+            )));
+        }
+    })
+}
+
+/// Adam's loss of its name (`"l1"`, `"mse"`).
+fn parse_loss(loss: &str) -> PyResult<Loss> {
+    Ok(match loss {
+        "l1" => Loss::L1,
+        "mse" => Loss::Mse,
+        _ => {
+            return Err(PyValueError::new_err(format!(
+                "loss `{loss}`: expected \"l1\" or \"mse\""
+            )));
+        }
+    })
+}
+
+/// The default bounds with those of `bounds` (by key) in their place.
+fn parse_bounds(bounds: &BTreeMap<String, f64>) -> PyResult<FitBounds> {
+    let mut b = FitBounds::default();
+    for (k, v) in bounds {
+        let slot = match k.as_str() {
+            "ka_min" => &mut b.ka_min,
+            "ka_max" => &mut b.ka_max,
+            "vs_min" => &mut b.vs_min,
+            "vs_max" => &mut b.vs_max,
+            "alpha_min" => &mut b.alpha_min,
+            "alpha_max" => &mut b.alpha_max,
+            "ks_max_ratio" => &mut b.ks_max_ratio,
+            _ => {
+                return Err(PyValueError::new_err(format!(
+                    "bound `{k}`: expected ka_min, ka_max, vs_min, vs_max, alpha_min, alpha_max or ks_max_ratio"
+                )));
+            }
+        };
+        *slot = *v;
+    }
+    Ok(b)
+}
+
+/// The bounds as a dict, keyed as [`parse_bounds`] reads them.
+fn bounds_dict<'py>(py: Python<'py>, b: &FitBounds) -> PyResult<Bound<'py, PyDict>> {
     let bd = PyDict::new(py);
     bd.set_item("ka_min", b.ka_min)?;
     bd.set_item("ka_max", b.ka_max)?;
@@ -170,11 +195,7 @@ pub fn fit_static<'py>(
     bd.set_item("alpha_min", b.alpha_min)?;
     bd.set_item("alpha_max", b.alpha_max)?;
     bd.set_item("ks_max_ratio", b.ks_max_ratio)?;
-    d.set_item("bounds", bd)?;
-    d.set_item("at_bounds", f.at_bounds)?;
-    d.set_item("sliding_quadrants", sliding_quadrants)?;
-    d.set_item("v_min_rad_s", v_min_rad_s)?;
-    Ok(d)
+    Ok(bd)
 }
 
 fn eval<M: StaticFriction>(params: &[f64], v: &[f64]) -> PyResult<Vec<f64>> {

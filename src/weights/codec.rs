@@ -177,15 +177,7 @@ pub(super) fn parse_header(b: &[u8]) -> Result<Header, WeightError> {
     let (features, n_inputs) = parse_features(b, version_minor)?;
     let input_units = parse_units(b, &features)?;
 
-    let d_code = rd_u8(b, off::DTYPE);
-    let dtype = layout::dtype_from_code(d_code).ok_or_else(|| unknown("dtype", d_code))?;
-    if dtype == StorageDtype::Int16 && version_minor < layout::MINOR_INT16 {
-        return Err(WeightError::Invalid {
-            field: "dtype",
-            value: format!("int16 (code {d_code}) in a 1.{version_minor} file"),
-            reason: "int16 storage exists from format 1.4 on",
-        });
-    }
+    let dtype = parse_dtype(b, version_minor)?;
     let f_code = rd_u8(b, off::FILTERING);
     let filtering =
         layout::filtering_from_code(f_code).ok_or_else(|| unknown("filtering", f_code))?;
@@ -221,52 +213,11 @@ pub(super) fn parse_header(b: &[u8]) -> Result<Header, WeightError> {
     )?;
     inconsistent("file_len", rd_u64(b, off::FILE_LEN), layout.file_len)?;
 
-    let scv = if flag(b, off::SCV_PRESENT, "scv_present")? {
-        let v = |i: usize| rd_f64(b, off::SCV + 8 * i);
-        Some(ScvParams {
-            kc: v(0),
-            ka: v(1),
-            kv: v(2),
-            ks: v(3),
-            vs: v(4),
-            alpha: v(5),
-        })
-    } else {
-        None
-    };
+    let scv = parse_scv(b)?;
 
-    // Before minor 2 these bytes are reserved (checked to be zero by `decode`, ignored here).
-    let input_range = if version_minor >= layout::MINOR_INPUT_RANGE
-        && flag(b, off::RANGE_PRESENT, "range_present")?
-    {
-        let v = |i: usize| rd_f32(b, off::INPUT_RANGE + 4 * i);
-        let mut r = super::InputRange {
-            blocks: [[0.0; 2]; layout::RANGE_BLOCKS],
-            temperature: [v(2 * layout::RANGE_BLOCKS), v(2 * layout::RANGE_BLOCKS + 1)],
-        };
-        for (k, s) in r.blocks.iter_mut().enumerate() {
-            *s = [v(2 * k), v(2 * k + 1)];
-        }
-        Some(r)
-    } else {
-        None
-    };
+    let input_range = parse_input_range(b, version_minor)?;
 
-    // NaN = not measured; only the canonical quiet NaN the writer uses (so re-encoding reproduces the
-    // file); a value is checked (finite, ≥ 0) with the rest of the metadata.
-    let quant_max_error_nm = if version_minor >= layout::MINOR_INT8 {
-        let v = rd_f32(b, off::QUANT_MAX_ERROR);
-        if v.is_nan() && v.to_bits() != f32::NAN.to_bits() {
-            return Err(WeightError::Invalid {
-                field: "quant_max_error_nm",
-                value: format!("NaN {:#010x}", v.to_bits()),
-                reason: "not measured is the quiet NaN 0x7fc00000",
-            });
-        }
-        Some(v).filter(|v| !v.is_nan())
-    } else {
-        None
-    };
+    let quant_max_error_nm = parse_quant_max_error(b, version_minor)?;
 
     Ok(Header {
         input_range,
@@ -290,6 +241,81 @@ pub(super) fn parse_header(b: &[u8]) -> Result<Header, WeightError> {
         created_unix_s: rd_u64(b, off::CREATED),
         joint_name: text::<64>(b, off::JOINT_NAME, "joint_name")?,
         tool_version: text::<32>(b, off::TOOL_VERSION, "tool_version")?,
+    })
+}
+
+/// The storage dtype (int16 only from format 1.4 on).
+fn parse_dtype(b: &[u8], version_minor: u16) -> Result<StorageDtype, WeightError> {
+    let d_code = rd_u8(b, off::DTYPE);
+    let dtype = layout::dtype_from_code(d_code).ok_or_else(|| unknown("dtype", d_code))?;
+    if dtype == StorageDtype::Int16 && version_minor < layout::MINOR_INT16 {
+        return Err(WeightError::Invalid {
+            field: "dtype",
+            value: format!("int16 (code {d_code}) in a 1.{version_minor} file"),
+            reason: "int16 storage exists from format 1.4 on",
+        });
+    }
+    Ok(dtype)
+}
+
+/// The SCV prior, if the file has one.
+fn parse_scv(b: &[u8]) -> Result<Option<ScvParams>, WeightError> {
+    Ok(if flag(b, off::SCV_PRESENT, "scv_present")? {
+        let v = |i: usize| rd_f64(b, off::SCV + 8 * i);
+        Some(ScvParams {
+            kc: v(0),
+            ka: v(1),
+            kv: v(2),
+            ks: v(3),
+            vs: v(4),
+            alpha: v(5),
+        })
+    } else {
+        None
+    })
+}
+
+/// The training rows' input range, if the file has one.
+fn parse_input_range(
+    b: &[u8],
+    version_minor: u16,
+) -> Result<Option<super::InputRange>, WeightError> {
+    // Before minor 2 these bytes are reserved (checked to be zero by `decode`, ignored here).
+    Ok(
+        if version_minor >= layout::MINOR_INPUT_RANGE
+            && flag(b, off::RANGE_PRESENT, "range_present")?
+        {
+            let v = |i: usize| rd_f32(b, off::INPUT_RANGE + 4 * i);
+            let mut r = super::InputRange {
+                blocks: [[0.0; 2]; layout::RANGE_BLOCKS],
+                temperature: [v(2 * layout::RANGE_BLOCKS), v(2 * layout::RANGE_BLOCKS + 1)],
+            };
+            for (k, s) in r.blocks.iter_mut().enumerate() {
+                *s = [v(2 * k), v(2 * k + 1)];
+            }
+            Some(r)
+        } else {
+            None
+        },
+    )
+}
+
+/// The quantisation's largest error [N·m], if measured (from format 1.3 on).
+fn parse_quant_max_error(b: &[u8], version_minor: u16) -> Result<Option<f32>, WeightError> {
+    // NaN = not measured; only the canonical quiet NaN the writer uses (so re-encoding reproduces the
+    // file); a value is checked (finite, ≥ 0) with the rest of the metadata.
+    Ok(if version_minor >= layout::MINOR_INT8 {
+        let v = rd_f32(b, off::QUANT_MAX_ERROR);
+        if v.is_nan() && v.to_bits() != f32::NAN.to_bits() {
+            return Err(WeightError::Invalid {
+                field: "quant_max_error_nm",
+                value: format!("NaN {:#010x}", v.to_bits()),
+                reason: "not measured is the quiet NaN 0x7fc00000",
+            });
+        }
+        Some(v).filter(|v| !v.is_nan())
+    } else {
+        None
     })
 }
 
@@ -655,11 +681,55 @@ pub(super) fn decode(b: &[u8]) -> Result<ModelFile, WeightError> {
     if declared < present {
         return Err(WeightError::TrailingData { declared, present });
     }
+    check_reserved(b, &h)?;
+    let gear_ratio = GearRatio::new(h.gear_ratio).map_err(|e| WeightError::Invalid {
+        field: "gear_ratio",
+        value: e.0.to_string(),
+        reason: "must be finite and non-zero",
+    })?;
+
+    // All sizes below were checked against the limits and the byte count (file_len == len).
+    let n = h.n_inputs;
+    let norm_at = layout::FIXED_HEADER_LEN + h.layers.len() * layout::LAYER_ENTRY_LEN;
+    let norm = Normalisation {
+        mean: decode_values(b, norm_at, n, StorageDtype::F32),
+        scale: decode_values(b, norm_at + 4 * n, n, StorageDtype::F32),
+    };
+    let layers = decode_layers(b, &h)?;
+    let file = ModelFile {
+        meta: ModelMeta {
+            joint_name: h.joint_name,
+            gear_ratio,
+            kt_nm_per_a: h.kt_nm_per_a,
+            features: h.features,
+            scv: h.scv,
+            training: TrainingMeta {
+                dataset_sha256: h.dataset_sha256,
+                val_rmse_nm: h.val_rmse_nm,
+                test_rmse_nm: h.test_rmse_nm,
+                created_unix_s: h.created_unix_s,
+                tool_version: h.tool_version,
+                filtering: h.filtering,
+                input_range: h.input_range,
+                quant_max_error_nm: h.quant_max_error_nm,
+                teacher_sha256: h.teacher_sha256,
+            },
+        },
+        dtype: h.dtype,
+        mlp: MlpWeights { norm, layers },
+    };
+    validate_model(&file)?;
+    probe_output(&file)?;
+    Ok(file)
+}
+
+/// Checks that the reserved bytes of a file of a known minor version are zero.
+fn check_reserved(b: &[u8], h: &Header) -> Result<(), WeightError> {
     // `<=` (not `==`): stays right when VERSION_MINOR is raised.
     #[allow(clippy::absurd_extreme_comparisons)]
     let known_minor = h.version_minor <= layout::VERSION_MINOR;
     if known_minor {
-        for r in reserved_ranges(&h) {
+        for r in reserved_ranges(h) {
             if let Some((i, &value)) = b
                 .get(r.clone())
                 .unwrap_or(&[])
@@ -674,19 +744,12 @@ pub(super) fn decode(b: &[u8]) -> Result<ModelFile, WeightError> {
             }
         }
     }
-    let gear_ratio = GearRatio::new(h.gear_ratio).map_err(|e| WeightError::Invalid {
-        field: "gear_ratio",
-        value: e.0.to_string(),
-        reason: "must be finite and non-zero",
-    })?;
+    Ok(())
+}
 
-    // All sizes below were checked against the limits and the byte count (file_len == len).
-    let n = h.n_inputs;
-    let norm_at = layout::FIXED_HEADER_LEN + h.layers.len() * layout::LAYER_ENTRY_LEN;
-    let norm = Normalisation {
-        mean: decode_values(b, norm_at, n, StorageDtype::F32),
-        scale: decode_values(b, norm_at + 4 * n, n, StorageDtype::F32),
-    };
+/// Decodes the payload's layers as the header `h` lays them out (int8/int16: hidden layers as
+/// codes + scales + f32 biases, the output layer f32).
+fn decode_layers(b: &[u8], h: &Header) -> Result<Vec<DenseLayer>, WeightError> {
     let mut at = h.layout.payload_offset as usize;
     let mut layers = Vec::with_capacity(h.layers.len());
     for (k, l) in h.layers.iter().enumerate() {
@@ -717,31 +780,7 @@ pub(super) fn decode(b: &[u8]) -> Result<ModelFile, WeightError> {
             activation: l.activation,
         });
     }
-    let file = ModelFile {
-        meta: ModelMeta {
-            joint_name: h.joint_name,
-            gear_ratio,
-            kt_nm_per_a: h.kt_nm_per_a,
-            features: h.features,
-            scv: h.scv,
-            training: TrainingMeta {
-                dataset_sha256: h.dataset_sha256,
-                val_rmse_nm: h.val_rmse_nm,
-                test_rmse_nm: h.test_rmse_nm,
-                created_unix_s: h.created_unix_s,
-                tool_version: h.tool_version,
-                filtering: h.filtering,
-                input_range: h.input_range,
-                quant_max_error_nm: h.quant_max_error_nm,
-                teacher_sha256: h.teacher_sha256,
-            },
-        },
-        dtype: h.dtype,
-        mlp: MlpWeights { norm, layers },
-    };
-    validate_model(&file)?;
-    probe_output(&file)?;
-    Ok(file)
+    Ok(layers)
 }
 
 fn finite_all(field: impl Fn() -> String, v: &[f32]) -> Result<(), WeightError> {
@@ -960,47 +999,52 @@ pub(super) fn encode(f: &ModelFile) -> Result<Vec<u8>, WeightError> {
     let lay = encoded_layout(mlp, f.dtype).with_extra_header(teacher_len);
     // Sizes are within limits (validated), so the layout fits the header's fields and memory.
     let mut b = vec![0u8; lay.file_len as usize];
-    put(&mut b, off::MAGIC, &layout::MAGIC);
+    put_format_fields(&mut b, f, &lay);
+    put_meta_fields(&mut b, m);
+    let at = put_header_tables(&mut b, f);
+    debug_assert_eq!(at as u64, lay.header_len);
+    let mut at = lay.payload_offset as usize;
+    for (k, l) in mlp.layers.iter().enumerate() {
+        let dtype = match f.dtype {
+            StorageDtype::Int8 | StorageDtype::Int16 if k + 1 == mlp.layers.len() => {
+                StorageDtype::F32
+            }
+            d => d,
+        };
+        at = put_layer(&mut b, at, l, dtype);
+    }
+    debug_assert_eq!(at as u64, lay.file_len);
+    let crc = file_crc(&b);
+    put(&mut b, off::CRC, &crc.to_le_bytes());
+    Ok(b)
+}
+
+/// Writes the fixed header's format fields: magic, version, the lengths of `lay`, the feature set
+/// and its units, the network's shape, dtype, output unit and filtering.
+fn put_format_fields(b: &mut [u8], f: &ModelFile, lay: &Layout) {
+    let mlp = &f.mlp;
+    let m = &f.meta;
+    put(b, off::MAGIC, &layout::MAGIC);
+    put(b, off::VERSION_MAJOR, &layout::VERSION_MAJOR.to_le_bytes());
+    put(b, off::VERSION_MINOR, &layout::VERSION_MINOR.to_le_bytes());
+    put(b, off::HEADER_LEN, &(lay.header_len as u32).to_le_bytes());
     put(
-        &mut b,
-        off::VERSION_MAJOR,
-        &layout::VERSION_MAJOR.to_le_bytes(),
-    );
-    put(
-        &mut b,
-        off::VERSION_MINOR,
-        &layout::VERSION_MINOR.to_le_bytes(),
-    );
-    put(
-        &mut b,
-        off::HEADER_LEN,
-        &(lay.header_len as u32).to_le_bytes(),
-    );
-    put(
-        &mut b,
+        b,
         off::PAYLOAD_OFFSET,
         &(lay.payload_offset as u32).to_le_bytes(),
     );
-    put(&mut b, off::PAYLOAD_LEN, &lay.payload_len.to_le_bytes());
-    put(&mut b, off::FILE_LEN, &lay.file_len.to_le_bytes());
+    put(b, off::PAYLOAD_LEN, &lay.payload_len.to_le_bytes());
+    put(b, off::FILE_LEN, &lay.file_len.to_le_bytes());
     let units = layout::block_units(m.features.set);
     put(
-        &mut b,
+        b,
         off::FEATURE_SET,
         &layout::feature_set_code(m.features.set).to_le_bytes(),
     );
     b[off::N_BLOCKS] = units.len() as u8;
     b[off::TEMPERATURE] = u8::from(m.features.temperature);
-    put(
-        &mut b,
-        off::HISTORY,
-        &(m.features.history as u32).to_le_bytes(),
-    );
-    put(
-        &mut b,
-        off::N_INPUTS,
-        &(mlp.n_inputs() as u32).to_le_bytes(),
-    );
+    put(b, off::HISTORY, &(m.features.history as u32).to_le_bytes());
+    put(b, off::N_INPUTS, &(mlp.n_inputs() as u32).to_le_bytes());
     b[off::N_LAYERS] = mlp.layers.len() as u8;
     b[off::DTYPE] = layout::dtype_code(f.dtype);
     b[off::OUTPUT_UNIT] = layout::OUTPUT_UNIT.code();
@@ -1014,130 +1058,122 @@ pub(super) fn encode(f: &ModelFile) -> Result<Vec<u8>, WeightError> {
     if m.features.temperature {
         b[off::TEMPERATURE_UNIT] = layout::TEMPERATURE_UNIT.code();
     }
-    put(&mut b, off::GEAR_RATIO, &m.gear_ratio.get().to_le_bytes());
-    put(&mut b, off::KT, &m.kt_nm_per_a.to_le_bytes());
+}
+
+/// Writes the fixed header's model and training fields of `m`: gear ratio, kt, the SCV
+/// parameters, the input range, the hashes, errors, creation time and names.
+fn put_meta_fields(b: &mut [u8], m: &ModelMeta) {
+    put(b, off::GEAR_RATIO, &m.gear_ratio.get().to_le_bytes());
+    put(b, off::KT, &m.kt_nm_per_a.to_le_bytes());
     if let Some(s) = &m.scv {
         b[off::SCV_PRESENT] = 1;
         for (i, v) in [s.kc, s.ka, s.kv, s.ks, s.vs, s.alpha]
             .into_iter()
             .enumerate()
         {
-            put(&mut b, off::SCV + 8 * i, &v.to_le_bytes());
+            put(b, off::SCV + 8 * i, &v.to_le_bytes());
         }
     }
     if let Some(r) = &m.training.input_range {
         b[off::RANGE_PRESENT] = 1;
         let values = r.blocks.iter().chain(std::iter::once(&r.temperature));
         for (k, s) in values.enumerate() {
-            put(&mut b, off::INPUT_RANGE + 8 * k, &s[0].to_le_bytes());
-            put(&mut b, off::INPUT_RANGE + 8 * k + 4, &s[1].to_le_bytes());
+            put(b, off::INPUT_RANGE + 8 * k, &s[0].to_le_bytes());
+            put(b, off::INPUT_RANGE + 8 * k + 4, &s[1].to_le_bytes());
         }
     }
-    put(&mut b, off::DATASET_SHA256, &m.training.dataset_sha256);
+    put(b, off::DATASET_SHA256, &m.training.dataset_sha256);
     if m.training.teacher_sha256.is_some() {
         b[off::TEACHER_PRESENT] = 1;
     }
-    put(&mut b, off::VAL_RMSE, &m.training.val_rmse_nm.to_le_bytes());
+    put(b, off::VAL_RMSE, &m.training.val_rmse_nm.to_le_bytes());
     put(
-        &mut b,
+        b,
         off::QUANT_MAX_ERROR,
         &m.training
             .quant_max_error_nm
             .unwrap_or(f32::NAN)
             .to_le_bytes(),
     );
-    put(
-        &mut b,
-        off::TEST_RMSE,
-        &m.training.test_rmse_nm.to_le_bytes(),
-    );
-    put(
-        &mut b,
-        off::CREATED,
-        &m.training.created_unix_s.to_le_bytes(),
-    );
-    put(&mut b, off::JOINT_NAME, m.joint_name.as_bytes());
-    put(
-        &mut b,
-        off::TOOL_VERSION,
-        m.training.tool_version.as_bytes(),
-    );
+    put(b, off::TEST_RMSE, &m.training.test_rmse_nm.to_le_bytes());
+    put(b, off::CREATED, &m.training.created_unix_s.to_le_bytes());
+    put(b, off::JOINT_NAME, m.joint_name.as_bytes());
+    put(b, off::TOOL_VERSION, m.training.tool_version.as_bytes());
+}
 
+/// Writes the header's variable part after the fixed header (the layer table, the
+/// normalisation, the teacher's hash); returns where it ends.
+fn put_header_tables(b: &mut [u8], f: &ModelFile) -> usize {
+    let mlp = &f.mlp;
+    let m = &f.meta;
     let mut at = layout::FIXED_HEADER_LEN;
     for l in &mlp.layers {
-        put(&mut b, at, &(l.n_in as u32).to_le_bytes());
-        put(&mut b, at + 4, &(l.n_out as u32).to_le_bytes());
+        put(b, at, &(l.n_in as u32).to_le_bytes());
+        put(b, at + 4, &(l.n_out as u32).to_le_bytes());
         b[at + 8] = layout::activation_code(l.activation);
         at += layout::LAYER_ENTRY_LEN;
     }
     for v in mlp.norm.mean.iter().chain(&mlp.norm.scale) {
-        put(&mut b, at, &v.to_le_bytes());
+        put(b, at, &v.to_le_bytes());
         at += 4;
     }
     if let Some(t) = &m.training.teacher_sha256 {
-        put(&mut b, at, t);
+        put(b, at, t);
         at += layout::TEACHER_LEN;
     }
-    debug_assert_eq!(at as u64, lay.header_len);
-    at = lay.payload_offset as usize;
-    for (k, l) in mlp.layers.iter().enumerate() {
-        let dtype = match f.dtype {
-            StorageDtype::Int8 | StorageDtype::Int16 if k + 1 == mlp.layers.len() => {
-                StorageDtype::F32
+    at
+}
+
+/// Writes layer `l`'s weights and biases in `dtype` at `at` of the payload (int8 and int16 with
+/// one scale per output row before the biases); returns where they end.
+fn put_layer(b: &mut [u8], mut at: usize, l: &DenseLayer, dtype: StorageDtype) -> usize {
+    if dtype == StorageDtype::Int16 {
+        let rows = l.weight.chunks(l.n_in.max(1));
+        let scales: Vec<f32> = rows
+            .clone()
+            .map(crate::kernel::int16_channel_scale)
+            .collect();
+        for (row, &sc) in rows.zip(&scales) {
+            for &v in row {
+                put(b, at, &crate::kernel::int16_code(v, sc).to_le_bytes());
+                at += 2;
             }
-            d => d,
-        };
-        if dtype == StorageDtype::Int16 {
-            let rows = l.weight.chunks(l.n_in.max(1));
-            let scales: Vec<f32> = rows
-                .clone()
-                .map(crate::kernel::int16_channel_scale)
-                .collect();
-            for (row, &sc) in rows.zip(&scales) {
-                for &v in row {
-                    put(&mut b, at, &crate::kernel::int16_code(v, sc).to_le_bytes());
-                    at += 2;
-                }
-            }
-            for &v in scales.iter().chain(&l.bias) {
-                put(&mut b, at, &v.to_le_bytes());
-                at += 4;
-            }
-            continue;
         }
-        if dtype == StorageDtype::Int8 {
-            let rows = l.weight.chunks(l.n_in.max(1));
-            let scales: Vec<f32> = rows
-                .clone()
-                .map(crate::kernel::int8_channel_scale)
-                .collect();
-            for (row, &sc) in rows.zip(&scales) {
-                for &v in row {
-                    b[at] = crate::kernel::int8_code(v, sc) as u8;
-                    at += 1;
-                }
-            }
-            for &v in scales.iter().chain(&l.bias) {
-                put(&mut b, at, &v.to_le_bytes());
-                at += 4;
-            }
-            continue;
+        for &v in scales.iter().chain(&l.bias) {
+            put(b, at, &v.to_le_bytes());
+            at += 4;
         }
-        for &v in l.weight.iter().chain(&l.bias) {
-            match dtype {
-                StorageDtype::F32 | StorageDtype::Int8 | StorageDtype::Int16 => {
-                    put(&mut b, at, &v.to_le_bytes())
-                }
-                StorageDtype::F16 => put(&mut b, at, &f16::from_f32(v).to_le_bytes()),
-                StorageDtype::Bf16 => put(&mut b, at, &bf16::from_f32(v).to_le_bytes()),
-            }
-            at += dtype.size_bytes();
-        }
+        return at;
     }
-    debug_assert_eq!(at as u64, lay.file_len);
-    let crc = file_crc(&b);
-    put(&mut b, off::CRC, &crc.to_le_bytes());
-    Ok(b)
+    if dtype == StorageDtype::Int8 {
+        let rows = l.weight.chunks(l.n_in.max(1));
+        let scales: Vec<f32> = rows
+            .clone()
+            .map(crate::kernel::int8_channel_scale)
+            .collect();
+        for (row, &sc) in rows.zip(&scales) {
+            for &v in row {
+                b[at] = crate::kernel::int8_code(v, sc) as u8;
+                at += 1;
+            }
+        }
+        for &v in scales.iter().chain(&l.bias) {
+            put(b, at, &v.to_le_bytes());
+            at += 4;
+        }
+        return at;
+    }
+    for &v in l.weight.iter().chain(&l.bias) {
+        match dtype {
+            StorageDtype::F32 | StorageDtype::Int8 | StorageDtype::Int16 => {
+                put(b, at, &v.to_le_bytes())
+            }
+            StorageDtype::F16 => put(b, at, &f16::from_f32(v).to_le_bytes()),
+            StorageDtype::Bf16 => put(b, at, &bf16::from_f32(v).to_le_bytes()),
+        }
+        at += dtype.size_bytes();
+    }
+    at
 }
 
 /// See [`super::probe_output`].

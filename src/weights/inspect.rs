@@ -162,9 +162,9 @@ fn opt_f32(v: f32) -> String {
     }
 }
 
-impl fmt::Display for Inspection {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let units: Vec<&str> = self.input_units.iter().map(|u| u.symbol()).collect();
+impl Inspection {
+    /// The input blocks with their units and history lengths, the temperature last.
+    fn blocks_text(&self) -> String {
         let h = self.features.history;
         let mut blocks: Vec<String> = self
             .blocks
@@ -178,6 +178,33 @@ impl fmt::Display for Inspection {
                 layout::TEMPERATURE_UNIT.symbol()
             ));
         }
+        blocks.join(", ")
+    }
+
+    /// Every input block's range `r` with its unit, the temperature's last.
+    fn input_range_text(&self, r: &super::InputRange) -> String {
+        let mut parts: Vec<String> = self
+            .blocks
+            .iter()
+            .zip(&r.blocks)
+            .zip(&self.input_units)
+            .map(|((b, s), u)| format!("{} [{}, {}] {}", b.name(), s[0], s[1], u.symbol()))
+            .collect();
+        if self.features.temperature {
+            parts.push(format!(
+                "temperature [{}, {}] {}",
+                r.temperature[0],
+                r.temperature[1],
+                layout::TEMPERATURE_UNIT.symbol()
+            ));
+        }
+        parts.join(", ")
+    }
+}
+
+impl fmt::Display for Inspection {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let units: Vec<&str> = self.input_units.iter().map(|u| u.symbol()).collect();
         let sizes: Vec<String> = self.sizes.iter().map(usize::to_string).collect();
         writeln!(
             f,
@@ -192,7 +219,7 @@ impl fmt::Display for Inspection {
             "features       {}, H = {}, temperature = {}",
             self.features.set, self.features.history, self.features.temperature
         )?;
-        writeln!(f, "blocks         {}", blocks.join(", "))?;
+        writeln!(f, "blocks         {}", self.blocks_text())?;
         writeln!(
             f,
             "input units    [{}] ({} inputs)",
@@ -231,24 +258,7 @@ impl fmt::Display for Inspection {
         writeln!(f, "filtering      {:?}", self.filtering)?;
         match &self.input_range {
             None => writeln!(f, "input range    none (never out of range)")?,
-            Some(r) => {
-                let mut parts: Vec<String> = self
-                    .blocks
-                    .iter()
-                    .zip(&r.blocks)
-                    .zip(&self.input_units)
-                    .map(|((b, s), u)| format!("{} [{}, {}] {}", b.name(), s[0], s[1], u.symbol()))
-                    .collect();
-                if self.features.temperature {
-                    parts.push(format!(
-                        "temperature [{}, {}] {}",
-                        r.temperature[0],
-                        r.temperature[1],
-                        layout::TEMPERATURE_UNIT.symbol()
-                    ));
-                }
-                writeln!(f, "input range    {}", parts.join(", "))?;
-            }
+            Some(r) => writeln!(f, "input range    {}", self.input_range_text(r))?,
         }
         writeln!(
             f,

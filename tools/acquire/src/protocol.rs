@@ -491,6 +491,85 @@ impl<'m, 'a> JointRunner<'m, 'a> {
         self.model.current_for_accel(s, acc)
     }
 
+    /// After the last block: the row holding the joint at its first position since (inactive,
+    /// [`Mode::Hold`], the last chunk).
+    fn park_row(&mut self, meas: Measurement, truth: Option<Truth>, v: f64) -> LogRow {
+        let s = meas.s_rad;
+        let park = *self.park_at.get_or_insert(s);
+        let i_ref = self
+            .position_current(s, v, park)
+            .clamp(-self.model.i_max_a, self.model.i_max_a);
+        LogRow {
+            chunk: self.blocks.last().map_or(0, |b| b.chunk),
+            active: false,
+            mode: Mode::Hold,
+            meas,
+            i_ref_a: i_ref,
+            truth,
+        }
+    }
+
+    /// The excitation's base current at position `s` [A]: the gravity's, or none.
+    fn holding_current_a(&self, s: f64) -> f64 {
+        let model = self.model;
+        match self.cfg.holding_current {
+            HoldingCurrent::Gravity => model.current_for_torque(model.link.gravity_nm(s)),
+            HoldingCurrent::Zero => 0.0,
+        }
+    }
+
+    /// Why the excitation must stop and hold at `meas`: a position limit, or the safety current.
+    fn latch_reason(&self, meas: &Measurement) -> Option<LatchReason> {
+        let s = meas.s_rad;
+        if s <= self.lim_lo || s >= self.lim_hi {
+            Some(LatchReason::PositionLimit)
+        } else if meas.i_meas_a.abs() >= self.cfg.max_safety_current_a {
+            Some(LatchReason::Current)
+        } else {
+            None
+        }
+    }
+
+    /// The mode and current [A] of the excitation `kind` at `t` [s] into it, at position `s`
+    /// [rad] and velocity `v` [rad/s].
+    fn excitation(&self, kind: &BlockKind, s: f64, v: f64, t: f64) -> (Mode, f64) {
+        let model = self.model;
+        let i0 = self.i0;
+        match kind {
+            BlockKind::Sine {
+                amplitude_a,
+                frequency_hz,
+                ..
+            } => (
+                Mode::Current,
+                i0 + amplitude_a * (std::f64::consts::TAU * frequency_hz * t).sin(),
+            ),
+            BlockKind::Ramp {
+                slope_a_per_s,
+                max_increment_a,
+            } => (
+                Mode::Current,
+                i0 + (slope_a_per_s * t).clamp(-max_increment_a, *max_increment_a),
+            ),
+            BlockKind::Step {
+                level_a, hold_s, ..
+            } => (Mode::Current, if t < *hold_s { i0 + level_a } else { i0 }),
+            BlockKind::Tracking {
+                amplitude_rad,
+                frequency_hz,
+                kp_per_s2,
+                ..
+            } => {
+                // Centred on the position reached by the re-centring (stiction can leave
+                // it short of the target): no error step, hence no current kick, at t = 0.
+                let s_d =
+                    self.centre + amplitude_rad * (std::f64::consts::TAU * frequency_hz * t).sin();
+                let acc = kp_per_s2 * (s_d - s) - 2.0 * kp_per_s2.sqrt() * v;
+                (Mode::Tracking, model.current_for_accel(s, acc))
+            }
+        }
+    }
+
     /// The sample at `meas`: the controller's current for the next period and the log row. After
     /// the last block the joint holds its last position (rows inactive, [`Mode::Hold`], the last
     /// chunk), not counted in the summary.
@@ -498,96 +577,32 @@ impl<'m, 'a> JointRunner<'m, 'a> {
         let v = self.vel.update(meas.s_rad);
         let s = meas.s_rad;
         let Some(block) = self.blocks.get(self.block) else {
-            let park = *self.park_at.get_or_insert(s);
-            let i_ref = self
-                .position_current(s, v, park)
-                .clamp(-self.model.i_max_a, self.model.i_max_a);
-            return LogRow {
-                chunk: self.blocks.last().map_or(0, |b| b.chunk),
-                active: false,
-                mode: Mode::Hold,
-                meas,
-                i_ref_a: i_ref,
-                truth,
-            };
+            return self.park_row(meas, truth, v);
         };
-        let (cfg, model) = (self.cfg, self.model);
+        let model = self.model;
         let (k, n_rec) = (self.k, self.n_rec);
         let (mode, i_ref) = if k < n_rec {
             (Mode::Recentre, self.position_current(s, v, block.start_rad))
         } else {
             if k == n_rec {
                 self.centre = s;
-                self.i0 = match cfg.holding_current {
-                    HoldingCurrent::Gravity => model.current_for_torque(model.link.gravity_nm(s)),
-                    HoldingCurrent::Zero => 0.0,
-                };
+                self.i0 = self.holding_current_a(s);
             }
-            if self.hold_at.is_none() {
-                let reason = if s <= self.lim_lo || s >= self.lim_hi {
-                    Some(LatchReason::PositionLimit)
-                } else if meas.i_meas_a.abs() >= cfg.max_safety_current_a {
-                    Some(LatchReason::Current)
-                } else {
-                    None
-                };
-                if let Some(reason) = reason {
-                    self.hold_at = Some(s);
-                    self.summary.latches.push(Latch {
-                        chunk: block.chunk,
-                        time_s: meas.time_s,
-                        reason,
-                        s_rad: s,
-                    });
-                }
+            if self.hold_at.is_none()
+                && let Some(reason) = self.latch_reason(&meas)
+            {
+                self.hold_at = Some(s);
+                self.summary.latches.push(Latch {
+                    chunk: block.chunk,
+                    time_s: meas.time_s,
+                    reason,
+                    s_rad: s,
+                });
             }
             let t = (k - n_rec) as f64 * model.period_s;
-            let i0 = self.i0;
-            match (self.hold_at, &block.kind) {
-                (Some(h), _) => (Mode::Hold, self.position_current(s, v, h)),
-                (
-                    None,
-                    BlockKind::Sine {
-                        amplitude_a,
-                        frequency_hz,
-                        ..
-                    },
-                ) => (
-                    Mode::Current,
-                    i0 + amplitude_a * (std::f64::consts::TAU * frequency_hz * t).sin(),
-                ),
-                (
-                    None,
-                    BlockKind::Ramp {
-                        slope_a_per_s,
-                        max_increment_a,
-                    },
-                ) => (
-                    Mode::Current,
-                    i0 + (slope_a_per_s * t).clamp(-max_increment_a, *max_increment_a),
-                ),
-                (
-                    None,
-                    BlockKind::Step {
-                        level_a, hold_s, ..
-                    },
-                ) => (Mode::Current, if t < *hold_s { i0 + level_a } else { i0 }),
-                (
-                    None,
-                    BlockKind::Tracking {
-                        amplitude_rad,
-                        frequency_hz,
-                        kp_per_s2,
-                        ..
-                    },
-                ) => {
-                    // Centred on the position reached by the re-centring (stiction can leave
-                    // it short of the target): no error step, hence no current kick, at t = 0.
-                    let s_d = self.centre
-                        + amplitude_rad * (std::f64::consts::TAU * frequency_hz * t).sin();
-                    let acc = kp_per_s2 * (s_d - s) - 2.0 * kp_per_s2.sqrt() * v;
-                    (Mode::Tracking, model.current_for_accel(s, acc))
-                }
+            match self.hold_at {
+                Some(h) => (Mode::Hold, self.position_current(s, v, h)),
+                None => self.excitation(&block.kind, s, v, t),
             }
         };
         let i_ref = i_ref.clamp(-model.i_max_a, model.i_max_a);

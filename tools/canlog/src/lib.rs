@@ -152,13 +152,8 @@ fn parse_hex_bytes(s: &str) -> Result<Vec<u8>, String> {
         .collect()
 }
 
-/// Parses one line's fields; errors are plain messages (the caller adds line number and text).
-fn parse_fields(line: &str) -> Result<LogEntry, String> {
-    let mut it = line.split_ascii_whitespace();
-    let (Some(ts), Some(iface), Some(frame), None) = (it.next(), it.next(), it.next(), it.next())
-    else {
-        return Err("expected `(sec.usec) iface frame`".into());
-    };
+/// The timestamp `(sec.usec)` in µs (exactly 6 fraction digits).
+fn parse_stamp_us(ts: &str) -> Result<u64, String> {
     let ts = ts
         .strip_prefix('(')
         .and_then(|t| t.strip_suffix(')'))
@@ -174,12 +169,13 @@ fn parse_fields(line: &str) -> Result<LogEntry, String> {
         .parse()
         .map_err(|_| format!("seconds `{sec}` too large"))?;
     let usec: u64 = usec.parse().map_err(|_| "bad fraction".to_string())?;
-    let stamp_us = sec
-        .checked_mul(1_000_000)
+    sec.checked_mul(1_000_000)
         .and_then(|s| s.checked_add(usec))
-        .ok_or("timestamp overflows u64 µs")?;
+        .ok_or_else(|| "timestamp overflows u64 µs".to_string())
+}
 
-    let (id_s, rest) = frame.split_once('#').ok_or("frame without `#`")?;
+/// The frame id's value and whether it is extended (3 hex digits: standard, 8: extended).
+fn parse_id(id_s: &str) -> Result<(u32, bool), String> {
     let extended = match id_s.len() {
         3 => false,
         8 => true,
@@ -196,6 +192,50 @@ fn parse_fields(line: &str) -> Result<LogEntry, String> {
             "id {id_s} out of range (error frames are not supported)"
         ));
     }
+    Ok((id, extended))
+}
+
+/// A classic data frame's `data[_dlc]` after the `#` (a raw DLC 9..F only with 8 bytes).
+fn parse_classic(id: u32, extended: bool, rest: &str) -> Result<LogFrame, String> {
+    let (data_s, dlc_s) = match rest.split_once('_') {
+        Some((d, l)) => (d, Some(l)),
+        None => (rest, None),
+    };
+    let data = parse_hex_bytes(data_s)?;
+    if data.len() > 8 {
+        return Err(format!("{} data bytes > 8 in a classic frame", data.len()));
+    }
+    let len8_dlc = match dlc_s {
+        None => None,
+        Some(l) => {
+            let v = (l.len() == 1)
+                .then(|| hex_val(l.as_bytes()[0]))
+                .flatten()
+                .filter(|v| (9..=15).contains(v))
+                .ok_or(format!("bad raw DLC `_{l}` (9..F)"))?;
+            if data.len() != 8 {
+                return Err("raw DLC `_` needs exactly 8 data bytes".into());
+            }
+            Some(v)
+        }
+    };
+    Ok(LogFrame::Can {
+        frame: WireFrame::data_frame(id, extended, &data).map_err(|e| e.to_string())?,
+        len8_dlc,
+    })
+}
+
+/// Parses one line's fields; errors are plain messages (the caller adds line number and text).
+fn parse_fields(line: &str) -> Result<LogEntry, String> {
+    let mut it = line.split_ascii_whitespace();
+    let (Some(ts), Some(iface), Some(frame), None) = (it.next(), it.next(), it.next(), it.next())
+    else {
+        return Err("expected `(sec.usec) iface frame`".into());
+    };
+    let stamp_us = parse_stamp_us(ts)?;
+
+    let (id_s, rest) = frame.split_once('#').ok_or("frame without `#`")?;
+    let (id, extended) = parse_id(id_s)?;
     let frame = if let Some(fd) = rest.strip_prefix('#') {
         let mut b = fd.bytes();
         let flags = b
@@ -225,32 +265,7 @@ fn parse_fields(line: &str) -> Result<LogEntry, String> {
             len8_dlc: None,
         }
     } else {
-        let (data_s, dlc_s) = match rest.split_once('_') {
-            Some((d, l)) => (d, Some(l)),
-            None => (rest, None),
-        };
-        let data = parse_hex_bytes(data_s)?;
-        if data.len() > 8 {
-            return Err(format!("{} data bytes > 8 in a classic frame", data.len()));
-        }
-        let len8_dlc = match dlc_s {
-            None => None,
-            Some(l) => {
-                let v = (l.len() == 1)
-                    .then(|| hex_val(l.as_bytes()[0]))
-                    .flatten()
-                    .filter(|v| (9..=15).contains(v))
-                    .ok_or(format!("bad raw DLC `_{l}` (9..F)"))?;
-                if data.len() != 8 {
-                    return Err("raw DLC `_` needs exactly 8 data bytes".into());
-                }
-                Some(v)
-            }
-        };
-        LogFrame::Can {
-            frame: WireFrame::data_frame(id, extended, &data).map_err(|e| e.to_string())?,
-            len8_dlc,
-        }
+        parse_classic(id, extended, rest)?
     };
     if iface.is_empty() || iface.len() > 15 {
         return Err(format!("bad interface name `{iface}`"));

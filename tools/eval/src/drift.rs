@@ -305,66 +305,11 @@ pub fn model_drift(
     coverage: Option<Coverage>,
     o: &DriftOptions,
 ) -> ModelDrift {
-    let mut checks = Vec::new();
-    let mut unchecked = Vec::new();
-    if let Some(r) = &reference {
-        let rp = &r.profile;
-        let mut all = check("all".into(), &new.all, None, Some(&rp.all), o);
-        if let Some(c) = &mut all {
-            c.reference_bin = "same".into();
-        }
-        checks.extend(all);
-        // A velocity band only against the same band: the error level depends on the velocity.
-        for (j, b) in new.bands.iter().enumerate() {
-            let what = format!("band [{}, {}) rad/s", b.lo_rad_s, hi_text(b.hi_rad_s));
-            let same = rp.bands.get(j).map(|x| &x.stats);
-            match check(what.clone(), &b.stats, same, None, o) {
-                Some(c) => checks.push(c),
-                None if b.stats.n >= o.min_samples => unchecked.push(format!(
-                    "{what}: {} new rows, but the reference has {} (< {}): not compared",
-                    b.stats.n,
-                    same.map_or(0, |s| s.n),
-                    o.min_samples
-                )),
-                None => {}
-            }
-        }
-        // A temperature bin against the same bin, else all rows (a hotter log has no same bin, and
-        // its velocity mix is the log's, like the reference's all rows). Not against the `.fwt`'s
-        // single RMSE (no rows behind it).
-        if rp.all.n > 0 {
-            for t in &new.temperature {
-                checks.extend(check(
-                    format!("temperature [{}, {}) °C", t.lo_c, t.hi_c),
-                    &t.stats,
-                    rp.temperature_bin(t.lo_c),
-                    Some(&rp.all),
-                    o,
-                ));
-            }
-        }
-    }
-    let mut reasons: Vec<String> = checks
-        .iter()
-        .filter(|c| c.fired)
-        .map(|c| {
-            format!(
-                "{}: n {}, RMSE {} vs limit {:.4} (ref {} on {} rows, {}), mean {} vs ref {}, mean along the motion {} vs ref {} (limit ±{:.4})",
-                c.what,
-                c.new.n,
-                fmt_opt(c.new.rmse_nm),
-                c.rmse_limit_nm,
-                fmt_opt(c.reference.rmse_nm),
-                c.reference.n,
-                if c.reference_bin == "same" { "same bin" } else { "all rows" },
-                fmt_opt(c.new.mean_residual_nm),
-                fmt_opt(c.reference.mean_residual_nm),
-                fmt_opt(c.new.mean_along_motion_nm),
-                fmt_opt(c.reference.mean_along_motion_nm),
-                c.mean_shift_limit_nm
-            )
-        })
-        .collect();
+    let (checks, unchecked) = match &reference {
+        Some(r) => reference_checks(&new, &r.profile, o),
+        None => (Vec::new(), Vec::new()),
+    };
+    let mut reasons: Vec<String> = checks.iter().filter(|c| c.fired).map(fired_text).collect();
     let extrapolating = coverage.is_some_and(|c| c.out_of_range_share > o.max_out_of_range);
     if let Some(c) = coverage.filter(|_| extrapolating) {
         reasons.push(format!(
@@ -402,6 +347,75 @@ pub fn model_drift(
         extrapolating,
         reasons,
     }
+}
+
+/// The checks of the new-log profile `new` against the reference profile `rp` (all rows, each
+/// velocity band, each temperature bin), and the bands left unchecked for want of reference rows.
+fn reference_checks(
+    new: &ResidualProfile,
+    rp: &ResidualProfile,
+    o: &DriftOptions,
+) -> (Vec<Check>, Vec<String>) {
+    let mut checks = Vec::new();
+    let mut unchecked = Vec::new();
+    let mut all = check("all".into(), &new.all, None, Some(&rp.all), o);
+    if let Some(c) = &mut all {
+        c.reference_bin = "same".into();
+    }
+    checks.extend(all);
+    // A velocity band only against the same band: the error level depends on the velocity.
+    for (j, b) in new.bands.iter().enumerate() {
+        let what = format!("band [{}, {}) rad/s", b.lo_rad_s, hi_text(b.hi_rad_s));
+        let same = rp.bands.get(j).map(|x| &x.stats);
+        match check(what.clone(), &b.stats, same, None, o) {
+            Some(c) => checks.push(c),
+            None if b.stats.n >= o.min_samples => unchecked.push(format!(
+                "{what}: {} new rows, but the reference has {} (< {}): not compared",
+                b.stats.n,
+                same.map_or(0, |s| s.n),
+                o.min_samples
+            )),
+            None => {}
+        }
+    }
+    // A temperature bin against the same bin, else all rows (a hotter log has no same bin, and
+    // its velocity mix is the log's, like the reference's all rows). Not against the `.fwt`'s
+    // single RMSE (no rows behind it).
+    if rp.all.n > 0 {
+        for t in &new.temperature {
+            checks.extend(check(
+                format!("temperature [{}, {}) °C", t.lo_c, t.hi_c),
+                &t.stats,
+                rp.temperature_bin(t.lo_c),
+                Some(&rp.all),
+                o,
+            ));
+        }
+    }
+    (checks, unchecked)
+}
+
+/// A fired check in words: its rows, RMSE against the limit and mean shifts.
+fn fired_text(c: &Check) -> String {
+    format!(
+        "{}: n {}, RMSE {} vs limit {:.4} (ref {} on {} rows, {}), mean {} vs ref {}, mean along the motion {} vs ref {} (limit ±{:.4})",
+        c.what,
+        c.new.n,
+        fmt_opt(c.new.rmse_nm),
+        c.rmse_limit_nm,
+        fmt_opt(c.reference.rmse_nm),
+        c.reference.n,
+        if c.reference_bin == "same" {
+            "same bin"
+        } else {
+            "all rows"
+        },
+        fmt_opt(c.new.mean_residual_nm),
+        fmt_opt(c.reference.mean_residual_nm),
+        fmt_opt(c.new.mean_along_motion_nm),
+        fmt_opt(c.reference.mean_along_motion_nm),
+        c.mean_shift_limit_nm
+    )
 }
 
 /// The rule in words (the `rule` key).

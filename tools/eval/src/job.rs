@@ -329,19 +329,7 @@ pub fn run(job: &EvalJob) -> Result<EvalOutcome, EvalError> {
         .chain(&job.test_datasets)
         .cloned()
         .collect();
-    let test_chunks = match (&job.train_report, job.test_only) {
-        (Some(r), true) => Some(crate::test_chunks_from_report(r, &all_paths)?),
-        (None, true) => {
-            return Err(EvalError::Selection(
-                "scoring the test split only needs the training report".into(),
-            ));
-        }
-        (_, false) => None,
-    };
-    let blocks = match (&test_chunks, &job.train_report) {
-        (Some(_), Some(r)) => report_blocks(r, &all_paths)?,
-        _ => vec![Vec::new(); all_paths.len()],
-    };
+    let (test_chunks, blocks) = test_split(job, &all_paths)?;
     let loaded = load_datasets(&all_paths, &blocks, &pinn_files, &mut warnings)?;
     let (held, train_range) = hold_out(job, &loaded)?;
     let training_range = training_range(job, train_range)?;
@@ -369,27 +357,7 @@ pub fn run(job: &EvalJob) -> Result<EvalOutcome, EvalError> {
         evals.push((ev, &l.ds, l.joint.clone()));
         scored_paths.push(l.path.clone());
     }
-    let scored: usize = evals
-        .iter()
-        .map(|(ev, _, _)| ev.mask.iter().filter(|m| **m).count())
-        .sum();
-    if scored == 0 {
-        let per: Vec<String> = loaded
-            .iter()
-            .map(|l| {
-                format!(
-                    "{}: {} rows, {} valid",
-                    l.path.display(),
-                    l.ds.len(),
-                    l.ds.valid.iter().filter(|v| **v).count()
-                )
-            })
-            .collect();
-        return Err(EvalError::Selection(format!(
-            "0 rows scored, nothing evaluated ({}); a row is scored when it is valid, in a scored run or chunk, every PINN's history is ready and every output is finite",
-            per.join("; ")
-        )));
-    }
+    check_some_scored(&evals, &loaded)?;
     let mut report = crate::build_report(&models, &evals, &job.options, job.test_only);
     crate::add_breakdown(
         &mut report,
@@ -404,23 +372,8 @@ pub fn run(job: &EvalJob) -> Result<EvalOutcome, EvalError> {
         Some(o) => Some(drift_monitor(job, o, &models, &pinn_files, &evals)?),
         None => None,
     };
-    let mut json =
-        serde_json::to_value(&report).map_err(|e| EvalError::Selection(e.to_string()))?;
-    if let (Some(d), Some(m)) = (&drift, json.as_object_mut()) {
-        let v = serde_json::to_value(d).map_err(|e| EvalError::Selection(e.to_string()))?;
-        m.insert("drift".into(), v);
-    }
-    let unchecked = drift
-        .as_ref()
-        .filter(|d| d.verdict == "unchecked")
-        .map(|d| {
-            d.models
-                .iter()
-                .filter(|m| m.verdict == "unchecked")
-                .flat_map(|m| m.reasons.iter().map(move |r| format!("{}: {r}", m.model)))
-                .collect::<Vec<_>>()
-                .join("; ")
-        });
+    let json = report_json(&report, drift.as_ref())?;
+    let unchecked = drift.as_ref().and_then(unchecked_reasons);
     let mut figures = Vec::new();
     if let (Some(dir), None) = (&job.figures_dir, &unchecked) {
         let figs = Figures {
@@ -447,6 +400,83 @@ pub fn run(job: &EvalJob) -> Result<EvalOutcome, EvalError> {
         figures,
         warnings,
         counts: (models.len(), evals.len()),
+    })
+}
+
+/// The test chunks to score (only with `--test-only`, from the training report) and, then, each
+/// dataset's blocks of the report's split (else none).
+#[allow(clippy::type_complexity)]
+fn test_split(
+    job: &EvalJob,
+    all_paths: &[PathBuf],
+) -> Result<(Option<Vec<BTreeSet<u32>>>, Vec<Vec<Block>>), EvalError> {
+    let test_chunks = match (&job.train_report, job.test_only) {
+        (Some(r), true) => Some(crate::test_chunks_from_report(r, all_paths)?),
+        (None, true) => {
+            return Err(EvalError::Selection(
+                "scoring the test split only needs the training report".into(),
+            ));
+        }
+        (_, false) => None,
+    };
+    let blocks = match (&test_chunks, &job.train_report) {
+        (Some(_), Some(r)) => report_blocks(r, all_paths)?,
+        _ => vec![Vec::new(); all_paths.len()],
+    };
+    Ok((test_chunks, blocks))
+}
+
+/// An error when no row of any dataset was scored, with each dataset's row counts.
+fn check_some_scored(
+    evals: &[(DatasetEval, &Dataset, String)],
+    loaded: &[Loaded],
+) -> Result<(), EvalError> {
+    let scored: usize = evals
+        .iter()
+        .map(|(ev, _, _)| ev.mask.iter().filter(|m| **m).count())
+        .sum();
+    if scored == 0 {
+        let per: Vec<String> = loaded
+            .iter()
+            .map(|l| {
+                format!(
+                    "{}: {} rows, {} valid",
+                    l.path.display(),
+                    l.ds.len(),
+                    l.ds.valid.iter().filter(|v| **v).count()
+                )
+            })
+            .collect();
+        return Err(EvalError::Selection(format!(
+            "0 rows scored, nothing evaluated ({}); a row is scored when it is valid, in a scored run or chunk, every PINN's history is ready and every output is finite",
+            per.join("; ")
+        )));
+    }
+    Ok(())
+}
+
+/// The report as JSON, with the drift report under `drift` when there is one.
+fn report_json(
+    report: &Report,
+    drift: Option<&DriftReport>,
+) -> Result<serde_json::Value, EvalError> {
+    let mut json = serde_json::to_value(report).map_err(|e| EvalError::Selection(e.to_string()))?;
+    if let (Some(d), Some(m)) = (drift, json.as_object_mut()) {
+        let v = serde_json::to_value(d).map_err(|e| EvalError::Selection(e.to_string()))?;
+        m.insert("drift".into(), v);
+    }
+    Ok(json)
+}
+
+/// Why the drift check is unchecked (each unchecked model's reasons), if it is.
+fn unchecked_reasons(d: &DriftReport) -> Option<String> {
+    (d.verdict == "unchecked").then(|| {
+        d.models
+            .iter()
+            .filter(|m| m.verdict == "unchecked")
+            .flat_map(|m| m.reasons.iter().map(move |r| format!("{}: {r}", m.model)))
+            .collect::<Vec<_>>()
+            .join("; ")
     })
 }
 

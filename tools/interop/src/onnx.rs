@@ -1127,59 +1127,94 @@ pub fn export_model(mlp: &MlpWeights, opts: &ExportOptions) -> Result<ModelProto
         .output
         .push(batch_value_info("output", mlp.n_outputs()));
     let mut current = "input".to_string();
-    let identity =
-        mlp.norm.mean.iter().all(|&m| m == 0.0) && mlp.norm.scale.iter().all(|&s| s == 1.0);
-    if !identity {
-        match opts.norm {
-            NormExport::SubDiv => {
-                graph.initializer.push(f32_tensor(
-                    "norm.mean",
-                    &[n],
-                    mlp.norm.mean.iter().copied(),
-                ));
-                graph.initializer.push(f32_tensor(
-                    "norm.scale",
-                    &[n],
-                    mlp.norm.scale.iter().copied(),
-                ));
-                graph.node.push(make_node(
-                    "Sub",
-                    "norm_sub",
-                    &["input", "norm.mean"],
-                    "norm_centered",
-                    vec![],
-                ));
-                graph.node.push(make_node(
-                    "Div",
-                    "norm_div",
-                    &["norm_centered", "norm.scale"],
-                    "norm_out",
-                    vec![],
-                ));
-            }
-            NormExport::DiagonalGemm => {
-                let mut w = vec![0f32; n * n];
-                let mut b = vec![0f32; n];
-                for i in 0..n {
-                    let inv = 1.0 / mlp.norm.scale[i] as f64;
-                    w[i * n + i] = inv as f32;
-                    b[i] = (-(mlp.norm.mean[i] as f64) * inv) as f32;
-                }
-                graph
-                    .initializer
-                    .push(f32_tensor("norm.weight", &[n, n], w));
-                graph.initializer.push(f32_tensor("norm.bias", &[n], b));
-                graph.node.push(make_node(
-                    "Gemm",
-                    "norm_gemm",
-                    &["input", "norm.weight", "norm.bias"],
-                    "norm_out",
-                    vec![int_attribute("transB", 1)],
-                ));
-            }
-        }
+    if push_normalisation(&mut graph, mlp, opts.norm) {
         current = "norm_out".into();
     }
+    push_layers(&mut graph, mlp, current);
+    let mut model = ModelProto::new();
+    model.ir_version = 7;
+    let mut op = OperatorSetIdProto::new();
+    op.version = EXPORT_OPSET;
+    model.opset_import.push(op);
+    model.producer_name = "frictl".into();
+    model.producer_version = env!("CARGO_PKG_VERSION").into();
+    model.doc_string =
+        "frictionless friction MLP: raw input [batch, n] -> joint-side friction torque [Nm]".into();
+    model.metadata_props = opts
+        .metadata
+        .iter()
+        .map(|(k, v)| {
+            let mut e = StringStringEntryProto::new();
+            e.key = k.clone();
+            e.value = v.clone();
+            e
+        })
+        .collect();
+    model.graph = protobuf::MessageField::some(graph);
+    Ok(model)
+}
+
+/// Adds the input normalisation as `norm_out` (`norm`: as Sub and Div, or as one diagonal Gemm);
+/// false, adding nothing, when it is the identity.
+fn push_normalisation(graph: &mut GraphProto, mlp: &MlpWeights, norm: NormExport) -> bool {
+    let n = mlp.n_inputs();
+    let identity =
+        mlp.norm.mean.iter().all(|&m| m == 0.0) && mlp.norm.scale.iter().all(|&s| s == 1.0);
+    if identity {
+        return false;
+    }
+    match norm {
+        NormExport::SubDiv => {
+            graph
+                .initializer
+                .push(f32_tensor("norm.mean", &[n], mlp.norm.mean.iter().copied()));
+            graph.initializer.push(f32_tensor(
+                "norm.scale",
+                &[n],
+                mlp.norm.scale.iter().copied(),
+            ));
+            graph.node.push(make_node(
+                "Sub",
+                "norm_sub",
+                &["input", "norm.mean"],
+                "norm_centered",
+                vec![],
+            ));
+            graph.node.push(make_node(
+                "Div",
+                "norm_div",
+                &["norm_centered", "norm.scale"],
+                "norm_out",
+                vec![],
+            ));
+        }
+        NormExport::DiagonalGemm => {
+            let mut w = vec![0f32; n * n];
+            let mut b = vec![0f32; n];
+            for i in 0..n {
+                let inv = 1.0 / mlp.norm.scale[i] as f64;
+                w[i * n + i] = inv as f32;
+                b[i] = (-(mlp.norm.mean[i] as f64) * inv) as f32;
+            }
+            graph
+                .initializer
+                .push(f32_tensor("norm.weight", &[n, n], w));
+            graph.initializer.push(f32_tensor("norm.bias", &[n], b));
+            graph.node.push(make_node(
+                "Gemm",
+                "norm_gemm",
+                &["input", "norm.weight", "norm.bias"],
+                "norm_out",
+                vec![int_attribute("transB", 1)],
+            ));
+        }
+    }
+    true
+}
+
+/// Adds every layer after `current` as a Gemm with its weight and bias, a Relu after each but
+/// the last, whose output is `output`.
+fn push_layers(graph: &mut GraphProto, mlp: &MlpWeights, mut current: String) {
     let last = mlp.layers.len() - 1;
     for (k, l) in mlp.layers.iter().enumerate() {
         let w = format!("layers.{k}.weight");
@@ -1211,27 +1246,6 @@ pub fn export_model(mlp: &MlpWeights, opts: &ExportOptions) -> Result<ModelProto
             current = r;
         }
     }
-    let mut model = ModelProto::new();
-    model.ir_version = 7;
-    let mut op = OperatorSetIdProto::new();
-    op.version = EXPORT_OPSET;
-    model.opset_import.push(op);
-    model.producer_name = "frictl".into();
-    model.producer_version = env!("CARGO_PKG_VERSION").into();
-    model.doc_string =
-        "frictionless friction MLP: raw input [batch, n] -> joint-side friction torque [Nm]".into();
-    model.metadata_props = opts
-        .metadata
-        .iter()
-        .map(|(k, v)| {
-            let mut e = StringStringEntryProto::new();
-            e.key = k.clone();
-            e.value = v.clone();
-            e
-        })
-        .collect();
-    model.graph = protobuf::MessageField::some(graph);
-    Ok(model)
 }
 
 /// Serialises `mlp` as ONNX bytes.

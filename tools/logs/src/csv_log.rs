@@ -212,6 +212,46 @@ fn state_columns(
     p: &str,
     notes: &mut Vec<String>,
 ) -> Result<(crate::StateLayout, Vec<usize>), LogsError> {
+    check_joint_templates(st)?;
+    let (names, q_idx) = state_position_columns(st, header, p, notes)?;
+    let qd = state_derivative_columns(st, header, p, &names, &st.velocities, "--velocities")?;
+    let qdd =
+        state_derivative_columns(st, header, p, &names, &st.accelerations, "--accelerations")?;
+    let mut idx = Vec::new();
+    for k in 0..names.len() {
+        idx.push(q_idx[k]);
+        idx.extend(qd[k]);
+        idx.extend(qdd[k]);
+    }
+    push_base_and_wrench_columns(st, header, p, &mut idx, notes)?;
+    notes.push(format!(
+        "whole-body state: {} joints from --positions {:?}{}",
+        names.len(),
+        st.positions,
+        if st.base_quat.is_some() {
+            ", base orientation from the quaternion columns"
+        } else {
+            ""
+        }
+    ));
+    let layout = crate::StateLayout {
+        qdot: qd.iter().map(Option::is_some).collect(),
+        qddot: qdd.iter().map(Option::is_some).collect(),
+        factors: [
+            spec.factor(Role::S),
+            spec.factor(Role::Sdot),
+            spec.factor(Role::Sddot),
+        ],
+        base_quat: st.base_quat.is_some(),
+        base_frame: None,
+        wrenches: st.wrenches.iter().map(|w| w.0.clone()).collect(),
+        names,
+    };
+    Ok((layout, idx))
+}
+
+/// Checks that the position, velocity and acceleration templates hold the joint placeholder.
+fn check_joint_templates(st: &CsvState) -> Result<(), LogsError> {
     for (flag, t) in [
         ("--positions", Some(&st.positions)),
         ("--velocities", st.velocities.as_ref()),
@@ -225,11 +265,18 @@ fn state_columns(
             )));
         }
     }
-    let col = |template: &str, joint: &str| {
-        let name = template.replace(JOINT, joint);
-        header.iter().position(|h| *h == name)
-    };
-    let no_match = |flag: &str, t: &str| LogsError::Format {
+    Ok(())
+}
+
+/// The column of `template` filled with `joint`, if the header has it.
+fn template_column(header: &[String], template: &str, joint: &str) -> Option<usize> {
+    let name = template.replace(JOINT, joint);
+    header.iter().position(|h| *h == name)
+}
+
+/// The error of a state template `t` (of `flag`) that matches no column for any URDF joint.
+fn no_state_match(st: &CsvState, header: &[String], p: &str, flag: &str, t: &str) -> LogsError {
+    LogsError::Format {
         path: p.to_string(),
         msg: format!(
             "{flag} {t:?} matches no column for any of the {} URDF joints ({}); the header has: {}",
@@ -243,17 +290,27 @@ fn state_columns(
                 + if st.joints.len() > 8 { ", …" } else { "" },
             header.join(", ")
         ),
-    };
+    }
+}
+
+/// The state's joint names and their position columns: the URDF's joints with a column of
+/// `--positions`, then those of columns fitting it for a name the URDF lacks (kept, and noted).
+fn state_position_columns(
+    st: &CsvState,
+    header: &[String],
+    p: &str,
+    notes: &mut Vec<String>,
+) -> Result<(Vec<String>, Vec<usize>), LogsError> {
     let mut names = Vec::new();
     let mut q_idx = Vec::new();
     for j in &st.joints {
-        if let Some(k) = col(&st.positions, j) {
+        if let Some(k) = template_column(header, &st.positions, j) {
             names.push(j.clone());
             q_idx.push(k);
         }
     }
     if names.is_empty() {
-        return Err(no_match("--positions", &st.positions));
+        return Err(no_state_match(st, header, p, "--positions", &st.positions));
     }
     // Columns that fit the template for a name the URDF lacks: kept, and listed.
     let unknown: Vec<&str> = template_matches(&st.positions, header)
@@ -272,26 +329,42 @@ fn state_columns(
             unknown.join(", ")
         ));
     }
-    let derivative = |t: &Option<String>, flag: &str| -> Result<Vec<Option<usize>>, LogsError> {
-        match t {
-            None => Ok(vec![None; names.len()]),
-            Some(t) => {
-                let v: Vec<Option<usize>> = names.iter().map(|j| col(t, j)).collect();
-                if v.iter().all(Option::is_none) {
-                    return Err(no_match(flag, t));
-                }
-                Ok(v)
+    Ok((names, q_idx))
+}
+
+/// Per state joint, the column of the derivative template `t` (of `flag`), if any; none at all
+/// is an error when the template is given.
+fn state_derivative_columns(
+    st: &CsvState,
+    header: &[String],
+    p: &str,
+    names: &[String],
+    t: &Option<String>,
+    flag: &str,
+) -> Result<Vec<Option<usize>>, LogsError> {
+    match t {
+        None => Ok(vec![None; names.len()]),
+        Some(t) => {
+            let v: Vec<Option<usize>> = names
+                .iter()
+                .map(|j| template_column(header, t, j))
+                .collect();
+            if v.iter().all(Option::is_none) {
+                return Err(no_state_match(st, header, p, flag, t));
             }
+            Ok(v)
         }
-    };
-    let qd = derivative(&st.velocities, "--velocities")?;
-    let qdd = derivative(&st.accelerations, "--accelerations")?;
-    let mut idx = Vec::new();
-    for k in 0..names.len() {
-        idx.push(q_idx[k]);
-        idx.extend(qd[k]);
-        idx.extend(qdd[k]);
     }
+}
+
+/// Appends the base quaternion's columns and every wrench's six columns to `idx`.
+fn push_base_and_wrench_columns(
+    st: &CsvState,
+    header: &[String],
+    p: &str,
+    idx: &mut Vec<usize>,
+    notes: &mut Vec<String>,
+) -> Result<(), LogsError> {
     if let Some(cols) = &st.base_quat {
         for c in cols {
             idx.push(header.iter().position(|h| h == c).ok_or_else(|| {
@@ -326,36 +399,20 @@ fn state_columns(
             "external wrench at frame `{frame}` from columns {template:?} (N, N·m, frame coordinates)"
         ));
     }
-    notes.push(format!(
-        "whole-body state: {} joints from --positions {:?}{}",
-        names.len(),
-        st.positions,
-        if st.base_quat.is_some() {
-            ", base orientation from the quaternion columns"
-        } else {
-            ""
-        }
-    ));
-    let layout = crate::StateLayout {
-        qdot: qd.iter().map(Option::is_some).collect(),
-        qddot: qdd.iter().map(Option::is_some).collect(),
-        factors: [
-            spec.factor(Role::S),
-            spec.factor(Role::Sdot),
-            spec.factor(Role::Sddot),
-        ],
-        base_quat: st.base_quat.is_some(),
-        base_frame: None,
-        wrenches: st.wrenches.iter().map(|w| w.0.clone()).collect(),
-        names,
-    };
-    Ok((layout, idx))
+    Ok(())
 }
 
 /// Reads one CSV log into a run named after the file stem.
 pub fn read(path: &Path, spec: &CsvSpec, progress: Progress) -> Result<ImportedRun, LogsError> {
     read_streamed(path, spec, progress, None)
 }
+
+/// The CSV reader of `path` (through the [`Guard`]) with its trimmed header and the file's size.
+type OpenedCsv = (
+    csv::Reader<Guard<std::io::BufReader<std::fs::File>>>,
+    Vec<String>,
+    u64,
+);
 
 /// [`read`], handing the rows to `stream` in blocks as they are read instead of holding them
 /// (`None`: held; see [`crate::BlockSink`]): the returned run then has the report and no rows.
@@ -365,6 +422,37 @@ pub fn read_streamed(
     progress: Progress,
     stream: Option<crate::BlockSink<'_>>,
 ) -> Result<ImportedRun, LogsError> {
+    let p = path.display().to_string();
+    let (mut r, header, total) = open_csv(path, spec)?;
+    let map = spec.role_map()?;
+    let mut notes = Vec::new();
+    let state = match &spec.state {
+        Some(st) => Some(state_columns(st, spec, &header, &p, &mut notes)?),
+        None => None,
+    };
+    let joints = select_joints(spec, state.as_ref().map(|s| &s.0), &header, &p, &mut notes)?;
+    let mut idx = role_columns(spec, &map, &header, &p, &joints)?;
+    let layout = state.map(|(layout, state_idx)| {
+        idx.extend(state_idx);
+        layout
+    });
+    let mut b = RunBuilder::with_joints(map, joints, layout, &p, "csv").streaming(stream);
+    for (role, col) in &spec.columns {
+        b.report_mut()
+            .sources
+            .insert(role.name().to_string(), format!("column `{col}`"));
+    }
+    b.report_mut().notes.extend(notes);
+    read_rows(path, &mut r, &mut b, &idx, &header, &mut *progress, total)?;
+    progress(total, total);
+    let name = path
+        .file_stem()
+        .map_or_else(|| "run".to_string(), |s| s.to_string_lossy().into_owned());
+    b.finish(&p, name)
+}
+
+/// Opens the non-empty CSV log `path` and reads its header line.
+fn open_csv(path: &Path, spec: &CsvSpec) -> Result<OpenedCsv, LogsError> {
     let p = path.display().to_string();
     let file = open_regular(path)?;
     let total = file.metadata().map(|m| m.len()).unwrap_or(0);
@@ -397,100 +485,119 @@ pub fn read_streamed(
             what: "no header line".into(),
         });
     }
-    let map = spec.role_map()?;
-    let find = |col: &str, role: Role| {
-        let k = header
-            .iter()
-            .position(|h| h == col)
-            .ok_or_else(|| LogsError::MissingColumn {
-                path: p.clone(),
-                column: col.to_string(),
-                role,
-                header: header.join(", "),
-            })?;
-        let same: Vec<String> = (0..header.len())
-            .filter(|&k| header[k] == *col)
-            .map(|k| (k + 1).to_string())
-            .collect();
-        if same.len() > 1 {
-            return Err(LogsError::Format {
-                path: p.clone(),
-                msg: format!(
-                    "column `{col}` (role {role}) is in the header {} times (columns {}): which \
-                     one holds it is ambiguous; rename the others",
-                    same.len(),
-                    same.join(", ")
-                ),
-            });
-        }
-        Ok(k)
-    };
-    let mut notes = Vec::new();
-    let state = match &spec.state {
-        Some(st) => Some(state_columns(st, spec, &header, &p, &mut notes)?),
-        None => None,
-    };
+    Ok((r, header, total))
+}
+
+/// The index of the header's one column `col` holding `role`: absent or repeated is an error.
+fn find_column(p: &str, header: &[String], col: &str, role: Role) -> Result<usize, LogsError> {
+    let k = header
+        .iter()
+        .position(|h| h == col)
+        .ok_or_else(|| LogsError::MissingColumn {
+            path: p.to_string(),
+            column: col.to_string(),
+            role,
+            header: header.join(", "),
+        })?;
+    let same: Vec<String> = (0..header.len())
+        .filter(|&k| header[k] == *col)
+        .map(|k| (k + 1).to_string())
+        .collect();
+    if same.len() > 1 {
+        return Err(LogsError::Format {
+            path: p.to_string(),
+            msg: format!(
+                "column `{col}` (role {role}) is in the header {} times (columns {}): which \
+                 one holds it is ambiguous; rename the others",
+                same.len(),
+                same.join(", ")
+            ),
+        });
+    }
+    Ok(k)
+}
+
+/// The joints to label: with `spec.all_joints` every state joint of the URDF with every mapped
+/// column (those lacking one noted), else those named, else one unnamed joint (the columns then
+/// must not be templates).
+fn select_joints(
+    spec: &CsvSpec,
+    state: Option<&crate::StateLayout>,
+    header: &[String],
+    p: &str,
+    notes: &mut Vec<String>,
+) -> Result<Vec<String>, LogsError> {
     let templated = spec.columns.iter().any(|c| c.1.contains(JOINT));
-    let joints: Vec<String> = if spec.all_joints {
-        let Some((layout, _)) = &state else {
-            return Err(LogsError::Usage(
-                "all joints: the whole-body state (--positions) is needed".into(),
-            ));
-        };
-        // Every state joint with every mapped column.
-        let mut lacking = Vec::new();
-        let urdf = spec
-            .state
-            .as_ref()
-            .map(|st| st.joints.as_slice())
-            .unwrap_or_default();
-        let v: Vec<String> = layout
-            .names
-            .iter()
-            .filter(|j| urdf.contains(j))
-            .filter(|j| {
-                let ok = spec
-                    .columns
-                    .iter()
-                    .all(|c| header.iter().any(|h| *h == c.1.replace(JOINT, j)));
-                if !ok {
-                    lacking.push(j.as_str());
-                }
-                ok
-            })
-            .cloned()
-            .collect();
-        if !lacking.is_empty() {
-            notes.push(format!(
-                "not labelled (a mapped column is missing): {}",
-                lacking.join(", ")
-            ));
+    if !spec.all_joints {
+        if spec.joints.is_empty() {
+            if templated {
+                return Err(LogsError::Usage(format!(
+                    "a --column holds {JOINT} but no joint is named to replace it"
+                )));
+            }
+            return Ok(vec![String::new()]);
         }
-        if v.is_empty() {
-            return Err(LogsError::Format {
-                path: p.clone(),
-                msg: format!(
-                    "no joint of the state has every mapped column ({}); the header has: {}",
-                    spec.columns
-                        .iter()
-                        .map(|c| c.1.as_str())
-                        .collect::<Vec<_>>()
-                        .join(", "),
-                    header.join(", ")
-                ),
-            });
-        }
-        v
-    } else if spec.joints.is_empty() {
-        if templated {
-            return Err(LogsError::Usage(format!(
-                "a --column holds {JOINT} but no joint is named to replace it"
-            )));
-        }
-        vec![String::new()]
-    } else {
-        spec.joints.clone()
+        return Ok(spec.joints.clone());
+    }
+    let Some(layout) = state else {
+        return Err(LogsError::Usage(
+            "all joints: the whole-body state (--positions) is needed".into(),
+        ));
     };
+    // Every state joint with every mapped column.
+    let mut lacking = Vec::new();
+    let urdf = spec
+        .state
+        .as_ref()
+        .map(|st| st.joints.as_slice())
+        .unwrap_or_default();
+    let v: Vec<String> = layout
+        .names
+        .iter()
+        .filter(|j| urdf.contains(j))
+        .filter(|j| {
+            let ok = spec
+                .columns
+                .iter()
+                .all(|c| header.iter().any(|h| *h == c.1.replace(JOINT, j)));
+            if !ok {
+                lacking.push(j.as_str());
+            }
+            ok
+        })
+        .cloned()
+        .collect();
+    if !lacking.is_empty() {
+        notes.push(format!(
+            "not labelled (a mapped column is missing): {}",
+            lacking.join(", ")
+        ));
+    }
+    if v.is_empty() {
+        return Err(LogsError::Format {
+            path: p.to_string(),
+            msg: format!(
+                "no joint of the state has every mapped column ({}); the header has: {}",
+                spec.columns
+                    .iter()
+                    .map(|c| c.1.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                header.join(", ")
+            ),
+        });
+    }
+    Ok(v)
+}
+
+/// The column indices of the row: the time column, then per joint every mapped role's column.
+fn role_columns(
+    spec: &CsvSpec,
+    map: &RoleMap,
+    header: &[String],
+    p: &str,
+    joints: &[String],
+) -> Result<Vec<usize>, LogsError> {
     let mut idx = Vec::new();
     let column_of = |role: Role| -> Result<&String, LogsError> {
         Ok(&spec
@@ -506,23 +613,31 @@ pub fn read_streamed(
             "--column time={time_col}: the time column is shared by every joint, it cannot hold {JOINT}"
         )));
     }
-    idx.push(find(time_col, Role::Time)?);
-    for j in &joints {
+    idx.push(find_column(p, header, time_col, Role::Time)?);
+    for j in joints {
         for role in map.roles().skip(1) {
-            idx.push(find(&column_of(role)?.replace(JOINT, j), role)?);
+            idx.push(find_column(
+                p,
+                header,
+                &column_of(role)?.replace(JOINT, j),
+                role,
+            )?);
         }
     }
-    let layout = state.map(|(layout, state_idx)| {
-        idx.extend(state_idx);
-        layout
-    });
-    let mut b = RunBuilder::with_joints(map, joints, layout, &p, "csv").streaming(stream);
-    for (role, col) in &spec.columns {
-        b.report_mut()
-            .sources
-            .insert(role.name().to_string(), format!("column `{col}`"));
-    }
-    b.report_mut().notes.extend(notes);
+    Ok(idx)
+}
+
+/// Reads every record of `r` into the run: the columns `idx` parsed as numbers (an empty field is
+/// NaN, any other non-number an error naming the line and column).
+fn read_rows(
+    path: &Path,
+    r: &mut csv::Reader<Guard<std::io::BufReader<std::fs::File>>>,
+    b: &mut RunBuilder<'_>,
+    idx: &[usize],
+    header: &[String],
+    progress: Progress,
+    total: u64,
+) -> Result<(), LogsError> {
     let mut rec = csv::ByteRecord::new();
     let mut line: u64 = 1;
     let mut rows = 0u64;
@@ -544,7 +659,7 @@ pub fn read_streamed(
                     Ok(v) => v,
                     Err(_) => {
                         return Err(LogsError::Parse {
-                            path: p,
+                            path: path.display().to_string(),
                             line,
                             column: header[j].clone(),
                             value: text.chars().take(64).collect(),
@@ -559,9 +674,5 @@ pub fn read_streamed(
             progress(r.get_ref().bytes, total);
         }
     }
-    progress(total, total);
-    let name = path
-        .file_stem()
-        .map_or_else(|| "run".to_string(), |s| s.to_string_lossy().into_owned());
-    b.finish(&p, name)
+    Ok(())
 }

@@ -578,71 +578,16 @@ pub fn read_streamed(
     stream: Option<crate::BlockSink<'_>>,
 ) -> Result<ImportedRun, LogsError> {
     let p = path.display().to_string();
-    let fmt = |msg: String| LogsError::Format {
-        path: p.clone(),
-        msg,
-    };
-    let mut f = open_regular(path)?;
-    let total = f.metadata().map(|m| m.len()).unwrap_or(0);
-    if total == 0 {
-        return Err(LogsError::Empty {
-            path: p,
-            what: "empty file".into(),
-        });
-    }
-    let mut head = [0u8; 128];
-    let got = f.read(&mut head).map_err(|e| LogsError::io(path, e))?;
-    if got < 19 || !head.starts_with(b"MATLAB 7.3 MAT-file") {
-        return Err(fmt(
-            "not a MATLAB v7.3 file (no `MATLAB 7.3 MAT-file` header); save with -v7.3".into(),
-        ));
-    }
-    drop(f);
+    check_mat_header(path)?;
     let file = h5::File::open(path).map_err(|e| h5err(path, "HDF5", e))?;
-    let root = file.group(ROOT).map_err(|_| {
-        fmt(format!(
+    let root = file.group(ROOT).map_err(|_| LogsError::Format {
+        path: p.clone(),
+        msg: format!(
             "no `/{ROOT}` struct (not a YARP robot logger file); top level: {}",
             file.member_names().unwrap_or_default().join(", ")
-        ))
+        ),
     })?;
-    let desired_joint = match root
-        .group(DESIRED)
-        .and_then(|g| g.dataset("elements_names"))
-    {
-        Ok(ds) => cellstr(&file, &ds)
-            .map_err(|e| h5err(path, DESIRED, e))?
-            .into_iter()
-            .next(),
-        Err(_) => None,
-    };
-    let joints: Vec<String> = match (spec.joints.is_empty(), &desired_joint) {
-        _ if spec.all_joints => {
-            let urdf = spec.state_joints.as_ref().ok_or_else(|| {
-                LogsError::Usage(
-                    "all joints: the whole-body state (the URDF's joint names) is needed".into(),
-                )
-            })?;
-            let g = root
-                .group("joints_state/positions")
-                .and_then(|g| g.dataset("elements_names"))
-                .map_err(|e| h5err(path, "joints_state/positions/elements_names", e))?;
-            let mut v: Vec<String> = cellstr(&file, &g)
-                .map_err(|e| h5err(path, "joints_state/positions/elements_names", e))?
-                .into_iter()
-                .filter(|n| urdf.contains(n))
-                .collect();
-            v.dedup();
-            v
-        }
-        (false, _) => spec.joints.clone(),
-        (true, Some(j)) => vec![j.clone()],
-        (true, None) => {
-            return Err(LogsError::Usage(format!(
-                "{p}: no --joint and no `{DESIRED}` channel naming the moving joint"
-            )));
-        }
-    };
-    let joint = joints.join(", ");
+    let joints = select_joints(path, &file, &root, spec)?;
     let JointChannels {
         chans: joint_chans,
         n_ticks,
@@ -658,36 +603,12 @@ pub fn read_streamed(
         });
     }
     let ts = timestamps(path, &root, "joints_state/positions", n)?;
-    // Every other joint channel on its own timestamps, aligned onto the positions' ticks.
-    let ref_step_s = median_step(path, &ts, n)?.unwrap_or(f64::INFINITY);
-    let mut chans: Vec<(Role, Lane)> = Vec::with_capacity(joint_chans.len());
-    for (role, ch, len, name) in joint_chans {
-        chans.push(if role == Role::S {
-            (role, Lane::Ticks(ch))
-        } else {
-            (
-                role,
-                Lane::Own(Aligned::open(path, &root, &name, ch, len, ref_step_s)?),
-            )
-        });
-    }
+    let mut chans = open_lanes(path, &root, &ts, n, joint_chans)?;
     let mut extras = match state.as_mut() {
         Some((layout, cols)) => {
             state_extras(path, &file, &root, extra, n, layout, cols, &mut notes)?
         }
-        None => {
-            if extra.base_orientation.is_some()
-                || !extra.wrenches.is_empty()
-                || extra.logged_derivatives
-            {
-                return Err(LogsError::Usage(
-                    "a base orientation, a wrench or logged derivatives enter the whole-body state, which only the \
-                     current label with a URDF reads"
-                        .into(),
-                ));
-            }
-            StateExtras::default()
-        }
+        None => no_state_extras(extra)?,
     };
     // Chunk spans from the desired-current stream.
     let spans = desired_spans(path, &root, spec.desired_gap_s, &mut notes)?;
@@ -702,144 +623,45 @@ pub fn read_streamed(
         Lane::Ticks(ch) => Some(ch.data.clone()),
         Lane::Own(_) => None,
     });
-    let gap_reasons: Vec<String> = chans
-        .iter()
-        .map(|(_, l)| match l {
-            Lane::Own(al) => format!("in a gap of {}", al.name),
-            Lane::Ticks(_) => String::new(),
-        })
-        .collect();
+    // Why a tick in a lane's gap is skipped, per lane.
+    let gap_reasons: Vec<String> = chans.iter().map(|(_, l)| l.gap_reason()).collect();
     // Hyperslabs of at most BLOCK ticks; streamed, of the sink's block size.
     let block = stream
         .as_ref()
         .map_or(BLOCK, |s| s.block_rows.clamp(1, BLOCK));
     let mut b = RunBuilder::with_joints(map, joints.clone(), state.map(|s| s.0), &p, "mat")
         .streaming(stream);
-    {
-        let rep = b.report_mut();
-        rep.sources.insert("joint".into(), joint.clone());
-        rep.sources.insert(
-            "time".into(),
-            "joints_state/positions/timestamps - t0".into(),
-        );
-        for (r, s) in sources {
-            rep.sources.insert(r.name().into(), s);
-        }
-        rep.notes.extend(notes);
+    let rep = b.report_mut();
+    rep.sources.insert("joint".into(), joints.join(", "));
+    rep.sources.insert(
+        "time".into(),
+        "joints_state/positions/timestamps - t0".into(),
+    );
+    for (r, s) in sources {
+        rep.sources.insert(r.name().into(), s);
     }
-    let mut t0: Option<f64> = None;
-    let mut span_i = 0usize;
-    // Chunks closed by a channel's gap so far, and whether the previous tick was in one.
-    let (mut gap_breaks, mut in_gap) = (0u32, false);
+    rep.notes.extend(notes);
+    let mut rows = RowChunker::new(spans);
     let mut a = 0;
     while a < n {
         let e = (a + block).min(n);
         let t = read_ts(path, &ts, a, e)?;
-        // Per channel, per joint: the block's values; `gap[k]`: the first channel without a
-        // value at tick k.
-        let mut gap: Vec<Option<usize>> = vec![None; e - a];
-        let mut per_chan: Vec<Vec<ndarray::Array1<f64>>> = Vec::with_capacity(chans.len());
-        for (ci, (role, lane)) in chans.iter_mut().enumerate() {
-            per_chan.push(match lane {
-                Lane::Ticks(ch) => (0..joints.len())
-                    .map(|j| {
-                        ch.data
-                            .read_slice_1d(ndarray::s![a..e, 0, ch.cols[j]])
-                            .map_err(|x| h5err(path, &format!("{role} data"), x))
-                    })
-                    .collect::<Result<_, _>>()?,
-                Lane::Own(al) => {
-                    let mut v = vec![ndarray::Array1::from_elem(e - a, f64::NAN); joints.len()];
-                    let mut at = vec![f64::NAN; joints.len()];
-                    for (k, &tk) in t.iter().enumerate() {
-                        if al.at(path, tk, &mut at)? {
-                            for (vj, x) in v.iter_mut().zip(&at) {
-                                vj[k] = *x;
-                            }
-                        } else if gap[k].is_none() {
-                            gap[k] = Some(ci);
-                        }
-                    }
-                    v
-                }
-            });
-        }
-        // Joint-major: every role of the first joint, then the next joint's (the row order).
-        let mut cols = Vec::with_capacity(chans.len() * joints.len() + state_cols.len());
-        for j in 0..joints.len() {
-            for c in &mut per_chan {
-                cols.push(std::mem::take(&mut c[j]));
-            }
-        }
+        let (mut cols, gap) = read_lane_block(path, &mut chans, joints.len(), &t, a, e)?;
         if let (Some(pos), false) = (&positions, state_cols.is_empty()) {
-            let all: ndarray::Array2<f64> = pos
-                .read_slice_2d(ndarray::s![a..e, 0, ..])
-                .map_err(|x| h5err(path, "joints_state/positions data", x))?;
-            let vel = extras
-                .qdot
-                .as_ref()
-                .map(|c| c.block(path, a, e))
-                .transpose()?;
-            let acc = extras
-                .qddot
-                .as_ref()
-                .map(|c| c.block(path, a, e))
-                .transpose()?;
-            for &c in &state_cols {
-                cols.push(all.column(c).to_owned());
-                for d in [&vel, &acc].into_iter().flatten() {
-                    cols.push(d.column(c).to_owned());
-                }
-            }
-            extras.push_block(path, a, e, &mut cols)?;
+            push_state_block(path, pos, &state_cols, &mut extras, a, e, &mut cols)?;
         }
-        for (k, &tk) in t.iter().enumerate() {
-            let mut chunk = 0u32;
-            if !spans.is_empty() {
-                while span_i < spans.len() && tk > spans[span_i].1 {
-                    span_i += 1;
-                }
-                if span_i >= spans.len() || tk < spans[span_i].0 {
-                    b.skip("outside the desired-current stream");
-                    continue;
-                }
-                chunk = span_i as u32;
-            }
-            if let Some(ci) = gap[k] {
-                b.skip(&gap_reasons[ci]);
-                if let Lane::Own(al) = &mut chans[ci].1 {
-                    al.dropped += 1;
-                }
-                in_gap = true;
-                continue;
-            }
-            // A channel's gap closes the chunk: the pipeline never interpolates across it.
-            if std::mem::take(&mut in_gap) && t0.is_some() {
-                gap_breaks += 1;
-            }
-            chunk += gap_breaks;
-            let origin = *t0.get_or_insert(tk);
-            let row = b.row_mut();
-            row[0] = tk - origin;
-            for (j, c) in cols.iter().enumerate() {
-                row[j + 1] = c[k];
-            }
-            b.push(|| format!("tick {}", a + k), chunk)?;
-        }
+        rows.push_block(&mut b, &mut chans, &gap_reasons, &t, &gap, &cols, a)?;
         a = e;
         progress(a as u64, n as u64);
     }
-    {
-        let rep = b.report_mut();
-        for (_, lane) in &chans {
-            if let Lane::Own(al) = lane {
-                al.say(&mut rep.notes, &mut rep.warnings);
-            }
+    let rep = b.report_mut();
+    for (_, lane) in &chans {
+        if let Lane::Own(al) = lane {
+            al.say(&mut rep.notes, &mut rep.warnings);
         }
     }
-    if let Some(t0) = t0 {
-        b.report_mut()
-            .notes
+    if let Some(t0) = rows.t0 {
+        rep.notes
             .push(format!("time origin t0 = {t0:.6} s since the epoch"));
     }
     let name = path
@@ -848,12 +670,285 @@ pub fn read_streamed(
     b.finish(&p, name)
 }
 
+/// Checks that `path` is a non-empty file starting with the MATLAB v7.3 header (an HDF5 file
+/// saved by MATLAB with `-v7.3`).
+fn check_mat_header(path: &Path) -> Result<(), LogsError> {
+    let mut f = open_regular(path)?;
+    let total = f.metadata().map(|m| m.len()).unwrap_or(0);
+    if total == 0 {
+        return Err(LogsError::Empty {
+            path: path.display().to_string(),
+            what: "empty file".into(),
+        });
+    }
+    let mut head = [0u8; 128];
+    let got = f.read(&mut head).map_err(|e| LogsError::io(path, e))?;
+    if got < 19 || !head.starts_with(b"MATLAB 7.3 MAT-file") {
+        return Err(LogsError::Format {
+            path: path.display().to_string(),
+            msg: "not a MATLAB v7.3 file (no `MATLAB 7.3 MAT-file` header); save with -v7.3".into(),
+        });
+    }
+    Ok(())
+}
+
+/// The joints to label: every joint of the positions the URDF knows (`spec.all_joints`), those
+/// asked for, or else the one the desired-current channel names.
+fn select_joints(
+    path: &Path,
+    file: &h5::File,
+    root: &h5::Group,
+    spec: &MatSpec,
+) -> Result<Vec<String>, LogsError> {
+    let desired_joint = match root
+        .group(DESIRED)
+        .and_then(|g| g.dataset("elements_names"))
+    {
+        Ok(ds) => cellstr(file, &ds)
+            .map_err(|e| h5err(path, DESIRED, e))?
+            .into_iter()
+            .next(),
+        Err(_) => None,
+    };
+    Ok(match (spec.joints.is_empty(), &desired_joint) {
+        _ if spec.all_joints => {
+            let urdf = spec.state_joints.as_ref().ok_or_else(|| {
+                LogsError::Usage(
+                    "all joints: the whole-body state (the URDF's joint names) is needed".into(),
+                )
+            })?;
+            let g = root
+                .group("joints_state/positions")
+                .and_then(|g| g.dataset("elements_names"))
+                .map_err(|e| h5err(path, "joints_state/positions/elements_names", e))?;
+            let mut v: Vec<String> = cellstr(file, &g)
+                .map_err(|e| h5err(path, "joints_state/positions/elements_names", e))?
+                .into_iter()
+                .filter(|n| urdf.contains(n))
+                .collect();
+            v.dedup();
+            v
+        }
+        (false, _) => spec.joints.clone(),
+        (true, Some(j)) => vec![j.clone()],
+        (true, None) => {
+            return Err(LogsError::Usage(format!(
+                "{}: no --joint and no `{DESIRED}` channel naming the moving joint",
+                path.display()
+            )));
+        }
+    })
+}
+
+/// The joint channels as lanes: the positions on their own ticks, every other channel on its own
+/// timestamps, aligned onto the positions' ticks `ts` (`n` of them).
+fn open_lanes(
+    path: &Path,
+    root: &h5::Group,
+    ts: &h5::Dataset,
+    n: usize,
+    joint_chans: Vec<(Role, Channel, usize, String)>,
+) -> Result<Vec<(Role, Lane)>, LogsError> {
+    let ref_step_s = median_step(path, ts, n)?.unwrap_or(f64::INFINITY);
+    let mut chans: Vec<(Role, Lane)> = Vec::with_capacity(joint_chans.len());
+    for (role, ch, len, name) in joint_chans {
+        chans.push(if role == Role::S {
+            (role, Lane::Ticks(ch))
+        } else {
+            (
+                role,
+                Lane::Own(Aligned::open(path, root, &name, ch, len, ref_step_s)?),
+            )
+        });
+    }
+    Ok(chans)
+}
+
+/// Without a whole-body state: none of its further channels may be asked for.
+fn no_state_extras(extra: &MatState) -> Result<StateExtras, LogsError> {
+    if extra.base_orientation.is_some() || !extra.wrenches.is_empty() || extra.logged_derivatives {
+        return Err(LogsError::Usage(
+            "a base orientation, a wrench or logged derivatives enter the whole-body state, which only the \
+             current label with a URDF reads"
+                .into(),
+        ));
+    }
+    Ok(StateExtras::default())
+}
+
+/// Per lane, per joint: the values of ticks `a..e` (stamped `t`), joint-major (every role of the
+/// first joint, then the next joint's: the row order); and per tick, the first lane without a
+/// value there.
+#[allow(clippy::type_complexity)]
+fn read_lane_block(
+    path: &Path,
+    chans: &mut [(Role, Lane)],
+    n_joints: usize,
+    t: &[f64],
+    a: usize,
+    e: usize,
+) -> Result<(Vec<ndarray::Array1<f64>>, Vec<Option<usize>>), LogsError> {
+    let mut gap: Vec<Option<usize>> = vec![None; e - a];
+    let mut per_chan: Vec<Vec<ndarray::Array1<f64>>> = Vec::with_capacity(chans.len());
+    for (ci, (role, lane)) in chans.iter_mut().enumerate() {
+        per_chan.push(match lane {
+            Lane::Ticks(ch) => (0..n_joints)
+                .map(|j| {
+                    ch.data
+                        .read_slice_1d(ndarray::s![a..e, 0, ch.cols[j]])
+                        .map_err(|x| h5err(path, &format!("{role} data"), x))
+                })
+                .collect::<Result<_, _>>()?,
+            Lane::Own(al) => {
+                let mut v = vec![ndarray::Array1::from_elem(e - a, f64::NAN); n_joints];
+                let mut at = vec![f64::NAN; n_joints];
+                for (k, &tk) in t.iter().enumerate() {
+                    if al.at(path, tk, &mut at)? {
+                        for (vj, x) in v.iter_mut().zip(&at) {
+                            vj[k] = *x;
+                        }
+                    } else if gap[k].is_none() {
+                        gap[k] = Some(ci);
+                    }
+                }
+                v
+            }
+        });
+    }
+    let mut cols = Vec::with_capacity(chans.len() * n_joints);
+    for j in 0..n_joints {
+        for c in &mut per_chan {
+            cols.push(std::mem::take(&mut c[j]));
+        }
+    }
+    Ok((cols, gap))
+}
+
+/// Appends the whole-body state's columns of ticks `a..e` to `cols`: per state joint its position
+/// (and the logged velocity and acceleration), then the base quaternion and the wrenches.
+fn push_state_block(
+    path: &Path,
+    positions: &h5::Dataset,
+    state_cols: &[usize],
+    extras: &mut StateExtras,
+    a: usize,
+    e: usize,
+    cols: &mut Vec<ndarray::Array1<f64>>,
+) -> Result<(), LogsError> {
+    let all: ndarray::Array2<f64> = positions
+        .read_slice_2d(ndarray::s![a..e, 0, ..])
+        .map_err(|x| h5err(path, "joints_state/positions data", x))?;
+    let vel = extras
+        .qdot
+        .as_ref()
+        .map(|c| c.block(path, a, e))
+        .transpose()?;
+    let acc = extras
+        .qddot
+        .as_ref()
+        .map(|c| c.block(path, a, e))
+        .transpose()?;
+    for &c in state_cols {
+        cols.push(all.column(c).to_owned());
+        for d in [&vel, &acc].into_iter().flatten() {
+            cols.push(d.column(c).to_owned());
+        }
+    }
+    extras.push_block(path, a, e, cols)
+}
+
+/// Hands the read ticks to the run as rows with their chunk ids: skips the ticks outside the
+/// desired-current stream's spans and those in a lane's gap, and closes a chunk at each gap.
+struct RowChunker {
+    /// The desired-current stream's spans (none: one chunk but for the gaps).
+    spans: Vec<(f64, f64)>,
+    /// The span the last tick fell in or before.
+    span_i: usize,
+    /// Chunks closed by a channel's gap so far.
+    gap_breaks: u32,
+    /// Whether the previous tick was in a gap.
+    in_gap: bool,
+    /// The first row's timestamp (the time origin).
+    t0: Option<f64>,
+}
+
+impl RowChunker {
+    fn new(spans: Vec<(f64, f64)>) -> Self {
+        Self {
+            spans,
+            span_i: 0,
+            gap_breaks: 0,
+            in_gap: false,
+            t0: None,
+        }
+    }
+
+    /// Pushes the block's ticks `t` (from tick `a`), their columns `cols` and lane gaps `gap`.
+    #[allow(clippy::too_many_arguments)]
+    fn push_block(
+        &mut self,
+        b: &mut RunBuilder<'_>,
+        chans: &mut [(Role, Lane)],
+        gap_reasons: &[String],
+        t: &[f64],
+        gap: &[Option<usize>],
+        cols: &[ndarray::Array1<f64>],
+        a: usize,
+    ) -> Result<(), LogsError> {
+        let spans = &self.spans;
+        for (k, &tk) in t.iter().enumerate() {
+            let mut chunk = 0u32;
+            if !spans.is_empty() {
+                while self.span_i < spans.len() && tk > spans[self.span_i].1 {
+                    self.span_i += 1;
+                }
+                if self.span_i >= spans.len() || tk < spans[self.span_i].0 {
+                    b.skip("outside the desired-current stream");
+                    continue;
+                }
+                chunk = self.span_i as u32;
+            }
+            if let Some(ci) = gap[k] {
+                b.skip(&gap_reasons[ci]);
+                if let Lane::Own(al) = &mut chans[ci].1 {
+                    al.dropped += 1;
+                }
+                self.in_gap = true;
+                continue;
+            }
+            // A channel's gap closes the chunk: the pipeline never interpolates across it.
+            if std::mem::take(&mut self.in_gap) && self.t0.is_some() {
+                self.gap_breaks += 1;
+            }
+            chunk += self.gap_breaks;
+            let origin = *self.t0.get_or_insert(tk);
+            let row = b.row_mut();
+            row[0] = tk - origin;
+            for (j, c) in cols.iter().enumerate() {
+                row[j + 1] = c[k];
+            }
+            b.push(|| format!("tick {}", a + k), chunk)?;
+        }
+        Ok(())
+    }
+}
+
 /// How a joint channel's samples meet the positions' ticks.
 enum Lane {
     /// The positions themselves: sample k is tick k.
     Ticks(Channel),
     /// Any other channel: on its own timestamps, aligned.
     Own(Aligned),
+}
+
+impl Lane {
+    /// The skip reason of a tick in the lane's gap (the positions have none).
+    fn gap_reason(&self) -> String {
+        match self {
+            Lane::Own(al) => format!("in a gap of {}", al.name),
+            Lane::Ticks(_) => String::new(),
+        }
+    }
 }
 
 /// The channels of the labelled joints' signals, in the row's role order (the position first).
@@ -1023,47 +1118,8 @@ fn state_extras(
         .and_then(|g| g.dataset("elements_names"))
         .and_then(|d| cellstr(file, &d))
         .map_err(|e| h5err(path, "joints_state/positions/elements_names", e))?;
-    for (name, slot) in [
-        ("joints_state/velocities", &mut out.qdot),
-        ("joints_state/accelerations", &mut out.qddot),
-    ] {
-        if !spec.logged_derivatives {
-            continue;
-        }
-        let Some(g) = root.group(name).ok().filter(|g| g.link_exists("data")) else {
-            notes.push(format!("{name}: absent (smoothed from q)"));
-            continue;
-        };
-        let names = g
-            .dataset("elements_names")
-            .and_then(|d| cellstr(file, &d))
-            .map_err(|e| h5err(path, &format!("{name}/elements_names"), e))?;
-        if names != pos_names {
-            notes.push(format!(
-                "{name}: not the elements of joints_state/positions: not used (smoothed from q)"
-            ));
-            continue;
-        }
-        *slot = Some(state_channel(
-            path,
-            file,
-            root,
-            name,
-            n,
-            &[],
-            &[pos_names.len()],
-            name,
-            notes,
-        )?);
-        notes.push(format!("whole-body state: {name} as logged"));
-    }
-    if spec.logged_derivatives && out.qdot.is_none() && out.qddot.is_none() {
-        return Err(LogsError::Format {
-            path: path.display().to_string(),
-            msg: "logged derivatives: neither joints_state/velocities nor \
-                  joints_state/accelerations has the elements of joints_state/positions"
-                .into(),
-        });
+    if spec.logged_derivatives {
+        (out.qdot, out.qddot) = logged_derivatives(path, file, root, n, &pos_names, notes)?;
     }
     let k = cols.len();
     layout.qdot = vec![out.qdot.is_some(); k];
@@ -1110,6 +1166,60 @@ fn state_extras(
         layout.wrenches.push(frame.clone());
     }
     Ok(out)
+}
+
+/// The joints' logged velocities and accelerations (`joints_state/velocities`, `.../accelerations`)
+/// where they have the elements `pos_names` of the positions (else noted: smoothed from q); an
+/// error when neither has.
+fn logged_derivatives(
+    path: &Path,
+    file: &h5::File,
+    root: &h5::Group,
+    n: usize,
+    pos_names: &[String],
+    notes: &mut Vec<String>,
+) -> Result<(Option<StateChannel>, Option<StateChannel>), LogsError> {
+    let (mut qdot, mut qddot) = (None, None);
+    for (name, slot) in [
+        ("joints_state/velocities", &mut qdot),
+        ("joints_state/accelerations", &mut qddot),
+    ] {
+        let Some(g) = root.group(name).ok().filter(|g| g.link_exists("data")) else {
+            notes.push(format!("{name}: absent (smoothed from q)"));
+            continue;
+        };
+        let names = g
+            .dataset("elements_names")
+            .and_then(|d| cellstr(file, &d))
+            .map_err(|e| h5err(path, &format!("{name}/elements_names"), e))?;
+        if names != pos_names {
+            notes.push(format!(
+                "{name}: not the elements of joints_state/positions: not used (smoothed from q)"
+            ));
+            continue;
+        }
+        *slot = Some(state_channel(
+            path,
+            file,
+            root,
+            name,
+            n,
+            &[],
+            &[pos_names.len()],
+            name,
+            notes,
+        )?);
+        notes.push(format!("whole-body state: {name} as logged"));
+    }
+    if qdot.is_none() && qddot.is_none() {
+        return Err(LogsError::Format {
+            path: path.display().to_string(),
+            msg: "logged derivatives: neither joints_state/velocities nor \
+                  joints_state/accelerations has the elements of joints_state/positions"
+                .into(),
+        });
+    }
+    Ok((qdot, qddot))
 }
 
 impl StateExtras {

@@ -741,12 +741,48 @@ impl<'s> Bag<'_, 's> {
     /// The run, once every record is read: the checks that need the whole bag, the report's
     /// notes and warnings, the signals of a field empty in some message dropped.
     fn finish(
-        self,
+        mut self,
         path: &Path,
         total: u64,
         unclosed: Option<u64>,
     ) -> Result<ImportedRun, LogsError> {
-        let (spec, msg_no, empty) = (self.spec, self.msg_no, self.empty);
+        self.check_complete()?;
+        let Some(mut b) = self.builder.take() else {
+            return Err(LogsError::Empty {
+                path: self.p,
+                what: format!("no message on {}", self.spec.topic),
+            });
+        };
+        self.say(b.report_mut(), total, unclosed);
+        let name = path
+            .file_stem()
+            .map_or_else(|| "run".to_string(), |s| s.to_string_lossy().into_owned());
+        let mut run = b.finish(&self.p, name)?;
+        let empty = self.empty;
+        for sig in std::iter::once(&mut run.signals).chain(&mut run.other_joints) {
+            drop_absent(sig, [empty[0] > 0, empty[1] > 0, empty[2] > 0]);
+            if sig.s_rad.is_none() && sig.sdot_rad_s.is_none() {
+                return Err(LogsError::Format {
+                    path: self.p.clone(),
+                    msg: format!(
+                        "joint {}: neither position nor velocity is in every message",
+                        self.joints.join(", ")
+                    ),
+                });
+            }
+        }
+        if self.state_vel_empty > 0
+            && let Some(st) = &mut run.state
+        {
+            st.qdot.iter_mut().for_each(|v| *v = None);
+        }
+        Ok(run)
+    }
+
+    /// The checks that need the whole bag: the topic exists, so do the state's topics, and some
+    /// message named the labelled joints.
+    fn check_complete(&self) -> Result<(), LogsError> {
+        let spec = self.spec;
         if self.wanted.is_empty() {
             let list: Vec<String> = self
                 .topics
@@ -766,20 +802,20 @@ impl<'s> Bag<'_, 's> {
         self.state_topics
             .check_present(&self.topics)
             .map_err(|e| self.fmt(e))?;
-        if msg_no > 0 && self.t0.is_none() {
+        if self.msg_no > 0 && self.t0.is_none() {
             return Err(LogsError::JointNotFound {
                 path: self.p.clone(),
                 joint: self.joints.join(", "),
                 available: self.names_seen.join(", "),
             });
         }
-        let Some(mut b) = self.builder else {
-            return Err(LogsError::Empty {
-                path: self.p,
-                what: format!("no message on {}", spec.topic),
-            });
-        };
-        let rep = b.report_mut();
+        Ok(())
+    }
+
+    /// The report's notes (the whole-body state, the time origin) and warnings (an unclosed
+    /// recording of `total` bytes, fields empty in some messages).
+    fn say(&self, rep: &mut crate::RunReport, total: u64, unclosed: Option<u64>) {
+        let (spec, msg_no, empty) = (self.spec, self.msg_no, self.empty);
         if spec.state_joints.is_some() {
             rep.notes.push(format!(
                 "whole-body state: {} joints of the first message's names{}",
@@ -832,28 +868,6 @@ impl<'s> Bag<'_, 's> {
                 self.first_empty[k].unwrap_or(0)
             ));
         }
-        let name = path
-            .file_stem()
-            .map_or_else(|| "run".to_string(), |s| s.to_string_lossy().into_owned());
-        let mut run = b.finish(&self.p, name)?;
-        for sig in std::iter::once(&mut run.signals).chain(&mut run.other_joints) {
-            drop_absent(sig, [empty[0] > 0, empty[1] > 0, empty[2] > 0]);
-            if sig.s_rad.is_none() && sig.sdot_rad_s.is_none() {
-                return Err(LogsError::Format {
-                    path: self.p.clone(),
-                    msg: format!(
-                        "joint {}: neither position nor velocity is in every message",
-                        self.joints.join(", ")
-                    ),
-                });
-            }
-        }
-        if self.state_vel_empty > 0
-            && let Some(st) = &mut run.state
-        {
-            st.qdot.iter_mut().for_each(|v| *v = None);
-        }
-        Ok(run)
     }
 }
 

@@ -852,18 +852,8 @@ fn drain_rx(
     Ok(())
 }
 
-fn serve_drives(
-    robot: &mut ServedRobot,
-    mut drives: Vec<Drive>,
-    opts: &CanServeOptions,
-    sock: &CanSocket,
-    stop: &AtomicBool,
-) -> Result<CanServeStats, ServeError> {
-    sock.set_nonblocking(true)
-        .map_err(|source| ServeError::CanSocket {
-            what: "setting the CAN socket non-blocking",
-            source,
-        })?;
+/// Says each drive's joint, protocol, node, MIT ranges and constants.
+fn log_drives(robot: &ServedRobot, drives: &[Drive], opts: &CanServeOptions) {
     for (k, d) in drives.iter().enumerate() {
         let r = d.ranges();
         tracing::info!(
@@ -880,12 +870,84 @@ fn serve_drives(
             robot.params(k).gear_ratio_signed
         );
     }
+}
+
+/// Answers the frames that arrive (and retries the queued replies) until `deadline` or a stop.
+#[allow(clippy::too_many_arguments)]
+fn answer_until(
+    deadline: Instant,
+    sock: &CanSocket,
+    drives: &mut [Drive],
+    meas: &[Measurement],
+    tick: u64,
+    tx: &mut Tx,
+    st: &mut CanServeStats,
+    stop: &AtomicBool,
+) -> Result<(), ServeError> {
+    let fd = sock.as_raw_fd();
+    loop {
+        tx.flush(sock, tick, st);
+        drain_rx(sock, drives, meas, tick, tx, st)?;
+        let now = Instant::now();
+        if now >= deadline || stop.load(Ordering::Relaxed) {
+            break;
+        }
+        let mut wait = deadline - now;
+        if !tx.queue.is_empty() {
+            wait = wait.min(TX_RETRY);
+        }
+        wait_readable(fd, wait).map_err(|source| ServeError::CanSocket {
+            what: "waiting on the CAN socket",
+            source,
+        })?;
+    }
+    Ok(())
+}
+
+/// Each drive's current for this tick into `i_ref_a`; a drive that idles for want of commands
+/// is counted and said.
+fn drive_currents(
+    robot: &ServedRobot,
+    drives: &mut [Drive],
+    meas: &[Measurement],
+    tick: u64,
+    opts: &CanServeOptions,
+    i_ref_a: &mut [f64],
+    st: &mut CanServeStats,
+) {
+    for (k, (d, m)) in drives.iter_mut().zip(meas).enumerate() {
+        let was_enabled = d.enabled();
+        i_ref_a[k] = d.current_a(m, tick);
+        if was_enabled && !d.enabled() {
+            st.command_timeouts += 1;
+            tracing::warn!(
+                "joint `{}` node {}: no command for {} ms, drive idles",
+                robot.name(k),
+                d.node(),
+                opts.command_timeout_ms
+            );
+        }
+    }
+}
+
+fn serve_drives(
+    robot: &mut ServedRobot,
+    mut drives: Vec<Drive>,
+    opts: &CanServeOptions,
+    sock: &CanSocket,
+    stop: &AtomicBool,
+) -> Result<CanServeStats, ServeError> {
+    sock.set_nonblocking(true)
+        .map_err(|source| ServeError::CanSocket {
+            what: "setting the CAN socket non-blocking",
+            source,
+        })?;
+    log_drives(robot, &drives, opts);
     let end_tick = match opts.duration_s {
         Some(d) if d.is_finite() && d >= 0.0 => Some((d * 1e3).round() as u64),
         Some(d) => return Err(ServeError::CanDuration(d)),
         None => None,
     };
-    let fd = sock.as_raw_fd();
     let mut st = CanServeStats::default();
     let mut tx = Tx {
         queue: VecDeque::with_capacity(TX_QUEUE_CAP),
@@ -902,36 +964,18 @@ fn serve_drives(
         let deadline =
             epoch + tick_period * u32::try_from(tick + 1 - epoch_tick).unwrap_or(u32::MAX);
         // Answer frames as they arrive until the tick's deadline.
-        loop {
-            tx.flush(sock, tick, &mut st);
-            drain_rx(sock, &mut drives, &meas, tick, &mut tx, &mut st)?;
-            let now = Instant::now();
-            if now >= deadline || stop.load(Ordering::Relaxed) {
-                break;
-            }
-            let mut wait = deadline - now;
-            if !tx.queue.is_empty() {
-                wait = wait.min(TX_RETRY);
-            }
-            wait_readable(fd, wait).map_err(|source| ServeError::CanSocket {
-                what: "waiting on the CAN socket",
-                source,
-            })?;
-        }
+        answer_until(
+            deadline,
+            sock,
+            &mut drives,
+            &meas,
+            tick,
+            &mut tx,
+            &mut st,
+            stop,
+        )?;
         // One 1 ms step of every joint at once, each with its drive's current.
-        for (k, (d, m)) in drives.iter_mut().zip(&meas).enumerate() {
-            let was_enabled = d.enabled();
-            i_ref_a[k] = d.current_a(m, tick);
-            if was_enabled && !d.enabled() {
-                st.command_timeouts += 1;
-                tracing::warn!(
-                    "joint `{}` node {}: no command for {} ms, drive idles",
-                    robot.name(k),
-                    d.node(),
-                    opts.command_timeout_ms
-                );
-            }
-        }
+        drive_currents(robot, &mut drives, &meas, tick, opts, &mut i_ref_a, &mut st);
         robot.step(&i_ref_a, &tau_ext_nm)?;
         for (k, m) in meas.iter_mut().enumerate() {
             *m = robot.measurement(k);

@@ -318,7 +318,6 @@ fn serve_loop(
     let mut summary = ServeSummary::default();
     let mut held = HeldCommand { cmd: None, at: 0 };
     let timeout_ns = opts.command_timeout_ms.saturating_mul(1_000_000);
-    let lockstep_timeout = Duration::from_millis(opts.lockstep_timeout_ms);
     let mut seq = 1u64;
     // The step's inputs, one per joint (allocated once, before the loop).
     let mut i_ref_a = vec![0.0; loops.len()];
@@ -329,44 +328,10 @@ fn serve_loop(
 
     while summary.ticks < max_ticks && !stop.load(Ordering::Relaxed) {
         // 1. the command for this tick
-        let fresh = if opts.lockstep {
-            match wait_answer(ports, seq, lockstep_timeout, stop, &mut summary)? {
-                Some(c) => {
-                    held = HeldCommand {
-                        cmd: Some(c),
-                        at: summary.ticks,
-                    };
-                    true
-                }
-                None if stop.load(Ordering::Relaxed) => break,
-                None => {
-                    if summary.commands_missed < 5 || summary.commands_missed % 1000 == 0 {
-                        eprintln!(
-                            "frictl sim serve: warning: lockstep: no command for state {seq} \
-                             within {} ms; holding the last one up to {} ms, then 0 A",
-                            opts.lockstep_timeout_ms, opts.command_timeout_ms
-                        );
-                    }
-                    false
-                }
-            }
-        } else {
-            frictionless_shm_types::sleep_until_ns(deadline);
-            match ports
-                .commands
-                .latest()
-                .map_err(|e| io_err("receiving commands", e))?
-            {
-                Some(c) => {
-                    summary.commands_received += 1;
-                    held = HeldCommand {
-                        cmd: Some(c),
-                        at: monotonic_ns(),
-                    };
-                    true
-                }
-                None => false,
-            }
+        let Some(fresh) =
+            receive_command(ports, opts, seq, deadline, stop, &mut summary, &mut held)?
+        else {
+            break;
         };
         if !fresh {
             summary.commands_missed += 1;
@@ -384,37 +349,9 @@ fn serve_loop(
             summary.zero_current_ticks += 1;
         }
         // 2. disturbance (newest, held)
-        if let Some(d) = ports
-            .disturbance
-            .latest()
-            .map_err(|e| io_err("receiving disturbances", e))?
-        {
-            for (j, l) in loops.iter_mut().enumerate() {
-                let tau = if j < d.n_joints as usize {
-                    d.tau_ext_nm[j]
-                } else {
-                    0.0
-                };
-                l.tau_ext_nm = if tau.is_finite() { tau } else { 0.0 };
-            }
-        }
+        take_disturbance(ports, loops)?;
         // 3. physics: every joint at once
-        for (j, l) in loops.iter_mut().enumerate() {
-            let i_ref = match cmd {
-                Some(c) if c.is_valid(j) && c.i_ref_a[j].is_finite() => c.i_ref_a[j],
-                _ => 0.0,
-            };
-            let i_max = robot.params(j).i_max_a;
-            l.i_applied_a = i_ref.clamp(-i_max, i_max);
-            i_ref_a[j] = l.i_applied_a;
-            tau_ext_nm[j] = l.tau_ext_nm;
-        }
-        robot.step(&i_ref_a, &tau_ext_nm)?;
-        for (j, l) in loops.iter_mut().enumerate() {
-            l.meas = robot.measurement(j);
-            l.truth = robot.truth(j);
-            l.vel.update(l.meas.s_rad);
-        }
+        step_joints(robot, loops, cmd, &mut i_ref_a, &mut tau_ext_nm)?;
         summary.ticks += 1;
         seq += 1;
         // 4. publish
@@ -431,6 +368,109 @@ fn serve_loop(
     }
     summary.wall_s = started.elapsed().as_secs_f64();
     Ok(summary)
+}
+
+/// Step 1 of a tick: takes this tick's command into `held` (lockstep: the answer to state `seq`,
+/// waited for; real time: the newest, at `deadline`). `Some(fresh)`: whether one came; `None`:
+/// stopped while waiting.
+fn receive_command(
+    ports: &PlantPorts,
+    opts: &ShmServeOptions,
+    seq: u64,
+    deadline: u64,
+    stop: &AtomicBool,
+    summary: &mut ServeSummary,
+    held: &mut HeldCommand,
+) -> Result<Option<bool>, ServeError> {
+    let lockstep_timeout = Duration::from_millis(opts.lockstep_timeout_ms);
+    Ok(Some(if opts.lockstep {
+        match wait_answer(ports, seq, lockstep_timeout, stop, summary)? {
+            Some(c) => {
+                *held = HeldCommand {
+                    cmd: Some(c),
+                    at: summary.ticks,
+                };
+                true
+            }
+            None if stop.load(Ordering::Relaxed) => return Ok(None),
+            None => {
+                if summary.commands_missed < 5 || summary.commands_missed % 1000 == 0 {
+                    eprintln!(
+                        "frictl sim serve: warning: lockstep: no command for state {seq} \
+                         within {} ms; holding the last one up to {} ms, then 0 A",
+                        opts.lockstep_timeout_ms, opts.command_timeout_ms
+                    );
+                }
+                false
+            }
+        }
+    } else {
+        frictionless_shm_types::sleep_until_ns(deadline);
+        match ports
+            .commands
+            .latest()
+            .map_err(|e| io_err("receiving commands", e))?
+        {
+            Some(c) => {
+                summary.commands_received += 1;
+                *held = HeldCommand {
+                    cmd: Some(c),
+                    at: monotonic_ns(),
+                };
+                true
+            }
+            None => false,
+        }
+    }))
+}
+
+/// Step 2 of a tick: the newest disturbance, if one came, is held by every joint (a non-finite
+/// or missing value as 0).
+fn take_disturbance(ports: &PlantPorts, loops: &mut [JointLoop]) -> Result<(), ServeError> {
+    if let Some(d) = ports
+        .disturbance
+        .latest()
+        .map_err(|e| io_err("receiving disturbances", e))?
+    {
+        for (j, l) in loops.iter_mut().enumerate() {
+            let tau = if j < d.n_joints as usize {
+                d.tau_ext_nm[j]
+            } else {
+                0.0
+            };
+            l.tau_ext_nm = if tau.is_finite() { tau } else { 0.0 };
+        }
+    }
+    Ok(())
+}
+
+/// Step 3 of a tick: every joint's current (the command's, clamped to ±i_max; else 0 A) and
+/// disturbance into the step's inputs `i_ref_a`, `tau_ext_nm`; one physics step; the joints'
+/// new measurements.
+fn step_joints(
+    robot: &mut ServedRobot,
+    loops: &mut [JointLoop],
+    cmd: Option<MotorCurrentCommand>,
+    i_ref_a: &mut [f64],
+    tau_ext_nm: &mut [f64],
+) -> Result<(), ServeError> {
+    for (j, l) in loops.iter_mut().enumerate() {
+        let i_ref = match cmd {
+            Some(c) if c.is_valid(j) && c.i_ref_a[j].is_finite() => c.i_ref_a[j],
+            _ => 0.0,
+        };
+        let i_max = robot.params(j).i_max_a;
+        l.i_applied_a = i_ref.clamp(-i_max, i_max);
+        i_ref_a[j] = l.i_applied_a;
+        tau_ext_nm[j] = l.tau_ext_nm;
+    }
+    robot.step(i_ref_a, tau_ext_nm)?;
+    for (j, l) in loops.iter_mut().enumerate() {
+        l.meas = robot.measurement(j);
+        l.truth = robot.truth(j);
+        l.vel.update(l.meas.s_rad);
+    }
+    Ok(())
 }
 
 /// Lockstep: waits for the command answering state `seq`. Older answers are counted and dropped.

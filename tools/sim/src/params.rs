@@ -296,14 +296,22 @@ impl PlantParams {
     /// Checks every value is finite and in its physical range.
     pub fn validate(&self) -> Result<(), ParamError> {
         self.torque_sensor.validate()?;
-        let pos = "must be > 0";
-        let nonneg = "must be >= 0";
         check(
             "gear_ratio_signed",
             self.gear_ratio_signed,
             self.gear_ratio_signed.abs() >= 1e-6,
             "must be non-zero",
         )?;
+        self.check_signs()?;
+        self.check_relations()?;
+        self.check_sensor_counts()?;
+        self.check_link()
+    }
+
+    /// The values that must be positive, then those that must be non-negative.
+    fn check_signs(&self) -> Result<(), ParamError> {
+        let pos = "must be > 0";
+        let nonneg = "must be >= 0";
         for (k, v) in [
             ("kt_nm_per_a", self.kt_nm_per_a),
             ("i_max_a", self.i_max_a),
@@ -352,6 +360,12 @@ impl PlantParams {
         ] {
             check(k, v, v >= 0.0, nonneg)?;
         }
+        Ok(())
+    }
+
+    /// The values bounded by others (friction levels, temperatures, joint range, substeps) and
+    /// those that need only be finite.
+    fn check_relations(&self) -> Result<(), ParamError> {
         check(
             "delta_f_c_nm",
             self.delta_f_c_nm,
@@ -391,6 +405,11 @@ impl PlantParams {
             self.substeps_per_sample >= 1,
             "must be >= 1",
         )?;
+        Ok(())
+    }
+
+    /// The encoders' counts per revolution and the velocity window: at least 1.
+    fn check_sensor_counts(&self) -> Result<(), ParamError> {
         let enc = &self.sensors;
         check(
             "sensors.joint_encoder_counts_per_rev",
@@ -410,6 +429,12 @@ impl PlantParams {
             enc.motor_velocity_window_samples >= 1,
             "must be >= 1",
         )?;
+        Ok(())
+    }
+
+    /// The link model's values: finite, a pendulum's inertia positive.
+    fn check_link(&self) -> Result<(), ParamError> {
+        let pos = "must be > 0";
         match &self.link {
             LinkModel::Urdf {
                 other_joints_rad, ..

@@ -224,33 +224,78 @@ pub fn load_sources(paths: &[PathBuf]) -> Result<Sources, PipelineError> {
     if paths.is_empty() {
         return Err(PipelineError::Usage("no --dataset given".into()));
     }
-    let mut list = Vec::with_capacity(paths.len());
-    for path in paths {
-        let sha256 = frictionless_dataset::file_sha256(path)
-            .map_err(|e| file_err(path, format!("cannot read: {e}")))?;
-        let data = Dataset::read_csv(path)?;
-        let side_path = path.with_extension("json");
-        let text = frictionless::regular_file::read_text(&side_path).map_err(|e| {
-            file_err(
-                &side_path,
-                format!(
-                    "cannot read the sidecar of {} (written by `frictl preprocess`): {e}",
-                    path.display()
-                ),
-            )
-        })?;
-        let sidecar: DatasetSidecar =
-            serde_json::from_str(&text).map_err(|e| file_err(&side_path, e))?;
-        if data.is_empty() {
-            return Err(file_err(path, "the dataset has no rows"));
-        }
-        list.push(Source {
-            path: path.clone(),
-            data,
-            sidecar,
-            sha256,
-        });
+    let list = paths
+        .iter()
+        .map(|p| load_source(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    let first = &list[0];
+    check_sources_agree(&list)?;
+    let side_path = first.path.with_extension("json");
+    let gear_ratio = GearRatio::new(first.sidecar.gear_ratio_signed).map_err(|e| {
+        file_err(
+            &side_path,
+            format!(
+                "gear_ratio_signed = {}: {e}",
+                first.sidecar.gear_ratio_signed
+            ),
+        )
+    })?;
+    let kt = first.sidecar.kt_nm_per_a;
+    if !(kt.is_finite() && kt > 0.0) {
+        return Err(file_err(
+            &side_path,
+            format!("kt_nm_per_a = {kt}: must be finite and positive"),
+        ));
     }
+    let dataset_sha256 = if list.len() == 1 {
+        list[0].sha256
+    } else {
+        let mut h = Sha256::new();
+        for s in &list {
+            h.update(s.sha256);
+        }
+        h.finalize().into()
+    };
+    Ok(Sources {
+        joint: first.sidecar.joint.clone(),
+        gear_ratio,
+        kt_nm_per_a: kt,
+        filtering: filtering_of(&first.sidecar),
+        dataset_sha256,
+        list,
+    })
+}
+
+/// Reads one dataset, its hash and its sidecar (beside it, `.json`); an empty dataset is an error.
+fn load_source(path: &Path) -> Result<Source, PipelineError> {
+    let sha256 = frictionless_dataset::file_sha256(path)
+        .map_err(|e| file_err(path, format!("cannot read: {e}")))?;
+    let data = Dataset::read_csv(path)?;
+    let side_path = path.with_extension("json");
+    let text = frictionless::regular_file::read_text(&side_path).map_err(|e| {
+        file_err(
+            &side_path,
+            format!(
+                "cannot read the sidecar of {} (written by `frictl preprocess`): {e}",
+                path.display()
+            ),
+        )
+    })?;
+    let sidecar: DatasetSidecar =
+        serde_json::from_str(&text).map_err(|e| file_err(&side_path, e))?;
+    if data.is_empty() {
+        return Err(file_err(path, "the dataset has no rows"));
+    }
+    Ok(Source {
+        path: path.to_path_buf(),
+        data,
+        sidecar,
+        sha256,
+    })
+}
+
+/// Checks that every dataset's sidecar has the first's joint, gear ratio, kt and filtering.
+fn check_sources_agree(list: &[Source]) -> Result<(), PipelineError> {
     let first = &list[0];
     for other in &list[1..] {
         let mismatch = |key, a: String, b: String| PipelineError::Mismatch {
@@ -286,40 +331,7 @@ pub fn load_sources(paths: &[PathBuf]) -> Result<Sources, PipelineError> {
             ));
         }
     }
-    let side_path = first.path.with_extension("json");
-    let gear_ratio = GearRatio::new(first.sidecar.gear_ratio_signed).map_err(|e| {
-        file_err(
-            &side_path,
-            format!(
-                "gear_ratio_signed = {}: {e}",
-                first.sidecar.gear_ratio_signed
-            ),
-        )
-    })?;
-    let kt = first.sidecar.kt_nm_per_a;
-    if !(kt.is_finite() && kt > 0.0) {
-        return Err(file_err(
-            &side_path,
-            format!("kt_nm_per_a = {kt}: must be finite and positive"),
-        ));
-    }
-    let dataset_sha256 = if list.len() == 1 {
-        list[0].sha256
-    } else {
-        let mut h = Sha256::new();
-        for s in &list {
-            h.update(s.sha256);
-        }
-        h.finalize().into()
-    };
-    Ok(Sources {
-        joint: first.sidecar.joint.clone(),
-        gear_ratio,
-        kt_nm_per_a: kt,
-        filtering: filtering_of(&first.sidecar),
-        dataset_sha256,
-        list,
-    })
+    Ok(())
 }
 
 /// The SCV prior of the physics loss, from `frictl fit … --json`.
@@ -999,47 +1011,9 @@ pub fn train_model(
     let train = prepared.train.view();
     let val_view = prepared.val.view();
     let val = (!prepared.val.is_empty()).then_some(&val_view);
-    let ckpt = job.checkpoint.as_deref();
-    if job.resume && job.init.is_some() {
-        return Err(PipelineError::Usage(
-            "--resume continues a checkpointed run; --init starts a new run from a model: give one"
-                .into(),
-        ));
-    }
-    let mut trainer = if job.resume {
-        let path =
-            ckpt.ok_or_else(|| PipelineError::Usage("--resume needs --checkpoint FILE".into()))?;
-        let mut t = Trainer::resume(path, &train, val)?;
-        check_resume(path, t.config(), &job.config)?;
-        t.set_epochs(job.config.epochs);
-        t
-    } else if let Some(init) = &job.init {
-        Trainer::from_init(job.config.clone(), init, &train, val)?
-    } else {
-        Trainer::new(job.config.clone(), &train, val)?
-    };
-    let every = job.checkpoint_every.max(1);
+    let mut trainer = start_trainer(job, &train, val)?;
     let started = Instant::now();
-    let mut user_stop = false;
-    let outcome = loop {
-        let out = trainer.train(|r| {
-            if on_epoch(r).is_break() {
-                user_stop = true;
-                return ControlFlow::Break(());
-            }
-            if ckpt.is_some() && r.epoch.is_multiple_of(every) {
-                ControlFlow::Break(())
-            } else {
-                ControlFlow::Continue(())
-            }
-        })?;
-        if let Some(p) = ckpt {
-            trainer.save_checkpoint(p)?;
-        }
-        if !out.interrupted || user_stop {
-            break out;
-        }
-    };
+    let outcome = train_checkpointed(&mut trainer, job, &mut on_epoch)?;
     let train_seconds = started.elapsed().as_secs_f64();
     let weights = round_to_dtype(&outcome.weights, job.dtype);
     let mut pred = Predictor::new(&weights, job.config.threads)?;
@@ -1050,36 +1024,7 @@ pub fn train_model(
         Some(r) => Some(r),
         None => residual_reference(&mut pred, sources, &prepared.train, "train")?,
     };
-    let nan = |v: Option<f64>| v.map_or(f32::NAN, |x| x as f32);
-    let model = ModelFile {
-        meta: ModelMeta {
-            joint_name: sources.joint.clone(),
-            gear_ratio: sources.gear_ratio,
-            kt_nm_per_a: sources.kt_nm_per_a,
-            features: job.spec,
-            scv: Some(storable_scv(scv.params)),
-            training: TrainingMeta {
-                dataset_sha256: sources.dataset_sha256,
-                val_rmse_nm: nan(va),
-                test_rmse_nm: nan(te),
-                created_unix_s: created_unix_s(),
-                tool_version: format!("frictl {}", env!("CARGO_PKG_VERSION")),
-                filtering: sources.filtering,
-                // Training rows only: validation and test stay unseen.
-                input_range: InputRange::from_rows(
-                    &job.spec,
-                    prepared
-                        .train
-                        .x
-                        .chunks_exact(prepared.train.n_inputs.max(1)),
-                ),
-                quant_max_error_nm: None,
-                teacher_sha256: None,
-            },
-        },
-        dtype: job.dtype,
-        mlp: weights,
-    };
+    let model = stored_model(sources, scv, prepared, job, weights, va, te);
     let n_params = model
         .mlp
         .layers
@@ -1094,25 +1039,7 @@ pub fn train_model(
         gear_ratio_signed: sources.gear_ratio.get(),
         kt_nm_per_a: sources.kt_nm_per_a,
         filtering: sources.filtering,
-        datasets: sources
-            .list
-            .iter()
-            .map(|s| DatasetInfo {
-                path: s.path.display().to_string(),
-                sha256: hex(&s.sha256),
-                samples: s.data.len(),
-                chunks: s.sidecar.chunks,
-                delta_theta_offset_motor_rad: job
-                    .spec
-                    .set
-                    .uses_delta_theta()
-                    .then(|| {
-                        job.delta_theta_offset
-                            .offset_for(&s.data, sources.gear_ratio)
-                    })
-                    .flatten(),
-            })
-            .collect(),
+        datasets: datasets_info(sources, job),
         dataset_sha256: hex(&sources.dataset_sha256),
         scv: ScvInfo {
             path: scv.path.display().to_string(),
@@ -1156,6 +1083,133 @@ pub fn train_model(
         residual_reference,
     };
     Ok(Trained { model, report })
+}
+
+/// The trainer of `job`: resumed from its checkpoint (`--resume`), started from a model
+/// (`--init`) or new.
+fn start_trainer(
+    job: &Job,
+    train: &super::Dataset<'_>,
+    val: Option<&super::Dataset<'_>>,
+) -> Result<Trainer, PipelineError> {
+    if job.resume && job.init.is_some() {
+        return Err(PipelineError::Usage(
+            "--resume continues a checkpointed run; --init starts a new run from a model: give one"
+                .into(),
+        ));
+    }
+    Ok(if job.resume {
+        let path = job
+            .checkpoint
+            .as_deref()
+            .ok_or_else(|| PipelineError::Usage("--resume needs --checkpoint FILE".into()))?;
+        let mut t = Trainer::resume(path, train, val)?;
+        check_resume(path, t.config(), &job.config)?;
+        t.set_epochs(job.config.epochs);
+        t
+    } else if let Some(init) = &job.init {
+        Trainer::from_init(job.config.clone(), init, train, val)?
+    } else {
+        Trainer::new(job.config.clone(), train, val)?
+    })
+}
+
+/// Trains to the end (or until `on_epoch` breaks), saving a checkpoint every
+/// `job.checkpoint_every` epochs and at the end when `job.checkpoint` is set.
+fn train_checkpointed(
+    trainer: &mut Trainer,
+    job: &Job,
+    on_epoch: &mut impl FnMut(&EpochReport) -> ControlFlow<()>,
+) -> Result<super::TrainOutcome, PipelineError> {
+    let ckpt = job.checkpoint.as_deref();
+    let every = job.checkpoint_every.max(1);
+    let mut user_stop = false;
+    Ok(loop {
+        let out = trainer.train(|r| {
+            if on_epoch(r).is_break() {
+                user_stop = true;
+                return ControlFlow::Break(());
+            }
+            if ckpt.is_some() && r.epoch.is_multiple_of(every) {
+                ControlFlow::Break(())
+            } else {
+                ControlFlow::Continue(())
+            }
+        })?;
+        if let Some(p) = ckpt {
+            trainer.save_checkpoint(p)?;
+        }
+        if !out.interrupted || user_stop {
+            break out;
+        }
+    })
+}
+
+/// The model file of the trained `weights` (already rounded to `job.dtype`), with the joint's
+/// constants, the SCV prior, the validation and test RMSEs `va`, `te` [N·m] and the training
+/// rows' input range.
+fn stored_model(
+    sources: &Sources,
+    scv: &ScvPrior,
+    prepared: &Prepared,
+    job: &Job,
+    weights: MlpWeights,
+    va: Option<f64>,
+    te: Option<f64>,
+) -> ModelFile {
+    let nan = |v: Option<f64>| v.map_or(f32::NAN, |x| x as f32);
+    ModelFile {
+        meta: ModelMeta {
+            joint_name: sources.joint.clone(),
+            gear_ratio: sources.gear_ratio,
+            kt_nm_per_a: sources.kt_nm_per_a,
+            features: job.spec,
+            scv: Some(storable_scv(scv.params)),
+            training: TrainingMeta {
+                dataset_sha256: sources.dataset_sha256,
+                val_rmse_nm: nan(va),
+                test_rmse_nm: nan(te),
+                created_unix_s: created_unix_s(),
+                tool_version: format!("frictl {}", env!("CARGO_PKG_VERSION")),
+                filtering: sources.filtering,
+                // Training rows only: validation and test stay unseen.
+                input_range: InputRange::from_rows(
+                    &job.spec,
+                    prepared
+                        .train
+                        .x
+                        .chunks_exact(prepared.train.n_inputs.max(1)),
+                ),
+                quant_max_error_nm: None,
+                teacher_sha256: None,
+            },
+        },
+        dtype: job.dtype,
+        mlp: weights,
+    }
+}
+
+/// What the report says of each training dataset (the Δθ offset where the features use it).
+fn datasets_info(sources: &Sources, job: &Job) -> Vec<DatasetInfo> {
+    sources
+        .list
+        .iter()
+        .map(|s| DatasetInfo {
+            path: s.path.display().to_string(),
+            sha256: hex(&s.sha256),
+            samples: s.data.len(),
+            chunks: s.sidecar.chunks,
+            delta_theta_offset_motor_rad: job
+                .spec
+                .set
+                .uses_delta_theta()
+                .then(|| {
+                    job.delta_theta_offset
+                        .offset_for(&s.data, sources.gear_ratio)
+                })
+                .flatten(),
+        })
+        .collect()
 }
 
 /// Writes the `.fwt` (atomically) and the report JSON; fills `report.model`.
