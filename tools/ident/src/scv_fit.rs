@@ -263,7 +263,8 @@ pub fn fit_scv_guarded(input: &ScvFitInput, opts: &FitOptions) -> Result<ScvFit,
     )?;
     let (scv_val, _) = errors(&train.model, v_val, t_val);
     validation.scv_rmse_nm = Some(scv_val);
-    if !(scv_val < cv_val) {
+    // NaN on either side falls back too.
+    if scv_val.partial_cmp(&cv_val) != Some(std::cmp::Ordering::Less) {
         return Ok(fallback(
             format!(
                 "the SCV is not better than the CV on the validation block (last {} rows): RMSE {scv_val:.4} Nm vs {cv_val:.4} Nm; SCV = CV (ks = kc)",

@@ -415,6 +415,7 @@ fn run_leg(args: &Args) -> anyhow::Result<()> {
     let n_fields = columns.len();
     let mut sink = |rows: &[frictionless_acquire::leg::LegRow]| -> Result<(), AcquireError> {
         leg_csv_line(&mut line, rows, n_fields);
+        line.push('\n');
         samples += 1;
         std::io::Write::write_all(&mut out, line.as_bytes())
             .map_err(|e| AcquireError::Sink(e.to_string()))
