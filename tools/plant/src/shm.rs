@@ -394,7 +394,7 @@ fn receive_command(
             }
             None if stop.load(Ordering::Relaxed) => return Ok(None),
             None => {
-                if summary.commands_missed < 5 || summary.commands_missed % 1000 == 0 {
+                if summary.commands_missed < 5 || summary.commands_missed.is_multiple_of(1000) {
                     eprintln!(
                         "frictl sim serve: warning: lockstep: no command for state {seq} \
                          within {} ms; holding the last one up to {} ms, then 0 A",

@@ -185,7 +185,7 @@ fn open_log(
     with_truth: bool,
 ) -> anyhow::Result<Log<frictionless::output_file::AtomicFile>> {
     let period_s = plant_params.sample_period_s();
-    let writer = frictionless::output_file::AtomicFile::create(&csv_path)
+    let writer = frictionless::output_file::AtomicFile::create(csv_path)
         .with_context(|| format!("cannot create {}", csv_path.display()))?;
     Ok(if args.sensor == Sensor::Torque {
         Log::Arm(Box::new(ArmLog::new(
