@@ -218,6 +218,47 @@ fn progress_bar(total: u64) -> indicatif::ProgressBar {
     bar
 }
 
+/// Connects to the plant on `--prefix`/`--root-path` as joint `joint_index` (sample period
+/// `period_s`), with `--connect-timeout-s` and `--state-timeout-ms`; Ctrl-C stops it.
+fn connect_live(
+    args: &Args,
+    joint_index: usize,
+    period_s: f64,
+) -> anyhow::Result<frictionless_plant::shm::LiveJoint<'_>> {
+    let stop = frictionless_plant::install_stop_flag()?;
+    anyhow::ensure!(
+        args.connect_timeout_s.is_finite() && args.connect_timeout_s > 0.0,
+        "--connect-timeout-s must be > 0, got {}",
+        args.connect_timeout_s
+    );
+    let cfg = frictionless_shm_types::IpcConfig::new(args.root_path.as_deref(), &args.prefix);
+    Ok(frictionless_plant::shm::LiveJoint::connect(
+        &cfg,
+        joint_index,
+        period_s,
+        Duration::from_secs_f64(args.connect_timeout_s),
+        Duration::from_millis(args.state_timeout_ms),
+        stop,
+    )?)
+}
+
+/// The sidecar's record of a live run through `joint` (joint `joint_index`).
+fn live_info(
+    args: &Args,
+    joint: &frictionless_plant::shm::LiveJoint,
+    joint_index: usize,
+) -> LiveInfo {
+    LiveInfo {
+        prefix: args.prefix.clone(),
+        root_path: args.root_path.as_ref().map(|p| p.display().to_string()),
+        joint_index,
+        first_seq: joint.first_seq(),
+        states_received: joint.states_received,
+        states_skipped: joint.states_skipped,
+        plant_publishes_sim_truth: joint.plant_publishes_sim_truth,
+    }
+}
+
 /// `--live-shm`: the protocol run through a plant served on shared memory; the joint is left at
 /// 0 A whatever happens.
 fn acquire_live(
@@ -228,34 +269,12 @@ fn acquire_live(
     blocks: &[frictionless_acquire::protocol::Block],
     sink: &mut dyn FnMut(&frictionless_acquire::LogRow) -> Result<(), AcquireError>,
 ) -> anyhow::Result<(frictionless_acquire::RunSummary, LiveInfo)> {
-    let stop = frictionless_plant::install_stop_flag()?;
-    anyhow::ensure!(
-        args.connect_timeout_s.is_finite() && args.connect_timeout_s > 0.0,
-        "--connect-timeout-s must be > 0, got {}",
-        args.connect_timeout_s
-    );
-    let cfg = frictionless_shm_types::IpcConfig::new(args.root_path.as_deref(), &args.prefix);
-    let mut joint = frictionless_plant::shm::LiveJoint::connect(
-        &cfg,
-        args.joint_index,
-        plant_params.sample_period_s(),
-        Duration::from_secs_f64(args.connect_timeout_s),
-        Duration::from_millis(args.state_timeout_ms),
-        stop,
-    )?;
+    let mut joint = connect_live(args, args.joint_index, plant_params.sample_period_s())?;
     let model = ControllerModel::nominal(plant_params, link);
     let result = run_protocol(&mut joint, &model, protocol, blocks, sink);
     // Leave the joint at 0 A whatever happened (the plant also zeroes after its timeout).
     let released = joint.release();
-    let info = LiveInfo {
-        prefix: args.prefix.clone(),
-        root_path: args.root_path.as_ref().map(|p| p.display().to_string()),
-        joint_index: args.joint_index,
-        first_seq: joint.first_seq(),
-        states_received: joint.states_received,
-        states_skipped: joint.states_skipped,
-        plant_publishes_sim_truth: joint.plant_publishes_sim_truth,
-    };
+    let info = live_info(args, &joint, args.joint_index);
     let summary = result?;
     released?;
     Ok((summary, info))
@@ -555,21 +574,7 @@ fn acquire_leg_live(
     protocols: &[ProtocolConfig],
     sink: &mut dyn FnMut(&[frictionless_acquire::leg::LegRow]) -> Result<(), AcquireError>,
 ) -> anyhow::Result<(Vec<frictionless_acquire::RunSummary>, LiveInfo)> {
-    let stop = frictionless_plant::install_stop_flag()?;
-    anyhow::ensure!(
-        args.connect_timeout_s.is_finite() && args.connect_timeout_s > 0.0,
-        "--connect-timeout-s must be > 0, got {}",
-        args.connect_timeout_s
-    );
-    let cfg = frictionless_shm_types::IpcConfig::new(args.root_path.as_deref(), &args.prefix);
-    let mut robot = frictionless_plant::shm::LiveJoint::connect(
-        &cfg,
-        0,
-        leg.joints[0].sample_period_s(),
-        Duration::from_secs_f64(args.connect_timeout_s),
-        Duration::from_millis(args.state_timeout_ms),
-        stop,
-    )?;
+    let mut robot = connect_live(args, 0, leg.joints[0].sample_period_s())?;
     anyhow::ensure!(
         robot.n_joints() == leg.joints.len(),
         "--preset leg --live-shm: the plant on `{}` publishes {} joint(s), the leg has {} \
@@ -581,15 +586,7 @@ fn acquire_leg_live(
     let result = frictionless_acquire::leg::run_leg(&mut robot, leg, protocols, sink);
     // Leave every joint at 0 A whatever happened (the plant also zeroes after its timeout).
     let released = robot.release_all(leg.joints.len());
-    let info = LiveInfo {
-        prefix: args.prefix.clone(),
-        root_path: args.root_path.as_ref().map(|p| p.display().to_string()),
-        joint_index: 0,
-        first_seq: robot.first_seq(),
-        states_received: robot.states_received,
-        states_skipped: robot.states_skipped,
-        plant_publishes_sim_truth: robot.plant_publishes_sim_truth,
-    };
+    let info = live_info(args, &robot, 0);
     let summaries = result?;
     released?;
     Ok((summaries, info))
