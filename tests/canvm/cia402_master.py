@@ -22,6 +22,11 @@ import canopen
 from canopen.profiles.p402 import BaseNode402
 
 
+# The SYNC and RPDO period [s], and how long a commanded torque may take to come back.
+PERIOD_S = 0.04
+SETTLE_TIMEOUT_S = 20.0
+
+
 def say(key, value):
     sys.stdout.write("%s=%s\n" % (key, value))
     sys.stdout.flush()
@@ -75,7 +80,7 @@ def main():
     say("rated_torque_mnm", node.sdo[0x6076].raw)
     say("counts_per_rev", node.sdo[0x608F][1].raw)
     say("supported_modes", "0x%08X" % node.sdo[0x6502].raw)
-    node.sdo[0x1017].raw = 50
+    node.sdo[0x1017].raw = 200
 
     # PDO configuration by SDO (BaseNode402 finds the controlword / statusword in it).
     node.setup_402_state_machine(read_pdos=True)
@@ -90,9 +95,10 @@ def main():
     say("op_mode", node.sdo[0x6061].raw)
 
     node.nmt.state = "OPERATIONAL"
-    # The SYNC producer (the drive sends its TPDOs and applies RPDOs at each SYNC), at 100 Hz: the
-    # VM emulates its CPU, and Python must keep up with every frame.
-    net.sync.start(0.01)
+    # The SYNC producer (the drive sends its TPDOs and applies RPDOs at each SYNC), at 25 Hz: the
+    # VM emulates its CPU, and Python must keep up with every frame it receives (its own SYNC and
+    # RPDO frames come back to it too); behind, it reads stale values and the kernel drops the rest.
+    net.sync.start(PERIOD_S)
     node.tpdo[1].wait_for_reception(5)
     say("state_start", node.state)
 
@@ -102,12 +108,19 @@ def main():
     rpdo1 = target.pdo_parent
     target.raw = 0
     node.rpdo_pointers[0x6040].raw = 0x0000
-    rpdo1.start(0.01)
+    rpdo1.start(PERIOD_S)
     node.state = "OPERATION ENABLED"
     say("state_enabled", node.state)
 
     def hold(permille, seconds):
+        """Commands `permille` until the drive reports it back as torque actual (within 3 %, or
+        a timeout: the VM may lag), then `seconds` more; returns position and torque actual."""
         target.raw = permille
+        t_end = time.monotonic() + SETTLE_TIMEOUT_S
+        while time.monotonic() < t_end:
+            node.tpdo[1].wait_for_reception(2.0)
+            if abs(node.tpdo_values[0x6077] - permille) <= 30:
+                break
         t_end = time.monotonic() + seconds
         while time.monotonic() < t_end:
             node.check_statusword(2.0)

@@ -252,6 +252,11 @@ log "VM exited (qemu rc $qrc)"
 set -e
 tr -d '\r' < "$WORK/console.log" | sed 's/\x1b\[[0-9;?]*[a-zA-Z]//g; s/\x1bc//g' > "$WORK/console.txt"
 grep -E '^(test |CANVM_|running|insmod|thread|---- |  left|  right|failures)' "$WORK/console.txt" || true
+# Each failing test's own output (its panic message and what it printed), up to 120 lines each.
+awk '/^---- .* stdout ----$/ { n = 0; keep = 1 } /^(failures|successes):$/ { keep = 0 }
+     keep && /panicked at/ { show = 1 } keep { buf[n++] = $0 }
+     /^(failures|successes):$/ && show { for (k = 0; k < n && k < 120; k++) print "| " buf[k]; show = 0; n = 0 }' \
+  "$WORK/console.txt" || true
 # Benchmarks inside the VM print lines starting with `bench:` (shown by --show-output): echo them.
 grep -E '^bench:' "$WORK/console.txt" | tee "$WORK/bench.txt" || true
 passed=$(grep -cE '^test .* \.\.\. ok$' "$WORK/console.txt" || true)
