@@ -93,6 +93,9 @@ class Drive:
         self.rpdo_maps = []
         self.tpdo_maps = []
         self.nmt_state = None
+        # The SYNC handler (python-can's notifier thread) and the stdin commands (main thread) both
+        # change the 402 state: one at a time, or a fault can be overwritten mid-SYNC.
+        self.lock = threading.Lock()
         # Plant (motor side): inertia [kg m^2], viscous damping [Nm s/rad].
         self.j_kgm2 = args.inertia_kgm2
         self.b_nms = args.damping_nms
@@ -207,6 +210,10 @@ class Drive:
             self.say("rx cw=0x%04X torque=%d" % (rx[0] or 0, rx[1] or 0))
 
     def on_sync(self, can_id, data, timestamp):
+        with self.lock:
+            self.sync_locked()
+
+    def sync_locked(self):
         if self.node.nmt.state != "OPERATIONAL":
             return
         self.syncs += 1
@@ -249,6 +256,10 @@ class Drive:
                 self.tpdos += 1
 
     def fault(self, code):
+        with self.lock:
+            self.fault_locked(code)
+
+    def fault_locked(self, code):
         self.enter("FAULT")
         self.set(0x603F, 0, code)
         self.set(0x1001, 0, 1)
