@@ -96,6 +96,7 @@ pub mod law;
 pub mod lugre;
 pub mod mlp;
 pub mod model;
+pub mod named;
 pub mod output_file;
 #[cfg(feature = "random")]
 pub mod random;

@@ -47,12 +47,12 @@ pub struct Args {
     /// Dataset CSV from `frictl preprocess`.
     pub dataset: PathBuf,
     /// Solver.
-    #[arg(long, value_enum, default_value_t = Method::Lm)]
-    #[serde(serialize_with = "super::stage::as_value_enum")]
+    #[arg(long, value_parser = super::stage::named::<Method>(Method::NAMES), default_value_t = Method::Lm)]
+    #[serde(serialize_with = "super::stage::as_name")]
     pub method: Method,
     /// Adam loss (`--method adam`).
-    #[arg(long, value_enum, default_value_t = Loss::L1)]
-    #[serde(serialize_with = "super::stage::as_value_enum")]
+    #[arg(long, value_parser = super::stage::named::<Loss>(Loss::NAMES), default_value_t = Loss::L1)]
+    #[serde(serialize_with = "super::stage::as_name")]
     pub loss: Loss,
     /// Adam epochs.
     #[arg(long, default_value_t = 3000)]

@@ -1,5 +1,6 @@
 //! Arguments of `frictl sim`.
 
+use frictionless_plant::can::Protocol;
 use std::path::PathBuf;
 
 /// Arguments of `frictl sim`.
@@ -140,8 +141,12 @@ pub struct ServeArgs {
     #[arg(long, default_value = "vcan0")]
     pub bus: String,
     /// can: motor protocol.
-    #[arg(long, value_enum, default_value_t = frictionless_plant::can::Protocol::Mit)]
-    pub protocol: frictionless_plant::can::Protocol,
+    #[arg(
+        long,
+        value_parser = crate::stage::named::<Protocol>(Protocol::NAMES),
+        default_value_t = Protocol::Mit
+    )]
+    pub protocol: Protocol,
     /// can: node id per joint, comma-separated (default 1, 2, …).
     #[arg(long, value_delimiter = ',')]
     pub node_ids: Vec<u8>,

@@ -251,6 +251,22 @@ pub fn as_value_enum<T: clap::ValueEnum, S: serde::Serializer>(
     }
 }
 
+/// `#[serde(serialize_with = "…")]` for a library's named enum (`frictionless::named_enum!`): its
+/// name, the word [`named`] parses.
+pub fn as_name<T: std::fmt::Display, S: serde::Serializer>(v: &T, s: S) -> Result<S::Ok, S::Error> {
+    s.collect_str(v)
+}
+
+/// The value parser of a library's named enum (`frictionless::named_enum!`): its names are the
+/// possible values (listed by `--help`, completed by the shells), parsed with its `FromStr`.
+pub fn named<T>(names: &'static [&'static str]) -> impl clap::builder::TypedValueParser<Value = T>
+where
+    T: std::str::FromStr<Err = String> + Clone + Send + Sync + 'static,
+{
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(names.iter().copied()).try_map(|s| s.parse::<T>())
+}
+
 /// A value enum's name on the command line (for messages and file names).
 pub fn value_name<T: clap::ValueEnum>(v: &T) -> String {
     v.to_possible_value()

@@ -94,7 +94,7 @@ pub enum FitError {
 }
 
 /// Solver.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Method {
     /// Projected Levenberg–Marquardt on log-parameters within the bounds (least squares).
@@ -104,7 +104,7 @@ pub enum Method {
 }
 
 /// Loss of the Adam solver (LM is always least squares).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Loss {
     /// Mean squared error (paper).
@@ -112,6 +112,9 @@ pub enum Loss {
     /// Mean absolute error (authors' code).
     L1,
 }
+
+frictionless::named_enum!(Method, "solver", [Lm = "lm", Adam = "adam"]);
+frictionless::named_enum!(Loss, "loss", [Mse = "mse", L1 = "l1"]);
 
 /// Floor/ceiling of the parameters that have no physical bound other than positivity (kc, kv, ks/kc).
 const P_MIN: f64 = 1e-12;

@@ -90,7 +90,7 @@ const MAX_CATCH_UP_TICKS: u64 = 100;
 const TX_RETRY: Duration = Duration::from_micros(100);
 
 /// The drive protocol spoken on the bus.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Protocol {
     /// MIT mini-cheetah / CubeMars AK "MIT mode".
     Mit,
@@ -99,6 +99,12 @@ pub enum Protocol {
     /// CiA 402 over CANopen.
     Cia402,
 }
+
+frictionless::named_enum!(
+    Protocol,
+    "protocol",
+    [Mit = "mit", Odrive = "odrive", Cia402 = "cia402"]
+);
 
 /// Options of [`run`] (`frictl sim serve --backend can …`).
 #[derive(Debug, Clone, PartialEq)]
