@@ -328,7 +328,12 @@ pub fn replay(bins: &Binaries, job: &ReplayJob) -> Result<ReplayOutcome, ReplayE
     let outputs = output_paths(job, &joints)?;
 
     let mut session = Session::new()?;
-    let config_dir = job.config.parent().unwrap_or(Path::new("."));
+    // `frictiond.toml` alone has the parent "", which `absolute` refuses: that is the cwd.
+    let config_dir = job
+        .config
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
     let config_dir = std::path::absolute(config_dir).map_err(|source| ReplayError::Output {
         path: config_dir.to_owned(),
         source,

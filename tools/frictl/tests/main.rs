@@ -6,6 +6,7 @@ mod acquire_live;
 mod acquire_protocol;
 mod cli_models;
 mod demo_chain;
+mod docs_workflow;
 mod dynamics_cli;
 mod eval_drift;
 mod eval_synthetic;
