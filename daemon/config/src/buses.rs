@@ -8,9 +8,9 @@ use frictionless_drives::can::units::{CommandUnit, JointUnits};
 
 use crate::error::{Checker, ConfigError};
 use crate::schema::{
-    BackendKind, BusConfig, BusJointConfig, BusLoad, CanProtocol, Cia402Drive, Cia402DriveLoop,
-    Cia402Mode, Cia402Object, Config, JointConfig, MAX_BUSES, RawConfig, ResolvedBus,
-    ResolvedDrive,
+    BackendKind, BusConfig, BusJointConfig, BusLoad, CanProtocol, Cia402Config, Cia402Drive,
+    Cia402DriveLoop, Cia402Mode, Cia402Object, Config, JointConfig, MAX_BUSES, RawConfig,
+    ResolvedBus, ResolvedDrive,
 };
 
 /// One line per bus for `frictiond --check` (empty without buses).
@@ -300,7 +300,51 @@ pub(crate) fn cia402_drive(
         ));
     };
     let k = |n: &str| key(&format!("cia402.{n}"));
-    let op_mode = match (cfg.mode, cfg.drive_loop) {
+    let op_mode = cia402_op_mode(c, &k, &cfg)?;
+    cia402_scales(c, &k, &cfg)?;
+    let enc = cfg
+        .joint_encoder
+        .as_ref()
+        .map(|o| cia402_object(c, &k, "joint_encoder", o, true))
+        .transpose()?;
+    let temp = cfg
+        .temperature
+        .as_ref()
+        .map(|o| cia402_object(c, &k, "temperature", o, false))
+        .transpose()?;
+    let hb_timeout = cia402_heartbeat(c, &k, &cfg)?;
+    let layout = Layout::new(
+        cfg.mode == Cia402Mode::TorqueOffset,
+        enc,
+        temp,
+        cfg.temperature_every,
+    )
+    .map_err(|e| c.fail(key("cia402"), "<mapping>", &e.to_string()))?;
+    cia402_max_torque(c, &k, &cfg, j, units)?;
+    let bits_per_tick = layout.bits_per_tick();
+    Ok((
+        JointUnits {
+            command: CommandUnit::MotorTorque,
+            ..units
+        },
+        Cia402Drive {
+            cfg,
+            op_mode,
+            heartbeat_timeout_ms: hb_timeout,
+            layout,
+            bits_per_tick,
+        },
+    ))
+}
+
+/// The operation mode of a `[bus.joint.cia402]` (CST, or the drive's own CSP/CSV loop under a
+/// torque offset).
+fn cia402_op_mode(
+    c: &Checker,
+    k: &dyn Fn(&str) -> String,
+    cfg: &Cia402Config,
+) -> Result<i8, ConfigError> {
+    Ok(match (cfg.mode, cfg.drive_loop) {
         (Cia402Mode::Cst, None) => frictionless_drives::can::cia402::mode::CST,
         (Cia402Mode::Cst, Some(l)) => {
             return Err(c.fail(
@@ -322,7 +366,16 @@ pub(crate) fn cia402_drive(
                 "mode = \"torque_offset\" needs the drive's own loop: \"csp\" or \"csv\"",
             ));
         }
-    };
+    })
+}
+
+/// The scales a `[bus.joint.cia402]` states (rated and max torque, counts per revolution: each
+/// positive where given, else read by SDO) and its velocity unit (required) [motor rad/s per unit].
+fn cia402_scales(
+    c: &Checker,
+    k: &dyn Fn(&str) -> String,
+    cfg: &Cia402Config,
+) -> Result<(), ConfigError> {
     if cfg.rated_torque_mnm == Some(0) {
         return Err(c.fail(
             k("rated_torque_mnm"),
@@ -348,59 +401,64 @@ pub(crate) fn cia402_drive(
         ));
     };
     c.finite_pos(k("velocity_unit_rad_s"), vel)?;
-    let object = |name: &str, o: &Cia402Object, encoder: bool| -> Result<PdoEntry, ConfigError> {
-        let kk = |f: &str| k(&format!("{name}.{f}"));
-        if !matches!(o.bits, 8 | 16 | 32) {
-            return Err(c.fail(kk("bits"), o.bits, "must be 8, 16 or 32"));
+    Ok(())
+}
+
+/// One optional PDO object of a `[bus.joint.cia402]` (`joint_encoder` with its counts per joint
+/// revolution, or `temperature` with its °C per unit) as a PDO entry.
+fn cia402_object(
+    c: &Checker,
+    k: &dyn Fn(&str) -> String,
+    name: &str,
+    o: &Cia402Object,
+    encoder: bool,
+) -> Result<PdoEntry, ConfigError> {
+    let kk = |f: &str| k(&format!("{name}.{f}"));
+    if !matches!(o.bits, 8 | 16 | 32) {
+        return Err(c.fail(kk("bits"), o.bits, "must be 8, 16 or 32"));
+    }
+    match (encoder, o.counts_per_rev, o.unit_c) {
+        (true, Some(n), None) => c.finite_pos(kk("counts_per_rev"), n)?,
+        (true, None, _) => {
+            return Err(c.fail(
+                kk("counts_per_rev"),
+                "<missing>",
+                "required: increments per joint revolution",
+            ));
         }
-        match (encoder, o.counts_per_rev, o.unit_c) {
-            (true, Some(n), None) => c.finite_pos(kk("counts_per_rev"), n)?,
-            (true, None, _) => {
-                return Err(c.fail(
-                    kk("counts_per_rev"),
-                    "<missing>",
-                    "required: increments per joint revolution",
-                ));
-            }
-            (true, Some(_), Some(_)) => {
-                return Err(c.fail(kk("unit_c"), "<set>", "only used by the temperature object"));
-            }
-            (false, None, Some(u)) => {
-                if !(u.is_finite() && u != 0.0) {
-                    return Err(c.fail(
-                        kk("unit_c"),
-                        u,
-                        "must be finite and non-zero [°C per unit]",
-                    ));
-                }
-            }
-            (false, None, None) => {
-                return Err(c.fail(
-                    kk("unit_c"),
-                    "<missing>",
-                    "required: °C per unit (e.g. 0.001 for m°C)",
-                ));
-            }
-            (false, Some(_), _) => {
-                return Err(c.fail(
-                    kk("counts_per_rev"),
-                    "<set>",
-                    "only used by the joint encoder",
-                ));
+        (true, Some(_), Some(_)) => {
+            return Err(c.fail(kk("unit_c"), "<set>", "only used by the temperature object"));
+        }
+        (false, None, Some(u)) => {
+            if !(u.is_finite() && u != 0.0) {
+                return Err(c.fail(kk("unit_c"), u, "must be finite and non-zero [°C per unit]"));
             }
         }
-        Ok(PdoEntry::new(o.index, o.sub, o.bits))
-    };
-    let enc = cfg
-        .joint_encoder
-        .as_ref()
-        .map(|o| object("joint_encoder", o, true))
-        .transpose()?;
-    let temp = cfg
-        .temperature
-        .as_ref()
-        .map(|o| object("temperature", o, false))
-        .transpose()?;
+        (false, None, None) => {
+            return Err(c.fail(
+                kk("unit_c"),
+                "<missing>",
+                "required: °C per unit (e.g. 0.001 for m°C)",
+            ));
+        }
+        (false, Some(_), _) => {
+            return Err(c.fail(
+                kk("counts_per_rev"),
+                "<set>",
+                "only used by the joint encoder",
+            ));
+        }
+    }
+    Ok(PdoEntry::new(o.index, o.sub, o.bits))
+}
+
+/// The temperature object's SYNC divider and the heartbeat keys; returns the heartbeat consumer's
+/// timeout [ms] (default three heartbeat periods).
+fn cia402_heartbeat(
+    c: &Checker,
+    k: &dyn Fn(&str) -> String,
+    cfg: &Cia402Config,
+) -> Result<u32, ConfigError> {
     if !(1..=240).contains(&cfg.temperature_every) {
         return Err(c.fail(
             k("temperature_every"),
@@ -425,13 +483,18 @@ pub(crate) fn cia402_drive(
             &format!("must be > heartbeat_ms = {}", cfg.heartbeat_ms),
         ));
     }
-    let layout = Layout::new(
-        cfg.mode == Cia402Mode::TorqueOffset,
-        enc,
-        temp,
-        cfg.temperature_every,
-    )
-    .map_err(|e| c.fail(key("cia402"), "<mapping>", &e.to_string()))?;
+    Ok(hb_timeout)
+}
+
+/// With both rated and max torque stated: the joint's current clamp must fit the drive's max
+/// torque (else the drive would clamp silently).
+fn cia402_max_torque(
+    c: &Checker,
+    k: &dyn Fn(&str) -> String,
+    cfg: &Cia402Config,
+    j: &JointConfig,
+    units: JointUnits,
+) -> Result<(), ConfigError> {
     if let (Some(rated), Some(max)) = (cfg.rated_torque_mnm, cfg.max_torque_permille) {
         let max_nm = f64::from(rated) * f64::from(max.min(i16::MAX as u16)) / 1e6;
         let max_cmd = units.command_from_current(j.max_curr).abs();
@@ -446,20 +509,7 @@ pub(crate) fn cia402_drive(
             ));
         }
     }
-    let bits_per_tick = layout.bits_per_tick();
-    Ok((
-        JointUnits {
-            command: CommandUnit::MotorTorque,
-            ..units
-        },
-        Cia402Drive {
-            cfg,
-            op_mode,
-            heartbeat_timeout_ms: hb_timeout,
-            layout,
-            bits_per_tick,
-        },
-    ))
+    Ok(())
 }
 
 /// MIT drive keys: motor id 1..=255 (not the host id), the fixed-point ranges, and a feed-forward
