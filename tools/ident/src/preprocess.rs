@@ -883,19 +883,11 @@ mod tests {
         let mut acc = vec![0.0; n];
         let mut f = vec![1.0; n];
         // 37 rows over the |s̈| limit (10 rad/s²), 5 of them also over the |ṡ| limit: |s̈| first.
-        for k in 100..137 {
-            acc[k] = 12.0;
-        }
-        for k in 100..105 {
-            v[k] = -11.0;
-        }
+        acc[100..137].fill(12.0);
+        v[100..105].fill(-11.0);
         // 3 rows over the |ṡ| limit alone, 4 over the |τ_F| limit (100 Nm), 1 without a label.
-        for k in 500..503 {
-            v[k] = 11.0;
-        }
-        for k in 900..904 {
-            f[k] = -150.0;
-        }
+        v[500..503].fill(11.0);
+        f[900..904].fill(-150.0);
         f[1500] = f64::NAN;
         let run = RunSignals {
             time_s: (0..n).map(|k| k as f64 * 1e-3).collect(),

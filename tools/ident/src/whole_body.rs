@@ -312,14 +312,12 @@ impl WholeBody {
         if let Some(f) = base_frame {
             up(self.robot.frames[f.0].body, &mut out);
         }
-        for k in 0..joints.len() {
+        for (k, o) in out.iter_mut().enumerate() {
             let mut b = k + 1;
             while b > 0 && !labelled.contains(&(b - 1)) {
                 b = joints[b - 1].parent_body;
             }
-            if b > 0 {
-                out[k] = true;
-            }
+            *o |= b > 0;
         }
         out
     }

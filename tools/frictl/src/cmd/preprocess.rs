@@ -177,6 +177,7 @@ fn write_settings(
     started: std::time::Instant,
 ) -> anyhow::Result<()> {
     let mut settings = settings;
+    let dynamics_line = format!("\n  tau_ID: {dynamics}");
     if let (Some(r), Some(map)) = (summary.ripple, settings.as_object_mut()) {
         map.insert("ripple_fit".into(), serde_json::to_value(r)?);
     }
@@ -202,6 +203,7 @@ fn write_settings(
         started.elapsed().as_secs_f64(),
         args.out.display()
     );
+    msg += &dynamics_line;
     if let Some(line) = cfg.limits.dropped_rows_line(&summary.dropped, ds.len()) {
         msg += &format!("\n  {line}");
     }
