@@ -1999,6 +1999,76 @@ fn csv_streamed_import_equals_the_whole_log_and_holds_a_window() {
     }
 }
 
+/// `--gravity-m-s2` of `frictl import`: the whole-body τ_ID is linear in g (its gravity term at
+/// 2·g0 twice the one at g0), the sidecar and the dynamics line record the value, and a value
+/// outside [0, 30] m/s² is refused naming the flag.
+#[test]
+fn csv_gravity_is_an_option_of_the_whole_body_label_and_recorded() {
+    let d = dir().join("gravity");
+    std::fs::create_dir_all(&d).unwrap();
+    let log = d.join("leg.csv");
+    leg_csv(&log, 3_000);
+    let urdf = ergocub_urdf();
+    let import = |g: &str, out: &Path| {
+        let flag = format!("--gravity-m-s2={g}");
+        frictl(&[
+            "import",
+            "csv",
+            s(&log),
+            "--joint",
+            "l_knee",
+            "--column",
+            "time=t",
+            "--column",
+            "s=q_{joint}",
+            "--column",
+            "current=i_{joint}",
+            "--positions",
+            "q_{joint}",
+            "--urdf",
+            s(&urdf),
+            "--gear-ratio",
+            "100",
+            "--kt",
+            "0.1",
+            &flag,
+            "-o",
+            s(out),
+        ])
+    };
+    let g0 = 9.80665;
+    let tau = |g: f64| {
+        let out = d.join(format!("ds_{g}.csv"));
+        let run = ok(import(&g.to_string(), &out), "import --gravity-m-s2");
+        let side = sidecar(&out);
+        assert_eq!(side["settings"]["import"]["gravity_m_s2"].as_f64(), Some(g));
+        let text = format!("g = {g} m/s²");
+        assert!(side["dynamics"].as_str().unwrap().contains(&text), "{side}");
+        assert!(String::from_utf8_lossy(&run.stderr).contains(&text));
+        dataset(&out).tau_id_nm
+    };
+    let (t0, t1, t2) = (tau(0.0), tau(g0), tau(2.0 * g0));
+    let mut grav2 = 0.0;
+    for k in 0..t1.len() {
+        let grav = t1[k] - t0[k];
+        grav2 += grav * grav;
+        assert!(
+            (t2[k] - t0[k] - 2.0 * grav).abs() < 1e-9 * (1.0 + t1[k].abs()),
+            "row {k}"
+        );
+    }
+    assert!(
+        (grav2 / t1.len() as f64).sqrt() > 1.0,
+        "the knee carries the shank"
+    );
+    let bad = d.join("bad.csv");
+    for v in ["31", "-0.5", "nan"] {
+        let e = err_text(import(v, &bad), v);
+        assert!(e.contains("--gravity-m-s2") && e.contains(v), "{v}: {e}");
+    }
+    assert!(!bad.exists());
+}
+
 #[test]
 fn csv_streamed_import_checks_the_units_on_the_first_window() {
     let d = dir().join("stream_units");
