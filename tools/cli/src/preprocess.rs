@@ -64,6 +64,31 @@ pub struct PipelineArgs {
     /// needs `--label-filter matched`, the motor position and the whole log in memory).
     #[arg(long, default_value = "off", value_parser = ripple_parser())]
     pub ripple: Ripple,
+    /// Magnitude of gravity along −z of the world (the fixed base's) frame [m/s²] in τ_ID from a
+    /// URDF, whole-body or single-joint view; recorded in the sidecar (`gravity_m_s2` in the
+    /// settings) [default: standard gravity, 9.80665].
+    #[arg(long, value_name = "G", value_parser = parse_gravity_m_s2)]
+    pub gravity_m_s2: Option<f64>,
+}
+
+/// Largest `--gravity-m-s2` [m/s²]: three times the Earth's (a larger value is a unit or typing
+/// mistake).
+pub const MAX_GRAVITY_M_S2: f64 = 30.0;
+
+/// `--gravity-m-s2`'s parser: a finite number in [0, [`MAX_GRAVITY_M_S2`]] (clap names the flag
+/// and the value in its error).
+fn parse_gravity_m_s2(text: &str) -> Result<f64, String> {
+    let g: f64 = text
+        .trim()
+        .parse()
+        .map_err(|_| format!("{text:?} is not a number [m/s²]"))?;
+    if !(g.is_finite() && (0.0..=MAX_GRAVITY_M_S2).contains(&g)) {
+        return Err(format!(
+            "{g} m/s² is outside [0, {MAX_GRAVITY_M_S2}] m/s² (the magnitude of gravity; Earth's \
+             is 9.80665)"
+        ));
+    }
+    Ok(g)
 }
 
 /// `--ripple`'s parser: the names of [`Ripple::ALL`].

@@ -296,6 +296,9 @@ pub struct DatasetSidecar {
     pub chunks: usize,
     /// Chunks dropped as too short to filter (samples marked invalid).
     pub short_chunks: usize,
+    /// The rows marked invalid, by reason (older sidecars: all zero).
+    #[serde(default)]
+    pub dropped_rows: DroppedRows,
     /// Column documentation, in file order.
     pub columns: Vec<ColumnDocOwned>,
     /// Where the friction label `tau_f_label_nm` comes from (older sidecars: the current label).
@@ -309,6 +312,96 @@ pub struct DatasetSidecar {
     /// torque-sensed arm without a motor encoder). A feature set that needs one of them is refused.
     #[serde(default)]
     pub absent_columns: Vec<String>,
+}
+
+/// Why the label pipeline marks a row invalid (`valid = 0`), in the order [`DroppedRows`] counts
+/// them: a row is counted once, under the first of these reasons it has.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DropReason {
+    /// Its chunk is too short for the zero-phase filter (every row of the chunk).
+    ShortChunk,
+    /// Its label τ_F or its velocity ṡ is not finite (e.g. no τ_ID for the sample).
+    NonFinite,
+    /// |s̈| is not below the acceleration limit.
+    JointAcc,
+    /// |ṡ| is not below the velocity limit.
+    JointVel,
+    /// |i_f| is not below the current limit.
+    Current,
+    /// |τ_F| is not below the friction limit.
+    TauF,
+    /// It passes every limit, but the matched label's smoother window around it holds a row that
+    /// fails one (the smoother's reach, `label_filter = matched`).
+    NearInvalid,
+}
+
+impl DropReason {
+    /// Every reason, in counting order.
+    pub const ALL: [Self; 7] = [
+        Self::ShortChunk,
+        Self::NonFinite,
+        Self::JointAcc,
+        Self::JointVel,
+        Self::Current,
+        Self::TauF,
+        Self::NearInvalid,
+    ];
+}
+
+/// The rows of a dataset marked invalid, by reason ([`DropReason`]): each invalid row is counted
+/// once, under the **first** reason it has in the order of the fields (a row of a short chunk that
+/// is also too fast counts as `short_chunk`; one too fast and too accelerated as `joint_acc`), so
+/// the fields add up to the invalid rows ([`Self::total`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct DroppedRows {
+    /// Rows of chunks too short for the zero-phase filter.
+    pub short_chunk: usize,
+    /// Rows whose label or velocity is not finite.
+    pub non_finite: usize,
+    /// Rows with |s̈| at or above the acceleration limit.
+    pub joint_acc: usize,
+    /// Rows with |ṡ| at or above the velocity limit.
+    pub joint_vel: usize,
+    /// Rows with |i_f| at or above the current limit.
+    pub current: usize,
+    /// Rows with |τ_F| at or above the friction limit.
+    pub tau_f: usize,
+    /// Rows within the matched smoother's reach of a row dropped for a limit.
+    pub near_invalid: usize,
+}
+
+impl DroppedRows {
+    /// The count of `reason`.
+    pub fn get(&self, reason: DropReason) -> usize {
+        match reason {
+            DropReason::ShortChunk => self.short_chunk,
+            DropReason::NonFinite => self.non_finite,
+            DropReason::JointAcc => self.joint_acc,
+            DropReason::JointVel => self.joint_vel,
+            DropReason::Current => self.current,
+            DropReason::TauF => self.tau_f,
+            DropReason::NearInvalid => self.near_invalid,
+        }
+    }
+
+    /// Counts one row dropped for `reason`.
+    pub fn count(&mut self, reason: DropReason) {
+        let c = match reason {
+            DropReason::ShortChunk => &mut self.short_chunk,
+            DropReason::NonFinite => &mut self.non_finite,
+            DropReason::JointAcc => &mut self.joint_acc,
+            DropReason::JointVel => &mut self.joint_vel,
+            DropReason::Current => &mut self.current,
+            DropReason::TauF => &mut self.tau_f,
+            DropReason::NearInvalid => &mut self.near_invalid,
+        };
+        *c += 1;
+    }
+
+    /// Every invalid row (the sum of the reasons).
+    pub fn total(&self) -> usize {
+        DropReason::ALL.iter().map(|r| self.get(*r)).sum()
+    }
 }
 
 /// Where a dataset's friction label comes from.

@@ -3,7 +3,7 @@
 //!
 //! What it **is**: the three-pass O(n) recursion in world coordinates (Pinocchio's WORLD
 //! convention: a child's articulated inertia adds to its parent's without a 6×6 transform), Pinocchio's `aba` for a fixed
-//! base (root link welded to the world at identity, gravity [0, 0, −9.80665] m/s², no damping,
+//! base (root link welded to the world at identity, gravity [0, 0, −g] of the robot's g, no damping,
 //! friction or rotor inertia), allocation-free into a caller-owned [`Workspace`]. Checked against
 //! the CRBA/RNEA solve `M⁻¹·(τ − h)` (unit tests) and against Pinocchio on the ergoCub URDF
 //! (`tools/dynamics/tests/dynamics_pinocchio.rs`).
@@ -16,7 +16,7 @@
 
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
-use super::algorithms::{Workspace, check_len, gravity_world};
+use super::algorithms::{Workspace, check_len};
 use super::error::DynamicsError;
 use super::robot::{JointKind, Robot};
 use super::spatial::{Force, Motion, SpatialInertia, Transform, skew};
@@ -211,7 +211,7 @@ impl Robot {
             ws.f[p] += to_force(&pa);
         }
         // Pass 3 (root → leaves): accelerations; the root's is −gravity (gravity as a base acceleration).
-        ws.a[0] = Motion::new(Vector3::zeros(), -gravity_world());
+        ws.a[0] = Motion::new(Vector3::zeros(), -self.gravity_world_m_s2());
         for (j, jt) in self.joints.iter().enumerate() {
             let b = j + 1;
             let a_in = ws.a[jt.parent_body] + ws.a[b];

@@ -2,8 +2,8 @@
 //! mass matrix, gravity vector and bias forces.
 //!
 //! What it **is**: allocation-free evaluations into a caller-owned [`Workspace`] and output slices.
-//! τ = M(q)·q̈ + C(q, q̇)·q̇ + g(q), gravity [0, 0, −9.80665] m/s² in the world frame, no damping,
-//! friction or rotor inertia.
+//! τ = M(q)·q̈ + C(q, q̇)·q̇ + g(q), gravity [0, 0, −g] in the world frame (g the robot's,
+//! [`Robot::with_gravity_m_s2`]; default [`GRAVITY_M_S2`]), no damping, friction or rotor inertia.
 //!
 //! Floating base (Pinocchio's free-flyer convention): the base pose is position + unit quaternion
 //! (x, y, z, w) of the root link in the world; the base velocity `ν = (v, ω)` is **body-fixed** (linear
@@ -22,10 +22,12 @@ use super::error::DynamicsError;
 use super::robot::{FrameId, JointKind, Robot};
 use super::spatial::{Force, Motion, SpatialInertia, Transform};
 
-/// Standard gravity [m/s²], along −z of the world frame.
+/// Standard gravity [m/s²], along −z of the world frame: every [`Robot`]'s unless
+/// [`Robot::with_gravity_m_s2`] sets another.
 pub const GRAVITY_M_S2: f64 = 9.80665;
 
-/// Gravity vector in the world frame [m/s²].
+/// Standard gravity's vector in the world frame [m/s²] ([`Robot::gravity_world_m_s2`] is a
+/// model's).
 pub fn gravity_world() -> Vector3<f64> {
     Vector3::new(0.0, 0.0, -GRAVITY_M_S2)
 }
@@ -249,7 +251,7 @@ impl Robot {
     ) -> Result<(), DynamicsError> {
         self.check_joint_vecs(q, qd, qdd, tau)?;
         ws.check(self)?;
-        let a0 = Motion::new(Vector3::zeros(), -gravity_world());
+        let a0 = Motion::new(Vector3::zeros(), -self.gravity_world_m_s2());
         self.rnea_core(ws, Motion::ZERO, a0, q, qd, qdd, &[], tau);
         Ok(())
     }
@@ -267,7 +269,7 @@ impl Robot {
         self.check_joint_vecs(q, qd, qdd, tau)?;
         ws.check(self)?;
         self.check_frames(ext)?;
-        let a0 = Motion::new(Vector3::zeros(), -gravity_world());
+        let a0 = Motion::new(Vector3::zeros(), -self.gravity_world_m_s2());
         self.rnea_core(ws, Motion::ZERO, a0, q, qd, qdd, ext, tau);
         Ok(())
     }
@@ -301,7 +303,9 @@ impl Robot {
         self.check_joint_vecs(q, qd, qdd, tau)?;
         ws.check(self)?;
         self.check_frames(ext)?;
-        let g_base = base.orientation.inverse_transform_vector(&gravity_world());
+        let g_base = base
+            .orientation
+            .inverse_transform_vector(&self.gravity_world_m_s2());
         let a0 = Motion::new(base.acc.ang, base.acc.lin - g_base);
         Ok(self.rnea_core(ws, base.vel, a0, q, qd, qdd, ext, tau))
     }
@@ -316,7 +320,7 @@ impl Robot {
         check_len("q", self.dof(), q.len())?;
         check_len("out", self.dof(), out.len())?;
         ws.check(self)?;
-        let a0 = Motion::new(Vector3::zeros(), -gravity_world());
+        let a0 = Motion::new(Vector3::zeros(), -self.gravity_world_m_s2());
         self.rnea_zero_vel(ws, a0, q, out);
         Ok(())
     }
@@ -347,7 +351,7 @@ impl Robot {
         check_len("qd", n, qd.len())?;
         check_len("out", n, out.len())?;
         ws.check(self)?;
-        let a0 = Motion::new(Vector3::zeros(), -gravity_world());
+        let a0 = Motion::new(Vector3::zeros(), -self.gravity_world_m_s2());
         // q̈ = 0: the core only reads qdd[j]; use a zero view of the right length.
         const CHUNK: usize = 64;
         static ZEROS: [f64; CHUNK] = [0.0; CHUNK];

@@ -118,6 +118,8 @@ pub struct Robot {
     pub frames: Vec<Frame>,
     joint_index: HashMap<String, usize>,
     frame_index: HashMap<String, usize>,
+    /// Magnitude of gravity [m/s²], along −z of the world frame.
+    gravity_m_s2: f64,
 }
 
 impl Robot {
@@ -158,6 +160,30 @@ impl Robot {
                 message: e.to_string(),
             })?;
         build(&urdf, source, reduction)
+    }
+
+    /// The same model under gravity of magnitude `gravity_m_s2` [m/s²] along −z of the world
+    /// frame (default [`super::algorithms::GRAVITY_M_S2`]); every algorithm uses it. Fails unless
+    /// finite and ≥ 0.
+    pub fn with_gravity_m_s2(mut self, gravity_m_s2: f64) -> Result<Robot, DynamicsError> {
+        if !(gravity_m_s2.is_finite() && gravity_m_s2 >= 0.0) {
+            return Err(DynamicsError::BadInput {
+                what: "gravity [m/s^2] (finite, >= 0)".into(),
+                value: gravity_m_s2.to_string(),
+            });
+        }
+        self.gravity_m_s2 = gravity_m_s2;
+        Ok(self)
+    }
+
+    /// Magnitude of the model's gravity [m/s²] ([`Self::with_gravity_m_s2`]).
+    pub fn gravity_m_s2(&self) -> f64 {
+        self.gravity_m_s2
+    }
+
+    /// The model's gravity vector in the world frame [m/s²]: `[0, 0, −g]`.
+    pub fn gravity_world_m_s2(&self) -> Vector3<f64> {
+        Vector3::new(0.0, 0.0, -self.gravity_m_s2)
     }
 
     /// Number of movable joints.
@@ -646,5 +672,49 @@ fn build(
         frames,
         joint_index,
         frame_index,
+        gravity_m_s2: super::algorithms::GRAVITY_M_S2,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::algorithms::{GRAVITY_M_S2, Workspace};
+
+    #[test]
+    fn gravity_torques_scale_with_the_models_gravity() {
+        let leg = super::super::virtual_leg().unwrap();
+        assert_eq!(leg.gravity_m_s2(), GRAVITY_M_S2);
+        let q: Vec<f64> = (0..leg.dof()).map(|k| 0.3 + 0.2 * k as f64).collect();
+        let zero = vec![0.0; leg.dof()];
+        let torques = |g: f64| {
+            let r = leg.clone().with_gravity_m_s2(g).unwrap();
+            let mut ws = Workspace::new(&r);
+            let (mut tau, mut grav) = (zero.clone(), zero.clone());
+            r.rnea(&mut ws, &q, &zero, &zero, &mut tau).unwrap();
+            r.gravity_torques(&mut ws, &q, &mut grav).unwrap();
+            assert_eq!(tau, grav);
+            let knee = r.single_joint_view("l_knee", &q).unwrap();
+            (tau, knee.gravity_nm(q[r.joint_index("l_knee").unwrap()]))
+        };
+        let (t1, k1) = torques(GRAVITY_M_S2);
+        let (t2, k2) = torques(2.0 * GRAVITY_M_S2);
+        let (t0, k0) = torques(0.0);
+        assert!(t1.iter().any(|t| t.abs() > 0.1), "{t1:?}");
+        for k in 0..t1.len() {
+            assert!(
+                (t2[k] - 2.0 * t1[k]).abs() < 1e-9 * (1.0 + t1[k].abs()),
+                "joint {k}"
+            );
+            assert_eq!(t0[k], 0.0);
+        }
+        assert!(
+            k1.abs() > 0.1 && (k2 - 2.0 * k1).abs() < 1e-9 * k1.abs(),
+            "{k1} {k2}"
+        );
+        assert_eq!(k0, 0.0);
+        for bad in [f64::NAN, -1.0, f64::INFINITY] {
+            let e = leg.clone().with_gravity_m_s2(bad).unwrap_err().to_string();
+            assert!(e.contains("gravity"), "{e}");
+        }
+    }
 }

@@ -17,7 +17,6 @@
 
 use nalgebra::Vector3;
 
-use super::algorithms::gravity_world;
 use super::error::DynamicsError;
 use super::robot::{JointKind, Robot};
 use super::spatial::Transform;
@@ -145,7 +144,7 @@ impl Robot {
         }
         let joint0_in_world = parent_in_world.compose(&jt.tree);
         // Gravity in the joint frame at s = 0.
-        let g0 = joint0_in_world.rot.transpose() * gravity_world();
+        let g0 = joint0_in_world.rot.transpose() * self.gravity_world_m_s2();
         // Composite inertia of the subtree in the moved body's frame (independent of s).
         let b = j + 1;
         let mut ic = jt.inertia;

@@ -1,5 +1,6 @@
 //! `frictl fit scv` is never worse than `frictl fit cv` on held-out data: on the virtual joints of the
-//! demo (knee and ankle roll presets, labels from `frictl preprocess`), the SCV's held-out RMSE is at
+//! demo (knee and ankle roll presets, labels from `frictl preprocess`) and on the virtual leg's knee
+//! (labelled by `frictl import` from the whole leg's state), the SCV's held-out RMSE is at
 //! most the CV's, and the JSON and the console say whether the SCV won its validation block or fell
 //! back to the CV (and why), and which parameters sit on a bound.
 
@@ -149,4 +150,94 @@ fn scv_fit_is_not_worse_than_cv_held_out_on_the_virtual_knee() {
 #[test]
 fn scv_fit_is_not_worse_than_cv_held_out_on_the_virtual_ankle_roll() {
     preset_case("ankle_roll");
+}
+
+/// A short run of the virtual leg (`frictl acquire --preset leg`, every joint excited at once) with
+/// `protocol` (sine, ramp, step), imported as the knee's whole-state `current` dataset: its path.
+fn leg_knee_dataset(dir: &Path, seed: &str, protocol: [&str; 3]) -> PathBuf {
+    let mut args = vec![
+        "acquire",
+        "--preset",
+        "leg",
+        "--seed",
+        seed,
+        "--out",
+        s(dir),
+        "--set",
+        "protocol.n_starts=1",
+        "--set",
+        "protocol.current_scale=0.4",
+        "--set",
+        "protocol.sines.amplitude_to_a=0.7",
+    ];
+    for set in &protocol {
+        args.extend_from_slice(&["--set", set]);
+    }
+    frictl_ok(&args);
+    let leg = frictionless_sim::LegParams::preset().unwrap();
+    let knee = leg.joints.iter().find(|p| p.joint == "l_knee").unwrap();
+    let (r, kt) = (
+        knee.gear_ratio_signed.to_string(),
+        knee.kt_nm_per_a.to_string(),
+    );
+    let urdf = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../tests/fixtures/ergocub/ergoCubSN001.urdf");
+    let log = dir.join(format!("leg_seed{seed}.csv"));
+    let ds = dir.join(format!("knee_seed{seed}.csv"));
+    frictl_ok(&[
+        "import",
+        "csv",
+        s(&log),
+        "--label",
+        "current",
+        "--joint",
+        "l_knee",
+        "--column",
+        "time=time_s",
+        "--column",
+        "s=q_{joint}",
+        "--column",
+        "current=i_{joint}",
+        "--column",
+        "theta=theta_{joint}",
+        "--positions",
+        "q_{joint}",
+        "--urdf",
+        s(&urdf),
+        "--gear-ratio",
+        &r,
+        "--kt",
+        &kt,
+        "-o",
+        s(&ds),
+    ]);
+    ds
+}
+
+/// On the leg (the knee's label from the whole leg's state while every joint moves), the SCV is
+/// not worse than the CV on a held-out run either.
+#[test]
+fn scv_fit_is_not_worse_than_cv_held_out_on_the_leg_knee() {
+    let dir = crate::util::scratch("fit-scv-leg");
+    std::fs::create_dir_all(&dir).unwrap();
+    let train = leg_knee_dataset(
+        &dir,
+        "5",
+        [
+            "protocol.sines.frequencies_hz=[0.7]",
+            "protocol.ramps.slopes_a_per_s=[0.39]",
+            "protocol.steps.levels_a=[0.8, -0.8]",
+        ],
+    );
+    let held = leg_knee_dataset(
+        &dir,
+        "6",
+        [
+            "protocol.sines.frequencies_hz=[0.5]",
+            "protocol.ramps.slopes_a_per_s=[0.5]",
+            "protocol.steps.levels_a=[0.6, -0.6]",
+        ],
+    );
+    scv_is_not_worse_than_cv(&dir, &train, &held);
+    std::fs::remove_dir_all(&dir).ok();
 }

@@ -470,10 +470,10 @@ fn csv_whole_body_label_matches_pinocchio_and_the_single_joint_view_does_not() {
         held0.contains("neck_pitch") && held0.contains("r_elbow"),
         "{held0}"
     );
-    assert!(
-        err.contains("held at 0 rad") && err.contains("neck_pitch"),
-        "{err}"
-    );
+    // The whole left leg is logged: the joints held at 0 (arms, head, the other leg) leave the
+    // knee's label unchanged and are held silently.
+    assert_eq!(wb["held_at_zero_relevant"], serde_json::json!([]), "{wb}");
+    assert!(!err.contains("held at 0 rad"), "{err}");
     assert!(
         side["dynamics"]
             .as_str()
@@ -1896,17 +1896,65 @@ fn csv_streamed_import_equals_the_whole_log_and_holds_a_window() {
             "100",
             "--kt",
             "0.1",
+            // The knee's s̈ reaches 7 rad/s²: some rows are dropped for it.
+            "--joint-acc-limit",
+            "5",
             "-o",
             s(out),
         ];
         if let Some(w) = window {
             args.extend(["--window-samples", w]);
         }
-        ok(frictl(&args), "import csv")
+        let run = ok(frictl(&args), "import csv");
+        String::from_utf8_lossy(&run.stderr).into_owned()
     };
-    import(&d.join("whole_{joint}.csv"), None);
-    import(&d.join("streamed_{joint}.csv"), Some("1000"));
+    let whole_err = import(&d.join("whole_{joint}.csv"), None);
+    let streamed_err = import(&d.join("streamed_{joint}.csv"), Some("1000"));
     for j in ["l_knee", "l_hip_pitch"] {
+        // Every dropped row counted once per reason, the same whole and streamed, in the sidecar
+        // and on the console; the default gravity recorded.
+        let (sw, ss) = (
+            sidecar(&d.join(format!("whole_{j}.csv"))),
+            sidecar(&d.join(format!("streamed_{j}.csv"))),
+        );
+        assert_eq!(sw["dropped_rows"], ss["dropped_rows"], "{j}");
+        let dropped = &sw["dropped_rows"];
+        let total: u64 = dropped
+            .as_object()
+            .unwrap()
+            .values()
+            .map(|v| v.as_u64().unwrap())
+            .sum();
+        let (samples, valid) = (
+            sw["samples"].as_u64().unwrap(),
+            sw["valid_samples"].as_u64().unwrap(),
+        );
+        assert_eq!(total, samples - valid, "{j}: {dropped}");
+        let acc = dropped["joint_acc"].as_u64().unwrap();
+        if j == "l_knee" {
+            assert!(acc > 100, "{j}: {dropped}");
+        }
+        if acc > 0 {
+            let line = format!(
+                "  {j}: dropped {total} of {samples} rows: {acc} |s̈| ≥ --joint-acc-limit 5 rad/s²"
+            );
+            assert!(whole_err.contains(&line), "{line}\n{whole_err}");
+            assert!(streamed_err.contains(&line), "{line}\n{streamed_err}");
+        }
+        for side in [&sw, &ss] {
+            assert_eq!(
+                side["settings"]["import"]["gravity_m_s2"].as_f64(),
+                Some(9.80665),
+                "{j}"
+            );
+            assert!(
+                side["dynamics"]
+                    .as_str()
+                    .unwrap()
+                    .contains("g = 9.80665 m/s²"),
+                "{j}"
+            );
+        }
         let w = dataset(&d.join(format!("whole_{j}.csv")));
         let st = dataset(&d.join(format!("streamed_{j}.csv")));
         assert!(w.len() > 13_000, "{}", w.len());
@@ -1949,6 +1997,76 @@ fn csv_streamed_import_equals_the_whole_log_and_holds_a_window() {
         );
         assert_eq!(side["samples"].as_u64(), Some(w.len() as u64));
     }
+}
+
+/// `--gravity-m-s2` of `frictl import`: the whole-body τ_ID is linear in g (its gravity term at
+/// 2·g0 twice the one at g0), the sidecar and the dynamics line record the value, and a value
+/// outside [0, 30] m/s² is refused naming the flag.
+#[test]
+fn csv_gravity_is_an_option_of_the_whole_body_label_and_recorded() {
+    let d = dir().join("gravity");
+    std::fs::create_dir_all(&d).unwrap();
+    let log = d.join("leg.csv");
+    leg_csv(&log, 3_000);
+    let urdf = ergocub_urdf();
+    let import = |g: &str, out: &Path| {
+        let flag = format!("--gravity-m-s2={g}");
+        frictl(&[
+            "import",
+            "csv",
+            s(&log),
+            "--joint",
+            "l_knee",
+            "--column",
+            "time=t",
+            "--column",
+            "s=q_{joint}",
+            "--column",
+            "current=i_{joint}",
+            "--positions",
+            "q_{joint}",
+            "--urdf",
+            s(&urdf),
+            "--gear-ratio",
+            "100",
+            "--kt",
+            "0.1",
+            &flag,
+            "-o",
+            s(out),
+        ])
+    };
+    let g0 = 9.80665;
+    let tau = |g: f64| {
+        let out = d.join(format!("ds_{g}.csv"));
+        let run = ok(import(&g.to_string(), &out), "import --gravity-m-s2");
+        let side = sidecar(&out);
+        assert_eq!(side["settings"]["import"]["gravity_m_s2"].as_f64(), Some(g));
+        let text = format!("g = {g} m/s²");
+        assert!(side["dynamics"].as_str().unwrap().contains(&text), "{side}");
+        assert!(String::from_utf8_lossy(&run.stderr).contains(&text));
+        dataset(&out).tau_id_nm
+    };
+    let (t0, t1, t2) = (tau(0.0), tau(g0), tau(2.0 * g0));
+    let mut grav2 = 0.0;
+    for k in 0..t1.len() {
+        let grav = t1[k] - t0[k];
+        grav2 += grav * grav;
+        assert!(
+            (t2[k] - t0[k] - 2.0 * grav).abs() < 1e-9 * (1.0 + t1[k].abs()),
+            "row {k}"
+        );
+    }
+    assert!(
+        (grav2 / t1.len() as f64).sqrt() > 1.0,
+        "the knee carries the shank"
+    );
+    let bad = d.join("bad.csv");
+    for v in ["31", "-0.5", "nan"] {
+        let e = err_text(import(v, &bad), v);
+        assert!(e.contains("--gravity-m-s2") && e.contains(v), "{v}: {e}");
+    }
+    assert!(!bad.exists());
 }
 
 #[test]
@@ -1999,7 +2117,8 @@ fn csv_streamed_import_checks_the_units_on_the_first_window() {
         "nothing written"
     );
     ok(import("time=s"), "import csv --window-samples");
-    // The log's one NaN position and the URDF joints held at 0 are reported as the whole-log
+    // The log's one NaN position and the URDF joints held at 0 that change the knee's label (the
+    // leg's unlogged ones; not the torso, arms or the other leg) are reported as the whole-log
     // import reports them; the units pass.
     let side = sidecar(&d.join("ds_l_knee.csv"));
     let w = &side["settings"]["import"]["warnings"];
@@ -2014,10 +2133,21 @@ fn csv_streamed_import_checks_the_units_on_the_first_window() {
         w[0].ends_with("leg.csv: 1 non-finite values dropped (q:l_hip_pitch: 1)"),
         "{w:?}"
     );
+    let wb = &side["settings"]["import"]["whole_body"];
+    let held0 = wb["held_at_zero"].as_array().unwrap().len();
+    assert!(
+        wb["held_at_zero"].to_string().contains("torso_roll"),
+        "{wb}"
+    );
     assert!(
         w[1].starts_with(
-            "URDF joints neither in the log nor given with --fixed-joint, held at 0 rad: "
-        ) && w[1].contains("torso_roll"),
+            "URDF joints neither in the log nor given with --fixed-joint, held at 0 rad, that \
+             change the label (on the path from the root to a labelled joint or below it): \
+             l_hip_roll, l_hip_yaw, l_ankle_roll; "
+        ) && w[1].contains(&format!(
+            "; {} other joints held at 0 rad do not change it",
+            held0 - 3
+        )),
         "{w:?}"
     );
 }

@@ -21,6 +21,7 @@ mod import_cli;
 mod leg_frictiond;
 mod onpolicy_cli;
 mod plant_common;
+mod preprocess_cli;
 mod replay_cli;
 mod robot_cli;
 mod search_cli;

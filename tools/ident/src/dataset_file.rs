@@ -128,6 +128,7 @@ pub fn write_dataset(
         valid_samples: ds.valid.iter().filter(|v| **v).count(),
         chunks: summary.chunks,
         short_chunks: summary.short_chunks,
+        dropped_rows: summary.dropped,
         columns: ds.columns().iter().map(ColumnDocOwned::from).collect(),
         label: LabelSource::Current,
         runs: Vec::new(),

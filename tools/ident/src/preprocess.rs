@@ -46,13 +46,14 @@ use super::kalman::{self, KalmanConfig, KalmanError};
 use super::matched;
 use frictionless::filter::{Butterworth, FilterError};
 use frictionless_dataset::Dataset;
+pub use frictionless_dataset::{DropReason, DroppedRows};
 use frictionless_sim::link::LinkDynamics;
 
 pub use super::signals::{
     Dynamics, JointLabel, RunJoints, RunSignals, SignalsLabel, SignalsSummary, preprocess_joints,
     preprocess_signals, required_signals,
 };
-pub use super::whole_body::{FrameWrench, JointStates, StatePlan, WholeBody};
+pub use super::whole_body::{FrameWrench, JointStates, StatePlan, WholeBody, gravity_text};
 
 /// Pipeline errors.
 #[derive(Debug, thiserror::Error)]
@@ -134,6 +135,92 @@ impl SampleLimits {
             im_limit_a: 10.0,
             tauf_limit_nm: if ankle_roll { 15.0 } else { 100.0 },
         }
+    }
+
+    /// The first limit a row fails, in [`DroppedRows`]'s order (`None`: within every limit). A
+    /// limit on an absent quantity (a NaN acceleration or current) does not reject the row; a
+    /// label or velocity that is not finite does.
+    pub fn first_failed(
+        &self,
+        acc_rad_s2: f64,
+        vel_rad_s: f64,
+        current_a: f64,
+        tau_f_nm: f64,
+    ) -> Option<DropReason> {
+        let beyond = |x: f64, lim: f64| !x.is_nan() && x.abs() >= lim;
+        if !(tau_f_nm.is_finite() && vel_rad_s.is_finite()) {
+            Some(DropReason::NonFinite)
+        } else if beyond(acc_rad_s2, self.joint_acc_limit_rad_s2) {
+            Some(DropReason::JointAcc)
+        } else if beyond(vel_rad_s, self.joint_vel_limit_rad_s) {
+            Some(DropReason::JointVel)
+        } else if beyond(current_a, self.im_limit_a) {
+            Some(DropReason::Current)
+        } else if beyond(tau_f_nm, self.tauf_limit_nm) {
+            Some(DropReason::TauF)
+        } else {
+            None
+        }
+    }
+
+    /// One line naming every non-zero count of `dropped` (rows of a dataset of `rows`) with the
+    /// command-line flag and the value of the limit behind it, e.g. `dropped 902 of 60000 rows: 902
+    /// |s̈| ≥ --joint-acc-limit 10 rad/s²`; `None` when no row is dropped.
+    pub fn dropped_rows_line(&self, dropped: &DroppedRows, rows: usize) -> Option<String> {
+        let total = dropped.total();
+        if total == 0 {
+            return None;
+        }
+        let parts: Vec<String> = DropReason::ALL
+            .iter()
+            .filter(|r| dropped.get(**r) > 0)
+            .map(|&r| {
+                let n = dropped.get(r);
+                match r {
+                    DropReason::ShortChunk => {
+                        format!("{n} in chunks too short for the zero-phase filter")
+                    }
+                    DropReason::NonFinite => format!("{n} with a non-finite label or ṡ"),
+                    DropReason::JointAcc => format!(
+                        "{n} |s̈| ≥ --joint-acc-limit {} rad/s²",
+                        self.joint_acc_limit_rad_s2
+                    ),
+                    DropReason::JointVel => format!(
+                        "{n} |ṡ| ≥ --joint-vel-limit {} rad/s",
+                        self.joint_vel_limit_rad_s
+                    ),
+                    DropReason::Current => format!("{n} |i_f| ≥ --im-limit {} A", self.im_limit_a),
+                    DropReason::TauF => {
+                        format!("{n} |τ_F| ≥ --tauf-limit {} Nm", self.tauf_limit_nm)
+                    }
+                    DropReason::NearInvalid => format!(
+                        "{n} within the matched smoother's reach of a dropped row \
+                         (--label-filter matched)"
+                    ),
+                }
+            })
+            .collect();
+        Some(format!(
+            "dropped {total} of {rows} rows: {}",
+            parts.join(", ")
+        ))
+    }
+}
+
+/// Counts one row in `dropped`: `chunk_ok` whether its chunk could be filtered, `own` the first
+/// limit it fails ([`SampleLimits::first_failed`]), `within` whether it is valid after the matched
+/// smoother's reach ([`matched::within_reach`]). A valid row is not counted.
+pub(crate) fn count_row(
+    dropped: &mut DroppedRows,
+    chunk_ok: bool,
+    own: Option<DropReason>,
+    within: bool,
+) {
+    match (chunk_ok, own) {
+        (false, _) => dropped.count(DropReason::ShortChunk),
+        (true, Some(r)) => dropped.count(r),
+        (true, None) if !within => dropped.count(DropReason::NearInvalid),
+        (true, None) => {}
     }
 }
 
@@ -409,6 +496,8 @@ pub struct PreprocessSummary {
     pub chunks: usize,
     /// Chunks too short for the zero-phase filter (their samples are invalid).
     pub short_chunks: usize,
+    /// The invalid rows, by reason.
+    pub dropped: DroppedRows,
     /// Δθ offset r·s₀ − θ₀ [motor rad].
     pub delta_theta_offset_motor_rad: f64,
     /// The ripple step's fit ([`Ripple::WaveGenerator`]; `None`: off, or too few rows to fit).
@@ -649,7 +738,7 @@ fn label_log(
             None => None,
         };
         let l = &cfg.limits;
-        let (mut tau_ids, mut tau_fs, mut within) = (
+        let (mut tau_ids, mut tau_fs, mut fails) = (
             Vec::with_capacity(n),
             Vec::with_capacity(n),
             Vec::with_capacity(n),
@@ -668,20 +757,17 @@ fn label_log(
             let tau_f = r * meta.kt_nm_per_a * i_f[k]
                 - tau_id
                 - cfg.subtract_reflected_inertia_kgm2 * phi_ddot[k];
-            within.push(
-                ak.abs() < l.joint_acc_limit_rad_s2
-                    && vk.abs() < l.joint_vel_limit_rad_s
-                    && i_f[k].abs() < l.im_limit_a
-                    && tau_f.abs() < l.tauf_limit_nm,
-            );
+            fails.push(l.first_failed(ak, vk, i_f[k], tau_f));
             tau_ids.push(tau_id);
             tau_fs.push(tau_f);
         }
-        let within = matched::within_reach(&within, reach);
+        let ok: Vec<bool> = fails.iter().map(Option::is_none).collect();
+        let within = matched::within_reach(&ok, reach);
         for k in 0..n {
             let sk = s[k];
             let (tau_id, tau_f) = (tau_ids[k], tau_fs[k]);
             let valid = chunk_ok && within[k];
+            count_row(&mut summary.dropped, chunk_ok, fails[k], within[k]);
             ds.time_s.push(tq[k]);
             ds.chunk.push(ci as u32);
             ds.source_chunk.push(log.chunk[a + prev[k]]);
@@ -787,6 +873,93 @@ mod tests {
         assert!(sum.absent_columns.contains(&"tau_id_nm"));
         let valid = ds.valid.iter().filter(|v| **v).count();
         assert!(valid > ds.len() * 9 / 10, "{valid} of {}", ds.len());
+    }
+
+    #[test]
+    fn every_dropped_row_is_counted_once_under_its_first_reason() {
+        // 2 s at 1 kHz with the label, ṡ and s̈ given (no filter: every chunk is long enough).
+        let n = 2000;
+        let mut v = vec![0.5; n];
+        let mut acc = vec![0.0; n];
+        let mut f = vec![1.0; n];
+        // 37 rows over the |s̈| limit (10 rad/s²), 5 of them also over the |ṡ| limit: |s̈| first.
+        acc[100..137].fill(12.0);
+        v[100..105].fill(-11.0);
+        // 3 rows over the |ṡ| limit alone, 4 over the |τ_F| limit (100 Nm), 1 without a label.
+        v[500..503].fill(11.0);
+        f[900..904].fill(-150.0);
+        f[1500] = f64::NAN;
+        let run = RunSignals {
+            time_s: (0..n).map(|k| k as f64 * 1e-3).collect(),
+            chunk: vec![0; n],
+            sdot_rad_s: Some(v),
+            sddot_rad_s2: Some(acc),
+            tau_f_nm: Some(f),
+            ..RunSignals::default()
+        };
+        let label = SignalsLabel {
+            source: frictionless_dataset::LabelSource::Given,
+            gear_ratio_signed: None,
+            kt_nm_per_a: None,
+        };
+        let cfg = PreprocessConfig::for_joint("j");
+        let (ds, sum) = preprocess_signals(&[run], &label, None, &cfg).unwrap();
+        assert_eq!(ds.len(), n);
+        let d = sum.dropped;
+        assert_eq!(
+            d,
+            DroppedRows {
+                joint_acc: 37,
+                joint_vel: 3,
+                tau_f: 4,
+                non_finite: 1,
+                ..DroppedRows::default()
+            }
+        );
+        assert_eq!(d.total(), ds.valid.iter().filter(|v| !**v).count());
+        let line = cfg.limits.dropped_rows_line(&d, ds.len()).unwrap();
+        assert_eq!(
+            line,
+            "dropped 45 of 2000 rows: 1 with a non-finite label or ṡ, 37 |s̈| ≥ --joint-acc-limit \
+             10 rad/s², 3 |ṡ| ≥ --joint-vel-limit 10 rad/s, 4 |τ_F| ≥ --tauf-limit 100 Nm"
+        );
+        assert_eq!(
+            cfg.limits
+                .dropped_rows_line(&DroppedRows::default(), ds.len()),
+            None
+        );
+    }
+
+    #[test]
+    fn a_row_is_counted_short_chunk_then_own_limit_then_near_invalid() {
+        let mut d = DroppedRows::default();
+        count_row(&mut d, false, Some(DropReason::JointAcc), false);
+        count_row(&mut d, true, Some(DropReason::Current), false);
+        count_row(&mut d, true, None, false);
+        count_row(&mut d, true, None, true);
+        assert_eq!(
+            d,
+            DroppedRows {
+                short_chunk: 1,
+                current: 1,
+                near_invalid: 1,
+                ..DroppedRows::default()
+            }
+        );
+        let l = SampleLimits::for_joint("knee");
+        assert_eq!(
+            l.first_failed(10.0, 0.0, 0.0, 0.0),
+            Some(DropReason::JointAcc)
+        );
+        assert_eq!(l.first_failed(f64::NAN, 0.0, f64::NAN, 0.0), None);
+        assert_eq!(
+            l.first_failed(0.0, 0.0, -10.0, 0.0),
+            Some(DropReason::Current)
+        );
+        assert_eq!(
+            l.first_failed(0.0, f64::NAN, 0.0, 0.0),
+            Some(DropReason::NonFinite)
+        );
     }
 
     #[test]
@@ -907,6 +1080,7 @@ mod tests {
             urdf: "virtual_leg".into(),
             joint: "l_knee".into(),
             other_joints_rad: held.clone(),
+            gravity_m_s2: None,
         })
         .unwrap();
         let (single, _) = preprocess_signals(

@@ -76,6 +76,8 @@ pub struct SignalsSummary {
     pub delta_theta_offsets_motor_rad: Vec<f64>,
     /// Chunks too short for the zero-phase filter (their samples are invalid).
     pub short_chunks: usize,
+    /// The invalid rows, by reason.
+    pub dropped: crate::preprocess::DroppedRows,
     /// Chunks with a single sample, dropped.
     pub dropped_single_sample_chunks: usize,
     /// Dataset columns that are NaN in every row (no source signal).
@@ -460,7 +462,7 @@ impl<'a> Labeller<'a> {
             keep.clone()
         };
         let mut labels = Vec::with_capacity(rows.len());
-        let mut within = Vec::with_capacity(rows.len());
+        let mut fails = Vec::with_capacity(rows.len());
         for k in rows.clone() {
             let sk = s.as_ref().map_or(f64::NAN, |s| s[k]);
             let (vk, ak) = (vel_nc[k], acc_nc[k]);
@@ -486,25 +488,18 @@ impl<'a> Labeller<'a> {
                 }
                 L::Given => tf.as_ref().map_or(f64::NAN, |x| x[k]),
             };
-            // A limit on an absent quantity (NaN) does not reject the sample.
-            let lim = |x: f64, lim: f64| x.is_nan() || x.abs() < lim;
-            within.push(
-                tau_f.is_finite()
-                    && vk.is_finite()
-                    && lim(ak, l.joint_acc_limit_rad_s2)
-                    && lim(vk, l.joint_vel_limit_rad_s)
-                    && lim(ifk, l.im_limit_a)
-                    && tau_f.abs() < l.tauf_limit_nm,
-            );
+            fails.push(l.first_failed(ak, vk, ifk, tau_f));
             labels.push((tau_id, tau_f, ifk));
         }
-        let within = matched::within_reach(&within, reach);
+        let ok: Vec<bool> = fails.iter().map(Option::is_none).collect();
+        let within = matched::within_reach(&ok, reach);
         let ds = &mut self.ds;
         self.rows += keep.len();
         for k in keep {
             let j = k - rows.start;
             let (tau_id, tau_f, ifk) = labels[j];
             let valid = chunk_ok && within[j];
+            crate::preprocess::count_row(&mut self.sum.dropped, chunk_ok, fails[j], within[j]);
             let sk = s.as_ref().map_or(f64::NAN, |s| s[k]);
             let at = |x: &Option<Vec<f64>>| x.as_ref().map_or(f64::NAN, |x| x[k]);
             let thk = at(&theta);

@@ -861,6 +861,13 @@ mod tests {
             assert_eq!(g.chunk, w.chunk, "{name}: chunk ids");
             assert_eq!(g.source_chunk, w.source_chunk, "{name}: source chunks");
             assert_eq!(g.valid, w.valid, "{name}: valid flags");
+            let invalid = w.valid.iter().filter(|v| !**v).count();
+            assert!(invalid > 0, "{name}: the log drops rows");
+            assert_eq!(
+                sum_w.dropped.total(),
+                invalid,
+                "{name}: each dropped row once"
+            );
             same("time_s", &w.time_s, &g.time_s);
             same("sdot_rad_s", &w.sdot_rad_s, &g.sdot_rad_s);
             same("sddot_rad_s2", &w.sddot_rad_s2, &g.sddot_rad_s2);

@@ -124,6 +124,9 @@ pub struct StatePlan {
     pub held: BTreeMap<String, f64>,
     /// URDF joints neither in the log nor given: held at 0.
     pub held_at_zero: Vec<String>,
+    /// Those of [`Self::held_at_zero`] whose position changes the label of a labelled joint
+    /// ([`WholeBody::label_joints`]); the others are held silently.
+    pub held_at_zero_relevant: Vec<String>,
     /// Names in the log that are not movable joints of the URDF (not used).
     pub not_in_urdf: Vec<String>,
     /// The base: fixed at the identity pose, or its orientation from the log (the root link's, or
@@ -131,6 +134,36 @@ pub struct StatePlan {
     pub base: String,
     /// Frames with a measured external wrench from the log.
     pub wrenches: Vec<String>,
+}
+
+impl StatePlan {
+    /// The warnings of the plan, one line each: the URDF joints held at 0 that change a label
+    /// (named; how many others are held at 0 without changing one), and the log's joints the URDF
+    /// lacks.
+    pub fn warnings(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        if !self.held_at_zero_relevant.is_empty() {
+            let silent = self.held_at_zero.len() - self.held_at_zero_relevant.len();
+            out.push(format!(
+                "URDF joints neither in the log nor given with --fixed-joint, held at 0 rad, that \
+                 change the label (on the path from the root to a labelled joint or below it): {}; \
+                 {silent} other joints held at 0 rad do not change it (settings whole_body.held_at_zero)",
+                self.held_at_zero_relevant.join(", ")
+            ));
+        }
+        if !self.not_in_urdf.is_empty() {
+            out.push(format!(
+                "log joints the URDF lacks (not used): {}",
+                self.not_in_urdf.join(", ")
+            ));
+        }
+        out
+    }
+}
+
+/// How a sidecar's `dynamics` line names the gravity of τ_ID: `g = 9.80665 m/s²`.
+pub fn gravity_text(gravity_m_s2: f64) -> String {
+    format!("g = {gravity_m_s2} m/s²")
 }
 
 /// The robot and the held joint positions of the whole-body τ_ID.
@@ -240,6 +273,55 @@ impl WholeBody {
         &self.robot
     }
 
+    /// The sidecar's `dynamics` line of the whole-body τ_ID with `plan`, pointing at the plan's
+    /// place in the sidecar (`plan_key`, e.g. `settings.whole_body`).
+    pub fn describe(&self, plan: &StatePlan, plan_key: &str) -> String {
+        format!(
+            "whole-body RNEA on URDF {} ({} joints): {} from the log, {} held at given values, {} \
+             held at 0; base {}; {} ({plan_key})",
+            self.robot.source,
+            self.robot.dof(),
+            plan.from_log.len(),
+            plan.held.len(),
+            plan.held_at_zero.len(),
+            plan.base,
+            gravity_text(self.robot.gravity_m_s2())
+        )
+    }
+
+    /// Which joints' positions change τ_ID of the joints `labelled` (URDF indices), by joint index:
+    /// for each labelled joint, the joints on the path from the root to it (their positions turn
+    /// gravity and the motion it is carried by) and the joints below it (their bodies' masses and
+    /// motions load it); with the orientation of a frame `base_frame` giving the base's, the joints
+    /// between the root and that frame. A joint of another branch moves no body whose force reaches
+    /// the labelled joint, the base being fixed or its motion given
+    /// (`tests::a_joint_of_another_branch_leaves_the_torque_unchanged`).
+    pub fn label_joints(&self, labelled: &[usize], base_frame: Option<FrameId>) -> Vec<bool> {
+        let joints = &self.robot.joints;
+        let mut out = vec![false; joints.len()];
+        // Marks the joints from body `b` up to the root.
+        let up = |mut b: usize, out: &mut [bool]| {
+            while b > 0 {
+                out[b - 1] = true;
+                b = joints[b - 1].parent_body;
+            }
+        };
+        for &j in labelled {
+            up(j + 1, &mut out);
+        }
+        if let Some(f) = base_frame {
+            up(self.robot.frames[f.0].body, &mut out);
+        }
+        for (k, o) in out.iter_mut().enumerate() {
+            let mut b = k + 1;
+            while b > 0 && !labelled.contains(&(b - 1)) {
+                b = joints[b - 1].parent_body;
+            }
+            *o |= b > 0;
+        }
+        out
+    }
+
     /// Which URDF joints come from a log holding `log_names` (plus the `labelled` joints, whose own
     /// positions count as logged).
     /// `base`: whether the log gives a base orientation, and the frame it names for it.
@@ -250,6 +332,20 @@ impl WholeBody {
         base: Option<Option<&str>>,
     ) -> StatePlan {
         let frame = base.map(|f| self.resolve_base_frame(f));
+        let labelled_index: Vec<usize> = labelled
+            .iter()
+            .filter_map(|n| self.robot.joint_index(n).ok())
+            .collect();
+        let relevant = if labelled_index.is_empty() {
+            // No labelled joint of the URDF: every joint counts.
+            vec![true; self.robot.dof()]
+        } else {
+            let base_frame = match &frame {
+                Some(Ok(f)) => *f,
+                _ => None,
+            };
+            self.label_joints(&labelled_index, base_frame)
+        };
         let mut p = StatePlan {
             base: match frame {
                 None => "fixed at the identity pose".into(),
@@ -263,13 +359,16 @@ impl WholeBody {
             },
             ..StatePlan::default()
         };
-        for name in self.robot.joint_names() {
+        for (k, name) in self.robot.joint_names().enumerate() {
             if let Some(&v) = self.held.get(name) {
                 p.held.insert(name.to_string(), v);
             } else if log_names.iter().chain(labelled).any(|n| n == name) {
                 p.from_log.push(name.to_string());
             } else {
                 p.held_at_zero.push(name.to_string());
+                if relevant[k] {
+                    p.held_at_zero_relevant.push(name.to_string());
+                }
             }
         }
         for n in log_names {
@@ -477,6 +576,117 @@ mod tests {
         let urdf = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../../tests/fixtures/ergocub/ergoCubSN001.urdf");
         WholeBody::new(Robot::from_urdf_file(urdf).unwrap(), BTreeMap::new()).unwrap()
+    }
+
+    /// The left leg of ergoCub, root to foot.
+    const LEFT_LEG: [&str; 6] = [
+        "l_hip_pitch",
+        "l_hip_roll",
+        "l_hip_yaw",
+        "l_knee",
+        "l_ankle_pitch",
+        "l_ankle_roll",
+    ];
+
+    #[test]
+    fn a_joint_of_another_branch_leaves_the_torque_unchanged() {
+        let b = ergocub();
+        let r = b.robot();
+        let knee = r.joint_index("l_knee").unwrap();
+        let rel = b.label_joints(&[knee], None);
+        let mut set: Vec<&str> = (0..r.dof())
+            .filter(|&k| rel[k])
+            .map(|k| r.joints[k].name.as_str())
+            .collect();
+        set.sort_unstable();
+        let mut leg = LEFT_LEG.to_vec();
+        leg.sort_unstable();
+        assert_eq!(set, leg);
+        // A state with every joint moving, and a base moving in the world.
+        let dof = r.dof();
+        let wave = |f: f64| -> Vec<f64> {
+            (0..dof)
+                .map(|k| 0.5 * ((k as f64 + 1.0) * f).sin())
+                .collect()
+        };
+        let (q, qd, qdd) = (wave(1.3), wave(2.1), wave(0.7));
+        let base = BaseState::from_arrays(
+            [0.1, -0.2, 0.8],
+            [0.1, 0.2, -0.1, 0.9],
+            [0.3, -0.1, 0.2, 0.4, -0.6, 0.2],
+            [1.0, 2.0, -0.5, 0.7, 0.3, -1.1],
+        )
+        .unwrap();
+        let mut ws = Workspace::new(r);
+        let mut tau = vec![0.0; dof];
+        let mut knee_tau = |q: &[f64], qd: &[f64], qdd: &[f64], floating: bool| {
+            if floating {
+                r.rnea_floating(&mut ws, &base, q, qd, qdd, &[], &mut tau)
+                    .unwrap();
+            } else {
+                r.rnea(&mut ws, q, qd, qdd, &mut tau).unwrap();
+            }
+            tau[knee]
+        };
+        for floating in [false, true] {
+            let tau0 = knee_tau(&q, &qd, &qdd, floating);
+            for k in 0..dof {
+                let (mut q1, mut qd1, mut qdd1) = (q.clone(), qd.clone(), qdd.clone());
+                q1[k] += 0.3;
+                qd1[k] += 0.5;
+                qdd1[k] += 2.0;
+                let d = (knee_tau(&q1, &qd1, &qdd1, floating) - tau0).abs();
+                let name = &r.joints[k].name;
+                if rel[k] {
+                    assert!(
+                        d > 1e-6,
+                        "{name} (floating {floating}) changes the knee: {d}"
+                    );
+                } else {
+                    assert!(
+                        d < 1e-9,
+                        "{name} (floating {floating}) leaves the knee: {d}"
+                    );
+                }
+            }
+        }
+        // A base orientation given as the waist IMU's puts the torso between it and the root.
+        let imu = r.frame_id("waist_imu_0").unwrap();
+        let rel = b.label_joints(&[knee], Some(imu));
+        assert!(rel[r.joint_index("torso_roll").unwrap()]);
+        assert!(!rel[r.joint_index("r_knee").unwrap()]);
+    }
+
+    #[test]
+    fn only_joints_that_change_a_label_are_warned_about() {
+        let b = ergocub();
+        let knee = ["l_knee".to_string()];
+        let names = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        // The whole leg logged: nothing held at 0 changes the knee's label.
+        let p = b.plan(&names(&LEFT_LEG), &knee, None);
+        assert!(p.held_at_zero.contains(&"r_knee".to_string()));
+        assert!(p.held_at_zero_relevant.is_empty());
+        assert!(p.warnings().is_empty(), "{:?}", p.warnings());
+        // Without the hip roll: it is named, the others are counted.
+        let no_roll: Vec<&str> = LEFT_LEG
+            .into_iter()
+            .filter(|j| *j != "l_hip_roll")
+            .collect();
+        let p = b.plan(&names(&no_roll), &knee, None);
+        assert_eq!(p.held_at_zero_relevant, ["l_hip_roll"]);
+        let w = p.warnings();
+        assert_eq!(w.len(), 1, "{w:?}");
+        let silent = p.held_at_zero.len() - 1;
+        assert!(
+            w[0].contains(": l_hip_roll; ")
+                && w[0].contains(&format!("{silent} other joints held at 0 rad"))
+                && !w[0].contains("r_knee"),
+            "{}",
+            w[0]
+        );
+        // The torso carries the waist IMU that gives the base's orientation.
+        let p = b.plan(&names(&LEFT_LEG), &knee, Some(Some("waist_imu_0")));
+        assert_eq!(p.held_at_zero_relevant, ["torso_roll"]);
     }
 
     #[test]

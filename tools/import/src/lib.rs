@@ -22,7 +22,7 @@ pub mod stream;
 pub mod urdf;
 pub mod whole;
 
-pub use urdf::{parse_fixed_joints, urdf_link, urdf_whole_body};
+pub use urdf::{gravity_m_s2, parse_fixed_joints, urdf_link, urdf_whole_body};
 pub use whole::{run_csv, run_mat, run_mcap};
 
 /// Refuses, before any work, an output that would overwrite one of the command's inputs (the same file

@@ -1,5 +1,5 @@
 //! What the whole-log and the streamed import share, below both: the output path per joint, the
-//! per-joint values of `R` / `NAME=R` options, the plan's warnings, the units, rates and
+//! per-joint values of `R` / `NAME=R` options, the units, rates and
 //! whole-state plausibility checks, the inputs' hashes and sidecar, and committing a dataset with
 //! its sidecar.
 
@@ -50,25 +50,6 @@ pub(crate) fn per_joint(values: &[String], joint: &str, flag: &str) -> anyhow::R
         }
     }
     Ok(mine.or(all))
-}
-
-/// The warnings of a whole-body state's plan: the URDF joints held at 0 and the log's joints the
-/// URDF lacks, each named.
-pub(crate) fn plan_warnings(plan: &frictionless_ident::preprocess::StatePlan) -> Vec<String> {
-    let mut out = Vec::new();
-    if !plan.held_at_zero.is_empty() {
-        out.push(format!(
-            "URDF joints neither in the log nor given with --fixed-joint, held at 0 rad: {}",
-            plan.held_at_zero.join(", ")
-        ));
-    }
-    if !plan.not_in_urdf.is_empty() {
-        out.push(format!(
-            "log joints the URDF lacks (not used): {}",
-            plan.not_in_urdf.join(", ")
-        ));
-    }
-    out
 }
 
 /// The units and rates check ([`frictionless_logs::plausibility`]) of `runs`: an error with every
@@ -266,6 +247,7 @@ impl<'a> Inputs<'a> {
             valid_samples: valid,
             chunks: sum.run_chunks.iter().map(Vec::len).sum(),
             short_chunks: sum.short_chunks,
+            dropped_rows: sum.dropped,
             columns: columns_of
                 .columns()
                 .iter()

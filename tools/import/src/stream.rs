@@ -10,7 +10,7 @@ use anyhow::{Context, bail};
 use frictionless::output_file::AtomicFile;
 use frictionless_dataset::{Dataset, LabelSource};
 use frictionless_ident::preprocess::{
-    Dynamics, JointLabel, PreprocessConfig, RunJoints, SignalsLabel, WholeBody,
+    Dynamics, JointLabel, PreprocessConfig, RunJoints, SignalsLabel, StatePlan, WholeBody,
 };
 use frictionless_ident::stream::{StreamLabeller, StreamStats};
 use frictionless_logs::{ImportedRun, Role, Unit, csv_log};
@@ -18,7 +18,7 @@ use frictionless_logs::{ImportedRun, Role, Unit, csv_log};
 use frictl_cli::import_log::CommonArgs;
 
 use crate::check_outputs;
-use crate::shared::{Inputs, commit_pair, out_path, per_joint, plan_warnings, plausibility};
+use crate::shared::{Inputs, commit_pair, out_path, per_joint, plausibility};
 
 /// One joint's output being written.
 struct Out {
@@ -242,18 +242,13 @@ pub fn run_stream(
         p.wrenches = st.wrench_frames.clone();
         p
     });
-    warnings.extend(plan.iter().flat_map(plan_warnings));
+    warnings.extend(plan.iter().flat_map(StatePlan::warnings));
     let inputs = Inputs::hash(files)?;
-    let dynamics = match &plan {
-        Some(p) => format!(
-            "whole-body RNEA ({} joints from the log, {} held, {} held at 0; base {}), streamed",
-            p.from_log.len(),
-            p.held.len(),
-            p.held_at_zero.len(),
-            p.base
-        ),
-        None => "none (the label does not use inverse dynamics)".into(),
+    let dynamics = match (&plan, body) {
+        (Some(p), Some(b)) => format!("{}, streamed", b.describe(p, "settings.import.whole_body")),
+        _ => "none (the label does not use inverse dynamics)".into(),
     };
+    let gravity_m_s2 = body.map(|b| b.robot().gravity_m_s2());
     let joint_names: Vec<String> = st.joints.iter().map(|j| j.joint.clone()).collect();
     for ((jl, o), sum) in st.joints.iter().zip(st.outs).zip(sums) {
         check_outputs(&inputs.paths(), &[&o.path, &o.path.with_extension("json")])?;
@@ -271,6 +266,7 @@ pub fn run_stream(
                 "joints_of_this_pass": joint_names,
                 "derivations": sum.derivations,
                 "whole_body": plan,
+                "gravity_m_s2": gravity_m_s2,
                 "stream": stream_json(&stats),
                 "dropped_single_sample_chunks": sum.dropped_single_sample_chunks,
                 "runs": inputs.reports(&runs),
@@ -298,6 +294,9 @@ pub fn run_stream(
             stats.trail,
             o.path.display()
         );
+        if let Some(line) = jl.cfg.limits.dropped_rows_line(&sum.dropped, o.rows) {
+            eprintln!("  {}: {line}", jl.joint);
+        }
     }
     for w in &warnings {
         eprintln!("warning: {w}");

@@ -50,37 +50,51 @@ pub fn check_not_held(labelled: &[&str], fixed_joints: &[String]) -> anyhow::Res
     Ok(())
 }
 
-/// The whole-body model for τ_ID: the URDF (default `virtual_leg`) with the `--fixed-joint` values.
+/// `--gravity-m-s2`'s value: the one given, else standard gravity [m/s²].
+pub fn gravity_m_s2(given: Option<f64>) -> f64 {
+    given.unwrap_or(frictionless_dynamics::GRAVITY_M_S2)
+}
+
+/// The whole-body model for τ_ID: the URDF (default `virtual_leg`) with the `--fixed-joint` values,
+/// under gravity `gravity_m_s2` [m/s²] (`--gravity-m-s2`).
 pub fn urdf_whole_body(
     urdf: Option<&str>,
     fixed_joints: &[String],
+    gravity_m_s2: f64,
 ) -> anyhow::Result<frictionless_ident::preprocess::WholeBody> {
     let held = parse_fixed_joints(fixed_joints)?;
     let robot = match urdf.unwrap_or("virtual_leg") {
         "virtual_leg" => frictionless_dynamics::virtual_leg()?,
         path => frictionless_dynamics::Robot::from_urdf_file(path)?,
-    };
+    }
+    .with_gravity_m_s2(gravity_m_s2)
+    .map_err(|e| anyhow::anyhow!("--gravity-m-s2 {gravity_m_s2}: {e}"))?;
     frictionless_ident::preprocess::WholeBody::new(robot, held)
         .map_err(|e| anyhow::anyhow!("--fixed-joint: {e}"))
 }
 
 /// The URDF link model of `joint` (URDF default `virtual_leg`) with other joints held at the
-/// `NAME=RAD` positions, and its description for the sidecar.
+/// `NAME=RAD` positions under gravity `gravity_m_s2` [m/s²], and its description for the sidecar.
 pub fn urdf_link(
     urdf: Option<&str>,
     joint: &str,
     fixed_joints: &[String],
+    gravity_m_s2: f64,
 ) -> anyhow::Result<(LinkModel, String)> {
     anyhow::ensure!(!joint.is_empty(), "no joint name: pass --joint");
     check_not_held(&[joint], fixed_joints)?;
     let other = parse_fixed_joints(fixed_joints)?;
     let urdf = urdf.unwrap_or("virtual_leg").to_string();
-    let d = format!("URDF {urdf} joint {joint}, other joints {other:?}, fixed base, g = 9.80665");
+    let d = format!(
+        "URDF {urdf} joint {joint}, other joints {other:?}, fixed base, {}",
+        frictionless_ident::preprocess::gravity_text(gravity_m_s2)
+    );
     Ok((
         LinkModel::Urdf {
             urdf,
             joint: joint.to_string(),
             other_joints_rad: other,
+            gravity_m_s2: Some(gravity_m_s2),
         },
         d,
     ))

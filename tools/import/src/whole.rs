@@ -17,7 +17,7 @@ use frictl_cli::import_log::{CommonArgs, CsvArgs, LabelArg, MatArgs, McapArgs};
 
 use crate::check_outputs;
 use crate::shared::{
-    Inputs, JOINT, commit_pair, out_path, per_joint, per_joint_values, plan_warnings, plausibility,
+    Inputs, JOINT, commit_pair, out_path, per_joint, per_joint_values, plausibility,
     state_plausibility,
 };
 use crate::urdf::{urdf_link, urdf_whole_body};
@@ -68,7 +68,11 @@ fn whole_body_for(common: &CommonArgs, default_current: bool) -> anyhow::Result<
     if !current {
         return Ok(None);
     }
-    let body = urdf_whole_body(common.urdf.as_deref(), &common.fixed_joints)?;
+    let body = urdf_whole_body(
+        common.urdf.as_deref(),
+        &common.fixed_joints,
+        crate::urdf::gravity_m_s2(common.pipeline.gravity_m_s2),
+    )?;
     Ok(Some(body.with_base_frame(common.base_frame.clone())?))
 }
 
@@ -393,6 +397,7 @@ fn finish(
         label,
         joints: &joints,
         plan: &model.plan,
+        gravity_m_s2: model.gravity_m_s2,
         dynamics: &model.text,
         warnings: &warnings,
         suspicious: &suspicious,
@@ -543,6 +548,8 @@ struct LabelDynamics {
     text: String,
     /// The whole-body state plan (`settings.import.whole_body`), or null.
     plan: serde_json::Value,
+    /// Gravity of τ_ID from the URDF [m/s²] (`settings.import.gravity_m_s2`; `None`: no τ_ID).
+    gravity_m_s2: Option<f64>,
 }
 
 /// The label's dynamics: the whole-body RNEA (`body`, with its plan and the warnings about held
@@ -565,6 +572,7 @@ fn dynamics_of(
                 link: None,
                 text: "none (the label does not use inverse dynamics)".into(),
                 plan: serde_json::Value::Null,
+                gravity_m_s2: None,
             });
         }
         // The single-joint view, when the log gives no whole-body state.
@@ -573,11 +581,18 @@ fn dynamics_of(
             "labelling several joints with the current label needs the positions of every joint (--positions for CSV)"
         );
         let urdf_joint = common.urdf_joint.as_deref().unwrap_or(&joints[0]);
-        let (m, d) = urdf_link(common.urdf.as_deref(), urdf_joint, &common.fixed_joints)?;
+        let gravity = crate::urdf::gravity_m_s2(common.pipeline.gravity_m_s2);
+        let (m, d) = urdf_link(
+            common.urdf.as_deref(),
+            urdf_joint,
+            &common.fixed_joints,
+            gravity,
+        )?;
         return Ok(LabelDynamics {
             link: Some(m),
             text: format!("single-joint view: {d}"),
             plan: serde_json::Value::Null,
+            gravity_m_s2: Some(gravity),
         });
     };
     let log_names: Vec<String> = runs
@@ -608,19 +623,12 @@ fn dynamics_of(
             b.robot().source
         );
     }
-    warnings.extend(plan_warnings(&plan));
+    warnings.extend(plan.warnings());
     Ok(LabelDynamics {
         link: None,
-        text: format!(
-            "whole-body RNEA on URDF {} ({} joints): {} from the log, {} held at given values, {} held at 0; base {}; g = 9.80665 (settings.import.whole_body)",
-            b.robot().source,
-            b.robot().dof(),
-            plan.from_log.len(),
-            plan.held.len(),
-            plan.held_at_zero.len(),
-            plan.base
-        ),
+        text: b.describe(&plan, "settings.import.whole_body"),
         plan: serde_json::to_value(&plan)?,
+        gravity_m_s2: Some(b.robot().gravity_m_s2()),
     })
 }
 
@@ -685,6 +693,7 @@ struct WholeImport<'a> {
     label: LabelSource,
     joints: &'a [String],
     plan: &'a serde_json::Value,
+    gravity_m_s2: Option<f64>,
     dynamics: &'a str,
     warnings: &'a [String],
     /// The plausibility warnings: the likely cause when a joint keeps nothing.
@@ -761,6 +770,7 @@ impl WholeImport<'_> {
                 "kt_nm_per_a": kt.map_or(not_given.to_string(), |k| k.to_string()),
                 "derivations": sum.derivations,
                 "whole_body": self.plan,
+                "gravity_m_s2": self.gravity_m_s2,
                 "dropped_single_sample_chunks": sum.dropped_single_sample_chunks,
                 "delta_theta_offsets_motor_rad": sum
                     .delta_theta_offsets_motor_rad
@@ -793,6 +803,9 @@ impl WholeImport<'_> {
             side.absent_columns.join(", "),
             out.display()
         );
+        if let Some(line) = jl.cfg.limits.dropped_rows_line(&sum.dropped, ds.len()) {
+            eprintln!("  {joint}: {line}");
+        }
         Ok(())
     }
 }

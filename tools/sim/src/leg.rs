@@ -805,7 +805,7 @@ impl LegPlant {
             .robot
             .body_placements(&self.q)
             .map_err(|source| self.dyn_err(source))?;
-        let g = frictionless_dynamics::gravity_world();
+        let g = self.robot.gravity_world_m_s2();
         let mut potential = 0.0;
         for (b, xb) in x.iter().enumerate().skip(1) {
             let i = &self.robot.joints[b - 1].inertia;

@@ -146,12 +146,17 @@ pub fn link_from_model(model: &LinkModel) -> Result<Box<dyn LinkDynamics>, Param
             urdf,
             joint,
             other_joints_rad,
+            gravity_m_s2,
         } => {
             let err = |e: frictionless_dynamics::DynamicsError| ParamError::Link(e.to_string());
             let robot = if urdf == "virtual_leg" {
                 frictionless_dynamics::virtual_leg().map_err(err)?
             } else {
                 frictionless_dynamics::Robot::from_urdf_file(urdf).map_err(err)?
+            };
+            let robot = match *gravity_m_s2 {
+                Some(g) => robot.with_gravity_m_s2(g).map_err(err)?,
+                None => robot,
             };
             let mut q = vec![0.0; robot.dof()];
             for (name, &v) in other_joints_rad {

@@ -113,6 +113,10 @@ pub enum LinkModel {
         /// Positions of the other joints [rad] by name (absent ones are 0).
         #[serde(default)]
         other_joints_rad: std::collections::BTreeMap<String, f64>,
+        /// Magnitude of gravity along −z of the world [m/s²] (absent: standard gravity,
+        /// [`frictionless_dynamics::GRAVITY_M_S2`]).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        gravity_m_s2: Option<f64>,
     },
 }
 

@@ -37,6 +37,7 @@ fn a_leg_of_one_joint_is_the_single_joint_plant() {
             urdf: FIXTURE.to_string(),
             joint: joint.to_string(),
             other_joints_rad: Default::default(),
+            gravity_m_s2: None,
         };
         let mut single = Plant::from_params(p.clone(), 11).unwrap();
         let mut leg = LegPlant::new(

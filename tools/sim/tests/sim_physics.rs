@@ -339,6 +339,7 @@ fn urdf_link_matches_the_ergocub_reference_values() {
             urdf: urdf.to_string(),
             joint: joint.to_string(),
             other_joints_rad: Default::default(),
+            gravity_m_s2: None,
         })
         .unwrap();
         let i = link.inertia_kgm2(0.3);
@@ -357,6 +358,7 @@ fn urdf_link_matches_the_ergocub_reference_values() {
         urdf: urdf.to_string(),
         joint: "l_elbow_nope".to_string(),
         other_joints_rad: Default::default(),
+        gravity_m_s2: None,
     })
     .err()
     .unwrap()

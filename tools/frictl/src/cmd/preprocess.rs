@@ -37,7 +37,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         (false, LinkSource::Urdf) => false,
         (false, LinkSource::Auto) => args.urdf.is_none() && meta.plant_link.is_some(),
     };
+    let gravity = frictionless_import::gravity_m_s2(args.pipeline.gravity_m_s2);
     let (link_model, dynamics) = if use_sidecar {
+        if let Some(g) = args.pipeline.gravity_m_s2 {
+            anyhow::bail!(
+                "--gravity-m-s2 {g}: the simulator's link model from the sidecar (--link sidecar, \
+                 or --link auto on a simulated log) has its own gravity; --gravity-m-s2 sets a \
+                 URDF's (--link urdf)"
+            );
+        }
         let l = meta.plant_link.clone().with_context(|| {
             format!(
                 "--link sidecar: {} has no plant.link (not a simulated log); use --link urdf",
@@ -48,13 +56,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         (l, d)
     } else {
         let joint = args.joint.clone().unwrap_or_else(|| meta.joint.clone());
-        urdf_link(args.urdf.as_deref(), &joint, &args.fixed_joints)?
+        urdf_link(args.urdf.as_deref(), &joint, &args.fixed_joints, gravity)?
     };
     let link = frictionless_sim::link::link_from_model(&link_model)?;
 
     let cfg = pipeline_config(&args, &meta)?;
     let (ds, summary) = preprocess(&log, &meta, link.as_ref(), &cfg)?;
-    write(&args, &meta, sha, &cfg, dynamics, ds, summary, started)
+    let mut settings = serde_json::to_value(&cfg)?;
+    if !use_sidecar {
+        settings["gravity_m_s2"] = gravity.into();
+    }
+    write_settings(
+        &args, &meta, sha, settings, &cfg, dynamics, ds, summary, started,
+    )
 }
 
 /// The pipeline settings of `args` for the log's joint.
@@ -98,7 +112,8 @@ fn run_whole_body(
             );
         }
     }
-    let body = urdf_whole_body(args.urdf.as_deref(), &args.fixed_joints)?;
+    let gravity = frictionless_import::gravity_m_s2(args.pipeline.gravity_m_s2);
+    let body = urdf_whole_body(args.urdf.as_deref(), &args.fixed_joints, gravity)?;
     let mut cols = frictionless_dataset::read_columns(&args.log)?;
     let mut names = Vec::new();
     let (mut q, mut qd, mut qdd) = (Vec::new(), Vec::new(), Vec::new());
@@ -133,49 +148,22 @@ fn run_whole_body(
         wrenches: Vec::new(),
     };
     let plan = body.plan(&state.names, std::slice::from_ref(&meta.joint), None);
-    if !plan.held_at_zero.is_empty() {
-        eprintln!(
-            "warning: URDF joints neither in the log nor given with --fixed-joint, held at 0 rad: {}",
-            plan.held_at_zero.join(", ")
-        );
+    for w in plan.warnings() {
+        eprintln!("warning: {w}");
     }
     let cfg = pipeline_config(args, meta)?;
     let (ds, summary) =
         frictionless_ident::preprocess::preprocess_whole_body(log, meta, &body, &state, &cfg)?;
-    let dynamics = format!(
-        "whole-body RNEA on URDF {} ({} joints): {} from the log, {} held at given values, {} held at 0; base {}; g = 9.80665 (settings.whole_body)",
-        body.robot().source,
-        body.robot().dof(),
-        plan.from_log.len(),
-        plan.held.len(),
-        plan.held_at_zero.len(),
-        plan.base
-    );
+    let dynamics = body.describe(&plan, "settings.whole_body");
     let mut settings = serde_json::to_value(&cfg)?;
+    settings["gravity_m_s2"] = gravity.into();
     settings["whole_body"] = serde_json::to_value(&plan)?;
     write_settings(
         args, meta, sha, settings, &cfg, dynamics, ds, summary, started,
     )
 }
 
-/// Writes the dataset and its sidecar, and prints the summary.
-#[allow(clippy::too_many_arguments)]
-fn write(
-    args: &Args,
-    meta: &LogMeta,
-    sha: String,
-    cfg: &PreprocessConfig,
-    dynamics: String,
-    ds: frictionless_dataset::Dataset,
-    summary: frictionless_ident::preprocess::PreprocessSummary,
-    started: std::time::Instant,
-) -> anyhow::Result<()> {
-    let settings = serde_json::to_value(cfg)?;
-    write_settings(
-        args, meta, sha, settings, cfg, dynamics, ds, summary, started,
-    )
-}
-
+/// Writes the dataset and its sidecar (`settings` as given), and prints the summary.
 #[allow(clippy::too_many_arguments)]
 fn write_settings(
     args: &Args,
@@ -189,6 +177,7 @@ fn write_settings(
     started: std::time::Instant,
 ) -> anyhow::Result<()> {
     let mut settings = settings;
+    let dynamics_line = format!("\n  tau_ID: {dynamics}");
     if let (Some(r), Some(map)) = (summary.ripple, settings.as_object_mut()) {
         map.insert("ripple_fit".into(), serde_json::to_value(r)?);
     }
@@ -214,6 +203,10 @@ fn write_settings(
         started.elapsed().as_secs_f64(),
         args.out.display()
     );
+    msg += &dynamics_line;
+    if let Some(line) = cfg.limits.dropped_rows_line(&summary.dropped, ds.len()) {
+        msg += &format!("\n  {line}");
+    }
     match (cfg.ripple, summary.ripple) {
         (frictionless_ident::preprocess::Ripple::Off, _) => {}
         (_, Some(r)) => msg += &format!("\n  {}", r.describe()),
