@@ -27,7 +27,7 @@ use frictionless_shm_types::JointStates;
 use socketcan::{CanFrame, CanSocket, Socket};
 
 use super::BackendError;
-use crate::config::ResolvedDrive;
+use crate::config::{Cia402Drive, ResolvedDrive};
 
 /// How long start-up waits for a node's boot-up or heartbeat.
 pub const BOOT_WAIT: Duration = Duration::from_secs(3);
@@ -329,113 +329,11 @@ pub fn configure(
         u32::from(x.cfg.heartbeat_ms),
         2,
     )?;
-    let supported = SdoAddr::new(obj::SUPPORTED_MODES, 0);
-    match sdo.read_raw(supported)? {
-        Ok(bits) => {
-            let bit = co::mode::supported_bit(x.op_mode).unwrap_or(0);
-            if bits & bit == 0 {
-                return Err(fail(
-                    interface,
-                    node,
-                    format!(
-                        "0x6502 supported modes {bits:#010X} lack mode {} (bit {:#X})",
-                        x.op_mode, bit
-                    ),
-                ));
-            }
-        }
-        Err(abort::NO_OBJECT) => {}
-        Err(code) => return Err(sdo.abort_error("reading", supported, code)),
-    }
-    sdo.write(
-        SdoAddr::new(obj::MODES_OF_OPERATION, 0),
-        u32::from(x.op_mode as u8),
-        1,
-    )?;
-    let display = SdoAddr::new(obj::MODES_DISPLAY, 0);
-    let deadline = Instant::now() + SDO_TIMEOUT;
-    loop {
-        let m = sdo.read(display)? as u8 as i8;
-        if m == x.op_mode {
-            break;
-        }
-        if Instant::now() >= deadline {
-            return Err(fail(
-                interface,
-                node,
-                format!(
-                    "0x6061 reports mode {m} after writing 0x6060 = {}",
-                    x.op_mode
-                ),
-            ));
-        }
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    let rated = match x.cfg.rated_torque_mnm {
-        Some(v) => v,
-        None => sdo.read(SdoAddr::new(obj::RATED_TORQUE, 0))?,
-    };
-    let max = match x.cfg.max_torque_permille {
-        Some(v) => v,
-        None => sdo.read(SdoAddr::new(obj::MAX_TORQUE, 0))? as u16,
-    };
-    let torque = TorqueScale::new(rated, max).map_err(|e| {
-        fail(
-            interface,
-            node,
-            format!("0x6076 = {rated} mNm / 0x6072 = {max} ‰: {e}"),
-        )
-    })?;
-    let max_cmd = d.units.command_from_current(d.max_curr_a).abs();
-    if max_cmd > torque.max_nm() * (1.0 + 1e-12) {
-        return Err(fail(
-            interface,
-            node,
-            format!(
-                "max torque {} Nm (0x6072 = {max} ‰ of 0x6076 = {rated} mNm) is below the joint's kt·max_curr = {max_cmd} Nm (the drive would clamp silently)",
-                torque.max_nm()
-            ),
-        ));
-    }
-    let counts = match x.cfg.counts_per_rev {
-        Some(c) => c,
-        None => {
-            let inc = sdo.read(SdoAddr::new(obj::ENCODER_RESOLUTION, 1))?;
-            let revs = sdo.read(SdoAddr::new(obj::ENCODER_RESOLUTION, 2))?;
-            if revs == 0 {
-                return Err(fail(
-                    interface,
-                    node,
-                    "0x608F:02 motor revolutions = 0".into(),
-                ));
-            }
-            f64::from(inc) / f64::from(revs)
-        }
-    };
-    let pos = AngleScale::new(counts)
-        .map_err(|e| fail(interface, node, format!("encoder resolution: {e}")))?;
-    let l = &x.layout;
+    set_mode(&sdo, x.op_mode)?;
+    let torque = torque_scale(&sdo, &x, d)?;
+    let pos = angle_scale(&sdo, &x)?;
+    map_layout(&sdo, &x.layout)?;
     let id = |base: u32| base + u32::from(node);
-    sdo.map_pdo(obj::RPDO_COMM, obj::RPDO_MAP, id(0x200), 1, &l.rpdo1)?;
-    sdo.map_pdo(obj::TPDO_COMM, obj::TPDO_MAP, id(0x180), 1, &l.tpdo1)?;
-    sdo.map_pdo(
-        obj::TPDO_COMM + 1,
-        obj::TPDO_MAP + 1,
-        id(0x280),
-        1,
-        &l.tpdo2,
-    )?;
-    match &l.tpdo3 {
-        Some(m) => sdo.map_pdo(
-            obj::TPDO_COMM + 2,
-            obj::TPDO_MAP + 2,
-            id(0x380),
-            l.tpdo3_every,
-            m,
-        )?,
-        None => sdo.disable_pdo(obj::TPDO_COMM + 2, id(0x380))?,
-    }
-    sdo.disable_pdo(obj::TPDO_COMM + 3, id(0x480))?;
     let joint_enc = x
         .cfg
         .joint_encoder
@@ -463,6 +361,139 @@ pub fn configure(
         last_emcy: 0,
         last_target: 0,
     })
+}
+
+/// Checks the drive supports `op_mode` (0x6502, where it has one), writes it (0x6060) and waits until
+/// the drive reports it (0x6061).
+fn set_mode(sdo: &Sdo<'_>, op_mode: i8) -> Result<(), BackendError> {
+    let (interface, node) = (sdo.interface, sdo.node);
+    let supported = SdoAddr::new(obj::SUPPORTED_MODES, 0);
+    match sdo.read_raw(supported)? {
+        Ok(bits) => {
+            let bit = co::mode::supported_bit(op_mode).unwrap_or(0);
+            if bits & bit == 0 {
+                return Err(fail(
+                    interface,
+                    node,
+                    format!(
+                        "0x6502 supported modes {bits:#010X} lack mode {} (bit {:#X})",
+                        op_mode, bit
+                    ),
+                ));
+            }
+        }
+        Err(abort::NO_OBJECT) => {}
+        Err(code) => return Err(sdo.abort_error("reading", supported, code)),
+    }
+    sdo.write(
+        SdoAddr::new(obj::MODES_OF_OPERATION, 0),
+        u32::from(op_mode as u8),
+        1,
+    )?;
+    let display = SdoAddr::new(obj::MODES_DISPLAY, 0);
+    let deadline = Instant::now() + SDO_TIMEOUT;
+    loop {
+        let m = sdo.read(display)? as u8 as i8;
+        if m == op_mode {
+            break;
+        }
+        if Instant::now() >= deadline {
+            return Err(fail(
+                interface,
+                node,
+                format!("0x6061 reports mode {m} after writing 0x6060 = {}", op_mode),
+            ));
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    Ok(())
+}
+
+/// The drive's torque scale: 0x6076 rated torque and 0x6072 max torque, from the config or read by
+/// SDO; refused when the joint's current clamp exceeds the max torque (the drive would clamp
+/// silently).
+fn torque_scale(
+    sdo: &Sdo<'_>,
+    x: &Cia402Drive,
+    d: &ResolvedDrive,
+) -> Result<TorqueScale, BackendError> {
+    let (interface, node) = (sdo.interface, sdo.node);
+    let rated = match x.cfg.rated_torque_mnm {
+        Some(v) => v,
+        None => sdo.read(SdoAddr::new(obj::RATED_TORQUE, 0))?,
+    };
+    let max = match x.cfg.max_torque_permille {
+        Some(v) => v,
+        None => sdo.read(SdoAddr::new(obj::MAX_TORQUE, 0))? as u16,
+    };
+    let torque = TorqueScale::new(rated, max).map_err(|e| {
+        fail(
+            interface,
+            node,
+            format!("0x6076 = {rated} mNm / 0x6072 = {max} ‰: {e}"),
+        )
+    })?;
+    let max_cmd = d.units.command_from_current(d.max_curr_a).abs();
+    if max_cmd > torque.max_nm() * (1.0 + 1e-12) {
+        return Err(fail(
+            interface,
+            node,
+            format!(
+                "max torque {} Nm (0x6072 = {max} ‰ of 0x6076 = {rated} mNm) is below the joint's kt·max_curr = {max_cmd} Nm (the drive would clamp silently)",
+                torque.max_nm()
+            ),
+        ));
+    }
+    Ok(torque)
+}
+
+/// The motor encoder's scale: increments per motor revolution from the config, else 0x608F read by
+/// SDO.
+fn angle_scale(sdo: &Sdo<'_>, x: &Cia402Drive) -> Result<AngleScale, BackendError> {
+    let (interface, node) = (sdo.interface, sdo.node);
+    let counts = match x.cfg.counts_per_rev {
+        Some(c) => c,
+        None => {
+            let inc = sdo.read(SdoAddr::new(obj::ENCODER_RESOLUTION, 1))?;
+            let revs = sdo.read(SdoAddr::new(obj::ENCODER_RESOLUTION, 2))?;
+            if revs == 0 {
+                return Err(fail(
+                    interface,
+                    node,
+                    "0x608F:02 motor revolutions = 0".into(),
+                ));
+            }
+            f64::from(inc) / f64::from(revs)
+        }
+    };
+    AngleScale::new(counts).map_err(|e| fail(interface, node, format!("encoder resolution: {e}")))
+}
+
+/// Writes the PDO mapping of `l` (RPDO1, TPDO1–2, TPDO3 where mapped; TPDO4 and an unmapped TPDO3
+/// disabled), each verified by reading it back.
+fn map_layout(sdo: &Sdo<'_>, l: &co::Layout) -> Result<(), BackendError> {
+    let id = |base: u32| base + u32::from(sdo.node);
+    sdo.map_pdo(obj::RPDO_COMM, obj::RPDO_MAP, id(0x200), 1, &l.rpdo1)?;
+    sdo.map_pdo(obj::TPDO_COMM, obj::TPDO_MAP, id(0x180), 1, &l.tpdo1)?;
+    sdo.map_pdo(
+        obj::TPDO_COMM + 1,
+        obj::TPDO_MAP + 1,
+        id(0x280),
+        1,
+        &l.tpdo2,
+    )?;
+    match &l.tpdo3 {
+        Some(m) => sdo.map_pdo(
+            obj::TPDO_COMM + 2,
+            obj::TPDO_MAP + 2,
+            id(0x380),
+            l.tpdo3_every,
+            m,
+        )?,
+        None => sdo.disable_pdo(obj::TPDO_COMM + 2, id(0x380))?,
+    }
+    sdo.disable_pdo(obj::TPDO_COMM + 3, id(0x480))?;
+    Ok(())
 }
 
 /// NMT start of every configured node on the bus (after all are configured).
