@@ -435,6 +435,46 @@ fn nelder_mead(
     (x, fx, evals.get())
 }
 
+/// Stage 1: the SCV (Stribeck) fit on the steady sliding rows of `series`.
+fn stribeck_stage(
+    series: &LugreSeries,
+    opts: &LugreFitOptions,
+) -> Result<FitResult<ScvParams>, LugreFitError> {
+    let slide: Vec<bool> = series
+        .sliding
+        .iter()
+        .zip(series.use_row)
+        .map(|(&a, &b)| a && b)
+        .collect();
+    let v = crate::fit::select(series.v_rad_s, &slide);
+    let t = crate::fit::select(series.tau_nm, &slide);
+    Ok(fit(&v, &t, &opts.static_fit)?)
+}
+
+/// The fitted parameters (from index `first_fitted` on, not `held`) at a bound of `bx`, as
+/// `NAME=min|max`.
+fn at_bounds(
+    params: &LugreParams,
+    bx: &[(f64, f64); 7],
+    held: &[bool; 7],
+    first_fitted: usize,
+) -> Vec<String> {
+    let names = LugreParams::PARAM_NAMES;
+    let mut out = Vec::new();
+    for (k, &x) in from_params(params).iter().enumerate().skip(first_fitted) {
+        if held[k] {
+            continue;
+        }
+        if x <= bx[k].0 * (1.0 + 1e-6) {
+            out.push(format!("{}=min", names[k]));
+        }
+        if x >= bx[k].1 * (1.0 - 1e-6) {
+            out.push(format!("{}=max", names[k]));
+        }
+    }
+    out
+}
+
 /// Identifies LuGre from `series` in the three stages of the module documentation.
 ///
 /// # Errors
@@ -450,15 +490,7 @@ pub fn fit_lugre(
         return Err(LugreFitError::NoRows(opts.warmup_travel_rad));
     }
     // Stage 1: the Stribeck curve from the steady sliding rows.
-    let slide: Vec<bool> = series
-        .sliding
-        .iter()
-        .zip(series.use_row)
-        .map(|(&a, &b)| a && b)
-        .collect();
-    let v = crate::fit::select(series.v_rad_s, &slide);
-    let t = crate::fit::select(series.tau_nm, &slide);
-    let static_fit: FitResult<ScvParams> = fit(&v, &t, &opts.static_fit)?;
+    let static_fit = stribeck_stage(series, opts)?;
     let s = static_fit.model;
     let mut bx = bounds(&s, &opts.static_fit);
     let mut p = [
@@ -566,20 +598,9 @@ pub fn fit_lugre(
     let params = to_params(&p);
     params.validate()?;
     let (s2, s1, n) = sums(&params, series, &segs, &rows);
-    let mut at_bounds = Vec::new();
-    let names = LugreParams::PARAM_NAMES;
-    let first_dynamic = if opts.max_evals_joint > 0 { 0 } else { 5 };
-    for (k, &x) in from_params(&params).iter().enumerate().skip(first_dynamic) {
-        if held[k] {
-            continue;
-        }
-        if x <= bx[k].0 * (1.0 + 1e-6) {
-            at_bounds.push(format!("{}=min", names[k]));
-        }
-        if x >= bx[k].1 * (1.0 - 1e-6) {
-            at_bounds.push(format!("{}=max", names[k]));
-        }
-    }
+    // Stage 3 moved every parameter; otherwise only σ0 and σ1 (index 5 on) were fitted here.
+    let first_fitted = if opts.max_evals_joint > 0 { 0 } else { 5 };
+    let at_bounds = at_bounds(&params, &bx, &held, first_fitted);
     Ok(LugreFitResult {
         params,
         rmse_nm: (s2 / n as f64).sqrt(),

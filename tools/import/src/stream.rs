@@ -198,31 +198,7 @@ pub fn run_stream(
         first_of_log: true,
         findings: Vec::new(),
     };
-    let mut runs: Vec<ImportedRun> = Vec::new();
-    for f in files {
-        st.first_of_log = true;
-        let mut failed: Option<anyhow::Error> = None;
-        let mut sink = |block: ImportedRun| {
-            st.block(block).map_err(|e| {
-                let msg = format!("{e:#}");
-                failed = Some(e);
-                msg
-            })
-        };
-        let stream = frictionless_logs::BlockSink {
-            block_rows: window,
-            sink: &mut sink,
-        };
-        let run = read(f, Some(stream));
-        if let Some(e) = failed {
-            return Err(e.context(format!("labelling {}", f.display())));
-        }
-        let run = run?;
-        if let Some(l) = st.labeller.as_mut() {
-            l.end_run()?;
-        }
-        runs.push(run);
-    }
+    let mut runs = read_all(&mut st, files, window, &mut read)?;
     frictionless_logs::unique_run_names(&mut runs);
     let Some(labeller) = st.labeller.take() else {
         bail!("no usable rows in {}", files.len());
@@ -309,6 +285,44 @@ pub fn run_stream(
         started.elapsed().as_secs_f64()
     );
     Ok(())
+}
+
+/// Reads every log of `files` through `st`, `window` rows a block; the runs as read.
+fn read_all(
+    st: &mut Streamer<'_>,
+    files: &[PathBuf],
+    window: usize,
+    read: &mut impl FnMut(
+        &Path,
+        Option<frictionless_logs::BlockSink<'_>>,
+    ) -> Result<ImportedRun, frictionless_logs::LogsError>,
+) -> anyhow::Result<Vec<ImportedRun>> {
+    let mut runs = Vec::new();
+    for f in files {
+        st.first_of_log = true;
+        let mut failed: Option<anyhow::Error> = None;
+        let mut sink = |block: ImportedRun| {
+            st.block(block).map_err(|e| {
+                let msg = format!("{e:#}");
+                failed = Some(e);
+                msg
+            })
+        };
+        let stream = frictionless_logs::BlockSink {
+            block_rows: window,
+            sink: &mut sink,
+        };
+        let run = read(f, Some(stream));
+        if let Some(e) = failed {
+            return Err(e.context(format!("labelling {}", f.display())));
+        }
+        let run = run?;
+        if let Some(l) = st.labeller.as_mut() {
+            l.end_run()?;
+        }
+        runs.push(run);
+    }
+    Ok(runs)
 }
 
 fn stream_json(s: &StreamStats) -> serde_json::Value {

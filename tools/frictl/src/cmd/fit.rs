@@ -33,78 +33,11 @@ pub use frictl_cli::fit::*;
 
 /// Runs `frictl fit`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let outputs: Vec<&std::path::Path> = [&args.toml, &args.json]
-        .into_iter()
-        .flatten()
-        .map(|p| p.as_path())
-        .collect();
-    let mut inputs: Vec<std::path::PathBuf> =
-        vec![args.dataset.clone(), args.dataset.with_extension("json")];
-    for t in &args.test_datasets {
-        inputs.push(t.clone());
-        inputs.push(t.with_extension("json"));
-    }
-    let input_refs: Vec<&std::path::Path> = inputs.iter().map(|p| p.as_path()).collect();
-    super::check_outputs(&input_refs, &outputs)?;
-    if let Some(s0) = args.sigma0 {
-        anyhow::ensure!(
-            s0.is_finite() && s0 > 0.0,
-            "--sigma0 {s0}: must be finite and > 0"
-        );
-    }
-    if let Some(s1) = args.sigma1 {
-        anyhow::ensure!(
-            s1.is_finite() && s1 >= 0.0,
-            "--sigma1 {s1}: must be finite and ≥ 0"
-        );
-    }
-    anyhow::ensure!(
-        args.warmup_travel_rad.is_finite() && args.warmup_travel_rad >= 0.0,
-        "--warmup-travel-rad {}: must be finite and ≥ 0",
-        args.warmup_travel_rad
-    );
+    check_args(&args)?;
     let ds = Dataset::read_csv(&args.dataset)?;
     let target = target_column(&ds, &args.dataset, args.truth)?;
     let mut mask = ds.valid.clone();
-    let mut held_runs = Vec::new();
-    if !args.test_runs.is_empty() {
-        let side: Option<frictionless_dataset::DatasetSidecar> =
-            frictionless::regular_file::read_text(&args.dataset.with_extension("json"))
-                .ok()
-                .and_then(|t| serde_json::from_str(&t).ok());
-        let runs = frictionless_dataset::dataset_runs(&args.dataset, side.as_ref(), &ds);
-        let mut held = Vec::new();
-        for name in &args.test_runs {
-            let run = runs.iter().find(|r| &r.name == name).with_context(|| {
-                let known: Vec<&str> = runs.iter().map(|r| r.name.as_str()).collect();
-                format!(
-                    "--test-run {name}: {} has no run of that name (runs: {})",
-                    args.dataset.display(),
-                    known.join(", ")
-                )
-            })?;
-            held.extend(run.chunks.iter().copied());
-        }
-        for (m, c) in mask.iter_mut().zip(&ds.chunk) {
-            *m &= !held.contains(c);
-        }
-        let rows: Vec<bool> = ds
-            .valid
-            .iter()
-            .zip(&ds.chunk)
-            .map(|(&v, c)| v && held.contains(c))
-            .collect();
-        held_runs.push(HeldOutData {
-            source: format!(
-                "{} runs {}",
-                args.dataset.display(),
-                args.test_runs.join(",")
-            ),
-            ds: None,
-            target: None,
-            rows,
-        });
-    }
+    let held_runs = held_out_runs(&args, &ds, &mut mask)?;
     // The rows the fit may use (before the sliding selection) and the held-out data.
     let use_rows = mask.clone();
     let mut held_out = held_runs;
@@ -153,24 +86,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             e => anyhow::Error::new(e),
         }
     };
-    let bounds = FitBounds {
-        ka_min: args.ka_min,
-        ka_max: args.ka_max,
-        vs_min: args.vs_min,
-        vs_max: args.vs_max,
-        alpha_min: args.alpha_min,
-        alpha_max: args.alpha_max,
-        ks_max_ratio: args.ks_max_ratio,
-        ..FitBounds::default()
-    };
-    let opts = FitOptions {
-        method: args.method,
-        adam_loss: args.loss,
-        adam_epochs: args.epochs,
-        adam_lr: args.lr,
-        bounds,
-        ..FitOptions::default()
-    };
+    let opts = fit_options(&args);
     let started = std::time::Instant::now();
     let ctx = Ctx {
         ds: &ds,
@@ -206,13 +122,120 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             h.source, h.rmse_nm, h.rows
         );
     }
+    write_outputs(&args, &toml, &json)
+}
+
+/// Refuses an output that would overwrite an input and the out-of-range σ and warm-up options, before
+/// any work.
+fn check_args(args: &Args) -> anyhow::Result<()> {
+    let outputs: Vec<&std::path::Path> = [&args.toml, &args.json]
+        .into_iter()
+        .flatten()
+        .map(|p| p.as_path())
+        .collect();
+    let mut inputs: Vec<std::path::PathBuf> =
+        vec![args.dataset.clone(), args.dataset.with_extension("json")];
+    for t in &args.test_datasets {
+        inputs.push(t.clone());
+        inputs.push(t.with_extension("json"));
+    }
+    let input_refs: Vec<&std::path::Path> = inputs.iter().map(|p| p.as_path()).collect();
+    super::check_outputs(&input_refs, &outputs)?;
+    if let Some(s0) = args.sigma0 {
+        anyhow::ensure!(
+            s0.is_finite() && s0 > 0.0,
+            "--sigma0 {s0}: must be finite and > 0"
+        );
+    }
+    if let Some(s1) = args.sigma1 {
+        anyhow::ensure!(
+            s1.is_finite() && s1 >= 0.0,
+            "--sigma1 {s1}: must be finite and ≥ 0"
+        );
+    }
+    anyhow::ensure!(
+        args.warmup_travel_rad.is_finite() && args.warmup_travel_rad >= 0.0,
+        "--warmup-travel-rad {}: must be finite and ≥ 0",
+        args.warmup_travel_rad
+    );
+    Ok(())
+}
+
+/// The runs `--test-run` names, held out of the fit (their chunks cleared in `mask`) and scored.
+fn held_out_runs(args: &Args, ds: &Dataset, mask: &mut [bool]) -> anyhow::Result<Vec<HeldOutData>> {
+    let mut held_runs = Vec::new();
+    if !args.test_runs.is_empty() {
+        let side: Option<frictionless_dataset::DatasetSidecar> =
+            frictionless::regular_file::read_text(&args.dataset.with_extension("json"))
+                .ok()
+                .and_then(|t| serde_json::from_str(&t).ok());
+        let runs = frictionless_dataset::dataset_runs(&args.dataset, side.as_ref(), ds);
+        let mut held = Vec::new();
+        for name in &args.test_runs {
+            let run = runs.iter().find(|r| &r.name == name).with_context(|| {
+                let known: Vec<&str> = runs.iter().map(|r| r.name.as_str()).collect();
+                format!(
+                    "--test-run {name}: {} has no run of that name (runs: {})",
+                    args.dataset.display(),
+                    known.join(", ")
+                )
+            })?;
+            held.extend(run.chunks.iter().copied());
+        }
+        for (m, c) in mask.iter_mut().zip(&ds.chunk) {
+            *m &= !held.contains(c);
+        }
+        let rows: Vec<bool> = ds
+            .valid
+            .iter()
+            .zip(&ds.chunk)
+            .map(|(&v, c)| v && held.contains(c))
+            .collect();
+        held_runs.push(HeldOutData {
+            source: format!(
+                "{} runs {}",
+                args.dataset.display(),
+                args.test_runs.join(",")
+            ),
+            ds: None,
+            target: None,
+            rows,
+        });
+    }
+    Ok(held_runs)
+}
+
+/// The solver's options from the command line (bounds, method, Adam's loss, epochs and rate).
+fn fit_options(args: &Args) -> FitOptions {
+    let bounds = FitBounds {
+        ka_min: args.ka_min,
+        ka_max: args.ka_max,
+        vs_min: args.vs_min,
+        vs_max: args.vs_max,
+        alpha_min: args.alpha_min,
+        alpha_max: args.alpha_max,
+        ks_max_ratio: args.ks_max_ratio,
+        ..FitBounds::default()
+    };
+    FitOptions {
+        method: args.method,
+        adam_loss: args.loss,
+        adam_epochs: args.epochs,
+        adam_lr: args.lr,
+        bounds,
+        ..FitOptions::default()
+    }
+}
+
+/// Prints the TOML and writes the `--toml` and `--json` files.
+fn write_outputs(args: &Args, toml: &str, json: &impl Serialize) -> anyhow::Result<()> {
     println!("{toml}");
     if let Some(p) = &args.toml {
-        frictionless::output_file::write(p, &toml)
+        frictionless::output_file::write(p, toml)
             .with_context(|| format!("cannot write {}", p.display()))?;
     }
     if let Some(p) = &args.json {
-        frictionless::output_file::write(p, serde_json::to_string_pretty(&json)?)
+        frictionless::output_file::write(p, serde_json::to_string_pretty(json)?)
             .with_context(|| format!("cannot write {}", p.display()))?;
     }
     Ok(())
