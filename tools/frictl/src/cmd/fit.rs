@@ -205,9 +205,9 @@ fn held_out_runs(args: &Args, ds: &Dataset, mask: &mut [bool]) -> anyhow::Result
     Ok(held_runs)
 }
 
-/// The solver's options from the command line (bounds, method, Adam's loss, epochs and rate).
-fn fit_options(args: &Args) -> FitOptions {
-    let bounds = FitBounds {
+/// The parameter bounds from the command line (the others at their defaults).
+fn fit_bounds(args: &Args) -> FitBounds {
+    FitBounds {
         ka_min: args.ka_min,
         ka_max: args.ka_max,
         vs_min: args.vs_min,
@@ -216,7 +216,12 @@ fn fit_options(args: &Args) -> FitOptions {
         alpha_max: args.alpha_max,
         ks_max_ratio: args.ks_max_ratio,
         ..FitBounds::default()
-    };
+    }
+}
+
+/// The solver's options from the command line (bounds, method, Adam's loss, epochs and rate).
+fn fit_options(args: &Args) -> FitOptions {
+    let bounds = fit_bounds(args);
     FitOptions {
         method: args.method,
         adam_loss: args.loss,
@@ -580,16 +585,7 @@ fn report(r: Summary, args: &Args) -> anyhow::Result<(String, FitFile)> {
         rmse_valid_nm: r.rmse_valid_nm,
         n_samples: r.n_samples,
         iterations: r.iterations,
-        bounds: r.bounds.unwrap_or(FitBounds {
-            ka_min: args.ka_min,
-            ka_max: args.ka_max,
-            vs_min: args.vs_min,
-            vs_max: args.vs_max,
-            alpha_min: args.alpha_min,
-            alpha_max: args.alpha_max,
-            ks_max_ratio: args.ks_max_ratio,
-            ..FitBounds::default()
-        }),
+        bounds: r.bounds.unwrap_or_else(|| fit_bounds(args)),
         at_bounds: r.at_bounds,
         sliding_quadrants: args.sliding_quadrants,
         v_min_rad_s: args.v_min,
