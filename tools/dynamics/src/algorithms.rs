@@ -19,12 +19,9 @@
 use nalgebra::{DMatrix, Matrix6, UnitQuaternion, Vector3, Vector6};
 
 use super::error::DynamicsError;
+pub use super::robot::GRAVITY_M_S2;
 use super::robot::{FrameId, JointKind, Robot};
 use super::spatial::{Force, Motion, SpatialInertia, Transform};
-
-/// Standard gravity [m/s²], along −z of the world frame: every [`Robot`]'s unless
-/// [`Robot::with_gravity_m_s2`] sets another.
-pub const GRAVITY_M_S2: f64 = 9.80665;
 
 /// Standard gravity's vector in the world frame [m/s²] ([`Robot::gravity_world_m_s2`] is a
 /// model's).

@@ -18,6 +18,10 @@ use nalgebra::{Matrix3, Vector3};
 use super::error::DynamicsError;
 use super::spatial::{SpatialInertia, Transform, axis_angle, axis_angle_sin_cos};
 
+/// Standard gravity [m/s²], along −z of the world frame: every [`Robot`]'s unless
+/// [`Robot::with_gravity_m_s2`] sets another.
+pub const GRAVITY_M_S2: f64 = 9.80665;
+
 /// Kind of a movable joint.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum JointKind {
@@ -163,7 +167,7 @@ impl Robot {
     }
 
     /// The same model under gravity of magnitude `gravity_m_s2` [m/s²] along −z of the world
-    /// frame (default [`super::algorithms::GRAVITY_M_S2`]); every algorithm uses it. Fails unless
+    /// frame (default [`GRAVITY_M_S2`]); every algorithm uses it. Fails unless
     /// finite and ≥ 0.
     pub fn with_gravity_m_s2(mut self, gravity_m_s2: f64) -> Result<Robot, DynamicsError> {
         if !(gravity_m_s2.is_finite() && gravity_m_s2 >= 0.0) {
@@ -672,13 +676,14 @@ fn build(
         frames,
         joint_index,
         frame_index,
-        gravity_m_s2: super::algorithms::GRAVITY_M_S2,
+        gravity_m_s2: GRAVITY_M_S2,
     })
 }
 
 #[cfg(test)]
 mod tests {
-    use super::super::algorithms::{GRAVITY_M_S2, Workspace};
+    use super::super::algorithms::Workspace;
+    use super::GRAVITY_M_S2;
 
     #[test]
     fn gravity_torques_scale_with_the_models_gravity() {
