@@ -5,7 +5,9 @@
 # The command is read from README.md (the line after `# 1.` in the "Set-up: the two commands" block), so
 # the README and CI cannot drift apart. Usage: bash .ci/readme-first-command.sh
 # Knobs (env): README_CMD_WORK (default: a new temporary directory, removed at the end unless
-#              README_CMD_KEEP=1).
+#              README_CMD_KEEP=1). The clone is README_CMD_WORK/clone; its build is in the clone's own
+#              target/ (where a newcomer's cargo puts it), so a later command run in the kept clone
+#              (CI's `bash packaging/deb.sh`) reuses what this one compiled.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
@@ -25,13 +27,14 @@ echo "readme-first-command: \`$cmd\`"
 work=${README_CMD_WORK:-$(mktemp -d)}
 cleanup() { [ -n "${README_CMD_KEEP:-}" ] || rm -rf "$work"; }
 trap cleanup EXIT
-rm -rf "$work/clone" "$work/target"
+rm -rf "$work/clone"
 git clone -q "$ROOT" "$work/clone"
-# A newcomer's clone has no build products: an empty, private target directory.
-mkdir -p "$work/target"
 cd "$work/clone"
+# A newcomer's clone has no build products: cargo's default target directory, the clone's own target/,
+# starts empty (a fresh clone has none: it is not in git).
+[ ! -e target ] || { echo "readme-first-command: the fresh clone has a target/ already" >&2; exit 2; }
 start=$(date +%s)
-env -u CARGO_INCREMENTAL CARGO_TARGET_DIR="$work/target" bash -c "$cmd" </dev/null
+env -u CARGO_INCREMENTAL -u CARGO_TARGET_DIR -u CARGO_BUILD_TARGET_DIR bash -c "$cmd" </dev/null
 echo "readme-first-command: finished in $(( $(date +%s) - start )) s (build from an empty target dir included)"
 
 python3 - "$work/clone/demo-out/report.json" <<'EOF'

@@ -23,7 +23,9 @@ command -v cargo-deb >/dev/null || {
 }
 
 log "release build: frictiond, frictl, libfrictionless"
-cargo build --release -p frictiond -p frictl -p frictionless-capi
+# One package per build: each resolves its dependencies' features as `cargo build -p` of it alone does,
+# so frictl's build is the README's `cargo run --release -p frictl` one, reused where that ran before.
+for p in frictl frictiond frictionless-capi; do cargo build --release -p "$p"; done
 REL=target/release
 A=$REL/deb-assets
 rm -rf "$A" && mkdir -p "$A"
