@@ -7,6 +7,39 @@ use frictionless_dataset::LabelSource;
 
 use crate::preprocess::PipelineArgs;
 
+/// The log formats `frictl import` reads, each its own subcommand.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LogFormat {
+    /// `frictl import csv`: any CSV, columns and units mapped by role.
+    Csv,
+    /// `frictl import mat`: the YARP robot logger's MATLAB v7.3 files (build feature `mat`).
+    Mat,
+    /// `frictl import mcap`: ROS 2 bags of sensor_msgs/JointState.
+    Mcap,
+}
+
+impl LogFormat {
+    /// The subcommand's name (`csv`, `mat`, `mcap`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Csv => "csv",
+            Self::Mat => "mat",
+            Self::Mcap => "mcap",
+        }
+    }
+
+    /// Checks a whole `frictl import FORMAT …` command line (`argv[0..2]` = `import`, the format)
+    /// as the command parses it, so a bad option is refused before anything runs.
+    pub fn check_argv(self, argv: &[String]) -> anyhow::Result<()> {
+        match self {
+            Self::Csv => crate::stage::roundtrip::<CsvArgs>(2, argv).map(drop),
+            Self::Mat => crate::stage::roundtrip::<MatArgs>(2, argv).map(drop),
+            Self::Mcap => crate::stage::roundtrip::<McapArgs>(2, argv).map(drop),
+        }
+    }
+}
+
 /// Label source on the command line.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LabelArg {

@@ -349,7 +349,7 @@ fn mat_file_imports_with_the_current_label_and_two_chunks() {
 /// The whole-body log of `make_fixtures.py leg` (Pinocchio on the ergoCub URDF: the six left-leg
 /// joints move, the other leg and torso joints are held; knee current = (whole-body τ_ID + SCV
 /// friction)/(r·k_t)), written once per test process.
-fn leg_fixture() -> PathBuf {
+pub(crate) fn leg_fixture() -> PathBuf {
     static DIR: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
     DIR.get_or_init(|| {
         let py = std::env::var_os("FRICTIONLESS_PY")
@@ -370,7 +370,7 @@ fn leg_fixture() -> PathBuf {
     .clone()
 }
 
-fn ergocub_urdf() -> PathBuf {
+pub(crate) fn ergocub_urdf() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/fixtures/ergocub/ergoCubSN001.urdf")
 }
 
@@ -384,7 +384,7 @@ const LEG: [&str; 6] = [
 ];
 
 /// A column of the fixture's reference CSV (1 kHz from t = 0).
-fn leg_ref(column: &str) -> Vec<f64> {
+pub(crate) fn leg_ref(column: &str) -> Vec<f64> {
     let cols = frictionless_dataset::read_columns(&leg_fixture().join("leg_ref.csv")).unwrap();
     cols.get(column)
         .unwrap_or_else(|| panic!("leg_ref.csv has no {column}"))
@@ -393,7 +393,11 @@ fn leg_ref(column: &str) -> Vec<f64> {
 
 /// RMS of `column(ds) − reference` over the dataset's valid samples, the reference indexed by the
 /// sample time (both 1 kHz grids from the log's first sample).
-fn rms_vs(ds: &frictionless_dataset::Dataset, got: &[f64], reference: &[f64]) -> (f64, usize) {
+pub(crate) fn rms_vs(
+    ds: &frictionless_dataset::Dataset,
+    got: &[f64],
+    reference: &[f64],
+) -> (f64, usize) {
     let (mut e2, mut n) = (0.0, 0usize);
     for ((t, valid), g) in ds.time_s.iter().zip(&ds.valid).zip(got) {
         let i = (t * 1000.0).round() as usize;
@@ -405,7 +409,7 @@ fn rms_vs(ds: &frictionless_dataset::Dataset, got: &[f64], reference: &[f64]) ->
     ((e2 / n.max(1) as f64).sqrt(), n)
 }
 
-fn dataset(path: &Path) -> frictionless_dataset::Dataset {
+pub(crate) fn dataset(path: &Path) -> frictionless_dataset::Dataset {
     frictionless_dataset::Dataset::read_csv(path).unwrap()
 }
 

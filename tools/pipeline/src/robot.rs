@@ -1,6 +1,7 @@
 //! The robot-level pipeline description (`frictl robot run ROBOT.toml`): one TOML file listing every
-//! joint (a simulator preset, raw logs or preprocessed datasets; the URDF joint name, the signed gear
-//! ratio, k_t, the feature set, the daemon's per-joint limits) and the search space shared by all.
+//! joint (a simulator preset, `frictl acquire` logs, the robot's own logs or preprocessed datasets;
+//! the URDF joint name, the signed gear ratio, k_t, the feature set, the daemon's per-joint limits)
+//! and the search space shared by all. Every key: `docs/robot-file.md`.
 //!
 //! What this module **is**: the typed schema ([`RobotFile`], `deny_unknown_fields` everywhere),
 //! [`load`] / [`parse`] with [`RobotError`] naming the file, the key and the value, and the checks
@@ -17,13 +18,19 @@
 //!
 //! [[joint]]
 //! name = "l_knee"               # URDF joint name, the name frictiond and the model carry
-//! preset = "knee"               # or logs = [...] (raw logs) or datasets = [...] (preprocessed)
+//! preset = "knee"               # or logs = [...] (`frictl acquire` logs), datasets = [...]
+//!                               # (preprocessed) or the robot's own logs ([import] below)
 //! gear_ratio = -100.0           # signed
 //! kt_nm_per_a = 0.157
 //! max_curr_a = 5.0
 //! features = "delta-theta-joint-vel"  # any of the core's feature sets (default the paper's)
 //! motor_encoder = "incremental" # or "absolute" (default): does θ keep its zero across power-ups
 //! temperature = false           # the motor temperature as one more input
+//!
+//! [import]                      # the robot's own logs, for every joint without another source
+//! format = "csv"                # csv | mat | mcap: `frictl import FORMAT`
+//! logs = ["walk.csv"]           # one recording or many (one run each); test_logs = [...] held out
+//! column = { time = "t", s = "q_{joint}", current = "i_{joint}" }  # any other key: an import option
 //! ```
 
 use std::path::{Path, PathBuf};
@@ -80,8 +87,107 @@ pub struct RobotFile {
     /// `[train]`: the fixed hyper-parameters when `search.trials = 0`.
     #[serde(default)]
     pub train: TrainSection,
+    /// `[import]`: the robot's own logs, the data of every joint that names no other source (a
+    /// joint's own `import` table extends it).
+    #[serde(default)]
+    pub import: Option<ImportSection>,
     /// `[[joint]]`, in payload-index order.
     pub joint: Vec<JointSection>,
+}
+
+/// `[import]` and a joint's `import`: the robot's own logs, labelled by `frictl import FORMAT` with
+/// the joint's name, gear ratio and k_t and the robot's URDF.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ImportSection {
+    /// The logs' format: `csv`, `mat` (the YARP robot logger's MATLAB v7.3) or `mcap` (ROS 2).
+    #[serde(default)]
+    pub format: Option<LogFormat>,
+    /// The training recordings (relative to this file), one run each: one recording is enough.
+    #[serde(default)]
+    pub logs: Vec<PathBuf>,
+    /// Held-out recordings for the evaluation (none: the test blocks of `logs`' split).
+    #[serde(default)]
+    pub test_logs: Vec<PathBuf>,
+    /// Every other key is a `frictl import FORMAT` option by its long name (`_` or `-`): a string
+    /// or number is its value, `true` the bare flag, an array one flag per element and a table one
+    /// `KEY=VALUE` flag per entry (`column = { time = "t" }` is `--column time=t`). `urdf` is
+    /// relative to this file (default: `[robot] urdf`).
+    #[serde(flatten)]
+    pub options: toml::Table,
+}
+
+pub use frictl_cli::import_log::LogFormat;
+
+/// The `frictl import` options a robot file sets itself, from the joint: not keys of `import`.
+const IMPORT_SET_BY_THE_FILE: [&str; 6] = ["joint", "joints", "out", "o", "gear-ratio", "kt"];
+
+impl ImportSection {
+    /// This section with `over`'s keys on top (a joint's table over `[import]`): options key by
+    /// key, and its logs (with their held-out logs) when it names any. A table of another format
+    /// stands alone: the options of one importer are not another's.
+    fn extended_by(&self, over: &ImportSection) -> ImportSection {
+        if over.format.is_some() && over.format != self.format {
+            return over.clone();
+        }
+        let mut options = self.options.clone();
+        options.extend(over.options.clone());
+        let (logs, test_logs) = if over.logs.is_empty() {
+            (self.logs.clone(), self.test_logs.clone())
+        } else {
+            (over.logs.clone(), over.test_logs.clone())
+        };
+        ImportSection {
+            format: over.format.or(self.format),
+            logs,
+            test_logs,
+            options,
+        }
+    }
+
+    /// The options as `frictl import` words (`--column`, `time=t`, …), keys in file order; a
+    /// value no flag can take is refused as (key, value, requirement).
+    pub fn option_words(&self) -> Result<Vec<String>, (String, String, String)> {
+        let mut words = vec![];
+        for (key, value) in &self.options {
+            let flag = key.replace('_', "-");
+            let refuse = |v: &dyn std::fmt::Debug, why: &str| {
+                (key.clone(), format!("{v:?}"), why.to_owned())
+            };
+            if IMPORT_SET_BY_THE_FILE.contains(&flag.as_str()) {
+                return Err(refuse(
+                    value,
+                    "set by the robot file (the joint's name, gear_ratio and kt_nm_per_a, the output)",
+                ));
+            }
+            if flag.is_empty() || !flag.chars().all(|c| c.is_ascii_alphanumeric() || c == '-') {
+                return Err(refuse(key, "a `frictl import` option's long name"));
+            }
+            let scalar = |v: &toml::Value| match v {
+                toml::Value::String(s) => Some(s.clone()),
+                toml::Value::Integer(i) => Some(i.to_string()),
+                toml::Value::Float(f) => Some(f.to_string()),
+                _ => None,
+            };
+            let scalar_or =
+                |v: &toml::Value| scalar(v).ok_or_else(|| refuse(v, "a string or a number"));
+            match value {
+                toml::Value::Boolean(true) => words.push(format!("--{flag}")),
+                toml::Value::Boolean(false) => {}
+                toml::Value::Array(items) => {
+                    for v in items {
+                        words.push(format!("--{flag}={}", scalar_or(v)?));
+                    }
+                }
+                toml::Value::Table(t) => {
+                    for (k, v) in t {
+                        words.push(format!("--{flag}={k}={}", scalar_or(v)?));
+                    }
+                }
+                v => words.push(format!("--{flag}={}", scalar_or(v)?)),
+            }
+        }
+        Ok(words)
+    }
 }
 
 /// `[robot]`.
@@ -350,6 +456,11 @@ pub struct JointSection {
     /// Further `frictl preprocess` arguments for this joint's logs.
     #[serde(default)]
     pub preprocess_args: Vec<String>,
+    /// The robot's own logs for this joint: `[import]`'s keys with this table's on top. After
+    /// [`parse`], the import every joint without another source takes (`[import]` itself when the
+    /// joint has no table).
+    #[serde(default)]
+    pub import: Option<ImportSection>,
 }
 
 fn default_kfc() -> f64 {
@@ -365,6 +476,8 @@ pub enum DataSource {
     Logs,
     /// `datasets`.
     Datasets,
+    /// `import` (the joint's own or `[import]`).
+    Import,
 }
 
 impl JointSection {
@@ -374,6 +487,8 @@ impl JointSection {
             DataSource::Preset
         } else if !self.logs.is_empty() {
             DataSource::Logs
+        } else if self.import.is_some() {
+            DataSource::Import
         } else {
             DataSource::Datasets
         }
@@ -409,6 +524,21 @@ pub fn load(path: &Path) -> Result<RobotFile, RobotError> {
         {
             rebase(p);
         }
+        if let Some(imp) = &mut j.import {
+            for p in imp.logs.iter_mut().chain(&mut imp.test_logs) {
+                rebase(p);
+            }
+            if let Some(toml::Value::String(u)) = imp.options.get_mut("urdf") {
+                let mut p = PathBuf::from(&*u);
+                rebase(&mut p);
+                *u = p.display().to_string();
+            }
+        }
+    }
+    if let Some(imp) = &mut file.import {
+        for p in imp.logs.iter_mut().chain(&mut imp.test_logs) {
+            rebase(p);
+        }
     }
     if let Some(u) = &mut file.robot.urdf {
         rebase(u);
@@ -421,7 +551,7 @@ pub fn load(path: &Path) -> Result<RobotFile, RobotError> {
 
 /// Parses and checks the text of a robot file (`path` names it in errors; paths are left as written).
 pub fn parse(path: &Path, text: &str) -> Result<RobotFile, RobotError> {
-    let file: RobotFile = toml::from_str(text).map_err(|e| RobotError::Parse {
+    let mut file: RobotFile = toml::from_str(text).map_err(|e| RobotError::Parse {
         path: path.to_owned(),
         message: e.to_string(),
     })?;
@@ -437,7 +567,58 @@ pub fn parse(path: &Path, text: &str) -> Result<RobotFile, RobotError> {
     check_search(&file, &bad)?;
     check_train(&file, &bad)?;
     check_joints(&file, &bad)?;
+    resolve_imports(&mut file, &bad)?;
     Ok(file)
+}
+
+/// Gives every joint without another source `[import]` (extended by its own table) and checks each
+/// import: a format, at least one log, options that are `frictl import` flags.
+fn resolve_imports(file: &mut RobotFile, bad: &Bad) -> Result<(), RobotError> {
+    let robot = file.import.clone();
+    if let Some(r) = &robot {
+        check_import("import", r, bad, false)?;
+    }
+    for (i, j) in file.joint.iter_mut().enumerate() {
+        let other = j.preset.is_some() || !j.logs.is_empty() || !j.datasets.is_empty();
+        if other {
+            continue;
+        }
+        j.import = match (&robot, &j.import) {
+            (Some(r), Some(own)) => Some(r.extended_by(own)),
+            (Some(r), None) => Some(r.clone()),
+            (None, own) => own.clone(),
+        };
+        if let Some(imp) = &j.import {
+            check_import(&format!("joint[{i}].import"), imp, bad, true)?;
+        }
+    }
+    Ok(())
+}
+
+/// One import section (`complete`: as a joint uses it, so it needs a format and logs).
+fn check_import(
+    at: &str,
+    imp: &ImportSection,
+    bad: &Bad,
+    complete: bool,
+) -> Result<(), RobotError> {
+    imp.option_words()
+        .map_err(|(key, value, why)| bad(format!("{at}.{key}"), value, &why))?;
+    if complete && imp.format.is_none() {
+        return Err(bad(
+            format!("{at}.format"),
+            "(none)".into(),
+            "csv, mat or mcap (here or in [import])",
+        ));
+    }
+    if complete && imp.logs.is_empty() {
+        return Err(bad(
+            format!("{at}.logs"),
+            "[]".into(),
+            "at least one log (here or in [import])",
+        ));
+    }
+    Ok(())
 }
 
 /// A refusal of one key: (key, value, requirement) → the error naming the file.
@@ -663,11 +844,12 @@ fn check_joints(file: &RobotFile, bad: &Bad) -> Result<(), RobotError> {
         let sources = usize::from(j.preset.is_some())
             + usize::from(!j.logs.is_empty())
             + usize::from(!j.datasets.is_empty());
-        if sources != 1 {
+        let import = j.import.is_some() || file.import.is_some();
+        if sources > 1 || sources == 0 && !import || sources == 1 && j.import.is_some() {
             return Err(bad(
-                key("preset/logs/datasets"),
-                format!("{sources} given"),
-                "exactly one of preset, logs, datasets",
+                key("preset/logs/datasets/import"),
+                format!("{} given", sources + usize::from(j.import.is_some())),
+                "exactly one of preset, logs, datasets, import (or none, with an [import] section)",
             ));
         }
         if !j.test_logs.is_empty() && j.logs.is_empty() {
@@ -759,7 +941,7 @@ features = "motor-vel-joint-vel"
         assert!(msg.contains("joint[1].name = \"l_knee\": unique"), "{msg}");
         let msg = e(&GOOD.replace("preset = \"knee\"", "preset = \"knee\"\nlogs = [\"x.csv\"]"));
         assert!(
-            msg.contains("joint[0].preset/logs/datasets = 2 given"),
+            msg.contains("joint[0].preset/logs/datasets/import = 2 given"),
             "{msg}"
         );
         let msg = e(&GOOD.replace("\"motor-vel-joint-vel\"", "\"velocity\""));
@@ -853,6 +1035,159 @@ features = "motor-vel-joint-vel"
         std::fs::write(&p, GOOD).unwrap();
         let f = load(&p).unwrap();
         assert_eq!(f.joint[1].datasets, vec![dir.join("data/a.csv")]);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The complete example of `docs/robot-file.md`.
+    fn doc_example() -> (&'static str, &'static str) {
+        let doc = include_str!("../../../docs/robot-file.md");
+        let example = doc
+            .split("## A complete example")
+            .nth(1)
+            .and_then(|t| t.split("```toml\n").nth(1))
+            .and_then(|t| t.split("```").next())
+            .expect("docs/robot-file.md has a complete example in a toml block");
+        (doc, example)
+    }
+
+    /// The doc's table of one section: the text from its `## ` heading to the next.
+    fn doc_section<'a>(doc: &'a str, heading: &str) -> &'a str {
+        let at = doc
+            .find(&format!("\n## {heading}"))
+            .unwrap_or_else(|| panic!("docs/robot-file.md has no `## {heading}` heading"));
+        let rest = &doc[at + 4..];
+        &rest[..rest.find("\n## ").unwrap_or(rest.len())]
+    }
+
+    #[test]
+    fn every_key_of_the_schema_is_in_the_reference_and_its_example_parses() {
+        let (doc, example) = doc_example();
+        let file = parse(Path::new("docs/robot-file.md"), example).unwrap();
+        // Written back, the parsed example holds every key its sections have (it sets them all).
+        let back = toml::Value::try_from(&file).unwrap();
+        let options: Vec<&String> = file.import.as_ref().unwrap().options.keys().collect();
+        let mut keys: Vec<(&str, String)> = vec![];
+        for (section, heading) in [
+            ("robot", "`[robot]`"),
+            ("acquire", "`[acquire]`"),
+            ("search", "`[search]`"),
+            ("train", "`[train]`"),
+            ("import", "`[import]`"),
+        ] {
+            for k in back[section].as_table().unwrap().keys() {
+                if section != "import" || !options.contains(&k) {
+                    keys.push((heading, k.clone()));
+                }
+            }
+        }
+        for j in back["joint"].as_array().unwrap() {
+            for k in j.as_table().unwrap().keys() {
+                keys.push(("`[[joint]]`", k.clone()));
+            }
+        }
+        for top in back.as_table().unwrap().keys() {
+            assert!(
+                ["robot", "acquire", "search", "train", "import", "joint"].contains(&top.as_str()),
+                "a section the test does not know: [{top}]"
+            );
+        }
+        assert!(keys.len() > 40, "{keys:?}");
+        for (heading, k) in keys {
+            assert!(
+                doc_section(doc, heading).contains(&format!("| `{k}` |")),
+                "docs/robot-file.md: {heading} has no row for `{k}`"
+            );
+        }
+        // The example's sources as the reference says: the robot's [import] for a joint without a
+        // source, its own import table on top for the ankle, the others untouched.
+        let src: Vec<DataSource> = file.joint.iter().map(|j| j.source()).collect();
+        use DataSource::*;
+        assert_eq!(src, [Import, Import, Preset, Logs, Datasets]);
+        let ankle = file.joint[1].import.as_ref().unwrap();
+        assert_eq!(ankle.format, Some(LogFormat::Csv));
+        assert_eq!(ankle.logs, [PathBuf::from("ankle_only.csv")]);
+        assert!(
+            ankle.test_logs.is_empty(),
+            "its own logs come without [import]'s test logs"
+        );
+        let words = ankle.option_words().unwrap();
+        for w in [
+            "--column=time=t_ms",
+            "--unit=s=deg",
+            "--label=current",
+            "--negate=current",
+        ] {
+            assert!(words.contains(&w.to_owned()), "{w} in {words:?}");
+        }
+        assert!(file.joint[2].import.is_none());
+    }
+
+    #[test]
+    fn import_keys_the_file_sets_or_no_flag_takes_are_refused_by_key() {
+        let with = |import: &str| {
+            format!(
+                "{import}\n[[joint]]\nname = \"k\"\ngear_ratio = 100.0\nkt_nm_per_a = 0.1\nmax_curr_a = 1.0\n"
+            )
+        };
+        let refused = |text: String, key: &str| {
+            let e = parse(Path::new("r.toml"), &text).unwrap_err().to_string();
+            assert!(e.contains("r.toml") && e.contains(key), "{key}: {e}");
+            e
+        };
+        let e = refused(
+            with("[import]\nformat = \"csv\"\nlogs = [\"a.csv\"]\ngear_ratio = 3"),
+            "import.gear_ratio",
+        );
+        assert!(e.contains("set by the robot file"), "{e}");
+        refused(
+            with("[import]\nformat = \"csv\"\nlogs = [\"a.csv\"]\nkt = 3"),
+            "import.kt",
+        );
+        refused(
+            with("[import]\nformat = \"csv\"\nlogs = [\"a.csv\"]\ncolumn = { time = [1] }"),
+            "import.column",
+        );
+        refused(
+            with("[import]\nlogs = [\"a.csv\"]"),
+            "joint[0].import.format",
+        );
+        refused(with("[import]\nformat = \"csv\""), "joint[0].import.logs");
+        let e = parse(
+            Path::new("r.toml"),
+            &with("[import]\nformat = \"xls\"\nlogs = [\"a\"]"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("xls"), "{e}");
+        // A joint's own import beside another source is two sources.
+        refused(
+            "[[joint]]\nname = \"k\"\npreset = \"knee\"\nimport = { format = \"csv\", logs = [\"a\"] }\n\
+             gear_ratio = 100.0\nkt_nm_per_a = 0.1\nmax_curr_a = 1.0\n"
+                .into(),
+            "preset/logs/datasets/import",
+        );
+        // No source and no [import]: refused as before.
+        refused(with(""), "preset/logs/datasets/import");
+    }
+
+    #[test]
+    fn load_makes_import_paths_relative_to_the_file() {
+        let dir = std::env::temp_dir().join(format!("frictl-robot-import-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("r.toml");
+        std::fs::write(
+            &p,
+            "[import]\nformat = \"mcap\"\nlogs = [\"bags/a.mcap\"]\nurdf = \"u/leg.urdf\"\n\
+             [[joint]]\nname = \"k\"\ngear_ratio = 100.0\nkt_nm_per_a = 0.1\nmax_curr_a = 1.0\n",
+        )
+        .unwrap();
+        let f = load(&p).unwrap();
+        let imp = f.joint[0].import.as_ref().unwrap();
+        assert_eq!(imp.logs, [dir.join("bags/a.mcap")]);
+        assert_eq!(
+            imp.options["urdf"].as_str(),
+            Some(dir.join("u/leg.urdf").to_str().unwrap())
+        );
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

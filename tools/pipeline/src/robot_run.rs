@@ -104,6 +104,7 @@ fn plan_joint(robot: &RobotFile, j: &JointSection) -> anyhow::Result<JointPlan> 
         DataSource::Preset => p.acquire_and_label()?,
         DataSource::Logs => p.label_logs()?,
         DataSource::Datasets => p.given_datasets(),
+        DataSource::Import => p.import_logs()?,
     };
     let (cv, scv) = p.fits(&train)?;
     let (search_args, model) = p.model(&train, &scv)?;
@@ -249,6 +250,66 @@ impl Planner<'_> {
                 } else {
                     lists.1.push(ds);
                 }
+            }
+        }
+        Ok(lists)
+    }
+
+    /// A joint with the robot's own logs (`import`): `frictl import FORMAT` of its training logs
+    /// into one dataset (a run per log) and of its held-out logs into another, with the joint's
+    /// name, gear ratio and k_t and the robot's URDF; returns the (train, test) datasets.
+    fn import_logs(&mut self) -> anyhow::Result<(Vec<String>, Vec<String>)> {
+        let (robot, j) = (self.robot, self.j);
+        let imp = j.import.as_ref().context("a joint without an import")?;
+        let format = imp.format.context("an import without a format")?;
+        let options = imp.option_words().map_err(|(key, value, why)| {
+            anyhow::anyhow!("joint {}: import.{key} = {value}: {why}", j.name)
+        })?;
+        let urdf = match imp.options.get("urdf") {
+            Some(_) => None,
+            None => robot.robot.urdf.as_ref().map(|u| s(u)),
+        };
+        let mut lists = (vec![], vec![]);
+        for (what, logs) in [("train", &imp.logs), ("test", &imp.test_logs)] {
+            if logs.is_empty() {
+                continue;
+            }
+            let ds = self.f(&format!("{what}_ds.csv"));
+            let mut args: Vec<String> = ["import", format.name()].map(String::from).into();
+            args.extend(options.iter().cloned());
+            args.extend([
+                "--joint".into(),
+                j.name.clone(),
+                format!("--gear-ratio={}", j.gear_ratio),
+                format!("--kt={}", j.kt_nm_per_a),
+            ]);
+            args.extend(urdf.iter().flat_map(|u| ["--urdf".to_owned(), u.clone()]));
+            args.extend(["--out".into(), ds.clone(), "--".into()]);
+            args.extend(logs.iter().map(|l| s(l)));
+            format.check_argv(&args).with_context(|| {
+                format!(
+                    "joint {}: the import ({options:?}) is not a `frictl import {}` command line",
+                    j.name,
+                    format.name()
+                )
+            })?;
+            let mut inputs: Vec<String> = logs.iter().map(|l| s(l)).collect();
+            inputs.extend(urdf.iter().cloned());
+            if let Some(toml::Value::String(u)) = imp.options.get("urdf") {
+                inputs.push(u.clone());
+            }
+            self.external_inputs.extend(inputs.iter().cloned());
+            self.stages.push(Stage {
+                id: format!("import_{what}"),
+                phase: Until::Data,
+                args,
+                inputs,
+                outputs: vec![ds.clone(), ds.replace(".csv", ".json")],
+            });
+            if what == "train" {
+                lists.0.push(ds);
+            } else {
+                lists.1.push(ds);
             }
         }
         Ok(lists)
@@ -959,6 +1020,14 @@ fn joint_report(
             DataSource::Preset => format!("preset {}", j.preset.as_deref().unwrap_or("")),
             DataSource::Logs => format!("{} log(s)", j.logs.len()),
             DataSource::Datasets => format!("{} dataset(s)", j.datasets.len()),
+            DataSource::Import => match &j.import {
+                Some(i) => format!(
+                    "{} {} log(s)",
+                    i.logs.len(),
+                    i.format.map_or("?", |f| f.name())
+                ),
+                None => String::new(),
+            },
         },
         gear_ratio: j.gear_ratio,
         kt_nm_per_a: j.kt_nm_per_a,

@@ -822,6 +822,7 @@ fn write_robot_file(
                 cutoff_hz: l.cutoff_hz,
             }),
             preprocess_args: vec![],
+            import: None,
         });
     }
     let robot = RobotFile {
@@ -831,6 +832,7 @@ fn write_robot_file(
             ..RobotSection::default()
         },
         acquire: Default::default(),
+        import: None,
         search: SearchSection {
             trials: 0,
             ..SearchSection::default()
