@@ -1,5 +1,5 @@
-//! `frictl import csv|mat|mcap`: the robot-log importers' arguments (the work:
-//! `frictionless-import`).
+//! `frictl import csv|mat|mcap`: the robot-log importers' arguments, and the options they give
+//! `frictionless-import` (which does the work and never sees this parser).
 
 use std::path::PathBuf;
 
@@ -248,4 +248,76 @@ pub struct MatArgs {
     #[command(flatten)]
     #[serde(flatten)]
     pub common: CommonArgs,
+}
+
+impl CommonArgs {
+    /// The import's options.
+    pub fn options(self) -> frictionless_import::CommonOptions {
+        frictionless_import::CommonOptions {
+            out: self.out,
+            all_joints: self.joints_all.is_some(),
+            label: self.label.map(LabelSource::from),
+            gear_ratio: self.gear_ratio,
+            kt: self.kt,
+            gap_s: self.gap_s,
+            negate: self.negate,
+            urdf: self.urdf,
+            urdf_joint: self.urdf_joint,
+            fixed_joints: self.fixed_joints,
+            base_frame: self.base_frame,
+            settings: self.pipeline.label_settings(),
+            gravity_m_s2: self.pipeline.gravity_m_s2,
+        }
+    }
+}
+
+impl CsvArgs {
+    /// The import's options.
+    pub fn options(self) -> frictionless_import::CsvOptions {
+        frictionless_import::CsvOptions {
+            files: self.files,
+            joint: self.joint,
+            columns: self.columns,
+            units: self.units,
+            positions: self.positions,
+            velocities: self.velocities,
+            accelerations: self.accelerations,
+            base_quat: self.base_quat,
+            wrenches: self.wrenches,
+            delimiter: self.delimiter,
+            window_samples: self.window_samples,
+            common: self.common.options(),
+        }
+    }
+}
+
+impl McapArgs {
+    /// The import's options.
+    pub fn options(self) -> frictionless_import::McapOptions {
+        frictionless_import::McapOptions {
+            files: self.files,
+            joint: self.joint,
+            topic: self.topic,
+            effort: self.effort,
+            base_orientation: self.base_orientation,
+            wrenches: self.wrenches,
+            window_samples: self.window_samples,
+            common: self.common.options(),
+        }
+    }
+}
+
+impl MatArgs {
+    /// The import's options.
+    pub fn options(self) -> frictionless_import::MatOptions {
+        frictionless_import::MatOptions {
+            files: self.files,
+            joint: self.joint,
+            base_orientation: self.base_orientation,
+            wrenches: self.wrenches,
+            logged_derivatives: self.logged_derivatives,
+            window_samples: self.window_samples,
+            common: self.common.options(),
+        }
+    }
 }

@@ -1,6 +1,7 @@
 //! Arguments of `frictl preprocess`.
 
 use frictionless_ident::kalman::KalmanConfig;
+use frictionless_ident::label_settings::LabelSettings;
 use frictionless_ident::preprocess::{LabelFilter, PreprocessConfig, Ripple};
 use std::path::PathBuf;
 
@@ -106,27 +107,30 @@ fn label_filter_parser() -> impl clap::builder::TypedValueParser<Value = LabelFi
 }
 
 impl PipelineArgs {
+    /// The settings as the labeller takes them.
+    pub fn label_settings(&self) -> LabelSettings {
+        LabelSettings {
+            fs_hz: self.fs_hz,
+            butter_order: self.butter_order,
+            butter_cutoff_hz: self.butter_cutoff_hz,
+            causal: self.causal,
+            kalman: KalmanConfig {
+                p0: [self.kalman_p0[0], self.kalman_p0[1], self.kalman_p0[2]],
+                q: [self.kalman_q[0], self.kalman_q[1], self.kalman_q[2]],
+                r: self.kalman_r,
+            },
+            joint_acc_limit_rad_s2: self.joint_acc_limit,
+            joint_vel_limit_rad_s: self.joint_vel_limit,
+            im_limit_a: self.im_limit,
+            tauf_limit_nm: self.tauf_limit,
+            label_filter: self.label_filter,
+            ripple: self.ripple,
+        }
+    }
+
     /// Writes these settings into `cfg`.
     pub fn apply(&self, cfg: &mut PreprocessConfig) {
-        cfg.fs_hz = self.fs_hz;
-        cfg.butter_order = self.butter_order;
-        cfg.butter_cutoff_hz = self.butter_cutoff_hz;
-        cfg.causal = self.causal;
-        cfg.kalman = KalmanConfig {
-            p0: [self.kalman_p0[0], self.kalman_p0[1], self.kalman_p0[2]],
-            q: [self.kalman_q[0], self.kalman_q[1], self.kalman_q[2]],
-            r: self.kalman_r,
-        };
-        cfg.limits.joint_acc_limit_rad_s2 = self.joint_acc_limit;
-        cfg.limits.joint_vel_limit_rad_s = self.joint_vel_limit;
-        if let Some(v) = self.im_limit {
-            cfg.limits.im_limit_a = v;
-        }
-        if let Some(v) = self.tauf_limit {
-            cfg.limits.tauf_limit_nm = v;
-        }
-        cfg.label_filter = self.label_filter;
-        cfg.ripple = self.ripple;
+        self.label_settings().apply(cfg);
     }
 }
 

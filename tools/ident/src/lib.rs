@@ -60,6 +60,7 @@
 pub mod dataset_file;
 pub mod fit;
 pub mod kalman;
+pub mod label_settings;
 pub mod lugre_fit;
 pub mod matched;
 pub mod preprocess;

@@ -4,6 +4,7 @@
 //! runs `frictionless-logs` reads, labelled by `frictionless-ident`'s one pipeline (the `current`
 //! label's τ_ID from the whole robot's state when the log has it, else the single-joint view of the
 //! URDF), one dataset and sidecar (`frictionless-dataset`) per labelled joint, written atomically:
+//! - [`options`]: what an import is asked to do, as plain values (no argument parser);
 //! - [`whole`]: the log held in memory, joints labelled in passes of a few;
 //! - [`stream`]: `--window-samples N`, the log read and labelled in windows, never held whole;
 //! - [`urdf`]: the robot from `--urdf` and `--fixed-joint` (also `frictl preprocess`'s);
@@ -11,17 +12,19 @@
 //!   checks, the inputs' sidecar and the committing of a dataset with its sidecar;
 //! - [`check_outputs`]: the refusal, before any work, of an output that would overwrite an input.
 //!
-//! It takes the arguments `frictl-cli` parses and reports with `anyhow`, as the command layer does.
-//! What it is **not**: a log reader (`frictionless-logs`) or the label pipeline
+//! It takes [`options`] (which `frictl-cli` fills from the command line) and reports with `anyhow`.
+//! What it is **not**: an argument parser, a log reader (`frictionless-logs`) or the label pipeline
 //! (`frictionless-ident`); formats, roles and units are in `docs/robot-logs.md`.
 
 #![warn(missing_docs)]
 
+pub mod options;
 mod shared;
 pub mod stream;
 pub mod urdf;
 pub mod whole;
 
+pub use options::{CommonOptions, CsvOptions, MatOptions, McapOptions};
 pub use urdf::{gravity_m_s2, parse_fixed_joints, urdf_link, urdf_whole_body};
 pub use whole::{run_csv, run_mat, run_mcap};
 

@@ -15,7 +15,7 @@ use frictionless_ident::preprocess::{
 use frictionless_ident::stream::{StreamLabeller, StreamStats};
 use frictionless_logs::{ImportedRun, Role, Unit, csv_log};
 
-use frictl_cli::import_log::CommonArgs;
+use crate::options::CommonOptions;
 
 use crate::check_outputs;
 use crate::shared::{Inputs, commit_pair, out_path, per_joint, plausibility};
@@ -30,7 +30,7 @@ struct Out {
 
 /// The state of a streamed import between blocks.
 struct Streamer<'a> {
-    common: &'a CommonArgs,
+    common: &'a CommonOptions,
     label: LabelSource,
     dynamics: Dynamics<'a>,
     window: usize,
@@ -72,7 +72,7 @@ impl<'a> Streamer<'a> {
             for j in &block.joints {
                 let mut cfg = PreprocessConfig::for_joint(j);
                 cfg.gap_s = self.common.gap_s.unwrap_or(0.1);
-                self.common.pipeline.apply(&mut cfg);
+                self.common.settings.apply(&mut cfg);
                 self.joints.push(JointLabel {
                     joint: j.clone(),
                     label: SignalsLabel {
@@ -131,7 +131,7 @@ impl<'a> Streamer<'a> {
 pub fn run_csv(
     files: &[PathBuf],
     spec: &csv_log::CsvSpec,
-    common: &CommonArgs,
+    common: &CommonOptions,
     body: Option<&WholeBody>,
     window: usize,
 ) -> anyhow::Result<()> {
@@ -163,7 +163,7 @@ pub fn run_stream(
     files: &[PathBuf],
     format: &str,
     default_label: LabelSource,
-    common: &CommonArgs,
+    common: &CommonOptions,
     body: Option<&WholeBody>,
     units: Option<&[(Role, Unit)]>,
     window: usize,

@@ -5,6 +5,7 @@
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 
+use crate::options::{CommonOptions, CsvOptions, MatOptions, McapOptions};
 use anyhow::{Context, bail};
 use frictionless_dataset::Dataset;
 use frictionless_dataset::LabelSource;
@@ -13,7 +14,6 @@ use frictionless_ident::preprocess::{
     preprocess_joints, required_signals,
 };
 use frictionless_logs::{ImportedRun, Role, csv_log, mcap_log};
-use frictl_cli::import_log::{CommonArgs, CsvArgs, LabelArg, MatArgs, McapArgs};
 
 use crate::check_outputs;
 use crate::shared::{
@@ -60,9 +60,12 @@ fn read_all(
 
 /// The whole-body model when the current label may be asked for (`label` is `current`, or not
 /// given and `default_current`), else `None`.
-fn whole_body_for(common: &CommonArgs, default_current: bool) -> anyhow::Result<Option<WholeBody>> {
+fn whole_body_for(
+    common: &CommonOptions,
+    default_current: bool,
+) -> anyhow::Result<Option<WholeBody>> {
     let current = match common.label {
-        Some(l) => l == LabelArg::Current,
+        Some(l) => l == LabelSource::Current,
         None => default_current,
     };
     if !current {
@@ -71,7 +74,7 @@ fn whole_body_for(common: &CommonArgs, default_current: bool) -> anyhow::Result<
     let body = urdf_whole_body(
         common.urdf.as_deref(),
         &common.fixed_joints,
-        crate::urdf::gravity_m_s2(common.pipeline.gravity_m_s2),
+        crate::urdf::gravity_m_s2(common.gravity_m_s2),
     )?;
     Ok(Some(body.with_base_frame(common.base_frame.clone())?))
 }
@@ -104,7 +107,7 @@ fn frame_pairs(
 }
 
 /// Runs `frictl import csv`.
-pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
+pub fn run_csv(args: CsvOptions) -> anyhow::Result<()> {
     let mut spec = csv_log::CsvSpec::parse(&args.columns, &args.units, &args.common.negate)?;
     anyhow::ensure!(
         args.delimiter.is_ascii(),
@@ -113,7 +116,7 @@ pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
     );
     spec.delimiter = args.delimiter as u8;
     spec.joints = args.joint.clone();
-    spec.all_joints = args.common.joints_all.is_some();
+    spec.all_joints = args.common.all_joints;
     check(
         &args.files,
         &args.joint,
@@ -172,7 +175,7 @@ pub fn run_csv(args: CsvArgs) -> anyhow::Result<()> {
 }
 
 /// Runs `frictl import mcap`.
-pub fn run_mcap(args: McapArgs) -> anyhow::Result<()> {
+pub fn run_mcap(args: McapOptions) -> anyhow::Result<()> {
     let effort_role = mcap_log::parse_effort(&args.effort)
         .map_err(|e| anyhow::anyhow!("--effort {}: {e}", args.effort))?;
     let negate = args
@@ -194,7 +197,7 @@ pub fn run_mcap(args: McapArgs) -> anyhow::Result<()> {
     let spec = mcap_log::McapSpec {
         topic: args.topic.clone(),
         joints: args.joint.clone(),
-        all_joints: args.common.joints_all.is_some(),
+        all_joints: args.common.all_joints,
         state_joints: urdf_names(&body),
         effort_role,
         negate,
@@ -236,7 +239,7 @@ pub fn run_mcap(args: McapArgs) -> anyhow::Result<()> {
 
 /// Runs `frictl import mat`.
 #[cfg(feature = "mat")]
-pub fn run_mat(args: MatArgs) -> anyhow::Result<()> {
+pub fn run_mat(args: MatOptions) -> anyhow::Result<()> {
     use frictionless_logs::mat_log;
     let negate = args
         .common
@@ -253,7 +256,7 @@ pub fn run_mat(args: MatArgs) -> anyhow::Result<()> {
     let body = whole_body_for(&args.common, true)?;
     let spec = mat_log::MatSpec {
         joints: args.joint.clone(),
-        all_joints: args.common.joints_all.is_some(),
+        all_joints: args.common.all_joints,
         state_joints: urdf_names(&body),
         negate,
         desired_gap_s: args.common.gap_s.unwrap_or(1.0),
@@ -293,7 +296,7 @@ pub fn run_mat(args: MatArgs) -> anyhow::Result<()> {
 
 /// Runs `frictl import mat` (built without the `mat` feature: explains how to get it).
 #[cfg(not(feature = "mat"))]
-pub fn run_mat(args: MatArgs) -> anyhow::Result<()> {
+pub fn run_mat(args: MatOptions) -> anyhow::Result<()> {
     let _ = args;
     bail!(
         "this frictl was built without `.mat` support (cargo feature `mat`, which needs the system HDF5 \
@@ -312,7 +315,7 @@ const JOINTS_PER_PASS: usize = 4;
 fn check(
     files: &[PathBuf],
     joints: &[String],
-    common: &CommonArgs,
+    common: &CommonOptions,
     base_option: (&str, bool),
 ) -> anyhow::Result<()> {
     for (k, j) in joints.iter().enumerate() {
@@ -359,7 +362,7 @@ fn finish(
     format: &str,
     default_gap_s: f64,
     units: Option<&[(Role, frictionless_logs::Unit)]>,
-    common: CommonArgs,
+    common: CommonOptions,
     body: Option<WholeBody>,
 ) -> anyhow::Result<()> {
     let started = std::time::Instant::now();
@@ -466,7 +469,7 @@ fn finish(
 }
 
 /// The labelled joints, the same in every run; several need `{joint}` in `-o`.
-fn labelled_joints(runs: &[ImportedRun], common: &CommonArgs) -> anyhow::Result<Vec<String>> {
+fn labelled_joints(runs: &[ImportedRun], common: &CommonOptions) -> anyhow::Result<Vec<String>> {
     let joints: Vec<String> = runs[0].joints.clone();
     for r in &runs[1..] {
         anyhow::ensure!(
@@ -489,10 +492,10 @@ fn labelled_joints(runs: &[ImportedRun], common: &CommonArgs) -> anyhow::Result<
 
 /// The label: `--label`, else the log's friction column, torque sensor or current; refused when
 /// the log lacks what it needs (with what the reader said), or the current label has no URDF.
-fn label_of(runs: &[ImportedRun], common: &CommonArgs) -> anyhow::Result<LabelSource> {
+fn label_of(runs: &[ImportedRun], common: &CommonOptions) -> anyhow::Result<LabelSource> {
     let first = &runs[0].signals;
     let label: LabelSource = match common.label {
-        Some(l) => l.into(),
+        Some(l) => l,
         None if first.tau_f_nm.is_some() => LabelSource::Given,
         None if first.tau_joint_nm.is_some() => LabelSource::TorqueSensor,
         None => LabelSource::Current,
@@ -558,7 +561,7 @@ fn dynamics_of(
     runs: &[ImportedRun],
     joints: &[String],
     label: LabelSource,
-    common: &CommonArgs,
+    common: &CommonOptions,
     body: Option<&WholeBody>,
     warnings: &mut Vec<String>,
 ) -> anyhow::Result<LabelDynamics> {
@@ -581,7 +584,7 @@ fn dynamics_of(
             "labelling several joints with the current label needs the positions of every joint (--positions for CSV)"
         );
         let urdf_joint = common.urdf_joint.as_deref().unwrap_or(&joints[0]);
-        let gravity = crate::urdf::gravity_m_s2(common.pipeline.gravity_m_s2);
+        let gravity = crate::urdf::gravity_m_s2(common.gravity_m_s2);
         let (m, d) = urdf_link(
             common.urdf.as_deref(),
             urdf_joint,
@@ -658,7 +661,7 @@ fn name_the_flag(e: frictionless_ident::preprocess::PreprocessError) -> anyhow::
 /// Each joint's label settings: the pipeline options, the gear ratio and torque constant.
 fn joint_labels(
     joints: &[String],
-    common: &CommonArgs,
+    common: &CommonOptions,
     format: &str,
     default_gap_s: f64,
     label: LabelSource,
@@ -671,7 +674,7 @@ fn joint_labels(
             // The .mat reader already cut chunks on the desired-current gaps; robot ticks are dense.
             cfg.gap_s = cfg.gap_s.max(1.0);
         }
-        common.pipeline.apply(&mut cfg);
+        common.settings.apply(&mut cfg);
         labels.push(JointLabel {
             joint: j.clone(),
             label: SignalsLabel {

@@ -169,9 +169,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     match args.what {
         What::Onnx(a) => run_model(Format::Onnx, a),
         What::Safetensors(a) => run_model(Format::Safetensors, a),
-        What::Csv(a) => super::import_log::run_csv(a),
-        What::Mat(a) => super::import_log::run_mat(a),
-        What::Mcap(a) => super::import_log::run_mcap(a),
+        What::Csv(a) => super::import_log::run_csv(a.options()),
+        What::Mat(a) => super::import_log::run_mat(a.options()),
+        What::Mcap(a) => super::import_log::run_mcap(a.options()),
     }
 }
 
