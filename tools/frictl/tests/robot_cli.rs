@@ -43,6 +43,22 @@ fn tmp(name: &str) -> PathBuf {
     d
 }
 
+/// `frictiond --config CFG --check` (the frictiond built next to this frictl) accepts `cfg`.
+fn frictiond_check(cfg: &Path) {
+    let bins = Binaries::with_frictl(PathBuf::from(env!("CARGO_BIN_EXE_frictl")))
+        .expect("frictiond built next to frictl (cargo build --workspace --bins)");
+    let check = Command::new(&bins.frictiond)
+        .args(["--config", s(cfg), "--check"])
+        .output()
+        .unwrap();
+    assert!(
+        check.status.success(),
+        "frictiond --check: {}{}",
+        String::from_utf8_lossy(&check.stdout),
+        String::from_utf8_lossy(&check.stderr)
+    );
+}
+
 fn ranked(dir: &Path) -> Vec<TrialResult> {
     serde_json::from_str(&std::fs::read_to_string(dir.join("results.json")).unwrap()).unwrap()
 }
@@ -66,18 +82,7 @@ fn a_two_joint_robot_gives_one_checked_frictiond_config_and_resumes_by_stamp() {
         );
     }
     // frictiond itself accepts it (models, joint names and k_t checked against the files).
-    let bins = Binaries::with_frictl(PathBuf::from(env!("CARGO_BIN_EXE_frictl")))
-        .expect("frictiond built next to frictl (cargo build --workspace --bins)");
-    let check = Command::new(&bins.frictiond)
-        .args(["--config", s(&cfg_path), "--check"])
-        .output()
-        .unwrap();
-    assert!(
-        check.status.success(),
-        "frictiond --check: {}{}",
-        String::from_utf8_lossy(&check.stdout),
-        String::from_utf8_lossy(&check.stderr)
-    );
+    frictiond_check(&cfg_path);
 
     // The per-joint report: every joint, its search and its evaluation.
     let report: serde_json::Value =
@@ -764,18 +769,7 @@ import = {{ logs = ["logs/walk.csv"], test_logs = ["logs/walk_again.csv"] }}
     let cfg = frictiond_config::load(&cfg_path).unwrap();
     let names: Vec<&str> = cfg.raw.joint.iter().map(|j| j.name.as_str()).collect();
     assert_eq!(names, ["a", "b"]);
-    let bins = Binaries::with_frictl(PathBuf::from(env!("CARGO_BIN_EXE_frictl")))
-        .expect("frictiond built next to frictl (cargo build --workspace --bins)");
-    let check = Command::new(&bins.frictiond)
-        .args(["--config", s(&cfg_path), "--check"])
-        .output()
-        .unwrap();
-    assert!(
-        check.status.success(),
-        "frictiond --check: {}{}",
-        String::from_utf8_lossy(&check.stdout),
-        String::from_utf8_lossy(&check.stderr)
-    );
+    frictiond_check(&cfg_path);
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("o/report.json")).unwrap()).unwrap();
     for j in ["a", "b"] {
@@ -867,18 +861,7 @@ import = {ankle_import}
         assert!(n > 10_000 && rms < 0.15, "{j}: RMS {rms} on {n}");
     }
     let cfg_path = dir.join("o/frictiond.toml");
-    let bins = Binaries::with_frictl(PathBuf::from(env!("CARGO_BIN_EXE_frictl")))
-        .expect("frictiond built next to frictl (cargo build --workspace --bins)");
-    let check = Command::new(&bins.frictiond)
-        .args(["--config", s(&cfg_path), "--check"])
-        .output()
-        .unwrap();
-    assert!(
-        check.status.success(),
-        "frictiond --check: {}{}",
-        String::from_utf8_lossy(&check.stdout),
-        String::from_utf8_lossy(&check.stderr)
-    );
+    frictiond_check(&cfg_path);
     let md = std::fs::read_to_string(dir.join("o/report.md")).unwrap();
     let want = if cfg!(feature = "mat") {
         "1 mat log(s)"
